@@ -1,0 +1,208 @@
+"""The colour sequence coded fringe pattern (paper Sec. 2 and 4, Eq. 7-8).
+
+Conventions (stated once, used everywhere)
+-----------------------------------------
+* Projector pixel coordinates follow OpenCV: pixel ``i`` has its centre at ``u = i`` and
+  spans ``[i - 0.5, i + 0.5)``.
+* Stripe ``s`` covers projector pixels ``s*T .. s*T + T - 1``; its borders lie at
+  ``u = s*T - 0.5``.  The fringe (paper Eq. 7) is
+
+      I(u) = A + B * cos(psi(u)),   psi(u) = 2*pi*(u + 0.5)/T - pi,
+
+  so the *wrapped* phase ``psi`` runs from ``-pi`` at a stripe's left border to ``+pi`` at its
+  right border and wraps exactly at stripe borders (paper Sec. 4.1 and 5.3 ask for this; the
+  paper's ``phi_0 = pi/2`` is the same statement in its own, unstated, arctan convention).
+  The fringe is darkest at stripe borders, so colour switches happen where there is least light.
+* Code values follow Eq. 8 and Eq. 13: ``C = 1`` is a red stripe, ``C = 0`` a green one.
+  (The paper's prose says the opposite once; the equations are consistent with each other.)
+* The unwrapped phase (Eq. 12) is ``Phi = psi + 2*pi*n`` with ``n`` the stripe index, and
+  ``u = T * (n + (psi + pi) / (2*pi)) - 0.5`` (:func:`column_from_phase`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "PatternSpec",
+    "de_bruijn",
+    "window_positions",
+    "fringe_pattern",
+    "quantize",
+    "column_from_phase",
+    "phase_from_column",
+]
+
+
+def de_bruijn(order: int, *, alphabet: int = 2) -> np.ndarray:
+    """Lexicographically smallest cyclic De Bruijn sequence B(alphabet, order).
+
+    Built by concatenating Lyndon words (Fredricksen-Kessler-Maiorana algorithm).
+
+    Parameters
+    ----------
+    order : int
+        Window length n >= 2 (the paper uses 3).
+    alphabet : int
+        Number of symbols k >= 2 (the paper uses 2: red and green).
+
+    Returns
+    -------
+    ndarray, shape (alphabet**order,), uint8
+        Every window of ``order`` consecutive symbols (cyclically) occurs exactly once.
+        ``de_bruijn(3)`` is ``00010111``, the paper's sequence (Sec. 4.2).
+    """
+    if int(order) != order or order < 2:
+        raise ValueError(f"De Bruijn order must be an integer >= 2, got {order!r}")
+    if int(alphabet) != alphabet or alphabet < 2:
+        raise ValueError(f"De Bruijn alphabet must be an integer >= 2, got {alphabet!r}")
+    if alphabet**order > 1 << 20:
+        raise ValueError(f"B({alphabet},{order}) would have {alphabet**order} symbols; too long")
+    k, n = int(alphabet), int(order)
+    a = [0] * (k * n)
+    out: list[int] = []
+
+    def db(t: int, p: int) -> None:
+        if t > n:
+            if n % p == 0:
+                out.extend(a[1 : p + 1])
+            return
+        a[t] = a[t - p]
+        db(t + 1, p)
+        for j in range(a[t - p] + 1, k):
+            a[t] = j
+            db(t + 1, t)
+
+    db(1, 1)
+    return np.asarray(out, dtype=np.uint8)
+
+
+def window_positions(sequence: np.ndarray, *, order: int, alphabet: int = 2) -> np.ndarray:
+    """Lookup table from a window's code to the position of the window's start.
+
+    The window starting at position ``q`` is ``sequence[q], ..., sequence[q + order - 1]``
+    (cyclic) and its code is ``sum(symbol_j * alphabet**(order - 1 - j))``.
+
+    Returns
+    -------
+    ndarray, shape (alphabet**order,), int32
+        ``table[code]`` is the start position, or -1 for a window that does not occur.
+
+    Raises
+    ------
+    ValueError
+        If some window occurs twice (the sequence is not a De Bruijn-like sequence).
+    """
+    seq = np.asarray(sequence, dtype=np.int64)
+    length = seq.size
+    if length < order:
+        raise ValueError(f"sequence of length {length} is shorter than the window {order}")
+    table = np.full(alphabet**order, -1, dtype=np.int32)
+    for q in range(length):
+        code = 0
+        for j in range(order):
+            code = code * alphabet + int(seq[(q + j) % length])
+        if table[code] != -1:
+            raise ValueError(
+                f"window at position {q} repeats the one at {table[code]}: "
+                "the sequence cannot locate stripes uniquely"
+            )
+        table[code] = q
+    return table
+
+
+@dataclass(frozen=True)
+class PatternSpec:
+    """The colour sequence coded fringe.
+
+    Attributes
+    ----------
+    size_hw : tuple of int
+        Pattern size (height, width) in projector pixels.
+    period_px : int
+        Fringe period T = stripe width, in projector pixels (paper: 21).
+    order : int
+        De Bruijn window length n; the cycle holds ``2**order`` stripes (paper: 3 -> 8).
+    dc : float
+        Fringe offset A of Eq. 7, in [0, 1] of full projector drive.
+    amplitude : float
+        Fringe amplitude B of Eq. 7; ``dc + amplitude <= 1`` and ``dc - amplitude >= 0``.
+    """
+
+    size_hw: tuple[int, int] = (1140, 1824)
+    period_px: int = 21
+    order: int = 3
+    dc: float = 0.5
+    amplitude: float = 0.5
+
+    def __post_init__(self) -> None:
+        h, w = self.size_hw
+        if int(h) != h or int(w) != w or h < 1 or w < 1:
+            raise ValueError(f"pattern size_hw must be two positive integers, got {self.size_hw}")
+        if int(self.period_px) != self.period_px or self.period_px < 4:
+            raise ValueError(f"period_px must be an integer >= 4, got {self.period_px}")
+        if self.order < 2 or int(self.order) != self.order:
+            raise ValueError(f"order must be an integer >= 2, got {self.order}")
+        if not (0.0 <= self.dc - self.amplitude and self.dc + self.amplitude <= 1.0):
+            raise ValueError(
+                f"dc={self.dc} and amplitude={self.amplitude} leave [0, 1]: "
+                "need 0 <= dc - amplitude and dc + amplitude <= 1"
+            )
+        if self.amplitude <= 0:
+            raise ValueError(f"amplitude must be > 0, got {self.amplitude}")
+
+    @property
+    def sequence(self) -> np.ndarray:
+        """The binary De Bruijn sequence B(2, order), shape (2**order,), uint8."""
+        return de_bruijn(self.order)
+
+    @property
+    def cycle_stripes(self) -> int:
+        """Number of stripes L in one De Bruijn cycle (paper: 8)."""
+        return 2**self.order
+
+
+def phase_from_column(u: np.ndarray, *, period_px: float) -> np.ndarray:
+    """Unwrapped phase Phi(u) of the fringe at projector column ``u`` (OpenCV coordinates)."""
+    return 2.0 * np.pi * (np.asarray(u, dtype=np.float64) + 0.5) / period_px - np.pi
+
+
+def column_from_phase(unwrapped: np.ndarray, *, period_px: float) -> np.ndarray:
+    """Projector column (OpenCV coordinates, px) of an unwrapped phase; inverse of
+    :func:`phase_from_column`."""
+    return (np.asarray(unwrapped) + np.pi) * (period_px / (2.0 * np.pi)) - 0.5
+
+
+def fringe_pattern(spec: PatternSpec) -> np.ndarray:
+    """The colour sequence coded fringe of paper Eq. 7-8, sampled at projector pixel centres.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32 in [0, 1]
+        Linear projector drive per channel (R, G, B): ``R = C*I``, ``G = (1-C)*I``, ``B = I``.
+    """
+    h, w = spec.size_hw
+    u = np.arange(w, dtype=np.float64)
+    intensity = spec.dc + spec.amplitude * np.cos(phase_from_column(u, period_px=spec.period_px))
+    seq = spec.sequence
+    code = seq[(np.arange(w) // spec.period_px) % seq.size].astype(np.float64)
+    row = np.stack([code * intensity, (1.0 - code) * intensity, intensity], axis=-1)
+    return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32)
+
+
+def quantize(pattern: np.ndarray, *, bits: int = 8) -> np.ndarray:
+    """Quantise a [0, 1] pattern to the projector's input bit depth.
+
+    Returns
+    -------
+    ndarray, same shape, uint8 (bits <= 8) or uint16
+    """
+    if not 1 <= bits <= 16:
+        raise ValueError(f"bits must be in 1..16, got {bits}")
+    if not np.all(np.isfinite(pattern)):
+        raise ValueError("pattern contains NaN or inf")
+    levels = (1 << bits) - 1
+    q = np.rint(np.clip(pattern, 0.0, 1.0) * levels)
+    return q.astype(np.uint8 if bits <= 8 else np.uint16)

@@ -1,0 +1,372 @@
+"""Mitsuba variant choice, capture and reference renders, and ground truth at pixel centres.
+
+Nothing here imports Dr.Jit or Mitsuba at module import time: Dr.Jit binds a libLLVM when it is
+first imported, so :func:`select_variant` must run first (at an entry point) to steer it.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simbench.rig import Intrinsics, Rig, pixel_rays, project_to_projector
+from simbench.scene import SceneSpec, object_to_mitsuba
+
+__all__ = [
+    "MIN_LLVM_MAJOR",
+    "find_libllvm",
+    "select_variant",
+    "projector_texture",
+    "mitsuba_scene",
+    "render_radiance",
+    "GroundTruth",
+    "ground_truth",
+]
+
+# Mitsuba 3.6+ kernels use llvm.minimum/maximum intrinsics; LLVM <= 15 cannot select them and
+# aborts the whole process ("LLVM ERROR: Cannot select ... fminimum"), which no try can catch.
+MIN_LLVM_MAJOR = 16
+
+_LLVM_GLOBS = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/aarch64-linux-gnu/libLLVM*.so*",
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
+    "/usr/local/opt/llvm/lib/libLLVM*.dylib",
+)
+
+
+def _llvm_major_from_path(path: Path) -> int | None:
+    for name in (path.name, Path(os.path.realpath(path)).name):
+        m = re.match(r"libLLVM[-.]?(?:so\.)?(\d+)", name)
+        if m:
+            return int(m.group(1))
+    m = re.search(r"llvm-(\d+)", str(path))
+    return int(m.group(1)) if m else None
+
+
+def find_libllvm() -> list[tuple[int, Path]]:
+    """Shared libLLVM files on this machine with their major versions, newest first."""
+    found: dict[Path, int] = {}
+    for pattern in _LLVM_GLOBS:
+        for p in glob.glob(pattern):
+            path = Path(p)
+            major = _llvm_major_from_path(path)
+            if major is not None and path.is_file():
+                found.setdefault(path, major)
+    return sorted(((v, p) for p, v in found.items()), key=lambda x: (-x[0], str(x[1])))
+
+
+def _notice(msg: str) -> None:
+    print(f"simbench: {msg}", file=sys.stderr)
+
+
+def select_variant(requested: str | None = None) -> str:
+    """Choose and set the Mitsuba variant; call once at an entry point, before other Mitsuba use.
+
+    Order: ``requested`` if given; else ``cuda_ad_rgb`` with a CUDA GPU; else ``llvm_ad_rgb``
+    when Dr.Jit runs on libLLVM >= 16; else ``scalar_rgb`` (about 5x slower) with a notice.
+
+    Raises
+    ------
+    ValueError
+        Unknown variant, or an LLVM variant requested where it would abort the process.
+    """
+    if "drjit" not in sys.modules and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        good = [p for v, p in find_libllvm() if v >= MIN_LLVM_MAJOR]
+        if good:
+            os.environ["DRJIT_LIBLLVM_PATH"] = str(good[0])
+    import drjit as dr
+    import mitsuba as mi
+
+    try:
+        llvm = dr.detail.llvm_version() if dr.has_backend(dr.JitBackend.LLVM) else None
+    except Exception:  # noqa: BLE001 - no usable LLVM backend at all
+        llvm = None
+    llvm_ok = llvm is not None and llvm[0] >= MIN_LLVM_MAJOR
+    llvm_text = "none found" if llvm is None else ".".join(map(str, llvm))
+
+    if requested:
+        if requested not in mi.variants():
+            raise ValueError(f"unknown Mitsuba variant {requested!r}; available: {mi.variants()}")
+        if requested.startswith("llvm_") and not llvm_ok:
+            raise ValueError(
+                f"variant {requested} needs libLLVM >= {MIN_LLVM_MAJOR} (found: {llvm_text}); "
+                "install it (Debian: apt-get install libllvm19) or use --variant scalar_rgb"
+            )
+        variant = requested
+    elif _has_cuda(dr) and "cuda_ad_rgb" in mi.variants():
+        variant = "cuda_ad_rgb"
+    elif llvm_ok:
+        variant = "llvm_ad_rgb"
+    else:
+        variant = "scalar_rgb"
+        _notice(
+            f"libLLVM >= {MIN_LLVM_MAJOR} not available (found: {llvm_text}); rendering with "
+            "scalar_rgb, about 5x slower. Fix: apt-get install libllvm19 (done by `make setup` as root)."
+        )
+    mi.set_variant(variant)
+    return variant
+
+
+def _has_cuda(dr) -> bool:
+    if not os.path.exists("/dev/nvidiactl"):
+        return False
+    try:
+        return bool(dr.has_backend(dr.JitBackend.CUDA))
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def _is_jit(variant: str) -> bool:
+    return variant.startswith(("llvm_", "cuda_"))
+
+
+def _pad_factor(c_px: float, size: int, scale: int) -> tuple[int, int, float]:
+    """Fine-pixel padding (left, total) that centres principal point ``c_px`` at upsampling
+    ``scale``, and the principal point actually realised (OpenCV px of the original grid)."""
+    a = round(2 * scale * (c_px + 0.5)) - 1  # 2 * realised centre, in fine pixels
+    half = max((a + 1) / 2, (2 * scale * size - 1 - a) / 2)
+    total = int(round(2 * half))
+    left = int(round(half - (a + 1) / 2))
+    realised = ((a / 2) + 0.5) / scale - 0.5
+    return left, total, realised
+
+
+def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndarray, float, Intrinsics]:
+    """Texture and field of view for Mitsuba's ``projector`` emitter.
+
+    Mitsuba's projector is a centred frustum; an off-centre principal point is modelled by
+    padding the pattern with black (and, if the offset is not on the half-pixel grid, by
+    nearest-neighbour upsampling by 2 first, which keeps DMD pixels sharp).
+
+    Parameters
+    ----------
+    drive : ndarray, shape (H, W, 3), float32
+        Linear projector drive in [0, 1] (what the DMD emits per channel).
+    projector : Intrinsics
+
+    Returns
+    -------
+    texture : ndarray, shape (H', W', 3), float32
+    fov_x_deg : float
+    realised : Intrinsics
+        The projector as rendered (principal point snapped to the 1/4-px grid at worst).
+    """
+    h, w = projector.size_hw
+    if drive.shape != (h, w, 3):
+        raise ValueError(f"pattern shape {drive.shape} does not match the projector {(h, w, 3)}")
+    best = None
+    for scale in (1, 2):
+        lx, tx, cx = _pad_factor(projector.cx_px, w, scale)
+        ly, ty, cy = _pad_factor(projector.cy_px, h, scale)
+        err = max(abs(cx - projector.cx_px), abs(cy - projector.cy_px))
+        if best is None or err < best[0] - 1e-9:
+            best = (err, scale, lx, tx, cx, ly, ty, cy)
+    _, scale, lx, tx, cx, ly, ty, cy = best
+    tex = drive
+    if scale > 1:
+        tex = np.repeat(np.repeat(tex, scale, axis=0), scale, axis=1)
+    if (tx, ty) != (w * scale, h * scale):
+        out = np.zeros((ty, tx, 3), dtype=np.float32)
+        out[ly : ly + h * scale, lx : lx + w * scale] = tex
+        tex = out
+    fov = float(np.degrees(2 * np.arctan(tx / (2.0 * scale * projector.focal_px))))
+    realised = Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy)
+    return np.ascontiguousarray(tex, dtype=np.float32), fov, realised
+
+
+def _look_at_z(mi, position) -> object:
+    pos = [float(x) for x in position]
+    return mi.ScalarTransform4f().look_at(origin=pos, target=[pos[0], pos[1], pos[2] + 1.0], up=[0, -1, 0])
+
+
+def _pose(mi, rig: Rig) -> object:
+    m = np.eye(4)
+    # Mitsuba's camera frame with look_at(up=-y) is OpenCV's (x right, y down, z forward).
+    m[:3, :3] = rig.rotation
+    m[:3, 3] = rig.position_m
+    return mi.ScalarTransform4f(m.tolist()) @ _look_at_z(mi, (0, 0, 0))
+
+
+def mitsuba_scene(scene: SceneSpec, drive: np.ndarray, *, spp: int, max_depth: int) -> tuple[dict, Rig]:
+    """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
+
+    Returns the dictionary and the rig as rendered (see :func:`projector_texture`).
+    """
+    import mitsuba as mi
+
+    if spp < 1 or int(spp) != spp:
+        raise ValueError(f"spp must be a positive integer, got {spp}")
+    rig = scene.rig
+    cam = rig.camera
+    tex, fov_p, realised = projector_texture(drive, rig.projector)
+    d: dict = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": int(max_depth)},
+        "sensor": {
+            "type": "perspective",
+            "fov": cam.fov_x_deg,
+            "fov_axis": "x",
+            # Mitsuba measures the offset in image widths/heights, positive moving the
+            # principal point towards -x/-y (checked by tests/test_render.py).
+            "principal_point_offset_x": ((cam.width_px - 1) / 2.0 - cam.cx_px) / cam.width_px,
+            "principal_point_offset_y": ((cam.height_px - 1) / 2.0 - cam.cy_px) / cam.height_px,
+            "near_clip": 1e-3,
+            "far_clip": 1e3,
+            "to_world": _look_at_z(mi, (0, 0, 0)),
+            "film": {
+                "type": "hdrfilm",
+                "width": cam.width_px,
+                "height": cam.height_px,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
+            "sampler": {"type": "independent", "sample_count": int(spp)},
+        },
+        "projector": {
+            "type": "projector",
+            "fov": fov_p,
+            "scale": float(scene.projector_scale),
+            "to_world": _pose(mi, rig),
+            "irradiance": {
+                "type": "bitmap",
+                "bitmap": mi.Bitmap(tex),
+                "raw": True,
+                "filter_type": "nearest",
+                "wrap_mode": "clamp",
+            },
+        },
+    }
+    if max(scene.ambient_rgb) > 0:
+        d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
+    for i, obj in enumerate(scene.objects):
+        d[f"obj{i:03d}"] = object_to_mitsuba(obj)
+    rendered = Rig(rig.camera, realised, rig.position_m, rig.rotation_deg, rig.name)
+    return d, rendered
+
+
+def render_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int, max_depth: int = 6) -> np.ndarray:
+    """Path-traced radiance reaching the camera, lit by the projector showing ``drive``.
+
+    Parameters
+    ----------
+    drive : ndarray, shape (Hp, Wp, 3), float32 in [0, 1]
+        Linear projector output per channel (after the projector's transfer curve).
+    spp, seed : int
+        Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm).
+    max_depth : int
+        Path length limit (>= 3 gives one interreflection bounce).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32, linear radiance (pattern value 1 on a white
+    Lambertian plane facing the projector at 1 m gives radiance ``scale``).
+    """
+    import mitsuba as mi
+
+    d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth)
+    img = mi.render(mi.load_dict(d), seed=int(seed), spp=int(spp))
+    return np.array(img, dtype=np.float32)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Ground truth at camera pixel centres.
+
+    Attributes
+    ----------
+    depth_m : ndarray, shape (H, W), float32
+        z-depth in the camera frame (not ray distance); NaN where the ray hits nothing.
+    column_px : ndarray, shape (H, W), float64
+        Projector column (OpenCV coordinates, sub-pixel) lighting the pixel; NaN if unlit.
+    object_id : ndarray, shape (H, W), int16
+        Index into ``SceneSpec.objects``; -1 where nothing is hit.
+    lit : ndarray, shape (H, W), bool
+        Seen by the camera and directly lit by the projector (inside its frustum, not in its
+        shadow, the same side of the surface facing both).
+    """
+
+    depth_m: np.ndarray
+    column_px: np.ndarray
+    object_id: np.ndarray
+    lit: np.ndarray
+
+    @property
+    def seen(self) -> np.ndarray:
+        return self.object_id >= 0
+
+
+def ground_truth(scene: SceneSpec) -> GroundTruth:
+    """Cast one ray through every camera pixel centre with Mitsuba and project the hits."""
+    import mitsuba as mi
+
+    d, rig = mitsuba_scene(scene, np.zeros((*scene.rig.projector.size_hw, 3), np.float32), spp=1, max_depth=1)
+    d.pop("projector")
+    d.pop("ambient", None)
+    mscene = mi.load_dict(d)
+    rays = pixel_rays(rig.camera)
+    h, w = rays.shape[:2]
+    dirs = (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)
+    proj_pos = np.asarray(rig.position_m)
+    key_to_index = {f"obj{i:03d}": i for i in range(len(scene.objects))}
+    if _is_jit(mi.variant()):
+        p, n, hit, occluded, obj = _trace_vectorised(mi, mscene, dirs, proj_pos, key_to_index)
+    else:
+        p, n, hit, occluded, obj = _trace_scalar(mi, mscene, dirs, proj_pos, key_to_index)
+    depth = np.where(hit, p[:, 2], np.nan)
+    u, v, zp = project_to_projector(p, rig)
+    prj = rig.projector
+    in_frustum = (zp > 0) & (u >= -0.5) & (u <= prj.width_px - 0.5) & (v >= -0.5) & (v <= prj.height_px - 0.5)
+    same_side = np.sign(np.sum(n * (proj_pos - p), axis=1)) == np.sign(np.sum(n * (-p), axis=1))
+    lit = hit & in_frustum & ~occluded & same_side
+    return GroundTruth(
+        depth_m=depth.reshape(h, w).astype(np.float32),
+        column_px=np.where(lit, u, np.nan).reshape(h, w),
+        object_id=np.where(hit, obj, -1).reshape(h, w).astype(np.int16),
+        lit=lit.reshape(h, w),
+    )
+
+
+def _trace_vectorised(mi, mscene, dirs, proj_pos, key_to_index):
+    ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(dirs[:, 0], dirs[:, 1], dirs[:, 2]))
+    si = mscene.ray_intersect(ray)
+    hit = np.array(si.is_valid(), dtype=bool)
+    shadow = si.spawn_ray_to(mi.Point3f(*[float(x) for x in proj_pos]))
+    occluded = np.array(mscene.ray_test(shadow, si.is_valid()), dtype=bool)
+    obj = np.full(hit.shape, -1, dtype=np.int32)
+    for shape in mscene.shapes():
+        obj[np.array(si.shape == mi.ShapePtr(shape), dtype=bool)] = key_to_index[shape.id()]
+    p = np.array(si.p, dtype=np.float64).T
+    n = np.array(si.n, dtype=np.float64).T
+    return p, n, hit, occluded, obj
+
+
+def _trace_scalar(mi, mscene, dirs, proj_pos, key_to_index):
+    count = len(dirs)
+    p = np.zeros((count, 3))
+    n = np.zeros((count, 3))
+    hit = np.zeros(count, bool)
+    occluded = np.zeros(count, bool)
+    obj = np.full(count, -1, np.int32)
+    target = mi.Point3f(*[float(x) for x in proj_pos])
+    origin = mi.Point3f(0.0, 0.0, 0.0)
+    for i, dvec in enumerate(dirs.tolist()):
+        si = mscene.ray_intersect(mi.Ray3f(origin, mi.Vector3f(dvec)))
+        if not si.is_valid():
+            continue
+        hit[i] = True
+        p[i] = si.p
+        n[i] = si.n
+        obj[i] = key_to_index[si.shape.id()]
+        occluded[i] = mscene.ray_test(si.spawn_ray_to(target))
+    return p, n, hit, occluded, obj

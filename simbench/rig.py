@@ -1,0 +1,383 @@
+"""Camera, projector and their relative pose; projection and triangulation.
+
+Frames and conventions
+----------------------
+* The world frame *is* the camera frame, OpenCV style: x right, y down, z forward (metres).
+* Pixel coordinates are OpenCV's: pixel ``(row, col)`` has its centre at ``(v, u) = (row, col)``;
+  a principal point at the image centre is ``((W-1)/2, (H-1)/2)``.
+* Pinhole intrinsics with square pixels (one focal length in px, as Mitsuba's sensors have).
+* The projector's pose is ``X_cam = R @ X_proj + t``: ``t`` (``position_m``) is the projector's
+  optical centre in the camera frame and ``R`` rotates projector axes into camera axes.
+
+The paper's rig (Sec. 6, Table 2)
+---------------------------------
+Camera Point Grey Flea3 FL3-U3-13E4C-C, 1280x960, f = 2312.5320 px; projector TI LightCrafter 4500,
+1824x1140, f = 2227.9948 px; baseline 93 mm; parallel optical axes. Table 2 as printed is
+garbled: its "principal points" ([1027.9968, 1014.5375] for a 1280x960 camera, i.e. outside the
+image vertically) and its "distortion" entries (3x3 blocks that read like rotation matrices)
+cannot be used as printed, so the preset puts both principal points at the image centres and
+uses no distortion; this is what the paper's "optical axes are parallel" implies.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from simbench.io import atomic_write_text
+
+__all__ = [
+    "Intrinsics",
+    "Rig",
+    "paper_rig",
+    "RIG_PRESETS",
+    "get_rig",
+    "rig_from_dict",
+    "rig_to_dict",
+    "load_rig",
+    "save_rig",
+    "rotation_xyz_deg",
+    "pixel_rays",
+    "project_to_projector",
+    "triangulate_columns",
+    "projector_column_at_depth",
+]
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics of a camera or projector (square pixels).
+
+    Attributes
+    ----------
+    width_px, height_px : int
+        Image (or DMD pattern) size.
+    focal_px : float
+        Focal length in pixels.
+    cx_px, cy_px : float
+        Principal point, OpenCV coordinates (centre = ``(W-1)/2, (H-1)/2``).
+    """
+
+    width_px: int
+    height_px: int
+    focal_px: float
+    cx_px: float
+    cy_px: float
+
+    def __post_init__(self) -> None:
+        for name in ("width_px", "height_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or int(v) != v or v < 1:
+                raise ValueError(f"{name} must be a positive integer, got {v!r}")
+        for name in ("focal_px", "cx_px", "cy_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {v!r}")
+        if self.focal_px <= 0:
+            raise ValueError(f"focal_px must be > 0, got {self.focal_px}")
+
+    @classmethod
+    def centred(cls, width_px: int, height_px: int, focal_px: float) -> "Intrinsics":
+        return cls(width_px, height_px, focal_px, (width_px - 1) / 2.0, (height_px - 1) / 2.0)
+
+    @property
+    def size_hw(self) -> tuple[int, int]:
+        return (int(self.height_px), int(self.width_px))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 OpenCV camera matrix K."""
+        return np.array(
+            [[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]]
+        )
+
+    @property
+    def fov_x_deg(self) -> float:
+        """Horizontal field of view of a centred frustum of this width (Mitsuba's ``fov``)."""
+        return math.degrees(2.0 * math.atan(self.width_px / (2.0 * self.focal_px)))
+
+
+def rotation_xyz_deg(angles_deg: tuple[float, float, float]) -> np.ndarray:
+    """Rotation matrix ``Rz @ Ry @ Rx`` from angles (degrees) about the x, y, z axes."""
+    ax, ay, az = np.radians(np.asarray(angles_deg, dtype=np.float64))
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A camera and a projector with the projector's pose in the camera frame.
+
+    Attributes
+    ----------
+    camera, projector : Intrinsics
+    position_m : tuple of 3 float
+        Projector optical centre in the camera frame (metres).
+    rotation_deg : tuple of 3 float
+        Projector orientation as angles about x, y, z (degrees), ``R = Rz @ Ry @ Rx``.
+    name : str
+    """
+
+    camera: Intrinsics
+    projector: Intrinsics
+    position_m: tuple[float, float, float] = (0.093, 0.0, 0.0)
+    rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    name: str = "custom"
+    _r: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        for name in ("position_m", "rotation_deg"):
+            v = getattr(self, name)
+            if len(v) != 3 or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in v
+            ):
+                raise ValueError(f"{name} must be three finite numbers, got {v!r}")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if np.linalg.norm(self.position_m) < 1e-6:
+            raise ValueError("projector position_m coincides with the camera: no baseline")
+        object.__setattr__(self, "_r", rotation_xyz_deg(self.rotation_deg))
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """R, shape (3, 3): projector axes expressed in the camera frame."""
+        return self._r.copy()
+
+    @property
+    def baseline_m(self) -> float:
+        return float(np.linalg.norm(self.position_m))
+
+    @property
+    def is_rectified(self) -> bool:
+        """Parallel optical axes, baseline along +x: the geometry of paper Sec. 5.4."""
+        return bool(
+            np.allclose(self._r, np.eye(3), atol=1e-9)
+            and abs(self.position_m[1]) < 1e-9
+            and abs(self.position_m[2]) < 1e-9
+            and self.position_m[0] > 0
+        )
+
+
+def paper_rig() -> Rig:
+    """The rig of paper Sec. 6 (see the module docstring for what Table 2 could not give)."""
+    return Rig(
+        camera=Intrinsics.centred(1280, 960, 2312.5320),
+        projector=Intrinsics.centred(1824, 1140, 2227.9948),
+        position_m=(0.093, 0.0, 0.0),
+        rotation_deg=(0.0, 0.0, 0.0),
+        name="li2017",
+    )
+
+
+RIG_PRESETS = {"paper": paper_rig}
+
+
+def get_rig(name_or_path: str | Path, *, base_dir: Path | None = None) -> Rig:
+    """A rig preset by name (``paper``) or a rig TOML file (relative to ``base_dir``)."""
+    key = str(name_or_path)
+    if key in RIG_PRESETS:
+        return RIG_PRESETS[key]()
+    path = Path(key)
+    if base_dir is not None and not path.is_absolute():
+        path = base_dir / path
+    if path.suffix.lower() != ".toml":
+        raise ValueError(
+            f"unknown rig {key!r}: give a preset ({', '.join(sorted(RIG_PRESETS))}) or a .toml file"
+        )
+    return load_rig(path)
+
+
+_INTR_KEYS = ("width_px", "height_px", "focal_px", "cx_px", "cy_px")
+_POSE_KEYS = ("position_m", "rotation_deg")
+
+
+def _check_keys(table: dict, allowed: tuple[str, ...], where: str, *, required=()) -> None:
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {list(allowed)}")
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {missing}")
+
+
+def _intrinsics_from(table: object, where: str) -> Intrinsics:
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: expected a table, got {type(table).__name__}")
+    _check_keys(table, _INTR_KEYS, where, required=("width_px", "height_px", "focal_px"))
+    w, h = table["width_px"], table["height_px"]
+    try:
+        return Intrinsics(
+            width_px=w,
+            height_px=h,
+            focal_px=table["focal_px"],
+            cx_px=table.get("cx_px", (w - 1) / 2.0 if isinstance(w, int) else w),
+            cy_px=table.get("cy_px", (h - 1) / 2.0 if isinstance(h, int) else h),
+        )
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def rig_from_dict(data: dict, *, where: str = "rig") -> Rig:
+    """Build a :class:`Rig` from the TOML table layout documented in :func:`save_rig`."""
+    _check_keys(data, ("name", "camera", "projector", "pose"), where, required=("camera", "projector"))
+    pose = data.get("pose", {})
+    if not isinstance(pose, dict):
+        raise ValueError(f"{where}.pose: expected a table")
+    _check_keys(pose, _POSE_KEYS, f"{where}.pose")
+    try:
+        return Rig(
+            camera=_intrinsics_from(data["camera"], f"{where}.camera"),
+            projector=_intrinsics_from(data["projector"], f"{where}.projector"),
+            position_m=tuple(pose.get("position_m", (0.093, 0.0, 0.0))),
+            rotation_deg=tuple(pose.get("rotation_deg", (0.0, 0.0, 0.0))),
+            name=str(data.get("name", "custom")),
+        )
+    except TypeError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def rig_to_dict(rig: Rig) -> dict:
+    def intr(i: Intrinsics) -> dict:
+        return {k: getattr(i, k) for k in _INTR_KEYS}
+
+    return {
+        "name": rig.name,
+        "camera": intr(rig.camera),
+        "projector": intr(rig.projector),
+        "pose": {"position_m": list(rig.position_m), "rotation_deg": list(rig.rotation_deg)},
+    }
+
+
+_RIG_HEADER = """\
+# simbench rig file.  Units: pixels and metres; frames: OpenCV (x right, y down, z forward).
+# [camera] / [projector]: width_px, height_px, focal_px, cx_px, cy_px (principal point in OpenCV
+#   pixel coordinates, where the image centre is ((W-1)/2, (H-1)/2); omitted = centred).
+# [pose]: the projector in the camera frame: position_m = optical centre; rotation_deg = angles
+#   about x, y, z in degrees, R = Rz @ Ry @ Rx maps projector axes to camera axes.
+"""
+
+
+def save_rig(rig: Rig, path: str | Path) -> Path:
+    """Write a rig TOML file (atomically) that :func:`load_rig` reads back to an equal rig."""
+    import tomli_w
+
+    return atomic_write_text(Path(path), _RIG_HEADER + tomli_w.dumps(rig_to_dict(rig)))
+
+
+def load_rig(path: str | Path) -> Rig:
+    """Read a rig TOML file; errors name the file and the offending field."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"rig file not found: {path}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    return rig_from_dict(data, where=str(path))
+
+
+def pixel_rays(intr: Intrinsics) -> np.ndarray:
+    """Ray directions through every pixel centre, normalised to z = 1.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float64
+    """
+    h, w = intr.size_hw
+    u = (np.arange(w) - intr.cx_px) / intr.focal_px
+    v = (np.arange(h) - intr.cy_px) / intr.focal_px
+    rays = np.empty((h, w, 3))
+    rays[..., 0] = u[None, :]
+    rays[..., 1] = v[:, None]
+    rays[..., 2] = 1.0
+    return rays
+
+
+def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project camera-frame points into the projector.
+
+    Parameters
+    ----------
+    points_m : ndarray, shape (..., 3)
+
+    Returns
+    -------
+    u_px, v_px, z_m : ndarray, shape (...)
+        Projector pixel coordinates (OpenCV) and depth along the projector's axis.
+    """
+    p = np.asarray(points_m, dtype=np.float64) - np.asarray(rig.position_m)
+    q = p @ rig.rotation  # R^T (X - t), row-vector form
+    z = q[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = rig.projector.focal_px * q[..., 0] / z + rig.projector.cx_px
+        v = rig.projector.focal_px * q[..., 1] / z + rig.projector.cy_px
+    return u, v, z
+
+
+def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows=None, cols=None) -> np.ndarray:
+    """Depth (camera z, metres) where each camera pixel's ray meets its projector column's plane.
+
+    Parameters
+    ----------
+    column_px : ndarray, shape (H, W) or (N,)
+        Projector column (OpenCV coordinates) seen by each camera pixel; NaN = unknown.
+    rows, cols : ndarray, optional
+        Camera pixel coordinates when ``column_px`` is not a full (H, W) image.
+
+    Returns
+    -------
+    ndarray, same shape, float64; NaN where the ray is parallel to the plane or behind.
+    """
+    cam, prj = rig.camera, rig.projector
+    col = np.asarray(column_px, dtype=np.float64)
+    if rows is None:
+        h, w = col.shape
+        rx = ((np.arange(w) - cam.cx_px) / cam.focal_px)[None, :]
+        ry = ((np.arange(h) - cam.cy_px) / cam.focal_px)[:, None]
+    else:
+        rx = (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px
+        ry = (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px
+    # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f.
+    a = (col - prj.cx_px) / prj.focal_px
+    r = rig.rotation
+    t = np.asarray(rig.position_m)
+    # normal n = R @ (1, 0, -a); plane n.(X - t) = 0; ray X = Z * (rx, ry, 1).
+    nx, ny, nz = r[0, 0] - a * r[0, 2], r[1, 0] - a * r[1, 2], r[2, 0] - a * r[2, 2]
+    num = nx * t[0] + ny * t[1] + nz * t[2]
+    den = nx * rx + ny * ry + nz
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = num / den
+    return np.where(np.isfinite(z) & (z > 0), z, np.nan)
+
+
+def projector_column_at_depth(depth_m, rig: Rig, *, rows=None, cols=None) -> np.ndarray:
+    """Projector column lighting each camera pixel if the surface there were at ``depth_m``.
+
+    ``depth_m`` may be a scalar (a fronto-parallel plane) or an (H, W) map.
+
+    Returns
+    -------
+    ndarray, shape (H, W) (or (N,) with ``rows``/``cols``), float64
+    """
+    cam = rig.camera
+    if rows is None:
+        rays = pixel_rays(cam)
+    else:
+        rays = np.stack(
+            [
+                (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px,
+                (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px,
+                np.ones(np.shape(rows)),
+            ],
+            axis=-1,
+        )
+    pts = rays * np.asarray(depth_m, dtype=np.float64)[..., None]
+    u, _, _ = project_to_projector(pts, rig)
+    return u

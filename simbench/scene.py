@@ -1,0 +1,286 @@
+"""Scene specifications (TOML files in ``scenes/``) and their Mitsuba dictionaries.
+
+A scene file::
+
+    name = "white_plane"
+    description = "..."
+    rig = "paper"                 # a rig preset or a rig .toml path (relative to this file)
+    reference_depth_m = 1.0       # Z0 of the reference-plane capture (paper Sec. 5.4)
+
+    [projector]
+    scale = 1.0                   # radiance scale of the pattern (1 = unit irradiance*pi at 1 m)
+
+    [ambient]
+    rgb = [0.0, 0.0, 0.0]         # constant environment radiance
+
+    [[object]]
+    type = "plane"                # plane | box | sphere | mesh
+    name = "wall"
+    center_m = [0.0, 0.0, 1.0]
+    size_m = [1.5, 1.2]           # plane: (x, y) extent; box: (x, y, z) extent
+    rotation_deg = [0, 30, 0]     # about x, y, z; R = Rz @ Ry @ Rx
+    rgb = [0.8, 0.8, 0.8]         # linear diffuse reflectance (two-sided Lambertian)
+
+Spheres take ``center_m`` and ``radius_m``; meshes take ``file`` (PLY/OBJ, relative to the
+scene file), ``scale`` (uniform, mesh units to metres), ``translate_m`` and ``rotation_deg``.
+All coordinates are in the camera frame (x right, y down, z forward, metres).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from simbench.rig import Rig, get_rig, rotation_xyz_deg
+
+__all__ = [
+    "Material",
+    "SceneObject",
+    "SceneSpec",
+    "OBJECT_KINDS",
+    "load_scene",
+    "scene_from_dict",
+    "reference_scene",
+    "object_to_mitsuba",
+]
+
+OBJECT_KINDS = {
+    "plane": ("center_m", "size_m", "rotation_deg"),
+    "box": ("center_m", "size_m", "rotation_deg"),
+    "sphere": ("center_m", "radius_m"),
+    "mesh": ("file", "scale", "translate_m", "rotation_deg"),
+}
+_COMMON_KEYS = ("type", "name", "rgb", "material")
+MATERIALS = ("diffuse",)
+
+
+@dataclass(frozen=True)
+class Material:
+    """A material. ``diffuse``: two-sided Lambertian with linear RGB reflectance in [0, 1]."""
+
+    kind: str = "diffuse"
+    rgb: tuple[float, float, float] = (0.8, 0.8, 0.8)
+
+    def __post_init__(self) -> None:
+        if self.kind not in MATERIALS:
+            raise ValueError(f"unknown material {self.kind!r}; valid: {list(MATERIALS)}")
+        if len(self.rgb) != 3 or not all(
+            isinstance(c, (int, float)) and not isinstance(c, bool) and 0.0 <= c <= 1.0 for c in self.rgb
+        ):
+            raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {self.rgb!r}")
+        object.__setattr__(self, "rgb", tuple(float(c) for c in self.rgb))
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """One object: its kind, geometry parameters (see module docstring) and material."""
+
+    kind: str
+    name: str
+    params: tuple[tuple[str, object], ...]
+    material: Material = Material()
+
+    def get(self, key: str, default=None):
+        return dict(self.params).get(key, default)
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    name: str
+    rig: Rig
+    objects: tuple[SceneObject, ...]
+    reference_depth_m: float = 1.0
+    projector_scale: float = 1.0
+    ambient_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    description: str = ""
+    base_dir: Path = field(default=Path("."), compare=False)
+
+
+def _vec(v: object, n: int, where: str, *, positive: bool = False) -> tuple[float, ...]:
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        raise ValueError(f"{where}: expected a list of {n} numbers, got {v!r}")
+    out = []
+    for x in v:
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise ValueError(f"{where}: expected finite numbers, got {v!r}")
+        if positive and x <= 0:
+            raise ValueError(f"{where}: values must be > 0, got {v!r}")
+        out.append(float(x))
+    return tuple(out)
+
+
+def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
+    where = f"object[{index}]"
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: expected a table")
+    kind = d.get("type")
+    if kind not in OBJECT_KINDS:
+        raise ValueError(f"{where}: unknown type {kind!r}; valid types: {sorted(OBJECT_KINDS)}")
+    allowed = _COMMON_KEYS + OBJECT_KINDS[kind]
+    unknown = sorted(set(d) - set(allowed))
+    if unknown:
+        raise ValueError(f"{where} ({kind}): unknown key(s) {unknown}; valid keys: {list(allowed)}")
+    name = str(d.get("name", f"{kind}{index}"))
+    where = f"object[{index}] {name!r}"
+    p: dict[str, object] = {}
+    if kind in ("plane", "box"):
+        p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
+        n = 2 if kind == "plane" else 3
+        if "size_m" not in d:
+            raise ValueError(f"{where}: missing size_m")
+        p["size_m"] = _vec(d["size_m"], n, f"{where}.size_m", positive=True)
+        p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+    elif kind == "sphere":
+        p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
+        r = d.get("radius_m")
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not (r > 0 and math.isfinite(r)):
+            raise ValueError(f"{where}: radius_m must be a positive number, got {r!r}")
+        p["radius_m"] = float(r)
+    else:
+        if "file" not in d:
+            raise ValueError(f"{where}: missing file")
+        path = Path(str(d["file"]))
+        if not path.is_absolute():
+            path = base_dir / path
+        if not path.is_file():
+            raise FileNotFoundError(f"{where}: mesh file not found: {path}")
+        if path.suffix.lower() not in (".ply", ".obj"):
+            raise ValueError(f"{where}: mesh must be .ply or .obj, got {path.name}")
+        p["file"] = str(path.resolve())
+        s = d.get("scale", 1.0)
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not (s > 0 and math.isfinite(s)):
+            raise ValueError(f"{where}: scale must be a positive number, got {s!r}")
+        p["scale"] = float(s)
+        p["translate_m"] = _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m")
+        p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+    try:
+        mat = Material(kind=str(d.get("material", "diffuse")), rgb=tuple(d.get("rgb", (0.8, 0.8, 0.8))))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat)
+
+
+_SCENE_KEYS = ("name", "description", "rig", "reference_depth_m", "projector", "ambient", "object")
+
+
+def scene_from_dict(data: dict, *, base_dir: Path = Path("."), where: str = "scene") -> SceneSpec:
+    """Validate a scene table (see module docstring) into a :class:`SceneSpec`."""
+    unknown = sorted(set(data) - set(_SCENE_KEYS))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {list(_SCENE_KEYS)}")
+    objs = data.get("object", [])
+    if not isinstance(objs, list) or not objs:
+        raise ValueError(f"{where}: needs at least one [[object]]")
+    try:
+        rig = get_rig(data.get("rig", "paper"), base_dir=base_dir)
+        objects = tuple(_object_from_dict(o, i, base_dir) for i, o in enumerate(objs))
+        proj = data.get("projector", {})
+        amb = data.get("ambient", {})
+        if not isinstance(proj, dict) or sorted(set(proj) - {"scale"}):
+            raise ValueError("[projector] takes only: scale")
+        if not isinstance(amb, dict) or sorted(set(amb) - {"rgb"}):
+            raise ValueError("[ambient] takes only: rgb")
+        scale = proj.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not scale > 0:
+            raise ValueError(f"projector.scale must be > 0, got {scale!r}")
+        z0 = data.get("reference_depth_m", 1.0)
+        if isinstance(z0, bool) or not isinstance(z0, (int, float)) or not z0 > 0:
+            raise ValueError(f"reference_depth_m must be > 0, got {z0!r}")
+        ambient = _vec(amb.get("rgb", (0, 0, 0)), 3, "ambient.rgb")
+        if min(ambient) < 0:
+            raise ValueError(f"ambient.rgb must be >= 0, got {ambient}")
+    except (FileNotFoundError, ValueError) as exc:
+        raise type(exc)(f"{where}: {exc}") from None
+    names = [o.name for o in objects]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{where}: object names must be unique, got {names}")
+    return SceneSpec(
+        name=str(data.get("name", "scene")),
+        rig=rig,
+        objects=objects,
+        reference_depth_m=float(z0),
+        projector_scale=float(scale),
+        ambient_rgb=ambient,
+        description=str(data.get("description", "")),
+        base_dir=base_dir,
+    )
+
+
+def load_scene(path: str | Path) -> SceneSpec:
+    """Read and validate a scene TOML file; errors name the file and the problem."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"scene file not found: {path}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    data.setdefault("name", path.stem)
+    return scene_from_dict(data, base_dir=path.parent, where=str(path))
+
+
+def reference_scene(scene: SceneSpec, *, albedo: float = 0.8) -> SceneSpec:
+    """The reference-plane scene of paper Sec. 5.4: a white fronto-parallel plane at Z0.
+
+    The plane is sized to fill the camera's view with a wide margin; ``albedo`` is an
+    assumption (a matte white board), stated in the render metadata.
+    """
+    z0 = scene.reference_depth_m
+    cam = scene.rig.camera
+    half_w = 1.5 * z0 * max(cam.cx_px + 1, cam.width_px - cam.cx_px) / cam.focal_px
+    half_h = 1.5 * z0 * max(cam.cy_px + 1, cam.height_px - cam.cy_px) / cam.focal_px
+    plane = SceneObject(
+        kind="plane",
+        name="reference_plane",
+        params=tuple(
+            sorted(
+                {
+                    "center_m": (0.0, 0.0, z0),
+                    "size_m": (2 * half_w, 2 * half_h),
+                    "rotation_deg": (0.0, 0.0, 0.0),
+                }.items()
+            )
+        ),
+        material=Material("diffuse", (albedo, albedo, albedo)),
+    )
+    return SceneSpec(
+        name=f"{scene.name}_reference",
+        rig=scene.rig,
+        objects=(plane,),
+        reference_depth_m=z0,
+        projector_scale=scene.projector_scale,
+        ambient_rgb=scene.ambient_rgb,
+        description=f"reference plane at {z0} m",
+        base_dir=scene.base_dir,
+    )
+
+
+def _to_world(mi, *, translate, rotation_deg, scale) -> object:
+    m = np.eye(4)
+    m[:3, :3] = rotation_xyz_deg(rotation_deg) @ np.diag(np.broadcast_to(np.asarray(scale, float), 3))
+    m[:3, 3] = translate
+    return mi.ScalarTransform4f(m.tolist())
+
+
+def object_to_mitsuba(obj: SceneObject) -> dict:
+    """Mitsuba plugin dictionary of one object (a variant must be set)."""
+    import mitsuba as mi
+
+    bsdf = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(obj.material.rgb)}}}
+    if obj.kind == "plane":
+        sx, sy = obj.get("size_m")
+        # Mitsuba's rectangle spans [-1, 1]^2 with normal +z; flip it to face the camera.
+        tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=(sx / 2, sy / 2, 1.0))
+        return {"type": "rectangle", "to_world": tw, "flip_normals": True, "bsdf": bsdf}
+    if obj.kind == "box":
+        tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2)
+        return {"type": "cube", "to_world": tw, "bsdf": bsdf}
+    if obj.kind == "sphere":
+        return {"type": "sphere", "center": list(obj.get("center_m")), "radius": obj.get("radius_m"), "bsdf": bsdf}
+    path = obj.get("file")
+    tw = _to_world(mi, translate=obj.get("translate_m"), rotation_deg=obj.get("rotation_deg"), scale=obj.get("scale"))
+    return {"type": Path(path).suffix.lower()[1:], "filename": path, "to_world": tw, "bsdf": bsdf, "face_normals": False}
