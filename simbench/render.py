@@ -23,6 +23,7 @@ __all__ = [
     "find_libllvm",
     "select_variant",
     "projector_texture",
+    "realised_rig",
     "mitsuba_scene",
     "render_radiance",
     "GroundTruth",
@@ -184,6 +185,14 @@ def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndar
     return np.ascontiguousarray(tex, dtype=np.float32), fov, realised
 
 
+def realised_rig(rig: Rig) -> Rig:
+    """The rig as Mitsuba renders it (projector principal point on the padding grid)."""
+    _, _, realised = projector_texture(np.zeros((*rig.projector.size_hw, 3), np.float32), rig.projector)
+    if realised == rig.projector:
+        return rig
+    return Rig(rig.camera, realised, rig.position_m, rig.rotation_deg, rig.name)
+
+
 def _look_at_z(mi, position) -> object:
     pos = [float(x) for x in position]
     return mi.ScalarTransform4f().look_at(origin=pos, target=[pos[0], pos[1], pos[2] + 1.0], up=[0, -1, 0])
@@ -313,7 +322,9 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
     d, rig = mitsuba_scene(scene, np.zeros((*scene.rig.projector.size_hw, 3), np.float32), spp=1, max_depth=1)
     d.pop("projector")
     d.pop("ambient", None)
-    mscene = mi.load_dict(d)
+    # optimize=False: Mitsuba would otherwise merge meshes sharing a material into one shape
+    # and the per-object ids would be lost.
+    mscene = mi.load_dict(d, optimize=False)
     rays = pixel_rays(rig.camera)
     h, w = rays.shape[:2]
     dirs = (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)

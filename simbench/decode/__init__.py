@@ -1,0 +1,14 @@
+"""The paper's decoder (Sec. 5): one module per stage, chained by :func:`decode`."""
+
+from simbench.decode.pipeline import (
+    MODES,
+    PHASE_METHODS,
+    DecodeResult,
+    DecoderParams,
+    ReferenceMap,
+    as_float_image,
+    decode,
+    decode_reference,
+)
+
+__all__ = ["MODES", "PHASE_METHODS", "DecodeResult", "DecoderParams", "ReferenceMap", "as_float_image", "decode", "decode_reference"]

@@ -1,0 +1,130 @@
+"""Stage 2: stripes and their colour code (paper Sec. 5.2, Eq. 13, with voting).
+
+A *stripe* is a run of valid pixels along one image row between two wrapped-phase jumps
+(paper Sec. 5.3).  Runs also end at invalid pixels and at phase steps no fringe of plausible
+local frequency could make (depth edges); only runs that end in a genuine wrap are *linked* to
+their right neighbour, i.e. known to be the next stripe of the pattern.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["color_code", "Stripes", "segment_stripes", "vote_codes"]
+
+
+def color_code(rgb: np.ndarray) -> np.ndarray:
+    """Per-pixel code of paper Eq. 13: 1 where R >= G (red stripe), else 0.
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    return rgb[..., 0] >= rgb[..., 1]
+
+
+@dataclass(frozen=True)
+class Stripes:
+    """Stripe segmentation of an image.
+
+    labels : ndarray, shape (H, W), int32; stripe index per pixel, -1 where invalid
+    row, start, stop : ndarray, shape (S,), int32; each stripe is ``[start, stop)`` of ``row``
+    linked_prev : ndarray, shape (S,), bool; stripe ``s - 1`` is the pattern's previous stripe
+    """
+
+    labels: np.ndarray
+    row: np.ndarray
+    start: np.ndarray
+    stop: np.ndarray
+    linked_prev: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.row.size)
+
+
+def segment_stripes(
+    wrapped: np.ndarray,
+    valid: np.ndarray,
+    *,
+    period_px: float,
+    min_step_ratio: float = 0.3,
+    max_step_ratio: float = 3.0,
+) -> Stripes:
+    """Split each row into stripes at wrapped-phase jumps.
+
+    Parameters
+    ----------
+    wrapped : ndarray, shape (H, W), float32 in [-pi, pi)
+    valid : ndarray, shape (H, W), bool
+    period_px : float
+        Nominal fringe period in camera pixels; the expected phase step per pixel is
+        ``2*pi/period_px``.
+    min_step_ratio, max_step_ratio : float
+        A step (after unwrapping a jump) outside ``[min, max] * 2*pi/period_px`` is a
+        discontinuity: the run ends there without a link.
+
+    Returns
+    -------
+    Stripes
+    """
+    h, w = wrapped.shape
+    omega = 2.0 * np.pi / period_px
+    d = np.diff(wrapped, axis=1)
+    wrap = d < -np.pi
+    step = d + np.float32(2 * np.pi) * wrap
+    plausible = (step > min_step_ratio * omega) & (step < min(max_step_ratio * omega, 0.9 * np.pi))
+    both = valid[:, 1:] & valid[:, :-1]
+    cont = both & plausible & ~wrap  # same stripe continues
+    linked = both & plausible & wrap  # next stripe of the pattern starts
+    starts = np.zeros((h, w), dtype=bool)
+    starts[:, 0] = valid[:, 0]
+    starts[:, 1:] = valid[:, 1:] & ~cont
+    flat_starts = starts.ravel()
+    labels = np.cumsum(flat_starts, dtype=np.int64) - 1
+    labels = np.where(valid.ravel(), labels, -1).astype(np.int32).reshape(h, w)
+    idx = np.flatnonzero(flat_starts)
+    row = (idx // w).astype(np.int32)
+    start = (idx % w).astype(np.int32)
+    stop = np.empty_like(start)
+    if idx.size:
+        valid_flat = valid.ravel()
+        # a stripe ends where the next one starts or at the first invalid pixel after it
+        ends = np.flatnonzero(np.diff(np.concatenate([[False], valid_flat, [False]]).astype(np.int8)) == -1)
+        nxt = np.searchsorted(ends, idx, side="right")
+        run_end = ends[nxt]
+        next_start = np.append(idx[1:], h * w)
+        row_end = (row.astype(np.int64) + 1) * w
+        stop = (np.minimum(np.minimum(run_end, next_start), row_end) - row.astype(np.int64) * w).astype(np.int32)
+    linked_prev = np.zeros(idx.size, dtype=bool)
+    inner = start > 0
+    linked_prev[inner] = linked[row[inner], start[inner] - 1]
+    return Stripes(labels=labels, row=row, start=start, stop=stop, linked_prev=linked_prev)
+
+
+def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """One code per stripe.
+
+    With ``voting`` (paper Sec. 5.2) the majority of the stripe's pixels decides (ties give 1,
+    like Eq. 13's ``>=``); without it, the stripe's middle pixel decides.
+
+    Returns
+    -------
+    stripe_code : ndarray, shape (S,), uint8
+    agreement : ndarray, shape (S,), float32; share of the stripe's pixels agreeing with it
+    """
+    lab = stripes.labels.ravel()
+    sel = lab >= 0
+    counts = np.bincount(lab[sel], minlength=stripes.count).astype(np.float64)
+    ones = np.bincount(lab[sel], weights=code.ravel()[sel], minlength=stripes.count)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(counts > 0, ones / counts, 0.5)
+    if voting:
+        out = (frac >= 0.5).astype(np.uint8)
+    else:
+        mid = (stripes.start + stripes.stop - 1) // 2
+        out = code[stripes.row, mid].astype(np.uint8)
+    agreement = np.where(out == 1, frac, 1.0 - frac).astype(np.float32)
+    return out, agreement

@@ -1,0 +1,128 @@
+"""Stage 3: stripe order from De Bruijn windows, with neighbour check and correction
+(paper Sec. 5.3).
+
+Each stripe's window is the codes of the stripes around it (for order 3: previous, own, next,
+as paper Eq. 3); the window's place in the cycle gives the stripe's position W.  Successive
+linked stripes must have successive positions, so each neighbour within ``reach`` also predicts
+W; the plurality of the predictions wins, and a stripe that no neighbour confirms is dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["chain_extent", "window_positions_of_stripes", "neighbour_correct"]
+
+
+def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How many linked stripes precede and follow each stripe in its chain.
+
+    Returns
+    -------
+    left, right : ndarray, shape (S,), int64
+    """
+    n = linked_prev.size
+    idx = np.arange(n)
+    chain_start = np.maximum.accumulate(np.where(~linked_prev, idx, 0)) if n else idx
+    chain_id = np.cumsum(~linked_prev) - 1
+    last = np.zeros(chain_id.max() + 1 if n else 0, dtype=np.int64)
+    np.maximum.at(last, chain_id, idx)
+    return idx - chain_start, last[chain_id] - idx
+
+
+def window_positions_of_stripes(
+    stripe_code: np.ndarray,
+    linked_prev: np.ndarray,
+    *,
+    order: int,
+    table: np.ndarray,
+    cycle: int,
+) -> np.ndarray:
+    """Position W in the De Bruijn cycle of each stripe from its window of ``order`` codes.
+
+    The window of stripe ``j`` is stripes ``j - h .. j - h + order - 1`` with
+    ``h = (order - 1) // 2``; it must lie inside one linked chain.
+
+    Returns
+    -------
+    ndarray, shape (S,), int32; -1 where the window is incomplete or unknown
+    """
+    n = stripe_code.size
+    h = (order - 1) // 2
+    left, right = chain_extent(linked_prev)
+    ok = (left >= h) & (right >= order - 1 - h)
+    code = np.zeros(n, dtype=np.int64)
+    for j in range(order):
+        shifted = np.zeros(n, dtype=np.int64)
+        off = j - h
+        if off < 0:
+            shifted[-off:] = stripe_code[: n + off]
+        elif off > 0:
+            shifted[:-off] = stripe_code[off:]
+        else:
+            shifted[:] = stripe_code
+        code = code * 2 + shifted
+    q = table[code]
+    ok &= q >= 0
+    return np.where(ok, (q + h) % cycle, -1).astype(np.int32)
+
+
+def neighbour_correct(
+    positions: np.ndarray,
+    linked_prev: np.ndarray,
+    *,
+    cycle: int,
+    reach: int,
+    min_support: int = 2,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Check each stripe's W against its linked neighbours and correct it by plurality.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (S,), int32; W per stripe, -1 unknown
+    linked_prev : ndarray, shape (S,), bool
+    cycle : int
+        De Bruijn cycle length L.
+    reach : int
+        Neighbours on each side that vote; 0 turns the correction off.
+    min_support : int
+        Votes the winner needs; with fewer the stripe becomes unknown (-1).
+
+    Returns
+    -------
+    corrected : ndarray, shape (S,), int32
+    support : ndarray, shape (S,), int32; number of predictions agreeing with the result
+    """
+    n = positions.size
+    if reach <= 0:
+        return positions.copy(), (positions >= 0).astype(np.int32)
+    left, right = chain_extent(linked_prev)
+    preds = np.full((2 * reach + 1, n), -1, dtype=np.int64)
+    for k, off in enumerate(range(-reach, reach + 1)):
+        src = np.arange(n) + off
+        ok = (left >= -off) if off < 0 else (right >= off)
+        ok &= (src >= 0) & (src < n)
+        p = np.full(n, -1, dtype=np.int64)
+        p[ok] = positions[src[ok]]
+        good = ok & (p >= 0)
+        preds[k] = np.where(good, (p - off) % cycle, -1)
+    votes = np.zeros_like(preds)
+    for k in range(preds.shape[0]):
+        votes[k] = np.sum((preds == preds[k][None, :]) & (preds[k][None, :] >= 0), axis=0)
+    own = reach
+    # Plurality; ties prefer the stripe's own window, then the nearest neighbour.
+    order = [own] + [own + s * d for d in range(1, reach + 1) for s in (-1, 1)]
+    best = np.full(n, -1, dtype=np.int64)
+    best_votes = np.zeros(n, dtype=np.int64)
+    for k in order:
+        better = votes[k] > best_votes
+        best = np.where(better, preds[k], best)
+        best_votes = np.where(better, votes[k], best_votes)
+    # A tie between different candidates (typical where a chain was linked across a depth
+    # edge) is not evidence for either: drop the stripe rather than guess.
+    rival = np.zeros(n, dtype=np.int64)
+    for k in range(preds.shape[0]):
+        other = (preds[k] >= 0) & (preds[k] != best)
+        rival = np.maximum(rival, np.where(other, votes[k], 0))
+    keep = (best_votes >= min_support) & (best_votes > rival)
+    return np.where(keep, best, -1).astype(np.int32), np.where(keep, best_votes, 0).astype(np.int32)

@@ -1,0 +1,201 @@
+"""Stage 1: intensity by channel overlay (paper Eq. 9) and wrapped phase by a 2-D Gabor filter
+(paper Eq. 10-11).
+
+The Gabor filter is evaluated as a *normalised convolution* (Knutsson & Westin, CVPR 1993):
+at each pixel we fit ``a0 + a1*cos(w*x) + a2*sin(w*x)`` to the intensity under the Gaussian
+window of the Gabor kernel, weighting each sample by a certainty (0 outside the image, in
+shadow, or where a channel is saturated).  Where the window is complete this is the classic
+Gabor response with its DC leakage removed; at image borders and around invalid pixels it stays
+unbiased for a fringe of the nominal frequency, where a plain Gabor filter would not.  The fit
+residual relative to the fringe amplitude flags pixels whose window straddles a depth edge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+__all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_map", "PhaseResult", "gabor_phase"]
+
+
+def _overlay(rgb: np.ndarray) -> np.ndarray:
+    # paper Eq. 9: the fringe lives in B and in one of R/G, so (R+G+B)/2 is the full fringe
+    return (rgb[..., 0] + rgb[..., 1] + rgb[..., 2]) * np.float32(0.5)
+
+
+def _blue(rgb: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(rgb[..., 2])
+
+
+INTENSITY_MODES = {"overlay": _overlay, "blue": _blue}
+
+
+def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay") -> np.ndarray:
+    """Fringe intensity from a capture.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32 in [0, 1]
+    mode : {"overlay", "blue"}
+        ``overlay`` is paper Eq. 9, ``(R + G + B) / 2``; ``blue`` uses the blue channel alone.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32
+    """
+    try:
+        fn = INTENSITY_MODES[mode]
+    except KeyError:
+        raise ValueError(f"unknown intensity mode {mode!r}; valid: {sorted(INTENSITY_MODES)}") from None
+    return fn(rgb)
+
+
+def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which pixels carry usable fringe samples, and which are lit at all.
+
+    A pixel is *unlit* when the brightest pixel within one fringe period along its row is below
+    ``dark_level`` (projector shadow, black surface): fringe troughs are dark even where lit, so
+    a per-pixel threshold would not do.  A pixel's sample is *uncertain* when it is unlit or any
+    channel is at or above ``saturation_level`` (clipped); the phase fit skips uncertain samples,
+    so a clipped pixel inside a lit region still gets a phase from its neighbours.
+
+    Returns
+    -------
+    certainty : ndarray, shape (H, W), float32 in {0, 1}
+    lit : ndarray, shape (H, W), bool
+    """
+    peak = rgb.max(axis=2)
+    width = max(3, int(round(period_px)) | 1)
+    local_max = cv2.dilate(peak, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    lit = local_max >= dark_level
+    return (lit & (peak < saturation_level)).astype(np.float32), lit
+
+
+@dataclass(frozen=True)
+class PhaseResult:
+    """Output of the phase stage; every array has shape (H, W), float32.
+
+    wrapped : wrapped phase psi in [-pi, pi) (see :mod:`simbench.pattern` for the convention)
+    amplitude : fringe amplitude B of the local fit (intensity units); 0 where unfit
+    offset : local mean A of the fit
+    residual : RMS fit residual divided by the RMS of the fitted fringe (``amplitude/sqrt 2``)
+    support : share of the window's weight on certain samples (1 = complete window)
+    """
+
+    wrapped: np.ndarray
+    amplitude: np.ndarray
+    offset: np.ndarray
+    residual: np.ndarray
+    support: np.ndarray
+
+
+def _kernel(sigma: float) -> np.ndarray:
+    r = max(1, int(np.ceil(3.0 * sigma)))
+    x = np.arange(-r, r + 1, dtype=np.float64)
+    k = np.exp(-0.5 * (x / sigma) ** 2)
+    return (k / k.sum()).astype(np.float32)
+
+
+def _conv(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+    return cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+
+
+@lru_cache(maxsize=8)
+def _full_gram(shape: tuple[int, int], omega: float, sx: float, sy: float):
+    """Window moments of the basis for an all-certain image (reused across captures)."""
+    ones = np.ones(shape, np.float32)
+    cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
+    kx, ky = _kernel(sx), _kernel(sy)
+    out = tuple(_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=8)
+def _basis(width: int, omega: float):
+    x = np.arange(width, dtype=np.float64) * omega
+    rows = [np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)]
+    out = tuple(r.astype(np.float32)[None, :] for r in rows)
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def gabor_phase(
+    intensity: np.ndarray,
+    *,
+    certainty: np.ndarray,
+    period_px: float,
+    sigma_x_px: float,
+    sigma_y_px: float,
+) -> PhaseResult:
+    """Wrapped phase of a vertical-stripe fringe by a Gaussian-windowed (Gabor) fit.
+
+    Parameters
+    ----------
+    intensity : ndarray, shape (H, W), float32
+    certainty : ndarray, shape (H, W), float32 in [0, 1]
+    period_px : float
+        Nominal fringe period in camera pixels (the Gabor carrier, paper Eq. 10).
+    sigma_x_px, sigma_y_px : float
+        Standard deviations of the Gaussian envelope.
+
+    Returns
+    -------
+    PhaseResult
+    """
+    if intensity.ndim != 2 or certainty.shape != intensity.shape:
+        raise ValueError(f"intensity {intensity.shape} and certainty {certainty.shape} must be equal 2-D shapes")
+    if not period_px > 2:
+        raise ValueError(f"period_px must be > 2, got {period_px}")
+    h, w = intensity.shape
+    omega = 2.0 * np.pi / period_px
+    kx, ky = _kernel(sigma_x_px), _kernel(sigma_y_px)
+    cos1, sin1, cos2, sin2 = _basis(w, round(omega, 12))
+    c = np.ascontiguousarray(certainty, dtype=np.float32)
+    ci = c * np.nan_to_num(intensity.astype(np.float32, copy=False))
+    if c.min() >= 1.0:
+        s1, sc, ss, sc2, ss2 = _full_gram((h, w), round(omega, 12), float(sigma_x_px), float(sigma_y_px))
+    else:
+        s1, sc, ss, sc2, ss2 = (_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
+    b0 = _conv(ci, kx, ky)
+    b1 = _conv(ci * cos1, kx, ky)
+    b2 = _conv(ci * sin1, kx, ky)
+    e2 = _conv(ci * intensity, kx, ky)
+
+    # Normal equations of the 3-parameter fit, M p = b with
+    # M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]]; solved by the adjugate.
+    scc = 0.5 * (s1 + sc2)
+    sss = 0.5 * (s1 - sc2)
+    scs = 0.5 * ss2
+    m00, m01, m02, m11, m12, m22 = s1, sc, ss, scc, scs, sss
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    scale = s1 * s1 * s1
+    good = (s1 > 0.05) & (det > 1e-4 * scale)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(good, 1.0 / det, 0.0).astype(np.float32)
+    a0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
+    a1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
+    a2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
+    # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta.
+    re = a1 * cos1 + a2 * sin1
+    im = a1 * sin1 - a2 * cos1
+    wrapped = np.arctan2(im, re)
+    amp = np.sqrt(re * re + im * im)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sse = np.maximum(e2 - (a0 * b0 + a1 * b1 + a2 * b2), 0.0) / s1
+        residual = np.sqrt(sse) / (amp * np.float32(np.sqrt(0.5)))
+    amp = np.where(good, amp, 0.0).astype(np.float32)
+    residual = np.where(good & (amp > 0), residual, np.inf).astype(np.float32)
+    wrapped = np.where(wrapped >= np.pi, -np.pi, wrapped).astype(np.float32)
+    return PhaseResult(wrapped=wrapped, amplitude=amp, offset=a0.astype(np.float32), residual=residual, support=s1)

@@ -1,0 +1,277 @@
+"""The paper's decoder (Sec. 5) as one function chaining the stages, each stage's output kept."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from simbench.decode.color import color_code, segment_stripes, vote_codes
+from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
+from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, match_reference
+from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
+from simbench.pattern import de_bruijn, window_positions
+from simbench.rig import Rig, projector_column_at_depth
+
+__all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "as_float_image", "decode_reference", "decode"]
+
+PHASE_METHODS = {"gabor": gabor_phase}
+MODES = ("reference", "calibrated")
+
+
+@dataclass(frozen=True)
+class DecoderParams:
+    """Decoder settings (defaults: the paper's pattern, our choices where the paper is silent).
+
+    Attributes
+    ----------
+    period_px, order : int
+        The pattern's fringe period T (projector px) and De Bruijn order (paper: 21, 3).
+    intensity_mode : str
+        ``overlay`` (paper Eq. 9) or ``blue``.
+    phase_method : str
+        Key of :data:`PHASE_METHODS`.
+    sigma_periods : float
+        Gabor envelope sigma along x in fringe periods (camera px = ``sigma_periods * T_cam``).
+        The paper gives no value; 0.25 (with ``sigma_y_ratio`` 0.6) trades noise against the
+        band lost where the window straddles a depth edge (measured on scenes/sphere.toml).
+    sigma_y_ratio : float
+        Envelope sigma along y relative to x.
+    camera_period_px : float or None
+        Fringe period in camera px; ``None`` = ``T * f_cam / f_proj`` (exact for fronto-parallel
+        surfaces with a rectified rig).
+    voting : bool
+        Majority vote of codes per stripe (paper Sec. 5.2); off = the stripe's middle pixel.
+    neighbour_reach : int
+        Neighbours per side in the W check and correction (paper Sec. 5.3); 0 = off.
+    min_support : int
+        Votes a stripe's W needs to be kept.
+    dark_level, saturation_level : float
+        In [0, 1] of full scale: a period-wide row maximum below ``dark_level`` is unlit;
+        any channel at or above ``saturation_level`` is clipped.
+    min_amplitude : float
+        Minimum fringe amplitude (full-scale units) for a valid pixel.
+    max_residual : float
+        Maximum fit residual relative to the fringe RMS (rejects windows over depth edges; it
+        also grows with shading gradients and fringe chirp, so it cannot be tight).
+    min_window_support : float
+        Minimum share of the Gabor window's weight on certain (lit, unclipped) samples.
+    mode : str
+        ``reference`` (paper Sec. 5.4) or ``calibrated`` (triangulate with the rig).
+    z0_m : float
+        Reference-plane depth Z0.
+    depth_range_m : tuple of float
+        Working range; depths outside are invalid.  In calibrated mode the cycle number is
+        chosen for the middle of this range (in inverse depth).
+    """
+
+    period_px: int = 21
+    order: int = 3
+    intensity_mode: str = "overlay"
+    phase_method: str = "gabor"
+    sigma_periods: float = 0.25
+    sigma_y_ratio: float = 0.6
+    camera_period_px: float | None = None
+    voting: bool = True
+    neighbour_reach: int = 3
+    min_support: int = 3
+    dark_level: float = 0.04
+    saturation_level: float = 1.0
+    min_amplitude: float = 0.02
+    max_residual: float = 0.6
+    min_window_support: float = 0.5
+    mode: str = "reference"
+    z0_m: float = 1.0
+    depth_range_m: tuple[float, float] = (0.75, 1.75)
+
+    def __post_init__(self) -> None:
+        if self.intensity_mode not in INTENSITY_MODES:
+            raise ValueError(f"unknown intensity_mode {self.intensity_mode!r}; valid: {sorted(INTENSITY_MODES)}")
+        if self.phase_method not in PHASE_METHODS:
+            raise ValueError(f"unknown phase_method {self.phase_method!r}; valid: {sorted(PHASE_METHODS)}")
+        if self.mode not in MODES:
+            raise ValueError(f"unknown mode {self.mode!r}; valid: {list(MODES)}")
+        lo, hi = self.depth_range_m
+        if not 0 < lo < hi:
+            raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
+        if not self.z0_m > 0:
+            raise ValueError(f"z0_m must be > 0, got {self.z0_m}")
+        if self.sigma_periods <= 0 or self.sigma_y_ratio <= 0:
+            raise ValueError("sigma_periods and sigma_y_ratio must be > 0")
+        if self.neighbour_reach < 0 or self.min_support < 1:
+            raise ValueError("neighbour_reach must be >= 0 and min_support >= 1")
+
+    @property
+    def cycle(self) -> int:
+        return 2**self.order
+
+    def camera_period(self, rig: Rig) -> float:
+        if self.camera_period_px is not None:
+            return float(self.camera_period_px)
+        return self.period_px * rig.camera.focal_px / rig.projector.focal_px
+
+
+@dataclass(frozen=True)
+class ReferenceMap:
+    """A decoded reference-plane capture: projector column per camera pixel (NaN = unknown)."""
+
+    column_px: np.ndarray
+    z0_m: float
+
+
+@dataclass(frozen=True)
+class DecodeResult:
+    """Decoder output.
+
+    depth_m : ndarray, shape (H, W), float32; NaN where invalid
+    valid : ndarray, shape (H, W), bool
+    confidence : ndarray, shape (H, W), float32; fringe amplitude (full-scale units), 0 if invalid
+    column_px : ndarray, shape (H, W), float64; decoded projector column, NaN if invalid
+    stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
+    stages : dict of str -> ndarray; intermediate images (paper Fig. 6)
+    """
+
+    depth_m: np.ndarray
+    valid: np.ndarray
+    confidence: np.ndarray
+    column_px: np.ndarray
+    stripe_index: np.ndarray
+    stages: dict = field(default_factory=dict)
+
+
+def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | None = None) -> np.ndarray:
+    """A capture as float32 RGB in [0, 1]: uint8 / 255, uint16 / 65535, floats as they are.
+
+    Raises
+    ------
+    ValueError
+        Wrong shape or size, unsupported dtype, or non-finite float values.
+    """
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"capture must have shape (H, W, 3), got {img.shape}")
+    if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
+        raise ValueError(f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is {expected_size_hw[1]}x{expected_size_hw[0]}")
+    if img.dtype == np.uint8:
+        return img.astype(np.float32) / np.float32(255)
+    if img.dtype == np.uint16:
+        return img.astype(np.float32) / np.float32(65535)
+    if np.issubdtype(img.dtype, np.floating):
+        out = img.astype(np.float32)
+        if not np.all(np.isfinite(out)):
+            raise ValueError("capture contains NaN or inf")
+        return out
+    raise ValueError(f"unsupported capture dtype {img.dtype}; use uint8, uint16 or float")
+
+
+def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Stages 1-3 and the absolute column; returns (column, stripe_index, stages)."""
+    t_cam = params.camera_period(rig)
+    intensity = overlay_intensity(rgb, mode=params.intensity_mode)
+    certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level)
+    sx = params.sigma_periods * t_cam
+    phase = PHASE_METHODS[params.phase_method](
+        intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
+    )
+    valid = (
+        lit
+        & (phase.support >= params.min_window_support)
+        & (phase.amplitude >= params.min_amplitude)
+        & (phase.residual <= params.max_residual)
+    )
+    code = color_code(rgb)
+    stripes = segment_stripes(phase.wrapped, valid, period_px=t_cam)
+    stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
+    seq = de_bruijn(params.order)
+    table = window_positions(seq, order=params.order)
+    raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
+    w_fixed, support = neighbour_correct(
+        raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
+    )
+    lab = stripes.labels
+    has = lab >= 0
+    safe = np.where(has, lab, 0)
+    position = np.where(has, w_fixed[safe], -1).astype(np.int32)
+    column, stripe_index = absolute_column(position, phase.wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
+    stages = {
+        "intensity": intensity,
+        "certainty": certainty,
+        "lit": lit,
+        "window_support": phase.support,
+        "wrapped_phase": phase.wrapped,
+        "amplitude": phase.amplitude,
+        "fit_residual": phase.residual,
+        "phase_valid": valid,
+        "code": code,
+        "stripe_label": lab,
+        "stripe_code": np.where(has, stripe_code[safe].astype(np.int8), -1),
+        "stripe_agreement": np.where(has, agreement[safe], 0).astype(np.float32),
+        "position_raw": np.where(has, raw_w[safe], -1).astype(np.int32),
+        "position": position,
+        "support": np.where(has, support[safe], 0).astype(np.int32),
+        "unwrapped_phase": np.where(stripe_index >= 0, phase.wrapped + 2 * np.pi * stripe_index, np.nan).astype(np.float32),
+    }
+    return column, stripe_index, stages
+
+
+def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> ReferenceMap:
+    """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map."""
+    rgb = as_float_image(reference, expected_size_hw=rig.camera.size_hw)
+    expected = projector_column_at_depth(params.z0_m, rig)
+    column, _, _ = _columns(rgb, expected, rig=rig, params=params)
+    return ReferenceMap(column_px=column, z0_m=params.z0_m)
+
+
+def decode(
+    capture: np.ndarray,
+    *,
+    rig: Rig,
+    params: DecoderParams = DecoderParams(),
+    reference: ReferenceMap | np.ndarray | None = None,
+) -> DecodeResult:
+    """Decode one capture into depth (paper Sec. 5).
+
+    Parameters
+    ----------
+    capture : ndarray, shape (H, W, 3), uint8/uint16/float
+        RGB capture of the scene under the pattern; (H, W) must match ``rig.camera``.
+    rig : Rig
+    params : DecoderParams
+    reference : ReferenceMap or ndarray, optional
+        The reference-plane capture (or its decoded map, to decode many captures against one
+        reference); required in ``reference`` mode.
+
+    Returns
+    -------
+    DecodeResult
+        Never raises on a legal image: what cannot be decoded is NaN in ``depth_m`` and False
+        in ``valid``.
+    """
+    rgb = as_float_image(capture, expected_size_hw=rig.camera.size_hw)
+    zmin, zmax = params.depth_range_m
+    if params.mode == "reference":
+        if reference is None:
+            raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
+        ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
+        if ref.column_px.shape != rgb.shape[:2]:
+            raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {rgb.shape[:2]}")
+        fallback = projector_column_at_depth(ref.z0_m, rig)
+        expected = np.where(np.isfinite(ref.column_px), ref.column_px, fallback)
+        column, stripe_index, stages = _columns(rgb, expected, rig=rig, params=params)
+        x_ref = match_reference(column, ref.column_px)
+        depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
+        stages["reference_x"] = x_ref.astype(np.float32)
+    else:
+        z_mid = 2.0 / (1.0 / zmin + 1.0 / zmax)
+        expected = projector_column_at_depth(z_mid, rig)
+        column, stripe_index, stages = _columns(rgb, expected, rig=rig, params=params)
+        depth = depth_calibrated(column, rig)
+    valid = np.isfinite(depth) & (depth >= zmin) & (depth <= zmax)
+    return DecodeResult(
+        depth_m=np.where(valid, depth, np.nan).astype(np.float32),
+        valid=valid,
+        confidence=np.where(valid, stages["amplitude"], 0).astype(np.float32),
+        column_px=np.where(valid, column, np.nan),
+        stripe_index=np.where(valid, stripe_index, -1).astype(np.int32),
+        stages=stages,
+    )

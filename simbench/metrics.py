@@ -1,0 +1,151 @@
+"""Error measures against ground truth, and the paper's own protocols.
+
+* :func:`depth_errors` - MAE, RMSE, median and p95 absolute error (mm), completeness, outlier
+  share and stripe-order error rate, over the pixels ground truth says are seen and lit.
+* :func:`plane_fit_error` - paper Table 1: mean absolute residual to a least-squares plane.
+* :func:`edge_band` - pixels near depth discontinuities, to exclude from edge-sensitive scores.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from simbench.rig import Intrinsics, pixel_rays
+
+__all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth"]
+
+
+def edge_band(gt_depth_m: np.ndarray, *, object_id: np.ndarray | None = None, band_px: int, rel_jump: float = 0.02) -> np.ndarray:
+    """Pixels within ``band_px`` of a depth discontinuity.
+
+    A discontinuity lies between 4-neighbours whose ground-truth depths differ by more than
+    ``rel_jump`` of the depth, that belong to different objects, or of which one sees nothing.
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    z = np.asarray(gt_depth_m, dtype=np.float64)
+    seen = np.isfinite(z)
+    edge = np.zeros(z.shape, dtype=bool)
+    for axis in (0, 1):
+        a = np.take(z, np.arange(z.shape[axis] - 1), axis=axis)
+        b = np.take(z, np.arange(1, z.shape[axis]), axis=axis)
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(a - b) > rel_jump * np.fmin(a, b)
+        jump |= np.isfinite(a) != np.isfinite(b)
+        if object_id is not None:
+            oa = np.take(object_id, np.arange(z.shape[axis] - 1), axis=axis)
+            ob = np.take(object_id, np.arange(1, z.shape[axis]), axis=axis)
+            jump |= oa != ob
+        sl_a = [slice(None)] * 2
+        sl_b = [slice(None)] * 2
+        sl_a[axis] = slice(0, -1)
+        sl_b[axis] = slice(1, None)
+        edge[tuple(sl_a)] |= jump
+        edge[tuple(sl_b)] |= jump
+    if band_px > 0:
+        k = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
+        edge = cv2.dilate(edge.astype(np.uint8), k) > 0
+    return edge & seen
+
+
+def depth_errors(
+    depth_m: np.ndarray,
+    gt_depth_m: np.ndarray,
+    *,
+    region: np.ndarray,
+    exclude: np.ndarray | None = None,
+    column_px: np.ndarray | None = None,
+    gt_column_px: np.ndarray | None = None,
+    period_px: float | None = None,
+    outlier_mm: float = 5.0,
+) -> dict:
+    """Scores of a depth map against ground truth.
+
+    Parameters
+    ----------
+    depth_m, gt_depth_m : ndarray, shape (H, W), float; NaN = invalid / nothing
+    region : ndarray, shape (H, W), bool
+        Pixels that count (normally: seen by the camera and lit by the projector).
+    exclude : ndarray, shape (H, W), bool, optional
+        Pixels left out of the error statistics (e.g. an edge band); they still count for
+        completeness.
+    column_px, gt_column_px, period_px : optional
+        Decoded and true projector columns and the fringe period, for the stripe-order error:
+        a pixel whose column is off by more than half a period was unwrapped into the wrong
+        stripe (its phase is off by a multiple of 2*pi).
+    outlier_mm : float
+        Absolute error above which a pixel is an outlier.
+
+    Returns
+    -------
+    dict
+        ``n_region``, ``n_valid``, ``completeness``, ``n_scored``, ``mae_mm``, ``rmse_mm``,
+        ``median_mm``, ``p95_mm``, ``max_mm``, ``bias_mm``, ``outlier_share`` and, with
+        columns, ``stripe_order_errors`` and ``stripe_order_error_rate`` (share of valid pixels).
+    """
+    d = np.asarray(depth_m, dtype=np.float64)
+    g = np.asarray(gt_depth_m, dtype=np.float64)
+    if d.shape != g.shape or region.shape != g.shape:
+        raise ValueError(f"shapes differ: depth {d.shape}, ground truth {g.shape}, region {region.shape}")
+    region = region & np.isfinite(g)
+    valid = region & np.isfinite(d)
+    scored = valid if exclude is None else valid & ~exclude
+    err = (d[scored] - g[scored]) * 1000.0
+    a = np.abs(err)
+    n_region = int(region.sum())
+    out = {
+        "n_region": n_region,
+        "n_valid": int(valid.sum()),
+        "completeness": float(valid.sum() / n_region) if n_region else float("nan"),
+        "n_scored": int(scored.sum()),
+        "mae_mm": float(a.mean()) if a.size else float("nan"),
+        "rmse_mm": float(np.sqrt(np.mean(err**2))) if a.size else float("nan"),
+        "median_mm": float(np.median(a)) if a.size else float("nan"),
+        "p95_mm": float(np.percentile(a, 95)) if a.size else float("nan"),
+        "max_mm": float(a.max()) if a.size else float("nan"),
+        "bias_mm": float(err.mean()) if a.size else float("nan"),
+        "outlier_share": float(np.mean(a > outlier_mm)) if a.size else float("nan"),
+    }
+    if column_px is not None and gt_column_px is not None:
+        if period_px is None:
+            raise ValueError("period_px is needed for the stripe-order error")
+        both = valid & np.isfinite(column_px) & np.isfinite(gt_column_px)
+        wrong = np.abs(column_px[both] - gt_column_px[both]) > 0.5 * period_px
+        out["stripe_order_errors"] = int(wrong.sum())
+        out["stripe_order_error_rate"] = float(wrong.mean()) if wrong.size else float("nan")
+    return out
+
+
+def points_from_depth(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
+    """Camera-frame 3-D points of every pixel, shape (H, W, 3); NaN where depth is NaN."""
+    return pixel_rays(camera) * np.asarray(depth_m, dtype=np.float64)[..., None]
+
+
+def plane_fit_error(depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray | None = None) -> dict:
+    """Paper Table 1 protocol: fit a plane to the measured points by least squares and report
+    the mean absolute (orthogonal) residual in mm.
+
+    Returns
+    -------
+    dict with ``mean_abs_residual_mm``, ``rms_residual_mm``, ``normal`` and ``n_points``
+    """
+    pts = points_from_depth(depth_m, camera)
+    ok = np.isfinite(pts[..., 2])
+    if mask is not None:
+        ok &= mask
+    p = pts[ok]
+    if len(p) < 3:
+        return {"mean_abs_residual_mm": float("nan"), "rms_residual_mm": float("nan"), "normal": [float("nan")] * 3, "n_points": int(len(p))}
+    c = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+    normal = vt[-1]
+    r = (p - c) @ normal * 1000.0
+    return {
+        "mean_abs_residual_mm": float(np.mean(np.abs(r))),
+        "rms_residual_mm": float(np.sqrt(np.mean(r**2))),
+        "normal": [float(x) for x in normal],
+        "n_points": int(len(p)),
+    }
