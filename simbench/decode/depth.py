@@ -18,7 +18,7 @@ import numpy as np
 from simbench.pattern import column_from_phase
 from simbench.rig import Rig, triangulate_columns
 
-__all__ = ["absolute_column", "match_reference", "depth_from_disparity", "depth_calibrated"]
+__all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity", "depth_calibrated"]
 
 
 def absolute_column(
@@ -43,53 +43,54 @@ def absolute_column(
 
     Returns
     -------
-    column_px : ndarray, shape (H, W), float64; NaN where unknown
+    column_px : ndarray, shape (H, W), float32; NaN where unknown
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 where unknown
     """
-    known = (position >= 0) & np.isfinite(expected_column)
-    col0 = column_from_phase(wrapped.astype(np.float64) + 2.0 * np.pi * position, period_px=period_px)
-    span = cycle * period_px
-    k = np.rint((np.nan_to_num(expected_column) - col0) / span)
-    col = col0 + k * span
-    n = position + cycle * k
-    return np.where(known, col, np.nan), np.where(known, n, -1).astype(np.int32)
+    t = np.float32(period_px)
+    # column_from_phase(psi + 2 pi W) without the float64 round trip
+    col0 = (wrapped + np.float32(np.pi)) * (t / np.float32(2 * np.pi)) + position.astype(np.float32) * t - np.float32(0.5)
+    span = np.float32(cycle * period_px)
+    k = np.rint((expected_column - col0) / span)
+    known = (position >= 0) & np.isfinite(k)
+    col = np.where(known, col0 + k * span, np.float32(np.nan))
+    n = np.where(known, position + cycle * np.nan_to_num(k).astype(np.int32), -1)
+    return col.astype(np.float32, copy=False), n.astype(np.int32, copy=False)
 
 
-def match_reference(column: np.ndarray, reference_column: np.ndarray, *, max_extrapolation_px: float = 160.0) -> np.ndarray:
-    """For each pixel, the sub-pixel x in the same row of the reference with the same column.
+def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, max_extrapolation_px: float = 160.0) -> np.ndarray:
+    """Per row of a decoded reference, the sub-pixel x showing each integer projector column.
 
-    Linear interpolation of the reference's column map along each row; reference pixels whose
-    column does not increase strictly along the row are left out.  Columns beyond the part of
-    the row the reference shows (a surface behind the reference plane, near the image's right
-    edge) are matched on the row's least-squares line - the reference is a plane, whose column
+    Built once per reference so that matching a capture is a table look-up.  Reference pixels
+    whose column does not increase strictly along the row are left out.  Columns beyond the
+    part of the row the reference shows (a surface behind the reference plane, near the image
+    edge) are placed on the row's least-squares line - the reference is a plane, so its column
     map is linear along a row for a rectified rig - up to ``max_extrapolation_px`` beyond the
-    row's ends; further out the result is NaN.
+    row's ends; further out the table holds NaN.
 
     Returns
     -------
-    ndarray, shape (H, W), float64
+    ndarray, shape (H, projector_width + 1), float32
     """
-    h, w = column.shape
-    ref = np.where(np.isfinite(reference_column), reference_column, np.nan)
+    h, w = reference_column.shape
+    ref = reference_column.astype(np.float64)
     run_max = np.fmax.accumulate(np.where(np.isfinite(ref), ref, -np.inf), axis=1)
     prev_max = np.concatenate([np.full((h, 1), -np.inf), run_max[:, :-1]], axis=1)
     keep = np.isfinite(ref) & (ref > prev_max)
     rows, xs = np.nonzero(keep)
+    table = np.full((h, projector_width + 1), np.nan, dtype=np.float32)
     if rows.size < 2:
-        return np.full((h, w), np.nan)
+        return table
     vals = ref[rows, xs]
-    lo_val = np.full(h, np.inf)
-    hi_val = np.full(h, -np.inf)
-    np.minimum.at(lo_val, rows, vals)
-    np.maximum.at(hi_val, rows, vals)
-    offset = 4.0 * (np.nanmax(np.abs(vals)) + np.nanmax(np.abs(np.nan_to_num(column))) + 1.0)
-    keys = vals + rows * offset
-    qrows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-    q = column + qrows * offset
-    xr = np.interp(q.ravel(), keys, xs.astype(np.float64)).reshape(h, w)
-    inside = np.isfinite(column) & (column >= lo_val[:, None]) & (column <= hi_val[:, None])
-    # per-row line x = a*u + b through the reference's (u, x) samples
     n = np.bincount(rows, minlength=h).astype(np.float64)
+    lo = np.full(h, np.inf)
+    hi = np.full(h, -np.inf)
+    np.minimum.at(lo, rows, vals)
+    np.maximum.at(hi, rows, vals)
+    stride = 4.0 * (projector_width + np.abs(vals).max() + 1.0)
+    c = np.arange(projector_width + 1, dtype=np.float64)[None, :]
+    q = (c + np.arange(h)[:, None] * stride).ravel()
+    xr = np.interp(q, vals + rows * stride, xs.astype(np.float64)).reshape(h, -1)
+    inside = (c >= lo[:, None]) & (c <= hi[:, None])
     su = np.bincount(rows, vals, h)
     sx = np.bincount(rows, xs, h)
     suu = np.bincount(rows, vals * vals, h)
@@ -97,11 +98,32 @@ def match_reference(column: np.ndarray, reference_column: np.ndarray, *, max_ext
     with np.errstate(divide="ignore", invalid="ignore"):
         a = (n * sux - su * sx) / (n * suu - su * su)
         b = (sx - a * su) / n
-        x_line = a[:, None] * column + b[:, None]
-    outside = np.isfinite(column) & ~inside & (n[:, None] >= 16)
-    reach = np.where(column < lo_val[:, None], (lo_val[:, None] - column), (column - hi_val[:, None])) * np.abs(a)[:, None]
-    ok_out = outside & (reach <= max_extrapolation_px)
-    return np.where(inside, xr, np.where(ok_out, x_line, np.nan))
+        line = a[:, None] * c + b[:, None]
+        reach = np.where(c < lo[:, None], lo[:, None] - c, c - hi[:, None]) * np.abs(a)[:, None]
+    outside_ok = ~inside & (n[:, None] >= 16) & (reach <= max_extrapolation_px)
+    table[:] = np.where(inside & (n[:, None] >= 2), xr, np.where(outside_ok, line, np.nan))
+    return table
+
+
+def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """For each pixel, the sub-pixel x in the same row of the reference that shows the same
+    projector column (linear interpolation in :func:`inverse_column_table`).
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32; NaN where the reference has no match
+    """
+    h, w = column.shape
+    width = table.shape[1] - 1
+    ok = np.isfinite(column) & (column >= 0) & (column <= width)
+    cf = np.where(ok, column, 0)
+    i = np.minimum(cf.astype(np.int32), width - 1)
+    f = cf - i
+    flat = table.ravel()
+    base = (np.arange(h, dtype=np.int64) * (width + 1))[:, None] + i
+    x0 = flat[base]
+    x1 = flat[base + 1]
+    return np.where(ok, x0 + f * (x1 - x0), np.float32(np.nan)).astype(np.float32, copy=False)
 
 
 def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: float, z0_m: float) -> np.ndarray:
@@ -109,14 +131,14 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
 
     Returns
     -------
-    ndarray, shape (H, W), float64; NaN where unmatched or not in front of the camera
+    ndarray, shape (H, W), float32; NaN where unmatched or not in front of the camera
     """
     h, w = x_ref.shape
-    d = np.arange(w, dtype=np.float64)[None, :] - x_ref
-    inv = 1.0 / z0_m + d / (focal_px * baseline_m)
+    d = np.arange(w, dtype=np.float32)[None, :] - x_ref
+    inv = np.float32(1.0 / z0_m) + d * np.float32(1.0 / (focal_px * baseline_m))
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = 1.0 / inv
-    return np.where(np.isfinite(z) & (z > 0), z, np.nan)
+        z = np.float32(1.0) / inv
+    return np.where(z > 0, z, np.float32(np.nan))
 
 
 def depth_calibrated(column: np.ndarray, rig: Rig) -> np.ndarray:

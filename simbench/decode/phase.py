@@ -23,11 +23,12 @@ __all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_map", "PhaseResult
 
 def _overlay(rgb: np.ndarray) -> np.ndarray:
     # paper Eq. 9: the fringe lives in B and in one of R/G, so (R+G+B)/2 is the full fringe
-    return (rgb[..., 0] + rgb[..., 1] + rgb[..., 2]) * np.float32(0.5)
+    out = cv2.transform(np.asarray(rgb, dtype=np.float32), np.full((1, 3), 0.5, np.float32))
+    return out.reshape(rgb.shape[:2])
 
 
 def _blue(rgb: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(rgb[..., 2])
+    return np.ascontiguousarray(rgb[..., 2], dtype=np.float32)
 
 
 INTENSITY_MODES = {"overlay": _overlay, "blue": _blue}
@@ -67,7 +68,8 @@ def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, satur
     certainty : ndarray, shape (H, W), float32 in {0, 1}
     lit : ndarray, shape (H, W), bool
     """
-    peak = rgb.max(axis=2)
+    r, g, b = cv2.split(rgb)
+    peak = cv2.max(cv2.max(r, g), b)
     width = max(3, int(round(period_px)) | 1)
     local_max = cv2.dilate(peak, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE)
     lit = local_max >= dark_level
@@ -157,7 +159,7 @@ def gabor_phase(
     kx, ky = _kernel(sigma_x_px), _kernel(sigma_y_px)
     cos1, sin1, cos2, sin2 = _basis(w, round(omega, 12))
     c = np.ascontiguousarray(certainty, dtype=np.float32)
-    ci = c * np.nan_to_num(intensity.astype(np.float32, copy=False))
+    ci = c * intensity.astype(np.float32, copy=False)
     if c.min() >= 1.0:
         s1, sc, ss, sc2, ss2 = _full_gram((h, w), round(omega, 12), float(sigma_x_px), float(sigma_y_px))
     else:

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
 from simbench.decode.color import color_code, segment_stripes, vote_codes
 from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
-from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, match_reference
+from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.pattern import de_bruijn, window_positions
 from simbench.rig import Rig, projector_column_at_depth
 
-__all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "as_float_image", "decode_reference", "decode"]
+__all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
 
 PHASE_METHODS = {"gabor": gabor_phase}
 MODES = ("reference", "calibrated")
@@ -113,9 +115,18 @@ class DecoderParams:
 
 @dataclass(frozen=True)
 class ReferenceMap:
-    """A decoded reference-plane capture: projector column per camera pixel (NaN = unknown)."""
+    """A decoded reference-plane capture.
+
+    column_px : ndarray, shape (H, W), float32; projector column per camera pixel, NaN unknown
+    expected_px : ndarray, shape (H, W), float32; ``column_px`` with the gaps filled from the
+        rig's prediction for a plane at Z0 (what the cycle number is chosen against)
+    inverse : ndarray, shape (H, Wp + 1), float32; x showing each integer column per row
+    z0_m : float
+    """
 
     column_px: np.ndarray
+    expected_px: np.ndarray
+    inverse: np.ndarray
     z0_m: float
 
 
@@ -126,9 +137,9 @@ class DecodeResult:
     depth_m : ndarray, shape (H, W), float32; NaN where invalid
     valid : ndarray, shape (H, W), bool
     confidence : ndarray, shape (H, W), float32; fringe amplitude (full-scale units), 0 if invalid
-    column_px : ndarray, shape (H, W), float64; decoded projector column, NaN if invalid
+    column_px : ndarray, shape (H, W), float32; decoded projector column, NaN if invalid
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
-    stages : dict of str -> ndarray; intermediate images (paper Fig. 6)
+    stages : Mapping of str -> ndarray; intermediate images (paper Fig. 6), made on first access
     """
 
     depth_m: np.ndarray
@@ -136,7 +147,32 @@ class DecodeResult:
     confidence: np.ndarray
     column_px: np.ndarray
     stripe_index: np.ndarray
-    stages: dict = field(default_factory=dict)
+    stages: Mapping = field(default_factory=dict)
+
+
+class LazyStages(Mapping):
+    """Stage images computed on first access, so a decode only pays for the ones it needs."""
+
+    def __init__(self) -> None:
+        self._make: dict[str, Callable[[], np.ndarray]] = {}
+        self._done: dict[str, np.ndarray] = {}
+
+    def put(self, name: str, value) -> None:
+        if callable(value):
+            self._make[name] = value
+        else:
+            self._make[name] = lambda v=value: v
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._done:
+            self._done[name] = self._make[name]()
+        return self._done[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._make)
+
+    def __len__(self) -> int:
+        return len(self._make)
 
 
 def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | None = None) -> np.ndarray:
@@ -153,18 +189,26 @@ def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | Non
     if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
         raise ValueError(f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is {expected_size_hw[1]}x{expected_size_hw[0]}")
     if img.dtype == np.uint8:
-        return img.astype(np.float32) / np.float32(255)
+        return np.multiply(img, np.float32(1 / 255), dtype=np.float32)
     if img.dtype == np.uint16:
-        return img.astype(np.float32) / np.float32(65535)
+        return np.multiply(img, np.float32(1 / 65535), dtype=np.float32)
     if np.issubdtype(img.dtype, np.floating):
         out = img.astype(np.float32)
-        if not np.all(np.isfinite(out)):
+        if not np.isfinite(out.sum(dtype=np.float64)):
             raise ValueError("capture contains NaN or inf")
         return out
     raise ValueError(f"unsupported capture dtype {img.dtype}; use uint8, uint16 or float")
 
 
-def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams) -> tuple[np.ndarray, np.ndarray, dict]:
+def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
+    """Spread one value per stripe over its pixels; ``fill`` where the label is -1."""
+    ext = np.empty(per_stripe.size + 1, dtype=per_stripe.dtype)
+    ext[:-1] = per_stripe
+    ext[-1] = fill
+    return ext[labels]
+
+
+def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams) -> tuple[np.ndarray, np.ndarray, LazyStages]:
     """Stages 1-3 and the absolute column; returns (column, stripe_index, stages)."""
     t_cam = params.camera_period(rig)
     intensity = overlay_intensity(rgb, mode=params.intensity_mode)
@@ -182,44 +226,59 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     code = color_code(rgb)
     stripes = segment_stripes(phase.wrapped, valid, period_px=t_cam)
     stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
-    seq = de_bruijn(params.order)
-    table = window_positions(seq, order=params.order)
+    table = _window_table(params.order)
     raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
     w_fixed, support = neighbour_correct(
         raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
     )
     lab = stripes.labels
-    has = lab >= 0
-    safe = np.where(has, lab, 0)
-    position = np.where(has, w_fixed[safe], -1).astype(np.int32)
+    position = _per_pixel(w_fixed, lab, -1)
     column, stripe_index = absolute_column(position, phase.wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
-    stages = {
-        "intensity": intensity,
-        "certainty": certainty,
-        "lit": lit,
-        "window_support": phase.support,
-        "wrapped_phase": phase.wrapped,
-        "amplitude": phase.amplitude,
-        "fit_residual": phase.residual,
-        "phase_valid": valid,
-        "code": code,
-        "stripe_label": lab,
-        "stripe_code": np.where(has, stripe_code[safe].astype(np.int8), -1),
-        "stripe_agreement": np.where(has, agreement[safe], 0).astype(np.float32),
-        "position_raw": np.where(has, raw_w[safe], -1).astype(np.int32),
-        "position": position,
-        "support": np.where(has, support[safe], 0).astype(np.int32),
-        "unwrapped_phase": np.where(stripe_index >= 0, phase.wrapped + 2 * np.pi * stripe_index, np.nan).astype(np.float32),
-    }
-    return column, stripe_index, stages
+    st = LazyStages()
+    st.put("intensity", intensity)
+    st.put("certainty", certainty)
+    st.put("lit", lit)
+    st.put("window_support", phase.support)
+    st.put("wrapped_phase", phase.wrapped)
+    st.put("amplitude", phase.amplitude)
+    st.put("fit_residual", phase.residual)
+    st.put("phase_valid", valid)
+    st.put("code", code)
+    st.put("stripe_label", lab)
+    st.put("stripe_code", lambda: _per_pixel(stripe_code.astype(np.int8), lab, -1))
+    st.put("stripe_agreement", lambda: _per_pixel(agreement, lab, 0.0))
+    st.put("position_raw", lambda: _per_pixel(raw_w, lab, -1))
+    st.put("position", position)
+    st.put("support", lambda: _per_pixel(support, lab, 0))
+    st.put("unwrapped_phase", lambda: np.where(stripe_index >= 0, phase.wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)))
+    return column, stripe_index, st
+
+
+@lru_cache(maxsize=16)
+def _window_table(order: int) -> np.ndarray:
+    t = window_positions(de_bruijn(order), order=order)
+    t.setflags(write=False)
+    return t
+
+
+@lru_cache(maxsize=16)
+def _plane_columns(rig: Rig, z_m: float) -> np.ndarray:
+    col = projector_column_at_depth(z_m, rig).astype(np.float32)
+    col.setflags(write=False)
+    return col
 
 
 def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> ReferenceMap:
-    """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map."""
+    """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
+
+    Done once per calibration; :func:`decode` then matches captures against it.
+    """
     rgb = as_float_image(reference, expected_size_hw=rig.camera.size_hw)
-    expected = projector_column_at_depth(params.z0_m, rig)
-    column, _, _ = _columns(rgb, expected, rig=rig, params=params)
-    return ReferenceMap(column_px=column, z0_m=params.z0_m)
+    predicted = _plane_columns(rig, float(params.z0_m))
+    column, _, _ = _columns(rgb, predicted, rig=rig, params=params)
+    expected = np.where(np.isfinite(column), column, predicted)
+    inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
+    return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m)
 
 
 def decode(
@@ -255,23 +314,21 @@ def decode(
         ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
         if ref.column_px.shape != rgb.shape[:2]:
             raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {rgb.shape[:2]}")
-        fallback = projector_column_at_depth(ref.z0_m, rig)
-        expected = np.where(np.isfinite(ref.column_px), ref.column_px, fallback)
-        column, stripe_index, stages = _columns(rgb, expected, rig=rig, params=params)
-        x_ref = match_reference(column, ref.column_px)
+        column, stripe_index, stages = _columns(rgb, ref.expected_px, rig=rig, params=params)
+        x_ref = match_reference(column, ref.inverse)
         depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
-        stages["reference_x"] = x_ref.astype(np.float32)
+        stages.put("reference_x", x_ref)
     else:
         z_mid = 2.0 / (1.0 / zmin + 1.0 / zmax)
-        expected = projector_column_at_depth(z_mid, rig)
-        column, stripe_index, stages = _columns(rgb, expected, rig=rig, params=params)
-        depth = depth_calibrated(column, rig)
-    valid = np.isfinite(depth) & (depth >= zmin) & (depth <= zmax)
+        column, stripe_index, stages = _columns(rgb, _plane_columns(rig, z_mid), rig=rig, params=params)
+        depth = depth_calibrated(column, rig).astype(np.float32)
+    valid = (depth >= zmin) & (depth <= zmax)
+    nan = np.float32(np.nan)
     return DecodeResult(
-        depth_m=np.where(valid, depth, np.nan).astype(np.float32),
+        depth_m=np.where(valid, depth, nan),
         valid=valid,
-        confidence=np.where(valid, stages["amplitude"], 0).astype(np.float32),
-        column_px=np.where(valid, column, np.nan),
-        stripe_index=np.where(valid, stripe_index, -1).astype(np.int32),
+        confidence=np.where(valid, stages["amplitude"], np.float32(0)),
+        column_px=np.where(valid, column, nan),
+        stripe_index=np.where(valid, stripe_index, -1),
         stages=stages,
     )

@@ -1,0 +1,35 @@
+# simbench: every target creates its own virtual environment (.venv) on a fresh machine.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup reproduce test test-fast bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml scripts/setup_system.sh
+	bash scripts/setup_system.sh
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	$(PY) -c "import simbench.render as r; print('simbench: libLLVM found:', [f'{v}: {p}' for v, p in r.find_libllvm()][:3])"
+	touch $(STAMP)
+
+# The main job: until the paper-reproduction experiments land, the pipeline demo.
+reproduce: setup
+	$(VENV)/bin/simbench demo --out results/demo
+
+# The whole test suite, slow renders included.
+test: setup
+	$(PY) -m pytest -q
+
+# Developers' loop: everything but the Mitsuba renders.
+test-fast: setup
+	$(PY) -m pytest -q -m "not slow"
+
+bench: setup
+	$(VENV)/bin/simbench bench --repeats 30
+
+clean:
+	rm -rf $(VENV) .pytest_cache .benchmarks

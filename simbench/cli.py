@@ -1,0 +1,253 @@
+"""Command line: each subcommand parses its arguments and calls one library function.
+
+Errors are one line on stderr and exit status 2 (``--debug`` shows the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["main"]
+
+
+def _cmd_pattern(args) -> int:
+    from simbench.io import save_png
+    from simbench.pattern import PatternSpec, fringe_pattern, quantize
+
+    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order)
+    path = save_png(args.out, quantize(fringe_pattern(spec)))
+    print(f"pattern {args.width}x{args.height}, period {args.period} px, B(2,{args.order}) -> {path}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from simbench.pattern import PatternSpec
+    from simbench.render import select_variant
+    from simbench.scene import load_scene
+    from simbench.sensor import get_camera
+    from simbench.simulate import acquire, write_acquisition
+
+    scene = load_scene(args.scene)
+    camera = get_camera(args.camera)
+    variant = select_variant(args.variant)
+    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order)
+    t0 = time.perf_counter()
+    acq = acquire(scene, pattern=pattern, camera=camera, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
+    files = write_acquisition(acq, args.out)
+    print(f"rendered {scene.name} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    for key, path in files.items():
+        print(f"  {key:13s} {path.name}")
+    return 0
+
+
+def _z0_for(reference: Path, z0: float | None) -> float:
+    if z0 is not None:
+        return z0
+    meta = reference.parent / "meta.json"
+    if meta.is_file():
+        try:
+            return float(json.loads(meta.read_text())["reference_depth_m"])
+        except (KeyError, ValueError, TypeError):
+            pass
+    return 1.0
+
+
+def _cmd_decode(args) -> int:
+    from simbench.decode import DecoderParams, decode
+    from simbench.io import load_image, save_npy, save_ply, save_png
+    from simbench.metrics import points_from_depth
+    from simbench.rig import load_rig
+
+    rig = load_rig(args.rig)
+    capture = load_image(args.capture, expected_size_hw=rig.camera.size_hw)
+    reference = None
+    z0 = args.z0 if args.z0 is not None else 1.0
+    if args.mode == "reference":
+        if args.reference is None:
+            raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
+        reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
+        z0 = _z0_for(Path(args.reference), args.z0)
+    params = DecoderParams(period_px=args.period, order=args.order, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    t0 = time.perf_counter()
+    result = decode(capture, rig=rig, params=params, reference=reference)
+    dt = time.perf_counter() - t0
+    out = save_npy(args.out, result.depth_m)
+    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m) -> {out}"
+    if args.ply:
+        pts = points_from_depth(result.depth_m, rig.camera)
+        ok = result.valid
+        save_ply(args.ply, pts[ok], capture[ok] if capture.dtype == np.uint8 else None)
+        msg += f", {args.ply}"
+    if args.debug_dir:
+        d = Path(args.debug_dir)
+        save_npy(d / "column.npy", result.column_px)
+        save_npy(d / "valid.npy", result.valid)
+        save_npy(d / "confidence.npy", result.confidence)
+        for name, arr in result.stages.items():
+            save_npy(d / f"{name}.npy", arr)
+        save_png(d / "wrapped_phase.png", _to_u8(result.stages["wrapped_phase"], -np.pi, np.pi))
+        save_png(d / "intensity.png", _to_u8(result.stages["intensity"], 0.0, 1.0))
+        save_png(d / "depth.png", _to_u8(result.depth_m, *_finite_range(result.depth_m)))
+        msg += f", stages in {d}/"
+    print(msg)
+    return 0
+
+
+def _finite_range(a: np.ndarray) -> tuple[float, float]:
+    f = a[np.isfinite(a)]
+    return (float(f.min()), float(f.max())) if f.size else (0.0, 1.0)
+
+
+def _to_u8(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    x = (np.nan_to_num(np.asarray(a, dtype=np.float64), nan=lo) - lo) / max(hi - lo, 1e-12)
+    return np.rint(np.clip(x, 0, 1) * 255).astype(np.uint8)
+
+
+def _cmd_score(args) -> int:
+    from simbench.io import load_npy
+    from simbench.metrics import depth_errors, edge_band
+
+    gt = load_npy(args.gt)
+    if gt.ndim != 2:
+        raise ValueError(f"{args.gt}: ground truth must be a 2-D depth map, got shape {gt.shape}")
+    depth = load_npy(args.depth, expected_shape=gt.shape)
+    gt_dir = Path(args.gt).parent
+    lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
+    region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
+    exclude = None
+    if args.edge_band > 0:
+        obj_path = gt_dir / "gt_object_id.npy"
+        obj = load_npy(obj_path, expected_shape=gt.shape) if obj_path.is_file() else None
+        exclude = edge_band(gt, object_id=obj, band_px=args.edge_band)
+    kw = {}
+    if args.column:
+        col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
+        kw = {"column_px": load_npy(args.column, expected_shape=gt.shape), "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape), "period_px": args.period}
+    m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
+    if args.json:
+        print(json.dumps(m, indent=2, sort_keys=True))
+    else:
+        print(f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 {m['p95_mm']:.4f} mm")
+        print(f"completeness {100 * m['completeness']:.2f} % of {m['n_region']} pixels, outliers (> 5 mm) {100 * m['outlier_share']:.3f} %")
+        if "stripe_order_errors" in m:
+            print(f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid pixels)")
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from simbench.experiments.demo import DemoConfig, run_demo
+    from simbench.render import select_variant
+
+    select_variant(args.variant)
+    cfg = DemoConfig(spp=args.spp, seed=args.seed, camera=args.camera)
+    if args.scenes:
+        cfg = replace(cfg, scenes=tuple(args.scenes))
+    run_demo(args.out, config=cfg, progress=lambda s: print(s, flush=True))
+    print(f"wrote {args.out}/summary.md, metrics.json, provenance.json and one figure per scene")
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from simbench.experiments.bench import run_decode_benchmark
+
+    res = run_decode_benchmark(repeats=args.repeats, variant=args.variant)
+    print(json.dumps(res, indent=2) if args.json else
+          f"decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture: median {res['median_ms']:.1f} ms, "
+          f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
+    if args.max_ms is not None and res["median_ms"] > args.max_ms:
+        raise ValueError(f"decode median {res['median_ms']:.1f} ms exceeds --max-ms {args.max_ms}")
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).")
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("pattern", help="write the colour sequence coded fringe pattern (PNG)")
+    s.add_argument("--out", required=True)
+    s.add_argument("--width", type=int, default=1824)
+    s.add_argument("--height", type=int, default=1140)
+    s.add_argument("--period", type=int, default=21, help="fringe period T in projector pixels")
+    s.add_argument("--order", type=int, default=3, help="De Bruijn window length n (cycle = 2**n stripes)")
+    s.set_defaults(fn=_cmd_pattern)
+
+    s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata")
+    s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
+    s.add_argument("--out", required=True)
+    s.add_argument("--spp", type=int, default=16)
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--max-depth", type=int, default=6)
+    s.add_argument("--camera", default="minimal", help="camera preset: minimal (noise) or ideal")
+    s.add_argument("--period", type=int, default=21)
+    s.add_argument("--order", type=int, default=3)
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: automatic)")
+    s.set_defaults(fn=_cmd_render)
+
+    s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)")
+    s.add_argument("capture")
+    s.add_argument("--reference", help="reference-plane capture (reference mode)")
+    s.add_argument("--rig", required=True, help="rig TOML file")
+    s.add_argument("--out", required=True)
+    s.add_argument("--ply", help="also write the point cloud as PLY")
+    s.add_argument("--debug-dir", help="write every decoder stage here")
+    s.add_argument("--mode", choices=("reference", "calibrated"), default="reference")
+    s.add_argument("--z0", type=float, default=None, help="reference depth (default: meta.json beside the reference, else 1.0)")
+    s.add_argument("--near", type=float, default=0.75, help="working range near end, m")
+    s.add_argument("--far", type=float, default=1.75, help="working range far end, m")
+    s.add_argument("--period", type=int, default=21)
+    s.add_argument("--order", type=int, default=3)
+    s.set_defaults(fn=_cmd_decode)
+
+    s = sub.add_parser("score", help="score a depth map against ground truth")
+    s.add_argument("depth")
+    s.add_argument("--gt", required=True, help="ground-truth depth .npy (gt_lit.npy beside it defines the region)")
+    s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
+    s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")
+    s.add_argument("--gt-column", help="true columns .npy (default: gt_column.npy beside --gt)")
+    s.add_argument("--period", type=float, default=21)
+    s.add_argument("--edge-band", type=int, default=0, help="exclude pixels this close to depth edges")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(fn=_cmd_score)
+
+    s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder")
+    s.add_argument("--out", default="results/demo")
+    s.add_argument("--spp", type=int, default=16)
+    s.add_argument("--seed", type=int, default=2017)
+    s.add_argument("--camera", default="minimal")
+    s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
+    s.add_argument("--variant", default=None)
+    s.set_defaults(fn=_cmd_demo)
+
+    s = sub.add_parser("bench", help="benchmark the decoder on a 1280x960 capture")
+    s.add_argument("--repeats", type=int, default=20)
+    s.add_argument("--max-ms", type=float, default=None, help="fail when the median exceeds this")
+    s.add_argument("--variant", default=None)
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(fn=_cmd_bench)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return args.fn(args)
+    except (ValueError, FileNotFoundError, OSError) as exc:
+        if args.debug:
+            raise
+        print(f"simbench: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("simbench: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

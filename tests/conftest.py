@@ -1,0 +1,36 @@
+"""Shared fixtures: the Mitsuba variant (chosen once, as an entry point would) and cached renders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = ROOT / "scenes"
+
+
+@pytest.fixture(scope="session")
+def variant() -> str:
+    from simbench.render import select_variant
+
+    return select_variant()
+
+
+@pytest.fixture(scope="session")
+def acquisitions(variant):
+    """Full-resolution, 16 spp, noisy acquisitions of the pipeline scenes (rendered once)."""
+    from simbench.pattern import PatternSpec
+    from simbench.scene import load_scene
+    from simbench.sensor import get_camera
+    from simbench.simulate import acquire
+
+    cache: dict = {}
+
+    def get(name: str, seed: int = 7):
+        key = (name, seed)
+        if key not in cache:
+            cache[key] = acquire(load_scene(SCENES / f"{name}.toml"), pattern=PatternSpec(), camera=get_camera("minimal"), spp=16, seed=seed)
+        return cache[key]
+
+    return get

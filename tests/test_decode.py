@@ -1,0 +1,130 @@
+"""The decoder alone, on analytic captures computed in numpy (no Mitsuba)."""
+
+import numpy as np
+import pytest
+
+from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
+from simbench.pattern import PatternSpec, de_bruijn, fringe_pattern, quantize, window_positions
+from simbench.rig import paper_rig
+from simbench.sensor import project_drive
+from simbench.synthetic import synthetic_plane_capture
+
+RIG = paper_rig()
+DRIVE = project_drive(quantize(fringe_pattern(PatternSpec())))
+
+
+@pytest.fixture(scope="module")
+def reference():
+    img, _, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.0))
+    return decode_reference(img, rig=RIG, params=DecoderParams())
+
+
+def _tilted(angle_deg: float, depth: float = 1.0):
+    a = np.radians(angle_deg)
+    return synthetic_plane_capture(DRIVE, RIG, normal=(np.sin(a), 0.0, -np.cos(a)), point_m=(0, 0, depth))
+
+
+@pytest.mark.parametrize("mode", ["calibrated", "reference"])
+@pytest.mark.parametrize("depth", [0.9, 1.0, 1.3])
+def test_noise_free_plane_recovers_projector_column(mode, depth, reference):
+    """Exact tier: the column of every valid pixel within 0.02 px RMS (issue 2)."""
+    img, col, z = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, depth))
+    r = decode(img, rig=RIG, params=DecoderParams(mode=mode), reference=reference)
+    lit = np.isfinite(col)
+    assert r.valid[lit].mean() > 0.99
+    err = r.column_px[r.valid] - col[r.valid]
+    assert np.sqrt(np.mean(err**2)) < 0.02
+    assert np.all(np.abs(err) < 0.5 * 21)  # no stripe-order error
+    # depth error implied by 0.02 px of column error: dZ = Z^2 / (f_p * B) * du
+    dz = r.depth_m[r.valid] - z[r.valid]
+    assert np.sqrt(np.mean(dz**2)) < 0.02 * depth**2 / (RIG.projector.focal_px * RIG.baseline_m)
+
+
+def test_noise_free_tilted_plane(reference):
+    img, col, z = _tilted(30)
+    r = decode(img, rig=RIG, params=DecoderParams(mode="calibrated"))
+    assert r.valid.mean() > 0.99
+    err = r.column_px[r.valid] - col[r.valid]
+    assert np.sqrt(np.mean(err**2)) < 0.05  # the fringe is chirped by the tilt
+    assert np.all(np.abs(err) < 10.5)
+
+
+def test_blue_only_mode_also_decodes(reference):
+    img, col, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1))
+    r = decode(img, rig=RIG, params=DecoderParams(intensity_mode="blue"), reference=reference)
+    err = r.column_px[r.valid] - col[r.valid]
+    assert r.valid.mean() > 0.99 and np.sqrt(np.mean(err**2)) < 0.02
+
+
+@pytest.mark.parametrize(
+    "image",
+    [
+        np.zeros((960, 1280, 3), np.uint8),
+        np.full((960, 1280, 3), 255, np.uint8),
+        np.random.default_rng(0).integers(0, 256, (960, 1280, 3), dtype=np.uint8),
+        np.full((960, 1280, 3), 65535, np.uint16),
+        np.zeros((960, 1280, 3), np.float64),
+    ],
+    ids=["dark", "saturated", "noise", "saturated16", "dark-float"],
+)
+def test_legal_images_never_crash_and_mark_invalid(image, reference):
+    for mode in ("reference", "calibrated"):
+        r = decode(image, rig=RIG, params=DecoderParams(mode=mode), reference=reference)
+        assert r.depth_m.shape == (960, 1280) and r.depth_m.dtype == np.float32
+        assert np.array_equal(np.isfinite(r.depth_m), r.valid)
+    if image.max() == 0 or image.min() == image.max():
+        assert not r.valid.any()
+
+
+@pytest.mark.parametrize(
+    "image, match",
+    [
+        (np.zeros((480, 640, 3), np.uint8), "rig's camera"),
+        (np.zeros((960, 1280), np.uint8), "shape"),
+        (np.full((960, 1280, 3), np.nan, np.float32), "NaN"),
+        (np.zeros((960, 1280, 3), np.int32), "dtype"),
+    ],
+)
+def test_illegal_images_raise_clearly(image, match, reference):
+    with pytest.raises(ValueError, match=match):
+        decode(image, rig=RIG, reference=reference)
+
+
+def test_reference_mode_needs_reference():
+    with pytest.raises(ValueError, match="reference"):
+        decode(np.zeros((960, 1280, 3), np.uint8), rig=RIG)
+
+
+def test_decoder_params_validate():
+    with pytest.raises(ValueError, match="gabor"):
+        DecoderParams(phase_method="nope")
+    with pytest.raises(ValueError, match="overlay"):
+        DecoderParams(intensity_mode="nope")
+    with pytest.raises(ValueError):
+        DecoderParams(depth_range_m=(2.0, 1.0))
+
+
+def test_decode_is_deterministic(reference):
+    img, _, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.2), supersample=2)
+    a = decode(img, rig=RIG, reference=reference)
+    b = decode(img, rig=RIG, reference=reference)
+    assert np.array_equal(a.depth_m, b.depth_m, equal_nan=True)
+
+
+def test_neighbour_correction_repairs_a_wrong_code():
+    seq = de_bruijn(3)
+    table = window_positions(seq, order=3)
+    codes = np.tile(seq, 4)
+    linked = np.ones(codes.size, bool)
+    linked[0] = False
+    truth = (np.arange(codes.size) % 8).astype(np.int32)
+    assert np.array_equal(window_positions_of_stripes(codes, linked, order=3, table=table, cycle=8)[1:-1], truth[1:-1])
+    bad = codes.copy()
+    bad[13] ^= 1  # three windows now read wrong positions
+    raw = window_positions_of_stripes(bad, linked, order=3, table=table, cycle=8)
+    assert np.sum(raw[1:-1] != truth[1:-1]) >= 2
+    fixed, support = neighbour_correct(raw, linked, cycle=8, reach=3)
+    assert np.array_equal(fixed, truth)
+    off, _ = neighbour_correct(raw, linked, cycle=8, reach=0)
+    assert np.array_equal(off, raw)

@@ -1,0 +1,49 @@
+import numpy as np
+import pytest
+
+from simbench.io import atomic_write_text, load_image, load_npy, save_npy, save_ply, save_png
+
+
+def test_atomic_write_leaves_no_temporary(tmp_path):
+    atomic_write_text(tmp_path / "a" / "x.txt", "hello")
+    assert (tmp_path / "a" / "x.txt").read_text() == "hello"
+    assert [p.name for p in (tmp_path / "a").iterdir()] == ["x.txt"]
+
+
+def test_png_round_trip_keeps_rgb_order(tmp_path):
+    img = np.zeros((4, 5, 3), np.uint8)
+    img[..., 0] = 200
+    save_png(tmp_path / "x.png", img)
+    assert np.array_equal(load_image(tmp_path / "x.png"), img)
+    with pytest.raises(ValueError, match="5x4"):
+        load_image(tmp_path / "x.png", expected_size_hw=(960, 1280))
+
+
+def test_load_image_errors(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        load_image(tmp_path / "missing.png")
+    (tmp_path / "junk.png").write_bytes(b"not a png")
+    with pytest.raises(ValueError, match="not a readable image"):
+        load_image(tmp_path / "junk.png")
+    save_png(tmp_path / "grey.png", np.zeros((3, 3), np.uint8))
+    with pytest.raises(ValueError, match="RGB"):
+        load_image(tmp_path / "grey.png")
+
+
+def test_npy(tmp_path):
+    save_npy(tmp_path / "a.npy", np.arange(6).reshape(2, 3))
+    assert load_npy(tmp_path / "a.npy", expected_shape=(2, 3)).sum() == 15
+    with pytest.raises(ValueError, match="shape"):
+        load_npy(tmp_path / "a.npy", expected_shape=(3, 2))
+    (tmp_path / "b.npy").write_bytes(b"garbage")
+    with pytest.raises(ValueError):
+        load_npy(tmp_path / "b.npy")
+
+
+def test_ply_is_readable_by_trimesh(tmp_path):
+    import trimesh
+
+    pts = np.random.default_rng(0).random((50, 3))
+    save_ply(tmp_path / "c.ply", pts, np.full((50, 3), 7, np.uint8))
+    cloud = trimesh.load(tmp_path / "c.ply")
+    assert np.allclose(np.asarray(cloud.vertices), pts, atol=1e-6)

@@ -1,0 +1,51 @@
+import numpy as np
+import pytest
+
+from simbench.metrics import depth_errors, edge_band, plane_fit_error, points_from_depth
+from simbench.rig import Intrinsics
+
+
+def test_depth_errors_by_hand():
+    gt = np.ones((4, 5))
+    d = gt.copy()
+    d[0, 0] = 1.002  # 2 mm
+    d[0, 1] = 1.010  # 10 mm: outlier
+    d[1, 1] = np.nan
+    region = np.ones_like(gt, bool)
+    region[3] = False
+    m = depth_errors(d, gt, region=region)
+    assert m["n_region"] == 15 and m["n_valid"] == 14
+    assert m["completeness"] == pytest.approx(14 / 15)
+    assert m["mae_mm"] == pytest.approx(12 / 14)
+    assert m["outlier_share"] == pytest.approx(1 / 14)
+    col = np.zeros_like(gt)
+    m = depth_errors(d, gt, region=region, column_px=col + np.array([0, 11, 0, 0, 0]), gt_column_px=col, period_px=21)
+    # column 1 is off by > T/2 in rows 0 and 2 (row 1 is invalid there, row 3 outside the region)
+    assert m["stripe_order_errors"] == 2
+    assert m["stripe_order_error_rate"] == pytest.approx(2 / 14)
+
+
+def test_plane_fit_error_is_zero_on_a_plane_and_sees_noise():
+    cam = Intrinsics.centred(200, 150, 300.0)
+    rows, cols = np.mgrid[0:150, 0:200]
+    rx, ry = (cols - cam.cx_px) / cam.focal_px, (rows - cam.cy_px) / cam.focal_px
+    # plane 0.2 x + 0.1 y + z = 1  ->  z = 1 / (0.2 rx + 0.1 ry + 1)
+    z = 1.0 / (0.2 * rx + 0.1 * ry + 1.0)
+    assert plane_fit_error(z, cam)["mean_abs_residual_mm"] < 1e-9
+    noisy = z + np.random.default_rng(0).normal(0, 1e-3, z.shape)
+    e = plane_fit_error(noisy, cam)["mean_abs_residual_mm"]
+    assert e == pytest.approx(np.sqrt(2 / np.pi) * 1.0 / np.sqrt(1 + 0.2**2 + 0.1**2), rel=0.05)
+
+
+def test_edge_band():
+    z = np.ones((20, 20))
+    z[:, 10:] = 1.2
+    b = edge_band(z, band_px=2)
+    assert b[:, 7:13].all() and not b[:, :7].any() and not b[:, 13:].any()
+    assert not edge_band(np.ones((5, 5)), band_px=3).any()
+
+
+def test_points_from_depth():
+    cam = Intrinsics.centred(3, 3, 1.0)
+    p = points_from_depth(np.full((3, 3), 2.0), cam)
+    assert np.allclose(p[0, 0], [-2, -2, 2])

@@ -1,0 +1,78 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from simbench.pattern import PatternSpec, column_from_phase, de_bruijn, fringe_pattern, phase_from_column, quantize, window_positions
+
+
+def test_paper_sequence():
+    # paper Sec. 4.2: B(2,3) = 00,010,111
+    assert "".join(map(str, de_bruijn(3))) == "00010111"
+
+
+@pytest.mark.parametrize("order", range(2, 9))
+@pytest.mark.parametrize("alphabet", [2, 3])
+def test_every_cyclic_window_occurs_exactly_once(order, alphabet):
+    if alphabet**order > 5000:
+        pytest.skip("large")
+    seq = de_bruijn(order, alphabet=alphabet)
+    assert seq.size == alphabet**order
+    ext = np.concatenate([seq, seq[: order - 1]])
+    windows = {tuple(ext[i : i + order]) for i in range(seq.size)}
+    assert windows == set(itertools.product(range(alphabet), repeat=order))
+
+
+def test_window_table_locates_each_window():
+    seq = de_bruijn(4)
+    table = window_positions(seq, order=4)
+    assert sorted(table.tolist()) == list(range(16))
+    for q in range(16):
+        code = 0
+        for j in range(4):
+            code = code * 2 + int(seq[(q + j) % 16])
+        assert table[code] == q
+
+
+def test_window_table_rejects_repeats():
+    with pytest.raises(ValueError, match="repeats"):
+        window_positions(np.array([0, 0, 1, 0, 0, 1]), order=2)
+
+
+@pytest.mark.parametrize("bad", [{"order": 1}, {"period_px": 2}, {"dc": 0.3, "amplitude": 0.5}, {"size_hw": (0, 10)}])
+def test_invalid_specs_raise(bad):
+    with pytest.raises(ValueError):
+        PatternSpec(**bad)
+
+
+@pytest.mark.parametrize("period", [11, 21, 32])
+def test_wrapped_phase_jumps_exactly_at_stripe_borders(period):
+    u = np.arange(0, 10 * period) - 0.5  # pixel edges
+    wrapped = np.angle(np.exp(1j * phase_from_column(u, period_px=period)))
+    at_border = (np.arange(u.size) % period) == 0
+    # at each border the phase is -pi (== +pi): it wraps there and nowhere else
+    assert np.allclose(np.abs(wrapped[at_border]), np.pi, atol=1e-9)
+    assert np.all(np.abs(wrapped[~at_border]) < np.pi - 1e-6)
+    assert np.allclose(column_from_phase(phase_from_column(u, period_px=period), period_px=period), u)
+
+
+def test_eq8_channels_and_stripe_colours():
+    spec = PatternSpec(size_hw=(4, 21 * 16), period_px=21, order=3)
+    p = fringe_pattern(spec)
+    r, g, b = p[0, :, 0], p[0, :, 1], p[0, :, 2]
+    assert np.allclose(r + g, b)  # the code splits the fringe between R and G (Eq. 8)
+    assert np.all((r == 0) | (g == 0))
+    seq = de_bruijn(3)
+    for s in range(16):
+        cols = slice(21 * s, 21 * (s + 1))
+        assert (r[cols].sum() > 0) == bool(seq[s % 8])  # C = 1 is red
+    # brightest at stripe centres, darkest at borders
+    assert np.argmax(b[:21]) == 10 and np.argmin(b[:21]) in (0, 20)
+    assert np.all(p == p[:1])
+
+
+def test_quantize():
+    q = quantize(np.array([[0.0, 0.5, 1.0, 1.2]]))
+    assert q.dtype == np.uint8 and q.tolist() == [[0, 128, 255, 255]]
+    with pytest.raises(ValueError):
+        quantize(np.array([np.nan]))
