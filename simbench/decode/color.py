@@ -115,12 +115,12 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     stripe_code : ndarray, shape (S,), uint8
     agreement : ndarray, shape (S,), float32; share of the stripe's pixels agreeing with it
     """
-    lab = stripes.labels.ravel()
-    sel = lab >= 0
-    counts = np.bincount(lab[sel], minlength=stripes.count).astype(np.float64)
-    ones = np.bincount(lab[sel], weights=code.ravel()[sel], minlength=stripes.count)
+    # one histogram over (stripe, code) pairs; label -1 (invalid) lands in the first two bins
+    key = (stripes.labels.ravel() + 1) * 2 + code.ravel()
+    hist = np.bincount(key, minlength=2 * (stripes.count + 1)).reshape(-1, 2)[1:].astype(np.float64)
+    counts = hist[:, 0] + hist[:, 1]
     with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(counts > 0, ones / counts, 0.5)
+        frac = np.where(counts > 0, hist[:, 1] / counts, 0.5)
     if voting:
         out = (frac >= 0.5).astype(np.uint8)
     else:

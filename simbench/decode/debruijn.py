@@ -106,23 +106,17 @@ def neighbour_correct(
         p[ok] = positions[src[ok]]
         good = ok & (p >= 0)
         preds[k] = np.where(good, (p - off) % cycle, -1)
-    votes = np.zeros_like(preds)
+    # votes per candidate position: a one-hot count over the 2*reach+1 predictions
+    counts = np.zeros((cycle, n), dtype=np.int16)
     for k in range(preds.shape[0]):
-        votes[k] = np.sum((preds == preds[k][None, :]) & (preds[k][None, :] >= 0), axis=0)
-    own = reach
-    # Plurality; ties prefer the stripe's own window, then the nearest neighbour.
-    order = [own] + [own + s * d for d in range(1, reach + 1) for s in (-1, 1)]
-    best = np.full(n, -1, dtype=np.int64)
-    best_votes = np.zeros(n, dtype=np.int64)
-    for k in order:
-        better = votes[k] > best_votes
-        best = np.where(better, preds[k], best)
-        best_votes = np.where(better, votes[k], best_votes)
+        for v in range(cycle):
+            counts[v] += preds[k] == v
+    cols = np.arange(n)
+    best = counts.argmax(axis=0)
+    best_votes = counts[best, cols].astype(np.int64)
     # A tie between different candidates (typical where a chain was linked across a depth
     # edge) is not evidence for either: drop the stripe rather than guess.
-    rival = np.zeros(n, dtype=np.int64)
-    for k in range(preds.shape[0]):
-        other = (preds[k] >= 0) & (preds[k] != best)
-        rival = np.maximum(rival, np.where(other, votes[k], 0))
+    counts[best, cols] = -1
+    rival = counts.max(axis=0) if n else np.zeros(0, np.int16)
     keep = (best_votes >= min_support) & (best_votes > rival)
     return np.where(keep, best, -1).astype(np.int32), np.where(keep, best_votes, 0).astype(np.int32)

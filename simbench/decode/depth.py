@@ -69,7 +69,8 @@ def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, 
 
     Returns
     -------
-    ndarray, shape (H, projector_width + 1), float32
+    ndarray, shape (H, projector_width + 2), float32
+        Column ``projector_width + 1`` is all NaN: the look-up's target for unknown columns.
     """
     h, w = reference_column.shape
     ref = reference_column.astype(np.float64)
@@ -77,7 +78,7 @@ def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, 
     prev_max = np.concatenate([np.full((h, 1), -np.inf), run_max[:, :-1]], axis=1)
     keep = np.isfinite(ref) & (ref > prev_max)
     rows, xs = np.nonzero(keep)
-    table = np.full((h, projector_width + 1), np.nan, dtype=np.float32)
+    table = np.full((h, projector_width + 2), np.nan, dtype=np.float32)
     if rows.size < 2:
         return table
     vals = ref[rows, xs]
@@ -101,7 +102,7 @@ def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, 
         line = a[:, None] * c + b[:, None]
         reach = np.where(c < lo[:, None], lo[:, None] - c, c - hi[:, None]) * np.abs(a)[:, None]
     outside_ok = ~inside & (n[:, None] >= 16) & (reach <= max_extrapolation_px)
-    table[:] = np.where(inside & (n[:, None] >= 2), xr, np.where(outside_ok, line, np.nan))
+    table[:, :-1] = np.where(inside & (n[:, None] >= 2), xr, np.where(outside_ok, line, np.nan))
     return table
 
 
@@ -114,16 +115,21 @@ def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
     ndarray, shape (H, W), float32; NaN where the reference has no match
     """
     h, w = column.shape
-    width = table.shape[1] - 1
-    ok = np.isfinite(column) & (column >= 0) & (column <= width)
-    cf = np.where(ok, column, 0)
-    i = np.minimum(cf.astype(np.int32), width - 1)
-    f = cf - i
+    stride = table.shape[1]
+    width = stride - 2
+    # NaN and out-of-range columns interpolate towards the table's NaN column, giving NaN
+    cf = np.nan_to_num(column, nan=-1.0)
+    bad = (cf < 0) | (cf > width)
+    cf[bad] = width + 0.5
+    fi = np.floor(cf)
+    fi[~bad & (fi >= width)] = width - 1
+    f = cf - fi
+    i = fi.astype(np.int32)
+    idx = i + (np.arange(h, dtype=np.int32) * stride)[:, None]
     flat = table.ravel()
-    base = (np.arange(h, dtype=np.int64) * (width + 1))[:, None] + i
-    x0 = flat[base]
-    x1 = flat[base + 1]
-    return np.where(ok, x0 + f * (x1 - x0), np.float32(np.nan)).astype(np.float32, copy=False)
+    x0 = np.take(flat, idx)
+    x1 = np.take(flat, idx + 1)
+    return x0 + f * (x1 - x0)
 
 
 def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: float, z0_m: float) -> np.ndarray:

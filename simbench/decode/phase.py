@@ -106,18 +106,6 @@ def _conv(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=8)
-def _full_gram(shape: tuple[int, int], omega: float, sx: float, sy: float):
-    """Window moments of the basis for an all-certain image (reused across captures)."""
-    ones = np.ones(shape, np.float32)
-    cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
-    kx, ky = _kernel(sx), _kernel(sy)
-    out = tuple(_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
-    for a in out:
-        a.setflags(write=False)
-    return out
-
-
-@lru_cache(maxsize=8)
 def _basis(width: int, omega: float):
     x = np.arange(width, dtype=np.float64) * omega
     rows = [np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)]
@@ -125,6 +113,48 @@ def _basis(width: int, omega: float):
     for a in out:
         a.setflags(write=False)
     return out
+
+
+def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
+    """Per-pixel maps turning the window moments (b0, b1, b2) of the data into the fit.
+
+    The normal equations are ``M p = b`` with ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs,
+    sss]]``; with the adjugate ``C`` and ``det``: ``p = C b / det``.  Returned are the rows
+    giving ``a0`` and the carrier-rotated ``re = a1 cos + a2 sin``, ``im = a1 sin - a2 cos``
+    (so that ``psi = atan2(im, re)``), ``1/s1`` and the mask of solvable pixels.
+    """
+    scc = 0.5 * (s1 + sc2)
+    sss = 0.5 * (s1 - sc2)
+    scs = 0.5 * ss2
+    c00 = scc * sss - scs * scs
+    c01 = ss * scs - sc * sss
+    c02 = sc * scs - ss * scc
+    c11 = s1 * sss - ss * ss
+    c12 = sc * ss - s1 * scs
+    c22 = s1 * scc - sc * sc
+    det = s1 * c00 + sc * c01 + ss * c02
+    good = (s1 > 0.05) & (det > 1e-4 * s1 * s1 * s1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(good, np.float32(1) / det, np.float32(0))
+        inv_s1 = np.where(good, np.float32(1) / s1, np.float32(0))
+    k = (c00 * inv, c01 * inv, c02 * inv)
+    p = ((c01 * cos1 + c02 * sin1) * inv, (c11 * cos1 + c12 * sin1) * inv, (c12 * cos1 + c22 * sin1) * inv)
+    q = ((c01 * sin1 - c02 * cos1) * inv, (c11 * sin1 - c12 * cos1) * inv, (c12 * sin1 - c22 * cos1) * inv)
+    return k, p, q, inv_s1, good
+
+
+@lru_cache(maxsize=8)
+def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
+    """:func:`_solver` for an all-certain image (reused across captures of one rig)."""
+    cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
+    kx, ky = _kernel(sx), _kernel(sy)
+    ones = np.ones(shape, np.float32)
+    moments = [_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
+    out = _solver(*moments, cos1, sin1)
+    for group in out:
+        for a in group if isinstance(group, tuple) else (group,):
+            a.setflags(write=False)
+    return out, moments[0]
 
 
 def gabor_phase(
@@ -155,49 +185,40 @@ def gabor_phase(
     if not period_px > 2:
         raise ValueError(f"period_px must be > 2, got {period_px}")
     h, w = intensity.shape
-    omega = 2.0 * np.pi / period_px
+    omega = round(2.0 * np.pi / period_px, 12)
     kx, ky = _kernel(sigma_x_px), _kernel(sigma_y_px)
-    cos1, sin1, cos2, sin2 = _basis(w, round(omega, 12))
-    c = np.ascontiguousarray(certainty, dtype=np.float32)
-    ci = c * intensity.astype(np.float32, copy=False)
+    cos1, sin1, cos2, sin2 = _basis(w, omega)
+    intensity = intensity.astype(np.float32, copy=False)
+    c = certainty.astype(np.float32, copy=False)
     if c.min() >= 1.0:
-        s1, sc, ss, sc2, ss2 = _full_gram((h, w), round(omega, 12), float(sigma_x_px), float(sigma_y_px))
+        (k, p, q, inv_s1, good), s1 = _full_solver((h, w), omega, float(sigma_x_px), float(sigma_y_px))
+        ci = intensity
     else:
-        s1, sc, ss, sc2, ss2 = (_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
+        moments = [_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
+        k, p, q, inv_s1, good = _solver(*moments, cos1, sin1)
+        s1 = moments[0]
+        ci = c * intensity
     b0 = _conv(ci, kx, ky)
     b1 = _conv(ci * cos1, kx, ky)
     b2 = _conv(ci * sin1, kx, ky)
     e2 = _conv(ci * intensity, kx, ky)
-
-    # Normal equations of the 3-parameter fit, M p = b with
-    # M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]]; solved by the adjugate.
-    scc = 0.5 * (s1 + sc2)
-    sss = 0.5 * (s1 - sc2)
-    scs = 0.5 * ss2
-    m00, m01, m02, m11, m12, m22 = s1, sc, ss, scc, scs, sss
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    det = m00 * c00 + m01 * c01 + m02 * c02
-    scale = s1 * s1 * s1
-    good = (s1 > 0.05) & (det > 1e-4 * scale)
+    a0 = k[0] * b0 + k[1] * b1 + k[2] * b2
+    re = p[0] * b0 + p[1] * b1 + p[2] * b2
+    im = q[0] * b0 + q[1] * b1 + q[2] * b2
+    # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
+    wrapped = cv2.phase(re, im)
+    wrapped[wrapped >= np.pi] -= np.float32(2 * np.pi)
+    amp = cv2.magnitude(re, im)
+    # weighted residual sum of squares: e2 - p.b, with a1 b1 + a2 b2 written through re, im
+    pb = a0 * b0 + re * (cos1 * b1 + sin1 * b2) + im * (sin1 * b1 - cos1 * b2)
+    sse = np.maximum(e2 - pb, 0) * inv_s1
     with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(good, 1.0 / det, 0.0).astype(np.float32)
-    a0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv
-    a1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv
-    a2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv
-    # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta.
-    re = a1 * cos1 + a2 * sin1
-    im = a1 * sin1 - a2 * cos1
-    wrapped = np.arctan2(im, re)
-    amp = np.sqrt(re * re + im * im)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sse = np.maximum(e2 - (a0 * b0 + a1 * b1 + a2 * b2), 0.0) / s1
         residual = np.sqrt(sse) / (amp * np.float32(np.sqrt(0.5)))
-    amp = np.where(good, amp, 0.0).astype(np.float32)
-    residual = np.where(good & (amp > 0), residual, np.inf).astype(np.float32)
-    wrapped = np.where(wrapped >= np.pi, -np.pi, wrapped).astype(np.float32)
-    return PhaseResult(wrapped=wrapped, amplitude=amp, offset=a0.astype(np.float32), residual=residual, support=s1)
+    ok = good & (amp > 0)
+    return PhaseResult(
+        wrapped=wrapped,
+        amplitude=np.where(good, amp, np.float32(0)),
+        offset=a0,
+        residual=np.where(ok, residual, np.float32(np.inf)),
+        support=s1,
+    )
