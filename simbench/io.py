@@ -27,12 +27,20 @@ __all__ = [
 ]
 
 
+def _file_mode() -> int:
+    """Permissions a plain ``open()`` would give (mkstemp's are 0600)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (temporary file + rename); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, _file_mode())
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()
@@ -145,6 +153,7 @@ def save_exr(path: str | Path, image: np.ndarray) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".exr", dir=path.parent)
     os.close(fd)
     try:
+        os.chmod(tmp, _file_mode())
         mi.Bitmap(np.ascontiguousarray(arr)).write(tmp)
         os.replace(tmp, path)
     except BaseException:
