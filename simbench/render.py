@@ -284,8 +284,15 @@ def render_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int,
     import mitsuba as mi
 
     d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth)
-    img = mi.render(mi.load_dict(d), seed=int(seed), spp=int(spp))
+    img = mi.render(_load(mi, d), seed=int(seed), spp=int(spp))
     return np.array(img, dtype=np.float32)
+
+
+def _load(mi, d: dict):
+    # optimize=False: Mitsuba's optimiser merges meshes sharing a material into one shape,
+    # which loses per-object ids and fails outright for meshes with different attributes
+    # (a cube next to a PLY mesh).
+    return mi.load_dict(d, optimize=False)
 
 
 @dataclass(frozen=True)
@@ -322,9 +329,7 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
     d, rig = mitsuba_scene(scene, np.zeros((*scene.rig.projector.size_hw, 3), np.float32), spp=1, max_depth=1)
     d.pop("projector")
     d.pop("ambient", None)
-    # optimize=False: Mitsuba would otherwise merge meshes sharing a material into one shape
-    # and the per-object ids would be lost.
-    mscene = mi.load_dict(d, optimize=False)
+    mscene = _load(mi, d)
     rays = pixel_rays(rig.camera)
     h, w = rays.shape[:2]
     dirs = (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)

@@ -128,3 +128,21 @@ def test_neighbour_correction_repairs_a_wrong_code():
     assert np.array_equal(fixed, truth)
     off, _ = neighbour_correct(raw, linked, cycle=8, reach=0)
     assert np.array_equal(off, raw)
+
+
+@pytest.mark.parametrize("mode", ["reference", "calibrated"])
+def test_result_does_not_depend_on_threads(mode, reference):
+    img, _, _ = _tilted(20, depth=1.1)
+    one = decode(img, rig=RIG, params=DecoderParams(mode=mode, threads=1), reference=reference)
+    for threads in (2, 3):
+        r = decode(img, rig=RIG, params=DecoderParams(mode=mode, threads=threads), reference=reference)
+        assert np.array_equal(r.depth_m, one.depth_m, equal_nan=True)
+        assert np.array_equal(r.stripe_index, one.stripe_index)
+    labels = r.stages["stripe_label"]
+    assert labels.shape == (960, 1280)
+    # renumbered across bands: one label never spans two bands' rows
+    rows_of = {}
+    ys, xs = np.nonzero(labels >= 0)
+    for y, lab in zip(ys[::97], labels[ys[::97], xs[::97]]):
+        rows_of.setdefault(lab, set()).add(y)
+    assert all(len(v) == 1 for v in rows_of.values())

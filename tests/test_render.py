@@ -1,5 +1,7 @@
 """Render tier: full-resolution Mitsuba captures of the pipeline scenes, decoded and scored."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -86,8 +88,6 @@ def test_off_centre_principal_points(variant):
     ground truth agree, and the decoder (calibrated mode) recovers the projector column."""
     rig = Rig(Intrinsics(640, 480, 1156.266, 300.25, 250.5), Intrinsics(912, 570, 1114.0, 480.5, 270.0), (0.093, 0, 0), (0, 0, 0))
     scene = scene_from_dict({"object": [{"type": "plane", "center_m": [0, 0, 1.0], "size_m": [2, 2]}]})
-    import dataclasses
-
     scene = dataclasses.replace(scene, rig=rig)
     spec = PatternSpec(size_hw=(570, 912))
     drive = project_drive(quantize(fringe_pattern(spec)))
@@ -101,3 +101,30 @@ def test_off_centre_principal_points(variant):
     assert ok.mean() > 0.9
     err = r.column_px[ok] - gt.column_px[ok]
     assert np.sqrt(np.mean(err**2)) < 0.05
+
+
+def test_box_mesh_and_ambient(variant, tmp_path):
+    """Every object kind renders and has exact ground truth; ambient light lifts shadows."""
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=4, radius=1.0).export(tmp_path / "ball.ply")
+    data = {
+        "object": [
+            {"type": "box", "name": "box", "center_m": [-0.12, 0, 1.0], "size_m": [0.1, 0.1, 0.1], "rotation_deg": [0, 0, 0]},
+            {"type": "mesh", "name": "ball", "file": "ball.ply", "scale": 0.06, "translate_m": [0.12, 0, 1.0]},
+            {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+        ],
+    }
+    scene = scene_from_dict(data, base_dir=tmp_path)
+    gt = ground_truth(scene)
+    ids = gt.object_id
+    assert set(np.unique(ids)) == {0, 1, 2}
+    # the box's front face is at z = 1.0 - 0.05; the mesh sphere's nearest point at 1.0 - 0.06
+    assert np.allclose(gt.depth_m[ids == 0].min(), 0.95, atol=1e-5)
+    assert gt.depth_m[ids == 1].min() == pytest.approx(0.94, abs=2e-4)  # tessellation
+    drive = project_drive(quantize(fringe_pattern(PatternSpec())))
+    dark = render_radiance(scene, drive, spp=4, seed=0)
+    lit = render_radiance(dataclasses.replace(scene, ambient_rgb=(0.05, 0.05, 0.05)), drive, spp=4, seed=0)
+    shadow = ~gt.lit & (ids == 2)
+    assert shadow.sum() > 1000
+    assert dark[shadow].mean() < 0.01 < 0.03 < lit[shadow].mean()

@@ -147,6 +147,14 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
     return np.where(z > 0, z, np.float32(np.nan))
 
 
-def depth_calibrated(column: np.ndarray, rig: Rig) -> np.ndarray:
-    """Depth by intersecting each camera ray with its projector column's plane."""
-    return triangulate_columns(column, rig)
+def depth_calibrated(column: np.ndarray, rig: Rig, *, rows: np.ndarray | None = None) -> np.ndarray:
+    """Depth by intersecting each camera ray with its projector column's plane.
+
+    ``rows`` gives the image rows of ``column`` when it is a band of the image.
+    """
+    if rows is None:
+        return triangulate_columns(column, rig)
+    h, w = column.shape
+    rr = np.broadcast_to(np.asarray(rows)[:, None], (h, w))
+    cc = np.broadcast_to(np.arange(w)[None, :], (h, w))
+    return triangulate_columns(column, rig, rows=rr, cols=cc)

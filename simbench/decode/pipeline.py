@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -65,6 +67,8 @@ class DecoderParams:
     depth_range_m : tuple of float
         Working range; depths outside are invalid.  In calibrated mode the cycle number is
         chosen for the middle of this range (in inverse depth).
+    threads : int or None
+        Worker threads (row bands); None = one per CPU.  Results do not depend on it.
     """
 
     period_px: int = 21
@@ -85,6 +89,7 @@ class DecoderParams:
     mode: str = "reference"
     z0_m: float = 1.0
     depth_range_m: tuple[float, float] = (0.75, 1.75)
+    threads: int | None = None
 
     def __post_init__(self) -> None:
         if self.intensity_mode not in INTENSITY_MODES:
@@ -100,6 +105,8 @@ class DecoderParams:
             raise ValueError(f"z0_m must be > 0, got {self.z0_m}")
         if self.sigma_periods <= 0 or self.sigma_y_ratio <= 0:
             raise ValueError("sigma_periods and sigma_y_ratio must be > 0")
+        if self.threads is not None and self.threads < 1:
+            raise ValueError(f"threads must be >= 1 or None, got {self.threads}")
         if self.neighbour_reach < 0 or self.min_support < 1:
             raise ValueError("neighbour_reach must be >= 0 and min_support >= 1")
 
@@ -208,8 +215,13 @@ def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     return ext[labels]
 
 
-def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams) -> tuple[np.ndarray, np.ndarray, LazyStages]:
-    """Stages 1-3 and the absolute column; returns (column, stripe_index, stages)."""
+def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams, crop: slice) -> tuple[np.ndarray, np.ndarray, LazyStages]:
+    """Stages 1-3 and the absolute column for one band of rows.
+
+    ``rgb`` holds the band plus a halo of rows above and below for the phase fit; ``crop``
+    selects the band's own rows, to which everything after the fit is restricted.
+    Returns (column, stripe_index, stages) for the cropped rows.
+    """
     t_cam = params.camera_period(rig)
     intensity = overlay_intensity(rgb, mode=params.intensity_mode)
     certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level)
@@ -217,14 +229,11 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     phase = PHASE_METHODS[params.phase_method](
         intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
     )
-    valid = (
-        lit
-        & (phase.support >= params.min_window_support)
-        & (phase.amplitude >= params.min_amplitude)
-        & (phase.residual <= params.max_residual)
-    )
+    rgb, intensity, certainty, lit = rgb[crop], intensity[crop], certainty[crop], lit[crop]
+    wrapped, amplitude, residual, support_w = phase.wrapped[crop], phase.amplitude[crop], phase.residual[crop], phase.support[crop]
+    valid = lit & (support_w >= params.min_window_support) & (amplitude >= params.min_amplitude) & (residual <= params.max_residual)
     code = color_code(rgb)
-    stripes = segment_stripes(phase.wrapped, valid, period_px=t_cam)
+    stripes = segment_stripes(wrapped, valid, period_px=t_cam)
     stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
     table = _window_table(params.order)
     raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
@@ -233,15 +242,15 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     )
     lab = stripes.labels
     position = _per_pixel(w_fixed, lab, -1)
-    column, stripe_index = absolute_column(position, phase.wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
+    column, stripe_index = absolute_column(position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
     st = LazyStages()
     st.put("intensity", intensity)
     st.put("certainty", certainty)
     st.put("lit", lit)
-    st.put("window_support", phase.support)
-    st.put("wrapped_phase", phase.wrapped)
-    st.put("amplitude", phase.amplitude)
-    st.put("fit_residual", phase.residual)
+    st.put("window_support", support_w)
+    st.put("wrapped_phase", wrapped)
+    st.put("amplitude", amplitude)
+    st.put("fit_residual", residual)
     st.put("phase_valid", valid)
     st.put("code", code)
     st.put("stripe_label", lab)
@@ -250,7 +259,7 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     st.put("position_raw", lambda: _per_pixel(raw_w, lab, -1))
     st.put("position", position)
     st.put("support", lambda: _per_pixel(support, lab, 0))
-    st.put("unwrapped_phase", lambda: np.where(stripe_index >= 0, phase.wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)))
+    st.put("unwrapped_phase", lambda: np.where(stripe_index >= 0, wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)))
     return column, stripe_index, st
 
 
@@ -268,6 +277,52 @@ def _plane_columns(rig: Rig, z_m: float) -> np.ndarray:
     return col
 
 
+def _bands(height: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int, int]], int]:
+    """Row bands for the worker threads and the halo (rows) each needs for the phase fit."""
+    sy = params.sigma_periods * params.camera_period(rig) * params.sigma_y_ratio
+    halo = int(np.ceil(3.0 * sy))
+    n = max(1, min(params.threads or os.cpu_count() or 1, height // max(4 * halo, 32) or 1))
+    edges = np.linspace(0, height, n + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo
+
+
+def _run_bands(fn, rgb: np.ndarray, params: DecoderParams, rig: Rig) -> list:
+    """Apply ``fn(rgb_with_halo, rows, crop)`` to each band, in parallel threads."""
+    h = rgb.shape[0]
+    bands, halo = _bands(h, params, rig)
+
+    def work(band):
+        r0, r1 = band
+        a0, a1 = max(0, r0 - halo), min(h, r1 + halo)
+        return fn(rgb[a0:a1], slice(r0, r1), slice(r0 - a0, r1 - a0))
+
+    if len(bands) == 1:
+        return [work(bands[0])]
+    with ThreadPoolExecutor(max_workers=len(bands)) as pool:
+        return list(pool.map(work, bands))
+
+
+def _merge_stages(parts: list[LazyStages]) -> LazyStages:
+    """Stack the bands' stage images; stripe labels are renumbered to stay unique."""
+    if len(parts) == 1:
+        return parts[0]
+    merged = LazyStages()
+
+    def stack(name):
+        arrays = [p[name] for p in parts]
+        if name == "stripe_label":
+            out, offset = [], 0
+            for a in arrays:
+                out.append(np.where(a >= 0, a + offset, -1))
+                offset += int(a.max()) + 1 if a.size and a.max() >= 0 else 0
+            arrays = out
+        return np.concatenate(arrays, axis=0)
+
+    for name in parts[0]:
+        merged.put(name, lambda name=name: stack(name))
+    return merged
+
+
 def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> ReferenceMap:
     """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
 
@@ -275,7 +330,8 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) 
     """
     rgb = as_float_image(reference, expected_size_hw=rig.camera.size_hw)
     predicted = _plane_columns(rig, float(params.z0_m))
-    column, _, _ = _columns(rgb, predicted, rig=rig, params=params)
+    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], rgb, params, rig)
+    column = np.concatenate(parts, axis=0)
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
     return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m)
@@ -289,6 +345,9 @@ def decode(
     reference: ReferenceMap | np.ndarray | None = None,
 ) -> DecodeResult:
     """Decode one capture into depth (paper Sec. 5).
+
+    Rows are processed in bands on ``params.threads`` threads (each with a halo of rows for
+    the phase fit); the result does not depend on the number of threads.
 
     Parameters
     ----------
@@ -308,27 +367,43 @@ def decode(
     """
     rgb = as_float_image(capture, expected_size_hw=rig.camera.size_hw)
     zmin, zmax = params.depth_range_m
+    ref = None
     if params.mode == "reference":
         if reference is None:
             raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
         ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
         if ref.column_px.shape != rgb.shape[:2]:
             raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {rgb.shape[:2]}")
-        column, stripe_index, stages = _columns(rgb, ref.expected_px, rig=rig, params=params)
-        x_ref = match_reference(column, ref.inverse)
-        depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
-        stages.put("reference_x", x_ref)
+        expected = ref.expected_px
     else:
-        z_mid = 2.0 / (1.0 / zmin + 1.0 / zmax)
-        column, stripe_index, stages = _columns(rgb, _plane_columns(rig, z_mid), rig=rig, params=params)
-        depth = depth_calibrated(column, rig).astype(np.float32)
-    valid = (depth >= zmin) & (depth <= zmax)
+        expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
     nan = np.float32(np.nan)
+
+    def band(img, rows, crop):
+        column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop)
+        if ref is not None:
+            x_ref = match_reference(column, ref.inverse[rows])
+            depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
+            stages.put("reference_x", x_ref)
+        else:
+            depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
+        valid = (depth >= zmin) & (depth <= zmax)
+        return (
+            np.where(valid, depth, nan),
+            valid,
+            np.where(valid, stages["amplitude"], np.float32(0)),
+            np.where(valid, column, nan),
+            np.where(valid, stripe_index, -1),
+            stages,
+        )
+
+    parts = _run_bands(band, rgb, params, rig)
+    cat = [np.concatenate([p[i] for p in parts], axis=0) if len(parts) > 1 else parts[0][i] for i in range(5)]
     return DecodeResult(
-        depth_m=np.where(valid, depth, nan),
-        valid=valid,
-        confidence=np.where(valid, stages["amplitude"], np.float32(0)),
-        column_px=np.where(valid, column, nan),
-        stripe_index=np.where(valid, stripe_index, -1),
-        stages=stages,
+        depth_m=cat[0],
+        valid=cat[1],
+        confidence=cat[2],
+        column_px=cat[3],
+        stripe_index=cat[4],
+        stages=_merge_stages([p[5] for p in parts]),
     )
