@@ -157,7 +157,7 @@ def _cmd_demo(args) -> int:
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark
 
-    res = run_decode_benchmark(repeats=args.repeats, variant=args.variant)
+    res = run_decode_benchmark(repeats=args.repeats)
     print(json.dumps(res, indent=2) if args.json else
           f"decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture: median {res['median_ms']:.1f} ms, "
           f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
@@ -229,7 +229,6 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("bench", help="benchmark the decoder on a 1280x960 capture")
     s.add_argument("--repeats", type=int, default=20)
     s.add_argument("--max-ms", type=float, default=None, help="fail when the median exceeds this")
-    s.add_argument("--variant", default=None)
     s.add_argument("--json", action="store_true")
     s.set_defaults(fn=_cmd_bench)
     return p

@@ -22,13 +22,12 @@ uses no distortion; this is what the paper's "optical axes are parallel" implies
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from simbench.io import atomic_write_text
+from simbench.io import atomic_write_text, read_toml
 
 __all__ = [
     "Intrinsics",
@@ -273,14 +272,7 @@ def save_rig(rig: Rig, path: str | Path) -> Path:
 
 def load_rig(path: str | Path) -> Rig:
     """Read a rig TOML file; errors name the file and the offending field."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"rig file not found: {path}")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML ({exc})") from None
-    return rig_from_dict(data, where=str(path))
+    return rig_from_dict(read_toml(path, what="rig"), where=str(path))
 
 
 def pixel_rays(intr: Intrinsics) -> np.ndarray:

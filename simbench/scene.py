@@ -29,12 +29,12 @@ All coordinates are in the camera frame (x right, y down, z forward, metres).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rotation_xyz_deg
 
 __all__ = [
@@ -213,12 +213,7 @@ def scene_from_dict(data: dict, *, base_dir: Path = Path("."), where: str = "sce
 def load_scene(path: str | Path) -> SceneSpec:
     """Read and validate a scene TOML file; errors name the file and the problem."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"scene file not found: {path}")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    data = read_toml(path, what="scene")
     data.setdefault("name", path.stem)
     return scene_from_dict(data, base_dir=path.parent, where=str(path))
 

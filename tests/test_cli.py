@@ -34,7 +34,6 @@ def test_errors_are_one_line_and_nonzero(tmp_path, monkeypatch, capsys, argv, ma
 
 def test_invalid_rig_field(tmp_path, capsys):
     (tmp_path / "r.toml").write_text("[camera]\nwidth_px=1280\nheight_px=960\nfocal_px=0\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n")
-    np.zeros(1)
     assert main(["decode", str(tmp_path / "c.png"), "--rig", str(tmp_path / "r.toml"), "--out", str(tmp_path / "d.npy")]) == 2
     assert "focal_px" in capsys.readouterr().err
 

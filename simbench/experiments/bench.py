@@ -38,9 +38,8 @@ def benchmark_inputs(*, seed: int = 0):
     return capture, decode_reference(reference, rig=rig, params=params), rig, params
 
 
-def run_decode_benchmark(*, repeats: int = 20, variant: str | None = None, warmup: int = 2) -> dict:
+def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2) -> dict:
     """Time :func:`simbench.decode.decode`; returns median/min/max in ms and the set-up."""
-    del variant  # the decoder does not use Mitsuba; accepted for a uniform CLI
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     capture, ref, rig, params = benchmark_inputs()
