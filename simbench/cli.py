@@ -21,10 +21,19 @@ def _cmd_pattern(args) -> int:
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
 
-    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order)
+    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order, sequence=_sequence(args.sequence))
     path = save_png(args.out, quantize(fringe_pattern(spec)))
-    print(f"pattern {args.width}x{args.height}, period {args.period} px, B(2,{args.order}) -> {path}")
+    codes = "".join(map(str, spec.codes()))
+    print(f"pattern {args.width}x{args.height}, period {args.period} px, codes {codes} (window {args.order}) -> {path}")
     return 0
+
+
+def _sequence(text: str | None) -> tuple[int, ...] | None:
+    if text is None:
+        return None
+    if not text or set(text) - {"0", "1"}:
+        raise ValueError(f"--sequence must be a string of 0 and 1, got {text!r}")
+    return tuple(int(c) for c in text)
 
 
 def _cmd_render(args) -> int:
@@ -37,7 +46,7 @@ def _cmd_render(args) -> int:
     scene = load_scene(args.scene)
     camera = get_camera(args.camera)
     variant = select_variant(args.variant)
-    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order)
+    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence))
     t0 = time.perf_counter()
     acq = acquire(scene, pattern=pattern, camera=camera, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
     files = write_acquisition(acq, args.out)
@@ -74,7 +83,7 @@ def _cmd_decode(args) -> int:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
-    params = DecoderParams(period_px=args.period, order=args.order, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -176,7 +185,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--width", type=int, default=1824)
     s.add_argument("--height", type=int, default=1140)
     s.add_argument("--period", type=int, default=21, help="fringe period T in projector pixels")
-    s.add_argument("--order", type=int, default=3, help="De Bruijn window length n (cycle = 2**n stripes)")
+    s.add_argument("--order", type=int, default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
+    s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
     s.set_defaults(fn=_cmd_pattern)
 
     s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata")
@@ -188,6 +198,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--camera", default="minimal", help="camera preset: minimal (noise) or ideal")
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
+    s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: automatic)")
     s.set_defaults(fn=_cmd_render)
 
@@ -204,6 +215,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--far", type=float, default=1.75, help="working range far end, m")
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
+    s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth")

@@ -29,6 +29,8 @@ __all__ = [
     "PatternSpec",
     "de_bruijn",
     "window_positions",
+    "check_sequence",
+    "code_sequence",
     "fringe_pattern",
     "quantize",
     "column_from_phase",
@@ -124,7 +126,11 @@ class PatternSpec:
     period_px : int
         Fringe period T = stripe width, in projector pixels (paper: 21).
     order : int
-        De Bruijn window length n; the cycle holds ``2**order`` stripes (paper: 3 -> 8).
+        Window length n: how many successive stripe codes identify a stripe (paper: 3).
+    sequence : tuple of int, optional
+        The binary stripe codes of one cycle.  Default: the De Bruijn sequence B(2, order)
+        (paper: 00010111, 8 stripes).  Any cyclic binary sequence whose windows of ``order``
+        codes are all different works.
     dc : float
         Fringe offset A of Eq. 7, in [0, 1] of full projector drive.
     amplitude : float
@@ -136,6 +142,7 @@ class PatternSpec:
     order: int = 3
     dc: float = 0.5
     amplitude: float = 0.5
+    sequence: tuple[int, ...] | None = None
 
     def __post_init__(self) -> None:
         h, w = self.size_hw
@@ -152,16 +159,37 @@ class PatternSpec:
             )
         if self.amplitude <= 0:
             raise ValueError(f"amplitude must be > 0, got {self.amplitude}")
+        if self.sequence is not None:
+            object.__setattr__(self, "sequence", check_sequence(self.sequence, order=self.order))
 
-    @property
-    def sequence(self) -> np.ndarray:
-        """The binary De Bruijn sequence B(2, order), shape (2**order,), uint8."""
-        return de_bruijn(self.order)
+    def codes(self) -> np.ndarray:
+        """The stripe codes of one cycle, shape (L,), uint8."""
+        return code_sequence(self.sequence, order=self.order)
 
     @property
     def cycle_stripes(self) -> int:
-        """Number of stripes L in one De Bruijn cycle (paper: 8)."""
-        return 2**self.order
+        """Number of stripes L in one cycle (paper: 8)."""
+        return 2**self.order if self.sequence is None else len(self.sequence)
+
+
+def check_sequence(sequence, *, order: int) -> tuple[int, ...]:
+    """Validate a cyclic binary code sequence: 0/1 values, every window of ``order`` unique.
+
+    Raises
+    ------
+    ValueError
+        Naming what is wrong.
+    """
+    seq = tuple(int(c) for c in sequence)
+    if any(c not in (0, 1) for c in seq):
+        raise ValueError(f"sequence must hold only 0 and 1, got {seq}")
+    window_positions(np.asarray(seq), order=order)
+    return seq
+
+
+def code_sequence(sequence, *, order: int) -> np.ndarray:
+    """``sequence`` as an array, or B(2, order) when it is None."""
+    return de_bruijn(order) if sequence is None else np.asarray(sequence, dtype=np.uint8)
 
 
 def phase_from_column(u: np.ndarray, *, period_px: float) -> np.ndarray:
@@ -186,7 +214,7 @@ def fringe_pattern(spec: PatternSpec) -> np.ndarray:
     h, w = spec.size_hw
     u = np.arange(w, dtype=np.float64)
     intensity = spec.dc + spec.amplitude * np.cos(phase_from_column(u, period_px=spec.period_px))
-    seq = spec.sequence
+    seq = spec.codes()
     code = seq[(np.arange(w) // spec.period_px) % seq.size].astype(np.float64)
     row = np.stack([code * intensity, (1.0 - code) * intensity, intensity], axis=-1)
     return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32)

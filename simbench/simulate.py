@@ -102,7 +102,7 @@ def acquire(
     gt = ground_truth(scene)
     meta = {
         "scene": scene.name,
-        "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "dc": pattern.dc, "amplitude": pattern.amplitude},
+        "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude},
         "camera": {k: getattr(camera, k) for k in ("exposure", "full_well_e", "read_noise_e", "bits", "noise")},
         "spp": int(spp),
         "max_depth": int(max_depth),

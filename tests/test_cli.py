@@ -23,6 +23,8 @@ def test_pattern_command(tmp_path, capsys):
         (["render", "missing.toml", "--out", "x"], "scene file not found"),
         (["score", "nope.npy", "--gt", "gt.npy"], "file not found"),
         (["pattern", "--out", "p.png", "--period", "2"], "period_px"),
+        (["pattern", "--out", "p.png", "--sequence", "0101"], "repeats"),
+        (["pattern", "--out", "p.png", "--sequence", "01x"], "0 and 1"),
     ],
 )
 def test_errors_are_one_line_and_nonzero(tmp_path, monkeypatch, capsys, argv, match):

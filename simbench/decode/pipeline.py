@@ -14,7 +14,7 @@ from simbench.decode.color import color_code, segment_stripes, vote_codes
 from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
-from simbench.pattern import de_bruijn, window_positions
+from simbench.pattern import check_sequence, code_sequence, window_positions
 from simbench.rig import Rig, projector_column_at_depth
 
 __all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
@@ -30,7 +30,9 @@ class DecoderParams:
     Attributes
     ----------
     period_px, order : int
-        The pattern's fringe period T (projector px) and De Bruijn order (paper: 21, 3).
+        The pattern's fringe period T (projector px) and window length (paper: 21, 3).
+    sequence : tuple of int, optional
+        The pattern's stripe codes; None = B(2, order) (see :class:`simbench.pattern.PatternSpec`).
     intensity_mode : str
         ``overlay`` (paper Eq. 9) or ``blue``.
     phase_method : str
@@ -73,6 +75,7 @@ class DecoderParams:
 
     period_px: int = 21
     order: int = 3
+    sequence: tuple[int, ...] | None = None
     intensity_mode: str = "overlay"
     phase_method: str = "gabor"
     sigma_periods: float = 0.25
@@ -92,6 +95,8 @@ class DecoderParams:
     threads: int | None = None
 
     def __post_init__(self) -> None:
+        if self.sequence is not None:
+            object.__setattr__(self, "sequence", check_sequence(self.sequence, order=self.order))
         if self.intensity_mode not in INTENSITY_MODES:
             raise ValueError(f"unknown intensity_mode {self.intensity_mode!r}; valid: {sorted(INTENSITY_MODES)}")
         if self.phase_method not in PHASE_METHODS:
@@ -112,7 +117,7 @@ class DecoderParams:
 
     @property
     def cycle(self) -> int:
-        return 2**self.order
+        return 2**self.order if self.sequence is None else len(self.sequence)
 
     def camera_period(self, rig: Rig) -> float:
         if self.camera_period_px is not None:
@@ -235,7 +240,7 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     code = color_code(rgb)
     stripes = segment_stripes(wrapped, valid, period_px=t_cam)
     stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
-    table = _window_table(params.order)
+    table = _window_table(params.order, params.sequence)
     raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
     w_fixed, support = neighbour_correct(
         raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
@@ -264,8 +269,8 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
 
 
 @lru_cache(maxsize=16)
-def _window_table(order: int) -> np.ndarray:
-    t = window_positions(de_bruijn(order), order=order)
+def _window_table(order: int, sequence: tuple[int, ...] | None) -> np.ndarray:
+    t = window_positions(code_sequence(sequence, order=order), order=order)
     t.setflags(write=False)
     return t
 
