@@ -21,6 +21,7 @@ from simbench.scene import SceneSpec, object_to_mitsuba
 __all__ = [
     "MIN_LLVM_MAJOR",
     "find_libllvm",
+    "choose_variant",
     "select_variant",
     "projector_texture",
     "realised_rig",
@@ -70,8 +71,14 @@ def _notice(msg: str) -> None:
     print(f"simbench: {msg}", file=sys.stderr)
 
 
-def select_variant(requested: str | None = None) -> str:
-    """Choose and set the Mitsuba variant; call once at an entry point, before other Mitsuba use.
+def choose_variant(
+    requested: str | None,
+    *,
+    available: list[str],
+    llvm_version: tuple[int, ...] | None,
+    cuda: bool,
+) -> tuple[str, str | None]:
+    """The Mitsuba variant to use, and a notice for the user (or None).
 
     Order: ``requested`` if given; else ``cuda_ad_rgb`` with a CUDA GPU; else ``llvm_ad_rgb``
     when Dr.Jit runs on libLLVM >= 16; else ``scalar_rgb`` (about 5x slower) with a notice.
@@ -81,6 +88,31 @@ def select_variant(requested: str | None = None) -> str:
     ValueError
         Unknown variant, or an LLVM variant requested where it would abort the process.
     """
+    llvm_ok = llvm_version is not None and llvm_version[0] >= MIN_LLVM_MAJOR
+    llvm_text = "none found" if llvm_version is None else ".".join(map(str, llvm_version))
+    if requested:
+        if requested not in available:
+            raise ValueError(f"unknown Mitsuba variant {requested!r}; available: {available}")
+        if requested.startswith("llvm_") and not llvm_ok:
+            raise ValueError(
+                f"variant {requested} needs libLLVM >= {MIN_LLVM_MAJOR} (found: {llvm_text}); "
+                "install it (Debian: apt-get install libllvm19) or use --variant scalar_rgb"
+            )
+        return requested, None
+    if cuda and "cuda_ad_rgb" in available:
+        return "cuda_ad_rgb", None
+    if llvm_ok and "llvm_ad_rgb" in available:
+        return "llvm_ad_rgb", None
+    return "scalar_rgb", (
+        f"libLLVM >= {MIN_LLVM_MAJOR} not available (found: {llvm_text}); rendering with "
+        "scalar_rgb, about 5x slower. Fix: apt-get install libllvm19 (done by `make setup` as root)."
+    )
+
+
+def select_variant(requested: str | None = None) -> str:
+    """Choose (:func:`choose_variant`) and set the Mitsuba variant; call once at an entry
+    point, before other Mitsuba use.  Points Dr.Jit at a libLLVM >= 16 if one exists, then
+    checks the version Dr.Jit actually loaded."""
     if "drjit" not in sys.modules and "DRJIT_LIBLLVM_PATH" not in os.environ:
         good = [p for v, p in find_libllvm() if v >= MIN_LLVM_MAJOR]
         if good:
@@ -89,31 +121,12 @@ def select_variant(requested: str | None = None) -> str:
     import mitsuba as mi
 
     try:
-        llvm = dr.detail.llvm_version() if dr.has_backend(dr.JitBackend.LLVM) else None
+        llvm = tuple(dr.detail.llvm_version()) if dr.has_backend(dr.JitBackend.LLVM) else None
     except Exception:  # noqa: BLE001 - no usable LLVM backend at all
         llvm = None
-    llvm_ok = llvm is not None and llvm[0] >= MIN_LLVM_MAJOR
-    llvm_text = "none found" if llvm is None else ".".join(map(str, llvm))
-
-    if requested:
-        if requested not in mi.variants():
-            raise ValueError(f"unknown Mitsuba variant {requested!r}; available: {mi.variants()}")
-        if requested.startswith("llvm_") and not llvm_ok:
-            raise ValueError(
-                f"variant {requested} needs libLLVM >= {MIN_LLVM_MAJOR} (found: {llvm_text}); "
-                "install it (Debian: apt-get install libllvm19) or use --variant scalar_rgb"
-            )
-        variant = requested
-    elif _has_cuda(dr) and "cuda_ad_rgb" in mi.variants():
-        variant = "cuda_ad_rgb"
-    elif llvm_ok:
-        variant = "llvm_ad_rgb"
-    else:
-        variant = "scalar_rgb"
-        _notice(
-            f"libLLVM >= {MIN_LLVM_MAJOR} not available (found: {llvm_text}); rendering with "
-            "scalar_rgb, about 5x slower. Fix: apt-get install libllvm19 (done by `make setup` as root)."
-        )
+    variant, notice = choose_variant(requested, available=list(mi.variants()), llvm_version=llvm, cuda=_has_cuda(dr))
+    if notice:
+        _notice(notice)
     mi.set_variant(variant)
     return variant
 

@@ -31,3 +31,64 @@ def test_unknown_variant_is_a_clear_error(variant):
     with pytest.raises(ValueError, match="unknown Mitsuba variant"):
         select_variant("no_such_variant")
     select_variant(variant)
+
+
+ALL = ["scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb"]
+
+
+@pytest.mark.parametrize(
+    "llvm, cuda, expect",
+    [((19, 1, 7), False, "llvm_ad_rgb"), ((16, 0), False, "llvm_ad_rgb"), ((15, 0, 7), False, "scalar_rgb"), (None, False, "scalar_rgb"), ((15, 0), True, "cuda_ad_rgb")],
+)
+def test_choose_variant(llvm, cuda, expect):
+    from simbench.render import choose_variant
+
+    variant, notice = choose_variant(None, available=ALL, llvm_version=llvm, cuda=cuda)
+    assert variant == expect
+    assert (notice is not None) == (expect == "scalar_rgb")
+    if notice:
+        assert "scalar_rgb" in notice and "libllvm19" in notice and "\n" not in notice
+
+
+def test_requested_llvm_with_old_llvm_is_refused():
+    from simbench.render import choose_variant
+
+    with pytest.raises(ValueError, match="needs libLLVM >= 16"):
+        choose_variant("llvm_ad_rgb", available=ALL, llvm_version=(15, 0, 7), cuda=False)
+    assert choose_variant("scalar_rgb", available=ALL, llvm_version=(15, 0, 7), cuda=False) == ("scalar_rgb", None)
+
+
+@pytest.mark.slow
+def test_scalar_fallback_renders_the_same_scene(variant, tmp_path):
+    """The scalar_rgb path (a Python loop for ground truth) agrees with the vectorised one."""
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    code = """
+import json, sys, numpy as np
+from simbench.render import select_variant, ground_truth, render_radiance
+v = select_variant(sys.argv[1])
+from simbench.scene import scene_from_dict
+from simbench.rig import Rig, Intrinsics
+import dataclasses
+s = scene_from_dict({"object": [{"type": "sphere", "center_m": [0.02, 0, 1.0], "radius_m": 0.05},
+                                {"type": "plane", "center_m": [0, 0, 1.2], "size_m": [2, 2]}]})
+s = dataclasses.replace(s, rig=Rig(Intrinsics.centred(96, 72, 173.4), Intrinsics.centred(136, 86, 166.1)))
+gt = ground_truth(s)
+rad = render_radiance(s, np.ones((86, 136, 3), np.float32), spp=64, seed=0)
+np.savez(sys.argv[2], depth=gt.depth_m, col=gt.column_px, lit=gt.lit, obj=gt.object_id, rad=rad)
+print(v)
+"""
+    out = {}
+    for v in ("scalar_rgb", variant):
+        path = tmp_path / f"{v}.npz"
+        res = subprocess.run([sys.executable, "-c", code, v, str(path)], capture_output=True, text=True, timeout=300)
+        assert res.returncode == 0, res.stderr
+        out[v] = np.load(path)
+    a, b = out["scalar_rgb"], out[variant]
+    assert np.array_equal(a["obj"], b["obj"]) and np.array_equal(a["lit"], b["lit"])
+    assert np.allclose(a["depth"], b["depth"], atol=1e-5, equal_nan=True)
+    assert np.allclose(a["col"], b["col"], atol=1e-3, equal_nan=True)
+    assert abs(a["rad"].mean() - b["rad"].mean()) < 0.01 * b["rad"].mean()  # different samplers, same physics
