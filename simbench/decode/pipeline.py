@@ -187,6 +187,29 @@ class LazyStages(Mapping):
         return len(self._make)
 
 
+def _check_capture(image: np.ndarray, expected_size_hw: tuple[int, int] | None) -> np.ndarray:
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"capture must have shape (H, W, 3), got {img.shape}")
+    if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
+        raise ValueError(f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is {expected_size_hw[1]}x{expected_size_hw[0]}")
+    if img.dtype in (np.uint8, np.uint16):
+        return img
+    if np.issubdtype(img.dtype, np.floating):
+        if not np.isfinite(img.sum(dtype=np.float64)):
+            raise ValueError("capture contains NaN or inf")
+        return img
+    raise ValueError(f"unsupported capture dtype {img.dtype}; use uint8, uint16 or float")
+
+
+def _to_float(img: np.ndarray) -> np.ndarray:
+    if img.dtype == np.uint8:
+        return np.multiply(img, np.float32(1 / 255), dtype=np.float32)
+    if img.dtype == np.uint16:
+        return np.multiply(img, np.float32(1 / 65535), dtype=np.float32)
+    return img.astype(np.float32)
+
+
 def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | None = None) -> np.ndarray:
     """A capture as float32 RGB in [0, 1]: uint8 / 255, uint16 / 65535, floats as they are.
 
@@ -195,21 +218,7 @@ def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | Non
     ValueError
         Wrong shape or size, unsupported dtype, or non-finite float values.
     """
-    img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] != 3:
-        raise ValueError(f"capture must have shape (H, W, 3), got {img.shape}")
-    if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
-        raise ValueError(f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is {expected_size_hw[1]}x{expected_size_hw[0]}")
-    if img.dtype == np.uint8:
-        return np.multiply(img, np.float32(1 / 255), dtype=np.float32)
-    if img.dtype == np.uint16:
-        return np.multiply(img, np.float32(1 / 65535), dtype=np.float32)
-    if np.issubdtype(img.dtype, np.floating):
-        out = img.astype(np.float32)
-        if not np.isfinite(out.sum(dtype=np.float64)):
-            raise ValueError("capture contains NaN or inf")
-        return out
-    raise ValueError(f"unsupported capture dtype {img.dtype}; use uint8, uint16 or float")
+    return _to_float(_check_capture(image, expected_size_hw))
 
 
 def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
@@ -291,15 +300,16 @@ def _bands(height: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo
 
 
-def _run_bands(fn, rgb: np.ndarray, params: DecoderParams, rig: Rig) -> list:
-    """Apply ``fn(rgb_with_halo, rows, crop)`` to each band, in parallel threads."""
-    h = rgb.shape[0]
+def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
+    """Apply ``fn(float_rgb_with_halo, rows, crop)`` to each band, in parallel threads
+    (``image`` is a checked capture; each band converts its own rows to float)."""
+    h = image.shape[0]
     bands, halo = _bands(h, params, rig)
 
     def work(band):
         r0, r1 = band
         a0, a1 = max(0, r0 - halo), min(h, r1 + halo)
-        return fn(rgb[a0:a1], slice(r0, r1), slice(r0 - a0, r1 - a0))
+        return fn(_to_float(image[a0:a1]), slice(r0, r1), slice(r0 - a0, r1 - a0))
 
     if len(bands) == 1:
         return [work(bands[0])]
@@ -333,9 +343,9 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) 
 
     Done once per calibration; :func:`decode` then matches captures against it.
     """
-    rgb = as_float_image(reference, expected_size_hw=rig.camera.size_hw)
+    image = _check_capture(reference, rig.camera.size_hw)
     predicted = _plane_columns(rig, float(params.z0_m))
-    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], rgb, params, rig)
+    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], image, params, rig)
     column = np.concatenate(parts, axis=0)
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
@@ -370,19 +380,25 @@ def decode(
         Never raises on a legal image: what cannot be decoded is NaN in ``depth_m`` and False
         in ``valid``.
     """
-    rgb = as_float_image(capture, expected_size_hw=rig.camera.size_hw)
+    image = _check_capture(capture, rig.camera.size_hw)
+    h, w = image.shape[:2]
     zmin, zmax = params.depth_range_m
     ref = None
     if params.mode == "reference":
         if reference is None:
             raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
         ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
-        if ref.column_px.shape != rgb.shape[:2]:
-            raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {rgb.shape[:2]}")
+        if ref.column_px.shape != (h, w):
+            raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {(h, w)}")
         expected = ref.expected_px
     else:
         expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
     nan = np.float32(np.nan)
+    depth_out = np.empty((h, w), np.float32)
+    valid_out = np.empty((h, w), bool)
+    conf_out = np.empty((h, w), np.float32)
+    col_out = np.empty((h, w), np.float32)
+    index_out = np.empty((h, w), np.int32)
 
     def band(img, rows, crop):
         column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop)
@@ -393,22 +409,19 @@ def decode(
         else:
             depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
         valid = (depth >= zmin) & (depth <= zmax)
-        return (
-            np.where(valid, depth, nan),
-            valid,
-            np.where(valid, stages["amplitude"], np.float32(0)),
-            np.where(valid, column, nan),
-            np.where(valid, stripe_index, -1),
-            stages,
-        )
+        valid_out[rows] = valid
+        np.copyto(depth_out[rows], np.where(valid, depth, nan))
+        np.copyto(conf_out[rows], np.where(valid, stages["amplitude"], np.float32(0)))
+        np.copyto(col_out[rows], np.where(valid, column, nan))
+        np.copyto(index_out[rows], np.where(valid, stripe_index, -1))
+        return stages
 
-    parts = _run_bands(band, rgb, params, rig)
-    cat = [np.concatenate([p[i] for p in parts], axis=0) if len(parts) > 1 else parts[0][i] for i in range(5)]
+    parts = _run_bands(band, image, params, rig)
     return DecodeResult(
-        depth_m=cat[0],
-        valid=cat[1],
-        confidence=cat[2],
-        column_px=cat[3],
-        stripe_index=cat[4],
-        stages=_merge_stages([p[5] for p in parts]),
+        depth_m=depth_out,
+        valid=valid_out,
+        confidence=conf_out,
+        column_px=col_out,
+        stripe_index=index_out,
+        stages=_merge_stages(parts),
     )
