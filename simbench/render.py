@@ -178,14 +178,7 @@ def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndar
     h, w = projector.size_hw
     if drive.shape != (h, w, 3):
         raise ValueError(f"pattern shape {drive.shape} does not match the projector {(h, w, 3)}")
-    best = None
-    for scale in (1, 2):
-        lx, tx, cx = _pad_factor(projector.cx_px, w, scale)
-        ly, ty, cy = _pad_factor(projector.cy_px, h, scale)
-        err = max(abs(cx - projector.cx_px), abs(cy - projector.cy_px))
-        if best is None or err < best[0] - 1e-9:
-            best = (err, scale, lx, tx, cx, ly, ty, cy)
-    _, scale, lx, tx, cx, ly, ty, cy = best
+    scale, (lx, tx), (ly, ty), realised = _padding(projector)
     tex = drive
     if scale > 1:
         tex = np.repeat(np.repeat(tex, scale, axis=0), scale, axis=1)
@@ -194,13 +187,26 @@ def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndar
         out[ly : ly + h * scale, lx : lx + w * scale] = tex
         tex = out
     fov = float(np.degrees(2 * np.arctan(tx / (2.0 * scale * projector.focal_px))))
-    realised = Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy)
     return np.ascontiguousarray(tex, dtype=np.float32), fov, realised
+
+
+def _padding(projector: Intrinsics) -> tuple[int, tuple[int, int], tuple[int, int], Intrinsics]:
+    """Upsampling factor, (left, total) padding along x and y, and the realised projector."""
+    h, w = projector.size_hw
+    best = None
+    for scale in (1, 2):
+        lx, tx, cx = _pad_factor(projector.cx_px, w, scale)
+        ly, ty, cy = _pad_factor(projector.cy_px, h, scale)
+        err = max(abs(cx - projector.cx_px), abs(cy - projector.cy_px))
+        if best is None or err < best[0] - 1e-9:
+            best = (err, scale, (lx, tx), (ly, ty), cx, cy)
+    _, scale, pad_x, pad_y, cx, cy = best
+    return scale, pad_x, pad_y, Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy)
 
 
 def realised_rig(rig: Rig) -> Rig:
     """The rig as Mitsuba renders it (projector principal point on the padding grid)."""
-    _, _, realised = projector_texture(np.zeros((*rig.projector.size_hw, 3), np.float32), rig.projector)
+    realised = _padding(rig.projector)[3]
     if realised == rig.projector:
         return rig
     return Rig(rig.camera, realised, rig.position_m, rig.rotation_deg, rig.name)
@@ -219,9 +225,10 @@ def _pose(mi, rig: Rig) -> object:
     return mi.ScalarTransform4f(m.tolist()) @ _look_at_z(mi, (0, 0, 0))
 
 
-def mitsuba_scene(scene: SceneSpec, drive: np.ndarray, *, spp: int, max_depth: int) -> tuple[dict, Rig]:
+def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int) -> tuple[dict, Rig]:
     """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
 
+    ``drive=None`` leaves out the projector and the ambient light (geometry only).
     Returns the dictionary and the rig as rendered (see :func:`projector_texture`).
     """
     import mitsuba as mi
@@ -230,7 +237,6 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray, *, spp: int, max_depth: i
         raise ValueError(f"spp must be a positive integer, got {spp}")
     rig = scene.rig
     cam = rig.camera
-    tex, fov_p, realised = projector_texture(drive, rig.projector)
     d: dict = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": int(max_depth)},
@@ -255,7 +261,10 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray, *, spp: int, max_depth: i
             },
             "sampler": {"type": "independent", "sample_count": int(spp)},
         },
-        "projector": {
+    }
+    if drive is not None:
+        tex, fov_p, _ = projector_texture(drive, rig.projector)
+        d["projector"] = {
             "type": "projector",
             "fov": fov_p,
             "scale": float(scene.projector_scale),
@@ -267,14 +276,12 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray, *, spp: int, max_depth: i
                 "filter_type": "nearest",
                 "wrap_mode": "clamp",
             },
-        },
-    }
-    if max(scene.ambient_rgb) > 0:
-        d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
+        }
+        if max(scene.ambient_rgb) > 0:
+            d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
     for i, obj in enumerate(scene.objects):
         d[f"obj{i:03d}"] = object_to_mitsuba(obj)
-    rendered = Rig(rig.camera, realised, rig.position_m, rig.rotation_deg, rig.name)
-    return d, rendered
+    return d, realised_rig(rig)
 
 
 def render_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int, max_depth: int = 6) -> np.ndarray:
@@ -339,9 +346,7 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
     """Cast one ray through every camera pixel centre with Mitsuba and project the hits."""
     import mitsuba as mi
 
-    d, rig = mitsuba_scene(scene, np.zeros((*scene.rig.projector.size_hw, 3), np.float32), spp=1, max_depth=1)
-    d.pop("projector")
-    d.pop("ambient", None)
+    d, rig = mitsuba_scene(scene, None, spp=1, max_depth=1)
     mscene = _load(mi, d)
     rays = pixel_rays(rig.camera)
     h, w = rays.shape[:2]

@@ -6,6 +6,7 @@ the reference's render seed and the two camera-noise seeds; all four are recorde
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 import sys
 from dataclasses import dataclass, field
@@ -75,8 +76,6 @@ def acquire(
 
     A Mitsuba variant must already be selected (:func:`simbench.render.select_variant`).
     """
-    import dataclasses
-
     import mitsuba as mi
 
     rig = realised_rig(scene.rig)

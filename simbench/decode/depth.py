@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from simbench.pattern import column_from_phase
 from simbench.rig import Rig, triangulate_columns
 
 __all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity", "depth_calibrated"]
