@@ -117,9 +117,10 @@ def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
     stride = table.shape[1]
     width = stride - 2
     # NaN and out-of-range columns interpolate towards the table's NaN column, giving NaN
-    cf = np.nan_to_num(column, nan=-1.0)
-    bad = (cf < 0) | (cf > width)
-    cf[bad] = width + 0.5
+    inside = column >= 0
+    inside &= column <= width  # False for NaN
+    cf = np.where(inside, column, np.float32(width + 0.5))
+    bad = ~inside
     fi = np.floor(cf)
     fi[~bad & (fi >= width)] = width - 1
     f = cf - fi

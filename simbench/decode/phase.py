@@ -143,6 +143,14 @@ def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
     return k, p, q, inv_s1, good
 
 
+def _dot3(m, b, *, out: np.ndarray, tmp: np.ndarray) -> None:
+    """``out = m[0]*b[0] + m[1]*b[1] + m[2]*b[2]`` without temporaries."""
+    np.multiply(m[0], b[0], out=out)
+    for mi, bi in zip(m[1:], b[1:]):
+        np.multiply(mi, bi, out=tmp)
+        out += tmp
+
+
 @lru_cache(maxsize=8)
 def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
     """:func:`_solver` for an all-certain image (reused across captures of one rig)."""
@@ -202,23 +210,41 @@ def gabor_phase(
     b1 = _conv(ci * cos1, kx, ky)
     b2 = _conv(ci * sin1, kx, ky)
     e2 = _conv(ci * intensity, kx, ky)
-    a0 = k[0] * b0 + k[1] * b1 + k[2] * b2
-    re = p[0] * b0 + p[1] * b1 + p[2] * b2
-    im = q[0] * b0 + q[1] * b1 + q[2] * b2
+    # the maps are fixed per rig; work in preallocated buffers (each fresh image-sized array
+    # costs page faults on top of the arithmetic)
+    a0, re, im, t = (np.empty_like(b0) for _ in range(4))
+    _dot3(k, (b0, b1, b2), out=a0, tmp=t)
+    _dot3(p, (b0, b1, b2), out=re, tmp=t)
+    _dot3(q, (b0, b1, b2), out=im, tmp=t)
     # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
     wrapped = cv2.phase(re, im)
     wrapped[wrapped >= np.pi] -= np.float32(2 * np.pi)
     amp = cv2.magnitude(re, im)
     # weighted residual sum of squares: e2 - p.b, with a1 b1 + a2 b2 written through re, im
-    pb = a0 * b0 + re * (cos1 * b1 + sin1 * b2) + im * (sin1 * b1 - cos1 * b2)
-    sse = np.maximum(e2 - pb, 0) * inv_s1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        residual = np.sqrt(sse) / (amp * np.float32(np.sqrt(0.5)))
+    u = np.empty_like(b0)
+    np.multiply(a0, b0, out=t)
+    np.subtract(e2, t, out=e2)
+    np.multiply(cos1, b1, out=t)
+    np.multiply(sin1, b2, out=u)
+    t += u
+    t *= re
+    e2 -= t
+    np.multiply(sin1, b1, out=t)
+    np.multiply(cos1, b2, out=u)
+    t -= u
+    t *= im
+    e2 -= t
+    np.maximum(e2, 0, out=e2)
+    e2 *= inv_s1
+    np.sqrt(e2, out=e2)
+    np.multiply(amp, np.float32(np.sqrt(0.5)), out=t)
     ok = good & (amp > 0)
+    residual = np.full_like(b0, np.inf)
+    np.divide(e2, t, out=residual, where=ok)
     return PhaseResult(
         wrapped=wrapped,
         amplitude=np.where(good, amp, np.float32(0)),
         offset=a0,
-        residual=np.where(ok, residual, np.float32(np.inf)),
+        residual=residual,
         support=s1,
     )

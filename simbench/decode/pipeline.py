@@ -408,12 +408,12 @@ def decode(
             stages.put("reference_x", x_ref)
         else:
             depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
-        valid = (depth >= zmin) & (depth <= zmax)
-        valid_out[rows] = valid
-        np.copyto(depth_out[rows], np.where(valid, depth, nan))
-        np.copyto(conf_out[rows], np.where(valid, stages["amplitude"], np.float32(0)))
-        np.copyto(col_out[rows], np.where(valid, column, nan))
-        np.copyto(index_out[rows], np.where(valid, stripe_index, -1))
+        valid = valid_out[rows]
+        np.greater_equal(depth, zmin, out=valid)
+        valid &= depth <= zmax
+        for dst, src, fill in ((depth_out, depth, nan), (conf_out, stages["amplitude"], 0), (col_out, column, nan), (index_out, stripe_index, -1)):
+            dst[rows] = fill
+            np.copyto(dst[rows], src, where=valid)
         return stages
 
     parts = _run_bands(band, image, params, rig)
