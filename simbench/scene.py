@@ -21,6 +21,12 @@ A scene file::
     rotation_deg = [0, 30, 0]     # about x, y, z; R = Rz @ Ry @ Rx
     rgb = [0.8, 0.8, 0.8]         # linear diffuse reflectance (two-sided Lambertian)
 
+Instead of ``rgb`` an object may give ``srgb8 = [255, 0, 0]``, an 8-bit sRGB colour as printed
+on a colour board (paper Table 1), turned into a reflectance by :func:`paint_reflectance`.
+``material`` is ``diffuse`` (default) or ``plastic``: a smooth or rough dielectric coating
+(Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
+diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
+
 Spheres take ``center_m`` and ``radius_m``; meshes take ``file`` (PLY/OBJ, relative to the
 scene file), ``scale`` (uniform, mesh units to metres), ``translate_m`` and ``rotation_deg``.
 All coordinates are in the camera frame (x right, y down, z forward, metres).
@@ -46,6 +52,7 @@ __all__ = [
     "scene_from_dict",
     "reference_scene",
     "object_to_mitsuba",
+    "paint_reflectance",
 ]
 
 OBJECT_KINDS = {
@@ -54,16 +61,43 @@ OBJECT_KINDS = {
     "sphere": ("center_m", "radius_m"),
     "mesh": ("file", "scale", "translate_m", "rotation_deg"),
 }
-_COMMON_KEYS = ("type", "name", "rgb", "material")
-MATERIALS = ("diffuse",)
+_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "material", "roughness")
+MATERIALS = ("diffuse", "plastic")
+
+# Reflectance range of matte paint, used by paint_reflectance.  Assumptions, argued from
+# physics: even a saturated paint reflects the ~4 % of a dielectric binder's surface (Fresnel
+# reflectance at normal incidence for n = 1.5 is ((n-1)/(n+1))^2 = 0.04), scattered diffusely
+# by the matte surface, in the bands its pigment absorbs; a good matte white reaches ~0.8-0.9
+# (0.8 = our white plane, the same as the reference board).
+PAINT_MIN_REFLECTANCE = 0.04
+PAINT_MAX_REFLECTANCE = 0.80
+
+
+def paint_reflectance(srgb8) -> tuple[float, float, float]:
+    """Linear diffuse reflectance of a matte paint printed as 8-bit sRGB ``srgb8``.
+
+    ``rho = rho_min + (rho_max - rho_min) * linear(srgb8 / 255)`` per channel, with the sRGB
+    decoding curve (IEC 61966-2-1) and the paint range above: pure red (255, 0, 0) becomes
+    (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
+    """
+    v = np.asarray(srgb8, dtype=np.float64)
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or v.min() < 0 or v.max() > 255:
+        raise ValueError(f"srgb8 must be three numbers in [0, 255], got {srgb8!r}")
+    c = v / 255.0
+    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
+    return tuple(float(round(x, 6)) for x in rho)
 
 
 @dataclass(frozen=True)
 class Material:
-    """A material. ``diffuse``: two-sided Lambertian with linear RGB reflectance in [0, 1]."""
+    """A material (see module docstring): ``diffuse`` (two-sided Lambertian) or ``plastic``
+    (rough dielectric coating over a diffuse base); ``rgb`` is the linear diffuse reflectance
+    in [0, 1], ``roughness`` the GGX alpha of the coating."""
 
     kind: str = "diffuse"
     rgb: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    roughness: float = 0.1
 
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
@@ -73,6 +107,10 @@ class Material:
         ):
             raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {self.rgb!r}")
         object.__setattr__(self, "rgb", tuple(float(c) for c in self.rgb))
+        r = self.roughness
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not 0.001 <= r <= 1.0:
+            raise ValueError(f"roughness must be a number in [0.001, 1], got {r!r}")
+        object.__setattr__(self, "roughness", float(r))
 
 
 @dataclass(frozen=True)
@@ -158,7 +196,13 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         p["translate_m"] = _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m")
         p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
     try:
-        mat = Material(kind=str(d.get("material", "diffuse")), rgb=tuple(d.get("rgb", (0.8, 0.8, 0.8))))
+        if "rgb" in d and "srgb8" in d:
+            raise ValueError("give either rgb (reflectance) or srgb8 (paint colour), not both")
+        rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else tuple(d.get("rgb", (0.8, 0.8, 0.8)))
+        mat_kind = str(d.get("material", "diffuse"))
+        if "roughness" in d and mat_kind != "plastic":
+            raise ValueError("roughness applies to material = 'plastic' only")
+        mat = Material(kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
     return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat)
@@ -261,11 +305,22 @@ def _to_world(mi, *, translate, rotation_deg, scale) -> object:
     return mi.ScalarTransform4f(m.tolist())
 
 
+def _bsdf(mat: Material) -> dict:
+    rgb = {"type": "rgb", "value": list(mat.rgb)}
+    if mat.kind == "plastic":
+        # polypropylene-like coating (IOR 1.49); nonlinear=False: the base colour is the
+        # reflectance the user asked for, not darkened by internal scattering
+        inner = {"type": "roughplastic", "distribution": "ggx", "alpha": mat.roughness, "int_ior": 1.49, "nonlinear": False, "diffuse_reflectance": rgb}
+    else:
+        inner = {"type": "diffuse", "reflectance": rgb}
+    return {"type": "twosided", "bsdf": inner}
+
+
 def object_to_mitsuba(obj: SceneObject) -> dict:
     """Mitsuba plugin dictionary of one object (a variant must be set)."""
     import mitsuba as mi
 
-    bsdf = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(obj.material.rgb)}}}
+    bsdf = _bsdf(obj.material)
     if obj.kind == "plane":
         sx, sy = obj.get("size_m")
         # Mitsuba's rectangle spans [-1, 1]^2 with normal +z; flip it to face the camera.

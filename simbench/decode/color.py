@@ -10,9 +10,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-__all__ = ["color_code", "Stripes", "segment_stripes", "vote_codes"]
+__all__ = ["color_code", "normalize_channels", "Stripes", "segment_stripes", "vote_codes"]
 
 
 def color_code(rgb: np.ndarray) -> np.ndarray:
@@ -23,6 +24,46 @@ def color_code(rgb: np.ndarray) -> np.ndarray:
     ndarray, shape (H, W), bool
     """
     return rgb[..., 0] >= rgb[..., 1]
+
+
+def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float) -> np.ndarray:
+    """Each channel rescaled to its local range across neighbouring stripes.
+
+    ``(v - local_min) / (local_max - local_min)`` per channel, over a window along the row wide
+    enough to hold a stripe of each colour wherever the pixel is: in a binary De Bruijn
+    sequence of order n the longest run of one code is n stripes, so the nearest stripe of the
+    other code is at most ``(n + 1) / 2`` periods away.  A surface that absorbs one stripe
+    colour (a red board reflects little green) then shows the same normalised fringe and the
+    same R-versus-G contrast as a white one, and the local minimum removes ambient light and
+    the projector's black level.  Not in the paper (its Eq. 9 and 13 use the raw channels):
+    our option for coloured surfaces, at the price of amplifying the noise of a weak channel.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32
+    period_px : float
+        Fringe period in camera pixels.
+    order : int
+        De Bruijn window length n.
+    min_span : float
+        A channel whose local range is below this (full-scale units) carries no fringe there;
+        it is set to 0.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32 in [0, 1]
+    """
+    half = int(np.ceil((order + 1) / 2 * period_px)) + 1
+    kernel = np.ones((1, 2 * half + 1), np.uint8)
+    out = np.empty(rgb.shape, np.float32)
+    for c in range(3):
+        v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
+        lo = cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE)
+        span = cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE) - lo
+        ok = span >= min_span
+        np.divide(v - lo, span, out=out[..., c], where=ok)
+        out[..., c][~ok] = 0.0
+    return out
 
 
 @dataclass(frozen=True)

@@ -54,12 +54,12 @@ def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay") -> np.ndarray:
     return fn(rgb)
 
 
-def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float) -> tuple[np.ndarray, np.ndarray]:
+def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float, window_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Which pixels carry usable fringe samples, and which are lit at all.
 
-    A pixel is *unlit* when the brightest pixel within one fringe period along its row is below
-    ``dark_level`` (projector shadow, black surface): fringe troughs are dark even where lit, so
-    a per-pixel threshold would not do.  A pixel's sample is *uncertain* when it is unlit or any
+    A pixel is *unlit* when the brightest pixel within ``window_periods`` fringe periods along
+    its row is below ``dark_level`` (projector shadow, black surface): fringe troughs are dark
+    even where lit, so a per-pixel threshold would not do.  A pixel's sample is *uncertain* when it is unlit or any
     channel is at or above ``saturation_level`` (clipped); the phase fit skips uncertain samples,
     so a clipped pixel inside a lit region still gets a phase from its neighbours.
 
@@ -70,7 +70,7 @@ def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, satur
     """
     r, g, b = cv2.split(rgb)
     peak = cv2.max(cv2.max(r, g), b)
-    width = max(3, int(round(period_px)) | 1)
+    width = max(3, int(round(window_periods * period_px)) | 1)
     local_max = cv2.dilate(peak, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE)
     lit = local_max >= dark_level
     return (lit & (peak < saturation_level)).astype(np.float32), lit

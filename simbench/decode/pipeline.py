@@ -10,7 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from simbench.decode.color import color_code, segment_stripes, vote_codes
+from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
 from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
@@ -46,6 +46,10 @@ class DecoderParams:
     camera_period_px : float or None
         Fringe period in camera px; ``None`` = ``T * f_cam / f_proj`` (exact for fronto-parallel
         surfaces with a rectified rig).
+    color_normalize : bool
+        Normalise each channel by its local range across neighbouring stripes before the
+        overlay (Eq. 9) and the code (Eq. 13) (:func:`simbench.decode.color.normalize_channels`);
+        off = the paper's decoder.
     voting : bool
         Majority vote of codes per stripe (paper Sec. 5.2); off = the stripe's middle pixel.
     neighbour_reach : int
@@ -81,6 +85,7 @@ class DecoderParams:
     sigma_periods: float = 0.25
     sigma_y_ratio: float = 0.6
     camera_period_px: float | None = None
+    color_normalize: bool = False
     voting: bool = True
     neighbour_reach: int = 3
     min_support: int = 3
@@ -237,8 +242,13 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     Returns (column, stripe_index, stages) for the cropped rows.
     """
     t_cam = params.camera_period(rig)
+    # with normalised channels a stripe whose colour the surface absorbs is still usable, so
+    # "lit" looks across the neighbouring stripes (the normalisation window)
+    window = params.order + 1 if params.color_normalize else 1
+    certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
+    if params.color_normalize:
+        rgb = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level)
     intensity = overlay_intensity(rgb, mode=params.intensity_mode)
-    certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level)
     sx = params.sigma_periods * t_cam
     phase = PHASE_METHODS[params.phase_method](
         intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
