@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup reproduce test test-fast bench clean
+.PHONY: setup reproduce quick quick-thresholds test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -16,9 +16,20 @@ $(STAMP): pyproject.toml scripts/setup_system.sh
 	$(PY) -c "import simbench.render as r; print('simbench: libLLVM found:', [f'{v}: {p}' for v, p in r.find_libllvm()][:3])"
 	touch $(STAMP)
 
-# The main job: until the paper-reproduction experiments land, the pipeline demo.
+# The main job: the paper's Table 1, Table 3, Fig. 9 and figures into results/ (renders are
+# cached in .cache/simbench), then the pipeline demo into results/demo.
 reproduce: setup
+	$(VENV)/bin/simbench reproduce all
 	$(VENV)/bin/simbench demo --out results/demo
+
+# The CI benchmark: the quick run checked against the committed thresholds.
+quick: setup
+	$(VENV)/bin/simbench reproduce all --quick --out .cache/quick --check results/quick/thresholds.toml
+
+# Re-measure the quick run into results/quick and re-derive its thresholds (for an intended
+# change only; say why in the commit).
+quick-thresholds: setup
+	$(VENV)/bin/simbench reproduce all --quick --write-thresholds results/quick/thresholds.toml
 
 # The whole test suite, slow renders included.
 test: setup
@@ -32,4 +43,4 @@ bench: setup
 	$(VENV)/bin/simbench bench --repeats 30
 
 clean:
-	rm -rf $(VENV) .pytest_cache .benchmarks
+	rm -rf $(VENV) .pytest_cache .benchmarks .cache

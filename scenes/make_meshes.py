@@ -1,4 +1,4 @@
-"""Make the meshes in scenes/meshes/ with trimesh (run: ``python scenes/make_meshes.py``).
+"""Make the meshes in scenes/meshes/ with trimesh (run: ``python scenes/make_meshes.py [OUT_DIR]``).
 
 Every mesh is in metres, in the camera-frame convention of the scene files (y points down), with
 its origin at the centre of its base, so a scene places it with ``translate_m`` = where the base
@@ -162,14 +162,16 @@ def export(mesh: trimesh.Trimesh, path: Path) -> None:
     tmp.replace(path)
 
 
-def main() -> None:
-    OUT.mkdir(exist_ok=True)
+def main(out: Path = OUT) -> None:
+    out.mkdir(parents=True, exist_ok=True)
     for name, make in MESHES.items():
         mesh = make()
-        export(mesh, OUT / f"{name}.ply")
+        export(mesh, out / f"{name}.ply")
         lo, hi = mesh.bounds
         print(f"{name}: {len(mesh.faces)} faces, extent {np.round(hi - lo, 3).tolist()} m")
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else OUT)

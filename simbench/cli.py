@@ -175,6 +175,51 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_reproduce(args) -> int:
+    from simbench.experiments.common import RunConfig
+    from simbench.experiments.reproduce import check_thresholds, reproduce, write_thresholds
+    from simbench.render import select_variant
+
+    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("camera", args.camera)) if v is not None}
+    config = RunConfig.preset(quick=args.quick, **overrides)
+    if args.decoder:
+        config = replace(config, decoder=_decoder_overrides(config.decoder, args.decoder))
+    out = args.out or ("results/quick" if args.quick else "results")
+    select_variant(args.variant)
+    command = "simbench " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("simbench") else "simbench reproduce " + " ".join(args.targets)
+    metrics = reproduce(args.targets, config=config, out_dir=out, cache_dir=None if args.no_cache else args.cache, progress=lambda s: print(s, flush=True), command=command)
+    if args.write_thresholds:
+        path = write_thresholds(args.write_thresholds, metrics, margin=args.margin, command=command)
+        print(f"wrote thresholds {path}")
+    if args.check:
+        failures = check_thresholds(metrics, args.check)
+        if failures:
+            for f in failures:
+                print(f"simbench: regression: {f}", file=sys.stderr)
+            print(f"simbench: {len(failures)} metric(s) worse than {args.check}", file=sys.stderr)
+            return 1
+        print(f"all metrics within {args.check}")
+    return 0
+
+
+def _decoder_overrides(params, items: list[str]):
+    """``name=value`` pairs applied to DecoderParams (values parsed as TOML scalars)."""
+    import dataclasses
+    import tomllib
+
+    names = {f.name for f in dataclasses.fields(params)}
+    changes = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or key not in names:
+            raise ValueError(f"--decoder takes name=value with name one of {sorted(names)}; got {item!r}")
+        try:
+            changes[key] = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            changes[key] = text
+    return replace(params, **changes)
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -237,6 +282,23 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None)
     s.set_defaults(fn=_cmd_demo)
+
+    s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures")
+    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures or all (default)")
+    s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
+    s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
+    s.add_argument("--cache", default=".cache/simbench", help="render cache folder (default: .cache/simbench)")
+    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+    s.add_argument("--seed", type=int, default=None, help="base seed (default 2017)")
+    s.add_argument("--spp", type=int, default=None)
+    s.add_argument("--repeats", type=int, default=None, help="recordings per Fig. 9 depth")
+    s.add_argument("--camera", default=None, help="camera preset (default: minimal)")
+    s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4")
+    s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
+    s.add_argument("--write-thresholds", help="write a thresholds TOML from this run's metrics")
+    s.add_argument("--margin", type=float, default=0.25, help="relative margin for --write-thresholds")
+    s.add_argument("--variant", default=None)
+    s.set_defaults(fn=_cmd_reproduce)
 
     s = sub.add_parser("bench", help="benchmark the decoder on a 1280x960 capture")
     s.add_argument("--repeats", type=int, default=20)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench.cache import RenderCache, array_digest, scene_fingerprint
 from simbench.io import save_exr, save_json, save_npy, save_png
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.render import GroundTruth, ground_truth, realised_rig, render_radiance
@@ -21,7 +22,7 @@ from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.sensor import SimpleCamera, project_drive, simple_camera
 
-__all__ = ["Acquisition", "split_seed", "acquire", "write_acquisition", "versions"]
+__all__ = ["Acquisition", "split_seed", "cached_radiance", "cached_ground_truth", "acquire", "write_acquisition", "versions"]
 
 REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
 
@@ -62,6 +63,33 @@ def versions() -> dict:
     }
 
 
+def _renderer_id() -> dict:
+    import mitsuba as mi
+
+    return {"variant": mi.variant(), "mitsuba": mi.__version__}
+
+
+def cached_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
+    """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``."""
+    if cache is None:
+        return render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)
+    parts = {"scene": scene_fingerprint(scene), "drive": array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), **_renderer_id()}
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)})["radiance"]
+
+
+def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
+    """:func:`simbench.render.ground_truth`, looked up in / stored to ``cache``."""
+    if cache is None:
+        return ground_truth(scene)
+
+    def make() -> dict:
+        gt = ground_truth(scene)
+        return {"depth_m": gt.depth_m, "column_px": gt.column_px, "object_id": gt.object_id, "lit": gt.lit}
+
+    arrays = cache.get_or_make("truth", {"scene": scene_fingerprint(scene), **_renderer_id()}, make)
+    return GroundTruth(**arrays)
+
+
 def acquire(
     scene: SceneSpec,
     *,
@@ -71,10 +99,12 @@ def acquire(
     seed: int,
     max_depth: int = 6,
     with_reference: bool = True,
+    cache: RenderCache | None = None,
 ) -> Acquisition:
     """Render and record a scene (and its reference plane) lit by the pattern.
 
     A Mitsuba variant must already be selected (:func:`simbench.render.select_variant`).
+    Renders and ground truth come from ``cache`` when it holds them.
     """
     import mitsuba as mi
 
@@ -91,14 +121,14 @@ def acquire(
     seeds = split_seed(seed)
     pat = quantize(fringe_pattern(pattern))
     drive = project_drive(pat)
-    rad = render_radiance(scene, drive, spp=spp, seed=seeds["render_capture"], max_depth=max_depth)
+    rad = cached_radiance(scene, drive, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, cache=cache)
     capture = simple_camera(rad, camera=camera, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
     if with_reference:
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
-        ref_rad = render_radiance(ref_scene, drive, spp=spp, seed=seeds["render_reference"], max_depth=max_depth)
+        ref_rad = cached_radiance(ref_scene, drive, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, cache=cache)
         reference = simple_camera(ref_rad, camera=camera, rng=seeds["noise_reference"])
-    gt = ground_truth(scene)
+    gt = cached_ground_truth(scene, cache=cache)
     meta = {
         "scene": scene.name,
         "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude},

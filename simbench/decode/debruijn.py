@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["chain_extent", "window_positions_of_stripes", "neighbour_correct"]
+__all__ = ["chain_extent", "window_positions_of_stripes", "neighbour_correct", "drop_broken_links"]
 
 
 def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -120,3 +120,30 @@ def neighbour_correct(
     rival = counts.max(axis=0) if n else np.zeros(0, np.int16)
     keep = (best_votes >= min_support) & (best_votes > rival)
     return np.where(keep, best, -1).astype(np.int32), np.where(keep, best_votes, 0).astype(np.int32)
+
+
+def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: int) -> np.ndarray:
+    """Drop both stripes of every link whose positions do not follow each other.
+
+    Linked stripes must have successive W (``W[s] = W[s-1] + 1 mod L``).  After the
+    neighbour correction a link that breaks this rule marks a depth edge the phase did not
+    show - typically a step whose disparity is close to a whole number of periods, so the
+    wrapped phase runs on smoothly across it and one stripe straddles both surfaces.  Which
+    of its pixels lie on which surface is unknown, so both stripes of the link are dropped
+    rather than unwrapped a whole period off.
+
+    Returns
+    -------
+    ndarray, shape (S,), int32; ``positions`` with the dropped stripes at -1
+    """
+    w = positions.astype(np.int64)
+    n = w.size
+    out = positions.astype(np.int32, copy=True)
+    if n < 2:
+        return out
+    prev, cur = w[:-1], w[1:]
+    broken = linked_prev[1:] & (prev >= 0) & (cur >= 0) & ((cur - prev) % cycle != 1)
+    idx = np.flatnonzero(broken) + 1
+    out[idx] = -1
+    out[idx - 1] = -1
+    return out

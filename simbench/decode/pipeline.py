@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 
 from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
-from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
+from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.pattern import check_sequence, code_sequence, window_positions
@@ -56,6 +56,9 @@ class DecoderParams:
         Neighbours per side in the W check and correction (paper Sec. 5.3); 0 = off.
     min_support : int
         Votes a stripe's W needs to be kept.
+    link_check : bool
+        After the correction, drop both stripes of any link whose W do not follow each other
+        (a depth edge hidden in a smooth phase; :func:`simbench.decode.debruijn.drop_broken_links`).
     dark_level, saturation_level : float
         In [0, 1] of full scale: a period-wide row maximum below ``dark_level`` is unlit;
         any channel at or above ``saturation_level`` is clipped.
@@ -89,6 +92,7 @@ class DecoderParams:
     voting: bool = True
     neighbour_reach: int = 3
     min_support: int = 3
+    link_check: bool = True
     dark_level: float = 0.04
     saturation_level: float = 1.0
     min_amplitude: float = 0.02
@@ -243,8 +247,9 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     """
     t_cam = params.camera_period(rig)
     # with normalised channels a stripe whose colour the surface absorbs is still usable, so
-    # "lit" looks across the neighbouring stripes (the normalisation window)
-    window = params.order + 1 if params.color_normalize else 1
+    # "lit" looks across the neighbouring stripes: twice the normalisation window, so that
+    # at the image border, where only one side is in view, both stripe colours still are
+    window = 2 * (params.order + 1) if params.color_normalize else 1
     certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
     if params.color_normalize:
         rgb = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level)
@@ -264,6 +269,9 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     w_fixed, support = neighbour_correct(
         raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
     )
+    if params.link_check:
+        w_fixed = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
+        support = np.where(w_fixed >= 0, support, 0)
     lab = stripes.labels
     position = _per_pixel(w_fixed, lab, -1)
     column, stripe_index = absolute_column(position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)

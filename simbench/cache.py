@@ -1,0 +1,104 @@
+"""Content-addressed cache of renders and ground truth.
+
+A render is keyed by a SHA-256 of everything that affects it: the scene (rig, objects,
+materials, the bytes of every mesh file, projector scale, ambient light), the projector drive
+image, spp, seed, path length, the Mitsuba variant and version, and :data:`RENDER_VERSION`
+(bumped when simbench's rendering code changes what it produces).  A decoder-only or
+camera-only change therefore never re-renders.  Entries are ``.npz`` files written atomically,
+so an interrupted run leaves no half-written entry; delete the directory to clear the cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from collections.abc import Callable
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from simbench.io import atomic_write_bytes
+from simbench.rig import rig_to_dict
+from simbench.scene import SceneSpec
+
+__all__ = ["RENDER_VERSION", "RenderCache", "scene_fingerprint", "array_digest"]
+
+RENDER_VERSION = 1
+
+
+@lru_cache(maxsize=64)
+def _file_digest(path: str, mtime_ns: int, size: int) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def array_digest(a: np.ndarray) -> str:
+    """SHA-256 of an array's dtype, shape and bytes."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
+    h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def scene_fingerprint(scene: SceneSpec) -> dict:
+    """Everything about a scene that affects a render, as plain JSON-able data."""
+    objects = []
+    for o in scene.objects:
+        params = dict(o.params)
+        if o.kind == "mesh":
+            p = Path(params["file"])
+            st = p.stat()
+            params["file"] = {"name": p.name, "sha256": _file_digest(str(p), st.st_mtime_ns, st.st_size)}
+        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": [o.material.kind, list(o.material.rgb), o.material.roughness]})
+    return {
+        "rig": rig_to_dict(scene.rig),
+        "objects": objects,
+        "projector_scale": scene.projector_scale,
+        "ambient_rgb": list(scene.ambient_rgb),
+    }
+
+
+def _digest(parts: dict) -> str:
+    text = json.dumps(parts, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class RenderCache:
+    """A directory of cached arrays keyed by content; ``root=None`` disables caching.
+
+    ``hits`` and ``misses`` count look-ups (for progress messages and tests).
+    """
+
+    def __init__(self, root: str | Path | None) -> None:
+        self.root = None if root is None else Path(root)
+        self.hits = 0
+        self.misses = 0
+
+    def key(self, kind: str, parts: dict) -> str:
+        return f"{kind}-{_digest({'kind': kind, 'render_version': RENDER_VERSION, **parts})[:32]}"
+
+    def get_or_make(self, kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+        """The arrays stored under ``(kind, parts)``, made by ``make()`` and stored on a miss."""
+        if self.root is None:
+            self.misses += 1
+            return make()
+        path = self.root / f"{self.key(kind, parts)}.npz"
+        if path.is_file():
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    out = {k: z[k] for k in z.files}
+                self.hits += 1
+                return out
+            except (OSError, ValueError, EOFError):
+                path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
+        self.misses += 1
+        arrays = make()
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        atomic_write_bytes(path, buf.getvalue())
+        return arrays

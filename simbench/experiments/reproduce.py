@@ -1,0 +1,129 @@
+"""``simbench reproduce``: regenerate the paper's tables and figures, and check regressions.
+
+Targets: ``table1``, ``table3``, ``fig9``, ``figures`` or ``all``.  The full run (``make
+reproduce``) writes into ``results/``; ``--quick`` (640x480, 4 spp, 3 recordings per Fig. 9
+depth) is the CI benchmark, whose key errors are compared with the thresholds in
+``results/quick/thresholds.toml`` (:func:`check_thresholds`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+from simbench.experiments.common import RunConfig, Session
+from simbench.experiments.fig9 import run_fig9
+from simbench.experiments.figures import run_figures
+from simbench.experiments.table1 import run_table1
+from simbench.experiments.table3 import run_table3
+from simbench.io import atomic_write_text, read_toml, save_json
+
+__all__ = ["TARGETS", "reproduce", "check_thresholds", "thresholds_from", "write_thresholds"]
+
+TARGETS: dict[str, Callable[[Session], dict]] = {"table1": run_table1, "table3": run_table3, "fig9": run_fig9, "figures": run_figures}
+
+
+def _resolve(targets: list[str]) -> list[str]:
+    if not targets or "all" in targets:
+        return list(TARGETS)
+    bad = [t for t in targets if t not in TARGETS]
+    if bad:
+        raise ValueError(f"unknown target(s) {bad}; valid: {list(TARGETS) + ['all']}")
+    return [t for t in TARGETS if t in targets]
+
+
+def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "") -> dict:
+    """Run the targets; returns ``{metric path: value}`` of all of them (also written to
+    ``<out_dir>/metrics.json`` merged with earlier runs' metrics of other targets)."""
+    names = _resolve(targets)
+    session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=progress, command=command)
+    metrics: dict = {}
+    for name in names:
+        with session.timed(f"{name} done"):
+            metrics.update(TARGETS[name](session))
+    path = Path(out_dir) / "metrics.json"
+    merged = {}
+    if path.is_file():
+        import json
+
+        try:
+            merged = {k: v for k, v in json.loads(path.read_text()).items() if k.split("/")[0] not in names}
+        except (ValueError, AttributeError):
+            merged = {}
+    save_json(path, dict(sorted({**merged, **metrics}.items())))
+    progress(f"render cache: {session.cache.hits} hits, {session.cache.misses} renders; results in {out_dir}")
+    return metrics
+
+
+# ---------------------------------------------------------------------------------------
+# Regression thresholds.  A rule per kind of metric, applied to the measured quick values:
+#   errors (``*_mm``)         max = measured * (1 + margin) + 0.02 mm
+#   completeness              min = measured - 0.01 (one percentage point), floor 0
+#   stripe-order errors       max = measured * (1 + margin) + 20 pixels
+#   stripe-order error rate   max = measured * (1 + margin) + 0.0005
+# The margin (default 0.25) covers run-to-run differences between machines (the llvm and
+# scalar variants sample differently); a change to the decoder that makes a key error 25 %
+# worse fails CI.
+
+def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
+    leaf = name.rsplit("/", 1)[-1]
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return None
+    if leaf.endswith("_mm"):
+        return "max", round(value * (1 + margin) + 0.02, 4)
+    if leaf == "completeness":
+        return "min", round(max(0.0, value - 0.01), 4)
+    if leaf == "stripe_order_errors":
+        return "max", int(math.ceil(value * (1 + margin) + 20))
+    if leaf == "stripe_order_error_rate":
+        return "max", round(value * (1 + margin) + 0.0005, 6)
+    return None
+
+
+def thresholds_from(metrics: dict, *, margin: float) -> dict:
+    out = {}
+    for name, value in sorted(metrics.items()):
+        r = _rule(name, value, margin)
+        if r is not None:
+            out[name] = {"measured": value, r[0]: r[1]}
+    return out
+
+
+def write_thresholds(path: str | Path, metrics: dict, *, margin: float, command: str) -> Path:
+    """A thresholds TOML from measured metrics (the header states the rules and the margin)."""
+    lines = [
+        "# Regression thresholds for `simbench reproduce all --quick` (checked by .ci/run).",
+        f"# Written by: {command}",
+        f"# Margin {margin:g}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
+        "# stripe-order errors max = measured*(1+margin)+20; their rate max = measured*(1+margin)+0.0005.",
+        "# Regenerate only for an intended change, and say why in the commit.",
+        "",
+    ]
+    for name, t in thresholds_from(metrics, margin=margin).items():
+        lines.append(f'["{name}"]')
+        for k, v in t.items():
+            lines.append(f"{k} = {v!r}" if not isinstance(v, float) else f"{k} = {v:.6g}")
+        lines.append("")
+    return atomic_write_text(path, "\n".join(lines))
+
+
+def check_thresholds(metrics: dict, thresholds_path: str | Path) -> list[str]:
+    """Failures (one line each) of ``metrics`` against a thresholds file; empty = pass.
+
+    A metric named in the file but missing from ``metrics`` (or NaN) fails too.
+    """
+    table = read_toml(thresholds_path, what="thresholds")
+    failures = []
+    for name, t in sorted(table.items()):
+        if not isinstance(t, dict) or not ({"max", "min"} & set(t)):
+            raise ValueError(f"{thresholds_path}: [{name!r}] needs max or min")
+        v = metrics.get(name)
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            failures.append(f"{name}: not measured")
+            continue
+        if "max" in t and v > t["max"]:
+            failures.append(f"{name} = {v:.6g} > max {t['max']} (measured when set: {t.get('measured')})")
+        if "min" in t and v < t["min"]:
+            failures.append(f"{name} = {v:.6g} < min {t['min']} (measured when set: {t.get('measured')})")
+    return failures

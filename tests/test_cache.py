@@ -1,0 +1,91 @@
+"""The content-hash render cache."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from simbench.cache import RenderCache, array_digest, scene_fingerprint
+from simbench.scene import load_scene, scene_from_dict
+
+from .conftest import SCENES
+
+
+def test_get_or_make_stores_then_hits(tmp_path):
+    cache = RenderCache(tmp_path)
+    calls = []
+
+    def make():
+        calls.append(1)
+        return {"a": np.arange(5, dtype=np.float32)}
+
+    a = cache.get_or_make("radiance", {"x": 1}, make)
+    b = cache.get_or_make("radiance", {"x": 1}, make)
+    c = cache.get_or_make("radiance", {"x": 2}, make)
+    assert len(calls) == 2 and (cache.hits, cache.misses) == (1, 2)
+    assert np.array_equal(a["a"], b["a"]) and b["a"].dtype == np.float32 and np.array_equal(c["a"], a["a"])
+    assert len(list(tmp_path.glob("*.npz"))) == 2 and not list(tmp_path.glob(".*tmp"))
+
+
+def test_damaged_entry_is_remade(tmp_path):
+    cache = RenderCache(tmp_path)
+    cache.get_or_make("k", {"x": 1}, lambda: {"a": np.ones(3)})
+    (entry,) = tmp_path.glob("*.npz")
+    entry.write_bytes(b"garbage")
+    out = cache.get_or_make("k", {"x": 1}, lambda: {"a": np.zeros(3)})
+    assert np.array_equal(out["a"], np.zeros(3)) and cache.misses == 2
+
+
+def test_disabled_cache_always_makes():
+    cache = RenderCache(None)
+    n = []
+    for _ in range(2):
+        cache.get_or_make("k", {}, lambda: n.append(1) or {"a": np.zeros(1)})
+    assert len(n) == 2
+
+
+def test_fingerprint_sees_what_affects_a_render(tmp_path):
+    base = {"object": [{"type": "plane", "size_m": [1, 1], "rgb": [0.5, 0.5, 0.5]}]}
+    s = scene_from_dict(base)
+    assert scene_fingerprint(s) == scene_fingerprint(scene_from_dict(base))
+    assert scene_fingerprint(s) != scene_fingerprint(scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], "rgb": [0.5, 0.5, 0.6]}]}))
+    assert scene_fingerprint(s) != scene_fingerprint(dataclasses.replace(s, ambient_rgb=(0.1, 0.1, 0.1)))
+    # descriptions and names of the scene do not matter; a mesh's bytes do
+    assert scene_fingerprint(s) == scene_fingerprint(dataclasses.replace(s, name="other", description="x"))
+    mesh = tmp_path / "m.ply"
+    mesh.write_bytes((SCENES / "meshes" / "cone.ply").read_bytes())
+    m = {"object": [{"type": "mesh", "file": str(mesh)}]}
+    f1 = scene_fingerprint(scene_from_dict(m))
+    mesh.write_bytes((SCENES / "meshes" / "cylinder.ply").read_bytes())
+    assert scene_fingerprint(scene_from_dict(m)) != f1
+
+
+def test_array_digest_sees_dtype_shape_and_values():
+    a = np.zeros((2, 3), np.float32)
+    assert array_digest(a) != array_digest(a.astype(np.float64))
+    assert array_digest(a) != array_digest(a.reshape(3, 2))
+    b = a.copy()
+    b[1, 2] = 1e-7
+    assert array_digest(a) != array_digest(b)
+
+
+@pytest.mark.slow
+def test_decoder_change_does_not_rerender(tmp_path, variant):
+    """A second run with other decoder settings takes every render from the cache, and the
+    cached run's tables equal an uncached run's byte for byte."""
+    from simbench.decode import DecoderParams
+    from simbench.experiments.common import RunConfig
+    from simbench.experiments.reproduce import reproduce
+
+    cfg = RunConfig.preset(quick=True)
+    quiet = lambda s: None  # noqa: E731
+    reproduce(["table3"], config=cfg, out_dir=tmp_path / "a", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    n_entries = len(list((tmp_path / "cache").glob("*.npz")))
+    other = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.3))
+    msgs = []
+    reproduce(["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=msgs.append, command="t")
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == n_entries
+    assert any("0 renders" in m for m in msgs)
+    reproduce(["table3"], config=cfg, out_dir=tmp_path / "c", cache_dir=None, progress=quiet, command="t")
+    for f in ("table3.csv", "table3.md", "fig10.png"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "c" / f).read_bytes(), f

@@ -1,0 +1,95 @@
+"""Paper-reproduction experiments: thresholds, seeds, configuration, and a quick run."""
+
+import dataclasses
+import json
+import math
+
+import pytest
+
+from simbench.experiments.common import RunConfig, label_seed
+from simbench.experiments.reproduce import _resolve, check_thresholds, thresholds_from, write_thresholds
+from simbench.rig import paper_rig, scale_camera
+
+
+def test_label_seeds_are_stable_and_distinct():
+    assert label_seed(2017, "table1/red") == label_seed(2017, "table1/red")
+    assert len({label_seed(2017, f"x/{i}") for i in range(200)}) == 200
+    assert label_seed(2017, "a") != label_seed(2018, "a")
+
+
+def test_quick_preset_and_overrides():
+    q = RunConfig.preset(quick=True, seed=5)
+    assert q.quick and q.camera_scale == 0.5 and q.seed == 5 and q.fig9_repeats >= 3
+    full = RunConfig.preset(quick=False)
+    assert full.camera_scale == 1 and full.fig9_repeats >= 10  # the paper: "more than 10 times"
+    json.dumps(full.to_dict())
+
+
+def test_scale_camera_keeps_the_view():
+    rig = paper_rig()
+    half = scale_camera(rig, 0.5)
+    assert half.camera.size_hw == (480, 640) and half.camera.focal_px == rig.camera.focal_px / 2
+    assert half.camera.cx_px == pytest.approx((half.camera.width_px - 1) / 2)  # centred stays centred
+    assert half.projector == rig.projector
+    with pytest.raises(ValueError, match="whole image sizes"):
+        scale_camera(rig, 0.33)
+
+
+def test_unknown_target_is_rejected():
+    assert _resolve(["all"]) == ["table1", "table3", "fig9", "figures"]
+    assert _resolve(["fig9", "table1"]) == ["table1", "fig9"]
+    with pytest.raises(ValueError, match="valid"):
+        _resolve(["table2"])
+
+
+def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
+    measured = {"table1/white/paper/gt_mae_mm": 0.3, "table1/white/paper/completeness": 0.999, "fig9/1.0m/stripe_order_errors": 0, "x/other": 3.0}
+    path = write_thresholds(tmp_path / "t.toml", measured, margin=0.25, command="test")
+    assert check_thresholds(measured, path) == []
+    worse = {**measured, "table1/white/paper/gt_mae_mm": 0.3 * 1.3 + 0.03}
+    assert any("gt_mae_mm" in f for f in check_thresholds(worse, path))
+    assert any("completeness" in f for f in check_thresholds({**measured, "table1/white/paper/completeness": 0.95}, path))
+    assert any("stripe_order_errors" in f for f in check_thresholds({**measured, "fig9/1.0m/stripe_order_errors": 100}, path))
+    missing = dict(measured)
+    del missing["table1/white/paper/gt_mae_mm"]
+    assert any("not measured" in f for f in check_thresholds(missing, path))
+    assert any("not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path))
+
+
+def test_threshold_rules():
+    t = thresholds_from({"a/mae_mm": 1.0, "a/completeness": 0.5, "a/stripe_order_error_rate": 0.0, "a/nan_mm": math.nan}, margin=0.5)
+    assert t["a/mae_mm"]["max"] == pytest.approx(1.52)
+    assert t["a/completeness"]["min"] == pytest.approx(0.49)
+    assert t["a/stripe_order_error_rate"]["max"] == pytest.approx(0.0005)
+    assert "a/nan_mm" not in t
+
+
+def test_committed_quick_thresholds_are_valid():
+    from .conftest import ROOT
+
+    path = ROOT / "results" / "quick" / "thresholds.toml"
+    metrics = json.loads((ROOT / "results" / "quick" / "metrics.json").read_text())
+    assert check_thresholds(metrics, path) == []  # the committed quick run passes its own thresholds
+
+
+@pytest.mark.slow
+def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
+    """The CI check catches a deliberately worse decoder parameter (issue 4)."""
+    from simbench.decode import DecoderParams
+    from simbench.experiments.reproduce import reproduce
+
+    cfg = RunConfig.preset(quick=True)
+    quiet = lambda s: None  # noqa: E731
+    good = reproduce(["table1"], config=cfg, out_dir=tmp_path / "good", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    path = write_thresholds(tmp_path / "t.toml", good, margin=0.25, command="t")
+    assert check_thresholds(good, path) == []
+    assert good["table1/white/paper/completeness"] > 0.99 and good["table1/white/paper/stripe_order_errors"] == 0
+    assert good["table1/red/normalized/completeness"] > 0.99 and good["table1/red/normalized/stripe_order_errors"] == 0
+    worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
+    worse = reproduce(["table1"], config=worse_cfg, out_dir=tmp_path / "worse", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    failures = check_thresholds(worse, path)
+    assert any("white/paper/gt_mae_mm" in f for f in failures)
+    rows = (tmp_path / "good" / "table1.csv").read_text().splitlines()
+    assert len(rows) == 8 and rows[0].startswith("colour,srgb8,reflectance,paper_mae_mm")
+    prov = json.loads((tmp_path / "good" / "table1.provenance.json").read_text())
+    assert set(prov["files"]) == {"table1.csv", "table1.md"} and prov["seeds"]["table1/red"]["render"] > 0

@@ -1,0 +1,94 @@
+"""The scene library: paint colours, materials, shipped meshes and scene files."""
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from simbench.scene import PAINT_MAX_REFLECTANCE, PAINT_MIN_REFLECTANCE, load_scene, paint_reflectance, scene_from_dict
+
+from .conftest import ROOT, SCENES
+
+PLANE = {"type": "plane", "size_m": [1, 1]}
+
+
+def test_paint_reflectance_end_points_and_srgb_curve():
+    assert paint_reflectance([255, 255, 255]) == pytest.approx((PAINT_MAX_REFLECTANCE,) * 3)
+    assert paint_reflectance([0, 0, 0]) == pytest.approx((PAINT_MIN_REFLECTANCE,) * 3)
+    assert paint_reflectance([255, 0, 0]) == pytest.approx((0.80, 0.04, 0.04))
+    # sRGB 128 decodes to linear 0.2158 (IEC 61966-2-1)
+    assert paint_reflectance([128, 128, 128])[0] == pytest.approx(0.04 + 0.76 * 0.21586, abs=1e-4)
+
+
+@pytest.mark.parametrize("bad", [[256, 0, 0], [-1, 0, 0], [1, 2], [np.nan, 0, 0]])
+def test_paint_reflectance_rejects_bad_colours(bad):
+    with pytest.raises(ValueError, match="srgb8"):
+        paint_reflectance(bad)
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ({"rgb": [0.5, 0.5, 0.5], "srgb8": [1, 2, 3]}, "not both"),
+        ({"roughness": 0.1}, "roughness applies"),
+        ({"material": "plastic", "roughness": 0}, "roughness"),
+        ({"material": "metal"}, "unknown material"),
+        ({"srgb8": [300, 0, 0]}, "srgb8"),
+    ],
+)
+def test_material_errors_name_the_problem(extra, match):
+    with pytest.raises(ValueError, match=match):
+        scene_from_dict({"object": [{**PLANE, **extra}]})
+
+
+def test_srgb8_and_plastic_reach_the_material():
+    s = scene_from_dict({"object": [{**PLANE, "srgb8": [0, 255, 255], "material": "plastic", "roughness": 0.2}]})
+    m = s.objects[0].material
+    assert m.kind == "plastic" and m.roughness == 0.2 and m.rgb == pytest.approx((0.04, 0.8, 0.8))
+
+
+def test_plastic_becomes_roughplastic(variant):
+    from simbench.scene import object_to_mitsuba
+
+    s = scene_from_dict({"object": [{**PLANE, "rgb": [0.2, 0.3, 0.4], "material": "plastic", "roughness": 0.05}]})
+    bsdf = object_to_mitsuba(s.objects[0])["bsdf"]["bsdf"]
+    assert bsdf["type"] == "roughplastic" and bsdf["alpha"] == 0.05 and bsdf["diffuse_reflectance"]["value"] == [0.2, 0.3, 0.4]
+
+
+@pytest.mark.parametrize("name", ["discontinuity", "geometries", "bust", "clutter_pink_cyan", "clutter_pear_hat"])
+def test_paper_scenes_have_their_objects_in_view(name):
+    """Every object's centre projects inside the camera image (the scene shows what it claims)."""
+    s = load_scene(SCENES / f"{name}.toml")
+    cam = s.rig.camera
+    for o in s.objects:
+        c = np.asarray(o.get("center_m") if o.kind != "mesh" else o.get("translate_m"), float)
+        if o.kind == "mesh":
+            c = c + np.array([0.0, -0.05, 0.0])  # meshes stand on their base: look a little above it
+        x = cam.focal_px * c[0] / c[2] + cam.cx_px
+        y = cam.focal_px * c[1] / c[2] + cam.cy_px
+        assert 0 <= x < cam.width_px and 0 <= y < cam.height_px, (name, o.name, x, y)
+
+
+def test_table1_and_fig9_scene_sets_are_complete():
+    from simbench.experiments.fig9 import DEPTHS_M
+    from simbench.experiments.table1 import PAPER_TABLE1
+
+    for colour, (srgb, _) in PAPER_TABLE1.items():
+        s = load_scene(SCENES / f"plane_{colour}.toml")
+        assert s.objects[0].material.rgb == pytest.approx(paint_reflectance(srgb))
+        assert s.objects[0].get("center_m")[2] == 1.0
+    for z in DEPTHS_M:
+        s = load_scene(SCENES / f"plane_depth_{int(round(z * 100)):03d}cm.toml")
+        assert s.objects[0].get("center_m")[2] == pytest.approx(z)
+
+
+@pytest.mark.slow
+def test_meshes_are_regenerated_identically(tmp_path):
+    """scenes/make_meshes.py reproduces the shipped PLY files byte for byte."""
+    subprocess.run([sys.executable, str(SCENES / "make_meshes.py"), str(tmp_path)], check=True, capture_output=True, cwd=ROOT)
+    shipped = sorted((SCENES / "meshes").glob("*.ply"))
+    assert shipped and sorted(p.name for p in tmp_path.glob("*.ply")) == [p.name for p in shipped]
+    for p in shipped:
+        assert hashlib.sha256(p.read_bytes()).digest() == hashlib.sha256((tmp_path / p.name).read_bytes()).digest(), p.name
