@@ -304,15 +304,23 @@ def render_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int,
     import mitsuba as mi
 
     d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth)
-    img = mi.render(_load(mi, d), seed=int(seed), spp=int(spp))
+    img = mi.render(_load(mi, d, scene), seed=int(seed), spp=int(spp))
     return np.array(img, dtype=np.float32)
 
 
-def _load(mi, d: dict):
+def _load(mi, d: dict, scene: SceneSpec):
+    """``mi.load_dict`` with Mitsuba's loader errors (a malformed mesh file, say) turned into
+    a one-line ``ValueError`` naming the scene object."""
     # optimize=False: Mitsuba's optimiser merges meshes sharing a material into one shape,
     # which loses per-object ids and fails outright for meshes with different attributes
     # (a cube next to a PLY mesh).
-    return mi.load_dict(d, optimize=False)
+    try:
+        return mi.load_dict(d, optimize=False)
+    except RuntimeError as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        for i, obj in enumerate(scene.objects):
+            msg = msg.replace(f'"obj{i:03d}"', f"object {obj.name!r}")
+        raise ValueError(f"scene {scene.name!r}: Mitsuba could not load it: {msg}") from None
 
 
 @dataclass(frozen=True)
@@ -347,7 +355,7 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
     import mitsuba as mi
 
     d, rig = mitsuba_scene(scene, None, spp=1, max_depth=1)
-    mscene = _load(mi, d)
+    mscene = _load(mi, d, scene)
     rays = pixel_rays(rig.camera)
     h, w = rays.shape[:2]
     dirs = (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)

@@ -92,3 +92,12 @@ def test_meshes_are_regenerated_identically(tmp_path):
     assert shipped and sorted(p.name for p in tmp_path.glob("*.ply")) == [p.name for p in shipped]
     for p in shipped:
         assert hashlib.sha256(p.read_bytes()).digest() == hashlib.sha256((tmp_path / p.name).read_bytes()).digest(), p.name
+
+
+def test_malformed_mesh_gives_one_clear_error(tmp_path, variant):
+    from simbench.render import ground_truth
+
+    (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
+    scene = scene_from_dict({"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path)
+    with pytest.raises(ValueError, match=r"scene 'mine'.*object 'statue'.*broken.ply"):
+        ground_truth(scene)
