@@ -21,6 +21,7 @@ $(STAMP): pyproject.toml scripts/setup_system.sh
 reproduce: setup
 	$(VENV)/bin/simbench reproduce all
 	$(VENV)/bin/simbench demo --out results/demo
+	$(VENV)/bin/simbench crosstalk --out results/crosstalk.md
 
 # The CI benchmark: the quick run checked against the committed thresholds.
 quick: setup

@@ -220,6 +220,19 @@ def _decoder_overrides(params, items: list[str]):
     return replace(params, **changes)
 
 
+def _cmd_crosstalk(args) -> int:
+    from simbench.experiments.table1 import PAPER_TABLE1
+    from simbench.io import atomic_write_text
+    from simbench.spectral import crosstalk_report
+
+    text = crosstalk_report({name: srgb for name, (srgb, _) in PAPER_TABLE1.items()})
+    print(text)
+    if args.out:
+        atomic_write_text(args.out, text.replace("# Projector-to-camera crosstalk matrices", f"# Projector-to-camera crosstalk matrices\n\nMade by `simbench crosstalk --out {args.out}`.", 1))
+        print(f"wrote {args.out}")
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).")
     p.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -299,6 +312,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--margin", type=float, default=0.25, help="relative margin for --write-thresholds")
     s.add_argument("--variant", default=None)
     s.set_defaults(fn=_cmd_reproduce)
+
+    s = sub.add_parser("crosstalk", help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours")
+    s.add_argument("--out", help="also write them as Markdown here")
+    s.set_defaults(fn=_cmd_crosstalk)
 
     s = sub.add_parser("bench", help="benchmark the decoder on a 1280x960 capture")
     s.add_argument("--repeats", type=int, default=20)

@@ -1,0 +1,133 @@
+"""Spectral crosstalk between the projector's primaries and the camera's colour channels.
+
+For a diffuse surface of spectral reflectance rho, the camera channel c records from projector
+primary p in proportion to ``integral S_c(l) rho(l) P_p(l) dl``.  We normalise by the matching
+channel's response to the same primary on a perfect white, so that a white surface has ones on
+the diagonal and its off-diagonal entries are the crosstalk ratios:
+
+    K[c, p] = integral S_c rho P_p / integral S_p P_p
+
+(the operator balances the projector's primaries for the camera on a white board).
+
+Data and assumptions (nothing here is fitted to the paper's results):
+
+* Projector primaries: LED spectra from colour-science's ``sd_single_led`` (Ohno 2005 model)
+  peaking at 620 / 522 / 455 nm with full widths at half maximum of 20 / 35 / 20 nm.
+  **Assumption**: typical red, green and blue LEDs of DLP pico projectors; TI does not publish
+  the DLP LightCrafter 4500's LED spectra.
+* Camera: ``Nikon 5100 (NPL)`` from colour-science's camera sensitivity datasets, standing in
+  for the Flea3 FL3-U3-13E4C (e2v EV76C560 with a Bayer filter), whose spectral curves are not
+  in any public dataset we can use.  Both are CMOS sensors with an RGB Bayer mosaic behind an
+  IR-cut filter; the other dataset (Sigma SD Merrill) is a stacked Foveon sensor, a different
+  principle, hence the choice.  **Assumption** with that reasoning.
+* Surface spectra from a material's linear RGB reflectance by Mallett & Yuksel 2019
+  (``RGB_to_sd_Mallett2019``): a bounded, smooth reflectance in [0, 1] that reproduces the RGB
+  under sRGB/D65, linear in the RGB, so crosstalk of any material is a fixed blend of three
+  basis matrices.
+"""
+
+from __future__ import annotations
+
+import warnings
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
+
+PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
+PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
+CAMERA_DATASET = "Nikon 5100 (NPL)"  # stands in for the Flea3 FL3-U3-13E4C (module docstring)
+
+
+def _colour():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+    return colour
+
+
+@lru_cache(maxsize=1)
+def _shape():
+    return _colour().SpectralShape(380, 780, 5)
+
+
+def wavelengths_nm() -> np.ndarray:
+    """The common wavelength grid, 380-780 nm in 5 nm steps."""
+    return np.asarray(_shape().wavelengths, dtype=np.float64)
+
+
+@lru_cache(maxsize=4)
+def projector_primaries() -> np.ndarray:
+    """Relative spectral power of the R, G, B primaries on :func:`wavelengths_nm`, shape (N, 3)."""
+    colour = _colour()
+    cols = []
+    for peak, fwhm in zip(PRIMARY_PEAKS_NM, PRIMARY_FWHM_NM):
+        sd = colour.sd_single_led(peak, half_spectral_width=fwhm, shape=colour.SpectralShape(360, 830, 1))
+        cols.append(np.asarray(sd.copy().align(_shape()).values, dtype=np.float64))
+    out = np.stack(cols, axis=1)
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=4)
+def camera_sensitivities() -> np.ndarray:
+    """Relative spectral sensitivities of the camera's R, G, B channels, shape (N, 3)."""
+    colour = _colour()
+    from colour.characterisation import MSDS_CAMERA_SENSITIVITIES
+
+    msds = MSDS_CAMERA_SENSITIVITIES[CAMERA_DATASET].copy().align(_shape())
+    out = np.asarray(msds.values, dtype=np.float64)
+    out.setflags(write=False)
+    del colour
+    return out
+
+
+def reflectance_spectrum(rgb) -> np.ndarray:
+    """Spectral reflectance (on :func:`wavelengths_nm`) of a linear-RGB diffuse reflectance."""
+    v = np.asarray(rgb, dtype=np.float64)
+    if v.shape != (3,) or not np.all((v >= 0) & (v <= 1)):
+        raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {rgb!r}")
+    _colour()
+    from colour.recovery import RGB_to_sd_Mallett2019
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sd = RGB_to_sd_Mallett2019(v)
+    return np.asarray(sd.copy().align(_shape()).values, dtype=np.float64)
+
+
+def crosstalk_matrix(rgb) -> np.ndarray:
+    """K[c, p]: camera channel c's response to projector primary p reflected by a diffuse
+    surface of linear RGB reflectance ``rgb``, relative to channel p's response to primary p
+    on a perfect white (module docstring).  Shape (3, 3), rows = camera R, G, B."""
+    s = camera_sensitivities()
+    p = projector_primaries()
+    rho = reflectance_spectrum(rgb)
+    resp = np.einsum("lc,l,lp->cp", s, rho, p)
+    white = np.einsum("lc,lp->cp", s, p)
+    return resp / np.diag(white)[None, :]
+
+
+def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
+    """Markdown: the crosstalk matrix of a perfect white and of each named sRGB paint colour
+    (reflectance by :func:`simbench.scene.paint_reflectance`)."""
+    from simbench.scene import paint_reflectance
+
+    lines = [
+        "# Projector-to-camera crosstalk matrices",
+        "",
+        "`K[c, p]`: camera channel c (rows R, G, B) recording projector primary p (columns R, G, B) reflected by the",
+        "surface, relative to channel p's response to primary p on a perfect white. Primaries: LEDs at "
+        + " / ".join(f"{x:g}" for x in PRIMARY_PEAKS_NM) + " nm (FWHM " + " / ".join(f"{x:g}" for x in PRIMARY_FWHM_NM) + f" nm, assumption); camera: `{CAMERA_DATASET}` sensitivities "
+        "(stand-in for the Flea3); surface spectra: Mallett & Yuksel 2019 from the paint reflectance. See `simbench/spectral.py`.",
+        "",
+    ]
+    entries = [("perfect white (reflectance 1)", (1.0, 1.0, 1.0))] + [(f"{name} (sRGB {','.join(map(str, c))})", paint_reflectance(c)) for name, c in colours.items()]
+    for title, rgb in entries:
+        k = crosstalk_matrix(rgb)
+        lines += [f"## {title}", "", f"reflectance RGB {tuple(round(x, 3) for x in rgb)}", "", "| camera \\ projector | R | G | B |", "| --- | --- | --- | --- |"]
+        for name, row in zip("RGB", k):
+            lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in row) + " |")
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,59 @@
+"""Spectral crosstalk: data alignment, normalisation, recovery and the physics it predicts."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from simbench.scene import paint_reflectance
+from simbench.spectral import camera_sensitivities, crosstalk_matrix, projector_primaries, reflectance_spectrum, wavelengths_nm
+
+
+def test_spectra_share_one_grid_and_peak_where_stated():
+    wl = wavelengths_nm()
+    p = projector_primaries()
+    assert p.shape == (wl.size, 3) and camera_sensitivities().shape == (wl.size, 3)
+    assert np.allclose(wl[p.argmax(axis=0)], (620, 522, 455), atol=5)
+
+
+def test_perfect_white_has_unit_diagonal_and_positive_crosstalk():
+    k = crosstalk_matrix([1.0, 1.0, 1.0])
+    assert np.allclose(np.diag(k), 1.0, atol=0.02)  # Mallett's white is ~1 across the spectrum
+    off = k[~np.eye(3, dtype=bool)]
+    assert np.all(off > 0) and np.all(off < 0.5)
+
+
+def test_recovered_spectrum_reproduces_its_rgb():
+    """Mallett & Yuksel 2019 round trip: the recovered reflectance, lit by D65 and seen by the
+    CIE observer, gives back its linear sRGB within 0.01."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+    for rgb in ([0.8, 0.04, 0.04], [0.04, 0.8, 0.8], [0.5, 0.3, 0.2]):
+        sd = colour.SpectralDistribution(dict(zip(wavelengths_nm(), reflectance_spectrum(rgb))))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            xyz = colour.sd_to_XYZ(sd, illuminant=colour.SDS_ILLUMINANTS["D65"]) / 100
+            back = colour.XYZ_to_RGB(xyz, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_encoding=False)
+        assert np.allclose(back, rgb, atol=0.01), (rgb, back)
+
+
+def test_crosstalk_is_linear_in_the_reflectance():
+    a, b = np.array([0.8, 0.04, 0.04]), np.array([0.04, 0.3, 0.7])
+    assert np.allclose(crosstalk_matrix(0.5 * a + 0.5 * b), 0.5 * crosstalk_matrix(a) + 0.5 * crosstalk_matrix(b), atol=1e-9)
+
+
+def test_red_surface_under_a_green_stripe_records_a_small_nonzero_signal():
+    """Issue 3: the red board reflects little of the green LED's light, and the red channel
+    barely sees that light, but neither is zero."""
+    red = crosstalk_matrix(paint_reflectance([255, 0, 0]))
+    white = crosstalk_matrix(paint_reflectance([255, 255, 255]))
+    g = 1  # the green primary
+    assert 0 < red[0, g] < 0.05 * white[0, 0]  # camera R under the green stripe
+    assert 0 < red[1, g] < 0.1 * white[1, g]  # camera G: the paint absorbs green
+    assert red[0, 0] > 0.9 * white[0, 0]  # under the red stripe the red channel sees ~ white
+
+
+def test_bad_reflectance_is_rejected():
+    with pytest.raises(ValueError, match="reflectance"):
+        reflectance_spectrum([1.2, 0, 0])
