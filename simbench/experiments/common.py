@@ -153,8 +153,6 @@ class Session:
     # provenance --------------------------------------------------------------------------
     def provenance(self, name: str, files: list[Path], extra: dict | None = None) -> Path:
         """``<name>.provenance.json`` beside the files: command, config, seeds, versions."""
-        import hashlib as _h
-
         record = {
             "command": self.command,
             "config": self.config.to_dict(),
@@ -163,7 +161,7 @@ class Session:
             "versions": versions(),
             "git_commit": git_commit(),
             "seeds": dict(sorted(self.seeds_used.items())),
-            "files": {str(p.relative_to(self.out)): _h.sha256(p.read_bytes()).hexdigest() for p in files},
+            "files": {str(p.relative_to(self.out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
             **(extra or {}),
         }
         return save_json(self.out / f"{name}.provenance.json", record)

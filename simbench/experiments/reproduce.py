@@ -8,6 +8,7 @@ depth) is the CI benchmark, whose key errors are compared with the thresholds in
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -45,8 +46,6 @@ def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cac
     path = Path(out_dir) / "metrics.json"
     merged = {}
     if path.is_file():
-        import json
-
         try:
             merged = {k: v for k, v in json.loads(path.read_text()).items() if k.split("/")[0] not in names}
         except (ValueError, AttributeError):
