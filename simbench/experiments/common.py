@@ -70,9 +70,7 @@ class RunConfig:
         return dataclasses.replace(base, **overrides)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
-        d["decoder"] = asdict(self.decoder)
-        return d
+        return asdict(self)  # recurses into the decoder's dataclass
 
 
 def label_seed(base: int, label: str) -> int:

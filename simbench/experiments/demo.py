@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.experiments.common import SCENES_DIR, git_commit
 from simbench.io import atomic_write_bytes, atomic_write_text, save_json
 from simbench.metrics import depth_errors, edge_band
 from simbench.pattern import PatternSpec
@@ -25,7 +26,6 @@ from simbench.simulate import acquire
 
 __all__ = ["DemoConfig", "DEFAULT_SCENES", "run_demo", "score_acquisition", "depth_figure"]
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 DEFAULT_SCENES = ("white_plane", "tilted_plane", "sphere", "step")
 
 
@@ -115,7 +115,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         atomic_write_bytes(out / f"{name}.png", depth_figure(acq.capture, result.depth_m, acq.gt.depth_m, title=f"{name}: MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"))
         progress(f"[{i + 1}/{len(config.scenes)}] {name}: MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %, stripe-order errors {m['stripe_order_errors']} (render {t1 - t0:.1f} s, decode {t3 - t2:.2f} s)")
     cfg = asdict(config)
-    provenance = {"command": "simbench demo --out " + str(out_dir), "config": cfg, "variant": mi.variant(), "versions": versions(), "git_commit": _git_commit()}
+    provenance = {"command": "simbench demo --out " + str(out_dir), "config": cfg, "variant": mi.variant(), "versions": versions(), "git_commit": git_commit()}
     save_json(out / "metrics.json", {"rows": rows})
     save_json(out / "provenance.json", provenance)
     cols = ["scene", "mae_mm", "rmse_mm", "median_mm", "p95_mm", "completeness", "outlier_share", "stripe_order_errors", "stripe_order_error_rate", "n_scored", "seed"]
@@ -141,12 +141,3 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         )
     atomic_write_text(out / "summary.md", "\n".join(md) + "\n")
     return {"rows": rows, "provenance": provenance}
-
-
-def _git_commit() -> str:
-    import subprocess
-
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=SCENES_DIR.parent).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
