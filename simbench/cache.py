@@ -54,12 +54,17 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
             p = Path(params["file"])
             st = p.stat()
             params["file"] = {"name": p.name, "sha256": _file_digest(str(p), st.st_mtime_ns, st.st_size)}
-        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": [o.material.kind, list(o.material.rgb), o.material.roughness]})
+        material = [o.material.kind, list(o.material.rgb), o.material.roughness]
+        if o.material.specular_rgb != (1.0, 1.0, 1.0):
+            material.append(list(o.material.specular_rgb))
+        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
     return {
         "rig": rig_to_dict(scene.rig),
         "objects": objects,
         "projector_scale": scene.projector_scale,
         "ambient_rgb": list(scene.ambient_rgb),
+        # only when set, so that pinhole scenes keep their cache keys
+        **({"camera_lens": list(scene.camera_lens)} if scene.camera_lens is not None else {}),
     }
 
 

@@ -40,15 +40,15 @@ def _cmd_render(args) -> int:
     from simbench.pattern import PatternSpec
     from simbench.render import select_variant
     from simbench.scene import load_scene
-    from simbench.sensor import get_camera
+    from simbench.device import get_sensor
     from simbench.simulate import acquire, write_acquisition
 
     scene = load_scene(args.scene)
-    camera = get_camera(args.camera)
+    sensor = get_sensor(args.camera)
     variant = select_variant(args.variant)
     pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence))
     t0 = time.perf_counter()
-    acq = acquire(scene, pattern=pattern, camera=camera, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
+    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
     files = write_acquisition(acq, args.out)
     print(f"rendered {scene.name} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
@@ -155,7 +155,7 @@ def _cmd_demo(args) -> int:
     from simbench.render import select_variant
 
     select_variant(args.variant)
-    cfg = DemoConfig(spp=args.spp, seed=args.seed, camera=args.camera)
+    cfg = DemoConfig(spp=args.spp, seed=args.seed, sensor=args.camera)
     if args.scenes:
         cfg = replace(cfg, scenes=tuple(args.scenes))
     run_demo(args.out, config=cfg, progress=lambda s: print(s, flush=True))
@@ -180,7 +180,7 @@ def _cmd_reproduce(args) -> int:
     from simbench.experiments.reproduce import check_thresholds, reproduce, write_thresholds
     from simbench.render import select_variant
 
-    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("camera", args.camera)) if v is not None}
+    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("sensor", args.camera)) if v is not None}
     config = RunConfig.preset(quick=args.quick, **overrides)
     if args.decoder:
         config = replace(config, decoder=_decoder_overrides(config.decoder, args.decoder))
@@ -253,7 +253,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--spp", type=int, default=16)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--max-depth", type=int, default=6)
-    s.add_argument("--camera", default="minimal", help="camera preset: minimal (noise) or ideal")
+    s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: a preset (ideal, minimal, paper) or a sensor TOML file (default: minimal)")
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
@@ -291,13 +291,13 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="results/demo")
     s.add_argument("--spp", type=int, default=16)
     s.add_argument("--seed", type=int, default=2017)
-    s.add_argument("--camera", default="minimal")
+    s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: preset (ideal, minimal, paper) or TOML file")
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None)
     s.set_defaults(fn=_cmd_demo)
 
     s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures")
-    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures or all (default)")
+    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget or all (default)")
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder (default: .cache/simbench)")
@@ -305,7 +305,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=None, help="base seed (default 2017)")
     s.add_argument("--spp", type=int, default=None)
     s.add_argument("--repeats", type=int, default=None, help="recordings per Fig. 9 depth")
-    s.add_argument("--camera", default=None, help="camera preset (default: minimal)")
+    s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: the run's)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4")
     s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
     s.add_argument("--write-thresholds", help="write a thresholds TOML from this run's metrics")

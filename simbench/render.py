@@ -201,7 +201,7 @@ def _padding(projector: Intrinsics) -> tuple[int, tuple[int, int], tuple[int, in
         if best is None or err < best[0] - 1e-9:
             best = (err, scale, (lx, tx), (ly, ty), cx, cy)
     _, scale, pad_x, pad_y, cx, cy = best
-    return scale, pad_x, pad_y, Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy)
+    return scale, pad_x, pad_y, Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy, projector.distortion)
 
 
 def realised_rig(rig: Rig) -> Rig:
@@ -228,7 +228,7 @@ def _pose(mi, rig: Rig) -> object:
 def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int) -> tuple[dict, Rig]:
     """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
 
-    ``drive=None`` leaves out the projector and the ambient light (geometry only).
+    ``drive=None`` leaves out the projector (the ambient light alone, or geometry only).
     Returns the dictionary and the rig as rendered (see :func:`projector_texture`).
     """
     import mitsuba as mi
@@ -262,6 +262,14 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
             "sampler": {"type": "independent", "sample_count": int(spp)},
         },
     }
+    if scene.camera_lens is not None and drive is not None:
+        # Mitsuba's thin lens has no principal-point offset
+        if d["sensor"]["principal_point_offset_x"] or d["sensor"]["principal_point_offset_y"]:
+            raise ValueError(f"scene {scene.name!r}: camera defocus (thin lens) needs a centred camera principal point, got ({cam.cx_px}, {cam.cy_px})")
+        aperture_radius_m, focus_m = scene.camera_lens
+        s = d["sensor"]
+        del s["principal_point_offset_x"], s["principal_point_offset_y"]
+        s.update(type="thinlens", aperture_radius=float(aperture_radius_m), focus_distance=float(focus_m))
     if drive is not None:
         tex, fov_p, _ = projector_texture(drive, rig.projector)
         d["projector"] = {
@@ -277,20 +285,27 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
                 "wrap_mode": "clamp",
             },
         }
-        if max(scene.ambient_rgb) > 0:
-            d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
+    if max(scene.ambient_rgb) > 0:
+        d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
     for i, obj in enumerate(scene.objects):
         d[f"obj{i:03d}"] = object_to_mitsuba(obj)
     return d, realised_rig(rig)
 
 
-def render_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int, max_depth: int = 6) -> np.ndarray:
-    """Path-traced radiance reaching the camera, lit by the projector showing ``drive``.
+def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int = 6) -> np.ndarray:
+    """Path-traced radiance reaching the camera, lit by the projector showing ``drive`` and by
+    the scene's ambient light.
+
+    Light adds linearly, and a path tracer choosing between two emitters per sample spends
+    half its samples on each: render the projector and the ambient light separately (a scene
+    with no ambient light, and ``drive=None``) and add the images, as
+    :func:`simbench.simulate.render_channels` does.
 
     Parameters
     ----------
-    drive : ndarray, shape (Hp, Wp, 3), float32 in [0, 1]
-        Linear projector output per channel (after the projector's transfer curve).
+    drive : ndarray, shape (Hp, Wp, 3), float32 in [0, 1], or None
+        Linear projector output per channel (after the projector's transfer curve); None =
+        projector off.
     spp, seed : int
         Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm).
     max_depth : int
@@ -412,3 +427,49 @@ def _trace_scalar(mi, mscene, dirs, proj_pos, key_to_index):
         obj[i] = key_to_index[si.shape.id()]
         occluded[i] = mscene.ray_test(si.spawn_ray_to(target))
     return p, n, hit, occluded, obj
+
+
+def projector_distance(scene: SceneSpec, *, stride: int = 4) -> np.ndarray:
+    """Depth along the projector's optical axis of the first surface each projector pixel's
+    ray meets (ideal pinhole rays), for the projector's defocus.
+
+    Rays are cast through every ``stride``-th pixel centre and the map is spread back to full
+    size by nearest neighbour (defocus varies slowly with depth; ``stride`` = 1 is exact).
+
+    Returns
+    -------
+    ndarray, shape (Hp, Wp), float32; NaN where the ray meets nothing.
+    """
+    import mitsuba as mi
+
+    if stride < 1 or int(stride) != stride:
+        raise ValueError(f"stride must be a positive integer, got {stride}")
+    d, rig = mitsuba_scene(scene, None, spp=1, max_depth=1)
+    mscene = _load(mi, d, scene)
+    prj = rig.projector
+    hp, wp = prj.size_hw
+    # one ray through the middle of each stride x stride block
+    cols = np.minimum(np.arange(0, wp, stride) + stride // 2, wp - 1).astype(np.float64)
+    rows = np.minimum(np.arange(0, hp, stride) + stride // 2, hp - 1).astype(np.float64)
+    x = (cols[None, :] - prj.cx_px) / prj.focal_px
+    y = (rows[:, None] - prj.cy_px) / prj.focal_px
+    local = np.stack(np.broadcast_arrays(x, y, np.ones_like(x * y)), axis=-1).reshape(-1, 3)
+    dirs = local @ rig.rotation.T
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origin = [float(v) for v in rig.position_m]
+    if _is_jit(mi.variant()):
+        dirs32 = dirs.astype(np.float32)
+        ray = mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(dirs32[:, 0], dirs32[:, 1], dirs32[:, 2]))
+        si = mscene.ray_intersect(ray)
+        t = np.where(np.array(si.is_valid(), dtype=bool), np.array(si.t, dtype=np.float64), np.nan)
+    else:
+        t = np.full(len(dirs), np.nan)
+        o = mi.Point3f(*origin)
+        for i, dv in enumerate(dirs.tolist()):
+            si = mscene.ray_intersect(mi.Ray3f(o, mi.Vector3f(dv)))
+            if si.is_valid():
+                t[i] = si.t
+    # distance along the axis = ray length * cos(angle to the axis) = t / |(x, y, 1)|
+    z = (t / np.linalg.norm(local, axis=1)).reshape(len(rows), len(cols))
+    full = np.repeat(np.repeat(z, stride, axis=0), stride, axis=1)[:hp, :wp]
+    return full.astype(np.float32)

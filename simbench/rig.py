@@ -60,6 +60,11 @@ class Intrinsics:
         Focal length in pixels.
     cx_px, cy_px : float
         Principal point, OpenCV coordinates (centre = ``(W-1)/2, (H-1)/2``).
+    distortion : tuple of 5 float
+        Brown-Conrady coefficients in OpenCV's order ``(k1, k2, p1, p2, k3)`` acting on
+        normalised coordinates (all zero = an ideal pinhole).  For a camera they map a ray to
+        the pixel where it is recorded; for a projector, a ray to the DMD pixel that lights it
+        (see :mod:`simbench.optics`).
     """
 
     width_px: int
@@ -67,6 +72,7 @@ class Intrinsics:
     focal_px: float
     cx_px: float
     cy_px: float
+    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         for name in ("width_px", "height_px"):
@@ -79,6 +85,23 @@ class Intrinsics:
                 raise ValueError(f"{name} must be a finite number, got {v!r}")
         if self.focal_px <= 0:
             raise ValueError(f"focal_px must be > 0, got {self.focal_px}")
+        d = self.distortion
+        if (
+            isinstance(d, (str, bytes))
+            or len(d) != 5
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in d)
+        ):
+            raise ValueError(f"distortion must be five finite numbers (k1, k2, p1, p2, k3), got {d!r}")
+        object.__setattr__(self, "distortion", tuple(float(x) for x in d))
+
+    @property
+    def has_distortion(self) -> bool:
+        return any(x != 0.0 for x in self.distortion)
+
+    @property
+    def undistorted(self) -> "Intrinsics":
+        """The same intrinsics as an ideal pinhole."""
+        return Intrinsics(self.width_px, self.height_px, self.focal_px, self.cx_px, self.cy_px)
 
     @classmethod
     def centred(cls, width_px: int, height_px: int, focal_px: float) -> "Intrinsics":
@@ -189,7 +212,7 @@ def scale_camera(rig: Rig, factor: float) -> Rig:
     w, h = cam.width_px * factor, cam.height_px * factor
     if not factor > 0 or w != int(w) or h != int(h):
         raise ValueError(f"camera scale {factor} must give whole image sizes (camera is {cam.width_px}x{cam.height_px})")
-    scaled = Intrinsics(int(w), int(h), cam.focal_px * factor, (cam.cx_px + 0.5) * factor - 0.5, (cam.cy_px + 0.5) * factor - 0.5)
+    scaled = Intrinsics(int(w), int(h), cam.focal_px * factor, (cam.cx_px + 0.5) * factor - 0.5, (cam.cy_px + 0.5) * factor - 0.5, cam.distortion)
     suffix = f"@{factor:g}x" if factor != 1 else ""
     return Rig(scaled, rig.projector, rig.position_m, rig.rotation_deg, rig.name + suffix)
 
@@ -209,7 +232,7 @@ def get_rig(name_or_path: str | Path, *, base_dir: Path | None = None) -> Rig:
     return load_rig(path)
 
 
-_INTR_KEYS = ("width_px", "height_px", "focal_px", "cx_px", "cy_px")
+_INTR_KEYS = ("width_px", "height_px", "focal_px", "cx_px", "cy_px", "distortion")
 _POSE_KEYS = ("position_m", "rotation_deg")
 
 
@@ -234,6 +257,7 @@ def _intrinsics_from(table: object, where: str) -> Intrinsics:
             focal_px=table["focal_px"],
             cx_px=table.get("cx_px", (w - 1) / 2.0 if isinstance(w, int) else w),
             cy_px=table.get("cy_px", (h - 1) / 2.0 if isinstance(h, int) else h),
+            distortion=table.get("distortion", (0.0,) * 5),
         )
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
@@ -260,7 +284,8 @@ def rig_from_dict(data: dict, *, where: str = "rig") -> Rig:
 
 def rig_to_dict(rig: Rig) -> dict:
     def intr(i: Intrinsics) -> dict:
-        return {k: getattr(i, k) for k in _INTR_KEYS}
+        # distortion only when present: ideal rigs keep their files (and cache keys) unchanged
+        return {k: (list(getattr(i, k)) if k == "distortion" else getattr(i, k)) for k in _INTR_KEYS if k != "distortion" or i.has_distortion}
 
     return {
         "name": rig.name,
@@ -273,7 +298,8 @@ def rig_to_dict(rig: Rig) -> dict:
 _RIG_HEADER = """\
 # simbench rig file.  Units: pixels and metres; frames: OpenCV (x right, y down, z forward).
 # [camera] / [projector]: width_px, height_px, focal_px, cx_px, cy_px (principal point in OpenCV
-#   pixel coordinates, where the image centre is ((W-1)/2, (H-1)/2); omitted = centred).
+#   pixel coordinates, where the image centre is ((W-1)/2, (H-1)/2); omitted = centred);
+#   optional distortion = [k1, k2, p1, p2, k3] (Brown-Conrady, OpenCV order; omitted = none).
 # [pose]: the projector in the camera frame: position_m = optical centre; rotation_deg = angles
 #   about x, y, z in degrees, R = Rz @ Ry @ Rx maps projector axes to camera axes.
 """
@@ -318,15 +344,20 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
     Returns
     -------
     u_px, v_px, z_m : ndarray, shape (...)
-        Projector pixel coordinates (OpenCV) and depth along the projector's axis.
+        Projector pixel coordinates (OpenCV; on the DMD, i.e. through the projector's lens
+        distortion if it has one) and depth along the projector's axis.
     """
+    from simbench.optics import distort_normalized
+
     p = np.asarray(points_m, dtype=np.float64) - np.asarray(rig.position_m)
     q = p @ rig.rotation  # R^T (X - t), row-vector form
     z = q[..., 2]
+    prj = rig.projector
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = rig.projector.focal_px * q[..., 0] / z + rig.projector.cx_px
-        v = rig.projector.focal_px * q[..., 1] / z + rig.projector.cy_px
-    return u, v, z
+        x, y = q[..., 0] / z, q[..., 1] / z
+    if prj.has_distortion:
+        x, y = distort_normalized(x, y, prj.distortion)
+    return prj.focal_px * x + prj.cx_px, prj.focal_px * y + prj.cy_px, z
 
 
 def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows=None, cols=None) -> np.ndarray:
@@ -352,6 +383,12 @@ def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows=None, cols=None
     else:
         rx = (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px
         ry = (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px
+    if prj.has_distortion:
+        from simbench.optics import undistort_projector_columns
+
+        if not rig.is_rectified:
+            raise ValueError("triangulating through projector distortion needs a rectified rig (parallel axes, baseline along +x)")
+        col = undistort_projector_columns(col, ry, prj)
     # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f.
     a = (col - prj.cx_px) / prj.focal_px
     r = rig.rotation

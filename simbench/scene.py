@@ -98,6 +98,9 @@ class Material:
     kind: str = "diffuse"
     rgb: tuple[float, float, float] = (0.8, 0.8, 0.8)
     roughness: float = 0.1
+    # the coating's specular tint; only the spectral-crosstalk renders set it (white light seen
+    # through the camera's channels), scene files cannot
+    specular_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
@@ -134,6 +137,9 @@ class SceneSpec:
     reference_depth_m: float = 1.0
     projector_scale: float = 1.0
     ambient_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # camera thin lens (aperture radius m, focus distance m); None = pinhole.  Set by the
+    # sensor model (simbench.device), not by scene files.
+    camera_lens: tuple[float, float] | None = None
     description: str = ""
     base_dir: Path = field(default=Path("."), compare=False)
 
@@ -293,6 +299,7 @@ def reference_scene(scene: SceneSpec, *, albedo: float = 0.8) -> SceneSpec:
         reference_depth_m=z0,
         projector_scale=scene.projector_scale,
         ambient_rgb=scene.ambient_rgb,
+        camera_lens=scene.camera_lens,
         description=f"reference plane at {z0} m",
         base_dir=scene.base_dir,
     )
@@ -311,6 +318,8 @@ def _bsdf(mat: Material) -> dict:
         # polypropylene-like coating (IOR 1.49); nonlinear=False: the base colour is the
         # reflectance the user asked for, not darkened by internal scattering
         inner = {"type": "roughplastic", "distribution": "ggx", "alpha": mat.roughness, "int_ior": 1.49, "nonlinear": False, "diffuse_reflectance": rgb}
+        if mat.specular_rgb != (1.0, 1.0, 1.0):
+            inner["specular_reflectance"] = {"type": "rgb", "value": list(mat.specular_rgb)}
     else:
         inner = {"type": "diffuse", "reflectance": rgb}
     return {"type": "twosided", "bsdf": inner}

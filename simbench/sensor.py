@@ -1,9 +1,10 @@
 """What the camera records from the rendered radiance.
 
-This module holds the *minimal* camera step (exposure, shot and read noise, full-well clipping,
-quantisation) as one replaceable function, :func:`simple_camera`; the full physical model
-(EMVA 1288, Bayer mosaic, spectral crosstalk, projector gamma and defocus) is a separate issue
-and will live beside it with the same signature.
+Two camera steps: the *minimal* one (exposure, shot and read noise, full-well clipping,
+quantisation), :func:`simple_camera`, and the physical one, :func:`emva_camera` (EMVA 1288 with
+a Bayer colour filter array and OpenCV demosaicing).  Their parameters and the rest of the
+physics (crosstalk, projector, lenses, ambient light) are configured by
+:class:`simbench.device.SensorModel` and chained by :func:`simbench.simulate.record`.
 """
 
 from __future__ import annotations
@@ -14,11 +15,11 @@ import numpy as np
 
 __all__ = [
     "SimpleCamera",
-    "CAMERA_PRESETS",
-    "get_camera",
     "simple_camera",
-    "project_drive",
-    "EmvaCamera",
+    "CFA_PATTERNS",
+    "DEMOSAIC_METHODS",
+    "bayer_mosaic",
+    "demosaic",
     "photons_per_unit_radiance",
     "emva_camera",
     "photon_transfer",
@@ -63,36 +64,6 @@ class SimpleCamera:
     @property
     def max_dn(self) -> int:
         return (1 << self.bits) - 1
-
-
-# The exposure is an assumption: the operator sets it so that the paper's white board at the
-# 1 m reference distance (albedo 0.8, rendered peak radiance 0.8) reaches ~65 % of full scale,
-# leaving head-room for the 0.9 m plane of Fig. 9.  Full well and read noise are the order of
-# magnitude of the Flea3 FL3-U3-13E4C's e2v EV76C560 CMOS sensor (~10 ke-, ~10 e-); the
-# physical-camera issue replaces them with cited EMVA 1288 figures.
-CAMERA_PRESETS = {
-    "minimal": SimpleCamera(exposure=0.8, full_well_e=10_000.0, read_noise_e=10.0, bits=8, noise=True),
-    "ideal": SimpleCamera(exposure=0.8, full_well_e=10_000.0, read_noise_e=0.0, bits=8, noise=False),
-}
-
-
-def get_camera(name: str) -> SimpleCamera:
-    try:
-        return CAMERA_PRESETS[name]
-    except KeyError:
-        raise ValueError(f"unknown camera preset {name!r}; valid: {sorted(CAMERA_PRESETS)}") from None
-
-
-def project_drive(pattern: np.ndarray) -> np.ndarray:
-    """Projector drive from an 8-bit pattern: linear response (LightCrafter pattern mode).
-
-    Returns
-    -------
-    ndarray, shape (H, W, 3), float32 in [0, 1]
-    """
-    if pattern.dtype != np.uint8:
-        raise ValueError(f"the projector takes 8-bit patterns, got {pattern.dtype}")
-    return pattern.astype(np.float32) / 255.0
 
 
 def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng=None) -> np.ndarray:
@@ -162,79 +133,81 @@ def photons_per_unit_radiance(
     return float(energy * wavelength_nm * 1e-9 / (PLANCK_J_S * LIGHT_M_S))
 
 
-@dataclass(frozen=True)
-class EmvaCamera:
-    """A linear camera after the EMVA 1288 model (release 3.1/4.0, Sec. 2).
+CFA_PATTERNS = {
+    # colour of the 2x2 cell's pixels (0,0), (0,1), (1,0), (1,1) -> OpenCV's name for it
+    # (OpenCV names a Bayer layout by the second row's second and third pixels; the mapping
+    # is checked by tests/test_sensor.py)
+    "none": None,
+    "RGGB": "BayerBG",
+    "BGGR": "BayerRG",
+    "GRBG": "BayerGB",
+    "GBRG": "BayerGR",
+}
+DEMOSAIC_METHODS = {"bilinear": "", "edge_aware": "_EA", "vng": "_VNG"}
+_CHANNEL = {"R": 0, "G": 1, "B": 2}
 
-    photons ``mu_p`` -> electrons ``eta * mu_p`` (Poisson) + dark electrons (Poisson, dark
-    current x exposure) + temporal dark noise ``sigma_d`` (Gaussian, e-) -> clipped at the
-    full well -> ``y = K * e + offset`` DN, rounded and clipped to the ADC range.  Optional
-    fixed-pattern noise: PRNU (relative gain spread) and DSNU (offset spread, e-), drawn once
-    from ``fixed_pattern_seed`` - a property of the sensor, the same in every frame.
 
-    Attributes
+def bayer_mosaic(img: np.ndarray, *, pattern: str) -> np.ndarray:
+    """Keep, at each pixel, only the channel its colour filter passes.
+
+    Parameters
     ----------
-    qe : tuple of 3 float
-        Quantum efficiency eta per colour channel (R, G, B) at the light's wavelength.
-    photons_per_radiance : float
-        Mean photons per pixel per unit rendered radiance (:func:`photons_per_unit_radiance`).
-    full_well_e : float
-        Saturation capacity, electrons.
-    dark_noise_e : float
-        Temporal dark noise sigma_d, electrons RMS.
-    gain_dn_per_e : float
-        Overall system gain K, DN per electron.
-    bits : int
-        ADC bit depth.
-    offset_dn : float
-        Dark offset (black level), DN.
-    dark_current_e_s, exposure_s : float
-        Dark current (e-/s) and exposure time (s).
-    prnu, dsnu_e : float
-        Photo-response non-uniformity (relative, 1 sigma) and dark-signal non-uniformity (e-).
-    fixed_pattern_seed : int
+    img : ndarray, shape (H, W, 3)
+    pattern : str, one of :data:`CFA_PATTERNS` but 'none' (e.g. 'RGGB': R at (0, 0))
+
+    Returns
+    -------
+    ndarray, shape (H, W), same dtype
     """
-
-    qe: tuple[float, float, float]
-    photons_per_radiance: float
-    full_well_e: float
-    dark_noise_e: float
-    gain_dn_per_e: float
-    bits: int = 8
-    offset_dn: float = 0.0
-    dark_current_e_s: float = 0.0
-    exposure_s: float = 0.01
-    prnu: float = 0.0
-    dsnu_e: float = 0.0
-    fixed_pattern_seed: int = 0
-
-    def __post_init__(self) -> None:
-        if len(self.qe) != 3 or not all(0 < q <= 1 for q in self.qe):
-            raise ValueError(f"qe must be three numbers in (0, 1], got {self.qe}")
-        for name in ("photons_per_radiance", "full_well_e", "gain_dn_per_e", "exposure_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("dark_noise_e", "offset_dn", "dark_current_e_s", "prnu", "dsnu_e"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.bits not in (8, 10, 12, 16):
-            raise ValueError(f"bits must be one of 8, 10, 12, 16; got {self.bits}")
-        object.__setattr__(self, "qe", tuple(float(q) for q in self.qe))
-
-    @property
-    def max_dn(self) -> int:
-        return (1 << self.bits) - 1
+    if CFA_PATTERNS.get(pattern) is None:
+        raise ValueError(f"unknown Bayer pattern {pattern!r}; valid: {[k for k in CFA_PATTERNS if k != 'none']}")
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"image must have shape (H, W, 3), got {img.shape}")
+    raw = np.empty(img.shape[:2], dtype=img.dtype)
+    for colour, (dy, dx) in zip(pattern, ((0, 0), (0, 1), (1, 0), (1, 1))):
+        raw[dy::2, dx::2] = img[dy::2, dx::2, _CHANNEL[colour]]
+    return raw
 
 
-def emva_camera(radiance: np.ndarray, *, camera: EmvaCamera, rng=None) -> np.ndarray:
-    """Rendered radiance -> recorded image through the EMVA 1288 model (:class:`EmvaCamera`).
+def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
+    """OpenCV demosaicing of a Bayer image into RGB (H, W, 3).
+
+    ``bilinear``: OpenCV's default; ``edge_aware``: its edge-aware method (``_EA``); ``vng``:
+    variable number of gradients (8-bit only).
+    """
+    import cv2
+
+    if method not in DEMOSAIC_METHODS:
+        raise ValueError(f"unknown demosaic method {method!r}; valid: {list(DEMOSAIC_METHODS)}")
+    stem = CFA_PATTERNS.get(pattern)
+    if stem is None:
+        raise ValueError(f"unknown Bayer pattern {pattern!r}; valid: {[k for k in CFA_PATTERNS if k != 'none']}")
+    if method == "vng" and raw.dtype != np.uint8:
+        raise ValueError("VNG demosaicing takes 8-bit images only")
+    return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))
+
+
+def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposure_s: float, rng=None) -> np.ndarray:
+    """Rendered radiance -> recorded image through the EMVA 1288 model and the colour filter
+    array of ``camera`` (a :class:`simbench.device.PhysicalCamera`).
+
+    Mean electrons ``e_c = radiance_c * electrons_per_radiance[c]`` (+ dark current x
+    exposure); Poisson shot noise, temporal dark noise ``sigma_d`` (Gaussian), full-well
+    clipping, ``y = K e + offset`` rounded to the ADC range (EMVA 1288 release 4.0, Sec. 2).
+    Optional PRNU (relative gain spread) and DSNU (offset spread, e-) are drawn once from
+    ``camera.fixed_pattern_seed``: a property of the sensor, the same in every frame.  With a
+    colour filter array, each pixel keeps its filter's channel before the noise, and the raw
+    frame is demosaiced by OpenCV.  ``camera.noise = False`` records the expected value.
 
     Parameters
     ----------
     radiance : ndarray, shape (H, W, 3), float
-    camera : EmvaCamera
+    electrons_per_radiance : sequence of 3 float
+        Mean electrons per unit radiance in each channel during this exposure.
+    exposure_s : float
+        Exposure time (dark current).
     rng : numpy.random.Generator | int | None
-        Temporal-noise seed (the fixed pattern comes from ``camera.fixed_pattern_seed``).
+        Temporal-noise seed.
 
     Returns
     -------
@@ -245,22 +218,33 @@ def emva_camera(radiance: np.ndarray, *, camera: EmvaCamera, rng=None) -> np.nda
         raise ValueError(f"radiance must have shape (H, W, 3), got {rad.shape}")
     if not np.all(np.isfinite(rad)):
         raise ValueError("radiance contains NaN or inf")
-    gen = np.random.default_rng(rng)
-    mean_e = np.clip(rad, 0.0, None) * camera.photons_per_radiance * np.asarray(camera.qe)
+    scale = np.asarray(electrons_per_radiance, dtype=np.float64)
+    if scale.shape != (3,) or not np.all(scale > 0):
+        raise ValueError(f"electrons_per_radiance must be three numbers > 0, got {electrons_per_radiance!r}")
+    mean_e = np.clip(rad, 0.0, None) * scale
+    if camera.cfa != "none":
+        mean_e = bayer_mosaic(mean_e, pattern=camera.cfa)
+    shape = mean_e.shape
     if camera.prnu > 0 or camera.dsnu_e > 0:
         fp = np.random.default_rng(camera.fixed_pattern_seed)
-        mean_e = mean_e * np.clip(1.0 + camera.prnu * fp.standard_normal(rad.shape), 0.0, None)
-        dark_fp = camera.dsnu_e * fp.standard_normal(rad.shape)
+        mean_e = mean_e * np.clip(1.0 + camera.prnu * fp.standard_normal(shape), 0.0, None)
+        dark_fp = camera.dsnu_e * fp.standard_normal(shape)
     else:
         dark_fp = 0.0
-    dark_e = camera.dark_current_e_s * camera.exposure_s
-    electrons = gen.poisson(np.minimum(mean_e + dark_e, 1e12)).astype(np.float64)
-    electrons += dark_fp
-    if camera.dark_noise_e > 0:
-        electrons += gen.normal(0.0, camera.dark_noise_e, size=rad.shape)
-    electrons = np.minimum(electrons, camera.full_well_e)
-    dn = np.clip(np.rint(camera.gain_dn_per_e * electrons + camera.offset_dn), 0, camera.max_dn)
-    return dn.astype(np.uint8 if camera.bits == 8 else np.uint16)
+    mean_e = mean_e + camera.dark_current_e_s * exposure_s
+    if camera.noise:
+        gen = np.random.default_rng(rng)
+        electrons = gen.poisson(np.minimum(mean_e, 1e12)).astype(np.float64)
+        if camera.dark_noise_e > 0:
+            electrons += gen.normal(0.0, camera.dark_noise_e, size=shape)
+    else:
+        electrons = mean_e
+    electrons = np.minimum(electrons + dark_fp, camera.full_well_e)
+    dn = np.clip(np.rint(camera.gain * electrons + camera.offset_dn), 0, camera.max_dn)
+    out = dn.astype(np.uint8 if camera.bits == 8 else np.uint16)
+    if camera.cfa != "none":
+        out = demosaic(out, pattern=camera.cfa, method=camera.demosaic)
+    return out
 
 
 def photon_transfer(frame_a: np.ndarray, frame_b: np.ndarray, dark_a: np.ndarray, dark_b: np.ndarray) -> tuple[float, float]:

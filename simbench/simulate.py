@@ -17,12 +17,28 @@ import numpy as np
 from simbench.cache import RenderCache, array_digest, scene_fingerprint
 from simbench.io import save_exr, save_json, save_npy, save_png
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.render import GroundTruth, ground_truth, realised_rig, render_radiance
+from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict
+from simbench.optics import distort_image, distorted_projector_drive
+from simbench.projector import defocus_pattern, emitted_pattern
+from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
 from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
-from simbench.sensor import SimpleCamera, project_drive, simple_camera
+from simbench.sensor import SimpleCamera, emva_camera, simple_camera
+from simbench.spectral import crosstalk_matrix
 
-__all__ = ["Acquisition", "split_seed", "cached_radiance", "cached_ground_truth", "acquire", "write_acquisition", "versions"]
+__all__ = [
+    "Acquisition",
+    "split_seed",
+    "cached_radiance",
+    "cached_ground_truth",
+    "physical_scene",
+    "projector_drive_for",
+    "render_channels",
+    "record",
+    "acquire",
+    "write_acquisition",
+    "versions",
+]
 
 REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
 
@@ -69,16 +85,17 @@ def _renderer_id() -> dict:
     return {"variant": mi.variant(), "mitsuba": mi.__version__}
 
 
-def cached_radiance(scene: SceneSpec, drive: np.ndarray, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
+def cached_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
     """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``."""
     if cache is None:
         return render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)
-    parts = {"scene": scene_fingerprint(scene), "drive": array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), **_renderer_id()}
+    parts = {"scene": scene_fingerprint(scene), "drive": "off" if drive is None else array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), **_renderer_id()}
     return cache.get_or_make("radiance", parts, lambda: {"radiance": render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)})["radiance"]
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
     """:func:`simbench.render.ground_truth`, looked up in / stored to ``cache``."""
+    scene = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
     if cache is None:
         return ground_truth(scene)
 
@@ -90,11 +107,119 @@ def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -
     return GroundTruth(**arrays)
 
 
+def physical_scene(scene: SceneSpec, sensor: SensorModel) -> SceneSpec:
+    """The scene as the sensor model sees it: lens distortion in the rig (as calibration
+    records it), the camera's thin lens when its defocus is on, and the ambient light at
+    ``sensor.ambient_ratio`` of the projector's white irradiance at Z0 (a constant
+    environment of radiance ``L`` gives an unoccluded surface ``pi L``; the projector's
+    white gives ``pi * scale / Z0^2`` at Z0 in render units).  Apply once per scene."""
+    rig = apply_to_rig(scene.rig, sensor)
+    lens = scene.camera_lens
+    if sensor.camera_lens.defocus:
+        if not sensor.is_physical:
+            raise ValueError("camera defocus needs the physical (emva) camera model (its pixel pitch sets the aperture)")
+        aperture = sensor.camera_lens.aperture_m(rig.camera.focal_px, sensor.camera.pixel_pitch_um)
+        lens = (aperture / 2.0, sensor.camera_lens.focus_m)
+    ambient = scene.ambient_rgb
+    if sensor.ambient_ratio > 0:
+        level = sensor.ambient_ratio * scene.projector_scale / scene.reference_depth_m**2
+        ambient = tuple(a + level for a in ambient)
+    return dataclasses.replace(scene, rig=rig, camera_lens=lens, ambient_rgb=ambient)
+
+
+def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None) -> np.ndarray:
+    """What Mitsuba's ideal projector must show so that the scene is lit as by the modelled
+    one: transfer curve, black level, DMD layout, defocus (by the depth each projector pixel
+    lights) and lens distortion (:mod:`simbench.projector`, :mod:`simbench.optics`)."""
+    prj = sensor.projector
+    drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd)
+    intr = scene.rig.projector
+    if prj.lens.defocus:
+        parts = {"scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))), "stride": PROJECTOR_DEPTH_STRIDE, **_renderer_id()}
+        dist = _cached(cache, "projector_depth", parts, lambda: {"z": projector_distance(scene, stride=PROJECTOR_DEPTH_STRIDE)})["z"]
+        drive = defocus_pattern(drive, dist, aperture_m=prj.lens.aperture_m(intr.focal_px, prj.pixel_pitch_um), focal_px=intr.focal_px, focus_m=prj.lens.focus_m)
+    if intr.has_distortion:
+        drive = distorted_projector_drive(drive, intr)
+    return np.ascontiguousarray(drive, dtype=np.float32)
+
+
+PROJECTOR_DEPTH_STRIDE = 4  # projector pixels per depth sample for the defocus map
+
+
+def _cached(cache: RenderCache | None, kind: str, parts: dict, make):
+    return make() if cache is None else cache.get_or_make(kind, parts, make)
+
+
+def _light_seed(seed: int, p: int) -> int:
+    return int(np.random.SeedSequence([int(seed), p]).generate_state(1)[0])
+
+
+def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
+    """The scene lit by primary ``p`` alone, with each material's reflectance replaced by the
+    camera's view of it (column ``p`` of its crosstalk matrix)."""
+    white = np.clip(crosstalk_matrix((1.0, 1.0, 1.0))[:, p], 0.0, 1.0)
+    objects = []
+    for o in scene.objects:
+        k = np.clip(crosstalk_matrix(o.material.rgb)[:, p], 0.0, 1.0)
+        mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white))
+        objects.append(dataclasses.replace(o, material=mat))
+    return dataclasses.replace(scene, objects=tuple(objects))
+
+
+def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
+    """Radiance per camera channel on the camera's recorded pixel grid.
+
+    Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
+    projector primary p (the drive's channel p in all three channels, materials replaced by
+    column p of their crosstalk matrix) summed with the weights of
+    :func:`simbench.device.channel_weights` - exact for direct light; interreflected light is
+    coloured by one bounce's crosstalk only (an approximation, as is the coating's
+    specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
+    per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
+    primary's materials: light of the projector's white.  Then the camera lens distortion.
+
+    ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for`.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32, in units of each channel's own primary
+    """
+    ambient = max(scene.ambient_rgb) > 0
+    dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
+    kw = {"spp": spp, "max_depth": max_depth, "cache": cache}
+    if not sensor.crosstalk:
+        q = cached_radiance(dark, drive, seed=seed, **kw)
+        if ambient:
+            q = q + cached_radiance(scene, None, seed=_light_seed(seed, 3), **kw)
+    else:
+        weights = channel_weights(sensor, scene.rig)
+        q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
+        for p in range(3):
+            mono = np.ascontiguousarray(np.repeat(drive[..., p : p + 1], 3, axis=2))
+            # the same seed for each primary: the sum has one render's sampling pattern
+            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
+            if ambient:
+                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_light_seed(seed, 3), **kw)
+            q += r * weights[:, p].astype(np.float32)
+    return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
+
+
+def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng=None) -> np.ndarray:
+    """The camera's recorded image from :func:`render_channels`' output: the simple camera,
+    or the EMVA 1288 camera with its colour filter array at the sensor's (auto) exposure."""
+    cam = sensor.camera
+    if isinstance(cam, SimpleCamera):
+        return simple_camera(q, camera=cam, rng=rng)
+    t = exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale)
+    per_radiance = electrons_per_radiance_s(sensor, scene.rig) * t
+    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, rng=rng)
+
+
 def acquire(
     scene: SceneSpec,
     *,
     pattern: PatternSpec,
-    camera: SimpleCamera,
+    sensor: SensorModel,
     spp: int,
     seed: int,
     max_depth: int = 6,
@@ -118,21 +243,24 @@ def acquire(
         scene = dataclasses.replace(scene, rig=rig)
     if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
         raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
+    scene = physical_scene(scene, sensor)
     seeds = split_seed(seed)
     pat = quantize(fringe_pattern(pattern))
-    drive = project_drive(pat)
-    rad = cached_radiance(scene, drive, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, cache=cache)
-    capture = simple_camera(rad, camera=camera, rng=seeds["noise_capture"])
+    drive = projector_drive_for(scene, pat, sensor, cache=cache)
+    q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, cache=cache)
+    capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
     if with_reference:
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
-        ref_rad = cached_radiance(ref_scene, drive, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, cache=cache)
-        reference = simple_camera(ref_rad, camera=camera, rng=seeds["noise_reference"])
+        ref_drive = projector_drive_for(ref_scene, pat, sensor, cache=cache)
+        ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, cache=cache)
+        reference = record(ref_q, sensor=sensor, scene=ref_scene, rng=seeds["noise_reference"])
     gt = cached_ground_truth(scene, cache=cache)
     meta = {
         "scene": scene.name,
         "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude},
-        "camera": {k: getattr(camera, k) for k in ("exposure", "full_well_e", "read_noise_e", "bits", "noise")},
+        "sensor": sensor_to_dict(sensor),
+        "exposure_s": exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale) if sensor.is_physical else None,
         "spp": int(spp),
         "max_depth": int(max_depth),
         "seed": int(seed),

@@ -33,7 +33,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
+__all__ = ["primary_irradiance_w_m2", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
 
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
 PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
@@ -101,6 +101,14 @@ def crosstalk_matrix(rgb) -> np.ndarray:
     """K[c, p]: camera channel c's response to projector primary p reflected by a diffuse
     surface of linear RGB reflectance ``rgb``, relative to channel p's response to primary p
     on a perfect white (module docstring).  Shape (3, 3), rows = camera R, G, B."""
+    v = np.asarray(rgb, dtype=np.float64)
+    if v.shape != (3,) or not np.all((v >= 0) & (v <= 1)):
+        raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {rgb!r}")
+    return _crosstalk_matrix(tuple(float(x) for x in v)).copy()
+
+
+@lru_cache(maxsize=256)
+def _crosstalk_matrix(rgb: tuple[float, float, float]) -> np.ndarray:
     s = camera_sensitivities()
     p = projector_primaries()
     rho = reflectance_spectrum(rgb)
@@ -131,3 +139,31 @@ def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
             lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in row) + " |")
         lines.append("")
     return "\n".join(lines)
+
+
+def primary_irradiance_w_m2(white_lux: float) -> np.ndarray:
+    """Radiometric irradiance (W/m^2) of each primary when the projector's full white gives
+    ``white_lux`` lux.
+
+    The white is assumed balanced to D65 (**assumption**: the usual white point of DLP
+    projectors' video modes; TI does not publish the LightCrafter 4500's): the three primaries'
+    luminances are the mix whose CIE 1931 XYZ has D65's chromaticity, and each primary's lux
+    are turned into watts by its LED spectrum's luminous efficacy (683 lm/W x V-weighted).
+
+    Returns
+    -------
+    ndarray, shape (3,), float64 (R, G, B primaries)
+    """
+    if not white_lux > 0:
+        raise ValueError(f"white_lux must be > 0, got {white_lux}")
+    colour = _colour()
+    cmfs = np.asarray(colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64)
+    xy = np.asarray(colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"], dtype=np.float64)
+    d65 = np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
+    prim = projector_primaries()
+    xyz = cmfs.T @ prim  # (3 xyz, 3 primaries), per unit spectral power sum
+    mix = np.linalg.solve(xyz, d65)  # power of each primary for a D65 white of Y = 1
+    lum = mix * xyz[1]  # luminance share of each primary
+    share = lum / lum.sum()
+    efficacy = 683.0 * xyz[1] / prim.sum(axis=0)  # lm/W of each LED spectrum (5 nm grid)
+    return white_lux * share / efficacy

@@ -22,7 +22,7 @@ def acquisitions(variant):
     """Full-resolution, 16 spp, noisy acquisitions of the pipeline scenes (rendered once)."""
     from simbench.pattern import PatternSpec
     from simbench.scene import load_scene
-    from simbench.sensor import get_camera
+    from simbench.device import get_sensor
     from simbench.simulate import acquire
 
     cache: dict = {}
@@ -30,7 +30,7 @@ def acquisitions(variant):
     def get(name: str, seed: int = 7):
         key = (name, seed)
         if key not in cache:
-            cache[key] = acquire(load_scene(SCENES / f"{name}.toml"), pattern=PatternSpec(), camera=get_camera("minimal"), spp=16, seed=seed)
+            cache[key] = acquire(load_scene(SCENES / f"{name}.toml"), pattern=PatternSpec(), sensor=get_sensor("minimal"), spp=16, seed=seed)
         return cache[key]
 
     return get

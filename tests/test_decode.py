@@ -7,11 +7,11 @@ from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
 from simbench.pattern import PatternSpec, de_bruijn, fringe_pattern, quantize, window_positions
 from simbench.rig import paper_rig
-from simbench.sensor import project_drive
+from simbench.projector import transfer_curve
 from simbench.synthetic import synthetic_plane_capture
 
 RIG = paper_rig()
-DRIVE = project_drive(quantize(fringe_pattern(PatternSpec())))
+DRIVE = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +153,7 @@ def test_custom_sequence_pattern_decodes():
     12-stripe sequence whose windows of 4 are unique but which is not a De Bruijn sequence."""
     for seq in (tuple(int(c) for c in de_bruijn(4)[::-1]), (0, 0, 0, 1, 1, 0, 1, 0, 1, 1, 1, 1)):
         spec = PatternSpec(order=4, sequence=seq)
-        drive = project_drive(quantize(fringe_pattern(spec)))
+        drive = transfer_curve(quantize(fringe_pattern(spec)), transfer="linear")
         img, col, _ = synthetic_plane_capture(drive, RIG, point_m=(0, 0, 1.1))
         r = decode(img, rig=RIG, params=DecoderParams(order=4, sequence=seq, mode="calibrated"))
         # a 4-code window reaches two stripes right: the last, partial stripe of each row has

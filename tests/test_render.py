@@ -11,7 +11,7 @@ from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.render import ground_truth, mitsuba_scene, render_radiance
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import scene_from_dict
-from simbench.sensor import project_drive
+from simbench.projector import transfer_curve
 
 pytestmark = pytest.mark.slow
 
@@ -65,7 +65,7 @@ def test_step_shadow_is_marked_unlit(acquisitions):
 
 def test_render_is_bit_identical_for_a_seed(variant):
     scene = scene_from_dict({"object": [{"type": "sphere", "center_m": [0, 0, 1], "radius_m": 0.2}]})
-    drive = project_drive(quantize(fringe_pattern(PatternSpec())))
+    drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
     a = render_radiance(scene, drive, spp=4, seed=3)
     b = render_radiance(scene, drive, spp=4, seed=3)
     c = render_radiance(scene, drive, spp=4, seed=4)
@@ -90,7 +90,7 @@ def test_off_centre_principal_points(variant):
     scene = scene_from_dict({"object": [{"type": "plane", "center_m": [0, 0, 1.0], "size_m": [2, 2]}]})
     scene = dataclasses.replace(scene, rig=rig)
     spec = PatternSpec(size_hw=(570, 912))
-    drive = project_drive(quantize(fringe_pattern(spec)))
+    drive = transfer_curve(quantize(fringe_pattern(spec)), transfer="linear")
     _, realised = mitsuba_scene(scene, drive, spp=1, max_depth=1)
     assert realised == rig  # both offsets lie on the half-pixel grid: no snapping
     rad = render_radiance(scene, drive, spp=16, seed=1)
@@ -122,7 +122,7 @@ def test_box_mesh_and_ambient(variant, tmp_path):
     # the box's front face is at z = 1.0 - 0.05; the mesh sphere's nearest point at 1.0 - 0.06
     assert np.allclose(gt.depth_m[ids == 0].min(), 0.95, atol=1e-5)
     assert gt.depth_m[ids == 1].min() == pytest.approx(0.94, abs=2e-4)  # tessellation
-    drive = project_drive(quantize(fringe_pattern(PatternSpec())))
+    drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
     dark = render_radiance(scene, drive, spp=4, seed=0)
     lit = render_radiance(dataclasses.replace(scene, ambient_rgb=(0.05, 0.05, 0.05)), drive, spp=4, seed=0)
     shadow = ~gt.lit & (ids == 2)

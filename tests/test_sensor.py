@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from simbench.sensor import SimpleCamera, get_camera, simple_camera
+from simbench.device import get_sensor
+from simbench.sensor import SimpleCamera, simple_camera
 
 
 def test_photon_transfer_mean_and_variance():
@@ -21,7 +22,7 @@ def test_photon_transfer_mean_and_variance():
 
 def test_seeded_and_clipped():
     rad = np.random.default_rng(0).random((50, 60, 3)).astype(np.float32) * 2
-    cam = get_camera("minimal")
+    cam = get_sensor("minimal").camera
     a, b = simple_camera(rad, camera=cam, rng=5), simple_camera(rad, camera=cam, rng=5)
     assert np.array_equal(a, b) and a.dtype == np.uint8
     assert not np.array_equal(a, simple_camera(rad, camera=cam, rng=6))
@@ -30,19 +31,19 @@ def test_seeded_and_clipped():
 
 def test_ideal_camera_is_deterministic_quantisation():
     rad = np.full((2, 2, 3), 0.5, np.float32)
-    img = simple_camera(rad, camera=get_camera("ideal"), rng=None)
+    img = simple_camera(rad, camera=SimpleCamera(exposure=0.8, full_well_e=1e4, read_noise_e=0.0, noise=False), rng=None)
     assert np.all(img == round(0.5 * 0.8 * 255))
 
 
 @pytest.mark.parametrize("bad", [np.full((4, 4), 0.5), np.full((4, 4, 3), np.nan)])
 def test_bad_radiance(bad):
     with pytest.raises(ValueError):
-        simple_camera(bad, camera=get_camera("minimal"), rng=0)
+        simple_camera(bad, camera=get_sensor("minimal").camera, rng=0)
 
 
 def test_unknown_preset():
     with pytest.raises(ValueError, match="minimal"):
-        get_camera("nope")
+        get_sensor("nope")
 
 
 def test_photons_per_unit_radiance_matches_the_camera_equation():
@@ -65,14 +66,17 @@ def test_emva_photon_transfer_returns_gain_and_dark_noise():
     """Issue 3's acceptance: over a range of exposures the photon-transfer curve (temporal
     variance against mean, EMVA 1288 Sec. 6) returns the configured system gain within 5 % and
     the configured dark noise within 10 %; PRNU/DSNU do not disturb it (frame differences)."""
-    from simbench.sensor import EmvaCamera, emva_camera, photon_transfer
+    from simbench.device import PhysicalCamera
+    from simbench.sensor import emva_camera, photon_transfer
 
-    cam = EmvaCamera(qe=(0.5, 0.6, 0.45), photons_per_radiance=20_000.0, full_well_e=10_500.0, dark_noise_e=20.0, gain_dn_per_e=0.35, bits=12, offset_dn=40.0, dark_current_e_s=50.0, exposure_s=0.01, prnu=0.01, dsnu_e=5.0, fixed_pattern_seed=3)
+    cam = PhysicalCamera(pixel_pitch_um=5.3, qe=(0.5, 0.6, 0.45), full_well_e=10_500.0, dark_noise_e=20.0, gain_dn_per_e=0.35, bits=12, offset_dn=40.0, dark_current_e_s=50.0, prnu=0.01, dsnu_e=5.0, fixed_pattern_seed=3)
+    photons = 20_000.0
+    kw = {"camera": cam, "electrons_per_radiance": np.array(cam.qe) * photons, "exposure_s": 0.01}
     shape = (200, 200, 3)
-    dark = [emva_camera(np.zeros(shape), camera=cam, rng=100 + k) for k in range(2)]
+    dark = [emva_camera(np.zeros(shape), rng=100 + k, **kw) for k in range(2)]
     means, variances = [], []
     for i, level in enumerate(np.linspace(0.02, 0.8, 10)):
-        a, b = (emva_camera(np.full(shape, level), camera=cam, rng=2 * i + k) for k in range(2))
+        a, b = (emva_camera(np.full(shape, level), rng=2 * i + k, **kw) for k in range(2))
         m, v = photon_transfer(a[..., 1], b[..., 1], dark[0][..., 1], dark[1][..., 1])
         means.append(m)
         variances.append(v)
@@ -83,22 +87,68 @@ def test_emva_photon_transfer_returns_gain_and_dark_noise():
     # dark noise from the dark frames' temporal variance: K^2 sigma_d^2 + quantisation 1/12
     dark_var = 0.5 * np.var(dark[0][..., 1].astype(float) - dark[1][..., 1].astype(float))
     sigma_d = np.sqrt(max(dark_var - 1 / 12, 0) / slope**2)
-    sigma_total = np.sqrt(cam.dark_noise_e**2 + cam.dark_current_e_s * cam.exposure_s)  # dark shot noise adds
+    sigma_total = np.sqrt(cam.dark_noise_e**2 + cam.dark_current_e_s * kw["exposure_s"])  # dark shot noise adds
     assert sigma_d == pytest.approx(sigma_total, rel=0.10)
     # the QE and photon scale set the mean: mu_y - mu_dark = K * eta * mu_p
-    assert means[0] == pytest.approx(cam.gain_dn_per_e * cam.qe[1] * cam.photons_per_radiance * 0.02, rel=0.01)
+    assert means[0] == pytest.approx(cam.gain_dn_per_e * cam.qe[1] * photons * 0.02, rel=0.01)
 
 
 def test_emva_saturation_fixed_pattern_and_seeds():
-    from simbench.sensor import EmvaCamera, emva_camera
+    from simbench.device import PhysicalCamera
+    from simbench.sensor import emva_camera
 
-    cam = EmvaCamera(qe=(0.5, 0.5, 0.5), photons_per_radiance=1e5, full_well_e=10_000.0, dark_noise_e=10.0, gain_dn_per_e=255 / 10_000, prnu=0.02, fixed_pattern_seed=1)
-    bright = emva_camera(np.full((8, 8, 3), 1.0), camera=cam, rng=0)
+    cam = PhysicalCamera(pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=10.0, prnu=0.02, fixed_pattern_seed=1)
+    assert cam.gain == pytest.approx(255 / 10_000)  # default: full well = full scale
+    kw = {"camera": cam, "electrons_per_radiance": (5e4, 5e4, 5e4), "exposure_s": 0.01}
+    bright = emva_camera(np.full((8, 8, 3), 1.0), rng=0, **kw)
     assert np.all(bright == 255)  # 50 000 e- mean clips at the full well
     rad = np.full((64, 64, 3), 0.1)
-    a, b = emva_camera(rad, camera=cam, rng=1), emva_camera(rad, camera=cam, rng=1)
-    assert np.array_equal(a, b) and not np.array_equal(a, emva_camera(rad, camera=cam, rng=2))
+    a, b = emva_camera(rad, rng=1, **kw), emva_camera(rad, rng=1, **kw)
+    assert np.array_equal(a, b) and not np.array_equal(a, emva_camera(rad, rng=2, **kw))
     with pytest.raises(ValueError, match="qe"):
-        EmvaCamera(qe=(0.5, 0.5, 1.5), photons_per_radiance=1, full_well_e=1, dark_noise_e=0, gain_dn_per_e=1)
+        PhysicalCamera(pixel_pitch_um=5.3, qe=(0.5, 0.5, 1.5), full_well_e=1, dark_noise_e=0)
     with pytest.raises(ValueError, match="radiance"):
-        emva_camera(np.full((4, 4), 0.1), camera=cam, rng=0)
+        emva_camera(np.full((4, 4), 0.1), rng=0, **kw)
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+@pytest.mark.parametrize("method", ["bilinear", "edge_aware", "vng"])
+def test_bayer_mosaic_and_demosaic_round_trip_a_smooth_image(pattern, method):
+    """A smooth colour image survives mosaic + OpenCV demosaicing within ~1 DN inside the
+    border (interpolation error of slowly varying colour), for every layout: checks our
+    layout -> OpenCV code table."""
+    from simbench.sensor import bayer_mosaic, demosaic
+
+    yy, xx = np.mgrid[0:64, 0:64]
+    img = np.stack([100 + 50 * np.sin(xx / 9), 120 + 40 * np.cos(yy / 8), 80 + 30 * np.sin((xx + yy) / 11)], -1).astype(np.uint8)
+    raw = bayer_mosaic(img, pattern=pattern)
+    assert raw.shape == (64, 64)
+    out = demosaic(raw, pattern=pattern, method=method)
+    err = np.abs(out[4:-4, 4:-4].astype(int) - img[4:-4, 4:-4])
+    assert err.mean() < 1.0, err.mean()
+
+
+def test_bayer_bad_inputs():
+    from simbench.sensor import bayer_mosaic, demosaic
+
+    with pytest.raises(ValueError, match="RGGB"):
+        bayer_mosaic(np.zeros((4, 4, 3)), pattern="XYZW")
+    with pytest.raises(ValueError, match="edge_aware"):
+        demosaic(np.zeros((4, 4), np.uint8), pattern="RGGB", method="magic")
+    with pytest.raises(ValueError, match="8-bit"):
+        demosaic(np.zeros((4, 4), np.uint16), pattern="RGGB", method="vng")
+
+
+def test_cfa_keeps_shot_noise_per_pixel():
+    """With a Bayer filter each pixel's noise is its own channel's: the raw frame's variance
+    at the green sites equals the no-CFA green variance (Poisson)."""
+    from simbench.device import PhysicalCamera
+    from simbench.sensor import bayer_mosaic, emva_camera
+
+    base = dict(pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=0.0, bits=16, gain_dn_per_e=1.0)
+    kw = {"electrons_per_radiance": (2000.0, 4000.0, 1000.0), "exposure_s": 0.01}
+    rad = np.ones((200, 200, 3))
+    full = emva_camera(rad, camera=PhysicalCamera(**base), rng=0, **kw).astype(float)
+    assert full[..., 1].var() == pytest.approx(4000.0, rel=0.05)
+    raw_green = bayer_mosaic(full, pattern="RGGB")[0::2, 1::2]
+    assert raw_green.mean() == pytest.approx(4000.0, rel=0.01)

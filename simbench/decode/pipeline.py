@@ -15,6 +15,7 @@ from simbench.decode.debruijn import drop_broken_links, neighbour_correct, windo
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.pattern import check_sequence, code_sequence, window_positions
+from simbench.optics import undistort_image
 from simbench.rig import Rig, projector_column_at_depth
 
 __all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
@@ -153,7 +154,8 @@ class ReferenceMap:
 
 @dataclass(frozen=True)
 class DecodeResult:
-    """Decoder output.
+    """Decoder output, on the camera's ideal pinhole pixel grid (a capture from a camera with
+    lens distortion in the rig is undistorted first).
 
     depth_m : ndarray, shape (H, W), float32; NaN where invalid
     valid : ndarray, shape (H, W), bool
@@ -209,6 +211,12 @@ def _check_capture(image: np.ndarray, expected_size_hw: tuple[int, int] | None) 
             raise ValueError("capture contains NaN or inf")
         return img
     raise ValueError(f"unsupported capture dtype {img.dtype}; use uint8, uint16 or float")
+
+
+def _ideal_image(image: np.ndarray, rig: Rig) -> np.ndarray:
+    """The capture resampled onto the ideal pinhole grid when the rig's camera has lens
+    distortion (every later stage, and the output, live on that grid)."""
+    return undistort_image(image, rig.camera) if rig.camera.has_distortion else image
 
 
 def _to_float(img: np.ndarray) -> np.ndarray:
@@ -361,7 +369,7 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) 
 
     Done once per calibration; :func:`decode` then matches captures against it.
     """
-    image = _check_capture(reference, rig.camera.size_hw)
+    image = _ideal_image(_check_capture(reference, rig.camera.size_hw), rig)
     predicted = _plane_columns(rig, float(params.z0_m))
     parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], image, params, rig)
     column = np.concatenate(parts, axis=0)
@@ -398,7 +406,7 @@ def decode(
         Never raises on a legal image: what cannot be decoded is NaN in ``depth_m`` and False
         in ``valid``.
     """
-    image = _check_capture(capture, rig.camera.size_hw)
+    image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
     h, w = image.shape[:2]
     zmin, zmax = params.depth_range_m
     ref = None

@@ -18,7 +18,9 @@ import numpy as np
 from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.rig import paper_rig
-from simbench.sensor import get_camera, project_drive, simple_camera
+from simbench.device import get_sensor
+from simbench.projector import transfer_curve
+from simbench.sensor import simple_camera
 from simbench.synthetic import synthetic_plane_capture
 
 __all__ = ["benchmark_inputs", "run_decode_benchmark"]
@@ -27,8 +29,8 @@ __all__ = ["benchmark_inputs", "run_decode_benchmark"]
 def benchmark_inputs(*, seed: int = 0):
     """(capture, reference map, rig, params) for the benchmark; deterministic for a seed."""
     rig = paper_rig()
-    drive = project_drive(quantize(fringe_pattern(PatternSpec(size_hw=rig.projector.size_hw))))
-    cam = get_camera("minimal")
+    drive = transfer_curve(quantize(fringe_pattern(PatternSpec(size_hw=rig.projector.size_hw))), transfer="linear")
+    cam = get_sensor("minimal").camera
     rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.1), supersample=2)
     ref_rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=2)
     rng = np.random.default_rng(seed)

@@ -30,8 +30,8 @@ from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.render import GroundTruth, realised_rig
 from simbench.rig import scale_camera
 from simbench.scene import SceneSpec, load_scene, reference_scene
-from simbench.sensor import get_camera, project_drive, simple_camera
-from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, cached_radiance, versions
+from simbench.device import SensorModel, get_sensor, sensor_to_dict
+from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, physical_scene, projector_drive_for, record, render_channels, versions
 
 __all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "label_seed", "write_table", "markdown_table", "git_commit"]
 
@@ -42,8 +42,8 @@ SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 class RunConfig:
     """Settings of a reproduction run (``quick`` = the reduced CI run).
 
-    camera : camera preset (:data:`simbench.sensor.CAMERA_PRESETS`); the physical ``paper``
-        preset belongs to the sensor issue - until it exists runs use ``minimal`` and say so.
+    sensor : sensor model, a preset of :func:`simbench.device.get_sensor` (``paper``: the
+        Flea3 + LightCrafter physics; ``minimal``: noise only; ``ideal``: nothing) or a TOML file
     camera_scale : camera resolution factor (0.5 = 640x480 for quick runs)
     spp, max_depth : path tracing samples per pixel and path length
     seed : base seed of every capture
@@ -54,7 +54,7 @@ class RunConfig:
     """
 
     quick: bool = False
-    camera: str = "minimal"
+    sensor: str = "minimal"
     camera_scale: float = 1.0
     spp: int = 16
     max_depth: int = 6
@@ -92,7 +92,7 @@ class Capture:
 class Session:
     """Shared state of one reproduction run: config, cache, pattern, calibration, progress."""
 
-    def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "") -> None:
+    def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "", sensor: SensorModel | None = None) -> None:
         import mitsuba as mi
 
         self.config = config
@@ -101,34 +101,42 @@ class Session:
         self.progress = progress
         self.command = command or "simbench " + " ".join(sys.argv[1:])
         self.variant = mi.variant()
-        self.camera = get_camera(config.camera)
+        self.sensor = sensor if sensor is not None else get_sensor(config.sensor)
         self.pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence)
-        self.drive = project_drive(quantize(fringe_pattern(self.pattern)))
+        self.pattern_u8 = quantize(fringe_pattern(self.pattern))
         self._refs: dict = {}
         self.seeds_used: dict[str, dict] = {}
 
+    def fork(self, sensor: SensorModel) -> "Session":
+        """A session with another sensor model sharing this one's cache, output and seed log."""
+        other = Session(self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
+        other.cache = self.cache
+        other.seeds_used = self.seeds_used
+        return other
+
     # scenes and captures -------------------------------------------------------------
     def scene(self, name: str) -> SceneSpec:
-        """A scene of ``scenes/`` with the run's camera resolution and the rendered rig."""
-        scene = load_scene(SCENES_DIR / f"{name}.toml")
-        rig = scene.rig if self.config.camera_scale == 1 else scale_camera(scene.rig, self.config.camera_scale)
-        return dataclasses.replace(scene, rig=realised_rig(rig))
+        """A scene of ``scenes/`` with the run's camera resolution, the rendered rig and the
+        sensor model's lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
+        return self.prepare(load_scene(SCENES_DIR / f"{name}.toml"))
 
-    def _render(self, scene: SceneSpec, seed: int) -> np.ndarray:
-        return cached_radiance(scene, self.drive, spp=self.config.spp, seed=seed, max_depth=self.config.max_depth, cache=self.cache)
+    def prepare(self, scene: SceneSpec) -> SceneSpec:
+        rig = scene.rig if self.config.camera_scale == 1 else scale_camera(scene.rig, self.config.camera_scale)
+        return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
 
     def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1) -> list[Capture]:
         """``repeats`` recordings of one render of ``scene`` (a static scene measured again
         differs by camera noise only), with seeds from ``label``."""
         render_seed = label_seed(self.config.seed, f"{label}/render")
-        rad = self._render(scene, render_seed)
+        drive = projector_drive_for(scene, self.pattern_u8, self.sensor, cache=self.cache)
+        q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []
         for k in range(repeats):
             noise_seed = label_seed(self.config.seed, f"{label}/noise/{k}")
             seeds = {"render": render_seed, "noise": noise_seed}
             self.seeds_used[f"{label}/{k}" if repeats > 1 else label] = seeds
-            out.append(Capture(scene=scene, image=simple_camera(rad, camera=self.camera, rng=noise_seed), gt=gt, seeds=seeds))
+            out.append(Capture(scene=scene, image=record(q, sensor=self.sensor, scene=scene, rng=noise_seed), gt=gt, seeds=seeds))
         return out
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
@@ -154,7 +162,7 @@ class Session:
         record = {
             "command": self.command,
             "config": self.config.to_dict(),
-            "sensor_note": _SENSOR_NOTE if self.config.camera != "paper" else "",
+            "sensor": sensor_to_dict(self.sensor),
             "variant": self.variant,
             "versions": versions(),
             "git_commit": git_commit(),
@@ -166,13 +174,6 @@ class Session:
 
     def timed(self, what: str):
         return _Timer(self.progress, what)
-
-
-_SENSOR_NOTE = (
-    "camera model: the minimal camera (exposure, Poisson shot noise, 10 e- read noise, 8-bit); "
-    "the physical 'paper' sensor preset (Flea3 + LightCrafter: crosstalk, Bayer, gamma, defocus) "
-    "is not built yet, so these numbers leave out its systematic errors"
-)
 
 
 class _Timer:

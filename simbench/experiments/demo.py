@@ -21,7 +21,7 @@ from simbench.io import atomic_write_bytes, atomic_write_text, save_json
 from simbench.metrics import depth_errors, edge_band
 from simbench.pattern import PatternSpec
 from simbench.scene import load_scene
-from simbench.sensor import get_camera
+from simbench.device import get_sensor
 from simbench.simulate import acquire
 
 __all__ = ["DemoConfig", "DEFAULT_SCENES", "run_demo", "score_acquisition", "depth_figure"]
@@ -32,7 +32,7 @@ DEFAULT_SCENES = ("white_plane", "tilted_plane", "sphere", "step")
 @dataclass(frozen=True)
 class DemoConfig:
     scenes: tuple[str, ...] = DEFAULT_SCENES
-    camera: str = "minimal"
+    sensor: str = "minimal"
     spp: int = 16
     seed: int = 2017
     edge_band_px: int = 5
@@ -93,7 +93,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     from simbench.simulate import versions
 
     out = Path(out_dir)
-    camera = get_camera(config.camera)
+    sensor = get_sensor(config.sensor)
     pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order)
     rows = []
     seeds = np.random.SeedSequence(config.seed).spawn(len(config.scenes))
@@ -101,7 +101,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         scene = load_scene(SCENES_DIR / f"{name}.toml")
         seed = int(ss.generate_state(1)[0])
         t0 = time.perf_counter()
-        acq = acquire(scene, pattern=pattern, camera=camera, spp=config.spp, seed=seed)
+        acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, seed=seed)
         t1 = time.perf_counter()
         params = DecoderParams(**{**asdict(config.decoder), "z0_m": scene.reference_depth_m})
         ref = decode_reference(acq.reference, rig=acq.scene.rig, params=params)
@@ -127,7 +127,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     md = [
         "# Pipeline demo: white plane, tilted plane, sphere, step",
         "",
-        f"Made by `simbench demo --out {out_dir}` (camera `{config.camera}`, {config.spp} spp, base seed {config.seed}, "
+        f"Made by `simbench demo --out {out_dir}` (sensor `{config.sensor}`, {config.spp} spp, base seed {config.seed}, "
         f"variant `{mi.variant()}`). Errors exclude a {config.edge_band_px}-px band at depth edges (none on the white plane); "
         "completeness is over the pixels ground truth says are seen and lit.",
         "",

@@ -85,7 +85,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Fig. 9: RMSE against depth",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, camera model `{cfg.camera}`, "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, sensor model `{cfg.sensor}`, "
         f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: `fig9.png`; "
         "every recording with its seeds: `fig9.csv`.",
         "",
@@ -102,6 +102,6 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines += markdown_table(["depth (m)", "RMSE (mm), mean", "min - max", "plane-fit RMS (mm)", "completeness", "paper", "Kinect", "ToF"], body)
     trend = "grows" if np.all(np.diff(mean) > 0) else "does not grow monotonically"
     lines += ["", f"Our RMSE {trend} with depth over 0.9-1.4 m."]
-    if cfg.camera != "paper":
+    if cfg.sensor != "paper":
         lines += ["", "**Caveat:** minimal camera model (noise only); the physical-sensor effects are not simulated yet."]
     return "\n".join(lines) + "\n"

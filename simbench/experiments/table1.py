@@ -82,7 +82,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Table 1: colour boards at 1.0 m",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, camera model `{cfg.camera}`, "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, sensor model `{cfg.sensor}`, "
         f"base seed {cfg.seed}, variant `{session.variant}`); seeds per capture in `table1.csv`, everything else in "
         "`table1.provenance.json`.",
         "",
@@ -113,7 +113,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "",
     ]
     lines += markdown_table(hdr, body("normalized"))
-    lines += ["", _SENSOR_CAVEAT if cfg.camera != "paper" else ""]
+    lines += ["", _SENSOR_CAVEAT if cfg.sensor != "paper" else ""]
     return "\n".join(lines).rstrip() + "\n"
 
 

@@ -91,7 +91,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
         "# Table 3: depth discontinuity (plaster cube next to a cuboid)",
         "",
         f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, "
-        f"camera model `{cfg.camera}`, base seed {cfg.seed}, variant `{session.variant}`).",
+        f"sensor model `{cfg.sensor}`, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
         "Scored over each object's front face (ground truth within 1 mm of the face plane) minus a "
         f"{cfg.edge_band_px}-px band at depth edges. *Plane fit* = the paper's protocol, mean absolute residual (mm) "
@@ -112,7 +112,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
         "",
         "The Kinect and ToF columns are filled by the competitor-sensors issue; until then only the paper's values are shown.",
     ]
-    if cfg.camera != "paper":
+    if cfg.sensor != "paper":
         lines += ["", "**Caveat:** minimal camera model (noise only); the physical-sensor effects are not simulated yet."]
     return "\n".join(lines) + "\n"
 

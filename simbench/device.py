@@ -1,0 +1,478 @@
+"""Sensor models: the physical camera and projector between the pattern and the recorded pixels,
+as one frozen configuration (:class:`SensorModel`) read from a TOML preset.
+
+Presets live in ``simbench/presets/<name>.toml`` (``ideal``, ``minimal``, ``paper``); a path to
+any TOML file with the same layout works too.  Every effect is switchable:
+
+=====================  =================================================================
+effect                 switch (TOML)
+=====================  =================================================================
+camera noise           ``[camera] noise``  (EMVA 1288: shot, dark, full well, ADC, PRNU/DSNU)
+colour filter array    ``[camera] cfa`` (``none`` / ``RGGB`` ...) and ``demosaic``
+spectral crosstalk     ``[spectral] crosstalk``
+projector transfer     ``[projector] transfer`` (``linear`` / ``gamma``), ``gamma``
+projector black level  ``[projector] contrast_ratio`` (``inf`` = off)
+DMD layout             ``[projector] dmd`` (``square`` / ``diamond``)
+camera defocus         ``[camera.lens] defocus``, ``f_number``, ``focus_m``
+projector defocus      ``[projector.lens] defocus``, ``f_number``, ``focus_m``
+lens distortion        ``[camera.lens] distortion``, ``[projector.lens] distortion``
+ambient light          ``[ambient] ratio`` (to the projector's white irradiance at Z0)
+=====================  =================================================================
+
+The photometric chain of the ``emva`` camera: the projector's white gives ``lumens / A``
+lux at 1 m (``A`` = its frustum's cross-section at 1 m, from the rig), split into primaries
+(:func:`simbench.spectral.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
+``p`` is the radiance ``E_p / pi`` of a white Lambertian surface 1 m in front of it, which the
+camera equation turns into photons per pixel (:func:`simbench.sensor.photons_per_unit_radiance`)
+and the channel's quantum efficiency into electrons.  The exposure time is ``auto`` by
+default: what brings the brightest channel of the white reference board at Z0 to
+``auto_exposure_fraction`` of the full well, as an operator would set it once for the rig.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from simbench.io import read_toml
+from simbench.projector import DMD_LAYOUTS, TRANSFERS
+from simbench.rig import Intrinsics, Rig
+from simbench.sensor import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera, photons_per_unit_radiance
+
+__all__ = [
+    "Lens",
+    "PhysicalCamera",
+    "ProjectorModel",
+    "SensorModel",
+    "PRESETS_DIR",
+    "SENSOR_PRESETS",
+    "get_sensor",
+    "load_sensor",
+    "sensor_from_dict",
+    "sensor_to_dict",
+    "apply_to_rig",
+    "electrons_per_radiance_s",
+    "exposure_s",
+    "channel_weights",
+    "EFFECTS",
+    "with_effects",
+]
+
+PRESETS_DIR = Path(__file__).resolve().parent / "presets"
+SENSOR_PRESETS = ("ideal", "minimal", "paper")
+_NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _positive(name: str, v) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+        raise ValueError(f"{name} must be a number > 0, got {v!r}")
+    return float(v)
+
+
+@dataclass(frozen=True)
+class Lens:
+    """A lens: photometry (f-number, transmission), thin-lens defocus, Brown-Conrady distortion.
+
+    ``focal_length_mm`` is derived from the device's focal length in pixels and its pixel pitch.
+    ``defocus`` switches the blur on; the f-number also sets the camera's exposure.
+    """
+
+    f_number: float = 4.0
+    transmission: float = 0.9
+    defocus: bool = False
+    focus_m: float = 1.0
+    distortion: tuple[float, float, float, float, float] = _NO_DISTORTION
+
+    def __post_init__(self) -> None:
+        _positive("f_number", self.f_number)
+        _positive("focus_m", self.focus_m)
+        if not 0 < self.transmission <= 1:
+            raise ValueError(f"transmission must be in (0, 1], got {self.transmission}")
+        d = self.distortion
+        if len(d) != 5 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in d):
+            raise ValueError(f"distortion must be five numbers (k1, k2, p1, p2, k3), got {d!r}")
+        object.__setattr__(self, "distortion", tuple(float(x) for x in d))
+        object.__setattr__(self, "f_number", float(self.f_number))
+        object.__setattr__(self, "focus_m", float(self.focus_m))
+
+    def aperture_m(self, focal_px: float, pixel_pitch_um: float) -> float:
+        """Aperture diameter F / N (m) for a device of focal length ``focal_px``."""
+        return focal_px * pixel_pitch_um * 1e-6 / self.f_number
+
+
+@dataclass(frozen=True)
+class PhysicalCamera:
+    """A colour camera after EMVA 1288 with a colour filter array (see :mod:`simbench.sensor`).
+
+    ``qe`` is each channel's quantum efficiency for the projector primary of its own colour;
+    ``gain_dn_per_e`` None = full well maps to the top of the ADC range; ``exposure_s`` None =
+    auto exposure (module docstring).
+    """
+
+    pixel_pitch_um: float
+    qe: tuple[float, float, float]
+    full_well_e: float
+    dark_noise_e: float
+    bits: int = 8
+    gain_dn_per_e: float | None = None
+    offset_dn: float = 0.0
+    dark_current_e_s: float = 0.0
+    prnu: float = 0.0
+    dsnu_e: float = 0.0
+    fixed_pattern_seed: int = 0
+    exposure_s: float | None = None
+    auto_exposure_fraction: float = 0.7
+    noise: bool = True
+    cfa: str = "none"
+    demosaic: str = "bilinear"
+
+    def __post_init__(self) -> None:
+        _positive("pixel_pitch_um", self.pixel_pitch_um)
+        _positive("full_well_e", self.full_well_e)
+        if len(self.qe) != 3 or not all(0 < q <= 1 for q in self.qe):
+            raise ValueError(f"qe must be three numbers in (0, 1], got {self.qe!r}")
+        object.__setattr__(self, "qe", tuple(float(q) for q in self.qe))
+        for name in ("dark_noise_e", "offset_dn", "dark_current_e_s", "prnu", "dsnu_e"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
+                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
+        if self.bits not in (8, 10, 12, 16):
+            raise ValueError(f"bits must be one of 8, 10, 12, 16; got {self.bits}")
+        if self.gain_dn_per_e is not None:
+            _positive("gain_dn_per_e", self.gain_dn_per_e)
+        if self.exposure_s is not None:
+            _positive("exposure_s", self.exposure_s)
+        if not 0 < self.auto_exposure_fraction <= 1:
+            raise ValueError(f"auto_exposure_fraction must be in (0, 1], got {self.auto_exposure_fraction}")
+        if self.cfa not in CFA_PATTERNS:
+            raise ValueError(f"unknown cfa {self.cfa!r}; valid: {list(CFA_PATTERNS)}")
+        if self.demosaic not in DEMOSAIC_METHODS:
+            raise ValueError(f"unknown demosaic {self.demosaic!r}; valid: {list(DEMOSAIC_METHODS)}")
+
+    @property
+    def max_dn(self) -> int:
+        return (1 << self.bits) - 1
+
+    @property
+    def gain(self) -> float:
+        return self.gain_dn_per_e if self.gain_dn_per_e is not None else self.max_dn / self.full_well_e
+
+
+@dataclass(frozen=True)
+class ProjectorModel:
+    """The projector's physics (see :mod:`simbench.projector`)."""
+
+    lumens: float = 150.0
+    transfer: str = "linear"
+    gamma: float = 2.2
+    contrast_ratio: float = math.inf
+    dmd: str = "square"
+    pixel_pitch_um: float = 5.4
+    lens: Lens = field(default_factory=lambda: Lens(f_number=2.0))
+
+    def __post_init__(self) -> None:
+        _positive("lumens", self.lumens)
+        _positive("gamma", self.gamma)
+        _positive("pixel_pitch_um", self.pixel_pitch_um)
+        if self.transfer not in TRANSFERS:
+            raise ValueError(f"unknown projector transfer {self.transfer!r}; valid: {list(TRANSFERS)}")
+        if self.dmd not in DMD_LAYOUTS:
+            raise ValueError(f"unknown dmd layout {self.dmd!r}; valid: {list(DMD_LAYOUTS)}")
+        if not self.contrast_ratio >= 1:
+            raise ValueError(f"contrast_ratio must be >= 1 (or inf), got {self.contrast_ratio}")
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Everything between the 8-bit pattern and the recorded image (module docstring)."""
+
+    name: str
+    camera: PhysicalCamera | SimpleCamera
+    camera_lens: Lens = Lens()
+    projector: ProjectorModel = ProjectorModel()
+    crosstalk: bool = False
+    ambient_ratio: float = 0.0
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ambient_ratio, bool) or not self.ambient_ratio >= 0:
+            raise ValueError(f"ambient ratio must be >= 0, got {self.ambient_ratio!r}")
+        if isinstance(self.camera, SimpleCamera) and self.crosstalk:
+            raise ValueError("spectral crosstalk needs the physical (emva) camera model")
+
+    @property
+    def is_physical(self) -> bool:
+        return isinstance(self.camera, PhysicalCamera)
+
+
+# ---------------------------------------------------------------------------------------
+# TOML
+
+
+def _table(data: dict, key: str, where: str) -> dict:
+    t = data.get(key, {})
+    if not isinstance(t, dict):
+        raise ValueError(f"{where}: [{key}] must be a table")
+    return t
+
+
+def _build(cls, table: dict, where: str, *, convert: dict | None = None):
+    allowed = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {allowed}")
+    kwargs = dict(table)
+    for k, fn in (convert or {}).items():
+        if k in kwargs:
+            kwargs[k] = fn(kwargs[k])
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _inf_or_number(v):
+    if v == "inf":
+        return math.inf
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"expected a number or 'inf', got {v!r}")
+    return float(v)
+
+
+def _auto_or_number(v):
+    if v == "auto":
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"expected a number or 'auto', got {v!r}")
+    return float(v)
+
+
+def sensor_from_dict(data: dict, *, where: str = "sensor") -> SensorModel:
+    """Validate a sensor TOML table (layout: ``simbench/presets/paper.toml``)."""
+    keys = ("name", "description", "camera", "projector", "spectral", "ambient")
+    unknown = sorted(set(data) - set(keys))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {list(keys)}")
+    cam = dict(_table(data, "camera", where))
+    cam_lens = _build(Lens, _table(cam, "lens", f"{where}.camera"), f"{where}.camera.lens")
+    model = cam.pop("model", "emva")
+    cam.pop("lens", None)
+    if model == "simple":
+        camera = _build(SimpleCamera, cam, f"{where}.camera")
+    elif model == "emva":
+        camera = _build(PhysicalCamera, cam, f"{where}.camera", convert={"exposure_s": _auto_or_number, "qe": tuple, "gain_dn_per_e": _auto_or_number})
+    else:
+        raise ValueError(f"{where}.camera.model must be 'emva' or 'simple', got {model!r}")
+    prj = dict(_table(data, "projector", where))
+    prj_lens = _build(Lens, _table(prj, "lens", f"{where}.projector"), f"{where}.projector.lens")
+    prj.pop("lens", None)
+    projector = _build(ProjectorModel, {**prj, "lens": prj_lens}, f"{where}.projector", convert={"contrast_ratio": _inf_or_number})
+    spectral = _table(data, "spectral", where)
+    ambient = _table(data, "ambient", where)
+    for t, allowed, name in ((spectral, ("crosstalk",), "spectral"), (ambient, ("ratio",), "ambient")):
+        bad = sorted(set(t) - set(allowed))
+        if bad:
+            raise ValueError(f"{where}.{name}: unknown key(s) {bad}; valid keys: {list(allowed)}")
+    crosstalk = spectral.get("crosstalk", False)
+    if not isinstance(crosstalk, bool):
+        raise ValueError(f"{where}.spectral.crosstalk must be true or false, got {crosstalk!r}")
+    ratio = ambient.get("ratio", 0.0)
+    if isinstance(ratio, bool) or not isinstance(ratio, (int, float)):
+        raise ValueError(f"{where}.ambient.ratio must be a number, got {ratio!r}")
+    try:
+        return SensorModel(name=str(data.get("name", "custom")), camera=camera, camera_lens=cam_lens, projector=projector, crosstalk=crosstalk, ambient_ratio=float(ratio), description=str(data.get("description", "")))
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def sensor_to_dict(sensor: SensorModel) -> dict:
+    """Plain data (JSON/TOML) of a sensor model; :func:`sensor_from_dict` reads it back."""
+
+    def enc(v):
+        if isinstance(v, float) and math.isinf(v):
+            return "inf"
+        if isinstance(v, tuple):
+            return list(v)
+        return v
+
+    def lens(x: Lens) -> dict:
+        return {k: enc(v) for k, v in dataclasses.asdict(x).items()}
+
+    cam = {k: enc(v) for k, v in dataclasses.asdict(sensor.camera).items() if v is not None}
+    cam = {"model": "emva" if sensor.is_physical else "simple", **cam}
+    if sensor.is_physical:
+        cam.setdefault("exposure_s", "auto")
+    cam["lens"] = lens(sensor.camera_lens)
+    prj = {k: enc(getattr(sensor.projector, k)) for k in ("lumens", "transfer", "gamma", "contrast_ratio", "dmd", "pixel_pitch_um")}
+    prj["lens"] = lens(sensor.projector.lens)
+    return {
+        "name": sensor.name,
+        "description": sensor.description,
+        "camera": cam,
+        "projector": prj,
+        "spectral": {"crosstalk": sensor.crosstalk},
+        "ambient": {"ratio": sensor.ambient_ratio},
+    }
+
+
+def load_sensor(path: str | Path) -> SensorModel:
+    """Read a sensor TOML file; errors name the file and the field."""
+    path = Path(path)
+    data = read_toml(path, what="sensor")
+    data.setdefault("name", path.stem)
+    return sensor_from_dict(data, where=str(path))
+
+
+def get_sensor(name_or_path: str | Path) -> SensorModel:
+    """A preset by name (:data:`SENSOR_PRESETS`) or a sensor TOML file."""
+    key = str(name_or_path)
+    if key in SENSOR_PRESETS:
+        return load_sensor(PRESETS_DIR / f"{key}.toml")
+    path = Path(key)
+    if path.suffix.lower() != ".toml":
+        raise ValueError(f"unknown sensor {key!r}: give a preset ({', '.join(SENSOR_PRESETS)}) or a .toml file")
+    return load_sensor(path)
+
+
+# ---------------------------------------------------------------------------------------
+# geometry and photometry
+
+
+def apply_to_rig(rig: Rig, sensor: SensorModel) -> Rig:
+    """The rig with the sensor's lens distortion (what calibration would record in the rig
+    file: the decoder reads it back from there)."""
+
+    def with_dist(intr: Intrinsics, d) -> Intrinsics:
+        if tuple(d) == intr.distortion:
+            return intr
+        return dataclasses.replace(intr, distortion=tuple(d))
+
+    cam = with_dist(rig.camera, sensor.camera_lens.distortion)
+    prj = with_dist(rig.projector, sensor.projector.lens.distortion)
+    if cam is rig.camera and prj is rig.projector:
+        return rig
+    return dataclasses.replace(rig, camera=cam, projector=prj)
+
+
+def white_lux_at_1m(sensor: SensorModel, rig: Rig) -> float:
+    """Illuminance (lux) of the projector's full white on a surface facing it at 1 m: its
+    luminous flux over the frustum's cross-section there (uniform field assumed)."""
+    prj = rig.projector
+    area_m2 = (prj.width_px / prj.focal_px) * (prj.height_px / prj.focal_px)
+    return sensor.projector.lumens / area_m2
+
+
+def electrons_per_radiance_s(sensor: SensorModel, rig: Rig) -> np.ndarray:
+    """Electrons per second in camera channel ``p`` per unit rendered radiance of primary ``p``
+    (module docstring), shape (3,).  Needs the physical camera."""
+    from simbench.spectral import PRIMARY_PEAKS_NM, primary_irradiance_w_m2
+
+    cam = sensor.camera
+    if not isinstance(cam, PhysicalCamera):
+        raise ValueError("photometry needs the physical (emva) camera model")
+    irr = primary_irradiance_w_m2(white_lux_at_1m(sensor, rig))
+    lens = sensor.camera_lens
+    photons = np.array(
+        [
+            photons_per_unit_radiance(irradiance_1m_w_m2=e, wavelength_nm=wl, f_number=lens.f_number, pixel_pitch_um=cam.pixel_pitch_um, exposure_s=1.0, lens_transmission=lens.transmission)
+            for e, wl in zip(irr, PRIMARY_PEAKS_NM)
+        ]
+    )
+    return photons * np.asarray(cam.qe)
+
+
+def _reference_matrix(sensor: SensorModel, albedo: float) -> np.ndarray:
+    if sensor.crosstalk:
+        from simbench.spectral import crosstalk_matrix
+
+        return crosstalk_matrix((albedo,) * 3)
+    return albedo * np.eye(3)
+
+
+def exposure_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> float:
+    """The camera's exposure time: the configured one, or auto exposure (module docstring)."""
+    cam = sensor.camera
+    if not isinstance(cam, PhysicalCamera):
+        raise ValueError("exposure time needs the physical (emva) camera model")
+    if cam.exposure_s is not None:
+        return cam.exposure_s
+    rate = electrons_per_radiance_s(sensor, rig)
+    k = _reference_matrix(sensor, reference_albedo)
+    board = (k * rate[None, :]).sum(axis=1) * projector_scale / reference_depth_m**2
+    return float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
+
+
+def channel_weights(sensor: SensorModel, rig: Rig) -> np.ndarray:
+    """W[c, p] = e_p / e_c: how much primary ``p``'s rendered radiance in camera channel ``c``
+    weighs relative to channel ``c``'s own primary (1 for the simple camera), shape (3, 3)."""
+    if not sensor.is_physical:
+        return np.ones((3, 3))
+    e = electrons_per_radiance_s(sensor, rig)
+    return e[None, :] / e[:, None]
+
+
+# ---------------------------------------------------------------------------------------
+# effects, one at a time (the error budget and ablations)
+
+EFFECTS = {
+    "noise": "camera noise (EMVA 1288: shot, dark, PRNU/DSNU)",
+    "cfa": "Bayer colour filter + demosaicing",
+    "crosstalk": "spectral crosstalk (LED primaries x camera sensitivities x surface)",
+    "transfer": "projector transfer curve",
+    "black_level": "projector black level (finite contrast)",
+    "dmd": "DMD diamond pixel layout",
+    "camera_defocus": "camera defocus (thin lens)",
+    "projector_defocus": "projector defocus",
+    "distortion": "lens distortion (camera + projector), undistorted by the decoder",
+    "ambient": "ambient light",
+}
+
+
+def with_effects(base: SensorModel, source: SensorModel, effects, *, name: str | None = None) -> SensorModel:
+    """``base`` with the named :data:`EFFECTS` taken from ``source`` (both physical)."""
+    if not (base.is_physical and source.is_physical):
+        raise ValueError("effects move between physical (emva) sensor models only")
+    bad = [e for e in effects if e not in EFFECTS]
+    if bad:
+        raise ValueError(f"unknown effect(s) {bad}; valid: {list(EFFECTS)}")
+    cam, src = base.camera, source.camera
+    cam_lens, prj, prj_lens = base.camera_lens, base.projector, base.projector.lens
+    crosstalk, ambient = base.crosstalk, base.ambient_ratio
+    for e in effects:
+        if e == "noise":
+            cam = dataclasses.replace(cam, **{k: getattr(src, k) for k in ("noise", "dark_noise_e", "dark_current_e_s", "prnu", "dsnu_e", "fixed_pattern_seed", "bits", "gain_dn_per_e", "offset_dn", "full_well_e")})
+        elif e == "cfa":
+            cam = dataclasses.replace(cam, cfa=src.cfa, demosaic=src.demosaic)
+        elif e == "crosstalk":
+            crosstalk = source.crosstalk
+        elif e == "transfer":
+            prj = dataclasses.replace(prj, transfer=source.projector.transfer, gamma=source.projector.gamma)
+        elif e == "black_level":
+            prj = dataclasses.replace(prj, contrast_ratio=source.projector.contrast_ratio)
+        elif e == "dmd":
+            prj = dataclasses.replace(prj, dmd=source.projector.dmd)
+        elif e == "camera_defocus":
+            s = source.camera_lens
+            cam_lens = dataclasses.replace(cam_lens, defocus=s.defocus, focus_m=s.focus_m, f_number=s.f_number)
+        elif e == "projector_defocus":
+            s = source.projector.lens
+            prj_lens = dataclasses.replace(prj_lens, defocus=s.defocus, focus_m=s.focus_m, f_number=s.f_number)
+        elif e == "distortion":
+            cam_lens = dataclasses.replace(cam_lens, distortion=source.camera_lens.distortion)
+            prj_lens = dataclasses.replace(prj_lens, distortion=source.projector.lens.distortion)
+        else:  # ambient
+            ambient = source.ambient_ratio
+    prj = dataclasses.replace(prj, lens=prj_lens)
+    return SensorModel(
+        name=name or f"{base.name}+{'+'.join(effects)}",
+        camera=cam,
+        camera_lens=cam_lens,
+        projector=prj,
+        crosstalk=crosstalk,
+        ambient_ratio=ambient,
+        description=f"{base.name} with {', '.join(effects)} from {source.name}",
+    )

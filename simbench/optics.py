@@ -1,0 +1,223 @@
+"""Lens effects between the ideal pinhole renders and the devices: Brown-Conrady distortion and
+thin-lens defocus.
+
+Distortion (OpenCV's model, coefficients ``(k1, k2, p1, p2, k3)`` on normalised coordinates)::
+
+    r^2 = x^2 + y^2
+    x_d = x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2)
+    y_d = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y
+
+* Camera: a ray with normalised direction ``(x, y)`` is recorded at pixel ``K (x_d, y_d)``.
+  Mitsuba renders the ideal pinhole image, so the recorded image at pixel ``p`` is the ideal
+  image at ``K D^-1(K^-1 p)`` (:func:`distort_image`); a decoder undoes it by sampling the
+  recorded image at ``K D(x)`` for every ideal pixel (:func:`undistort_image`).
+* Projector (an inverse camera): the DMD pixel that lights the ray ``(x, y)`` is ``K D(x, y)``.
+  Mitsuba's projector is an ideal pinhole, so its texture at ideal pixel ``q`` is the DMD
+  image at ``K D(K^-1 q)`` (:func:`distorted_projector_drive`).
+
+Defocus of a thin lens of aperture diameter ``A`` focused at distance ``s``: a point at
+distance ``z`` is spread over a blur circle of diameter ``A f |1/z - 1/s|`` in pixels of a
+device with focal length ``f`` px (first order in ``F/z``, the focal length over the distance).
+A uniform disc of diameter ``c`` has a per-axis standard deviation ``c / 4``; we blur with the
+Gaussian of that standard deviation (:func:`blur_sigma_px`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "distort_normalized",
+    "undistort_normalized",
+    "distort_image",
+    "undistort_image",
+    "distorted_projector_drive",
+    "undistort_projector_columns",
+    "blur_circle_px",
+    "blur_sigma_px",
+    "depth_varying_blur",
+]
+
+
+def _coeffs(distortion) -> tuple[float, float, float, float, float]:
+    d = tuple(float(x) for x in distortion)
+    if len(d) != 5:
+        raise ValueError(f"distortion must be (k1, k2, p1, p2, k3), got {distortion!r}")
+    return d
+
+
+def distort_normalized(x: np.ndarray, y: np.ndarray, distortion) -> tuple[np.ndarray, np.ndarray]:
+    """Brown-Conrady forward model on normalised coordinates (module docstring)."""
+    k1, k2, p1, p2, k3 = _coeffs(distortion)
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return xd, yd
+
+
+def undistort_normalized(xd: np.ndarray, yd: np.ndarray, distortion, *, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """Invert :func:`distort_normalized` by fixed-point iteration (OpenCV's method); converges
+    for the moderate distortion of measurement lenses (tested to 1e-9 within the image)."""
+    k1, k2, p1, p2, k3 = _coeffs(distortion)
+    xd = np.asarray(xd, dtype=np.float64)
+    yd = np.asarray(yd, dtype=np.float64)
+    x, y = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        x = (xd - dx) / radial
+        y = (yd - dy) / radial
+    return x, y
+
+
+def _grid(intr) -> tuple[np.ndarray, np.ndarray]:
+    h, w = intr.size_hw
+    x = (np.arange(w, dtype=np.float64) - intr.cx_px) / intr.focal_px
+    y = (np.arange(h, dtype=np.float64) - intr.cy_px) / intr.focal_px
+    return np.broadcast_to(x[None, :], (h, w)), np.broadcast_to(y[:, None], (h, w))
+
+
+def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:
+    import cv2
+
+    src = np.asarray(img)
+    dtype = src.dtype
+    work = src.astype(np.float32) if dtype not in (np.float32, np.uint8, np.uint16) else src
+    out = cv2.remap(work, mx.astype(np.float32), my.astype(np.float32), interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    if out.ndim == 2 and src.ndim == 3:
+        out = out[..., None]
+    return out.astype(dtype, copy=False)
+
+
+def distort_image(img: np.ndarray, intr) -> np.ndarray:
+    """What a camera with ``intr.distortion`` records, from the ideal pinhole image ``img``.
+
+    Parameters
+    ----------
+    img : ndarray, shape (H, W) or (H, W, C)
+        Image on the ideal pinhole grid of ``intr``.
+    intr : simbench.rig.Intrinsics
+
+    Returns
+    -------
+    ndarray, same shape and dtype; zero where the recorded pixel sees outside the ideal image.
+    """
+    import cv2
+
+    if not intr.has_distortion:
+        return img
+    xd, yd = _grid(intr)
+    x, y = undistort_normalized(xd, yd, intr.distortion)
+    return _remap(img, x * intr.focal_px + intr.cx_px, y * intr.focal_px + intr.cy_px, cv2.INTER_LINEAR)
+
+
+def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> np.ndarray:
+    """The ideal pinhole image from a recorded image (OpenCV's undistortion map), zero where
+    the ideal pixel falls outside the recorded image."""
+    import cv2
+
+    if not intr.has_distortion:
+        return img
+    x, y = _grid(intr)
+    xd, yd = distort_normalized(x, y, intr.distortion)
+    flag = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interpolation]
+    return _remap(img, xd * intr.focal_px + intr.cx_px, yd * intr.focal_px + intr.cy_px, flag)
+
+
+def distorted_projector_drive(drive: np.ndarray, intr) -> np.ndarray:
+    """The ideal-pinhole texture that makes Mitsuba's projector emit like a projector whose lens
+    has ``intr.distortion`` while its DMD shows ``drive``: texture(q) = drive(K D(K^-1 q)).
+
+    Nearest-neighbour sampling keeps DMD pixels sharp (the lens does not resample them).
+    """
+    return undistort_image(drive, intr, interpolation="nearest")
+
+
+def undistort_projector_columns(column_px: np.ndarray, row_norm_y: np.ndarray, intr, *, iterations: int = 8) -> np.ndarray:
+    """Ideal-pinhole projector columns from decoded DMD columns.
+
+    In a rectified rig (parallel axes, baseline along x) a camera pixel with normalised
+    ``y`` sees points whose projector normalised ``y`` is the same, so the DMD column ``u_d``
+    fixes the ideal ``x`` through ``fx * D_x(x, y) + cx = u_d``, solved here by Newton's method.
+
+    Parameters
+    ----------
+    column_px : ndarray, shape (H, W), DMD columns (NaN = unknown)
+    row_norm_y : ndarray, broadcastable to (H, W), normalised y of each camera pixel
+    intr : simbench.rig.Intrinsics (the projector)
+    """
+    col = np.asarray(column_px, dtype=np.float64)
+    if not intr.has_distortion:
+        return col
+    k1, k2, p1, p2, k3 = _coeffs(intr.distortion)
+    y = np.broadcast_to(np.asarray(row_norm_y, dtype=np.float64), col.shape)
+    target = (col - intr.cx_px) / intr.focal_px
+    x = np.where(np.isfinite(target), target, 0.0)
+    for _ in range(iterations):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dradial = 2.0 * x * (k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3))
+        f = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - target
+        fp = radial + x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+        x = x - f / fp
+    return np.where(np.isfinite(col), x * intr.focal_px + intr.cx_px, np.nan)
+
+
+def blur_circle_px(distance_m: np.ndarray, *, aperture_m: float, focal_px: float, focus_m: float) -> np.ndarray:
+    """Blur-circle diameter in pixels of a thin lens (module docstring); NaN distance -> NaN."""
+    if not aperture_m >= 0 or not focal_px > 0 or not focus_m > 0:
+        raise ValueError(f"need aperture_m >= 0, focal_px > 0, focus_m > 0; got {aperture_m}, {focal_px}, {focus_m}")
+    z = np.asarray(distance_m, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return aperture_m * focal_px * np.abs(1.0 / z - 1.0 / focus_m)
+
+
+def blur_sigma_px(distance_m: np.ndarray, *, aperture_m: float, focal_px: float, focus_m: float) -> np.ndarray:
+    """Standard deviation (px) of the Gaussian standing in for the blur circle: diameter / 4."""
+    return blur_circle_px(distance_m, aperture_m=aperture_m, focal_px=focal_px, focus_m=focus_m) / 4.0
+
+
+def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float = 0.25) -> np.ndarray:
+    """Blur ``img`` with a Gaussian whose standard deviation varies per pixel.
+
+    The image is blurred at levels ``0, step, 2 step, ...`` up to the largest sigma and each
+    pixel interpolates linearly between the two levels around its own sigma (a layered
+    approximation of a spatially varying point-spread function; exact where sigma is constant).
+
+    Parameters
+    ----------
+    img : ndarray, shape (H, W) or (H, W, C), float32
+    sigma_px : ndarray, shape (H, W), float; NaN is treated as 0 (in focus)
+    step_px : float
+        Spacing of the blur levels.
+    """
+    import cv2
+
+    src = np.asarray(img, dtype=np.float32)
+    sig = np.nan_to_num(np.asarray(sigma_px, dtype=np.float64), nan=0.0, posinf=0.0)
+    if sig.shape != src.shape[:2]:
+        raise ValueError(f"sigma map shape {sig.shape} differs from the image's {src.shape[:2]}")
+    smax = float(sig.max(initial=0.0))
+    if smax <= 0.0:
+        return src.copy()
+    levels = np.arange(0.0, smax + step_px, step_px)
+    pos = np.clip(sig / step_px, 0.0, len(levels) - 1.0)
+    lo = np.floor(pos).astype(np.int64)
+    frac = (pos - lo).astype(np.float32)
+    out = np.zeros_like(src)
+    for k, s in enumerate(levels):
+        cur = src if s == 0.0 else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
+        if cur.ndim == 2 and src.ndim == 3:
+            cur = cur[..., None]
+        w_lo = np.where(lo == k, 1.0 - frac, 0.0).astype(np.float32)
+        w_hi = np.where(lo == k - 1, frac, 0.0).astype(np.float32)
+        w = w_lo + w_hi
+        if src.ndim == 3:
+            w = w[..., None]
+        out += w * cur
+    return out
