@@ -1,0 +1,165 @@
+"""Lens physics (simbench.optics, simbench.projector) and the decoder's undistortion."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.optics import (
+    blur_circle_px,
+    depth_varying_blur,
+    distort_image,
+    distort_normalized,
+    undistort_image,
+    undistort_normalized,
+    undistort_projector_columns,
+)
+from simbench.pattern import PatternSpec, fringe_pattern, quantize
+from simbench.projector import defocus_pattern, dmd_layout, transfer_curve
+from simbench.rig import Intrinsics, paper_rig
+from simbench.synthetic import synthetic_plane_capture
+
+DIST = (-0.08, 0.10, 0.001, -0.0005, 0.0)
+
+
+def test_distortion_matches_opencv_both_ways():
+    intr = Intrinsics(1280, 960, 2312.5, 639.5, 479.5, DIST)
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-0.28, 0.28, 200), rng.uniform(-0.21, 0.21, 200)
+    xd, yd = distort_normalized(x, y, DIST)
+    proj, _ = cv2.projectPoints(np.stack([x, y, np.ones_like(x)], -1), np.zeros(3), np.zeros(3), intr.matrix, np.array(DIST))
+    assert np.allclose(proj[:, 0, 0], intr.focal_px * xd + intr.cx_px, atol=1e-9)
+    assert np.allclose(proj[:, 0, 1], intr.focal_px * yd + intr.cy_px, atol=1e-9)
+    xu, yu = undistort_normalized(xd, yd, DIST)
+    assert np.max(np.abs(xu - x)) < 1e-9 and np.max(np.abs(yu - y)) < 1e-9
+
+
+def test_distort_then_undistort_image_recovers_a_smooth_image():
+    intr = Intrinsics(320, 240, 578.0, 159.5, 119.5, DIST)
+    yy, xx = np.mgrid[0:240, 0:320]
+    img = (0.5 + 0.4 * np.sin(xx / 13.0) * np.cos(yy / 17.0)).astype(np.float32)
+    back = undistort_image(distort_image(img, intr), intr)
+    inner = (slice(20, -20), slice(20, -20))
+    assert np.max(np.abs(back[inner] - img[inner])) < 0.01  # two bilinear resamplings
+    assert not np.allclose(distort_image(img, intr)[inner], img[inner], atol=0.01)  # it did distort
+
+
+def test_projector_columns_undistort_exactly():
+    prj = Intrinsics(1824, 1140, 2228.0, 911.5, 569.5, DIST)
+    x = np.linspace(-0.38, 0.38, 50)[None, :]
+    y = np.linspace(-0.24, 0.24, 40)[:, None]
+    xd, _ = distort_normalized(x, y, DIST)
+    got = undistort_projector_columns(prj.focal_px * xd + prj.cx_px, y, prj)
+    assert np.max(np.abs(got - (prj.focal_px * x + prj.cx_px))) < 1e-6
+    assert np.isnan(undistort_projector_columns(np.array([np.nan]), np.array([0.0]), prj)[0])
+
+
+def test_blur_circle_by_hand():
+    # 3 mm aperture, f = 2000 px, focused at 1 m, object at 2 m: 0.003 * 2000 * 0.5 = 3 px
+    assert blur_circle_px(2.0, aperture_m=0.003, focal_px=2000.0, focus_m=1.0) == pytest.approx(3.0)
+    assert blur_circle_px(1.0, aperture_m=0.003, focal_px=2000.0, focus_m=1.0) == 0.0
+    with pytest.raises(ValueError):
+        blur_circle_px(1.0, aperture_m=0.003, focal_px=2000.0, focus_m=0.0)
+
+
+def test_depth_varying_blur_is_exact_for_constant_sigma():
+    img = np.random.default_rng(1).random((60, 80, 3)).astype(np.float32)
+    sigma = np.full((60, 80), 1.5)
+    ref = cv2.GaussianBlur(img, (0, 0), 1.5, borderType=cv2.BORDER_REPLICATE)
+    assert np.allclose(depth_varying_blur(img, sigma), ref, atol=1e-5)
+    assert np.array_equal(depth_varying_blur(img, np.zeros((60, 80))), img)
+    with pytest.raises(ValueError, match="shape"):
+        depth_varying_blur(img, np.zeros((3, 3)))
+
+
+def test_projector_defocus_lowers_fringe_contrast_by_the_gaussian_mtf():
+    """A Gaussian blur of standard deviation s multiplies a fringe of period T by
+    exp(-2 pi^2 s^2 / T^2) (its transfer function)."""
+    period, s = 21.0, 3.0
+    x = np.arange(840)
+    row = (0.5 + 0.5 * np.cos(2 * np.pi * x / period)).astype(np.float32)
+    drive = np.repeat(np.repeat(row[None, :, None], 40, 0), 3, 2)
+    # sigma = blur circle / 4; choose the distance that gives s
+    aperture, f, focus = 0.006, 2228.0, 1.0
+    z = 1.0 / (1.0 / focus + 4 * s / (aperture * f))
+    out = defocus_pattern(drive, np.full((40, 840), z), aperture_m=aperture, focal_px=f, focus_m=focus)
+    line = out[20, 100:-100, 2]
+    amp = 0.5 * (line.max() - line.min())
+    assert amp == pytest.approx(0.5 * np.exp(-2 * np.pi**2 * s**2 / period**2), rel=0.02)
+
+
+def test_transfer_curve_and_black_level():
+    pat = np.array([[[0, 128, 255]]], np.uint8)
+    lin = transfer_curve(pat, transfer="linear")
+    assert np.allclose(lin, [0.0, 128 / 255, 1.0])
+    gam = transfer_curve(pat, transfer="gamma", gamma=2.2)
+    assert np.allclose(gam, [0.0, (128 / 255) ** 2.2, 1.0], atol=1e-6)
+    black = transfer_curve(pat, transfer="linear", contrast_ratio=1000.0)
+    assert black[0, 0, 0] == pytest.approx(1e-3) and black[0, 0, 2] == pytest.approx(1.0)
+    assert black[0, 0, 2] / black[0, 0, 0] == pytest.approx(1000.0)  # the contrast ratio
+    for bad in ({"transfer": "sRGB"}, {"transfer": "gamma", "gamma": 0.0}, {"transfer": "linear", "contrast_ratio": 0.5}):
+        with pytest.raises(ValueError):
+            transfer_curve(pat, **bad)
+    with pytest.raises(ValueError, match="8-bit"):
+        transfer_curve(pat.astype(np.float32), transfer="linear")
+
+
+def test_diamond_dmd_pairs_columns_with_alternate_row_offsets():
+    rng = np.random.default_rng(2)
+    drive = rng.random((6, 10, 3)).astype(np.float32)
+    out = dmd_layout(drive, layout="diamond")
+    assert np.array_equal(out[0, 0], out[0, 1]) and np.allclose(out[0, 0], 0.5 * (drive[0, 0] + drive[0, 1]))
+    assert np.array_equal(out[1, 1], out[1, 2]) and np.allclose(out[1, 1], 0.5 * (drive[1, 1] + drive[1, 2]))
+    assert not np.array_equal(out[1, 0], out[1, 1])
+    assert out[2:4].mean() == pytest.approx(drive[2:4].mean(), abs=0.05)  # light is conserved up to the edges
+    assert dmd_layout(drive, layout="square") is drive
+    with pytest.raises(ValueError, match="diamond"):
+        dmd_layout(drive, layout="hexagonal")
+    with pytest.raises(ValueError, match="even"):
+        dmd_layout(drive[:, :9], layout="diamond")
+
+
+# the decoder with lens distortion -------------------------------------------------------
+
+RIG = paper_rig()
+DRIVE = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
+
+
+def _distorted_rig(camera=DIST, projector=(0.0,) * 5):
+    return dataclasses.replace(RIG, camera=dataclasses.replace(RIG.camera, distortion=camera), projector=dataclasses.replace(RIG.projector, distortion=projector))
+
+
+@pytest.mark.parametrize("mode", ["reference", "calibrated"])
+def test_decoder_undistorts_the_camera(mode):
+    """A capture through a distorting camera lens, decoded with the rig file's coefficients,
+    gives the depth on the ideal pixel grid (resampling costs a little accuracy)."""
+    rig = _distorted_rig()
+    img, _, z = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1))
+    ref, _, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.0))
+    seen_img, seen_ref = distort_image(img, rig.camera), distort_image(ref, rig.camera)
+    r = decode(seen_img, rig=rig, params=DecoderParams(mode=mode), reference=decode_reference(seen_ref, rig=rig, params=DecoderParams()))
+    assert r.valid.mean() > 0.97
+    err = r.depth_m[r.valid] - z[r.valid]
+    assert np.sqrt(np.mean(err**2)) < 0.2e-3
+    naive = decode(seen_img, rig=RIG, params=DecoderParams(mode="calibrated"))  # ignoring the distortion
+    bad = naive.depth_m[naive.valid] - z[naive.valid]
+    assert np.sqrt(np.mean(bad**2)) > 5 * np.sqrt(np.mean(err**2))
+
+
+@pytest.mark.parametrize("mode", ["reference", "calibrated"])
+def test_decoder_handles_projector_distortion(mode):
+    """The DMD pattern leaves through a distorting projector lens: reference matching is exact
+    along rows in a rectified rig, calibrated triangulation undoes the distortion per column."""
+    rig = _distorted_rig(camera=(0.0,) * 5, projector=(-0.05, 0.02, 0.0, 0.0, 0.0))
+    img, col, z = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.2))
+    ref, _, _ = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.0))
+    r = decode(img, rig=rig, params=DecoderParams(mode=mode), reference=decode_reference(ref, rig=rig, params=DecoderParams()))
+    assert r.valid.mean() > 0.98
+    assert np.sqrt(np.mean((r.column_px[r.valid] - col[r.valid]) ** 2)) < 0.05  # DMD columns
+    # 0.03 px of column error in depth: dZ = Z^2 / (f_p B) du (the ideal rig's test uses 0.02 px;
+    # near the image ends the reference is extrapolated along its curved column map)
+    assert np.sqrt(np.mean((r.depth_m[r.valid] - z[r.valid]) ** 2)) < 0.03 * 1.2**2 / (rig.projector.focal_px * rig.baseline_m)
