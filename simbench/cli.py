@@ -253,7 +253,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--spp", type=int, default=16)
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--max-depth", type=int, default=6)
-    s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: a preset (ideal, minimal, paper) or a sensor TOML file (default: minimal)")
+    s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file (default: paper)")
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")

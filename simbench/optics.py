@@ -133,9 +133,11 @@ def distorted_projector_drive(drive: np.ndarray, intr) -> np.ndarray:
     """The ideal-pinhole texture that makes Mitsuba's projector emit like a projector whose lens
     has ``intr.distortion`` while its DMD shows ``drive``: texture(q) = drive(K D(K^-1 q)).
 
-    Nearest-neighbour sampling keeps DMD pixels sharp (the lens does not resample them).
+    Bilinear sampling: the texture's pixels are not the DMD's, and nearest-neighbour sampling
+    would move each DMD pixel edge by up to half a pixel (a column bias the decoder sees);
+    interpolating keeps every edge where the lens puts it, softened over one texel.
     """
-    return undistort_image(drive, intr, interpolation="nearest")
+    return undistort_image(drive, intr, interpolation="linear")
 
 
 def undistort_projector_columns(column_px: np.ndarray, row_norm_y: np.ndarray, intr, *, iterations: int = 8) -> np.ndarray:

@@ -40,9 +40,12 @@ def test_invalid_rig_field(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_render_decode_score_end_to_end(tmp_path, capsys, variant):
+@pytest.mark.parametrize("sensor, max_mae_mm", [("minimal", 0.3), ("paper", 1.0)])
+def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_mae_mm):
+    """The pipeline issue's bound with the minimal camera; with the physical paper model
+    (distortion in rig.toml, undistorted by decode) the error grows but stays sub-millimetre."""
     out = tmp_path / "wp"
-    assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(out), "--seed", "3"]) == 0
+    assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(out), "--seed", "3", "--sensor", sensor]) == 0
     for f in ("capture.png", "reference.png", "gt_depth.npy", "gt_depth.exr", "gt_column.npy", "gt_lit.npy", "rig.toml", "meta.json"):
         assert (out / f).is_file(), f
     meta = json.loads((out / "meta.json").read_text())
@@ -53,7 +56,8 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, variant):
     capsys.readouterr()
     assert main(["score", str(tmp_path / "d.npy"), "--gt", str(out / "gt_depth.npy"), "--column", str(tmp_path / "dbg" / "column.npy"), "--json"]) == 0
     m = json.loads(capsys.readouterr().out)
-    assert m["mae_mm"] < 0.3 and m["completeness"] > 0.99 and m["stripe_order_errors"] == 0
+    assert m["mae_mm"] < max_mae_mm and m["completeness"] > 0.99 and m["stripe_order_errors"] == 0
+    assert meta["sensor"]["name"] == sensor
     # the same seed renders the same capture, bit for bit
-    assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(tmp_path / "wp2"), "--seed", "3"]) == 0
+    assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(tmp_path / "wp2"), "--seed", "3", "--sensor", sensor]) == 0
     assert (out / "capture.png").read_bytes() == (tmp_path / "wp2" / "capture.png").read_bytes()

@@ -56,19 +56,13 @@ def absolute_column(
     return col.astype(np.float32, copy=False), n.astype(np.int32, copy=False)
 
 
-EXTRAPOLATION_FIT_PX = 64
-
-
-def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, max_extrapolation_px: float = 160.0) -> np.ndarray:
+def inverse_column_table(reference_column: np.ndarray, *, projector_width: int) -> np.ndarray:
     """Per row of a decoded reference, the sub-pixel x showing each integer projector column.
 
     Built once per reference so that matching a capture is a table look-up.  Reference pixels
-    whose column does not increase strictly along the row are left out.  Columns beyond the
-    part of the row the reference shows (a surface behind the reference plane, near the image
-    edge) are placed on the least-squares line of the row's last :data:`EXTRAPOLATION_FIT_PX`
-    pixels at that end - the reference is a plane, so its column map is linear along a row
-    for an ideal rectified rig, and smooth with lens distortion - up to
-    ``max_extrapolation_px`` beyond the row's ends; further out the table holds NaN.
+    whose column does not increase strictly along the row are left out.  Columns the row of the
+    reference does not show (a surface behind or before the reference plane, near the image
+    edge) hold NaN: :func:`simbench.decode.decode` triangulates those with the rig instead.
 
     Returns
     -------
@@ -95,31 +89,7 @@ def inverse_column_table(reference_column: np.ndarray, *, projector_width: int, 
     q = (c + np.arange(h)[:, None] * stride).ravel()
     xr = np.interp(q, vals + rows * stride, xs.astype(np.float64)).reshape(h, -1)
     inside = (c >= lo[:, None]) & (c <= hi[:, None])
-    # extrapolate each end along the line fitted to that end's last EXTRAPOLATION_FIT_PX pixels
-    # (the tangent there: exact for an ideal rig, close with lens distortion, whose column map
-    # curves along the row)
-    x_first = np.full(h, np.inf)
-    x_last = np.full(h, -np.inf)
-    np.minimum.at(x_first, rows, xs)
-    np.maximum.at(x_last, rows, xs)
-    ends = []
-    for near in (xs <= x_first[rows] + EXTRAPOLATION_FIT_PX, xs >= x_last[rows] - EXTRAPOLATION_FIT_PX):
-        rr, uu, xx = rows[near], vals[near], xs[near].astype(np.float64)
-        m = np.bincount(rr, minlength=h).astype(np.float64)
-        su, sx = np.bincount(rr, uu, h), np.bincount(rr, xx, h)
-        suu, sux = np.bincount(rr, uu * uu, h), np.bincount(rr, uu * xx, h)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = (m * sux - su * sx) / (m * suu - su * su)
-            b = (sx - a * su) / m
-        ends.append((a, b, m))
-    (a_lo, b_lo, m_lo), (a_hi, b_hi, m_hi) = ends
-    below = c < lo[:, None]
-    with np.errstate(invalid="ignore"):
-        line = np.where(below, a_lo[:, None] * c + b_lo[:, None], a_hi[:, None] * c + b_hi[:, None])
-        reach = np.where(below, (lo[:, None] - c) * np.abs(a_lo)[:, None], (c - hi[:, None]) * np.abs(a_hi)[:, None])
-        enough = np.where(below, m_lo[:, None], m_hi[:, None]) >= 16
-    outside_ok = ~inside & enough & (reach <= max_extrapolation_px)
-    table[:, :-1] = np.where(inside & (n[:, None] >= 2), xr, np.where(outside_ok, line, np.nan))
+    table[:, :-1] = np.where(inside & (n[:, None] >= 2), xr, np.nan)
     return table
 
 

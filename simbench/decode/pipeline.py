@@ -16,7 +16,7 @@ from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.pattern import check_sequence, code_sequence, window_positions
 from simbench.optics import undistort_image
-from simbench.rig import Rig, projector_column_at_depth
+from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
 __all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
 
@@ -431,7 +431,14 @@ def decode(
         if ref is not None:
             x_ref = match_reference(column, ref.inverse[rows])
             depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
+            # a column the reference row never shows (near the image's ends, for surfaces off
+            # the reference depth) cannot be matched: triangulate it with the calibrated rig
+            beyond = np.isnan(x_ref) & np.isfinite(column)
+            if beyond.any():
+                r_idx, c_idx = np.nonzero(beyond)
+                depth[beyond] = triangulate_columns(column[beyond], rig, rows=r_idx + rows.start, cols=c_idx).astype(np.float32)
             stages.put("reference_x", x_ref)
+            stages.put("triangulated", beyond)
         else:
             depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
         valid = valid_out[rows]

@@ -54,7 +54,7 @@ class RunConfig:
     """
 
     quick: bool = False
-    sensor: str = "minimal"
+    sensor: str = "paper"
     camera_scale: float = 1.0
     spp: int = 16
     max_depth: int = 6

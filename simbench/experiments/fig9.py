@@ -103,5 +103,5 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     trend = "grows" if np.all(np.diff(mean) > 0) else "does not grow monotonically"
     lines += ["", f"Our RMSE {trend} with depth over 0.9-1.4 m."]
     if cfg.sensor != "paper":
-        lines += ["", "**Caveat:** minimal camera model (noise only); the physical-sensor effects are not simulated yet."]
+        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD grid, defocus and distortion are left out."]
     return "\n".join(lines) + "\n"

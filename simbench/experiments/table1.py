@@ -113,12 +113,6 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "",
     ]
     lines += markdown_table(hdr, body("normalized"))
-    lines += ["", _SENSOR_CAVEAT if cfg.sensor != "paper" else ""]
+    if cfg.sensor != "paper":
+        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: colour crosstalk, the Bayer mosaic, the DMD grid, defocus and distortion are left out, so errors are expected below the paper's. No parameter was fitted to the paper."]
     return "\n".join(lines).rstrip() + "\n"
-
-
-_SENSOR_CAVEAT = (
-    "**Caveat:** the camera model is the minimal one (shot and read noise, 8-bit); colour crosstalk, the Bayer "
-    "mosaic, projector gamma and defocus (the physical-sensor issue) are left out, so our errors are expected to be "
-    "well below the paper's measured ones. The ratios show that gap; no parameter was fitted to the paper."
-)

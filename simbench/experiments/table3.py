@@ -113,7 +113,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
         "The Kinect and ToF columns are filled by the competitor-sensors issue; until then only the paper's values are shown.",
     ]
     if cfg.sensor != "paper":
-        lines += ["", "**Caveat:** minimal camera model (noise only); the physical-sensor effects are not simulated yet."]
+        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD grid, defocus and distortion are left out."]
     return "\n".join(lines) + "\n"
 
 
