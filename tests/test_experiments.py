@@ -84,7 +84,9 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
     path = write_thresholds(tmp_path / "t.toml", good, margin=0.25, command="t")
     assert check_thresholds(good, path) == []
     assert good["table1/white/paper/completeness"] > 0.99 and good["table1/white/paper/stripe_order_errors"] == 0
-    assert good["table1/red/normalized/completeness"] > 0.99 and good["table1/red/normalized/stripe_order_errors"] == 0
+    # under the paper sensor model the normalised decoder rescues the blue board the paper's loses
+    assert good["table1/blue/normalized/completeness"] > 0.99 and good["table1/blue/normalized/stripe_order_errors"] == 0
+    assert good["table1/blue/paper/completeness"] < 0.01
     worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
     worse = reproduce(["table1"], config=worse_cfg, out_dir=tmp_path / "worse", cache_dir=tmp_path / "cache", progress=quiet, command="t")
     failures = check_thresholds(worse, path)
