@@ -225,6 +225,10 @@ def _build(cls, table: dict, where: str, *, convert: dict | None = None):
     unknown = sorted(set(table) - set(allowed))
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {allowed}")
+    required = [f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    missing = [k for k in required if k not in table]
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {missing}")
     kwargs = dict(table)
     for k, fn in (convert or {}).items():
         if k in kwargs:

@@ -88,6 +88,8 @@ def test_bad_sensor_files_are_clear():
         sensor_from_dict({**base, "projector": {**base["projector"], "lens": {"f_number": 0}}})
     with pytest.raises(ValueError, match="crosstalk.*emva"):
         sensor_from_dict({**sensor_to_dict(get_sensor("minimal")), "spectral": {"crosstalk": True}})
+    with pytest.raises(ValueError, match=r"missing key\(s\) \['pixel_pitch_um'"):
+        sensor_from_dict({"camera": {"model": "emva", "qe": [0.5, 0.5, 0.5]}})
     with pytest.raises(ValueError, match="preset"):
         get_sensor("flea3")
     with pytest.raises(FileNotFoundError):
