@@ -211,8 +211,11 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     pos = np.clip(sig / step_px, 0.0, len(levels) - 1.0)
     lo = np.floor(pos).astype(np.int64)
     frac = (pos - lo).astype(np.float32)
+    used = np.bincount(lo.ravel(), minlength=len(levels) + 1)
     out = np.zeros_like(src)
     for k, s in enumerate(levels):
+        if used[k] == 0 and (k == 0 or used[k - 1] == 0):
+            continue  # no pixel interpolates from this level
         cur = src if s == 0.0 else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
         if cur.ndim == 2 and src.ndim == 3:
             cur = cur[..., None]

@@ -147,6 +147,14 @@ DEMOSAIC_METHODS = {"bilinear": "", "edge_aware": "_EA", "vng": "_VNG"}
 _CHANNEL = {"R": 0, "G": 1, "B": 2}
 
 
+def _opencv_bayer(pattern: str) -> str:
+    """OpenCV's name of a Bayer layout; ValueError listing the layouts otherwise."""
+    stem = CFA_PATTERNS.get(pattern)
+    if stem is None:
+        raise ValueError(f"unknown Bayer pattern {pattern!r}; valid: {[k for k in CFA_PATTERNS if k != 'none']}")
+    return stem
+
+
 def bayer_mosaic(img: np.ndarray, *, pattern: str) -> np.ndarray:
     """Keep, at each pixel, only the channel its colour filter passes.
 
@@ -159,8 +167,7 @@ def bayer_mosaic(img: np.ndarray, *, pattern: str) -> np.ndarray:
     -------
     ndarray, shape (H, W), same dtype
     """
-    if CFA_PATTERNS.get(pattern) is None:
-        raise ValueError(f"unknown Bayer pattern {pattern!r}; valid: {[k for k in CFA_PATTERNS if k != 'none']}")
+    _opencv_bayer(pattern)
     if img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"image must have shape (H, W, 3), got {img.shape}")
     raw = np.empty(img.shape[:2], dtype=img.dtype)
@@ -179,9 +186,7 @@ def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
 
     if method not in DEMOSAIC_METHODS:
         raise ValueError(f"unknown demosaic method {method!r}; valid: {list(DEMOSAIC_METHODS)}")
-    stem = CFA_PATTERNS.get(pattern)
-    if stem is None:
-        raise ValueError(f"unknown Bayer pattern {pattern!r}; valid: {[k for k in CFA_PATTERNS if k != 'none']}")
+    stem = _opencv_bayer(pattern)
     if method == "vng" and raw.dtype != np.uint8:
         raise ValueError("VNG demosaicing takes 8-bit images only")
     return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))

@@ -127,6 +127,9 @@ def physical_scene(scene: SceneSpec, sensor: SensorModel) -> SceneSpec:
     return dataclasses.replace(scene, rig=rig, camera_lens=lens, ambient_rgb=ambient)
 
 
+PROJECTOR_DEPTH_STRIDE = 4  # projector pixels per depth sample for the defocus map
+
+
 def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None) -> np.ndarray:
     """What Mitsuba's ideal projector must show so that the scene is lit as by the modelled
     one: transfer curve, black level, DMD layout, defocus (by the depth each projector pixel
@@ -143,15 +146,14 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
     return np.ascontiguousarray(drive, dtype=np.float32)
 
 
-PROJECTOR_DEPTH_STRIDE = 4  # projector pixels per depth sample for the defocus map
-
 
 def _cached(cache: RenderCache | None, kind: str, parts: dict, make):
     return make() if cache is None else cache.get_or_make(kind, parts, make)
 
 
-def _light_seed(seed: int, p: int) -> int:
-    return int(np.random.SeedSequence([int(seed), p]).generate_state(1)[0])
+def _ambient_seed(seed: int) -> int:
+    """The ambient render's seed, independent of the projector render's."""
+    return int(np.random.SeedSequence([int(seed), 3]).generate_state(1)[0])
 
 
 def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
@@ -190,7 +192,7 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive, seed=seed, **kw)
         if ambient:
-            q = q + cached_radiance(scene, None, seed=_light_seed(seed, 3), **kw)
+            q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
     else:
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
@@ -199,7 +201,7 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
             # the same seed for each primary: the sum has one render's sampling pattern
             r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
             if ambient:
-                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_light_seed(seed, 3), **kw)
+                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
     return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
 

@@ -101,10 +101,8 @@ def crosstalk_matrix(rgb) -> np.ndarray:
     """K[c, p]: camera channel c's response to projector primary p reflected by a diffuse
     surface of linear RGB reflectance ``rgb``, relative to channel p's response to primary p
     on a perfect white (module docstring).  Shape (3, 3), rows = camera R, G, B."""
-    v = np.asarray(rgb, dtype=np.float64)
-    if v.shape != (3,) or not np.all((v >= 0) & (v <= 1)):
-        raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {rgb!r}")
-    return _crosstalk_matrix(tuple(float(x) for x in v)).copy()
+    # a hashable key for the cache; reflectance_spectrum validates it
+    return _crosstalk_matrix(tuple(float(x) for x in np.ravel(rgb))).copy()
 
 
 @lru_cache(maxsize=256)
@@ -156,6 +154,12 @@ def primary_irradiance_w_m2(white_lux: float) -> np.ndarray:
     """
     if not white_lux > 0:
         raise ValueError(f"white_lux must be > 0, got {white_lux}")
+    return white_lux * _watts_per_lux()
+
+
+@lru_cache(maxsize=1)
+def _watts_per_lux() -> np.ndarray:
+    """W/m^2 of each primary per lux of the D65-balanced white (see :func:`primary_irradiance_w_m2`)."""
     colour = _colour()
     cmfs = np.asarray(colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64)
     xy = np.asarray(colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"], dtype=np.float64)
@@ -166,4 +170,6 @@ def primary_irradiance_w_m2(white_lux: float) -> np.ndarray:
     lum = mix * xyz[1]  # luminance share of each primary
     share = lum / lum.sum()
     efficacy = 683.0 * xyz[1] / prim.sum(axis=0)  # lm/W of each LED spectrum (5 nm grid)
-    return white_lux * share / efficacy
+    out = share / efficacy
+    out.setflags(write=False)
+    return out
