@@ -29,6 +29,7 @@ __all__ = [
     "render_radiance",
     "GroundTruth",
     "ground_truth",
+    "trace_rays",
 ]
 
 # Mitsuba 3.6+ kernels use llvm.minimum/maximum intrinsics; LLVM <= 15 cannot select them and
@@ -392,6 +393,35 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
         object_id=np.where(hit, obj, -1).reshape(h, w).astype(np.int16),
         lit=lit.reshape(h, w),
     )
+
+
+def trace_rays(scene: SceneSpec, dirs: np.ndarray) -> dict[str, np.ndarray]:
+    """First hits of rays from the camera centre along ``dirs`` (camera frame), for sensors
+    that need more than one ray per pixel (the ToF camera's supersampled footprints).
+
+    Parameters
+    ----------
+    dirs : ndarray, shape (N, 3)
+        Ray directions (normalised here).
+
+    Returns
+    -------
+    dict of ndarray: ``p`` (N, 3) hit points (m), ``n`` (N, 3) shading normals, ``hit`` (N,)
+    bool, ``occluded`` (N,) bool (the projector cannot see the hit), ``object_id`` (N,) int32
+    (index into ``scene.objects``, -1 = miss).
+    """
+    import mitsuba as mi
+
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(dirs)) or np.any(np.linalg.norm(dirs, axis=1) == 0):
+        raise ValueError("ray directions must be finite and non-zero")
+    d, rig = mitsuba_scene(scene, None, spp=1, max_depth=1)
+    mscene = _load(mi, d, scene)
+    unit = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+    key_to_index = {f"obj{i:03d}": i for i in range(len(scene.objects))}
+    trace = _trace_vectorised if _is_jit(mi.variant()) else _trace_scalar
+    p, n, hit, occluded, obj = trace(mi, mscene, unit, np.asarray(rig.position_m), key_to_index)
+    return {"p": p, "n": n, "hit": hit, "occluded": occluded, "object_id": obj}
 
 
 def _trace_vectorised(mi, mscene, dirs, proj_pos, key_to_index):

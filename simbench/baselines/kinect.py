@@ -1,0 +1,356 @@
+"""A Kinect-v1-like speckle structured-light sensor, simulated the way the device works.
+
+Device (numbers from the literature where they exist, otherwise stated assumptions):
+
+- An 830 nm laser behind a diffractive element projects a fixed pseudo-random dot pattern: a
+  3x3 tiling of one 211x165-position tile, each tile with a brighter centre dot (the pattern's
+  structure as reverse-engineered from IR captures; position count and ~10 % lit share are
+  assumptions of that order).  Here it is Mitsuba's ``projector`` emitter textured with the dots
+  (each dot one texel of a 3x3 cell, so a dot is smaller than a camera pixel), 75 mm to the
+  camera's +x (baseline: Khoshelham & Oude Elberink 2012).
+- A monochrome IR camera, 640x480, f = 571 px (the competitor issue; Khoshelham & Oude Elberink
+  2012 calibrate ~580 px), Aptina MT9M001 5.2 um pixels binned 2x2 (datasheet (recalled)).
+- The scene's NIR reflectance is taken as the mean of its RGB reflectance (assumption: no NIR
+  spectra are known for the scene materials); the 830 nm band-pass filter removes ambient light.
+- Laser speckle: coherent light gives each camera pixel a multiplicative speckle intensity,
+  integrated over ``M = P (pixel pitch / speckle grain)^2`` grains of diameter ``2.44 lambda N``,
+  with ``P = 2`` polarisation states for depolarising matte surfaces (Goodman, *Speckle
+  Phenomena in Optics*, subjective speckle): gamma distributed with mean 1 and variance ``1/M``.  It is frozen to the surface (the same in every frame of a static scene) and
+  decorrelates between the reference plane and the scene, which is what limits the matching.
+  This is the speckle and detector noise Landau et al. (2015) identify; their fitted values
+  could not be re-checked here, so the grain statistics come from the optics instead.
+- Detector: Poisson shot noise, Gaussian read noise, full well and a 10-bit ADC (EMVA 1288); a
+  fixed exposure set once so that the reference plane's brightest dots reach 70 % of the full
+  well (assumption), kept for every capture (so returns fall off as 1/Z^2).
+
+Matching as the device does it: a 9x9 normalised cross-correlation window along rows against
+the reference image recorded at a known depth, 64 integer disparity positions, parabolic
+sub-pixel refinement quantised to 1/8 px, 11-bit disparity codes (2047 = invalid), depth from
+``1/Z = 1/Z_ref + d / (f B)``, valid over 0.8-4 m.  Pixels are invalid where the window has no
+dot contrast (projector shadow), the best correlation is weak, a second peak nearly equals it
+(ambiguous), or the disparity falls outside the search range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from simbench.rig import Intrinsics, Rig
+from simbench.scene import SceneSpec, reference_scene
+
+__all__ = ["KinectModel", "KinectCalibration", "KinectDepth", "kinect_rig", "dot_pattern", "device_scene", "speckle", "record_ir", "match", "calibrate", "capture"]
+
+
+@dataclass(frozen=True)
+class KinectModel:
+    """Kinect-v1-like device parameters (module docstring for their sources)."""
+
+    width_px: int = 640
+    height_px: int = 480
+    focal_px: float = 571.0
+    baseline_m: float = 0.075
+    # assumption: the factory reference plane; chosen so the 64 disparity positions centre on
+    # the 0.8-4 m range (1/Z_ref = mean of 1/0.8 and 1/4)
+    reference_depth_m: float = 4.0 / 3.0
+    min_depth_m: float = 0.8
+    max_depth_m: float = 4.0
+    window_px: int = 9
+    disparities: int = 64
+    subpixel_steps: int = 8
+    code_bits: int = 11
+    tile_wh: tuple[int, int] = (211, 165)
+    tiles_wh: tuple[int, int] = (3, 3)
+    dot_fraction: float = 0.10  # assumption: ~10 % of the positions lit (order of the real pattern)
+    centre_gain: float = 3.0  # assumption: the tile's centre dot is ~3x brighter
+    texels_per_dot: int = 4
+    # assumption: the 633 x 495 positions spread over a wider field than the camera's 640 x 480
+    # (the projector must light the whole view at every depth of the range, and the factory
+    # reference must be lit edge to edge): 1.25 camera px per position
+    dot_pitch_px: float = 1.25
+    # assumption: each diffracted spot is a Gaussian of sigma 0.4 position (FWHM ~ one camera
+    # pixel at any depth: spot and pattern scale together with distance)
+    dot_sigma: float = 0.4
+    pattern_seed: int = 2010
+    wavelength_nm: float = 830.0
+    f_number: float = 2.0  # assumption: a fast small-format IR lens
+    pixel_pitch_um: float = 10.4  # MT9M001 5.2 um, 2x2 binned (datasheet (recalled))
+    # matte paint and plaster depolarise: two independent speckle patterns add (Goodman)
+    polarisation_states: int = 2
+    psf_sigma_px: float = 0.5  # assumption: lens blur + pixel crosstalk, Gaussian sigma
+    full_well_e: float = 20000.0  # assumption: binned MT9M001 pixel
+    read_noise_e: float = 10.0  # assumption
+    bits: int = 10  # MT9M001 ADC (datasheet (recalled))
+    exposure_fraction: float = 0.7
+    speckle: bool = True
+    noise: bool = True
+    min_ncc: float = 0.5  # assumption: below it the match is not trusted
+    ambiguity_ratio: float = 0.9  # assumption: second peak >= 0.9 x best = ambiguous
+    speckle_area_px: int = 40  # assumption: blobs below ~ half a 9x9 window are outliers
+    min_contrast_e: float = 200.0  # assumption: window std below this (e-) = no dots (shadow)
+
+    def __post_init__(self) -> None:
+        for name in ("focal_px", "baseline_m", "reference_depth_m", "min_depth_m", "max_depth_m", "wavelength_nm", "f_number", "pixel_pitch_um", "full_well_e"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise ValueError(f"kinect {name} must be a number > 0, got {v!r}")
+        if not self.min_depth_m < self.max_depth_m:
+            raise ValueError("kinect min_depth_m must be below max_depth_m")
+        if self.window_px < 3 or self.window_px % 2 == 0:
+            raise ValueError(f"kinect window_px must be odd and >= 3, got {self.window_px}")
+        if self.disparities < 3:
+            raise ValueError(f"kinect disparities must be >= 3, got {self.disparities}")
+        if self.disparities * self.subpixel_steps >= 1 << self.code_bits:
+            raise ValueError(f"{self.disparities} disparities x {self.subpixel_steps} steps do not fit {self.code_bits}-bit codes")
+        if not 0 < self.dot_fraction <= 1:
+            raise ValueError(f"kinect dot_fraction must be in (0, 1], got {self.dot_fraction}")
+
+    @property
+    def camera(self) -> Intrinsics:
+        return Intrinsics.centred(self.width_px, self.height_px, self.focal_px)
+
+    @property
+    def fb_px_m(self) -> float:
+        """f * B (px m): disparity (px) per unit inverse depth (1/m)."""
+        return self.focal_px * self.baseline_m
+
+    @property
+    def first_disparity_px(self) -> int:
+        """The smallest searched disparity; the 64 positions cover 0.8-4 m."""
+        lo = self.fb_px_m * (1 / self.max_depth_m - 1 / self.reference_depth_m)
+        hi = self.fb_px_m * (1 / self.min_depth_m - 1 / self.reference_depth_m)
+        return int(math.floor((lo + hi) / 2 - (self.disparities - 1) / 2))
+
+    @property
+    def speckle_grains_per_pixel(self) -> float:
+        grain_um = 2.44 * self.wavelength_nm * 1e-3 * self.f_number
+        return max(1.0, self.polarisation_states * (self.pixel_pitch_um / grain_um) ** 2)
+
+
+def kinect_rig(model: KinectModel) -> Rig:
+    """IR camera and dot projector (one texel = ``1/texels_per_dot`` of a dot position)."""
+    t = model.texels_per_dot
+    w = model.tile_wh[0] * model.tiles_wh[0] * t
+    h = model.tile_wh[1] * model.tiles_wh[1] * t
+    # the dot positions a fixed angle apart (dot_pitch_px camera pixels at any depth)
+    projector = Intrinsics.centred(w, h, model.focal_px / model.dot_pitch_px * t)
+    return Rig(camera=model.camera, projector=projector, position_m=(model.baseline_m, 0.0, 0.0), name="kinect_v1")
+
+
+def dot_pattern(model: KinectModel) -> np.ndarray:
+    """The projector's dot texture, shape (Hp, Wp), float32 in [0, 1] (seeded)."""
+    tw, th = model.tile_wh
+    rng = np.random.default_rng(model.pattern_seed)
+    tile = (rng.random((th, tw)) < model.dot_fraction).astype(np.float32) / model.centre_gain
+    tile[th // 2, tw // 2] = 1.0
+    dots = np.tile(tile, (model.tiles_wh[1], model.tiles_wh[0]))
+    t = model.texels_per_dot
+    tex = np.zeros((dots.shape[0] * t, dots.shape[1] * t), np.float32)
+    tex[t // 2 :: t, t // 2 :: t] = dots
+    if model.dot_sigma > 0:
+        sigma = model.dot_sigma * t
+        tex = cv2.GaussianBlur(tex, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
+        tex *= 2 * np.pi * sigma**2  # peak of an isolated dot stays its value
+    # a black border: Mitsuba's texture lookup clamps beyond the frustum, which would smear
+    # the edge texels into row-invariant streaks outside it
+    tex[[0, -1], :] = 0.0
+    tex[:, [0, -1]] = 0.0
+    return np.clip(tex, 0.0, 1.0)
+
+
+def device_scene(scene: SceneSpec, model: KinectModel) -> SceneSpec:
+    """``scene`` seen by the Kinect: its rig, no lens model, no ambient (IR band-pass)."""
+    return dataclasses.replace(scene, rig=kinect_rig(model), camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0), projector_scale=1.0, reference_depth_m=model.reference_depth_m)
+
+
+def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng) -> np.ndarray:
+    """Integrated speckle intensity per pixel: gamma(M, 1/M), mean 1, variance 1/M."""
+    m = float(grains_per_pixel)
+    return np.random.default_rng(rng).gamma(m, 1.0 / m, size=shape).astype(np.float32)
+
+
+def record_ir(radiance: np.ndarray, *, model: KinectModel, electrons_per_radiance: float, speckle_rng, rng) -> np.ndarray:
+    """IR radiance (H, W) -> recorded frame (H, W) uint16 DN: optics blur, speckle, EMVA noise."""
+    rad = np.asarray(radiance, dtype=np.float32)
+    if rad.shape != (model.height_px, model.width_px):
+        raise ValueError(f"IR radiance must have shape {(model.height_px, model.width_px)}, got {rad.shape}")
+    if model.psf_sigma_px > 0:
+        rad = cv2.GaussianBlur(rad, (0, 0), model.psf_sigma_px, borderType=cv2.BORDER_REFLECT)
+    if model.speckle:
+        rad = rad * speckle(rad.shape, grains_per_pixel=model.speckle_grains_per_pixel, rng=speckle_rng)
+    mean_e = np.clip(rad, 0, None).astype(np.float64) * electrons_per_radiance
+    if model.noise:
+        gen = np.random.default_rng(rng)
+        e = gen.poisson(np.minimum(mean_e, 1e9)).astype(np.float64) + gen.normal(0.0, model.read_noise_e, mean_e.shape)
+    else:
+        e = mean_e
+    max_dn = (1 << model.bits) - 1
+    return np.clip(np.rint(np.minimum(e, model.full_well_e) * max_dn / model.full_well_e), 0, max_dn).astype(np.uint16)
+
+
+@dataclass(frozen=True)
+class KinectCalibration:
+    """The factory calibration: the recorded reference image at ``reference_depth_m`` and the
+    fixed exposure (electrons per unit rendered radiance)."""
+
+    reference: np.ndarray
+    electrons_per_radiance: float
+
+
+@dataclass(frozen=True)
+class KinectDepth:
+    """Matching output at IR-camera pixels.
+
+    depth_m : (H, W) float32, NaN invalid; disparity_px : (H, W) float32, quantised to
+    1/8 px, NaN invalid; code : (H, W) uint16 11-bit disparity code (2047 invalid);
+    ncc : (H, W) float32 best correlation; valid : (H, W) bool.
+    """
+
+    depth_m: np.ndarray
+    disparity_px: np.ndarray
+    code: np.ndarray
+    ncc: np.ndarray
+    valid: np.ndarray
+    second: np.ndarray = None
+
+
+def _box_stats(img: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
+    mean = cv2.boxFilter(img, cv2.CV_32F, (w, w), borderType=cv2.BORDER_REFLECT)
+    sq = cv2.boxFilter(img * img, cv2.CV_32F, (w, w), borderType=cv2.BORDER_REFLECT)
+    return mean, np.sqrt(np.maximum(sq - mean * mean, 0.0))
+
+
+def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> KinectDepth:
+    """Block matching of an IR frame against the reference (module docstring).
+
+    Parameters
+    ----------
+    ir, reference : ndarray, shape (H, W), integer DN or float
+    """
+    h, w = model.height_px, model.width_px
+    for name, a in (("IR frame", ir), ("reference", reference)):
+        if np.shape(a) != (h, w):
+            raise ValueError(f"{name} must have shape {(h, w)}, got {np.shape(a)}")
+    img = np.asarray(ir, dtype=np.float32)
+    ref = np.asarray(reference, dtype=np.float32)
+    if not (np.all(np.isfinite(img)) and np.all(np.isfinite(ref))):
+        raise ValueError("IR frame and reference must be finite")
+    win = model.window_px
+    mi, si = _box_stats(img, win)
+    mr, sr = _box_stats(ref, win)
+    inv_si = np.where(si > 0, 1.0 / np.maximum(si, 1e-12), 0.0).astype(np.float32)
+    ref_ok = sr > 0
+    inv_sr = np.where(ref_ok, 1.0 / np.maximum(sr, 1e-12), 0.0).astype(np.float32)
+    d0 = model.first_disparity_px
+    n = model.disparities
+    scores = np.full((n, h, w), -1.0, np.float32)
+    for k in range(n):
+        s = d0 + k  # the capture's pixel x matches the reference's x - s
+        xa, xb = max(s, 0), w + min(s, 0)
+        if xb - xa < win:
+            continue
+        prod = img[:, xa:xb] * ref[:, xa - s : xb - s]
+        num = cv2.boxFilter(prod, cv2.CV_32F, (win, win), borderType=cv2.BORDER_REFLECT)
+        num -= mi[:, xa:xb] * mr[:, xa - s : xb - s]
+        num *= inv_si[:, xa:xb]
+        num *= inv_sr[:, xa - s : xb - s]
+        scores[k, :, xa:xb] = num
+    best = np.argmax(scores, axis=0)
+    rows, cols = np.indices((h, w))
+    c0 = scores[best, rows, cols]
+    inner = (best > 0) & (best < n - 1)
+    cm = scores[np.maximum(best - 1, 0), rows, cols]
+    cp = scores[np.minimum(best + 1, n - 1), rows, cols]
+    # Gaussian (log-parabola) peak fit: the correlation peak of ~1 px dots is narrower than
+    # the 1-px sampling, where a plain parabola locks onto integers (bias up to ~0.2 px)
+    lm, l0, lp = (np.log(np.maximum(c, 1e-3)) for c in (cm, c0, cp))
+    curv = lm - 2 * l0 + lp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        delta = np.where(inner & (curv < 0), 0.5 * (lm - lp) / curv, 0.0)
+    delta = np.clip(delta, -0.5, 0.5)
+    # the second-best peak away from the best one (ambiguity)
+    for off in (-1, 0, 1):
+        idx = np.clip(best + off, 0, n - 1)
+        scores[idx, rows, cols] = -1.0
+    second = scores.max(axis=0)
+    steps = model.subpixel_steps
+    code = np.rint((best + delta) * steps).astype(np.int64)
+    invalid_code = (1 << model.code_bits) - 1
+    disparity = d0 + code / steps
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = 1.0 / (1.0 / model.reference_depth_m + disparity / model.fb_px_m)
+        contrast_e = si * (model.full_well_e / ((1 << model.bits) - 1))
+        valid = (
+            inner
+            & (c0 >= model.min_ncc)
+            & (second < model.ambiguity_ratio * c0)
+            & (contrast_e >= model.min_contrast_e)
+            & (depth >= model.min_depth_m)
+            & (depth <= model.max_depth_m)
+        )
+    border = win // 2
+    valid[:border] = valid[-border:] = False
+    # only where the reference holds every candidate window: elsewhere the true match may lie
+    # outside the reference and a wrong one win (the real device's invalid band at the side)
+    x_lo = border + d0 + n - 1
+    x_hi = w - 1 - border + d0
+    valid[:, : max(x_lo, border)] = False
+    valid[:, min(x_hi, w - 1 - border) + 1 :] = False
+    # outlier removal as stereo matchers do it (OpenCV filterSpeckles): connected regions of
+    # consistent disparity smaller than speckle_area_px are wrong matches, not surfaces
+    if model.speckle_area_px > 0:
+        codes = np.where(valid, code, -1).astype(np.int16)
+        cv2.filterSpeckles(codes, -1, model.speckle_area_px, steps)
+        valid &= codes >= 0
+    return KinectDepth(
+        depth_m=np.where(valid, depth, np.nan).astype(np.float32),
+        disparity_px=np.where(valid, disparity, np.nan).astype(np.float32),
+        code=np.where(valid, code, invalid_code).astype(np.uint16),
+        ncc=c0.astype(np.float32),
+        valid=valid,
+        second=second,
+    )
+
+
+def _ir(radiance_rgb: np.ndarray) -> np.ndarray:
+    # NIR reflectance = mean of the RGB reflectances (module docstring)
+    return np.asarray(radiance_rgb, dtype=np.float32).mean(axis=2)
+
+
+def _render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, cache) -> np.ndarray:
+    from simbench.simulate import cached_radiance
+
+    drive = np.repeat(dot_pattern(model)[..., None], 3, axis=2)
+    return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, cache=cache))
+
+
+def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, cache=None, albedo: float = 0.8) -> KinectCalibration:
+    """Record the factory reference: a white plane (``albedo``) at ``reference_depth_m``; the
+    exposure is set so that its brightest dots (99.9th percentile) reach ``exposure_fraction``
+    of the full well.  Seeds: render ``seed``; speckle and noise derived from it."""
+    from simbench.scene import SceneObject
+
+    placeholder = SceneSpec(name="kinect_reference", rig=kinect_rig(model), objects=(SceneObject("plane", "p", (("center_m", (0.0, 0.0, 1.0)), ("size_m", (1.0, 1.0)))),))
+    ref_scene = reference_scene(device_scene(placeholder, model), albedo=albedo)
+    rad = _render(ref_scene, model, spp=spp, seed=seed, max_depth=max_depth, cache=cache)
+    blurred = cv2.GaussianBlur(rad, (0, 0), model.psf_sigma_px) if model.psf_sigma_px > 0 else rad
+    peak = float(np.percentile(blurred, 99.9))
+    if not peak > 0:
+        raise ValueError("the Kinect reference render is dark: no dots reached the camera")
+    k = model.exposure_fraction * model.full_well_e / peak
+    seq = np.random.SeedSequence([int(seed), 1])
+    speckle_seed, noise_seed = (int(s.generate_state(1)[0]) for s in seq.spawn(2))
+    ref = record_ir(rad, model=model, electrons_per_radiance=k, speckle_rng=speckle_seed, rng=noise_seed)
+    return KinectCalibration(reference=ref, electrons_per_radiance=k)
+
+
+def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, cache=None) -> list[np.ndarray]:
+    """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
+    frozen to the static scene, derives from it) recorded once per noise seed."""
+    rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, cache=cache)
+    speckle_seed = int(np.random.SeedSequence([int(seed), 2]).generate_state(1)[0])
+    return [record_ir(rad, model=model, electrons_per_radiance=calibration.electrons_per_radiance, speckle_rng=speckle_seed, rng=s) for s in noise_seeds]
