@@ -215,7 +215,16 @@ class KinectDepth:
     code: np.ndarray
     ncc: np.ndarray
     valid: np.ndarray
-    second: np.ndarray = None
+
+
+def _parallel(fill, n: int) -> None:
+    """Run ``fill(j)`` for ``j`` in ``range(n)`` on ``n`` threads (OpenCV and NumPy release the
+    GIL on whole-image operations); each writes its own outputs, so the result does not depend
+    on the scheduling."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=n) as pool:
+        list(pool.map(fill, range(n)))
 
 
 def _box_stats(img: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -247,21 +256,50 @@ def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> Kinec
     inv_sr = np.where(ref_ok, 1.0 / np.maximum(sr, 1e-12), 0.0).astype(np.float32)
     d0 = model.first_disparity_px
     n = model.disparities
-    scores = np.full((n, h, w), -1.0, np.float32)
-    for k in range(n):
-        s = d0 + k  # the capture's pixel x matches the reference's x - s
-        xa, xb = max(s, 0), w + min(s, 0)
-        if xb - xa < win:
-            continue
-        prod = img[:, xa:xb] * ref[:, xa - s : xb - s]
-        num = cv2.boxFilter(prod, cv2.CV_32F, (win, win), borderType=cv2.BORDER_REFLECT)
-        num -= mi[:, xa:xb] * mr[:, xa - s : xb - s]
-        num *= inv_si[:, xa:xb]
-        num *= inv_sr[:, xa - s : xb - s]
-        scores[k, :, xa:xb] = num
-    best = np.argmax(scores, axis=0)
-    rows, cols = np.indices((h, w))
-    c0 = scores[best, rows, cols]
+    border = win // 2
+    # only pixels whose every candidate window lies inside the reference are matched:
+    # elsewhere the true match may be missing and a wrong one win (the real device's invalid
+    # band at the image side)
+    x_lo = max(border + d0 + n - 1, border)
+    x_hi = min(w - 1 - border + d0, w - 1 - border)
+    if x_hi < x_lo:
+        raise ValueError("the disparity search range is wider than the image")
+    cols_c = slice(x_lo, x_hi + 1)
+    wc = x_hi + 1 - x_lo
+    scores = np.empty((n, h, wc), np.float32)
+    img_c, inv_si_c = img[:, cols_c], inv_si[:, cols_c]
+    p_c = (mi * inv_si)[:, cols_c]
+    q = mr * inv_sr
+
+    halves = (range(0, n, 2), range(1, n, 2))
+    bests = [np.full((h, wc), -np.inf, np.float32) for _ in halves]
+    idxs = [np.zeros((h, wc), np.int64) for _ in halves]
+
+    def fill(j: int) -> None:
+        best, idx = bests[j], idxs[j]
+        mask = np.empty((h, wc), bool)
+        tmp = np.empty((h, wc), np.float32)
+        for k in halves[j]:
+            s = d0 + k  # the capture's pixel x matches the reference's x - s
+            rs = slice(x_lo - s, x_hi + 1 - s)
+            # box filtering the product over the full image height keeps OpenCV's border
+            # handling identical to the statistics above
+            num = cv2.boxFilter(cv2.multiply(img_c, ref[:, rs]), cv2.CV_32F, (win, win), borderType=cv2.BORDER_REFLECT)
+            # (box(I R) - mean_I mean_R) / (sigma_I sigma_R) = box(I R) a b - (mean_I a)(mean_R b)
+            cv2.multiply(inv_si_c, inv_sr[:, rs], dst=tmp)
+            cv2.multiply(num, tmp, dst=num)
+            cv2.multiply(p_c, q[:, rs], dst=tmp)
+            cv2.subtract(num, tmp, dst=scores[k])
+            np.greater(scores[k], best, out=mask)  # ascending k: ties keep the smaller index
+            np.copyto(best, scores[k], where=mask)
+            np.copyto(idx, k, where=mask)
+
+    _parallel(fill, 2)
+    # merge the two halves; on a tie the smaller disparity index wins
+    take_odd = (bests[1] > bests[0]) | ((bests[1] == bests[0]) & (idxs[1] < idxs[0]))
+    c0 = np.where(take_odd, bests[1], bests[0])
+    best = np.where(take_odd, idxs[1], idxs[0])
+    rows, cols = np.indices((h, wc))
     inner = (best > 0) & (best < n - 1)
     cm = scores[np.maximum(best - 1, 0), rows, cols]
     cp = scores[np.minimum(best + 1, n - 1), rows, cols]
@@ -274,32 +312,34 @@ def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> Kinec
     delta = np.clip(delta, -0.5, 0.5)
     # the second-best peak away from the best one (ambiguity)
     for off in (-1, 0, 1):
-        idx = np.clip(best + off, 0, n - 1)
-        scores[idx, rows, cols] = -1.0
+        scores[np.clip(best + off, 0, n - 1), rows, cols] = -1.0
     second = scores.max(axis=0)
     steps = model.subpixel_steps
-    code = np.rint((best + delta) * steps).astype(np.int64)
-    invalid_code = (1 << model.code_bits) - 1
-    disparity = d0 + code / steps
+    code_c = np.rint((best + delta) * steps).astype(np.int64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        depth = 1.0 / (1.0 / model.reference_depth_m + disparity / model.fb_px_m)
-        contrast_e = si * (model.full_well_e / ((1 << model.bits) - 1))
-        valid = (
+        disp_c = d0 + code_c / steps
+        depth_c = 1.0 / (1.0 / model.reference_depth_m + disp_c / model.fb_px_m)
+        contrast_e = si[:, cols_c] * (model.full_well_e / ((1 << model.bits) - 1))
+        ok = (
             inner
             & (c0 >= model.min_ncc)
             & (second < model.ambiguity_ratio * c0)
             & (contrast_e >= model.min_contrast_e)
-            & (depth >= model.min_depth_m)
-            & (depth <= model.max_depth_m)
+            & (depth_c >= model.min_depth_m)
+            & (depth_c <= model.max_depth_m)
         )
-    border = win // 2
-    valid[:border] = valid[-border:] = False
-    # only where the reference holds every candidate window: elsewhere the true match may lie
-    # outside the reference and a wrong one win (the real device's invalid band at the side)
-    x_lo = border + d0 + n - 1
-    x_hi = w - 1 - border + d0
-    valid[:, : max(x_lo, border)] = False
-    valid[:, min(x_hi, w - 1 - border) + 1 :] = False
+    ok[:border] = ok[h - border :] = False
+    valid = np.zeros((h, w), bool)
+    valid[:, cols_c] = ok
+    code = np.zeros((h, w), np.int64)
+    code[:, cols_c] = code_c
+    disparity = np.full((h, w), np.nan)
+    disparity[:, cols_c] = disp_c
+    depth = np.full((h, w), np.nan)
+    depth[:, cols_c] = depth_c
+    ncc = np.full((h, w), np.nan, np.float32)
+    ncc[:, cols_c] = c0
+    invalid_code = (1 << model.code_bits) - 1
     # outlier removal as stereo matchers do it (OpenCV filterSpeckles): connected regions of
     # consistent disparity smaller than speckle_area_px are wrong matches, not surfaces
     if model.speckle_area_px > 0:
@@ -310,9 +350,8 @@ def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> Kinec
         depth_m=np.where(valid, depth, np.nan).astype(np.float32),
         disparity_px=np.where(valid, disparity, np.nan).astype(np.float32),
         code=np.where(valid, code, invalid_code).astype(np.uint16),
-        ncc=c0.astype(np.float32),
+        ncc=ncc,
         valid=valid,
-        second=second,
     )
 
 

@@ -23,7 +23,9 @@ from simbench.projector import transfer_curve
 from simbench.sensor import simple_camera
 from simbench.synthetic import synthetic_plane_capture
 
-__all__ = ["benchmark_inputs", "run_decode_benchmark"]
+__all__ = ["benchmark_inputs", "run_decode_benchmark", "competitor_inputs", "BENCH_DEVICES"]
+
+BENCH_DEVICES = ("proposed", "kinect", "tof")
 
 
 def benchmark_inputs(*, seed: int = 0):
@@ -40,20 +42,81 @@ def benchmark_inputs(*, seed: int = 0):
     return capture, decode_reference(reference, rig=rig, params=params), rig, params
 
 
-def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2) -> dict:
-    """Time :func:`simbench.decode.decode`; returns median/min/max in ms and the set-up."""
+def competitor_inputs(device: str, *, seed: int = 0):
+    """(model, raw frame, calibration) of a competitor looking at a plane at 1.1 m, made in
+    numpy without the renderer (deterministic for a seed).
+
+    Kinect: the dot texture box-resampled onto the camera grid (the reference at its depth,
+    the capture shifted by the plane's disparity), with speckle and detector noise.  ToF: the
+    four samples of a plane's phasor with shot noise.
+    """
+    from simbench import baselines
+    from simbench.baselines import kinect, tof
+
+    model = baselines.get_device(device)
+    rng = np.random.default_rng(seed)
+    if device == "kinect":
+        tex = kinect.dot_pattern(model)
+        cam = model.camera
+        scale = model.texels_per_dot * model.dot_pitch_px  # texels per camera pixel
+        cu, cv = (tex.shape[1] - 1) / 2, (tex.shape[0] - 1) / 2
+
+        def view(shift_px: float) -> np.ndarray:
+            # x_tex = scale * (x - cx - shift) + cu: the pattern displaced by shift_px
+            xs = (np.arange(cam.width_px) - cam.cx_px - shift_px) * scale + cu
+            ys = (np.arange(cam.height_px) - cam.cy_px) * scale + cv
+            mx, my = np.meshgrid(xs.astype(np.float32), ys.astype(np.float32))
+            blurred = cv2.GaussianBlur(tex, (0, 0), scale / 2)
+            return cv2.remap(blurred, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+
+        d = model.fb_px_m * (1 / 1.1 - 1 / model.reference_depth_m)
+        k = model.exposure_fraction * model.full_well_e / float(np.percentile(view(0.0), 99.9))
+        ref = kinect.record_ir(view(0.0), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
+        cap = kinect.record_ir(view(d), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
+        return model, cap, kinect.KinectCalibration(reference=ref, electrons_per_radiance=k)
+    if device == "tof":
+        cam = model.camera
+        yy, xx = np.indices(cam.size_hw)
+        ray = np.sqrt(((xx - cam.cx_px) / cam.focal_px) ** 2 + ((yy - cam.cy_px) / cam.focal_px) ** 2 + 1)
+        path = 2 * 1.1 * ray
+        phasor = np.exp(1j * 2 * np.pi * model.modulation_hz * path / 299_792_458.0)
+        amplitude = np.full(cam.size_hw, 0.8 / 1.1**2)
+        return model, tof.record_taps(amplitude, phasor, model=model, rng=rng), None
+    raise ValueError(f"unknown benchmark device {device!r}; valid: {list(BENCH_DEVICES)}")
+
+
+def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "proposed") -> dict:
+    """Time one decode (the paper's :func:`simbench.decode.decode`, or a competitor's
+    :func:`simbench.baselines.decode_raw`) at the device's native resolution; returns
+    median/min/max in ms and the set-up."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
-    capture, ref, rig, params = benchmark_inputs()
+    if device not in BENCH_DEVICES:
+        raise ValueError(f"unknown benchmark device {device!r}; valid: {list(BENCH_DEVICES)}")
+    if device == "proposed":
+        capture, ref, rig, params = benchmark_inputs()
+        size_wh = [rig.camera.width_px, rig.camera.height_px]
+
+        def run():
+            decode(capture, rig=rig, params=params, reference=ref)
+    else:
+        from simbench.baselines import decode_raw
+
+        model, raw, cal = competitor_inputs(device)
+        size_wh = [model.width_px, model.height_px]
+
+        def run():
+            decode_raw(model, raw, cal)
     for _ in range(warmup):
-        decode(capture, rig=rig, params=params, reference=ref)
+        run()
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        decode(capture, rig=rig, params=params, reference=ref)
+        run()
         times.append((time.perf_counter() - t0) * 1000.0)
     return {
-        "size_wh": [rig.camera.width_px, rig.camera.height_px],
+        "device": device,
+        "size_wh": size_wh,
         "repeats": repeats,
         "median_ms": statistics.median(times),
         "min_ms": min(times),

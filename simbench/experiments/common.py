@@ -89,6 +89,17 @@ class Capture:
     seeds: dict
 
 
+@dataclass
+class CompetitorCapture:
+    """One competitor depth map (:mod:`simbench.baselines`) with its scene, truth and seeds."""
+
+    device: str
+    scene: SceneSpec
+    depth: object  # simbench.baselines.CompetitorDepth
+    gt: GroundTruth
+    seeds: dict
+
+
 class Session:
     """Shared state of one reproduction run: config, cache, pattern, calibration, progress."""
 
@@ -105,6 +116,7 @@ class Session:
         self.pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence)
         self.pattern_u8 = quantize(fringe_pattern(self.pattern))
         self._refs: dict = {}
+        self._competitor_cal: dict = {}
         self.seeds_used: dict[str, dict] = {}
 
     def fork(self, sensor: SensorModel) -> "Session":
@@ -112,6 +124,7 @@ class Session:
         other = Session(self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
         other.cache = self.cache
         other.seeds_used = self.seeds_used
+        other._competitor_cal = self._competitor_cal
         return other
 
     # scenes and captures -------------------------------------------------------------
@@ -138,6 +151,37 @@ class Session:
             self.seeds_used[f"{label}/{k}" if repeats > 1 else label] = seeds
             out.append(Capture(scene=scene, image=record(q, sensor=self.sensor, scene=scene, rng=noise_seed), gt=gt, seeds=seeds))
         return out
+
+    def competitor(self, device: str, name: str, label: str, *, repeats: int = 1) -> list["CompetitorCapture"]:
+        """``repeats`` depth maps of scene ``name`` from competitor ``device`` (``kinect`` or
+        ``tof``, :mod:`simbench.baselines`) at its native resolution, decoded the device's way,
+        with ground truth at its pixels.  Seeds derive from ``device/label``; the Kinect's
+        factory reference is recorded once per session."""
+        from simbench import baselines
+
+        model = baselines.get_device(device)
+        if device not in self._competitor_cal:
+            cal_seed = label_seed(self.config.seed, f"{device}/calibration")
+            self.seeds_used[f"{device}/calibration"] = {"render": cal_seed}
+            self._competitor_cal[device] = baselines.calibrate(model, spp=self.config.spp, seed=cal_seed, cache=self.cache)
+        cal = self._competitor_cal[device]
+        scene = baselines.device_scene(model, load_scene(SCENES_DIR / f"{name}.toml"))
+        render_seed = label_seed(self.config.seed, f"{device}/{label}/render")
+        noise_seeds = [label_seed(self.config.seed, f"{device}/{label}/noise/{k}") for k in range(repeats)]
+        raws = baselines.acquire(model, scene, cal, spp=self.config.spp, seed=render_seed, noise_seeds=noise_seeds, cache=self.cache)
+        gt = cached_ground_truth(scene, cache=self.cache)
+        out = []
+        for k, (raw, noise_seed) in enumerate(zip(raws, noise_seeds)):
+            seeds = {"render": render_seed, "noise": noise_seed}
+            self.seeds_used[f"{device}/{label}/{k}" if repeats > 1 else f"{device}/{label}"] = seeds
+            out.append(CompetitorCapture(device=device, scene=scene, depth=baselines.decode_raw(model, raw, cal), gt=gt, seeds=seeds))
+        return out
+
+    def edge_band_for(self, camera) -> int:
+        """The run's edge band (defined on the main camera) at another camera's resolution:
+        the same angle, at least one pixel."""
+        main_f = self.scene("plane_depth_100cm").rig.camera.focal_px
+        return max(1, int(round(self.config.edge_band_px * camera.focal_px / main_f)))
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
         """The calibration: one capture of the white reference plane at the scene's Z0 per rig
