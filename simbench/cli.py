@@ -163,12 +163,53 @@ def _cmd_demo(args) -> int:
     return 0
 
 
+def _cmd_competitor_render(args) -> int:
+    from simbench import baselines
+    from simbench.render import select_variant
+    from simbench.scene import load_scene
+    from simbench.simulate import cached_ground_truth
+
+    model = baselines.get_device(args.device)
+    scene = baselines.device_scene(model, load_scene(args.scene))
+    variant = select_variant(args.variant)
+    seeds = {k: int(s.generate_state(1)[0]) for k, s in zip(("calibration", "render", "noise"), np.random.SeedSequence(args.seed).spawn(3))}
+    t0 = time.perf_counter()
+    cal = baselines.calibrate(model, spp=args.spp, seed=seeds["calibration"])
+    raw = baselines.acquire(model, scene, cal, spp=args.spp, seed=seeds["render"], noise_seeds=[seeds["noise"]])[0]
+    gt = cached_ground_truth(scene)
+    meta = {"scene": str(args.scene), "spp": args.spp, "seed": args.seed, "seeds": seeds, "variant": variant}
+    files = baselines.write_recording(args.out, model, raw, cal, gt_depth_m=gt.depth_m, meta=meta)
+    print(f"rendered {scene.name} with the {baselines.DEVICE_LABELS[args.device]} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    for key, path in files.items():
+        print(f"  {key:13s} {path.name}")
+    return 0
+
+
+def _cmd_competitor_decode(args) -> int:
+    from simbench import baselines
+    from simbench.io import save_npy, save_ply
+    from simbench.metrics import points_from_depth
+
+    model, raw, cal = baselines.read_recording(args.recording)
+    t0 = time.perf_counter()
+    res = baselines.decode_raw(model, raw, cal)
+    dt = time.perf_counter() - t0
+    out = save_npy(args.out, res.depth_m)
+    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({baselines.DEVICE_LABELS[baselines.device_params(model)['device']]}) -> {out}"
+    if args.ply:
+        pts = points_from_depth(res.depth_m, model.camera)
+        save_ply(args.ply, pts[res.valid])
+        msg += f", {args.ply}"
+    print(msg)
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark
 
-    res = run_decode_benchmark(repeats=args.repeats)
+    res = run_decode_benchmark(repeats=args.repeats, device=args.device)
     print(json.dumps(res, indent=2) if args.json else
-          f"decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture: median {res['median_ms']:.1f} ms, "
+          f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture: median {res['median_ms']:.1f} ms, "
           f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
     if args.max_ms is not None and res["median_ms"] > args.max_ms:
         raise ValueError(f"decode median {res['median_ms']:.1f} ms exceeds --max-ms {args.max_ms}")
@@ -317,7 +358,24 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="also write them as Markdown here")
     s.set_defaults(fn=_cmd_crosstalk)
 
-    s = sub.add_parser("bench", help="benchmark the decoder on a 1280x960 capture")
+    s = sub.add_parser("competitor", help="the simulated competitors (Kinect v1, SR4000 ToF): render a scene, decode a recording")
+    csub = s.add_subparsers(dest="action", required=True)
+    c = csub.add_parser("render", help="render SCENE with a competitor: raw frames, calibration, ground truth, device.json")
+    c.add_argument("device", choices=["kinect", "tof"])
+    c.add_argument("scene", help="scene TOML file (the competitor replaces its rig)")
+    c.add_argument("--out", required=True, help="output folder")
+    c.add_argument("--spp", type=int, default=16)
+    c.add_argument("--seed", type=int, default=2017)
+    c.add_argument("--variant", default=None, help="Mitsuba variant (default: chosen for this machine)")
+    c.set_defaults(fn=_cmd_competitor_render)
+    c = csub.add_parser("decode", help="decode a competitor recording folder into a depth map (.npy, metres, NaN = invalid)")
+    c.add_argument("recording", help="folder written by `simbench competitor render`")
+    c.add_argument("--out", required=True, help="depth map .npy")
+    c.add_argument("--ply", default=None, help="also write the point cloud")
+    c.set_defaults(fn=_cmd_competitor_decode)
+
+    s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)")
+    s.add_argument("--device", default="proposed", choices=["proposed", "kinect", "tof"], help="whose decoder (default: the paper's)")
     s.add_argument("--repeats", type=int, default=20)
     s.add_argument("--max-ms", type=float, default=None, help="fail when the median exceeds this")
     s.add_argument("--json", action="store_true")

@@ -15,3 +15,18 @@ def test_decode_speed(benchmark):
     result = benchmark(decode, capture, rig=rig, params=params, reference=ref)
     assert result.valid.mean() > 0.99
     assert abs(np.nanmedian(result.depth_m) - 1.1) < 1e-3  # the benchmark plane is at 1.1 m
+
+
+def test_competitor_decode_speed(benchmark):
+    """The competitors' decoders at native resolution (issue: <= 100 ms; `simbench bench
+    --device kinect|tof` on the command line)."""
+    import pytest
+
+    from simbench.baselines import decode_raw
+    from simbench.experiments.bench import competitor_inputs
+
+    for device in ("kinect", "tof"):
+        model, raw, cal = competitor_inputs(device)
+        result = benchmark.pedantic(decode_raw, args=(model, raw, cal), rounds=1) if device == "kinect" else decode_raw(model, raw, cal)
+        assert result.valid.mean() > 0.8
+        assert np.nanmedian(result.depth_m) == pytest.approx(1.1, abs=0.005)

@@ -24,7 +24,7 @@ from simbench.baselines import kinect, tof
 from simbench.rig import Intrinsics
 from simbench.scene import SceneSpec
 
-__all__ = ["DEVICES", "DEVICE_LABELS", "get_device", "CompetitorDepth", "device_scene", "calibrate", "acquire", "decode_raw", "register_depth", "device_params"]
+__all__ = ["DEVICES", "DEVICE_LABELS", "get_device", "CompetitorDepth", "device_scene", "calibrate", "acquire", "decode_raw", "register_depth", "device_params", "write_recording", "read_recording"]
 
 DEVICES = {"kinect": kinect.KinectModel, "tof": tof.ToFModel}
 DEVICE_LABELS = {"kinect": "Kinect v1 (simulated)", "tof": "SR4000 ToF (simulated)"}
@@ -116,3 +116,65 @@ def register_depth(depth_m: np.ndarray, *, source: Intrinsics, target: Intrinsic
     out = np.full(target.size_hw, np.nan, np.float32)
     out[inside] = d[ys[inside], xs[inside]]
     return out
+
+
+def write_recording(out_dir, model, raw: np.ndarray, calibration, *, gt_depth_m: np.ndarray, meta: dict) -> dict:
+    """A competitor recording as files: ``ir.png`` + ``reference.png`` (Kinect, 16-bit grey) or
+    ``taps.npy`` (ToF, (H, W, 4) float32 electrons); ``gt_depth.npy``/``.exr`` (z-depth, m);
+    ``device.json`` (every device parameter, the calibration's exposure and ``meta``)."""
+    from pathlib import Path
+
+    from simbench.io import save_exr, save_json, save_npy, save_png
+
+    out = Path(out_dir)
+    files = {}
+    info = {**device_params(model), **meta}
+    if _kind(model) == "kinect":
+        files["ir"] = save_png(out / "ir.png", np.asarray(raw, np.uint16))
+        files["reference"] = save_png(out / "reference.png", np.asarray(calibration.reference, np.uint16))
+        info["electrons_per_radiance"] = calibration.electrons_per_radiance
+    else:
+        files["taps"] = save_npy(out / "taps.npy", np.asarray(raw, np.float32))
+    files["gt_depth"] = save_npy(out / "gt_depth.npy", gt_depth_m.astype(np.float32))
+    files["gt_depth_exr"] = save_exr(out / "gt_depth.exr", gt_depth_m.astype(np.float32))
+    files["device"] = save_json(out / "device.json", info)
+    return files
+
+
+def read_recording(in_dir):
+    """(model, raw, calibration) from a folder written by :func:`write_recording`."""
+    import json
+    from pathlib import Path
+
+    import cv2
+
+    from simbench.io import load_npy
+
+    d = Path(in_dir)
+    info_path = d / "device.json"
+    if not info_path.is_file():
+        raise FileNotFoundError(f"{info_path} not found: not a competitor recording folder")
+    try:
+        info = json.loads(info_path.read_text())
+        name = info.pop("device")
+    except (ValueError, KeyError, AttributeError):
+        raise ValueError(f"{info_path}: not a valid device file") from None
+    fields = DEVICES[name].__dataclass_fields__ if name in DEVICES else {}
+    params = {k: tuple(v) if isinstance(v, list) else v for k, v in info.items() if k in fields}
+    model = get_device(name, **params)
+    if name == "kinect":
+        frames = []
+        for fname in ("ir.png", "reference.png"):
+            p = d / fname
+            if not p.is_file():
+                raise FileNotFoundError(f"image not found: {p}")
+            img = cv2.imdecode(np.fromfile(p, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+            if img is None or img.ndim != 2:
+                raise ValueError(f"{p}: expected a single-channel IR image")
+            if img.shape != model.camera.size_hw:
+                raise ValueError(f"{p}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the device's camera is {model.width_px}x{model.height_px}")
+            frames.append(img)
+        cal = kinect.KinectCalibration(reference=frames[1], electrons_per_radiance=float(info.get("electrons_per_radiance", 1.0)))
+        return model, frames[0], cal
+    taps = load_npy(d / "taps.npy", expected_shape=(model.height_px, model.width_px, 4))
+    return model, taps, None

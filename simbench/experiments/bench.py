@@ -42,23 +42,23 @@ def benchmark_inputs(*, seed: int = 0):
     return capture, decode_reference(reference, rig=rig, params=params), rig, params
 
 
-def competitor_inputs(device: str, *, seed: int = 0):
+def competitor_inputs(device: str, *, seed: int = 0, model=None):
     """(model, raw frame, calibration) of a competitor looking at a plane at 1.1 m, made in
     numpy without the renderer (deterministic for a seed).
 
     Kinect: the dot texture box-resampled onto the camera grid (the reference at its depth,
     the capture shifted by the plane's disparity), with speckle and detector noise.  ToF: the
-    four samples of a plane's phasor with shot noise.
+    four samples of a plane's phasor with shot noise.  ``model`` overrides the default device.
     """
     from simbench import baselines
     from simbench.baselines import kinect, tof
 
-    model = baselines.get_device(device)
+    model = baselines.get_device(device) if model is None else model
     rng = np.random.default_rng(seed)
     if device == "kinect":
         tex = kinect.dot_pattern(model)
         cam = model.camera
-        scale = model.texels_per_dot * model.dot_pitch_px  # texels per camera pixel
+        scale = model.texels_per_dot / model.dot_pitch_px  # texels per camera pixel
         cu, cv = (tex.shape[1] - 1) / 2, (tex.shape[0] - 1) / 2
 
         def view(shift_px: float) -> np.ndarray:
