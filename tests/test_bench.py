@@ -5,6 +5,7 @@ the suite never depends on timing; `simbench bench` is the command-line equivale
 """
 
 import numpy as np
+import pytest
 
 from simbench.decode import decode
 from simbench.experiments.bench import benchmark_inputs
@@ -17,16 +18,14 @@ def test_decode_speed(benchmark):
     assert abs(np.nanmedian(result.depth_m) - 1.1) < 1e-3  # the benchmark plane is at 1.1 m
 
 
-def test_competitor_decode_speed(benchmark):
+@pytest.mark.parametrize("device", ["kinect", "tof"])
+def test_competitor_decode_speed(benchmark, device):
     """The competitors' decoders at native resolution (issue: <= 100 ms; `simbench bench
     --device kinect|tof` on the command line)."""
-    import pytest
-
     from simbench.baselines import decode_raw
     from simbench.experiments.bench import competitor_inputs
 
-    for device in ("kinect", "tof"):
-        model, raw, cal = competitor_inputs(device)
-        result = benchmark.pedantic(decode_raw, args=(model, raw, cal), rounds=1) if device == "kinect" else decode_raw(model, raw, cal)
-        assert result.valid.mean() > 0.8
-        assert np.nanmedian(result.depth_m) == pytest.approx(1.1, abs=0.005)
+    model, raw, cal = competitor_inputs(device)
+    result = benchmark(decode_raw, model, raw, cal)
+    assert result.valid.mean() > 0.8
+    assert np.nanmedian(result.depth_m) == pytest.approx(1.1, abs=0.005)
