@@ -204,6 +204,24 @@ def _cmd_competitor_decode(args) -> int:
     return 0
 
 
+def _cmd_ablate(args) -> int:
+    from simbench.experiments.ablate import BUILTIN_STUDIES, load_sweep, run_sweep
+    from simbench.render import select_variant
+
+    names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
+    sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    select_variant(args.variant)
+    command = "simbench ablate " + " ".join(sys.argv[2:]) if sys.argv[0].endswith("simbench") else "simbench ablate " + " ".join(args.sweep)
+    for sweep in sweeps:
+        t0 = time.perf_counter()
+        rows = run_sweep(sweep, out_dir=args.out, cache_dir=None if args.no_cache else args.cache, workers=args.workers, scheduler=args.scheduler, variant=args.variant, progress=lambda s: print(s, flush=True), command=command)
+        failed = sum(1 for r in rows if r["error"])
+        print(f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> {args.out}/{sweep.name}.csv, .md, .png")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark
 
@@ -357,6 +375,16 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("crosstalk", help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours")
     s.add_argument("--out", help="also write them as Markdown here")
     s.set_defaults(fn=_cmd_crosstalk)
+
+    s = sub.add_parser("ablate", help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)")
+    s.add_argument("sweep", nargs="+", help="sweep TOML file(s), built-in study name(s), or 'builtin'")
+    s.add_argument("--out", default="results/ablations", help="output folder (default results/ablations)")
+    s.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    s.add_argument("--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead")
+    s.add_argument("--cache", default=".cache/simbench", help="render cache directory")
+    s.add_argument("--no-cache", action="store_true")
+    s.add_argument("--variant", default=None)
+    s.set_defaults(fn=_cmd_ablate)
 
     s = sub.add_parser("competitor", help="the simulated competitors (Kinect v1, SR4000 ToF): render a scene, decode a recording")
     csub = s.add_subparsers(dest="action", required=True)

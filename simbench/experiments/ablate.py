@@ -1,0 +1,539 @@
+"""Ablation studies: declarative sweeps over pattern, sensor, decoder and scene (``simbench ablate``).
+
+A sweep file (TOML)::
+
+    name = "period"                      # results/ablations/<name>.csv/.md/.png
+    description = "fringe period T"
+    repeats = 2                          # recordings per parameter set (own seeds each)
+    seed = 2017                          # base seed: repetition r uses the same seeds in every
+                                         # parameter set (common random numbers)
+    plot_metric = "gt_mae_mm"            # y of the plot (default gt_mae_mm)
+
+    [base]                               # any parameter (below) fixed for every run
+    "scene.name" = "plane_white"
+    "run.camera_scale" = 0.5
+
+    [[axis]]                             # one or more axes
+    name = "pattern.period_px"
+    values = [11, 15, 21, 31, 41]
+
+    [[axis]]
+    name = "decoder.voting"
+    values = [true, false]
+
+    combine = "grid"                     # "grid" (every combination) or "zip" (axes in step)
+
+Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
+
+- ``pattern.period_px``, ``pattern.order``, ``pattern.sequence`` (a 0/1 string): the projected
+  pattern, which the decoder is told about;
+- ``decoder.<field>``: any :class:`simbench.decode.DecoderParams` field (phase method, overlay vs
+  ``blue`` intensity, voting, neighbour correction, colour normalisation, ...);
+- ``sensor.preset``: a sensor preset or TOML file; ``sensor.effects``: a list of
+  :data:`simbench.device.EFFECTS` switched on over the ``ideal`` model, taken from
+  ``sensor.source`` (default ``paper``); ``sensor.<table>.<key>``: one number of the sensor model
+  (e.g. ``sensor.camera.dark_noise_e``, ``sensor.ambient.ratio``, ``sensor.projector.lumens``);
+- ``scene.name`` (a file of ``scenes/``), ``scene.srgb8`` (repaint every object), ``scene.depth_m``
+  (move the scene so its first object's centre is at this depth), ``scene.tilt_deg`` (the first
+  object's rotation about the vertical axis);
+- ``run.spp``, ``run.camera_scale``, ``run.max_depth``.
+
+Execution: a local process pool (``workers``) or a Dask distributed cluster (``scheduler``); each
+run is a pure function of its parameters and seeds, so both give identical tables.  Renders go
+through the content-hash cache, so a decoder-only axis renders each scene once.  Finished runs
+are appended to ``<name>.runs.jsonl``; a restarted sweep skips them.  A failing run is recorded
+with its error and the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from simbench.io import atomic_write_bytes, atomic_write_text, read_toml, save_json
+
+__all__ = ["PARAMETERS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "BUILTIN_STUDIES", "STUDIES_DIR"]
+
+STUDIES_DIR = Path(__file__).resolve().parents[1] / "studies"
+METRICS = ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors", "stripe_order_error_rate")
+
+
+def _decoder_fields() -> dict[str, str]:
+    from simbench.decode import DecoderParams
+
+    skip = {"period_px", "order", "sequence", "z0_m", "threads"}
+    return {f"decoder.{f.name}": f"DecoderParams.{f.name}" for f in dataclasses.fields(DecoderParams) if f.name not in skip}
+
+
+def _parameters() -> dict[str, str]:
+    p = {
+        "pattern.period_px": "fringe period T (projector px)",
+        "pattern.order": "De Bruijn window length n of B(2, n)",
+        "pattern.sequence": "explicit stripe code sequence (0/1 string)",
+        "sensor.preset": "sensor model: a preset (ideal, minimal, paper) or a TOML file",
+        "sensor.effects": "list of physical effects switched on over the ideal model",
+        "sensor.source": "where sensor.effects take their values from (default paper)",
+        "scene.name": "scene file of scenes/",
+        "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
+        "scene.depth_m": "move the scene so its first object's centre is at this depth",
+        "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",
+        "run.spp": "samples per pixel",
+        "run.camera_scale": "camera resolution factor",
+        "run.max_depth": "path length",
+    }
+    p.update(_decoder_fields())
+    return p
+
+
+PARAMETERS = _parameters()
+_SENSOR_TABLES = ("camera", "camera.lens", "projector", "projector.lens", "spectral", "ambient")
+DEFAULTS = {"scene.name": "plane_white", "sensor.preset": "paper", "run.spp": 16, "run.camera_scale": 1.0, "run.max_depth": 6}
+
+
+def _check_name(name: str) -> None:
+    if name in PARAMETERS:
+        return
+    table, _, key = name.rpartition(".")
+    if name.startswith("sensor.") and table[len("sensor.") :] in _SENSOR_TABLES and key:
+        return
+    raise ValueError(
+        f"unknown sweep parameter {name!r}; valid: {sorted(PARAMETERS)} and sensor.<table>.<key> with <table> one of {list(_SENSOR_TABLES)}"
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class Sweep:
+    name: str
+    description: str
+    base: dict
+    axes: tuple[tuple[str, tuple], ...]
+    combine: str = "grid"
+    repeats: int = 1
+    seed: int = 2017
+    plot_metric: str = "gt_mae_mm"
+    path: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.name or not all(c.isalnum() or c in "-_" for c in self.name):
+            raise ValueError(f"sweep name must be letters, digits, - and _, got {self.name!r}")
+        for k in self.base:
+            _check_name(k)
+        if not self.axes:
+            raise ValueError("a sweep needs at least one [[axis]]")
+        for k, values in self.axes:
+            _check_name(k)
+            if not values:
+                raise ValueError(f"axis {k!r} has no values")
+        names = [k for k, _ in self.axes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"an axis is given twice: {names}")
+        if self.combine not in ("grid", "zip"):
+            raise ValueError(f"combine must be 'grid' or 'zip', got {self.combine!r}")
+        if self.combine == "zip" and len({len(v) for _, v in self.axes}) != 1:
+            raise ValueError("zipped axes must have the same number of values")
+        if isinstance(self.repeats, bool) or int(self.repeats) != self.repeats or self.repeats < 1:
+            raise ValueError(f"repeats must be a positive integer, got {self.repeats!r}")
+        if self.plot_metric not in METRICS:
+            raise ValueError(f"plot_metric must be one of {list(METRICS)}, got {self.plot_metric!r}")
+
+
+def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
+    allowed = {"name", "description", "base", "axis", "combine", "repeats", "seed", "plot_metric"}
+    bad = sorted(set(data) - allowed)
+    if bad:
+        raise ValueError(f"{where}: unknown key(s) {bad}; valid: {sorted(allowed)}")
+    axes = []
+    for i, ax in enumerate(data.get("axis", [])):
+        if not isinstance(ax, dict) or set(ax) != {"name", "values"} or not isinstance(ax["values"], list):
+            raise ValueError(f"{where}: axis {i + 1} needs exactly 'name' and a list 'values'")
+        axes.append((ax["name"], tuple(tuple(v) if isinstance(v, list) else v for v in ax["values"])))
+    try:
+        return Sweep(
+            name=data.get("name", ""),
+            description=data.get("description", ""),
+            base=dict(data.get("base", {})),
+            axes=tuple(axes),
+            combine=data.get("combine", "grid"),
+            repeats=data.get("repeats", 1),
+            seed=data.get("seed", 2017),
+            plot_metric=data.get("plot_metric", "gt_mae_mm"),
+            path=where,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "noise_ambient", "surface_colour")
+
+
+def load_sweep(path_or_name: str | Path) -> Sweep:
+    """A sweep file, or a built-in study by name (:data:`BUILTIN_STUDIES`)."""
+    p = Path(path_or_name)
+    if not p.suffix and str(path_or_name) in BUILTIN_STUDIES:
+        p = STUDIES_DIR / f"{path_or_name}.toml"
+    data = read_toml(p, what="sweep")
+    data.setdefault("name", p.stem)
+    return sweep_from_dict(data, where=str(p))
+
+
+def expand(sweep: Sweep) -> list[dict]:
+    """Every run: ``{"run": index, "repeat": r, "params": {...}, "seed": s, "key": ...}``.
+    Repetition ``r`` has the same seed in every parameter set (common random numbers)."""
+    names = [k for k, _ in sweep.axes]
+    value_lists = [v for _, v in sweep.axes]
+    combos = itertools.product(*value_lists) if sweep.combine == "grid" else zip(*value_lists)
+    runs = []
+    for combo in combos:
+        params = {**DEFAULTS, **sweep.base, **dict(zip(names, combo))}
+        for r in range(sweep.repeats):
+            seed = int(np.random.SeedSequence([int(sweep.seed), r]).generate_state(1)[0])
+            key = hashlib.sha256(json.dumps({"params": params, "repeat": r, "seed": seed}, sort_keys=True, default=str).encode()).hexdigest()[:16]
+            runs.append({"run": len(runs), "repeat": r, "params": params, "seed": seed, "key": key})
+    return runs
+
+
+# ------------------------------------------------------------------------------ one run
+
+
+def _sensor(params: dict):
+    from simbench.device import get_sensor, sensor_from_dict, sensor_to_dict, with_effects
+
+    if "sensor.effects" in params:
+        effects = params["sensor.effects"]
+        effects = [effects] if isinstance(effects, str) else list(effects)
+        sensor = with_effects(get_sensor("ideal"), get_sensor(params.get("sensor.source", "paper")), effects, name="ideal+" + "+".join(effects) if effects else "ideal")
+    else:
+        sensor = get_sensor(params["sensor.preset"])
+    overrides = {k: v for k, v in params.items() if k.startswith("sensor.") and k not in PARAMETERS}
+    if overrides:
+        data = sensor_to_dict(sensor)
+        for k, v in overrides.items():
+            *tables, key = k.split(".")[1:]
+            node = data
+            for t in tables:
+                node = node[t]
+            if key not in node:
+                raise ValueError(f"unknown sensor field {k!r}; fields of [{'.'.join(tables)}]: {sorted(x for x in node if not isinstance(node[x], dict))}")
+            node[key] = list(v) if isinstance(v, tuple) else v
+        data["name"] = f"{sensor.name}*"
+        sensor = sensor_from_dict(data, where="sweep sensor")
+    return sensor
+
+
+def _scene(params: dict):
+    from simbench.experiments.common import SCENES_DIR
+    from simbench.scene import Material, load_scene, paint_reflectance
+
+    scene = load_scene(SCENES_DIR / f"{params['scene.name']}.toml")
+    objs = list(scene.objects)
+    if "scene.srgb8" in params:
+        rgb = paint_reflectance(params["scene.srgb8"])
+        objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, rgb=rgb)) for o in objs]
+    if "scene.depth_m" in params or "scene.tilt_deg" in params:
+        first = dict(objs[0].params)
+        key = "center_m" if "center_m" in first else "translate_m"
+        if "scene.depth_m" in params:
+            dz = float(params["scene.depth_m"]) - first[key][2]
+            for i, o in enumerate(objs):
+                q = dict(o.params)
+                k = "center_m" if "center_m" in q else "translate_m"
+                q[k] = (q[k][0], q[k][1], q[k][2] + dz)
+                objs[i] = dataclasses.replace(o, params=tuple(sorted(q.items())))
+        if "scene.tilt_deg" in params:
+            q = dict(objs[0].params)
+            rx, _, rz = q.get("rotation_deg", (0.0, 0.0, 0.0))
+            q["rotation_deg"] = (rx, float(params["scene.tilt_deg"]), rz)
+            objs[0] = dataclasses.replace(objs[0], params=tuple(sorted(q.items())))
+    return dataclasses.replace(scene, objects=tuple(objs))
+
+
+def _decoder(params: dict):
+    from simbench.decode import DecoderParams
+
+    fields = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("decoder.")}
+    for k in ("depth_range_m",):
+        if k in fields and isinstance(fields[k], list):
+            fields[k] = tuple(fields[k])
+    if "pattern.period_px" in params:
+        fields["period_px"] = int(params["pattern.period_px"])
+    if "pattern.order" in params:
+        fields["order"] = int(params["pattern.order"])
+    if "pattern.sequence" in params:
+        text = str(params["pattern.sequence"])
+        if not text or set(text) - {"0", "1"}:
+            raise ValueError(f"pattern.sequence must be a 0/1 string, got {text!r}")
+        fields["sequence"] = tuple(int(c) for c in text)
+    return DecoderParams(**fields)
+
+
+def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
+    """Render (through the cache), record, decode and score one parameter set.  Returns the
+    metrics and timings, or ``{"error": ...}``; never raises for a bad parameter value."""
+    t0 = time.perf_counter()
+    try:
+        from simbench.experiments.common import RunConfig, Session
+        from simbench.experiments.table1 import _score
+        import sys
+
+        from simbench.render import select_variant
+
+        # a Dask worker arrives here without an entry point: choose the variant first (it must
+        # steer Dr.Jit's libLLVM before Mitsuba is imported)
+        if "mitsuba" not in sys.modules or sys.modules["mitsuba"].variant() is None:
+            select_variant(None)
+        decoder = _decoder(params)
+        sensor = _sensor(params)
+        config = RunConfig(sensor=sensor.name, spp=int(params["run.spp"]), camera_scale=float(params["run.camera_scale"]), max_depth=int(params["run.max_depth"]), seed=int(seed), decoder=decoder)
+        session = Session(config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor)
+        scene = session.prepare(_scene(params))
+        t1 = time.perf_counter()
+        cap = session.capture(scene, "ablate")[0]
+        t2 = time.perf_counter()
+        result = session.decode(cap, decoder)
+        t3 = time.perf_counter()
+        row = {k: float(v) for k, v in _score(cap, result, decoder.period_px).items()}
+        row.update(render_seed=cap.seeds["render"], noise_seed=cap.seeds["noise"], error="")
+        row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
+        return row
+    except Exception as exc:  # noqa: BLE001 - a failing run is recorded, not fatal
+        msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        return {"error": msg, "traceback": traceback.format_exc(limit=4), "timing": {"setup_s": time.perf_counter() - t0}}
+
+
+def _worker_init(variant: str | None) -> None:
+    from simbench.render import select_variant
+
+    select_variant(variant)
+
+
+# ------------------------------------------------------------------------------ the sweep
+
+
+def _load_done(path: Path) -> dict[str, dict]:
+    done = {}
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+                done[rec["key"]] = rec
+            except (ValueError, KeyError, TypeError):
+                continue  # a line cut by an interruption: that run is redone
+    return done
+
+
+def _append(path: Path, rec: dict) -> None:
+    with open(path, "a", encoding="utf-8") as f:
+        f.write(json.dumps(rec, sort_keys=True, default=str) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def run_sweep(
+    sweep: Sweep,
+    *,
+    out_dir: str | Path,
+    cache_dir: str | Path | None,
+    workers: int = 1,
+    scheduler: str | object | None = None,
+    variant: str | None = None,
+    progress: Callable[[str], None] = print,
+    command: str = "",
+) -> list[dict]:
+    """Run every unfinished run of ``sweep`` and write ``<name>.csv``, ``.md``, ``.png``,
+    ``.timings.csv`` and ``.provenance.json`` into ``out_dir``; returns the rows.
+
+    ``scheduler``: a Dask scheduler address (or a ``distributed.Client``); None = a local
+    process pool of ``workers`` processes (1 = in this process).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = expand(sweep)
+    log = out / f"{sweep.name}.runs.jsonl"
+    done = _load_done(log)
+    todo = [r for r in runs if r["key"] not in done]
+    progress(f"[ablate {sweep.name}] {len(runs)} runs, {len(runs) - len(todo)} already done, {len(todo)} to run")
+    cache = None if cache_dir is None else str(cache_dir)
+    n = 0
+
+    def finished(run: dict, res: dict) -> None:
+        nonlocal n
+        n += 1
+        rec = {"key": run["key"], "run": run["run"], **res}
+        _append(log, rec)
+        done[run["key"]] = rec
+        status = f"error: {res['error']}" if res.get("error") else f"{sweep.plot_metric} {res.get(sweep.plot_metric, float('nan')):.4g}"
+        progress(f"[ablate {sweep.name} {n}/{len(todo)}] run {run['run']}: {status}")
+
+    if todo:
+        if scheduler is not None:
+            _run_dask(todo, scheduler, cache, finished)
+        elif workers > 1:
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+            import multiprocessing as mp
+
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_worker_init, initargs=(variant,)) as pool:
+                futs = {pool.submit(run_one, r["params"], seed=r["seed"], cache_dir=cache): r for r in todo}
+                for f in as_completed(futs):
+                    finished(futs[f], f.result())
+        else:
+            for r in todo:
+                finished(r, run_one(r["params"], seed=r["seed"], cache_dir=cache))
+    rows = _rows(sweep, runs, done)
+    _write(sweep, rows, runs, done, out, command)
+    return rows
+
+
+def _run_dask(todo: list[dict], scheduler, cache, finished) -> None:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise ValueError("--scheduler needs Dask distributed: pip install 'dask[distributed]'") from None
+    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+    try:
+        futs = {client.submit(run_one, r["params"], seed=r["seed"], cache_dir=cache, pure=False): r for r in todo}
+        by_key = {f.key: r for f, r in futs.items()}
+        for f in as_completed(list(futs)):
+            finished(by_key[f.key], f.result())
+    finally:
+        if client is not scheduler:
+            client.close()
+
+
+def _rows(sweep: Sweep, runs: list[dict], done: dict) -> list[dict]:
+    axis_names = [k for k, _ in sweep.axes]
+    rows = []
+    for r in runs:
+        rec = done.get(r["key"], {})
+        row = {"run": r["run"], "repeat": r["repeat"], **{k: _fmt(r["params"].get(k)) for k in axis_names}}
+        for k in METRICS:
+            row[k] = rec.get(k, float("nan"))
+        row.update(seed=r["seed"], render_seed=rec.get("render_seed", ""), noise_seed=rec.get("noise_seed", ""), error=rec.get("error", "not run"))
+        rows.append(row)
+    return rows
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return "+".join(map(str, v)) if v else "none"
+    if isinstance(v, bool):
+        return "on" if v else "off"
+    return str(v)
+
+
+def _write(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
+    from simbench.experiments.common import git_commit, markdown_table, write_table
+    from simbench.simulate import versions
+
+    axis_names = [k for k, _ in sweep.axes]
+    cols = ["run", "repeat", *axis_names, *METRICS, "seed", "render_seed", "noise_seed", "error"]
+    files = [write_table(out / f"{sweep.name}.csv", rows, cols)]
+    timing_rows = [{"run": r["run"], **done.get(r["key"], {}).get("timing", {})} for r in runs]
+    files.append(write_table(out / f"{sweep.name}.timings.csv", timing_rows, ["run", "setup_s", "render_record_s", "decode_s"]))
+    files.append(atomic_write_text(out / f"{sweep.name}.md", _markdown(sweep, rows, command)))
+    files.append(atomic_write_bytes(out / f"{sweep.name}.png", _plot(sweep, rows)))
+    base = {k: _fmt(v) for k, v in {**DEFAULTS, **sweep.base}.items()}
+    save_json(out / f"{sweep.name}.provenance.json", {
+        "command": command, "sweep_file": sweep.path, "sweep": {"name": sweep.name, "base": base, "axes": [[k, [_fmt(v) for v in vs]] for k, vs in sweep.axes], "combine": sweep.combine, "repeats": sweep.repeats, "seed": sweep.seed},
+        "versions": versions(), "git_commit": git_commit(),
+        "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
+    })
+
+
+def _groups(sweep: Sweep, rows: list[dict]) -> list[tuple[tuple, list[dict]]]:
+    axis_names = [k for k, _ in sweep.axes]
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in axis_names), []).append(r)
+    return list(groups.items())
+
+
+def _mean(rows: list[dict], key: str) -> float:
+    vals = [r[key] for r in rows if not r["error"] and isinstance(r[key], float) and math.isfinite(r[key])]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
+    from simbench.experiments.common import markdown_table
+
+    axis_names = [k for k, _ in sweep.axes]
+    base = {**DEFAULTS, **sweep.base}
+    lines = [
+        f"# Ablation: {sweep.name}",
+        "",
+        sweep.description,
+        "",
+        f"Made by `{command}` (sweep `{sweep.path}`; {sweep.combine} over {', '.join(axis_names)}; {sweep.repeats} repetition(s) "
+        f"with the same seeds in every parameter set, base seed {sweep.seed}). Every run with its seeds: `{sweep.name}.csv`; "
+        f"timings: `{sweep.name}.timings.csv`; plot: `{sweep.name}.png`.",
+        "",
+        "Fixed: " + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in sorted(base.items()) if k not in axis_names) + ".",
+        "",
+        "Mean over repetitions (failed runs left out; `errors` counts them):",
+        "",
+    ]
+    body = []
+    for combo, group in _groups(sweep, rows):
+        errs = sum(1 for r in group if r["error"])
+        body.append([*combo, *(f"{_mean(group, k):.4g}" for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm")), f"{100 * _mean(group, 'completeness'):.2f} %", f"{_mean(group, 'stripe_order_errors'):.0f}", str(errs)])
+    lines += markdown_table([*axis_names, "plane fit (mm)", "GT MAE (mm)", "GT RMSE (mm)", "completeness", "stripe-order errors", "errors"], body)
+    failures = sorted({r["error"] for r in rows if r["error"]})
+    if failures:
+        lines += ["", "Errors:", ""] + [f"- {e}" for e in failures]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axis_names = [k for k, _ in sweep.axes]
+    x_name = axis_names[0]
+    x_vals = list(dict.fromkeys(r[x_name] for r in rows))
+    series_names = axis_names[1:] if sweep.combine == "grid" else []
+    series = list(dict.fromkeys(tuple(r[k] for k in series_names) for r in rows))
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    numeric = all(_is_number(v) for v in x_vals)
+    pos = [float(v) for v in x_vals] if numeric else list(range(len(x_vals)))
+    for s in series:
+        means, lo, hi = [], [], []
+        for xv in x_vals:
+            vals = [r[sweep.plot_metric] for r in rows if r[x_name] == xv and tuple(r[k] for k in series_names) == s and not r["error"] and math.isfinite(r[sweep.plot_metric])]
+            means.append(np.mean(vals) if vals else np.nan)
+            lo.append(np.min(vals) if vals else np.nan)
+            hi.append(np.max(vals) if vals else np.nan)
+        means, lo, hi = map(np.array, (means, lo, hi))
+        label = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(series_names, s)) or sweep.plot_metric
+        ax.errorbar(pos, means, yerr=[means - lo, hi - means], fmt="o-", capsize=3, label=label)
+    if not numeric:
+        ax.set_xticks(pos, x_vals, rotation=20, fontsize=8)
+    ax.set_xlabel(x_name)
+    ax.set_ylabel(sweep.plot_metric)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title(f"ablation {sweep.name}: {sweep.description}"[:90], fontsize=9)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
