@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup reproduce quick quick-thresholds test test-fast bench clean
+.PHONY: setup reproduce ablations quick quick-thresholds test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -22,6 +22,10 @@ reproduce: setup
 	$(VENV)/bin/simbench reproduce all
 	$(VENV)/bin/simbench demo --out results/demo
 	$(VENV)/bin/simbench crosstalk --out results/crosstalk.md
+
+# The built-in ablation studies into results/ablations (every run redone; ~10 min on 2 cores).
+ablations: setup
+	$(VENV)/bin/simbench ablate builtin --fresh --workers 2
 
 # The CI benchmark: the quick run checked against the committed thresholds.
 quick: setup

@@ -216,6 +216,8 @@ def _cmd_ablate(args) -> int:
     command = "simbench ablate " + " ".join(sys.argv[2:]) if sys.argv[0].endswith("simbench") else "simbench ablate " + " ".join(args.sweep)
     for sweep in sweeps:
         t0 = time.perf_counter()
+        if args.fresh:
+            (Path(args.out) / f"{sweep.name}.runs.jsonl").unlink(missing_ok=True)
         rows = run_sweep(sweep, out_dir=args.out, cache_dir=None if args.no_cache else args.cache, workers=args.workers, scheduler=args.scheduler, variant=args.variant, progress=lambda s: print(s, flush=True), command=command)
         failed = sum(1 for r in rows if r["error"])
         print(f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> {args.out}/{sweep.name}.csv, .md, .png")
@@ -380,6 +382,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("sweep", nargs="+", help="sweep TOML file(s), built-in study name(s), or 'builtin'")
     s.add_argument("--out", default="results/ablations", help="output folder (default results/ablations)")
     s.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    s.add_argument("--fresh", action="store_true", help="forget finished runs (the run log) and redo every run")
     s.add_argument("--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead")
     s.add_argument("--cache", default=".cache/simbench", help="render cache directory")
     s.add_argument("--no-cache", action="store_true")

@@ -180,11 +180,15 @@ BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "noise_ambient"
 def load_sweep(path_or_name: str | Path) -> Sweep:
     """A sweep file, or a built-in study by name (:data:`BUILTIN_STUDIES`)."""
     p = Path(path_or_name)
+    where = str(p)
     if not p.suffix and str(path_or_name) in BUILTIN_STUDIES:
         p = STUDIES_DIR / f"{path_or_name}.toml"
+        where = f"simbench/studies/{p.name}"  # the same on every machine
+    elif not p.is_file() and not p.suffix:
+        raise ValueError(f"no sweep file {p} and no built-in study of that name; built-in: {list(BUILTIN_STUDIES)}")
     data = read_toml(p, what="sweep")
     data.setdefault("name", p.stem)
-    return sweep_from_dict(data, where=str(p))
+    return sweep_from_dict(data, where=where)
 
 
 def expand(sweep: Sweep) -> list[dict]:
@@ -524,7 +528,9 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    ax.set_title(f"ablation {sweep.name}: {sweep.description}"[:90], fontsize=9)
+    import textwrap
+
+    ax.set_title(textwrap.fill(f"ablation {sweep.name}: {sweep.description}", 90), fontsize=8)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
     plt.close(fig)
