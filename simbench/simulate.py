@@ -31,6 +31,7 @@ __all__ = [
     "split_seed",
     "cached_radiance",
     "cached_ground_truth",
+    "cached_arrays",
     "physical_scene",
     "projector_drive_for",
     "render_channels",
@@ -138,8 +139,8 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
     drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd)
     intr = scene.rig.projector
     if prj.lens.defocus:
-        parts = {"scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))), "stride": PROJECTOR_DEPTH_STRIDE, **_renderer_id()}
-        dist = _cached(cache, "projector_depth", parts, lambda: {"z": projector_distance(scene, stride=PROJECTOR_DEPTH_STRIDE)})["z"]
+        parts = {"scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))), "stride": PROJECTOR_DEPTH_STRIDE}
+        dist = cached_arrays("projector_depth", parts, lambda: {"z": projector_distance(scene, stride=PROJECTOR_DEPTH_STRIDE)}, cache=cache)["z"]
         drive = defocus_pattern(drive, dist, aperture_m=prj.lens.aperture_m(intr.focal_px, prj.pixel_pitch_um), focal_px=intr.focal_px, focus_m=prj.lens.focus_m)
     if intr.has_distortion:
         drive = distorted_projector_drive(drive, intr)
@@ -147,8 +148,10 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
 
 
 
-def _cached(cache: RenderCache | None, kind: str, parts: dict, make):
-    return make() if cache is None else cache.get_or_make(kind, parts, make)
+def cached_arrays(kind: str, parts: dict, make, *, cache: RenderCache | None = None) -> dict[str, np.ndarray]:
+    """``make()``'s arrays, looked up in / stored to ``cache`` under ``kind`` and ``parts``
+    plus the renderer's identity (variant, Mitsuba version)."""
+    return make() if cache is None else cache.get_or_make(kind, {**parts, **_renderer_id()}, make)
 
 
 def _ambient_seed(seed: int) -> int:

@@ -252,8 +252,7 @@ def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> Kinec
     mi, si = _box_stats(img, win)
     mr, sr = _box_stats(ref, win)
     inv_si = np.where(si > 0, 1.0 / np.maximum(si, 1e-12), 0.0).astype(np.float32)
-    ref_ok = sr > 0
-    inv_sr = np.where(ref_ok, 1.0 / np.maximum(sr, 1e-12), 0.0).astype(np.float32)
+    inv_sr = np.where(sr > 0, 1.0 / np.maximum(sr, 1e-12), 0.0).astype(np.float32)
     d0 = model.first_disparity_px
     n = model.disparities
     border = win // 2

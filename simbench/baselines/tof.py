@@ -161,9 +161,10 @@ def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         cos_i = np.abs(np.sum(hits["n"] * to_e, axis=1)) / r_e
         albedo = np.array([float(np.mean(o.material.rgb)) for o in scene.objects] + [0.0])
-        w = np.where(hits["hit"] & ~hits["occluded"], albedo[hits["object_id"]] * cos_i / r_e**2, 0.0)
-    path = np.linalg.norm(p, axis=1) + r_e
-    ph = np.where(w > 0, w * np.exp(1j * 2 * np.pi * model.modulation_hz * np.where(w > 0, path, 0.0) / LIGHT_M_S), 0.0)
+        returns = hits["hit"] & ~hits["occluded"]
+        w = np.where(returns, albedo[hits["object_id"]] * cos_i / r_e**2, 0.0)
+    path = np.where(returns, np.linalg.norm(p, axis=1) + r_e, 0.0)  # misses carry no weight
+    ph = w * np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S)
     s = model.supersample
     shape = (model.height_px, s, model.width_px, s)
     total = ph.reshape(shape).sum(axis=(1, 3))
@@ -233,7 +234,7 @@ def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_see
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
     from simbench.cache import scene_fingerprint
-    from simbench.simulate import cached_radiance
+    from simbench.simulate import cached_arrays, cached_radiance
 
     rad = cached_radiance(scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, cache=cache).mean(axis=2)
     parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
@@ -242,11 +243,6 @@ def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_see
         z = footprint_phasor(scene, model)
         return {"re": z.real, "im": z.imag}
 
-    if cache is None:
-        arrays = make()
-    else:
-        import mitsuba as mi
-
-        arrays = cache.get_or_make("tof_phasor", {**parts, "variant": mi.variant()}, make)
+    arrays = cached_arrays("tof_phasor", parts, make, cache=cache)
     z = arrays["re"] + 1j * arrays["im"]
     return [record_taps(rad, z, model=model, rng=s) for s in noise_seeds]

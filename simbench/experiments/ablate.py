@@ -406,9 +406,8 @@ def _run_dask(todo: list[dict], scheduler, cache, finished) -> None:
     client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
     try:
         futs = {client.submit(run_one, r["params"], seed=r["seed"], cache_dir=cache, pure=False): r for r in todo}
-        by_key = {f.key: r for f, r in futs.items()}
         for f in as_completed(list(futs)):
-            finished(by_key[f.key], f.result())
+            finished(futs[f], f.result())
     finally:
         if client is not scheduler:
             client.close()
@@ -436,7 +435,7 @@ def _fmt(v) -> str:
 
 
 def _write(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
-    from simbench.experiments.common import git_commit, markdown_table, write_table
+    from simbench.experiments.common import git_commit, write_table
     from simbench.simulate import versions
 
     axis_names = [k for k, _ in sweep.axes]

@@ -20,7 +20,7 @@ from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.rig import paper_rig
 from simbench.device import get_sensor
 from simbench.projector import transfer_curve
-from simbench.sensor import simple_camera
+from simbench.sensor import LIGHT_M_S, simple_camera
 from simbench.synthetic import synthetic_plane_capture
 
 __all__ = ["benchmark_inputs", "run_decode_benchmark", "competitor_inputs", "BENCH_DEVICES"]
@@ -60,18 +60,19 @@ def competitor_inputs(device: str, *, seed: int = 0, model=None):
         cam = model.camera
         scale = model.texels_per_dot / model.dot_pitch_px  # texels per camera pixel
         cu, cv = (tex.shape[1] - 1) / 2, (tex.shape[0] - 1) / 2
+        blurred = cv2.GaussianBlur(tex, (0, 0), scale / 2)
 
         def view(shift_px: float) -> np.ndarray:
             # x_tex = scale * (x - cx - shift) + cu: the pattern displaced by shift_px
             xs = (np.arange(cam.width_px) - cam.cx_px - shift_px) * scale + cu
             ys = (np.arange(cam.height_px) - cam.cy_px) * scale + cv
             mx, my = np.meshgrid(xs.astype(np.float32), ys.astype(np.float32))
-            blurred = cv2.GaussianBlur(tex, (0, 0), scale / 2)
             return cv2.remap(blurred, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
 
         d = model.fb_px_m * (1 / 1.1 - 1 / model.reference_depth_m)
-        k = model.exposure_fraction * model.full_well_e / float(np.percentile(view(0.0), 99.9))
-        ref = kinect.record_ir(view(0.0), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
+        ref_view = view(0.0)
+        k = model.exposure_fraction * model.full_well_e / float(np.percentile(ref_view, 99.9))
+        ref = kinect.record_ir(ref_view, model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
         cap = kinect.record_ir(view(d), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
         return model, cap, kinect.KinectCalibration(reference=ref, electrons_per_radiance=k)
     if device == "tof":
@@ -79,7 +80,7 @@ def competitor_inputs(device: str, *, seed: int = 0, model=None):
         yy, xx = np.indices(cam.size_hw)
         ray = np.sqrt(((xx - cam.cx_px) / cam.focal_px) ** 2 + ((yy - cam.cy_px) / cam.focal_px) ** 2 + 1)
         path = 2 * 1.1 * ray
-        phasor = np.exp(1j * 2 * np.pi * model.modulation_hz * path / 299_792_458.0)
+        phasor = np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S)
         amplitude = np.full(cam.size_hw, 0.8 / 1.1**2)
         return model, tof.record_taps(amplitude, phasor, model=model, rng=rng), None
     raise ValueError(f"unknown benchmark device {device!r}; valid: {list(BENCH_DEVICES)}")

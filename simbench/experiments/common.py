@@ -177,12 +177,6 @@ class Session:
             out.append(CompetitorCapture(device=device, scene=scene, depth=baselines.decode_raw(model, raw, cal), gt=gt, seeds=seeds))
         return out
 
-    def edge_band_for(self, camera) -> int:
-        """The run's edge band (defined on the main camera) at another camera's resolution:
-        the same angle, at least one pixel."""
-        main_f = self.scene("plane_depth_100cm").rig.camera.focal_px
-        return max(1, int(round(self.config.edge_band_px * camera.focal_px / main_f)))
-
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
         """The calibration: one capture of the white reference plane at the scene's Z0 per rig
         and lighting, decoded once per decoder setting (albedo:

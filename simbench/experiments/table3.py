@@ -48,12 +48,14 @@ COMPETITORS = ("kinect", "tof")
 
 
 def _competitor_faces(session: Session) -> dict:
-    """Per competitor: its capture, faces and per-face scores."""
+    """Per competitor: its capture, faces and per-face scores.  The edge band, defined on the
+    main camera, is scaled to each competitor's resolution (the same angle, at least 1 px)."""
+    main_focal_px = session.scene(SCENE).rig.camera.focal_px
     out = {}
     for device in COMPETITORS:
         with session.timed(f"[table3] {device}"):
             cap = session.competitor(device, SCENE, f"table3/{SCENE}")[0]
-            band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=session.edge_band_for(cap.scene.rig.camera))
+            band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=max(1, int(round(session.config.edge_band_px * cap.scene.rig.camera.focal_px / main_focal_px))))
             faces, scores = {}, {}
             for name in PAPER_TABLE3:
                 face = front_face_mask(cap.scene, cap.gt, name) & ~band
