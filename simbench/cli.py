@@ -84,6 +84,7 @@ def _cmd_decode(args) -> int:
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
     params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    params = _decoder_overrides(params, args.decoder or [])
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -335,6 +336,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
+    s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth")

@@ -94,7 +94,8 @@ class PhaseResult:
     support: np.ndarray
 
 
-def _kernel(sigma: float) -> np.ndarray:
+def gaussian_kernel(sigma: float) -> np.ndarray:
+    """Unit-sum sampled Gaussian, radius ``ceil(3 sigma)`` (the decoder's row halo assumes it)."""
     r = max(1, int(np.ceil(3.0 * sigma)))
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
@@ -155,7 +156,7 @@ def _dot3(m, b, *, out: np.ndarray, tmp: np.ndarray) -> None:
 def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
     """:func:`_solver` for an all-certain image (reused across captures of one rig)."""
     cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
-    kx, ky = _kernel(sx), _kernel(sy)
+    kx, ky = gaussian_kernel(sx), gaussian_kernel(sy)
     ones = np.ones(shape, np.float32)
     moments = [_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
     out = _solver(*moments, cos1, sin1)
@@ -194,7 +195,7 @@ def gabor_phase(
         raise ValueError(f"period_px must be > 2, got {period_px}")
     h, w = intensity.shape
     omega = round(2.0 * np.pi / period_px, 12)
-    kx, ky = _kernel(sigma_x_px), _kernel(sigma_y_px)
+    kx, ky = gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px)
     cos1, sin1, cos2, sin2 = _basis(w, omega)
     intensity = intensity.astype(np.float32, copy=False)
     c = certainty.astype(np.float32, copy=False)

@@ -13,6 +13,7 @@ import numpy as np
 from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
 from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
+from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.pattern import check_sequence, code_sequence, window_positions
 from simbench.optics import undistort_image
@@ -20,7 +21,7 @@ from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
 __all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
 
-PHASE_METHODS = {"gabor": gabor_phase}
+PHASE_METHODS = {"gabor": gabor_phase, "ftp": ftp_phase, "wfr": wfr_phase}
 MODES = ("reference", "calibrated")
 
 
@@ -37,7 +38,9 @@ class DecoderParams:
     intensity_mode : str
         ``overlay`` (paper Eq. 9) or ``blue``.
     phase_method : str
-        Key of :data:`PHASE_METHODS`.
+        Key of :data:`PHASE_METHODS`: ``gabor`` (paper Eq. 10-11), ``ftp`` (Fourier transform
+        profilometry, row by row) or ``wfr`` (windowed Fourier ridges); see
+        :mod:`simbench.decode.fourier`.  All three use the same window for their quality maps.
     sigma_periods : float
         Gabor envelope sigma along x in fringe periods (camera px = ``sigma_periods * T_cam``).
         The paper gives no value; 0.25 (with ``sigma_y_ratio`` 0.6) trades noise against the
