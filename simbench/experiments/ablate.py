@@ -66,7 +66,8 @@ from simbench.io import atomic_write_bytes, atomic_write_text, read_toml, save_j
 __all__ = ["PARAMETERS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "BUILTIN_STUDIES", "STUDIES_DIR"]
 
 STUDIES_DIR = Path(__file__).resolve().parents[1] / "studies"
-METRICS = ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors", "stripe_order_error_rate")
+METRICS = ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "outlier_share", "edge5_mae_mm", "completeness", "stripe_order_errors", "stripe_order_error_rate")
+EDGE_BAND_PX = 5  # edge5_mae_mm: the MAE outside this band at depth edges (issue 2's protocol for shapes)
 
 
 def _decoder_fields() -> dict[str, str]:
@@ -174,7 +175,7 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
         raise ValueError(f"{where}: {exc}") from None
 
 
-BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "noise_ambient", "surface_colour")
+BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "phase_method", "voting", "noise_ambient", "surface_colour")
 
 
 def load_sweep(path_or_name: str | Path) -> Sweep:
@@ -307,12 +308,23 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         result = session.decode(cap, decoder)
         t3 = time.perf_counter()
         row = {k: float(v) for k, v in _score(cap, result, decoder.period_px).items()}
+        row.update(_more_scores(cap, result))
         row.update(render_seed=cap.seeds["render"], noise_seed=cap.seeds["noise"], error="")
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row
     except Exception as exc:  # noqa: BLE001 - a failing run is recorded, not fatal
         msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
         return {"error": msg, "traceback": traceback.format_exc(limit=4), "timing": {"setup_s": time.perf_counter() - t0}}
+
+
+def _more_scores(cap, result) -> dict:
+    from simbench.metrics import depth_errors, edge_band
+
+    gt = cap.gt
+    full = depth_errors(result.depth_m, gt.depth_m, region=gt.lit)
+    band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=EDGE_BAND_PX)
+    off_edges = depth_errors(result.depth_m, gt.depth_m, region=gt.lit, exclude=band)
+    return {"gt_p95_mm": float(full["p95_mm"]), "outlier_share": float(full["outlier_share"]), "edge5_mae_mm": float(off_edges["mae_mm"])}
 
 
 def _worker_init(variant: str | None) -> None:
@@ -488,8 +500,9 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
     body = []
     for combo, group in _groups(sweep, rows):
         errs = sum(1 for r in group if r["error"])
-        body.append([*combo, *(f"{_mean(group, k):.4g}" for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm")), f"{100 * _mean(group, 'completeness'):.2f} %", f"{_mean(group, 'stripe_order_errors'):.0f}", str(errs)])
-    lines += markdown_table([*axis_names, "plane fit (mm)", "GT MAE (mm)", "GT RMSE (mm)", "completeness", "stripe-order errors", "errors"], body)
+        body.append([*combo, *(f"{_mean(group, k):.4g}" for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm")), f"{100 * _mean(group, 'outlier_share'):.3f} %", f"{100 * _mean(group, 'completeness'):.2f} %", f"{_mean(group, 'stripe_order_errors'):.0f}", str(errs)])
+    header = [*axis_names, "plane fit (mm)", "GT MAE (mm)", "GT RMSE (mm)", "GT p95 (mm)", f"MAE off edges (mm, {EDGE_BAND_PX} px)", "outliers (> 5 mm)", "completeness", "stripe-order errors", "errors"]
+    lines += markdown_table(header, body)
     failures = sorted({r["error"] for r in rows if r["error"]})
     if failures:
         lines += ["", "Errors:", ""] + [f"- {e}" for e in failures]
