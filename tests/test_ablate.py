@@ -66,6 +66,17 @@ def test_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path, variant):
 
 
 @pytest.mark.slow
+def test_phase_method_axis(tmp_path, variant):
+    """Every registered phase method runs through a sweep (one render shared); an unknown one is a recorded error."""
+    sweep = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "ftp", "wfr", "hilbert"]}])
+    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    for r in rows[:3]:
+        assert r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0  # small, few-spp renders
+    assert len({r["gt_mae_mm"] for r in rows[:3]}) == 3  # the axis reaches the decoder
+    assert "unknown phase_method 'hilbert'" in rows[3]["error"] and "'wfr'" in rows[3]["error"]
+
+
+@pytest.mark.slow
 def test_interrupted_sweep_resumes_without_redoing_runs(tmp_path, variant):
     sweep = _sweep(axis=[{"name": "decoder.voting", "values": [True, False]}, {"name": "decoder.neighbour_reach", "values": [0, 3]}])
     cache = tmp_path / "cache"
