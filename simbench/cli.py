@@ -21,7 +21,7 @@ def _cmd_pattern(args) -> int:
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
 
-    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order, sequence=_sequence(args.sequence))
+    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     path = save_png(args.out, quantize(fringe_pattern(spec)))
     codes = "".join(map(str, spec.codes()))
     print(f"pattern {args.width}x{args.height}, period {args.period} px, codes {codes} (window {args.order}) -> {path}")
@@ -46,7 +46,7 @@ def _cmd_render(args) -> int:
     scene = load_scene(args.scene)
     sensor = get_sensor(args.camera)
     variant = select_variant(args.variant)
-    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence))
+    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     t0 = time.perf_counter()
     acq = acquire(scene, pattern=pattern, sensor=sensor, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
     files = write_acquisition(acq, args.out)
@@ -83,7 +83,7 @@ def _cmd_decode(args) -> int:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
-    params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
     params = _decoder_overrides(params, args.decoder or [])
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
@@ -307,6 +307,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=int, default=21, help="fringe period T in projector pixels")
     s.add_argument("--order", type=int, default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
+    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
     s.set_defaults(fn=_cmd_pattern)
 
     s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata")
@@ -319,6 +320,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
+    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: automatic)")
     s.set_defaults(fn=_cmd_render)
 
@@ -336,6 +338,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--period", type=int, default=21)
     s.add_argument("--order", type=int, default=3)
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
+    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
     s.set_defaults(fn=_cmd_decode)
 

@@ -27,6 +27,7 @@ import numpy as np
 
 __all__ = [
     "PatternSpec",
+    "check_channels",
     "de_bruijn",
     "window_positions",
     "check_sequence",
@@ -135,6 +136,10 @@ class PatternSpec:
         Fringe offset A of Eq. 7, in [0, 1] of full projector drive.
     amplitude : float
         Fringe amplitude B of Eq. 7; ``dc + amplitude <= 1`` and ``dc - amplitude >= 0``.
+    channels : str
+        Which colour channel carries code 1, code 0 and the fringe, in that order: a permutation
+        of ``"rgb"``.  The paper's pattern is ``"rgb"`` (red stripes = 1, green = 0, fringe in
+        blue); ``"rbg"`` puts the fringe in green, ``"gbr"`` in red.
     """
 
     size_hw: tuple[int, int] = (1140, 1824)
@@ -143,8 +148,10 @@ class PatternSpec:
     dc: float = 0.5
     amplitude: float = 0.5
     sequence: tuple[int, ...] | None = None
+    channels: str = "rgb"
 
     def __post_init__(self) -> None:
+        check_channels(self.channels)
         h, w = self.size_hw
         if int(h) != h or int(w) != w or h < 1 or w < 1:
             raise ValueError(f"pattern size_hw must be two positive integers, got {self.size_hw}")
@@ -170,6 +177,19 @@ class PatternSpec:
     def cycle_stripes(self) -> int:
         """Number of stripes L in one cycle (paper: 8)."""
         return 2**self.order if self.sequence is None else len(self.sequence)
+
+
+def check_channels(channels: str) -> tuple[int, int, int]:
+    """Indices (R = 0, G = 1, B = 2) of the channels carrying code 1, code 0 and the fringe.
+
+    Raises
+    ------
+    ValueError
+        Unless ``channels`` is a permutation of ``"rgb"``.
+    """
+    if not isinstance(channels, str) or sorted(channels) != ["b", "g", "r"]:
+        raise ValueError(f"channels must be a permutation of 'rgb' (code 1, code 0, fringe), got {channels!r}")
+    return tuple("rgb".index(c) for c in channels)
 
 
 def check_sequence(sequence, *, order: int) -> tuple[int, ...]:
@@ -209,14 +229,16 @@ def fringe_pattern(spec: PatternSpec) -> np.ndarray:
     Returns
     -------
     ndarray, shape (H, W, 3), float32 in [0, 1]
-        Linear projector drive per channel (R, G, B): ``R = C*I``, ``G = (1-C)*I``, ``B = I``.
+        Linear projector drive per channel (R, G, B): ``R = C*I``, ``G = (1-C)*I``, ``B = I``
+        for the paper's ``channels = "rgb"``, permuted accordingly otherwise.
     """
     h, w = spec.size_hw
     u = np.arange(w, dtype=np.float64)
     intensity = spec.dc + spec.amplitude * np.cos(phase_from_column(u, period_px=spec.period_px))
     seq = spec.codes()
     code = seq[(np.arange(w) // spec.period_px) % seq.size].astype(np.float64)
-    row = np.stack([code * intensity, (1.0 - code) * intensity, intensity], axis=-1)
+    row = np.empty((w, 3))
+    row[:, list(check_channels(spec.channels))] = np.stack([code * intensity, (1.0 - code) * intensity, intensity], axis=-1)
     return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32)
 
 

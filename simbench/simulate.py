@@ -263,7 +263,7 @@ def acquire(
     gt = cached_ground_truth(scene, cache=cache)
     meta = {
         "scene": scene.name,
-        "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude},
+        "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude, "channels": pattern.channels},
         "sensor": sensor_to_dict(sensor),
         "exposure_s": exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale) if sensor.is_physical else None,
         "spp": int(spp),

@@ -24,6 +24,7 @@ def test_pattern_command(tmp_path, capsys):
         (["pattern", "--out", "p.png", "--period", "2"], "period_px"),
         (["pattern", "--out", "p.png", "--sequence", "0101"], "repeats"),
         (["pattern", "--out", "p.png", "--sequence", "01x"], "0 and 1"),
+        (["pattern", "--out", "p.png", "--channels", "rgg"], "permutation of 'rgb'"),
     ],
 )
 def test_errors_are_one_line_and_nonzero(tmp_path, monkeypatch, capsys, argv, match):
@@ -31,6 +32,15 @@ def test_errors_are_one_line_and_nonzero(tmp_path, monkeypatch, capsys, argv, ma
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("simbench: error:") and match in err and "\n" not in err
+
+
+def test_pattern_channels(tmp_path):
+    """`--channels gbr`: code 1 green, code 0 blue, the fringe in red (OpenCV reads BGR; load_image gives RGB)."""
+    assert main(["pattern", "--out", str(tmp_path / "p.png"), "--channels", "gbr"]) == 0
+    import numpy as np
+
+    img = load_image(tmp_path / "p.png").astype(int)
+    assert np.abs(img[..., 1] + img[..., 2] - img[..., 0]).max() <= 1 and (img[..., 1] * img[..., 2] == 0).all()
 
 
 def test_invalid_rig_field(tmp_path, capsys):

@@ -39,7 +39,7 @@ def test_window_table_rejects_repeats():
         window_positions(np.array([0, 0, 1, 0, 0, 1]), order=2)
 
 
-@pytest.mark.parametrize("bad", [{"order": 1}, {"period_px": 2}, {"dc": 0.3, "amplitude": 0.5}, {"size_hw": (0, 10)}])
+@pytest.mark.parametrize("bad", [{"order": 1}, {"period_px": 2}, {"dc": 0.3, "amplitude": 0.5}, {"size_hw": (0, 10)}, {"channels": "rgr"}, {"channels": "rg"}])
 def test_invalid_specs_raise(bad):
     with pytest.raises(ValueError):
         PatternSpec(**bad)
@@ -69,6 +69,17 @@ def test_eq8_channels_and_stripe_colours():
     # brightest at stripe centres, darkest at borders
     assert np.argmax(b[:21]) == 10 and np.argmin(b[:21]) in (0, 20)
     assert np.all(p == p[:1])
+
+
+@pytest.mark.parametrize("channels", ["rbg", "gbr", "brg"])
+def test_channel_assignment_permutes_eq8(channels):
+    """``channels`` names the colours of code 1, code 0 and the fringe: the paper's pattern with its channels moved."""
+    spec = PatternSpec(size_hw=(2, 21 * 8))
+    paper = fringe_pattern(spec)
+    moved = fringe_pattern(PatternSpec(size_hw=(2, 21 * 8), channels=channels))
+    idx = ["rgb".index(c) for c in channels]
+    for k in range(3):
+        assert np.array_equal(moved[..., idx[k]], paper[..., k])
 
 
 def test_quantize():

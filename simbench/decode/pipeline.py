@@ -15,7 +15,7 @@ from simbench.decode.debruijn import drop_broken_links, neighbour_correct, windo
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
-from simbench.pattern import check_sequence, code_sequence, window_positions
+from simbench.pattern import check_channels, check_sequence, code_sequence, window_positions
 from simbench.optics import undistort_image
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
@@ -35,8 +35,12 @@ class DecoderParams:
         The pattern's fringe period T (projector px) and window length (paper: 21, 3).
     sequence : tuple of int, optional
         The pattern's stripe codes; None = B(2, order) (see :class:`simbench.pattern.PatternSpec`).
+    channels : str
+        The pattern's channel assignment (code 1, code 0, fringe; see
+        :class:`simbench.pattern.PatternSpec`); the decoder reorders the capture's channels so
+        that every stage sees the paper's layout (R = code 1, G = code 0, B = fringe).
     intensity_mode : str
-        ``overlay`` (paper Eq. 9) or ``blue``.
+        ``overlay`` (paper Eq. 9) or ``blue`` (the fringe channel alone: blue in the paper's pattern).
     phase_method : str
         Key of :data:`PHASE_METHODS`: ``gabor`` (paper Eq. 10-11), ``ftp`` (Fourier transform
         profilometry, row by row) or ``wfr`` (windowed Fourier ridges); see
@@ -87,6 +91,7 @@ class DecoderParams:
     period_px: int = 21
     order: int = 3
     sequence: tuple[int, ...] | None = None
+    channels: str = "rgb"
     intensity_mode: str = "overlay"
     phase_method: str = "gabor"
     sigma_periods: float = 0.25
@@ -108,6 +113,7 @@ class DecoderParams:
     threads: int | None = None
 
     def __post_init__(self) -> None:
+        check_channels(self.channels)
         if self.sequence is not None:
             object.__setattr__(self, "sequence", check_sequence(self.sequence, order=self.order))
         if self.intensity_mode not in INTENSITY_MODES:
@@ -334,11 +340,13 @@ def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
     (``image`` is a checked capture; each band converts its own rows to float)."""
     h = image.shape[0]
     bands, halo = _bands(h, params, rig)
+    order = list(check_channels(params.channels))
 
     def work(band):
         r0, r1 = band
         a0, a1 = max(0, r0 - halo), min(h, r1 + halo)
-        return fn(_to_float(image[a0:a1]), slice(r0, r1), slice(r0 - a0, r1 - a0))
+        rows = image[a0:a1] if order == [0, 1, 2] else image[a0:a1][..., order]
+        return fn(_to_float(rows), slice(r0, r1), slice(r0 - a0, r1 - a0))
 
     if len(bands) == 1:
         return [work(bands[0])]

@@ -25,8 +25,9 @@ A sweep file (TOML)::
 
 Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
 
-- ``pattern.period_px``, ``pattern.order``, ``pattern.sequence`` (a 0/1 string): the projected
-  pattern, which the decoder is told about;
+- ``pattern.period_px``, ``pattern.order``, ``pattern.sequence`` (a 0/1 string),
+  ``pattern.channels`` (which colour carries code 1, code 0 and the fringe, e.g. ``rbg``): the
+  projected pattern, which the decoder is told about;
 - ``decoder.<field>``: any :class:`simbench.decode.DecoderParams` field (phase method, overlay vs
   ``blue`` intensity, voting, neighbour correction, colour normalisation, ...);
 - ``sensor.preset``: a sensor preset or TOML file; ``sensor.effects``: a list of
@@ -73,7 +74,7 @@ EDGE_BAND_PX = 5  # edge5_mae_mm: the MAE outside this band at depth edges (issu
 def _decoder_fields() -> dict[str, str]:
     from simbench.decode import DecoderParams
 
-    skip = {"period_px", "order", "sequence", "z0_m", "threads"}
+    skip = {"period_px", "order", "sequence", "channels", "z0_m", "threads"}
     return {f"decoder.{f.name}": f"DecoderParams.{f.name}" for f in dataclasses.fields(DecoderParams) if f.name not in skip}
 
 
@@ -82,6 +83,7 @@ def _parameters() -> dict[str, str]:
         "pattern.period_px": "fringe period T (projector px)",
         "pattern.order": "De Bruijn window length n of B(2, n)",
         "pattern.sequence": "explicit stripe code sequence (0/1 string)",
+        "pattern.channels": "colour channels of code 1, code 0 and the fringe (paper: rgb)",
         "sensor.preset": "sensor model: a preset (ideal, minimal, paper) or a TOML file",
         "sensor.effects": "list of physical effects switched on over the ideal model",
         "sensor.source": "where sensor.effects take their values from (default paper)",
@@ -175,7 +177,7 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
         raise ValueError(f"{where}: {exc}") from None
 
 
-BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "phase_method", "voting", "noise_ambient", "surface_colour")
+BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "pattern_colours", "phase_method", "voting", "noise_ambient", "surface_colour")
 
 
 def load_sweep(path_or_name: str | Path) -> Sweep:
@@ -279,6 +281,8 @@ def _decoder(params: dict):
         if not text or set(text) - {"0", "1"}:
             raise ValueError(f"pattern.sequence must be a 0/1 string, got {text!r}")
         fields["sequence"] = tuple(int(c) for c in text)
+    if "pattern.channels" in params:
+        fields["channels"] = str(params["pattern.channels"])
     return DecoderParams(**fields)
 
 

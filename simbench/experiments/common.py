@@ -113,7 +113,7 @@ class Session:
         self.command = command or "simbench " + " ".join(sys.argv[1:])
         self.variant = mi.variant()
         self.sensor = sensor if sensor is not None else get_sensor(config.sensor)
-        self.pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence)
+        self.pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence, channels=config.decoder.channels)
         self.pattern_u8 = quantize(fringe_pattern(self.pattern))
         self._refs: dict = {}
         self._competitor_cal: dict = {}

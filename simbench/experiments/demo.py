@@ -94,7 +94,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
 
     out = Path(out_dir)
     sensor = get_sensor(config.sensor)
-    pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order)
+    pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence, channels=config.decoder.channels)
     rows = []
     seeds = np.random.SeedSequence(config.seed).spawn(len(config.scenes))
     for i, (name, ss) in enumerate(zip(config.scenes, seeds)):
