@@ -67,9 +67,11 @@ def test_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path, variant):
 
 @pytest.mark.slow
 def test_phase_method_axis(tmp_path, variant):
-    """Every registered phase method runs through a sweep (one render shared); an unknown one is a recorded error."""
+    """Every registered phase method runs through a sweep; the decoder-only axis renders the scene
+    once (one capture and one reference radiance in the cache); an unknown method is a recorded error."""
     sweep = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "ftp", "wfr", "hilbert"]}])
     rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    assert len(list((tmp_path / "cache").glob("radiance-*.npz"))) == 2
     for r in rows[:3]:
         assert r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0  # small, few-spp renders
     assert len({r["gt_mae_mm"] for r in rows[:3]}) == 3  # the axis reaches the decoder
