@@ -69,12 +69,14 @@ def test_blue_only_mode_also_decodes(reference):
     ids=["dark", "saturated", "noise", "saturated16", "dark-float"],
 )
 def test_legal_images_never_crash_and_mark_invalid(image, reference):
-    for mode in ("reference", "calibrated"):
-        r = decode(image, rig=RIG, params=DecoderParams(mode=mode), reference=reference)
+    variants = [DecoderParams(mode="reference"), DecoderParams(mode="calibrated")]
+    variants += [DecoderParams(mode="calibrated", phase_method=m, color_normalize=True) for m in ("ftp", "wfr")]
+    for params in variants:
+        r = decode(image, rig=RIG, params=params, reference=reference if params.mode == "reference" else None)
         assert r.depth_m.shape == (960, 1280) and r.depth_m.dtype == np.float32
         assert np.array_equal(np.isfinite(r.depth_m), r.valid)
-    if image.max() == 0 or image.min() == image.max():
-        assert not r.valid.any()
+        if image.max() == 0 or image.min() == image.max():
+            assert not r.valid.any()
 
 
 @pytest.mark.parametrize(
