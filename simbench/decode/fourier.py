@@ -33,18 +33,20 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from simbench.decode.phase import PhaseResult, gaussian_kernel
+from simbench.decode.phase import PhaseResult, check_phase_inputs, gaussian_kernel
 
 __all__ = ["ftp_phase", "wfr_phase", "ridge_frequencies"]
 
 _ROW = np.ones(1, np.float32)
 
 
-def _check(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
-    if intensity.ndim != 2 or certainty.shape != intensity.shape:
-        raise ValueError(f"intensity {intensity.shape} and certainty {certainty.shape} must be equal 2-D shapes")
-    if not period_px > 2:
-        raise ValueError(f"period_px must be > 2, got {period_px}")
+def _prepare(intensity: np.ndarray, certainty: np.ndarray, period_px: float):
+    """Checked float32 inputs, the background A and the fringe ``c * (I - A)`` (0 where uncertain)."""
+    check_phase_inputs(intensity, certainty, period_px)
+    intensity = intensity.astype(np.float32, copy=False)
+    c = certainty.astype(np.float32, copy=False)
+    background = _background(intensity, c, period_px=period_px)
+    return intensity, c, background, c * (intensity - background)
 
 
 def _background(intensity: np.ndarray, certainty: np.ndarray, *, period_px: float) -> np.ndarray:
@@ -116,12 +118,8 @@ def ftp_phase(
     -------
     PhaseResult
     """
-    _check(intensity, certainty, period_px)
-    intensity = intensity.astype(np.float32, copy=False)
-    c = certainty.astype(np.float32, copy=False)
+    intensity, c, background, fringe = _prepare(intensity, certainty, period_px)
     h, w = intensity.shape
-    background = _background(intensity, c, period_px=period_px)
-    fringe = c * (intensity - background)
     # zero padding by at least two periods: the row is not periodic, and the circular wrap of the
     # DFT would otherwise join its two ends
     n = cv2.getOptimalDFTSize(w + 2 * int(np.ceil(period_px)))
@@ -192,13 +190,9 @@ def wfr_phase(
     -------
     PhaseResult
     """
-    _check(intensity, certainty, period_px)
     if not (sigma_x_px > 0 and sigma_y_px > 0):
         raise ValueError("sigma_x_px and sigma_y_px must be > 0")
-    intensity = intensity.astype(np.float32, copy=False)
-    c = certainty.astype(np.float32, copy=False)
-    background = _background(intensity, c, period_px=period_px)
-    fringe = c * (intensity - background)
+    intensity, c, background, fringe = _prepare(intensity, certainty, period_px)
     xi_x, xi_y = ridge_frequencies(period_px=period_px, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
     gy = gaussian_kernel(sigma_y_px)
     cy, sy = _modulated(sigma_y_px, xi_y)

@@ -166,6 +166,14 @@ def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
     return out, moments[0]
 
 
+def check_phase_inputs(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
+    """The checks every phase stage of :data:`simbench.decode.pipeline.PHASE_METHODS` makes."""
+    if intensity.ndim != 2 or certainty.shape != intensity.shape:
+        raise ValueError(f"intensity {intensity.shape} and certainty {certainty.shape} must be equal 2-D shapes")
+    if not period_px > 2:
+        raise ValueError(f"period_px must be > 2, got {period_px}")
+
+
 def gabor_phase(
     intensity: np.ndarray,
     *,
@@ -189,10 +197,7 @@ def gabor_phase(
     -------
     PhaseResult
     """
-    if intensity.ndim != 2 or certainty.shape != intensity.shape:
-        raise ValueError(f"intensity {intensity.shape} and certainty {certainty.shape} must be equal 2-D shapes")
-    if not period_px > 2:
-        raise ValueError(f"period_px must be > 2, got {period_px}")
+    check_phase_inputs(intensity, certainty, period_px)
     h, w = intensity.shape
     omega = round(2.0 * np.pi / period_px, 12)
     kx, ky = gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px)

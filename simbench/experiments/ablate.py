@@ -311,24 +311,13 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         t2 = time.perf_counter()
         result = session.decode(cap, decoder)
         t3 = time.perf_counter()
-        row = {k: float(v) for k, v in _score(cap, result, decoder.period_px).items()}
-        row.update(_more_scores(cap, result))
+        row = {k: float(v) for k, v in _score(cap, result, decoder.period_px, edge_band_px=EDGE_BAND_PX).items()}
         row.update(render_seed=cap.seeds["render"], noise_seed=cap.seeds["noise"], error="")
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row
     except Exception as exc:  # noqa: BLE001 - a failing run is recorded, not fatal
         msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
         return {"error": msg, "traceback": traceback.format_exc(limit=4), "timing": {"setup_s": time.perf_counter() - t0}}
-
-
-def _more_scores(cap, result) -> dict:
-    from simbench.metrics import depth_errors, edge_band
-
-    gt = cap.gt
-    full = depth_errors(result.depth_m, gt.depth_m, region=gt.lit)
-    band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=EDGE_BAND_PX)
-    off_edges = depth_errors(result.depth_m, gt.depth_m, region=gt.lit, exclude=band)
-    return {"gt_p95_mm": float(full["p95_mm"]), "outlier_share": float(full["outlier_share"]), "edge5_mae_mm": float(off_edges["mae_mm"])}
 
 
 def _worker_init(variant: str | None) -> None:

@@ -13,7 +13,7 @@ import dataclasses
 
 from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.io import atomic_write_text
-from simbench.metrics import depth_errors, plane_fit_error
+from simbench.metrics import depth_errors, edge_band, plane_fit_error
 
 __all__ = ["PAPER_TABLE1", "COLOURS", "run_table1"]
 
@@ -31,10 +31,13 @@ COLOURS = tuple(PAPER_TABLE1)
 DECODERS = ("paper", "normalized")
 
 
-def _score(cap, result, period_px: float) -> dict:
-    m = depth_errors(result.depth_m, cap.gt.depth_m, region=cap.gt.lit, column_px=result.column_px, gt_column_px=cap.gt.column_px, period_px=period_px)
-    fit = plane_fit_error(result.depth_m, cap.scene.rig.camera, mask=cap.gt.lit)
-    return {
+def _score(cap, result, period_px: float, *, edge_band_px: int = 0) -> dict:
+    """The Table 1 scores; with ``edge_band_px`` also the 95th percentile, the outlier share and
+    ``edge<N>_mae_mm``, the MAE outside an N-px band at depth edges (the ablation tables)."""
+    gt = cap.gt
+    m = depth_errors(result.depth_m, gt.depth_m, region=gt.lit, column_px=result.column_px, gt_column_px=gt.column_px, period_px=period_px)
+    fit = plane_fit_error(result.depth_m, cap.scene.rig.camera, mask=gt.lit)
+    out = {
         "plane_mae_mm": fit["mean_abs_residual_mm"],
         "gt_mae_mm": m["mae_mm"],
         "gt_rmse_mm": m["rmse_mm"],
@@ -42,6 +45,11 @@ def _score(cap, result, period_px: float) -> dict:
         "stripe_order_errors": m["stripe_order_errors"],
         "stripe_order_error_rate": m["stripe_order_error_rate"],
     }
+    if edge_band_px > 0:
+        band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
+        off_edges = depth_errors(result.depth_m, gt.depth_m, region=gt.lit, exclude=band)
+        out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
+    return out
 
 
 def run_table1(session: Session) -> dict:
