@@ -217,3 +217,23 @@ def test_other_channel_assignments_decode(channels):
         assert (wrong.valid & (np.abs(wrong.column_px - col) < 0.5)).mean() < 0.5
     with pytest.raises(ValueError, match="permutation of 'rgb'"):
         DecoderParams(channels="rgx")
+
+
+def test_result_does_not_depend_on_opencv_threads(reference):
+    """OpenCV's own worker threads split filter calls at varying points (last-bit differences in
+    the Gabor moments); the decoder runs them single-threaded and restores the caller's setting."""
+    import cv2
+
+    img, _, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.2), supersample=2)
+    saved = cv2.getNumThreads()
+    try:
+        results = []
+        for n in (1, 8):
+            cv2.setNumThreads(n)
+            results.append(decode(img, rig=RIG, params=DecoderParams(), reference=reference))
+            assert cv2.getNumThreads() == n
+    finally:
+        cv2.setNumThreads(saved)
+    a, b = results
+    assert np.array_equal(a.confidence, b.confidence) and np.array_equal(a.depth_m, b.depth_m, equal_nan=True)
+    assert np.array_equal(a.stages["fit_residual"], b.stages["fit_residual"])
