@@ -33,7 +33,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from simbench.decode.phase import PhaseResult, check_phase_inputs, gaussian_kernel
+from simbench.decode.phase import PhaseResult, check_phase_inputs, gaussian_kernel, magnitude
 
 __all__ = ["ftp_phase", "wfr_phase", "ridge_frequencies"]
 
@@ -68,7 +68,7 @@ def _result(intensity, certainty, *, background, analytic_re, analytic_im, suppo
     kx = gaussian_kernel(sigma_x_px)
     wrapped = cv2.phase(analytic_re, analytic_im)
     wrapped[wrapped >= np.pi] -= np.float32(2 * np.pi)
-    amplitude = 2.0 * cv2.magnitude(analytic_re, analytic_im)
+    amplitude = 2.0 * magnitude(analytic_re, analytic_im)
     good = (support > 0.05) & (amplitude > 0)
     amplitude = np.where(good, amplitude, np.float32(0))
     # per-pixel misfit of A + B cos(psi), its certainty-weighted RMS over the window along the row

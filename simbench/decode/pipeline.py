@@ -8,7 +8,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 
-import cv2
 import numpy as np
 
 from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
@@ -349,19 +348,10 @@ def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
         rows = image[a0:a1] if order == [0, 1, 2] else image[a0:a1][..., order]
         return fn(_to_float(rows), slice(r0, r1), slice(r0 - a0, r1 - a0))
 
-    # the bands are the decoder's parallelism; OpenCV's own worker threads split a filter call
-    # at points that vary from run to run, which changes the last bits of the Gabor moments
-    # (measured: amplitude and residual differed by ~1e-8 between processes), so they are
-    # switched off while the bands run
-    saved = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        if len(bands) == 1:
-            return [work(bands[0])]
-        with ThreadPoolExecutor(max_workers=len(bands)) as pool:
-            return list(pool.map(work, bands))
-    finally:
-        cv2.setNumThreads(saved)
+    if len(bands) == 1:
+        return [work(bands[0])]
+    with ThreadPoolExecutor(max_workers=len(bands)) as pool:
+        return list(pool.map(work, bands))
 
 
 def _merge_stages(parts: list[LazyStages]) -> LazyStages:
