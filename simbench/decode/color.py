@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from simbench.decode import _kernels
+
 __all__ = ["color_code", "normalize_channels", "Stripes", "segment_stripes", "vote_codes"]
 
 
@@ -113,36 +115,16 @@ def segment_stripes(
     """
     h, w = wrapped.shape
     omega = 2.0 * np.pi / period_px
-    d = np.diff(wrapped, axis=1)
-    wrap = d < -np.pi
-    step = d + np.float32(2 * np.pi) * wrap
-    plausible = (step > min_step_ratio * omega) & (step < min(max_step_ratio * omega, 0.9 * np.pi))
-    both = valid[:, 1:] & valid[:, :-1]
-    cont = both & plausible & ~wrap  # same stripe continues
-    linked = both & plausible & wrap  # next stripe of the pattern starts
-    starts = np.zeros((h, w), dtype=bool)
-    starts[:, 0] = valid[:, 0]
-    starts[:, 1:] = valid[:, 1:] & ~cont
-    flat_starts = starts.ravel()
-    labels = np.cumsum(flat_starts, dtype=np.int64) - 1
-    labels = np.where(valid.ravel(), labels, -1).astype(np.int32).reshape(h, w)
-    idx = np.flatnonzero(flat_starts)
-    row = (idx // w).astype(np.int32)
-    start = (idx % w).astype(np.int32)
-    stop = np.empty_like(start)
-    if idx.size:
-        valid_flat = valid.ravel()
-        # a stripe ends where the next one starts or at the first invalid pixel after it
-        ends = np.flatnonzero(np.diff(np.concatenate([[False], valid_flat, [False]]).astype(np.int8)) == -1)
-        nxt = np.searchsorted(ends, idx, side="right")
-        run_end = ends[nxt]
-        next_start = np.append(idx[1:], h * w)
-        row_end = (row.astype(np.int64) + 1) * w
-        stop = (np.minimum(np.minimum(run_end, next_start), row_end) - row.astype(np.int64) * w).astype(np.int32)
-    linked_prev = np.zeros(idx.size, dtype=bool)
-    inner = start > 0
-    linked_prev[inner] = linked[row[inner], start[inner] - 1]
-    return Stripes(labels=labels, row=row, start=start, stop=stop, linked_prev=linked_prev)
+    lo = np.float32(min_step_ratio * omega)
+    hi = np.float32(min(max_step_ratio * omega, 0.9 * np.pi))
+    labels = np.empty((h, w), np.int32)
+    # room for one stripe per pixel; only the pages of the stripes found are ever touched
+    row, start, stop = (np.empty(h * w, np.int32) for _ in range(3))
+    linked_prev = np.empty(h * w, bool)
+    n = _kernels.segment_stripes(
+        np.ascontiguousarray(wrapped, dtype=np.float32), np.ascontiguousarray(valid, dtype=bool), lo, hi, labels, row, start, stop, linked_prev
+    )
+    return Stripes(labels=labels, row=row[:n].copy(), start=start[:n].copy(), stop=stop[:n].copy(), linked_prev=linked_prev[:n].copy())
 
 
 def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -156,16 +138,7 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     stripe_code : ndarray, shape (S,), uint8
     agreement : ndarray, shape (S,), float32; share of the stripe's pixels agreeing with it
     """
-    # one histogram over (stripe, code) pairs; label -1 (invalid) lands in the first two bins
-    key = (stripes.labels.ravel() + 1) * 2 + code.ravel()
-    hist = np.bincount(key, minlength=2 * (stripes.count + 1)).reshape(-1, 2)[1:].astype(np.float64)
-    counts = hist[:, 0] + hist[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac = np.where(counts > 0, hist[:, 1] / counts, 0.5)
-    if voting:
-        out = (frac >= 0.5).astype(np.uint8)
-    else:
-        mid = (stripes.start + stripes.stop - 1) // 2
-        out = code[stripes.row, mid].astype(np.uint8)
-    agreement = np.where(out == 1, frac, 1.0 - frac).astype(np.float32)
+    out = np.empty(stripes.count, np.uint8)
+    agreement = np.empty(stripes.count, np.float32)
+    _kernels.vote_codes(np.ascontiguousarray(code, dtype=bool), stripes.row, stripes.start, stripes.stop, bool(voting), out, agreement)
     return out, agreement

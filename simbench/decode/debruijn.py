@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from simbench.decode import _kernels
+
 __all__ = ["chain_extent", "window_positions_of_stripes", "neighbour_correct", "drop_broken_links"]
 
 
@@ -21,13 +23,11 @@ def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     -------
     left, right : ndarray, shape (S,), int64
     """
-    n = linked_prev.size
-    idx = np.arange(n)
-    chain_start = np.maximum.accumulate(np.where(~linked_prev, idx, 0)) if n else idx
-    chain_id = np.cumsum(~linked_prev) - 1
-    last = np.zeros(chain_id.max() + 1 if n else 0, dtype=np.int64)
-    np.maximum.at(last, chain_id, idx)
-    return idx - chain_start, last[chain_id] - idx
+    linked_prev = np.ascontiguousarray(linked_prev, dtype=bool)
+    left = np.empty(linked_prev.size, np.int64)
+    right = np.empty(linked_prev.size, np.int64)
+    _kernels.chain_extent(linked_prev, left, right)
+    return left, right
 
 
 def window_positions_of_stripes(
@@ -96,30 +96,14 @@ def neighbour_correct(
     n = positions.size
     if reach <= 0:
         return positions.copy(), (positions >= 0).astype(np.int32)
+    positions = np.ascontiguousarray(positions, dtype=np.int32)
     left, right = chain_extent(linked_prev)
-    preds = np.full((2 * reach + 1, n), -1, dtype=np.int64)
-    for k, off in enumerate(range(-reach, reach + 1)):
-        src = np.arange(n) + off
-        ok = (left >= -off) if off < 0 else (right >= off)
-        ok &= (src >= 0) & (src < n)
-        p = np.full(n, -1, dtype=np.int64)
-        p[ok] = positions[src[ok]]
-        good = ok & (p >= 0)
-        preds[k] = np.where(good, (p - off) % cycle, -1)
-    # votes per candidate position: a one-hot count over the 2*reach+1 predictions
-    counts = np.zeros((cycle, n), dtype=np.int16)
-    for k in range(preds.shape[0]):
-        for v in range(cycle):
-            counts[v] += preds[k] == v
-    cols = np.arange(n)
-    best = counts.argmax(axis=0)
-    best_votes = counts[best, cols].astype(np.int64)
+    out = np.empty(n, np.int32)
+    support = np.empty(n, np.int32)
     # A tie between different candidates (typical where a chain was linked across a depth
-    # edge) is not evidence for either: drop the stripe rather than guess.
-    counts[best, cols] = -1
-    rival = counts.max(axis=0) if n else np.zeros(0, np.int16)
-    keep = (best_votes >= min_support) & (best_votes > rival)
-    return np.where(keep, best, -1).astype(np.int32), np.where(keep, best_votes, 0).astype(np.int32)
+    # edge) is not evidence for either: the stripe is dropped rather than guessed.
+    _kernels.neighbour_correct(positions, left, right, cycle, reach, min_support, out, support)
+    return out, support
 
 
 def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: int) -> np.ndarray:

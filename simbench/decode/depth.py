@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from simbench.decode import _kernels
 from simbench.rig import Rig, triangulate_columns
 
 __all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity", "depth_calibrated"]
@@ -45,15 +46,14 @@ def absolute_column(
     column_px : ndarray, shape (H, W), float32; NaN where unknown
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 where unknown
     """
-    t = np.float32(period_px)
-    # column_from_phase(psi + 2 pi W) without the float64 round trip
-    col0 = (wrapped + np.float32(np.pi)) * (t / np.float32(2 * np.pi)) + position.astype(np.float32) * t - np.float32(0.5)
-    span = np.float32(cycle * period_px)
-    k = np.rint((expected_column - col0) / span)
-    known = (position >= 0) & np.isfinite(k)
-    col = np.where(known, col0 + k * span, np.float32(np.nan))
-    n = np.where(known, position + cycle * np.nan_to_num(k).astype(np.int32), -1)
-    return col.astype(np.float32, copy=False), n.astype(np.int32, copy=False)
+    position = np.ascontiguousarray(position, dtype=np.int32)
+    wrapped = np.ascontiguousarray(wrapped, dtype=np.float32)
+    expected = np.ascontiguousarray(np.broadcast_to(expected_column, position.shape), dtype=np.float32)
+    column = np.empty(position.shape, np.float32)
+    index = np.empty(position.shape, np.int32)
+    # column_from_phase(psi + 2 pi W) in float32, one pass (simbench.decode._kernels)
+    _kernels.absolute_column(position, wrapped, expected, np.float32(period_px), np.float32(cycle * period_px), cycle, column, index)
+    return column, index
 
 
 def inverse_column_table(reference_column: np.ndarray, *, projector_width: int) -> np.ndarray:
@@ -101,23 +101,10 @@ def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (H, W), float32; NaN where the reference has no match
     """
-    h, w = column.shape
-    stride = table.shape[1]
-    width = stride - 2
-    # NaN and out-of-range columns interpolate towards the table's NaN column, giving NaN
-    inside = column >= 0
-    inside &= column <= width  # False for NaN
-    cf = np.where(inside, column, np.float32(width + 0.5))
-    bad = ~inside
-    fi = np.floor(cf)
-    fi[~bad & (fi >= width)] = width - 1
-    f = cf - fi
-    i = fi.astype(np.int32)
-    idx = i + (np.arange(h, dtype=np.int32) * stride)[:, None]
-    flat = table.ravel()
-    x0 = np.take(flat, idx)
-    x1 = np.take(flat, idx + 1)
-    return x0 + f * (x1 - x0)
+    column = np.ascontiguousarray(column, dtype=np.float32)
+    out = np.empty(column.shape, np.float32)
+    _kernels.match_reference(column, np.ascontiguousarray(table, dtype=np.float32), out)
+    return out
 
 
 def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: float, z0_m: float) -> np.ndarray:
@@ -127,12 +114,10 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
     -------
     ndarray, shape (H, W), float32; NaN where unmatched or not in front of the camera
     """
-    h, w = x_ref.shape
-    d = np.arange(w, dtype=np.float32)[None, :] - x_ref
-    inv = np.float32(1.0 / z0_m) + d * np.float32(1.0 / (focal_px * baseline_m))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.float32(1.0) / inv
-    return np.where(z > 0, z, np.float32(np.nan))
+    x_ref = np.ascontiguousarray(x_ref, dtype=np.float32)
+    out = np.empty(x_ref.shape, np.float32)
+    _kernels.depth_from_disparity(x_ref, np.float32(1.0 / z0_m), np.float32(1.0 / (focal_px * baseline_m)), out)
+    return out
 
 
 def depth_calibrated(column: np.ndarray, rig: Rig, *, rows: np.ndarray | None = None) -> np.ndarray:

@@ -18,6 +18,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from simbench.decode import _kernels
+
 __all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_map", "PhaseResult", "gabor_phase"]
 
 
@@ -129,54 +131,16 @@ def _basis(width: int, omega: float):
     return out
 
 
-def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
-    """Per-pixel maps turning the window moments (b0, b1, b2) of the data into the fit.
-
-    The normal equations are ``M p = b`` with ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs,
-    sss]]``; with the adjugate ``C`` and ``det``: ``p = C b / det``.  Returned are the rows
-    giving ``a0`` and the carrier-rotated ``re = a1 cos + a2 sin``, ``im = a1 sin - a2 cos``
-    (so that ``psi = atan2(im, re)``), ``1/s1`` and the mask of solvable pixels.
-    """
-    scc = 0.5 * (s1 + sc2)
-    sss = 0.5 * (s1 - sc2)
-    scs = 0.5 * ss2
-    c00 = scc * sss - scs * scs
-    c01 = ss * scs - sc * sss
-    c02 = sc * scs - ss * scc
-    c11 = s1 * sss - ss * ss
-    c12 = sc * ss - s1 * scs
-    c22 = s1 * scc - sc * sc
-    det = s1 * c00 + sc * c01 + ss * c02
-    good = (s1 > 0.05) & (det > 1e-4 * s1 * s1 * s1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(good, np.float32(1) / det, np.float32(0))
-        inv_s1 = np.where(good, np.float32(1) / s1, np.float32(0))
-    k = (c00 * inv, c01 * inv, c02 * inv)
-    p = ((c01 * cos1 + c02 * sin1) * inv, (c11 * cos1 + c12 * sin1) * inv, (c12 * cos1 + c22 * sin1) * inv)
-    q = ((c01 * sin1 - c02 * cos1) * inv, (c11 * sin1 - c12 * cos1) * inv, (c12 * sin1 - c22 * cos1) * inv)
-    return k, p, q, inv_s1, good
-
-
-def _dot3(m, b, *, out: np.ndarray, tmp: np.ndarray) -> None:
-    """``out = m[0]*b[0] + m[1]*b[1] + m[2]*b[2]`` without temporaries."""
-    np.multiply(m[0], b[0], out=out)
-    for mi, bi in zip(m[1:], b[1:]):
-        np.multiply(mi, bi, out=tmp)
-        out += tmp
-
-
 @lru_cache(maxsize=8)
-def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
-    """:func:`_solver` for an all-certain image (reused across captures of one rig)."""
+def _full_moments(shape: tuple[int, int], omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
+    """The certainty moments of an all-certain image (reused across captures of one rig)."""
     cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
     kx, ky = gaussian_kernel(sx), gaussian_kernel(sy)
     ones = np.ones(shape, np.float32)
-    moments = [_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
-    out = _solver(*moments, cos1, sin1)
-    for group in out:
-        for a in group if isinstance(group, tuple) else (group,):
-            a.setflags(write=False)
-    return out, moments[0]
+    moments = tuple(_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
+    for a in moments:
+        a.setflags(write=False)
+    return moments
 
 
 def check_phase_inputs(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
@@ -218,51 +182,26 @@ def gabor_phase(
     intensity = intensity.astype(np.float32, copy=False)
     c = certainty.astype(np.float32, copy=False)
     if c.min() >= 1.0:
-        (k, p, q, inv_s1, good), s1 = _full_solver((h, w), omega, float(sigma_x_px), float(sigma_y_px))
+        moments = _full_moments((h, w), omega, float(sigma_x_px), float(sigma_y_px))
         ci = intensity
     else:
-        moments = [_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
-        k, p, q, inv_s1, good = _solver(*moments, cos1, sin1)
-        s1 = moments[0]
+        moments = tuple(_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
         ci = c * intensity
     b0 = _conv(ci, kx, ky)
     b1 = _conv(ci * cos1, kx, ky)
     b2 = _conv(ci * sin1, kx, ky)
     e2 = _conv(ci * intensity, kx, ky)
-    # the maps are fixed per rig; work in preallocated buffers (each fresh image-sized array
-    # costs page faults on top of the arithmetic)
-    a0, re, im, t = (np.empty_like(b0) for _ in range(4))
-    _dot3(k, (b0, b1, b2), out=a0, tmp=t)
-    _dot3(p, (b0, b1, b2), out=re, tmp=t)
-    _dot3(q, (b0, b1, b2), out=im, tmp=t)
+    # the fit (normal equations solved by the adjugate, paper Eq. 10-11), amplitude and
+    # residual in one pass over the pixels: see simbench.decode._kernels.gabor_fit
+    a0, re, im, amp, residual = (np.empty_like(b0) for _ in range(5))
+    _kernels.gabor_fit(b0, b1, b2, e2, *moments, cos1, sin1, re, im, a0, amp, residual)
     # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
     wrapped = cv2.phase(re, im)
-    wrapped[wrapped >= np.pi] -= np.float32(2 * np.pi)
-    amp = magnitude(re, im, tmp=t)
-    # weighted residual sum of squares: e2 - p.b, with a1 b1 + a2 b2 written through re, im
-    u = np.empty_like(b0)
-    np.multiply(a0, b0, out=t)
-    np.subtract(e2, t, out=e2)
-    np.multiply(cos1, b1, out=t)
-    np.multiply(sin1, b2, out=u)
-    t += u
-    t *= re
-    e2 -= t
-    np.multiply(sin1, b1, out=t)
-    np.multiply(cos1, b2, out=u)
-    t -= u
-    t *= im
-    e2 -= t
-    np.maximum(e2, 0, out=e2)
-    e2 *= inv_s1
-    np.sqrt(e2, out=e2)
-    np.multiply(amp, np.float32(np.sqrt(0.5)), out=t)
-    ok = good & (amp > 0)
-    residual = np.full_like(b0, np.inf)
-    np.divide(e2, t, out=residual, where=ok)
+    _kernels.wrap_to_pi(wrapped)
+    s1 = moments[0]
     return PhaseResult(
         wrapped=wrapped,
-        amplitude=np.where(good, amp, np.float32(0)),
+        amplitude=amp,
         offset=a0,
         residual=residual,
         support=s1,

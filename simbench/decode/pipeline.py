@@ -10,6 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from simbench.decode import _kernels
 from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
 from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
@@ -249,10 +250,9 @@ def as_float_image(image: np.ndarray, *, expected_size_hw: tuple[int, int] | Non
 
 def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     """Spread one value per stripe over its pixels; ``fill`` where the label is -1."""
-    ext = np.empty(per_stripe.size + 1, dtype=per_stripe.dtype)
-    ext[:-1] = per_stripe
-    ext[-1] = fill
-    return ext[labels]
+    out = np.empty(labels.shape, per_stripe.dtype)
+    _kernels.gather(np.ascontiguousarray(per_stripe), np.ascontiguousarray(labels), per_stripe.dtype.type(fill), out)
+    return out
 
 
 def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams, crop: slice) -> tuple[np.ndarray, np.ndarray, LazyStages]:
