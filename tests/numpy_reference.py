@@ -1,0 +1,283 @@
+"""The decoder's stages as whole-image numpy expressions (their form before the fused numba
+loops of :mod:`simbench.decode._kernels`); ``tests/test_kernels.py`` checks that each kernel
+gives the same bits."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from simbench.decode.color import Stripes
+from simbench.decode.phase import _basis, _conv, gaussian_kernel, magnitude
+
+
+def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
+    """Per-pixel maps turning the window moments (b0, b1, b2) of the data into the fit.
+
+    The normal equations are ``M p = b`` with ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs,
+    sss]]``; with the adjugate ``C`` and ``det``: ``p = C b / det``.  Returned are the rows
+    giving ``a0`` and the carrier-rotated ``re = a1 cos + a2 sin``, ``im = a1 sin - a2 cos``
+    (so that ``psi = atan2(im, re)``), ``1/s1`` and the mask of solvable pixels.
+    """
+    scc = 0.5 * (s1 + sc2)
+    sss = 0.5 * (s1 - sc2)
+    scs = 0.5 * ss2
+    c00 = scc * sss - scs * scs
+    c01 = ss * scs - sc * sss
+    c02 = sc * scs - ss * scc
+    c11 = s1 * sss - ss * ss
+    c12 = sc * ss - s1 * scs
+    c22 = s1 * scc - sc * sc
+    det = s1 * c00 + sc * c01 + ss * c02
+    good = (s1 > 0.05) & (det > 1e-4 * s1 * s1 * s1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(good, np.float32(1) / det, np.float32(0))
+        inv_s1 = np.where(good, np.float32(1) / s1, np.float32(0))
+    k = (c00 * inv, c01 * inv, c02 * inv)
+    p = ((c01 * cos1 + c02 * sin1) * inv, (c11 * cos1 + c12 * sin1) * inv, (c12 * cos1 + c22 * sin1) * inv)
+    q = ((c01 * sin1 - c02 * cos1) * inv, (c11 * sin1 - c12 * cos1) * inv, (c12 * sin1 - c22 * cos1) * inv)
+    return k, p, q, inv_s1, good
+
+
+def _dot3(m, b, *, out: np.ndarray, tmp: np.ndarray) -> None:
+    """``out = m[0]*b[0] + m[1]*b[1] + m[2]*b[2]`` without temporaries."""
+    np.multiply(m[0], b[0], out=out)
+    for mi, bi in zip(m[1:], b[1:]):
+        np.multiply(mi, bi, out=tmp)
+        out += tmp
+
+
+@lru_cache(maxsize=8)
+def _full_solver(shape: tuple[int, int], omega: float, sx: float, sy: float):
+    """:func:`_solver` for an all-certain image (reused across captures of one rig)."""
+    cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
+    kx, ky = gaussian_kernel(sx), gaussian_kernel(sy)
+    ones = np.ones(shape, np.float32)
+    moments = [_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
+    out = _solver(*moments, cos1, sin1)
+    for group in out:
+        for a in group if isinstance(group, tuple) else (group,):
+            a.setflags(write=False)
+    return out, moments[0]
+
+
+def gabor_phase(
+    intensity: np.ndarray,
+    *,
+    certainty: np.ndarray,
+    period_px: float,
+    sigma_x_px: float,
+    sigma_y_px: float,
+) -> tuple:
+    h, w = intensity.shape
+    omega = round(2.0 * np.pi / period_px, 12)
+    kx, ky = gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px)
+    cos1, sin1, cos2, sin2 = _basis(w, omega)
+    intensity = intensity.astype(np.float32, copy=False)
+    c = certainty.astype(np.float32, copy=False)
+    if c.min() >= 1.0:
+        (k, p, q, inv_s1, good), s1 = _full_solver((h, w), omega, float(sigma_x_px), float(sigma_y_px))
+        ci = intensity
+    else:
+        moments = [_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
+        k, p, q, inv_s1, good = _solver(*moments, cos1, sin1)
+        s1 = moments[0]
+        ci = c * intensity
+    b0 = _conv(ci, kx, ky)
+    b1 = _conv(ci * cos1, kx, ky)
+    b2 = _conv(ci * sin1, kx, ky)
+    e2 = _conv(ci * intensity, kx, ky)
+    # the maps are fixed per rig; work in preallocated buffers (each fresh image-sized array
+    # costs page faults on top of the arithmetic)
+    a0, re, im, t = (np.empty_like(b0) for _ in range(4))
+    _dot3(k, (b0, b1, b2), out=a0, tmp=t)
+    _dot3(p, (b0, b1, b2), out=re, tmp=t)
+    _dot3(q, (b0, b1, b2), out=im, tmp=t)
+    # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
+    wrapped = cv2.phase(re, im)
+    wrapped[wrapped >= np.pi] -= np.float32(2 * np.pi)
+    amp = magnitude(re, im, tmp=t)
+    # weighted residual sum of squares: e2 - p.b, with a1 b1 + a2 b2 written through re, im
+    u = np.empty_like(b0)
+    np.multiply(a0, b0, out=t)
+    np.subtract(e2, t, out=e2)
+    np.multiply(cos1, b1, out=t)
+    np.multiply(sin1, b2, out=u)
+    t += u
+    t *= re
+    e2 -= t
+    np.multiply(sin1, b1, out=t)
+    np.multiply(cos1, b2, out=u)
+    t -= u
+    t *= im
+    e2 -= t
+    np.maximum(e2, 0, out=e2)
+    e2 *= inv_s1
+    np.sqrt(e2, out=e2)
+    np.multiply(amp, np.float32(np.sqrt(0.5)), out=t)
+    ok = good & (amp > 0)
+    residual = np.full_like(b0, np.inf)
+    np.divide(e2, t, out=residual, where=ok)
+    return wrapped, np.where(good, amp, np.float32(0)), a0, residual, s1
+
+
+def segment_stripes(
+    wrapped: np.ndarray,
+    valid: np.ndarray,
+    *,
+    period_px: float,
+    min_step_ratio: float = 0.3,
+    max_step_ratio: float = 3.0,
+) -> Stripes:
+    h, w = wrapped.shape
+    omega = 2.0 * np.pi / period_px
+    d = np.diff(wrapped, axis=1)
+    wrap = d < -np.pi
+    step = d + np.float32(2 * np.pi) * wrap
+    plausible = (step > min_step_ratio * omega) & (step < min(max_step_ratio * omega, 0.9 * np.pi))
+    both = valid[:, 1:] & valid[:, :-1]
+    cont = both & plausible & ~wrap  # same stripe continues
+    linked = both & plausible & wrap  # next stripe of the pattern starts
+    starts = np.zeros((h, w), dtype=bool)
+    starts[:, 0] = valid[:, 0]
+    starts[:, 1:] = valid[:, 1:] & ~cont
+    flat_starts = starts.ravel()
+    labels = np.cumsum(flat_starts, dtype=np.int64) - 1
+    labels = np.where(valid.ravel(), labels, -1).astype(np.int32).reshape(h, w)
+    idx = np.flatnonzero(flat_starts)
+    row = (idx // w).astype(np.int32)
+    start = (idx % w).astype(np.int32)
+    stop = np.empty_like(start)
+    if idx.size:
+        valid_flat = valid.ravel()
+        # a stripe ends where the next one starts or at the first invalid pixel after it
+        ends = np.flatnonzero(np.diff(np.concatenate([[False], valid_flat, [False]]).astype(np.int8)) == -1)
+        nxt = np.searchsorted(ends, idx, side="right")
+        run_end = ends[nxt]
+        next_start = np.append(idx[1:], h * w)
+        row_end = (row.astype(np.int64) + 1) * w
+        stop = (np.minimum(np.minimum(run_end, next_start), row_end) - row.astype(np.int64) * w).astype(np.int32)
+    linked_prev = np.zeros(idx.size, dtype=bool)
+    inner = start > 0
+    linked_prev[inner] = linked[row[inner], start[inner] - 1]
+    return Stripes(labels=labels, row=row, start=start, stop=stop, linked_prev=linked_prev)
+
+
+def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    # one histogram over (stripe, code) pairs; label -1 (invalid) lands in the first two bins
+    key = (stripes.labels.ravel() + 1) * 2 + code.ravel()
+    hist = np.bincount(key, minlength=2 * (stripes.count + 1)).reshape(-1, 2)[1:].astype(np.float64)
+    counts = hist[:, 0] + hist[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        frac = np.where(counts > 0, hist[:, 1] / counts, 0.5)
+    if voting:
+        out = (frac >= 0.5).astype(np.uint8)
+    else:
+        mid = (stripes.start + stripes.stop - 1) // 2
+        out = code[stripes.row, mid].astype(np.uint8)
+    agreement = np.where(out == 1, frac, 1.0 - frac).astype(np.float32)
+    return out, agreement
+
+
+def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = linked_prev.size
+    idx = np.arange(n)
+    chain_start = np.maximum.accumulate(np.where(~linked_prev, idx, 0)) if n else idx
+    chain_id = np.cumsum(~linked_prev) - 1
+    last = np.zeros(chain_id.max() + 1 if n else 0, dtype=np.int64)
+    np.maximum.at(last, chain_id, idx)
+    return idx - chain_start, last[chain_id] - idx
+
+
+def neighbour_correct(
+    positions: np.ndarray,
+    linked_prev: np.ndarray,
+    *,
+    cycle: int,
+    reach: int,
+    min_support: int = 2,
+) -> tuple[np.ndarray, np.ndarray]:
+    n = positions.size
+    if reach <= 0:
+        return positions.copy(), (positions >= 0).astype(np.int32)
+    left, right = chain_extent(linked_prev)
+    preds = np.full((2 * reach + 1, n), -1, dtype=np.int64)
+    for k, off in enumerate(range(-reach, reach + 1)):
+        src = np.arange(n) + off
+        ok = (left >= -off) if off < 0 else (right >= off)
+        ok &= (src >= 0) & (src < n)
+        p = np.full(n, -1, dtype=np.int64)
+        p[ok] = positions[src[ok]]
+        good = ok & (p >= 0)
+        preds[k] = np.where(good, (p - off) % cycle, -1)
+    # votes per candidate position: a one-hot count over the 2*reach+1 predictions
+    counts = np.zeros((cycle, n), dtype=np.int16)
+    for k in range(preds.shape[0]):
+        for v in range(cycle):
+            counts[v] += preds[k] == v
+    cols = np.arange(n)
+    best = counts.argmax(axis=0)
+    best_votes = counts[best, cols].astype(np.int64)
+    # A tie between different candidates (typical where a chain was linked across a depth
+    # edge) is not evidence for either: drop the stripe rather than guess.
+    counts[best, cols] = -1
+    rival = counts.max(axis=0) if n else np.zeros(0, np.int16)
+    keep = (best_votes >= min_support) & (best_votes > rival)
+    return np.where(keep, best, -1).astype(np.int32), np.where(keep, best_votes, 0).astype(np.int32)
+
+
+def absolute_column(
+    position: np.ndarray,
+    wrapped: np.ndarray,
+    expected_column: np.ndarray,
+    *,
+    period_px: float,
+    cycle: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    t = np.float32(period_px)
+    # column_from_phase(psi + 2 pi W) without the float64 round trip
+    col0 = (wrapped + np.float32(np.pi)) * (t / np.float32(2 * np.pi)) + position.astype(np.float32) * t - np.float32(0.5)
+    span = np.float32(cycle * period_px)
+    k = np.rint((expected_column - col0) / span)
+    known = (position >= 0) & np.isfinite(k)
+    col = np.where(known, col0 + k * span, np.float32(np.nan))
+    n = np.where(known, position + cycle * np.nan_to_num(k).astype(np.int32), -1)
+    return col.astype(np.float32, copy=False), n.astype(np.int32, copy=False)
+
+
+def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
+    h, w = column.shape
+    stride = table.shape[1]
+    width = stride - 2
+    # NaN and out-of-range columns interpolate towards the table's NaN column, giving NaN
+    inside = column >= 0
+    inside &= column <= width  # False for NaN
+    cf = np.where(inside, column, np.float32(width + 0.5))
+    bad = ~inside
+    fi = np.floor(cf)
+    fi[~bad & (fi >= width)] = width - 1
+    f = cf - fi
+    i = fi.astype(np.int32)
+    idx = i + (np.arange(h, dtype=np.int32) * stride)[:, None]
+    flat = table.ravel()
+    x0 = np.take(flat, idx)
+    x1 = np.take(flat, idx + 1)
+    return x0 + f * (x1 - x0)
+
+
+def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: float, z0_m: float) -> np.ndarray:
+    h, w = x_ref.shape
+    d = np.arange(w, dtype=np.float32)[None, :] - x_ref
+    inv = np.float32(1.0 / z0_m) + d * np.float32(1.0 / (focal_px * baseline_m))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.float32(1.0) / inv
+    return np.where(z > 0, z, np.float32(np.nan))
+
+
+def per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
+    ext = np.empty(per_stripe.size + 1, dtype=per_stripe.dtype)
+    ext[:-1] = per_stripe
+    ext[-1] = fill
+    return ext[labels]

@@ -1,0 +1,151 @@
+"""The fused numba loops (simbench.decode._kernels) give the same bits as the whole-image numpy
+expressions they replaced (tests/numpy_reference.py), on realistic and on awkward inputs."""
+
+import numpy as np
+import pytest
+
+from simbench.decode import color, debruijn, depth, phase
+from simbench.decode.pipeline import _per_pixel
+from tests import numpy_reference as ref
+
+T_CAM = 21.8
+
+
+def same(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape
+    assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+
+
+def fringe(h=90, w=300, seed=0, holes=True):
+    """A noisy fringe whose phase drifts (slant and a step), with dark holes and a clipped spot."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[:h, :w].astype(np.float64)
+    psi = 2 * np.pi * x / T_CAM * (1 + 0.15 * y / h) + np.where(x > w * 0.6, 2.0, 0.0)
+    img = (0.45 + 0.35 * np.cos(psi) + rng.normal(0, 0.02, (h, w))).astype(np.float32)
+    cert = np.ones((h, w), np.float32)
+    if holes:
+        cert[h // 3 : h // 2, w // 4 : w // 3] = 0  # shadow
+        cert[rng.random((h, w)) < 0.01] = 0  # scattered clipped pixels
+        cert[:, :3] = 0
+    return img, cert
+
+
+@pytest.mark.parametrize("holes", [False, True], ids=["all-certain", "with-holes"])
+@pytest.mark.parametrize("shape", [(90, 300), (1, 64), (7, 23)])
+def test_gabor_fit_matches_numpy(holes, shape):
+    img, cert = fringe(*shape, holes=holes)
+    kw = dict(period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
+    got = phase.gabor_phase(img, certainty=cert, **kw)
+    want = ref.gabor_phase(img, certainty=cert, **kw)
+    for a, b in zip((got.wrapped, got.amplitude, got.offset, got.residual, got.support), want):
+        same(a, b)
+    assert np.isfinite(got.wrapped).all() and (got.wrapped >= -np.pi).all() and (got.wrapped < np.pi).all()
+
+
+def test_gabor_fit_on_flat_and_empty_images():
+    for img, cert in ((np.zeros((20, 40), np.float32), np.zeros((20, 40), np.float32)), (np.full((20, 40), 0.5, np.float32), np.ones((20, 40), np.float32))):
+        got = phase.gabor_phase(img, certainty=cert, period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
+        want = ref.gabor_phase(img, certainty=cert, period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
+        for a, b in zip((got.wrapped, got.amplitude, got.offset, got.residual, got.support), want):
+            same(a, b)
+
+
+def stripes_input(seed=1):
+    img, cert = fringe(seed=seed)
+    p = phase.gabor_phase(img, certainty=cert, period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
+    rng = np.random.default_rng(seed)
+    valid = (p.amplitude > 0.1) & (rng.random(img.shape) > 0.02)
+    return p.wrapped, valid, img > 0.45
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_segmentation_and_voting_match_numpy(seed):
+    wrapped, valid, code = stripes_input(seed)
+    got = color.segment_stripes(wrapped, valid, period_px=T_CAM)
+    want = ref.segment_stripes(wrapped, valid, period_px=T_CAM)
+    for f in ("labels", "row", "start", "stop", "linked_prev"):
+        same(getattr(got, f), getattr(want, f))
+    assert got.count > 100 and got.linked_prev.any()
+    for voting in (True, False):
+        for a, b in zip(color.vote_codes(code, got, voting=voting), ref.vote_codes(code, want, voting=voting)):
+            same(a, b)
+
+
+def step_row(bound):
+    """A row whose phase grows by exactly ``bound`` (float32) per pixel."""
+    b = np.float32(bound)
+    return np.float32([[0, b, 2 * b, 4 * b]])
+
+
+def test_segmentation_edge_cases():
+    for wrapped, valid in (
+        (np.zeros((3, 5), np.float32), np.zeros((3, 5), bool)),  # nothing valid
+        (np.zeros((0, 5), np.float32), np.zeros((0, 5), bool)),  # no rows
+        (np.zeros((2, 1), np.float32), np.ones((2, 1), bool)),  # one column
+        (np.tile(np.float32([3.0, -3.0]), (2, 3)), np.ones((2, 6), bool)),  # a wrap at every pixel
+        # steps exactly at segment_stripes' plausibility bounds (0.3 and min(3, 0.9 pi / omega) omega)
+        (step_row(0.3 * (2.0 * np.pi / T_CAM)), np.ones((1, 4), bool)),
+        (step_row(min(3.0 * (2.0 * np.pi / T_CAM), 0.9 * np.pi) / 2), np.ones((1, 4), bool)),
+    ):
+        got = color.segment_stripes(wrapped, valid, period_px=T_CAM)
+        want = ref.segment_stripes(wrapped, valid, period_px=T_CAM)
+        for f in ("labels", "row", "start", "stop", "linked_prev"):
+            same(getattr(got, f), getattr(want, f))
+        code = np.ones(wrapped.shape, bool)
+        for a, b in zip(color.vote_codes(code, got), ref.vote_codes(code, want)):
+            same(a, b)
+
+
+@pytest.mark.parametrize("reach,min_support", [(1, 1), (2, 2), (3, 2), (4, 3)])
+def test_neighbour_correction_matches_numpy(reach, min_support):
+    rng = np.random.default_rng(reach)
+    n, cycle = 5000, 8
+    linked = rng.random(n) > 0.1
+    linked[0] = False
+    true = np.arange(n) % cycle
+    positions = np.where(rng.random(n) < 0.15, rng.integers(-1, cycle, n), true).astype(np.int32)
+    for a, b in zip(debruijn.chain_extent(linked), ref.chain_extent(linked)):
+        same(a.astype(np.int64), b.astype(np.int64))
+    got = debruijn.neighbour_correct(positions, linked, cycle=cycle, reach=reach, min_support=min_support)
+    want = ref.neighbour_correct(positions, linked, cycle=cycle, reach=reach, min_support=min_support)
+    for a, b in zip(got, want):
+        same(a, b)
+    empty = np.zeros(0, np.int32)
+    for a, b in zip(debruijn.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach), ref.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach)):
+        same(a, b)
+
+
+def test_absolute_column_and_gather_match_numpy():
+    wrapped, valid, _ = stripes_input(3)
+    rng = np.random.default_rng(3)
+    labels = np.where(valid, rng.integers(0, 400, wrapped.shape), -1).astype(np.int32)
+    per_stripe = rng.integers(-1, 8, 400).astype(np.int32)
+    for fill, arr in ((-1, per_stripe), (0.0, rng.random(400).astype(np.float32)), (-1, per_stripe.astype(np.int8))):
+        same(_per_pixel(arr, labels, fill), ref.per_pixel(arr, labels, fill))
+    position = ref.per_pixel(per_stripe, labels, -1)
+    expected = (np.arange(wrapped.shape[1], dtype=np.float32) * 1.1 + rng.normal(0, 30, wrapped.shape)).astype(np.float32)
+    expected[0, :5] = np.nan
+    for period in (21.0, 15.0, 8.5):
+        got = depth.absolute_column(position, wrapped, expected, period_px=period, cycle=8)
+        want = ref.absolute_column(position, wrapped, expected, period_px=period, cycle=8)
+        for a, b in zip(got, want):
+            same(a, b)
+
+
+def test_reference_matching_and_depth_match_numpy():
+    rng = np.random.default_rng(4)
+    h, w, width = 40, 200, 300
+    table = np.sort(rng.uniform(0, w, (h, width + 2)), axis=1).astype(np.float32)
+    table[:, -1] = np.nan
+    table[1:][rng.random((h - 1, width + 2)) < 0.05] = np.nan
+    column = rng.uniform(-5, width + 5, (h, w)).astype(np.float32)
+    column[rng.random(column.shape) < 0.1] = np.nan
+    column[0, :4] = [0.0, float(width), np.nextafter(np.float32(width), np.float32(0)), -0.0]
+    x_ref = depth.match_reference(column, table)
+    same(x_ref, ref.match_reference(column, table))
+    assert x_ref[0, 1] == table[0, width]  # the last projector column itself is matched
+    assert np.isfinite(x_ref).mean() > 0.5
+    x_ref[0, 10] = 1e9  # a disparity putting the point behind the camera
+    kw = dict(focal_px=2312.532, baseline_m=0.093, z0_m=1.0)
+    same(depth.depth_from_disparity(x_ref, **kw), ref.depth_from_disparity(x_ref, **kw))
