@@ -228,9 +228,9 @@ def _cmd_ablate(args) -> int:
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark
 
-    res = run_decode_benchmark(repeats=args.repeats, device=args.device)
+    res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene)
     print(json.dumps(res, indent=2) if args.json else
-          f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture: median {res['median_ms']:.1f} ms, "
+          f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({res['scene']}): median {res['median_ms']:.1f} ms, "
           f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
     if args.max_ms is not None and res["median_ms"] > args.max_ms:
         raise ValueError(f"decode median {res['median_ms']:.1f} ms exceeds --max-ms {args.max_ms}")
@@ -412,6 +412,7 @@ def _parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)")
     s.add_argument("--device", default="proposed", choices=["proposed", "kinect", "tof"], help="whose decoder (default: the paper's)")
+    s.add_argument("--scene", default="plane", choices=["plane", "shadow"], help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)")
     s.add_argument("--repeats", type=int, default=20)
     s.add_argument("--max-ms", type=float, default=None, help="fail when the median exceeds this")
     s.add_argument("--json", action="store_true")

@@ -18,6 +18,19 @@ def test_decode_speed(benchmark):
     assert abs(np.nanmedian(result.depth_m) - 1.1) < 1e-3  # the benchmark plane is at 1.1 m
 
 
+def test_decode_speed_with_shadow(benchmark):
+    """The path real scenes take: part of the image unlit, so certainty moments per capture."""
+    capture, ref, rig, params = benchmark_inputs(scene="shadow")
+    result = benchmark(decode, capture, rig=rig, params=params, reference=ref)
+    shadow = np.zeros(result.valid.shape, bool)
+    shadow[330:630, 440:840] = True
+    assert not result.valid[shadow[:, :]].any()
+    assert result.valid[~shadow].mean() > 0.97
+    assert abs(np.nanmedian(result.depth_m) - 1.1) < 1e-3
+    with pytest.raises(ValueError, match="unknown benchmark scene"):
+        benchmark_inputs(scene="cube")
+
+
 @pytest.mark.parametrize("device", ["kinect", "tof"])
 def test_competitor_decode_speed(benchmark, device):
     """The competitors' decoders at native resolution (issue: <= 100 ms; `simbench bench
