@@ -46,6 +46,8 @@ test-fast: setup
 
 bench: setup
 	$(VENV)/bin/simbench bench --repeats 30
+	$(VENV)/bin/simbench bench --scene shadow --repeats 30
 
 clean:
 	rm -rf $(VENV) .pytest_cache .benchmarks .cache
+	find simbench -name '*.nbi' -o -name '*.nbc' | xargs rm -f
