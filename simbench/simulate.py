@@ -66,8 +66,10 @@ class Acquisition:
 
 
 def versions() -> dict:
+    import cv2
     import drjit
     import mitsuba
+    import numba
 
     import simbench
 
@@ -76,6 +78,9 @@ def versions() -> dict:
         "mitsuba": mitsuba.__version__,
         "drjit": drjit.__version__,
         "numpy": np.__version__,
+        # the decoder's convolutions (OpenCV) and fused loops (numba)
+        "opencv": cv2.__version__,
+        "numba": numba.__version__,
         "python": platform.python_version(),
     }
 
