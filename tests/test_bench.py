@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from simbench.decode import decode
-from simbench.experiments.bench import benchmark_inputs
+from simbench.experiments.bench import SHADOW, benchmark_inputs
 
 
 def test_decode_speed(benchmark):
@@ -23,8 +23,8 @@ def test_decode_speed_with_shadow(benchmark):
     capture, ref, rig, params = benchmark_inputs(scene="shadow")
     result = benchmark(decode, capture, rig=rig, params=params, reference=ref)
     shadow = np.zeros(result.valid.shape, bool)
-    shadow[330:630, 440:840] = True
-    assert not result.valid[shadow[:, :]].any()
+    shadow[SHADOW] = True
+    assert not result.valid[shadow].any()
     assert result.valid[~shadow].mean() > 0.97
     assert abs(np.nanmedian(result.depth_m) - 1.1) < 1e-3
     with pytest.raises(ValueError, match="unknown benchmark scene"):

@@ -45,8 +45,9 @@ def gabor_fit(b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0,
     ``s1 = G*c``, ``sc = G*(c cos)``, ``ss = G*(c sin)``, ``sc2 = G*(c cos2)``, ``ss2 = G*(c sin2)``.
     Outputs: ``a0`` and the carrier-rotated ``re``, ``im`` of the fit, the amplitude
     ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular) and the RMS residual
-    relative to ``amp/sqrt 2`` (inf there).  Same operations as :func:`phase._solver` (adjugate
-    of the 3x3 normal matrix) followed by :func:`phase.gabor_phase`'s numpy passes.
+    relative to ``amp/sqrt 2`` (inf there).  The normal equations ``M p = b`` with
+    ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]]`` are solved by the adjugate, in the
+    operation order of the numpy form (``_solver`` and ``gabor_phase`` in tests/numpy_reference.py).
     """
     h, w = b0.shape
     half = np.float32(0.5)

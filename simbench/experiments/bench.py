@@ -28,17 +28,18 @@ from simbench.projector import transfer_curve
 from simbench.sensor import LIGHT_M_S, simple_camera
 from simbench.synthetic import synthetic_plane_capture
 
-__all__ = ["benchmark_inputs", "run_decode_benchmark", "competitor_inputs", "BENCH_DEVICES"]
+__all__ = ["benchmark_inputs", "run_decode_benchmark", "competitor_inputs", "BENCH_DEVICES", "BENCH_SCENES", "SHADOW"]
 
 BENCH_DEVICES = ("proposed", "kinect", "tof")
 BENCH_SCENES = ("plane", "shadow")
+# the ``shadow`` scene's region without projector light (rows, columns)
+SHADOW = (slice(330, 630), slice(440, 840))
 
 
 def benchmark_inputs(*, seed: int = 0, scene: str = "plane"):
     """(capture, reference map, rig, params) for the benchmark; deterministic for a seed.
 
-    ``scene``: ``plane`` (fully lit) or ``shadow`` (rows 330-630, columns 440-840 get no
-    projector light).
+    ``scene``: ``plane`` (fully lit) or ``shadow`` (:data:`SHADOW` gets no projector light).
     """
     if scene not in BENCH_SCENES:
         raise ValueError(f"unknown benchmark scene {scene!r}; valid: {list(BENCH_SCENES)}")
@@ -49,7 +50,7 @@ def benchmark_inputs(*, seed: int = 0, scene: str = "plane"):
     ref_rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=2)
     if scene == "shadow":
         rad = rad.copy()
-        rad[330:630, 440:840] = 0.0
+        rad[SHADOW] = 0.0
     rng = np.random.default_rng(seed)
     capture = simple_camera(rad / 1.21, camera=cam, rng=rng)
     reference = simple_camera(ref_rad, camera=cam, rng=rng)
