@@ -65,24 +65,34 @@ class Acquisition:
     meta: dict = field(default_factory=dict)
 
 
+# distribution names of what provenance records (read from the installed metadata: no import,
+# so nothing another package put into sys.modules, such as colour-science's stand-in for a
+# missing SciPy, can break or fool the lookup)
+VERSIONED_DISTRIBUTIONS = {
+    "simbench": "simbench",
+    "mitsuba": "mitsuba",
+    "drjit": "drjit",
+    "numpy": "numpy",
+    # the decoder's convolutions (OpenCV) and fused loops (numba)
+    "opencv": "opencv-python-headless",
+    "numba": "numba",
+    "colour": "colour-science",
+    "scipy": "scipy",
+}
+
+
 def versions() -> dict:
-    import cv2
-    import drjit
-    import mitsuba
-    import numba
+    """Versions of the installed packages that affect results, and of Python."""
+    from importlib import metadata
 
-    import simbench
-
-    return {
-        "simbench": simbench.__version__,
-        "mitsuba": mitsuba.__version__,
-        "drjit": drjit.__version__,
-        "numpy": np.__version__,
-        # the decoder's convolutions (OpenCV) and fused loops (numba)
-        "opencv": cv2.__version__,
-        "numba": numba.__version__,
-        "python": platform.python_version(),
-    }
+    out = {}
+    for key, dist in VERSIONED_DISTRIBUTIONS.items():
+        try:
+            out[key] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[key] = "not installed"
+    out["python"] = platform.python_version()
+    return out
 
 
 def _renderer_id() -> dict:

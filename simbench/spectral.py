@@ -41,9 +41,25 @@ CAMERA_DATASET = "Nikon 5100 (NPL)"  # stands in for the Flea3 FL3-U3-13E4C (mod
 
 
 def _colour():
+    """colour-science, imported so that it cannot poison the interpreter.
+
+    Without SciPy, colour-science puts a ``MagicMock`` into ``sys.modules["scipy"]`` and makes
+    its spline interpolators subclasses of it; numba, imported later, then fails reading the
+    mock's version, and colour's SciPy-backed features would return mocks instead of numbers.
+    SciPy is therefore a dependency of simbench; if it is missing anyway we fail here, with the
+    fix, instead of later with a riddle.
+    """
+    import sys
+    import types
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import colour
+    if not isinstance(sys.modules.get("scipy"), types.ModuleType):
+        for name in [n for n in sys.modules if n == "scipy" or n.startswith("scipy.")]:
+            if not isinstance(sys.modules[name], types.ModuleType):
+                del sys.modules[name]
+        raise ImportError("colour-science could not import SciPy, which simbench needs; install it: pip install 'scipy>=1.13'")
     return colour
 
 

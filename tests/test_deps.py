@@ -1,0 +1,77 @@
+"""Imports and version lookups that another package's stand-in modules cannot break.
+
+colour-science puts a ``MagicMock`` into ``sys.modules["scipy"]`` when SciPy is missing, and
+numba's import then fails reading its version. These run in fresh interpreters, where import
+order is what a user's process has (an in-process test would see numba already loaded).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+
+# a meta-path finder that makes SciPy look uninstalled in the child interpreter
+_HIDE_SCIPY = textwrap.dedent(
+    """
+    import sys
+    class _NoScipy:
+        def find_spec(self, name, path=None, target=None):
+            if name == "scipy" or name.startswith("scipy."):
+                raise ImportError("No module named 'scipy' (hidden by the test)")
+    sys.meta_path.insert(0, _NoScipy())
+    """
+)
+
+
+def _run(code: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+
+
+def test_versions_import_nothing_and_survive_a_mocked_scipy():
+    code = _HIDE_SCIPY + textwrap.dedent(
+        """
+        import json, sys
+        from unittest import mock
+        sys.modules["scipy"] = mock.MagicMock()   # what colour-science leaves behind
+        from simbench.simulate import versions
+        v = versions()
+        print(json.dumps({"v": v, "numba_loaded": "numba" in sys.modules}))
+        """
+    )
+    res = _run(code)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    from importlib import metadata
+
+    assert out["v"]["numba"] == metadata.version("numba")
+    assert out["v"]["opencv"] == metadata.version("opencv-python-headless")
+    assert out["v"]["python"].count(".") == 2
+
+
+def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():
+    code = _HIDE_SCIPY + textwrap.dedent(
+        """
+        import sys, types
+        from simbench import spectral
+        try:
+            spectral.camera_sensitivities()
+        except ImportError as exc:
+            print("ERR", exc)
+        assert not any(n == "scipy" or n.startswith("scipy.") for n in sys.modules), sorted(n for n in sys.modules if "scipy" in n)
+        import numba  # would raise AttributeError: __version__ with colour's mock in place
+        print("numba ok")
+        """
+    )
+    res = _run(code)
+    assert res.returncode == 0, res.stderr
+    assert "ERR colour-science could not import SciPy" in res.stdout and "pip install" in res.stdout
+    assert "numba ok" in res.stdout
+
+
+def test_colour_then_numba_in_a_fresh_process():
+    """The order `simbench render` takes: colour's crosstalk first, then the decoder's kernels."""
+    res = _run("from simbench import spectral; spectral.camera_sensitivities(); import numba; from simbench.decode import _kernels; print('ok')")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip().endswith("ok")
