@@ -5,7 +5,9 @@ materials, the bytes of every mesh file, projector scale, ambient light), the pr
 image, spp, seed, path length, the Mitsuba variant and version, and :data:`RENDER_VERSION`
 (bumped when simbench's rendering code changes what it produces).  A decoder-only or
 camera-only change therefore never re-renders.  Entries are ``.npz`` files written atomically,
-so an interrupted run leaves no half-written entry; delete the directory to clear the cache.
+so an interrupted run leaves no half-written entry, and each carries a SHA-256 of its arrays:
+an entry damaged later (truncated, bit-flipped) fails the check and is re-made; delete the
+directory to clear the cache.
 """
 
 from __future__ import annotations
@@ -76,13 +78,15 @@ def _digest(parts: dict) -> str:
 class RenderCache:
     """A directory of cached arrays keyed by content; ``root=None`` disables caching.
 
-    ``hits`` and ``misses`` count look-ups (for progress messages and tests).
+    ``hits`` and ``misses`` count look-ups (for progress messages and tests), ``damaged`` the
+    entries found unreadable or failing their checksum (removed and re-made).
     """
 
     def __init__(self, root: str | Path | None) -> None:
         self.root = None if root is None else Path(root)
         self.hits = 0
         self.misses = 0
+        self.damaged = 0
 
     def key(self, kind: str, parts: dict) -> str:
         return f"{kind}-{_digest({'kind': kind, 'render_version': RENDER_VERSION, **parts})[:32]}"
@@ -94,16 +98,42 @@ class RenderCache:
             return make()
         path = self.root / f"{self.key(kind, parts)}.npz"
         if path.is_file():
-            try:
-                with np.load(path, allow_pickle=False) as z:
-                    out = {k: z[k] for k in z.files}
+            out = _read_entry(path)
+            if out is not None:
                 self.hits += 1
                 return out
-            except (OSError, ValueError, EOFError):
-                path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
+            path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
+            self.damaged += 1
         self.misses += 1
         arrays = make()
         buf = io.BytesIO()
-        np.savez(buf, **arrays)
+        np.savez(buf, **arrays, **{_DIGEST_KEY: np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8)})
         atomic_write_bytes(path, buf.getvalue())
         return arrays
+
+
+_DIGEST_KEY = "__sha256__"
+
+
+def _arrays_digest(arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 over every array's name, dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        h.update(name.encode())
+        h.update(array_digest(np.asarray(arrays[name])).encode())
+    return h.hexdigest()
+
+
+def _read_entry(path: Path) -> dict[str, np.ndarray] | None:
+    """A cache entry's arrays, or None if it cannot be read or its checksum does not match
+    (truncated, bit-flipped, written by an older simbench without a checksum)."""
+    try:
+        # our own handle: np.load leaves its file open when the zip directory is unreadable
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+            out = {k: z[k] for k in z.files}
+    except Exception:  # noqa: BLE001 - zip, zlib, format and OS errors alike mean "damaged"
+        return None
+    stored = out.pop(_DIGEST_KEY, None)
+    if stored is None or stored.dtype != np.uint8 or stored.tobytes().hex() != _arrays_digest(out):
+        return None
+    return out

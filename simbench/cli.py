@@ -17,6 +17,69 @@ import numpy as np
 __all__ = ["main"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the CLI's error convention: one line on stderr, exit status 2."""
+
+    def error(self, message: str):  # noqa: D102 - argparse's hook
+        where = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(2, f"simbench: error: {where}{message} (see {self.prog} --help)\n")
+
+
+class _Formatter(argparse.HelpFormatter):
+    """Every option's help ends with its default (unless it has none or says it already)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default is None or action.default is False or action.default == argparse.SUPPRESS or "default" in text or action.required or not action.option_strings:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+def _int(lo: int | None = None, hi: int | None = None):
+    """An argparse type: an integer checked by :func:`simbench.validate.integer`."""
+
+    def parse(text: str) -> int:
+        from simbench import validate
+
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        try:
+            return validate.integer(value, "value", lo=lo, hi=hi)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).replace("value must", "must")) from None
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def _float(**limits):
+    """An argparse type: a number checked by :func:`simbench.validate.number`."""
+
+    def parse(text: str) -> float:
+        from simbench import validate
+
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        try:
+            return validate.number(value, "value", **limits)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).replace("value must", "must")) from None
+
+    parse.__name__ = "number"
+    return parse
+
+
+# seeds: SeedSequence takes any non-negative integer; 63 bits keep them exact in JSON and NumPy
+_SEED = _int(0, 2**63 - 1)
+_SPP = _int(1, 1 << 16)
+# Mitsuba's path length: 1 sees only the emitters, so the projector's light needs >= 2
+_MAX_DEPTH = _int(2, 1024)
+
+
 def _cmd_pattern(args) -> int:
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
@@ -49,32 +112,67 @@ def _cmd_render(args) -> int:
     pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     t0 = time.perf_counter()
     acq = acquire(scene, pattern=pattern, sensor=sensor, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
-    files = write_acquisition(acq, args.out)
+    files = write_acquisition(acq, args.out, overwrite=args.overwrite)
     print(f"rendered {scene.name} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
         print(f"  {key:13s} {path.name}")
     return 0
 
 
+def _manifest_of(path: Path) -> dict | None:
+    """The ``meta.json`` of the render folder holding ``path``, if there is a readable one."""
+    meta = path.parent / "meta.json"
+    if not meta.is_file():
+        return None
+    try:
+        data = json.loads(meta.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        raise ValueError(f"{meta}: not a readable meta.json") from None
+    return data if isinstance(data, dict) else None
+
+
+def _check_manifest(path: Path) -> None:
+    """A file listed in its folder's meta.json must have the SHA-256 recorded there: a folder
+    mixing the files of two renders (an interrupted older version, a hand copy) is refused."""
+    import hashlib
+
+    meta = _manifest_of(path)
+    if not meta or not isinstance(meta.get("files"), dict) or not isinstance(meta.get("sha256"), dict):
+        return
+    for key, name in meta["files"].items():
+        if name == path.name and key in meta["sha256"]:
+            if hashlib.sha256(path.read_bytes()).hexdigest() != meta["sha256"][key]:
+                raise ValueError(f"{path} does not match {path.parent / 'meta.json'} (SHA-256 differs): the folder mixes files of two renders")
+
+
 def _z0_for(reference: Path, z0: float | None) -> float:
     if z0 is not None:
         return z0
-    meta = reference.parent / "meta.json"
-    if meta.is_file():
-        try:
-            return float(json.loads(meta.read_text())["reference_depth_m"])
-        except (KeyError, ValueError, TypeError):
-            pass
+    meta = _manifest_of(reference)
+    if meta is not None and "reference_depth_m" in meta:
+        from simbench import validate
+
+        return validate.number(meta["reference_depth_m"], f"{reference.parent / 'meta.json'}: reference_depth_m", lo=0.0, lo_open=True)
     return 1.0
 
 
 def _cmd_decode(args) -> int:
     from simbench.decode import DecoderParams, decode
-    from simbench.io import load_image, save_npy, save_ply, save_png
+    from simbench.io import load_image, npy_bytes, ply_bytes, png_bytes, write_files
     from simbench.metrics import points_from_depth
     from simbench.rig import load_rig
 
+    if Path(args.out).suffix != ".npy":
+        raise ValueError(f"--out must name a .npy file, got {args.out}")
+    if args.ply and Path(args.ply).suffix.lower() != ".ply":
+        raise ValueError(f"--ply must name a .ply file, got {args.ply}")
+    if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
+        raise ValueError(f"--debug-dir {args.debug_dir} exists and is not a folder")
+    _decoder_overrides(DecoderParams(), args.decoder or [])  # bad values fail before any file is read
     rig = load_rig(args.rig)
+    for p in (args.capture, args.reference, args.rig):
+        if p is not None and Path(p).is_file():
+            _check_manifest(Path(p))
     capture = load_image(args.capture, expected_size_hw=rig.camera.size_hw)
     reference = None
     z0 = args.z0 if args.z0 is not None else 1.0
@@ -88,24 +186,28 @@ def _cmd_decode(args) -> int:
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
-    out = save_npy(args.out, result.depth_m)
-    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m) -> {out}"
+    # every output is written, or none is (an unwritable --ply must not leave depth.npy behind)
+    files = {Path(args.out): npy_bytes(result.depth_m)}
+    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m) -> {args.out}"
     if args.ply:
         pts = points_from_depth(result.depth_m, rig.camera)
         ok = result.valid
-        save_ply(args.ply, pts[ok], capture[ok] if capture.dtype == np.uint8 else None)
+        files[Path(args.ply)] = ply_bytes(pts[ok], capture[ok] if capture.dtype == np.uint8 else None)
         msg += f", {args.ply}"
     if args.debug_dir:
         d = Path(args.debug_dir)
-        save_npy(d / "column.npy", result.column_px)
-        save_npy(d / "valid.npy", result.valid)
-        save_npy(d / "confidence.npy", result.confidence)
+        files[d / "column.npy"] = npy_bytes(result.column_px)
+        files[d / "valid.npy"] = npy_bytes(result.valid)
+        files[d / "confidence.npy"] = npy_bytes(result.confidence)
         for name, arr in result.stages.items():
-            save_npy(d / f"{name}.npy", arr)
-        save_png(d / "wrapped_phase.png", _to_u8(result.stages["wrapped_phase"], -np.pi, np.pi))
-        save_png(d / "intensity.png", _to_u8(result.stages["intensity"], 0.0, 1.0))
-        save_png(d / "depth.png", _to_u8(result.depth_m, *_finite_range(result.depth_m)))
+            files[d / f"{name}.npy"] = npy_bytes(arr)
+        files[d / "wrapped_phase.png"] = png_bytes(_to_u8(result.stages["wrapped_phase"], -np.pi, np.pi))
+        files[d / "intensity.png"] = png_bytes(_to_u8(result.stages["intensity"], 0.0, 1.0))
+        files[d / "depth.png"] = png_bytes(_to_u8(result.depth_m, *_finite_range(result.depth_m)))
         msg += f", stages in {d}/"
+    if len({p.resolve() for p in files}) != len(files):
+        raise ValueError("--out, --ply and the --debug-dir files must be different paths")
+    write_files(files)
     print(msg)
     return 0
 
@@ -124,6 +226,8 @@ def _cmd_score(args) -> int:
     from simbench.io import load_npy
     from simbench.metrics import depth_errors, edge_band
 
+    if args.period <= 2:
+        raise ValueError(f"--period must be > 2 projector px, got {args.period}")
     gt = load_npy(args.gt)
     if gt.ndim != 2:
         raise ValueError(f"{args.gt}: ground truth must be a 2-D depth map, got shape {gt.shape}")
@@ -132,6 +236,8 @@ def _cmd_score(args) -> int:
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
     exclude = None
+    if args.edge_band < 0:
+        raise ValueError(f"--edge-band must be >= 0, got {args.edge_band}")
     if args.edge_band > 0:
         obj_path = gt_dir / "gt_object_id.npy"
         obj = load_npy(obj_path, expected_shape=gt.shape) if obj_path.is_file() else None
@@ -179,7 +285,7 @@ def _cmd_competitor_render(args) -> int:
     raw = baselines.acquire(model, scene, cal, spp=args.spp, seed=seeds["render"], noise_seeds=[seeds["noise"]])[0]
     gt = cached_ground_truth(scene)
     meta = {"scene": str(args.scene), "spp": args.spp, "seed": args.seed, "seeds": seeds, "variant": variant}
-    files = baselines.write_recording(args.out, model, raw, cal, gt_depth_m=gt.depth_m, meta=meta)
+    files = baselines.write_recording(args.out, model, raw, cal, gt_depth_m=gt.depth_m, meta=meta, overwrite=args.overwrite)
     print(f"rendered {scene.name} with the {baselines.DEVICE_LABELS[args.device]} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
         print(f"  {key:13s} {path.name}")
@@ -188,19 +294,24 @@ def _cmd_competitor_render(args) -> int:
 
 def _cmd_competitor_decode(args) -> int:
     from simbench import baselines
-    from simbench.io import save_npy, save_ply
+    from simbench.io import npy_bytes, ply_bytes, write_files
     from simbench.metrics import points_from_depth
 
+    if Path(args.out).suffix != ".npy":
+        raise ValueError(f"--out must name a .npy file, got {args.out}")
+    if args.ply and Path(args.ply).suffix.lower() != ".ply":
+        raise ValueError(f"--ply must name a .ply file, got {args.ply}")
     model, raw, cal = baselines.read_recording(args.recording)
     t0 = time.perf_counter()
     res = baselines.decode_raw(model, raw, cal)
     dt = time.perf_counter() - t0
-    out = save_npy(args.out, res.depth_m)
-    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({baselines.DEVICE_LABELS[baselines.device_params(model)['device']]}) -> {out}"
+    files = {Path(args.out): npy_bytes(res.depth_m)}
+    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({baselines.DEVICE_LABELS[baselines.device_params(model)['device']]}) -> {args.out}"
     if args.ply:
         pts = points_from_depth(res.depth_m, model.camera)
-        save_ply(args.ply, pts[res.valid])
+        files[Path(args.ply)] = ply_bytes(pts[res.valid])
         msg += f", {args.ply}"
+    write_files(files)
     print(msg)
     return 0
 
@@ -211,8 +322,6 @@ def _cmd_ablate(args) -> int:
 
     names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
-    if args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     select_variant(args.variant)
     command = "simbench ablate " + " ".join(sys.argv[2:]) if sys.argv[0].endswith("simbench") else "simbench ablate " + " ".join(args.sweep)
     for sweep in sweeps:
@@ -239,9 +348,16 @@ def _cmd_bench(args) -> int:
 
 def _cmd_reproduce(args) -> int:
     from simbench.experiments.common import RunConfig
-    from simbench.experiments.reproduce import check_thresholds, reproduce, write_thresholds
+    from simbench.device import get_sensor
+    from simbench.experiments.reproduce import check_targets, check_thresholds, load_thresholds, reproduce, write_thresholds
     from simbench.render import select_variant
 
+    # everything a user can get wrong is checked before the first render
+    check_targets(args.targets)
+    if args.check:
+        load_thresholds(args.check)
+    if args.camera is not None:
+        get_sensor(args.camera)
     overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("sensor", args.camera)) if v is not None}
     config = RunConfig.preset(quick=args.quick, **overrides)
     if args.decoder:
@@ -276,10 +392,16 @@ def _decoder_overrides(params, items: list[str]):
         if not sep or key not in names:
             raise ValueError(f"--decoder takes name=value with name one of {sorted(names)}; got {item!r}")
         try:
-            changes[key] = tomllib.loads(f"v = {text}")["v"]
+            value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            changes[key] = text
-    return replace(params, **changes)
+            value = text  # a bare word: phase_method=ftp
+        if isinstance(value, list) and key in ("depth_range_m", "sequence"):
+            value = tuple(value)
+        changes[key] = value
+    try:
+        return replace(params, **changes)
+    except ValueError as exc:
+        raise ValueError(f"--decoder: {exc}") from None
 
 
 def _cmd_crosstalk(args) -> int:
@@ -295,143 +417,166 @@ def _cmd_crosstalk(args) -> int:
     return 0
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).")
-    p.add_argument("--debug", action="store_true", help="show tracebacks")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    s = sub.add_parser("pattern", help="write the colour sequence coded fringe pattern (PNG)")
-    s.add_argument("--out", required=True)
-    s.add_argument("--width", type=int, default=1824)
-    s.add_argument("--height", type=int, default=1140)
-    s.add_argument("--period", type=int, default=21, help="fringe period T in projector pixels")
-    s.add_argument("--order", type=int, default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
+def _add_pattern_options(s: argparse.ArgumentParser) -> None:
+    """The pattern's options, shared by every command that makes or reads the pattern."""
+    s.add_argument("--period", type=_int(4, 16384), default=21, help="fringe period T in projector pixels")
+    s.add_argument("--order", type=_int(2, 16), default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
-    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
+    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (rgb: the paper's red/green stripes, blue fringe)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    from simbench.validate import MAX_SIDE_PX
+
+    kw = {"formatter_class": _Formatter}
+    p = _Parser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).", **kw)
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("pattern", help="write the colour sequence coded fringe pattern (PNG)", **kw)
+    s.add_argument("--out", required=True, help="PNG file to write")
+    s.add_argument("--width", type=_int(1, MAX_SIDE_PX), default=1824, help="pattern width, projector px (the LightCrafter 4500's)")
+    s.add_argument("--height", type=_int(1, MAX_SIDE_PX), default=1140, help="pattern height, projector px")
+    _add_pattern_options(s)
     s.set_defaults(fn=_cmd_pattern)
 
-    s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata")
+    s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata", **kw)
     s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
-    s.add_argument("--out", required=True)
-    s.add_argument("--spp", type=int, default=16)
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--max-depth", type=int, default=6)
-    s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file (default: paper)")
-    s.add_argument("--period", type=int, default=21)
-    s.add_argument("--order", type=int, default=3)
-    s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
-    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
-    s.add_argument("--variant", default=None, help="Mitsuba variant (default: automatic)")
+    s.add_argument("--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)")
+    s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write (e.g. decoded depth)")
+    s.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    s.add_argument("--seed", type=_SEED, default=0, help="base seed (split into render and noise seeds, all recorded in meta.json)")
+    s.add_argument("--max-depth", type=_MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
+    s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file")
+    _add_pattern_options(s)
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_render)
 
-    s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)")
-    s.add_argument("capture")
+    s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)", **kw)
+    s.add_argument("capture", help="the capture (PNG/TIFF, or .npy for float images)")
     s.add_argument("--reference", help="reference-plane capture (reference mode)")
     s.add_argument("--rig", required=True, help="rig TOML file")
-    s.add_argument("--out", required=True)
+    s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
     s.add_argument("--ply", help="also write the point cloud as PLY")
     s.add_argument("--debug-dir", help="write every decoder stage here")
-    s.add_argument("--mode", choices=("reference", "calibrated"), default="reference")
-    s.add_argument("--z0", type=float, default=None, help="reference depth (default: meta.json beside the reference, else 1.0)")
-    s.add_argument("--near", type=float, default=0.75, help="working range near end, m")
-    s.add_argument("--far", type=float, default=1.75, help="working range far end, m")
-    s.add_argument("--period", type=int, default=21)
-    s.add_argument("--order", type=int, default=3)
-    s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
-    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (default rgb: the paper's red/green stripes, blue fringe)")
+    s.add_argument("--mode", choices=("reference", "calibrated"), default="reference", help="reference: match against the reference plane (paper Sec. 5.4); calibrated: triangulate with the rig")
+    s.add_argument("--z0", type=_float(lo=0.0, hi=100.0, lo_open=True), default=None, help="reference depth, m (default: meta.json beside the reference, else 1.0)")
+    s.add_argument("--near", type=_float(lo=0.0, hi=100.0, lo_open=True), default=0.75, help="working range near end, m")
+    s.add_argument("--far", type=_float(lo=0.0, hi=100.0, lo_open=True), default=1.75, help="working range far end, m")
+    _add_pattern_options(s)
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
     s.set_defaults(fn=_cmd_decode)
 
-    s = sub.add_parser("score", help="score a depth map against ground truth")
-    s.add_argument("depth")
+    s = sub.add_parser("score", help="score a depth map against ground truth", **kw)
+    s.add_argument("depth", help="depth map .npy (metres, NaN = invalid)")
     s.add_argument("--gt", required=True, help="ground-truth depth .npy (gt_lit.npy beside it defines the region)")
     s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
     s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")
     s.add_argument("--gt-column", help="true columns .npy (default: gt_column.npy beside --gt)")
-    s.add_argument("--period", type=float, default=21)
-    s.add_argument("--edge-band", type=int, default=0, help="exclude pixels this close to depth edges")
-    s.add_argument("--json", action="store_true")
+    s.add_argument("--period", type=_float(lo=2.0, hi=16384.0, lo_open=True), default=21.0, help="fringe period, projector px (a column off by more than half of it is a stripe-order error)")
+    s.add_argument("--edge-band", type=_int(0, 1000), default=0, help="exclude pixels this close to depth edges (px)")
+    s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.set_defaults(fn=_cmd_score)
 
-    s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder")
-    s.add_argument("--out", default="results/demo")
-    s.add_argument("--spp", type=int, default=16)
-    s.add_argument("--seed", type=int, default=2017)
+    s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder", **kw)
+    s.add_argument("--out", default="results/demo", help="output folder")
+    s.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    s.add_argument("--seed", type=_SEED, default=2017, help="base seed")
     s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: preset (ideal, minimal, paper) or TOML file")
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
-    s.add_argument("--variant", default=None)
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_demo)
 
-    s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures")
+    s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures", **kw)
     s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget or all (default)")
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
-    s.add_argument("--cache", default=".cache/simbench", help="render cache folder (default: .cache/simbench)")
+    s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
-    s.add_argument("--seed", type=int, default=None, help="base seed (default 2017)")
-    s.add_argument("--spp", type=int, default=None)
-    s.add_argument("--repeats", type=int, default=None, help="recordings per Fig. 9 depth")
-    s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: the run's)")
+    s.add_argument("--seed", type=_SEED, default=None, help="base seed (default 2017)")
+    s.add_argument("--spp", type=_SPP, default=None, help="path-tracing samples per pixel (default: 16, 4 with --quick)")
+    s.add_argument("--repeats", type=_int(1, 1000), default=None, help="recordings per Fig. 9 depth (default: 10, 3 with --quick)")
+    s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4")
     s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
     s.add_argument("--write-thresholds", help="write a thresholds TOML from this run's metrics")
-    s.add_argument("--margin", type=float, default=0.25, help="relative margin for --write-thresholds")
-    s.add_argument("--variant", default=None)
+    s.add_argument("--margin", type=_float(lo=0.0, hi=10.0), default=0.25, help="relative margin for --write-thresholds")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_reproduce)
 
-    s = sub.add_parser("crosstalk", help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours")
+    s = sub.add_parser("crosstalk", help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours", **kw)
     s.add_argument("--out", help="also write them as Markdown here")
     s.set_defaults(fn=_cmd_crosstalk)
 
-    s = sub.add_parser("ablate", help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)")
+    s = sub.add_parser("ablate", help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)", **kw)
     s.add_argument("sweep", nargs="+", help="sweep TOML file(s), built-in study name(s), or 'builtin'")
-    s.add_argument("--out", default="results/ablations", help="output folder (default results/ablations)")
-    s.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    s.add_argument("--out", default="results/ablations", help="output folder")
+    s.add_argument("--workers", type=_int(1, 256), default=1, help="local worker processes")
     s.add_argument("--fresh", action="store_true", help="forget finished runs (the run log) and redo every run")
     s.add_argument("--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead")
-    s.add_argument("--cache", default=".cache/simbench", help="render cache directory")
-    s.add_argument("--no-cache", action="store_true")
-    s.add_argument("--variant", default=None)
+    s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
 
-    s = sub.add_parser("competitor", help="the simulated competitors (Kinect v1, SR4000 ToF): render a scene, decode a recording")
-    csub = s.add_subparsers(dest="action", required=True)
-    c = csub.add_parser("render", help="render SCENE with a competitor: raw frames, calibration, ground truth, device.json")
-    c.add_argument("device", choices=["kinect", "tof"])
+    s = sub.add_parser("competitor", help="the simulated competitors (Kinect v1, SR4000 ToF): render a scene, decode a recording", **kw)
+    csub = s.add_subparsers(dest="action", required=True, parser_class=_Parser)
+    c = csub.add_parser("render", help="render SCENE with a competitor: raw frames, calibration, ground truth, device.json", **kw)
+    c.add_argument("device", choices=["kinect", "tof"], help="which competitor")
     c.add_argument("scene", help="scene TOML file (the competitor replaces its rig)")
-    c.add_argument("--out", required=True, help="output folder")
-    c.add_argument("--spp", type=int, default=16)
-    c.add_argument("--seed", type=int, default=2017)
-    c.add_argument("--variant", default=None, help="Mitsuba variant (default: chosen for this machine)")
+    c.add_argument("--out", required=True, help="output folder (written whole or not at all)")
+    c.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write")
+    c.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    c.add_argument("--seed", type=_SEED, default=2017, help="base seed")
+    c.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     c.set_defaults(fn=_cmd_competitor_render)
-    c = csub.add_parser("decode", help="decode a competitor recording folder into a depth map (.npy, metres, NaN = invalid)")
+    c = csub.add_parser("decode", help="decode a competitor recording folder into a depth map (.npy, metres, NaN = invalid)", **kw)
     c.add_argument("recording", help="folder written by `simbench competitor render`")
     c.add_argument("--out", required=True, help="depth map .npy")
     c.add_argument("--ply", default=None, help="also write the point cloud")
     c.set_defaults(fn=_cmd_competitor_decode)
 
-    s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)")
-    s.add_argument("--device", default="proposed", choices=["proposed", "kinect", "tof"], help="whose decoder (default: the paper's)")
+    s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)", **kw)
+    s.add_argument("--device", default="proposed", choices=["proposed", "kinect", "tof"], help="whose decoder")
     s.add_argument("--scene", default="plane", choices=["plane", "shadow"], help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)")
-    s.add_argument("--repeats", type=int, default=20)
-    s.add_argument("--max-ms", type=float, default=None, help="fail when the median exceeds this")
-    s.add_argument("--json", action="store_true")
+    s.add_argument("--repeats", type=_int(1, 100000), default=20, help="timed decodes (after one warm-up)")
+    s.add_argument("--max-ms", type=_float(lo=0.0, lo_open=True), default=None, help="fail when the median exceeds this")
+    s.add_argument("--json", action="store_true", help="print the timings as JSON")
     s.set_defaults(fn=_cmd_bench)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:  # --help, or a usage error already printed as one line
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         return args.fn(args)
-    except (ValueError, FileNotFoundError, OSError) as exc:
-        if args.debug:
-            raise
-        print(f"simbench: error: {exc}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         print("simbench: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        if args.debug:
+            raise
+        print("simbench: error: out of memory (the inputs ask for more than this machine has)", file=sys.stderr)
+        return 2
+    except (ValueError, OSError) as exc:  # bad input: missing or unreadable files, invalid values
+        if args.debug:
+            raise
+        print(f"simbench: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - anything else is a bug: say so in one line
+        if args.debug:
+            raise
+        print(f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback and please report it", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import validate
 from simbench.io import read_toml
 from simbench.projector import DMD_LAYOUTS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
@@ -67,10 +68,10 @@ SENSOR_PRESETS = ("ideal", "minimal", "paper")
 _NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-def _positive(name: str, v) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-        raise ValueError(f"{name} must be a number > 0, got {v!r}")
-    return float(v)
+def _set(obj, values: dict) -> None:
+    """Store validated (normalised) field values on a frozen dataclass."""
+    for name, value in values.items():
+        object.__setattr__(obj, name, value)
 
 
 @dataclass(frozen=True)
@@ -88,16 +89,15 @@ class Lens:
     distortion: tuple[float, float, float, float, float] = _NO_DISTORTION
 
     def __post_init__(self) -> None:
-        _positive("f_number", self.f_number)
-        _positive("focus_m", self.focus_m)
-        if not 0 < self.transmission <= 1:
-            raise ValueError(f"transmission must be in (0, 1], got {self.transmission}")
-        d = self.distortion
-        if len(d) != 5 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in d):
-            raise ValueError(f"distortion must be five numbers (k1, k2, p1, p2, k3), got {d!r}")
-        object.__setattr__(self, "distortion", tuple(float(x) for x in d))
-        object.__setattr__(self, "f_number", float(self.f_number))
-        object.__setattr__(self, "focus_m", float(self.focus_m))
+        v = validate
+        _set(self, {
+            "f_number": v.number(self.f_number, "f_number", lo=0.5, hi=64.0),
+            "transmission": v.number(self.transmission, "transmission", lo=0.0, hi=1.0, lo_open=True),
+            "defocus": v.boolean(self.defocus, "defocus"),
+            "focus_m": v.number(self.focus_m, "focus_m", lo=0.0, lo_open=True),
+            # assumption: |coefficient| <= 10; beyond, Brown-Conrady folds over inside any normal view
+            "distortion": v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0),
+        })
 
     def aperture_m(self, focal_px: float, pixel_pitch_um: float) -> float:
         """Aperture diameter F / N (m) for a device of focal length ``focal_px``."""
@@ -131,27 +131,25 @@ class PhysicalCamera:
     demosaic: str = "bilinear"
 
     def __post_init__(self) -> None:
-        _positive("pixel_pitch_um", self.pixel_pitch_um)
-        _positive("full_well_e", self.full_well_e)
-        if len(self.qe) != 3 or not all(0 < q <= 1 for q in self.qe):
-            raise ValueError(f"qe must be three numbers in (0, 1], got {self.qe!r}")
-        object.__setattr__(self, "qe", tuple(float(q) for q in self.qe))
-        for name in ("dark_noise_e", "offset_dn", "dark_current_e_s", "prnu", "dsnu_e"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0:
-                raise ValueError(f"{name} must be a number >= 0, got {v!r}")
-        if self.bits not in (8, 10, 12, 16):
-            raise ValueError(f"bits must be one of 8, 10, 12, 16; got {self.bits}")
-        if self.gain_dn_per_e is not None:
-            _positive("gain_dn_per_e", self.gain_dn_per_e)
-        if self.exposure_s is not None:
-            _positive("exposure_s", self.exposure_s)
-        if not 0 < self.auto_exposure_fraction <= 1:
-            raise ValueError(f"auto_exposure_fraction must be in (0, 1], got {self.auto_exposure_fraction}")
-        if self.cfa not in CFA_PATTERNS:
-            raise ValueError(f"unknown cfa {self.cfa!r}; valid: {list(CFA_PATTERNS)}")
-        if self.demosaic not in DEMOSAIC_METHODS:
-            raise ValueError(f"unknown demosaic {self.demosaic!r}; valid: {list(DEMOSAIC_METHODS)}")
+        v = validate
+        _set(self, {
+            "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+            "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
+            "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
+            "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0),
+            "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
+            "gain_dn_per_e": v.optional(v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True),
+            "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0),
+            "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0),
+            "prnu": v.number(self.prnu, "prnu", lo=0.0, hi=1.0),
+            "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0),
+            "fixed_pattern_seed": v.integer(self.fixed_pattern_seed, "fixed_pattern_seed", lo=0, hi=2**63 - 1),
+            "exposure_s": v.optional(v.number, self.exposure_s, "exposure_s", lo=0.0, hi=3600.0, lo_open=True),
+            "auto_exposure_fraction": v.number(self.auto_exposure_fraction, "auto_exposure_fraction", lo=0.0, hi=1.0, lo_open=True),
+            "noise": v.boolean(self.noise, "noise"),
+            "cfa": v.choice(self.cfa, "cfa", CFA_PATTERNS),
+            "demosaic": v.choice(self.demosaic, "demosaic", DEMOSAIC_METHODS),
+        })
 
     @property
     def max_dn(self) -> int:
@@ -175,15 +173,18 @@ class ProjectorModel:
     lens: Lens = field(default_factory=lambda: Lens(f_number=2.0))
 
     def __post_init__(self) -> None:
-        _positive("lumens", self.lumens)
-        _positive("gamma", self.gamma)
-        _positive("pixel_pitch_um", self.pixel_pitch_um)
-        if self.transfer not in TRANSFERS:
-            raise ValueError(f"unknown projector transfer {self.transfer!r}; valid: {list(TRANSFERS)}")
-        if self.dmd not in DMD_LAYOUTS:
-            raise ValueError(f"unknown dmd layout {self.dmd!r}; valid: {list(DMD_LAYOUTS)}")
-        if not self.contrast_ratio >= 1:
-            raise ValueError(f"contrast_ratio must be >= 1 (or inf), got {self.contrast_ratio}")
+        v = validate
+        _set(self, {
+            "lumens": v.number(self.lumens, "lumens", lo=0.0, lo_open=True),
+            "transfer": v.choice(self.transfer, "transfer", TRANSFERS),
+            # assumption: display gammas lie in (0, 10]; 2.2 is the video standard
+            "gamma": v.number(self.gamma, "gamma", lo=0.0, hi=10.0, lo_open=True),
+            "contrast_ratio": v.number(self.contrast_ratio, "contrast_ratio", lo=1.0, allow_inf=True),
+            "dmd": v.choice(self.dmd, "dmd", DMD_LAYOUTS),
+            "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+        })
+        if not isinstance(self.lens, Lens):
+            raise ValueError(f"lens must be a Lens, got {type(self.lens).__name__}")
 
 
 @dataclass(frozen=True)
@@ -199,8 +200,11 @@ class SensorModel:
     description: str = ""
 
     def __post_init__(self) -> None:
-        if isinstance(self.ambient_ratio, bool) or not self.ambient_ratio >= 0:
-            raise ValueError(f"ambient ratio must be >= 0, got {self.ambient_ratio!r}")
+        _set(self, {
+            "crosstalk": validate.boolean(self.crosstalk, "crosstalk"),
+            # assumption: room light up to 100x the projector's white at Z0 (daylight on a pico projector)
+            "ambient_ratio": validate.number(self.ambient_ratio, "ambient ratio", lo=0.0, hi=100.0),
+        })
         if isinstance(self.camera, SimpleCamera) and self.crosstalk:
             raise ValueError("spectral crosstalk needs the physical (emva) camera model")
 
@@ -230,10 +234,13 @@ def _build(cls, table: dict, where: str, *, convert: dict | None = None):
     if missing:
         raise ValueError(f"{where}: missing key(s) {missing}")
     kwargs = dict(table)
-    for k, fn in (convert or {}).items():
-        if k in kwargs:
-            kwargs[k] = fn(kwargs[k])
     try:
+        for k, fn in (convert or {}).items():
+            if k in kwargs:
+                try:
+                    kwargs[k] = fn(kwargs[k])
+                except (TypeError, ValueError) as exc:
+                    raise ValueError(f"{k}: {exc}") from None
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
@@ -281,12 +288,11 @@ def sensor_from_dict(data: dict, *, where: str = "sensor") -> SensorModel:
         bad = sorted(set(t) - set(allowed))
         if bad:
             raise ValueError(f"{where}.{name}: unknown key(s) {bad}; valid keys: {list(allowed)}")
-    crosstalk = spectral.get("crosstalk", False)
-    if not isinstance(crosstalk, bool):
-        raise ValueError(f"{where}.spectral.crosstalk must be true or false, got {crosstalk!r}")
-    ratio = ambient.get("ratio", 0.0)
-    if isinstance(ratio, bool) or not isinstance(ratio, (int, float)):
-        raise ValueError(f"{where}.ambient.ratio must be a number, got {ratio!r}")
+    try:
+        crosstalk = validate.boolean(spectral.get("crosstalk", False), f"{where}.spectral.crosstalk")
+        ratio = validate.number(ambient.get("ratio", 0.0), f"{where}.ambient.ratio", lo=0.0, hi=100.0)
+    except ValueError as exc:
+        raise ValueError(str(exc)) from None
     try:
         return SensorModel(name=str(data.get("name", "custom")), camera=camera, camera_lens=cam_lens, projector=projector, crosstalk=crosstalk, ambient_ratio=float(ratio), description=str(data.get("description", "")))
     except ValueError as exc:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -19,9 +20,15 @@ import numpy as np
 __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
+    "json_bytes",
     "save_json",
+    "npy_bytes",
     "save_npy",
     "load_npy",
+    "write_files",
+    "output_directory",
+    "png_bytes",
+    "ply_bytes",
     "save_png",
     "load_image",
     "save_exr",
@@ -53,6 +60,133 @@ def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
         raise
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale_siblings(folder: Path) -> None:
+    """Remove temporary siblings of ``folder`` left by a process that was killed while
+    building or replacing it (their names carry the dead process's id)."""
+    import re
+    import shutil
+
+    pattern = re.compile(re.escape(f".{folder.name}.") + r"(tmp|old)-(\d+)-")
+    for entry in folder.parent.glob(f".{folder.name}.*"):
+        m = pattern.match(entry.name)
+        if m and entry.is_dir() and not _pid_alive(int(m.group(2))):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False if unsupported."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def _check_replaceable(folder: Path, manifest: str, overwrite: bool) -> None:
+    """May ``folder`` be replaced by a new output?  Yes if empty; if it is an output of the
+    same kind (its ``manifest`` lists every file in it); or, with ``overwrite``, if it is an
+    output of the same kind holding other files too.  A folder simbench did not write is
+    never replaced."""
+    entries = sorted(e.name for e in folder.iterdir())
+    if not entries:
+        return
+    listed: set[str] | None = None
+    m = folder / manifest
+    if m.is_file():
+        try:
+            files = json.loads(m.read_text(encoding="utf-8")).get("files", {})
+            listed = {str(v) for v in (files.values() if isinstance(files, dict) else files)} | {manifest}
+        except (ValueError, AttributeError, UnicodeDecodeError):
+            listed = None
+    if listed is None:
+        raise ValueError(f"{folder} exists, is not empty and was not written by this command (no {manifest}); choose another output folder")
+    extra = [e for e in entries if e not in listed]
+    if extra and not overwrite:
+        shown = ", ".join(extra[:4]) + (", ..." if len(extra) > 4 else "")
+        raise ValueError(f"{folder} holds files this command did not write ({shown}); pass --overwrite to replace the folder whole, or choose another output folder")
+
+
+@contextmanager
+def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> Iterator[Path]:
+    """A result folder written whole or not at all.
+
+    Yields a temporary sibling folder to fill; when the block succeeds it takes ``path``'s
+    place in one atomic step (an existing output is swapped out and removed), so a reader sees
+    the old folder or the new one, never a mix.  If the block fails, or the process is killed,
+    ``path`` is untouched; a killed run's temporary sibling is removed by the next run.
+
+    Parameters
+    ----------
+    path : the output folder
+    manifest : name of the JSON file in the folder that lists its files under ``"files"``
+        (what makes an existing folder recognisable as a replaceable output)
+    overwrite : replace an existing output even when it holds files it did not write
+
+    Raises
+    ------
+    ValueError
+        ``path`` is a file, or an existing folder that may not be replaced.
+    """
+    import shutil
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path} exists and is not a folder")
+    if path.is_dir():
+        _check_replaceable(path, manifest, overwrite)
+    created = []
+    d = path.parent
+    while not d.exists():
+        created.append(d)
+        d = d.parent
+    for c in reversed(created):
+        c.mkdir()
+    _remove_stale_siblings(path)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o777 & ~_umask())
+        if not path.exists():
+            os.rename(tmp, path)
+        elif _exchange(tmp, path):
+            shutil.rmtree(tmp)  # now the old folder
+        else:
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-{os.getpid()}-", dir=path.parent))
+            os.rmdir(old)
+            os.rename(path, old)
+            os.rename(tmp, path)
+            shutil.rmtree(old)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        for c in created:
+            try:
+                c.rmdir()
+            except OSError:
+                break
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (temporary file + rename); returns the path."""
     path = Path(path)
@@ -68,8 +202,13 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def json_bytes(obj: object) -> bytes:
+    """``obj`` as indented, key-sorted JSON (NumPy scalars and arrays, paths allowed)."""
+    return (json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n").encode("utf-8")
+
+
 def save_json(path: str | Path, obj: object) -> Path:
-    return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True, default=_json_default) + "\n")
+    return atomic_write_bytes(path, json_bytes(obj))
 
 
 def _json_default(o: object):
@@ -82,10 +221,62 @@ def _json_default(o: object):
     raise TypeError(f"cannot store {type(o).__name__} in JSON")
 
 
-def save_npy(path: str | Path, array: np.ndarray) -> Path:
+def npy_bytes(array: np.ndarray) -> bytes:
+    """An array encoded as an .npy file (no pickles)."""
     buf = io.BytesIO()
     np.save(buf, np.asarray(array), allow_pickle=False)
-    return atomic_write_bytes(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def save_npy(path: str | Path, array: np.ndarray) -> Path:
+    return atomic_write_bytes(path, npy_bytes(array))
+
+
+def write_files(files: dict[str | Path, bytes]) -> list[Path]:
+    """Write several files all or nothing.
+
+    Every file is first written to a temporary file beside its destination (creating missing
+    folders); only when all of them are written are they renamed into place.  If any write
+    fails (an unwritable folder, a full disk), the temporary files and the folders this call
+    created are removed and the error is raised: no destination is touched.
+
+    Returns
+    -------
+    list of Path, the destinations in the order given
+    """
+    staged: list[tuple[str, Path]] = []
+    created: list[Path] = []
+    try:
+        for path, data in files.items():
+            path = Path(path)
+            missing = []
+            d = path.parent
+            while not d.exists():
+                missing.append(d)
+                d = d.parent
+            for m in reversed(missing):
+                m.mkdir()
+                created.append(m)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
+            staged.append((tmp, path))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(tmp, _file_mode())
+    except BaseException:
+        for tmp, _ in staged:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        for m in reversed(created):
+            try:
+                m.rmdir()
+            except OSError:
+                pass
+        raise
+    for tmp, path in staged:
+        os.replace(tmp, path)
+    return [path for _, path in staged]
 
 
 def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None) -> np.ndarray:
@@ -93,10 +284,15 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"file not found: {path}")
+    with open(path, "rb") as fh:
+        magic = fh.read(6)
+    if magic != b"\x93NUMPY":
+        what = "an empty file" if not magic else "not a NumPy .npy file"
+        raise ValueError(f"{path}: {what} (expected an array saved with numpy.save)")
     try:
         arr = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as exc:
-        raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
+    except (ValueError, OSError, EOFError) as exc:
+        raise ValueError(f"{path}: not a readable .npy array ({exc or 'truncated'})") from None
     if expected_shape is not None and arr.shape != tuple(expected_shape):
         raise ValueError(f"{path}: shape {arr.shape}, expected {tuple(expected_shape)}")
     return arr
@@ -104,8 +300,14 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
 
 def save_png(path: str | Path, image: np.ndarray) -> Path:
     """Save an RGB (H, W, 3) or grey (H, W) uint8/uint16 image as PNG (RGB order in memory)."""
+    return atomic_write_bytes(path, png_bytes(image, name=str(path)))
+
+
+def png_bytes(image: np.ndarray, *, name: str = "image") -> bytes:
+    """An RGB (H, W, 3) or grey (H, W) uint8/uint16 image encoded as PNG."""
     import cv2
 
+    path = name
     img = np.asarray(image)
     if img.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"PNG needs uint8 or uint16 pixels, got {img.dtype}")
@@ -116,11 +318,12 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     ok, enc = cv2.imencode(".png", np.ascontiguousarray(img))
     if not ok:
         raise ValueError(f"could not encode {path} as PNG")
-    return atomic_write_bytes(path, enc.tobytes())
+    return enc.tobytes()
 
 
-def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = None) -> np.ndarray:
-    """Load a capture (PNG/TIFF/...; .npy for float captures) as RGB, shape (H, W, 3).
+def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = None, channels: int = 3) -> np.ndarray:
+    """Load a capture (PNG/TIFF/...; .npy for float captures) as RGB, shape (H, W, 3), or with
+    ``channels=1`` as a grey image, shape (H, W).
 
     Raises
     ------
@@ -135,21 +338,58 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
     if path.suffix.lower() == ".npy":
         img = load_npy(path)
     else:
-        img = cv2.imdecode(np.fromfile(path, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        data = np.fromfile(path, dtype=np.uint8)
+        if data.size == 0:
+            raise ValueError(f"{path}: an empty file, not an image")
+        with _captured_stderr() as messages:
+            try:
+                img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+            except cv2.error:
+                img = None
         if img is None:
-            raise ValueError(f"{path}: not a readable image")
+            # OpenCV's log lines carry "[ WARN:0@0.03] global grfmt_png.cpp:793 function" first
+            lines = [re.sub(r"^\[[^\]]*\]\s*global\s+\S+\s+\S+\s+", "", ln.strip()) for ln in messages().splitlines()]
+            detail = "; ".join(ln for ln in lines if ln)
+            raise ValueError(f"{path}: not a readable image" + (f" ({detail[:200]})" if detail else ""))
         if img.ndim == 3 and img.shape[2] == 4:
             img = img[..., :3]
         if img.ndim == 3:
             img = img[..., ::-1]
-    if img.ndim != 3 or img.shape[2] != 3:
+    if channels == 1:
+        if img.ndim != 2:
+            raise ValueError(f"{path}: expected a single-channel image, got shape {img.shape}")
+    elif img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"{path}: expected an RGB image, got shape {img.shape}")
     if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
         h, w = expected_size_hw
         raise ValueError(
-            f"{path}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the rig's camera is {w}x{h}"
+            f"{path}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the camera is {w}x{h}"
         )
     return np.ascontiguousarray(img)
+
+
+@contextmanager
+def _captured_stderr() -> Iterator:
+    """Collect what C libraries write to file descriptor 2 (libpng's "libpng error: ..."
+    lines) instead of letting it reach the terminal; yields a function returning the text."""
+    import sys
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):
+        yield lambda: ""
+        return
+    text = ""
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lambda: text
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read().decode("utf-8", "replace")
 
 
 def save_exr(path: str | Path, image: np.ndarray) -> Path:
@@ -173,7 +413,13 @@ def read_toml(path: str | Path, *, what: str) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"{what} file not found: {path}")
     try:
-        return tomllib.loads(path.read_text())
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a UTF-8 text file (byte {exc.start}), so not TOML") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path}: a folder, not a {what} file") from None
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML ({exc})") from None
 
@@ -186,6 +432,11 @@ def save_ply(path: str | Path, points_m: np.ndarray, colors: np.ndarray | None =
     points_m : ndarray, shape (N, 3)
     colors : ndarray, shape (N, 3), uint8, optional
     """
+    return atomic_write_bytes(path, ply_bytes(points_m, colors))
+
+
+def ply_bytes(points_m: np.ndarray, colors: np.ndarray | None = None) -> bytes:
+    """A point cloud encoded as binary little-endian PLY (see :func:`save_ply`)."""
     pts = np.asarray(points_m, dtype=np.float32).reshape(-1, 3)
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if colors is not None:
@@ -198,4 +449,4 @@ def save_ply(path: str | Path, points_m: np.ndarray, colors: np.ndarray | None =
         rec["red"], rec["green"], rec["blue"] = c[:, 0], c[:, 1], c[:, 2]
         props += "property uchar red\nproperty uchar green\nproperty uchar blue\n"
     header = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n{props}end_header\n"
-    return atomic_write_bytes(path, header.encode("ascii") + rec.tobytes())
+    return header.encode("ascii") + rec.tobytes()

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simbench import validate
+
 __all__ = [
     "PatternSpec",
     "check_channels",
@@ -152,13 +154,14 @@ class PatternSpec:
 
     def __post_init__(self) -> None:
         check_channels(self.channels)
-        h, w = self.size_hw
-        if int(h) != h or int(w) != w or h < 1 or w < 1:
-            raise ValueError(f"pattern size_hw must be two positive integers, got {self.size_hw}")
-        if int(self.period_px) != self.period_px or self.period_px < 4:
-            raise ValueError(f"period_px must be an integer >= 4, got {self.period_px}")
-        if self.order < 2 or int(self.order) != self.order:
-            raise ValueError(f"order must be an integer >= 2, got {self.order}")
+        if isinstance(self.size_hw, (str, bytes)) or len(self.size_hw) != 2:
+            raise ValueError(f"pattern size_hw must be (height, width), got {self.size_hw!r}")
+        w, h = validate.image_size(self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height"))
+        object.__setattr__(self, "size_hw", (h, w))
+        object.__setattr__(self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX))
+        object.__setattr__(self, "order", validate.integer(self.order, "order", lo=2, hi=16))
+        object.__setattr__(self, "dc", validate.number(self.dc, "dc", lo=0.0, hi=1.0))
+        object.__setattr__(self, "amplitude", validate.number(self.amplitude, "amplitude", lo=0.0, hi=0.5, lo_open=True))
         if not (0.0 <= self.dc - self.amplitude and self.dc + self.amplitude <= 1.0):
             raise ValueError(
                 f"dc={self.dc} and amplitude={self.amplitude} leave [0, 1]: "
@@ -200,9 +203,15 @@ def check_sequence(sequence, *, order: int) -> tuple[int, ...]:
     ValueError
         Naming what is wrong.
     """
-    seq = tuple(int(c) for c in sequence)
-    if any(c not in (0, 1) for c in seq):
-        raise ValueError(f"sequence must hold only 0 and 1, got {seq}")
+    if isinstance(sequence, (str, bytes)):
+        raise ValueError(f"sequence must be a list of 0 and 1, got {sequence!r}")
+    try:
+        items = list(sequence)
+    except TypeError:
+        raise ValueError(f"sequence must be a list of 0 and 1, got {sequence!r}") from None
+    if any(isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, np.integer)) or c not in (0, 1) for c in items):
+        raise ValueError(f"sequence must hold only 0 and 1 (integers), got {sequence!r}")
+    seq = tuple(int(c) for c in items)
     window_positions(np.asarray(seq), order=order)
     return seq
 

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import validate
 from simbench.io import atomic_write_text, read_toml
 
 __all__ = [
@@ -75,24 +76,16 @@ class Intrinsics:
     distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        for name in ("width_px", "height_px"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or int(v) != v or v < 1:
-                raise ValueError(f"{name} must be a positive integer, got {v!r}")
-        for name in ("focal_px", "cx_px", "cy_px"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{name} must be a finite number, got {v!r}")
-        if self.focal_px <= 0:
-            raise ValueError(f"focal_px must be > 0, got {self.focal_px}")
-        d = self.distortion
-        if (
-            isinstance(d, (str, bytes))
-            or len(d) != 5
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in d)
-        ):
-            raise ValueError(f"distortion must be five finite numbers (k1, k2, p1, p2, k3), got {d!r}")
-        object.__setattr__(self, "distortion", tuple(float(x) for x in d))
+        v = validate
+        w, h = v.image_size(self.width_px, self.height_px, "image")
+        f = v.number(self.focal_px, "focal_px", lo=0.0, lo_open=True, hi=1e6)
+        # assumption: the principal point lies within one image size of the image (lens-shifted
+        # projectors such as 100 %-offset DLP engines put it at the border, never far beyond)
+        cx = v.number(self.cx_px, "cx_px", lo=-w, hi=2.0 * w)
+        cy = v.number(self.cy_px, "cy_px", lo=-h, hi=2.0 * h)
+        d = v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0)
+        for name, value in (("width_px", w), ("height_px", h), ("focal_px", f), ("cx_px", cx), ("cy_px", cy), ("distortion", d)):
+            object.__setattr__(self, name, value)
 
     @property
     def has_distortion(self) -> bool:
@@ -156,14 +149,12 @@ class Rig:
     _r: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        for name in ("position_m", "rotation_deg"):
-            v = getattr(self, name)
-            if len(v) != 3 or not all(
-                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                for x in v
-            ):
-                raise ValueError(f"{name} must be three finite numbers, got {v!r}")
-            object.__setattr__(self, name, tuple(float(x) for x in v))
+        # assumption: a projector within 10 m of the camera; angles within one turn
+        object.__setattr__(self, "position_m", validate.numbers(self.position_m, "position_m", 3, lo=-10.0, hi=10.0))
+        object.__setattr__(self, "rotation_deg", validate.numbers(self.rotation_deg, "rotation_deg", 3, lo=-360.0, hi=360.0))
+        for name in ("camera", "projector"):
+            if not isinstance(getattr(self, name), Intrinsics):
+                raise ValueError(f"{name} must be Intrinsics, got {type(getattr(self, name)).__name__}")
         if np.linalg.norm(self.position_m) < 1e-6:
             raise ValueError("projector position_m coincides with the camera: no baseline")
         object.__setattr__(self, "_r", rotation_xyz_deg(self.rotation_deg))
@@ -270,15 +261,17 @@ def rig_from_dict(data: dict, *, where: str = "rig") -> Rig:
     if not isinstance(pose, dict):
         raise ValueError(f"{where}.pose: expected a table")
     _check_keys(pose, _POSE_KEYS, f"{where}.pose")
+    camera = _intrinsics_from(data["camera"], f"{where}.camera")
+    projector = _intrinsics_from(data["projector"], f"{where}.projector")
     try:
         return Rig(
-            camera=_intrinsics_from(data["camera"], f"{where}.camera"),
-            projector=_intrinsics_from(data["projector"], f"{where}.projector"),
+            camera=camera,
+            projector=projector,
             position_m=tuple(pose.get("position_m", (0.093, 0.0, 0.0))),
             rotation_deg=tuple(pose.get("rotation_deg", (0.0, 0.0, 0.0))),
             name=str(data.get("name", "custom")),
         )
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
 
 

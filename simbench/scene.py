@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import validate
 from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rotation_xyz_deg
 
@@ -80,9 +81,7 @@ def paint_reflectance(srgb8) -> tuple[float, float, float]:
     decoding curve (IEC 61966-2-1) and the paint range above: pure red (255, 0, 0) becomes
     (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
     """
-    v = np.asarray(srgb8, dtype=np.float64)
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or v.min() < 0 or v.max() > 255:
-        raise ValueError(f"srgb8 must be three numbers in [0, 255], got {srgb8!r}")
+    v = np.asarray(validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0), dtype=np.float64)
     c = v / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
@@ -105,15 +104,9 @@ class Material:
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
             raise ValueError(f"unknown material {self.kind!r}; valid: {list(MATERIALS)}")
-        if len(self.rgb) != 3 or not all(
-            isinstance(c, (int, float)) and not isinstance(c, bool) and 0.0 <= c <= 1.0 for c in self.rgb
-        ):
-            raise ValueError(f"rgb reflectance must be three numbers in [0, 1], got {self.rgb!r}")
-        object.__setattr__(self, "rgb", tuple(float(c) for c in self.rgb))
-        r = self.roughness
-        if isinstance(r, bool) or not isinstance(r, (int, float)) or not 0.001 <= r <= 1.0:
-            raise ValueError(f"roughness must be a number in [0.001, 1], got {r!r}")
-        object.__setattr__(self, "roughness", float(r))
+        object.__setattr__(self, "rgb", validate.numbers(self.rgb, "rgb reflectance", 3, lo=0.0, hi=1.0))
+        object.__setattr__(self, "roughness", validate.number(self.roughness, "roughness", lo=0.001, hi=1.0))
+        object.__setattr__(self, "specular_rgb", validate.numbers(self.specular_rgb, "specular_rgb", 3, lo=0.0, hi=1.0))
 
 
 @dataclass(frozen=True)
@@ -145,16 +138,7 @@ class SceneSpec:
 
 
 def _vec(v: object, n: int, where: str, *, positive: bool = False) -> tuple[float, ...]:
-    if not isinstance(v, (list, tuple)) or len(v) != n:
-        raise ValueError(f"{where}: expected a list of {n} numbers, got {v!r}")
-    out = []
-    for x in v:
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-            raise ValueError(f"{where}: expected finite numbers, got {v!r}")
-        if positive and x <= 0:
-            raise ValueError(f"{where}: values must be > 0, got {v!r}")
-        out.append(float(x))
-    return tuple(out)
+    return validate.numbers(v, where, n, lo=0.0 if positive else None, lo_open=positive)
 
 
 def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
@@ -180,10 +164,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
     elif kind == "sphere":
         p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
-        r = d.get("radius_m")
-        if isinstance(r, bool) or not isinstance(r, (int, float)) or not (r > 0 and math.isfinite(r)):
-            raise ValueError(f"{where}: radius_m must be a positive number, got {r!r}")
-        p["radius_m"] = float(r)
+        p["radius_m"] = validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True)
     else:
         if "file" not in d:
             raise ValueError(f"{where}: missing file")
@@ -195,10 +176,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         if path.suffix.lower() not in (".ply", ".obj"):
             raise ValueError(f"{where}: mesh must be .ply or .obj, got {path.name}")
         p["file"] = str(path.resolve())
-        s = d.get("scale", 1.0)
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or not (s > 0 and math.isfinite(s)):
-            raise ValueError(f"{where}: scale must be a positive number, got {s!r}")
-        p["scale"] = float(s)
+        p["scale"] = validate.number(d.get("scale", 1.0), f"{where}: scale", lo=0.0, lo_open=True)
         p["translate_m"] = _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m")
         p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
     try:
@@ -234,15 +212,10 @@ def scene_from_dict(data: dict, *, base_dir: Path = Path("."), where: str = "sce
             raise ValueError("[projector] takes only: scale")
         if not isinstance(amb, dict) or sorted(set(amb) - {"rgb"}):
             raise ValueError("[ambient] takes only: rgb")
-        scale = proj.get("scale", 1.0)
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not scale > 0:
-            raise ValueError(f"projector.scale must be > 0, got {scale!r}")
-        z0 = data.get("reference_depth_m", 1.0)
-        if isinstance(z0, bool) or not isinstance(z0, (int, float)) or not z0 > 0:
-            raise ValueError(f"reference_depth_m must be > 0, got {z0!r}")
-        ambient = _vec(amb.get("rgb", (0, 0, 0)), 3, "ambient.rgb")
-        if min(ambient) < 0:
-            raise ValueError(f"ambient.rgb must be >= 0, got {ambient}")
+        scale = validate.number(proj.get("scale", 1.0), "projector.scale", lo=0.0, lo_open=True)
+        # assumption: structured light works within 100 m
+        z0 = validate.number(data.get("reference_depth_m", 1.0), "reference_depth_m", lo=0.0, hi=100.0, lo_open=True)
+        ambient = validate.numbers(amb.get("rgb", (0, 0, 0)), "ambient.rgb", 3, lo=0.0)
     except (FileNotFoundError, ValueError) as exc:
         raise type(exc)(f"{where}: {exc}") from None
     names = [o.name for o in objects]

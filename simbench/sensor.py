@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simbench import validate
+
 __all__ = [
     "SimpleCamera",
     "simple_camera",
@@ -52,14 +54,16 @@ class SimpleCamera:
     noise: bool = True
 
     def __post_init__(self) -> None:
-        if not self.exposure > 0:
-            raise ValueError(f"exposure must be > 0, got {self.exposure}")
-        if not self.full_well_e > 0:
-            raise ValueError(f"full_well_e must be > 0, got {self.full_well_e}")
-        if not self.read_noise_e >= 0:
-            raise ValueError(f"read_noise_e must be >= 0, got {self.read_noise_e}")
-        if self.bits not in (8, 10, 12, 16):
-            raise ValueError(f"bits must be one of 8, 10, 12, 16; got {self.bits}")
+        v = validate
+        values = {
+            "exposure": v.number(self.exposure, "exposure", lo=0.0, lo_open=True),
+            "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
+            "read_noise_e": v.number(self.read_noise_e, "read_noise_e", lo=0.0),
+            "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
+            "noise": v.boolean(self.noise, "noise"),
+        }
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
 
     @property
     def max_dn(self) -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench.cache import RenderCache, array_digest, scene_fingerprint
-from simbench.io import save_exr, save_json, save_npy, save_png
+from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict
 from simbench.optics import distort_image, distorted_projector_drive
@@ -293,18 +293,36 @@ def acquire(
     return Acquisition(scene=scene, pattern=pat, capture=capture, reference=reference, gt=gt, meta=meta)
 
 
-def write_acquisition(acq: Acquisition, out_dir: str | Path) -> dict[str, Path]:
-    """Write an acquisition as the files of ``simbench render`` (all writes atomic)."""
+RENDER_MANIFEST = "meta.json"
+
+
+def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool = False) -> dict[str, Path]:
+    """Write an acquisition as the files of ``simbench render``, the folder whole or not at all
+    (:func:`simbench.io.output_directory`: built beside ``out_dir`` and swapped in; an earlier
+    render there is replaced, any other non-empty folder refused).  ``meta.json`` lists every
+    file with its SHA-256, so a reader can tell a folder's files belong together."""
+    import hashlib
+
     out = Path(out_dir)
-    files = {
-        "capture": save_png(out / "capture.png", acq.capture),
-        "reference": save_png(out / "reference.png", acq.reference),
-        "gt_depth": save_npy(out / "gt_depth.npy", acq.gt.depth_m),
-        "gt_depth_exr": save_exr(out / "gt_depth.exr", acq.gt.depth_m),
-        "gt_column": save_npy(out / "gt_column.npy", acq.gt.column_px),
-        "gt_lit": save_npy(out / "gt_lit.npy", acq.gt.lit),
-        "gt_object_id": save_npy(out / "gt_object_id.npy", acq.gt.object_id),
-        "rig": save_rig(acq.scene.rig, out / "rig.toml"),
-    }
-    files["meta"] = save_json(out / "meta.json", {**acq.meta, "files": {k: v.name for k, v in files.items()}})
-    return files
+    with output_directory(out, manifest=RENDER_MANIFEST, overwrite=overwrite) as tmp:
+        names = {
+            "capture": "capture.png",
+            "reference": "reference.png",
+            "gt_depth": "gt_depth.npy",
+            "gt_depth_exr": "gt_depth.exr",
+            "gt_column": "gt_column.npy",
+            "gt_lit": "gt_lit.npy",
+            "gt_object_id": "gt_object_id.npy",
+            "rig": "rig.toml",
+        }
+        save_png(tmp / names["capture"], acq.capture)
+        save_png(tmp / names["reference"], acq.reference)
+        save_npy(tmp / names["gt_depth"], acq.gt.depth_m)
+        save_exr(tmp / names["gt_depth_exr"], acq.gt.depth_m)
+        save_npy(tmp / names["gt_column"], acq.gt.column_px)
+        save_npy(tmp / names["gt_lit"], acq.gt.lit)
+        save_npy(tmp / names["gt_object_id"], acq.gt.object_id)
+        save_rig(acq.scene.rig, tmp / names["rig"])
+        digests = {k: hashlib.sha256((tmp / n).read_bytes()).hexdigest() for k, n in names.items()}
+        save_json(tmp / RENDER_MANIFEST, {**acq.meta, "files": names, "sha256": digests})
+    return {**{k: out / n for k, n in names.items()}, "meta": out / RENDER_MANIFEST}

@@ -75,7 +75,7 @@ def test_phase_method_axis(tmp_path, variant):
     for r in rows[:3]:
         assert r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0  # small, few-spp renders
     assert len({r["gt_mae_mm"] for r in rows[:3]}) == 3  # the axis reaches the decoder
-    assert "unknown phase_method 'hilbert'" in rows[3]["error"] and "'wfr'" in rows[3]["error"]
+    assert "phase_method must be one of" in rows[3]["error"] and "'hilbert'" in rows[3]["error"] and "'wfr'" in rows[3]["error"]
 
 
 @pytest.mark.slow
@@ -123,3 +123,84 @@ def test_process_pool_and_dask_local_cluster_give_identical_tables(tmp_path, var
     assert len(a) == 24 and a == b
     assert all(r["error"] == "" for r in a)
     assert (tmp_path / "pool" / "t.md").read_text() == (tmp_path / "dask" / "t.md").read_text()
+
+
+# ------------------------------------------------------------------ dying workers
+
+
+def _marker_sweep(names):
+    return sweep_from_dict({"name": "w", "description": "runner test", "axis": [{"name": "scene.name", "values": list(names)}]})
+
+
+def test_a_killed_worker_costs_its_run_one_retry_and_the_table_is_complete(tmp_path, variant):
+    from tests import ablate_helpers
+
+    names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2"), str(tmp_path / "ok3")]
+    rows = run_sweep(_marker_sweep(names), out_dir=tmp_path / "out", cache_dir=None, workers=2, variant=variant, progress=lambda s: None, run_fn=ablate_helpers.dies_once)
+    assert [r["error"] for r in rows] == ["", "", "", ""]
+    assert (tmp_path / "die1").exists()  # it did die once
+    ref = run_sweep(_marker_sweep(names), out_dir=tmp_path / "ref", cache_dir=None, workers=1, progress=lambda s: None, run_fn=ablate_helpers.quick_run)
+    assert (tmp_path / "out" / "w.csv").read_bytes() == (tmp_path / "ref" / "w.csv").read_bytes()
+    assert not (tmp_path / "out" / ".w.running").exists()
+
+
+def test_a_run_that_kills_its_worker_twice_is_recorded_as_failed(tmp_path, variant):
+    from simbench.experiments.ablate import WORKER_DIED
+    from tests import ablate_helpers
+
+    names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2")]
+    rows = run_sweep(_marker_sweep(names), out_dir=tmp_path / "out", cache_dir=None, workers=2, variant=variant, progress=lambda s: None, run_fn=ablate_helpers.always_dies)
+    assert [r["error"] for r in rows] == ["", WORKER_DIED, ""]
+    assert WORKER_DIED in (tmp_path / "out" / "w.md").read_text()
+
+
+def _descendants(pid):
+    import psutil
+
+    try:
+        return psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def test_killing_the_sweep_leaves_no_process_behind(tmp_path):
+    """kill -9 of the parent: its pool workers (and multiprocessing's resource tracker) end too."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    import psutil
+
+    code = textwrap.dedent(
+        f"""
+        import sys
+        sys.path.insert(0, {str(__import__('pathlib').Path(__file__).resolve().parents[1])!r})
+        from simbench.experiments.ablate import sweep_from_dict, run_sweep
+        from tests import ablate_helpers
+        sweep = sweep_from_dict({{"name": "k", "axis": [{{"name": "scene.name", "values": ["a", "b", "c"]}}]}})
+        run_sweep(sweep, out_dir={str(tmp_path / 'out')!r}, cache_dir=None, workers=2, variant="scalar_rgb", progress=print, run_fn=ablate_helpers.slow_run)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        kids = []
+        while time.monotonic() < deadline:
+            kids = _descendants(proc.pid)
+            # two workers running a run each (their marker files exist) plus the resource tracker
+            if len(list((tmp_path / "out" / ".k.running").glob("*"))) == 2:
+                break
+            time.sleep(0.2)
+        assert len(kids) >= 2, "the pool did not start"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+        gone, alive = psutil.wait_procs(kids, timeout=30)
+        assert not alive, [p.cmdline()[:3] for p in alive]
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass

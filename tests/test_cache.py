@@ -36,6 +36,47 @@ def test_damaged_entry_is_remade(tmp_path):
     assert np.array_equal(out["a"], np.zeros(3)) and cache.misses == 2
 
 
+@pytest.mark.parametrize("damage", ["truncate", "flip_zip_byte", "flip_array_byte", "empty", "no_checksum", "wrong_checksum"])
+def test_every_kind_of_damage_is_remade_and_later_runs_hit(tmp_path, damage):
+    """A damaged entry (zip CRC error, truncated file, an array changed behind the zip's back, an
+    entry written without or with a wrong checksum) is re-made once; the run after that hits."""
+    import io as _io
+    import zipfile
+
+    cache = RenderCache(tmp_path)
+    good = {"a": np.arange(1000, dtype=np.float32), "b": np.ones((3, 4), np.uint8)}
+    cache.get_or_make("radiance", {"x": 1}, lambda: good)
+    (entry,) = tmp_path.glob("*.npz")
+    data = bytearray(entry.read_bytes())
+    if damage == "truncate":
+        data = data[: len(data) // 2]
+    elif damage == "flip_zip_byte":
+        data[len(data) // 3] ^= 0x40
+    elif damage == "empty":
+        data = bytearray()
+    else:
+        with np.load(entry) as z:
+            arrays = {k: z[k].copy() for k in z.files}
+        if damage == "flip_array_byte":
+            arrays["a"][10] += 1  # rewritten with valid zip CRCs: only the checksum can tell
+        elif damage == "no_checksum":
+            arrays.pop("__sha256__")
+        else:
+            arrays["__sha256__"] = np.zeros(32, np.uint8)
+        buf = _io.BytesIO()
+        np.savez(buf, **arrays)
+        data = bytearray(buf.getvalue())
+        assert zipfile.is_zipfile(_io.BytesIO(data))
+    entry.write_bytes(bytes(data))
+    fresh = RenderCache(tmp_path)
+    out = fresh.get_or_make("radiance", {"x": 1}, lambda: {k: v + 0 for k, v in good.items()})
+    assert fresh.damaged == 1 and fresh.misses == 1
+    assert all(np.array_equal(out[k], good[k]) for k in good)
+    again = RenderCache(tmp_path)
+    again.get_or_make("radiance", {"x": 1}, lambda: pytest.fail("re-made a good entry"))
+    assert (again.hits, again.damaged) == (1, 0)
+
+
 def test_disabled_cache_always_makes():
     cache = RenderCache(None)
     n = []

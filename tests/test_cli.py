@@ -21,7 +21,7 @@ def test_pattern_command(tmp_path, capsys):
         (["decode", "missing.png", "--rig", "missing.toml", "--out", "d.npy"], "rig file not found"),
         (["render", "missing.toml", "--out", "x"], "scene file not found"),
         (["score", "nope.npy", "--gt", "gt.npy"], "file not found"),
-        (["pattern", "--out", "p.png", "--period", "2"], "period_px"),
+        (["pattern", "--out", "p.png", "--period", "2"], "--period"),
         (["pattern", "--out", "p.png", "--sequence", "0101"], "repeats"),
         (["pattern", "--out", "p.png", "--sequence", "01x"], "0 and 1"),
         (["pattern", "--out", "p.png", "--channels", "rgg"], "permutation of 'rgb'"),
@@ -105,4 +105,107 @@ def test_decode_takes_decoder_parameters(tmp_path, capsys):
         assert np.nanmedian(depth) == pytest.approx(1.1, abs=1e-3) and np.isfinite(depth).mean() > 0.95
     assert main(["decode", *args, "--out", str(tmp_path / "x.npy"), "--decoder", "phase_method=nope"]) == 2
     err = capsys.readouterr().err
-    assert "unknown phase_method 'nope'" in err and "'ftp'" in err and "'wfr'" in err
+    assert "phase_method must be one of" in err and "'nope'" in err and "'ftp'" in err and "'wfr'" in err
+
+
+TINY_SCENE = """\
+name = "tiny"
+rig = "rig.toml"
+[[object]]
+type = "plane"
+name = "wall"
+center_m = [0.0, 0.0, 1.1]
+size_m = [2.0, 2.0]
+"""
+
+
+def _folder_is_whole(out) -> bool:
+    """Every file meta.json lists is there with the SHA-256 it records, and nothing else."""
+    import hashlib
+
+    meta = json.loads((out / "meta.json").read_text())
+    listed = set(meta["files"].values()) | {"meta.json"}
+    present = {p.name for p in out.iterdir()}
+    return present == listed and all(hashlib.sha256((out / n).read_bytes()).hexdigest() == meta["sha256"][k] for k, n in meta["files"].items())
+
+
+@pytest.mark.slow
+def test_render_killed_at_any_moment_leaves_a_whole_folder(tmp_path):
+    """kill -9 of `simbench render` over an earlier render, at moments spread over its run
+    (start-up, rendering, writing): the folder is always one whole render, old or new; the next
+    run removes what the killed ones left beside it."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from tests.test_bad_inputs import TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    exe = str(Path(sys.executable).parent / "simbench")
+    out = tmp_path / "out"
+
+    def render(seed):
+        return subprocess.Popen([exe, "render", str(tmp_path / "s.toml"), "--out", str(out), "--sensor", "ideal", "--spp", "4", "--seed", str(seed)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    first = render(1)
+    assert first.wait(timeout=300) == 0
+    t0 = time.monotonic()
+    full = render(99)
+    assert full.wait(timeout=300) == 0
+    duration = time.monotonic() - t0
+    seeds_seen = set()
+    for k, frac in enumerate((0.3, 0.5, 0.65, 0.75, 0.8, 0.85, 0.9, 0.95, 0.98)):
+        p = render(100 + k)
+        time.sleep(frac * duration)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        assert _folder_is_whole(out), f"killed at {frac:.2f} of a run: {sorted(x.name for x in out.iterdir())}"
+        seeds_seen.add(json.loads((out / "meta.json").read_text())["seed"])
+    last = render(7)
+    assert last.wait(timeout=300) == 0
+    assert _folder_is_whole(out) and json.loads((out / "meta.json").read_text())["seed"] == 7
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "rig.toml", "s.toml"], "a killed run's temporary folder was left"
+
+
+def _all_parsers():
+    import argparse
+
+    from simbench.cli import _parser
+
+    todo, out = [_parser()], []
+    while todo:
+        p = todo.pop()
+        out.append(p)
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                todo.extend(a.choices.values())
+    return out
+
+
+def test_every_option_has_help_and_shows_its_default():
+    import argparse
+
+    parsers = _all_parsers()
+    assert len(parsers) >= 12
+    for p in parsers:
+        text = p.format_help()
+        for a in p._actions:
+            if isinstance(a, (argparse._HelpAction, argparse._SubParsersAction)):
+                continue
+            name = "/".join(a.option_strings) or a.dest
+            assert a.help and len(a.help) > 8, f"{p.prog} {name}: no help text"
+            if a.option_strings and not a.required and a.default not in (None, False) and not isinstance(a, argparse._StoreTrueAction):
+                shown = " ".join(text.split())
+                assert f"default: {a.default}" in shown or "default" in a.help, f"{p.prog} {name}: default {a.default!r} not shown"
+
+
+def test_help_exits_zero_and_usage_errors_are_one_line(capsys):
+    assert main(["render", "--help"]) == 0
+    assert "--max-depth" in capsys.readouterr().out
+    assert main(["render", str(SCENES / "white_plane.toml"), "--out", "x", "--spp", "zero"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("simbench: error: render: argument --spp") and "see simbench render --help" in err[0]

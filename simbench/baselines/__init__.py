@@ -118,27 +118,29 @@ def register_depth(depth_m: np.ndarray, *, source: Intrinsics, target: Intrinsic
     return out
 
 
-def write_recording(out_dir, model, raw: np.ndarray, calibration, *, gt_depth_m: np.ndarray, meta: dict) -> dict:
+def write_recording(out_dir, model, raw: np.ndarray, calibration, *, gt_depth_m: np.ndarray, meta: dict, overwrite: bool = False) -> dict:
     """A competitor recording as files: ``ir.png`` + ``reference.png`` (Kinect, 16-bit grey) or
     ``taps.npy`` (ToF, (H, W, 4) float32 electrons); ``gt_depth.npy``/``.exr`` (z-depth, m);
-    ``device.json`` (every device parameter, the calibration's exposure and ``meta``)."""
+    ``device.json`` (every device parameter, the calibration's exposure, ``meta`` and the list
+    of files).  The folder is written whole or not at all (:func:`simbench.io.output_directory`)."""
     from pathlib import Path
 
-    from simbench.io import save_exr, save_json, save_npy, save_png
+    from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 
     out = Path(out_dir)
-    files = {}
     info = {**device_params(model), **meta}
-    if _kind(model) == "kinect":
-        files["ir"] = save_png(out / "ir.png", np.asarray(raw, np.uint16))
-        files["reference"] = save_png(out / "reference.png", np.asarray(calibration.reference, np.uint16))
-        info["electrons_per_radiance"] = calibration.electrons_per_radiance
-    else:
-        files["taps"] = save_npy(out / "taps.npy", np.asarray(raw, np.float32))
-    files["gt_depth"] = save_npy(out / "gt_depth.npy", gt_depth_m.astype(np.float32))
-    files["gt_depth_exr"] = save_exr(out / "gt_depth.exr", gt_depth_m.astype(np.float32))
-    files["device"] = save_json(out / "device.json", info)
-    return files
+    names = {}
+    with output_directory(out, manifest="device.json", overwrite=overwrite) as tmp:
+        if _kind(model) == "kinect":
+            names["ir"] = save_png(tmp / "ir.png", np.asarray(raw, np.uint16)).name
+            names["reference"] = save_png(tmp / "reference.png", np.asarray(calibration.reference, np.uint16)).name
+            info["electrons_per_radiance"] = calibration.electrons_per_radiance
+        else:
+            names["taps"] = save_npy(tmp / "taps.npy", np.asarray(raw, np.float32)).name
+        names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
+        names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", gt_depth_m.astype(np.float32)).name
+        names["device"] = save_json(tmp / "device.json", {**info, "files": dict(names)}).name
+    return {k: out / n for k, n in names.items()}
 
 
 def read_recording(in_dir):
@@ -146,9 +148,7 @@ def read_recording(in_dir):
     import json
     from pathlib import Path
 
-    import cv2
-
-    from simbench.io import load_npy
+    from simbench.io import load_image, load_npy
 
     d = Path(in_dir)
     info_path = d / "device.json"
@@ -163,17 +163,7 @@ def read_recording(in_dir):
     params = {k: tuple(v) if isinstance(v, list) else v for k, v in info.items() if k in fields}
     model = get_device(name, **params)
     if name == "kinect":
-        frames = []
-        for fname in ("ir.png", "reference.png"):
-            p = d / fname
-            if not p.is_file():
-                raise FileNotFoundError(f"image not found: {p}")
-            img = cv2.imdecode(np.fromfile(p, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-            if img is None or img.ndim != 2:
-                raise ValueError(f"{p}: expected a single-channel IR image")
-            if img.shape != model.camera.size_hw:
-                raise ValueError(f"{p}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the device's camera is {model.width_px}x{model.height_px}")
-            frames.append(img)
+        frames = [load_image(d / fname, expected_size_hw=model.camera.size_hw, channels=1) for fname in ("ir.png", "reference.png")]
         cal = kinect.KinectCalibration(reference=frames[1], electrons_per_radiance=float(info.get("electrons_per_radiance", 1.0)))
         return model, frames[0], cal
     taps = load_npy(d / "taps.npy", expected_shape=(model.height_px, model.width_px, 4))

@@ -10,6 +10,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from simbench import validate
 from simbench.decode import _kernels
 from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
 from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
@@ -78,6 +79,11 @@ class DecoderParams:
         also grows with shading gradients and fringe chirp, so it cannot be tight).
     min_window_support : float
         Minimum share of the Gabor window's weight on certain (lit, unclipped) samples.
+    min_reference_coverage : float
+        Share of the reference capture's pixels that must decode: a reference plane at Z0
+        fills the view, so a black, unlit or unrelated reference is an error, not a silent
+        fall-back to triangulation (assumption: half the view, leaving room for a reference
+        board smaller than the view).
     mode : str
         ``reference`` (paper Sec. 5.4) or ``calibrated`` (triangulate with the rig).
     z0_m : float
@@ -108,32 +114,48 @@ class DecoderParams:
     min_amplitude: float = 0.02
     max_residual: float = 0.6
     min_window_support: float = 0.5
+    min_reference_coverage: float = 0.5
     mode: str = "reference"
     z0_m: float = 1.0
     depth_range_m: tuple[float, float] = (0.75, 1.75)
     threads: int | None = None
 
     def __post_init__(self) -> None:
+        v = validate
+        fixed = {
+            "period_px": v.integer(self.period_px, "period_px", lo=4, hi=v.MAX_SIDE_PX),
+            "order": v.integer(self.order, "order", lo=2, hi=16),
+            "intensity_mode": v.choice(self.intensity_mode, "intensity_mode", INTENSITY_MODES),
+            "phase_method": v.choice(self.phase_method, "phase_method", PHASE_METHODS),
+            "sigma_periods": v.number(self.sigma_periods, "sigma_periods", lo=0.0, hi=10.0, lo_open=True),
+            "sigma_y_ratio": v.number(self.sigma_y_ratio, "sigma_y_ratio", lo=0.0, hi=10.0, lo_open=True),
+            "camera_period_px": v.optional(v.number, self.camera_period_px, "camera_period_px", lo=2.0, hi=float(v.MAX_SIDE_PX), lo_open=True),
+            "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
+            "voting": v.boolean(self.voting, "voting"),
+            "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
+            "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
+            "link_check": v.boolean(self.link_check, "link_check"),
+            "dark_level": v.number(self.dark_level, "dark_level", lo=0.0, hi=1.0),
+            "saturation_level": v.number(self.saturation_level, "saturation_level", lo=0.0, hi=1.0, lo_open=True),
+            "min_amplitude": v.number(self.min_amplitude, "min_amplitude", lo=0.0, hi=1.0),
+            "max_residual": v.number(self.max_residual, "max_residual", lo=0.0, lo_open=True, allow_inf=True),
+            "min_window_support": v.number(self.min_window_support, "min_window_support", lo=0.0, hi=1.0),
+            "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
+            "mode": v.choice(self.mode, "mode", MODES),
+            "z0_m": v.number(self.z0_m, "z0_m", lo=0.0, lo_open=True),
+            "depth_range_m": v.numbers(self.depth_range_m, "depth_range_m", 2, lo=0.0, lo_open=True),
+            "threads": v.optional(v.integer, self.threads, "threads", lo=1, hi=1024),
+        }
+        lo, hi = fixed["depth_range_m"]
+        if not lo < hi:
+            raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
         check_channels(self.channels)
         if self.sequence is not None:
-            object.__setattr__(self, "sequence", check_sequence(self.sequence, order=self.order))
-        if self.intensity_mode not in INTENSITY_MODES:
-            raise ValueError(f"unknown intensity_mode {self.intensity_mode!r}; valid: {sorted(INTENSITY_MODES)}")
-        if self.phase_method not in PHASE_METHODS:
-            raise ValueError(f"unknown phase_method {self.phase_method!r}; valid: {sorted(PHASE_METHODS)}")
-        if self.mode not in MODES:
-            raise ValueError(f"unknown mode {self.mode!r}; valid: {list(MODES)}")
-        lo, hi = self.depth_range_m
-        if not 0 < lo < hi:
-            raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
-        if not self.z0_m > 0:
-            raise ValueError(f"z0_m must be > 0, got {self.z0_m}")
-        if self.sigma_periods <= 0 or self.sigma_y_ratio <= 0:
-            raise ValueError("sigma_periods and sigma_y_ratio must be > 0")
-        if self.threads is not None and self.threads < 1:
-            raise ValueError(f"threads must be >= 1 or None, got {self.threads}")
-        if self.neighbour_reach < 0 or self.min_support < 1:
-            raise ValueError("neighbour_reach must be >= 0 and min_support >= 1")
+            if isinstance(self.sequence, (str, bytes)) or not isinstance(self.sequence, (list, tuple)):
+                raise ValueError(f"sequence must be a list of 0 and 1, got {self.sequence!r}")
+            fixed["sequence"] = check_sequence(self.sequence, order=fixed["order"])
+        for name, value in fixed.items():
+            object.__setattr__(self, name, value)
 
     @property
     def cycle(self) -> int:
@@ -379,11 +401,24 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) 
     """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
 
     Done once per calibration; :func:`decode` then matches captures against it.
+
+    Raises
+    ------
+    ValueError
+        When less than ``params.min_reference_coverage`` of the pixels decode (a black,
+        saturated or unrelated image is not a reference).
     """
     image = _ideal_image(_check_capture(reference, rig.camera.size_hw), rig)
     predicted = _plane_columns(rig, float(params.z0_m))
     parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], image, params, rig)
     column = np.concatenate(parts, axis=0)
+    coverage = float(np.isfinite(column).mean())
+    if coverage < params.min_reference_coverage:
+        raise ValueError(
+            f"the reference capture decodes at only {100 * coverage:.1f} % of its pixels (at least "
+            f"{100 * params.min_reference_coverage:.0f} % expected of a lit plane at Z0 = {params.z0_m:g} m): "
+            "is it the reference-plane capture, taken with this pattern and rig?"
+        )
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
     return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m)

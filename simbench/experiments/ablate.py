@@ -62,6 +62,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import validate
 from simbench.io import atomic_write_bytes, atomic_write_text, read_toml, save_json
 
 __all__ = ["PARAMETERS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "BUILTIN_STUDIES", "STUDIES_DIR"]
@@ -128,8 +129,10 @@ class Sweep:
     path: str = ""
 
     def __post_init__(self) -> None:
-        if not self.name or not all(c.isalnum() or c in "-_" for c in self.name):
+        if not isinstance(self.name, str) or not self.name or not all(c.isalnum() or c in "-_" for c in self.name):
             raise ValueError(f"sweep name must be letters, digits, - and _, got {self.name!r}")
+        if not isinstance(self.base, dict):
+            raise ValueError(f"[base] must be a table, got {self.base!r}")
         for k in self.base:
             _check_name(k)
         if not self.axes:
@@ -145,8 +148,11 @@ class Sweep:
             raise ValueError(f"combine must be 'grid' or 'zip', got {self.combine!r}")
         if self.combine == "zip" and len({len(v) for _, v in self.axes}) != 1:
             raise ValueError("zipped axes must have the same number of values")
-        if isinstance(self.repeats, bool) or int(self.repeats) != self.repeats or self.repeats < 1:
-            raise ValueError(f"repeats must be a positive integer, got {self.repeats!r}")
+        object.__setattr__(self, "repeats", validate.integer(self.repeats, "repeats", lo=1, hi=10000))
+        object.__setattr__(self, "seed", validate.integer(self.seed, "seed", lo=0, hi=2**63 - 1))
+        if not isinstance(self.description, str):
+            raise ValueError(f"description must be a string, got {self.description!r}")
+
         if self.plot_metric not in METRICS:
             raise ValueError(f"plot_metric must be one of {list(METRICS)}, got {self.plot_metric!r}")
 
@@ -157,6 +163,8 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
     if bad:
         raise ValueError(f"{where}: unknown key(s) {bad}; valid: {sorted(allowed)}")
     axes = []
+    if not isinstance(data.get("axis", []), list):
+        raise ValueError(f"{where}: axis must be an array of tables ([[axis]])")
     for i, ax in enumerate(data.get("axis", [])):
         if not isinstance(ax, dict) or set(ax) != {"name", "values"} or not isinstance(ax["values"], list):
             raise ValueError(f"{where}: axis {i + 1} needs exactly 'name' and a list 'values'")
@@ -165,7 +173,7 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
         return Sweep(
             name=data.get("name", ""),
             description=data.get("description", ""),
-            base=dict(data.get("base", {})),
+            base=data.get("base", {}),
             axes=tuple(axes),
             combine=data.get("combine", "grid"),
             repeats=data.get("repeats", 1),
@@ -173,7 +181,7 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
             plot_metric=data.get("plot_metric", "gt_mae_mm"),
             path=where,
         )
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
 
 
@@ -320,10 +328,85 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         return {"error": msg, "traceback": traceback.format_exc(limit=4), "timing": {"setup_s": time.perf_counter() - t0}}
 
 
-def _worker_init(variant: str | None) -> None:
+def _worker_init(variant: str | None, parent_pid: int) -> None:
     from simbench.render import select_variant
 
+    _die_with_parent(parent_pid)
     select_variant(variant)
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Make this worker process die when the sweep's process does (Linux ``PR_SET_PDEATHSIG``),
+    so that a killed sweep leaves no workers (each holds ~0.5 GB) behind."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: workers end when their task queue closes
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(1)
+
+
+def _tracked(run_fn, marker_dir: str, key: str, params: dict, seed: int, cache_dir: str | None) -> dict:
+    """``run_fn(params, seed=..., cache_dir=...)`` with a marker file present while it runs:
+    if the worker dies, the markers left say which runs were on it."""
+    marker = Path(marker_dir) / key
+    marker.touch()
+    try:
+        return run_fn(params, seed=seed, cache_dir=cache_dir)
+    finally:
+        marker.unlink(missing_ok=True)
+
+
+WORKER_DIED = "worker process died twice on this run (killed, or out of memory)"
+
+
+def _run_pool(todo: list[dict], *, workers: int, variant: str | None, cache: str | None, finished, run_fn, marker_dir: Path, progress) -> None:
+    """Run ``todo`` on a process pool.  A worker that dies (kill -9, the OOM killer) breaks the
+    pool: the runs it held (their marker files are left) are retried once, each alone in a
+    fresh pool; a run that kills its worker again is recorded as failed.  Runs that were only
+    queued are resubmitted unpenalised."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    marker_dir.mkdir(parents=True, exist_ok=True)
+    for m in marker_dir.iterdir():
+        m.unlink()
+    deaths: dict[str, int] = {}
+    rounds: list[tuple[list[dict], int]] = [(list(todo), workers)]
+    ctx = mp.get_context("spawn")
+    while rounds:
+        batch, n_workers = rounds.pop(0)
+        broken: list[dict] = []
+        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init, initargs=(variant, os.getpid())) as pool:
+            futs = {pool.submit(_tracked, run_fn, str(marker_dir), r["key"], r["params"], r["seed"], cache): r for r in batch}
+            for f in as_completed(futs):
+                try:
+                    res = f.result()
+                except BrokenProcessPool:
+                    broken.append(futs[f])
+                    continue
+                finished(futs[f], res)
+        if not broken:
+            continue
+        on_dead = {m.name for m in marker_dir.iterdir()}
+        for m in marker_dir.iterdir():
+            m.unlink()
+        suspects = [r for r in broken if r["key"] in on_dead]
+        queued = [r for r in broken if r["key"] not in on_dead]
+        retry = []
+        for r in suspects:
+            deaths[r["key"]] = deaths.get(r["key"], 0) + 1
+            if deaths[r["key"]] >= 2:
+                finished(r, {"error": WORKER_DIED, "timing": {}})
+            else:
+                retry.append(r)
+        progress(f"a worker process died (runs {sorted(r['run'] for r in suspects)} were on it): retrying them one at a time")
+        rounds = [(rs, 1) for rs in ([r] for r in retry)] + ([(queued, workers)] if queued else []) + rounds
+    marker_dir.rmdir()
 
 
 # ------------------------------------------------------------------------------ the sweep
@@ -358,12 +441,16 @@ def run_sweep(
     variant: str | None = None,
     progress: Callable[[str], None] = print,
     command: str = "",
+    run_fn: Callable[..., dict] = run_one,
 ) -> list[dict]:
     """Run every unfinished run of ``sweep`` and write ``<name>.csv``, ``.md``, ``.png``,
     ``.timings.csv`` and ``.provenance.json`` into ``out_dir``; returns the rows.
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``); None = a local
-    process pool of ``workers`` processes (1 = in this process).
+    process pool of ``workers`` processes (1 = in this process).  ``run_fn`` runs one
+    parameter set (:func:`run_one`; another module-level function with its signature can
+    stand in, e.g. to test the runner).  A pool worker that dies costs its runs one retry;
+    a run that kills its worker twice is recorded as failed (:func:`_run_pool`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -386,33 +473,31 @@ def run_sweep(
 
     if todo:
         if scheduler is not None:
-            _run_dask(todo, scheduler, cache, finished)
+            _run_dask(todo, scheduler, cache, finished, run_fn)
         elif workers > 1:
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-            import multiprocessing as mp
-
-            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_worker_init, initargs=(variant,)) as pool:
-                futs = {pool.submit(run_one, r["params"], seed=r["seed"], cache_dir=cache): r for r in todo}
-                for f in as_completed(futs):
-                    finished(futs[f], f.result())
+            _run_pool(todo, workers=workers, variant=variant, cache=cache, finished=finished, run_fn=run_fn, marker_dir=out / f".{sweep.name}.running", progress=progress)
         else:
             for r in todo:
-                finished(r, run_one(r["params"], seed=r["seed"], cache_dir=cache))
+                finished(r, run_fn(r["params"], seed=r["seed"], cache_dir=cache))
     rows = _rows(sweep, runs, done)
     _write(sweep, rows, runs, done, out, command)
     return rows
 
 
-def _run_dask(todo: list[dict], scheduler, cache, finished) -> None:
+def _run_dask(todo: list[dict], scheduler, cache, finished, run_fn) -> None:
     try:
         from distributed import Client, as_completed
     except ImportError:
         raise ValueError("--scheduler needs Dask distributed: pip install 'dask[distributed]'") from None
     client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
     try:
-        futs = {client.submit(run_one, r["params"], seed=r["seed"], cache_dir=cache, pure=False): r for r in todo}
+        futs = {client.submit(run_fn, r["params"], seed=r["seed"], cache_dir=cache, pure=False): r for r in todo}
         for f in as_completed(list(futs)):
-            finished(futs[f], f.result())
+            try:
+                res = f.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: Dask retried and gave up
+                res = {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "timing": {}}
+            finished(futs[f], res)
     finally:
         if client is not scheduler:
             client.close()

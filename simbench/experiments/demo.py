@@ -17,7 +17,7 @@ import numpy as np
 
 from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.experiments.common import SCENES_DIR, git_commit
-from simbench.io import atomic_write_bytes, atomic_write_text, save_json
+from simbench.io import json_bytes, write_files
 from simbench.metrics import depth_errors, edge_band
 from simbench.pattern import PatternSpec
 from simbench.scene import load_scene
@@ -97,8 +97,9 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence, channels=config.decoder.channels)
     rows = []
     seeds = np.random.SeedSequence(config.seed).spawn(len(config.scenes))
-    for i, (name, ss) in enumerate(zip(config.scenes, seeds)):
-        scene = load_scene(SCENES_DIR / f"{name}.toml")
+    scenes = [load_scene(SCENES_DIR / f"{name}.toml") for name in config.scenes]  # all checked before rendering
+    files: dict[Path, bytes] = {}
+    for i, (name, scene, ss) in enumerate(zip(config.scenes, scenes, seeds)):
         seed = int(ss.generate_state(1)[0])
         t0 = time.perf_counter()
         acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, seed=seed)
@@ -112,18 +113,18 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         # timings go to the progress log only: result files must be identical on a re-run
         row = {"scene": name, "seed": seed, **m}
         rows.append(row)
-        atomic_write_bytes(out / f"{name}.png", depth_figure(acq.capture, result.depth_m, acq.gt.depth_m, title=f"{name}: MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"))
+        files[out / f"{name}.png"] = (depth_figure(acq.capture, result.depth_m, acq.gt.depth_m, title=f"{name}: MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"))
         progress(f"[{i + 1}/{len(config.scenes)}] {name}: MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %, stripe-order errors {m['stripe_order_errors']} (render {t1 - t0:.1f} s, decode {t3 - t2:.2f} s)")
     cfg = asdict(config)
     provenance = {"command": "simbench demo --out " + str(out_dir), "config": cfg, "variant": mi.variant(), "versions": versions(), "git_commit": git_commit()}
-    save_json(out / "metrics.json", {"rows": rows})
-    save_json(out / "provenance.json", provenance)
+    files[out / "metrics.json"] = json_bytes({"rows": rows})
+    files[out / "provenance.json"] = json_bytes(provenance)
     cols = ["scene", "mae_mm", "rmse_mm", "median_mm", "p95_mm", "completeness", "outlier_share", "stripe_order_errors", "stripe_order_error_rate", "n_scored", "seed"]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
-    atomic_write_text(out / "summary.csv", buf.getvalue())
+    files[out / "summary.csv"] = buf.getvalue().encode()
     md = [
         "# Pipeline demo: white plane, tilted plane, sphere, step",
         "",
@@ -139,5 +140,6 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
             f"| {r['scene']} | {r['mae_mm']:.3f} | {r['rmse_mm']:.3f} | {r['p95_mm']:.3f} | {100 * r['completeness']:.2f} % | "
             f"{100 * r['outlier_share']:.3f} % | {r['stripe_order_errors']} ({100 * r['stripe_order_error_rate']:.3f} %) |"
         )
-    atomic_write_text(out / "summary.md", "\n".join(md) + "\n")
+    files[out / "summary.md"] = ("\n".join(md) + "\n").encode()
+    write_files(files)  # the folder's files together, or none of them
     return {"rows": rows, "provenance": provenance}

@@ -21,7 +21,7 @@ from simbench.experiments.table1 import run_table1
 from simbench.experiments.table3 import run_table3
 from simbench.io import atomic_write_text, read_toml, save_json
 
-__all__ = ["TARGETS", "reproduce", "check_thresholds", "thresholds_from", "write_thresholds"]
+__all__ = ["TARGETS", "check_targets", "reproduce", "load_thresholds", "check_thresholds", "thresholds_from", "write_thresholds"]
 
 TARGETS: dict[str, Callable[[Session], dict]] = {"table1": run_table1, "table3": run_table3, "fig9": run_fig9, "figures": run_figures, "budget": run_budget}
 
@@ -33,6 +33,11 @@ def _resolve(targets: list[str]) -> list[str]:
     if bad:
         raise ValueError(f"unknown target(s) {bad}; valid: {list(TARGETS) + ['all']}")
     return [t for t in TARGETS if t in targets]
+
+
+def check_targets(targets: list[str]) -> list[str]:
+    """The target names to run (``all`` = every one), or a ValueError listing the valid ones."""
+    return _resolve(targets)
 
 
 def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "") -> dict:
@@ -108,16 +113,28 @@ def write_thresholds(path: str | Path, metrics: dict, *, margin: float, command:
     return atomic_write_text(path, "\n".join(lines))
 
 
+def load_thresholds(path: str | Path) -> dict:
+    """A thresholds file, checked: every entry a table with a finite ``max`` and/or ``min``."""
+    from simbench import validate
+
+    table = read_toml(path, what="thresholds")
+    for name, t in table.items():
+        if not isinstance(t, dict) or not ({"max", "min"} & set(t)):
+            raise ValueError(f"{path}: [{name!r}] needs max or min")
+        for k in ("max", "min"):
+            if k in t:
+                validate.number(t[k], f"{path}: [{name!r}] {k}")
+    return table
+
+
 def check_thresholds(metrics: dict, thresholds_path: str | Path) -> list[str]:
     """Failures (one line each) of ``metrics`` against a thresholds file; empty = pass.
 
     A metric named in the file but missing from ``metrics`` (or NaN) fails too.
     """
-    table = read_toml(thresholds_path, what="thresholds")
+    table = load_thresholds(thresholds_path)
     failures = []
     for name, t in sorted(table.items()):
-        if not isinstance(t, dict) or not ({"max", "min"} & set(t)):
-            raise ValueError(f"{thresholds_path}: [{name!r}] needs max or min")
         v = metrics.get(name)
         if v is None or (isinstance(v, float) and math.isnan(v)):
             failures.append(f"{name}: not measured")

@@ -1,0 +1,532 @@
+"""Bad input, table-driven: every case exits with status 2, prints exactly one line on stderr
+that names the problem, and leaves nothing behind in the working folder.
+
+The cases run the real command line (``simbench.cli.main``) in-process, in a fresh temporary
+folder each; a sample also runs in a fresh interpreter (``test_a_sample_in_fresh_processes``),
+where import order is what a user's shell gives.  Files the case itself prepares are inputs;
+anything else appearing in the folder afterwards is a partial output and fails the case.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from simbench.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = ROOT / "scenes"
+
+TINY_RIG = """\
+name = "tiny"
+[camera]
+width_px = 160
+height_px = 120
+focal_px = 289.0
+[projector]
+width_px = 456
+height_px = 285
+focal_px = 557.0
+[pose]
+position_m = [0.093, 0.0, 0.0]
+"""
+
+
+def _rig_text(**changes) -> str:
+    """TINY_RIG with ``section.key = value`` lines replaced or added (value as TOML text)."""
+    lines = TINY_RIG.splitlines()
+    for dotted, value in changes.items():
+        section, key = dotted.split(".")
+        start = lines.index(f"[{section}]")
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+        hit = [i for i in range(start + 1, end) if lines[i].split("=")[0].strip() == key]
+        if value is None:
+            for i in hit:
+                lines.pop(i)
+        elif hit:
+            lines[hit[0]] = f"{key} = {value}"
+        else:
+            lines.insert(end, f"{key} = {value}")
+    return "\n".join(lines) + "\n"
+
+
+def _tiny_images() -> tuple[np.ndarray, np.ndarray]:
+    from simbench.pattern import PatternSpec, fringe_pattern, quantize
+    from simbench.rig import rig_from_dict
+    from simbench.synthetic import synthetic_plane_capture
+    import tomllib
+
+    rig = rig_from_dict(tomllib.loads(TINY_RIG))
+    drive = quantize(fringe_pattern(PatternSpec(size_hw=rig.projector.size_hw))).astype(np.float32) / 255
+    cap = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.1))[0]
+    ref = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0))[0]
+    return np.round(np.clip(cap, 0, 1) * 255).astype(np.uint8), np.round(np.clip(ref, 0, 1) * 255).astype(np.uint8)
+
+
+_IMAGES: list = []
+
+
+def render_folder(d: Path) -> Path:
+    """A small, valid render folder (synthetic plane at 1.1 m, reference at 1.0 m) in ``d/r``."""
+    import hashlib
+
+    from simbench.io import save_npy, save_png
+
+    if not _IMAGES:
+        _IMAGES.extend(_tiny_images())
+    cap, ref = _IMAGES
+    r = d / "r"
+    r.mkdir()
+    (r / "rig.toml").write_text(TINY_RIG)
+    save_png(r / "capture.png", cap)
+    save_png(r / "reference.png", ref)
+    gt = np.full((120, 160), 1.1, np.float32)
+    save_npy(r / "gt_depth.npy", gt)
+    save_npy(r / "gt_lit.npy", np.ones((120, 160), bool))
+    save_npy(r / "gt_column.npy", np.zeros((120, 160), np.float32))
+    save_npy(r / "depth.npy", gt)
+    names = {"capture": "capture.png", "reference": "reference.png", "rig": "rig.toml", "gt_depth": "gt_depth.npy"}
+    sha = {k: hashlib.sha256((r / n).read_bytes()).hexdigest() for k, n in names.items()}
+    (r / "meta.json").write_text(json.dumps({"reference_depth_m": 1.0, "files": names, "sha256": sha}))
+    return r
+
+
+@dataclass
+class Case:
+    """``argv(d)`` builds the command line after ``setup(d)`` has made its input files."""
+
+    id: str
+    argv: object
+    expect: str | tuple[str, ...]
+    setup: object = None
+    files: dict = field(default_factory=dict)
+
+
+CASES: list[Case] = []
+
+
+def case(id: str, argv, expect, *, setup=None, files=None) -> None:
+    CASES.append(Case(id, argv, expect, setup, files or {}))
+
+
+def _w(path: str, content: str | bytes):
+    return {path: content}
+
+
+# --------------------------------------------------------------------------------- pattern
+for opt, bad, msg in [
+    ("--width", "0", "--width"), ("--width", "-1", "--width"), ("--width", "10000000", "--width"), ("--width", "abc", "--width"),
+    ("--width", "1.5", "--width"), ("--width", "", "--width"), ("--height", "0", "--height"), ("--height", "100000", "--height"),
+    ("--height", "x", "--height"), ("--height", "-7", "--height"), ("--period", "0", "--period"), ("--period", "2", "--period"),
+    ("--period", "3", "--period"), ("--period", "-5", "--period"), ("--period", "x", "--period"), ("--period", "1e9", "--period"),
+    ("--order", "0", "--order"), ("--order", "1", "--order"), ("--order", "17", "--order"), ("--order", "x", "--order"),
+    ("--sequence", "0101", "repeats"), ("--sequence", "01x", "0 and 1"), ("--sequence", "", "0 and 1"), ("--sequence", "2", "0 and 1"),
+    ("--channels", "rgg", "permutation"), ("--channels", "rgba", "permutation"), ("--channels", "", "permutation"), ("--channels", "xyz", "permutation"),
+]:
+    case(f"pattern{opt}={bad!r}", lambda d, o=opt, b=bad: ["pattern", "--out", str(d / "p.png"), o, b], msg)
+case("pattern-width-x-height-too-many-pixels", lambda d: ["pattern", "--out", str(d / "p.png"), "--width", "16384", "--height", "16384"], "Mpx")
+case("pattern-out-under-a-file", lambda d: ["pattern", "--out", str(d / "f" / "p.png")], "f", files=_w("f", "x"))
+case("pattern-out-is-a-folder", lambda d: ["pattern", "--out", str(d / "dir")], "dir", setup=lambda d: (d / "dir").mkdir())
+case("pattern-sequence-for-other-order", lambda d: ["pattern", "--out", str(d / "p.png"), "--order", "2", "--sequence", "00010111"], "repeats")
+
+# ---------------------------------------------------------------------------------- render
+def _scene(body: str, rig: str | None = None) -> dict:
+    files = {"s.toml": body}
+    if rig is not None:
+        files["rig.toml"] = rig
+    return files
+
+
+PLANE = '[[object]]\ntype = "plane"\nname = "wall"\ncenter_m = [0.0, 0.0, 1.0]\nsize_m = [1.5, 1.2]\n'
+for cid, body, msg in [
+    ("empty", "", "object"),
+    ("bad-toml", "name = \n", "not valid TOML"),
+    ("unknown-key", "colour = 1\n" + PLANE, "unknown key"),
+    ("no-objects", 'name = "x"\n', "object"),
+    ("object-unknown-type", '[[object]]\ntype = "cone"\n', "unknown type"),
+    ("object-not-table", "object = [1]\n", "expected a table"),
+    ("center-string", PLANE.replace("[0.0, 0.0, 1.0]", '"here"'), "center_m"),
+    ("center-nan", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, nan, 1.0]"), "center_m"),
+    ("center-inf", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, inf]"), "center_m"),
+    ("center-two", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 1.0]"), "center_m"),
+    ("center-bool", PLANE.replace("[0.0, 0.0, 1.0]", "[true, 0.0, 1.0]"), "center_m"),
+    ("size-negative", PLANE.replace("[1.5, 1.2]", "[-1.5, 1.2]"), "size_m"),
+    ("size-zero", PLANE.replace("[1.5, 1.2]", "[0, 1.2]"), "size_m"),
+    ("size-missing", PLANE.replace("size_m = [1.5, 1.2]\n", ""), "size_m"),
+    ("rgb-above-one", PLANE + "rgb = [1.5, 0.5, 0.5]\n", "rgb"),
+    ("rgb-negative", PLANE + "rgb = [-0.1, 0.5, 0.5]\n", "rgb"),
+    ("rgb-string", PLANE + 'rgb = "red"\n', "rgb"),
+    ("srgb8-above-255", PLANE + "srgb8 = [300, 0, 0]\n", "srgb8"),
+    ("srgb8-bool", PLANE + "srgb8 = [true, false, true]\n", "srgb8"),
+    ("rgb-and-srgb8", PLANE + "rgb = [0.5, 0.5, 0.5]\nsrgb8 = [255, 0, 0]\n", "not both"),
+    ("material-unknown", PLANE + 'material = "metal"\n', "material"),
+    ("roughness-without-plastic", PLANE + "roughness = 0.2\n", "roughness"),
+    ("roughness-zero", PLANE + 'material = "plastic"\nroughness = 0\n', "roughness"),
+    ("rig-unknown-preset", 'rig = "kinect2"\n' + PLANE, "kinect2"),
+    ("rig-file-missing", 'rig = "nope.toml"\n' + PLANE, "nope.toml"),
+    ("z0-zero", "reference_depth_m = 0\n" + PLANE, "reference_depth_m"),
+    ("z0-negative", "reference_depth_m = -1.0\n" + PLANE, "reference_depth_m"),
+    ("z0-inf", "reference_depth_m = inf\n" + PLANE, "reference_depth_m"),
+    ("z0-nan", "reference_depth_m = nan\n" + PLANE, "reference_depth_m"),
+    ("z0-string", 'reference_depth_m = "1"\n' + PLANE, "reference_depth_m"),
+    ("ambient-negative", "[ambient]\nrgb = [-1.0, 0.0, 0.0]\n" + PLANE, "ambient"),
+    ("ambient-unknown-key", "[ambient]\nlux = 3\n" + PLANE, "ambient"),
+    ("projector-scale-zero", "[projector]\nscale = 0\n" + PLANE, "projector.scale"),
+    ("projector-scale-inf", "[projector]\nscale = inf\n" + PLANE, "projector.scale"),
+    ("sphere-radius-zero", '[[object]]\ntype = "sphere"\nradius_m = 0\n', "radius_m"),
+    ("sphere-radius-missing", '[[object]]\ntype = "sphere"\n', "radius_m"),
+    ("mesh-missing", '[[object]]\ntype = "mesh"\nfile = "nope.ply"\n', "nope.ply"),
+    ("mesh-not-ply", '[[object]]\ntype = "mesh"\nfile = "s.toml"\n', ".ply or .obj"),
+    ("mesh-scale-negative", f'[[object]]\ntype = "mesh"\nfile = "{SCENES / "meshes" / "pear.ply"}"\nscale = -1\n', "scale"),
+    ("duplicate-names", PLANE + PLANE, "unique"),
+]:
+    case(f"render-scene-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene(body))
+case("render-scene-missing", lambda d: ["render", str(d / "nope.toml"), "--out", str(d / "out")], "scene file not found")
+case("render-scene-is-folder", lambda d: ["render", str(d / "sd"), "--out", str(d / "out")], "sd", setup=lambda d: (d / "sd").mkdir())
+case("render-scene-not-utf8", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "s.toml", files={"s.toml": b"name = \"\xff\xfe\"\n"})
+
+for cid, changes, msg in [
+    ("width-zero", {"camera.width_px": "0"}, "width_px"),
+    ("width-fraction", {"camera.width_px": "10.5"}, "width_px"),
+    ("width-huge", {"camera.width_px": "100000", "camera.height_px": "100000"}, "width_px"),
+    ("too-many-pixels", {"camera.width_px": "16000", "camera.height_px": "16000"}, "Mpx"),
+    ("width-string", {"camera.width_px": '"160"'}, "width_px"),
+    ("width-bool", {"camera.width_px": "true"}, "width_px"),
+    ("focal-zero", {"camera.focal_px": "0"}, "focal_px"),
+    ("focal-negative", {"camera.focal_px": "-1.0"}, "focal_px"),
+    ("focal-nan", {"camera.focal_px": "nan"}, "focal_px"),
+    ("focal-missing", {"camera.focal_px": None}, "focal_px"),
+    ("cx-huge", {"camera.cx_px": "1e9"}, "cx_px"),
+    ("cy-minus-huge", {"camera.cy_px": "-1e9"}, "cy_px"),
+    ("distortion-four", {"camera.distortion": "[0.1, 0.0, 0.0, 0.0]"}, "distortion"),
+    ("distortion-string", {"camera.distortion": '"barrel"'}, "distortion"),
+    ("distortion-huge", {"camera.distortion": "[1e6, 0.0, 0.0, 0.0, 0.0]"}, "distortion"),
+    ("projector-height-negative", {"projector.height_px": "-285"}, "height_px"),
+    ("unknown-key", {"camera.skew": "0.0"}, "unknown key"),
+    ("no-baseline", {"pose.position_m": "[0.0, 0.0, 0.0]"}, "baseline"),
+    ("position-nan", {"pose.position_m": "[nan, 0.0, 0.0]"}, "position_m"),
+    ("position-far", {"pose.position_m": "[1000.0, 0.0, 0.0]"}, "position_m"),
+    ("rotation-inf", {"pose.rotation_deg": "[0.0, inf, 0.0]"}, "rotation_deg"),
+    ("rotation-two", {"pose.rotation_deg": "[0.0, 0.0]"}, "rotation_deg"),
+]:
+    case(f"render-rig-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene('rig = "rig.toml"\n' + PLANE, _rig_text(**changes)))
+case("render-rig-missing-camera", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "camera", files=_scene('rig = "rig.toml"\n' + PLANE, "[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"))
+case("render-rig-pose-not-table", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "pose", files=_scene('rig = "rig.toml"\n' + PLANE, TINY_RIG.replace("[pose]\nposition_m", "pose = 3\n[x]\nposition_m")))
+
+for opt, bad, msg in [("--spp", "0", "--spp"), ("--spp", "-1", "--spp"), ("--spp", "x", "--spp"), ("--spp", "1000000", "--spp"), ("--seed", "-1", "--seed"),
+                      ("--seed", "x", "--seed"), ("--seed", str(2**64), "--seed"), ("--max-depth", "0", "--max-depth"), ("--max-depth", "1", "--max-depth"),
+                      ("--max-depth", "x", "--max-depth"), ("--period", "2", "--period"), ("--order", "1", "--order"), ("--channels", "rrb", "permutation"),
+                      ("--sequence", "0101", "repeats")]:
+    case(f"render{opt}={bad}", lambda d, o=opt, b=bad: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), o, b], msg)
+
+SENSOR_OK = (ROOT / "simbench" / "presets" / "minimal.toml").read_text()
+PAPER = (ROOT / "simbench" / "presets" / "paper.toml").read_text()
+
+
+def _sensor(text: str, old: str, new: str) -> str:
+    assert old in text, old
+    return text.replace(old, new, 1)
+
+
+for cid, text, msg in [
+    ("noise-string", _sensor(PAPER, "noise = true", 'noise = "false"'), "noise"),
+    ("noise-int", _sensor(PAPER, "noise = true", "noise = 0"), "noise"),
+    ("gamma-inf", _sensor(PAPER, "gamma = 2.2", "gamma = inf"), "gamma"),
+    ("gamma-zero", _sensor(PAPER, "gamma = 2.2", "gamma = 0.0"), "gamma"),
+    ("gamma-negative", _sensor(PAPER, "gamma = 2.2", "gamma = -2.2"), "gamma"),
+    ("qe-four", _sensor(PAPER, "qe = [0.45, 0.50, 0.45]", "qe = [0.45, 0.50, 0.45, 0.4]"), "qe"),
+    ("qe-zero", _sensor(PAPER, "qe = [0.45, 0.50, 0.45]", "qe = [0.0, 0.50, 0.45]"), "qe"),
+    ("qe-string", _sensor(PAPER, "qe = [0.45, 0.50, 0.45]", 'qe = "high"'), "qe"),
+    ("full-well-zero", _sensor(PAPER, "full_well_e = 10000.0", "full_well_e = 0.0"), "full_well_e"),
+    ("full-well-nan", _sensor(PAPER, "full_well_e = 10000.0", "full_well_e = nan"), "full_well_e"),
+    ("dark-noise-negative", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = -1.0"), "dark_noise_e"),
+    ("dark-noise-inf", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = inf"), "dark_noise_e"),
+    ("bits-9", _sensor(PAPER, "bits = 8", "bits = 9"), "bits"),
+    ("bits-string", _sensor(PAPER, "bits = 8", 'bits = "8"'), "bits"),
+    ("cfa-unknown", _sensor(PAPER, 'cfa = "RGGB"', 'cfa = "RGBW"'), "cfa"),
+    ("demosaic-unknown", _sensor(PAPER, 'demosaic = "bilinear"', 'demosaic = "ai"'), "demosaic"),
+    ("prnu-above-one", _sensor(PAPER, "prnu = 0.01", "prnu = 2.0"), "prnu"),
+    ("exposure-negative", _sensor(PAPER, 'exposure_s = "auto"', "exposure_s = -0.01"), "exposure_s"),
+    ("exposure-word", _sensor(PAPER, 'exposure_s = "auto"', 'exposure_s = "manual"'), "auto"),
+    ("auto-fraction-zero", _sensor(PAPER, "auto_exposure_fraction = 0.7", "auto_exposure_fraction = 0.0"), "auto_exposure_fraction"),
+    ("camera-unknown-key", _sensor(PAPER, "pixel_pitch_um = 5.3", "pixel_pitch_um = 5.3\niso = 100"), "unknown key"),
+    ("camera-missing-pitch", _sensor(PAPER, "pixel_pitch_um = 5.3", ""), "pixel_pitch_um"),
+    ("camera-model-unknown", _sensor(PAPER, 'model = "emva"', 'model = "ccd"'), "model"),
+    ("lens-f-number-zero", _sensor(PAPER, "f_number = 4.0", "f_number = 0.0"), "f_number"),
+    ("lens-transmission-two", _sensor(PAPER, "transmission = 0.9", "transmission = 2.0"), "transmission"),
+    ("lens-defocus-string", _sensor(PAPER, "defocus = true", 'defocus = "yes"'), "defocus"),
+    ("lens-focus-inf", _sensor(PAPER, "focus_m = 1.0", "focus_m = inf"), "focus_m"),
+    ("lumens-zero", _sensor(PAPER, "lumens = 150.0", "lumens = 0.0"), "lumens"),
+    ("contrast-below-one", _sensor(PAPER, "contrast_ratio = 1000.0", "contrast_ratio = 0.5"), "contrast_ratio"),
+    ("contrast-word", _sensor(PAPER, "contrast_ratio = 1000.0", 'contrast_ratio = "high"'), "contrast_ratio"),
+    ("dmd-unknown", _sensor(PAPER, 'dmd = "diamond"', 'dmd = "hexagon"'), "dmd"),
+    ("transfer-unknown", _sensor(PAPER, 'transfer = "linear"', 'transfer = "log"'), "transfer"),
+    ("crosstalk-string", _sensor(PAPER, "crosstalk = true", 'crosstalk = "true"'), "crosstalk"),
+    ("ambient-negative", _sensor(PAPER, "ratio = 0.02", "ratio = -0.02"), "ratio"),
+    ("ambient-nan", _sensor(PAPER, "ratio = 0.02", "ratio = nan"), "ratio"),
+    ("unknown-table", PAPER + "\n[thermal]\ndrift = 1\n", "unknown key"),
+    ("not-toml", "camera = [", "not valid TOML"),
+]:
+    case(f"render-sensor-{cid}", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "sensor.toml")], msg, files={"sensor.toml": text})
+case("render-sensor-unknown-preset", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", "flea4"], "unknown sensor")
+case("render-sensor-file-missing", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "nope.toml")], "nope.toml")
+case("render-sensor-minimal-crosstalk", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "sensor.toml")], "crosstalk",
+     files={"sensor.toml": SENSOR_OK + "\n[spectral]\ncrosstalk = true\n"})
+case("render-out-foreign-folder", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "mine")], "mine", files={"mine/notes.txt": "my notes"})
+case("render-out-is-a-file", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "f")], "not a folder", files={"f": "x"})
+
+# ---------------------------------------------------------------------------------- decode
+
+
+def _decode(d: Path, *extra: str, capture: str = "capture.png", reference: str | None = "reference.png", rig: str = "rig.toml") -> list[str]:
+    r = d / "r"
+    argv = ["decode", str(r / capture), "--rig", str(r / rig), "--out", str(d / "depth.npy")]
+    if reference is not None:
+        argv += ["--reference", str(r / reference)]
+    return argv + list(extra)
+
+
+def _image_file(name: str, content) -> object:
+    def setup(d: Path) -> None:
+        render_folder(d)
+        p = d / "r" / name
+        if isinstance(content, bytes):
+            p.write_bytes(content)
+        else:
+            from simbench.io import save_npy, save_png
+
+            (save_npy if name.endswith(".npy") else save_png)(p, content)
+
+    return setup
+
+
+RNG = np.random.default_rng(7)
+for cid, name, content, msg in [
+    ("capture-empty", "c.png", b"", "empty"),
+    ("capture-random-bytes", "c.png", RNG.integers(0, 256, 4000, dtype=np.uint8).tobytes(), "not a readable image"),
+    ("capture-text", "c.png", b"this is not a png\n", "not a readable image"),
+    ("capture-truncated-png", "c.png", None, "not a readable image"),
+    ("capture-crc-error", "c.png", "flip", "CRC error"),
+    ("capture-grey", "c.png", np.zeros((120, 160), np.uint8), "RGB"),
+    ("capture-wrong-size", "c.png", np.zeros((240, 320, 3), np.uint8), "320x240"),
+    ("capture-npy-nan", "c.npy", np.full((120, 160, 3), np.nan, np.float32), "NaN"),
+    ("capture-npy-2d", "c.npy", np.zeros((120, 160), np.float32), "RGB"),
+    ("capture-npy-int64", "c.npy", np.zeros((120, 160, 3), np.int64), "dtype"),
+    ("capture-npy-empty", "c.npy", b"", "empty"),
+    ("capture-npy-not-npy", "c.npy", b"PK\x03\x04 not numpy", "not a NumPy"),
+]:
+    def _setup(d, name=name, content=content):
+        if content is None:  # a real PNG cut in half
+            render_folder(d)
+            data = (d / "r" / "capture.png").read_bytes()
+            (d / "r" / name).write_bytes(data[: len(data) // 2])
+        elif isinstance(content, str):  # a real PNG with one byte of its image data flipped
+            render_folder(d)
+            data = bytearray((d / "r" / "capture.png").read_bytes())
+            data[len(data) // 2] ^= 0xFF
+            (d / "r" / name).write_bytes(bytes(data))
+        else:
+            _image_file(name, content)(d)
+
+    case(f"decode-{cid}", lambda d, n=name: _decode(d, capture=n), msg, setup=_setup)
+case("decode-capture-missing", lambda d: _decode(d, capture="nope.png"), "nope.png", setup=render_folder)
+case("decode-capture-is-folder", lambda d: _decode(d, capture="sub"), "sub", setup=lambda d: (render_folder(d) / "sub").mkdir())
+for cid, content, msg in [
+    ("reference-black", np.zeros((120, 160, 3), np.uint8), "reference capture decodes at only"),
+    ("reference-saturated", np.full((120, 160, 3), 255, np.uint8), "reference capture decodes at only"),
+    ("reference-noise", RNG.integers(0, 256, (120, 160, 3), dtype=np.uint8), "reference capture decodes at only"),
+    ("reference-wrong-size", np.zeros((60, 80, 3), np.uint8), "80x60"),
+    ("reference-empty", b"", "empty"),
+]:
+    case(f"decode-{cid}", lambda d: _decode(d, reference="ref2.png"), msg, setup=_image_file("ref2.png", content))
+case("decode-reference-missing", lambda d: _decode(d, reference="nope.png"), "nope.png", setup=render_folder)
+case("decode-reference-mode-without-reference", lambda d: _decode(d, reference=None), "--reference", setup=render_folder)
+case("decode-rig-missing", lambda d: _decode(d, rig="nope.toml"), "nope.toml", setup=render_folder)
+case("decode-rig-invalid", lambda d: _decode(d, rig="bad.toml"), "focal_px", setup=lambda d: (render_folder(d) / "bad.toml").write_text(_rig_text(**{"camera.focal_px": "0"})))
+case("decode-rig-not-utf8", lambda d: _decode(d, rig="bad.toml"), "UTF-8", setup=lambda d: (render_folder(d) / "bad.toml").write_bytes(b"\xff\xfe\x00"))
+case("decode-rig-other-camera", lambda d: _decode(d, rig="big.toml"), "camera is 320x240", setup=lambda d: (render_folder(d) / "big.toml").write_text(_rig_text(**{"camera.width_px": "320", "camera.height_px": "240"})))
+for opt, bad in [("--z0", "0"), ("--z0", "-1"), ("--z0", "inf"), ("--z0", "nan"), ("--z0", "x"), ("--near", "0"), ("--near", "-1"), ("--far", "nan"), ("--far", "1e9")]:
+    case(f"decode{opt}={bad}", lambda d, o=opt, b=bad: _decode(d, o, b), opt, setup=render_folder)
+case("decode-near-beyond-far", lambda d: _decode(d, "--near", "2.0", "--far", "1.0"), "near < far", setup=render_folder)
+case("decode-mode-unknown", lambda d: _decode(d, "--mode", "stereo"), "--mode", setup=render_folder)
+for item, msg in [
+    ("voting=maybe", "voting"), ("voting=1", "voting"), ("voting='true'", "voting"), ("neighbour_reach=[1,2]", "neighbour_reach"),
+    ("neighbour_reach=-1", "neighbour_reach"), ("neighbour_reach=2.5", "neighbour_reach"), ("sigma_periods=0", "sigma_periods"),
+    ("sigma_periods=inf", "sigma_periods"), ("sigma_periods=nan", "sigma_periods"), ("dark_level=2", "dark_level"), ("phase_method=nope", "phase_method"),
+    ("phase_method=1", "phase_method"), ("unknown=1", "name one of"), ("voting", "name=value"), ("mode=stereo", "mode"),
+    ("depth_range_m=[2.0,1.0]", "depth_range_m"), ("depth_range_m=3", "depth_range_m"), ("min_support=0", "min_support"), ("threads=0", "threads"),
+    ("z0_m=-1", "z0_m"), ("saturation_level=0", "saturation_level"), ("max_residual=0", "max_residual"), ("sequence=[0,2,1]", "sequence"),
+    ("sequence='0101'", "sequence"), ("intensity_mode=3", "intensity_mode"), ("camera_period_px=1", "camera_period_px"), ("min_amplitude=-0.1", "min_amplitude"),
+    ("min_reference_coverage=1.5", "min_reference_coverage"), ("color_normalize=yes", "color_normalize"), ("link_check=0", "link_check"),
+]:
+    case(f"decode--decoder-{item}", lambda d, i=item: _decode(d, "--decoder", i), msg, setup=render_folder)
+case("decode-out-not-npy", lambda d: _decode(d)[:-5] + [str(d / "depth.png")] + _decode(d)[-2:], "--out", setup=render_folder)
+case("decode-ply-unwritable", lambda d: _decode(d, "--ply", str(d / "f" / "c.ply")), "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+case("decode-ply-not-ply", lambda d: _decode(d, "--ply", str(d / "c.txt")), "--ply", setup=render_folder)
+case("decode-debug-dir-unwritable", lambda d: _decode(d, "--debug-dir", str(d / "f" / "stages")), "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+case("decode-debug-dir-is-a-file", lambda d: _decode(d, "--debug-dir", str(d / "f")), "not a folder", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+case("decode-out-under-a-file", lambda d: _decode(d)[:-5] + [str(d / "f" / "depth.npy")] + _decode(d)[-2:], "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+
+
+def _mixed(d: Path) -> None:
+    """capture.png replaced after meta.json was written (what a killed older version left)."""
+    from simbench.io import save_png
+
+    r = render_folder(d)
+    save_png(r / "capture.png", np.roll(_IMAGES[0], 3, axis=1))
+
+
+case("decode-mixed-render-folder", lambda d: _decode(d), "mixes files of two renders", setup=_mixed)
+case("decode-meta-not-json", lambda d: _decode(d), "meta.json", setup=lambda d: (render_folder(d) / "meta.json").write_text("{not json"))
+case("decode-meta-z0-negative", lambda d: _decode(d), "reference_depth_m", setup=lambda d: (render_folder(d) / "meta.json").write_text('{"reference_depth_m": -1}'))
+
+# ----------------------------------------------------------------------------------- score
+for cid, argv, msg, setup in [
+    ("depth-missing", lambda d: ["score", str(d / "nope.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "nope.npy", render_folder),
+    ("depth-empty", lambda d: ["score", str(d / "e.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "empty", lambda d: (render_folder(d), (d / "e.npy").write_bytes(b""))),
+    ("depth-png", lambda d: ["score", str(d / "r" / "capture.png"), "--gt", str(d / "r" / "gt_depth.npy")], "not a NumPy", render_folder),
+    ("depth-truncated", lambda d: ["score", str(d / "t.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "t.npy", lambda d: (render_folder(d), (d / "t.npy").write_bytes((d / "r" / "gt_depth.npy").read_bytes()[:200]))),
+    ("depth-wrong-shape", lambda d: ["score", str(d / "w.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.zeros((10, 10), np.float32)))),
+    ("gt-missing", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "nope.npy")], "nope.npy", render_folder),
+    ("gt-3d", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")], "2-D", lambda d: (render_folder(d), np.save(d / "g.npy", np.zeros((2, 3, 4), np.float32)))),
+    ("period-zero", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "0"], "--period", render_folder),
+    ("period-negative", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "-21"], "--period", render_folder),
+    ("period-nan", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "nan"], "--period", render_folder),
+    ("edge-band-negative", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--edge-band", "-3"], "--edge-band", render_folder),
+    ("lit-wrong-shape", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--lit", str(d / "w.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), bool)))),
+    ("column-wrong-shape", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--column", str(d / "w.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), np.float32)))),
+    ("pickled-object-array", lambda d: ["score", str(d / "o.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "o.npy", lambda d: (render_folder(d), np.save(d / "o.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True))),
+]:
+    case(f"score-{cid}", argv, msg, setup=setup)
+
+# ------------------------------------------------------------------------------ competitor
+
+
+def _recording(d: Path, device: dict, files: dict | None = None) -> None:
+    rec = d / "rec"
+    rec.mkdir()
+    (rec / "device.json").write_text(json.dumps(device))
+    for name, content in (files or {}).items():
+        (rec / name).write_bytes(content)
+
+
+for cid, argv, msg in [
+    ("render-unknown-device", lambda d: ["competitor", "render", "kinect2", str(SCENES / "white_plane.toml"), "--out", str(d / "o")], "kinect2"),
+    ("render-scene-missing", lambda d: ["competitor", "render", "kinect", str(d / "nope.toml"), "--out", str(d / "o")], "nope.toml"),
+    ("render-spp-zero", lambda d: ["competitor", "render", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--spp", "0"], "--spp"),
+    ("render-seed-negative", lambda d: ["competitor", "render", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--seed", "-1"], "--seed"),
+    ("decode-folder-missing", lambda d: ["competitor", "decode", str(d / "nope"), "--out", str(d / "x.npy")], "not a competitor recording"),
+    ("decode-out-not-npy", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.png")], "--out"),
+]:
+    case(f"competitor-{cid}", argv, msg, setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None)
+case("competitor-decode-device-json-invalid", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "device.json", setup=lambda d: ((d / "rec").mkdir(), (d / "rec" / "device.json").write_text("{")))
+case("competitor-decode-device-unknown", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "unknown competitor", setup=lambda d: _recording(d, {"device": "lidar"}))
+case("competitor-decode-ir-empty", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "empty", setup=lambda d: _recording(d, {"device": "kinect"}, {"ir.png": b"", "reference.png": b""}))
+case("competitor-decode-taps-missing", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "taps.npy", setup=lambda d: _recording(d, {"device": "tof"}))
+case("competitor-decode-taps-wrong-shape", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "shape",
+     setup=lambda d: (_recording(d, {"device": "tof"}), np.save(d / "rec" / "taps.npy", np.zeros((4, 4, 4), np.float32))))
+
+# ------------------------------------------------------------------- bench, reproduce, ablate, demo, crosstalk
+for cid, argv, msg in [
+    ("bench-repeats-zero", ["bench", "--repeats", "0"], "--repeats"),
+    ("bench-max-ms-zero", ["bench", "--repeats", "1", "--max-ms", "0"], "--max-ms"),
+    ("bench-device-unknown", ["bench", "--device", "lidar"], "--device"),
+    ("bench-scene-unknown", ["bench", "--scene", "bust"], "--scene"),
+    ("bench-competitor-shadow", ["bench", "--device", "tof", "--scene", "shadow", "--repeats", "1"], "only the plane"),
+    ("reproduce-unknown-target", ["reproduce", "table2"], "table2"),
+    ("reproduce-spp-zero", ["reproduce", "--spp", "0"], "--spp"),
+    ("reproduce-seed-negative", ["reproduce", "--seed", "-1"], "--seed"),
+    ("reproduce-repeats-zero", ["reproduce", "--repeats", "0"], "--repeats"),
+    ("reproduce-margin-negative", ["reproduce", "--margin", "-1"], "--margin"),
+    ("reproduce-sensor-unknown", ["reproduce", "table1", "--sensor", "flea4"], "unknown sensor"),
+    ("reproduce-decoder-bad", ["reproduce", "table1", "--decoder", "voting=maybe"], "voting"),
+    ("reproduce-check-missing", ["reproduce", "table1", "--check", "nope.toml"], "nope.toml"),
+    ("ablate-file-missing", ["ablate", "nope.toml"], "nope.toml"),
+    ("ablate-unknown-study", ["ablate", "periods"], "built-in"),
+    ("ablate-workers-zero", ["ablate", "period", "--workers", "0"], "--workers"),
+    ("demo-spp-zero", ["demo", "--spp", "0"], "--spp"),
+    ("demo-seed-word", ["demo", "--seed", "x"], "--seed"),
+    ("demo-unknown-scene", ["demo", "--out", "demo", "--scenes", "white_plane", "no_such_scene"], "no_such_scene"),
+    ("demo-sensor-unknown", ["demo", "--out", "demo", "--sensor", "flea4"], "unknown sensor"),
+    ("no-command", [], "required"),
+    ("unknown-command", ["calibrate2"], "calibrate2"),
+]:
+    case(cid, lambda d, a=argv: list(a), msg)
+case("reproduce-check-invalid", lambda d: ["reproduce", "table1", "--check", str(d / "t.toml")], "max or min", files={"t.toml": '["a/b"]\nmeasured = 1\n'})
+case("crosstalk-out-under-a-file", lambda d: ["crosstalk", "--out", str(d / "f" / "c.md")], "f", files={"f": "x"})
+for cid, body, msg in [
+    ("unknown-parameter", 'name = "s"\n[[axis]]\nname = "decoder.votes"\nvalues = [1]\n', "unknown sweep parameter"),
+    ("axis-without-values", 'name = "s"\n[[axis]]\nname = "decoder.voting"\n', "axis 1"),
+    ("no-axis", 'name = "s"\n', "at least one"),
+    ("combine-unknown", 'name = "s"\ncombine = "cartesian"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "combine"),
+    ("repeats-zero", 'name = "s"\nrepeats = 0\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "repeats"),
+    ("repeats-bool", 'name = "s"\nrepeats = true\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "repeats"),
+    ("seed-negative", 'name = "s"\nseed = -1\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "seed"),
+    ("seed-string", 'name = "s"\nseed = "x"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "seed"),
+    ("plot-metric-unknown", 'name = "s"\nplot_metric = "beauty"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "plot_metric"),
+    ("name-with-spaces", 'name = "my sweep"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "sweep name"),
+    ("axis-twice", 'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n[[axis]]\nname = "decoder.voting"\nvalues = [false]\n', "twice"),
+    ("not-toml", "name = [", "not valid TOML"),
+]:
+    case(f"ablate-sweep-{cid}", lambda d: ["ablate", str(d / "s.toml"), "--out", str(d / "abl")], msg, files={"s.toml": body})
+
+
+# ---------------------------------------------------------------------------------- runner
+
+
+def _snapshot(d: Path) -> set[str]:
+    return {str(p.relative_to(d)) for p in d.rglob("*")}
+
+
+def test_the_table_has_the_cases_the_issue_asked_for():
+    assert len(CASES) >= 200
+    assert len({c.id for c in CASES}) == len(CASES), "case ids must be unique"
+
+
+@pytest.mark.parametrize("c", CASES, ids=[c.id for c in CASES])
+def test_bad_input_gives_one_line_exit_2_and_no_output(c: Case, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for name, content in c.files.items():
+        p = tmp_path / name
+        p.parent.mkdir(parents=True, exist_ok=True)
+        (p.write_bytes if isinstance(content, bytes) else p.write_text)(content)
+    if c.setup is not None:
+        c.setup(tmp_path)
+    argv = c.argv(tmp_path)
+    before = _snapshot(tmp_path)
+    rc = main(argv)
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert rc == 2, f"exit {rc}; stderr: {err!r}; stdout: {out[-500:]!r}"
+    assert len(lines) == 1 and lines[0].startswith("simbench: error:"), err
+    expects = (c.expect,) if isinstance(c.expect, str) else c.expect
+    assert all(e in lines[0] for e in expects), f"{expects} not in {lines[0]!r}"
+    assert "Traceback" not in err
+    assert _snapshot(tmp_path) == before, f"left behind: {sorted(_snapshot(tmp_path) - before)}"
+
+
+SAMPLE = ["decode-capture-empty", "decode-capture-truncated-png", "decode-capture-crc-error", "decode-capture-random-bytes", "decode--decoder-voting=maybe", "render-sensor-noise-string", "render-rig-cx-huge", "score-depth-png", "pattern--width='10000000'"]
+
+
+def test_a_sample_in_fresh_processes(tmp_path):
+    """The same cases through the installed `simbench` script: one line, exit 2, no traceback."""
+    exe = Path(sys.executable).parent / "simbench"
+    for c in [c for c in CASES if c.id in SAMPLE]:
+        d = tmp_path / c.id.replace("/", "_")
+        d.mkdir()
+        for name, content in c.files.items():
+            (d / name).parent.mkdir(parents=True, exist_ok=True)
+            ((d / name).write_bytes if isinstance(content, bytes) else (d / name).write_text)(content)
+        if c.setup is not None:
+            c.setup(d)
+        res = subprocess.run([str(exe), *c.argv(d)], cwd=d, capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "default"})
+        lines = res.stderr.strip().splitlines()
+        assert res.returncode == 2 and len(lines) == 1 and lines[0].startswith("simbench: error:"), (c.id, res.stderr)
+    assert len([c for c in CASES if c.id in SAMPLE]) == len(SAMPLE)
