@@ -59,6 +59,8 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
         material = [o.material.kind, list(o.material.rgb), o.material.roughness]
         if o.material.specular_rgb != (1.0, 1.0, 1.0):
             material.append(list(o.material.specular_rgb))
+        if o.material.spectrum is not None:
+            material.append({"spectrum": o.material.spectrum})
         objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
     return {
         "rig": rig_to_dict(scene.rig),

@@ -22,7 +22,9 @@ A scene file::
     rgb = [0.8, 0.8, 0.8]         # linear diffuse reflectance (two-sided Lambertian)
 
 Instead of ``rgb`` an object may give ``srgb8 = [255, 0, 0]``, an 8-bit sRGB colour as printed
-on a colour board (paper Table 1), turned into a reflectance by :func:`paint_reflectance`.
+on a colour board (paper Table 1), turned into a reflectance by :func:`paint_reflectance`, or
+``spectrum = "ColorChecker N Ohta/red"``, a measured reflectance spectrum
+(:data:`simbench.spectral.MEASURED_DATASETS`) used as it is by the spectral (crosstalk) path.
 ``material`` is ``diffuse`` (default) or ``plastic``: a smooth or rough dielectric coating
 (Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
 diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
@@ -34,6 +36,7 @@ All coordinates are in the camera frame (x right, y down, z forward, metres).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +55,8 @@ __all__ = [
     "load_scene",
     "scene_from_dict",
     "reference_scene",
+    "Placement",
+    "place_objects",
     "object_to_mitsuba",
     "paint_reflectance",
 ]
@@ -62,7 +67,7 @@ OBJECT_KINDS = {
     "sphere": ("center_m", "radius_m"),
     "mesh": ("file", "scale", "translate_m", "rotation_deg"),
 }
-_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "material", "roughness")
+_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness")
 MATERIALS = ("diffuse", "plastic")
 
 # Reflectance range of matte paint, used by paint_reflectance.  Assumptions, argued from
@@ -100,6 +105,9 @@ class Material:
     # the coating's specular tint; only the spectral-crosstalk renders set it (white light seen
     # through the camera's channels), scene files cannot
     specular_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    # a measured reflectance spectrum "<dataset>/<patch>" (simbench.spectral.MEASURED_DATASETS);
+    # rgb is then its linear sRGB, and the spectral path uses the spectrum itself
+    spectrum: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
@@ -180,13 +188,23 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         p["translate_m"] = _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m")
         p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
     try:
-        if "rgb" in d and "srgb8" in d:
-            raise ValueError("give either rgb (reflectance) or srgb8 (paint colour), not both")
-        rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else tuple(d.get("rgb", (0.8, 0.8, 0.8)))
+        given = [k for k in ("rgb", "srgb8", "spectrum") if k in d]
+        if len(given) > 1:
+            raise ValueError(f"give one of rgb (reflectance), srgb8 (paint colour) or spectrum (measured), not {' and '.join(given)}")
+        spectrum = None
+        if "spectrum" in d:
+            from simbench.spectral import measured_linear_srgb
+
+            if not isinstance(d["spectrum"], str):
+                raise ValueError(f"spectrum must be a string '<dataset>/<patch>', got {d['spectrum']!r}")
+            spectrum = d["spectrum"]
+            rgb = measured_linear_srgb(spectrum)
+        else:
+            rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else tuple(d.get("rgb", (0.8, 0.8, 0.8)))
         mat_kind = str(d.get("material", "diffuse"))
         if "roughness" in d and mat_kind != "plastic":
             raise ValueError("roughness applies to material = 'plastic' only")
-        mat = Material(kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1))
+        mat = Material(kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1), spectrum=spectrum)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
     return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat)
@@ -276,6 +294,60 @@ def reference_scene(scene: SceneSpec, *, albedo: float = 0.8) -> SceneSpec:
         description=f"reference plane at {z0} m",
         base_dir=scene.base_dir,
     )
+
+
+@dataclass(frozen=True)
+class Placement:
+    """How precisely a lab places a test object: uniform errors within +-``depth_m`` along the
+    camera axis and +-``tilt_deg`` about the object's own x and y axes.
+
+    The defaults are an assumption argued from a hand set-up like the paper's (Sec. 5.5-6): a
+    board is put at "1.0 m" with a tape measure (EU MID class II tolerance +-(0.3 + 0.2 L) mm,
+    0.5 mm at 1 m) from a rig whose depth origin, the camera's entrance pupil, lies somewhere
+    inside the lens and is not marked: +-10 mm; it is squared to the rig by eye or with a
+    set square against the rig's rail: +-2 deg.  Neither is the paper's number (it gives none).
+    """
+
+    depth_m: float = 0.010
+    tilt_deg: float = 2.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "depth_m", validate.number(self.depth_m, "placement depth_m", lo=0.0, hi=1.0))
+        object.__setattr__(self, "tilt_deg", validate.number(self.tilt_deg, "placement tilt_deg", lo=0.0, hi=45.0))
+
+
+def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tuple[SceneSpec, dict]:
+    """``scene`` with each named plane or box moved as a lab would have placed it: its own
+    seeded depth offset and tilt (:class:`Placement`), independent of the reference plane.
+
+    Returns
+    -------
+    scene : SceneSpec
+    offsets : dict of name -> {"depth_m": float, "tilt_deg": [about x, about y]}
+    """
+    rng = np.random.default_rng(rng)
+    wanted = list(names)
+    known = {o.name: o for o in scene.objects}
+    missing = [n for n in wanted if n not in known]
+    if missing:
+        raise ValueError(f"{scene.name}: no object(s) {missing} to place; objects: {list(known)}")
+    offsets, objects = {}, []
+    for o in scene.objects:
+        if o.name not in wanted:
+            objects.append(o)
+            continue
+        if o.kind not in ("plane", "box"):
+            raise ValueError(f"{scene.name}: placement perturbs planes and boxes, not a {o.kind} ({o.name!r})")
+        dz = float(rng.uniform(-placement.depth_m, placement.depth_m))
+        tx, ty = (float(t) for t in rng.uniform(-placement.tilt_deg, placement.tilt_deg, size=2))
+        p = dict(o.params)
+        cx, cy, cz = p["center_m"]
+        rx, ry, rz = p["rotation_deg"]
+        p["center_m"] = (cx, cy, cz + dz)
+        p["rotation_deg"] = (rx + tx, ry + ty, rz)
+        objects.append(SceneObject(kind=o.kind, name=o.name, params=tuple(sorted(p.items())), material=o.material))
+        offsets[o.name] = {"depth_m": dz, "tilt_deg": [tx, ty]}
+    return dataclasses.replace(scene, objects=tuple(objects)), offsets
 
 
 def _to_world(mi, *, translate, rotation_deg, scale) -> object:

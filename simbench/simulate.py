@@ -24,7 +24,7 @@ from simbench.render import GroundTruth, ground_truth, projector_distance, reali
 from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
-from simbench.spectral import crosstalk_matrix
+from simbench.spectral import crosstalk_matrix, material_crosstalk
 
 __all__ = [
     "Acquisition",
@@ -180,7 +180,7 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     white = np.clip(crosstalk_matrix((1.0, 1.0, 1.0))[:, p], 0.0, 1.0)
     objects = []
     for o in scene.objects:
-        k = np.clip(crosstalk_matrix(o.material.rgb)[:, p], 0.0, 1.0)
+        k = np.clip(material_crosstalk(o.material.rgb, o.material.spectrum)[:, p], 0.0, 1.0)
         mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white))
         objects.append(dataclasses.replace(o, material=mat))
     return dataclasses.replace(scene, objects=tuple(objects))
@@ -216,8 +216,9 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
         for p in range(3):
             mono = np.ascontiguousarray(np.repeat(drive[..., p : p + 1], 3, axis=2))
-            # the same seed for each primary: the sum has one render's sampling pattern
-            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
+            # the same seed for each primary: the sum has one render's sampling pattern; a
+            # primary the drive leaves off (calibration frames) lights nothing
+            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if mono.any() else np.zeros_like(q)
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)

@@ -20,7 +20,9 @@ Data and assumptions (nothing here is fitted to the paper's results):
   in any public dataset we can use.  Both are CMOS sensors with an RGB Bayer mosaic behind an
   IR-cut filter; the other dataset (Sigma SD Merrill) is a stacked Foveon sensor, a different
   principle, hence the choice.  **Assumption** with that reasoning.
-* Surface spectra from a material's linear RGB reflectance by Mallett & Yuksel 2019
+* Measured surfaces: the reflectance spectra of colour-science's ColorChecker datasets
+  (:data:`MEASURED_DATASETS`), named ``"<dataset>/<patch>"`` in scene files.
+* Other surface spectra from a material's linear RGB reflectance by Mallett & Yuksel 2019
   (``RGB_to_sd_Mallett2019``): a bounded, smooth reflectance in [0, 1] that reproduces the RGB
   under sRGB/D65, linear in the RGB, so crosstalk of any material is a fixed blend of three
   basis matrices.
@@ -33,7 +35,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["primary_irradiance_w_m2", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
+__all__ = ["MEASURED_DATASETS", "measured_reflectance", "measured_linear_srgb", "material_crosstalk", "primary_irradiance_w_m2", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
 
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
 PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
@@ -127,6 +129,69 @@ def _crosstalk_matrix(rgb: tuple[float, float, float]) -> np.ndarray:
     p = projector_primaries()
     rho = reflectance_spectrum(rgb)
     resp = np.einsum("lc,l,lp->cp", s, rho, p)
+    white = np.einsum("lc,lp->cp", s, p)
+    return resp / np.diag(white)[None, :]
+
+
+# measured reflectance datasets a scene material can name (colour-science's
+# SDS_COLOURCHECKERS: "ColorChecker N Ohta" are N. Ohta's spectrophotometer measurements of a
+# ColorChecker; "BabelColor Average" the average of 30 charts measured by BabelColor)
+MEASURED_DATASETS = ("ColorChecker N Ohta", "BabelColor Average")
+
+
+def _measured_sd(name: str):
+    colour = _colour()
+    dataset, sep, patch = str(name).partition("/")
+    if not sep or dataset not in MEASURED_DATASETS:
+        raise ValueError(f"measured spectrum must be '<dataset>/<patch>' with dataset one of {list(MEASURED_DATASETS)}, got {name!r}")
+    patches = colour.SDS_COLOURCHECKERS[dataset]
+    if patch not in patches:
+        raise ValueError(f"{dataset} has no patch {patch!r}; patches: {list(patches)}")
+    return patches[patch]
+
+
+@lru_cache(maxsize=64)
+def _measured_values(name: str) -> np.ndarray:
+    sd = _measured_sd(name).copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        v = np.asarray(sd.align(_shape()).values, dtype=np.float64)
+    v = np.clip(v, 0.0, 1.0)
+    v.setflags(write=False)
+    return v
+
+
+def measured_reflectance(name: str) -> np.ndarray:
+    """Spectral reflectance of a measured patch ``"<dataset>/<patch>"`` on :func:`wavelengths_nm`."""
+    return _measured_values(name).copy()
+
+
+@lru_cache(maxsize=64)
+def measured_linear_srgb(name: str) -> tuple[float, float, float]:
+    """Linear sRGB reflectance (D65, CIE 1931 2 deg) of a measured patch, clipped to [0, 1]:
+    what a renderer without spectra shows for it."""
+    colour = _colour()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sd = colour.SpectralDistribution(dict(zip(wavelengths_nm(), _measured_values(name))))
+        xyz = colour.sd_to_XYZ(sd, colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"], colour.SDS_ILLUMINANTS["D65"]) / 100.0
+        rgb = colour.XYZ_to_RGB(xyz, "sRGB", apply_cctf_encoding=False)
+    return tuple(float(round(x, 6)) for x in np.clip(rgb, 0.0, 1.0))
+
+
+def material_crosstalk(rgb, spectrum: str | None = None) -> np.ndarray:
+    """:func:`crosstalk_matrix` of a material: from its measured spectrum when it names one,
+    else from its linear RGB reflectance."""
+    if spectrum is None:
+        return crosstalk_matrix(rgb)
+    return _spectrum_crosstalk(spectrum).copy()
+
+
+@lru_cache(maxsize=64)
+def _spectrum_crosstalk(name: str) -> np.ndarray:
+    s = camera_sensitivities()
+    p = projector_primaries()
+    resp = np.einsum("lc,l,lp->cp", s, _measured_values(name), p)
     white = np.einsum("lc,lp->cp", s, p)
     return resp / np.diag(white)[None, :]
 

@@ -77,21 +77,32 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
     """The CI check catches a deliberately worse decoder parameter (issue 4)."""
     from simbench.decode import DecoderParams
     from simbench.experiments.reproduce import reproduce
+    from simbench.experiments.table1 import BOARD_SETS, COLOURS, PROTOCOLS
 
     cfg = RunConfig.preset(quick=True)
     quiet = lambda s: None  # noqa: E731
     good = reproduce(["table1"], config=cfg, out_dir=tmp_path / "good", cache_dir=tmp_path / "cache", progress=quiet, command="t")
     path = write_thresholds(tmp_path / "t.toml", good, margin=0.25, command="t")
     assert check_thresholds(good, path) == []
-    assert good["table1/white/paper/completeness"] > 0.99 and good["table1/white/paper/stripe_order_errors"] == 0
-    # under the paper sensor model the normalised decoder rescues the blue board the paper's loses
-    assert good["table1/blue/normalized/completeness"] > 0.99 and good["table1/blue/normalized/stripe_order_errors"] == 0
-    assert good["table1/blue/paper/completeness"] < 0.01
+    white = {b: good[f"table1/{b}/white/robust/calibrated/completeness"] for b in BOARD_SETS}
+    assert good["table1/paint/white/paper/calibrated/completeness"] > 0.99 and good["table1/paint/white/paper/calibrated/stripe_order_errors"] == 0
+    # issue 17: the colour-robust decoder decodes all seven boards of both sets under the paper
+    # sensor model at >= 99 % of the white board's completeness, without stripe-order errors,
+    # by both protocols; the paper's decoder loses the paint blue board
+    for b in BOARD_SETS:
+        for c in COLOURS:
+            for mode in PROTOCOLS:
+                key = f"table1/{b}/{c}/robust/{mode}"
+                # (at the quick run's 640x480 and 4 spp; the full run's table shows >= 99 %)
+                assert good[f"{key}/completeness"] >= 0.98 * white[b], key
+                assert good[f"{key}/stripe_order_errors"] == 0, key
+    assert good["table1/paint/blue/paper/calibrated/completeness"] < 0.01
     worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
     worse = reproduce(["table1"], config=worse_cfg, out_dir=tmp_path / "worse", cache_dir=tmp_path / "cache", progress=quiet, command="t")
     failures = check_thresholds(worse, path)
-    assert any("white/paper/gt_mae_mm" in f for f in failures)
+    assert any("white/paper/calibrated/gt_mae_mm" in f for f in failures)
     rows = (tmp_path / "good" / "table1.csv").read_text().splitlines()
-    assert len(rows) == 8 and rows[0].startswith("colour,srgb8,reflectance,paper_mae_mm")
+    assert len(rows) == 1 + len(BOARD_SETS) * len(COLOURS) * 4 and rows[0].startswith("board_set,colour,material,reflectance,decoder,protocol,paper_mae_mm")
     prov = json.loads((tmp_path / "good" / "table1.provenance.json").read_text())
-    assert set(prov["files"]) == {"table1.csv", "table1.md"} and prov["seeds"]["table1/red"]["render"] > 0
+    assert set(prov["files"]) == {"table1.csv", "table1.md"} and prov["seeds"]["table1/paint/red"]["render"] > 0
+    assert abs(prov["seeds"]["table1/paint/red/placement"]["board_depth_m"]) <= cfg.placement_depth_mm / 1000

@@ -9,6 +9,7 @@ from simbench.decode.pipeline import (
     as_float_image,
     decode,
     decode_reference,
+    robust_params,
 )
 
-__all__ = ["MODES", "PHASE_METHODS", "DecodeResult", "DecoderParams", "ReferenceMap", "as_float_image", "decode", "decode_reference"]
+__all__ = ["MODES", "PHASE_METHODS", "DecodeResult", "DecoderParams", "ReferenceMap", "as_float_image", "decode", "decode_reference", "robust_params"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["color_code", "normalize_channels", "Stripes", "segment_stripes", "vote_codes"]
+__all__ = ["color_code", "mixing_matrix", "unmix", "normalize_channels", "overlay_weights", "Stripes", "segment_stripes", "vote_codes"]
 
 
 def color_code(rgb: np.ndarray) -> np.ndarray:
@@ -28,7 +28,90 @@ def color_code(rgb: np.ndarray) -> np.ndarray:
     return rgb[..., 0] >= rgb[..., 1]
 
 
-def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float) -> np.ndarray:
+def mixing_matrix(primaries, dark: np.ndarray, *, region: np.ndarray | None = None) -> np.ndarray:
+    """The projector-to-camera coupling matrix K from calibration captures of the reference
+    plane (Caspi, Kiryati & Shamir 1998).
+
+    With ``dark`` the plane under a black frame (ambient light and the projector's black level)
+    and ``primaries[p]`` under projector primary p at full drive, column p of K is the median
+    over ``region`` of ``primaries[p] - dark``, scaled so that ``K[p, p] = 1``: each camera
+    channel stays in units of its own primary on the reference.  A surface of spectral
+    reflectance rho under narrow-band primaries then records ``c = K diag(rho_p) p`` (rho taken
+    at each primary's wavelength), so ``K^-1 c`` separates the primaries whatever the surface
+    colour; the broader a primary's spectrum, the less exact this is.
+
+    Parameters
+    ----------
+    primaries : sequence of 3 ndarray, shape (H, W, 3)
+        Captures under the red, green and blue primary (projector channel order).
+    dark : ndarray, shape (H, W, 3)
+    region : ndarray, shape (H, W), bool, optional
+        Pixels to use (default: all).
+
+    Returns
+    -------
+    ndarray, shape (3, 3), float64; rows camera channels, columns projector primaries
+
+    Raises
+    ------
+    ValueError
+        When a primary does not lift its own channel above the dark frame, or K is singular.
+
+    References
+    ----------
+    D. Caspi, N. Kiryati and J. Shamir, "Range imaging with adaptive color structured light",
+    IEEE TPAMI 20(5), 470-480, 1998.
+    """
+    if len(primaries) != 3:
+        raise ValueError(f"need the captures under the 3 primaries, got {len(primaries)}")
+    d = _as_float(dark)
+    sel = np.ones(d.shape[:2], bool) if region is None else np.asarray(region, bool)
+    if sel.shape != d.shape[:2] or not sel.any():
+        raise ValueError("region must be a non-empty (H, W) mask of the calibration captures")
+    k = np.empty((3, 3))
+    for p, img in enumerate(primaries):
+        f = _as_float(img)
+        if f.shape != d.shape:
+            raise ValueError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
+        k[:, p] = np.median((f - d)[sel], axis=0)
+        if not k[p, p] > 1e-3:
+            raise ValueError(f"projector primary {'RGB'[p]} does not light camera channel {'RGB'[p]} above the dark frame: not a calibration capture")
+    k /= np.diag(k)[None, :]
+    if np.linalg.cond(k) > 1e3:
+        raise ValueError(f"the coupling matrix is singular (condition number {np.linalg.cond(k):.3g})")
+    return k
+
+
+def _as_float(img) -> np.ndarray:
+    a = np.asarray(img)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"calibration captures must have shape (H, W, 3), got {a.shape}")
+    if a.dtype == np.uint8:
+        return a.astype(np.float32) / 255
+    if a.dtype == np.uint16:
+        return a.astype(np.float32) / 65535
+    return a.astype(np.float32)
+
+
+def unmix(rgb: np.ndarray, unmixing: np.ndarray) -> np.ndarray:
+    """``unmixing @ c`` per pixel (``unmixing`` = the inverse of :func:`mixing_matrix`'s K,
+    rows and columns in the capture's channel order): each channel then holds one primary.
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32 (may be slightly negative where noise is)
+    """
+    out = cv2.transform(np.ascontiguousarray(rgb, dtype=np.float32), np.asarray(unmixing, np.float32))
+    return out.reshape(rgb.shape)
+
+
+def _code_window_px(period_px: float, order: int) -> int:
+    # in a binary De Bruijn sequence of order n the longest run of one code is n stripes, so
+    # the nearest stripe of the other code is at most (n + 1) / 2 periods away
+    return int(np.ceil((order + 1) / 2 * period_px)) + 1
+
+
+def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False):
     """Each channel rescaled to its local range across neighbouring stripes.
 
     ``(v - local_min) / (local_max - local_min)`` per channel, over a window along the row wide
@@ -50,14 +133,19 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
     min_span : float
         A channel whose local range is below this (full-scale units) carries no fringe there;
         it is set to 0.
+    return_span : bool
+        Also return the local ranges.
 
     Returns
     -------
     ndarray, shape (H, W, 3), float32 in [0, 1]
+        (and with ``return_span`` the local ranges, shape (H, W, 3), float32, 0 where below
+        ``min_span``)
     """
-    half = int(np.ceil((order + 1) / 2 * period_px)) + 1
+    half = _code_window_px(period_px, order)
     kernel = np.ones((1, 2 * half + 1), np.uint8)
     out = np.empty(rgb.shape, np.float32)
+    spans = np.empty(rgb.shape, np.float32) if return_span else None
     for c in range(3):
         v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
         lo = cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE)
@@ -65,7 +153,43 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
         ok = span >= min_span
         np.divide(v - lo, span, out=out[..., c], where=ok)
         out[..., c][~ok] = 0.0
-    return out
+        if spans is not None:
+            spans[..., c] = np.where(ok, span, 0.0)
+    return (out, spans) if return_span else out
+
+
+def overlay_weights(raw: np.ndarray, span: np.ndarray, *, unmixing: np.ndarray | None, period_px: float, order: int, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse noise variances of the normalised code pair (R + G) and fringe channel (B).
+
+    A normalised channel ``(u - lo) / span`` has noise ``sigma_u / span``.  ``u`` is the
+    unmixed channel ``sum_j U[c, j] c_j`` of raw channels ``c_j`` whose variance is taken
+    proportional to ``c_j + floor`` (photon shot noise plus a read-noise floor in the same
+    full-scale units: only ratios matter, the camera's gain drops out), with ``c_j`` the
+    local mean over the code window.  The pair R + G has the sum of both variances: in every
+    stripe one of them carries the fringe and the other only noise.
+
+    Parameters
+    ----------
+    raw : ndarray, shape (H, W, 3), float32; the capture before unmixing
+    span : ndarray, shape (H, W, 3), float32; local ranges of the unmixed channels, 0 = no fringe
+    unmixing : ndarray, shape (3, 3), or None (identity)
+    floor : float
+        Read-noise floor, full-scale units (assumption of the caller).
+
+    Returns
+    -------
+    w_code, w_fringe : ndarray, shape (H, W), float32; 0 where a channel has no fringe
+    """
+    half = _code_window_px(period_px, order)
+    mean = cv2.blur(np.ascontiguousarray(raw, dtype=np.float32), (2 * half + 1, 1), borderType=cv2.BORDER_REPLICATE)
+    level = np.maximum(mean, 0.0) + np.float32(floor)
+    u = np.eye(3) if unmixing is None else np.asarray(unmixing, np.float64)
+    var_u = cv2.transform(level, (u * u).astype(np.float32)).reshape(raw.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(span > 0, var_u / np.maximum(span, 1e-12) ** 2, np.inf).astype(np.float32)
+        w_code = (1.0 / (rel[..., 0] + rel[..., 1])).astype(np.float32)
+        w_fringe = (1.0 / rel[..., 2]).astype(np.float32)
+    return w_code, w_fringe
 
 
 @dataclass(frozen=True)

@@ -33,17 +33,33 @@ def _blue(rgb: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(rgb[..., 2], dtype=np.float32)
 
 
-INTENSITY_MODES = {"overlay": _overlay, "blue": _blue}
+def _weighted(rgb: np.ndarray, weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    # normalised channels: the code pair R + G carries the fringe in every stripe, B carries it
+    # everywhere; each gets its inverse noise variance (one weight for the pair, so a red and
+    # a green stripe are weighted alike and the stripe colour cannot bias the fringe)
+    if weights is None:
+        raise ValueError("intensity_mode 'weighted' needs normalised channels (color_normalize=True) and their noise weights")
+    w_code, w_fringe = weights
+    num = w_code * (rgb[..., 0] + rgb[..., 1]) + w_fringe * rgb[..., 2]
+    den = w_code + w_fringe
+    return np.divide(num, den, out=np.zeros(num.shape, np.float32), where=den > 0).astype(np.float32, copy=False)
 
 
-def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay") -> np.ndarray:
+INTENSITY_MODES = {"overlay": _overlay, "blue": _blue, "weighted": _weighted}
+
+
+def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay", weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Fringe intensity from a capture.
 
     Parameters
     ----------
     rgb : ndarray, shape (H, W, 3), float32 in [0, 1]
-    mode : {"overlay", "blue"}
-        ``overlay`` is paper Eq. 9, ``(R + G + B) / 2``; ``blue`` uses the blue channel alone.
+    mode : {"overlay", "blue", "weighted"}
+        ``overlay`` is paper Eq. 9, ``(R + G + B) / 2``; ``blue`` uses the blue channel alone;
+        ``weighted`` (ours) is ``(w_code (R + G) + w_fringe B) / (w_code + w_fringe)`` of
+        normalised channels with ``weights`` from
+        :func:`simbench.decode.color.overlay_weights`.
+    weights : (w_code, w_fringe), each ndarray of shape (H, W), float32; ``weighted`` only
 
     Returns
     -------
@@ -53,7 +69,7 @@ def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay") -> np.ndarray:
         fn = INTENSITY_MODES[mode]
     except KeyError:
         raise ValueError(f"unknown intensity mode {mode!r}; valid: {sorted(INTENSITY_MODES)}") from None
-    return fn(rgb)
+    return fn(rgb, weights) if mode == "weighted" else fn(rgb)
 
 
 def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float, window_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

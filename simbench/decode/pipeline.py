@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
@@ -12,7 +13,7 @@ import numpy as np
 
 from simbench import validate
 from simbench.decode import _kernels
-from simbench.decode.color import color_code, normalize_channels, segment_stripes, vote_codes
+from simbench.decode.color import color_code, mixing_matrix, normalize_channels, overlay_weights, segment_stripes, unmix, vote_codes
 from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.fourier import ftp_phase, wfr_phase
@@ -21,7 +22,7 @@ from simbench.pattern import check_channels, check_sequence, code_sequence, wind
 from simbench.optics import undistort_image
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
-__all__ = ["DecoderParams", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
+__all__ = ["DecoderParams", "robust_params", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
 
 PHASE_METHODS = {"gabor": gabor_phase, "ftp": ftp_phase, "wfr": wfr_phase}
 MODES = ("reference", "calibrated")
@@ -42,7 +43,9 @@ class DecoderParams:
         :class:`simbench.pattern.PatternSpec`); the decoder reorders the capture's channels so
         that every stage sees the paper's layout (R = code 1, G = code 0, B = fringe).
     intensity_mode : str
-        ``overlay`` (paper Eq. 9) or ``blue`` (the fringe channel alone: blue in the paper's pattern).
+        ``overlay`` (paper Eq. 9), ``blue`` (the fringe channel alone: blue in the paper's
+        pattern) or ``weighted`` (normalised channels weighted by their noise,
+        :func:`simbench.decode.color.overlay_weights`; needs ``color_normalize``).
     phase_method : str
         Key of :data:`PHASE_METHODS`: ``gabor`` (paper Eq. 10-11), ``ftp`` (Fourier transform
         profilometry, row by row) or ``wfr`` (windowed Fourier ridges); see
@@ -56,6 +59,11 @@ class DecoderParams:
     camera_period_px : float or None
         Fringe period in camera px; ``None`` = ``T * f_cam / f_proj`` (exact for fronto-parallel
         surfaces with a rectified rig).
+    unmix : bool
+        Separate the projector's primaries before every stage with the inverse of the coupling
+        matrix measured on the reference plane (:func:`simbench.decode.color.mixing_matrix`,
+        Caspi et al. 1998): the reference must come with its calibration captures under each
+        primary.  Off = the paper's decoder (raw channels).
     color_normalize : bool
         Normalise each channel by its local range across neighbouring stripes before the
         overlay (Eq. 9) and the code (Eq. 13) (:func:`simbench.decode.color.normalize_channels`);
@@ -104,6 +112,7 @@ class DecoderParams:
     sigma_periods: float = 0.25
     sigma_y_ratio: float = 0.6
     camera_period_px: float | None = None
+    unmix: bool = False
     color_normalize: bool = False
     voting: bool = True
     neighbour_reach: int = 3
@@ -130,6 +139,7 @@ class DecoderParams:
             "sigma_periods": v.number(self.sigma_periods, "sigma_periods", lo=0.0, hi=10.0, lo_open=True),
             "sigma_y_ratio": v.number(self.sigma_y_ratio, "sigma_y_ratio", lo=0.0, hi=10.0, lo_open=True),
             "camera_period_px": v.optional(v.number, self.camera_period_px, "camera_period_px", lo=2.0, hi=float(v.MAX_SIDE_PX), lo_open=True),
+            "unmix": v.boolean(self.unmix, "unmix"),
             "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
             "voting": v.boolean(self.voting, "voting"),
             "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
@@ -150,6 +160,8 @@ class DecoderParams:
         if not lo < hi:
             raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
         check_channels(self.channels)
+        if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
+            raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
         if self.sequence is not None:
             if isinstance(self.sequence, (str, bytes)) or not isinstance(self.sequence, (list, tuple)):
                 raise ValueError(f"sequence must be a list of 0 and 1, got {self.sequence!r}")
@@ -167,6 +179,17 @@ class DecoderParams:
         return self.period_px * rig.camera.focal_px / rig.projector.focal_px
 
 
+def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
+    """Our colour-robust decoder (not the paper's): ``params`` with the primaries unmixed by
+    the coupling matrix measured on the reference plane (Caspi et al. 1998) and each channel
+    normalised by its local range across neighbouring stripes, so that the code (Eq. 13) and
+    the fringe (Eq. 9) no longer depend on the surface colour or on a stripe's colour; its
+    validity tests then act on signal relative to the local range (``min_amplitude`` on the
+    normalised fringe, ``max_residual`` relative to it; the lit test looks across a whole
+    code window).  Everything else as ``params``."""
+    return dataclasses.replace(params, unmix=True, color_normalize=True, intensity_mode="weighted")
+
+
 @dataclass(frozen=True)
 class ReferenceMap:
     """A decoded reference-plane capture.
@@ -176,12 +199,16 @@ class ReferenceMap:
         rig's prediction for a plane at Z0 (what the cycle number is chosen against)
     inverse : ndarray, shape (H, Wp + 1), float32; x showing each integer column per row
     z0_m : float
+    mixing : ndarray, shape (3, 3), float64, or None; the projector-to-camera coupling matrix
+        K (:func:`simbench.decode.color.mixing_matrix`), when calibration captures under each
+        primary came with the reference
     """
 
     column_px: np.ndarray
     expected_px: np.ndarray
     inverse: np.ndarray
     z0_m: float
+    mixing: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -277,7 +304,7 @@ def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     return out
 
 
-def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams, crop: slice) -> tuple[np.ndarray, np.ndarray, LazyStages]:
+def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams, crop: slice, unmixing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, LazyStages]:
     """Stages 1-3 and the absolute column for one band of rows.
 
     ``rgb`` holds the band plus a halo of rows above and below for the phase fit; ``crop``
@@ -290,9 +317,15 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
     certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
+    raw = rgb
+    if unmixing is not None:
+        rgb = unmix(rgb, unmixing)
+    weights = None
     if params.color_normalize:
-        rgb = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level)
-    intensity = overlay_intensity(rgb, mode=params.intensity_mode)
+        rgb, span = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
+        if params.intensity_mode == "weighted":
+            weights = overlay_weights(raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level)
+    intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
     sx = params.sigma_periods * t_cam
     phase = PHASE_METHODS[params.phase_method](
         intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
@@ -397,20 +430,54 @@ def _merge_stages(parts: list[LazyStages]) -> LazyStages:
     return merged
 
 
-def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> ReferenceMap:
+def _unmixing(mixing: np.ndarray | None, params: DecoderParams) -> np.ndarray | None:
+    """The inverse coupling matrix in the stages' channel order (R = code 1, G = code 0,
+    B = fringe), or None when ``params.unmix`` is off."""
+    if not params.unmix:
+        return None
+    if mixing is None:
+        raise ValueError("unmix=True needs the reference plane's calibration captures under each primary (decode_reference(..., primaries=, dark=))")
+    order = list(check_channels(params.channels))
+    inv = np.linalg.inv(np.asarray(mixing, np.float64))
+    return inv[np.ix_(order, order)]
+
+
+def _calibration_region(primaries, dark: np.ndarray) -> np.ndarray:
+    """Pixels where every primary lifts its own channel to at least a quarter of its 95th
+    percentile over the dark frame: the lit reference plane, away from shadows and borders."""
+    d = np.asarray(dark, np.float32)
+    region = np.ones(d.shape[:2], bool)
+    for p, img in enumerate(primaries):
+        lift = np.asarray(img, np.float32)[..., p] - d[..., p]
+        region &= lift >= 0.25 * np.percentile(lift, 95)
+    return region
+
+
+def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None) -> ReferenceMap:
     """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
 
-    Done once per calibration; :func:`decode` then matches captures against it.
+    Done once per calibration; :func:`decode` then matches captures against it.  With
+    ``primaries`` (the plane under the projector's red, green and blue primary at full drive)
+    and ``dark`` (under a black frame) the coupling matrix is measured too
+    (:func:`simbench.decode.color.mixing_matrix`), which ``params.unmix`` needs.
 
     Raises
     ------
     ValueError
         When less than ``params.min_reference_coverage`` of the pixels decode (a black,
-        saturated or unrelated image is not a reference).
+        saturated or unrelated image is not a reference), or calibration captures are
+        missing, mis-sized or unusable.
     """
     image = _ideal_image(_check_capture(reference, rig.camera.size_hw), rig)
+    mixing = None
+    if primaries is not None or dark is not None:
+        if primaries is None or dark is None or len(primaries) != 3:
+            raise ValueError("the coupling-matrix calibration needs three primary captures and a dark frame")
+        cal = [_to_float(_ideal_image(_check_capture(c, rig.camera.size_hw), rig)) for c in (*primaries, dark)]
+        mixing = mixing_matrix(cal[:3], cal[3], region=_calibration_region(cal[:3], cal[3]))
+    unmixing = _unmixing(mixing, params)
     predicted = _plane_columns(rig, float(params.z0_m))
-    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop)[0], image, params, rig)
+    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)[0], image, params, rig)
     column = np.concatenate(parts, axis=0)
     coverage = float(np.isfinite(column).mean())
     if coverage < params.min_reference_coverage:
@@ -421,7 +488,7 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams) 
         )
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
-    return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m)
+    return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m, mixing=mixing)
 
 
 def decode(
@@ -444,7 +511,8 @@ def decode(
     params : DecoderParams
     reference : ReferenceMap or ndarray, optional
         The reference-plane capture (or its decoded map, to decode many captures against one
-        reference); required in ``reference`` mode.
+        reference); required in ``reference`` mode, and with ``params.unmix`` (for its
+        coupling matrix) in either mode.
 
     Returns
     -------
@@ -456,14 +524,19 @@ def decode(
     h, w = image.shape[:2]
     zmin, zmax = params.depth_range_m
     ref = None
-    if params.mode == "reference":
-        if reference is None:
-            raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
+    if params.mode == "reference" and reference is None:
+        raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
+    if params.unmix and not isinstance(reference, ReferenceMap):
+        raise ValueError("unmix=True needs the decoded reference (decode_reference with its calibration captures under each primary)")
+    if reference is not None and (params.mode == "reference" or params.unmix):
         ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
         if ref.column_px.shape != (h, w):
             raise ValueError(f"reference map shape {ref.column_px.shape} does not match the capture {(h, w)}")
+    unmixing = _unmixing(ref.mixing if ref is not None else None, params)
+    if params.mode == "reference":
         expected = ref.expected_px
     else:
+        ref = None  # calibrated mode uses the reference for its coupling matrix only
         expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
     nan = np.float32(np.nan)
     depth_out = np.empty((h, w), np.float32)
@@ -473,7 +546,7 @@ def decode(
     index_out = np.empty((h, w), np.int32)
 
     def band(img, rows, crop):
-        column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop)
+        column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
         if ref is not None:
             x_ref = match_reference(column, ref.inverse[rows])
             depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)

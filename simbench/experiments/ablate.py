@@ -300,7 +300,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
     t0 = time.perf_counter()
     try:
         from simbench.experiments.common import RunConfig, Session
-        from simbench.experiments.table1 import _score
+        from simbench.experiments.common import score as _score
         import sys
 
         from simbench.render import select_variant

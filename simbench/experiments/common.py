@@ -26,14 +26,15 @@ from simbench.cache import RenderCache
 from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
+from simbench.metrics import depth_errors, edge_band, plane_fit_error
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.render import GroundTruth, realised_rig
 from simbench.rig import scale_camera
-from simbench.scene import SceneSpec, load_scene, reference_scene
+from simbench.scene import Placement, SceneSpec, load_scene, place_objects, reference_scene
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, physical_scene, projector_drive_for, record, render_channels, versions
 
-__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "label_seed", "write_table", "markdown_table", "git_commit"]
+__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "calibration_frames", "label_seed", "write_table", "markdown_table", "git_commit"]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -49,8 +50,11 @@ class RunConfig:
     seed : base seed of every capture
     fig9_repeats : noise realisations per depth in Fig. 9 (the paper: "more than 10 times")
     edge_band_px : band at depth edges left out of error statistics
-    decoder : the paper's decoder settings; the colour-normalised variant differs only in
-        ``color_normalize``
+    decoder : the paper's decoder settings (the colour-robust decoder is
+        :func:`simbench.decode.robust_params` of them)
+    placement_depth_mm, placement_tilt_deg : how precisely test objects are placed
+        (:class:`simbench.scene.Placement`: each object gets its own seeded error within these
+        bounds, independent of the reference plane; 0 = exactly on the nominal pose)
     """
 
     quick: bool = False
@@ -62,7 +66,13 @@ class RunConfig:
     fig9_repeats: int = 10
     edge_band_px: int = 5
     ply_stride: int = 3
+    placement_depth_mm: float = 10.0
+    placement_tilt_deg: float = 2.0
     decoder: DecoderParams = field(default_factory=DecoderParams)
+
+    @property
+    def placement(self) -> Placement:
+        return Placement(depth_m=self.placement_depth_mm / 1000.0, tilt_deg=self.placement_tilt_deg)
 
     @classmethod
     def preset(cls, *, quick: bool, **overrides) -> "RunConfig":
@@ -71,6 +81,18 @@ class RunConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)  # recurses into the decoder's dataclass
+
+
+def calibration_frames(pattern_u8: np.ndarray) -> dict[str, np.ndarray]:
+    """The projector frames of the coupling-matrix calibration: black, and each primary at
+    full drive (same size and dtype as the pattern)."""
+    full = np.iinfo(pattern_u8.dtype).max
+    out = {"dark": np.zeros_like(pattern_u8)}
+    for p, name in enumerate(("red", "green", "blue")):
+        f = np.zeros_like(pattern_u8)
+        f[..., p] = full
+        out[name] = f
+    return out
 
 
 def label_seed(base: int, label: str) -> int:
@@ -128,6 +150,10 @@ class Session:
         return other
 
     # scenes and captures -------------------------------------------------------------
+    def raw_scene(self, name: str) -> SceneSpec:
+        """A scene of ``scenes/`` as its file says (before :meth:`prepare`)."""
+        return load_scene(SCENES_DIR / f"{name}.toml")
+
     def scene(self, name: str) -> SceneSpec:
         """A scene of ``scenes/`` with the run's camera resolution, the rendered rig and the
         sensor model's lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
@@ -137,11 +163,20 @@ class Session:
         rig = scene.rig if self.config.camera_scale == 1 else scale_camera(scene.rig, self.config.camera_scale)
         return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
 
-    def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1) -> list[Capture]:
+    def place(self, scene: SceneSpec, label: str, names) -> SceneSpec:
+        """``scene`` with the objects ``names`` placed as a lab would (the run's placement
+        tolerance, seeds from ``label``); the offsets are recorded with the seeds."""
+        seed = label_seed(self.config.seed, f"{label}/placement")
+        placed, offsets = place_objects(scene, names, placement=self.config.placement, rng=seed)
+        self.seeds_used[f"{label}/placement"] = {"placement": seed, **{f"{n}_{k}": v for n, o in offsets.items() for k, v in o.items()}}
+        return placed
+
+    def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1, pattern_u8: np.ndarray | None = None) -> list[Capture]:
         """``repeats`` recordings of one render of ``scene`` (a static scene measured again
-        differs by camera noise only), with seeds from ``label``."""
+        differs by camera noise only), with seeds from ``label``; ``pattern_u8`` replaces the
+        run's pattern (calibration frames)."""
         render_seed = label_seed(self.config.seed, f"{label}/render")
-        drive = projector_drive_for(scene, self.pattern_u8, self.sensor, cache=self.cache)
+        drive = projector_drive_for(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache)
         q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []
@@ -152,9 +187,10 @@ class Session:
             out.append(Capture(scene=scene, image=record(q, sensor=self.sensor, scene=scene, rng=noise_seed), gt=gt, seeds=seeds))
         return out
 
-    def competitor(self, device: str, name: str, label: str, *, repeats: int = 1) -> list["CompetitorCapture"]:
+    def competitor(self, device: str, name: "str | SceneSpec", label: str, *, repeats: int = 1) -> list["CompetitorCapture"]:
         """``repeats`` depth maps of scene ``name`` from competitor ``device`` (``kinect`` or
-        ``tof``, :mod:`simbench.baselines`) at its native resolution, decoded the device's way,
+        ``tof``, :mod:`simbench.baselines`; ``name`` a scene of ``scenes/`` or a loaded, not
+        yet prepared scene, e.g. one placed by :meth:`place`) at its native resolution, decoded the device's way,
         with ground truth at its pixels.  Seeds derive from ``device/label``; the Kinect's
         factory reference is recorded once per session."""
         from simbench import baselines
@@ -165,7 +201,8 @@ class Session:
             self.seeds_used[f"{device}/calibration"] = {"render": cal_seed}
             self._competitor_cal[device] = baselines.calibrate(model, spp=self.config.spp, seed=cal_seed, cache=self.cache)
         cal = self._competitor_cal[device]
-        scene = baselines.device_scene(model, load_scene(SCENES_DIR / f"{name}.toml"))
+        raw = load_scene(SCENES_DIR / f"{name}.toml") if isinstance(name, str) else name
+        scene = baselines.device_scene(model, raw)
         render_seed = label_seed(self.config.seed, f"{device}/{label}/render")
         noise_seeds = [label_seed(self.config.seed, f"{device}/{label}/noise/{k}") for k in range(repeats)]
         raws = baselines.acquire(model, scene, cal, spp=self.config.spp, seed=render_seed, noise_seeds=noise_seeds, cache=self.cache)
@@ -179,19 +216,29 @@ class Session:
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
         """The calibration: one capture of the white reference plane at the scene's Z0 per rig
-        and lighting, decoded once per decoder setting (albedo:
-        :data:`simbench.simulate.REFERENCE_ALBEDO`)."""
+        and lighting (albedo :data:`simbench.simulate.REFERENCE_ALBEDO`), with its own seeds,
+        decoded once per decoder setting; for a decoder that unmixes the primaries also the
+        plane under a black frame and under each primary at full drive (Caspi et al. 1998's
+        calibration of the coupling matrix; four frames once per calibration, the measurement
+        stays single-shot)."""
         key = (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, params)
         if key not in self._refs:
             ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
             label = f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
             img = self.capture(ref_scene, label)[0].image
-            self._refs[key] = decode_reference(img, rig=scene.rig, params=params)
+            cal = {}
+            if params.unmix:
+                for name, drive in calibration_frames(self.pattern_u8).items():
+                    cal[name] = self.capture(ref_scene, f"{label}/{name}", pattern_u8=drive)[0].image
+            primaries = [cal[k] for k in ("red", "green", "blue")] if cal else None
+            self._refs[key] = decode_reference(img, rig=scene.rig, params=params, primaries=primaries, dark=cal.get("dark"))
         return self._refs[key]
 
-    def decode(self, cap: Capture, params: DecoderParams) -> DecodeResult:
-        params = dataclasses.replace(params, z0_m=cap.scene.reference_depth_m)
-        ref = self.reference(cap.scene, params)
+    def decode(self, cap: Capture, params: DecoderParams, *, mode: str | None = None) -> DecodeResult:
+        """``cap`` decoded with ``params`` (Z0 = the scene's reference depth) in ``mode``
+        (``reference`` or ``calibrated``; None = ``params.mode``)."""
+        params = dataclasses.replace(params, z0_m=cap.scene.reference_depth_m, mode=mode or params.mode)
+        ref = self.reference(cap.scene, dataclasses.replace(params, mode="reference")) if params.mode == "reference" or params.unmix else None
         return decode(cap.image, rig=cap.scene.rig, params=params, reference=ref)
 
     # provenance --------------------------------------------------------------------------
@@ -225,6 +272,39 @@ class _Timer:
     def __exit__(self, *exc) -> None:
         if exc[0] is None:
             self.progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
+
+
+def score(cap: Capture, result: DecodeResult, period_px: float, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
+    """The scores every experiment reports for one decoded capture, over ``region`` (default:
+    the pixels ground truth says are seen and lit):
+
+    ``plane_mae_mm`` / ``plane_rms_mm``: the paper's protocol, mean absolute (RMS) residual of
+    the decoded points to their least-squares plane (it absorbs any error that is planar, so
+    it cannot see a tilt or an offset of the whole board); ``gt_mae_mm``, ``gt_rmse_mm``,
+    ``bias_mm``: against rendered ground truth; ``completeness``; ``stripe_order_errors`` (and
+    their rate): pixels whose projector column is off by more than half a period.  With
+    ``edge_band_px`` also the 95th percentile, the outlier share and ``edge<N>_mae_mm``, the
+    MAE outside an N-px band at depth edges (the ablation tables).
+    """
+    gt = cap.gt
+    region = gt.lit if region is None else region
+    m = depth_errors(result.depth_m, gt.depth_m, region=region, column_px=result.column_px, gt_column_px=gt.column_px, period_px=period_px)
+    fit = plane_fit_error(result.depth_m, cap.scene.rig.camera, mask=region)
+    out = {
+        "plane_mae_mm": fit["mean_abs_residual_mm"],
+        "plane_rms_mm": fit["rms_residual_mm"],
+        "gt_mae_mm": m["mae_mm"],
+        "gt_rmse_mm": m["rmse_mm"],
+        "bias_mm": m["bias_mm"],
+        "completeness": m["completeness"],
+        "stripe_order_errors": m["stripe_order_errors"],
+        "stripe_order_error_rate": m["stripe_order_error_rate"],
+    }
+    if edge_band_px > 0:
+        band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
+        off_edges = depth_errors(result.depth_m, gt.depth_m, region=region, exclude=band)
+        out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
+    return out
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
