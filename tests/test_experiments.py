@@ -62,6 +62,7 @@ def test_threshold_rules():
     assert t["a/completeness"]["min"] == pytest.approx(0.49)
     assert t["a/stripe_order_error_rate"]["max"] == pytest.approx(0.0005)
     assert "a/nan_mm" not in t
+    assert "a/bias_mm" not in thresholds_from({"a/bias_mm": -0.4}, margin=0.5)  # signed: no max
 
 
 def test_committed_quick_thresholds_are_valid():

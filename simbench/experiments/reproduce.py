@@ -75,6 +75,8 @@ def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
     leaf = name.rsplit("/", 1)[-1]
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return None
+    if leaf == "bias_mm":
+        return None  # signed: a "max" would not bound its size
     if leaf.endswith("_mm"):
         return "max", round(value * (1 + margin) + 0.02, 4)
     if leaf == "completeness":
