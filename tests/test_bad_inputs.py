@@ -165,7 +165,7 @@ for cid, body, msg in [
     ("rgb-string", PLANE + 'rgb = "red"\n', "rgb"),
     ("srgb8-above-255", PLANE + "srgb8 = [300, 0, 0]\n", "srgb8"),
     ("srgb8-bool", PLANE + "srgb8 = [true, false, true]\n", "srgb8"),
-    ("rgb-and-srgb8", PLANE + "rgb = [0.5, 0.5, 0.5]\nsrgb8 = [255, 0, 0]\n", "not both"),
+    ("rgb-and-srgb8", PLANE + "rgb = [0.5, 0.5, 0.5]\nsrgb8 = [255, 0, 0]\n", "not rgb and srgb8"),
     ("material-unknown", PLANE + 'material = "metal"\n', "material"),
     ("roughness-without-plastic", PLANE + "roughness = 0.2\n", "roughness"),
     ("roughness-zero", PLANE + 'material = "plastic"\nroughness = 0\n', "roughness"),
