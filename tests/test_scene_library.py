@@ -31,7 +31,7 @@ def test_paint_reflectance_rejects_bad_colours(bad):
 @pytest.mark.parametrize(
     "extra, match",
     [
-        ({"rgb": [0.5, 0.5, 0.5], "srgb8": [1, 2, 3]}, "not both"),
+        ({"rgb": [0.5, 0.5, 0.5], "srgb8": [1, 2, 3]}, "not rgb and srgb8"),
         ({"roughness": 0.1}, "roughness applies"),
         ({"material": "plastic", "roughness": 0}, "roughness"),
         ({"material": "metal"}, "unknown material"),
