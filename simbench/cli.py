@@ -35,42 +35,33 @@ class _Formatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-def _int(lo: int | None = None, hi: int | None = None):
-    """An argparse type: an integer checked by :func:`simbench.validate.integer`."""
+def _checked(convert, check: str, what: str, **limits):
+    """An argparse type: ``convert(text)`` checked by ``simbench.validate.<check>``."""
 
-    def parse(text: str) -> int:
+    def parse(text: str):
         from simbench import validate
 
         try:
-            value = int(text)
+            value = convert(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
         try:
-            return validate.integer(value, "value", lo=lo, hi=hi)
+            return getattr(validate, check)(value, "value", **limits)
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc).replace("value must", "must")) from None
 
-    parse.__name__ = "integer"
+    parse.__name__ = check
     return parse
+
+
+def _int(lo: int | None = None, hi: int | None = None):
+    """An argparse type: an integer checked by :func:`simbench.validate.integer`."""
+    return _checked(int, "integer", "an integer", lo=lo, hi=hi)
 
 
 def _float(**limits):
     """An argparse type: a number checked by :func:`simbench.validate.number`."""
-
-    def parse(text: str) -> float:
-        from simbench import validate
-
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        try:
-            return validate.number(value, "value", **limits)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc).replace("value must", "must")) from None
-
-    parse.__name__ = "number"
-    return parse
+    return _checked(float, "number", "a number", **limits)
 
 
 # seeds: SeedSequence takes any non-negative integer; 63 bits keep them exact in JSON and NumPy

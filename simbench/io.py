@@ -149,13 +149,7 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
         raise ValueError(f"{path} exists and is not a folder")
     if path.is_dir():
         _check_replaceable(path, manifest, overwrite)
-    created = []
-    d = path.parent
-    while not d.exists():
-        created.append(d)
-        d = d.parent
-    for c in reversed(created):
-        c.mkdir()
+    _make_parents(path)
     _remove_stale_siblings(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
     try:
@@ -232,6 +226,19 @@ def save_npy(path: str | Path, array: np.ndarray) -> Path:
     return atomic_write_bytes(path, npy_bytes(array))
 
 
+def _make_parents(path: Path) -> list[Path]:
+    """Create ``path``'s missing parent folders; returns them, outermost first."""
+    missing = []
+    d = path.parent
+    while not d.exists():
+        missing.append(d)
+        d = d.parent
+    missing.reverse()
+    for m in missing:
+        m.mkdir()
+    return missing
+
+
 def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     """Write several files all or nothing.
 
@@ -249,14 +256,7 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     try:
         for path, data in files.items():
             path = Path(path)
-            missing = []
-            d = path.parent
-            while not d.exists():
-                missing.append(d)
-                d = d.parent
-            for m in reversed(missing):
-                m.mkdir()
-                created.append(m)
+            created += _make_parents(path)
             fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
             staged.append((tmp, path))
             with os.fdopen(fd, "wb") as fh:

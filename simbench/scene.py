@@ -345,7 +345,7 @@ def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tupl
         rx, ry, rz = p["rotation_deg"]
         p["center_m"] = (cx, cy, cz + dz)
         p["rotation_deg"] = (rx + tx, ry + ty, rz)
-        objects.append(SceneObject(kind=o.kind, name=o.name, params=tuple(sorted(p.items())), material=o.material))
+        objects.append(dataclasses.replace(o, params=tuple(sorted(p.items()))))
         offsets[o.name] = {"depth_m": dz, "tilt_deg": [tx, ty]}
     return dataclasses.replace(scene, objects=tuple(objects)), offsets
 

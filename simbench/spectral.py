@@ -125,9 +125,13 @@ def crosstalk_matrix(rgb) -> np.ndarray:
 
 @lru_cache(maxsize=256)
 def _crosstalk_matrix(rgb: tuple[float, float, float]) -> np.ndarray:
+    return _crosstalk_of(reflectance_spectrum(rgb))
+
+
+def _crosstalk_of(rho: np.ndarray) -> np.ndarray:
+    """K of a spectral reflectance ``rho`` on :func:`wavelengths_nm` (module docstring)."""
     s = camera_sensitivities()
     p = projector_primaries()
-    rho = reflectance_spectrum(rgb)
     resp = np.einsum("lc,l,lp->cp", s, rho, p)
     white = np.einsum("lc,lp->cp", s, p)
     return resp / np.diag(white)[None, :]
@@ -189,11 +193,7 @@ def material_crosstalk(rgb, spectrum: str | None = None) -> np.ndarray:
 
 @lru_cache(maxsize=64)
 def _spectrum_crosstalk(name: str) -> np.ndarray:
-    s = camera_sensitivities()
-    p = projector_primaries()
-    resp = np.einsum("lc,l,lp->cp", s, _measured_values(name), p)
-    white = np.einsum("lc,lp->cp", s, p)
-    return resp / np.diag(white)[None, :]
+    return _crosstalk_of(_measured_values(name))
 
 
 def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:

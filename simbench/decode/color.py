@@ -42,9 +42,10 @@ def mixing_matrix(primaries, dark: np.ndarray, *, region: np.ndarray | None = No
 
     Parameters
     ----------
-    primaries : sequence of 3 ndarray, shape (H, W, 3)
-        Captures under the red, green and blue primary (projector channel order).
-    dark : ndarray, shape (H, W, 3)
+    primaries : sequence of 3 ndarray, shape (H, W, 3), float32 in [0, 1]
+        Captures under the red, green and blue primary (projector channel order), e.g. from
+        :func:`simbench.decode.as_float_image`.
+    dark : ndarray, shape (H, W, 3), float32 in [0, 1]
     region : ndarray, shape (H, W), bool, optional
         Pixels to use (default: all).
 
@@ -64,13 +65,13 @@ def mixing_matrix(primaries, dark: np.ndarray, *, region: np.ndarray | None = No
     """
     if len(primaries) != 3:
         raise ValueError(f"need the captures under the 3 primaries, got {len(primaries)}")
-    d = _as_float(dark)
+    d = _calibration_frame(dark)
     sel = np.ones(d.shape[:2], bool) if region is None else np.asarray(region, bool)
     if sel.shape != d.shape[:2] or not sel.any():
         raise ValueError("region must be a non-empty (H, W) mask of the calibration captures")
     k = np.empty((3, 3))
     for p, img in enumerate(primaries):
-        f = _as_float(img)
+        f = _calibration_frame(img)
         if f.shape != d.shape:
             raise ValueError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
         k[:, p] = np.median((f - d)[sel], axis=0)
@@ -82,15 +83,11 @@ def mixing_matrix(primaries, dark: np.ndarray, *, region: np.ndarray | None = No
     return k
 
 
-def _as_float(img) -> np.ndarray:
-    a = np.asarray(img)
+def _calibration_frame(img) -> np.ndarray:
+    a = np.asarray(img, dtype=np.float32)
     if a.ndim != 3 or a.shape[2] != 3:
         raise ValueError(f"calibration captures must have shape (H, W, 3), got {a.shape}")
-    if a.dtype == np.uint8:
-        return a.astype(np.float32) / 255
-    if a.dtype == np.uint16:
-        return a.astype(np.float32) / 65535
-    return a.astype(np.float32)
+    return a
 
 
 def unmix(rgb: np.ndarray, unmixing: np.ndarray) -> np.ndarray:

@@ -300,7 +300,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
     t0 = time.perf_counter()
     try:
         from simbench.experiments.common import RunConfig, Session
-        from simbench.experiments.common import score as _score
+        from simbench.experiments.common import score
         import sys
 
         from simbench.render import select_variant
@@ -319,7 +319,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         t2 = time.perf_counter()
         result = session.decode(cap, decoder)
         t3 = time.perf_counter()
-        row = {k: float(v) for k, v in _score(cap, result, decoder.period_px, edge_band_px=EDGE_BAND_PX).items()}
+        row = {k: float(v) for k, v in score(cap, result, decoder.period_px, edge_band_px=EDGE_BAND_PX).items()}
         row.update(render_seed=cap.seeds["render"], noise_seed=cap.seeds["noise"], error="")
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row

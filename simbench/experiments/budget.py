@@ -16,7 +16,7 @@ import numpy as np
 
 from simbench.device import EFFECTS, SensorModel, get_sensor, with_effects
 from simbench.experiments.common import Session, markdown_table, write_table
-from simbench.experiments.common import score as _score
+from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
 
@@ -58,7 +58,7 @@ def run_budget(session: Session) -> dict:
             caps = sub.capture(scene, "budget/white", repeats=repeats)
             row = {"effect": key, "description": text}
             for mode in MODES:
-                scores = [_score(c, sub.decode(c, cfg.decoder, mode=mode), cfg.decoder.period_px) for c in caps]
+                scores = [score(c, sub.decode(c, cfg.decoder, mode=mode), cfg.decoder.period_px) for c in caps]
                 prefix = "" if mode == "calibrated" else "ref_"
                 for k in scores[0]:
                     v = float(np.mean([s[k] for s in scores]))
