@@ -67,6 +67,24 @@ def _float(**limits):
 # seeds: SeedSequence takes any non-negative integer; 63 bits keep them exact in JSON and NumPy
 _SEED = _int(0, 2**63 - 1)
 _SPP = _int(1, 1 << 16)
+
+
+def _add_render_options(s, *, quick_spp: int | None = None) -> None:
+    """--spp and --sampler, one definition for every subcommand that renders."""
+    from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
+
+    quick = f", {quick_spp} with --quick" if quick_spp else ""
+    s.add_argument("--spp", type=_SPP, default=None, help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick})")
+    s.add_argument("--sampler", choices=SAMPLERS, default=DEFAULT_SAMPLER, help="Mitsuba sample generator (results/render_noise.md compares them)")
+
+
+def _render_settings(args) -> tuple[int, str]:
+    """(spp, sampler) of the parsed options, checked together before anything renders."""
+    from simbench.render import DEFAULT_SPP, check_sampler
+
+    spp = args.spp if args.spp is not None else DEFAULT_SPP
+    check_sampler(args.sampler, spp)
+    return spp, args.sampler
 # Mitsuba's path length: 1 sees only the emitters, so the projector's light needs >= 2
 _MAX_DEPTH = _int(2, 1024)
 
@@ -99,14 +117,15 @@ def _cmd_render(args) -> int:
 
     scene = load_scene(args.scene)
     sensor = get_sensor(args.camera)
+    spp, sampler = _render_settings(args)
     variant = select_variant(args.variant)
     pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     t0 = time.perf_counter()
-    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=args.spp, seed=args.seed, max_depth=args.max_depth)
+    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames)
     files = write_acquisition(acq, args.out, overwrite=args.overwrite)
-    print(f"rendered {scene.name} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    print(f"rendered {scene.name} ({variant}, {spp} spp {sampler}, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
-        print(f"  {key:13s} {path.name}")
+        print(f"  {key:17s} {path.name}")
     return 0
 
 
@@ -148,7 +167,7 @@ def _z0_for(reference: Path, z0: float | None) -> float:
 
 
 def _cmd_decode(args) -> int:
-    from simbench.decode import DecoderParams, decode
+    from simbench.decode import DecoderParams, decode, robust_params
     from simbench.io import load_image, npy_bytes, ply_bytes, png_bytes, write_files
     from simbench.metrics import points_from_depth
     from simbench.rig import load_rig
@@ -173,7 +192,11 @@ def _cmd_decode(args) -> int:
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
     params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    if args.robust:
+        params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
+    if params.unmix:
+        reference = _calibrated_reference(args, rig, params)
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -201,6 +224,29 @@ def _cmd_decode(args) -> int:
     write_files(files)
     print(msg)
     return 0
+
+
+def _calibrated_reference(args, rig, params):
+    """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
+    the reference capture and the calibration frames beside it (or in --calibration)."""
+    from simbench.decode import decode_reference
+    from simbench.io import load_image
+    from simbench.pattern import CALIBRATION_FRAMES
+
+    if args.reference is None:
+        raise ValueError("the colour-robust decoder (unmix) calibrates on the reference plane: give --reference (and its calibration frames)")
+    folder = Path(args.calibration) if args.calibration is not None else Path(args.reference).parent
+    paths = {k: folder / f"calibration_{k}.png" for k in CALIBRATION_FRAMES}
+    missing = [p.name for p in paths.values() if not p.is_file()]
+    if missing:
+        raise ValueError(f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench render --calibration-frames`, or give --calibration FOLDER)")
+    for p in paths.values():
+        _check_manifest(p)
+    frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
+    reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
+    z0 = _z0_for(Path(args.reference), args.z0)
+    ref_params = replace(params, mode="reference", z0_m=z0)
+    return decode_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"])
 
 
 def _finite_range(a: np.ndarray) -> tuple[float, float]:
@@ -252,8 +298,9 @@ def _cmd_demo(args) -> int:
     from simbench.experiments.demo import DemoConfig, run_demo
     from simbench.render import select_variant
 
+    spp, sampler = _render_settings(args)
     select_variant(args.variant)
-    cfg = DemoConfig(spp=args.spp, seed=args.seed, sensor=args.camera)
+    cfg = DemoConfig(spp=spp, sampler=sampler, seed=args.seed, sensor=args.camera)
     if args.scenes:
         cfg = replace(cfg, scenes=tuple(args.scenes))
     run_demo(args.out, config=cfg, progress=lambda s: print(s, flush=True))
@@ -269,17 +316,18 @@ def _cmd_competitor_render(args) -> int:
 
     model = baselines.get_device(args.device)
     scene = baselines.device_scene(model, load_scene(args.scene))
+    spp, sampler = _render_settings(args)
     variant = select_variant(args.variant)
     seeds = {k: int(s.generate_state(1)[0]) for k, s in zip(("calibration", "render", "noise"), np.random.SeedSequence(args.seed).spawn(3))}
     t0 = time.perf_counter()
-    cal = baselines.calibrate(model, spp=args.spp, seed=seeds["calibration"])
-    raw = baselines.acquire(model, scene, cal, spp=args.spp, seed=seeds["render"], noise_seeds=[seeds["noise"]])[0]
+    cal = baselines.calibrate(model, spp=spp, sampler=sampler, seed=seeds["calibration"])
+    raw = baselines.acquire(model, scene, cal, spp=spp, sampler=sampler, seed=seeds["render"], noise_seeds=[seeds["noise"]])[0]
     gt = cached_ground_truth(scene)
-    meta = {"scene": str(args.scene), "spp": args.spp, "seed": args.seed, "seeds": seeds, "variant": variant}
+    meta = {"scene": str(args.scene), "spp": spp, "sampler": sampler, "seed": args.seed, "seeds": seeds, "variant": variant}
     files = baselines.write_recording(args.out, model, raw, cal, gt_depth_m=gt.depth_m, meta=meta, overwrite=args.overwrite)
-    print(f"rendered {scene.name} with the {baselines.DEVICE_LABELS[args.device]} ({variant}, {args.spp} spp, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    print(f"rendered {scene.name} with the {baselines.DEVICE_LABELS[args.device]} ({variant}, {spp} spp {sampler}, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
-        print(f"  {key:13s} {path.name}")
+        print(f"  {key:17s} {path.name}")
     return 0
 
 
@@ -349,8 +397,8 @@ def _cmd_reproduce(args) -> int:
         load_thresholds(args.check)
     if args.camera is not None:
         get_sensor(args.camera)
-    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("sensor", args.camera)) if v is not None}
-    config = RunConfig.preset(quick=args.quick, **overrides)
+    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("sensor", args.camera), ("sampler", args.sampler)) if v is not None}
+    config = RunConfig.preset(quick=args.quick, **overrides)  # checks spp against the sampler
     if args.decoder:
         config = replace(config, decoder=_decoder_overrides(config.decoder, args.decoder))
     out = args.out or ("results/quick" if args.quick else "results")
@@ -435,7 +483,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
     s.add_argument("--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)")
     s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write (e.g. decoded depth)")
-    s.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    _add_render_options(s)
+    s.add_argument("--calibration-frames", action="store_true", help="also record the reference plane under black and each primary (calibration_*.png), which `simbench decode --robust` needs")
     s.add_argument("--seed", type=_SEED, default=0, help="base seed (split into render and noise seeds, all recorded in meta.json)")
     s.add_argument("--max-depth", type=_MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
     s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file")
@@ -455,6 +504,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--near", type=_float(lo=0.0, hi=100.0, lo_open=True), default=0.75, help="working range near end, m")
     s.add_argument("--far", type=_float(lo=0.0, hi=100.0, lo_open=True), default=1.75, help="working range far end, m")
     _add_pattern_options(s)
+    s.add_argument("--robust", action="store_true", help="our colour-robust decoder (unmixing, colour normalisation, weighted intensity) instead of the paper's; needs the calibration frames")
+    s.add_argument("--calibration", default=None, help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: the --reference folder)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
     s.set_defaults(fn=_cmd_decode)
 
@@ -471,7 +522,7 @@ def _parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder", **kw)
     s.add_argument("--out", default="results/demo", help="output folder")
-    s.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    _add_render_options(s)
     s.add_argument("--seed", type=_SEED, default=2017, help="base seed")
     s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: preset (ideal, minimal, paper) or TOML file")
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
@@ -479,13 +530,13 @@ def _parser() -> argparse.ArgumentParser:
     s.set_defaults(fn=_cmd_demo)
 
     s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures", **kw)
-    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget or all (default)")
+    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget, render_noise or all (default)")
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
     s.add_argument("--seed", type=_SEED, default=None, help="base seed (default 2017)")
-    s.add_argument("--spp", type=_SPP, default=None, help="path-tracing samples per pixel (default: 16, 4 with --quick)")
+    _add_render_options(s, quick_spp=4)
     s.add_argument("--repeats", type=_int(1, 1000), default=None, help="recordings per Fig. 9 depth (default: 10, 3 with --quick)")
     s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4")
@@ -517,7 +568,7 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("scene", help="scene TOML file (the competitor replaces its rig)")
     c.add_argument("--out", required=True, help="output folder (written whole or not at all)")
     c.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write")
-    c.add_argument("--spp", type=_SPP, default=16, help="path-tracing samples per pixel")
+    _add_render_options(c)
     c.add_argument("--seed", type=_SEED, default=2017, help="base seed")
     c.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     c.set_defaults(fn=_cmd_competitor_render)

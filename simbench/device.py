@@ -8,6 +8,7 @@ any TOML file with the same layout works too.  Every effect is switchable:
 effect                 switch (TOML)
 =====================  =================================================================
 camera noise           ``[camera] noise``  (EMVA 1288: shot, dark, full well, ADC, PRNU/DSNU)
+white balance          ``[camera] white_balance`` (``off`` / ``one_push``)
 colour filter array    ``[camera] cfa`` (``none`` / ``RGGB`` ...) and ``demosaic``
 spectral crosstalk     ``[spectral] crosstalk``
 projector transfer     ``[projector] transfer`` (``linear`` / ``gamma``), ``gamma``
@@ -27,6 +28,9 @@ camera equation turns into photons per pixel (:func:`simbench.sensor.photons_per
 and the channel's quantum efficiency into electrons.  The exposure time is ``auto`` by
 default: what brings the brightest channel of the white reference board at Z0 to
 ``auto_exposure_fraction`` of the full well, as an operator would set it once for the rig.
+White balance ``one_push`` sets the red and blue channel gains once, on the same white board
+under the projector's full white, so that its three channels read alike
+(:func:`white_balance_gains`); the auto exposure then holds for the balanced channels.
 """
 
 from __future__ import annotations
@@ -59,6 +63,8 @@ __all__ = [
     "electrons_per_radiance_s",
     "exposure_s",
     "channel_weights",
+    "white_balance_gains",
+    "WHITE_BALANCE_MODES",
     "EFFECTS",
     "with_effects",
 ]
@@ -66,6 +72,10 @@ __all__ = [
 PRESETS_DIR = Path(__file__).resolve().parent / "presets"
 SENSOR_PRESETS = ("ideal", "minimal", "paper")
 _NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
+# Point Grey Flea3 USB 3.0 Technical Reference (rev. 9/27/2012), Sec. 7.8 "White Balance": off
+# (one gain for every pixel of the Bayer tiling) or red and blue gains relative to green, set by
+# hand or by One Push on a white target; we model off and One Push.
+WHITE_BALANCE_MODES = ("off", "one_push")
 
 
 def _set(obj, values: dict) -> None:
@@ -129,6 +139,7 @@ class PhysicalCamera:
     noise: bool = True
     cfa: str = "none"
     demosaic: str = "bilinear"
+    white_balance: str = "off"
 
     def __post_init__(self) -> None:
         v = validate
@@ -149,6 +160,7 @@ class PhysicalCamera:
             "noise": v.boolean(self.noise, "noise"),
             "cfa": v.choice(self.cfa, "cfa", CFA_PATTERNS),
             "demosaic": v.choice(self.demosaic, "demosaic", DEMOSAIC_METHODS),
+            "white_balance": v.choice(self.white_balance, "white_balance", WHITE_BALANCE_MODES),
         })
 
     @property
@@ -403,16 +415,41 @@ def _reference_matrix(sensor: SensorModel, albedo: float) -> np.ndarray:
     return albedo * np.eye(3)
 
 
+def _white_board_electrons_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float) -> np.ndarray:
+    """Electrons per second in each camera channel from the white board at Z0 under the
+    projector's full white, shape (3,)."""
+    rate = electrons_per_radiance_s(sensor, rig)
+    k = _reference_matrix(sensor, reference_albedo)
+    return (k * rate[None, :]).sum(axis=1) * projector_scale / reference_depth_m**2
+
+
+def white_balance_gains(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> np.ndarray:
+    """The camera's analogue gain per colour channel relative to green, shape (3,).
+
+    ``off``: (1, 1, 1).  ``one_push``: the Flea3's One Push on the white reference board at Z0
+    under the projector's full white (the room light, of the same white in our model, does not
+    change the ratios): red and blue scaled so that the board reads 1:1:1 (Point Grey Flea3
+    USB 3.0 Technical Reference, Sec. 7.8), green left at 1.  The gain acts before the ADC (the
+    PxGA white-balance stage of the Flea3's A/D converter, ibid. "Gain"), so a boosted channel
+    reaches the top of the ADC range before its pixels reach full well.
+    """
+    cam = sensor.camera
+    if not isinstance(cam, PhysicalCamera) or cam.white_balance == "off":
+        return np.ones(3)
+    board = _white_board_electrons_s(sensor, rig, reference_depth_m=reference_depth_m, reference_albedo=reference_albedo, projector_scale=projector_scale)
+    return board[1] / board
+
+
 def exposure_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> float:
-    """The camera's exposure time: the configured one, or auto exposure (module docstring)."""
+    """The camera's exposure time: the configured one, or auto exposure (module docstring),
+    which brings the brightest white-balanced channel of the board to the set fraction."""
     cam = sensor.camera
     if not isinstance(cam, PhysicalCamera):
         raise ValueError("exposure time needs the physical (emva) camera model")
     if cam.exposure_s is not None:
         return cam.exposure_s
-    rate = electrons_per_radiance_s(sensor, rig)
-    k = _reference_matrix(sensor, reference_albedo)
-    board = (k * rate[None, :]).sum(axis=1) * projector_scale / reference_depth_m**2
+    kw = {"reference_depth_m": reference_depth_m, "reference_albedo": reference_albedo, "projector_scale": projector_scale}
+    board = _white_board_electrons_s(sensor, rig, **kw) * white_balance_gains(sensor, rig, **kw)
     return float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
 
 
@@ -430,6 +467,7 @@ def channel_weights(sensor: SensorModel, rig: Rig) -> np.ndarray:
 
 EFFECTS = {
     "noise": "camera noise (EMVA 1288: shot, dark, PRNU/DSNU)",
+    "white_balance": "camera white balance (One Push on the white reference)",
     "cfa": "Bayer colour filter + demosaicing",
     "crosstalk": "spectral crosstalk (LED primaries x camera sensitivities x surface)",
     "transfer": "projector transfer curve",
@@ -455,6 +493,8 @@ def with_effects(base: SensorModel, source: SensorModel, effects, *, name: str |
     for e in effects:
         if e == "noise":
             cam = dataclasses.replace(cam, **{k: getattr(src, k) for k in ("noise", "dark_noise_e", "dark_current_e_s", "prnu", "dsnu_e", "fixed_pattern_seed", "bits", "gain_dn_per_e", "offset_dn", "full_well_e")})
+        elif e == "white_balance":
+            cam = dataclasses.replace(cam, white_balance=src.white_balance)
         elif e == "cfa":
             cam = dataclasses.replace(cam, cfa=src.cfa, demosaic=src.demosaic)
         elif e == "crosstalk":

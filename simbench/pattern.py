@@ -29,6 +29,8 @@ from simbench import validate
 
 __all__ = [
     "PatternSpec",
+    "CALIBRATION_FRAMES",
+    "calibration_frames",
     "check_channels",
     "de_bruijn",
     "window_positions",
@@ -265,3 +267,20 @@ def quantize(pattern: np.ndarray, *, bits: int = 8) -> np.ndarray:
     levels = (1 << bits) - 1
     q = np.rint(np.clip(pattern, 0.0, 1.0) * levels)
     return q.astype(np.uint8 if bits <= 8 else np.uint16)
+
+
+# the projector frames of the colour-robust decoder's calibration (Caspi, Kiryati and Shamir
+# 1998): the reference plane under black and under each primary at full drive
+CALIBRATION_FRAMES = ("dark", "red", "green", "blue")
+
+
+def calibration_frames(pattern_u8: np.ndarray) -> dict[str, np.ndarray]:
+    """The :data:`CALIBRATION_FRAMES` for a projector showing ``pattern_u8`` (same size and
+    dtype): black, and each primary at full drive."""
+    full = np.iinfo(pattern_u8.dtype).max
+    out = {"dark": np.zeros_like(pattern_u8)}
+    for p, name in enumerate(CALIBRATION_FRAMES[1:]):
+        f = np.zeros_like(pattern_u8)
+        f[..., p] = full
+        out[name] = f
+    return out

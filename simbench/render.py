@@ -7,6 +7,7 @@ first imported, so :func:`select_variant` must run first (at an entry point) to 
 from __future__ import annotations
 
 import glob
+import math
 import os
 import re
 import sys
@@ -25,6 +26,10 @@ __all__ = [
     "select_variant",
     "projector_texture",
     "realised_rig",
+    "SAMPLERS",
+    "DEFAULT_SAMPLER",
+    "DEFAULT_SPP",
+    "check_sampler",
     "mitsuba_scene",
     "render_radiance",
     "GroundTruth",
@@ -226,16 +231,48 @@ def _pose(mi, rig: Rig) -> object:
     return mi.ScalarTransform4f(m.tolist()) @ _look_at_z(mi, (0, 0, 0))
 
 
-def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int) -> tuple[dict, Rig]:
+# Mitsuba 3's sample generators (plugin reference, "Samplers"): independent = uniform random;
+# stratified = jittered strata (sample count rounded to a square per dimension); multijitter =
+# correlated multi-jittered (Kensler 2013); orthogonal = orthogonal array-based Latin
+# hypercube (sample count a prime squared); ldsampler = low-discrepancy (0,2)-sequence
+# (a square power of two: 4, 16, 64 ...).  We accept a count only where Mitsuba would not silently change it.
+SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+# The run default, from measurement (results/render_noise.md, `simbench reproduce render_noise`):
+# on the white board under the `paper` sensor, the smallest cost whose render-noise depth error
+# stays at most 1/3 of the camera-noise one.  Independent sampling needs ~150 spp for it.
+DEFAULT_SAMPLER = "multijitter"
+DEFAULT_SPP = 36
+
+
+def check_sampler(sampler: str, spp: int) -> None:
+    """ValueError unless Mitsuba renders exactly ``spp`` samples per pixel with ``sampler``."""
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r}; valid: {list(SAMPLERS)}")
+    root = math.isqrt(int(spp))
+    if sampler in ("stratified", "multijitter") and root * root != spp:
+        raise ValueError(f"the {sampler} sampler needs a square sample count (4, 9, 16, 25 ...), got {spp}")
+    if sampler == "orthogonal" and not (root * root == spp and _is_prime(root)):
+        raise ValueError(f"the orthogonal sampler needs a sample count that is a prime squared (4, 9, 25, 49 ...), got {spp}")
+    if sampler == "ldsampler" and (spp & (spp - 1) or root * root != spp):
+        raise ValueError(f"the ldsampler needs a sample count that is a square power of two (4, 16, 64, 256 ...), got {spp}")
+
+
+def _is_prime(n: int) -> bool:
+    return n >= 2 and all(n % k for k in range(2, math.isqrt(n) + 1))
+
+
+def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int, sampler: str = "independent") -> tuple[dict, Rig]:
     """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
 
     ``drive=None`` leaves out the projector (the ambient light alone, or geometry only).
+    ``sampler`` is one of :data:`SAMPLERS` (Mitsuba's sample generators).
     Returns the dictionary and the rig as rendered (see :func:`projector_texture`).
     """
     import mitsuba as mi
 
     if spp < 1 or int(spp) != spp:
         raise ValueError(f"spp must be a positive integer, got {spp}")
+    check_sampler(sampler, spp)
     rig = scene.rig
     cam = rig.camera
     d: dict = {
@@ -260,7 +297,7 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
                 "pixel_format": "rgb",
                 "component_format": "float32",
             },
-            "sampler": {"type": "independent", "sample_count": int(spp)},
+            "sampler": {"type": sampler, "sample_count": int(spp)},
         },
     }
     if scene.camera_lens is not None and drive is not None:
@@ -293,7 +330,7 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
     return d, realised_rig(rig)
 
 
-def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int = 6) -> np.ndarray:
+def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent") -> np.ndarray:
     """Path-traced radiance reaching the camera, lit by the projector showing ``drive`` and by
     the scene's ambient light.
 
@@ -311,6 +348,8 @@ def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, see
         Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm).
     max_depth : int
         Path length limit (>= 3 gives one interreflection bounce).
+    sampler : str
+        One of :data:`SAMPLERS`.
 
     Returns
     -------
@@ -319,7 +358,7 @@ def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, see
     """
     import mitsuba as mi
 
-    d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth)
+    d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth, sampler=sampler)
     img = mi.render(_load(mi, d, scene), seed=int(seed), spp=int(spp))
     return np.array(img, dtype=np.float32)
 

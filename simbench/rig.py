@@ -348,6 +348,11 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
     prj = rig.projector
     with np.errstate(divide="ignore", invalid="ignore"):
         x, y = q[..., 0] / z, q[..., 1] / z
+    # a point in the projector's focal plane or behind it has no projector pixel (inf would
+    # turn into NaN with a warning inside the distortion polynomial)
+    behind = ~(z > 0)
+    if np.any(behind):
+        x, y = np.where(behind, np.nan, x), np.where(behind, np.nan, y)
     if prj.has_distortion:
         x, y = distort_normalized(x, y, prj.distortion)
     return prj.focal_px * x + prj.cx_px, prj.focal_px * y + prj.cy_px, z

@@ -196,13 +196,14 @@ def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
     return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))
 
 
-def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposure_s: float, rng=None) -> np.ndarray:
+def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposure_s: float, white_balance=(1.0, 1.0, 1.0), rng=None) -> np.ndarray:
     """Rendered radiance -> recorded image through the EMVA 1288 model and the colour filter
     array of ``camera`` (a :class:`simbench.device.PhysicalCamera`).
 
     Mean electrons ``e_c = radiance_c * electrons_per_radiance[c]`` (+ dark current x
     exposure); Poisson shot noise, temporal dark noise ``sigma_d`` (Gaussian), full-well
-    clipping, ``y = K e + offset`` rounded to the ADC range (EMVA 1288 release 4.0, Sec. 2).
+    clipping, ``y = K g_c e + offset`` rounded to the ADC range (EMVA 1288 release 4.0, Sec. 2;
+    ``g_c`` the white-balance gain of the pixel's colour, applied before the ADC).
     Optional PRNU (relative gain spread) and DSNU (offset spread, e-) are drawn once from
     ``camera.fixed_pattern_seed``: a property of the sensor, the same in every frame.  With a
     colour filter array, each pixel keeps its filter's channel before the noise, and the raw
@@ -215,6 +216,8 @@ def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposur
         Mean electrons per unit radiance in each channel during this exposure.
     exposure_s : float
         Exposure time (dark current).
+    white_balance : sequence of 3 float
+        Analogue gain of each colour channel (:func:`simbench.device.white_balance_gains`).
     rng : numpy.random.Generator | int | None
         Temporal-noise seed.
 
@@ -230,9 +233,14 @@ def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposur
     scale = np.asarray(electrons_per_radiance, dtype=np.float64)
     if scale.shape != (3,) or not np.all(scale > 0):
         raise ValueError(f"electrons_per_radiance must be three numbers > 0, got {electrons_per_radiance!r}")
+    wb = np.asarray(white_balance, dtype=np.float64)
+    if wb.shape != (3,) or not np.all(np.isfinite(wb) & (wb > 0)):
+        raise ValueError(f"white_balance must be three finite numbers > 0, got {white_balance!r}")
     mean_e = np.clip(rad, 0.0, None) * scale
+    gain = camera.gain * wb
     if camera.cfa != "none":
         mean_e = bayer_mosaic(mean_e, pattern=camera.cfa)
+        gain = bayer_mosaic(np.broadcast_to(gain, rad.shape), pattern=camera.cfa)
     shape = mean_e.shape
     if camera.prnu > 0 or camera.dsnu_e > 0:
         fp = np.random.default_rng(camera.fixed_pattern_seed)
@@ -249,7 +257,7 @@ def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposur
     else:
         electrons = mean_e
     electrons = np.minimum(electrons + dark_fp, camera.full_well_e)
-    dn = np.clip(np.rint(camera.gain * electrons + camera.offset_dn), 0, camera.max_dn)
+    dn = np.clip(np.rint(gain * electrons + camera.offset_dn), 0, camera.max_dn)
     out = dn.astype(np.uint8 if camera.bits == 8 else np.uint16)
     if camera.cfa != "none":
         out = demosaic(out, pattern=camera.cfa, method=camera.demosaic)

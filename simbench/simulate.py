@@ -16,11 +16,11 @@ import numpy as np
 
 from simbench.cache import RenderCache, array_digest, scene_fingerprint
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict
+from simbench.pattern import CALIBRATION_FRAMES, PatternSpec, calibration_frames, fringe_pattern, quantize
+from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern
-from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
+from simbench.render import GroundTruth, check_sampler, ground_truth, projector_distance, realised_rig, render_radiance
 from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
@@ -44,12 +44,18 @@ __all__ = [
 REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
 
 
-def split_seed(seed: int) -> dict[str, int]:
-    """Four independent 32-bit seeds from one base seed."""
+_SEED_NAMES = ("render_capture", "render_reference", "noise_capture", "noise_reference")
+_CALIBRATION_SEED_NAMES = tuple(f"{kind}_calibration_{f}" for kind in ("render", "noise") for f in CALIBRATION_FRAMES)
+
+
+def split_seed(seed: int, *, calibration: bool = False) -> dict[str, int]:
+    """Independent 32-bit seeds from one base seed: four for the capture and the reference, and
+    with ``calibration`` eight more for the calibration frames (SeedSequence children are
+    numbered, so the first four are the same either way)."""
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    kids = np.random.SeedSequence(int(seed)).spawn(4)
-    names = ("render_capture", "render_reference", "noise_capture", "noise_reference")
+    names = _SEED_NAMES + (_CALIBRATION_SEED_NAMES if calibration else ())
+    kids = np.random.SeedSequence(int(seed)).spawn(len(names))
     return {n: int(k.generate_state(1)[0]) for n, k in zip(names, kids)}
 
 
@@ -63,6 +69,8 @@ class Acquisition:
     reference: np.ndarray  # (H, W, 3) recorded image of the reference plane
     gt: GroundTruth
     meta: dict = field(default_factory=dict)
+    # the reference plane under each of simbench.pattern.CALIBRATION_FRAMES (colour-robust decoder)
+    calibration: dict = field(default_factory=dict)
 
 
 # distribution names of what provenance records (read from the installed metadata: no import,
@@ -101,12 +109,13 @@ def _renderer_id() -> dict:
     return {"variant": mi.variant(), "mitsuba": mi.__version__}
 
 
-def cached_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
+def cached_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
     """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``."""
+    kw = {"spp": spp, "seed": seed, "max_depth": max_depth, "sampler": sampler}
     if cache is None:
-        return render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)
-    parts = {"scene": scene_fingerprint(scene), "drive": "off" if drive is None else array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), **_renderer_id()}
-    return cache.get_or_make("radiance", parts, lambda: {"radiance": render_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth)})["radiance"]
+        return render_radiance(scene, drive, **kw)
+    parts = {"scene": scene_fingerprint(scene), "drive": "off" if drive is None else array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), "sampler": sampler, **_renderer_id()}
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render_radiance(scene, drive, **kw)})["radiance"]
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
@@ -186,7 +195,7 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
-def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *, spp: int, seed: int, max_depth: int, cache: RenderCache | None = None) -> np.ndarray:
+def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
     """Radiance per camera channel on the camera's recorded pixel grid.
 
     Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
@@ -206,7 +215,7 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
     """
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
-    kw = {"spp": spp, "max_depth": max_depth, "cache": cache}
+    kw = {"spp": spp, "max_depth": max_depth, "sampler": sampler, "cache": cache}
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive, seed=seed, **kw)
         if ambient:
@@ -231,9 +240,11 @@ def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng=None) ->
     cam = sensor.camera
     if isinstance(cam, SimpleCamera):
         return simple_camera(q, camera=cam, rng=rng)
-    t = exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale)
+    board = {"reference_depth_m": scene.reference_depth_m, "reference_albedo": REFERENCE_ALBEDO, "projector_scale": scene.projector_scale}
+    t = exposure_s(sensor, scene.rig, **board)
     per_radiance = electrons_per_radiance_s(sensor, scene.rig) * t
-    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, rng=rng)
+    gains = white_balance_gains(sensor, scene.rig, **board)
+    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, white_balance=gains, rng=rng)
 
 
 def acquire(
@@ -244,7 +255,9 @@ def acquire(
     spp: int,
     seed: int,
     max_depth: int = 6,
+    sampler: str = "independent",
     with_reference: bool = True,
+    with_calibration: bool = False,
     cache: RenderCache | None = None,
 ) -> Acquisition:
     """Render and record a scene (and its reference plane) lit by the pattern.
@@ -265,24 +278,34 @@ def acquire(
     if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
         raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
     scene = physical_scene(scene, sensor)
-    seeds = split_seed(seed)
+    if with_calibration and not with_reference:
+        raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
+    seeds = split_seed(seed, calibration=with_calibration)
     pat = quantize(fringe_pattern(pattern))
     drive = projector_drive_for(scene, pat, sensor, cache=cache)
-    q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, cache=cache)
+    check_sampler(sampler, spp)
+    q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, sampler=sampler, cache=cache)
     capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
     if with_reference:
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
         ref_drive = projector_drive_for(ref_scene, pat, sensor, cache=cache)
-        ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, cache=cache)
+        ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, sampler=sampler, cache=cache)
         reference = record(ref_q, sensor=sensor, scene=ref_scene, rng=seeds["noise_reference"])
+    calibration = {}
+    if with_calibration:
+        for name, frame in calibration_frames(pat).items():
+            q_cal = render_channels(ref_scene, projector_drive_for(ref_scene, frame, sensor, cache=cache), sensor, spp=spp, seed=seeds[f"render_calibration_{name}"], max_depth=max_depth, sampler=sampler, cache=cache)
+            calibration[name] = record(q_cal, sensor=sensor, scene=ref_scene, rng=seeds[f"noise_calibration_{name}"])
     gt = cached_ground_truth(scene, cache=cache)
     meta = {
         "scene": scene.name,
         "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude, "channels": pattern.channels},
         "sensor": sensor_to_dict(sensor),
         "exposure_s": exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale) if sensor.is_physical else None,
+        "white_balance_gains": white_balance_gains(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale).tolist(),
         "spp": int(spp),
+        "sampler": sampler,
         "max_depth": int(max_depth),
         "seed": int(seed),
         "seeds": seeds,
@@ -291,7 +314,7 @@ def acquire(
         "variant": mi.variant(),
         "versions": versions(),
     }
-    return Acquisition(scene=scene, pattern=pat, capture=capture, reference=reference, gt=gt, meta=meta)
+    return Acquisition(scene=scene, pattern=pat, capture=capture, reference=reference, gt=gt, meta=meta, calibration=calibration)
 
 
 RENDER_MANIFEST = "meta.json"
@@ -315,7 +338,10 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
             "gt_lit": "gt_lit.npy",
             "gt_object_id": "gt_object_id.npy",
             "rig": "rig.toml",
+            **{f"calibration_{k}": f"calibration_{k}.png" for k in acq.calibration},
         }
+        for k, img in acq.calibration.items():
+            save_png(tmp / f"calibration_{k}.png", img)
         save_png(tmp / names["capture"], acq.capture)
         save_png(tmp / names["reference"], acq.reference)
         save_npy(tmp / names["gt_depth"], acq.gt.depth_m)

@@ -75,6 +75,12 @@ def test_phase_method_axis(tmp_path, variant):
     for r in rows[:3]:
         assert r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0  # small, few-spp renders
     assert len({r["gt_mae_mm"] for r in rows[:3]}) == 3  # the axis reaches the decoder
+    # both protocols, the board placed off the reference plane (same placement in every run)
+    for r in rows[:3]:
+        assert r["ref_completeness"] > 0.95 and r["ref_gt_mae_mm"] < 1.0 and r["ref_gt_mae_mm"] != r["gt_mae_mm"]
+    assert len({r["placement_seed"] for r in rows[:3]}) == 1 and rows[0]["placement_seed"] != ""
+    table = _table(tmp_path / "t.csv")
+    assert {"ref_plane_mae_mm", "ref_completeness", "placement_seed"} <= set(table[0])
     assert "phase_method must be one of" in rows[3]["error"] and "'hilbert'" in rows[3]["error"] and "'wfr'" in rows[3]["error"]
 
 

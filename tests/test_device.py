@@ -21,6 +21,7 @@ from simbench.device import (
     load_sensor,
     sensor_from_dict,
     sensor_to_dict,
+    white_balance_gains,
     with_effects,
 )
 from simbench.rig import paper_rig
@@ -126,6 +127,58 @@ def test_auto_exposure_puts_the_reference_board_at_the_set_fraction(crosstalk):
     assert img.max() == round(s.camera.auto_exposure_fraction * 255)
     fixed = dataclasses.replace(s, camera=dataclasses.replace(s.camera, exposure_s=0.004))
     assert exposure_s(fixed, RIG, reference_depth_m=z0, reference_albedo=0.8) == 0.004
+
+
+@pytest.mark.parametrize("crosstalk", [False, True])
+@pytest.mark.parametrize("cfa", ["none", "RGGB"])
+def test_one_push_white_balance_makes_the_reference_board_grey(crosstalk, cfa):
+    """Flea3 One Push (Technical Reference Sec. 7.8): red and blue gains relative to green such
+    that the white board at Z0 under the projector's white reads 1:1:1; with auto exposure the
+    balanced channels sit at the set fraction of full scale.  Without white balance they do not
+    (the LED primaries and the channel QEs differ)."""
+    from simbench.simulate import REFERENCE_ALBEDO
+    from simbench.spectral import crosstalk_matrix
+
+    base = get_sensor("ideal")
+    z0 = 1.3
+    board = {"reference_depth_m": z0, "reference_albedo": REFERENCE_ALBEDO}
+    k = crosstalk_matrix((REFERENCE_ALBEDO,) * 3) if crosstalk else REFERENCE_ALBEDO * np.eye(3)
+    images = {}
+    for mode in ("off", "one_push"):
+        s = dataclasses.replace(base, crosstalk=crosstalk, camera=dataclasses.replace(base.camera, white_balance=mode, cfa=cfa))
+        gains = white_balance_gains(s, RIG, **board)
+        t = exposure_s(s, RIG, **board)
+        q = (k * channel_weights(s, RIG)).sum(axis=1) / z0**2
+        images[mode] = emva_camera(np.broadcast_to(q, (8, 8, 3)).copy(), camera=s.camera, electrons_per_radiance=electrons_per_radiance_s(s, RIG) * t, exposure_s=t, white_balance=gains)
+        if mode == "off":
+            assert np.array_equal(gains, np.ones(3))
+        else:
+            assert gains[1] == 1.0 and np.all(gains > 0)
+    levels = images["one_push"][2:-2, 2:-2].reshape(-1, 3).astype(float)
+    # 0.7 x 255 = 178.5: rounding puts each channel on either side of the half
+    assert np.all(np.abs(levels - base.camera.auto_exposure_fraction * 255) <= 0.5 + 1e-9)
+    off = images["off"][2:-2, 2:-2].reshape(-1, 3)
+    assert off.max() - off.min() > 10
+
+
+def test_white_balance_gain_acts_before_the_adc_clip():
+    """A channel with gain > 1 reaches the top of the ADC range before full well."""
+    cam = dataclasses.replace(get_sensor("ideal").camera, full_well_e=1000.0)
+    rad = np.full((2, 2, 3), 0.6)
+    img = emva_camera(rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(2.0, 1.0, 0.5))
+    assert img[0, 0].tolist() == [255, round(0.6 * 255), round(0.3 * 255)]
+    with pytest.raises(ValueError, match="white_balance"):
+        emva_camera(rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(1.0, 0.0, 1.0))
+
+
+def test_paper_preset_balances_white_on_the_camera():
+    paper = get_sensor("paper")
+    assert paper.camera.white_balance == "one_push"
+    gains = white_balance_gains(paper, RIG, reference_depth_m=1.0, reference_albedo=0.8)
+    # the LED blue line gives the fewest electrons per unit drive (spectral.py): the largest gain
+    assert gains[1] == 1.0 and gains[2] > gains[0] > 1.0
+    with pytest.raises(ValueError, match="white_balance"):
+        sensor_from_dict({"camera": {"model": "emva", "pixel_pitch_um": 5.3, "qe": [0.5] * 3, "full_well_e": 1e4, "dark_noise_e": 1.0, "white_balance": "auto"}})
 
 
 def test_apply_to_rig_puts_the_lens_distortion_in_the_rig():

@@ -70,19 +70,19 @@ def device_scene(model, scene: SceneSpec) -> SceneSpec:
     return kinect.device_scene(scene, model) if _kind(model) == "kinect" else tof.device_scene(scene, model)
 
 
-def calibrate(model, *, spp: int, seed: int, cache=None):
+def calibrate(model, *, spp: int, seed: int, sampler: str = "independent", cache=None):
     """The device's calibration (Kinect: :class:`~simbench.baselines.kinect.KinectCalibration`;
     ToF: None)."""
-    return kinect.calibrate(model, spp=spp, seed=seed, cache=cache) if _kind(model) == "kinect" else None
+    return kinect.calibrate(model, spp=spp, seed=seed, sampler=sampler, cache=cache) if _kind(model) == "kinect" else None
 
 
-def acquire(model, scene: SceneSpec, calibration, *, spp: int, seed: int, noise_seeds: list[int], cache=None) -> list[np.ndarray]:
+def acquire(model, scene: SceneSpec, calibration, *, spp: int, seed: int, noise_seeds: list[int], sampler: str = "independent", cache=None) -> list[np.ndarray]:
     """Raw frames of ``scene`` (already :func:`device_scene`), one per noise seed."""
     if _kind(model) == "kinect":
         if calibration is None:
             raise ValueError("the Kinect needs its calibration (reference image): call calibrate() first")
-        return kinect.capture(scene, model, calibration, spp=spp, seed=seed, noise_seeds=noise_seeds, cache=cache)
-    return tof.capture(scene, model, spp=spp, seed=seed, noise_seeds=noise_seeds, cache=cache)
+        return kinect.capture(scene, model, calibration, spp=spp, seed=seed, noise_seeds=noise_seeds, sampler=sampler, cache=cache)
+    return tof.capture(scene, model, spp=spp, seed=seed, noise_seeds=noise_seeds, sampler=sampler, cache=cache)
 
 
 def decode_raw(model, raw: np.ndarray, calibration=None) -> CompetitorDepth:

@@ -359,14 +359,14 @@ def _ir(radiance_rgb: np.ndarray) -> np.ndarray:
     return np.asarray(radiance_rgb, dtype=np.float32).mean(axis=2)
 
 
-def _render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, cache) -> np.ndarray:
+def _render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache) -> np.ndarray:
     from simbench.simulate import cached_radiance
 
     drive = np.repeat(dot_pattern(model)[..., None], 3, axis=2)
-    return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, cache=cache))
+    return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache))
 
 
-def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, cache=None, albedo: float = 0.8) -> KinectCalibration:
+def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent", cache=None, albedo: float = 0.8) -> KinectCalibration:
     """Record the factory reference: a white plane (``albedo``) at ``reference_depth_m``; the
     exposure is set so that its brightest dots (99.9th percentile) reach ``exposure_fraction``
     of the full well.  Seeds: render ``seed``; speckle and noise derived from it."""
@@ -374,7 +374,7 @@ def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, ca
 
     placeholder = SceneSpec(name="kinect_reference", rig=kinect_rig(model), objects=(SceneObject("plane", "p", (("center_m", (0.0, 0.0, 1.0)), ("size_m", (1.0, 1.0)))),))
     ref_scene = reference_scene(device_scene(placeholder, model), albedo=albedo)
-    rad = _render(ref_scene, model, spp=spp, seed=seed, max_depth=max_depth, cache=cache)
+    rad = _render(ref_scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
     blurred = cv2.GaussianBlur(rad, (0, 0), model.psf_sigma_px) if model.psf_sigma_px > 0 else rad
     peak = float(np.percentile(blurred, 99.9))
     if not peak > 0:
@@ -386,9 +386,9 @@ def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, ca
     return KinectCalibration(reference=ref, electrons_per_radiance=k)
 
 
-def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, cache=None) -> list[np.ndarray]:
+def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, sampler: str = "independent", cache=None) -> list[np.ndarray]:
     """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
     frozen to the static scene, derives from it) recorded once per noise seed."""
-    rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, cache=cache)
+    rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
     speckle_seed = int(np.random.SeedSequence([int(seed), 2]).generate_state(1)[0])
     return [record_ir(rad, model=model, electrons_per_radiance=calibration.electrons_per_radiance, speckle_rng=speckle_seed, rng=s) for s in noise_seeds]

@@ -230,13 +230,13 @@ def decode_taps(taps: np.ndarray, *, model: ToFModel) -> ToFDepth:
     )
 
 
-def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_seeds: list[int], cache=None) -> list[np.ndarray]:
+def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_seeds: list[int], sampler: str = "independent", cache=None) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
     from simbench.cache import scene_fingerprint
     from simbench.simulate import cached_arrays, cached_radiance
 
-    rad = cached_radiance(scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, cache=cache).mean(axis=2)
+    rad = cached_radiance(scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache).mean(axis=2)
     parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
 
     def make() -> dict:

@@ -11,6 +11,7 @@ contrast that noise then perturbs), so the single-effect rows need not add up to
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -20,17 +21,26 @@ from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
 
-__all__ = ["budget_rows", "run_budget"]
+__all__ = ["budget_rows", "converged_spp", "run_budget"]
 
 SCENE = "plane_white"
+RENDER_ROW = "render_converged"
 MODES = ("calibrated", "reference")  # triangulation (paper Eq. 15), reference plane (Sec. 5.4)
 PAPER_WHITE_MM = PAPER_TABLE1["white"][1]
+
+
+def converged_spp(spp: int) -> int:
+    """The sample count of the render-noise row: at least 4x ``spp`` (half the Monte Carlo
+    noise of independent sampling, less with stratification), a square for ``multijitter``."""
+    root = math.isqrt(4 * spp)
+    return root * root if root * root == 4 * spp else (root + 1) ** 2
 
 
 def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, SensorModel]]:
     """(key, description, sensor) of each row: the baseline, each effect the ``paper`` model
     switches on, the projector's video-mode gamma (a what-if: the paper used pattern mode),
-    and the full ``paper`` model."""
+    and the full ``paper`` model.  The render-noise row (:data:`RENDER_ROW`, the ideal sensor
+    rendered with :func:`converged_spp` samples) comes second in :func:`run_budget`."""
     rows = [("ideal", "ideal: every effect off", ideal)]
     for key, text in EFFECTS.items():
         s = with_effects(ideal, paper, [key], name=f"ideal+{key}")
@@ -50,9 +60,11 @@ def run_budget(session: Session) -> dict:
     ideal, paper = get_sensor("ideal"), get_sensor("paper")
     rows, metrics = [], {}
     specs = budget_rows(ideal, paper)
+    converged = dataclasses.replace(cfg, sampler="multijitter", spp=converged_spp(cfg.spp))
+    specs.insert(1, (RENDER_ROW, f"ideal, rendered with {converged.spp} spp multijitter: the ideal row minus this is render noise ({cfg.spp} spp {cfg.sampler} in every other row)", ideal))
     for i, (key, text, sensor) in enumerate(specs):
         with session.timed(f"[budget {i + 1}/{len(specs)}] {key}"):
-            sub = session.fork(sensor)
+            sub = session.fork(sensor, config=converged if key == RENDER_ROW else None)
             # the same placement (and seeds) in every row
             scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "budget/white", ["board"]))
             caps = sub.capture(scene, "budget/white", repeats=repeats)
@@ -80,7 +92,7 @@ def _markdown(session: Session, rows: list[dict], repeats: int) -> str:
     lines = [
         "# Error budget: white board at 1.0 m",
         "",
-        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, "
+        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
         f"{repeats} recording(s) per row averaged, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
         "Each row is the `ideal` sensor model (`simbench/presets/ideal.toml`) with one effect of the `paper` model "

@@ -27,14 +27,14 @@ from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
 from simbench.metrics import depth_errors, edge_band, plane_fit_error
-from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.render import GroundTruth, realised_rig
+from simbench.pattern import PatternSpec, calibration_frames, fringe_pattern, quantize
+from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, GroundTruth, check_sampler, realised_rig
 from simbench.rig import scale_camera
 from simbench.scene import Placement, SceneSpec, load_scene, place_objects, reference_scene
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, physical_scene, projector_drive_for, record, render_channels, versions
 
-__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "calibration_frames", "label_seed", "write_table", "markdown_table", "git_commit"]
+__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "git_commit"]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -46,7 +46,9 @@ class RunConfig:
     sensor : sensor model, a preset of :func:`simbench.device.get_sensor` (``paper``: the
         Flea3 + LightCrafter physics; ``minimal``: noise only; ``ideal``: nothing) or a TOML file
     camera_scale : camera resolution factor (0.5 = 640x480 for quick runs)
-    spp, max_depth : path tracing samples per pixel and path length
+    spp, sampler, max_depth : path tracing samples per pixel, Mitsuba sample generator
+        (:data:`simbench.render.DEFAULT_SAMPLER` and ``DEFAULT_SPP``: measured to keep render
+        noise below a third of camera noise on the white board) and path length
     seed : base seed of every capture
     fig9_repeats : noise realisations per depth in Fig. 9 (the paper: "more than 10 times")
     edge_band_px : band at depth edges left out of error statistics
@@ -60,7 +62,8 @@ class RunConfig:
     quick: bool = False
     sensor: str = "paper"
     camera_scale: float = 1.0
-    spp: int = 16
+    spp: int = DEFAULT_SPP
+    sampler: str = DEFAULT_SAMPLER
     max_depth: int = 6
     seed: int = 2017
     fig9_repeats: int = 10
@@ -69,6 +72,9 @@ class RunConfig:
     placement_depth_mm: float = 10.0
     placement_tilt_deg: float = 2.0
     decoder: DecoderParams = field(default_factory=DecoderParams)
+
+    def __post_init__(self) -> None:
+        check_sampler(self.sampler, self.spp)
 
     @property
     def placement(self) -> Placement:
@@ -81,18 +87,6 @@ class RunConfig:
 
     def to_dict(self) -> dict:
         return asdict(self)  # recurses into the decoder's dataclass
-
-
-def calibration_frames(pattern_u8: np.ndarray) -> dict[str, np.ndarray]:
-    """The projector frames of the coupling-matrix calibration: black, and each primary at
-    full drive (same size and dtype as the pattern)."""
-    full = np.iinfo(pattern_u8.dtype).max
-    out = {"dark": np.zeros_like(pattern_u8)}
-    for p, name in enumerate(("red", "green", "blue")):
-        f = np.zeros_like(pattern_u8)
-        f[..., p] = full
-        out[name] = f
-    return out
 
 
 def label_seed(base: int, label: str) -> int:
@@ -141,9 +135,10 @@ class Session:
         self._competitor_cal: dict = {}
         self.seeds_used: dict[str, dict] = {}
 
-    def fork(self, sensor: SensorModel) -> "Session":
-        """A session with another sensor model sharing this one's cache, output and seed log."""
-        other = Session(self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
+    def fork(self, sensor: SensorModel, *, config: RunConfig | None = None) -> "Session":
+        """A session with another sensor model (and optionally other run settings) sharing
+        this one's cache, output and seed log."""
+        other = Session(config or self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
         other.cache = self.cache
         other.seeds_used = self.seeds_used
         other._competitor_cal = self._competitor_cal
@@ -177,7 +172,7 @@ class Session:
         run's pattern (calibration frames)."""
         render_seed = label_seed(self.config.seed, f"{label}/render")
         drive = projector_drive_for(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache)
-        q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, cache=self.cache)
+        q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, sampler=self.config.sampler, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []
         for k in range(repeats):
@@ -199,13 +194,13 @@ class Session:
         if device not in self._competitor_cal:
             cal_seed = label_seed(self.config.seed, f"{device}/calibration")
             self.seeds_used[f"{device}/calibration"] = {"render": cal_seed}
-            self._competitor_cal[device] = baselines.calibrate(model, spp=self.config.spp, seed=cal_seed, cache=self.cache)
+            self._competitor_cal[device] = baselines.calibrate(model, spp=self.config.spp, seed=cal_seed, sampler=self.config.sampler, cache=self.cache)
         cal = self._competitor_cal[device]
         raw = load_scene(SCENES_DIR / f"{name}.toml") if isinstance(name, str) else name
         scene = baselines.device_scene(model, raw)
         render_seed = label_seed(self.config.seed, f"{device}/{label}/render")
         noise_seeds = [label_seed(self.config.seed, f"{device}/{label}/noise/{k}") for k in range(repeats)]
-        raws = baselines.acquire(model, scene, cal, spp=self.config.spp, seed=render_seed, noise_seeds=noise_seeds, cache=self.cache)
+        raws = baselines.acquire(model, scene, cal, spp=self.config.spp, seed=render_seed, noise_seeds=noise_seeds, sampler=self.config.sampler, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []
         for k, (raw, noise_seed) in enumerate(zip(raws, noise_seeds)):

@@ -22,6 +22,7 @@ from simbench.metrics import depth_errors, edge_band
 from simbench.pattern import PatternSpec
 from simbench.scene import load_scene
 from simbench.device import get_sensor
+from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
 from simbench.simulate import acquire
 
 __all__ = ["DemoConfig", "DEFAULT_SCENES", "run_demo", "score_acquisition", "depth_figure"]
@@ -33,7 +34,8 @@ DEFAULT_SCENES = ("white_plane", "tilted_plane", "sphere", "step")
 class DemoConfig:
     scenes: tuple[str, ...] = DEFAULT_SCENES
     sensor: str = "minimal"
-    spp: int = 16
+    spp: int = DEFAULT_SPP
+    sampler: str = DEFAULT_SAMPLER
     seed: int = 2017
     edge_band_px: int = 5
     decoder: DecoderParams = DecoderParams()
@@ -102,7 +104,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     for i, (name, scene, ss) in enumerate(zip(config.scenes, scenes, seeds)):
         seed = int(ss.generate_state(1)[0])
         t0 = time.perf_counter()
-        acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, seed=seed)
+        acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, sampler=config.sampler, seed=seed)
         t1 = time.perf_counter()
         params = DecoderParams(**{**asdict(config.decoder), "z0_m": scene.reference_depth_m})
         ref = decode_reference(acq.reference, rig=acq.scene.rig, params=params)

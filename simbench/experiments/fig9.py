@@ -131,7 +131,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Fig. 9: RMSE against depth",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, sensor model `{cfg.sensor}`, "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
         f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: `fig9.png`; "
         "every recording with its seeds: `fig9.csv`.",
         "",

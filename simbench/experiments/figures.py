@@ -138,7 +138,7 @@ def run_figures(session: Session) -> dict:
     md = [
         "# Qualitative figures (paper Fig. 6, 11, 12, 13)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, sensor model `{cfg.sensor}`, "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
         f"base seed {cfg.seed}, variant `{session.variant}`). Errors exclude a {cfg.edge_band_px}-px band at depth edges; "
         f"completeness is over the seen and lit pixels. Point clouds keep every {cfg.ply_stride}-th pixel per axis.",
         "",

@@ -112,7 +112,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Table 1: colour boards at 1.0 m (the paper's simulation, Sec. 5.5)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, sensor model `{cfg.sensor}`, "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
         f"base seed {cfg.seed}, variant `{session.variant}`); seeds and placement per capture in `table1.csv`, everything "
         "else in `table1.provenance.json`.",
         "",

@@ -137,7 +137,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
     lines = [
         "# Table 3: depth discontinuity (plaster cube next to a cuboid)",
         "",
-        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp, "
+        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
         f"sensor model `{cfg.sensor}`, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
         "The paper's Table 3 is measured on its rig (Sec. 6). The cube and the cuboid are each placed with a seeded error "
