@@ -5,7 +5,10 @@ the virtual environment's ``bin`` on ``PATH``, an empty ``HOME``, no ``PYTHONPAT
 empty working folder that holds the repository's ``scenes/`` and ``simbench/studies/`` as the
 README's relative paths expect.  ``simbench`` lines run as they are, in order (later lines read
 what earlier ones wrote); Python blocks run as scripts; ``make`` lines are checked with
-``make -n`` (running them would start this suite again, or take minutes: CI runs them).
+``make -n`` (running them would start this suite again, or take minutes: CI runs them), and
+``simbench ablate`` lines (a built-in study is tens of full-resolution renders at the run's
+36 spp: most of an hour) are parsed by the real parser and their sweeps loaded, validated and
+expanded, not run (``tests/test_ablate.py`` runs sweeps end to end).
 Inline ``simbench ...`` commands in README.md and results/README.md are parsed by the real
 command-line parser (alternatives written ``a|b`` are each parsed).
 """
@@ -110,6 +113,16 @@ def test_inline_commands_parse():
             pytest.fail(f"README command does not parse: {cmd!r} (exit {exc.code})")
 
 
+def _check_ablate(argv: list[str], workdir: Path) -> None:
+    from simbench.cli import _parser
+    from simbench.experiments.ablate import expand, load_sweep
+
+    args = _parser().parse_args(argv[1:])
+    for name in args.sweep:
+        path = workdir / name if (workdir / name).exists() else name
+        assert expand(load_sweep(path)), name
+
+
 @pytest.mark.slow
 def test_every_fenced_block_runs_as_written(workdir):
     """The README's blocks, in order, in one working folder: each simbench line exits 0."""
@@ -130,6 +143,9 @@ def test_every_fenced_block_runs_as_written(workdir):
             if cmd.startswith("make "):
                 continue  # test_make_targets_in_the_readme_exist
             argv = shlex.split(cmd)
+            if argv[1] == "ablate":
+                _check_ablate(argv, workdir)
+                continue
             res = _run([str(BIN / argv[0]), *argv[1:]], workdir, home)
             assert res.returncode == 0, f"README command failed: {cmd}\n{res.stdout[-2000:]}\n{res.stderr[-3000:]}"
             assert "Traceback" not in res.stderr, res.stderr[-3000:]

@@ -117,8 +117,9 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "(renders with different seeds, the camera's temporal noise off) and from the camera alone (one render recorded "
         "with different noise seeds). Target: render noise at most 1/3 of camera noise on the white board. The run "
         f"renders with `{cfg.sampler}` at {cfg.spp} spp (marked), which {'meets' if own_meets else 'does not meet'} the target here; "
-        f"the default of full runs (`simbench.render.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = {DEFAULT_SPP}) is the "
-        "cheapest setting of the full run's table that meets it. Stratified generators help most where the integrand is smooth "
+        f"the default of full runs (`simbench.render.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = {DEFAULT_SPP}) was chosen "
+        f"from the full run's table as the cheapest setting that meets it with a margin of 10 % (render / camera <= {0.9 * TARGET_RATIO:.2f}; "
+        "a setting on the limit is not counted, three seeds do not resolve it). Stratified generators help most where the integrand is smooth "
         "over the pixel (direct light on a plane); interreflected light of mesh scenes converges more slowly.",
         "",
     ]
