@@ -24,6 +24,8 @@ Gaussian of that standard deviation (:func:`blur_sigma_px`).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 __all__ = [
@@ -82,13 +84,37 @@ def _grid(intr) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_to(x[None, :], (h, w)), np.broadcast_to(y[:, None], (h, w))
 
 
+# The remap maps depend on the intrinsics alone (a frozen, hashable dataclass): computed once per
+# device and reused, read-only (issue 16: rebuilding the map was most of an undistortion's time)
+@lru_cache(maxsize=8)
+def _distort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
+    """Where the recorded pixel's light comes from in the ideal image: K D^-1(K^-1 p)."""
+    xd, yd = _grid(intr)
+    x, y = undistort_normalized(xd, yd, intr.distortion)
+    return _readonly_map(x * intr.focal_px + intr.cx_px), _readonly_map(y * intr.focal_px + intr.cy_px)
+
+
+@lru_cache(maxsize=8)
+def _undistort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
+    """Where the ideal pixel is recorded: K D(K^-1 q)."""
+    x, y = _grid(intr)
+    xd, yd = distort_normalized(x, y, intr.distortion)
+    return _readonly_map(xd * intr.focal_px + intr.cx_px), _readonly_map(yd * intr.focal_px + intr.cy_px)
+
+
+def _readonly_map(m: np.ndarray) -> np.ndarray:
+    out = np.ascontiguousarray(m, dtype=np.float32)
+    out.setflags(write=False)
+    return out
+
+
 def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:
     import cv2
 
     src = np.asarray(img)
     dtype = src.dtype
     work = src.astype(np.float32) if dtype not in (np.float32, np.uint8, np.uint16) else src
-    out = cv2.remap(work, mx.astype(np.float32), my.astype(np.float32), interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    out = cv2.remap(work, mx, my, interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     if out.ndim == 2 and src.ndim == 3:
         out = out[..., None]
     return out.astype(dtype, copy=False)
@@ -111,9 +137,7 @@ def distort_image(img: np.ndarray, intr) -> np.ndarray:
 
     if not intr.has_distortion:
         return img
-    xd, yd = _grid(intr)
-    x, y = undistort_normalized(xd, yd, intr.distortion)
-    return _remap(img, x * intr.focal_px + intr.cx_px, y * intr.focal_px + intr.cy_px, cv2.INTER_LINEAR)
+    return _remap(img, *_distort_maps(intr), cv2.INTER_LINEAR)
 
 
 def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> np.ndarray:
@@ -123,10 +147,8 @@ def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> 
 
     if not intr.has_distortion:
         return img
-    x, y = _grid(intr)
-    xd, yd = distort_normalized(x, y, intr.distortion)
     flag = {"linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interpolation]
-    return _remap(img, xd * intr.focal_px + intr.cx_px, yd * intr.focal_px + intr.cy_px, flag)
+    return _remap(img, *_undistort_maps(intr), flag)
 
 
 def distorted_projector_drive(drive: np.ndarray, intr) -> np.ndarray:

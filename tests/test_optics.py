@@ -48,6 +48,27 @@ def test_distort_then_undistort_image_recovers_a_smooth_image():
     assert not np.allclose(distort_image(img, intr)[inner], img[inner], atol=0.01)  # it did distort
 
 
+def test_remap_maps_are_cached_per_device_with_the_same_bits():
+    """The undistortion and distortion maps are built once per intrinsics and reused (read-only);
+    the images are bit-identical to remapping with maps built afresh from the model."""
+    from simbench.optics import _distort_maps, _grid, _undistort_maps
+
+    intr = Intrinsics(320, 240, 578.0, 159.5, 119.5, DIST)
+    img = np.random.default_rng(3).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    x, y = _grid(intr)
+    xd, yd = distort_normalized(x, y, DIST)
+    fresh = cv2.remap(img, (xd * intr.focal_px + intr.cx_px).astype(np.float32), (yd * intr.focal_px + intr.cy_px).astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    assert np.array_equal(undistort_image(img, intr), fresh)
+    xu, yu = undistort_normalized(x, y, DIST)
+    fresh = cv2.remap(img, (xu * intr.focal_px + intr.cx_px).astype(np.float32), (yu * intr.focal_px + intr.cy_px).astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    assert np.array_equal(distort_image(img, intr), fresh)
+    for maps in (_undistort_maps, _distort_maps):
+        a, b = maps(intr), maps(dataclasses.replace(intr))
+        assert a[0] is b[0] and not a[0].flags.writeable
+    other = dataclasses.replace(intr, distortion=(-0.05, 0.0, 0.0, 0.0, 0.0))
+    assert not np.array_equal(_undistort_maps(other)[0], _undistort_maps(intr)[0])
+
+
 def test_projector_columns_undistort_exactly():
     prj = Intrinsics(1824, 1140, 2228.0, 911.5, 569.5, DIST)
     x = np.linspace(-0.38, 0.38, 50)[None, :]
