@@ -78,6 +78,17 @@ def _add_render_options(s, *, quick_spp: int | None = None) -> None:
     s.add_argument("--sampler", choices=SAMPLERS, default=DEFAULT_SAMPLER, help="Mitsuba sample generator (results/render_noise.md compares them)")
 
 
+def _add_cache_options(s) -> None:
+    s.add_argument("--cache", default=".cache/simbench", help="render cache folder (renders and ground truth keyed by everything that affects them)")
+    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+
+
+def _cache_of(args):
+    from simbench.cache import RenderCache
+
+    return RenderCache(None if args.no_cache else args.cache)
+
+
 def _render_settings(args) -> tuple[int, str]:
     """(spp, sampler) of the parsed options, checked together before anything renders."""
     from simbench.render import DEFAULT_SPP, check_sampler
@@ -113,17 +124,21 @@ def _cmd_render(args) -> int:
     from simbench.render import select_variant
     from simbench.scene import load_scene
     from simbench.device import get_sensor
-    from simbench.simulate import acquire, write_acquisition
+    from simbench.io import check_output_directory
+    from simbench.simulate import RENDER_MANIFEST, acquire, write_acquisition
 
     scene = load_scene(args.scene)
     sensor = get_sensor(args.camera)
     spp, sampler = _render_settings(args)
+    check_output_directory(args.out, manifest=RENDER_MANIFEST, overwrite=args.overwrite)  # before minutes of rendering
     variant = select_variant(args.variant)
     pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     t0 = time.perf_counter()
-    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames)
+    cache = _cache_of(args)
+    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames, cache=cache)
     files = write_acquisition(acq, args.out, overwrite=args.overwrite)
-    print(f"rendered {scene.name} ({variant}, {spp} spp {sampler}, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
+    print(f"rendered {scene.name} ({variant}, {spp} spp {sampler}, seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
     return 0
@@ -484,6 +499,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)")
     s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write (e.g. decoded depth)")
     _add_render_options(s)
+    _add_cache_options(s)
     s.add_argument("--calibration-frames", action="store_true", help="also record the reference plane under black and each primary (calibration_*.png), which `simbench decode --robust` needs")
     s.add_argument("--seed", type=_SEED, default=0, help="base seed (split into render and noise seeds, all recorded in meta.json)")
     s.add_argument("--max-depth", type=_MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")

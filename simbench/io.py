@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
+    "check_output_directory",
     "atomic_write_bytes",
     "atomic_write_text",
     "json_bytes",
@@ -121,6 +122,16 @@ def _check_replaceable(folder: Path, manifest: str, overwrite: bool) -> None:
         raise ValueError(f"{folder} holds files this command did not write ({shown}); pass --overwrite to replace the folder whole, or choose another output folder")
 
 
+def check_output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> None:
+    """ValueError unless :func:`output_directory` could write ``path`` (call it before long
+    work, so that a wrong ``--out`` fails at once)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{path} exists and is not a folder")
+    if path.is_dir():
+        _check_replaceable(path, manifest, overwrite)
+
+
 @contextmanager
 def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> Iterator[Path]:
     """A result folder written whole or not at all.
@@ -145,10 +156,7 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
     import shutil
 
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"{path} exists and is not a folder")
-    if path.is_dir():
-        _check_replaceable(path, manifest, overwrite)
+    check_output_directory(path, manifest=manifest, overwrite=overwrite)
     _make_parents(path)
     _remove_stale_siblings(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))

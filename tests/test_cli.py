@@ -251,3 +251,24 @@ def test_render_calibration_frames_then_robust_decode(tmp_path, capsys, variant)
     assert main(["score", str(tmp_path / "d.npy"), "--gt", str(out / "gt_depth.npy"), "--column", str(tmp_path / "dbg" / "column.npy"), "--json"]) == 0
     m = json.loads(capsys.readouterr().out)
     assert m["completeness"] > 0.99 and m["stripe_order_errors"] == 0 and m["mae_mm"] < 0.6
+
+
+def test_render_reruns_from_the_render_cache(tmp_path, capsys, variant):
+    """A second `simbench render` of the same scene, settings and seed takes every render from
+    the cache and writes the same bytes; --no-cache renders and stores nothing."""
+    from tests.test_bad_inputs import TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    base = ["render", str(tmp_path / "s.toml"), "--sensor", "paper", "--spp", "4", "--seed", "5", "--cache", str(tmp_path / "cache")]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 0
+    first = capsys.readouterr().out
+    assert main([*base, "--out", str(tmp_path / "b")]) == 0
+    second = capsys.readouterr().out
+    n = len(list((tmp_path / "cache").glob("*.npz")))
+    assert n > 0 and ", 0 of " in first and f"{n} of {n} from the render cache" in second
+    for name in ("capture.png", "reference.png", "gt_depth.npy"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    assert main([*base[:-2], "--no-cache", "--out", str(tmp_path / "c")]) == 0
+    assert len(list((tmp_path / "cache").glob("*.npz"))) == n
+    assert (tmp_path / "c" / "capture.png").read_bytes() == (tmp_path / "a" / "capture.png").read_bytes()
