@@ -211,7 +211,7 @@ def _cmd_decode(args) -> int:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
     if params.unmix:
-        reference = _calibrated_reference(args, rig, params)
+        reference = _calibrated_reference(args, rig, params, reference)
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -241,9 +241,10 @@ def _cmd_decode(args) -> int:
     return 0
 
 
-def _calibrated_reference(args, rig, params):
+def _calibrated_reference(args, rig, params, reference):
     """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
-    the reference capture and the calibration frames beside it (or in --calibration)."""
+    the reference capture (``reference``, or read from --reference in calibrated mode) and the
+    calibration frames beside it (or in --calibration)."""
     from simbench.decode import decode_reference
     from simbench.io import load_image
     from simbench.pattern import CALIBRATION_FRAMES
@@ -258,7 +259,8 @@ def _calibrated_reference(args, rig, params):
     for p in paths.values():
         _check_manifest(p)
     frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
-    reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
+    if reference is None:
+        reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
     z0 = _z0_for(Path(args.reference), args.z0)
     ref_params = replace(params, mode="reference", z0_m=z0)
     return decode_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"])

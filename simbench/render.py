@@ -238,8 +238,9 @@ def _pose(mi, rig: Rig) -> object:
 # (a square power of two: 4, 16, 64 ...).  We accept a count only where Mitsuba would not silently change it.
 SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 # The run default, from measurement (results/render_noise.md, `simbench reproduce render_noise`):
-# on the white board under the `paper` sensor, the smallest cost whose render-noise depth error
-# stays at most 1/3 of the camera-noise one.  Independent sampling needs ~150 spp for it.
+# on the white board under the `paper` sensor, the cheapest setting whose render-noise depth
+# spread stays at most 1/3 of the camera-noise one with a 10 % margin (0.28 measured).
+# Independent sampling would need ~150-190 spp for it (1.02 at 16 spp, falling as 1/sqrt(spp)).
 DEFAULT_SAMPLER = "multijitter"
 DEFAULT_SPP = 36
 

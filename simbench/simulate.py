@@ -20,7 +20,7 @@ from simbench.pattern import CALIBRATION_FRAMES, PatternSpec, calibration_frames
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern
-from simbench.render import GroundTruth, check_sampler, ground_truth, projector_distance, realised_rig, render_radiance
+from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
 from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
@@ -234,13 +234,18 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
     return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
 
 
+def _white_board(scene: SceneSpec) -> dict:
+    """The white reference board the camera's exposure and white balance are set on."""
+    return {"reference_depth_m": scene.reference_depth_m, "reference_albedo": REFERENCE_ALBEDO, "projector_scale": scene.projector_scale}
+
+
 def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng=None) -> np.ndarray:
     """The camera's recorded image from :func:`render_channels`' output: the simple camera,
     or the EMVA 1288 camera with its colour filter array at the sensor's (auto) exposure."""
     cam = sensor.camera
     if isinstance(cam, SimpleCamera):
         return simple_camera(q, camera=cam, rng=rng)
-    board = {"reference_depth_m": scene.reference_depth_m, "reference_albedo": REFERENCE_ALBEDO, "projector_scale": scene.projector_scale}
+    board = _white_board(scene)
     t = exposure_s(sensor, scene.rig, **board)
     per_radiance = electrons_per_radiance_s(sensor, scene.rig) * t
     gains = white_balance_gains(sensor, scene.rig, **board)
@@ -283,7 +288,6 @@ def acquire(
     seeds = split_seed(seed, calibration=with_calibration)
     pat = quantize(fringe_pattern(pattern))
     drive = projector_drive_for(scene, pat, sensor, cache=cache)
-    check_sampler(sampler, spp)
     q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, sampler=sampler, cache=cache)
     capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
@@ -302,8 +306,8 @@ def acquire(
         "scene": scene.name,
         "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude, "channels": pattern.channels},
         "sensor": sensor_to_dict(sensor),
-        "exposure_s": exposure_s(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale) if sensor.is_physical else None,
-        "white_balance_gains": white_balance_gains(sensor, scene.rig, reference_depth_m=scene.reference_depth_m, reference_albedo=REFERENCE_ALBEDO, projector_scale=scene.projector_scale).tolist(),
+        "exposure_s": exposure_s(sensor, scene.rig, **_white_board(scene)) if sensor.is_physical else None,
+        "white_balance_gains": white_balance_gains(sensor, scene.rig, **_white_board(scene)).tolist(),
         "spp": int(spp),
         "sampler": sampler,
         "max_depth": int(max_depth),

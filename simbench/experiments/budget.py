@@ -32,8 +32,7 @@ PAPER_WHITE_MM = PAPER_TABLE1["white"][1]
 def converged_spp(spp: int) -> int:
     """The sample count of the render-noise row: at least 4x ``spp`` (half the Monte Carlo
     noise of independent sampling, less with stratification), a square for ``multijitter``."""
-    root = math.isqrt(4 * spp)
-    return root * root if root * root == 4 * spp else (root + 1) ** 2
+    return (math.isqrt(4 * spp - 1) + 1) ** 2  # the smallest square >= 4 spp
 
 
 def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, SensorModel]]:
