@@ -130,6 +130,8 @@ def segment_stripes(
     period_px: float,
     min_step_ratio: float = 0.3,
     max_step_ratio: float = 3.0,
+    max_gap_px: int = 0,
+    gap_tolerance_rad: float = np.pi / 4,
 ) -> Stripes:
     h, w = wrapped.shape
     omega = 2.0 * np.pi / period_px
@@ -162,7 +164,45 @@ def segment_stripes(
     linked_prev = np.zeros(idx.size, dtype=bool)
     inner = start > 0
     linked_prev[inner] = linked[row[inner], start[inner] - 1]
+    if max_gap_px > 0:
+        omega32 = (np.float32(min_step_ratio * omega), np.float32(min(max_step_ratio * omega, 0.9 * np.pi)))
+        return _bridge_gaps(wrapped, labels, row, start, stop, linked_prev, omega32, omega, max_gap_px, gap_tolerance_rad)
     return Stripes(labels=labels, row=row, start=start, stop=stop, linked_prev=linked_prev)
+
+
+def _bridge_gaps(wrapped, labels, row, start, stop, linked_prev, bounds, omega, max_gap, tol):
+    """The gap bridging of segment_stripes as a pass over the unbridged stripes: a stripe that
+    starts unlinked after a gap of 1..max_gap invalid pixels behind the row's previous
+    (possibly already merged) stripe is merged into it (no wrap in the gap) or linked to it."""
+    lo, hi = float(bounds[0]), float(bounds[1])  # compared in float64, as the kernel does
+    keep = np.ones(row.size, bool)
+    owner = np.arange(row.size)  # stripe each unbridged stripe ends up in
+    row, start, stop, linked_prev = row.copy(), start.copy(), stop.copy(), linked_prev.copy()
+    cur = -1
+    for s in range(row.size):
+        y = row[s]
+        gap = start[s] - stop[cur] if cur >= 0 else 0
+        if cur >= 0 and row[cur] == y and not linked_prev[s] and 1 <= gap <= max_gap:
+            xl, x = stop[cur] - 1, start[s]
+            steps = (xl - start[cur]) + (stop[s] - 1 - x)
+            acc = (float(wrapped[y, xl]) - float(wrapped[y, start[cur]])) + (float(wrapped[y, stop[s] - 1]) - float(wrapped[y, x]))
+            slope = acc / steps if steps >= 2 else omega
+            if lo < slope < hi:
+                advance = slope * (x - xl)
+                d = float(wrapped[y, x]) - float(wrapped[y, xl])
+                k = np.floor((advance - d) / (2.0 * np.pi) + 0.5)
+                if k in (0.0, 1.0) and abs(d + 2.0 * np.pi * k - advance) <= tol:
+                    if k == 0.0:
+                        keep[s] = False
+                        owner[s] = cur
+                        stop[cur] = stop[s]
+                        continue
+                    linked_prev[s] = True
+        cur = s
+    new_index = np.cumsum(keep) - 1
+    lut = np.append(new_index[owner], -1).astype(np.int32)  # label -1 stays -1
+    labels = lut[labels]
+    return Stripes(labels=labels, row=row[keep], start=start[keep], stop=stop[keep], linked_prev=linked_prev[keep])
 
 
 def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:

@@ -149,3 +149,29 @@ def test_reference_matching_and_depth_match_numpy():
     x_ref[0, 10] = 1e9  # a disparity putting the point behind the camera
     kw = dict(focal_px=2312.532, baseline_m=0.093, z0_m=1.0)
     same(depth.depth_from_disparity(x_ref, **kw), ref.depth_from_disparity(x_ref, **kw))
+
+
+def gapped_fringe(seed):
+    """Stripes input with short invalid gaps across every row (albedo edges along the stripes),
+    one of them at a phase step that must not be bridged (a depth edge)."""
+    wrapped, valid, code = stripes_input(seed)
+    rng = np.random.default_rng(seed)
+    valid = valid.copy()
+    for x0 in rng.integers(10, wrapped.shape[1] - 30, 8):
+        valid[:, x0 : x0 + rng.integers(1, 21)] = False
+    return wrapped, valid, code
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_gap_bridging_matches_numpy(seed):
+    wrapped, valid, code = gapped_fringe(seed)
+    kw = dict(period_px=T_CAM, max_gap_px=int(0.95 * T_CAM))
+    got = color.segment_stripes(wrapped, valid, **kw)
+    want = ref.segment_stripes(wrapped, valid, **kw)
+    for f in ("labels", "row", "start", "stop", "linked_prev"):
+        same(getattr(got, f), getattr(want, f))
+    plain = color.segment_stripes(wrapped, valid, period_px=T_CAM)
+    assert got.count < plain.count and got.linked_prev.sum() > plain.linked_prev.sum()
+    for voting in (True, False):
+        for a, b in zip(color.vote_codes(code, got, voting=voting), ref.vote_codes(code, want, voting=voting)):
+            same(a, b)

@@ -243,14 +243,50 @@ def neighbour_correct(positions, left, right, cycle, reach, min_support, out, su
 
 
 @numba.njit(**_JIT)
-def segment_stripes(wrapped, valid, lo, hi, labels, row, start, stop, linked_prev):  # pragma: no cover - compiled
+def _bridge(wrapped, valid, y, xl, x, first, lo, hi, omega, tol):  # pragma: no cover - compiled
+    """Wraps (0 or 1) across the invalid gap between pixels ``xl`` and ``x`` of row ``y``, or -1.
+
+    ``first`` is the first pixel of the stripe ending at ``xl``.  The phase slope is the mean
+    step of that stripe and of the run continuing from ``x`` (up to its first wrap or break;
+    the nominal ``omega`` if both have fewer than 2 steps together), in float64; the gap's
+    advance ``slope * (x - xl)`` chooses the wrap count ``k``, accepted when the wrapped phase
+    at ``x`` lies within ``tol`` of the prediction.
+    """
+    w = wrapped.shape[1]
+    neg_pi = np.float32(-np.pi)
+    steps = xl - first
+    acc = np.float64(wrapped[y, xl]) - np.float64(wrapped[y, first])
+    j = x
+    while j + 1 < w and valid[y, j + 1]:
+        d = wrapped[y, j + 1] - wrapped[y, j]
+        if d < neg_pi or not (d > lo and d < hi):
+            break
+        j += 1
+    steps += j - x
+    acc += np.float64(wrapped[y, j]) - np.float64(wrapped[y, x])
+    slope = acc / steps if steps >= 2 else omega
+    if not (slope > lo and slope < hi):
+        return -1
+    advance = slope * (x - xl)
+    d = np.float64(wrapped[y, x]) - np.float64(wrapped[y, xl])
+    two_pi = 2.0 * np.pi
+    k = np.floor((advance - d) / two_pi + 0.5)
+    if (k == 0.0 or k == 1.0) and abs(d + two_pi * k - advance) <= tol:
+        return np.int64(k)
+    return -1
+
+
+@numba.njit(**_JIT)
+def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, start, stop, linked_prev):  # pragma: no cover - compiled
     """Row-wise stripe segmentation; returns the number of stripes.
 
     Between pixels ``x-1`` and ``x`` of a row: ``d = psi[x] - psi[x-1]``, a wrap where
     ``d < -pi`` (then ``step = d + 2 pi``), a plausible step when ``lo < step < hi``; with both
     pixels valid the stripe continues (plausible, no wrap), or the next stripe starts linked to
-    it (plausible wrap); any other valid pixel starts an unlinked stripe.  ``row``/``start``/
-    ``stop``/``linked_prev`` must hold one entry per possible stripe (H*W).
+    it (plausible wrap); any other valid pixel starts an unlinked stripe, unless it ends a gap
+    of 1 to ``max_gap`` invalid pixels after the row's last stripe that :func:`_bridge`
+    crosses: with no wrap the stripe continues after the gap, with one the next starts linked.
+    ``row``/``start``/``stop``/``linked_prev`` must hold one entry per possible stripe (H*W).
     """
     h, w = wrapped.shape
     neg_pi = np.float32(-np.pi)
@@ -270,6 +306,10 @@ def segment_stripes(wrapped, valid, lo, hi, labels, row, start, stop, linked_pre
                 if step > lo and step < hi:
                     cont = not wrap
                     link = wrap
+            elif max_gap > 0 and s >= 0 and row[s] == y and x - stop[s] <= max_gap:
+                k = _bridge(wrapped, valid, y, stop[s] - 1, x, start[s], lo, hi, omega, tol)
+                cont = k == 0
+                link = k == 1
             if not cont:
                 s += 1
                 row[s] = y
@@ -281,16 +321,19 @@ def segment_stripes(wrapped, valid, lo, hi, labels, row, start, stop, linked_pre
 
 
 @numba.njit(**_JIT)
-def vote_codes(code, row, start, stop, voting, out, agreement):  # pragma: no cover - compiled
-    """Per stripe: share of its pixels with code 1 (float64); the code is the majority (ties
-    give 1) or, without voting, the middle pixel's; ``agreement`` = share agreeing with it."""
+def vote_codes(code, labels, row, start, stop, voting, out, agreement):  # pragma: no cover - compiled
+    """Per stripe: share of its pixels with code 1 (float64; pixels of a gap it was bridged
+    across are not its own); the code is the majority (ties give 1) or, without voting, the
+    middle pixel's; ``agreement`` = share agreeing with it."""
     n = row.size
     for s in range(n):
         y = row[s]
         ones = 0
+        count = 0
         for x in range(start[s], stop[s]):
-            ones += code[y, x]
-        count = stop[s] - start[s]
+            if labels[y, x] == s:
+                ones += code[y, x]
+                count += 1
         frac = ones / count if count > 0 else 0.5
         if voting:
             c = 1 if frac >= 0.5 else 0

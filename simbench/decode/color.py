@@ -120,6 +120,13 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
     the projector's black level.  Not in the paper (its Eq. 9 and 13 use the raw channels):
     our option for coloured surfaces, at the price of amplifying the noise of a weak channel.
 
+    The running minimum and maximum are then averaged over the same window.  Raw, they step
+    where an albedo edge enters the window, half a window away from the edge, and the step in
+    the normalised fringe fails the phase fit there (measured on ``scenes/robust_printed.toml``:
+    a second invalid line beside every printed edge, cutting off a 2-period strip of stripes
+    that could not form De Bruijn windows); averaged, they ramp across the window, which the
+    fit follows like any slow change of fringe amplitude.
+
     Parameters
     ----------
     rgb : ndarray, shape (H, W, 3), float32
@@ -135,7 +142,7 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
 
     Returns
     -------
-    ndarray, shape (H, W, 3), float32 in [0, 1]
+    ndarray, shape (H, W, 3), float32, in [0, 1] away from albedo edges
         (and with ``return_span`` the local ranges, shape (H, W, 3), float32, 0 where below
         ``min_span``)
     """
@@ -145,8 +152,9 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
     spans = np.empty(rgb.shape, np.float32) if return_span else None
     for c in range(3):
         v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
-        lo = cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE)
-        span = cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE) - lo
+        box = (2 * half + 1, 1)
+        lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
+        span = cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
         ok = span >= min_span
         np.divide(v - lo, span, out=out[..., c], where=ok)
         out[..., c][~ok] = 0.0
@@ -216,8 +224,10 @@ def segment_stripes(
     period_px: float,
     min_step_ratio: float = 0.3,
     max_step_ratio: float = 3.0,
+    max_gap_px: int = 0,
+    gap_tolerance_rad: float = np.pi / 4,
 ) -> Stripes:
-    """Split each row into stripes at wrapped-phase jumps.
+    """Split each row into stripes at wrapped-phase jumps, optionally bridging short gaps.
 
     Parameters
     ----------
@@ -229,6 +239,23 @@ def segment_stripes(
     min_step_ratio, max_step_ratio : float
         A step (after unwrapping a jump) outside ``[min, max] * 2*pi/period_px`` is a
         discontinuity: the run ends there without a link.
+    max_gap_px : int
+        Bridge gaps of up to this many invalid pixels (0: never).  Beside an albedo edge along
+        the stripes the phase fit fails for a few pixels (its window straddles two
+        reflectances) although the phase runs on across it; unbridged, every such gap cuts the
+        row's chain of linked stripes, and a stripe cut off between two gaps, or between a gap
+        and the image border, has too few neighbours for a De Bruijn window.  The phase slope
+        on both sides of the gap (the stripe before it, the run after it) predicts the advance
+        across it; if the phase after the gap lies within ``gap_tolerance_rad`` of the
+        prediction, the stripe continues across the gap (no wrap in it) or the next stripe
+        starts linked (one wrap).  Keep the gap shorter than a period, so that at most one
+        wrap can hide in it.  A wrong bridge (a depth edge whose phase happens to continue) is
+        caught like any wrong link, by the De Bruijn windows on both sides
+        (:func:`simbench.decode.debruijn.drop_broken_links`).
+    gap_tolerance_rad : float
+        Largest distance, in radians, between the predicted and the measured phase after a
+        bridged gap (assumption: pi/4, a quarter of the phase's +-pi range of outcomes, so a
+        random phase jump at a depth edge is taken for a bridge with probability 1/4).
 
     Returns
     -------
@@ -243,7 +270,18 @@ def segment_stripes(
     row, start, stop = (np.empty(h * w, np.int32) for _ in range(3))
     linked_prev = np.empty(h * w, bool)
     n = _kernels.segment_stripes(
-        np.ascontiguousarray(wrapped, dtype=np.float32), np.ascontiguousarray(valid, dtype=bool), lo, hi, labels, row, start, stop, linked_prev
+        np.ascontiguousarray(wrapped, dtype=np.float32),
+        np.ascontiguousarray(valid, dtype=bool),
+        lo,
+        hi,
+        int(max_gap_px),
+        float(omega),
+        float(gap_tolerance_rad),
+        labels,
+        row,
+        start,
+        stop,
+        linked_prev,
     )
     return Stripes(labels=labels, row=row[:n].copy(), start=start[:n].copy(), stop=stop[:n].copy(), linked_prev=linked_prev[:n].copy())
 
@@ -251,7 +289,8 @@ def segment_stripes(
 def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """One code per stripe.
 
-    With ``voting`` (paper Sec. 5.2) the majority of the stripe's pixels decides (ties give 1,
+    With ``voting`` (paper Sec. 5.2) the majority of the stripe's pixels (its label's, not
+    those of a gap it was bridged across) decides (ties give 1,
     like Eq. 13's ``>=``); without it, the stripe's middle pixel decides.
 
     Returns
@@ -261,5 +300,5 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     """
     out = np.empty(stripes.count, np.uint8)
     agreement = np.empty(stripes.count, np.float32)
-    _kernels.vote_codes(np.ascontiguousarray(code, dtype=bool), stripes.row, stripes.start, stripes.stop, bool(voting), out, agreement)
+    _kernels.vote_codes(np.ascontiguousarray(code, dtype=bool), stripes.labels, stripes.row, stripes.start, stripes.stop, bool(voting), out, agreement)
     return out, agreement

@@ -26,6 +26,12 @@ __all__ = ["DecoderParams", "robust_params", "PHASE_METHODS", "MODES", "Referenc
 
 PHASE_METHODS = {"gabor": gabor_phase, "ftp": ftp_phase, "wfr": wfr_phase}
 MODES = ("reference", "calibrated")
+# Gaps the colour-robust decoder bridges, in camera periods (assumption: just under one period,
+# so that at the nominal period at most one wrap hides in a gap - where the local period is
+# shorter the slope predicts more and the bridge is refused.  Measured on
+# scenes/robust_printed.toml: the phase fit fails for 6-11 px beside most printed edges and for
+# 20-26 px beside the saturated red and orange tiles, whose fits are poor anyway)
+ROBUST_BRIDGE_GAP_PERIODS = 0.95
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,11 @@ class DecoderParams:
         Neighbours per side in the W check and correction (paper Sec. 5.3); 0 = off.
     min_support : int
         Votes a stripe's W needs to be kept.
+    bridge_gap_periods : float
+        Bridge gaps of invalid pixels up to this share of the camera period within a row when
+        the phase on both sides agrees (:func:`simbench.decode.color.segment_stripes`); 0 (the
+        paper's decoder: not described) never bridges.  At most 1, so that a gap holds at most
+        one wrap.
     link_check : bool
         After the correction, drop both stripes of any link whose W do not follow each other
         (a depth edge hidden in a smooth phase; :func:`simbench.decode.debruijn.drop_broken_links`).
@@ -117,6 +128,7 @@ class DecoderParams:
     voting: bool = True
     neighbour_reach: int = 3
     min_support: int = 3
+    bridge_gap_periods: float = 0.0
     link_check: bool = True
     dark_level: float = 0.04
     saturation_level: float = 1.0
@@ -144,6 +156,7 @@ class DecoderParams:
             "voting": v.boolean(self.voting, "voting"),
             "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
+            "bridge_gap_periods": v.number(self.bridge_gap_periods, "bridge_gap_periods", lo=0.0, hi=1.0),
             "link_check": v.boolean(self.link_check, "link_check"),
             "dark_level": v.number(self.dark_level, "dark_level", lo=0.0, hi=1.0),
             "saturation_level": v.number(self.saturation_level, "saturation_level", lo=0.0, hi=1.0, lo_open=True),
@@ -187,7 +200,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     validity tests then act on signal relative to the local range (``min_amplitude`` on the
     normalised fringe, ``max_residual`` relative to it; the lit test looks across a whole
     code window).  Everything else as ``params``."""
-    return dataclasses.replace(params, unmix=True, color_normalize=True, intensity_mode="weighted")
+    return dataclasses.replace(params, unmix=True, color_normalize=True, intensity_mode="weighted", bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS)
 
 
 @dataclass(frozen=True)
@@ -334,7 +347,7 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     wrapped, amplitude, residual, support_w = phase.wrapped[crop], phase.amplitude[crop], phase.residual[crop], phase.support[crop]
     valid = lit & (support_w >= params.min_window_support) & (amplitude >= params.min_amplitude) & (residual <= params.max_residual)
     code = color_code(rgb)
-    stripes = segment_stripes(wrapped, valid, period_px=t_cam)
+    stripes = segment_stripes(wrapped, valid, period_px=t_cam, max_gap_px=int(params.bridge_gap_periods * t_cam))
     stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
     table = _window_table(params.order, params.sequence)
     raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
