@@ -548,7 +548,7 @@ def _parser() -> argparse.ArgumentParser:
     s.set_defaults(fn=_cmd_demo)
 
     s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures", **kw)
-    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget, render_noise or all (default)")
+    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget, render_noise, flatness or all (default)")
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder")

@@ -13,6 +13,7 @@ colour filter array    ``[camera] cfa`` (``none`` / ``RGGB`` ...) and ``demosaic
 spectral crosstalk     ``[spectral] crosstalk``
 projector transfer     ``[projector] transfer`` (``linear`` / ``gamma``), ``gamma``
 projector black level  ``[projector] contrast_ratio`` (``inf`` = off)
+projector timing       ``[projector] timing`` (``triggered`` / ``video``), ``frame_rate_hz``
 DMD layout             ``[projector] dmd`` (``square`` / ``diamond``)
 camera defocus         ``[camera.lens] defocus``, ``f_number``, ``focus_m``
 projector defocus      ``[projector.lens] defocus``, ``f_number``, ``focus_m``
@@ -44,7 +45,7 @@ import numpy as np
 
 from simbench import validate
 from simbench.io import read_toml
-from simbench.projector import DMD_LAYOUTS, TRANSFERS
+from simbench.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
 from simbench.sensor import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera, photons_per_unit_radiance
 
@@ -182,6 +183,8 @@ class ProjectorModel:
     contrast_ratio: float = math.inf
     dmd: str = "square"
     pixel_pitch_um: float = 5.4
+    timing: str = "triggered"
+    frame_rate_hz: float = 60.0
     lens: Lens = field(default_factory=lambda: Lens(f_number=2.0))
 
     def __post_init__(self) -> None:
@@ -194,6 +197,9 @@ class ProjectorModel:
             "contrast_ratio": v.number(self.contrast_ratio, "contrast_ratio", lo=1.0, allow_inf=True),
             "dmd": v.choice(self.dmd, "dmd", DMD_LAYOUTS),
             "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+            "timing": v.choice(self.timing, "timing", TIMINGS),
+            # assumption: video inputs run at up to a few hundred frames per second
+            "frame_rate_hz": v.number(self.frame_rate_hz, "frame_rate_hz", lo=1.0, hi=1000.0),
         })
         if not isinstance(self.lens, Lens):
             raise ValueError(f"lens must be a Lens, got {type(self.lens).__name__}")
@@ -329,7 +335,7 @@ def sensor_to_dict(sensor: SensorModel) -> dict:
     if sensor.is_physical:
         cam.setdefault("exposure_s", "auto")
     cam["lens"] = lens(sensor.camera_lens)
-    prj = {k: enc(getattr(sensor.projector, k)) for k in ("lumens", "transfer", "gamma", "contrast_ratio", "dmd", "pixel_pitch_um")}
+    prj = {k: enc(getattr(sensor.projector, k)) for k in ("lumens", "transfer", "gamma", "contrast_ratio", "dmd", "pixel_pitch_um", "timing", "frame_rate_hz")}
     prj["lens"] = lens(sensor.projector.lens)
     return {
         "name": sensor.name,
@@ -472,6 +478,7 @@ EFFECTS = {
     "crosstalk": "spectral crosstalk (LED primaries x camera sensitivities x surface)",
     "transfer": "projector transfer curve",
     "black_level": "projector black level (finite contrast)",
+    "timing": "projector bit-plane timing against the camera exposure",
     "dmd": "DMD diamond pixel layout",
     "camera_defocus": "camera defocus (thin lens)",
     "projector_defocus": "projector defocus",
@@ -501,6 +508,8 @@ def with_effects(base: SensorModel, source: SensorModel, effects, *, name: str |
             crosstalk = source.crosstalk
         elif e == "transfer":
             prj = dataclasses.replace(prj, transfer=source.projector.transfer, gamma=source.projector.gamma)
+        elif e == "timing":
+            prj = dataclasses.replace(prj, timing=source.projector.timing, frame_rate_hz=source.projector.frame_rate_hz)
         elif e == "black_level":
             prj = dataclasses.replace(prj, contrast_ratio=source.projector.contrast_ratio)
         elif e == "dmd":

@@ -6,6 +6,14 @@ Transfer: ``linear`` is the LightCrafter 4500's pattern mode (8-bit patterns are
 binary bit-planes with exposure times in the ratio of the bit weights, so the emitted light is
 proportional to the 8-bit value); ``gamma`` is its video mode (a display gamma such as 2.2).
 
+Timing: a DMD makes grey levels in time, showing each bit-plane of a channel for a time
+proportional to its weight, so a camera sees the intended level only if its exposure takes in
+whole sequences.  ``triggered`` is the paper's set-up (the LightCrafter 4500 in pattern mode
+triggers the camera, which exposes for whole patterns): exact.  ``video`` is a free-running
+projector in video mode beside a free-running camera (a lab without a trigger cable): each
+frame shows red, green and blue in turn, and the exposure starts at an arbitrary point of the
+frame, so the bit-planes its ends cut are collected in part (:func:`video_bitplane_weights`).
+
 Black level: a DMD's "off" mirrors still send some light into the lens; with a full-on /
 full-off contrast ratio ``C`` the emitted level is ``1/C + (1 - 1/C) * t(v)``.
 
@@ -24,13 +32,50 @@ import numpy as np
 
 from simbench.optics import blur_sigma_px, depth_varying_blur
 
-__all__ = ["TRANSFERS", "DMD_LAYOUTS", "transfer_curve", "dmd_layout", "defocus_pattern", "emitted_pattern"]
+__all__ = ["TRANSFERS", "TIMINGS", "DMD_LAYOUTS", "transfer_curve", "video_bitplane_weights", "dmd_layout", "defocus_pattern", "emitted_pattern"]
 
 TRANSFERS = ("linear", "gamma")
+TIMINGS = ("triggered", "video")
+BITS = 8
 DMD_LAYOUTS = ("square", "diamond")
 
 
-def transfer_curve(pattern: np.ndarray, *, transfer: str, gamma: float = 2.2, contrast_ratio: float = math.inf) -> np.ndarray:
+def video_bitplane_weights(*, exposure_s: float, frame_rate_hz: float, phase: float) -> np.ndarray:
+    """Share of each bit-plane's light a free-running camera collects from a projector in
+    video mode, relative to what an exposure of whole frames would, shape (3, 8), float64.
+
+    Model (assumption: TI's DLPC350 programmer's guide documents video mode's bit-plane
+    sequences only as configurable, so this takes the simplest): every frame of
+    ``1 / frame_rate_hz`` shows red, green, then blue for a third of the frame each, each colour
+    its 8 bit-planes most significant first for times in the ratio 128:64:...:1, without dark
+    time.  The exposure ``[t0, t0 + exposure_s)`` starts at ``t0 = phase / frame_rate_hz``.
+    Weight (c, b) is the time the exposure overlaps plane b of colour c, over
+    ``exposure_s * frame_rate_hz`` times the plane's time per frame: all weights are 1 when the
+    exposure is a whole number of frames, whatever the phase, and 1 on average over the phase.
+    """
+    if not exposure_s > 0 or not frame_rate_hz > 0:
+        raise ValueError(f"exposure_s and frame_rate_hz must be > 0, got {exposure_s}, {frame_rate_hz}")
+    if not 0.0 <= phase < 1.0:
+        raise ValueError(f"phase must be in [0, 1), got {phase}")
+    frame = 1.0 / frame_rate_hz
+    seg = frame / 3.0
+    weights = np.empty((3, BITS))
+    t0, t1 = phase * frame, phase * frame + exposure_s
+    full = float(2**BITS - 1)
+    for c in range(3):
+        start = c * seg
+        for b in range(BITS - 1, -1, -1):  # most significant first
+            dur = seg * (2**b) / full
+            got = 0.0
+            for k in range(math.floor((t0 - start - dur) / frame), math.ceil((t1 - start) / frame) + 1):
+                a = start + k * frame
+                got += max(0.0, min(t1, a + dur) - max(t0, a))
+            weights[c, b] = got / (exposure_s * frame_rate_hz * dur)
+            start += dur
+    return weights
+
+
+def transfer_curve(pattern: np.ndarray, *, transfer: str, gamma: float = 2.2, contrast_ratio: float = math.inf, bitplane_weights: np.ndarray | None = None) -> np.ndarray:
     """Relative emitted light per channel for an 8-bit pattern.
 
     Parameters
@@ -41,6 +86,10 @@ def transfer_curve(pattern: np.ndarray, *, transfer: str, gamma: float = 2.2, co
         Display gamma of the ``gamma`` transfer.
     contrast_ratio : float
         Full-on / full-off contrast (``inf`` = perfectly black off-state).
+    bitplane_weights : ndarray, shape (3, 8), optional
+        The share of each bit-plane a camera collects (:func:`video_bitplane_weights`); the
+        level shown is the transfer's rounded to 8 bits, each of its set bits weighted.
+        None = every plane collected whole (a triggered camera).
 
     Returns
     -------
@@ -57,6 +106,15 @@ def transfer_curve(pattern: np.ndarray, *, transfer: str, gamma: float = 2.2, co
     v = pattern.astype(np.float32) / np.float32(255.0)
     if transfer == "gamma":
         v = v ** np.float32(gamma)
+    if bitplane_weights is not None:
+        w = np.asarray(bitplane_weights, np.float64)
+        if w.shape != (3, BITS):
+            raise ValueError(f"bitplane_weights must have shape (3, {BITS}), got {w.shape}")
+        codes = np.arange(256)
+        shown = codes if transfer == "linear" else np.round((codes / 255.0) ** gamma * 255.0)
+        bits = (shown.astype(np.int64)[:, None] >> np.arange(BITS)) & 1  # (256, 8)
+        lut = (bits * (2.0 ** np.arange(BITS)) @ w.T / 255.0).astype(np.float32)  # (256, 3)
+        v = np.stack([lut[pattern[..., c], c] for c in range(3)], axis=-1)
     black = np.float32(0.0 if math.isinf(contrast_ratio) else 1.0 / contrast_ratio)
     if black > 0:
         v = black + (np.float32(1.0) - black) * v
@@ -122,12 +180,16 @@ def emitted_pattern(
     gamma: float = 2.2,
     contrast_ratio: float = math.inf,
     layout: str = "square",
+    bitplane_weights: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Transfer curve, black level and DMD layout of an 8-bit pattern (defocus and distortion
-    need the scene and the lens, see :func:`simbench.simulate.projector_drive_for`).
+    """Transfer curve (with the bit-plane timing), black level and DMD layout of an 8-bit
+    pattern (defocus and distortion need the scene and the lens, see
+    :func:`simbench.simulate.projector_drive_for`).
 
     Returns
     -------
-    ndarray, shape (H, W, 3), float32 in [0, 1]
+    ndarray, shape (H, W, 3), float32 in [0, 1] (above 1 where a video-mode exposure
+    collects more than its share of a plane)
     """
-    return dmd_layout(transfer_curve(pattern, transfer=transfer, gamma=gamma, contrast_ratio=contrast_ratio), layout=layout)
+    v = transfer_curve(pattern, transfer=transfer, gamma=gamma, contrast_ratio=contrast_ratio, bitplane_weights=bitplane_weights)
+    return dmd_layout(v, layout=layout)

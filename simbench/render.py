@@ -327,7 +327,7 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
     if max(scene.ambient_rgb) > 0:
         d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
     for i, obj in enumerate(scene.objects):
-        d[f"obj{i:03d}"] = object_to_mitsuba(obj)
+        d[f"obj{i:03d}"] = object_to_mitsuba(obj, key=f"obj{i:03d}")
     return d, realised_rig(rig)
 
 

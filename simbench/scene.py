@@ -29,6 +29,12 @@ on a colour board (paper Table 1), turned into a reflectance by :func:`paint_ref
 (Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
 diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
 
+A plane may also have a form error, as real boards do (:func:`board_form_m`): ``bow_m_per_m``
+(sag of a spherical bow over a 1 m chord, positive bulging towards the camera),
+``waviness_m`` (amplitude of a ripple across the board's x axis), ``waviness_period_m``
+(default :data:`WAVINESS_PERIOD_M`) and ``waviness_phase_rad``; such a plane is rendered as a
+displaced grid mesh (:data:`BOARD_GRID`, :data:`RIPPLE_CELLS`).
+
 Spheres take ``center_m`` and ``radius_m``; meshes take ``file`` (PLY/OBJ, relative to the
 scene file), ``scale`` (uniform, mesh units to metres), ``translate_m`` and ``rotation_deg``.
 All coordinates are in the camera frame (x right, y down, z forward, metres).
@@ -56,13 +62,17 @@ __all__ = [
     "scene_from_dict",
     "reference_scene",
     "Placement",
+    "board_form",
+    "board_form_m",
+    "BOARD_FORM_KEYS",
     "place_objects",
     "object_to_mitsuba",
     "paint_reflectance",
 ]
 
+BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
 OBJECT_KINDS = {
-    "plane": ("center_m", "size_m", "rotation_deg"),
+    "plane": ("center_m", "size_m", "rotation_deg", *BOARD_FORM_KEYS),
     "box": ("center_m", "size_m", "rotation_deg"),
     "sphere": ("center_m", "radius_m"),
     "mesh": ("file", "scale", "translate_m", "rotation_deg"),
@@ -77,6 +87,59 @@ MATERIALS = ("diffuse", "plastic")
 # (0.8 = our white plane, the same as the reference board).
 PAINT_MIN_REFLECTANCE = 0.04
 PAINT_MAX_REFLECTANCE = 0.80
+
+# Form error of a board (assumptions, argued): the ripple of a laminated or painted panel has a
+# wavelength of centimetres (the spacing of press rollers and core cells); 50 mm is our stated
+# middle of that range.  The grid that renders a formed board has at least BOARD_GRID cells a
+# side, and RIPPLE_CELLS per ripple period across x: piecewise flat, the ripple then deviates
+# from its sine by at most 1 - cos(pi / 16) = 1.9 % of its amplitude, the bow's paraboloid by
+# at most pv / (2 * BOARD_GRID^2) = 0.01 % of its peak-to-valley pv over the board.
+WAVINESS_PERIOD_M = 0.05
+BOARD_GRID = 64
+RIPPLE_CELLS = 16
+MAX_FORM_M = 0.02  # a board bent by more than 2 cm is not a board (validation bound)
+# The form error of the error budget's boards (assumption: the paper does not describe its
+# boards; 0.5 mm per metre is a stiff panel stored upright, a 0.05 mm ripple a good
+# laminate's.  The flatness study, simbench reproduce flatness, spans 0-2 mm per metre and
+# 0.02-0.2 mm, so a reader can take the figure of their own board.)
+BUDGET_BOW_M_PER_M = 0.0005
+BUDGET_WAVINESS_M = 0.00005
+
+
+def board_form_m(x_m: np.ndarray, y_m: np.ndarray, *, size_m, bow_m_per_m: float = 0.0, waviness_m: float = 0.0, waviness_period_m: float = WAVINESS_PERIOD_M, waviness_phase_rad: float = 0.0) -> np.ndarray:
+    """Height of a board's surface above its nominal plane (towards the camera), metres.
+
+    ``x_m, y_m`` are in the board's own frame (centre 0, extent ``size_m``).  The bow is a
+    paraboloid (a sphere of large radius) whose sag over a 1 m chord through the centre is
+    ``bow_m_per_m`` - a flatness of "so many mm per metre", the same curvature whatever the
+    board's size: ``bow_m_per_m * (c - r^2 / (0.5 m)^2)``, with ``c`` keeping the board's mean
+    height at 0 (its ``center_m`` stays its mean plane).  The ripple is
+    ``waviness_m * sin(2 pi x / waviness_period_m + waviness_phase_rad)``, across the board's
+    x axis: the direction in which a fringe sensor's phase runs, where a ripple reads as depth.
+    """
+    sx, sy = size_m
+    x = np.asarray(x_m, np.float64)
+    y = np.asarray(y_m, np.float64)
+    mean_r2 = (sx * sx + sy * sy) / 12.0  # mean of x^2 + y^2 over the board
+    h = bow_m_per_m * (mean_r2 - (x * x + y * y)) / 0.25
+    if waviness_m:
+        h = h + waviness_m * np.sin(2.0 * np.pi * x / waviness_period_m + waviness_phase_rad)
+    return h
+
+
+def _board_form(d: dict, where: str) -> dict:
+    """The form keys of a plane, validated; only those that change the board are kept, so that
+    a flat board keeps the parameters (and render-cache keys) it always had."""
+    p = {}
+    bow = validate.number(d.get("bow_m_per_m", 0.0), f"{where}: bow_m_per_m", lo=-MAX_FORM_M, hi=MAX_FORM_M)
+    wav = validate.number(d.get("waviness_m", 0.0), f"{where}: waviness_m", lo=0.0, hi=MAX_FORM_M)
+    period = validate.number(d.get("waviness_period_m", WAVINESS_PERIOD_M), f"{where}: waviness_period_m", lo=0.001, hi=10.0)
+    phase = validate.number(d.get("waviness_phase_rad", 0.0), f"{where}: waviness_phase_rad", lo=-100.0, hi=100.0)
+    if bow:
+        p["bow_m_per_m"] = bow
+    if wav:
+        p.update(waviness_m=wav, waviness_period_m=period, waviness_phase_rad=phase)
+    return p
 
 
 def paint_reflectance(srgb8) -> tuple[float, float, float]:
@@ -170,6 +233,8 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
             raise ValueError(f"{where}: missing size_m")
         p["size_m"] = _vec(d["size_m"], n, f"{where}.size_m", positive=True)
         p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+        if kind == "plane":
+            p.update(_board_form(d, where))
     elif kind == "sphere":
         p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
         p["radius_m"] = validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True)
@@ -259,11 +324,13 @@ def load_scene(path: str | Path) -> SceneSpec:
     return scene_from_dict(data, base_dir=path.parent, where=str(path))
 
 
-def reference_scene(scene: SceneSpec, *, albedo: float = 0.8) -> SceneSpec:
+def reference_scene(scene: SceneSpec, *, albedo: float = 0.8, form: dict | None = None) -> SceneSpec:
     """The reference-plane scene of paper Sec. 5.4: a white fronto-parallel plane at Z0.
 
     The plane is sized to fill the camera's view with a wide margin; ``albedo`` is an
-    assumption (a matte white board), stated in the render metadata.
+    assumption (a matte white board), stated in the render metadata.  ``form`` gives it a form
+    error (the keys of :func:`board_form`; its bow is over the whole board, of which the
+    camera sees the middle two thirds).
     """
     z0 = scene.reference_depth_m
     cam = scene.rig.camera
@@ -278,6 +345,7 @@ def reference_scene(scene: SceneSpec, *, albedo: float = 0.8) -> SceneSpec:
                     "center_m": (0.0, 0.0, z0),
                     "size_m": (2 * half_w, 2 * half_h),
                     "rotation_deg": (0.0, 0.0, 0.0),
+                    **_board_form(form or {}, "reference plane"),
                 }.items()
             )
         ),
@@ -306,14 +374,36 @@ class Placement:
     0.5 mm at 1 m) from a rig whose depth origin, the camera's entrance pupil, lies somewhere
     inside the lens and is not marked: +-10 mm; it is squared to the rig by eye or with a
     set square against the rig's rail: +-2 deg.  Neither is the paper's number (it gives none).
+
+    ``bow_m_per_m`` and ``waviness_m`` give every placed plane a form error (:func:`board_form_m`):
+    a bow of that sag per metre, bulging towards or away from the camera (seeded), and a ripple
+    of that amplitude with a seeded phase; 0 (the default) = flat boards.
     """
 
     depth_m: float = 0.010
     tilt_deg: float = 2.0
+    bow_m_per_m: float = 0.0
+    waviness_m: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "depth_m", validate.number(self.depth_m, "placement depth_m", lo=0.0, hi=1.0))
         object.__setattr__(self, "tilt_deg", validate.number(self.tilt_deg, "placement tilt_deg", lo=0.0, hi=45.0))
+        object.__setattr__(self, "bow_m_per_m", validate.number(self.bow_m_per_m, "board bow_m_per_m", lo=0.0, hi=MAX_FORM_M))
+        object.__setattr__(self, "waviness_m", validate.number(self.waviness_m, "board waviness_m", lo=0.0, hi=MAX_FORM_M))
+
+
+def board_form(*, bow_m_per_m: float, waviness_m: float, rng) -> dict:
+    """The form keys of one board of a batch whose boards bow by ``bow_m_per_m`` (sag over a
+    1 m chord) and ripple by
+    ``waviness_m``: the bow's sign and the ripple's phase drawn from ``rng`` (a Generator)."""
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    phase = float(rng.uniform(0.0, 2.0 * np.pi))
+    form = {}
+    if bow_m_per_m:
+        form["bow_m_per_m"] = sign * bow_m_per_m
+    if waviness_m:
+        form.update(waviness_m=waviness_m, waviness_period_m=WAVINESS_PERIOD_M, waviness_phase_rad=phase)
+    return form
 
 
 def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tuple[SceneSpec, dict]:
@@ -347,6 +437,13 @@ def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tupl
         p["rotation_deg"] = (rx + tx, ry + ty, rz)
         objects.append(dataclasses.replace(o, params=tuple(sorted(p.items()))))
         offsets[o.name] = {"depth_m": dz, "tilt_deg": [tx, ty]}
+    if placement.bow_m_per_m or placement.waviness_m:
+        # drawn after every placement, so that flat and formed boards sit in the same poses
+        for i, o in enumerate(objects):
+            if o.name in wanted and o.kind == "plane":
+                form = board_form(bow_m_per_m=placement.bow_m_per_m, waviness_m=placement.waviness_m, rng=rng)
+                objects[i] = dataclasses.replace(o, params=tuple(sorted({**dict(o.params), **form}.items())))
+                offsets[o.name].update(form)
     return dataclasses.replace(scene, objects=tuple(objects)), offsets
 
 
@@ -370,11 +467,15 @@ def _bsdf(mat: Material) -> dict:
     return {"type": "twosided", "bsdf": inner}
 
 
-def object_to_mitsuba(obj: SceneObject) -> dict:
-    """Mitsuba plugin dictionary of one object (a variant must be set)."""
+def object_to_mitsuba(obj: SceneObject, *, key: str | None = None):
+    """Mitsuba plugin dictionary of one object (a variant must be set); a plane with a form
+    error is a Mesh instance instead, with id ``key`` (the key it gets in the scene dict, which
+    names a dict entry's shape)."""
     import mitsuba as mi
 
     bsdf = _bsdf(obj.material)
+    if obj.kind == "plane" and any(obj.get(k) for k in BOARD_FORM_KEYS):
+        return _formed_board(mi, obj, bsdf, key or obj.name)
     if obj.kind == "plane":
         sx, sy = obj.get("size_m")
         # Mitsuba's rectangle spans [-1, 1]^2 with normal +z; flip it to face the camera.
@@ -388,3 +489,30 @@ def object_to_mitsuba(obj: SceneObject) -> dict:
     path = obj.get("file")
     tw = _to_world(mi, translate=obj.get("translate_m"), rotation_deg=obj.get("rotation_deg"), scale=obj.get("scale"))
     return {"type": Path(path).suffix.lower()[1:], "filename": path, "to_world": tw, "bsdf": bsdf, "face_normals": False}
+
+
+def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str):
+    """A plane with a form error as a Mitsuba mesh: a grid (:data:`BOARD_GRID`,
+    :data:`RIPPLE_CELLS`) displaced by :func:`board_form_m` towards the camera (local -z: the
+    plane faces the camera along -z before its rotation), placed like the flat plane."""
+    sx, sy = obj.get("size_m")
+    form = {k: obj.get(k) for k in BOARD_FORM_KEYS if obj.get(k) is not None}
+    cells_x = BOARD_GRID
+    if form.get("waviness_m"):
+        cells_x = max(cells_x, math.ceil(RIPPLE_CELLS * sx / form["waviness_period_m"]))
+    nx, ny = cells_x + 1, BOARD_GRID + 1
+    x, y = np.meshgrid(np.linspace(-sx / 2, sx / 2, nx), np.linspace(-sy / 2, sy / 2, ny))
+    z = -board_form_m(x, y, size_m=(sx, sy), **form)
+    local = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    world = local @ rotation_xyz_deg(obj.get("rotation_deg")).T + np.asarray(obj.get("center_m"), np.float64)
+    a = (np.arange(ny - 1)[:, None] * nx + np.arange(nx - 1)[None, :]).ravel()  # each cell's first vertex
+    faces = np.concatenate([np.stack([a, a + 1, a + nx], 1), np.stack([a + 1, a + nx + 1, a + nx], 1)])
+    props = mi.Properties()
+    props.set_id(key)
+    props["bsdf"] = mi.load_dict(bsdf)
+    mesh = mi.Mesh(key, vertex_count=nx * ny, face_count=len(faces), has_vertex_normals=False, has_vertex_texcoords=False, props=props)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(world.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
+    params.update()
+    return mesh

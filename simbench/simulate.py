@@ -19,7 +19,7 @@ from simbench.io import output_directory, save_exr, save_json, save_npy, save_pn
 from simbench.pattern import CALIBRATION_FRAMES, PatternSpec, calibration_frames, fringe_pattern, quantize
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
-from simbench.projector import defocus_pattern, emitted_pattern
+from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
 from simbench.rig import save_rig
 from simbench.scene import SceneSpec, reference_scene
@@ -33,6 +33,7 @@ __all__ = [
     "cached_ground_truth",
     "cached_arrays",
     "physical_scene",
+    "exposure_phase",
     "projector_drive_for",
     "render_channels",
     "record",
@@ -155,12 +156,25 @@ def physical_scene(scene: SceneSpec, sensor: SensorModel) -> SceneSpec:
 PROJECTOR_DEPTH_STRIDE = 4  # projector pixels per depth sample for the defocus map
 
 
-def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None) -> np.ndarray:
+def exposure_phase(render_seed: int) -> float:
+    """Where in the projector's frame a free-running camera's exposure starts, in [0, 1) of a
+    frame (projector ``timing = "video"``): drawn from the capture's render seed, since the
+    light the camera collects - and so the render - depends on it."""
+    return float(np.random.default_rng(np.random.SeedSequence([int(render_seed), 5])).random())
+
+
+def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0) -> np.ndarray:
     """What Mitsuba's ideal projector must show so that the scene is lit as by the modelled
-    one: transfer curve, black level, DMD layout, defocus (by the depth each projector pixel
-    lights) and lens distortion (:mod:`simbench.projector`, :mod:`simbench.optics`)."""
+    one: transfer curve, bit-plane timing (video mode: the exposure, from ``phase`` of a frame
+    on, :func:`exposure_phase`), black level, DMD layout, defocus (by the depth each projector
+    pixel lights) and lens distortion (:mod:`simbench.projector`, :mod:`simbench.optics`)."""
     prj = sensor.projector
-    drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd)
+    weights = None
+    if prj.timing == "video":
+        if not sensor.is_physical:
+            raise ValueError("the projector's video-mode timing needs the physical (emva) camera's exposure time")
+        weights = video_bitplane_weights(exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase)
+    drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd, bitplane_weights=weights)
     intr = scene.rig.projector
     if prj.lens.defocus:
         parts = {"scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))), "stride": PROJECTOR_DEPTH_STRIDE}
@@ -287,19 +301,20 @@ def acquire(
         raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
     seeds = split_seed(seed, calibration=with_calibration)
     pat = quantize(fringe_pattern(pattern))
-    drive = projector_drive_for(scene, pat, sensor, cache=cache)
+    drive = projector_drive_for(scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_capture"]))
     q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, sampler=sampler, cache=cache)
     capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
     if with_reference:
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
-        ref_drive = projector_drive_for(ref_scene, pat, sensor, cache=cache)
+        ref_drive = projector_drive_for(ref_scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_reference"]))
         ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, sampler=sampler, cache=cache)
         reference = record(ref_q, sensor=sensor, scene=ref_scene, rng=seeds["noise_reference"])
     calibration = {}
     if with_calibration:
         for name, frame in calibration_frames(pat).items():
-            q_cal = render_channels(ref_scene, projector_drive_for(ref_scene, frame, sensor, cache=cache), sensor, spp=spp, seed=seeds[f"render_calibration_{name}"], max_depth=max_depth, sampler=sampler, cache=cache)
+            cal_drive = projector_drive_for(ref_scene, frame, sensor, cache=cache, phase=exposure_phase(seeds[f"render_calibration_{name}"]))
+            q_cal = render_channels(ref_scene, cal_drive, sensor, spp=spp, seed=seeds[f"render_calibration_{name}"], max_depth=max_depth, sampler=sampler, cache=cache)
             calibration[name] = record(q_cal, sensor=sensor, scene=ref_scene, rng=seeds[f"noise_calibration_{name}"])
     gt = cached_ground_truth(scene, cache=cache)
     meta = {

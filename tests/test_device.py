@@ -48,8 +48,8 @@ def test_ideal_has_every_effect_off_and_paper_has_them_on():
     assert not ideal.camera_lens.defocus and not ideal.projector.lens.defocus
     assert apply_to_rig(RIG, ideal) == RIG
     for key in EFFECTS:
-        if key == "transfer":
-            continue  # the paper used the linear pattern mode
+        if key in ("transfer", "timing"):
+            continue  # the paper used the linear pattern mode, triggering the camera
         moved = with_effects(ideal, paper, [key])
         assert dataclasses.replace(moved, name=ideal.name, description=ideal.description) != ideal, key
     assert with_effects(ideal, paper, list(EFFECTS)).camera == paper.camera
@@ -85,6 +85,10 @@ def test_bad_sensor_files_are_clear():
         sensor_from_dict({**base, "camera": {**base["camera"], "cfa": "RGBW"}})
     with pytest.raises(ValueError, match="transfer"):
         sensor_from_dict({**base, "projector": {**base["projector"], "transfer": "srgb"}})
+    with pytest.raises(ValueError, match="timing"):
+        sensor_from_dict({**base, "projector": {**base["projector"], "timing": "free"}})
+    with pytest.raises(ValueError, match="frame_rate_hz"):
+        sensor_from_dict({**base, "projector": {**base["projector"], "frame_rate_hz": 0}})
     with pytest.raises(ValueError, match="f_number"):
         sensor_from_dict({**base, "projector": {**base["projector"], "lens": {"f_number": 0}}})
     with pytest.raises(ValueError, match="crosstalk.*emva"):

@@ -129,6 +129,36 @@ def test_transfer_curve_and_black_level():
         transfer_curve(pat.astype(np.float32), transfer="linear")
 
 
+def test_video_mode_bitplane_timing_against_its_model():
+    """A free-running camera collects each bit-plane whole when its exposure is a whole number of
+    frames (any phase), on average over the phase whatever its length, and by hand-computed
+    shares in a simple case; a triggered camera (no weights) sees the linear transfer."""
+    from simbench.projector import video_bitplane_weights
+
+    for phase in (0.0, 0.37, 0.999):
+        np.testing.assert_allclose(video_bitplane_weights(exposure_s=2 / 60, frame_rate_hz=60.0, phase=phase), 1.0, rtol=1e-9)
+    mean = np.mean([video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=p) for p in (np.arange(3000) + 0.5) / 3000], axis=0)
+    np.testing.assert_allclose(mean, 1.0, atol=2e-3)
+    # a third of a frame from its start: the red third whole (3x its share of a frame's), nothing else
+    w = video_bitplane_weights(exposure_s=1 / 180, frame_rate_hz=60.0, phase=0.0)
+    np.testing.assert_allclose(w[0], 3.0, rtol=1e-9)
+    np.testing.assert_allclose(w[1:], 0.0, atol=1e-12)
+    # half of red's third from its start: the MSB lasts 128/255 of the third, so it is cut just
+    # before its end (weight (1/2) / (E f 128/255) = 6 * 255/256) and the next plane is missed
+    w = video_bitplane_weights(exposure_s=1 / 360, frame_rate_hz=60.0, phase=0.0)
+    assert w[0, 7] == pytest.approx(6.0 * 255 / 256, rel=1e-12) and w[0, 6] == 0.0
+    pat = np.arange(256, dtype=np.uint8).reshape(1, 256, 1).repeat(3, axis=2)
+    ones = transfer_curve(pat, transfer="linear", bitplane_weights=np.ones((3, 8)))
+    np.testing.assert_allclose(ones, transfer_curve(pat, transfer="linear"), atol=1e-7)
+    partial = transfer_curve(pat, transfer="linear", bitplane_weights=video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=0.3))
+    assert np.abs(partial - ones).max() > 0.1  # levels off by more than a tenth of full scale
+    for bad in ({"exposure_s": 0.0, "frame_rate_hz": 60.0, "phase": 0.0}, {"exposure_s": 0.01, "frame_rate_hz": 60.0, "phase": 1.0}):
+        with pytest.raises(ValueError):
+            video_bitplane_weights(**bad)
+    with pytest.raises(ValueError, match="shape"):
+        transfer_curve(pat, transfer="linear", bitplane_weights=np.ones((3, 7)))
+
+
 def test_diamond_dmd_pairs_columns_with_alternate_row_offsets():
     rng = np.random.default_rng(2)
     drive = rng.random((6, 10, 3)).astype(np.float32)

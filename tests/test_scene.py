@@ -88,3 +88,64 @@ def test_measured_spectrum_material():
     for bad, match in (({"spectrum": "ColorChecker N Ohta/nope"}, "no patch"), ({"spectrum": "Nope/blue"}, "dataset"), ({"spectrum": 3}, "string"), ({"spectrum": "ColorChecker N Ohta/blue", "rgb": [1, 1, 1]}, "not rgb and spectrum")):
         with pytest.raises(ValueError, match=match):
             scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], **bad}]})
+
+
+def test_board_form_against_its_definition():
+    """The bow sags by bow_m_per_m over a 1 m chord through the centre whatever the board's
+    size, the board's mean height stays 0 (its center_m is its mean plane), and the ripple has
+    its amplitude and period across x only."""
+    from simbench.scene import board_form_m
+
+    for size in ((2.0, 1.6), (0.4, 0.3)):
+        cells = [(np.arange(n) + 0.5) / n * s - s / 2 for n, s in ((800, size[0]), (600, size[1]))]  # cell centres
+        h = board_form_m(*np.meshgrid(*cells), size_m=size, bow_m_per_m=0.001)
+        assert abs(h.mean()) < 1e-5 * np.abs(h).max()  # the midpoint rule's error on a quadratic: ~1/n^2
+        centre = board_form_m(0.0, 0.0, size_m=size, bow_m_per_m=0.001)
+        for px, py in ((0.5, 0.0), (0.0, -0.5), (0.3, 0.4)):  # 0.5 m from the centre
+            assert centre - board_form_m(px, py, size_m=size, bow_m_per_m=0.001) == pytest.approx(0.001, rel=1e-12)
+    x = np.linspace(-0.2, 0.2, 4001)
+    w = board_form_m(x, np.full_like(x, 0.1), size_m=(0.4, 0.4), waviness_m=1e-4, waviness_period_m=0.05, waviness_phase_rad=1.0)
+    assert w.max() == pytest.approx(1e-4, rel=1e-4) and w.min() == pytest.approx(-1e-4, rel=1e-4)
+    assert board_form_m(x + 0.05, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4) == pytest.approx(board_form_m(x, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4), abs=1e-15)
+    assert board_form_m(0.1, 0.2, size_m=(0.4, 0.4), waviness_m=1e-4) == board_form_m(0.1, -0.1, size_m=(0.4, 0.4), waviness_m=1e-4)
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        ({"bow_m_per_m": 0.5}, "bow_m_per_m"),
+        ({"waviness_m": -1e-4}, "waviness_m"),
+        ({"waviness_m": 1e-4, "waviness_period_m": 0.0}, "waviness_period_m"),
+        ({"bow_m_per_m": "flat"}, "bow_m_per_m"),
+    ],
+)
+def test_board_form_keys_are_validated(extra, match):
+    with pytest.raises(ValueError, match=match):
+        scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], **extra}]})
+    with pytest.raises(ValueError, match="unknown key"):
+        scene_from_dict({"object": [{"type": "box", "size_m": [1, 1, 1], "bow_m_per_m": 0.001}]})
+
+
+def test_board_form_placement_keeps_the_poses_and_flat_boards_their_keys():
+    """Formed boards sit in the same seeded poses as flat ones (the form is drawn after every
+    placement); a flat board's parameters, and so its render-cache key, do not change."""
+    from simbench.cache import scene_fingerprint
+    from simbench.scene import Placement, place_objects
+
+    scene = scene_from_dict({"object": [
+        {"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]},
+        {"type": "box", "name": "cube", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
+    ]})
+    flat, off_flat = place_objects(scene, ["board", "cube"], placement=Placement(), rng=3)
+    formed, off = place_objects(scene, ["board", "cube"], placement=Placement(bow_m_per_m=0.001, waviness_m=5e-5), rng=3)
+    board = dict(formed.objects[0].params)
+    assert abs(board["bow_m_per_m"]) == 0.001 and board["waviness_m"] == 5e-5 and 0 <= board["waviness_phase_rad"] < 2 * np.pi
+    for k in ("center_m", "rotation_deg"):
+        assert board[k] == dict(flat.objects[0].params)[k]
+    assert formed.objects[1] == flat.objects[1]  # boxes do not bow
+    assert off["board"]["depth_m"] == off_flat["board"]["depth_m"] and off["board"]["bow_m_per_m"] == board["bow_m_per_m"]
+    explicit = scene_from_dict({"object": [{"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1], "bow_m_per_m": 0.0, "waviness_m": 0.0}]})
+    plain = scene_from_dict({"object": [{"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]}]})
+    assert scene_fingerprint(explicit) == scene_fingerprint(plain)
+    with pytest.raises(ValueError, match="bow_m_per_m"):
+        Placement(bow_m_per_m=-0.001)

@@ -104,6 +104,8 @@ def _parameters() -> dict[str, str]:
         "run.max_depth": "path length",
         "run.placement_depth_mm": "placement tolerance in depth (every object placed, seeded)",
         "run.placement_tilt_deg": "placement tolerance in tilt",
+        "run.board_bow_mm_per_m": "bow of every placed board and the reference board (mm of sag per metre, seeded sign)",
+        "run.board_waviness_mm": "ripple amplitude of every placed board and the reference board (mm, seeded phase)",
     }
     p.update(_decoder_fields())
     return p
@@ -111,7 +113,7 @@ def _parameters() -> dict[str, str]:
 
 PARAMETERS = _parameters()
 _SENSOR_TABLES = ("camera", "camera.lens", "projector", "projector.lens", "spectral", "ambient")
-DEFAULTS = {"scene.name": "plane_white", "sensor.preset": "paper", "run.spp": DEFAULT_SPP, "run.sampler": DEFAULT_SAMPLER, "run.camera_scale": 1.0, "run.max_depth": 6, "run.placement_depth_mm": 10.0, "run.placement_tilt_deg": 2.0}
+DEFAULTS = {"scene.name": "plane_white", "sensor.preset": "paper", "run.spp": DEFAULT_SPP, "run.sampler": DEFAULT_SAMPLER, "run.camera_scale": 1.0, "run.max_depth": 6, "run.placement_depth_mm": 10.0, "run.placement_tilt_deg": 2.0, "run.board_bow_mm_per_m": 0.0, "run.board_waviness_mm": 0.0}
 
 
 def _check_name(name: str) -> None:
@@ -322,7 +324,8 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         sensor = _sensor(params)
         config = RunConfig(
             sensor=sensor.name, spp=int(params["run.spp"]), sampler=str(params["run.sampler"]), camera_scale=float(params["run.camera_scale"]), max_depth=int(params["run.max_depth"]), seed=int(seed),
-            placement_depth_mm=float(params["run.placement_depth_mm"]), placement_tilt_deg=float(params["run.placement_tilt_deg"]), decoder=decoder,
+            placement_depth_mm=float(params["run.placement_depth_mm"]), placement_tilt_deg=float(params["run.placement_tilt_deg"]),
+            board_bow_mm_per_m=float(params["run.board_bow_mm_per_m"]), board_waviness_mm=float(params["run.board_waviness_mm"]), decoder=decoder,
         )
         session = Session(config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor)
         raw = _scene(params)

@@ -20,11 +20,13 @@ from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
+from simbench.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M
 
 __all__ = ["budget_rows", "converged_spp", "run_budget"]
 
 SCENE = "plane_white"
 RENDER_ROW = "render_converged"
+FORM_ROW = "board_form"
 MODES = ("calibrated", "reference")  # triangulation (paper Eq. 15), reference plane (Sec. 5.4)
 PAPER_WHITE_MM = PAPER_TABLE1["white"][1]
 
@@ -37,8 +39,8 @@ def converged_spp(spp: int) -> int:
 
 def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, SensorModel]]:
     """(key, description, sensor) of each row: the baseline, each effect the ``paper`` model
-    switches on, the projector's video-mode gamma (a what-if: the paper used pattern mode),
-    and the full ``paper`` model.  The render-noise row (:data:`RENDER_ROW`, the ideal sensor
+    switches on, the projector's video-mode gamma and its free-running bit-plane timing
+    (what-ifs: the paper triggered the camera from pattern mode), and the full ``paper`` model.  The render-noise row (:data:`RENDER_ROW`, the ideal sensor
     rendered with :func:`converged_spp` samples) comes second in :func:`run_budget`."""
     rows = [("ideal", "ideal: every effect off", ideal)]
     for key, text in EFFECTS.items():
@@ -49,6 +51,14 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
     video_mode = dataclasses.replace(paper, projector=dataclasses.replace(paper.projector, transfer="gamma"))
     video = with_effects(ideal, video_mode, ["transfer"], name="ideal+video_gamma")
     rows.append(("video_gamma", f"what if: projector video mode, gamma {paper.projector.gamma:g} (the paper used pattern mode)", video))
+    free_running = dataclasses.replace(paper, projector=dataclasses.replace(paper.projector, timing="video"))
+    timing = with_effects(ideal, free_running, ["timing"], name="ideal+video_timing")
+    rows.append((
+        "video_timing",
+        f"what if: projector free-running in video mode ({paper.projector.frame_rate_hz:g} Hz, red, green, blue bit-planes in turn), camera not triggered, "
+        "its exposure starting anywhere in a frame (the paper triggered the camera from pattern mode)",
+        timing,
+    ))
     rows.append(("paper", "paper: all effects together", paper))
     return rows
 
@@ -59,11 +69,19 @@ def run_budget(session: Session) -> dict:
     ideal, paper = get_sensor("ideal"), get_sensor("paper")
     rows, metrics = [], {}
     specs = budget_rows(ideal, paper)
-    converged = dataclasses.replace(cfg, sampler="multijitter", spp=converged_spp(cfg.spp))
-    specs.insert(1, (RENDER_ROW, f"ideal, rendered with {converged.spp} spp multijitter: the ideal row minus this is render noise ({cfg.spp} spp {cfg.sampler} in every other row)", ideal))
+    configs = {
+        RENDER_ROW: dataclasses.replace(cfg, sampler="multijitter", spp=converged_spp(cfg.spp)),
+        FORM_ROW: dataclasses.replace(cfg, board_bow_mm_per_m=1000.0 * BUDGET_BOW_M_PER_M, board_waviness_mm=1000.0 * BUDGET_WAVINESS_M),
+    }
+    specs.insert(1, (RENDER_ROW, f"ideal, rendered with {configs[RENDER_ROW].spp} spp multijitter: the ideal row minus this is render noise ({cfg.spp} spp {cfg.sampler} in every other row)", ideal))
+    form_text = (
+        f"board form: test and reference boards bowed by {1000 * BUDGET_BOW_M_PER_M:g} mm per metre and rippled by {1000 * BUDGET_WAVINESS_M:g} mm "
+        "(assumption; `simbench reproduce flatness` sweeps both)"
+    )
+    specs.insert([k for k, _, _ in specs].index("video_gamma"), (FORM_ROW, form_text, ideal))  # with the effects, before the what-ifs
     for i, (key, text, sensor) in enumerate(specs):
         with session.timed(f"[budget {i + 1}/{len(specs)}] {key}"):
-            sub = session.fork(sensor, config=converged if key == RENDER_ROW else None)
+            sub = session.fork(sensor, config=configs.get(key))
             # the same placement (and seeds) in every row
             scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "budget/white", ["board"]))
             caps = sub.capture(scene, "budget/white", repeats=repeats)

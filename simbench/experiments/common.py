@@ -30,9 +30,9 @@ from simbench.metrics import depth_errors, edge_band, plane_fit_error
 from simbench.pattern import PatternSpec, calibration_frames, fringe_pattern, quantize
 from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, GroundTruth, check_sampler, realised_rig
 from simbench.rig import scale_camera
-from simbench.scene import Placement, SceneSpec, load_scene, place_objects, reference_scene
+from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects, reference_scene
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
-from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, physical_scene, projector_drive_for, record, render_channels, versions
+from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, exposure_phase, physical_scene, projector_drive_for, record, render_channels, versions
 
 __all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "git_commit"]
 
@@ -57,6 +57,9 @@ class RunConfig:
     placement_depth_mm, placement_tilt_deg : how precisely test objects are placed
         (:class:`simbench.scene.Placement`: each object gets its own seeded error within these
         bounds, independent of the reference plane; 0 = exactly on the nominal pose)
+    board_bow_mm_per_m, board_waviness_mm : form error of every placed board and of the reference
+        board (:func:`simbench.scene.board_form_m`: the bow's sag over a 1 m chord, the
+        ripple's amplitude; seeded bow sign and ripple phase per board); 0 = flat
     """
 
     quick: bool = False
@@ -71,14 +74,31 @@ class RunConfig:
     ply_stride: int = 3
     placement_depth_mm: float = 10.0
     placement_tilt_deg: float = 2.0
+    board_bow_mm_per_m: float = 0.0
+    board_waviness_mm: float = 0.0
     decoder: DecoderParams = field(default_factory=DecoderParams)
 
     def __post_init__(self) -> None:
         check_sampler(self.sampler, self.spp)
+        self.placement  # validates the placement and board form
 
     @property
     def placement(self) -> Placement:
-        return Placement(depth_m=self.placement_depth_mm / 1000.0, tilt_deg=self.placement_tilt_deg)
+        return Placement(
+            depth_m=self.placement_depth_mm / 1000.0,
+            tilt_deg=self.placement_tilt_deg,
+            bow_m_per_m=self.board_bow_mm_per_m / 1000.0,
+            waviness_m=self.board_waviness_mm / 1000.0,
+        )
+
+    def reference_form(self) -> dict:
+        """Form keys of the reference board (:func:`simbench.scene.board_form`, seeded from the
+        run's seed: one board for the whole run); empty when boards are flat."""
+        p = self.placement
+        if not (p.bow_m_per_m or p.waviness_m):
+            return {}
+        rng = np.random.default_rng(label_seed(self.seed, "reference/form"))
+        return board_form(bow_m_per_m=p.bow_m_per_m, waviness_m=p.waviness_m, rng=rng)
 
     @classmethod
     def preset(cls, *, quick: bool, **overrides) -> "RunConfig":
@@ -171,7 +191,7 @@ class Session:
         differs by camera noise only), with seeds from ``label``; ``pattern_u8`` replaces the
         run's pattern (calibration frames)."""
         render_seed = label_seed(self.config.seed, f"{label}/render")
-        drive = projector_drive_for(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache)
+        drive = projector_drive_for(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache, phase=exposure_phase(render_seed))
         q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, sampler=self.config.sampler, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []
@@ -216,9 +236,10 @@ class Session:
         plane under a black frame and under each primary at full drive (Caspi et al. 1998's
         calibration of the coupling matrix; four frames once per calibration, the measurement
         stays single-shot)."""
-        key = (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, params)
+        form = self.config.reference_form()
+        key = (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, params, tuple(sorted(form.items())))
         if key not in self._refs:
-            ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
+            ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO, form=form)
             label = f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
             img = self.capture(ref_scene, label)[0].image
             cal = {}

@@ -1,7 +1,8 @@
 """``simbench reproduce``: regenerate the paper's tables and figures, and check regressions.
 
 Targets: ``table1``, ``table3``, ``fig9``, ``figures``, ``budget`` (the sensor error budget),
-``render_noise`` (render against camera noise) or ``all``.  The full run (``make
+``render_noise`` (render against camera noise), ``flatness`` (error against board flatness)
+or ``all``.  The full run (``make
 reproduce``) writes into ``results/``; ``--quick`` (640x480, 4 spp, 3 recordings per Fig. 9
 depth) is the CI benchmark, whose key errors are compared with the thresholds in
 ``results/quick/thresholds.toml`` (:func:`check_thresholds`).
@@ -18,6 +19,7 @@ from simbench.experiments.budget import run_budget
 from simbench.experiments.common import RunConfig, Session
 from simbench.experiments.fig9 import run_fig9
 from simbench.experiments.figures import run_figures
+from simbench.experiments.flatness import run_flatness
 from simbench.experiments.render_noise import run_render_noise
 from simbench.experiments.table1 import run_table1
 from simbench.experiments.table3 import run_table3
@@ -25,7 +27,7 @@ from simbench.io import atomic_write_text, read_toml, save_json
 
 __all__ = ["TARGETS", "check_targets", "reproduce", "load_thresholds", "check_thresholds", "thresholds_from", "write_thresholds"]
 
-TARGETS: dict[str, Callable[[Session], dict]] = {"table1": run_table1, "table3": run_table3, "fig9": run_fig9, "figures": run_figures, "budget": run_budget, "render_noise": run_render_noise}
+TARGETS: dict[str, Callable[[Session], dict]] = {"table1": run_table1, "table3": run_table3, "fig9": run_fig9, "figures": run_figures, "budget": run_budget, "render_noise": run_render_noise, "flatness": run_flatness}
 
 
 def _resolve(targets: list[str]) -> list[str]:
