@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
 import itertools
 import json
 import math
@@ -652,10 +651,9 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
     import textwrap
 
     ax.set_title(textwrap.fill(f"ablation {sweep.name}: {sweep.description}", 90), fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    return buf.getvalue()
+    from simbench.experiments.common import figure_png
+
+    return figure_png(fig, dpi=100)
 
 
 def _is_number(s: str) -> bool:

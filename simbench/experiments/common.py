@@ -34,7 +34,7 @@ from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_o
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, exposure_phase, physical_scene, projector_drive_for, record, render_channels, versions
 
-__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "git_commit"]
+__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "figure_png", "git_commit"]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -321,6 +321,16 @@ def score(cap: Capture, result: DecodeResult, period_px: float, *, region: np.nd
         off_edges = depth_errors(result.depth_m, gt.depth_m, region=region, exclude=band)
         out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
     return out
+
+
+def figure_png(fig, *, dpi: int) -> bytes:
+    """A matplotlib figure as PNG bytes (written atomically by the caller); closes it."""
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    return buf.getvalue()
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench.decode import DecoderParams, decode, decode_reference
-from simbench.experiments.common import SCENES_DIR, git_commit
+from simbench.experiments.common import SCENES_DIR, figure_png, git_commit
 from simbench.io import json_bytes, write_files
 from simbench.metrics import depth_errors, edge_band
 from simbench.pattern import PatternSpec
@@ -79,10 +79,7 @@ def depth_figure(capture: np.ndarray, depth_m: np.ndarray, gt_depth_m: np.ndarra
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(title)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, dpi=80)
 
 
 def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress=print) -> dict:

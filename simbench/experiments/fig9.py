@@ -13,12 +13,11 @@ ToF curves come with the competitor-sensors issue.  Writes ``fig9.png``, ``fig9.
 
 from __future__ import annotations
 
-import io
 import warnings
 
 import numpy as np
 
-from simbench.experiments.common import Session, markdown_table, score, write_table
+from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import depth_errors, plane_fit_error
 
@@ -119,10 +118,7 @@ def fig9_plot(rows: list[dict], *, title: str) -> bytes:
         axis.legend(fontsize=7)
     ax2.set_title("proposed method alone (zoomed)", fontsize=9)
     fig.suptitle(title, fontsize=10)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, dpi=110)
 
 
 def _markdown(session: Session, rows: list[dict]) -> str:

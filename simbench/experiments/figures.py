@@ -10,11 +10,10 @@ with each scene's scores; ``figures.provenance.json``.
 
 from __future__ import annotations
 
-import io
 
 import numpy as np
 
-from simbench.experiments.common import Session, markdown_table, write_table
+from simbench.experiments.common import Session, figure_png, markdown_table, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text, save_ply
 from simbench.metrics import depth_errors, edge_band, points_from_depth
 
@@ -52,13 +51,6 @@ def _fig(n_panels: int, width: float = 4.6):
     return plt, fig, np.atleast_1d(axes)
 
 
-def _png(plt, fig, dpi: int = 80) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    plt.close(fig)
-    return buf.getvalue()
-
-
 def _depth_range(depth_m: np.ndarray) -> tuple[float, float]:
     finite = depth_m[np.isfinite(depth_m)]
     return tuple(np.percentile(finite, [1, 99])) if finite.size else (0.0, 1.0)
@@ -86,7 +78,7 @@ def stages_figure(cap, result, *, title: str) -> bytes:
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(title, fontsize=10)
-    return _png(plt, fig, dpi=90)
+    return figure_png(fig, dpi=90)
 
 
 def scene_figure(cap, result, *, title: str) -> bytes:
@@ -107,7 +99,7 @@ def scene_figure(cap, result, *, title: str) -> bytes:
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(title)
-    return _png(plt, fig)
+    return figure_png(fig, dpi=80)
 
 
 def run_figures(session: Session) -> dict:

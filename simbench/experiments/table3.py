@@ -12,13 +12,12 @@ their own resolutions (the edge band scaled to the same angle).  Writes ``table3
 
 from __future__ import annotations
 
-import io
 
 import numpy as np
 
 from simbench.baselines import DEVICE_LABELS
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, markdown_table, score, write_table
+from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import depth_errors, edge_band, plane_fit_error, points_from_depth
 from simbench.rig import rotation_xyz_deg
@@ -217,7 +216,4 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
         ax.legend(loc="best", fontsize=7)
         ax.set_title(f"{label}: row {row}", fontsize=9)
     fig.suptitle(title)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, dpi=80)
