@@ -391,12 +391,15 @@ def _cmd_ablate(args) -> int:
 
 
 def _cmd_bench(args) -> int:
-    from simbench.experiments.bench import run_decode_benchmark
+    from simbench.experiments.bench import run_decode_benchmark, stage_table
 
     res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene)
     print(json.dumps(res, indent=2) if args.json else
           f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({res['scene']}): median {res['median_ms']:.1f} ms, "
           f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
+    if res["stages_ms"] and not args.json:
+        print("per stage, mean per decode (row bands run in parallel threads, so the sum exceeds the wall time):")
+        print(stage_table(res["stages_ms"]))
     if args.max_ms is not None and res["median_ms"] > args.max_ms:
         raise ValueError(f"decode median {res['median_ms']:.1f} ms exceeds --max-ms {args.max_ms}")
     return 0

@@ -42,3 +42,31 @@ def test_competitor_decode_speed(benchmark, device):
     result = benchmark(decode_raw, model, raw, cal)
     assert result.valid.mean() > 0.8
     assert np.nanmedian(result.depth_m) == pytest.approx(1.1, abs=0.005)
+
+
+def test_stage_times_cover_the_decode_without_changing_it():
+    """The per-stage profile (simbench bench's table) sees every stage in every row-band thread
+    and leaves the decode's output bit-identical; with no collector nothing is recorded."""
+    import dataclasses
+
+    from simbench.decode.profile import stage, stage_times
+    from simbench.experiments.bench import run_decode_benchmark, stage_table
+
+    capture, ref, rig, params = benchmark_inputs()
+    params = dataclasses.replace(params, threads=2)
+    plain = decode(capture, rig=rig, params=params, reference=ref)
+    with stage_times() as times:
+        profiled = decode(capture, rig=rig, params=params, reference=ref)
+    for a, b in ((plain.depth_m, profiled.depth_m), (plain.column_px, profiled.column_px), (plain.valid, profiled.valid)):
+        assert np.array_equal(a, b, equal_nan=True)
+    for name in ("phase (gabor, Eq. 10-11)", "stripe segmentation and voting", "De Bruijn windows and neighbour correction", "depth (reference matching, Eq. 15)"):
+        assert times.calls[name] == 2 and times.seconds[name] > 0, name  # once per band thread
+    assert times.calls["input check and undistortion"] == 1
+    with stage("outside"):
+        pass
+    assert "outside" not in times.seconds
+    res = run_decode_benchmark(repeats=1, warmup=0)
+    assert set(res["stages_ms"]) == set(times.seconds)
+    table = stage_table(res["stages_ms"])
+    assert "phase (gabor" in table and table.splitlines()[-1].startswith("sum over threads")
+    assert run_decode_benchmark(repeats=1, warmup=0, device="kinect")["stages_ms"] == {}

@@ -18,6 +18,7 @@ from simbench.decode.debruijn import drop_broken_links, neighbour_correct, windo
 from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
+from simbench.decode.profile import run_in_context, stage
 from simbench.pattern import check_channels, check_sequence, code_sequence, window_positions
 from simbench.optics import undistort_image
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
@@ -329,37 +330,46 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     # "lit" looks across the neighbouring stripes: twice the normalisation window, so that
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
-    certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
+    with stage("lit and clipped pixels"):
+        certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
     raw = rgb
-    if unmixing is not None:
-        rgb = unmix(rgb, unmixing)
     weights = None
-    if params.color_normalize:
-        rgb, span = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
-        if params.intensity_mode == "weighted":
-            weights = overlay_weights(raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level)
-    intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
+    with stage("colour unmixing and normalisation"):
+        if unmixing is not None:
+            rgb = unmix(rgb, unmixing)
+        if params.color_normalize:
+            rgb, span = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
+            if params.intensity_mode == "weighted":
+                weights = overlay_weights(raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level)
+    with stage("intensity overlay (Eq. 9)"):
+        intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
     sx = params.sigma_periods * t_cam
-    phase = PHASE_METHODS[params.phase_method](
-        intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
-    )
-    rgb, intensity, certainty, lit = rgb[crop], intensity[crop], certainty[crop], lit[crop]
-    wrapped, amplitude, residual, support_w = phase.wrapped[crop], phase.amplitude[crop], phase.residual[crop], phase.support[crop]
-    valid = lit & (support_w >= params.min_window_support) & (amplitude >= params.min_amplitude) & (residual <= params.max_residual)
-    code = color_code(rgb)
-    stripes = segment_stripes(wrapped, valid, period_px=t_cam, max_gap_px=int(params.bridge_gap_periods * t_cam))
-    stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
-    table = _window_table(params.order, params.sequence)
-    raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
-    w_fixed, support = neighbour_correct(
-        raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
-    )
-    if params.link_check:
-        w_fixed = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
-        support = np.where(w_fixed >= 0, support, 0)
+    with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
+        phase = PHASE_METHODS[params.phase_method](
+            intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
+        )
+    with stage("validity"):
+        rgb, intensity, certainty, lit = rgb[crop], intensity[crop], certainty[crop], lit[crop]
+        wrapped, amplitude, residual, support_w = phase.wrapped[crop], phase.amplitude[crop], phase.residual[crop], phase.support[crop]
+        valid = lit & (support_w >= params.min_window_support) & (amplitude >= params.min_amplitude) & (residual <= params.max_residual)
+    with stage("colour code (Eq. 13)"):
+        code = color_code(rgb)
+    with stage("stripe segmentation and voting"):
+        stripes = segment_stripes(wrapped, valid, period_px=t_cam, max_gap_px=int(params.bridge_gap_periods * t_cam))
+        stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
+    with stage("De Bruijn windows and neighbour correction"):
+        table = _window_table(params.order, params.sequence)
+        raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
+        w_fixed, support = neighbour_correct(
+            raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
+        )
+        if params.link_check:
+            w_fixed = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
+            support = np.where(w_fixed >= 0, support, 0)
     lab = stripes.labels
-    position = _per_pixel(w_fixed, lab, -1)
-    column, stripe_index = absolute_column(position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
+    with stage("absolute column (Eq. 14)"):
+        position = _per_pixel(w_fixed, lab, -1)
+        column, stripe_index = absolute_column(position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
     st = LazyStages()
     st.put("intensity", intensity)
     st.put("certainty", certainty)
@@ -414,12 +424,14 @@ def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
         r0, r1 = band
         a0, a1 = max(0, r0 - halo), min(h, r1 + halo)
         rows = image[a0:a1] if order == [0, 1, 2] else image[a0:a1][..., order]
-        return fn(_to_float(rows), slice(r0, r1), slice(r0 - a0, r1 - a0))
+        with stage("to float"):
+            rows = _to_float(rows)
+        return fn(rows, slice(r0, r1), slice(r0 - a0, r1 - a0))
 
     if len(bands) == 1:
         return [work(bands[0])]
     with ThreadPoolExecutor(max_workers=len(bands)) as pool:
-        return list(pool.map(work, bands))
+        return run_in_context(pool, work, bands)
 
 
 def _merge_stages(parts: list[LazyStages]) -> LazyStages:
@@ -533,7 +545,8 @@ def decode(
         Never raises on a legal image: what cannot be decoded is NaN in ``depth_m`` and False
         in ``valid``.
     """
-    image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
+    with stage("input check and undistortion"):
+        image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
     h, w = image.shape[:2]
     zmin, zmax = params.depth_range_m
     ref = None
@@ -560,25 +573,27 @@ def decode(
 
     def band(img, rows, crop):
         column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
-        if ref is not None:
-            x_ref = match_reference(column, ref.inverse[rows])
-            depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
-            # a column the reference row never shows (near the image's ends, for surfaces off
-            # the reference depth) cannot be matched: triangulate it with the calibrated rig
-            beyond = np.isnan(x_ref) & np.isfinite(column)
-            if beyond.any():
-                r_idx, c_idx = np.nonzero(beyond)
-                depth[beyond] = triangulate_columns(column[beyond], rig, rows=r_idx + rows.start, cols=c_idx).astype(np.float32)
-            stages.put("reference_x", x_ref)
-            stages.put("triangulated", beyond)
-        else:
-            depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
-        valid = valid_out[rows]
-        np.greater_equal(depth, zmin, out=valid)
-        valid &= depth <= zmax
-        for dst, src, fill in ((depth_out, depth, nan), (conf_out, stages["amplitude"], 0), (col_out, column, nan), (index_out, stripe_index, -1)):
-            dst[rows] = fill
-            np.copyto(dst[rows], src, where=valid)
+        with stage("depth (reference matching, Eq. 15)" if ref is not None else "depth (triangulation, Eq. 15)"):
+            if ref is not None:
+                x_ref = match_reference(column, ref.inverse[rows])
+                depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
+                # a column the reference row never shows (near the image's ends, for surfaces off
+                # the reference depth) cannot be matched: triangulate it with the calibrated rig
+                beyond = np.isnan(x_ref) & np.isfinite(column)
+                if beyond.any():
+                    r_idx, c_idx = np.nonzero(beyond)
+                    depth[beyond] = triangulate_columns(column[beyond], rig, rows=r_idx + rows.start, cols=c_idx).astype(np.float32)
+                stages.put("reference_x", x_ref)
+                stages.put("triangulated", beyond)
+            else:
+                depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
+        with stage("output"):
+            valid = valid_out[rows]
+            np.greater_equal(depth, zmin, out=valid)
+            valid &= depth <= zmax
+            for dst, src, fill in ((depth_out, depth, nan), (conf_out, stages["amplitude"], 0), (col_out, column, nan), (index_out, stripe_index, -1)):
+                dst[rows] = fill
+                np.copyto(dst[rows], src, where=valid)
         return stages
 
     parts = _run_bands(band, image, params, rig)

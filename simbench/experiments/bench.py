@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.decode.profile import stage_times
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.rig import paper_rig
 from simbench.device import get_sensor
@@ -28,7 +29,7 @@ from simbench.projector import transfer_curve
 from simbench.sensor import LIGHT_M_S, simple_camera
 from simbench.synthetic import synthetic_plane_capture
 
-__all__ = ["benchmark_inputs", "run_decode_benchmark", "competitor_inputs", "BENCH_DEVICES", "BENCH_SCENES", "SHADOW"]
+__all__ = ["benchmark_inputs", "run_decode_benchmark", "stage_table", "competitor_inputs", "BENCH_DEVICES", "BENCH_SCENES", "SHADOW"]
 
 BENCH_DEVICES = ("proposed", "kinect", "tof")
 BENCH_SCENES = ("plane", "shadow")
@@ -105,7 +106,9 @@ def competitor_inputs(device: str, *, seed: int = 0, model=None):
 def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "proposed", scene: str = "plane") -> dict:
     """Time one decode (the paper's :func:`simbench.decode.decode`, or a competitor's
     :func:`simbench.baselines.decode_raw`) at the device's native resolution; returns
-    median/min/max in ms and the set-up.  ``scene`` (proposed only): see the module doc."""
+    median/min/max in ms and the set-up, and for the proposed decoder ``stages_ms``: each
+    stage's mean time per decode, summed over the row-band threads that ran it
+    (:mod:`simbench.decode.profile`).  ``scene`` (proposed only): see the module doc."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if device not in BENCH_DEVICES:
@@ -129,10 +132,11 @@ def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "p
     for _ in range(warmup):
         run()
     times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        run()
-        times.append((time.perf_counter() - t0) * 1000.0)
+    with stage_times() as stages:
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            run()
+            times.append((time.perf_counter() - t0) * 1000.0)
     return {
         "device": device,
         "scene": scene,
@@ -143,4 +147,16 @@ def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "p
         "max_ms": max(times),
         "threads": cv2.getNumThreads(),
         "cpus": os.cpu_count(),
+        "stages_ms": {k: v / repeats for k, v in stages.ms.items()},
     }
+
+
+def stage_table(stages_ms: dict[str, float]) -> str:
+    """The per-stage times as a plain-text table: ms per decode and share of their sum."""
+    total = sum(stages_ms.values())
+    width = max([len(k) for k in stages_ms] + [5])
+    lines = [f"{'stage':<{width}}  {'ms':>7}  {'share':>6}"]
+    for k, v in sorted(stages_ms.items(), key=lambda kv: -kv[1]):
+        lines.append(f"{k:<{width}}  {v:7.2f}  {100 * v / total if total else 0:5.1f} %")
+    lines.append(f"{'sum over threads':<{width}}  {total:7.2f}")
+    return "\n".join(lines)
