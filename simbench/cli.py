@@ -182,7 +182,9 @@ def _z0_for(reference: Path, z0: float | None) -> float:
 
 
 def _cmd_decode(args) -> int:
+    from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode, robust_params
+    from simbench.decode.persist import cached_decode_reference
     from simbench.io import load_image, npy_bytes, ply_bytes, png_bytes, write_files
     from simbench.metrics import points_from_depth
     from simbench.rig import load_rig
@@ -210,14 +212,18 @@ def _cmd_decode(args) -> int:
     if args.robust:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
+    cache = RenderCache(None if args.no_cache else args.cache)
     if params.unmix:
-        reference = _calibrated_reference(args, rig, params, reference)
+        reference = _calibrated_reference(args, rig, params, reference, cache=cache)
+    elif reference is not None:
+        reference = cached_decode_reference(reference, rig=rig, params=params, cache=cache)
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
     # every output is written, or none is (an unwritable --ply must not leave depth.npy behind)
     files = {Path(args.out): npy_bytes(result.depth_m)}
-    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m) -> {args.out}"
+    ref_note = "" if reference is None else (", reference map from the cache" if cache.hits else ", reference decoded" + ("" if cache.root is None else " and cached"))
+    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m{ref_note}) -> {args.out}"
     if args.ply:
         pts = points_from_depth(result.depth_m, rig.camera)
         ok = result.valid
@@ -241,11 +247,11 @@ def _cmd_decode(args) -> int:
     return 0
 
 
-def _calibrated_reference(args, rig, params, reference):
+def _calibrated_reference(args, rig, params, reference, *, cache=None):
     """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
     the reference capture (``reference``, or read from --reference in calibrated mode) and the
     calibration frames beside it (or in --calibration)."""
-    from simbench.decode import decode_reference
+    from simbench.decode.persist import cached_decode_reference
     from simbench.io import load_image
     from simbench.pattern import CALIBRATION_FRAMES
 
@@ -263,7 +269,7 @@ def _calibrated_reference(args, rig, params, reference):
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
     z0 = _z0_for(Path(args.reference), args.z0)
     ref_params = replace(params, mode="reference", z0_m=z0)
-    return decode_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"])
+    return cached_decode_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"], cache=cache)
 
 
 def _finite_range(a: np.ndarray) -> tuple[float, float]:
@@ -528,6 +534,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--robust", action="store_true", help="our colour-robust decoder (unmixing, colour normalisation, weighted intensity) instead of the paper's; needs the calibration frames")
     s.add_argument("--calibration", default=None, help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: the --reference folder)")
     s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
+    s.add_argument("--cache", default=".cache/simbench", help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and decoder code)")
+    s.add_argument("--no-cache", action="store_true", help="decode the reference plane every time, store nothing")
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth", **kw)

@@ -272,3 +272,51 @@ def test_render_reruns_from_the_render_cache(tmp_path, capsys, variant):
     assert main([*base[:-2], "--no-cache", "--out", str(tmp_path / "c")]) == 0
     assert len(list((tmp_path / "cache").glob("*.npz"))) == n
     assert (tmp_path / "c" / "capture.png").read_bytes() == (tmp_path / "a" / "capture.png").read_bytes()
+
+
+def test_decode_keeps_the_decoded_reference(tmp_path, capsys):
+    """The reference plane is decoded once and kept in the cache (issue 16): a second decode
+    reads it back and writes the same depth bytes as a decode without the cache; another
+    reference image, or other decoder settings, is another entry."""
+    import numpy as np
+
+    args = _synthetic_recording(tmp_path)
+    cache = ["--cache", str(tmp_path / "cache")]
+    outs = []
+    for i, extra in enumerate((cache, cache, ["--no-cache"])):
+        outs.append(tmp_path / f"d{i}.npy")
+        assert main(["decode", *args, "--out", str(outs[-1]), *extra]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert "reference decoded and cached" in printed[0] and "reference map from the cache" in printed[1] and "reference decoded)" in printed[2]
+    assert outs[0].read_bytes() == outs[1].read_bytes() == outs[2].read_bytes()
+    entries = sorted((tmp_path / "cache").glob("reference_map-*.npz"))
+    assert len(entries) == 1
+    assert main(["decode", *args, "--out", str(tmp_path / "v.npy"), *cache, "--decoder", "voting=false"]) == 0
+    assert len(list((tmp_path / "cache").glob("reference_map-*.npz"))) == 2
+    assert np.nanmedian(np.load(outs[0])) == pytest.approx(1.1, abs=1e-3)
+
+
+def test_cached_reference_key_follows_the_decoder_code(tmp_path, monkeypatch):
+    """A decoded reference stored by one version of the decoder is never read by another: the
+    key holds a digest of the decoder's source files."""
+    import numpy as np
+
+    from simbench.cache import RenderCache
+    from simbench.decode import DecoderParams, decode_reference
+    from simbench.decode import persist
+    from simbench.io import load_image
+    from simbench.rig import load_rig
+
+    _synthetic_recording(tmp_path)
+    rig = load_rig(tmp_path / "rig.toml")
+    ref = load_image(tmp_path / "reference.png")
+    cache = RenderCache(tmp_path / "cache")
+    got = persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(), cache=cache)
+    again = persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(threads=1), cache=cache)  # threads do not matter
+    fresh = decode_reference(ref, rig=rig, params=DecoderParams())
+    for a, b in ((got.column_px, fresh.column_px), (again.inverse, fresh.inverse), (again.expected_px, fresh.expected_px)):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert cache.hits == 1 and cache.misses == 1 and got.z0_m == fresh.z0_m and got.mixing is None
+    monkeypatch.setattr(persist, "decoder_fingerprint", lambda: "another decoder")
+    persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(), cache=cache)
+    assert cache.misses == 2

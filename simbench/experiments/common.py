@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from simbench.cache import RenderCache
-from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.decode import DecoderParams, decode
+from simbench.decode.persist import cached_decode_reference
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
 from simbench.metrics import depth_errors, edge_band, plane_fit_error
@@ -247,7 +248,7 @@ class Session:
                 for name, drive in calibration_frames(self.pattern_u8).items():
                     cal[name] = self.capture(ref_scene, f"{label}/{name}", pattern_u8=drive)[0].image
             primaries = [cal[k] for k in ("red", "green", "blue")] if cal else None
-            self._refs[key] = decode_reference(img, rig=scene.rig, params=params, primaries=primaries, dark=cal.get("dark"))
+            self._refs[key] = cached_decode_reference(img, rig=scene.rig, params=params, primaries=primaries, dark=cal.get("dark"), cache=self.cache)
         return self._refs[key]
 
     def decode(self, cap: Capture, params: DecoderParams, *, mode: str | None = None) -> DecodeResult:

@@ -1,0 +1,68 @@
+"""A decoded reference plane, computed once and kept: :func:`cached_decode_reference`.
+
+Decoding the reference plane (and measuring its coupling matrix) is done once per calibration,
+yet a command-line decode or an experiment run would redo it every time.  The decoded map is
+stored in a :class:`simbench.cache.RenderCache` under a key made of everything it depends on:
+the bytes of the reference and calibration captures, the rig, the decoder settings (all but the
+thread count, which results do not depend on) and the decoder's own source code, so that a
+changed decoder never reads a map an older one wrote.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from simbench.cache import RenderCache, array_digest
+from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
+from simbench.rig import Rig, rig_to_dict
+
+__all__ = ["cached_decode_reference", "decoder_fingerprint"]
+
+
+@lru_cache(maxsize=1)
+def decoder_fingerprint() -> str:
+    """SHA-256 over the decoder package's source files (name and bytes, in name order)."""
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> ReferenceMap:
+    """:func:`simbench.decode.decode_reference`, looked up in / stored to ``cache`` (None:
+    decoded every time).  Raises what ``decode_reference`` raises (a failed reference is
+    never stored)."""
+
+    def make() -> dict[str, np.ndarray]:
+        ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
+        arrays = {"column_px": ref.column_px, "expected_px": ref.expected_px, "inverse": ref.inverse, "z0_m": np.float64(ref.z0_m)}
+        if ref.mixing is not None:
+            arrays["mixing"] = ref.mixing
+        return arrays
+
+    if cache is None or cache.root is None:
+        arrays = make()
+    else:
+        settings = dataclasses.asdict(params)
+        settings.pop("threads")
+        parts = {
+            "reference": array_digest(np.asarray(reference)),
+            "calibration": None if primaries is None else [array_digest(np.asarray(p)) for p in primaries] + [array_digest(np.asarray(dark))],
+            "rig": rig_to_dict(rig),
+            "decoder": settings,
+            "decoder_source": decoder_fingerprint(),
+        }
+        arrays = cache.get_or_make("reference_map", parts, make)
+    return ReferenceMap(
+        column_px=arrays["column_px"],
+        expected_px=arrays["expected_px"],
+        inverse=arrays["inverse"],
+        z0_m=float(arrays["z0_m"]),
+        mixing=arrays.get("mixing"),
+    )
