@@ -210,3 +210,17 @@ def test_killing_the_sweep_leaves_no_process_behind(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_board_form_and_projector_timing_are_sweepable():
+    """Issue 17's new effects are axes: the boards' form (run.*) and the projector's timing
+    (sensor.projector.timing, frame_rate_hz) reach the run's config and sensor."""
+    from simbench.experiments.ablate import DEFAULTS, _sensor
+
+    sw = sweep_from_dict({"name": "t", "axis": [{"name": "run.board_bow_mm_per_m", "values": [0.0, 1.0]}, {"name": "sensor.projector.timing", "values": ["triggered", "video"]}]})
+    runs = expand(sw)
+    assert {(r["params"]["run.board_bow_mm_per_m"], r["params"]["sensor.projector.timing"]) for r in runs} >= {(0.0, "triggered"), (1.0, "video")}
+    sensor = _sensor({**DEFAULTS, "sensor.projector.timing": "video", "sensor.projector.frame_rate_hz": 120.0})
+    assert sensor.projector.timing == "video" and sensor.projector.frame_rate_hz == 120.0
+    with pytest.raises(ValueError, match="timing"):
+        _sensor({**DEFAULTS, "sensor.projector.timing": "free"})
