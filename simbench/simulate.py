@@ -7,9 +7,12 @@ the reference's render seed and the two camera-noise seeds; all four are recorde
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import platform
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +24,7 @@ from simbench.device import SensorModel, apply_to_rig, channel_weights, electron
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
-from simbench.rig import save_rig
+from simbench.rig import rig_to_dict, save_rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
 from simbench.spectral import crosstalk_matrix, material_crosstalk
@@ -35,6 +38,8 @@ __all__ = [
     "physical_scene",
     "exposure_phase",
     "projector_drive_for",
+    "ProjectorDrive",
+    "DriveImage",
     "render_channels",
     "record",
     "acquire",
@@ -110,13 +115,29 @@ def _renderer_id() -> dict:
     return {"variant": mi.variant(), "mitsuba": mi.__version__}
 
 
-def cached_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
-    """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``."""
+class DriveImage:
+    """An image for the projector known by its SHA-256 before it is built: ``digest`` keys the
+    render cache, ``make()`` builds the image only for a render the cache does not hold."""
+
+    def __init__(self, digest: str, make: Callable[[], np.ndarray]) -> None:
+        self.digest = digest
+        self.make = make
+
+
+def cached_radiance(scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
+    """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``; ``drive``
+    may be a :class:`DriveImage`, built only on a miss."""
     kw = {"spp": spp, "seed": seed, "max_depth": max_depth, "sampler": sampler}
+    lazy = isinstance(drive, DriveImage)
+
+    def render() -> np.ndarray:
+        return render_radiance(scene, drive.make() if lazy else drive, **kw)
+
     if cache is None:
-        return render_radiance(scene, drive, **kw)
-    parts = {"scene": scene_fingerprint(scene), "drive": "off" if drive is None else array_digest(drive), "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), "sampler": sampler, **_renderer_id()}
-    return cache.get_or_make("radiance", parts, lambda: {"radiance": render_radiance(scene, drive, **kw)})["radiance"]
+        return render()
+    digest = "off" if drive is None else (drive.digest if lazy else array_digest(drive))
+    parts = {"scene": scene_fingerprint(scene), "drive": digest, "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), "sampler": sampler, **_renderer_id()}
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
@@ -168,12 +189,20 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
     one: transfer curve, bit-plane timing (video mode: the exposure, from ``phase`` of a frame
     on, :func:`exposure_phase`), black level, DMD layout, defocus (by the depth each projector
     pixel lights) and lens distortion (:mod:`simbench.projector`, :mod:`simbench.optics`)."""
+    return _build_drive(scene, pattern, sensor, cache=cache, weights=_bitplane_weights(scene, sensor, phase))
+
+
+def _bitplane_weights(scene: SceneSpec, sensor: SensorModel, phase: float) -> np.ndarray | None:
     prj = sensor.projector
-    weights = None
-    if prj.timing == "video":
-        if not sensor.is_physical:
-            raise ValueError("the projector's video-mode timing needs the physical (emva) camera's exposure time")
-        weights = video_bitplane_weights(exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase)
+    if prj.timing != "video":
+        return None
+    if not sensor.is_physical:
+        raise ValueError("the projector's video-mode timing needs the physical (emva) camera's exposure time")
+    return video_bitplane_weights(exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase)
+
+
+def _build_drive(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None, weights: np.ndarray | None) -> np.ndarray:
+    prj = sensor.projector
     drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd, bitplane_weights=weights)
     intr = scene.rig.projector
     if prj.lens.defocus:
@@ -183,6 +212,82 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
     if intr.has_distortion:
         drive = distorted_projector_drive(drive, intr)
     return np.ascontiguousarray(drive, dtype=np.float32)
+
+
+@lru_cache(maxsize=1)
+def _drive_code_digest() -> str:
+    """SHA-256 of the modules that build a projector drive (a changed model never reuses the
+    digests an older one cached)."""
+    import simbench.optics
+    import simbench.projector
+
+    h = hashlib.sha256()
+    for mod in (simbench.projector, simbench.optics, sys.modules[__name__]):
+        h.update(Path(mod.__file__).read_bytes())
+    return h.hexdigest()
+
+
+def _mono(drive: np.ndarray, p: int) -> np.ndarray:
+    """Primary ``p``'s channel of the drive in all three channels (a crosstalk render's drive)."""
+    return np.ascontiguousarray(np.repeat(drive[..., p : p + 1], 3, axis=2))
+
+
+class ProjectorDrive:
+    """:func:`projector_drive_for`'s drive, built on first use.  The render cache keys on the
+    drive's digest (and on those of the single-primary drives a crosstalk render uses); these
+    digests are kept in ``cache`` under a key of the drive's inputs - pattern bytes, projector
+    model, exposure phase, rig, the scene's geometry when defocus depends on it, and the code
+    that builds drives - so a run whose renders are all cached never builds a drive (building
+    one, with its depth-dependent defocus, took a third of a warm quick run)."""
+
+    def __init__(self, scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0) -> None:
+        self._scene, self._pattern, self._sensor, self._cache = scene, pattern, sensor, cache
+        self._weights = _bitplane_weights(scene, sensor, phase)
+        self._array: np.ndarray | None = None
+        self._digests: dict[str, str] | None = None
+
+    def array(self) -> np.ndarray:
+        if self._array is None:
+            self._array = _build_drive(self._scene, self._pattern, self._sensor, cache=self._cache, weights=self._weights)
+        return self._array
+
+    def _compute_digests(self) -> dict[str, str]:
+        a = self.array()
+        out = {"rgb": array_digest(a)}
+        for p in range(3):
+            m = _mono(a, p)
+            out[f"mono{p}"] = array_digest(m) if m.any() else ""  # "" = the primary lights nothing
+        return out
+
+    def digests(self) -> dict[str, str]:
+        if self._digests is None:
+            if self._cache is None or self._cache.root is None:
+                self._digests = self._compute_digests()
+            else:
+                prj = self._sensor.projector
+                scene = self._scene
+                inputs = {
+                    "pattern": array_digest(self._pattern),
+                    "projector": sensor_to_dict(self._sensor)["projector"],
+                    "bitplane_weights": None if self._weights is None else self._weights.tolist(),
+                    "rig": rig_to_dict(scene.rig),
+                    "geometry": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))) if prj.lens.defocus else None,
+                    "stride": PROJECTOR_DEPTH_STRIDE,
+                    "code": _drive_code_digest(),
+                    **_renderer_id(),
+                }
+                arrays = self._cache.get_or_make("drive_digests", inputs, lambda: {k: np.frombuffer(v.encode(), np.uint8) for k, v in self._compute_digests().items()})
+                self._digests = {k: bytes(np.asarray(v, np.uint8)).decode() for k, v in arrays.items()}
+        return self._digests
+
+    def image(self) -> DriveImage:
+        """The whole drive, for the render cache."""
+        return DriveImage(self.digests()["rgb"], self.array)
+
+    def primary(self, p: int) -> DriveImage | None:
+        """Primary ``p`` alone in all three channels, or None where the drive leaves it off."""
+        digest = self.digests()[f"mono{p}"]
+        return DriveImage(digest, lambda: _mono(self.array(), p)) if digest else None
 
 
 
@@ -209,7 +314,7 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
-def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
+def render_channels(scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sensor: SensorModel, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
     """Radiance per camera channel on the camera's recorded pixel grid.
 
     Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
@@ -221,7 +326,8 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
     per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
     primary's materials: light of the projector's white.  Then the camera lens distortion.
 
-    ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for`.
+    ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for` (or a
+    :class:`ProjectorDrive`, built only for renders the cache does not hold).
 
     Returns
     -------
@@ -230,18 +336,20 @@ def render_channels(scene: SceneSpec, drive: np.ndarray, sensor: SensorModel, *,
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
     kw = {"spp": spp, "max_depth": max_depth, "sampler": sampler, "cache": cache}
+    lazy = isinstance(drive, ProjectorDrive)
     if not sensor.crosstalk:
-        q = cached_radiance(dark, drive, seed=seed, **kw)
+        q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
         if ambient:
             q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
     else:
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
         for p in range(3):
-            mono = np.ascontiguousarray(np.repeat(drive[..., p : p + 1], 3, axis=2))
+            mono = drive.primary(p) if lazy else _mono(drive, p)
             # the same seed for each primary: the sum has one render's sampling pattern; a
             # primary the drive leaves off (calibration frames) lights nothing
-            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if mono.any() else np.zeros_like(q)
+            lit = mono is not None if lazy else mono.any()
+            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if lit else np.zeros_like(q)
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
@@ -301,19 +409,19 @@ def acquire(
         raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
     seeds = split_seed(seed, calibration=with_calibration)
     pat = quantize(fringe_pattern(pattern))
-    drive = projector_drive_for(scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_capture"]))
+    drive = ProjectorDrive(scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_capture"]))
     q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, sampler=sampler, cache=cache)
     capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
     reference = np.zeros_like(capture)
     if with_reference:
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
-        ref_drive = projector_drive_for(ref_scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_reference"]))
+        ref_drive = ProjectorDrive(ref_scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_reference"]))
         ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, sampler=sampler, cache=cache)
         reference = record(ref_q, sensor=sensor, scene=ref_scene, rng=seeds["noise_reference"])
     calibration = {}
     if with_calibration:
         for name, frame in calibration_frames(pat).items():
-            cal_drive = projector_drive_for(ref_scene, frame, sensor, cache=cache, phase=exposure_phase(seeds[f"render_calibration_{name}"]))
+            cal_drive = ProjectorDrive(ref_scene, frame, sensor, cache=cache, phase=exposure_phase(seeds[f"render_calibration_{name}"]))
             q_cal = render_channels(ref_scene, cal_drive, sensor, spp=spp, seed=seeds[f"render_calibration_{name}"], max_depth=max_depth, sampler=sampler, cache=cache)
             calibration[name] = record(q_cal, sensor=sensor, scene=ref_scene, rng=seeds[f"noise_calibration_{name}"])
     gt = cached_ground_truth(scene, cache=cache)
@@ -344,7 +452,6 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
     (:func:`simbench.io.output_directory`: built beside ``out_dir`` and swapped in; an earlier
     render there is replaced, any other non-empty folder refused).  ``meta.json`` lists every
     file with its SHA-256, so a reader can tell a folder's files belong together."""
-    import hashlib
 
     out = Path(out_dir)
     with output_directory(out, manifest=RENDER_MANIFEST, overwrite=overwrite) as tmp:

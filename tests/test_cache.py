@@ -111,9 +111,11 @@ def test_array_digest_sees_dtype_shape_and_values():
 
 
 @pytest.mark.slow
-def test_decoder_change_does_not_rerender(tmp_path, variant):
-    """A second run with other decoder settings takes every render from the cache, and the
-    cached run's tables equal an uncached run's byte for byte."""
+def test_decoder_change_does_not_rerender(tmp_path, variant, monkeypatch):
+    """A second run with other decoder settings takes every render from the cache without even
+    building a projector drive (the render keys' drive digests are cached by the drive's
+    inputs), and the cached run's tables equal an uncached run's byte for byte."""
+    from simbench import simulate
     from simbench.decode import DecoderParams
     from simbench.experiments.common import RunConfig
     from simbench.experiments.reproduce import reproduce
@@ -121,12 +123,46 @@ def test_decoder_change_does_not_rerender(tmp_path, variant):
     cfg = RunConfig.preset(quick=True)
     quiet = lambda s: None  # noqa: E731
     reproduce(["table3"], config=cfg, out_dir=tmp_path / "a", cache_dir=tmp_path / "cache", progress=quiet, command="t")
-    n_entries = len(list((tmp_path / "cache").glob("*.npz")))
+    renders = sorted((tmp_path / "cache").glob("radiance-*.npz"))
+    assert renders and list((tmp_path / "cache").glob("drive_digests-*.npz"))
     other = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.3))
-    msgs = []
-    reproduce(["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=msgs.append, command="t")
-    assert len(list((tmp_path / "cache").glob("*.npz"))) == n_entries
-    assert any("0 renders" in m for m in msgs)
+
+    def no_drive(*args, **kwargs):
+        raise AssertionError("a warm run built a projector drive")
+
+    with monkeypatch.context() as m:
+        m.setattr(simulate, "_build_drive", no_drive)
+        reproduce(["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    assert sorted((tmp_path / "cache").glob("radiance-*.npz")) == renders
     reproduce(["table3"], config=cfg, out_dir=tmp_path / "c", cache_dir=None, progress=quiet, command="t")
     for f in ("table3.csv", "table3.md", "fig10.png"):
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "c" / f).read_bytes(), f
+
+
+def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, variant):
+    """ProjectorDrive's digests are those of projector_drive_for's array and of its
+    single-primary drives (empty for a primary the drive leaves off); a second ProjectorDrive
+    of the same inputs reads them from the cache without building the drive, and other inputs
+    (another pattern, another exposure phase in video mode) are another entry."""
+    from simbench.device import get_sensor
+    from simbench.pattern import calibration_frames
+    from simbench.simulate import ProjectorDrive, _mono, physical_scene, projector_drive_for
+    from simbench.experiments.common import Session, RunConfig
+
+    sensor = get_sensor("paper")
+    session = Session(RunConfig.preset(quick=True), out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
+    scene = physical_scene(session.scene("plane_white"), sensor)
+    pattern = session.pattern_u8
+    cache = RenderCache(tmp_path / "cache")
+    first = ProjectorDrive(scene, pattern, sensor, cache=cache)
+    array = projector_drive_for(scene, pattern, sensor)
+    assert first.digests() == {"rgb": array_digest(array), **{f"mono{p}": array_digest(_mono(array, p)) for p in range(3)}}
+    second = ProjectorDrive(scene, pattern, sensor, cache=cache)
+    assert second.digests() == first.digests() and second._array is None
+    red = calibration_frames(pattern)["red"]
+    only_red = ProjectorDrive(scene, red, get_sensor("ideal"), cache=cache).digests()  # a perfect black: green and blue off
+    assert only_red["mono0"] and only_red["mono1"] == "" and only_red["mono2"] == ""
+    video = dataclasses.replace(sensor, projector=dataclasses.replace(sensor.projector, timing="video"))
+    a = ProjectorDrive(scene, pattern, video, cache=cache, phase=0.1).digests()
+    b = ProjectorDrive(scene, pattern, video, cache=cache, phase=0.6).digests()
+    assert a["rgb"] != b["rgb"] != first.digests()["rgb"]

@@ -33,7 +33,7 @@ from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, GroundTruth, check_sam
 from simbench.rig import scale_camera
 from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects, reference_scene
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
-from simbench.simulate import REFERENCE_ALBEDO, cached_ground_truth, exposure_phase, physical_scene, projector_drive_for, record, render_channels, versions
+from simbench.simulate import REFERENCE_ALBEDO, ProjectorDrive, cached_ground_truth, exposure_phase, physical_scene, record, render_channels, versions
 
 __all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "figure_png", "git_commit"]
 
@@ -192,7 +192,7 @@ class Session:
         differs by camera noise only), with seeds from ``label``; ``pattern_u8`` replaces the
         run's pattern (calibration frames)."""
         render_seed = label_seed(self.config.seed, f"{label}/render")
-        drive = projector_drive_for(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache, phase=exposure_phase(render_seed))
+        drive = ProjectorDrive(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache, phase=exposure_phase(render_seed))
         q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, sampler=self.config.sampler, cache=self.cache)
         gt = cached_ground_truth(scene, cache=self.cache)
         out = []

@@ -61,7 +61,7 @@ def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cac
         except (ValueError, AttributeError):
             merged = {}
     save_json(path, dict(sorted({**merged, **metrics}.items())))
-    progress(f"render cache: {session.cache.hits} hits, {session.cache.misses} renders; results in {out_dir}")
+    progress(f"cache: {session.cache.hits} hits, {session.cache.misses} made (renders, ground truth, decoded references, drive digests); results in {out_dir}")
     return metrics
 
 
