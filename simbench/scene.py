@@ -407,8 +407,11 @@ def board_form(*, bow_m_per_m: float, waviness_m: float, rng) -> dict:
 
 
 def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tuple[SceneSpec, dict]:
-    """``scene`` with each named plane or box moved as a lab would have placed it: its own
-    seeded depth offset and tilt (:class:`Placement`), independent of the reference plane.
+    """``scene`` with each named object moved as a lab would have placed it: its own seeded
+    depth offset and tilt (:class:`Placement`), independent of the reference plane.  Planes,
+    boxes and meshes tilt about their own x and y axes (a mesh about its file's origin); a
+    sphere only moves in depth (its tilt is drawn, so that the other objects' draws do not
+    depend on it, and recorded as 0).
 
     Returns
     -------
@@ -426,15 +429,17 @@ def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tupl
         if o.name not in wanted:
             objects.append(o)
             continue
-        if o.kind not in ("plane", "box"):
-            raise ValueError(f"{scene.name}: placement perturbs planes and boxes, not a {o.kind} ({o.name!r})")
         dz = float(rng.uniform(-placement.depth_m, placement.depth_m))
         tx, ty = (float(t) for t in rng.uniform(-placement.tilt_deg, placement.tilt_deg, size=2))
         p = dict(o.params)
-        cx, cy, cz = p["center_m"]
-        rx, ry, rz = p["rotation_deg"]
-        p["center_m"] = (cx, cy, cz + dz)
-        p["rotation_deg"] = (rx + tx, ry + ty, rz)
+        where = "translate_m" if o.kind == "mesh" else "center_m"
+        cx, cy, cz = p[where]
+        p[where] = (cx, cy, cz + dz)
+        if o.kind == "sphere":
+            tx = ty = 0.0
+        else:
+            rx, ry, rz = p["rotation_deg"]
+            p["rotation_deg"] = (rx + tx, ry + ty, rz)
         objects.append(dataclasses.replace(o, params=tuple(sorted(p.items()))))
         offsets[o.name] = {"depth_m": dz, "tilt_deg": [tx, ty]}
     if placement.bow_m_per_m or placement.waviness_m:

@@ -149,3 +149,28 @@ def test_board_form_placement_keeps_the_poses_and_flat_boards_their_keys():
     assert scene_fingerprint(explicit) == scene_fingerprint(plain)
     with pytest.raises(ValueError, match="bow_m_per_m"):
         Placement(bow_m_per_m=-0.001)
+
+
+def test_placement_moves_spheres_and_meshes_too(tmp_path):
+    """Every object kind can be placed (the ablations place every object of a scene): a mesh
+    moves by its translation and tilts, a sphere moves in depth only; the draws of the objects
+    after them do not depend on their kind."""
+    from simbench.scene import Placement, place_objects
+
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = scene_from_dict({"object": [
+        {"type": "mesh", "name": "bust", "file": "m.obj", "translate_m": [0, 0, 1.0]},
+        {"type": "sphere", "name": "ball", "center_m": [0, 0, 0.9], "radius_m": 0.1},
+        {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+    ]}, base_dir=tmp_path)
+    placed, off = place_objects(scene, ["bust", "ball", "wall"], placement=Placement(), rng=4)
+    mesh, ball, wall = (dict(o.params) for o in placed.objects)
+    assert mesh["translate_m"][2] == pytest.approx(1.0 + off["bust"]["depth_m"]) and mesh["rotation_deg"][:2] == pytest.approx(tuple(off["bust"]["tilt_deg"]))
+    assert ball["center_m"][2] == pytest.approx(0.9 + off["ball"]["depth_m"]) and off["ball"]["tilt_deg"] == [0.0, 0.0]
+    assert off["ball"]["depth_m"] != 0.0 and off["bust"]["tilt_deg"] != [0.0, 0.0]
+    boxed = scene_from_dict({"object": [
+        {"type": "box", "name": "bust", "center_m": [0, 0, 1.0], "size_m": [0.1, 0.1, 0.1]},
+        {"type": "box", "name": "ball", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
+        {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+    ]})
+    assert place_objects(boxed, ["bust", "ball", "wall"], placement=Placement(), rng=4)[1]["wall"] == off["wall"]
