@@ -150,28 +150,6 @@ def test_result_does_not_depend_on_threads(mode, reference):
     assert all(len(v) == 1 for v in rows_of.values())
 
 
-def test_band_threads_turn_opencv_threads_off_and_restore_them(reference):
-    """OpenCV runs single-threaded inside the decoder's band threads (no oversubscription) and
-    gets its own thread count back afterwards, also after a decode that raised."""
-    import cv2
-
-    img, _, _ = _tilted(20, depth=1.1)
-    before = cv2.getNumThreads()
-    decode(img, rig=RIG, params=DecoderParams(threads=2), reference=reference)
-    assert cv2.getNumThreads() == before
-    from simbench.decode import pipeline
-
-    seen = []
-
-    def spy(rows, *args, **kwargs):
-        seen.append(cv2.getNumThreads())
-        raise RuntimeError("stop")
-
-    with pytest.raises(RuntimeError, match="stop"):
-        pipeline._run_bands(spy, pipeline._check_capture(img, RIG.camera.size_hw), DecoderParams(threads=2), RIG)
-    assert seen and set(seen) == {1} and cv2.getNumThreads() == before
-
-
 def test_custom_sequence_pattern_decodes():
     """Any cyclic binary sequence with unique windows: here B(2, 4) reversed, and a
     12-stripe sequence whose windows of 4 are unique but which is not a De Bruijn sequence."""

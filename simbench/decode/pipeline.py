@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import threading
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import lru_cache
 
-import cv2
 import numpy as np
 
 from simbench import validate
@@ -433,34 +430,8 @@ def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
 
     if len(bands) == 1:
         return [work(bands[0])]
-    with _opencv_single_threaded(), ThreadPoolExecutor(max_workers=len(bands)) as pool:
+    with ThreadPoolExecutor(max_workers=len(bands)) as pool:
         return run_in_context(pool, work, bands)
-
-
-_CV_THREADS_LOCK = threading.Lock()
-_cv_users = 0
-_cv_saved = 1
-
-
-@contextmanager
-def _opencv_single_threaded():
-    """OpenCV's own worker threads off while the row bands run: each band is already a thread,
-    and OpenCV's pool inside them oversubscribes the cores (measured on 2 cores: 26-28 ms a
-    decode with it, 22 ms without; OpenCV's filters give the same bits either way).  The setting
-    is process-wide: it is restored when the last concurrent decode ends."""
-    global _cv_users, _cv_saved
-    with _CV_THREADS_LOCK:
-        if _cv_users == 0:
-            _cv_saved = cv2.getNumThreads()
-            cv2.setNumThreads(1)
-        _cv_users += 1
-    try:
-        yield
-    finally:
-        with _CV_THREADS_LOCK:
-            _cv_users -= 1
-            if _cv_users == 0:
-                cv2.setNumThreads(_cv_saved)
 
 
 def _merge_stages(parts: list[LazyStages]) -> LazyStages:
