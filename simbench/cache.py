@@ -95,9 +95,18 @@ class RenderCache:
 
     def get_or_make(self, kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
         """The arrays stored under ``(kind, parts)``, made by ``make()`` and stored on a miss."""
+        out = self.lookup(kind, parts)
+        if out is None:
+            out = make()
+            self.store(kind, parts, out)
+        return out
+
+    def lookup(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
+        """The arrays stored under ``(kind, parts)``, or None (a miss; a damaged entry is
+        removed and counts as one)."""
         if self.root is None:
             self.misses += 1
-            return make()
+            return None
         path = self.root / f"{self.key(kind, parts)}.npz"
         if path.is_file():
             out = _read_entry(path)
@@ -107,11 +116,15 @@ class RenderCache:
             path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
             self.damaged += 1
         self.misses += 1
-        arrays = make()
+        return None
+
+    def store(self, kind: str, parts: dict, arrays: dict[str, np.ndarray]) -> None:
+        """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum)."""
+        if self.root is None:
+            return
         buf = io.BytesIO()
         np.savez(buf, **arrays, **{_DIGEST_KEY: np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8)})
-        atomic_write_bytes(path, buf.getvalue())
-        return arrays
+        atomic_write_bytes(self.root / f"{self.key(kind, parts)}.npz", buf.getvalue())
 
 
 _DIGEST_KEY = "__sha256__"

@@ -184,7 +184,7 @@ def _z0_for(reference: Path, z0: float | None) -> float:
 def _cmd_decode(args) -> int:
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode, robust_params
-    from simbench.decode.persist import cached_decode_reference
+    from simbench.decode.persist import lookup_decoded_reference
     from simbench.io import load_image, npy_bytes, ply_bytes, png_bytes, write_files
     from simbench.metrics import points_from_depth
     from simbench.rig import load_rig
@@ -213,10 +213,11 @@ def _cmd_decode(args) -> int:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
     cache = RenderCache(None if args.no_cache else args.cache)
+    store_reference = lambda: None  # noqa: E731
     if params.unmix:
-        reference = _calibrated_reference(args, rig, params, reference, cache=cache)
+        reference, store_reference = _calibrated_reference(args, rig, params, reference, cache=cache)
     elif reference is not None:
-        reference = cached_decode_reference(reference, rig=rig, params=params, cache=cache)
+        reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -243,6 +244,7 @@ def _cmd_decode(args) -> int:
     if len({p.resolve() for p in files}) != len(files):
         raise ValueError("--out, --ply and the --debug-dir files must be different paths")
     write_files(files)
+    store_reference()  # only now: a failed decode leaves nothing behind, not even a cache entry
     print(msg)
     return 0
 
@@ -250,8 +252,9 @@ def _cmd_decode(args) -> int:
 def _calibrated_reference(args, rig, params, reference, *, cache=None):
     """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
     the reference capture (``reference``, or read from --reference in calibrated mode) and the
-    calibration frames beside it (or in --calibration)."""
-    from simbench.decode.persist import cached_decode_reference
+    calibration frames beside it (or in --calibration); with the function that caches it
+    (:func:`simbench.decode.persist.lookup_decoded_reference`)."""
+    from simbench.decode.persist import lookup_decoded_reference
     from simbench.io import load_image
     from simbench.pattern import CALIBRATION_FRAMES
 
@@ -269,7 +272,7 @@ def _calibrated_reference(args, rig, params, reference, *, cache=None):
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
     z0 = _z0_for(Path(args.reference), args.z0)
     ref_params = replace(params, mode="reference", z0_m=z0)
-    return cached_decode_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"], cache=cache)
+    return lookup_decoded_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"], cache=cache)
 
 
 def _finite_range(a: np.ndarray) -> tuple[float, float]:

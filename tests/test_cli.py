@@ -266,7 +266,12 @@ def test_render_reruns_from_the_render_cache(tmp_path, capsys, variant):
     assert main([*base, "--out", str(tmp_path / "b")]) == 0
     second = capsys.readouterr().out
     n = len(list((tmp_path / "cache").glob("*.npz")))
-    assert n > 0 and ", 0 of " in first and f"{n} of {n} from the render cache" in second
+    import re
+
+    # the rerun looks up fewer entries than the first run stored (a cached drive digest spares
+    # building the drive, and with it the defocus depth map), and finds every one
+    hits = re.search(r"(\d+) of (\d+) from the render cache", second)
+    assert n > 0 and ", 0 of " in first and hits and hits.group(1) == hits.group(2) and 0 < int(hits.group(1)) <= n
     for name in ("capture.png", "reference.png", "gt_depth.npy"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     assert main([*base[:-2], "--no-cache", "--out", str(tmp_path / "c")]) == 0

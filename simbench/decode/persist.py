@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from simbench.cache import RenderCache, array_digest
 from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
 
-__all__ = ["cached_decode_reference", "decoder_fingerprint"]
+__all__ = ["cached_decode_reference", "lookup_decoded_reference", "decoder_fingerprint"]
 
 
 @lru_cache(maxsize=1)
@@ -38,17 +39,18 @@ def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderP
     """:func:`simbench.decode.decode_reference`, looked up in / stored to ``cache`` (None:
     decoded every time).  Raises what ``decode_reference`` raises (a failed reference is
     never stored)."""
+    ref, store = lookup_decoded_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark, cache=cache)
+    store()
+    return ref
 
-    def make() -> dict[str, np.ndarray]:
-        ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
-        arrays = {"column_px": ref.column_px, "expected_px": ref.expected_px, "inverse": ref.inverse, "z0_m": np.float64(ref.z0_m)}
-        if ref.mixing is not None:
-            arrays["mixing"] = ref.mixing
-        return arrays
 
-    if cache is None or cache.root is None:
-        arrays = make()
-    else:
+def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> tuple[ReferenceMap, Callable[[], None]]:
+    """The decoded reference from ``cache``, or decoded now, and a function that stores it
+    (nothing to do when it came from the cache): a command stores it only once everything
+    else has succeeded, so a failed command leaves nothing behind."""
+    parts = None
+    arrays = None
+    if cache is not None and cache.root is not None:
         settings = dataclasses.asdict(params)
         settings.pop("threads")
         parts = {
@@ -58,11 +60,23 @@ def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderP
             "decoder": settings,
             "decoder_source": decoder_fingerprint(),
         }
-        arrays = cache.get_or_make("reference_map", parts, make)
-    return ReferenceMap(
+        arrays = cache.lookup("reference_map", parts)
+    fresh = arrays is None
+    if fresh:
+        ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
+        arrays = {"column_px": ref.column_px, "expected_px": ref.expected_px, "inverse": ref.inverse, "z0_m": np.float64(ref.z0_m)}
+        if ref.mixing is not None:
+            arrays["mixing"] = ref.mixing
+
+    def store() -> None:
+        if fresh and parts is not None:
+            cache.store("reference_map", parts, arrays)
+
+    ref = ReferenceMap(
         column_px=arrays["column_px"],
         expected_px=arrays["expected_px"],
         inverse=arrays["inverse"],
         z0_m=float(arrays["z0_m"]),
         mixing=arrays.get("mixing"),
     )
+    return ref, store
