@@ -25,7 +25,7 @@ from simbench.io import atomic_write_bytes
 from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
 
-__all__ = ["RENDER_VERSION", "RenderCache", "scene_fingerprint", "array_digest"]
+__all__ = ["RENDER_VERSION", "RenderCache", "scene_fingerprint", "array_digest", "source_digest"]
 
 RENDER_VERSION = 1
 
@@ -36,6 +36,17 @@ def _file_digest(path: str, mtime_ns: int, size: int) -> str:
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
+    return h.hexdigest()
+
+
+def source_digest(paths) -> str:
+    """SHA-256 over source files (name and bytes, in the order given): part of a cache key
+    for results of code that may change between runs."""
+    h = hashlib.sha256()
+    for path in paths:
+        path = Path(path)
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
     return h.hexdigest()
 
 

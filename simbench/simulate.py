@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench.cache import RenderCache, array_digest, scene_fingerprint
+from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 from simbench.pattern import CALIBRATION_FRAMES, PatternSpec, calibration_frames, fringe_pattern, quantize
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
@@ -189,7 +189,7 @@ def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorMod
     one: transfer curve, bit-plane timing (video mode: the exposure, from ``phase`` of a frame
     on, :func:`exposure_phase`), black level, DMD layout, defocus (by the depth each projector
     pixel lights) and lens distortion (:mod:`simbench.projector`, :mod:`simbench.optics`)."""
-    return _build_drive(scene, pattern, sensor, cache=cache, weights=_bitplane_weights(scene, sensor, phase))
+    return ProjectorDrive(scene, pattern, sensor, cache=cache, phase=phase).array()
 
 
 def _bitplane_weights(scene: SceneSpec, sensor: SensorModel, phase: float) -> np.ndarray | None:
@@ -221,10 +221,7 @@ def _drive_code_digest() -> str:
     import simbench.optics
     import simbench.projector
 
-    h = hashlib.sha256()
-    for mod in (simbench.projector, simbench.optics, sys.modules[__name__]):
-        h.update(Path(mod.__file__).read_bytes())
-    return h.hexdigest()
+    return source_digest(m.__file__ for m in (simbench.projector, simbench.optics, sys.modules[__name__]))
 
 
 def _mono(drive: np.ndarray, p: int) -> np.ndarray:

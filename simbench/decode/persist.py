@@ -11,14 +11,13 @@ changed decoder never reads a map an older one wrote.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from simbench.cache import RenderCache, array_digest
+from simbench.cache import RenderCache, array_digest, source_digest
 from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
 
@@ -28,11 +27,7 @@ __all__ = ["cached_decode_reference", "lookup_decoded_reference", "decoder_finge
 @lru_cache(maxsize=1)
 def decoder_fingerprint() -> str:
     """SHA-256 over the decoder package's source files (name and bytes, in name order)."""
-    h = hashlib.sha256()
-    for path in sorted(Path(__file__).parent.glob("*.py")):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()
+    return source_digest(sorted(Path(__file__).parent.glob("*.py")))
 
 
 def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> ReferenceMap:
