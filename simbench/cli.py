@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench.seeds import DEFAULT_SEED
+
 __all__ = ["main"]
 
 
@@ -100,6 +102,12 @@ def _render_settings(args) -> tuple[int, str]:
 _MAX_DEPTH = _int(2, 1024)
 
 
+def _system_names() -> list[str]:
+    from simbench.systems import system_names
+
+    return system_names()
+
+
 def _cmd_pattern(args) -> int:
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
@@ -120,28 +128,56 @@ def _sequence(text: str | None) -> tuple[int, ...] | None:
 
 
 def _cmd_render(args) -> int:
-    from simbench.pattern import PatternSpec
+    from simbench.io import check_output_directory
     from simbench.render import select_variant
     from simbench.scene import load_scene
-    from simbench.device import get_sensor
-    from simbench.io import check_output_directory
-    from simbench.simulate import RENDER_MANIFEST, acquire, write_acquisition
+    from simbench.systems import get_system
 
+    system = get_system(args.system)  # an unknown name fails before anything else
     scene = load_scene(args.scene)
-    sensor = get_sensor(args.camera)
     spp, sampler = _render_settings(args)
-    check_output_directory(args.out, manifest=RENDER_MANIFEST, overwrite=args.overwrite)  # before minutes of rendering
+    manifest = "meta.json" if args.system == "proposed" else "device.json"
+    check_output_directory(args.out, manifest=manifest, overwrite=args.overwrite)  # before minutes of rendering
     variant = select_variant(args.variant)
-    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
     t0 = time.perf_counter()
     cache = _cache_of(args)
-    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames, cache=cache)
-    files = write_acquisition(acq, args.out, overwrite=args.overwrite)
+    if args.system == "proposed":
+        files = _render_proposed(args, scene, spp=spp, sampler=sampler, cache=cache)
+    else:
+        files = _render_system(args, system, scene, spp=spp, sampler=sampler, cache=cache, variant=variant)
     cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
-    print(f"rendered {scene.name} ({variant}, {spp} spp {sampler}, seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    print(f"rendered {scene.name} with the {system.info().label} ({variant}, {spp} spp {sampler}, seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
     return 0
+
+
+def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
+    """The proposed sensor's render folder: capture, reference (and calibration frames),
+    ground truth, rig, meta.json (:func:`simbench.simulate.acquire`)."""
+    from simbench.device import get_sensor
+    from simbench.pattern import PatternSpec
+    from simbench.simulate import acquire, write_acquisition
+
+    sensor = get_sensor(args.camera)
+    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
+    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames, cache=cache)
+    return write_acquisition(acq, args.out, overwrite=args.overwrite)
+
+
+def _render_system(args, system, scene, *, spp: int, sampler: str, cache, variant: str) -> dict:
+    """Another registered system's recording folder: its raw frames, calibration, ground
+    truth and manifest (:meth:`simbench.systems.DepthSystem.write_recording`)."""
+    from simbench.seeds import SeedLog
+    from simbench.systems import RenderSettings, acquire
+
+    seeds = SeedLog(args.seed)
+    render = RenderSettings(spp=spp, sampler=sampler, max_depth=args.max_depth, cache=cache)
+    prepared = system.prepare(scene)
+    cal = system.calibrate(prepared, seeds=seeds, render=render)
+    rec = acquire(system, prepared, scene.name, seeds=seeds, render=render, calibration=cal, prepared=True)[0]
+    meta = {"scene": str(args.scene), "spp": spp, "sampler": sampler, "seed": args.seed, "seeds": dict(seeds.used), "variant": variant}
+    return system.write_recording(Path(args.out), rec.raw, cal, scene=rec.scene, gt=rec.gt, meta=meta, overwrite=args.overwrite)
 
 
 def _manifest_of(path: Path) -> dict | None:
@@ -196,6 +232,19 @@ def _cmd_decode(args) -> int:
     if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
         raise ValueError(f"--debug-dir {args.debug_dir} exists and is not a folder")
     _decoder_overrides(DecoderParams(), args.decoder or [])  # bad values fail before any file is read
+    if Path(args.capture).is_dir():
+        from simbench.systems import system_of_recording
+
+        if system_of_recording(args.capture) != "proposed":
+            return _decode_recording(args)
+        folder = Path(args.capture)
+        args.capture = str(folder / "capture.png")
+        args.rig = args.rig or str(folder / "rig.toml")
+        args.reference = args.reference or str(folder / "reference.png")
+    if args.rig is None:
+        if not Path(args.capture).exists():
+            raise FileNotFoundError(f"{args.capture} not found")
+        raise ValueError("--rig is required when CAPTURE is an image (or give a folder written by `simbench render`)")
     rig = load_rig(args.rig)
     for p in (args.capture, args.reference, args.rig):
         if p is not None and Path(p).is_file():
@@ -334,47 +383,22 @@ def _cmd_demo(args) -> int:
     return 0
 
 
-def _cmd_competitor_render(args) -> int:
-    from simbench import baselines
-    from simbench.render import select_variant
-    from simbench.scene import load_scene
-    from simbench.simulate import cached_ground_truth
-
-    model = baselines.get_device(args.device)
-    scene = baselines.device_scene(model, load_scene(args.scene))
-    spp, sampler = _render_settings(args)
-    variant = select_variant(args.variant)
-    seeds = {k: int(s.generate_state(1)[0]) for k, s in zip(("calibration", "render", "noise"), np.random.SeedSequence(args.seed).spawn(3))}
-    t0 = time.perf_counter()
-    cal = baselines.calibrate(model, spp=spp, sampler=sampler, seed=seeds["calibration"])
-    raw = baselines.acquire(model, scene, cal, spp=spp, sampler=sampler, seed=seeds["render"], noise_seeds=[seeds["noise"]])[0]
-    gt = cached_ground_truth(scene)
-    meta = {"scene": str(args.scene), "spp": spp, "sampler": sampler, "seed": args.seed, "seeds": seeds, "variant": variant}
-    files = baselines.write_recording(args.out, model, raw, cal, gt_depth_m=gt.depth_m, meta=meta, overwrite=args.overwrite)
-    print(f"rendered {scene.name} with the {baselines.DEVICE_LABELS[args.device]} ({variant}, {spp} spp {sampler}, seed {args.seed}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
-    for key, path in files.items():
-        print(f"  {key:17s} {path.name}")
-    return 0
-
-
-def _cmd_competitor_decode(args) -> int:
-    from simbench import baselines
+def _decode_recording(args) -> int:
+    """``simbench decode FOLDER``: a recording of a system other than the proposed sensor,
+    decoded the system's way (:meth:`simbench.systems.DepthSystem.decode`)."""
     from simbench.io import npy_bytes, ply_bytes, write_files
     from simbench.metrics import points_from_depth
+    from simbench.systems import get_system, system_of_recording
 
-    if Path(args.out).suffix != ".npy":
-        raise ValueError(f"--out must name a .npy file, got {args.out}")
-    if args.ply and Path(args.ply).suffix.lower() != ".ply":
-        raise ValueError(f"--ply must name a .ply file, got {args.ply}")
-    model, raw, cal = baselines.read_recording(args.recording)
+    system = get_system(system_of_recording(args.capture))
+    raw, cal, scene = system.read_recording(Path(args.capture))
     t0 = time.perf_counter()
-    res = baselines.decode_raw(model, raw, cal)
+    res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
     files = {Path(args.out): npy_bytes(res.depth_m)}
-    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({baselines.DEVICE_LABELS[baselines.device_params(model)['device']]}) -> {args.out}"
+    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}) -> {args.out}"
     if args.ply:
-        pts = points_from_depth(res.depth_m, model.camera)
-        files[Path(args.ply)] = ply_bytes(pts[res.valid])
+        files[Path(args.ply)] = ply_bytes(points_from_depth(res.depth_m, scene.rig.camera)[res.valid])
         msg += f", {args.ply}"
     write_files(files)
     print(msg)
@@ -508,14 +532,15 @@ def _parser() -> argparse.ArgumentParser:
     _add_pattern_options(s)
     s.set_defaults(fn=_cmd_pattern)
 
-    s = sub.add_parser("render", help="render a scene: capture, reference, ground truth, rig, metadata", **kw)
+    s = sub.add_parser("render", help="render a scene with a depth system: its raw frames, calibration, ground truth, metadata", **kw)
     s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
+    s.add_argument("--system", default="proposed", help=f"depth system (registered: {', '.join(_system_names())}); the others replace the scene's rig with their own")
     s.add_argument("--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)")
     s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write (e.g. decoded depth)")
     _add_render_options(s)
     _add_cache_options(s)
     s.add_argument("--calibration-frames", action="store_true", help="also record the reference plane under black and each primary (calibration_*.png), which `simbench decode --robust` needs")
-    s.add_argument("--seed", type=_SEED, default=0, help="base seed (split into render and noise seeds, all recorded in meta.json)")
+    s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed (every render and noise seed derives from it and a label; all recorded in the manifest)")
     s.add_argument("--max-depth", type=_MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
     s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file")
     _add_pattern_options(s)
@@ -523,9 +548,9 @@ def _parser() -> argparse.ArgumentParser:
     s.set_defaults(fn=_cmd_render)
 
     s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)", **kw)
-    s.add_argument("capture", help="the capture (PNG/TIFF, or .npy for float images)")
+    s.add_argument("capture", help="the capture (PNG/TIFF, or .npy for float images), or a folder written by `simbench render` (any --system; its reference, rig and calibration frames are used)")
     s.add_argument("--reference", help="reference-plane capture (reference mode)")
-    s.add_argument("--rig", required=True, help="rig TOML file")
+    s.add_argument("--rig", help="rig TOML file (required unless CAPTURE is a render folder)")
     s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
     s.add_argument("--ply", help="also write the point cloud as PLY")
     s.add_argument("--debug-dir", help="write every decoder stage here")
@@ -555,7 +580,7 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder", **kw)
     s.add_argument("--out", default="results/demo", help="output folder")
     _add_render_options(s)
-    s.add_argument("--seed", type=_SEED, default=2017, help="base seed")
+    s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed")
     s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: preset (ideal, minimal, paper) or TOML file")
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
@@ -567,7 +592,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
-    s.add_argument("--seed", type=_SEED, default=None, help="base seed (default 2017)")
+    s.add_argument("--seed", type=_SEED, default=None, help=f"base seed (default {DEFAULT_SEED})")
     _add_render_options(s, quick_spp=4)
     s.add_argument("--repeats", type=_int(1, 1000), default=None, help="recordings per Fig. 9 depth (default: 10, 3 with --quick)")
     s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)")
@@ -593,25 +618,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
 
-    s = sub.add_parser("competitor", help="the simulated competitors (Kinect v1, SR4000 ToF): render a scene, decode a recording", **kw)
-    csub = s.add_subparsers(dest="action", required=True, parser_class=_Parser)
-    c = csub.add_parser("render", help="render SCENE with a competitor: raw frames, calibration, ground truth, device.json", **kw)
-    c.add_argument("device", choices=["kinect", "tof"], help="which competitor")
-    c.add_argument("scene", help="scene TOML file (the competitor replaces its rig)")
-    c.add_argument("--out", required=True, help="output folder (written whole or not at all)")
-    c.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write")
-    _add_render_options(c)
-    c.add_argument("--seed", type=_SEED, default=2017, help="base seed")
-    c.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
-    c.set_defaults(fn=_cmd_competitor_render)
-    c = csub.add_parser("decode", help="decode a competitor recording folder into a depth map (.npy, metres, NaN = invalid)", **kw)
-    c.add_argument("recording", help="folder written by `simbench competitor render`")
-    c.add_argument("--out", required=True, help="depth map .npy")
-    c.add_argument("--ply", default=None, help="also write the point cloud")
-    c.set_defaults(fn=_cmd_competitor_decode)
-
     s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)", **kw)
-    s.add_argument("--device", default="proposed", choices=["proposed", "kinect", "tof"], help="whose decoder")
+    s.add_argument("--system", "--device", dest="device", default="proposed", choices=_system_names(), help="whose decoder")
     s.add_argument("--scene", default="plane", choices=["plane", "shadow"], help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)")
     s.add_argument("--repeats", type=_int(1, 100000), default=20, help="timed decodes (after one warm-up)")
     s.add_argument("--max-ms", type=_float(lo=0.0, lo_open=True), default=None, help="fail when the median exceeds this")

@@ -157,7 +157,7 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
 
     path = Path(path)
     check_output_directory(path, manifest=manifest, overwrite=overwrite)
-    _make_parents(path)
+    created = _make_parents(path)
     _remove_stale_siblings(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
     try:
@@ -175,7 +175,7 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
             shutil.rmtree(old)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
-        for c in created:
+        for c in reversed(created):  # innermost first
             try:
                 c.rmdir()
             except OSError:

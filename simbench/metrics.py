@@ -4,6 +4,7 @@
   share and stripe-order error rate, over the pixels ground truth says are seen and lit.
 * :func:`plane_fit_error` - paper Table 1: mean absolute residual to a least-squares plane.
 * :func:`edge_band` - pixels near depth discontinuities, to exclude from edge-sensitive scores.
+* :func:`score` - the scores every experiment reports, one protocol for every depth system.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from simbench.rig import Intrinsics, pixel_rays
 
-__all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth"]
+__all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth", "score"]
 
 
 def edge_band(gt_depth_m: np.ndarray, *, object_id: np.ndarray | None = None, band_px: int, rel_jump: float = 0.02) -> np.ndarray:
@@ -161,3 +162,71 @@ def plane_fit_error(depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray
         "normal": [float(x) for x in normal],
         "n_points": int(len(p)),
     }
+
+
+def score(
+    depth_m: np.ndarray,
+    gt,
+    *,
+    camera: Intrinsics,
+    region: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
+    column_px: np.ndarray | None = None,
+    period_px: float | None = None,
+    edge_band_px: int = 0,
+    detail: bool = False,
+) -> dict:
+    """The scores every experiment reports for one depth map of any depth system.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W), float32 metres, NaN = invalid
+    gt : :class:`simbench.render.GroundTruth` at the same pixels (``depth_m``, ``lit``,
+        ``object_id``, ``column_px``)
+    camera : the camera of the depth map (for the plane fit)
+    region : ndarray, shape (H, W), bool, optional
+        Pixels that count (default: those ground truth says are seen and lit; a face mask for
+        Table 3).
+    exclude : ndarray, shape (H, W), bool, optional
+        Pixels left out of the ground-truth error statistics but not of completeness.
+    column_px, period_px : optional
+        Decoded projector columns and the fringe period (structured-light systems), for the
+        stripe-order errors against ``gt.column_px``.
+    edge_band_px : int
+        With N > 0 also ``gt_p95_mm``, ``outlier_share`` and ``edge<N>_mae_mm``, the MAE outside
+        an N-px band at depth edges (:func:`edge_band`).
+    detail : bool
+        Also ``gt_median_mm``, ``gt_p95_mm``, ``outlier_share`` and ``n_scored``.
+
+    Returns
+    -------
+    dict
+        ``plane_mae_mm`` / ``plane_rms_mm``: the paper's protocol, mean absolute (RMS) residual
+        of the decoded points to their least-squares plane (:func:`plane_fit_error`; it absorbs
+        any error that is planar, so it cannot see a tilt or an offset of the whole board);
+        ``gt_mae_mm``, ``gt_rmse_mm``, ``bias_mm``: against ground truth (they see everything
+        the plane fit hides, but no error shared by ground truth and decoding, e.g. a wrong
+        rig used for both); ``completeness``; with columns ``stripe_order_errors`` and their
+        rate: pixels whose projector column is off by more than half a period.
+    """
+    region = gt.lit if region is None else region
+    with_columns = column_px is not None and getattr(gt, "column_px", None) is not None
+    m = depth_errors(depth_m, gt.depth_m, region=region, exclude=exclude, column_px=column_px if with_columns else None, gt_column_px=gt.column_px if with_columns else None, period_px=period_px)
+    fit = plane_fit_error(depth_m, camera, mask=region)
+    out = {
+        "plane_mae_mm": fit["mean_abs_residual_mm"],
+        "plane_rms_mm": fit["rms_residual_mm"],
+        "gt_mae_mm": m["mae_mm"],
+        "gt_rmse_mm": m["rmse_mm"],
+        "bias_mm": m["bias_mm"],
+        "completeness": m["completeness"],
+    }
+    if with_columns:
+        out.update({"stripe_order_errors": m["stripe_order_errors"], "stripe_order_error_rate": m["stripe_order_error_rate"]})
+    if detail:
+        out.update({"gt_median_mm": m["median_mm"], "gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], "n_scored": m["n_scored"]})
+    if edge_band_px > 0:
+        band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
+        off_edges = depth_errors(depth_m, gt.depth_m, region=region, exclude=band)
+        out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
+    return out

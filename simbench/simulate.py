@@ -1,13 +1,14 @@
 """One simulated acquisition: pattern -> scene render -> camera, for a scene and its reference.
 
-Seeds: one base seed is split with ``numpy.random.SeedSequence`` into the capture's render seed,
-the reference's render seed and the two camera-noise seeds; all four are recorded.
+Seeds: derived from one base seed and each capture's label (:mod:`simbench.seeds`); all are
+recorded.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import logging
 import platform
 import sys
 from collections.abc import Callable
@@ -19,19 +20,19 @@ import numpy as np
 
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.pattern import CALIBRATION_FRAMES, PatternSpec, calibration_frames, fringe_pattern, quantize
+from simbench.pattern import PatternSpec
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
 from simbench.rig import rig_to_dict, save_rig
-from simbench.scene import SceneSpec, reference_scene
+from simbench.scene import SceneSpec
+from simbench.seeds import child_seed
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
 from simbench.spectral import crosstalk_matrix, material_crosstalk
 
 __all__ = [
     "Acquisition",
-    "split_seed",
     "cached_radiance",
     "cached_ground_truth",
     "cached_arrays",
@@ -47,22 +48,9 @@ __all__ = [
     "versions",
 ]
 
+log = logging.getLogger(__name__)
+
 REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
-
-
-_SEED_NAMES = ("render_capture", "render_reference", "noise_capture", "noise_reference")
-_CALIBRATION_SEED_NAMES = tuple(f"{kind}_calibration_{f}" for kind in ("render", "noise") for f in CALIBRATION_FRAMES)
-
-
-def split_seed(seed: int, *, calibration: bool = False) -> dict[str, int]:
-    """Independent 32-bit seeds from one base seed: four for the capture and the reference, and
-    with ``calibration`` eight more for the calibration frames (SeedSequence children are
-    numbered, so the first four are the same either way)."""
-    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    names = _SEED_NAMES + (_CALIBRATION_SEED_NAMES if calibration else ())
-    kids = np.random.SeedSequence(int(seed)).spawn(len(names))
-    return {n: int(k.generate_state(1)[0]) for n, k in zip(names, kids)}
 
 
 @dataclass(frozen=True)
@@ -181,7 +169,7 @@ def exposure_phase(render_seed: int) -> float:
     """Where in the projector's frame a free-running camera's exposure starts, in [0, 1) of a
     frame (projector ``timing = "video"``): drawn from the capture's render seed, since the
     light the camera collects - and so the render - depends on it."""
-    return float(np.random.default_rng(np.random.SeedSequence([int(render_seed), 5])).random())
+    return float(np.random.default_rng(child_seed(render_seed, "dlp_exposure_phase")).random())
 
 
 def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0) -> np.ndarray:
@@ -296,7 +284,7 @@ def cached_arrays(kind: str, parts: dict, make, *, cache: RenderCache | None = N
 
 def _ambient_seed(seed: int) -> int:
     """The ambient render's seed, independent of the projector render's."""
-    return int(np.random.SeedSequence([int(seed), 3]).generate_state(1)[0])
+    return int(child_seed(seed, "ambient_render").generate_state(1)[0])
 
 
 def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
@@ -384,44 +372,38 @@ def acquire(
     with_calibration: bool = False,
     cache: RenderCache | None = None,
 ) -> Acquisition:
-    """Render and record a scene (and its reference plane) lit by the pattern.
+    """Render and record a scene (and its reference plane) lit by the pattern: the proposed
+    sensor's recording (:class:`simbench.systems.proposed.ColourFringeSystem`) through the one
+    acquisition path (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the
+    labels ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
 
     A Mitsuba variant must already be selected (:func:`simbench.render.select_variant`).
     Renders and ground truth come from ``cache`` when it holds them.
     """
     import mitsuba as mi
 
+    from simbench.decode import DecoderParams
+    from simbench.seeds import SeedLog
+    from simbench.systems import RenderSettings, SystemOptions, acquire as acquire_recording
+    from simbench.systems.proposed import ColourFringeSystem
+
     rig = realised_rig(scene.rig)
     if rig != scene.rig:
-        print(
-            f"simbench: projector principal point rendered at ({rig.projector.cx_px}, {rig.projector.cy_px}) "
-            f"instead of ({scene.rig.projector.cx_px}, {scene.rig.projector.cy_px}); rig.toml records the rendered one",
-            file=sys.stderr,
+        log.warning(
+            "projector principal point rendered at (%s, %s) instead of (%s, %s); rig.toml records the rendered one",
+            rig.projector.cx_px, rig.projector.cy_px, scene.rig.projector.cx_px, scene.rig.projector.cy_px,
         )
-        scene = dataclasses.replace(scene, rig=rig)
     if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
         raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
-    scene = physical_scene(scene, sensor)
     if with_calibration and not with_reference:
         raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
-    seeds = split_seed(seed, calibration=with_calibration)
-    pat = quantize(fringe_pattern(pattern))
-    drive = ProjectorDrive(scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_capture"]))
-    q = render_channels(scene, drive, sensor, spp=spp, seed=seeds["render_capture"], max_depth=max_depth, sampler=sampler, cache=cache)
-    capture = record(q, sensor=sensor, scene=scene, rng=seeds["noise_capture"])
-    reference = np.zeros_like(capture)
-    if with_reference:
-        ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO)
-        ref_drive = ProjectorDrive(ref_scene, pat, sensor, cache=cache, phase=exposure_phase(seeds["render_reference"]))
-        ref_q = render_channels(ref_scene, ref_drive, sensor, spp=spp, seed=seeds["render_reference"], max_depth=max_depth, sampler=sampler, cache=cache)
-        reference = record(ref_q, sensor=sensor, scene=ref_scene, rng=seeds["noise_reference"])
-    calibration = {}
-    if with_calibration:
-        for name, frame in calibration_frames(pat).items():
-            cal_drive = ProjectorDrive(ref_scene, frame, sensor, cache=cache, phase=exposure_phase(seeds[f"render_calibration_{name}"]))
-            q_cal = render_channels(ref_scene, cal_drive, sensor, spp=spp, seed=seeds[f"render_calibration_{name}"], max_depth=max_depth, sampler=sampler, cache=cache)
-            calibration[name] = record(q_cal, sensor=sensor, scene=ref_scene, rng=seeds[f"noise_calibration_{name}"])
-    gt = cached_ground_truth(scene, cache=cache)
+    decoder = DecoderParams(period_px=pattern.period_px, order=pattern.order, sequence=pattern.sequence, channels=pattern.channels)
+    system = ColourFringeSystem(SystemOptions(sensor=sensor, decoder=decoder, pattern=pattern))
+    seeds = SeedLog(seed)
+    render = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=cache)
+    scene = system.prepare(scene)
+    calibration = system.calibrate(scene, seeds=seeds, render=render, frames=with_calibration) if with_reference else None
+    rec = acquire_recording(system, scene, f"capture/{scene.name}", seeds=seeds, render=render, prepared=True)[0]
     meta = {
         "scene": scene.name,
         "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude, "channels": pattern.channels},
@@ -432,13 +414,14 @@ def acquire(
         "sampler": sampler,
         "max_depth": int(max_depth),
         "seed": int(seed),
-        "seeds": seeds,
+        "seeds": dict(seeds.used),
         "reference_depth_m": scene.reference_depth_m,
         "reference_albedo": REFERENCE_ALBEDO,
         "variant": mi.variant(),
         "versions": versions(),
     }
-    return Acquisition(scene=scene, pattern=pat, capture=capture, reference=reference, gt=gt, meta=meta, calibration=calibration)
+    reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
+    return Acquisition(scene=scene, pattern=system.pattern_u8, capture=rec.raw, reference=reference, gt=rec.gt, meta=meta, calibration=calibration.frames if calibration is not None else {})
 
 
 RENDER_MANIFEST = "meta.json"

@@ -418,19 +418,19 @@ def _recording(d: Path, device: dict, files: dict | None = None) -> None:
 
 
 for cid, argv, msg in [
-    ("render-unknown-device", lambda d: ["competitor", "render", "kinect2", str(SCENES / "white_plane.toml"), "--out", str(d / "o")], "kinect2"),
-    ("render-scene-missing", lambda d: ["competitor", "render", "kinect", str(d / "nope.toml"), "--out", str(d / "o")], "nope.toml"),
-    ("render-spp-zero", lambda d: ["competitor", "render", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--spp", "0"], "--spp"),
-    ("render-seed-negative", lambda d: ["competitor", "render", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--seed", "-1"], "--seed"),
-    ("decode-folder-missing", lambda d: ["competitor", "decode", str(d / "nope"), "--out", str(d / "x.npy")], "not a competitor recording"),
-    ("decode-out-not-npy", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.png")], "--out"),
+    ("render-unknown-system", lambda d: ["render", "--system", "kinect2", str(SCENES / "white_plane.toml"), "--out", str(d / "o")], ("kinect2", "'proposed', 'kinect', 'tof'")),
+    ("render-scene-missing", lambda d: ["render", "--system", "kinect", str(d / "nope.toml"), "--out", str(d / "o")], "nope.toml"),
+    ("render-spp-zero", lambda d: ["render", "--system", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--spp", "0"], "--spp"),
+    ("render-seed-negative", lambda d: ["render", "--system", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--seed", "-1"], "--seed"),
+    ("decode-folder-missing", lambda d: ["decode", str(d / "nope"), "--out", str(d / "x.npy")], "nope"),
+    ("decode-out-not-npy", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.png")], "--out"),
 ]:
-    case(f"competitor-{cid}", argv, msg, setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None)
-case("competitor-decode-device-json-invalid", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "device.json", setup=lambda d: ((d / "rec").mkdir(), (d / "rec" / "device.json").write_text("{")))
-case("competitor-decode-device-unknown", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "unknown competitor", setup=lambda d: _recording(d, {"device": "lidar"}))
-case("competitor-decode-ir-empty", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "empty", setup=lambda d: _recording(d, {"device": "kinect"}, {"ir.png": b"", "reference.png": b""}))
-case("competitor-decode-taps-missing", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "taps.npy", setup=lambda d: _recording(d, {"device": "tof"}))
-case("competitor-decode-taps-wrong-shape", lambda d: ["competitor", "decode", str(d / "rec"), "--out", str(d / "x.npy")], "shape",
+    case(f"system-{cid}", argv, msg, setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None)
+case("system-decode-device-json-invalid", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "device.json", setup=lambda d: ((d / "rec").mkdir(), (d / "rec" / "device.json").write_text("{")))
+case("system-decode-device-unknown", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], ("unknown depth system", "lidar"), setup=lambda d: _recording(d, {"device": "lidar"}))
+case("system-decode-ir-empty", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "empty", setup=lambda d: _recording(d, {"device": "kinect"}, {"ir.png": b"", "reference.png": b""}))
+case("system-decode-taps-missing", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "taps.npy", setup=lambda d: _recording(d, {"device": "tof"}))
+case("system-decode-taps-wrong-shape", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "shape",
      setup=lambda d: (_recording(d, {"device": "tof"}), np.save(d / "rec" / "taps.npy", np.zeros((4, 4, 4), np.float32))))
 
 # ------------------------------------------------------------------- bench, reproduce, ablate, demo, crosstalk

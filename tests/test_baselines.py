@@ -205,14 +205,21 @@ def test_register_depth_resamples_between_cameras_sharing_a_centre():
 
 @pytest.mark.parametrize("device", ["kinect", "tof"])
 def test_recording_files_round_trip(tmp_path, device):
-    model, raw, cal = competitor_inputs(device)
-    gt = np.full(model.camera.size_hw, 1.1, np.float32)
-    baselines.write_recording(tmp_path, model, raw, cal, gt_depth_m=gt, meta={"seed": 1})
-    m2, raw2, cal2 = baselines.read_recording(tmp_path)
-    assert m2 == model
+    from types import SimpleNamespace
+
+    from simbench.systems import get_system, system_of_recording
+
+    system = get_system(device)
+    raw, cal, scene = system.bench_inputs()
+    gt = SimpleNamespace(depth_m=np.full(system.model.camera.size_hw, 1.1, np.float32))
+    system.write_recording(tmp_path, raw, cal, scene=scene, gt=gt, meta={"seed": 1})
+    assert system_of_recording(tmp_path) == device
+    other = get_system(device)
+    raw2, cal2, scene2 = other.read_recording(tmp_path)
+    assert other.model == system.model and scene2.rig == scene.rig
     assert np.array_equal(raw2, raw)
-    a = baselines.decode_raw(model, raw, cal)
-    b = baselines.decode_raw(m2, raw2, cal2)
+    a = system.decode(raw, cal, scene=scene)
+    b = other.decode(raw2, cal2, scene=scene2)
     assert np.array_equal(np.nan_to_num(a.depth_m), np.nan_to_num(b.depth_m))
 
 
@@ -281,12 +288,12 @@ def test_tof_flying_pixels_at_the_depth_step(variant):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("device", ["kinect", "tof"])
-def test_cli_competitor_render_decode_score(tmp_path, variant, device):
+def test_cli_system_render_decode_score(tmp_path, variant, device):
     from simbench.cli import main
 
-    assert main(["competitor", "render", device, str(SCENES / "discontinuity.toml"), "--out", str(tmp_path / "rec"), "--spp", "4"]) == 0
-    assert main(["competitor", "decode", str(tmp_path / "rec"), "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply")]) == 0
+    assert main(["render", "--system", device, str(SCENES / "discontinuity.toml"), "--out", str(tmp_path / "rec"), "--spp", "4"]) == 0
+    assert main(["decode", str(tmp_path / "rec"), "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply")]) == 0
     assert main(["score", str(tmp_path / "d.npy"), "--gt", str(tmp_path / "rec" / "gt_depth.npy")]) == 0
     depth = np.load(tmp_path / "d.npy")
     assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.8
-    assert main(["competitor", "decode", str(tmp_path / "missing"), "--out", str(tmp_path / "x.npy")]) == 2
+    assert main(["decode", str(tmp_path / "missing"), "--out", str(tmp_path / "x.npy")]) == 2

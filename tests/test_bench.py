@@ -34,12 +34,12 @@ def test_decode_speed_with_shadow(benchmark):
 @pytest.mark.parametrize("device", ["kinect", "tof"])
 def test_competitor_decode_speed(benchmark, device):
     """The competitors' decoders at native resolution (issue: <= 100 ms; `simbench bench
-    --device kinect|tof` on the command line)."""
-    from simbench.baselines import decode_raw
-    from simbench.experiments.bench import competitor_inputs
+    --system kinect|tof` on the command line)."""
+    from simbench.systems import get_system
 
-    model, raw, cal = competitor_inputs(device)
-    result = benchmark(decode_raw, model, raw, cal)
+    system = get_system(device)
+    raw, cal, scene = system.bench_inputs()
+    result = benchmark(system.decode, raw, cal, scene=scene)
     assert result.valid.mean() > 0.8
     assert np.nanmedian(result.depth_m) == pytest.approx(1.1, abs=0.005)
 

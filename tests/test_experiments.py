@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from simbench.experiments.common import RunConfig, label_seed
+from simbench.experiments.common import RunConfig
+from simbench.seeds import derive_seed as label_seed
 from simbench.experiments.reproduce import _resolve, check_thresholds, thresholds_from, write_thresholds
 from simbench.rig import paper_rig, scale_camera
 

@@ -42,6 +42,7 @@ import numpy as np
 
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec, reference_scene
+from simbench.seeds import child_seed
 
 __all__ = ["KinectModel", "KinectCalibration", "KinectDepth", "kinect_rig", "dot_pattern", "device_scene", "speckle", "record_ir", "match", "calibrate", "capture"]
 
@@ -380,7 +381,7 @@ def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sa
     if not peak > 0:
         raise ValueError("the Kinect reference render is dark: no dots reached the camera")
     k = model.exposure_fraction * model.full_well_e / peak
-    seq = np.random.SeedSequence([int(seed), 1])
+    seq = child_seed(seed, "kinect_calibration_frames")
     speckle_seed, noise_seed = (int(s.generate_state(1)[0]) for s in seq.spawn(2))
     ref = record_ir(rad, model=model, electrons_per_radiance=k, speckle_rng=speckle_seed, rng=noise_seed)
     return KinectCalibration(reference=ref, electrons_per_radiance=k)
@@ -390,5 +391,114 @@ def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration
     """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
     frozen to the static scene, derives from it) recorded once per noise seed."""
     rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
-    speckle_seed = int(np.random.SeedSequence([int(seed), 2]).generate_state(1)[0])
+    speckle_seed = int(child_seed(seed, "kinect_speckle").generate_state(1)[0])
     return [record_ir(rad, model=model, electrons_per_radiance=calibration.electrons_per_radiance, speckle_rng=speckle_seed, rng=s) for s in noise_seeds]
+
+
+class KinectSystem:
+    """The Kinect-v1-like sensor as a depth system (:mod:`simbench.systems`): its own camera
+    and dot projector, the factory reference recorded once, the device's matching."""
+
+    name = "kinect"
+    seed_prefix = "kinect/"
+
+    def __init__(self, options=None, *, model: KinectModel | None = None) -> None:
+        self.model = model if model is not None else KinectModel()
+
+    def info(self):
+        from simbench.systems import SystemInfo
+
+        m = self.model
+        return SystemInfo(
+            name=self.name,
+            label="Kinect v1 (simulated)",
+            size_hw=(m.height_px, m.width_px),
+            captures=1,
+            numbers={
+                "focal_px": (m.focal_px, "Khoshelham & Oude Elberink 2012 (~580 px calibrated)"),
+                "baseline_m": (m.baseline_m, "Khoshelham & Oude Elberink 2012"),
+                "range_m": ((m.min_depth_m, m.max_depth_m), "Khoshelham & Oude Elberink 2012"),
+                "wavelength_nm": (m.wavelength_nm, "Khoshelham & Oude Elberink 2012"),
+            },
+        )
+
+    def prepare(self, scene: SceneSpec) -> SceneSpec:
+        return device_scene(scene, self.model)
+
+    def calibration_key(self, scene: SceneSpec):
+        return "factory"  # one factory reference, whatever the scene
+
+    def calibrate(self, scene: SceneSpec, *, seeds, render) -> KinectCalibration:
+        label = f"{self.seed_prefix}calibration"
+        seed = seeds.seed(label)
+        seeds.record(label, {"render": seed})
+        return calibrate(self.model, spp=render.spp, seed=seed, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+
+    def acquire(self, scene: SceneSpec, calibration: KinectCalibration, *, render_seed: int, noise_seeds: list[int], render) -> list[np.ndarray]:
+        if calibration is None:
+            raise ValueError("the Kinect needs its calibration (reference image): calibrate first")
+        return capture(scene, self.model, calibration, spp=render.spp, seed=render_seed, noise_seeds=noise_seeds, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+
+    def decode(self, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec | None = None):
+        from simbench.systems import SystemDepth
+
+        if calibration is None:
+            raise ValueError("the Kinect needs its reference image to decode")
+        r = match(raw, calibration.reference, model=self.model)
+        return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.ncc, detail=r)
+
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0):
+        """(IR frame, calibration, scene) of a plane at 1.1 m made in numpy without the renderer
+        (deterministic for a seed): the dot texture box-resampled onto the camera grid (the
+        reference at its depth, the capture shifted by the plane's disparity), with speckle and
+        detector noise."""
+        if scene != "plane":
+            raise ValueError(f"the {self.name} benchmark has only the plane, not {scene!r}")
+        model = self.model
+        rng = np.random.default_rng(seed)
+        tex = dot_pattern(model)
+        cam = model.camera
+        scale = model.texels_per_dot / model.dot_pitch_px  # texels per camera pixel
+        cu, cv = (tex.shape[1] - 1) / 2, (tex.shape[0] - 1) / 2
+        blurred = cv2.GaussianBlur(tex, (0, 0), scale / 2)
+
+        def view(shift_px: float) -> np.ndarray:
+            # x_tex = scale * (x - cx - shift) + cu: the pattern displaced by shift_px
+            xs = (np.arange(cam.width_px) - cam.cx_px - shift_px) * scale + cu
+            ys = (np.arange(cam.height_px) - cam.cy_px) * scale + cv
+            mx, my = np.meshgrid(xs.astype(np.float32), ys.astype(np.float32))
+            return cv2.remap(blurred, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+
+        d = model.fb_px_m * (1 / 1.1 - 1 / model.reference_depth_m)
+        ref_view = view(0.0)
+        k = model.exposure_fraction * model.full_well_e / float(np.percentile(ref_view, 99.9))
+        ref = record_ir(ref_view, model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
+        cap = record_ir(view(d), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
+        return cap, KinectCalibration(reference=ref, electrons_per_radiance=k), SceneSpec(name="bench_plane", rig=kinect_rig(model), objects=())
+
+    def write_recording(self, out_dir, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False):
+        """``ir.png`` + ``reference.png`` (16-bit grey), ground truth, ``device.json``."""
+        from simbench.baselines.recording import write_device_recording
+        from simbench.io import save_png
+
+        writers = {
+            "ir": lambda d: save_png(d / "ir.png", np.asarray(raw, np.uint16)),
+            "reference": lambda d: save_png(d / "reference.png", np.asarray(calibration.reference, np.uint16)),
+        }
+        info = {**meta, "electrons_per_radiance": calibration.electrons_per_radiance}
+        return write_device_recording(out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=info, overwrite=overwrite)
+
+    def read_recording(self, in_dir):
+        """(IR frame, calibration, scene) of a folder written by :meth:`write_recording`; the
+        system's model becomes the recorded one."""
+        from pathlib import Path
+
+        from simbench import validate
+        from simbench.baselines.recording import read_device_info
+        from simbench.io import load_image
+
+        d = Path(in_dir)
+        self.model, info = read_device_info(d, self.name, KinectModel)
+        ir, ref = (load_image(d / f, expected_size_hw=self.model.camera.size_hw, channels=1) for f in ("ir.png", "reference.png"))
+        k = validate.number(info.get("electrons_per_radiance", 1.0), f"{d / 'device.json'}: electrons_per_radiance", lo=0.0, lo_open=True)
+        return ir, KinectCalibration(reference=ref, electrons_per_radiance=k), self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=kinect_rig(self.model), objects=()))

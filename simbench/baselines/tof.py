@@ -246,3 +246,83 @@ def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_see
     arrays = cached_arrays("tof_phasor", parts, make, cache=cache)
     z = arrays["re"] + 1j * arrays["im"]
     return [record_taps(rad, z, model=model, rng=s) for s in noise_seeds]
+
+
+class ToFSystem:
+    """The SR4000-like ToF camera as a depth system (:mod:`simbench.systems`): no calibration,
+    four tap frames per recording, four-sample phase decoding."""
+
+    name = "tof"
+    seed_prefix = "tof/"
+
+    def __init__(self, options=None, *, model: ToFModel | None = None) -> None:
+        self.model = model if model is not None else ToFModel()
+
+    def info(self):
+        from simbench.systems import SystemInfo
+
+        m = self.model
+        return SystemInfo(
+            name=self.name,
+            label="SR4000 ToF (simulated)",
+            size_hw=(m.height_px, m.width_px),
+            captures=1,
+            numbers={
+                "size_wh": ((m.width_px, m.height_px), "MESA SR4000 data sheet, as quoted by Chiabrando et al. 2009"),
+                "fov_x_deg": (m.fov_x_deg, "MESA SR4000 data sheet, as quoted by Chiabrando et al. 2009"),
+                "modulation_hz": (m.modulation_hz, "MESA SR4000 default"),
+                "integration_s": (m.integration_s, "Chiabrando et al. 2009"),
+            },
+        )
+
+    def prepare(self, scene: SceneSpec) -> SceneSpec:
+        return device_scene(scene, self.model)
+
+    def calibration_key(self, scene: SceneSpec):
+        return None
+
+    def calibrate(self, scene: SceneSpec, *, seeds, render):
+        return None  # the device needs none
+
+    def acquire(self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render) -> list[np.ndarray]:
+        return capture(scene, self.model, spp=render.spp, seed=render_seed, noise_seeds=noise_seeds, sampler=render.sampler, cache=render.cache)
+
+    def decode(self, raw: np.ndarray, calibration=None, *, scene: SceneSpec | None = None):
+        from simbench.systems import SystemDepth
+
+        r = decode_taps(raw, model=self.model)
+        return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.amplitude_e, detail=r)
+
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0):
+        """(tap frames, None, scene) of a plane at 1.1 m made in numpy (deterministic for a
+        seed): the four samples of the plane's phasor with shot noise."""
+        if scene != "plane":
+            raise ValueError(f"the {self.name} benchmark has only the plane, not {scene!r}")
+        model = self.model
+        rng = np.random.default_rng(seed)
+        cam = model.camera
+        yy, xx = np.indices(cam.size_hw)
+        ray = np.sqrt(((xx - cam.cx_px) / cam.focal_px) ** 2 + ((yy - cam.cy_px) / cam.focal_px) ** 2 + 1)
+        path = 2 * 1.1 * ray
+        phasor = np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S)
+        amplitude = np.full(cam.size_hw, 0.8 / 1.1**2)
+        return record_taps(amplitude, phasor, model=model, rng=rng), None, SceneSpec(name="bench_plane", rig=tof_rig(model), objects=())
+
+    def write_recording(self, out_dir, raw: np.ndarray, calibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False):
+        """``taps.npy`` ((H, W, 4) float32 electrons), ground truth, ``device.json``."""
+        from simbench.baselines.recording import write_device_recording
+        from simbench.io import save_npy
+
+        writers = {"taps": lambda d: save_npy(d / "taps.npy", np.asarray(raw, np.float32))}
+        return write_device_recording(out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite)
+
+    def read_recording(self, in_dir):
+        from pathlib import Path
+
+        from simbench.baselines.recording import read_device_info
+        from simbench.io import load_npy
+
+        d = Path(in_dir)
+        self.model, info = read_device_info(d, self.name, ToFModel)
+        taps = load_npy(d / "taps.npy", expected_shape=(self.model.height_px, self.model.width_px, 4))
+        return taps, None, self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=tof_rig(self.model), objects=()))

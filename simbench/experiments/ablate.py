@@ -258,7 +258,7 @@ def _sensor(params: dict):
 
 def _scene(params: dict):
     from simbench.experiments.common import SCENES_DIR
-    from simbench.scene import Material, load_scene, paint_reflectance
+    from simbench.scene import load_scene, paint_reflectance
 
     scene = load_scene(SCENES_DIR / f"{params['scene.name']}.toml")
     objs = list(scene.objects)

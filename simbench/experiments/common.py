@@ -3,8 +3,8 @@ the calibration (one reference-plane capture per run, as in the paper's Sec. 5.4
 and result files with provenance.
 
 Seeds: every capture's seeds derive from the run's base seed and the capture's label
-(``SeedSequence([base, sha256(label)])``), so a capture keeps its seeds when experiments are
-added, removed or run alone; every result row records them.
+(:mod:`simbench.seeds`), so a capture keeps its seeds when experiments are added, removed or
+run alone; every result row records them.
 """
 
 from __future__ import annotations
@@ -23,19 +23,18 @@ from pathlib import Path
 import numpy as np
 
 from simbench.cache import RenderCache
-from simbench.decode import DecoderParams, decode
-from simbench.decode.persist import cached_decode_reference
+from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
-from simbench.metrics import depth_errors, edge_band, plane_fit_error
-from simbench.pattern import PatternSpec, calibration_frames, fringe_pattern, quantize
-from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, GroundTruth, check_sampler, realised_rig
-from simbench.rig import scale_camera
-from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects, reference_scene
+from simbench.metrics import score as metrics_score
+from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
-from simbench.simulate import REFERENCE_ALBEDO, ProjectorDrive, cached_ground_truth, exposure_phase, physical_scene, record, render_channels, versions
+from simbench.seeds import DEFAULT_SEED, SeedLog, derive_seed
+from simbench.simulate import versions
+from simbench.systems import DepthSystem, Recording, RenderSettings, SystemDepth, SystemOptions, acquire, get_system
 
-__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "label_seed", "write_table", "markdown_table", "figure_png", "git_commit"]
+__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "write_table", "markdown_table", "figure_png", "git_commit"]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -69,7 +68,7 @@ class RunConfig:
     spp: int = DEFAULT_SPP
     sampler: str = DEFAULT_SAMPLER
     max_depth: int = 6
-    seed: int = 2017
+    seed: int = DEFAULT_SEED
     fig9_repeats: int = 10
     edge_band_px: int = 5
     ply_stride: int = 3
@@ -98,7 +97,7 @@ class RunConfig:
         p = self.placement
         if not (p.bow_m_per_m or p.waviness_m):
             return {}
-        rng = np.random.default_rng(label_seed(self.seed, "reference/form"))
+        rng = np.random.default_rng(derive_seed(self.seed, "reference/form"))
         return board_form(bow_m_per_m=p.bow_m_per_m, waviness_m=p.waviness_m, rng=rng)
 
     @classmethod
@@ -110,35 +109,13 @@ class RunConfig:
         return asdict(self)  # recurses into the decoder's dataclass
 
 
-def label_seed(base: int, label: str) -> int:
-    """A 32-bit seed for ``label``, independent of which other labels a run uses."""
-    h = int.from_bytes(hashlib.sha256(label.encode()).digest()[:8], "little")
-    return int(np.random.SeedSequence([int(base), h]).generate_state(1)[0])
-
-
-@dataclass
-class Capture:
-    """One recorded capture of a scene with its ground truth and seeds."""
-
-    scene: SceneSpec
-    image: np.ndarray
-    gt: GroundTruth
-    seeds: dict
-
-
-@dataclass
-class CompetitorCapture:
-    """One competitor depth map (:mod:`simbench.baselines`) with its scene, truth and seeds."""
-
-    device: str
-    scene: SceneSpec
-    depth: object  # simbench.baselines.CompetitorDepth
-    gt: GroundTruth
-    seeds: dict
+# one recording of a scene by a depth system (the proposed sensor's: ``image`` is its capture)
+Capture = Recording
 
 
 class Session:
-    """Shared state of one reproduction run: config, cache, pattern, calibration, progress."""
+    """Shared state of one reproduction run: config, cache, seeds, the depth systems and their
+    calibrations, progress."""
 
     def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "", sensor: SensorModel | None = None) -> None:
         import mitsuba as mi
@@ -150,20 +127,47 @@ class Session:
         self.command = command or "simbench " + " ".join(sys.argv[1:])
         self.variant = mi.variant()
         self.sensor = sensor if sensor is not None else get_sensor(config.sensor)
-        self.pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence, channels=config.decoder.channels)
-        self.pattern_u8 = quantize(fringe_pattern(self.pattern))
-        self._refs: dict = {}
-        self._competitor_cal: dict = {}
-        self.seeds_used: dict[str, dict] = {}
+        self.seeds = SeedLog(config.seed)
+        self._systems: dict[str, DepthSystem] = {}
+        self._calibrations: dict = {}
+        self.proposed = self.system("proposed")
+        self.pattern = self.proposed.pattern
+        self.pattern_u8 = self.proposed.pattern_u8
+
+    @property
+    def render(self) -> RenderSettings:
+        return RenderSettings(spp=self.config.spp, sampler=self.config.sampler, max_depth=self.config.max_depth, cache=self.cache)
+
+    @property
+    def seeds_used(self) -> dict[str, dict]:
+        """Every seed the run derived, by label (written to the provenance files)."""
+        return self.seeds.used
 
     def fork(self, sensor: SensorModel, *, config: RunConfig | None = None) -> "Session":
         """A session with another sensor model (and optionally other run settings) sharing
-        this one's cache, output and seed log."""
+        this one's cache, output, seed log and calibrations."""
         other = Session(config or self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
         other.cache = self.cache
-        other.seeds_used = self.seeds_used
-        other._competitor_cal = self._competitor_cal
+        other.seeds = self.seeds
+        other._calibrations = self._calibrations
         return other
+
+    def system(self, name: str) -> DepthSystem:
+        """The registered depth system ``name`` (:mod:`simbench.systems`) set up for this run."""
+        if name not in self._systems:
+            cfg = self.config
+            options = SystemOptions(sensor=self.sensor, decoder=cfg.decoder, camera_scale=cfg.camera_scale, reference_form=cfg.reference_form())
+            self._systems[name] = get_system(name, options)
+        return self._systems[name]
+
+    def calibration(self, system: DepthSystem, scene: SceneSpec, **options):
+        """``system``'s calibration for ``scene`` (prepared), recorded once per run for each
+        calibration key, sensor and render setting (``options`` go to its ``calibrate``)."""
+        r = self.render
+        key = (system.name, system.calibration_key(scene), getattr(system, "sensor", None), r.spp, r.sampler, r.max_depth, tuple(sorted(options.items())))
+        if key not in self._calibrations:
+            self._calibrations[key] = system.calibrate(scene, seeds=self.seeds, render=r, **options)
+        return self._calibrations[key]
 
     # scenes and captures -------------------------------------------------------------
     def raw_scene(self, name: str) -> SceneSpec:
@@ -171,92 +175,50 @@ class Session:
         return load_scene(SCENES_DIR / f"{name}.toml")
 
     def scene(self, name: str) -> SceneSpec:
-        """A scene of ``scenes/`` with the run's camera resolution, the rendered rig and the
-        sensor model's lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
-        return self.prepare(load_scene(SCENES_DIR / f"{name}.toml"))
+        """A scene of ``scenes/`` as the proposed sensor sees it (:meth:`prepare`)."""
+        return self.prepare(self.raw_scene(name))
 
     def prepare(self, scene: SceneSpec) -> SceneSpec:
-        rig = scene.rig if self.config.camera_scale == 1 else scale_camera(scene.rig, self.config.camera_scale)
-        return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
+        """``scene`` with the run's camera resolution, the rendered rig and the sensor model's
+        lenses and ambient light (:meth:`simbench.systems.proposed.ColourFringeSystem.prepare`)."""
+        return self.proposed.prepare(scene)
 
     def place(self, scene: SceneSpec, label: str, names) -> SceneSpec:
         """``scene`` with the objects ``names`` placed as a lab would (the run's placement
         tolerance, seeds from ``label``); the offsets are recorded with the seeds."""
-        seed = label_seed(self.config.seed, f"{label}/placement")
+        seed = self.seeds.seed(f"{label}/placement")
         placed, offsets = place_objects(scene, names, placement=self.config.placement, rng=seed)
-        self.seeds_used[f"{label}/placement"] = {"placement": seed, **{f"{n}_{k}": v for n, o in offsets.items() for k, v in o.items()}}
+        self.seeds.record(f"{label}/placement", {"placement": seed, **{f"{n}_{k}": v for n, o in offsets.items() for k, v in o.items()}})
         return placed
 
-    def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1, pattern_u8: np.ndarray | None = None) -> list[Capture]:
-        """``repeats`` recordings of one render of ``scene`` (a static scene measured again
-        differs by camera noise only), with seeds from ``label``; ``pattern_u8`` replaces the
-        run's pattern (calibration frames)."""
-        render_seed = label_seed(self.config.seed, f"{label}/render")
-        drive = ProjectorDrive(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=self.cache, phase=exposure_phase(render_seed))
-        q = render_channels(scene, drive, self.sensor, spp=self.config.spp, seed=render_seed, max_depth=self.config.max_depth, sampler=self.config.sampler, cache=self.cache)
-        gt = cached_ground_truth(scene, cache=self.cache)
-        out = []
-        for k in range(repeats):
-            noise_seed = label_seed(self.config.seed, f"{label}/noise/{k}")
-            seeds = {"render": render_seed, "noise": noise_seed}
-            self.seeds_used[f"{label}/{k}" if repeats > 1 else label] = seeds
-            out.append(Capture(scene=scene, image=record(q, sensor=self.sensor, scene=scene, rng=noise_seed), gt=gt, seeds=seeds))
-        return out
+    def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1) -> list[Capture]:
+        """``repeats`` recordings of ``scene`` (prepared) by the proposed sensor, with seeds
+        from ``label`` (:func:`simbench.systems.acquire`)."""
+        return acquire(self.proposed, scene, label, seeds=self.seeds, render=self.render, repeats=repeats, prepared=True)
 
-    def competitor(self, device: str, name: "str | SceneSpec", label: str, *, repeats: int = 1) -> list["CompetitorCapture"]:
-        """``repeats`` depth maps of scene ``name`` from competitor ``device`` (``kinect`` or
-        ``tof``, :mod:`simbench.baselines`; ``name`` a scene of ``scenes/`` or a loaded, not
-        yet prepared scene, e.g. one placed by :meth:`place`) at its native resolution, decoded the device's way,
-        with ground truth at its pixels.  Seeds derive from ``device/label``; the Kinect's
-        factory reference is recorded once per session."""
-        from simbench import baselines
-
-        model = baselines.get_device(device)
-        if device not in self._competitor_cal:
-            cal_seed = label_seed(self.config.seed, f"{device}/calibration")
-            self.seeds_used[f"{device}/calibration"] = {"render": cal_seed}
-            self._competitor_cal[device] = baselines.calibrate(model, spp=self.config.spp, seed=cal_seed, sampler=self.config.sampler, cache=self.cache)
-        cal = self._competitor_cal[device]
-        raw = load_scene(SCENES_DIR / f"{name}.toml") if isinstance(name, str) else name
-        scene = baselines.device_scene(model, raw)
-        render_seed = label_seed(self.config.seed, f"{device}/{label}/render")
-        noise_seeds = [label_seed(self.config.seed, f"{device}/{label}/noise/{k}") for k in range(repeats)]
-        raws = baselines.acquire(model, scene, cal, spp=self.config.spp, seed=render_seed, noise_seeds=noise_seeds, sampler=self.config.sampler, cache=self.cache)
-        gt = cached_ground_truth(scene, cache=self.cache)
-        out = []
-        for k, (raw, noise_seed) in enumerate(zip(raws, noise_seeds)):
-            seeds = {"render": render_seed, "noise": noise_seed}
-            self.seeds_used[f"{device}/{label}/{k}" if repeats > 1 else f"{device}/{label}"] = seeds
-            out.append(CompetitorCapture(device=device, scene=scene, depth=baselines.decode_raw(model, raw, cal), gt=gt, seeds=seeds))
-        return out
+    def acquire(self, name: str, scene: "str | SceneSpec", label: str, *, repeats: int = 1) -> list[tuple[Recording, SystemDepth]]:
+        """``repeats`` recordings of ``scene`` (a scene of ``scenes/`` or a loaded, not yet
+        prepared scene, e.g. one placed by :meth:`place`) by the system ``name`` at its native
+        resolution, each with its depth decoded the system's own way; seeds from
+        ``system.seed_prefix + label``, the calibration recorded once per run."""
+        system = self.system(name)
+        prepared = system.prepare(self.raw_scene(scene) if isinstance(scene, str) else scene)
+        cal = self.calibration(system, prepared)
+        recs = acquire(system, prepared, label, seeds=self.seeds, render=self.render, calibration=cal, repeats=repeats, prepared=True)
+        return [(rec, system.decode(rec.raw, cal, scene=rec.scene)) for rec in recs]
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
-        """The calibration: one capture of the white reference plane at the scene's Z0 per rig
-        and lighting (albedo :data:`simbench.simulate.REFERENCE_ALBEDO`), with its own seeds,
-        decoded once per decoder setting; for a decoder that unmixes the primaries also the
-        plane under a black frame and under each primary at full drive (Caspi et al. 1998's
-        calibration of the coupling matrix; four frames once per calibration, the measurement
-        stays single-shot)."""
-        form = self.config.reference_form()
-        key = (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, params, tuple(sorted(form.items())))
-        if key not in self._refs:
-            ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO, form=form)
-            label = f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
-            img = self.capture(ref_scene, label)[0].image
-            cal = {}
-            if params.unmix:
-                for name, drive in calibration_frames(self.pattern_u8).items():
-                    cal[name] = self.capture(ref_scene, f"{label}/{name}", pattern_u8=drive)[0].image
-            primaries = [cal[k] for k in ("red", "green", "blue")] if cal else None
-            self._refs[key] = cached_decode_reference(img, rig=scene.rig, params=params, primaries=primaries, dark=cal.get("dark"), cache=self.cache)
-        return self._refs[key]
+        """The proposed sensor's reference plane behind ``scene`` decoded with ``params``
+        (:class:`simbench.systems.proposed.ReferenceCalibration`; with the calibration frames
+        when the decoder unmixes)."""
+        return self.calibration(self.proposed, scene, frames=bool(params.unmix)).reference_map(params)
 
     def decode(self, cap: Capture, params: DecoderParams, *, mode: str | None = None) -> DecodeResult:
         """``cap`` decoded with ``params`` (Z0 = the scene's reference depth) in ``mode``
         (``reference`` or ``calibrated``; None = ``params.mode``)."""
-        params = dataclasses.replace(params, z0_m=cap.scene.reference_depth_m, mode=mode or params.mode)
-        ref = self.reference(cap.scene, dataclasses.replace(params, mode="reference")) if params.mode == "reference" or params.unmix else None
-        return decode(cap.image, rig=cap.scene.rig, params=params, reference=ref)
+        mode = mode or params.mode
+        cal = self.calibration(self.proposed, cap.scene, frames=bool(params.unmix)) if mode == "reference" or params.unmix else None
+        return self.proposed.decode(cap.raw, cal, scene=cap.scene, params=params, mode=mode).detail
 
     # provenance --------------------------------------------------------------------------
     def provenance(self, name: str, files: list[Path], extra: dict | None = None) -> Path:
@@ -291,37 +253,11 @@ class _Timer:
             self.progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
 
 
-def score(cap: Capture, result: DecodeResult, period_px: float, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
-    """The scores every experiment reports for one decoded capture, over ``region`` (default:
-    the pixels ground truth says are seen and lit):
-
-    ``plane_mae_mm`` / ``plane_rms_mm``: the paper's protocol, mean absolute (RMS) residual of
-    the decoded points to their least-squares plane (it absorbs any error that is planar, so
-    it cannot see a tilt or an offset of the whole board); ``gt_mae_mm``, ``gt_rmse_mm``,
-    ``bias_mm``: against rendered ground truth; ``completeness``; ``stripe_order_errors`` (and
-    their rate): pixels whose projector column is off by more than half a period.  With
-    ``edge_band_px`` also the 95th percentile, the outlier share and ``edge<N>_mae_mm``, the
-    MAE outside an N-px band at depth edges (the ablation tables).
-    """
-    gt = cap.gt
-    region = gt.lit if region is None else region
-    m = depth_errors(result.depth_m, gt.depth_m, region=region, column_px=result.column_px, gt_column_px=gt.column_px, period_px=period_px)
-    fit = plane_fit_error(result.depth_m, cap.scene.rig.camera, mask=region)
-    out = {
-        "plane_mae_mm": fit["mean_abs_residual_mm"],
-        "plane_rms_mm": fit["rms_residual_mm"],
-        "gt_mae_mm": m["mae_mm"],
-        "gt_rmse_mm": m["rmse_mm"],
-        "bias_mm": m["bias_mm"],
-        "completeness": m["completeness"],
-        "stripe_order_errors": m["stripe_order_errors"],
-        "stripe_order_error_rate": m["stripe_order_error_rate"],
-    }
-    if edge_band_px > 0:
-        band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
-        off_edges = depth_errors(result.depth_m, gt.depth_m, region=region, exclude=band)
-        out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
-    return out
+def score(rec: Recording, result, period_px: float | None = None, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
+    """:func:`simbench.metrics.score` of a recording's decoded depth (a
+    :class:`simbench.systems.SystemDepth` or a :class:`DecodeResult`), with its projector
+    columns where it has them."""
+    return metrics_score(result.depth_m, rec.gt, camera=rec.scene.rig.camera, region=region, column_px=getattr(result, "column_px", None), period_px=period_px, edge_band_px=edge_band_px)
 
 
 def figure_png(fig, *, dpi: int) -> bytes:

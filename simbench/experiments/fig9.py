@@ -19,13 +19,18 @@ import numpy as np
 
 from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
-from simbench.metrics import depth_errors, plane_fit_error
 
 __all__ = ["DEPTHS_M", "run_fig9", "fig9_plot"]
 
 DEPTHS_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.4)
 SENSORS = ("proposed", "kinect", "tof")
-SENSOR_LABELS = {"proposed": "proposed (Li et al.)", "kinect": "Kinect v1 (simulated)", "tof": "SR4000 ToF (simulated)"}
+
+
+def sensor_label(name: str) -> str:
+    """A system's label for the plot and the text (:meth:`simbench.systems.DepthSystem.info`)."""
+    from simbench.systems import get_system
+
+    return get_system(name).info().label
 CHIABRANDO_TOF = (1.3, 4.0)  # (depth m, per-pixel sigma mm), Chiabrando et al. 2009
 
 
@@ -53,17 +58,17 @@ def run_fig9(session: Session) -> dict:
                     "ref_stripe_order_errors": ref["stripe_order_errors"], **cap.seeds, **placement,
                 })
             for device in SENSORS[1:]:
-                caps = session.competitor(device, raw, f"fig9/{name}", repeats=cfg.fig9_repeats)
+                recs = session.acquire(device, raw, f"fig9/{name}", repeats=cfg.fig9_repeats)
                 # per-pixel temporal sigma over the recordings (how Chiabrando et al. measure a ToF camera)
                 with np.errstate(invalid="ignore"), warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)
-                    stack = np.stack([cc.depth.depth_m for cc in caps])
-                    sigma = np.nanstd(stack, axis=0, ddof=1) if len(caps) > 1 else np.full(stack.shape[1:], np.nan)
-                temporal_mm = float(np.nanmean(sigma[caps[0].gt.lit])) * 1000 if np.isfinite(sigma[caps[0].gt.lit]).any() else float("nan")
-                for k, cc in enumerate(caps):
-                    m = depth_errors(cc.depth.depth_m, cc.gt.depth_m, region=cc.gt.lit)
-                    fit = plane_fit_error(cc.depth.depth_m, cc.scene.rig.camera, mask=cc.gt.lit)
-                    rows.append({"sensor": device, "depth_m": z, "repeat": k, "rmse_mm": m["rmse_mm"], "plane_rms_mm": fit["rms_residual_mm"], "mae_mm": m["mae_mm"], "bias_mm": m["bias_mm"], "completeness": m["completeness"], "stripe_order_errors": "", "temporal_sigma_mm": temporal_mm, **cc.seeds})
+                    stack = np.stack([depth.depth_m for _, depth in recs])
+                    sigma = np.nanstd(stack, axis=0, ddof=1) if len(recs) > 1 else np.full(stack.shape[1:], np.nan)
+                lit = recs[0][0].gt.lit
+                temporal_mm = float(np.nanmean(sigma[lit])) * 1000 if np.isfinite(sigma[lit]).any() else float("nan")
+                for k, (rec, depth) in enumerate(recs):
+                    sc = score(rec, depth)
+                    rows.append({"sensor": device, "depth_m": z, "repeat": k, "rmse_mm": sc["gt_rmse_mm"], "plane_rms_mm": sc["plane_rms_mm"], "mae_mm": sc["gt_mae_mm"], "bias_mm": sc["bias_mm"], "completeness": sc["completeness"], "stripe_order_errors": "", "temporal_sigma_mm": temporal_mm, **rec.seeds})
         for sensor in SENSORS:
             sel = [r for r in rows if r["depth_m"] == z and r["sensor"] == sensor]
             prefix = f"fig9/{z:.1f}m" if sensor == "proposed" else f"fig9/{sensor}/{z:.1f}m"
@@ -98,7 +103,7 @@ def fig9_plot(rows: list[dict], *, title: str) -> bytes:
             if not any(r.get("sensor", "proposed") == sensor for r in rows):
                 continue
             zs, mean, lo, hi = _summary(rows, "rmse_mm", sensor)
-            axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="o-", color=f"C{SENSORS.index(sensor)}", capsize=3, label=f"{SENSOR_LABELS[sensor]}: RMSE vs ground truth")
+            axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="o-", color=f"C{SENSORS.index(sensor)}", capsize=3, label=f"{sensor_label(sensor)}: RMSE vs ground truth")
             if sensor == "proposed":
                 zs, mean, lo, hi = _summary(rows, "plane_rms_mm", sensor)
                 axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="s--", color="C0", alpha=0.6, capsize=3, label="proposed: RMS residual to fitted plane")
@@ -170,7 +175,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines += ["", f"Our RMSE {trend} with depth over 0.9-1.4 m."]
     for d, (_, cm, _, _) in comp_rows.items():
         below = np.all(mean < cm)
-        lines.append(f"Proposed RMSE {'below' if below else 'NOT below'} the {SENSOR_LABELS[d]}'s at {'every' if below else 'some'} depth" + (" (as the paper states)." if below else " (the paper states it is below)."))
+        lines.append(f"Proposed RMSE {'below' if below else 'NOT below'} the {sensor_label(d)}'s at {'every' if below else 'some'} depth" + (" (as the paper states)." if below else " (the paper states it is below)."))
     if cfg.sensor != "paper":
         lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD grid, defocus and distortion are left out."]
     return "\n".join(lines) + "\n"

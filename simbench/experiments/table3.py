@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from simbench.baselines import DEVICE_LABELS
 from simbench.decode import robust_params
 from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
-from simbench.metrics import depth_errors, edge_band, plane_fit_error, points_from_depth
+from simbench.metrics import depth_errors, edge_band, points_from_depth
 from simbench.rig import rotation_xyz_deg
 
 __all__ = ["PAPER_TABLE3", "SCENE", "front_face_mask", "run_table3"]
@@ -45,25 +44,27 @@ def front_face_mask(scene, gt, name: str, *, tol_m: float = 1e-3) -> np.ndarray:
 
 
 COMPETITORS = ("kinect", "tof")
+# the paper's competitor columns: system -> (short name, index into PAPER_TABLE3's tuples)
+PAPER_COMPETITORS = {"kinect": ("Kinect", 1), "tof": ("ToF", 2)}
 
 
-def _competitor_faces(session: Session, raw) -> dict:
-    """Per competitor: its capture, faces and per-face scores.  The edge band, defined on the
-    main camera, is scaled to each competitor's resolution (the same angle, at least 1 px)."""
+def _competitor_faces(session: Session, raw, systems) -> dict:
+    """Per competitor system: its recording, depth, faces and per-face scores.  The edge band,
+    defined on the main camera, is scaled to each system's resolution (the same angle, at
+    least 1 px)."""
     main_focal_px = session.scene(SCENE).rig.camera.focal_px
     out = {}
-    for device in COMPETITORS:
-        with session.timed(f"[table3] {device}"):
-            cap = session.competitor(device, raw, f"table3/{SCENE}")[0]
-            band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=max(1, int(round(session.config.edge_band_px * cap.scene.rig.camera.focal_px / main_focal_px))))
+    for name in systems:
+        with session.timed(f"[table3] {name}"):
+            rec, depth = session.acquire(name, raw, f"table3/{SCENE}")[0]
+            band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=max(1, int(round(session.config.edge_band_px * rec.scene.rig.camera.focal_px / main_focal_px))))
             faces, scores = {}, {}
-            for name in PAPER_TABLE3:
-                face = front_face_mask(cap.scene, cap.gt, name) & ~band
-                faces[name] = face
-                fit = plane_fit_error(cap.depth.depth_m, cap.scene.rig.camera, mask=face)
-                m = depth_errors(cap.depth.depth_m, cap.gt.depth_m, region=face)
-                scores[name] = {"plane_mae_mm": fit["mean_abs_residual_mm"], "gt_mae_mm": m["mae_mm"], "completeness": m["completeness"], "face_pixels": int(face.sum()), "seeds": cap.seeds}
-            out[device] = {"capture": cap, "faces": faces, "scores": scores}
+            for obj in PAPER_TABLE3:
+                face = front_face_mask(rec.scene, rec.gt, obj) & ~band
+                faces[obj] = face
+                sc = score(rec, depth, region=face)
+                scores[obj] = {"plane_mae_mm": sc["plane_mae_mm"], "gt_mae_mm": sc["gt_mae_mm"], "completeness": sc["completeness"], "face_pixels": int(face.sum()), "seeds": rec.seeds}
+            out[name] = {"recording": rec, "depth": depth, "label": session.system(name).info().label, "faces": faces, "scores": scores}
     return out
 
 
@@ -71,12 +72,14 @@ PLACED = ("cube", "cuboid")
 VARIANTS = (("paper", "calibrated"), ("paper", "reference"), ("robust", "calibrated"), ("robust", "reference"))
 
 
-def run_table3(session: Session) -> dict:
+def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS) -> dict:
+    """Table 3 with the proposed sensor and the competitor ``systems`` (registered names,
+    :mod:`simbench.systems`; the paper's: the Kinect and the ToF camera)."""
     cfg = session.config
     label = f"table3/{SCENE}"
     # one placement of the objects, seen by every sensor
     raw = session.place(session.raw_scene(SCENE), label, PLACED)
-    competitors = _competitor_faces(session, raw)
+    competitors = _competitor_faces(session, raw, systems)
     params = {"paper": cfg.decoder, "robust": robust_params(cfg.decoder)}
     with session.timed("[table3] cube and cuboid"):
         scene = session.prepare(raw)
@@ -94,21 +97,17 @@ def run_table3(session: Session) -> dict:
                 row.update({f"{key}_plane_mae_mm": sc["plane_mae_mm"], f"{key}_ratio": sc["plane_mae_mm"] / paper[0], f"{key}_gt_mae_mm": sc["gt_mae_mm"], f"{key}_completeness": sc["completeness"], f"{key}_stripe_order_errors": sc["stripe_order_errors"]})
                 for k in ("plane_mae_mm", "gt_mae_mm", "completeness", "stripe_order_errors"):
                     metrics[f"table3/{name}/{d}/{m}/{k}"] = sc[k]
+            for d, c in competitors.items():
+                if d in PAPER_COMPETITORS:
+                    row[f"paper_{d}_mm"] = paper[PAPER_COMPETITORS[d][1]]
+                row.update({f"{d}_mm": c["scores"][name]["plane_mae_mm"], f"{d}_gt_mae_mm": c["scores"][name]["gt_mae_mm"], f"{d}_completeness": c["scores"][name]["completeness"]})
             row.update({
-                "paper_kinect_mm": paper[1],
-                "kinect_mm": competitors["kinect"]["scores"][name]["plane_mae_mm"],
-                "kinect_gt_mae_mm": competitors["kinect"]["scores"][name]["gt_mae_mm"],
-                "kinect_completeness": competitors["kinect"]["scores"][name]["completeness"],
-                "paper_tof_mm": paper[2],
-                "tof_mm": competitors["tof"]["scores"][name]["plane_mae_mm"],
-                "tof_gt_mae_mm": competitors["tof"]["scores"][name]["gt_mae_mm"],
-                "tof_completeness": competitors["tof"]["scores"][name]["completeness"],
                 **cap.seeds,
                 **session.seeds_used[f"{label}/placement"],
-                **{f"{d}_{k}_seed": v for d in COMPETITORS for k, v in competitors[d]["scores"][name]["seeds"].items()},
+                **{f"{d}_{k}_seed": v for d in competitors for k, v in competitors[d]["scores"][name]["seeds"].items()},
             })
             rows.append(row)
-            for d in COMPETITORS:
+            for d in competitors:
                 for k in ("plane_mae_mm", "gt_mae_mm", "completeness"):
                     metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
         result = results[("paper", "calibrated")]
@@ -118,19 +117,20 @@ def run_table3(session: Session) -> dict:
     out = session.out
     cols = ["object", "paper_mm", "face_pixels"]
     cols += [f"{d}_{m}_{k}" for d, m in VARIANTS for k in ("plane_mae_mm", "ratio", "gt_mae_mm", "completeness", "stripe_order_errors")]
-    cols += ["paper_kinect_mm", "kinect_mm", "kinect_gt_mae_mm", "kinect_completeness", "paper_tof_mm", "tof_mm", "tof_gt_mae_mm", "tof_completeness", "render", "noise", "placement"]
+    cols += [c for d in competitors for c in ([f"paper_{d}_mm"] if d in PAPER_COMPETITORS else []) + [f"{d}_mm", f"{d}_gt_mae_mm", f"{d}_completeness"]]
+    cols += ["render", "noise", "placement"]
     cols += [f"{n}_{k}" for n in PLACED for k in ("depth_m", "tilt_deg")]
-    cols += ["kinect_render_seed", "kinect_noise_seed", "tof_render_seed", "tof_noise_seed"]
+    cols += [f"{d}_{k}_seed" for d in competitors for k in ("render", "noise")]
     files = [write_table(out / "table3.csv", rows, cols)]
-    files.append(atomic_write_text(out / "table3.md", _markdown(session, rows, whole)))
+    files.append(atomic_write_text(out / "table3.md", _markdown(session, rows, whole, competitors)))
     panels = [("proposed", cap.scene.rig.camera, cap.gt.depth_m, result.depth_m, faces)]
-    panels += [(DEVICE_LABELS[d], c["capture"].scene.rig.camera, c["capture"].gt.depth_m, c["capture"].depth.depth_m, c["faces"]) for d, c in competitors.items()]
+    panels += [(c["label"], c["recording"].scene.rig.camera, c["recording"].gt.depth_m, c["depth"].depth_m, c["faces"]) for c in competitors.values()]
     files.append(atomic_write_bytes(out / "fig10.png", cross_section_figure(panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)")))
     session.provenance("table3", files, extra={"placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg}})
     return metrics
 
 
-def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
+def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict) -> str:
     cfg = session.config
     cam = session.scene(SCENE).rig.camera
     lines = [
@@ -148,15 +148,29 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
         "separately captured reference plane (Sec. 5.4). Cross-section (paper's decoder, triangulation): `fig10.png`.",
         "",
     ]
-    hdr = ["object", "paper (mm)", "triangulation: plane fit (mm)", "ratio", "reference: plane fit (mm)", "ratio", "robust decoder, triangulation (mm)", "GT MAE (mm)", "completeness", "stripe-order errors", "Kinect: paper / sim (mm)", "ratio", "ToF: paper / sim (mm)", "ratio"]
+    hdr = ["object", "paper (mm)", "triangulation: plane fit (mm)", "ratio", "reference: plane fit (mm)", "ratio", "robust decoder, triangulation (mm)", "GT MAE (mm)", "completeness", "stripe-order errors"]
+    for d, c in competitors.items():
+        hdr += [f"{PAPER_COMPETITORS[d][0]}: paper / sim (mm)", "ratio"] if d in PAPER_COMPETITORS else [f"{c['label']} (mm)"]
+
+    def short(d: str) -> str:
+        return PAPER_COMPETITORS[d][0] if d in PAPER_COMPETITORS else competitors[d]["label"]
+
+    def competitor_cells(r: dict) -> list[str]:
+        cells = []
+        for d in competitors:
+            if d in PAPER_COMPETITORS:
+                cells += [f"{r[f'paper_{d}_mm']:.4f} / {r[f'{d}_mm']:.4f}", f"{r[f'{d}_mm'] / r[f'paper_{d}_mm']:.2f}"]
+            else:
+                cells.append(f"{r[f'{d}_mm']:.4f}")
+        return cells
+
     body = [
         [
             r["object"], f"{r['paper_mm']:.4f}", f"{r['paper_calibrated_plane_mae_mm']:.4f}", f"{r['paper_calibrated_ratio']:.2f}",
             f"{r['paper_reference_plane_mae_mm']:.4f}", f"{r['paper_reference_ratio']:.2f}", f"{r['robust_calibrated_plane_mae_mm']:.4f}",
             f"{r['paper_calibrated_gt_mae_mm']:.4f}", f"{100 * r['paper_calibrated_completeness']:.2f} %", str(r["paper_calibrated_stripe_order_errors"]),
-            f"{r['paper_kinect_mm']:.4f} / {r['kinect_mm']:.4f}", f"{r['kinect_mm'] / r['paper_kinect_mm']:.2f}",
-            f"{r['paper_tof_mm']:.4f} / {r['tof_mm']:.4f}", f"{r['tof_mm'] / r['paper_tof_mm']:.2f}",
         ]
+        + competitor_cells(r)
         for r in rows
     ]
     lines += markdown_table(hdr, body)
@@ -169,12 +183,18 @@ def _markdown(session: Session, rows: list[dict], whole: dict) -> str:
         f"Whole scene (lit pixels outside the edge band, paper's decoder, triangulation): completeness {100 * whole['completeness']:.2f} %, "
         f"MAE {whole['mae_mm']:.3f} mm, stripe-order errors {whole['stripe_order_errors']}.",
         "",
-        "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera (176x144) of "
-        "`simbench/baselines/`, on the same scene from the same camera centre, scored with the same protocol at their own "
-        "resolutions (edge band scaled to the same angle). Their completeness on the faces: "
-        + "; ".join(f"{r['object']}: Kinect {100 * r['kinect_completeness']:.1f} %, ToF {100 * r['tof_completeness']:.1f} %" for r in rows)
+        (
+            "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera (176x144) of "
+            "`simbench/baselines/`, on the same scene from the same camera centre, scored with the same protocol at their own "
+            "resolutions (edge band scaled to the same angle). "
+            if tuple(competitors) == COMPETITORS
+            else "Competitors: " + ", ".join(c["label"] for c in competitors.values()) + " (`simbench.systems`), on the same scene, "
+            "scored with the same protocol at their own resolutions (edge band scaled to the same angle). "
+        )
+        + "Their completeness on the faces: "
+        + "; ".join(f"{r['object']}: " + ", ".join(f"{short(d)} {100 * r[f'{d}_completeness']:.1f} %" for d in competitors) for r in rows)
         + ". Their ground-truth MAE: "
-        + "; ".join(f"{r['object']}: Kinect {r['kinect_gt_mae_mm']:.3f} mm, ToF {r['tof_gt_mae_mm']:.3f} mm" for r in rows)
+        + "; ".join(f"{r['object']}: " + ", ".join(f"{short(d)} {r[f'{d}_gt_mae_mm']:.3f} mm" for d in competitors) for r in rows)
         + ". Left out of the competitors: multipath and wiggling (ToF), the Kinect's proprietary post-filters.",
     ]
     if cfg.sensor != "paper":

@@ -1,0 +1,55 @@
+"""Competitor recordings as files: the device's raw frames, ground truth and ``device.json``
+(every device parameter, the calibration's numbers, the run's metadata and the list of files),
+the folder written whole or not at all (:func:`simbench.io.output_directory`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["DEVICE_MANIFEST", "write_device_recording", "read_device_info"]
+
+DEVICE_MANIFEST = "device.json"
+
+
+def write_device_recording(out_dir, name: str, model, writers: dict[str, Callable[[Path], Path]], *, gt_depth_m: np.ndarray, info: dict, overwrite: bool = False) -> dict[str, Path]:
+    """Write ``writers`` (key -> function writing one file into the folder it is given and
+    returning its path), ``gt_depth.npy``/``.exr`` (z-depth, m) and ``device.json``
+    (``{"device": name, **model's parameters, **info, "files": ...}``)."""
+    from simbench.io import output_directory, save_exr, save_json, save_npy
+
+    out = Path(out_dir)
+    names = {}
+    with output_directory(out, manifest=DEVICE_MANIFEST, overwrite=overwrite) as tmp:
+        for key, write in writers.items():
+            names[key] = write(tmp).name
+        names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
+        names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", gt_depth_m.astype(np.float32)).name
+        names["device"] = save_json(tmp / DEVICE_MANIFEST, {"device": name, **asdict(model), **info, "files": dict(names)}).name
+    return {k: out / n for k, n in names.items()}
+
+
+def read_device_info(in_dir, name: str, model_cls) -> tuple[object, dict]:
+    """(the device model, the rest of ``device.json``) of a folder written by
+    :func:`write_device_recording` for the device ``name``."""
+    path = Path(in_dir) / DEVICE_MANIFEST
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: not a competitor recording folder")
+    try:
+        info = json.loads(path.read_text())
+        device = info.pop("device")
+    except (ValueError, KeyError, AttributeError, UnicodeDecodeError):
+        raise ValueError(f"{path}: not a valid device file") from None
+    if device != name:
+        raise ValueError(f"{path}: a {device!r} recording, not {name!r}")
+    fields = model_cls.__dataclass_fields__
+    params = {k: tuple(v) if isinstance(v, list) else v for k, v in info.items() if k in fields}
+    try:
+        model = model_cls(**params)
+    except TypeError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return model, info

@@ -1,0 +1,78 @@
+"""Seeds: one default, one derivation scheme, one log of every seed a run used.
+
+Every random draw of a run descends from one base seed (:data:`DEFAULT_SEED` unless the user
+gives another).  A capture's seeds are derived from the base seed and the capture's *label*, a
+path-like name such as ``table1/white_paint/render`` (:func:`derive_seed`: ``SeedSequence([base,
+sha256(label)])``), so a capture keeps its seeds when experiments, scenes or systems are added,
+removed or run alone, and two runs that name the same capture the same way render the same
+image.  Inside one render, the few independent streams a model needs (the ambient render, the
+DLP exposure phase, the Kinect's speckle) are numbered children of that render's seed
+(:func:`child_seed`, numbers listed in :data:`CHILD_STREAMS`).  Every derived seed is recorded
+(:class:`SeedLog`) and written to the result rows and provenance files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+__all__ = ["DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "SeedLog"]
+
+# the paper's year; any non-negative integer works
+DEFAULT_SEED = 2017
+
+# numbered streams below one render seed (numbers are part of the results: never renumber)
+CHILD_STREAMS = {
+    # the Kinect's factory reference: its speckle and its camera noise (simbench.baselines.kinect)
+    "kinect_calibration_frames": 1,
+    "kinect_speckle": 2,  # the speckle frozen to a captured scene (simbench.baselines.kinect)
+    "ambient_render": 3,  # the ambient-only render beside the projector render (simbench.simulate)
+    "dlp_exposure_phase": 5,  # where the exposure starts in a video-mode DLP frame (simbench.simulate)
+}
+
+
+def check_seed(seed) -> int:
+    """``seed`` as an int, or ValueError: seeds are non-negative integers (SeedSequence's rule)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def derive_seed(base: int, label: str) -> int:
+    """A 32-bit seed for ``label`` under the base seed ``base``, independent of which other
+    labels a run uses."""
+    h = int.from_bytes(hashlib.sha256(label.encode()).digest()[:8], "little")
+    return int(np.random.SeedSequence([check_seed(base), h]).generate_state(1)[0])
+
+
+def child_seed(seed: int, stream: str) -> np.random.SeedSequence:
+    """The numbered stream ``stream`` (a key of :data:`CHILD_STREAMS`) below ``seed``."""
+    if stream not in CHILD_STREAMS:
+        raise ValueError(f"unknown seed stream {stream!r}; valid: {sorted(CHILD_STREAMS)}")
+    return np.random.SeedSequence([int(seed), CHILD_STREAMS[stream]])
+
+
+class SeedLog:
+    """The seeds of one run: derives them from the base seed and records each under its key."""
+
+    def __init__(self, base: int = DEFAULT_SEED) -> None:
+        self.base = check_seed(base)
+        self.used: dict[str, dict] = {}
+
+    def seed(self, label: str) -> int:
+        """The seed of ``label`` (not recorded: record what a capture used with :meth:`record`)."""
+        return derive_seed(self.base, label)
+
+    def record(self, key: str, seeds: dict) -> dict:
+        self.used[key] = seeds
+        return seeds
+
+    def capture(self, label: str, *, repeats: int = 1) -> tuple[int, list[int]]:
+        """(render seed, one noise seed per repeat) of the capture ``label``, recorded under
+        ``label`` (one repeat) or ``label/k``."""
+        render = self.seed(f"{label}/render")
+        noise = [self.seed(f"{label}/noise/{k}") for k in range(repeats)]
+        for k, n in enumerate(noise):
+            self.record(f"{label}/{k}" if repeats > 1 else label, {"render": render, "noise": n})
+        return render, noise

@@ -1,0 +1,246 @@
+"""Depth systems: every sensor the testbed simulates, behind one interface and one registry.
+
+A depth system (:class:`DepthSystem`) says how it sees a scene (:meth:`~DepthSystem.prepare`:
+its own camera, emitter and lenses in place of the scene file's rig), how it is calibrated
+once (:meth:`~DepthSystem.calibrate`: the proposed sensor's reference plane, the Kinect's factory
+reference, nothing for the ToF camera), how it acquires raw data (:meth:`~DepthSystem.acquire`:
+renders through the render cache and records one raw frame per noise seed, from seeds it is
+given), how it decodes raw data to depth in the common conventions (:meth:`~DepthSystem.decode`:
+float32 z-depth in metres at its pixel centres, NaN where invalid) and what it is
+(:meth:`~DepthSystem.info`: label, native resolution, captures per depth map, cited device
+numbers).  Experiments, the benchmark and the CLI loop over systems by name.
+
+Systems are registered by name (:func:`register_system`, the way Mitsuba registers plugins):
+the built-in ones are ``proposed`` (:mod:`simbench.systems.proposed`, the paper's colour
+sequence coded fringe sensor), ``kinect`` (:mod:`simbench.baselines.kinect`) and ``tof``
+(:mod:`simbench.baselines.tof`).  A new system is one module with a class following
+:class:`DepthSystem` plus one :func:`register_system` call; :func:`get_system` builds a system by
+name from the run's :class:`SystemOptions` and lists the registered names when one is unknown.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from simbench.cache import RenderCache
+from simbench.scene import SceneSpec
+
+__all__ = [
+    "SystemOptions",
+    "SystemInfo",
+    "RenderSettings",
+    "SystemDepth",
+    "Recording",
+    "DepthSystem",
+    "acquire",
+    "register_system",
+    "unregister_system",
+    "get_system",
+    "system_names",
+    "system_of_recording",
+]
+
+
+@dataclass(frozen=True)
+class SystemOptions:
+    """What a run sets for every system; each system uses what applies to it.
+
+    sensor : the proposed sensor's camera/projector model (:class:`simbench.device.SensorModel`;
+        None = the ``paper`` preset).  The competitors carry their own sensors.
+    decoder : the proposed sensor's decoder settings (:class:`simbench.decode.DecoderParams`;
+        None = the paper's)
+    pattern : the projected pattern (:class:`simbench.pattern.PatternSpec`; None = the one the
+        decoder's period, order, sequence and channels describe)
+    camera_scale : resolution factor of the proposed sensor's camera (0.5 for quick runs)
+    reference_form : form keys of the reference board (:func:`simbench.scene.board_form`)
+    """
+
+    sensor: Any = None
+    decoder: Any = None
+    pattern: Any = None
+    camera_scale: float = 1.0
+    reference_form: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SystemInfo:
+    """What a system is: ``label`` for tables and plots, native ``size_hw`` (H, W) of its depth
+    map, ``captures`` camera exposures per depth map (1 = single shot), ``numbers``: cited device
+    numbers, name -> (value, source)."""
+
+    name: str
+    label: str
+    size_hw: tuple[int, int]
+    captures: int
+    numbers: dict[str, tuple[Any, str]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How a system renders: samples per pixel, Mitsuba sampler, path length, render cache."""
+
+    spp: int
+    sampler: str
+    max_depth: int = 6
+    cache: RenderCache | None = None
+
+
+@dataclass(frozen=True)
+class SystemDepth:
+    """A decoded depth map in the common conventions: ``depth_m`` (H, W) float32 z-depth in
+    metres (NaN invalid), ``valid`` (H, W) bool, ``confidence`` (H, W) float32 in the system's
+    own unit or None; ``column_px`` the decoded projector column where the system has one (for
+    stripe-order errors); ``detail`` the system's own full result (e.g. a
+    :class:`simbench.decode.pipeline.DecodeResult`)."""
+
+    depth_m: np.ndarray
+    valid: np.ndarray
+    confidence: np.ndarray | None = None
+    column_px: np.ndarray | None = None
+    detail: Any = None
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording of a scene by a system: the scene as the system saw it, the raw frame
+    (the proposed sensor's colour image, the Kinect's IR image, the ToF camera's tap frames),
+    ground truth at the system's pixels and the seeds it was made from."""
+
+    system: str
+    scene: SceneSpec
+    raw: np.ndarray
+    gt: Any  # simbench.render.GroundTruth
+    seeds: dict
+
+    @property
+    def image(self) -> np.ndarray:
+        return self.raw
+
+
+@runtime_checkable
+class DepthSystem(Protocol):
+    """The shape of every depth system (see the module docstring).
+
+    ``name`` is its registry name; ``seed_prefix`` prefixes the labels its captures derive their
+    seeds from (:class:`simbench.seeds.SeedLog`), so two systems looking at the same scene under
+    the same label draw independent noise.
+    """
+
+    name: str
+    seed_prefix: str
+
+    def info(self) -> SystemInfo: ...
+
+    def prepare(self, scene: SceneSpec) -> SceneSpec: ...
+
+    def calibration_key(self, scene: SceneSpec) -> Any: ...
+
+    def calibrate(self, scene: SceneSpec, *, seeds, render: RenderSettings) -> Any: ...
+
+    def acquire(self, scene: SceneSpec, calibration: Any, *, render_seed: int, noise_seeds: list[int], render: RenderSettings) -> list[np.ndarray]: ...
+
+    def decode(self, raw: np.ndarray, calibration: Any, *, scene: SceneSpec) -> SystemDepth: ...
+
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, Any, SceneSpec | None]: ...
+
+    def write_recording(self, out_dir: Path, raw: np.ndarray, calibration: Any, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False) -> dict[str, Path]: ...
+
+    def read_recording(self, in_dir: Path) -> tuple[np.ndarray, Any, SceneSpec | None]: ...
+
+
+# name -> a factory taking SystemOptions, or "module:attribute" imported on first use (so the
+# registry costs nothing until a system is built)
+_SYSTEMS: dict[str, Callable[[SystemOptions], DepthSystem] | str] = {}
+
+
+def register_system(name: str, factory: Callable[[SystemOptions], DepthSystem] | str, *, replace: bool = False) -> None:
+    """Register a depth system under ``name``: ``factory(options)`` returns the system (a
+    :class:`DepthSystem`); a string ``"module:attribute"`` is imported when first built."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"a system name must be an identifier, got {name!r}")
+    if name in _SYSTEMS and not replace:
+        raise ValueError(f"a depth system {name!r} is already registered")
+    _SYSTEMS[name] = factory
+
+
+def unregister_system(name: str) -> None:
+    """Remove ``name`` from the registry (a test's own system, for example)."""
+    _SYSTEMS.pop(name, None)
+
+
+def system_names() -> list[str]:
+    """The registered system names, in registration order."""
+    return list(_SYSTEMS)
+
+
+def get_system(name: str, options: SystemOptions | None = None) -> DepthSystem:
+    """The depth system ``name`` built for ``options``; ValueError listing the registered names
+    when ``name`` is unknown."""
+    if name not in _SYSTEMS:
+        raise ValueError(f"unknown depth system {name!r}; registered: {system_names()}")
+    factory = _SYSTEMS[name]
+    if isinstance(factory, str):
+        module, _, attr = factory.partition(":")
+        factory = getattr(importlib.import_module(module), attr)
+        _SYSTEMS[name] = factory
+    system = factory(options or SystemOptions())
+    if not isinstance(system, DepthSystem):
+        raise TypeError(f"the factory of depth system {name!r} returned a {type(system).__name__}, not a DepthSystem")
+    if system.name != name:
+        raise ValueError(f"depth system registered as {name!r} calls itself {system.name!r}")
+    return system
+
+
+def acquire(system: DepthSystem, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, calibration: Any = None, repeats: int = 1, prepared: bool = False) -> list[Recording]:
+    """``repeats`` recordings of ``scene`` by ``system`` (one render, one camera-noise draw
+    each): the one acquisition path of the CLI, the experiments and the sweeps.
+
+    ``scene`` is a scene file's scene (``prepared``: already through :meth:`DepthSystem.prepare`);
+    seeds derive from ``system.seed_prefix + label`` (:meth:`simbench.seeds.SeedLog.capture`,
+    recorded there); ``calibration`` is what :meth:`DepthSystem.calibrate` returned.  Renders
+    and ground truth come from ``render.cache`` when it holds them.
+    """
+    from simbench.simulate import cached_ground_truth
+
+    if not prepared:
+        scene = system.prepare(scene)
+    render_seed, noise_seeds = seeds.capture(system.seed_prefix + label, repeats=repeats)
+    raws = system.acquire(scene, calibration, render_seed=render_seed, noise_seeds=noise_seeds, render=render)
+    gt = cached_ground_truth(scene, cache=render.cache)
+    return [Recording(system=system.name, scene=scene, raw=raw, gt=gt, seeds={"render": render_seed, "noise": n}) for raw, n in zip(raws, noise_seeds)]
+
+
+# recording folders name their system in one of these files
+RECORDING_MANIFESTS = ("device.json", "meta.json")
+
+
+def system_of_recording(in_dir: str | Path) -> str:
+    """The system name a recording folder (``simbench render --out``) was written by."""
+    import json
+
+    d = Path(in_dir)
+    for manifest in RECORDING_MANIFESTS:
+        path = d / manifest
+        if path.is_file():
+            try:
+                info = json.loads(path.read_text(encoding="utf-8"))
+            except (ValueError, UnicodeDecodeError):
+                raise ValueError(f"{path}: not a valid recording manifest") from None
+            if not isinstance(info, dict):
+                raise ValueError(f"{path}: not a valid recording manifest")
+            name = info.get("system", info.get("device", "proposed"))
+            if name not in _SYSTEMS:
+                raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
+            return name
+    raise FileNotFoundError(f"{d} holds no {' or '.join(RECORDING_MANIFESTS)}: not a recording folder (`simbench render --out`)")
+
+
+register_system("proposed", "simbench.systems.proposed:ColourFringeSystem")
+register_system("kinect", "simbench.baselines.kinect:KinectSystem")
+register_system("tof", "simbench.baselines.tof:ToFSystem")

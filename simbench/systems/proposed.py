@@ -1,0 +1,218 @@
+"""The proposed sensor as a depth system: the paper's colour sequence coded fringe pattern
+projected by a DLP projector, recorded by a colour camera, decoded by the paper's pipeline.
+
+Calibration is the paper's Sec. 5.4: one capture of a white reference plane at the scene's Z0
+(albedo :data:`simbench.simulate.REFERENCE_ALBEDO`) per rig and lighting, decoded once per
+decoder setting; a decoder that unmixes the primaries also needs the plane under a black frame
+and under each primary at full drive (Caspi et al. 1998's calibration of the coupling matrix;
+four frames once per calibration, the measurement stays single-shot).
+
+References
+----------
+.. [1] F. Li, B. Zhang, G. Shi, Y. Niu, R. Li, L. Yang, X. Xie, "Single-Shot Dense Depth Sensing
+   with Color Sequence Coded Fringe Pattern", Sensors 17(11), 2558, 2017.
+.. [2] D. Caspi, N. Kiryati, J. Shamir, "Range imaging with adaptive color structured light",
+   IEEE TPAMI 20(5), 470-480, 1998.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from simbench.scene import SceneSpec, reference_scene
+from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
+
+__all__ = ["ColourFringeSystem", "ReferenceCalibration", "BENCH_SCENES", "BENCH_SHADOW"]
+
+BENCH_SCENES = ("plane", "shadow")
+# the ``shadow`` benchmark scene's region without projector light (rows, columns)
+BENCH_SHADOW = (slice(330, 630), slice(440, 840))
+
+
+@dataclass
+class ReferenceCalibration:
+    """The proposed sensor's calibration: the recorded reference plane (``image``), with the
+    calibration frames (``frames``: name -> image, :data:`simbench.pattern.CALIBRATION_FRAMES`)
+    when a decoder unmixes the primaries; decoded reference maps are kept per decoder setting
+    (and in the render cache: :func:`simbench.decode.persist.cached_decode_reference`)."""
+
+    rig: object
+    image: np.ndarray
+    frames: dict = field(default_factory=dict)
+    cache: object = None
+    _maps: dict = field(default_factory=dict, repr=False)
+
+    def reference_map(self, params):
+        """The reference decoded with ``params`` (mode and Z0 as given)."""
+        from simbench.decode.persist import cached_decode_reference
+
+        if params not in self._maps:
+            primaries = None
+            if params.unmix:
+                if not self.frames:
+                    raise ValueError("this decoder unmixes the primaries: the calibration needs its frames (calibrate with frames=True)")
+                primaries = [self.frames[k] for k in ("red", "green", "blue")]
+            self._maps[params] = cached_decode_reference(self.image, rig=self.rig, params=params, primaries=primaries, dark=self.frames.get("dark"), cache=self.cache)
+        return self._maps[params]
+
+
+class ColourFringeSystem:
+    """The proposed sensor (module docstring); ``options`` gives its sensor model, decoder,
+    camera scale and reference-board form."""
+
+    name = "proposed"
+    # the proposed sensor's captures keep the labels experiments give them
+    seed_prefix = ""
+
+    def __init__(self, options: SystemOptions | None = None) -> None:
+        from simbench.decode import DecoderParams
+        from simbench.device import get_sensor
+        from simbench.pattern import PatternSpec, fringe_pattern, quantize
+
+        options = options or SystemOptions()
+        self.sensor = options.sensor if options.sensor is not None else get_sensor("paper")
+        self.decoder = options.decoder if options.decoder is not None else DecoderParams()
+        self.camera_scale = float(options.camera_scale)
+        self.reference_form = dict(options.reference_form)
+        d = self.decoder
+        self.pattern = options.pattern if options.pattern is not None else PatternSpec(period_px=d.period_px, order=d.order, sequence=d.sequence, channels=d.channels)
+        self.pattern_u8 = quantize(fringe_pattern(self.pattern))
+
+    def info(self) -> SystemInfo:
+        from simbench.rig import paper_rig, scale_camera
+
+        cam = scale_camera(paper_rig(), self.camera_scale).camera if self.camera_scale != 1 else paper_rig().camera
+        return SystemInfo(
+            name=self.name,
+            label="proposed (Li et al.)",
+            size_hw=cam.size_hw,
+            captures=1,
+            numbers={
+                "period_px": (self.pattern.period_px, "paper Sec. 3 (T = 21 projector px)"),
+                "debruijn_order": (self.pattern.order, "paper Eq. 7-8 (B(2, 3))"),
+                "camera_wh": ((1280, 960), "paper Sec. 6 (Point Grey Flea3)"),
+                "projector_wh": ((1824, 1140), "paper Sec. 6 (TI DLP LightCrafter 4500)"),
+            },
+        )
+
+    def prepare(self, scene: SceneSpec) -> SceneSpec:
+        """The scene with the run's camera resolution, the rendered rig and the sensor model's
+        lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
+        from simbench.render import realised_rig
+        from simbench.rig import scale_camera
+        from simbench.simulate import physical_scene
+
+        rig = scene.rig if self.camera_scale == 1 else scale_camera(scene.rig, self.camera_scale)
+        return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
+
+    def reference_label(self, scene: SceneSpec) -> str:
+        """The seed label of the reference capture: one per rig and lighting."""
+        return f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
+
+    def calibration_key(self, scene: SceneSpec):
+        return (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, tuple(sorted(self.reference_form.items())))
+
+    def calibrate(self, scene: SceneSpec, *, seeds, render: RenderSettings, frames: bool | None = None) -> ReferenceCalibration:
+        """Record the reference plane behind ``scene`` (prepared) and, with ``frames`` (default:
+        when the decoder unmixes), the calibration frames; seeds from :meth:`reference_label`."""
+        from simbench.pattern import calibration_frames
+        from simbench.simulate import REFERENCE_ALBEDO
+
+        ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO, form=self.reference_form)
+        label = self.reference_label(scene)
+        image = self._record(ref_scene, label, seeds=seeds, render=render)
+        cal = {}
+        if self.decoder.unmix if frames is None else frames:
+            for name, drive in calibration_frames(self.pattern_u8).items():
+                cal[name] = self._record(ref_scene, f"{label}/{name}", seeds=seeds, render=render, pattern_u8=drive)
+        return ReferenceCalibration(rig=scene.rig, image=image, frames=cal, cache=render.cache)
+
+    def _record(self, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, pattern_u8=None) -> np.ndarray:
+        render_seed, noise = seeds.capture(label)
+        return self.acquire(scene, None, render_seed=render_seed, noise_seeds=noise, render=render, pattern_u8=pattern_u8)[0]
+
+    def acquire(self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render: RenderSettings, pattern_u8: np.ndarray | None = None) -> list[np.ndarray]:
+        """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
+        once per noise seed (a static scene measured again differs by camera noise only)."""
+        from simbench.simulate import ProjectorDrive, exposure_phase, record, render_channels
+
+        drive = ProjectorDrive(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
+        q = render_channels(scene, drive, self.sensor, spp=render.spp, seed=render_seed, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+        return [record(q, sensor=self.sensor, scene=scene, rng=n) for n in noise_seeds]
+
+    def decode(self, raw: np.ndarray, calibration: ReferenceCalibration | None, *, scene: SceneSpec, params=None, mode: str | None = None) -> SystemDepth:
+        """``raw`` decoded with ``params`` (default: the system's decoder; Z0 = the scene's
+        reference depth) in ``mode`` (``reference`` or ``calibrated``; None = the params')."""
+        from simbench.decode import decode
+
+        params = params if params is not None else self.decoder
+        params = dataclasses.replace(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
+        ref = None
+        if params.mode == "reference" or params.unmix:
+            if calibration is None:
+                raise ValueError(f"decoding in {params.mode} mode{' with unmixing' if params.unmix else ''} needs the reference calibration")
+            ref = calibration.reference_map(dataclasses.replace(params, mode="reference"))
+        r = decode(raw, rig=scene.rig, params=params, reference=ref)
+        return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
+
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0):
+        """(capture, calibration, scene) of the decoder benchmark (``simbench bench``), made in
+        numpy without the renderer (:mod:`simbench.synthetic`), deterministic for a seed: the
+        paper's rig, a plane at 1.1 m, the reference at 1.0 m, the minimal camera's noise.
+
+        ``scene``: ``plane`` (fully lit) or ``shadow`` (:data:`BENCH_SHADOW` gets no projector
+        light, which sends the decoder down the path every scene with shadows takes).
+        """
+        from simbench.device import get_sensor
+        from simbench.pattern import fringe_pattern, quantize
+        from simbench.projector import transfer_curve
+        from simbench.rig import paper_rig
+        from simbench.sensor import simple_camera
+        from simbench.synthetic import synthetic_plane_capture
+
+        if scene not in BENCH_SCENES:
+            raise ValueError(f"unknown benchmark scene {scene!r}; valid: {list(BENCH_SCENES)}")
+        rig = paper_rig()
+        pattern = dataclasses.replace(self.pattern, size_hw=rig.projector.size_hw)
+        drive = transfer_curve(quantize(fringe_pattern(pattern)), transfer="linear")
+        cam = get_sensor("minimal").camera
+        rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.1), supersample=2)
+        ref_rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=2)
+        if scene == "shadow":
+            rad = rad.copy()
+            rad[BENCH_SHADOW] = 0.0
+        rng = np.random.default_rng(seed)
+        capture = simple_camera(rad / 1.21, camera=cam, rng=rng)
+        reference = simple_camera(ref_rad, camera=cam, rng=rng)
+        return capture, ReferenceCalibration(rig=rig, image=reference), SceneSpec(name=f"bench_{scene}", rig=rig, objects=(), reference_depth_m=1.0)
+
+    def write_recording(self, out_dir: Path, raw: np.ndarray, calibration: ReferenceCalibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False) -> dict[str, Path]:
+        from simbench.simulate import Acquisition, write_acquisition
+
+        acq = Acquisition(scene=scene, pattern=self.pattern_u8, capture=raw, reference=calibration.image, gt=gt, meta=meta, calibration=calibration.frames)
+        return write_acquisition(acq, out_dir, overwrite=overwrite)
+
+    def read_recording(self, in_dir: Path):
+        """(capture, calibration, scene) of a folder written by :meth:`write_recording`
+        (``simbench render``); the scene carries the recorded rig and Z0, no objects."""
+        import json
+
+        from simbench import validate
+        from simbench.io import load_image
+        from simbench.rig import load_rig
+        from simbench.simulate import RENDER_MANIFEST
+
+        d = Path(in_dir)
+        meta = json.loads((d / RENDER_MANIFEST).read_text(encoding="utf-8"))
+        rig = load_rig(d / "rig.toml")
+        z0 = validate.number(meta.get("reference_depth_m", 1.0), f"{d / RENDER_MANIFEST}: reference_depth_m", lo=0.0, lo_open=True)
+        capture = load_image(d / "capture.png", expected_size_hw=rig.camera.size_hw)
+        frames = {}
+        for name in (n for n in ("dark", "red", "green", "blue") if (d / f"calibration_{n}.png").is_file()):
+            frames[name] = load_image(d / f"calibration_{name}.png", expected_size_hw=rig.camera.size_hw)
+        cal = ReferenceCalibration(rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames)
+        return capture, cal, SceneSpec(name=str(meta.get("scene", d.name)), rig=rig, objects=(), reference_depth_m=z0)
