@@ -7,7 +7,8 @@ sha256(label)])``), so a capture keeps its seeds when experiments, scenes or sys
 removed or run alone, and two runs that name the same capture the same way render the same
 image.  Inside one render, the few independent streams a model needs (the ambient render, the
 DLP exposure phase, the Kinect's speckle) are numbered children of that render's seed
-(:func:`child_seed`, numbers listed in :data:`CHILD_STREAMS`).  Every derived seed is recorded
+(:func:`child_seed`, numbers listed in :data:`CHILD_STREAMS`); a sweep's repetitions number
+theirs (:func:`repetition_seed`).  Every derived seed is recorded
 (:class:`SeedLog`) and written to the result rows and provenance files.
 """
 
@@ -17,7 +18,7 @@ import hashlib
 
 import numpy as np
 
-__all__ = ["DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "SeedLog"]
+__all__ = ["DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "repetition_seed", "SeedLog"]
 
 # the paper's year; any non-negative integer works
 DEFAULT_SEED = 2017
@@ -51,6 +52,12 @@ def child_seed(seed: int, stream: str) -> np.random.SeedSequence:
     if stream not in CHILD_STREAMS:
         raise ValueError(f"unknown seed stream {stream!r}; valid: {sorted(CHILD_STREAMS)}")
     return np.random.SeedSequence([int(seed), CHILD_STREAMS[stream]])
+
+
+def repetition_seed(base: int, repeat: int) -> int:
+    """The base seed of repetition ``repeat`` of a sweep (``simbench ablate``): the same in every
+    parameter set, so a sweep compares its settings under common random numbers."""
+    return int(np.random.SeedSequence([check_seed(base), int(repeat)]).generate_state(1)[0])
 
 
 class SeedLog:

@@ -47,3 +47,15 @@ def test_ply_is_readable_by_trimesh(tmp_path):
     save_ply(tmp_path / "c.ply", pts, np.full((50, 3), 7, np.uint8))
     cloud = trimesh.load(tmp_path / "c.ply")
     assert np.allclose(np.asarray(cloud.vertices), pts, atol=1e-6)
+
+
+def test_failed_output_directory_leaves_nothing_and_keeps_the_error(tmp_path):
+    """A block that fails inside output_directory re-raises its own error, and the folders made
+    for it (missing parents included) are gone."""
+    from simbench.io import output_directory
+
+    with pytest.raises(RuntimeError, match="boom"):
+        with output_directory(tmp_path / "a" / "b" / "out", manifest="meta.json") as tmp:
+            (tmp / "x.txt").write_text("x")
+            raise RuntimeError("boom")
+    assert list(tmp_path.iterdir()) == []

@@ -5,7 +5,7 @@ A sweep file (TOML)::
     name = "period"                      # results/ablations/<name>.csv/.md/.png
     description = "fringe period T"
     repeats = 2                          # recordings per parameter set (own seeds each)
-    seed = 2017                          # base seed: repetition r uses the same seeds in every
+    seed = 2017                          # base seed (default simbench.seeds.DEFAULT_SEED): repetition r uses the same seeds in every
                                          # parameter set (common random numbers)
     plot_metric = "gt_mae_mm"            # y of the plot (default gt_mae_mm)
 
@@ -61,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench.seeds import DEFAULT_SEED, repetition_seed
 from simbench import validate
 from simbench.io import atomic_write_bytes, atomic_write_text, read_toml, save_json
 from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
@@ -134,7 +135,7 @@ class Sweep:
     axes: tuple[tuple[str, tuple], ...]
     combine: str = "grid"
     repeats: int = 1
-    seed: int = 2017
+    seed: int = DEFAULT_SEED
     plot_metric: str = "gt_mae_mm"
     path: str = ""
 
@@ -222,7 +223,7 @@ def expand(sweep: Sweep) -> list[dict]:
     for combo in combos:
         params = {**DEFAULTS, **sweep.base, **dict(zip(names, combo))}
         for r in range(sweep.repeats):
-            seed = int(np.random.SeedSequence([int(sweep.seed), r]).generate_state(1)[0])
+            seed = repetition_seed(sweep.seed, r)
             key = hashlib.sha256(json.dumps({"params": params, "repeat": r, "seed": seed}, sort_keys=True, default=str).encode()).hexdigest()[:16]
             runs.append({"run": len(runs), "repeat": r, "params": params, "seed": seed, "key": key})
     return runs
