@@ -110,21 +110,24 @@ def _system_names() -> list[str]:
 
 def _cmd_pattern(args) -> int:
     from simbench.io import save_png
-    from simbench.pattern import PatternSpec, fringe_pattern, quantize
+    from simbench.pattern import fringe_pattern, quantize
 
-    spec = PatternSpec(size_hw=(args.height, args.width), period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
+    spec = _pattern_spec(args, (args.height, args.width))
     path = save_png(args.out, quantize(fringe_pattern(spec)))
     codes = "".join(map(str, spec.codes()))
     print(f"pattern {args.width}x{args.height}, period {args.period} px, codes {codes} (window {args.order}) -> {path}")
     return 0
 
 
-def _sequence(text: str | None) -> tuple[int, ...] | None:
-    if text is None:
-        return None
-    if not text or set(text) - {"0", "1"}:
-        raise ValueError(f"--sequence must be a string of 0 and 1, got {text!r}")
-    return tuple(int(c) for c in text)
+def _pattern_spec(args, size_hw: tuple[int, int]):
+    """The PatternSpec of the pattern options (:func:`_add_pattern_options`) at ``size_hw``."""
+    from simbench.pattern import PatternSpec, parse_sequence
+
+    try:
+        sequence = None if args.sequence is None else parse_sequence(args.sequence)
+    except ValueError as exc:
+        raise ValueError(f"--sequence: {exc}") from None
+    return PatternSpec(size_hw=size_hw, period_px=args.period, order=args.order, sequence=sequence, channels=args.channels)
 
 
 def _cmd_render(args) -> int:
@@ -156,11 +159,10 @@ def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
     """The proposed sensor's render folder: capture, reference (and calibration frames),
     ground truth, rig, meta.json (:func:`simbench.simulate.acquire`)."""
     from simbench.device import get_sensor
-    from simbench.pattern import PatternSpec
     from simbench.simulate import acquire, write_acquisition
 
     sensor = get_sensor(args.camera)
-    pattern = PatternSpec(size_hw=scene.rig.projector.size_hw, period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels)
+    pattern = _pattern_spec(args, scene.rig.projector.size_hw)
     acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames, cache=cache)
     return write_acquisition(acq, args.out, overwrite=args.overwrite)
 
@@ -257,7 +259,7 @@ def _cmd_decode(args) -> int:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
-    params = DecoderParams(period_px=args.period, order=args.order, sequence=_sequence(args.sequence), channels=args.channels, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    params = DecoderParams(pattern=_pattern_spec(args, rig.projector.size_hw), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
     if args.robust:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])

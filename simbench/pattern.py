@@ -35,6 +35,7 @@ __all__ = [
     "de_bruijn",
     "window_positions",
     "check_sequence",
+    "parse_sequence",
     "code_sequence",
     "fringe_pattern",
     "quantize",
@@ -195,6 +196,14 @@ def check_channels(channels: str) -> tuple[int, int, int]:
     if not isinstance(channels, str) or sorted(channels) != ["b", "g", "r"]:
         raise ValueError(f"channels must be a permutation of 'rgb' (code 1, code 0, fringe), got {channels!r}")
     return tuple("rgb".index(c) for c in channels)
+
+
+def parse_sequence(text: str) -> tuple[int, ...]:
+    """A code sequence written as a string of 0 and 1 (``"00010111"``, the CLI's and sweep
+    files' form) as a tuple; its windows are checked by :class:`PatternSpec`."""
+    if not isinstance(text, str) or not text or set(text) - {"0", "1"}:
+        raise ValueError(f"a code sequence is a string of 0 and 1, got {text!r}")
+    return tuple(int(c) for c in text)
 
 
 def check_sequence(sequence, *, order: int) -> tuple[int, ...]:

@@ -397,8 +397,7 @@ def acquire(
         raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
     if with_calibration and not with_reference:
         raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
-    decoder = DecoderParams(period_px=pattern.period_px, order=pattern.order, sequence=pattern.sequence, channels=pattern.channels)
-    system = ColourFringeSystem(SystemOptions(sensor=sensor, decoder=decoder, pattern=pattern))
+    system = ColourFringeSystem(SystemOptions(sensor=sensor, decoder=DecoderParams(pattern=pattern)))
     seeds = SeedLog(seed)
     render = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=cache)
     scene = system.prepare(scene)

@@ -157,7 +157,7 @@ def test_custom_sequence_pattern_decodes():
         spec = PatternSpec(order=4, sequence=seq)
         drive = transfer_curve(quantize(fringe_pattern(spec)), transfer="linear")
         img, col, _ = synthetic_plane_capture(drive, RIG, point_m=(0, 0, 1.1))
-        r = decode(img, rig=RIG, params=DecoderParams(order=4, sequence=seq, mode="calibrated"))
+        r = decode(img, rig=RIG, params=DecoderParams(pattern=spec, mode="calibrated"))
         # a 4-code window reaches two stripes right: the last, partial stripe of each row has
         # no window and only two voting neighbours (min_support 3), so about 1.4 % is lost there
         assert r.valid.mean() > 0.98
@@ -170,7 +170,7 @@ def test_sequence_with_repeated_windows_is_rejected():
     with pytest.raises(ValueError, match="repeats"):
         PatternSpec(order=2, sequence=(0, 1, 0, 1))
     with pytest.raises(ValueError, match="only 0 and 1"):
-        DecoderParams(sequence=(0, 2, 1))
+        DecoderParams(pattern={"sequence": (0, 2, 1)})
 
 
 @pytest.mark.parametrize("reflectance", [(0.8, 0.04, 0.04), (0.04, 0.8, 0.04), (0.8, 0.04, 0.8)], ids=["red", "green", "pink"])
@@ -209,14 +209,14 @@ def test_other_channel_assignments_decode(channels):
     noise-free image (its red stripes equal the green fringe, and Eq. 13 says R >= G)."""
     drive = transfer_curve(quantize(fringe_pattern(PatternSpec(channels=channels))), transfer="linear")
     img, col, _ = synthetic_plane_capture(drive, RIG, point_m=(0, 0, 1.1))
-    r = decode(img, rig=RIG, params=DecoderParams(mode="calibrated", channels=channels))
+    r = decode(img, rig=RIG, params=DecoderParams(mode="calibrated", pattern=PatternSpec(channels=channels)))
     err = r.column_px[r.valid] - col[r.valid]
     assert r.valid.mean() > 0.99 and np.sqrt(np.mean(err**2)) < 0.02
     if channels == "gbr":
         wrong = decode(img, rig=RIG, params=DecoderParams(mode="calibrated"))
         assert (wrong.valid & (np.abs(wrong.column_px - col) < 0.5)).mean() < 0.5
     with pytest.raises(ValueError, match="permutation of 'rgb'"):
-        DecoderParams(channels="rgx")
+        DecoderParams(pattern={"channels": "rgx"})
 
 
 def test_repeated_decodes_are_bit_identical(reference):

@@ -19,7 +19,7 @@ from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
 from simbench.decode.profile import run_in_context, stage
-from simbench.pattern import check_channels, check_sequence, code_sequence, window_positions
+from simbench.pattern import PatternSpec, check_channels, code_sequence, window_positions
 from simbench.optics import undistort_image
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
@@ -41,14 +41,12 @@ class DecoderParams:
 
     Attributes
     ----------
-    period_px, order : int
-        The pattern's fringe period T (projector px) and window length (paper: 21, 3).
-    sequence : tuple of int, optional
-        The pattern's stripe codes; None = B(2, order) (see :class:`simbench.pattern.PatternSpec`).
-    channels : str
-        The pattern's channel assignment (code 1, code 0, fringe; see
-        :class:`simbench.pattern.PatternSpec`); the decoder reorders the capture's channels so
-        that every stage sees the paper's layout (R = code 1, G = code 0, B = fringe).
+    pattern : :class:`simbench.pattern.PatternSpec`
+        The projected pattern (default: the paper's); the decoder reads its fringe period T
+        (projector px), window length, stripe codes and channel assignment (code 1, code 0,
+        fringe), also as ``period_px``, ``order``, ``sequence`` and ``channels``; it reorders the
+        capture's channels so that every stage sees the paper's layout (R = code 1, G = code 0,
+        B = fringe).  A table of PatternSpec's fields (TOML, JSON) is accepted.
     intensity_mode : str
         ``overlay`` (paper Eq. 9), ``blue`` (the fringe channel alone: blue in the paper's
         pattern) or ``weighted`` (normalised channels weighted by their noise,
@@ -115,10 +113,7 @@ class DecoderParams:
         Worker threads (row bands); None = one per CPU.  Results do not depend on it.
     """
 
-    period_px: int = 21
-    order: int = 3
-    sequence: tuple[int, ...] | None = None
-    channels: str = "rgb"
+    pattern: PatternSpec = PatternSpec()
     intensity_mode: str = "overlay"
     phase_method: str = "gabor"
     sigma_periods: float = 0.25
@@ -145,8 +140,7 @@ class DecoderParams:
     def __post_init__(self) -> None:
         v = validate
         fixed = {
-            "period_px": v.integer(self.period_px, "period_px", lo=4, hi=v.MAX_SIDE_PX),
-            "order": v.integer(self.order, "order", lo=2, hi=16),
+            "pattern": _pattern_of(self.pattern),
             "intensity_mode": v.choice(self.intensity_mode, "intensity_mode", INTENSITY_MODES),
             "phase_method": v.choice(self.phase_method, "phase_method", PHASE_METHODS),
             "sigma_periods": v.number(self.sigma_periods, "sigma_periods", lo=0.0, hi=10.0, lo_open=True),
@@ -173,15 +167,26 @@ class DecoderParams:
         lo, hi = fixed["depth_range_m"]
         if not lo < hi:
             raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
-        check_channels(self.channels)
         if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
             raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
-        if self.sequence is not None:
-            if isinstance(self.sequence, (str, bytes)) or not isinstance(self.sequence, (list, tuple)):
-                raise ValueError(f"sequence must be a list of 0 and 1, got {self.sequence!r}")
-            fixed["sequence"] = check_sequence(self.sequence, order=fixed["order"])
         for name, value in fixed.items():
             object.__setattr__(self, name, value)
+
+    @property
+    def period_px(self) -> int:
+        return self.pattern.period_px
+
+    @property
+    def order(self) -> int:
+        return self.pattern.order
+
+    @property
+    def sequence(self) -> tuple[int, ...] | None:
+        return self.pattern.sequence
+
+    @property
+    def channels(self) -> str:
+        return self.pattern.channels
 
     @property
     def cycle(self) -> int:
@@ -191,6 +196,19 @@ class DecoderParams:
         if self.camera_period_px is not None:
             return float(self.camera_period_px)
         return self.period_px * rig.camera.focal_px / rig.projector.focal_px
+
+
+def _pattern_of(value) -> PatternSpec:
+    """``value`` as a PatternSpec: one already, or a table of its fields (lists as tuples)."""
+    if isinstance(value, PatternSpec):
+        return value
+    if isinstance(value, Mapping):
+        fields = {f.name for f in dataclasses.fields(PatternSpec)}
+        unknown = sorted(set(value) - fields)
+        if unknown:
+            raise ValueError(f"pattern: unknown field(s) {unknown}; valid: {sorted(fields)}")
+        return PatternSpec(**{k: tuple(x) if isinstance(x, list) else x for k, x in value.items()})
+    raise ValueError(f"pattern must be a PatternSpec or a table of its fields, got {value!r}")
 
 
 def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:

@@ -81,7 +81,7 @@ def _decoder_fields() -> dict[str, str]:
     from simbench.decode import DecoderParams
 
     # mode: every run is scored in both modes (MODES)
-    skip = {"period_px", "order", "sequence", "channels", "z0_m", "threads", "mode"}
+    skip = {"pattern", "z0_m", "threads", "mode"}
     return {f"decoder.{f.name}": f"DecoderParams.{f.name}" for f in dataclasses.fields(DecoderParams) if f.name not in skip}
 
 
@@ -286,23 +286,17 @@ def _scene(params: dict):
 
 def _decoder(params: dict):
     from simbench.decode import DecoderParams
+    from simbench.pattern import PatternSpec, parse_sequence
 
     fields = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("decoder.")}
     for k in ("depth_range_m",):
         if k in fields and isinstance(fields[k], list):
             fields[k] = tuple(fields[k])
-    if "pattern.period_px" in params:
-        fields["period_px"] = int(params["pattern.period_px"])
-    if "pattern.order" in params:
-        fields["order"] = int(params["pattern.order"])
+    kinds = {"pattern.period_px": int, "pattern.order": int, "pattern.channels": str}
+    pattern = {k.split(".", 1)[1]: kinds[k](v) for k, v in params.items() if k in kinds}
     if "pattern.sequence" in params:
-        text = str(params["pattern.sequence"])
-        if not text or set(text) - {"0", "1"}:
-            raise ValueError(f"pattern.sequence must be a 0/1 string, got {text!r}")
-        fields["sequence"] = tuple(int(c) for c in text)
-    if "pattern.channels" in params:
-        fields["channels"] = str(params["pattern.channels"])
-    return DecoderParams(**fields)
+        pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
+    return DecoderParams(pattern=PatternSpec(**pattern), **fields)
 
 
 def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:

@@ -27,6 +27,7 @@ from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
 from simbench.metrics import score as metrics_score
+from simbench.pattern import PatternSpec
 from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
 from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
@@ -106,7 +107,16 @@ class RunConfig:
         return dataclasses.replace(base, **overrides)
 
     def to_dict(self) -> dict:
-        return asdict(self)  # recurses into the decoder's dataclass
+        """The settings as plain data (provenance).  The decoder's pattern is written as its
+        four decoder-relevant fields inline (period_px, order, sequence, channels), the layout
+        of every provenance file so far, plus any other pattern field that is not the default."""
+        d = asdict(self)
+        pattern = d["decoder"].pop("pattern")
+        default = asdict(PatternSpec())
+        inline = {k: pattern.pop(k) for k in ("period_px", "order", "sequence", "channels")}
+        extra = {k: v for k, v in pattern.items() if v != default[k]}
+        d["decoder"] = {**inline, **({"pattern": extra} if extra else {}), **d["decoder"]}
+        return d
 
 
 # one recording of a scene by a depth system (the proposed sensor's: ``image`` is its capture)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import time
+import dataclasses
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -19,7 +20,6 @@ from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.experiments.common import SCENES_DIR, figure_png, git_commit
 from simbench.io import json_bytes, write_files
 from simbench.metrics import edge_band, score
-from simbench.pattern import PatternSpec
 from simbench.scene import load_scene
 from simbench.device import get_sensor
 from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
@@ -79,7 +79,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
 
     out = Path(out_dir)
     sensor = get_sensor(config.sensor)
-    pattern = PatternSpec(period_px=config.decoder.period_px, order=config.decoder.order, sequence=config.decoder.sequence, channels=config.decoder.channels)
+    pattern = config.decoder.pattern
     rows = []
     scenes = [load_scene(SCENES_DIR / f"{name}.toml") for name in config.scenes]  # all checked before rendering
     files: dict[Path, bytes] = {}
@@ -89,7 +89,7 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         # rig and Z0 share the reference capture
         acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, sampler=config.sampler, seed=config.seed)
         t1 = time.perf_counter()
-        params = DecoderParams(**{**asdict(config.decoder), "z0_m": scene.reference_depth_m})
+        params = dataclasses.replace(config.decoder, z0_m=scene.reference_depth_m)
         ref = decode_reference(acq.reference, rig=acq.scene.rig, params=params)
         t2 = time.perf_counter()
         result = decode(acq.capture, rig=acq.scene.rig, params=params, reference=ref)

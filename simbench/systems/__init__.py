@@ -53,17 +53,14 @@ class SystemOptions:
 
     sensor : the proposed sensor's camera/projector model (:class:`simbench.device.SensorModel`;
         None = the ``paper`` preset).  The competitors carry their own sensors.
-    decoder : the proposed sensor's decoder settings (:class:`simbench.decode.DecoderParams`;
-        None = the paper's)
-    pattern : the projected pattern (:class:`simbench.pattern.PatternSpec`; None = the one the
-        decoder's period, order, sequence and channels describe)
+    decoder : the proposed sensor's decoder settings, with the pattern it projects
+        (:class:`simbench.decode.DecoderParams`; None = the paper's)
     camera_scale : resolution factor of the proposed sensor's camera (0.5 for quick runs)
     reference_form : form keys of the reference board (:func:`simbench.scene.board_form`)
     """
 
     sensor: Any = None
     decoder: Any = None
-    pattern: Any = None
     camera_scale: float = 1.0
     reference_form: dict = field(default_factory=dict)
 

@@ -71,15 +71,14 @@ class ColourFringeSystem:
     def __init__(self, options: SystemOptions | None = None) -> None:
         from simbench.decode import DecoderParams
         from simbench.device import get_sensor
-        from simbench.pattern import PatternSpec, fringe_pattern, quantize
+        from simbench.pattern import fringe_pattern, quantize
 
         options = options or SystemOptions()
         self.sensor = options.sensor if options.sensor is not None else get_sensor("paper")
         self.decoder = options.decoder if options.decoder is not None else DecoderParams()
         self.camera_scale = float(options.camera_scale)
         self.reference_form = dict(options.reference_form)
-        d = self.decoder
-        self.pattern = options.pattern if options.pattern is not None else PatternSpec(period_px=d.period_px, order=d.order, sequence=d.sequence, channels=d.channels)
+        self.pattern = self.decoder.pattern
         self.pattern_u8 = quantize(fringe_pattern(self.pattern))
 
     def info(self) -> SystemInfo:
