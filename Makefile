@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml scripts/setup_system.sh
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev]'
-	$(PY) -c "import simbench.render as r; print('simbench: libLLVM found:', [f'{v}: {p}' for v, p in r.find_libllvm()][:3])"
+	$(PY) -c "import simbench.variant as r; print('simbench: libLLVM found:', [f'{v}: {p}' for v, p in r.find_libllvm()][:3])"
 	touch $(STAMP)
 
 # The main job: the paper's Table 1, Table 3, Fig. 9 and figures into results/ (renders are

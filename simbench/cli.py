@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import time
 from dataclasses import replace
@@ -73,7 +74,7 @@ _SPP = _int(1, 1 << 16)
 
 def _add_render_options(s, *, quick_spp: int | None = None) -> None:
     """--spp and --sampler, one definition for every subcommand that renders."""
-    from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
+    from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
 
     quick = f", {quick_spp} with --quick" if quick_spp else ""
     s.add_argument("--spp", type=_SPP, default=None, help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick})")
@@ -93,7 +94,7 @@ def _cache_of(args):
 
 def _render_settings(args) -> tuple[int, str]:
     """(spp, sampler) of the parsed options, checked together before anything renders."""
-    from simbench.render import DEFAULT_SPP, check_sampler
+    from simbench.mitsuba_dict import DEFAULT_SPP, check_sampler
 
     spp = args.spp if args.spp is not None else DEFAULT_SPP
     check_sampler(args.sampler, spp)
@@ -132,7 +133,7 @@ def _pattern_spec(args, size_hw: tuple[int, int]):
 
 def _cmd_render(args) -> int:
     from simbench.io import check_output_directory
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
     from simbench.scene import load_scene
     from simbench.systems import get_system
 
@@ -373,7 +374,7 @@ def _cmd_score(args) -> int:
 
 def _cmd_demo(args) -> int:
     from simbench.experiments.demo import DemoConfig, run_demo
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     spp, sampler = _render_settings(args)
     select_variant(args.variant)
@@ -409,7 +410,7 @@ def _decode_recording(args) -> int:
 
 def _cmd_ablate(args) -> int:
     from simbench.experiments.ablate import BUILTIN_STUDIES, load_sweep, run_sweep
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
@@ -444,7 +445,7 @@ def _cmd_reproduce(args) -> int:
     from simbench.experiments.common import RunConfig
     from simbench.device import get_sensor
     from simbench.experiments.reproduce import check_targets, check_thresholds, load_thresholds, reproduce, write_thresholds
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     # everything a user can get wrong is checked before the first render
     check_targets(args.targets)
@@ -630,8 +631,33 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Library messages (``logging``, logger ``simbench``) as ``simbench: ...`` lines on the
+    current ``sys.stderr`` (looked up per record, so redirected streams see them)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setFormatter(logging.Formatter("simbench: %(message)s"))
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
+def _report_library_messages() -> None:
+    logger = logging.getLogger("simbench")
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        logger.addHandler(_StderrHandler())
+    logger.setLevel(logging.WARNING)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
+    _report_library_messages()
     try:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed as one line

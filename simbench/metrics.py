@@ -181,7 +181,7 @@ def score(
     Parameters
     ----------
     depth_m : ndarray, shape (H, W), float32 metres, NaN = invalid
-    gt : :class:`simbench.render.GroundTruth` at the same pixels (``depth_m``, ``lit``,
+    gt : :class:`simbench.truth.GroundTruth` at the same pixels (``depth_m``, ``lit``,
         ``object_id``, ``column_px``)
     camera : the camera of the depth map (for the plane fit)
     region : ndarray, shape (H, W), bool, optional

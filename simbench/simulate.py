@@ -24,7 +24,9 @@ from simbench.pattern import PatternSpec
 from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
-from simbench.render import GroundTruth, ground_truth, projector_distance, realised_rig, render_radiance
+from simbench.truth import GroundTruth, ground_truth, projector_distance
+from simbench.mitsuba_dict import realised_rig
+from simbench.render import render_radiance
 from simbench.rig import rig_to_dict, save_rig
 from simbench.scene import SceneSpec
 from simbench.seeds import child_seed
@@ -129,7 +131,7 @@ def cached_radiance(scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
-    """:func:`simbench.render.ground_truth`, looked up in / stored to ``cache``."""
+    """:func:`simbench.truth.ground_truth`, looked up in / stored to ``cache``."""
     scene = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
     if cache is None:
         return ground_truth(scene)
@@ -377,7 +379,7 @@ def acquire(
     acquisition path (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the
     labels ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
 
-    A Mitsuba variant must already be selected (:func:`simbench.render.select_variant`).
+    A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
     Renders and ground truth come from ``cache`` when it holds them.
     """
     import mitsuba as mi

@@ -12,7 +12,7 @@ SCENES = ROOT / "scenes"
 
 @pytest.fixture(scope="session")
 def variant() -> str:
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     return select_variant()
 

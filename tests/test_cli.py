@@ -4,7 +4,7 @@ import pytest
 
 from simbench.cli import main
 from simbench.io import load_image
-from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
 from .conftest import SCENES
 

@@ -8,7 +8,9 @@ import pytest
 from simbench.decode import DecoderParams, decode
 from simbench.metrics import edge_band, score
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.render import ground_truth, mitsuba_scene, render_radiance
+from simbench.truth import ground_truth
+from simbench.mitsuba_dict import mitsuba_scene
+from simbench.render import render_radiance
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import scene_from_dict
 from simbench.projector import transfer_curve
@@ -155,7 +157,7 @@ def test_formed_board_ground_truth_follows_its_form(variant):
     (the piecewise-flat grid: 1 - cos(pi / RIPPLE_CELLS) = 1.9 %), object ids intact."""
     import dataclasses
 
-    from simbench.render import ground_truth
+    from simbench.truth import ground_truth
     from simbench.rig import pixel_rays, scale_camera
     from simbench.scene import board_form_m, scene_from_dict
 

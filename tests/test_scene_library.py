@@ -95,7 +95,7 @@ def test_meshes_are_regenerated_identically(tmp_path):
 
 
 def test_malformed_mesh_gives_one_clear_error(tmp_path, variant):
-    from simbench.render import ground_truth
+    from simbench.truth import ground_truth
 
     (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
     scene = scene_from_dict({"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path)

@@ -2,7 +2,7 @@ from pathlib import Path
 
 import pytest
 
-from simbench.render import MIN_LLVM_MAJOR, _llvm_major_from_path, find_libllvm
+from simbench.variant import MIN_LLVM_MAJOR, _llvm_major_from_path, find_libllvm
 
 
 @pytest.mark.parametrize(
@@ -26,7 +26,7 @@ def test_selected_variant_never_runs_llvm_below_16(variant):
 
 
 def test_unknown_variant_is_a_clear_error(variant):
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     with pytest.raises(ValueError, match="unknown Mitsuba variant"):
         select_variant("no_such_variant")
@@ -41,7 +41,7 @@ ALL = ["scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb"]
     [((19, 1, 7), False, "llvm_ad_rgb"), ((16, 0), False, "llvm_ad_rgb"), ((15, 0, 7), False, "scalar_rgb"), (None, False, "scalar_rgb"), ((15, 0), True, "cuda_ad_rgb")],
 )
 def test_choose_variant(llvm, cuda, expect):
-    from simbench.render import choose_variant
+    from simbench.variant import choose_variant
 
     variant, notice = choose_variant(None, available=ALL, llvm_version=llvm, cuda=cuda)
     assert variant == expect
@@ -51,7 +51,7 @@ def test_choose_variant(llvm, cuda, expect):
 
 
 def test_requested_llvm_with_old_llvm_is_refused():
-    from simbench.render import choose_variant
+    from simbench.variant import choose_variant
 
     with pytest.raises(ValueError, match="needs libLLVM >= 16"):
         choose_variant("llvm_ad_rgb", available=ALL, llvm_version=(15, 0, 7), cuda=False)
@@ -68,7 +68,9 @@ def test_scalar_fallback_renders_the_same_scene(variant, tmp_path):
 
     code = """
 import json, sys, numpy as np
-from simbench.render import select_variant, ground_truth, render_radiance
+from simbench.variant import select_variant
+from simbench.truth import ground_truth
+from simbench.render import render_radiance
 v = select_variant(sys.argv[1])
 from simbench.scene import scene_from_dict
 from simbench.rig import Rig, Intrinsics

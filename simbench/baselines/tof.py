@@ -151,7 +151,7 @@ def _sub_rays(model: ToFModel) -> np.ndarray:
 def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
     """Normalised phasor ``Z`` of each pixel's direct return, shape (H, W), complex128
     (0 where nothing in the footprint returns light)."""
-    from simbench.render import trace_rays
+    from simbench.truth import trace_rays
 
     hits = trace_rays(scene, _sub_rays(model))
     p = hits["p"]

@@ -48,6 +48,7 @@ with its error and the sweep goes on.
 
 from __future__ import annotations
 
+import logging
 import dataclasses
 import hashlib
 import itertools
@@ -64,7 +65,9 @@ import numpy as np
 from simbench.seeds import DEFAULT_SEED, repetition_seed
 from simbench import validate
 from simbench.io import atomic_write_bytes, atomic_write_text, read_toml, save_json
-from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+
+log = logging.getLogger(__name__)
 
 __all__ = ["PARAMETERS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "BUILTIN_STUDIES", "STUDIES_DIR"]
 
@@ -308,7 +311,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         from simbench.experiments.common import score
         import sys
 
-        from simbench.render import select_variant
+        from simbench.variant import select_variant
 
         # a Dask worker arrives here without an entry point: choose the variant first (it must
         # steer Dr.Jit's libLLVM before Mitsuba is imported)
@@ -343,7 +346,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
 
 
 def _worker_init(variant: str | None, parent_pid: int) -> None:
-    from simbench.render import select_variant
+    from simbench.variant import select_variant
 
     _die_with_parent(parent_pid)
     select_variant(variant)
@@ -453,7 +456,7 @@ def run_sweep(
     workers: int = 1,
     scheduler: str | object | None = None,
     variant: str | None = None,
-    progress: Callable[[str], None] = print,
+    progress: Callable[[str], None] = log.info,
     command: str = "",
     run_fn: Callable[..., dict] = run_one,
 ) -> list[dict]:

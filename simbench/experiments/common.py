@@ -9,6 +9,7 @@ run alone; every result row records them.
 
 from __future__ import annotations
 
+import logging
 import csv
 import dataclasses
 import hashlib
@@ -28,12 +29,14 @@ from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.io import atomic_write_text, save_json
 from simbench.metrics import score as metrics_score
 from simbench.pattern import PatternSpec
-from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
 from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.seeds import DEFAULT_SEED, SeedLog, derive_seed
 from simbench.simulate import versions
 from simbench.systems import DepthSystem, Recording, RenderSettings, SystemDepth, SystemOptions, acquire, get_system
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "write_table", "markdown_table", "figure_png", "git_commit"]
 
@@ -48,7 +51,7 @@ class RunConfig:
         Flea3 + LightCrafter physics; ``minimal``: noise only; ``ideal``: nothing) or a TOML file
     camera_scale : camera resolution factor (0.5 = 640x480 for quick runs)
     spp, sampler, max_depth : path tracing samples per pixel, Mitsuba sample generator
-        (:data:`simbench.render.DEFAULT_SAMPLER` and ``DEFAULT_SPP``: measured to keep render
+        (:data:`simbench.mitsuba_dict.DEFAULT_SAMPLER` and ``DEFAULT_SPP``: measured to keep render
         noise below a third of camera noise on the white board) and path length
     seed : base seed of every capture
     fig9_repeats : noise realisations per depth in Fig. 9 (the paper: "more than 10 times")
@@ -127,7 +130,7 @@ class Session:
     """Shared state of one reproduction run: config, cache, seeds, the depth systems and their
     calibrations, progress."""
 
-    def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "", sensor: SensorModel | None = None) -> None:
+    def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = log.info, command: str = "", sensor: SensorModel | None = None) -> None:
         import mitsuba as mi
 
         self.config = config

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import logging
 import csv
 import io
 import time
@@ -22,9 +23,11 @@ from simbench.io import json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.scene import load_scene
 from simbench.device import get_sensor
-from simbench.render import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 from simbench.seeds import DEFAULT_SEED
 from simbench.simulate import acquire
+
+log = logging.getLogger(__name__)
 
 __all__ = ["DemoConfig", "DEFAULT_SCENES", "run_demo", "depth_figure"]
 

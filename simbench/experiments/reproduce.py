@@ -10,6 +10,7 @@ depth) is the CI benchmark, whose key errors are compared with the thresholds in
 
 from __future__ import annotations
 
+import logging
 import json
 import math
 from collections.abc import Callable
@@ -24,6 +25,8 @@ from simbench.experiments.render_noise import run_render_noise
 from simbench.experiments.table1 import run_table1
 from simbench.experiments.table3 import run_table3
 from simbench.io import atomic_write_text, read_toml, save_json
+
+log = logging.getLogger(__name__)
 
 __all__ = ["TARGETS", "check_targets", "reproduce", "load_thresholds", "check_thresholds", "thresholds_from", "write_thresholds"]
 
@@ -44,7 +47,7 @@ def check_targets(targets: list[str]) -> list[str]:
     return _resolve(targets)
 
 
-def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = print, command: str = "") -> dict:
+def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = log.info, command: str = "") -> dict:
     """Run the targets; returns ``{metric path: value}`` of all of them (also written to
     ``<out_dir>/metrics.json`` merged with earlier runs' metrics of other targets)."""
     names = _resolve(targets)

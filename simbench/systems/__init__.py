@@ -112,7 +112,7 @@ class Recording:
     system: str
     scene: SceneSpec
     raw: np.ndarray
-    gt: Any  # simbench.render.GroundTruth
+    gt: Any  # simbench.truth.GroundTruth
     seeds: dict
 
     @property

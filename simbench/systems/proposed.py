@@ -101,7 +101,7 @@ class ColourFringeSystem:
     def prepare(self, scene: SceneSpec) -> SceneSpec:
         """The scene with the run's camera resolution, the rendered rig and the sensor model's
         lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
-        from simbench.render import realised_rig
+        from simbench.mitsuba_dict import realised_rig
         from simbench.rig import scale_camera
         from simbench.simulate import physical_scene
 

@@ -1,0 +1,222 @@
+"""Scene specs as Mitsuba scene dictionaries: the projector emitter's texture and padding, the
+camera and projector poses, the sampler settings, and loading.
+
+Nothing here imports Mitsuba at module import time (:mod:`simbench.variant`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from simbench.rig import Intrinsics, Rig
+from simbench.scene import SceneSpec, object_to_mitsuba
+
+__all__ = [
+    "projector_texture",
+    "realised_rig",
+    "SAMPLERS",
+    "DEFAULT_SAMPLER",
+    "DEFAULT_SPP",
+    "check_sampler",
+    "mitsuba_scene",
+    "load_scene_dict",
+]
+
+def _pad_factor(c_px: float, size: int, scale: int) -> tuple[int, int, float]:
+    """Fine-pixel padding (left, total) that centres principal point ``c_px`` at upsampling
+    ``scale``, and the principal point actually realised (OpenCV px of the original grid)."""
+    a = round(2 * scale * (c_px + 0.5)) - 1  # 2 * realised centre, in fine pixels
+    half = max((a + 1) / 2, (2 * scale * size - 1 - a) / 2)
+    total = int(round(2 * half))
+    left = int(round(half - (a + 1) / 2))
+    realised = ((a / 2) + 0.5) / scale - 0.5
+    return left, total, realised
+
+
+def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndarray, float, Intrinsics]:
+    """Texture and field of view for Mitsuba's ``projector`` emitter.
+
+    Mitsuba's projector is a centred frustum; an off-centre principal point is modelled by
+    padding the pattern with black (and, if the offset is not on the half-pixel grid, by
+    nearest-neighbour upsampling by 2 first, which keeps DMD pixels sharp).
+
+    Parameters
+    ----------
+    drive : ndarray, shape (H, W, 3), float32
+        Linear projector drive in [0, 1] (what the DMD emits per channel).
+    projector : Intrinsics
+
+    Returns
+    -------
+    texture : ndarray, shape (H', W', 3), float32
+    fov_x_deg : float
+    realised : Intrinsics
+        The projector as rendered (principal point snapped to the 1/4-px grid at worst).
+    """
+    h, w = projector.size_hw
+    if drive.shape != (h, w, 3):
+        raise ValueError(f"pattern shape {drive.shape} does not match the projector {(h, w, 3)}")
+    scale, (lx, tx), (ly, ty), realised = _padding(projector)
+    tex = drive
+    if scale > 1:
+        tex = np.repeat(np.repeat(tex, scale, axis=0), scale, axis=1)
+    if (tx, ty) != (w * scale, h * scale):
+        out = np.zeros((ty, tx, 3), dtype=np.float32)
+        out[ly : ly + h * scale, lx : lx + w * scale] = tex
+        tex = out
+    fov = float(np.degrees(2 * np.arctan(tx / (2.0 * scale * projector.focal_px))))
+    return np.ascontiguousarray(tex, dtype=np.float32), fov, realised
+
+
+def _padding(projector: Intrinsics) -> tuple[int, tuple[int, int], tuple[int, int], Intrinsics]:
+    """Upsampling factor, (left, total) padding along x and y, and the realised projector."""
+    h, w = projector.size_hw
+    best = None
+    for scale in (1, 2):
+        lx, tx, cx = _pad_factor(projector.cx_px, w, scale)
+        ly, ty, cy = _pad_factor(projector.cy_px, h, scale)
+        err = max(abs(cx - projector.cx_px), abs(cy - projector.cy_px))
+        if best is None or err < best[0] - 1e-9:
+            best = (err, scale, (lx, tx), (ly, ty), cx, cy)
+    _, scale, pad_x, pad_y, cx, cy = best
+    return scale, pad_x, pad_y, Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy, projector.distortion)
+
+
+def realised_rig(rig: Rig) -> Rig:
+    """The rig as Mitsuba renders it (projector principal point on the padding grid)."""
+    realised = _padding(rig.projector)[3]
+    if realised == rig.projector:
+        return rig
+    return Rig(rig.camera, realised, rig.position_m, rig.rotation_deg, rig.name)
+
+
+def _look_at_z(mi, position) -> object:
+    pos = [float(x) for x in position]
+    return mi.ScalarTransform4f().look_at(origin=pos, target=[pos[0], pos[1], pos[2] + 1.0], up=[0, -1, 0])
+
+
+def _pose(mi, rig: Rig) -> object:
+    m = np.eye(4)
+    # Mitsuba's camera frame with look_at(up=-y) is OpenCV's (x right, y down, z forward).
+    m[:3, :3] = rig.rotation
+    m[:3, 3] = rig.position_m
+    return mi.ScalarTransform4f(m.tolist()) @ _look_at_z(mi, (0, 0, 0))
+
+
+# Mitsuba 3's sample generators (plugin reference, "Samplers"): independent = uniform random;
+# stratified = jittered strata (sample count rounded to a square per dimension); multijitter =
+# correlated multi-jittered (Kensler 2013); orthogonal = orthogonal array-based Latin
+# hypercube (sample count a prime squared); ldsampler = low-discrepancy (0,2)-sequence
+# (a square power of two: 4, 16, 64 ...).  We accept a count only where Mitsuba would not silently change it.
+SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+# The run default, from measurement (results/render_noise.md, `simbench reproduce render_noise`):
+# on the white board under the `paper` sensor, the cheapest setting whose render-noise depth
+# spread stays at most 1/3 of the camera-noise one with a 10 % margin (0.28 measured).
+# Independent sampling would need ~150-190 spp for it (1.02 at 16 spp, falling as 1/sqrt(spp)).
+DEFAULT_SAMPLER = "multijitter"
+DEFAULT_SPP = 36
+
+
+def check_sampler(sampler: str, spp: int) -> None:
+    """ValueError unless Mitsuba renders exactly ``spp`` samples per pixel with ``sampler``."""
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r}; valid: {list(SAMPLERS)}")
+    root = math.isqrt(int(spp))
+    if sampler in ("stratified", "multijitter") and root * root != spp:
+        raise ValueError(f"the {sampler} sampler needs a square sample count (4, 9, 16, 25 ...), got {spp}")
+    if sampler == "orthogonal" and not (root * root == spp and _is_prime(root)):
+        raise ValueError(f"the orthogonal sampler needs a sample count that is a prime squared (4, 9, 25, 49 ...), got {spp}")
+    if sampler == "ldsampler" and (spp & (spp - 1) or root * root != spp):
+        raise ValueError(f"the ldsampler needs a sample count that is a square power of two (4, 16, 64, 256 ...), got {spp}")
+
+
+def _is_prime(n: int) -> bool:
+    return n >= 2 and all(n % k for k in range(2, math.isqrt(n) + 1))
+
+
+def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int, sampler: str = "independent") -> tuple[dict, Rig]:
+    """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
+
+    ``drive=None`` leaves out the projector (the ambient light alone, or geometry only).
+    ``sampler`` is one of :data:`SAMPLERS` (Mitsuba's sample generators).
+    Returns the dictionary and the rig as rendered (see :func:`projector_texture`).
+    """
+    import mitsuba as mi
+
+    if spp < 1 or int(spp) != spp:
+        raise ValueError(f"spp must be a positive integer, got {spp}")
+    check_sampler(sampler, spp)
+    rig = scene.rig
+    cam = rig.camera
+    d: dict = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": int(max_depth)},
+        "sensor": {
+            "type": "perspective",
+            "fov": cam.fov_x_deg,
+            "fov_axis": "x",
+            # Mitsuba measures the offset in image widths/heights, positive moving the
+            # principal point towards -x/-y (checked by tests/test_render.py).
+            "principal_point_offset_x": ((cam.width_px - 1) / 2.0 - cam.cx_px) / cam.width_px,
+            "principal_point_offset_y": ((cam.height_px - 1) / 2.0 - cam.cy_px) / cam.height_px,
+            "near_clip": 1e-3,
+            "far_clip": 1e3,
+            "to_world": _look_at_z(mi, (0, 0, 0)),
+            "film": {
+                "type": "hdrfilm",
+                "width": cam.width_px,
+                "height": cam.height_px,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
+            "sampler": {"type": sampler, "sample_count": int(spp)},
+        },
+    }
+    if scene.camera_lens is not None and drive is not None:
+        # Mitsuba's thin lens has no principal-point offset
+        if d["sensor"]["principal_point_offset_x"] or d["sensor"]["principal_point_offset_y"]:
+            raise ValueError(f"scene {scene.name!r}: camera defocus (thin lens) needs a centred camera principal point, got ({cam.cx_px}, {cam.cy_px})")
+        aperture_radius_m, focus_m = scene.camera_lens
+        s = d["sensor"]
+        del s["principal_point_offset_x"], s["principal_point_offset_y"]
+        s.update(type="thinlens", aperture_radius=float(aperture_radius_m), focus_distance=float(focus_m))
+    if drive is not None:
+        tex, fov_p, _ = projector_texture(drive, rig.projector)
+        d["projector"] = {
+            "type": "projector",
+            "fov": fov_p,
+            "scale": float(scene.projector_scale),
+            "to_world": _pose(mi, rig),
+            "irradiance": {
+                "type": "bitmap",
+                "bitmap": mi.Bitmap(tex),
+                "raw": True,
+                "filter_type": "nearest",
+                "wrap_mode": "clamp",
+            },
+        }
+    if max(scene.ambient_rgb) > 0:
+        d["ambient"] = {"type": "constant", "radiance": {"type": "rgb", "value": list(scene.ambient_rgb)}}
+    for i, obj in enumerate(scene.objects):
+        d[f"obj{i:03d}"] = object_to_mitsuba(obj, key=f"obj{i:03d}")
+    return d, realised_rig(rig)
+
+
+def load_scene_dict(mi, d: dict, scene: SceneSpec):
+    """``mi.load_dict`` with Mitsuba's loader errors (a malformed mesh file, say) turned into
+    a one-line ``ValueError`` naming the scene object."""
+    # optimize=False: Mitsuba's optimiser merges meshes sharing a material into one shape,
+    # which loses per-object ids and fails outright for meshes with different attributes
+    # (a cube next to a PLY mesh).
+    try:
+        return mi.load_dict(d, optimize=False)
+    except RuntimeError as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        for i, obj in enumerate(scene.objects):
+            msg = msg.replace(f'"obj{i:03d}"', f"object {obj.name!r}")
+        raise ValueError(f"scene {scene.name!r}: Mitsuba could not load it: {msg}") from None
+
+
