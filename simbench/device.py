@@ -54,6 +54,8 @@ __all__ = [
     "PhysicalCamera",
     "ProjectorModel",
     "SensorModel",
+    "Effect",
+    "EFFECT_TABLE",
     "PRESETS_DIR",
     "SENSOR_PRESETS",
     "get_sensor",
@@ -471,67 +473,58 @@ def channel_weights(sensor: SensorModel, rig: Rig) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # effects, one at a time (the error budget and ablations)
 
-EFFECTS = {
-    "noise": "camera noise (EMVA 1288: shot, dark, PRNU/DSNU)",
-    "white_balance": "camera white balance (One Push on the white reference)",
-    "cfa": "Bayer colour filter + demosaicing",
-    "crosstalk": "spectral crosstalk (LED primaries x camera sensitivities x surface)",
-    "transfer": "projector transfer curve",
-    "black_level": "projector black level (finite contrast)",
-    "timing": "projector bit-plane timing against the camera exposure",
-    "dmd": "DMD diamond pixel layout",
-    "camera_defocus": "camera defocus (thin lens)",
-    "projector_defocus": "projector defocus",
-    "distortion": "lens distortion (camera + projector), undistorted by the decoder",
-    "ambient": "ambient light",
+@dataclass(frozen=True)
+class Effect:
+    """One physical effect of a sensor model: ``description`` for tables, ``fields`` the dotted
+    paths into :class:`SensorModel` that carry it (``camera.noise``, ``projector.lens.defocus``,
+    ``crosstalk``): :func:`with_effects` copies exactly these from one model to another."""
+
+    description: str
+    fields: tuple[str, ...]
+
+
+_CAMERA_NOISE = ("noise", "dark_noise_e", "dark_current_e_s", "prnu", "dsnu_e", "fixed_pattern_seed", "bits", "gain_dn_per_e", "offset_dn", "full_well_e")
+
+# the effects the error budget and the ablations switch on one at a time; adding one is one entry
+EFFECT_TABLE: dict[str, Effect] = {
+    "noise": Effect("camera noise (EMVA 1288: shot, dark, PRNU/DSNU)", tuple(f"camera.{k}" for k in _CAMERA_NOISE)),
+    "white_balance": Effect("camera white balance (One Push on the white reference)", ("camera.white_balance",)),
+    "cfa": Effect("Bayer colour filter + demosaicing", ("camera.cfa", "camera.demosaic")),
+    "crosstalk": Effect("spectral crosstalk (LED primaries x camera sensitivities x surface)", ("crosstalk",)),
+    "transfer": Effect("projector transfer curve", ("projector.transfer", "projector.gamma")),
+    "black_level": Effect("projector black level (finite contrast)", ("projector.contrast_ratio",)),
+    "timing": Effect("projector bit-plane timing against the camera exposure", ("projector.timing", "projector.frame_rate_hz")),
+    "dmd": Effect("DMD diamond pixel layout", ("projector.dmd",)),
+    "camera_defocus": Effect("camera defocus (thin lens)", ("camera_lens.defocus", "camera_lens.focus_m", "camera_lens.f_number")),
+    "projector_defocus": Effect("projector defocus", ("projector.lens.defocus", "projector.lens.focus_m", "projector.lens.f_number")),
+    "distortion": Effect("lens distortion (camera + projector), undistorted by the decoder", ("camera_lens.distortion", "projector.lens.distortion")),
+    "ambient": Effect("ambient light", ("ambient_ratio",)),
 }
+# name -> description (tables, help texts)
+EFFECTS = {name: e.description for name, e in EFFECT_TABLE.items()}
+
+
+def _get_path(obj, path: str):
+    for part in path.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def _replace_path(obj, path: str, value):
+    head, _, rest = path.partition(".")
+    return dataclasses.replace(obj, **{head: _replace_path(getattr(obj, head), rest, value) if rest else value})
 
 
 def with_effects(base: SensorModel, source: SensorModel, effects, *, name: str | None = None) -> SensorModel:
-    """``base`` with the named :data:`EFFECTS` taken from ``source`` (both physical)."""
+    """``base`` with the named effects (:data:`EFFECT_TABLE`) taken from ``source`` (both
+    physical): every field of each effect copied from ``source``."""
     if not (base.is_physical and source.is_physical):
         raise ValueError("effects move between physical (emva) sensor models only")
-    bad = [e for e in effects if e not in EFFECTS]
+    bad = [e for e in effects if e not in EFFECT_TABLE]
     if bad:
-        raise ValueError(f"unknown effect(s) {bad}; valid: {list(EFFECTS)}")
-    cam, src = base.camera, source.camera
-    cam_lens, prj, prj_lens = base.camera_lens, base.projector, base.projector.lens
-    crosstalk, ambient = base.crosstalk, base.ambient_ratio
+        raise ValueError(f"unknown effect(s) {bad}; valid: {list(EFFECT_TABLE)}")
+    out = base
     for e in effects:
-        if e == "noise":
-            cam = dataclasses.replace(cam, **{k: getattr(src, k) for k in ("noise", "dark_noise_e", "dark_current_e_s", "prnu", "dsnu_e", "fixed_pattern_seed", "bits", "gain_dn_per_e", "offset_dn", "full_well_e")})
-        elif e == "white_balance":
-            cam = dataclasses.replace(cam, white_balance=src.white_balance)
-        elif e == "cfa":
-            cam = dataclasses.replace(cam, cfa=src.cfa, demosaic=src.demosaic)
-        elif e == "crosstalk":
-            crosstalk = source.crosstalk
-        elif e == "transfer":
-            prj = dataclasses.replace(prj, transfer=source.projector.transfer, gamma=source.projector.gamma)
-        elif e == "timing":
-            prj = dataclasses.replace(prj, timing=source.projector.timing, frame_rate_hz=source.projector.frame_rate_hz)
-        elif e == "black_level":
-            prj = dataclasses.replace(prj, contrast_ratio=source.projector.contrast_ratio)
-        elif e == "dmd":
-            prj = dataclasses.replace(prj, dmd=source.projector.dmd)
-        elif e == "camera_defocus":
-            s = source.camera_lens
-            cam_lens = dataclasses.replace(cam_lens, defocus=s.defocus, focus_m=s.focus_m, f_number=s.f_number)
-        elif e == "projector_defocus":
-            s = source.projector.lens
-            prj_lens = dataclasses.replace(prj_lens, defocus=s.defocus, focus_m=s.focus_m, f_number=s.f_number)
-        elif e == "distortion":
-            cam_lens = dataclasses.replace(cam_lens, distortion=source.camera_lens.distortion)
-            prj_lens = dataclasses.replace(prj_lens, distortion=source.projector.lens.distortion)
-        else:  # ambient
-            ambient = source.ambient_ratio
-    prj = dataclasses.replace(prj, lens=prj_lens)
-    return SensorModel(
-        name=name or f"{base.name}+{'+'.join(effects)}",
-        camera=cam,
-        camera_lens=cam_lens,
-        projector=prj,
-        crosstalk=crosstalk,
-        ambient_ratio=ambient,
-        description=f"{base.name} with {', '.join(effects)} from {source.name}",
-    )
+        for path in EFFECT_TABLE[e].fields:
+            out = _replace_path(out, path, _get_path(source, path))
+    return dataclasses.replace(out, name=name or f"{base.name}+{'+'.join(effects)}", description=f"{base.name} with {', '.join(effects)} from {source.name}")

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,6 +59,8 @@ __all__ = [
     "SceneObject",
     "SceneSpec",
     "OBJECT_KINDS",
+    "ObjectKind",
+    "OBJECT_KIND_TABLE",
     "load_scene",
     "scene_from_dict",
     "reference_scene",
@@ -71,12 +74,6 @@ __all__ = [
 ]
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
-OBJECT_KINDS = {
-    "plane": ("center_m", "size_m", "rotation_deg", *BOARD_FORM_KEYS),
-    "box": ("center_m", "size_m", "rotation_deg"),
-    "sphere": ("center_m", "radius_m"),
-    "mesh": ("file", "scale", "translate_m", "rotation_deg"),
-}
 _COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness")
 MATERIALS = ("diffuse", "plastic")
 
@@ -225,33 +222,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         raise ValueError(f"{where} ({kind}): unknown key(s) {unknown}; valid keys: {list(allowed)}")
     name = str(d.get("name", f"{kind}{index}"))
     where = f"object[{index}] {name!r}"
-    p: dict[str, object] = {}
-    if kind in ("plane", "box"):
-        p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
-        n = 2 if kind == "plane" else 3
-        if "size_m" not in d:
-            raise ValueError(f"{where}: missing size_m")
-        p["size_m"] = _vec(d["size_m"], n, f"{where}.size_m", positive=True)
-        p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
-        if kind == "plane":
-            p.update(_board_form(d, where))
-    elif kind == "sphere":
-        p["center_m"] = _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")
-        p["radius_m"] = validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True)
-    else:
-        if "file" not in d:
-            raise ValueError(f"{where}: missing file")
-        path = Path(str(d["file"]))
-        if not path.is_absolute():
-            path = base_dir / path
-        if not path.is_file():
-            raise FileNotFoundError(f"{where}: mesh file not found: {path}")
-        if path.suffix.lower() not in (".ply", ".obj"):
-            raise ValueError(f"{where}: mesh must be .ply or .obj, got {path.name}")
-        p["file"] = str(path.resolve())
-        p["scale"] = validate.number(d.get("scale", 1.0), f"{where}: scale", lo=0.0, lo_open=True)
-        p["translate_m"] = _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m")
-        p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+    p = OBJECT_KIND_TABLE[kind].parse(d, where, base_dir)
     try:
         given = [k for k in ("rgb", "srgb8", "spectrum") if k in d]
         if len(given) > 1:
@@ -432,10 +403,10 @@ def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tupl
         dz = float(rng.uniform(-placement.depth_m, placement.depth_m))
         tx, ty = (float(t) for t in rng.uniform(-placement.tilt_deg, placement.tilt_deg, size=2))
         p = dict(o.params)
-        where = "translate_m" if o.kind == "mesh" else "center_m"
-        cx, cy, cz = p[where]
-        p[where] = (cx, cy, cz + dz)
-        if o.kind == "sphere":
+        kind = OBJECT_KIND_TABLE[o.kind]
+        cx, cy, cz = p[kind.position_key]
+        p[kind.position_key] = (cx, cy, cz + dz)
+        if not kind.tilts:
             tx = ty = 0.0
         else:
             rx, ry, rz = p["rotation_deg"]
@@ -478,22 +449,102 @@ def object_to_mitsuba(obj: SceneObject, *, key: str | None = None):
     names a dict entry's shape)."""
     import mitsuba as mi
 
-    bsdf = _bsdf(obj.material)
-    if obj.kind == "plane" and any(obj.get(k) for k in BOARD_FORM_KEYS):
-        return _formed_board(mi, obj, bsdf, key or obj.name)
-    if obj.kind == "plane":
-        sx, sy = obj.get("size_m")
-        # Mitsuba's rectangle spans [-1, 1]^2 with normal +z; flip it to face the camera.
-        tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=(sx / 2, sy / 2, 1.0))
-        return {"type": "rectangle", "to_world": tw, "flip_normals": True, "bsdf": bsdf}
-    if obj.kind == "box":
-        tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2)
-        return {"type": "cube", "to_world": tw, "bsdf": bsdf}
-    if obj.kind == "sphere":
-        return {"type": "sphere", "center": list(obj.get("center_m")), "radius": obj.get("radius_m"), "bsdf": bsdf}
+    return OBJECT_KIND_TABLE[obj.kind].to_mitsuba(mi, obj, _bsdf(obj.material), key or obj.name)
+
+
+# ---------------------------------------------------------------------------------------
+# object kinds: how each is read from a scene file, placed and handed to Mitsuba
+
+
+def _parse_board(d: dict, where: str, base_dir: Path, *, dims: int) -> dict:
+    p: dict[str, object] = {"center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m")}
+    if "size_m" not in d:
+        raise ValueError(f"{where}: missing size_m")
+    p["size_m"] = _vec(d["size_m"], dims, f"{where}.size_m", positive=True)
+    p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+    return p
+
+
+def _parse_plane(d: dict, where: str, base_dir: Path) -> dict:
+    return {**_parse_board(d, where, base_dir, dims=2), **_board_form(d, where)}
+
+
+def _parse_box(d: dict, where: str, base_dir: Path) -> dict:
+    return _parse_board(d, where, base_dir, dims=3)
+
+
+def _parse_sphere(d: dict, where: str, base_dir: Path) -> dict:
+    return {
+        "center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m"),
+        "radius_m": validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True),
+    }
+
+
+def _parse_mesh(d: dict, where: str, base_dir: Path) -> dict:
+    if "file" not in d:
+        raise ValueError(f"{where}: missing file")
+    path = Path(str(d["file"]))
+    if not path.is_absolute():
+        path = base_dir / path
+    if not path.is_file():
+        raise FileNotFoundError(f"{where}: mesh file not found: {path}")
+    if path.suffix.lower() not in (".ply", ".obj"):
+        raise ValueError(f"{where}: mesh must be .ply or .obj, got {path.name}")
+    return {
+        "file": str(path.resolve()),
+        "scale": validate.number(d.get("scale", 1.0), f"{where}: scale", lo=0.0, lo_open=True),
+        "translate_m": _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m"),
+        "rotation_deg": _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg"),
+    }
+
+
+def _plane_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
+    if any(obj.get(k) for k in BOARD_FORM_KEYS):
+        return _formed_board(mi, obj, bsdf, key)
+    sx, sy = obj.get("size_m")
+    # Mitsuba's rectangle spans [-1, 1]^2 with normal +z; flip it to face the camera.
+    tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=(sx / 2, sy / 2, 1.0))
+    return {"type": "rectangle", "to_world": tw, "flip_normals": True, "bsdf": bsdf}
+
+
+def _box_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
+    tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2)
+    return {"type": "cube", "to_world": tw, "bsdf": bsdf}
+
+
+def _sphere_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
+    return {"type": "sphere", "center": list(obj.get("center_m")), "radius": obj.get("radius_m"), "bsdf": bsdf}
+
+
+def _mesh_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
     path = obj.get("file")
     tw = _to_world(mi, translate=obj.get("translate_m"), rotation_deg=obj.get("rotation_deg"), scale=obj.get("scale"))
     return {"type": Path(path).suffix.lower()[1:], "filename": path, "to_world": tw, "bsdf": bsdf, "face_normals": False}
+
+
+@dataclass(frozen=True)
+class ObjectKind:
+    """One kind of scene object: the ``keys`` a scene file may give it (besides the common
+    ones), ``parse(table, where, base_dir)`` -> its checked parameters, ``to_mitsuba(mi, obj,
+    bsdf, key)`` -> its Mitsuba plugin dict or object, the parameter placement moves in depth
+    (``position_key``) and whether placement tilts it (``tilts``; a sphere does not)."""
+
+    keys: tuple[str, ...]
+    parse: Callable[[dict, str, Path], dict]
+    to_mitsuba: Callable
+    position_key: str = "center_m"
+    tilts: bool = True
+
+
+# adding an object kind is one entry here
+OBJECT_KIND_TABLE: dict[str, ObjectKind] = {
+    "plane": ObjectKind(("center_m", "size_m", "rotation_deg", *BOARD_FORM_KEYS), _parse_plane, _plane_to_mitsuba),
+    "box": ObjectKind(("center_m", "size_m", "rotation_deg"), _parse_box, _box_to_mitsuba),
+    "sphere": ObjectKind(("center_m", "radius_m"), _parse_sphere, _sphere_to_mitsuba, tilts=False),
+    "mesh": ObjectKind(("file", "scale", "translate_m", "rotation_deg"), _parse_mesh, _mesh_to_mitsuba, position_key="translate_m"),
+}
+# kind -> the keys a scene file may give it
+OBJECT_KINDS = {name: k.keys for name, k in OBJECT_KIND_TABLE.items()}
 
 
 def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str):
