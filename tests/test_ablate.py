@@ -215,7 +215,8 @@ def test_killing_the_sweep_leaves_no_process_behind(tmp_path):
 def test_board_form_and_projector_timing_are_sweepable():
     """Issue 17's new effects are axes: the boards' form (run.*) and the projector's timing
     (sensor.projector.timing, frame_rate_hz) reach the run's config and sensor."""
-    from simbench.experiments.ablate import DEFAULTS, _sensor
+    from simbench.experiments.ablate.mapping import sensor_for as _sensor
+    from simbench.experiments.ablate import DEFAULTS
 
     sw = sweep_from_dict({"name": "t", "axis": [{"name": "run.board_bow_mm_per_m", "values": [0.0, 1.0]}, {"name": "sensor.projector.timing", "values": ["triggered", "video"]}]})
     runs = expand(sw)

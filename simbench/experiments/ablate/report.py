@@ -1,0 +1,160 @@
+"""A sweep's results as files: one row per run (CSV), a Markdown table of means per
+parameter set and a plot."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from simbench.io import atomic_write_bytes, atomic_write_text, save_json
+
+log = logging.getLogger(__name__)
+from simbench.experiments.ablate.spec import DEFAULTS, EDGE_BAND_PX, METRICS, REF_METRICS, Sweep
+
+__all__ = ["sweep_rows", "write_sweep"]
+
+
+def sweep_rows(sweep: Sweep, runs: list[dict], done: dict) -> list[dict]:
+    axis_names = [k for k, _ in sweep.axes]
+    rows = []
+    for r in runs:
+        rec = done.get(r["key"], {})
+        row = {"run": r["run"], "repeat": r["repeat"], **{k: _fmt(r["params"].get(k)) for k in axis_names}}
+        for k in METRICS + REF_METRICS:
+            row[k] = rec.get(k, float("nan"))
+        row.update(seed=r["seed"], render_seed=rec.get("render_seed", ""), noise_seed=rec.get("noise_seed", ""), placement_seed=rec.get("placement_seed", ""), error=rec.get("error", "not run"))
+        rows.append(row)
+    return rows
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return "+".join(map(str, v)) if v else "none"
+    if isinstance(v, bool):
+        return "on" if v else "off"
+    return str(v)
+
+
+def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
+    from simbench.experiments.common import git_commit, write_table
+    from simbench.simulate import versions
+
+    axis_names = [k for k, _ in sweep.axes]
+    cols = ["run", "repeat", *axis_names, *METRICS, *REF_METRICS, "seed", "render_seed", "noise_seed", "placement_seed", "error"]
+    files = [write_table(out / f"{sweep.name}.csv", rows, cols)]
+    timing_rows = [{"run": r["run"], **done.get(r["key"], {}).get("timing", {})} for r in runs]
+    files.append(write_table(out / f"{sweep.name}.timings.csv", timing_rows, ["run", "setup_s", "render_record_s", "decode_s"]))
+    files.append(atomic_write_text(out / f"{sweep.name}.md", _markdown(sweep, rows, command)))
+    files.append(atomic_write_bytes(out / f"{sweep.name}.png", _plot(sweep, rows)))
+    base = {k: _fmt(v) for k, v in {**DEFAULTS, **sweep.base}.items()}
+    save_json(out / f"{sweep.name}.provenance.json", {
+        "command": command, "sweep_file": sweep.path, "sweep": {"name": sweep.name, "base": base, "axes": [[k, [_fmt(v) for v in vs]] for k, vs in sweep.axes], "combine": sweep.combine, "repeats": sweep.repeats, "seed": sweep.seed},
+        "versions": versions(), "git_commit": git_commit(),
+        "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
+    })
+
+
+def _groups(sweep: Sweep, rows: list[dict]) -> list[tuple[tuple, list[dict]]]:
+    axis_names = [k for k, _ in sweep.axes]
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in axis_names), []).append(r)
+    return list(groups.items())
+
+
+def _mean(rows: list[dict], key: str) -> float:
+    vals = [r[key] for r in rows if not r["error"] and isinstance(r[key], float) and math.isfinite(r[key])]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
+    from simbench.experiments.common import markdown_table
+
+    axis_names = [k for k, _ in sweep.axes]
+    base = {**DEFAULTS, **sweep.base}
+    lines = [
+        f"# Ablation: {sweep.name}",
+        "",
+        sweep.description,
+        "",
+        f"Made by `{command}` (sweep `{sweep.path}`; {sweep.combine} over {', '.join(axis_names)}; {sweep.repeats} repetition(s) "
+        f"with the same seeds in every parameter set, base seed {sweep.seed}). Every run with its seeds: `{sweep.name}.csv`; "
+        f"timings: `{sweep.name}.timings.csv`; plot: `{sweep.name}.png`.",
+        "",
+        "Fixed: " + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in sorted(base.items()) if k not in axis_names) + ".",
+        "",
+        "Every object of the scene is placed with the run's placement tolerance (seeded, independent of the reference "
+        "plane; `run.placement_depth_mm`, `run.placement_tilt_deg`). Decoded by triangulation with the rig (paper Eq. 15; "
+        "the first columns) and against the separately captured reference plane (Sec. 5.4; `ref. plane` columns).",
+        "",
+        "Mean over repetitions (failed runs left out; `errors` counts them):",
+        "",
+    ]
+    body = []
+    for combo, group in _groups(sweep, rows):
+        errs = sum(1 for r in group if r["error"])
+        body.append([
+            *combo, *(f"{_mean(group, k):.4g}" for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm")), f"{100 * _mean(group, 'outlier_share'):.3f} %",
+            f"{100 * _mean(group, 'completeness'):.2f} %", f"{_mean(group, 'stripe_order_errors'):.0f}",
+            *(f"{_mean(group, k):.4g}" for k in ("ref_plane_mae_mm", "ref_gt_mae_mm")), f"{100 * _mean(group, 'ref_completeness'):.2f} %", str(errs),
+        ])
+    header = [
+        *axis_names, "plane fit (mm)", "GT MAE (mm)", "GT RMSE (mm)", "GT p95 (mm)", f"MAE off edges (mm, {EDGE_BAND_PX} px)", "outliers (> 5 mm)", "completeness", "stripe-order errors",
+        "ref. plane: plane fit (mm)", "ref. plane: GT MAE (mm)", "ref. plane: completeness", "errors",
+    ]
+    lines += markdown_table(header, body)
+    failures = sorted({r["error"] for r in rows if r["error"]})
+    if failures:
+        lines += ["", "Errors:", ""] + [f"- {e}" for e in failures]
+    return "\n".join(lines) + "\n"
+
+
+def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    axis_names = [k for k, _ in sweep.axes]
+    x_name = axis_names[0]
+    x_vals = list(dict.fromkeys(r[x_name] for r in rows))
+    series_names = axis_names[1:] if sweep.combine == "grid" else []
+    series = list(dict.fromkeys(tuple(r[k] for k in series_names) for r in rows))
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    numeric = all(_is_number(v) for v in x_vals)
+    pos = [float(v) for v in x_vals] if numeric else list(range(len(x_vals)))
+    for s in series:
+        means, lo, hi = [], [], []
+        for xv in x_vals:
+            vals = [r[sweep.plot_metric] for r in rows if r[x_name] == xv and tuple(r[k] for k in series_names) == s and not r["error"] and math.isfinite(r[sweep.plot_metric])]
+            means.append(np.mean(vals) if vals else np.nan)
+            lo.append(np.min(vals) if vals else np.nan)
+            hi.append(np.max(vals) if vals else np.nan)
+        means, lo, hi = map(np.array, (means, lo, hi))
+        label = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(series_names, s)) or sweep.plot_metric
+        ax.errorbar(pos, means, yerr=[means - lo, hi - means], fmt="o-", capsize=3, label=label)
+    if not numeric:
+        ax.set_xticks(pos, x_vals, rotation=20, fontsize=8)
+    ax.set_xlabel(x_name)
+    ax.set_ylabel(sweep.plot_metric)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    import textwrap
+
+    ax.set_title(textwrap.fill(f"ablation {sweep.name}: {sweep.description}", 90), fontsize=8)
+    from simbench.experiments.common import figure_png
+
+    return figure_png(fig, dpi=100)
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
