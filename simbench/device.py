@@ -23,15 +23,15 @@ ambient light          ``[ambient] ratio`` (to the projector's white irradiance 
 
 The photometric chain of the ``emva`` camera: the projector's white gives ``lumens / A``
 lux at 1 m (``A`` = its frustum's cross-section at 1 m, from the rig), split into primaries
-(:func:`simbench.spectral.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
+(:func:`simbench.photometry.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
 ``p`` is the radiance ``E_p / pi`` of a white Lambertian surface 1 m in front of it, which the
-camera equation turns into photons per pixel (:func:`simbench.sensor.photons_per_unit_radiance`)
-and the channel's quantum efficiency into electrons.  The exposure time is ``auto`` by
+camera equation turns into photons per pixel (:func:`simbench.photometry.photons_per_unit_radiance`)
+and the channel's quantum efficiency into electrons (the whole chain: :mod:`simbench.photometry`).  The exposure time is ``auto`` by
 default: what brings the brightest channel of the white reference board at Z0 to
 ``auto_exposure_fraction`` of the full well, as an operator would set it once for the rig.
 White balance ``one_push`` sets the red and blue channel gains once, on the same white board
 under the projector's full white, so that its three channels read alike
-(:func:`white_balance_gains`); the auto exposure then holds for the balanced channels.
+(:func:`simbench.photometry.white_balance_gains`); the auto exposure then holds for the balanced channels.
 """
 
 from __future__ import annotations
@@ -41,13 +41,12 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 from simbench import validate
 from simbench.io import read_toml
 from simbench.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
-from simbench.sensor import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera, photons_per_unit_radiance
+from simbench.sensor import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
 
 __all__ = [
     "Lens",
@@ -63,10 +62,6 @@ __all__ = [
     "sensor_from_dict",
     "sensor_to_dict",
     "apply_to_rig",
-    "electrons_per_radiance_s",
-    "exposure_s",
-    "channel_weights",
-    "white_balance_gains",
     "WHITE_BALANCE_MODES",
     "EFFECTS",
     "with_effects",
@@ -386,88 +381,6 @@ def apply_to_rig(rig: Rig, sensor: SensorModel) -> Rig:
     if cam is rig.camera and prj is rig.projector:
         return rig
     return dataclasses.replace(rig, camera=cam, projector=prj)
-
-
-def white_lux_at_1m(sensor: SensorModel, rig: Rig) -> float:
-    """Illuminance (lux) of the projector's full white on a surface facing it at 1 m: its
-    luminous flux over the frustum's cross-section there (uniform field assumed)."""
-    prj = rig.projector
-    area_m2 = (prj.width_px / prj.focal_px) * (prj.height_px / prj.focal_px)
-    return sensor.projector.lumens / area_m2
-
-
-def electrons_per_radiance_s(sensor: SensorModel, rig: Rig) -> np.ndarray:
-    """Electrons per second in camera channel ``p`` per unit rendered radiance of primary ``p``
-    (module docstring), shape (3,).  Needs the physical camera."""
-    from simbench.spectral import PRIMARY_PEAKS_NM, primary_irradiance_w_m2
-
-    cam = sensor.camera
-    if not isinstance(cam, PhysicalCamera):
-        raise ValueError("photometry needs the physical (emva) camera model")
-    irr = primary_irradiance_w_m2(white_lux_at_1m(sensor, rig))
-    lens = sensor.camera_lens
-    photons = np.array(
-        [
-            photons_per_unit_radiance(irradiance_1m_w_m2=e, wavelength_nm=wl, f_number=lens.f_number, pixel_pitch_um=cam.pixel_pitch_um, exposure_s=1.0, lens_transmission=lens.transmission)
-            for e, wl in zip(irr, PRIMARY_PEAKS_NM)
-        ]
-    )
-    return photons * np.asarray(cam.qe)
-
-
-def _reference_matrix(sensor: SensorModel, albedo: float) -> np.ndarray:
-    if sensor.crosstalk:
-        from simbench.spectral import crosstalk_matrix
-
-        return crosstalk_matrix((albedo,) * 3)
-    return albedo * np.eye(3)
-
-
-def _white_board_electrons_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float) -> np.ndarray:
-    """Electrons per second in each camera channel from the white board at Z0 under the
-    projector's full white, shape (3,)."""
-    rate = electrons_per_radiance_s(sensor, rig)
-    k = _reference_matrix(sensor, reference_albedo)
-    return (k * rate[None, :]).sum(axis=1) * projector_scale / reference_depth_m**2
-
-
-def white_balance_gains(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> np.ndarray:
-    """The camera's analogue gain per colour channel relative to green, shape (3,).
-
-    ``off``: (1, 1, 1).  ``one_push``: the Flea3's One Push on the white reference board at Z0
-    under the projector's full white (the room light, of the same white in our model, does not
-    change the ratios): red and blue scaled so that the board reads 1:1:1 (Point Grey Flea3
-    USB 3.0 Technical Reference, Sec. 7.8), green left at 1.  The gain acts before the ADC (the
-    PxGA white-balance stage of the Flea3's A/D converter, ibid. "Gain"), so a boosted channel
-    reaches the top of the ADC range before its pixels reach full well.
-    """
-    cam = sensor.camera
-    if not isinstance(cam, PhysicalCamera) or cam.white_balance == "off":
-        return np.ones(3)
-    board = _white_board_electrons_s(sensor, rig, reference_depth_m=reference_depth_m, reference_albedo=reference_albedo, projector_scale=projector_scale)
-    return board[1] / board
-
-
-def exposure_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> float:
-    """The camera's exposure time: the configured one, or auto exposure (module docstring),
-    which brings the brightest white-balanced channel of the board to the set fraction."""
-    cam = sensor.camera
-    if not isinstance(cam, PhysicalCamera):
-        raise ValueError("exposure time needs the physical (emva) camera model")
-    if cam.exposure_s is not None:
-        return cam.exposure_s
-    kw = {"reference_depth_m": reference_depth_m, "reference_albedo": reference_albedo, "projector_scale": projector_scale}
-    board = _white_board_electrons_s(sensor, rig, **kw) * white_balance_gains(sensor, rig, **kw)
-    return float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
-
-
-def channel_weights(sensor: SensorModel, rig: Rig) -> np.ndarray:
-    """W[c, p] = e_p / e_c: how much primary ``p``'s rendered radiance in camera channel ``c``
-    weighs relative to channel ``c``'s own primary (1 for the simple camera), shape (3, 3)."""
-    if not sensor.is_physical:
-        return np.ones((3, 3))
-    e = electrons_per_radiance_s(sensor, rig)
-    return e[None, :] / e[:, None]
 
 
 # ---------------------------------------------------------------------------------------

@@ -22,7 +22,6 @@ __all__ = [
     "DEMOSAIC_METHODS",
     "bayer_mosaic",
     "demosaic",
-    "photons_per_unit_radiance",
     "emva_camera",
     "photon_transfer",
 ]
@@ -105,38 +104,6 @@ def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng=None) -> np
 # ---------------------------------------------------------------------------------------
 # EMVA 1288 camera model (the physical-sensor issue, part 1)
 
-PLANCK_J_S = 6.62607015e-34
-LIGHT_M_S = 299_792_458.0
-
-
-def photons_per_unit_radiance(
-    *,
-    irradiance_1m_w_m2: float,
-    wavelength_nm: float,
-    f_number: float,
-    pixel_pitch_um: float,
-    exposure_s: float,
-    lens_transmission: float = 0.9,
-) -> float:
-    """Mean photons reaching one pixel during the exposure per unit of *rendered* radiance.
-
-    A rendered radiance of 1 is what a white Lambertian surface facing the projector at 1 m
-    sends back under full drive (see :func:`simbench.render.render_radiance`): physical radiance
-    ``L = E_1m / pi`` for a projector irradiance ``E_1m`` at 1 m.  A lens of f-number N and
-    transmission tau focused far away puts ``E_s = pi * tau * L / (4 N^2)`` on the sensor
-    (camera equation, on axis, magnification and cos^4 fall-off neglected); a pixel of area
-    A collects ``E_s * A * t`` joules, i.e. that divided by ``h c / lambda`` photons.
-    """
-    for name, v in (("irradiance_1m_w_m2", irradiance_1m_w_m2), ("wavelength_nm", wavelength_nm), ("f_number", f_number), ("pixel_pitch_um", pixel_pitch_um), ("exposure_s", exposure_s)):
-        if not v > 0:
-            raise ValueError(f"{name} must be > 0, got {v}")
-    if not 0 < lens_transmission <= 1:
-        raise ValueError(f"lens_transmission must be in (0, 1], got {lens_transmission}")
-    sensor_irradiance = lens_transmission * irradiance_1m_w_m2 / (4.0 * f_number**2)
-    energy = sensor_irradiance * (pixel_pitch_um * 1e-6) ** 2 * exposure_s
-    return float(energy * wavelength_nm * 1e-9 / (PLANCK_J_S * LIGHT_M_S))
-
-
 CFA_PATTERNS = {
     # colour of the 2x2 cell's pixels (0,0), (0,1), (1,0), (1,1) -> OpenCV's name for it
     # (OpenCV names a Bayer layout by the second row's second and third pixels; the mapping
@@ -217,7 +184,7 @@ def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposur
     exposure_s : float
         Exposure time (dark current).
     white_balance : sequence of 3 float
-        Analogue gain of each colour channel (:func:`simbench.device.white_balance_gains`).
+        Analogue gain of each colour channel (:func:`simbench.photometry.white_balance_gains`).
     rng : numpy.random.Generator | int | None
         Temporal-noise seed.
 

@@ -21,7 +21,8 @@ import numpy as np
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 from simbench.pattern import PatternSpec
-from simbench.device import SensorModel, apply_to_rig, channel_weights, electrons_per_radiance_s, exposure_s, sensor_to_dict, white_balance_gains
+from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
+from simbench.photometry import channel_weights, electrons_per_radiance_s, exposure_s, white_balance_gains
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.truth import GroundTruth, ground_truth, projector_distance
@@ -307,7 +308,7 @@ def render_channels(scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sens
     Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
     projector primary p (the drive's channel p in all three channels, materials replaced by
     column p of their crosstalk matrix) summed with the weights of
-    :func:`simbench.device.channel_weights` - exact for direct light; interreflected light is
+    :func:`simbench.photometry.channel_weights` - exact for direct light; interreflected light is
     coloured by one bounce's crosstalk only (an approximation, as is the coating's
     specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
     per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per

@@ -35,7 +35,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["MEASURED_DATASETS", "measured_reflectance", "measured_linear_srgb", "material_crosstalk", "primary_irradiance_w_m2", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
+__all__ = ["watts_per_lux", "MEASURED_DATASETS", "measured_reflectance", "measured_linear_srgb", "material_crosstalk", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
 
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
 PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
@@ -220,27 +220,10 @@ def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
     return "\n".join(lines)
 
 
-def primary_irradiance_w_m2(white_lux: float) -> np.ndarray:
-    """Radiometric irradiance (W/m^2) of each primary when the projector's full white gives
-    ``white_lux`` lux.
-
-    The white is assumed balanced to D65 (**assumption**: the usual white point of DLP
-    projectors' video modes; TI does not publish the LightCrafter 4500's): the three primaries'
-    luminances are the mix whose CIE 1931 XYZ has D65's chromaticity, and each primary's lux
-    are turned into watts by its LED spectrum's luminous efficacy (683 lm/W x V-weighted).
-
-    Returns
-    -------
-    ndarray, shape (3,), float64 (R, G, B primaries)
-    """
-    if not white_lux > 0:
-        raise ValueError(f"white_lux must be > 0, got {white_lux}")
-    return white_lux * _watts_per_lux()
-
-
 @lru_cache(maxsize=1)
-def _watts_per_lux() -> np.ndarray:
-    """W/m^2 of each primary per lux of the D65-balanced white (see :func:`primary_irradiance_w_m2`)."""
+def watts_per_lux() -> np.ndarray:
+    """W/m^2 of each primary per lux of the D65-balanced white (see
+    :func:`simbench.photometry.primary_irradiance_w_m2`), shape (3,)."""
     colour = _colour()
     cmfs = np.asarray(colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64)
     xy = np.asarray(colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"], dtype=np.float64)

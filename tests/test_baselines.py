@@ -13,7 +13,7 @@ from simbench import baselines
 from simbench.baselines import kinect, tof
 from simbench.experiments.bench import competitor_inputs
 from simbench.rig import Intrinsics
-from simbench.sensor import LIGHT_M_S
+from simbench.photometry import LIGHT_M_S
 
 from .conftest import SCENES
 

@@ -14,16 +14,13 @@ from simbench.device import (
     PRESETS_DIR,
     SENSOR_PRESETS,
     apply_to_rig,
-    channel_weights,
-    electrons_per_radiance_s,
-    exposure_s,
     get_sensor,
     load_sensor,
     sensor_from_dict,
     sensor_to_dict,
-    white_balance_gains,
     with_effects,
 )
+from simbench.photometry import channel_weights, electrons_per_radiance_s, exposure_s, white_balance_gains
 from simbench.rig import paper_rig
 from simbench.sensor import emva_camera
 

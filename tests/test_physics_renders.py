@@ -72,7 +72,7 @@ def test_crosstalk_renders_match_the_spectral_integral(variant, rgb):
     each primary alone is int(S_c rho P_p) / int(S_c P_c) times the channel's own primary on
     a perfect white, within 1 % (box-filtered direct light on a plane has no render noise
     to speak of)."""
-    from simbench.device import electrons_per_radiance_s
+    from simbench.photometry import electrons_per_radiance_s
     from simbench.simulate import render_channels
     from simbench.spectral import camera_sensitivities, projector_primaries, reflectance_spectrum
 

@@ -49,7 +49,7 @@ def test_unknown_preset():
 def test_photons_per_unit_radiance_matches_the_camera_equation():
     # 1 W/m^2 at 1 m, f/2, tau 1, 5.3 um pixel, 10 ms, 520 nm, by hand:
     # E_s = 1/16 W/m^2; energy = E_s * (5.3e-6)^2 * 0.01 J; photons = energy * lambda / (h c)
-    from simbench.sensor import photons_per_unit_radiance
+    from simbench.photometry import photons_per_unit_radiance
 
     expected = (1 / 16) * (5.3e-6) ** 2 * 0.01 * 520e-9 / (6.62607015e-34 * 299792458.0)
     got = photons_per_unit_radiance(irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=2.0, pixel_pitch_um=5.3, exposure_s=0.01, lens_transmission=1.0)

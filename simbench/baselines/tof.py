@@ -38,7 +38,7 @@ import numpy as np
 
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec
-from simbench.sensor import LIGHT_M_S, photons_per_unit_radiance
+from simbench.photometry import LIGHT_M_S, photons_per_unit_radiance
 
 __all__ = ["ToFModel", "ToFDepth", "tof_rig", "device_scene", "footprint_phasor", "record_taps", "decode_taps", "capture"]
 
@@ -122,7 +122,7 @@ def device_scene(scene: SceneSpec, model: ToFModel) -> SceneSpec:
 def electrons_per_radiance(model: ToFModel) -> float:
     """Electrons (all four samples together) per unit rendered radiance: the emitter's
     irradiance at 1 m (optical power over the frustum's cross-section) through the camera
-    equation (:func:`simbench.sensor.photons_per_unit_radiance`), QE and fill factor."""
+    equation (:func:`simbench.photometry.photons_per_unit_radiance`), QE and fill factor."""
     prj = tof_rig(model).projector
     area_1m = ((prj.width_px - 2) / prj.focal_px) * ((prj.height_px - 2) / prj.focal_px)
     photons = photons_per_unit_radiance(
