@@ -49,7 +49,13 @@ def _coeffs(distortion) -> tuple[float, float, float, float, float]:
 
 
 def distort_normalized(x: np.ndarray, y: np.ndarray, distortion) -> tuple[np.ndarray, np.ndarray]:
-    """Brown-Conrady forward model on normalised coordinates (module docstring)."""
+    """Brown-Conrady forward model on normalised coordinates (module docstring).
+
+    References
+    ----------
+    .. [1] D. C. Brown, "Decentering distortion of lenses", Photogrammetric Engineering 32(3),
+       444-462, 1966.
+    """
     k1, k2, p1, p2, k3 = _coeffs(distortion)
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
@@ -142,7 +148,13 @@ def distort_image(img: np.ndarray, intr) -> np.ndarray:
 
 def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> np.ndarray:
     """The ideal pinhole image from a recorded image (OpenCV's undistortion map), zero where
-    the ideal pixel falls outside the recorded image."""
+    the ideal pixel falls outside the recorded image.
+
+    References
+    ----------
+    .. [1] D. C. Brown, "Decentering distortion of lenses", Photogrammetric Engineering 32(3),
+       444-462, 1966.
+    """
     import cv2
 
     if not intr.has_distortion:

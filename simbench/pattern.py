@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simbench import validate
+from simbench.literature import PAPER_DEBRUIJN_ORDER, PAPER_PERIOD_PX
 
 __all__ = [
     "PatternSpec",
@@ -61,6 +62,11 @@ def de_bruijn(order: int, *, alphabet: int = 2) -> np.ndarray:
     ndarray, shape (alphabet**order,), uint8
         Every window of ``order`` consecutive symbols (cyclically) occurs exactly once.
         ``de_bruijn(3)`` is ``00010111``, the paper's sequence (Sec. 4.2).
+
+    References
+    ----------
+    .. [1] H. Fredricksen, "A survey of full length nonlinear shift register cycle algorithms",
+       SIAM Review 24(2), 195-221, 1982.
     """
     if int(order) != order or order < 2:
         raise ValueError(f"De Bruijn order must be an integer >= 2, got {order!r}")
@@ -148,8 +154,8 @@ class PatternSpec:
     """
 
     size_hw: tuple[int, int] = (1140, 1824)
-    period_px: int = 21
-    order: int = 3
+    period_px: int = PAPER_PERIOD_PX
+    order: int = PAPER_DEBRUIJN_ORDER
     dc: float = 0.5
     amplitude: float = 0.5
     sequence: tuple[int, ...] | None = None
@@ -251,6 +257,11 @@ def fringe_pattern(spec: PatternSpec) -> np.ndarray:
     ndarray, shape (H, W, 3), float32 in [0, 1]
         Linear projector drive per channel (R, G, B): ``R = C*I``, ``G = (1-C)*I``, ``B = I``
         for the paper's ``channels = "rgb"``, permuted accordingly otherwise.
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Eq. 7-8.
     """
     h, w = spec.size_hw
     u = np.arange(w, dtype=np.float64)

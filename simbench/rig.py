@@ -181,10 +181,12 @@ class Rig:
 
 def paper_rig() -> Rig:
     """The rig of paper Sec. 6 (see the module docstring for what Table 2 could not give)."""
+    from simbench.literature import PAPER_BASELINE_M, PAPER_CAMERA, PAPER_PROJECTOR
+
     return Rig(
-        camera=Intrinsics.centred(1280, 960, 2312.5320),
-        projector=Intrinsics.centred(1824, 1140, 2227.9948),
-        position_m=(0.093, 0.0, 0.0),
+        camera=Intrinsics.centred(*PAPER_CAMERA),
+        projector=Intrinsics.centred(*PAPER_PROJECTOR),
+        position_m=(PAPER_BASELINE_M, 0.0, 0.0),
         rotation_deg=(0.0, 0.0, 0.0),
         name="li2017",
     )

@@ -191,6 +191,11 @@ def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposur
     Returns
     -------
     ndarray, shape (H, W, 3), uint8 (8 bits) or uint16
+
+    References
+    ----------
+    .. [1] EMVA Standard 1288, Release 4.0, "Standard for Characterization of Image Sensors and
+       Cameras", 2021.
     """
     rad = np.asarray(radiance, dtype=np.float64)
     if rad.ndim != 3 or rad.shape[2] != 3:
@@ -236,6 +241,10 @@ def photon_transfer(frame_a: np.ndarray, frame_b: np.ndarray, dark_a: np.ndarray
     (mean signal above dark, temporal variance above dark), both in DN / DN^2.
 
     The temporal variance is ``var(a - b) / 2`` (the difference cancels fixed-pattern noise).
+
+    References
+    ----------
+    .. [1] EMVA Standard 1288, Release 4.0, 2021 (the photon transfer method).
     """
     a, b, da, db = (np.asarray(x, dtype=np.float64) for x in (frame_a, frame_b, dark_a, dark_b))
     mean = 0.5 * (a.mean() + b.mean()) - 0.5 * (da.mean() + db.mean())

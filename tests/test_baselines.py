@@ -12,6 +12,7 @@ import pytest
 from simbench import baselines
 from simbench.baselines import kinect, tof
 from simbench.experiments.bench import competitor_inputs
+from simbench.literature import nguyen_kinect_sigma_mm
 from simbench.rig import Intrinsics
 from simbench.photometry import LIGHT_M_S
 
@@ -242,7 +243,7 @@ def test_kinect_plane_error_within_2x_of_nguyen_2012(variant):
         res = kinect.match(ir, cal.reference, model=model)
         gt = cached_ground_truth(scene)
         e = depth_errors(res.depth_m, gt.depth_m, region=gt.lit)
-        nguyen = 1.2 + 1.9 * (z_cm / 100 - 0.4) ** 2
+        nguyen = float(nguyen_kinect_sigma_mm(z_cm / 100))
         assert nguyen / 2 <= e["rmse_mm"] <= 2 * nguyen, (z_cm, e["rmse_mm"], nguyen)
         # the side bands without a full search range are invalid, the rest decodes
         assert e["completeness"] > 0.8

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec, reference_scene
 from simbench.seeds import child_seed
@@ -53,8 +54,8 @@ class KinectModel:
 
     width_px: int = 640
     height_px: int = 480
-    focal_px: float = 571.0
-    baseline_m: float = 0.075
+    focal_px: float = KINECT_FOCAL_PX
+    baseline_m: float = KINECT_BASELINE_M
     # assumption: the factory reference plane; chosen so the 64 disparity positions centre on
     # the 0.8-4 m range (1/Z_ref = mean of 1/0.8 and 1/4)
     reference_depth_m: float = 4.0 / 3.0
@@ -169,7 +170,13 @@ def device_scene(scene: SceneSpec, model: KinectModel) -> SceneSpec:
 
 
 def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng) -> np.ndarray:
-    """Integrated speckle intensity per pixel: gamma(M, 1/M), mean 1, variance 1/M."""
+    """Integrated speckle intensity per pixel: gamma(M, 1/M), mean 1, variance 1/M.
+
+    References
+    ----------
+    .. [1] J. W. Goodman, "Speckle Phenomena in Optics", Roberts & Co., 2007 (fully developed
+       speckle integrated over a pixel).
+    """
     m = float(grains_per_pixel)
     return np.random.default_rng(rng).gamma(m, 1.0 / m, size=shape).astype(np.float32)
 
@@ -240,6 +247,11 @@ def match(ir: np.ndarray, reference: np.ndarray, *, model: KinectModel) -> Kinec
     Parameters
     ----------
     ir, reference : ndarray, shape (H, W), integer DN or float
+
+    References
+    ----------
+    .. [1] K. Khoshelham, S. Oude Elberink, "Accuracy and Resolution of Kinect Depth Data for
+       Indoor Mapping Applications", Sensors 12(2), 1437-1454, 2012.
     """
     h, w = model.height_px, model.width_px
     for name, a in (("IR frame", ir), ("reference", reference)):

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simbench.literature import SR4000_FOV_X_DEG, SR4000_MODULATION_HZ, SR4000_SIZE_WH
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec
 from simbench.photometry import LIGHT_M_S, photons_per_unit_radiance
@@ -47,10 +48,10 @@ __all__ = ["ToFModel", "ToFDepth", "tof_rig", "device_scene", "footprint_phasor"
 class ToFModel:
     """SR4000-like device parameters (module docstring for their sources)."""
 
-    width_px: int = 176
-    height_px: int = 144
-    fov_x_deg: float = 43.6
-    modulation_hz: float = 30e6
+    width_px: int = SR4000_SIZE_WH[0]
+    height_px: int = SR4000_SIZE_WH[1]
+    fov_x_deg: float = SR4000_FOV_X_DEG
+    modulation_hz: float = SR4000_MODULATION_HZ
     wavelength_nm: float = 850.0
     pixel_pitch_um: float = 40.0
     # assumption: ~1 W of optical power from the LED array (order of the SR4000's 24 LEDs)
@@ -177,6 +178,11 @@ def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, r
     """Four correlation samples (H, W, 4) in electrons (float32), seeded noise.
 
     ``amplitude`` is the rendered direct return (H, W) (mean over RGB = NIR, module docstring).
+
+    References
+    ----------
+    .. [1] R. Lange, P. Seitz, "Solid-state time-of-flight range camera", IEEE J. Quantum
+       Electronics 37(3), 390-397, 2001.
     """
     a = np.asarray(amplitude, dtype=np.float64)
     if a.shape != (model.height_px, model.width_px) or phasor.shape != a.shape:
@@ -206,7 +212,13 @@ class ToFDepth:
 
 
 def decode_taps(taps: np.ndarray, *, model: ToFModel) -> ToFDepth:
-    """Four-sample phase -> radial distance -> z-depth (module docstring)."""
+    """Four-sample phase -> radial distance -> z-depth (module docstring).
+
+    References
+    ----------
+    .. [1] R. Lange, P. Seitz, "Solid-state time-of-flight range camera", IEEE J. Quantum
+       Electronics 37(3), 390-397, 2001.
+    """
     t = np.asarray(taps, dtype=np.float64)
     if t.shape != (model.height_px, model.width_px, 4):
         raise ValueError(f"taps must have shape {(model.height_px, model.width_px, 4)}, got {t.shape}")

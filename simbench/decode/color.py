@@ -24,6 +24,11 @@ def color_code(rgb: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (H, W), bool
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Eq. 13.
     """
     return rgb[..., 0] >= rgb[..., 1]
 
@@ -297,6 +302,11 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     -------
     stripe_code : ndarray, shape (S,), uint8
     agreement : ndarray, shape (S,), float32; share of the stripe's pixels agreeing with it
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Sec. 5.3 (colour voting along a stripe).
     """
     out = np.empty(stripes.count, np.uint8)
     agreement = np.empty(stripes.count, np.float32)

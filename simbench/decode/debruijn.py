@@ -92,6 +92,12 @@ def neighbour_correct(
     -------
     corrected : ndarray, shape (S,), int32
     support : ndarray, shape (S,), int32; number of predictions agreeing with the result
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Sec. 5.3 (neighbour correction of the stripe
+       order).
     """
     n = positions.size
     if reach <= 0:

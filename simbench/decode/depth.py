@@ -45,6 +45,11 @@ def absolute_column(
     -------
     column_px : ndarray, shape (H, W), float32; NaN where unknown
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 where unknown
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Eq. 14.
     """
     position = np.ascontiguousarray(position, dtype=np.int32)
     wrapped = np.ascontiguousarray(wrapped, dtype=np.float32)
@@ -100,6 +105,11 @@ def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (H, W), float32; NaN where the reference has no match
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Sec. 5.4 (matching against the reference plane).
     """
     column = np.ascontiguousarray(column, dtype=np.float32)
     out = np.empty(column.shape, np.float32)
@@ -113,6 +123,11 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
     Returns
     -------
     ndarray, shape (H, W), float32; NaN where unmatched or not in front of the camera
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Sec. 5.4.
     """
     x_ref = np.ascontiguousarray(x_ref, dtype=np.float32)
     out = np.empty(x_ref.shape, np.float32)
@@ -124,6 +139,11 @@ def depth_calibrated(column: np.ndarray, rig: Rig, *, rows: np.ndarray | None = 
     """Depth by intersecting each camera ray with its projector column's plane.
 
     ``rows`` gives the image rows of ``column`` when it is a band of the image.
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Eq. 15.
     """
     if rows is None:
         return triangulate_columns(column, rig)

@@ -117,6 +117,11 @@ def ftp_phase(
     Returns
     -------
     PhaseResult
+
+    References
+    ----------
+    .. [1] M. Takeda, H. Ina, S. Kobayashi, "Fourier-transform method of fringe-pattern analysis
+       for computer-based topography and interferometry", JOSA 72(1), 156-160, 1982.
     """
     intensity, c, background, fringe = _prepare(intensity, certainty, period_px)
     h, w = intensity.shape
@@ -189,6 +194,11 @@ def wfr_phase(
     Returns
     -------
     PhaseResult
+
+    References
+    ----------
+    .. [1] Q. Kemao, "Windowed Fourier transform for fringe pattern analysis", Applied Optics
+       43(13), 2695-2702, 2004.
     """
     if not (sigma_x_px > 0 and sigma_y_px > 0):
         raise ValueError("sigma_x_px and sigma_y_px must be > 0")

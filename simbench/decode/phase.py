@@ -64,6 +64,11 @@ def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay", weights: tuple[
     Returns
     -------
     ndarray, shape (H, W), float32
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Eq. 9.
     """
     try:
         fn = INTENSITY_MODES[mode]
@@ -189,6 +194,12 @@ def gabor_phase(
     Returns
     -------
     PhaseResult
+
+    References
+    ----------
+    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
+       Pattern", Sensors 17(11), 2558, 2017, Sec. 5.2, Eq. 10-11.
+    .. [2] D. Gabor, "Theory of communication", J. IEE 93(26), 429-457, 1946.
     """
     check_phase_inputs(intensity, certainty, period_px)
     h, w = intensity.shape

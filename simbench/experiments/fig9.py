@@ -19,6 +19,7 @@ import numpy as np
 
 from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
+from simbench.literature import CHIABRANDO_TOF, nguyen_kinect_sigma_mm
 
 __all__ = ["DEPTHS_M", "run_fig9", "fig9_plot"]
 
@@ -31,12 +32,6 @@ def sensor_label(name: str) -> str:
     from simbench.systems import get_system
 
     return get_system(name).info().label
-CHIABRANDO_TOF = (1.3, 4.0)  # (depth m, per-pixel sigma mm), Chiabrando et al. 2009
-
-
-def nguyen_kinect_sigma_mm(z_m):
-    """Kinect v1 axial noise (mm) at depth ``z_m``, Nguyen, Izadi & Lovell 2012."""
-    return 1.2 + 1.9 * (np.asarray(z_m, dtype=float) - 0.4) ** 2
 
 
 def run_fig9(session: Session) -> dict:

@@ -18,18 +18,10 @@ from simbench.decode import robust_params
 from simbench.experiments.common import Session, markdown_table, score, write_table
 from simbench.io import atomic_write_text
 
+from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
+
 __all__ = ["PAPER_TABLE1", "COLOURS", "BOARD_SETS", "MEASURED_PATCHES", "DECODERS", "PROTOCOLS", "board_scene", "run_table1"]
 
-# paper Table 1: colour -> (sRGB of the board, mean absolute error in mm)
-PAPER_TABLE1 = {
-    "white": ((255, 255, 255), 0.42),
-    "red": ((255, 0, 0), 0.83),
-    "green": ((0, 255, 0), 0.84),
-    "blue": ((0, 0, 255), 0.41),
-    "yellow": ((255, 255, 0), 0.46),
-    "pink": ((255, 0, 255), 0.55),
-    "cyan": ((0, 255, 255), 0.56),
-}
 COLOURS = tuple(PAPER_TABLE1)
 # The measured set: ColorChecker N Ohta patches chosen by name.  The chart's row of saturated
 # colours is McCamy et al.'s (1976) printed version of exactly the additive and subtractive
