@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import lru_cache
 from pathlib import Path
 
@@ -39,7 +39,7 @@ def _file_digest(path: str, mtime_ns: int, size: int) -> str:
     return h.hexdigest()
 
 
-def source_digest(paths) -> str:
+def source_digest(paths: Iterable[str | Path]) -> str:
     """SHA-256 over source files (name and bytes, in the order given): part of a cache key
     for results of code that may change between runs."""
     h = hashlib.sha256()

@@ -38,9 +38,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-
 
 from simbench import validate
 from simbench.io import read_toml
@@ -428,7 +428,7 @@ def _replace_path(obj, path: str, value):
     return dataclasses.replace(obj, **{head: _replace_path(getattr(obj, head), rest, value) if rest else value})
 
 
-def with_effects(base: SensorModel, source: SensorModel, effects, *, name: str | None = None) -> SensorModel:
+def with_effects(base: SensorModel, source: SensorModel, effects: Iterable[str], *, name: str | None = None) -> SensorModel:
     """``base`` with the named effects (:data:`EFFECT_TABLE`) taken from ``source`` (both
     physical): every field of each effect copied from ``source``."""
     if not (base.is_physical and source.is_physical):

@@ -75,6 +75,6 @@ SR4000_MODULATION_HZ = 30e6
 CHIABRANDO_TOF = (1.3, 4.0)
 
 
-def nguyen_kinect_sigma_mm(z_m):
+def nguyen_kinect_sigma_mm(z_m: float | np.ndarray) -> np.ndarray:
     """Kinect v1 axial noise (mm) at depth ``z_m`` (m): ``1.2 + 1.9 (z - 0.4)^2`` [Nguyen2012]."""
     return 1.2 + 1.9 * (np.asarray(z_m, dtype=float) - 0.4) ** 2

@@ -9,10 +9,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import cv2
 import numpy as np
 
 from simbench.rig import Intrinsics, pixel_rays
+
+if TYPE_CHECKING:
+    from simbench.truth import GroundTruth
 
 __all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth", "score"]
 
@@ -172,7 +177,7 @@ def plane_fit_error(depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray
 
 def score(
     depth_m: np.ndarray,
-    gt,
+    gt: GroundTruth,
     *,
     camera: Intrinsics,
     region: np.ndarray | None = None,

@@ -7,6 +7,7 @@ Nothing here imports Mitsuba at module import time (:mod:`simbench.variant`).
 from __future__ import annotations
 
 import math
+from types import ModuleType
 
 import numpy as np
 
@@ -205,7 +206,7 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
     return d, realised_rig(rig)
 
 
-def load_scene_dict(mi, d: dict, scene: SceneSpec):
+def load_scene_dict(mi: ModuleType, d: dict, scene: SceneSpec) -> object:
     """``mi.load_dict`` with Mitsuba's loader errors (a malformed mesh file, say) turned into
     a one-line ``ValueError`` naming the scene object."""
     # optimize=False: Mitsuba's optimiser merges meshes sharing a material into one shape,

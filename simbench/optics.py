@@ -24,9 +24,14 @@ Gaussian of that standard deviation (:func:`blur_sigma_px`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from simbench.rig import Intrinsics
 
 __all__ = [
     "distort_normalized",
@@ -48,7 +53,7 @@ def _coeffs(distortion) -> tuple[float, float, float, float, float]:
     return d
 
 
-def distort_normalized(x: np.ndarray, y: np.ndarray, distortion) -> tuple[np.ndarray, np.ndarray]:
+def distort_normalized(x: np.ndarray, y: np.ndarray, distortion: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """Brown-Conrady forward model on normalised coordinates (module docstring).
 
     References
@@ -66,7 +71,7 @@ def distort_normalized(x: np.ndarray, y: np.ndarray, distortion) -> tuple[np.nda
     return xd, yd
 
 
-def undistort_normalized(xd: np.ndarray, yd: np.ndarray, distortion, *, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+def undistort_normalized(xd: np.ndarray, yd: np.ndarray, distortion: Sequence[float], *, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
     """Invert :func:`distort_normalized` by fixed-point iteration (OpenCV's method); converges
     for the moderate distortion of measurement lenses (tested to 1e-9 within the image)."""
     k1, k2, p1, p2, k3 = _coeffs(distortion)
@@ -126,7 +131,7 @@ def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) 
     return out.astype(dtype, copy=False)
 
 
-def distort_image(img: np.ndarray, intr) -> np.ndarray:
+def distort_image(img: np.ndarray, intr: Intrinsics) -> np.ndarray:
     """What a camera with ``intr.distortion`` records, from the ideal pinhole image ``img``.
 
     Parameters
@@ -146,7 +151,7 @@ def distort_image(img: np.ndarray, intr) -> np.ndarray:
     return _remap(img, *_distort_maps(intr), cv2.INTER_LINEAR)
 
 
-def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> np.ndarray:
+def undistort_image(img: np.ndarray, intr: Intrinsics, *, interpolation: str = "linear") -> np.ndarray:
     """The ideal pinhole image from a recorded image (OpenCV's undistortion map), zero where
     the ideal pixel falls outside the recorded image.
 
@@ -163,7 +168,7 @@ def undistort_image(img: np.ndarray, intr, *, interpolation: str = "linear") -> 
     return _remap(img, *_undistort_maps(intr), flag)
 
 
-def distorted_projector_drive(drive: np.ndarray, intr) -> np.ndarray:
+def distorted_projector_drive(drive: np.ndarray, intr: Intrinsics) -> np.ndarray:
     """The ideal-pinhole texture that makes Mitsuba's projector emit like a projector whose lens
     has ``intr.distortion`` while its DMD shows ``drive``: texture(q) = drive(K D(K^-1 q)).
 
@@ -174,7 +179,7 @@ def distorted_projector_drive(drive: np.ndarray, intr) -> np.ndarray:
     return undistort_image(drive, intr, interpolation="linear")
 
 
-def undistort_projector_columns(column_px: np.ndarray, row_norm_y: np.ndarray, intr, *, iterations: int = 8) -> np.ndarray:
+def undistort_projector_columns(column_px: np.ndarray, row_norm_y: np.ndarray, intr: Intrinsics, *, iterations: int = 8) -> np.ndarray:
     """Ideal-pinhole projector columns from decoded DMD columns.
 
     In a rectified rig (parallel axes, baseline along x) a camera pixel with normalised

@@ -21,6 +21,7 @@ Conventions (stated once, used everywhere)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -212,7 +213,7 @@ def parse_sequence(text: str) -> tuple[int, ...]:
     return tuple(int(c) for c in text)
 
 
-def check_sequence(sequence, *, order: int) -> tuple[int, ...]:
+def check_sequence(sequence: Sequence[int], *, order: int) -> tuple[int, ...]:
     """Validate a cyclic binary code sequence: 0/1 values, every window of ``order`` unique.
 
     Raises
@@ -233,7 +234,7 @@ def check_sequence(sequence, *, order: int) -> tuple[int, ...]:
     return seq
 
 
-def code_sequence(sequence, *, order: int) -> np.ndarray:
+def code_sequence(sequence: Sequence[int] | None, *, order: int) -> np.ndarray:
     """``sequence`` as an array, or B(2, order) when it is None."""
     return de_bruijn(order) if sequence is None else np.asarray(sequence, dtype=np.uint8)
 

@@ -360,7 +360,7 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
     return prj.focal_px * x + prj.cx_px, prj.focal_px * y + prj.cy_px, z
 
 
-def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows=None, cols=None) -> np.ndarray:
+def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None) -> np.ndarray:
     """Depth (camera z, metres) where each camera pixel's ray meets its projector column's plane.
 
     Parameters
@@ -402,7 +402,7 @@ def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows=None, cols=None
     return np.where(np.isfinite(z) & (z > 0), z, np.nan)
 
 
-def projector_column_at_depth(depth_m, rig: Rig, *, rows=None, cols=None) -> np.ndarray:
+def projector_column_at_depth(depth_m: float | np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None) -> np.ndarray:
     """Projector column lighting each camera pixel if the surface there were at ``depth_m``.
 
     ``depth_m`` may be a scalar (a fronto-parallel plane) or an (H, W) map.

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +53,7 @@ import numpy as np
 from simbench import validate
 from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rotation_xyz_deg
+from simbench.seeds import RngLike
 
 __all__ = [
     "Material",
@@ -103,7 +104,7 @@ BUDGET_BOW_M_PER_M = 0.0005
 BUDGET_WAVINESS_M = 0.00005
 
 
-def board_form_m(x_m: np.ndarray, y_m: np.ndarray, *, size_m, bow_m_per_m: float = 0.0, waviness_m: float = 0.0, waviness_period_m: float = WAVINESS_PERIOD_M, waviness_phase_rad: float = 0.0) -> np.ndarray:
+def board_form_m(x_m: np.ndarray, y_m: np.ndarray, *, size_m: tuple[float, float], bow_m_per_m: float = 0.0, waviness_m: float = 0.0, waviness_period_m: float = WAVINESS_PERIOD_M, waviness_phase_rad: float = 0.0) -> np.ndarray:
     """Height of a board's surface above its nominal plane (towards the camera), metres.
 
     ``x_m, y_m`` are in the board's own frame (centre 0, extent ``size_m``).  The bow is a
@@ -139,7 +140,7 @@ def _board_form(d: dict, where: str) -> dict:
     return p
 
 
-def paint_reflectance(srgb8) -> tuple[float, float, float]:
+def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
     """Linear diffuse reflectance of a matte paint printed as 8-bit sRGB ``srgb8``.
 
     ``rho = rho_min + (rho_max - rho_min) * linear(srgb8 / 255)`` per channel, with the sRGB
@@ -186,7 +187,7 @@ class SceneObject:
     params: tuple[tuple[str, object], ...]
     material: Material = Material()
 
-    def get(self, key: str, default=None):
+    def get(self, key: str, default=None) -> object:
         return dict(self.params).get(key, default)
 
 
@@ -363,7 +364,7 @@ class Placement:
         object.__setattr__(self, "waviness_m", validate.number(self.waviness_m, "board waviness_m", lo=0.0, hi=MAX_FORM_M))
 
 
-def board_form(*, bow_m_per_m: float, waviness_m: float, rng) -> dict:
+def board_form(*, bow_m_per_m: float, waviness_m: float, rng: RngLike) -> dict:
     """The form keys of one board of a batch whose boards bow by ``bow_m_per_m`` (sag over a
     1 m chord) and ripple by
     ``waviness_m``: the bow's sign and the ripple's phase drawn from ``rng`` (a Generator)."""
@@ -377,7 +378,7 @@ def board_form(*, bow_m_per_m: float, waviness_m: float, rng) -> dict:
     return form
 
 
-def place_objects(scene: SceneSpec, names, *, placement: Placement, rng) -> tuple[SceneSpec, dict]:
+def place_objects(scene: SceneSpec, names: Iterable[str], *, placement: Placement, rng: RngLike) -> tuple[SceneSpec, dict]:
     """``scene`` with each named object moved as a lab would have placed it: its own seeded
     depth offset and tilt (:class:`Placement`), independent of the reference plane.  Planes,
     boxes and meshes tilt about their own x and y axes (a mesh about its file's origin); a
@@ -443,7 +444,7 @@ def _bsdf(mat: Material) -> dict:
     return {"type": "twosided", "bsdf": inner}
 
 
-def object_to_mitsuba(obj: SceneObject, *, key: str | None = None):
+def object_to_mitsuba(obj: SceneObject, *, key: str | None = None) -> object:
     """Mitsuba plugin dictionary of one object (a variant must be set); a plane with a form
     error is a Mesh instance instead, with id ``key`` (the key it gets in the scene dict, which
     names a dict entry's shape)."""

@@ -18,7 +18,7 @@ import hashlib
 
 import numpy as np
 
-__all__ = ["DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "repetition_seed", "SeedLog"]
+__all__ = ["RngLike", "DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "repetition_seed", "SeedLog"]
 
 # the paper's year; any non-negative integer works
 DEFAULT_SEED = 2017
@@ -33,7 +33,7 @@ CHILD_STREAMS = {
 }
 
 
-def check_seed(seed) -> int:
+def check_seed(seed: object) -> int:
     """``seed`` as an int, or ValueError: seeds are non-negative integers (SeedSequence's rule)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
@@ -83,3 +83,7 @@ class SeedLog:
         for k, n in enumerate(noise):
             self.record(f"{label}/{k}" if repeats > 1 else label, {"render": render, "noise": n})
         return render, noise
+
+
+# what every stochastic function accepts as ``rng`` (numpy.random.default_rng's inputs)
+RngLike = np.random.Generator | np.random.SeedSequence | int | None

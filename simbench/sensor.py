@@ -10,10 +10,15 @@ physics (crosstalk, projector, lenses, ambient light) are configured by
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench import validate
+from simbench.seeds import RngLike
+
+if TYPE_CHECKING:
+    from simbench.device import PhysicalCamera
 
 __all__ = [
     "SimpleCamera",
@@ -69,7 +74,7 @@ class SimpleCamera:
         return (1 << self.bits) - 1
 
 
-def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng=None) -> np.ndarray:
+def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng: RngLike = None) -> np.ndarray:
     """Radiance -> recorded image: exposure, Poisson shot noise, Gaussian read noise,
     full-well clipping and ADC quantisation.
 
@@ -163,7 +168,7 @@ def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
     return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))
 
 
-def emva_camera(radiance: np.ndarray, *, camera, electrons_per_radiance, exposure_s: float, white_balance=(1.0, 1.0, 1.0), rng=None) -> np.ndarray:
+def emva_camera(radiance: np.ndarray, *, camera: PhysicalCamera, electrons_per_radiance: float | np.ndarray, exposure_s: float, white_balance: np.ndarray | None = (1.0, 1.0, 1.0), rng: RngLike = None) -> np.ndarray:
     """Rendered radiance -> recorded image through the EMVA 1288 model and the colour filter
     array of ``camera`` (a :class:`simbench.device.PhysicalCamera`).
 

@@ -19,20 +19,25 @@ from pathlib import Path
 import numpy as np
 
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
-from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.pattern import PatternSpec
 from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
-from simbench.photometry import channel_weights, electrons_per_radiance_s, exposure_s, white_balance_gains
-from simbench.optics import distort_image, distorted_projector_drive
-from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
-from simbench.truth import GroundTruth, ground_truth, projector_distance
+from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 from simbench.mitsuba_dict import realised_rig
+from simbench.optics import distort_image, distorted_projector_drive
+from simbench.pattern import PatternSpec
+from simbench.photometry import (
+    channel_weights,
+    electrons_per_radiance_s,
+    exposure_s,
+    white_balance_gains,
+)
+from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import render_radiance
 from simbench.rig import rig_to_dict, save_rig
 from simbench.scene import SceneSpec
-from simbench.seeds import child_seed
+from simbench.seeds import RngLike, child_seed
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
 from simbench.spectral import crosstalk_matrix, material_crosstalk
+from simbench.truth import GroundTruth, ground_truth, projector_distance
 
 __all__ = [
     "Acquisition",
@@ -279,7 +284,7 @@ class ProjectorDrive:
 
 
 
-def cached_arrays(kind: str, parts: dict, make, *, cache: RenderCache | None = None) -> dict[str, np.ndarray]:
+def cached_arrays(kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]], *, cache: RenderCache | None = None) -> dict[str, np.ndarray]:
     """``make()``'s arrays, looked up in / stored to ``cache`` under ``kind`` and ``parts``
     plus the renderer's identity (variant, Mitsuba version)."""
     return make() if cache is None else cache.get_or_make(kind, {**parts, **_renderer_id()}, make)
@@ -349,7 +354,7 @@ def _white_board(scene: SceneSpec) -> dict:
     return {"reference_depth_m": scene.reference_depth_m, "reference_albedo": REFERENCE_ALBEDO, "projector_scale": scene.projector_scale}
 
 
-def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng=None) -> np.ndarray:
+def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
     """The camera's recorded image from :func:`render_channels`' output: the simple camera,
     or the EMVA 1288 camera with its colour filter array at the sensor's (auto) exposure."""
     cam = sensor.camera
@@ -387,7 +392,8 @@ def acquire(
 
     from simbench.decode import DecoderParams
     from simbench.seeds import SeedLog
-    from simbench.systems import RenderSettings, SystemOptions, acquire as acquire_recording
+    from simbench.systems import RenderSettings, SystemOptions
+    from simbench.systems import acquire as acquire_recording
     from simbench.systems.proposed import ColourFringeSystem
 
     rig = realised_rig(scene.rig)

@@ -31,6 +31,7 @@ Data and assumptions (nothing here is fitted to the paper's results):
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
@@ -101,7 +102,7 @@ def camera_sensitivities() -> np.ndarray:
     return out
 
 
-def reflectance_spectrum(rgb) -> np.ndarray:
+def reflectance_spectrum(rgb: Sequence[float]) -> np.ndarray:
     """Spectral reflectance (on :func:`wavelengths_nm`) of a linear-RGB diffuse reflectance."""
     v = np.asarray(rgb, dtype=np.float64)
     if v.shape != (3,) or not np.all((v >= 0) & (v <= 1)):
@@ -115,7 +116,7 @@ def reflectance_spectrum(rgb) -> np.ndarray:
     return np.asarray(sd.copy().align(_shape()).values, dtype=np.float64)
 
 
-def crosstalk_matrix(rgb) -> np.ndarray:
+def crosstalk_matrix(rgb: Sequence[float]) -> np.ndarray:
     """K[c, p]: camera channel c's response to projector primary p reflected by a diffuse
     surface of linear RGB reflectance ``rgb``, relative to channel p's response to primary p
     on a perfect white (module docstring).  Shape (3, 3), rows = camera R, G, B."""
@@ -183,7 +184,7 @@ def measured_linear_srgb(name: str) -> tuple[float, float, float]:
     return tuple(float(round(x, 6)) for x in np.clip(rgb, 0.0, 1.0))
 
 
-def material_crosstalk(rgb, spectrum: str | None = None) -> np.ndarray:
+def material_crosstalk(rgb: Sequence[float], spectrum: str | None = None) -> np.ndarray:
     """:func:`crosstalk_matrix` of a material: from its measured spectrum when it names one,
     else from its linear RGB reflectance."""
     if spectrum is None:

@@ -9,6 +9,8 @@ need.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from simbench.rig import Rig, project_to_projector
@@ -36,8 +38,8 @@ def synthetic_plane_capture(
     drive: np.ndarray,
     rig: Rig,
     *,
-    normal=(0.0, 0.0, -1.0),
-    point_m=(0.0, 0.0, 1.0),
+    normal: Sequence[float] = (0.0, 0.0, -1.0),
+    point_m: Sequence[float] = (0.0, 0.0, 1.0),
     albedo: float = 0.8,
     supersample: int = 4,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

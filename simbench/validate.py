@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import numbers as _numbers
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -101,7 +101,7 @@ def boolean(value: object, name: str) -> bool:
     return bool(value)
 
 
-def choice(value: object, name: str, options: Iterable):
+def choice(value: object, name: str, options: Iterable) -> str:
     """``value`` if it is one of ``options`` (of the same type: a string for string options),
     else an error listing them."""
     opts = list(options)
@@ -111,7 +111,7 @@ def choice(value: object, name: str, options: Iterable):
     return value
 
 
-def numbers(value: object, name: str, n: int, **limits) -> tuple[float, ...]:
+def numbers(value: object, name: str, n: int, **limits: object) -> tuple[float, ...]:
     """A list or tuple of ``n`` numbers, each checked by :func:`number` with ``limits``."""
     if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)) or len(value) != n:
         raise ValueError(f"{name} must be a list of {n} numbers, got {value!r}")
@@ -128,6 +128,6 @@ def image_size(width: object, height: object, name: str, *, names: tuple[str, st
     return w, h
 
 
-def optional(check, value: object, name: str, **kw):
+def optional(check: Callable[..., object], value: object, name: str, **kw: object) -> object:
     """``None`` stays ``None``; anything else goes through ``check(value, name, **kw)``."""
     return None if value is None else check(value, name, **kw)

@@ -25,7 +25,7 @@ __all__ = ["DEVICES", "get_device", "register_depth"]
 DEVICES = {"kinect": kinect.KinectModel, "tof": tof.ToFModel}
 
 
-def get_device(name: str, **overrides):
+def get_device(name: str, **overrides: object) -> kinect.KinectModel | tof.ToFModel:
     """The device model ``name`` (``kinect`` or ``tof``) with optional parameter overrides."""
     if name not in DEVICES:
         raise ValueError(f"unknown competitor device {name!r}; valid: {list(DEVICES)}")

@@ -36,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -43,7 +44,10 @@ import numpy as np
 from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec, reference_scene
-from simbench.seeds import child_seed
+from simbench.seeds import RngLike, child_seed
+
+if TYPE_CHECKING:
+    from simbench.cache import RenderCache
 
 __all__ = ["KinectModel", "KinectCalibration", "KinectDepth", "kinect_rig", "dot_pattern", "device_scene", "speckle", "record_ir", "match", "calibrate", "capture"]
 
@@ -169,7 +173,7 @@ def device_scene(scene: SceneSpec, model: KinectModel) -> SceneSpec:
     return dataclasses.replace(scene, rig=kinect_rig(model), camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0), projector_scale=1.0, reference_depth_m=model.reference_depth_m)
 
 
-def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng) -> np.ndarray:
+def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng: RngLike) -> np.ndarray:
     """Integrated speckle intensity per pixel: gamma(M, 1/M), mean 1, variance 1/M.
 
     References
@@ -181,7 +185,7 @@ def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng) -> np.ndarr
     return np.random.default_rng(rng).gamma(m, 1.0 / m, size=shape).astype(np.float32)
 
 
-def record_ir(radiance: np.ndarray, *, model: KinectModel, electrons_per_radiance: float, speckle_rng, rng) -> np.ndarray:
+def record_ir(radiance: np.ndarray, *, model: KinectModel, electrons_per_radiance: float, speckle_rng: RngLike, rng: RngLike) -> np.ndarray:
     """IR radiance (H, W) -> recorded frame (H, W) uint16 DN: optics blur, speckle, EMVA noise."""
     rad = np.asarray(radiance, dtype=np.float32)
     if rad.shape != (model.height_px, model.width_px):
@@ -379,7 +383,7 @@ def _render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_de
     return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache))
 
 
-def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent", cache=None, albedo: float = 0.8) -> KinectCalibration:
+def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent", cache: RenderCache | None = None, albedo: float = 0.8) -> KinectCalibration:
     """Record the factory reference: a white plane (``albedo``) at ``reference_depth_m``; the
     exposure is set so that its brightest dots (99.9th percentile) reach ``exposure_fraction``
     of the full well.  Seeds: render ``seed``; speckle and noise derived from it."""
@@ -399,7 +403,7 @@ def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sa
     return KinectCalibration(reference=ref, electrons_per_radiance=k)
 
 
-def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, sampler: str = "independent", cache=None) -> list[np.ndarray]:
+def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, sampler: str = "independent", cache: RenderCache | None = None) -> list[np.ndarray]:
     """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
     frozen to the static scene, derives from it) recorded once per noise seed."""
     rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)

@@ -16,7 +16,7 @@ __all__ = ["DEVICE_MANIFEST", "write_device_recording", "read_device_info"]
 DEVICE_MANIFEST = "device.json"
 
 
-def write_device_recording(out_dir, name: str, model, writers: dict[str, Callable[[Path], Path]], *, gt_depth_m: np.ndarray, info: dict, overwrite: bool = False) -> dict[str, Path]:
+def write_device_recording(out_dir: str | Path, name: str, model: object, writers: dict[str, Callable[[Path], Path]], *, gt_depth_m: np.ndarray, info: dict, overwrite: bool = False) -> dict[str, Path]:
     """Write ``writers`` (key -> function writing one file into the folder it is given and
     returning its path), ``gt_depth.npy``/``.exr`` (z-depth, m) and ``device.json``
     (``{"device": name, **model's parameters, **info, "files": ...}``)."""
@@ -33,7 +33,7 @@ def write_device_recording(out_dir, name: str, model, writers: dict[str, Callabl
     return {k: out / n for k, n in names.items()}
 
 
-def read_device_info(in_dir, name: str, model_cls) -> tuple[object, dict]:
+def read_device_info(in_dir: str | Path, name: str, model_cls: type) -> tuple[object, dict]:
     """(the device model, the rest of ``device.json``) of a folder written by
     :func:`write_device_recording` for the device ``name``."""
     path = Path(in_dir) / DEVICE_MANIFEST

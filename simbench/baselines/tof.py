@@ -33,13 +33,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.literature import SR4000_FOV_X_DEG, SR4000_MODULATION_HZ, SR4000_SIZE_WH
+from simbench.photometry import LIGHT_M_S, photons_per_unit_radiance
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec
-from simbench.photometry import LIGHT_M_S, photons_per_unit_radiance
+from simbench.seeds import RngLike
+
+if TYPE_CHECKING:
+    from simbench.cache import RenderCache
 
 __all__ = ["ToFModel", "ToFDepth", "tof_rig", "device_scene", "footprint_phasor", "record_taps", "decode_taps", "capture"]
 
@@ -174,7 +179,7 @@ def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
         return np.where(weight > 0, total / weight, 0.0)
 
 
-def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, rng) -> np.ndarray:
+def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, rng: RngLike) -> np.ndarray:
     """Four correlation samples (H, W, 4) in electrons (float32), seeded noise.
 
     ``amplitude`` is the rendered direct return (H, W) (mean over RGB = NIR, module docstring).
@@ -242,7 +247,7 @@ def decode_taps(taps: np.ndarray, *, model: ToFModel) -> ToFDepth:
     )
 
 
-def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_seeds: list[int], sampler: str = "independent", cache=None) -> list[np.ndarray]:
+def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_seeds: list[int], sampler: str = "independent", cache: RenderCache | None = None) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
     from simbench.cache import scene_fingerprint

@@ -8,6 +8,7 @@ their right neighbour, i.e. known to be the next stripe of the pattern.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -33,7 +34,7 @@ def color_code(rgb: np.ndarray) -> np.ndarray:
     return rgb[..., 0] >= rgb[..., 1]
 
 
-def mixing_matrix(primaries, dark: np.ndarray, *, region: np.ndarray | None = None) -> np.ndarray:
+def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: np.ndarray | None = None) -> np.ndarray:
     """The projector-to-camera coupling matrix K from calibration captures of the reference
     plane (Caspi, Kiryati & Shamir 1998).
 
@@ -113,7 +114,7 @@ def _code_window_px(period_px: float, order: int) -> int:
     return int(np.ceil((order + 1) / 2 * period_px)) + 1
 
 
-def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False):
+def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Each channel rescaled to its local range across neighbouring stripes.
 
     ``(v - local_min) / (local_max - local_min)`` per channel, over a window along the row wide

@@ -11,7 +11,7 @@ changed decoder never reads a map an older one wrote.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import lru_cache
 from pathlib import Path
 
@@ -30,7 +30,7 @@ def decoder_fingerprint() -> str:
     return source_digest(sorted(Path(__file__).parent.glob("*.py")))
 
 
-def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> ReferenceMap:
+def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> ReferenceMap:
     """:func:`simbench.decode.decode_reference`, looked up in / stored to ``cache`` (None:
     decoded every time).  Raises what ``decode_reference`` raises (a failed reference is
     never stored)."""
@@ -39,7 +39,7 @@ def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderP
     return ref
 
 
-def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> tuple[ReferenceMap, Callable[[], None]]:
+def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> tuple[ReferenceMap, Callable[[], None]]:
     """The decoded reference from ``cache``, or decoded now, and a function that stores it
     (nothing to do when it came from the cache): a command stores it only once everything
     else has succeeded, so a failed command leaves nothing behind."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -13,14 +13,42 @@ import numpy as np
 
 from simbench import validate
 from simbench.decode import _kernels
-from simbench.decode.color import color_code, mixing_matrix, normalize_channels, overlay_weights, segment_stripes, unmix, vote_codes
-from simbench.decode.debruijn import drop_broken_links, neighbour_correct, window_positions_of_stripes
-from simbench.decode.depth import absolute_column, depth_calibrated, depth_from_disparity, inverse_column_table, match_reference
+from simbench.decode.color import (
+    color_code,
+    mixing_matrix,
+    normalize_channels,
+    overlay_weights,
+    segment_stripes,
+    unmix,
+    vote_codes,
+)
+from simbench.decode.debruijn import (
+    drop_broken_links,
+    neighbour_correct,
+    window_positions_of_stripes,
+)
+from simbench.decode.depth import (
+    absolute_column,
+    depth_calibrated,
+    depth_from_disparity,
+    inverse_column_table,
+    match_reference,
+)
 from simbench.decode.fourier import ftp_phase, wfr_phase
-from simbench.decode.phase import INTENSITY_MODES, certainty_map, gabor_phase, overlay_intensity
+from simbench.decode.phase import (
+    INTENSITY_MODES,
+    certainty_map,
+    gabor_phase,
+    overlay_intensity,
+)
 from simbench.decode.profile import run_in_context, stage
-from simbench.pattern import PatternSpec, check_channels, code_sequence, window_positions
 from simbench.optics import undistort_image
+from simbench.pattern import (
+    PatternSpec,
+    check_channels,
+    code_sequence,
+    window_positions,
+)
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
 __all__ = ["DecoderParams", "robust_params", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
@@ -496,7 +524,7 @@ def _calibration_region(primaries, dark: np.ndarray) -> np.ndarray:
     return region
 
 
-def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries=None, dark: np.ndarray | None = None) -> ReferenceMap:
+def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None) -> ReferenceMap:
     """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
 
     Done once per calibration; :func:`decode` then matches captures against it.  With

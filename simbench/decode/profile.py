@@ -17,6 +17,8 @@ from __future__ import annotations
 import contextvars
 import threading
 import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor
 from contextlib import contextmanager
 
 __all__ = ["StageTimes", "stage", "stage_times", "run_in_context"]
@@ -44,7 +46,7 @@ _ACTIVE: contextvars.ContextVar[StageTimes | None] = contextvars.ContextVar("sim
 
 
 @contextmanager
-def stage(name: str):
+def stage(name: str) -> Iterator[None]:
     """Time the enclosed block as stage ``name`` if a collector is active."""
     times = _ACTIVE.get()
     if times is None:
@@ -58,7 +60,7 @@ def stage(name: str):
 
 
 @contextmanager
-def stage_times():
+def stage_times() -> Iterator[StageTimes]:
     """Collect the stage times of everything run inside (threads started through
     :func:`run_in_context` included)."""
     times = StageTimes()
@@ -69,7 +71,7 @@ def stage_times():
         _ACTIVE.reset(token)
 
 
-def run_in_context(pool, fn, items) -> list:
+def run_in_context(pool: Executor, fn: Callable, items: Iterable) -> list:
     """``pool.map(fn, items)`` with each call in a copy of the caller's context, so that
     worker threads report to the caller's collector (executors do not carry context over)."""
     futures = [pool.submit(contextvars.copy_context().run, fn, item) for item in items]

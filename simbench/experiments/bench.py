@@ -22,12 +22,13 @@ import cv2
 from simbench.decode import DecoderParams
 from simbench.decode.profile import stage_times
 from simbench.systems import get_system, system_names
-from simbench.systems.proposed import BENCH_SCENES, BENCH_SHADOW as SHADOW
+from simbench.systems.proposed import BENCH_SCENES
+from simbench.systems.proposed import BENCH_SHADOW as SHADOW
 
 __all__ = ["benchmark_inputs", "run_decode_benchmark", "stage_table", "competitor_inputs", "BENCH_SCENES", "SHADOW"]
 
 
-def benchmark_inputs(*, seed: int = 0, scene: str = "plane"):
+def benchmark_inputs(*, seed: int = 0, scene: str = "plane") -> tuple:
     """(capture, reference map, rig, params) of the proposed decoder's benchmark; deterministic
     for a seed (:meth:`simbench.systems.proposed.ColourFringeSystem.bench_inputs`)."""
     capture, cal, spec = get_system("proposed").bench_inputs(scene=scene, seed=seed)
@@ -35,7 +36,7 @@ def benchmark_inputs(*, seed: int = 0, scene: str = "plane"):
     return capture, cal.reference_map(params), spec.rig, params
 
 
-def competitor_inputs(device: str, *, seed: int = 0, model=None):
+def competitor_inputs(device: str, *, seed: int = 0, model: object = None) -> tuple:
     """(model, raw frame, calibration) of competitor ``device`` looking at a plane at 1.1 m,
     made in numpy without the renderer (its system's ``bench_inputs``); ``model`` overrides
     the default device."""

@@ -9,32 +9,44 @@ run alone; every result row records them.
 
 from __future__ import annotations
 
-import logging
 import csv
 import dataclasses
 import hashlib
 import io
+import logging
 import subprocess
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.cache import RenderCache
 from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
+from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.io import atomic_write_text, save_json
 from simbench.metrics import score as metrics_score
-from simbench.pattern import PatternSpec
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+from simbench.pattern import PatternSpec
 from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
-from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.seeds import DEFAULT_SEED, SeedLog, derive_seed
 from simbench.simulate import versions
-from simbench.systems import DepthSystem, Recording, RenderSettings, SystemDepth, SystemOptions, acquire, get_system
+from simbench.systems import (
+    DepthSystem,
+    Recording,
+    RenderSettings,
+    SystemDepth,
+    SystemOptions,
+    acquire,
+    get_system,
+)
+
+if TYPE_CHECKING:
+    import matplotlib.figure
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +185,7 @@ class Session:
             self._systems[name] = get_system(name, options)
         return self._systems[name]
 
-    def calibration(self, system: DepthSystem, scene: SceneSpec, **options):
+    def calibration(self, system: DepthSystem, scene: SceneSpec, **options) -> object:
         """``system``'s calibration for ``scene`` (prepared), recorded once per run for each
         calibration key, sensor and render setting (``options`` go to its ``calibrate``)."""
         r = self.render
@@ -249,7 +261,7 @@ class Session:
         }
         return save_json(self.out / f"{name}.provenance.json", record)
 
-    def timed(self, what: str):
+    def timed(self, what: str) -> _Timer:
         return _Timer(self.progress, what)
 
 
@@ -266,14 +278,14 @@ class _Timer:
             self.progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
 
 
-def score(rec: Recording, result, period_px: float | None = None, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
+def score(rec: Recording, result: SystemDepth | DecodeResult, period_px: float | None = None, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
     """:func:`simbench.metrics.score` of a recording's decoded depth (a
     :class:`simbench.systems.SystemDepth` or a :class:`DecodeResult`), with its projector
     columns where it has them."""
     return metrics_score(result.depth_m, rec.gt, camera=rec.scene.rig.camera, region=region, column_px=getattr(result, "column_px", None), period_px=period_px, edge_band_px=edge_band_px)
 
 
-def figure_png(fig, *, dpi: int) -> bytes:
+def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
     """A matplotlib figure as PNG bytes (written atomically by the caller); closes it."""
     import matplotlib.pyplot as plt
 

@@ -7,23 +7,24 @@
 
 from __future__ import annotations
 
-import logging
 import csv
-import io
-import time
 import dataclasses
+import io
+import logging
+import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from simbench.decode import DecoderParams, decode, decode_reference
+from simbench.device import get_sensor
 from simbench.experiments.common import SCENES_DIR, figure_png, git_commit
 from simbench.io import json_bytes, write_files
 from simbench.metrics import edge_band, score
-from simbench.scene import load_scene
-from simbench.device import get_sensor
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.scene import load_scene
 from simbench.seeds import DEFAULT_SEED
 from simbench.simulate import acquire
 
@@ -71,7 +72,7 @@ def depth_figure(capture: np.ndarray, depth_m: np.ndarray, gt_depth_m: np.ndarra
     return figure_png(fig, dpi=80)
 
 
-def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress=print) -> dict:
+def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] = print) -> dict:
     """Render, decode and score each scene; write figures and tables to ``out_dir``.
 
     A Mitsuba variant must already be selected.

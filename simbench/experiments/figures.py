@@ -10,12 +10,18 @@ with each scene's scores; ``figures.provenance.json``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.experiments.common import Session, figure_png, markdown_table, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text, save_ply
 from simbench.metrics import depth_errors, edge_band, points_from_depth
+
+if TYPE_CHECKING:
+    from simbench.decode.pipeline import DecodeResult
+    from simbench.experiments.common import Capture
+    from simbench.rig import Intrinsics
 
 __all__ = ["FIGURE_SCENES", "FIG6_SCENE", "run_figures", "shaded_view", "stages_figure"]
 
@@ -24,7 +30,7 @@ FIGURE_SCENES = {"geometries": "fig11", "bust": "fig12", "clutter_pink_cyan": "f
 FIG6_SCENE = "geometries"
 
 
-def shaded_view(depth_m: np.ndarray, camera) -> np.ndarray:
+def shaded_view(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
     """A grey 3-D rendering of a depth map: Lambertian shading of the surface normals
     (from the point cloud's image-space derivatives) under a light at the camera.
 
@@ -56,7 +62,7 @@ def _depth_range(depth_m: np.ndarray) -> tuple[float, float]:
     return tuple(np.percentile(finite, [1, 99])) if finite.size else (0.0, 1.0)
 
 
-def stages_figure(cap, result, *, title: str) -> bytes:
+def stages_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
     """Paper Fig. 6: capture, intensity, wrapped phase, De Bruijn stripes, unwrapped phase,
     depth, 3-D view."""
     st = result.stages
@@ -81,7 +87,7 @@ def stages_figure(cap, result, *, title: str) -> bytes:
     return figure_png(fig, dpi=90)
 
 
-def scene_figure(cap, result, *, title: str) -> bytes:
+def scene_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
     plt, fig, axes = _fig(4)
     lo, hi = _depth_range(result.depth_m)
     err = (result.depth_m - cap.gt.depth_m) * 1000.0

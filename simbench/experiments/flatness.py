@@ -23,12 +23,22 @@ board's and the reference board's independently.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
+from simbench.experiments.common import (
+    Session,
+    figure_png,
+    markdown_table,
+    score,
+    write_table,
+)
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import plane_fit_error, points_from_depth
+
+if TYPE_CHECKING:
+    from simbench.experiments.common import Capture
 
 __all__ = ["BOW_LEVELS_MM", "WAVINESS_LEVELS_MM", "QUICK_BOW_LEVELS_MM", "QUICK_WAVINESS_LEVELS_MM", "run_flatness", "surface_form"]
 
@@ -42,7 +52,7 @@ QUICK_BOW_LEVELS_MM = (0.0, 1.0)
 QUICK_WAVINESS_LEVELS_MM = (0.1,)
 
 
-def surface_form(cap) -> dict:
+def surface_form(cap: Capture) -> dict:
     """Plane-fit RMS and peak-to-valley (mm) of the rendered surface over the lit pixels: the
     form a perfect sensor would report."""
     gt = cap.gt

@@ -14,11 +14,15 @@ matching (Sec. 5.4).  Scores: :func:`simbench.experiments.common.score`.  Writes
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from simbench.decode import robust_params
 from simbench.experiments.common import Session, markdown_table, score, write_table
 from simbench.io import atomic_write_text
-
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
+
+if TYPE_CHECKING:
+    from simbench.scene import SceneSpec
 
 __all__ = ["PAPER_TABLE1", "COLOURS", "BOARD_SETS", "MEASURED_PATCHES", "DECODERS", "PROTOCOLS", "board_scene", "run_table1"]
 
@@ -45,7 +49,7 @@ PROTOCOL_TEXT = {"calibrated": "triangulation (Eq. 15)", "reference": "reference
 BOARD = "board"
 
 
-def board_scene(session: Session, board_set: str, colour: str):
+def board_scene(session: Session, board_set: str, colour: str) -> SceneSpec:
     """The placed board of ``colour`` in ``board_set`` and its capture label."""
     label = f"table1/{board_set}/{colour}"
     raw = session.raw_scene(BOARD_SETS[board_set].format(colour=colour))

@@ -12,23 +12,35 @@ their own resolutions (the edge band scaled to the same angle).  Writes ``table3
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
+from simbench.experiments.common import (
+    Session,
+    figure_png,
+    markdown_table,
+    score,
+    write_table,
+)
 from simbench.io import atomic_write_bytes, atomic_write_text
+from simbench.literature import (
+    PAPER_TABLE3,  # paper Table 3 (mm): object -> (proposed, Kinect, ToF)
+)
 from simbench.metrics import depth_errors, edge_band, points_from_depth
 from simbench.rig import rotation_xyz_deg
 
-from simbench.literature import PAPER_TABLE3  # paper Table 3 (mm): object -> (proposed, Kinect, ToF)
+if TYPE_CHECKING:
+    from simbench.scene import SceneSpec
+    from simbench.truth import GroundTruth
 
 __all__ = ["PAPER_TABLE3", "SCENE", "front_face_mask", "run_table3"]
 
 SCENE = "discontinuity"
 
 
-def front_face_mask(scene, gt, name: str, *, tol_m: float = 1e-3) -> np.ndarray:
+def front_face_mask(scene: SceneSpec, gt: GroundTruth, name: str, *, tol_m: float = 1e-3) -> np.ndarray:
     """Pixels on the camera-facing (-z) face of box ``name``, from ground truth."""
     idx = [o.name for o in scene.objects].index(name)
     obj = scene.objects[idx]

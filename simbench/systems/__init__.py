@@ -24,12 +24,15 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from simbench.cache import RenderCache
 from simbench.scene import SceneSpec
+
+if TYPE_CHECKING:
+    from simbench.seeds import SeedLog
 
 __all__ = [
     "SystemOptions",
@@ -194,7 +197,7 @@ def get_system(name: str, options: SystemOptions | None = None) -> DepthSystem:
     return system
 
 
-def acquire(system: DepthSystem, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, calibration: Any = None, repeats: int = 1, prepared: bool = False) -> list[Recording]:
+def acquire(system: DepthSystem, scene: SceneSpec, label: str, *, seeds: SeedLog, render: RenderSettings, calibration: Any = None, repeats: int = 1, prepared: bool = False) -> list[Recording]:
     """``repeats`` recordings of ``scene`` by ``system`` (one render, one camera-noise draw
     each): the one acquisition path of the CLI, the experiments and the sweeps.
 

@@ -20,11 +20,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
+
+if TYPE_CHECKING:
+    from simbench.decode.pipeline import ReferenceMap
 
 __all__ = ["ColourFringeSystem", "ReferenceCalibration", "BENCH_SCENES", "BENCH_SHADOW"]
 
@@ -46,7 +50,7 @@ class ReferenceCalibration:
     cache: object = None
     _maps: dict = field(default_factory=dict, repr=False)
 
-    def reference_map(self, params):
+    def reference_map(self, params) -> ReferenceMap:
         """The reference decoded with ``params`` (mode and Z0 as given)."""
         from simbench.decode.persist import cached_decode_reference
 
@@ -112,7 +116,7 @@ class ColourFringeSystem:
         """The seed label of the reference capture: one per rig and lighting."""
         return f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
 
-    def calibration_key(self, scene: SceneSpec):
+    def calibration_key(self, scene: SceneSpec) -> tuple:
         return (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, tuple(sorted(self.reference_form.items())))
 
     def calibrate(self, scene: SceneSpec, *, seeds, render: RenderSettings, frames: bool | None = None) -> ReferenceCalibration:
@@ -137,7 +141,12 @@ class ColourFringeSystem:
     def acquire(self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render: RenderSettings, pattern_u8: np.ndarray | None = None) -> list[np.ndarray]:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
         once per noise seed (a static scene measured again differs by camera noise only)."""
-        from simbench.simulate import ProjectorDrive, exposure_phase, record, render_channels
+        from simbench.simulate import (
+            ProjectorDrive,
+            exposure_phase,
+            record,
+            render_channels,
+        )
 
         drive = ProjectorDrive(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
         q = render_channels(scene, drive, self.sensor, spp=render.spp, seed=render_seed, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
@@ -158,7 +167,7 @@ class ColourFringeSystem:
         r = decode(raw, rig=scene.rig, params=params, reference=ref)
         return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
 
-    def bench_inputs(self, *, scene: str = "plane", seed: int = 0):
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of the decoder benchmark (``simbench bench``), made in
         numpy without the renderer (:mod:`simbench.synthetic`), deterministic for a seed: the
         paper's rig, a plane at 1.1 m, the reference at 1.0 m, the minimal camera's noise.
@@ -195,7 +204,7 @@ class ColourFringeSystem:
         acq = Acquisition(scene=scene, pattern=self.pattern_u8, capture=raw, reference=calibration.image, gt=gt, meta=meta, calibration=calibration.frames)
         return write_acquisition(acq, out_dir, overwrite=overwrite)
 
-    def read_recording(self, in_dir: Path):
+    def read_recording(self, in_dir: Path) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of a folder written by :meth:`write_recording`
         (``simbench render``); the scene carries the recorded rig and Z0, no objects."""
         import json

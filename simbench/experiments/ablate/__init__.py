@@ -52,6 +52,15 @@ The package: :mod:`~simbench.experiments.ablate.spec` (the sweep file and its ex
 """
 
 from simbench.experiments.ablate.execute import WORKER_DIED, run_one, run_sweep
-from simbench.experiments.ablate.spec import BUILTIN_STUDIES, DEFAULTS, PARAMETERS, STUDIES_DIR, Sweep, expand, load_sweep, sweep_from_dict
+from simbench.experiments.ablate.spec import (
+    BUILTIN_STUDIES,
+    DEFAULTS,
+    PARAMETERS,
+    STUDIES_DIR,
+    Sweep,
+    expand,
+    load_sweep,
+    sweep_from_dict,
+)
 
 __all__ = ["PARAMETERS", "DEFAULTS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "WORKER_DIED", "BUILTIN_STUDIES", "STUDIES_DIR"]

@@ -12,12 +12,11 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-
-
-log = logging.getLogger(__name__)
 from simbench.experiments.ablate.mapping import decoder_for, scene_for, sensor_for
 from simbench.experiments.ablate.report import sweep_rows, write_sweep
 from simbench.experiments.ablate.spec import EDGE_BAND_PX, MODES, Sweep, expand
+
+log = logging.getLogger(__name__)
 
 __all__ = ["run_one", "run_sweep", "WORKER_DIED"]
 
@@ -27,10 +26,9 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
     metrics and timings, or ``{"error": ...}``; never raises for a bad parameter value."""
     t0 = time.perf_counter()
     try:
-        from simbench.experiments.common import RunConfig, Session
-        from simbench.experiments.common import score
         import sys
 
+        from simbench.experiments.common import RunConfig, Session, score
         from simbench.variant import select_variant
 
         # a Dask worker arrives here without an entry point: choose the variant first (it must

@@ -5,17 +5,27 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from typing import TYPE_CHECKING
 
+if TYPE_CHECKING:
+    from simbench.decode import DecoderParams
+    from simbench.device import SensorModel
+    from simbench.scene import SceneSpec
 
+from simbench.experiments.ablate.spec import PARAMETERS
 
 log = logging.getLogger(__name__)
-from simbench.experiments.ablate.spec import PARAMETERS
 
 __all__ = ["sensor_for", "scene_for", "decoder_for"]
 
 
-def sensor_for(params: dict):
-    from simbench.device import get_sensor, sensor_from_dict, sensor_to_dict, with_effects
+def sensor_for(params: dict) -> SensorModel:
+    from simbench.device import (
+        get_sensor,
+        sensor_from_dict,
+        sensor_to_dict,
+        with_effects,
+    )
 
     if "sensor.effects" in params:
         effects = params["sensor.effects"]
@@ -39,7 +49,7 @@ def sensor_for(params: dict):
     return sensor
 
 
-def scene_for(params: dict):
+def scene_for(params: dict) -> SceneSpec:
     from simbench.experiments.common import SCENES_DIR
     from simbench.scene import load_scene, paint_reflectance
 
@@ -66,7 +76,7 @@ def scene_for(params: dict):
     return dataclasses.replace(scene, objects=tuple(objs))
 
 
-def decoder_for(params: dict):
+def decoder_for(params: dict) -> DecoderParams:
     from simbench.decode import DecoderParams
     from simbench.pattern import PatternSpec, parse_sequence
 

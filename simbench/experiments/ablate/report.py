@@ -10,10 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench.experiments.ablate.spec import (
+    DEFAULTS,
+    EDGE_BAND_PX,
+    METRICS,
+    REF_METRICS,
+    Sweep,
+)
 from simbench.io import atomic_write_bytes, atomic_write_text, save_json
 
 log = logging.getLogger(__name__)
-from simbench.experiments.ablate.spec import DEFAULTS, EDGE_BAND_PX, METRICS, REF_METRICS, Sweep
 
 __all__ = ["sweep_rows", "write_sweep"]
 

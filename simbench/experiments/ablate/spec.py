@@ -10,7 +10,6 @@ import json
 import logging
 from pathlib import Path
 
-
 from simbench import validate
 from simbench.io import read_toml
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
