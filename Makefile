@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup reproduce ablations quick quick-thresholds test test-fast bench clean
+.PHONY: setup reproduce ablations quick quick-thresholds lint test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -36,8 +36,13 @@ quick: setup
 quick-thresholds: setup
 	$(VENV)/bin/simbench reproduce all --quick --write-thresholds results/quick/thresholds.toml
 
-# The whole test suite, slow renders included.
-test: setup
+# Style: ruff's lint rules and formatting (pyproject.toml [tool.ruff], line length 120).
+lint: setup
+	$(VENV)/bin/ruff check simbench tests scenes
+	$(VENV)/bin/ruff format --check simbench tests scenes
+
+# The whole test suite, slow renders included (after the lint).
+test: lint
 	$(PY) -m pytest -q
 
 # Developers' loop: everything but the Mitsuba renders.

@@ -112,7 +112,9 @@ def hat() -> trimesh.Trimesh:
 
 MESHES = {
     "vase": vase,
-    "cylinder": lambda: trimesh.creation.cylinder(radius=0.06, height=0.18, sections=128, transform=trimesh.transformations.translation_matrix([0, 0, 0.09])),
+    "cylinder": lambda: trimesh.creation.cylinder(
+        radius=0.06, height=0.18, sections=128, transform=trimesh.transformations.translation_matrix([0, 0, 0.09])
+    ),
     "cone": lambda: trimesh.creation.cone(radius=0.07, height=0.16, sections=128),
     "bust": bust,
     "pot": pot,

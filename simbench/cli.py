@@ -33,7 +33,14 @@ class _Formatter(argparse.HelpFormatter):
 
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
-        if action.default is None or action.default is False or action.default == argparse.SUPPRESS or "default" in text or action.required or not action.option_strings:
+        if (
+            action.default is None
+            or action.default is False
+            or action.default == argparse.SUPPRESS
+            or "default" in text
+            or action.required
+            or not action.option_strings
+        ):
             return text
         return f"{text} (default: %(default)s)"
 
@@ -77,12 +84,23 @@ def _add_render_options(s, *, quick_spp: int | None = None) -> None:
     from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
 
     quick = f", {quick_spp} with --quick" if quick_spp else ""
-    s.add_argument("--spp", type=_SPP, default=None, help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick})")
-    s.add_argument("--sampler", choices=SAMPLERS, default=DEFAULT_SAMPLER, help="Mitsuba sample generator (results/render_noise.md compares them)")
+    s.add_argument(
+        "--spp", type=_SPP, default=None, help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick})"
+    )
+    s.add_argument(
+        "--sampler",
+        choices=SAMPLERS,
+        default=DEFAULT_SAMPLER,
+        help="Mitsuba sample generator (results/render_noise.md compares them)",
+    )
 
 
 def _add_cache_options(s) -> None:
-    s.add_argument("--cache", default=".cache/simbench", help="render cache folder (renders and ground truth keyed by everything that affects them)")
+    s.add_argument(
+        "--cache",
+        default=".cache/simbench",
+        help="render cache folder (renders and ground truth keyed by everything that affects them)",
+    )
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
 
 
@@ -99,6 +117,8 @@ def _render_settings(args) -> tuple[int, str]:
     spp = args.spp if args.spp is not None else DEFAULT_SPP
     check_sampler(args.sampler, spp)
     return spp, args.sampler
+
+
 # Mitsuba's path length: 1 sees only the emitters, so the projector's light needs >= 2
 _MAX_DEPTH = _int(2, 1024)
 
@@ -128,7 +148,9 @@ def _pattern_spec(args, size_hw: tuple[int, int]):
         sequence = None if args.sequence is None else parse_sequence(args.sequence)
     except ValueError as exc:
         raise ValueError(f"--sequence: {exc}") from None
-    return PatternSpec(size_hw=size_hw, period_px=args.period, order=args.order, sequence=sequence, channels=args.channels)
+    return PatternSpec(
+        size_hw=size_hw, period_px=args.period, order=args.order, sequence=sequence, channels=args.channels
+    )
 
 
 def _cmd_render(args) -> int:
@@ -150,7 +172,10 @@ def _cmd_render(args) -> int:
     else:
         files = _render_system(args, system, scene, spp=spp, sampler=sampler, cache=cache, variant=variant)
     cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
-    print(f"rendered {scene.name} with the {system.info().label} ({variant}, {spp} spp {sampler}, seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/")
+    print(
+        f"rendered {scene.name} with the {system.info().label} ({variant}, {spp} spp {sampler}, seed "
+        f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
+    )
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
     return 0
@@ -164,7 +189,17 @@ def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
 
     sensor = get_sensor(args.camera)
     pattern = _pattern_spec(args, scene.rig.projector.size_hw)
-    acq = acquire(scene, pattern=pattern, sensor=sensor, spp=spp, sampler=sampler, seed=args.seed, max_depth=args.max_depth, with_calibration=args.calibration_frames, cache=cache)
+    acq = acquire(
+        scene,
+        pattern=pattern,
+        sensor=sensor,
+        spp=spp,
+        sampler=sampler,
+        seed=args.seed,
+        max_depth=args.max_depth,
+        with_calibration=args.calibration_frames,
+        cache=cache,
+    )
     return write_acquisition(acq, args.out, overwrite=args.overwrite)
 
 
@@ -179,8 +214,17 @@ def _render_system(args, system, scene, *, spp: int, sampler: str, cache, varian
     prepared = system.prepare(scene)
     cal = system.calibrate(prepared, seeds=seeds, render=render)
     rec = acquire(system, prepared, scene.name, seeds=seeds, render=render, calibration=cal, prepared=True)[0]
-    meta = {"scene": str(args.scene), "spp": spp, "sampler": sampler, "seed": args.seed, "seeds": dict(seeds.used), "variant": variant}
-    return system.write_recording(Path(args.out), rec.raw, cal, scene=rec.scene, gt=rec.gt, meta=meta, overwrite=args.overwrite)
+    meta = {
+        "scene": str(args.scene),
+        "spp": spp,
+        "sampler": sampler,
+        "seed": args.seed,
+        "seeds": dict(seeds.used),
+        "variant": variant,
+    }
+    return system.write_recording(
+        Path(args.out), rec.raw, cal, scene=rec.scene, gt=rec.gt, meta=meta, overwrite=args.overwrite
+    )
 
 
 def _manifest_of(path: Path) -> dict | None:
@@ -206,7 +250,10 @@ def _check_manifest(path: Path) -> None:
     for key, name in meta["files"].items():
         if name == path.name and key in meta["sha256"]:
             if hashlib.sha256(path.read_bytes()).hexdigest() != meta["sha256"][key]:
-                raise ValueError(f"{path} does not match {path.parent / 'meta.json'} (SHA-256 differs): the folder mixes files of two renders")
+                raise ValueError(
+                    f"{path} does not match {path.parent / 'meta.json'} (SHA-256 differs): the folder mixes files of "
+                    f"two renders"
+                )
 
 
 def _z0_for(reference: Path, z0: float | None) -> float:
@@ -216,7 +263,9 @@ def _z0_for(reference: Path, z0: float | None) -> float:
     if meta is not None and "reference_depth_m" in meta:
         from simbench import validate
 
-        return validate.number(meta["reference_depth_m"], f"{reference.parent / 'meta.json'}: reference_depth_m", lo=0.0, lo_open=True)
+        return validate.number(
+            meta["reference_depth_m"], f"{reference.parent / 'meta.json'}: reference_depth_m", lo=0.0, lo_open=True
+        )
     return 1.0
 
 
@@ -260,7 +309,9 @@ def _cmd_decode(args) -> int:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
-    params = DecoderParams(pattern=_pattern_spec(args, rig.projector.size_hw), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
+    params = DecoderParams(
+        pattern=_pattern_spec(args, rig.projector.size_hw), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far)
+    )
     if args.robust:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
@@ -275,8 +326,19 @@ def _cmd_decode(args) -> int:
     dt = time.perf_counter() - t0
     # every output is written, or none is (an unwritable --ply must not leave depth.npy behind)
     files = {Path(args.out): npy_bytes(result.depth_m)}
-    ref_note = "" if reference is None else (", reference map from the cache" if cache.hits else ", reference decoded" + ("" if cache.root is None else " and cached"))
-    msg = f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({args.mode} mode, Z0 = {z0} m{ref_note}) -> {args.out}"
+    ref_note = (
+        ""
+        if reference is None
+        else (
+            ", reference map from the cache"
+            if cache.hits
+            else ", reference decoded" + ("" if cache.root is None else " and cached")
+        )
+    )
+    msg = (
+        f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms "
+        f"({args.mode} mode, Z0 = {z0} m{ref_note}) -> {args.out}"
+    )
     if args.ply:
         pts = points_from_depth(result.depth_m, rig.camera)
         ok = result.valid
@@ -311,12 +373,18 @@ def _calibrated_reference(args, rig, params, reference, *, cache=None):
     from simbench.pattern import CALIBRATION_FRAMES
 
     if args.reference is None:
-        raise ValueError("the colour-robust decoder (unmix) calibrates on the reference plane: give --reference (and its calibration frames)")
+        raise ValueError(
+            "the colour-robust decoder (unmix) calibrates on the reference plane: give --reference (and its "
+            "calibration frames)"
+        )
     folder = Path(args.calibration) if args.calibration is not None else Path(args.reference).parent
     paths = {k: folder / f"calibration_{k}.png" for k in CALIBRATION_FRAMES}
     missing = [p.name for p in paths.values() if not p.is_file()]
     if missing:
-        raise ValueError(f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench render --calibration-frames`, or give --calibration FOLDER)")
+        raise ValueError(
+            f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench "
+            f"render --calibration-frames`, or give --calibration FOLDER)"
+        )
     for p in paths.values():
         _check_manifest(p)
     frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
@@ -324,7 +392,14 @@ def _calibrated_reference(args, rig, params, reference, *, cache=None):
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
     z0 = _z0_for(Path(args.reference), args.z0)
     ref_params = replace(params, mode="reference", z0_m=z0)
-    return lookup_decoded_reference(reference, rig=rig, params=ref_params, primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]], dark=frames["dark"], cache=cache)
+    return lookup_decoded_reference(
+        reference,
+        rig=rig,
+        params=ref_params,
+        primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]],
+        dark=frames["dark"],
+        cache=cache,
+    )
 
 
 def _finite_range(a: np.ndarray) -> tuple[float, float]:
@@ -360,15 +435,28 @@ def _cmd_score(args) -> int:
     kw = {}
     if args.column:
         col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
-        kw = {"column_px": load_npy(args.column, expected_shape=gt.shape), "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape), "period_px": args.period}
+        kw = {
+            "column_px": load_npy(args.column, expected_shape=gt.shape),
+            "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape),
+            "period_px": args.period,
+        }
     m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
     if args.json:
         print(json.dumps(m, indent=2, sort_keys=True))
     else:
-        print(f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 {m['p95_mm']:.4f} mm")
-        print(f"completeness {100 * m['completeness']:.2f} % of {m['n_region']} pixels, outliers (> 5 mm) {100 * m['outlier_share']:.3f} %")
+        print(
+            f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 "
+            f"{m['p95_mm']:.4f} mm"
+        )
+        print(
+            f"completeness {100 * m['completeness']:.2f} % of {m['n_region']} pixels, outliers (> 5 mm) "
+            f"{100 * m['outlier_share']:.3f} %"
+        )
         if "stripe_order_errors" in m:
-            print(f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid pixels)")
+            print(
+                f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid "
+                f"pixels)"
+            )
     return 0
 
 
@@ -399,7 +487,9 @@ def _decode_recording(args) -> int:
     res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
     files = {Path(args.out): npy_bytes(res.depth_m)}
-    msg = f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}) -> {args.out}"
+    msg = (
+        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}) -> {args.out}"
+    )
     if args.ply:
         files[Path(args.ply)] = ply_bytes(points_from_depth(res.depth_m, scene.rig.camera)[res.valid])
         msg += f", {args.ply}"
@@ -415,14 +505,30 @@ def _cmd_ablate(args) -> int:
     names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
     select_variant(args.variant)
-    command = "simbench ablate " + " ".join(sys.argv[2:]) if sys.argv[0].endswith("simbench") else "simbench ablate " + " ".join(args.sweep)
+    command = (
+        "simbench ablate " + " ".join(sys.argv[2:])
+        if sys.argv[0].endswith("simbench")
+        else "simbench ablate " + " ".join(args.sweep)
+    )
     for sweep in sweeps:
         t0 = time.perf_counter()
         if args.fresh:
             (Path(args.out) / f"{sweep.name}.runs.jsonl").unlink(missing_ok=True)
-        rows = run_sweep(sweep, out_dir=args.out, cache_dir=None if args.no_cache else args.cache, workers=args.workers, scheduler=args.scheduler, variant=args.variant, progress=lambda s: print(s, flush=True), command=command)
+        rows = run_sweep(
+            sweep,
+            out_dir=args.out,
+            cache_dir=None if args.no_cache else args.cache,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            variant=args.variant,
+            progress=lambda s: print(s, flush=True),
+            command=command,
+        )
         failed = sum(1 for r in rows if r["error"])
-        print(f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> {args.out}/{sweep.name}.csv, .md, .png")
+        print(
+            f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> "
+            f"{args.out}/{sweep.name}.csv, .md, .png"
+        )
     return 0
 
 
@@ -430,9 +536,13 @@ def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark, stage_table
 
     res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene)
-    print(json.dumps(res, indent=2) if args.json else
-          f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({res['scene']}): median {res['median_ms']:.1f} ms, "
-          f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)")
+    print(
+        json.dumps(res, indent=2)
+        if args.json
+        else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({res['scene']}): median "
+        f"{res['median_ms']:.1f} ms, "
+        f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)"
+    )
     if res["stages_ms"] and not args.json:
         print("per stage, mean per decode (row bands run in parallel threads, so the sum exceeds the wall time):")
         print(stage_table(res["stages_ms"]))
@@ -444,7 +554,13 @@ def _cmd_bench(args) -> int:
 def _cmd_reproduce(args) -> int:
     from simbench.experiments.common import RunConfig
     from simbench.device import get_sensor
-    from simbench.experiments.reproduce import check_targets, check_thresholds, load_thresholds, reproduce, write_thresholds
+    from simbench.experiments.reproduce import (
+        check_targets,
+        check_thresholds,
+        load_thresholds,
+        reproduce,
+        write_thresholds,
+    )
     from simbench.variant import select_variant
 
     # everything a user can get wrong is checked before the first render
@@ -453,14 +569,35 @@ def _cmd_reproduce(args) -> int:
         load_thresholds(args.check)
     if args.camera is not None:
         get_sensor(args.camera)
-    overrides = {k: v for k, v in (("seed", args.seed), ("spp", args.spp), ("fig9_repeats", args.repeats), ("sensor", args.camera), ("sampler", args.sampler)) if v is not None}
+    overrides = {
+        k: v
+        for k, v in (
+            ("seed", args.seed),
+            ("spp", args.spp),
+            ("fig9_repeats", args.repeats),
+            ("sensor", args.camera),
+            ("sampler", args.sampler),
+        )
+        if v is not None
+    }
     config = RunConfig.preset(quick=args.quick, **overrides)  # checks spp against the sampler
     if args.decoder:
         config = replace(config, decoder=_decoder_overrides(config.decoder, args.decoder))
     out = args.out or ("results/quick" if args.quick else "results")
     select_variant(args.variant)
-    command = "simbench " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("simbench") else "simbench reproduce " + " ".join(args.targets)
-    metrics = reproduce(args.targets, config=config, out_dir=out, cache_dir=None if args.no_cache else args.cache, progress=lambda s: print(s, flush=True), command=command)
+    command = (
+        "simbench " + " ".join(sys.argv[1:])
+        if sys.argv[0].endswith("simbench")
+        else "simbench reproduce " + " ".join(args.targets)
+    )
+    metrics = reproduce(
+        args.targets,
+        config=config,
+        out_dir=out,
+        cache_dir=None if args.no_cache else args.cache,
+        progress=lambda s: print(s, flush=True),
+        command=command,
+    )
     if args.write_thresholds:
         path = write_thresholds(args.write_thresholds, metrics, margin=args.margin, command=command)
         print(f"wrote thresholds {path}")
@@ -507,7 +644,14 @@ def _cmd_crosstalk(args) -> int:
     text = crosstalk_report({name: srgb for name, (srgb, _) in PAPER_TABLE1.items()})
     print(text)
     if args.out:
-        atomic_write_text(args.out, text.replace("# Projector-to-camera crosstalk matrices", f"# Projector-to-camera crosstalk matrices\n\nMade by `simbench crosstalk --out {args.out}`.", 1))
+        atomic_write_text(
+            args.out,
+            text.replace(
+                "# Projector-to-camera crosstalk matrices",
+                f"# Projector-to-camera crosstalk matrices\n\nMade by `simbench crosstalk --out {args.out}`.",
+                1,
+            ),
+        )
         print(f"wrote {args.out}")
     return 0
 
@@ -517,55 +661,131 @@ def _add_pattern_options(s: argparse.ArgumentParser) -> None:
     s.add_argument("--period", type=_int(4, 16384), default=21, help="fringe period T in projector pixels")
     s.add_argument("--order", type=_int(2, 16), default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
-    s.add_argument("--channels", default="rgb", help="colour channels of code 1, code 0 and the fringe (rgb: the paper's red/green stripes, blue fringe)")
+    s.add_argument(
+        "--channels",
+        default="rgb",
+        help="colour channels of code 1, code 0 and the fringe (rgb: the paper's red/green stripes, blue fringe)",
+    )
 
 
 def _parser() -> argparse.ArgumentParser:
     from simbench.validate import MAX_SIDE_PX
 
     kw = {"formatter_class": _Formatter}
-    p = _Parser(prog="simbench", description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).", **kw)
+    p = _Parser(
+        prog="simbench",
+        description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).",
+        **kw,
+    )
     p.add_argument("--debug", action="store_true", help="show tracebacks")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     s = sub.add_parser("pattern", help="write the colour sequence coded fringe pattern (PNG)", **kw)
     s.add_argument("--out", required=True, help="PNG file to write")
-    s.add_argument("--width", type=_int(1, MAX_SIDE_PX), default=1824, help="pattern width, projector px (the LightCrafter 4500's)")
+    s.add_argument(
+        "--width", type=_int(1, MAX_SIDE_PX), default=1824, help="pattern width, projector px (the LightCrafter 4500's)"
+    )
     s.add_argument("--height", type=_int(1, MAX_SIDE_PX), default=1140, help="pattern height, projector px")
     _add_pattern_options(s)
     s.set_defaults(fn=_cmd_pattern)
 
-    s = sub.add_parser("render", help="render a scene with a depth system: its raw frames, calibration, ground truth, metadata", **kw)
+    s = sub.add_parser(
+        "render", help="render a scene with a depth system: its raw frames, calibration, ground truth, metadata", **kw
+    )
     s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
-    s.add_argument("--system", default="proposed", help=f"depth system (registered: {', '.join(_system_names())}); the others replace the scene's rig with their own")
-    s.add_argument("--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)")
-    s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds files render did not write (e.g. decoded depth)")
+    s.add_argument(
+        "--system",
+        default="proposed",
+        help=f"depth system (registered: {', '.join(_system_names())}); the others replace the scene's rig with their "
+        f"own",
+    )
+    s.add_argument(
+        "--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)"
+    )
+    s.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output folder even if it holds files render did not write (e.g. decoded depth)",
+    )
     _add_render_options(s)
     _add_cache_options(s)
-    s.add_argument("--calibration-frames", action="store_true", help="also record the reference plane under black and each primary (calibration_*.png), which `simbench decode --robust` needs")
-    s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed (every render and noise seed derives from it and a label; all recorded in the manifest)")
+    s.add_argument(
+        "--calibration-frames",
+        action="store_true",
+        help="also record the reference plane under black and each primary (calibration_*.png), which `simbench "
+        "decode --robust` needs",
+    )
+    s.add_argument(
+        "--seed",
+        type=_SEED,
+        default=DEFAULT_SEED,
+        help="base seed (every render and noise seed derives from it and a label; all recorded in the manifest)",
+    )
     s.add_argument("--max-depth", type=_MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
-    s.add_argument("--sensor", "--camera", dest="camera", default="paper", help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) or a sensor TOML file")
+    s.add_argument(
+        "--sensor",
+        "--camera",
+        dest="camera",
+        default="paper",
+        help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) "
+        "or a sensor TOML file",
+    )
     _add_pattern_options(s)
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_render)
 
     s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)", **kw)
-    s.add_argument("capture", help="the capture (PNG/TIFF, or .npy for float images), or a folder written by `simbench render` (any --system; its reference, rig and calibration frames are used)")
+    s.add_argument(
+        "capture",
+        help="the capture (PNG/TIFF, or .npy for float images), or a folder written by `simbench render` (any "
+        "--system; its reference, rig and calibration frames are used)",
+    )
     s.add_argument("--reference", help="reference-plane capture (reference mode)")
     s.add_argument("--rig", help="rig TOML file (required unless CAPTURE is a render folder)")
     s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
     s.add_argument("--ply", help="also write the point cloud as PLY")
     s.add_argument("--debug-dir", help="write every decoder stage here")
-    s.add_argument("--mode", choices=("reference", "calibrated"), default="reference", help="reference: match against the reference plane (paper Sec. 5.4); calibrated: triangulate with the rig")
-    s.add_argument("--z0", type=_float(lo=0.0, hi=100.0, lo_open=True), default=None, help="reference depth, m (default: meta.json beside the reference, else 1.0)")
-    s.add_argument("--near", type=_float(lo=0.0, hi=100.0, lo_open=True), default=0.75, help="working range near end, m")
+    s.add_argument(
+        "--mode",
+        choices=("reference", "calibrated"),
+        default="reference",
+        help="reference: match against the reference plane (paper Sec. 5.4); calibrated: triangulate with the rig",
+    )
+    s.add_argument(
+        "--z0",
+        type=_float(lo=0.0, hi=100.0, lo_open=True),
+        default=None,
+        help="reference depth, m (default: meta.json beside the reference, else 1.0)",
+    )
+    s.add_argument(
+        "--near", type=_float(lo=0.0, hi=100.0, lo_open=True), default=0.75, help="working range near end, m"
+    )
     s.add_argument("--far", type=_float(lo=0.0, hi=100.0, lo_open=True), default=1.75, help="working range far end, m")
     _add_pattern_options(s)
-    s.add_argument("--robust", action="store_true", help="our colour-robust decoder (unmixing, colour normalisation, weighted intensity) instead of the paper's; needs the calibration frames")
-    s.add_argument("--calibration", default=None, help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: the --reference folder)")
-    s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="other decoder parameters, e.g. phase_method=ftp voting=false")
-    s.add_argument("--cache", default=".cache/simbench", help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and decoder code)")
+    s.add_argument(
+        "--robust",
+        action="store_true",
+        help="our colour-robust decoder (unmixing, colour normalisation, weighted intensity) instead of the paper's; "
+        "needs the calibration frames",
+    )
+    s.add_argument(
+        "--calibration",
+        default=None,
+        help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: "
+        "the --reference folder)",
+    )
+    s.add_argument(
+        "--decoder",
+        nargs="*",
+        metavar="NAME=VALUE",
+        help="other decoder parameters, e.g. phase_method=ftp voting=false",
+    )
+    s.add_argument(
+        "--cache",
+        default=".cache/simbench",
+        help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and "
+        "decoder code)",
+    )
     s.add_argument("--no-cache", action="store_true", help="decode the reference plane every time, store nothing")
     s.set_defaults(fn=_cmd_decode)
 
@@ -575,7 +795,12 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
     s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")
     s.add_argument("--gt-column", help="true columns .npy (default: gt_column.npy beside --gt)")
-    s.add_argument("--period", type=_float(lo=2.0, hi=16384.0, lo_open=True), default=21.0, help="fringe period, projector px (a column off by more than half of it is a stripe-order error)")
+    s.add_argument(
+        "--period",
+        type=_float(lo=2.0, hi=16384.0, lo_open=True),
+        default=21.0,
+        help="fringe period, projector px (a column off by more than half of it is a stripe-order error)",
+    )
     s.add_argument("--edge-band", type=_int(0, 1000), default=0, help="exclude pixels this close to depth edges (px)")
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.set_defaults(fn=_cmd_score)
@@ -584,48 +809,90 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="results/demo", help="output folder")
     _add_render_options(s)
     s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed")
-    s.add_argument("--sensor", "--camera", dest="camera", default="minimal", help="sensor model: preset (ideal, minimal, paper) or TOML file")
+    s.add_argument(
+        "--sensor",
+        "--camera",
+        dest="camera",
+        default="minimal",
+        help="sensor model: preset (ideal, minimal, paper) or TOML file",
+    )
     s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_demo)
 
     s = sub.add_parser("reproduce", help="regenerate the paper's Table 1, Table 3, Fig. 9 and figures", **kw)
-    s.add_argument("targets", nargs="*", default=["all"], help="table1, table3, fig9, figures, budget, render_noise, flatness or all (default)")
+    s.add_argument(
+        "targets",
+        nargs="*",
+        default=["all"],
+        help="table1, table3, fig9, figures, budget, render_noise, flatness or all (default)",
+    )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
     s.add_argument("--seed", type=_SEED, default=None, help=f"base seed (default {DEFAULT_SEED})")
     _add_render_options(s, quick_spp=4)
-    s.add_argument("--repeats", type=_int(1, 1000), default=None, help="recordings per Fig. 9 depth (default: 10, 3 with --quick)")
-    s.add_argument("--sensor", "--camera", dest="camera", default=None, help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)")
-    s.add_argument("--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4")
+    s.add_argument(
+        "--repeats", type=_int(1, 1000), default=None, help="recordings per Fig. 9 depth (default: 10, 3 with --quick)"
+    )
+    s.add_argument(
+        "--sensor",
+        "--camera",
+        dest="camera",
+        default=None,
+        help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)",
+    )
+    s.add_argument(
+        "--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4"
+    )
     s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
     s.add_argument("--write-thresholds", help="write a thresholds TOML from this run's metrics")
-    s.add_argument("--margin", type=_float(lo=0.0, hi=10.0), default=0.25, help="relative margin for --write-thresholds")
+    s.add_argument(
+        "--margin", type=_float(lo=0.0, hi=10.0), default=0.25, help="relative margin for --write-thresholds"
+    )
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_reproduce)
 
-    s = sub.add_parser("crosstalk", help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours", **kw)
+    s = sub.add_parser(
+        "crosstalk",
+        help="print the projector-to-camera crosstalk matrices of white and the paper's seven colours",
+        **kw,
+    )
     s.add_argument("--out", help="also write them as Markdown here")
     s.set_defaults(fn=_cmd_crosstalk)
 
-    s = sub.add_parser("ablate", help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)", **kw)
+    s = sub.add_parser(
+        "ablate",
+        help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)",
+        **kw,
+    )
     s.add_argument("sweep", nargs="+", help="sweep TOML file(s), built-in study name(s), or 'builtin'")
     s.add_argument("--out", default="results/ablations", help="output folder")
     s.add_argument("--workers", type=_int(1, 256), default=1, help="local worker processes")
     s.add_argument("--fresh", action="store_true", help="forget finished runs (the run log) and redo every run")
-    s.add_argument("--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead")
+    s.add_argument(
+        "--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead"
+    )
     s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
 
     s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)", **kw)
-    s.add_argument("--system", "--device", dest="device", default="proposed", choices=_system_names(), help="whose decoder")
-    s.add_argument("--scene", default="plane", choices=["plane", "shadow"], help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)")
+    s.add_argument(
+        "--system", "--device", dest="device", default="proposed", choices=_system_names(), help="whose decoder"
+    )
+    s.add_argument(
+        "--scene",
+        default="plane",
+        choices=["plane", "shadow"],
+        help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)",
+    )
     s.add_argument("--repeats", type=_int(1, 100000), default=20, help="timed decodes (after one warm-up)")
-    s.add_argument("--max-ms", type=_float(lo=0.0, lo_open=True), default=None, help="fail when the median exceeds this")
+    s.add_argument(
+        "--max-ms", type=_float(lo=0.0, lo_open=True), default=None, help="fail when the median exceeds this"
+    )
     s.add_argument("--json", action="store_true", help="print the timings as JSON")
     s.set_defaults(fn=_cmd_bench)
     return p
@@ -680,7 +947,11 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - anything else is a bug: say so in one line
         if args.debug:
             raise
-        print(f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback and please report it", file=sys.stderr)
+        print(
+            f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback "
+            f"and please report it",
+            file=sys.stderr,
+        )
         return 1
 
 

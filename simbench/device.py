@@ -26,8 +26,8 @@ lux at 1 m (``A`` = its frustum's cross-section at 1 m, from the rig), split int
 (:func:`simbench.photometry.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
 ``p`` is the radiance ``E_p / pi`` of a white Lambertian surface 1 m in front of it, which the
 camera equation turns into photons per pixel (:func:`simbench.photometry.photons_per_unit_radiance`)
-and the channel's quantum efficiency into electrons (the whole chain: :mod:`simbench.photometry`).  The exposure time is ``auto`` by
-default: what brings the brightest channel of the white reference board at Z0 to
+and the channel's quantum efficiency into electrons (the whole chain: :mod:`simbench.photometry`).
+The exposure time is ``auto`` by default: what brings the brightest channel of the white reference board at Z0 to
 ``auto_exposure_fraction`` of the full well, as an operator would set it once for the rig.
 White balance ``one_push`` sets the red and blue channel gains once, on the same white board
 under the projector's full white, so that its three channels read alike
@@ -98,14 +98,17 @@ class Lens:
 
     def __post_init__(self) -> None:
         v = validate
-        _set(self, {
-            "f_number": v.number(self.f_number, "f_number", lo=0.5, hi=64.0),
-            "transmission": v.number(self.transmission, "transmission", lo=0.0, hi=1.0, lo_open=True),
-            "defocus": v.boolean(self.defocus, "defocus"),
-            "focus_m": v.number(self.focus_m, "focus_m", lo=0.0, lo_open=True),
-            # assumption: |coefficient| <= 10; beyond, Brown-Conrady folds over inside any normal view
-            "distortion": v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0),
-        })
+        _set(
+            self,
+            {
+                "f_number": v.number(self.f_number, "f_number", lo=0.5, hi=64.0),
+                "transmission": v.number(self.transmission, "transmission", lo=0.0, hi=1.0, lo_open=True),
+                "defocus": v.boolean(self.defocus, "defocus"),
+                "focus_m": v.number(self.focus_m, "focus_m", lo=0.0, lo_open=True),
+                # assumption: |coefficient| <= 10; beyond, Brown-Conrady folds over inside any normal view
+                "distortion": v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0),
+            },
+        )
 
     def aperture_m(self, focal_px: float, pixel_pitch_um: float) -> float:
         """Aperture diameter F / N (m) for a device of focal length ``focal_px``."""
@@ -141,25 +144,30 @@ class PhysicalCamera:
 
     def __post_init__(self) -> None:
         v = validate
-        _set(self, {
-            "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
-            "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
-            "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
-            "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0),
-            "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
-            "gain_dn_per_e": v.optional(v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True),
-            "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0),
-            "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0),
-            "prnu": v.number(self.prnu, "prnu", lo=0.0, hi=1.0),
-            "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0),
-            "fixed_pattern_seed": v.integer(self.fixed_pattern_seed, "fixed_pattern_seed", lo=0, hi=2**63 - 1),
-            "exposure_s": v.optional(v.number, self.exposure_s, "exposure_s", lo=0.0, hi=3600.0, lo_open=True),
-            "auto_exposure_fraction": v.number(self.auto_exposure_fraction, "auto_exposure_fraction", lo=0.0, hi=1.0, lo_open=True),
-            "noise": v.boolean(self.noise, "noise"),
-            "cfa": v.choice(self.cfa, "cfa", CFA_PATTERNS),
-            "demosaic": v.choice(self.demosaic, "demosaic", DEMOSAIC_METHODS),
-            "white_balance": v.choice(self.white_balance, "white_balance", WHITE_BALANCE_MODES),
-        })
+        _set(
+            self,
+            {
+                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+                "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
+                "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
+                "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0),
+                "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
+                "gain_dn_per_e": v.optional(v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True),
+                "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0),
+                "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0),
+                "prnu": v.number(self.prnu, "prnu", lo=0.0, hi=1.0),
+                "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0),
+                "fixed_pattern_seed": v.integer(self.fixed_pattern_seed, "fixed_pattern_seed", lo=0, hi=2**63 - 1),
+                "exposure_s": v.optional(v.number, self.exposure_s, "exposure_s", lo=0.0, hi=3600.0, lo_open=True),
+                "auto_exposure_fraction": v.number(
+                    self.auto_exposure_fraction, "auto_exposure_fraction", lo=0.0, hi=1.0, lo_open=True
+                ),
+                "noise": v.boolean(self.noise, "noise"),
+                "cfa": v.choice(self.cfa, "cfa", CFA_PATTERNS),
+                "demosaic": v.choice(self.demosaic, "demosaic", DEMOSAIC_METHODS),
+                "white_balance": v.choice(self.white_balance, "white_balance", WHITE_BALANCE_MODES),
+            },
+        )
 
     @property
     def max_dn(self) -> int:
@@ -186,18 +194,21 @@ class ProjectorModel:
 
     def __post_init__(self) -> None:
         v = validate
-        _set(self, {
-            "lumens": v.number(self.lumens, "lumens", lo=0.0, lo_open=True),
-            "transfer": v.choice(self.transfer, "transfer", TRANSFERS),
-            # assumption: display gammas lie in (0, 10]; 2.2 is the video standard
-            "gamma": v.number(self.gamma, "gamma", lo=0.0, hi=10.0, lo_open=True),
-            "contrast_ratio": v.number(self.contrast_ratio, "contrast_ratio", lo=1.0, allow_inf=True),
-            "dmd": v.choice(self.dmd, "dmd", DMD_LAYOUTS),
-            "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
-            "timing": v.choice(self.timing, "timing", TIMINGS),
-            # assumption: video inputs run at up to a few hundred frames per second
-            "frame_rate_hz": v.number(self.frame_rate_hz, "frame_rate_hz", lo=1.0, hi=1000.0),
-        })
+        _set(
+            self,
+            {
+                "lumens": v.number(self.lumens, "lumens", lo=0.0, lo_open=True),
+                "transfer": v.choice(self.transfer, "transfer", TRANSFERS),
+                # assumption: display gammas lie in (0, 10]; 2.2 is the video standard
+                "gamma": v.number(self.gamma, "gamma", lo=0.0, hi=10.0, lo_open=True),
+                "contrast_ratio": v.number(self.contrast_ratio, "contrast_ratio", lo=1.0, allow_inf=True),
+                "dmd": v.choice(self.dmd, "dmd", DMD_LAYOUTS),
+                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+                "timing": v.choice(self.timing, "timing", TIMINGS),
+                # assumption: video inputs run at up to a few hundred frames per second
+                "frame_rate_hz": v.number(self.frame_rate_hz, "frame_rate_hz", lo=1.0, hi=1000.0),
+            },
+        )
         if not isinstance(self.lens, Lens):
             raise ValueError(f"lens must be a Lens, got {type(self.lens).__name__}")
 
@@ -215,11 +226,14 @@ class SensorModel:
     description: str = ""
 
     def __post_init__(self) -> None:
-        _set(self, {
-            "crosstalk": validate.boolean(self.crosstalk, "crosstalk"),
-            # assumption: room light up to 100x the projector's white at Z0 (daylight on a pico projector)
-            "ambient_ratio": validate.number(self.ambient_ratio, "ambient ratio", lo=0.0, hi=100.0),
-        })
+        _set(
+            self,
+            {
+                "crosstalk": validate.boolean(self.crosstalk, "crosstalk"),
+                # assumption: room light up to 100x the projector's white at Z0 (daylight on a pico projector)
+                "ambient_ratio": validate.number(self.ambient_ratio, "ambient ratio", lo=0.0, hi=100.0),
+            },
+        )
         if isinstance(self.camera, SimpleCamera) and self.crosstalk:
             raise ValueError("spectral crosstalk needs the physical (emva) camera model")
 
@@ -244,7 +258,11 @@ def _build(cls, table: dict, where: str, *, convert: dict | None = None):
     unknown = sorted(set(table) - set(allowed))
     if unknown:
         raise ValueError(f"{where}: unknown key(s) {unknown}; valid keys: {allowed}")
-    required = [f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    required = [
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
     missing = [k for k in required if k not in table]
     if missing:
         raise ValueError(f"{where}: missing key(s) {missing}")
@@ -290,13 +308,20 @@ def sensor_from_dict(data: dict, *, where: str = "sensor") -> SensorModel:
     if model == "simple":
         camera = _build(SimpleCamera, cam, f"{where}.camera")
     elif model == "emva":
-        camera = _build(PhysicalCamera, cam, f"{where}.camera", convert={"exposure_s": _auto_or_number, "qe": tuple, "gain_dn_per_e": _auto_or_number})
+        camera = _build(
+            PhysicalCamera,
+            cam,
+            f"{where}.camera",
+            convert={"exposure_s": _auto_or_number, "qe": tuple, "gain_dn_per_e": _auto_or_number},
+        )
     else:
         raise ValueError(f"{where}.camera.model must be 'emva' or 'simple', got {model!r}")
     prj = dict(_table(data, "projector", where))
     prj_lens = _build(Lens, _table(prj, "lens", f"{where}.projector"), f"{where}.projector.lens")
     prj.pop("lens", None)
-    projector = _build(ProjectorModel, {**prj, "lens": prj_lens}, f"{where}.projector", convert={"contrast_ratio": _inf_or_number})
+    projector = _build(
+        ProjectorModel, {**prj, "lens": prj_lens}, f"{where}.projector", convert={"contrast_ratio": _inf_or_number}
+    )
     spectral = _table(data, "spectral", where)
     ambient = _table(data, "ambient", where)
     for t, allowed, name in ((spectral, ("crosstalk",), "spectral"), (ambient, ("ratio",), "ambient")):
@@ -309,7 +334,15 @@ def sensor_from_dict(data: dict, *, where: str = "sensor") -> SensorModel:
     except ValueError as exc:
         raise ValueError(str(exc)) from None
     try:
-        return SensorModel(name=str(data.get("name", "custom")), camera=camera, camera_lens=cam_lens, projector=projector, crosstalk=crosstalk, ambient_ratio=float(ratio), description=str(data.get("description", "")))
+        return SensorModel(
+            name=str(data.get("name", "custom")),
+            camera=camera,
+            camera_lens=cam_lens,
+            projector=projector,
+            crosstalk=crosstalk,
+            ambient_ratio=float(ratio),
+            description=str(data.get("description", "")),
+        )
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
 
@@ -332,7 +365,10 @@ def sensor_to_dict(sensor: SensorModel) -> dict:
     if sensor.is_physical:
         cam.setdefault("exposure_s", "auto")
     cam["lens"] = lens(sensor.camera_lens)
-    prj = {k: enc(getattr(sensor.projector, k)) for k in ("lumens", "transfer", "gamma", "contrast_ratio", "dmd", "pixel_pitch_um", "timing", "frame_rate_hz")}
+    prj = {
+        k: enc(getattr(sensor.projector, k))
+        for k in ("lumens", "transfer", "gamma", "contrast_ratio", "dmd", "pixel_pitch_um", "timing", "frame_rate_hz")
+    }
     prj["lens"] = lens(sensor.projector.lens)
     return {
         "name": sensor.name,
@@ -386,6 +422,7 @@ def apply_to_rig(rig: Rig, sensor: SensorModel) -> Rig:
 # ---------------------------------------------------------------------------------------
 # effects, one at a time (the error budget and ablations)
 
+
 @dataclass(frozen=True)
 class Effect:
     """One physical effect of a sensor model: ``description`` for tables, ``fields`` the dotted
@@ -396,7 +433,18 @@ class Effect:
     fields: tuple[str, ...]
 
 
-_CAMERA_NOISE = ("noise", "dark_noise_e", "dark_current_e_s", "prnu", "dsnu_e", "fixed_pattern_seed", "bits", "gain_dn_per_e", "offset_dn", "full_well_e")
+_CAMERA_NOISE = (
+    "noise",
+    "dark_noise_e",
+    "dark_current_e_s",
+    "prnu",
+    "dsnu_e",
+    "fixed_pattern_seed",
+    "bits",
+    "gain_dn_per_e",
+    "offset_dn",
+    "full_well_e",
+)
 
 # the effects the error budget and the ablations switch on one at a time; adding one is one entry
 EFFECT_TABLE: dict[str, Effect] = {
@@ -406,11 +454,20 @@ EFFECT_TABLE: dict[str, Effect] = {
     "crosstalk": Effect("spectral crosstalk (LED primaries x camera sensitivities x surface)", ("crosstalk",)),
     "transfer": Effect("projector transfer curve", ("projector.transfer", "projector.gamma")),
     "black_level": Effect("projector black level (finite contrast)", ("projector.contrast_ratio",)),
-    "timing": Effect("projector bit-plane timing against the camera exposure", ("projector.timing", "projector.frame_rate_hz")),
+    "timing": Effect(
+        "projector bit-plane timing against the camera exposure", ("projector.timing", "projector.frame_rate_hz")
+    ),
     "dmd": Effect("DMD diamond pixel layout", ("projector.dmd",)),
-    "camera_defocus": Effect("camera defocus (thin lens)", ("camera_lens.defocus", "camera_lens.focus_m", "camera_lens.f_number")),
-    "projector_defocus": Effect("projector defocus", ("projector.lens.defocus", "projector.lens.focus_m", "projector.lens.f_number")),
-    "distortion": Effect("lens distortion (camera + projector), undistorted by the decoder", ("camera_lens.distortion", "projector.lens.distortion")),
+    "camera_defocus": Effect(
+        "camera defocus (thin lens)", ("camera_lens.defocus", "camera_lens.focus_m", "camera_lens.f_number")
+    ),
+    "projector_defocus": Effect(
+        "projector defocus", ("projector.lens.defocus", "projector.lens.focus_m", "projector.lens.f_number")
+    ),
+    "distortion": Effect(
+        "lens distortion (camera + projector), undistorted by the decoder",
+        ("camera_lens.distortion", "projector.lens.distortion"),
+    ),
     "ambient": Effect("ambient light", ("ambient_ratio",)),
 }
 # name -> description (tables, help texts)
@@ -428,7 +485,9 @@ def _replace_path(obj, path: str, value):
     return dataclasses.replace(obj, **{head: _replace_path(getattr(obj, head), rest, value) if rest else value})
 
 
-def with_effects(base: SensorModel, source: SensorModel, effects: Iterable[str], *, name: str | None = None) -> SensorModel:
+def with_effects(
+    base: SensorModel, source: SensorModel, effects: Iterable[str], *, name: str | None = None
+) -> SensorModel:
     """``base`` with the named effects (:data:`EFFECT_TABLE`) taken from ``source`` (both
     physical): every field of each effect copied from ``source``."""
     if not (base.is_physical and source.is_physical):
@@ -440,4 +499,8 @@ def with_effects(base: SensorModel, source: SensorModel, effects: Iterable[str],
     for e in effects:
         for path in EFFECT_TABLE[e].fields:
             out = _replace_path(out, path, _get_path(source, path))
-    return dataclasses.replace(out, name=name or f"{base.name}+{'+'.join(effects)}", description=f"{base.name} with {', '.join(effects)} from {source.name}")
+    return dataclasses.replace(
+        out,
+        name=name or f"{base.name}+{'+'.join(effects)}",
+        description=f"{base.name} with {', '.join(effects)} from {source.name}",
+    )

@@ -115,11 +115,17 @@ def _check_replaceable(folder: Path, manifest: str, overwrite: bool) -> None:
         except (ValueError, AttributeError, UnicodeDecodeError):
             listed = None
     if listed is None:
-        raise ValueError(f"{folder} exists, is not empty and was not written by this command (no {manifest}); choose another output folder")
+        raise ValueError(
+            f"{folder} exists, is not empty and was not written by this command (no {manifest}); choose another output "
+            f"folder"
+        )
     extra = [e for e in entries if e not in listed]
     if extra and not overwrite:
         shown = ", ".join(extra[:4]) + (", ..." if len(extra) > 4 else "")
-        raise ValueError(f"{folder} holds files this command did not write ({shown}); pass --overwrite to replace the folder whole, or choose another output folder")
+        raise ValueError(
+            f"{folder} holds files this command did not write ({shown}); pass --overwrite to replace the folder whole, "
+            f"or choose another output folder"
+        )
 
 
 def check_output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> None:
@@ -370,9 +376,7 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
         raise ValueError(f"{path}: expected an RGB image, got shape {img.shape}")
     if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
         h, w = expected_size_hw
-        raise ValueError(
-            f"{path}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the camera is {w}x{h}"
-        )
+        raise ValueError(f"{path}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the camera is {w}x{h}")
     return np.ascontiguousarray(img)
 
 

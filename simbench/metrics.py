@@ -22,7 +22,9 @@ if TYPE_CHECKING:
 __all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth", "score"]
 
 
-def edge_band(gt_depth_m: np.ndarray, *, object_id: np.ndarray | None = None, band_px: int, rel_jump: float = 0.02) -> np.ndarray:
+def edge_band(
+    gt_depth_m: np.ndarray, *, object_id: np.ndarray | None = None, band_px: int, rel_jump: float = 0.02
+) -> np.ndarray:
     """Pixels within ``band_px`` of a depth discontinuity.
 
     A discontinuity lies between 4-neighbours whose ground-truth depths differ by more than
@@ -135,7 +137,9 @@ def points_from_depth(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
 MIN_PLANE_POINTS = 100
 
 
-def plane_fit_error(depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray | None = None, min_points: int = MIN_PLANE_POINTS) -> dict:
+def plane_fit_error(
+    depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray | None = None, min_points: int = MIN_PLANE_POINTS
+) -> dict:
     """Paper Table 1 protocol: fit a plane to the measured points by least squares and report
     the mean absolute (orthogonal) residual in mm.
 
@@ -159,7 +163,12 @@ def plane_fit_error(depth_m: np.ndarray, camera: Intrinsics, *, mask: np.ndarray
         ok &= mask
     p = pts[ok]
     if len(p) < max(3, min_points):
-        return {"mean_abs_residual_mm": float("nan"), "rms_residual_mm": float("nan"), "normal": [float("nan")] * 3, "n_points": int(len(p))}
+        return {
+            "mean_abs_residual_mm": float("nan"),
+            "rms_residual_mm": float("nan"),
+            "normal": [float("nan")] * 3,
+            "n_points": int(len(p)),
+        }
     c = p.mean(axis=0)
     q = p - c
     # the least-squares plane's normal: the scatter matrix's eigenvector of least eigenvalue
@@ -222,7 +231,15 @@ def score(
     """
     region = gt.lit if region is None else region
     with_columns = column_px is not None and getattr(gt, "column_px", None) is not None
-    m = depth_errors(depth_m, gt.depth_m, region=region, exclude=exclude, column_px=column_px if with_columns else None, gt_column_px=gt.column_px if with_columns else None, period_px=period_px)
+    m = depth_errors(
+        depth_m,
+        gt.depth_m,
+        region=region,
+        exclude=exclude,
+        column_px=column_px if with_columns else None,
+        gt_column_px=gt.column_px if with_columns else None,
+        period_px=period_px,
+    )
     fit = plane_fit_error(depth_m, camera, mask=region)
     out = {
         "plane_mae_mm": fit["mean_abs_residual_mm"],
@@ -233,11 +250,26 @@ def score(
         "completeness": m["completeness"],
     }
     if with_columns:
-        out.update({"stripe_order_errors": m["stripe_order_errors"], "stripe_order_error_rate": m["stripe_order_error_rate"]})
+        out.update(
+            {"stripe_order_errors": m["stripe_order_errors"], "stripe_order_error_rate": m["stripe_order_error_rate"]}
+        )
     if detail:
-        out.update({"gt_median_mm": m["median_mm"], "gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], "n_scored": m["n_scored"]})
+        out.update(
+            {
+                "gt_median_mm": m["median_mm"],
+                "gt_p95_mm": m["p95_mm"],
+                "outlier_share": m["outlier_share"],
+                "n_scored": m["n_scored"],
+            }
+        )
     if edge_band_px > 0:
         band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
         off_edges = depth_errors(depth_m, gt.depth_m, region=region, exclude=band)
-        out.update({"gt_p95_mm": m["p95_mm"], "outlier_share": m["outlier_share"], f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"]})
+        out.update(
+            {
+                "gt_p95_mm": m["p95_mm"],
+                "outlier_share": m["outlier_share"],
+                f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"],
+            }
+        )
     return out

@@ -25,6 +25,7 @@ __all__ = [
     "load_scene_dict",
 ]
 
+
 def _pad_factor(c_px: float, size: int, scale: int) -> tuple[int, int, float]:
     """Fine-pixel padding (left, total) that centres principal point ``c_px`` at upsampling
     ``scale``, and the principal point actually realised (OpenCV px of the original grid)."""
@@ -82,7 +83,12 @@ def _padding(projector: Intrinsics) -> tuple[int, tuple[int, int], tuple[int, in
         if best is None or err < best[0] - 1e-9:
             best = (err, scale, (lx, tx), (ly, ty), cx, cy)
     _, scale, pad_x, pad_y, cx, cy = best
-    return scale, pad_x, pad_y, Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy, projector.distortion)
+    return (
+        scale,
+        pad_x,
+        pad_y,
+        Intrinsics(projector.width_px, projector.height_px, projector.focal_px, cx, cy, projector.distortion),
+    )
 
 
 def realised_rig(rig: Rig) -> Rig:
@@ -128,16 +134,22 @@ def check_sampler(sampler: str, spp: int) -> None:
     if sampler in ("stratified", "multijitter") and root * root != spp:
         raise ValueError(f"the {sampler} sampler needs a square sample count (4, 9, 16, 25 ...), got {spp}")
     if sampler == "orthogonal" and not (root * root == spp and _is_prime(root)):
-        raise ValueError(f"the orthogonal sampler needs a sample count that is a prime squared (4, 9, 25, 49 ...), got {spp}")
+        raise ValueError(
+            f"the orthogonal sampler needs a sample count that is a prime squared (4, 9, 25, 49 ...), got {spp}"
+        )
     if sampler == "ldsampler" and (spp & (spp - 1) or root * root != spp):
-        raise ValueError(f"the ldsampler needs a sample count that is a square power of two (4, 16, 64, 256 ...), got {spp}")
+        raise ValueError(
+            f"the ldsampler needs a sample count that is a square power of two (4, 16, 64, 256 ...), got {spp}"
+        )
 
 
 def _is_prime(n: int) -> bool:
     return n >= 2 and all(n % k for k in range(2, math.isqrt(n) + 1))
 
 
-def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int, sampler: str = "independent") -> tuple[dict, Rig]:
+def mitsuba_scene(
+    scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_depth: int, sampler: str = "independent"
+) -> tuple[dict, Rig]:
     """Mitsuba scene dictionary: camera, projector emitter with the pattern, objects, ambient.
 
     ``drive=None`` leaves out the projector (the ambient light alone, or geometry only).
@@ -179,7 +191,10 @@ def mitsuba_scene(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, max_d
     if scene.camera_lens is not None and drive is not None:
         # Mitsuba's thin lens has no principal-point offset
         if d["sensor"]["principal_point_offset_x"] or d["sensor"]["principal_point_offset_y"]:
-            raise ValueError(f"scene {scene.name!r}: camera defocus (thin lens) needs a centred camera principal point, got ({cam.cx_px}, {cam.cy_px})")
+            raise ValueError(
+                f"scene {scene.name!r}: camera defocus (thin lens) needs a centred camera principal point, got "
+                f"({cam.cx_px}, {cam.cy_px})"
+            )
         aperture_radius_m, focus_m = scene.camera_lens
         s = d["sensor"]
         del s["principal_point_offset_x"], s["principal_point_offset_y"]
@@ -219,5 +234,3 @@ def load_scene_dict(mi: ModuleType, d: dict, scene: SceneSpec) -> object:
         for i, obj in enumerate(scene.objects):
             msg = msg.replace(f'"obj{i:03d}"', f"object {obj.name!r}")
         raise ValueError(f"scene {scene.name!r}: Mitsuba could not load it: {msg}") from None
-
-

@@ -71,7 +71,9 @@ def distort_normalized(x: np.ndarray, y: np.ndarray, distortion: Sequence[float]
     return xd, yd
 
 
-def undistort_normalized(xd: np.ndarray, yd: np.ndarray, distortion: Sequence[float], *, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+def undistort_normalized(
+    xd: np.ndarray, yd: np.ndarray, distortion: Sequence[float], *, iterations: int = 30
+) -> tuple[np.ndarray, np.ndarray]:
     """Invert :func:`distort_normalized` by fixed-point iteration (OpenCV's method); converges
     for the moderate distortion of measurement lenses (tested to 1e-9 within the image)."""
     k1, k2, p1, p2, k3 = _coeffs(distortion)
@@ -179,7 +181,9 @@ def distorted_projector_drive(drive: np.ndarray, intr: Intrinsics) -> np.ndarray
     return undistort_image(drive, intr, interpolation="linear")
 
 
-def undistort_projector_columns(column_px: np.ndarray, row_norm_y: np.ndarray, intr: Intrinsics, *, iterations: int = 8) -> np.ndarray:
+def undistort_projector_columns(
+    column_px: np.ndarray, row_norm_y: np.ndarray, intr: Intrinsics, *, iterations: int = 8
+) -> np.ndarray:
     """Ideal-pinhole projector columns from decoded DMD columns.
 
     In a rectified rig (parallel axes, baseline along x) a camera pixel with normalised
@@ -255,7 +259,11 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     for k, s in enumerate(levels):
         if used[k] == 0 and (k == 0 or used[k - 1] == 0):
             continue  # no pixel interpolates from this level
-        cur = src if s == 0.0 else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
+        cur = (
+            src
+            if s == 0.0
+            else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
+        )
         if cur.ndim == 2 and src.ndim == 3:
             cur = cur[..., None]
         w_lo = np.where(lo == k, 1.0 - frac, 0.0).astype(np.float32)

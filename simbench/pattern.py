@@ -121,8 +121,7 @@ def window_positions(sequence: np.ndarray, *, order: int, alphabet: int = 2) -> 
             code = code * alphabet + int(seq[(q + j) % length])
         if table[code] != -1:
             raise ValueError(
-                f"window at position {q} repeats the one at {table[code]}: "
-                "the sequence cannot locate stripes uniquely"
+                f"window at position {q} repeats the one at {table[code]}: the sequence cannot locate stripes uniquely"
             )
         table[code] = q
     return table
@@ -166,12 +165,18 @@ class PatternSpec:
         check_channels(self.channels)
         if isinstance(self.size_hw, (str, bytes)) or len(self.size_hw) != 2:
             raise ValueError(f"pattern size_hw must be (height, width), got {self.size_hw!r}")
-        w, h = validate.image_size(self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height"))
+        w, h = validate.image_size(
+            self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height")
+        )
         object.__setattr__(self, "size_hw", (h, w))
-        object.__setattr__(self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX))
+        object.__setattr__(
+            self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
+        )
         object.__setattr__(self, "order", validate.integer(self.order, "order", lo=2, hi=16))
         object.__setattr__(self, "dc", validate.number(self.dc, "dc", lo=0.0, hi=1.0))
-        object.__setattr__(self, "amplitude", validate.number(self.amplitude, "amplitude", lo=0.0, hi=0.5, lo_open=True))
+        object.__setattr__(
+            self, "amplitude", validate.number(self.amplitude, "amplitude", lo=0.0, hi=0.5, lo_open=True)
+        )
         if not (0.0 <= self.dc - self.amplitude and self.dc + self.amplitude <= 1.0):
             raise ValueError(
                 f"dc={self.dc} and amplitude={self.amplitude} leave [0, 1]: "
@@ -270,7 +275,9 @@ def fringe_pattern(spec: PatternSpec) -> np.ndarray:
     seq = spec.codes()
     code = seq[(np.arange(w) // spec.period_px) % seq.size].astype(np.float64)
     row = np.empty((w, 3))
-    row[:, list(check_channels(spec.channels))] = np.stack([code * intensity, (1.0 - code) * intensity, intensity], axis=-1)
+    row[:, list(check_channels(spec.channels))] = np.stack(
+        [code * intensity, (1.0 - code) * intensity, intensity], axis=-1
+    )
     return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32)
 
 

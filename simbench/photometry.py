@@ -63,7 +63,13 @@ def photons_per_unit_radiance(
     ----------
     .. [1] EMVA Standard 1288, Release 4.0, 2021, Sec. 2 (the camera equation).
     """
-    for name, v in (("irradiance_1m_w_m2", irradiance_1m_w_m2), ("wavelength_nm", wavelength_nm), ("f_number", f_number), ("pixel_pitch_um", pixel_pitch_um), ("exposure_s", exposure_s)):
+    for name, v in (
+        ("irradiance_1m_w_m2", irradiance_1m_w_m2),
+        ("wavelength_nm", wavelength_nm),
+        ("f_number", f_number),
+        ("pixel_pitch_um", pixel_pitch_um),
+        ("exposure_s", exposure_s),
+    ):
         if not v > 0:
             raise ValueError(f"{name} must be > 0, got {v}")
     if not 0 < lens_transmission <= 1:
@@ -114,7 +120,14 @@ def electrons_per_radiance_s(sensor: SensorModel, rig: Rig) -> np.ndarray:
     lens = sensor.camera_lens
     photons = np.array(
         [
-            photons_per_unit_radiance(irradiance_1m_w_m2=e, wavelength_nm=wl, f_number=lens.f_number, pixel_pitch_um=cam.pixel_pitch_um, exposure_s=1.0, lens_transmission=lens.transmission)
+            photons_per_unit_radiance(
+                irradiance_1m_w_m2=e,
+                wavelength_nm=wl,
+                f_number=lens.f_number,
+                pixel_pitch_um=cam.pixel_pitch_um,
+                exposure_s=1.0,
+                lens_transmission=lens.transmission,
+            )
             for e, wl in zip(irr, PRIMARY_PEAKS_NM)
         ]
     )
@@ -129,7 +142,9 @@ def _reference_matrix(sensor: SensorModel, albedo: float) -> np.ndarray:
     return albedo * np.eye(3)
 
 
-def _white_board_electrons_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float) -> np.ndarray:
+def _white_board_electrons_s(
+    sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float
+) -> np.ndarray:
     """Electrons per second in each camera channel from the white board at Z0 under the
     projector's full white, shape (3,)."""
     rate = electrons_per_radiance_s(sensor, rig)
@@ -137,7 +152,9 @@ def _white_board_electrons_s(sensor: SensorModel, rig: Rig, *, reference_depth_m
     return (k * rate[None, :]).sum(axis=1) * projector_scale / reference_depth_m**2
 
 
-def white_balance_gains(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> np.ndarray:
+def white_balance_gains(
+    sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0
+) -> np.ndarray:
     """The camera's analogue gain per colour channel relative to green, shape (3,).
 
     ``off``: (1, 1, 1).  ``one_push``: the Flea3's One Push on the white reference board at Z0
@@ -150,11 +167,19 @@ def white_balance_gains(sensor: SensorModel, rig: Rig, *, reference_depth_m: flo
     cam = sensor.camera
     if not isinstance(cam, PhysicalCamera) or cam.white_balance == "off":
         return np.ones(3)
-    board = _white_board_electrons_s(sensor, rig, reference_depth_m=reference_depth_m, reference_albedo=reference_albedo, projector_scale=projector_scale)
+    board = _white_board_electrons_s(
+        sensor,
+        rig,
+        reference_depth_m=reference_depth_m,
+        reference_albedo=reference_albedo,
+        projector_scale=projector_scale,
+    )
     return board[1] / board
 
 
-def exposure_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0) -> float:
+def exposure_s(
+    sensor: SensorModel, rig: Rig, *, reference_depth_m: float, reference_albedo: float, projector_scale: float = 1.0
+) -> float:
     """The camera's exposure time: the configured one, or auto exposure (module docstring),
     which brings the brightest white-balanced channel of the board to the set fraction."""
     cam = sensor.camera
@@ -162,7 +187,11 @@ def exposure_s(sensor: SensorModel, rig: Rig, *, reference_depth_m: float, refer
         raise ValueError("exposure time needs the physical (emva) camera model")
     if cam.exposure_s is not None:
         return cam.exposure_s
-    kw = {"reference_depth_m": reference_depth_m, "reference_albedo": reference_albedo, "projector_scale": projector_scale}
+    kw = {
+        "reference_depth_m": reference_depth_m,
+        "reference_albedo": reference_albedo,
+        "projector_scale": projector_scale,
+    }
     board = _white_board_electrons_s(sensor, rig, **kw) * white_balance_gains(sensor, rig, **kw)
     return float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
 

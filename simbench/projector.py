@@ -32,7 +32,16 @@ import numpy as np
 
 from simbench.optics import blur_sigma_px, depth_varying_blur
 
-__all__ = ["TRANSFERS", "TIMINGS", "DMD_LAYOUTS", "transfer_curve", "video_bitplane_weights", "dmd_layout", "defocus_pattern", "emitted_pattern"]
+__all__ = [
+    "TRANSFERS",
+    "TIMINGS",
+    "DMD_LAYOUTS",
+    "transfer_curve",
+    "video_bitplane_weights",
+    "dmd_layout",
+    "defocus_pattern",
+    "emitted_pattern",
+]
 
 TRANSFERS = ("linear", "gamma")
 TIMINGS = ("triggered", "video")
@@ -75,7 +84,14 @@ def video_bitplane_weights(*, exposure_s: float, frame_rate_hz: float, phase: fl
     return weights
 
 
-def transfer_curve(pattern: np.ndarray, *, transfer: str, gamma: float = 2.2, contrast_ratio: float = math.inf, bitplane_weights: np.ndarray | None = None) -> np.ndarray:
+def transfer_curve(
+    pattern: np.ndarray,
+    *,
+    transfer: str,
+    gamma: float = 2.2,
+    contrast_ratio: float = math.inf,
+    bitplane_weights: np.ndarray | None = None,
+) -> np.ndarray:
     """Relative emitted light per channel for an 8-bit pattern.
 
     Parameters
@@ -152,7 +168,9 @@ def dmd_layout(drive: np.ndarray, *, layout: str) -> np.ndarray:
     return out
 
 
-def defocus_pattern(drive: np.ndarray, distance_m: np.ndarray, *, aperture_m: float, focal_px: float, focus_m: float) -> np.ndarray:
+def defocus_pattern(
+    drive: np.ndarray, distance_m: np.ndarray, *, aperture_m: float, focal_px: float, focus_m: float
+) -> np.ndarray:
     """Defocus of the projector lens: blur the DMD image, at each projector pixel, by the blur
     circle of the surface it lights (thin lens, :mod:`simbench.optics`).
 
@@ -191,5 +209,7 @@ def emitted_pattern(
     ndarray, shape (H, W, 3), float32 in [0, 1] (above 1 where a video-mode exposure
     collects more than its share of a plane)
     """
-    v = transfer_curve(pattern, transfer=transfer, gamma=gamma, contrast_ratio=contrast_ratio, bitplane_weights=bitplane_weights)
+    v = transfer_curve(
+        pattern, transfer=transfer, gamma=gamma, contrast_ratio=contrast_ratio, bitplane_weights=bitplane_weights
+    )
     return dmd_layout(v, layout=layout)

@@ -14,7 +14,9 @@ from simbench.scene import SceneSpec
 __all__ = ["render_radiance"]
 
 
-def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent") -> np.ndarray:
+def render_radiance(
+    scene: SceneSpec, drive: np.ndarray | None, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent"
+) -> np.ndarray:
     """Path-traced radiance reaching the camera, lit by the projector showing ``drive`` and by
     the scene's ambient light.
 
@@ -45,5 +47,3 @@ def render_radiance(scene: SceneSpec, drive: np.ndarray | None, *, spp: int, see
     d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth, sampler=sampler)
     img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
     return np.array(img, dtype=np.float32)
-
-

@@ -84,7 +84,14 @@ class Intrinsics:
         cx = v.number(self.cx_px, "cx_px", lo=-w, hi=2.0 * w)
         cy = v.number(self.cy_px, "cy_px", lo=-h, hi=2.0 * h)
         d = v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0)
-        for name, value in (("width_px", w), ("height_px", h), ("focal_px", f), ("cx_px", cx), ("cy_px", cy), ("distortion", d)):
+        for name, value in (
+            ("width_px", w),
+            ("height_px", h),
+            ("focal_px", f),
+            ("cx_px", cx),
+            ("cy_px", cy),
+            ("distortion", d),
+        ):
             object.__setattr__(self, name, value)
 
     @property
@@ -107,9 +114,7 @@ class Intrinsics:
     @property
     def matrix(self) -> np.ndarray:
         """The 3x3 OpenCV camera matrix K."""
-        return np.array(
-            [[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]]
-        )
+        return np.array([[self.focal_px, 0.0, self.cx_px], [0.0, self.focal_px, self.cy_px], [0.0, 0.0, 1.0]])
 
     @property
     def fov_x_deg(self) -> float:
@@ -151,7 +156,9 @@ class Rig:
     def __post_init__(self) -> None:
         # assumption: a projector within 10 m of the camera; angles within one turn
         object.__setattr__(self, "position_m", validate.numbers(self.position_m, "position_m", 3, lo=-10.0, hi=10.0))
-        object.__setattr__(self, "rotation_deg", validate.numbers(self.rotation_deg, "rotation_deg", 3, lo=-360.0, hi=360.0))
+        object.__setattr__(
+            self, "rotation_deg", validate.numbers(self.rotation_deg, "rotation_deg", 3, lo=-360.0, hi=360.0)
+        )
         for name in ("camera", "projector"):
             if not isinstance(getattr(self, name), Intrinsics):
                 raise ValueError(f"{name} must be Intrinsics, got {type(getattr(self, name)).__name__}")
@@ -204,8 +211,17 @@ def scale_camera(rig: Rig, factor: float) -> Rig:
     cam = rig.camera
     w, h = cam.width_px * factor, cam.height_px * factor
     if not factor > 0 or w != int(w) or h != int(h):
-        raise ValueError(f"camera scale {factor} must give whole image sizes (camera is {cam.width_px}x{cam.height_px})")
-    scaled = Intrinsics(int(w), int(h), cam.focal_px * factor, (cam.cx_px + 0.5) * factor - 0.5, (cam.cy_px + 0.5) * factor - 0.5, cam.distortion)
+        raise ValueError(
+            f"camera scale {factor} must give whole image sizes (camera is {cam.width_px}x{cam.height_px})"
+        )
+    scaled = Intrinsics(
+        int(w),
+        int(h),
+        cam.focal_px * factor,
+        (cam.cx_px + 0.5) * factor - 0.5,
+        (cam.cy_px + 0.5) * factor - 0.5,
+        cam.distortion,
+    )
     suffix = f"@{factor:g}x" if factor != 1 else ""
     return Rig(scaled, rig.projector, rig.position_m, rig.rotation_deg, rig.name + suffix)
 
@@ -219,9 +235,7 @@ def get_rig(name_or_path: str | Path, *, base_dir: Path | None = None) -> Rig:
     if base_dir is not None and not path.is_absolute():
         path = base_dir / path
     if path.suffix.lower() != ".toml":
-        raise ValueError(
-            f"unknown rig {key!r}: give a preset ({', '.join(sorted(RIG_PRESETS))}) or a .toml file"
-        )
+        raise ValueError(f"unknown rig {key!r}: give a preset ({', '.join(sorted(RIG_PRESETS))}) or a .toml file")
     return load_rig(path)
 
 
@@ -280,7 +294,11 @@ def rig_from_dict(data: dict, *, where: str = "rig") -> Rig:
 def rig_to_dict(rig: Rig) -> dict:
     def intr(i: Intrinsics) -> dict:
         # distortion only when present: ideal rigs keep their files (and cache keys) unchanged
-        return {k: (list(getattr(i, k)) if k == "distortion" else getattr(i, k)) for k in _INTR_KEYS if k != "distortion" or i.has_distortion}
+        return {
+            k: (list(getattr(i, k)) if k == "distortion" else getattr(i, k))
+            for k in _INTR_KEYS
+            if k != "distortion" or i.has_distortion
+        }
 
     return {
         "name": rig.name,
@@ -360,7 +378,9 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
     return prj.focal_px * x + prj.cx_px, prj.focal_px * y + prj.cy_px, z
 
 
-def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None) -> np.ndarray:
+def triangulate_columns(
+    column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None
+) -> np.ndarray:
     """Depth (camera z, metres) where each camera pixel's ray meets its projector column's plane.
 
     Parameters
@@ -387,7 +407,9 @@ def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = N
         from simbench.optics import undistort_projector_columns
 
         if not rig.is_rectified:
-            raise ValueError("triangulating through projector distortion needs a rectified rig (parallel axes, baseline along +x)")
+            raise ValueError(
+                "triangulating through projector distortion needs a rectified rig (parallel axes, baseline along +x)"
+            )
         col = undistort_projector_columns(col, ry, prj)
     # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f.
     a = (col - prj.cx_px) / prj.focal_px
@@ -402,7 +424,9 @@ def triangulate_columns(column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = N
     return np.where(np.isfinite(z) & (z > 0), z, np.nan)
 
 
-def projector_column_at_depth(depth_m: float | np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None) -> np.ndarray:
+def projector_column_at_depth(
+    depth_m: float | np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None
+) -> np.ndarray:
     """Projector column lighting each camera pixel if the surface there were at ``depth_m``.
 
     ``depth_m`` may be a scalar (a fronto-parallel plane) or an (H, W) map.

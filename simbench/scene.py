@@ -104,7 +104,16 @@ BUDGET_BOW_M_PER_M = 0.0005
 BUDGET_WAVINESS_M = 0.00005
 
 
-def board_form_m(x_m: np.ndarray, y_m: np.ndarray, *, size_m: tuple[float, float], bow_m_per_m: float = 0.0, waviness_m: float = 0.0, waviness_period_m: float = WAVINESS_PERIOD_M, waviness_phase_rad: float = 0.0) -> np.ndarray:
+def board_form_m(
+    x_m: np.ndarray,
+    y_m: np.ndarray,
+    *,
+    size_m: tuple[float, float],
+    bow_m_per_m: float = 0.0,
+    waviness_m: float = 0.0,
+    waviness_period_m: float = WAVINESS_PERIOD_M,
+    waviness_phase_rad: float = 0.0,
+) -> np.ndarray:
     """Height of a board's surface above its nominal plane (towards the camera), metres.
 
     ``x_m, y_m`` are in the board's own frame (centre 0, extent ``size_m``).  The bow is a
@@ -131,7 +140,9 @@ def _board_form(d: dict, where: str) -> dict:
     p = {}
     bow = validate.number(d.get("bow_m_per_m", 0.0), f"{where}: bow_m_per_m", lo=-MAX_FORM_M, hi=MAX_FORM_M)
     wav = validate.number(d.get("waviness_m", 0.0), f"{where}: waviness_m", lo=0.0, hi=MAX_FORM_M)
-    period = validate.number(d.get("waviness_period_m", WAVINESS_PERIOD_M), f"{where}: waviness_period_m", lo=0.001, hi=10.0)
+    period = validate.number(
+        d.get("waviness_period_m", WAVINESS_PERIOD_M), f"{where}: waviness_period_m", lo=0.001, hi=10.0
+    )
     phase = validate.number(d.get("waviness_phase_rad", 0.0), f"{where}: waviness_phase_rad", lo=-100.0, hi=100.0)
     if bow:
         p["bow_m_per_m"] = bow
@@ -147,7 +158,10 @@ def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
     decoding curve (IEC 61966-2-1) and the paint range above: pure red (255, 0, 0) becomes
     (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
     """
-    v = np.asarray(validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0), dtype=np.float64)
+    v = np.asarray(
+        validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0),
+        dtype=np.float64,
+    )
     c = v / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
@@ -227,7 +241,9 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
     try:
         given = [k for k in ("rgb", "srgb8", "spectrum") if k in d]
         if len(given) > 1:
-            raise ValueError(f"give one of rgb (reflectance), srgb8 (paint colour) or spectrum (measured), not {' and '.join(given)}")
+            raise ValueError(
+                f"give one of rgb (reflectance), srgb8 (paint colour) or spectrum (measured), not {' and '.join(given)}"
+            )
         spectrum = None
         if "spectrum" in d:
             from simbench.spectral import measured_linear_srgb
@@ -360,8 +376,12 @@ class Placement:
     def __post_init__(self) -> None:
         object.__setattr__(self, "depth_m", validate.number(self.depth_m, "placement depth_m", lo=0.0, hi=1.0))
         object.__setattr__(self, "tilt_deg", validate.number(self.tilt_deg, "placement tilt_deg", lo=0.0, hi=45.0))
-        object.__setattr__(self, "bow_m_per_m", validate.number(self.bow_m_per_m, "board bow_m_per_m", lo=0.0, hi=MAX_FORM_M))
-        object.__setattr__(self, "waviness_m", validate.number(self.waviness_m, "board waviness_m", lo=0.0, hi=MAX_FORM_M))
+        object.__setattr__(
+            self, "bow_m_per_m", validate.number(self.bow_m_per_m, "board bow_m_per_m", lo=0.0, hi=MAX_FORM_M)
+        )
+        object.__setattr__(
+            self, "waviness_m", validate.number(self.waviness_m, "board waviness_m", lo=0.0, hi=MAX_FORM_M)
+        )
 
 
 def board_form(*, bow_m_per_m: float, waviness_m: float, rng: RngLike) -> dict:
@@ -378,7 +398,9 @@ def board_form(*, bow_m_per_m: float, waviness_m: float, rng: RngLike) -> dict:
     return form
 
 
-def place_objects(scene: SceneSpec, names: Iterable[str], *, placement: Placement, rng: RngLike) -> tuple[SceneSpec, dict]:
+def place_objects(
+    scene: SceneSpec, names: Iterable[str], *, placement: Placement, rng: RngLike
+) -> tuple[SceneSpec, dict]:
     """``scene`` with each named object moved as a lab would have placed it: its own seeded
     depth offset and tilt (:class:`Placement`), independent of the reference plane.  Planes,
     boxes and meshes tilt about their own x and y axes (a mesh about its file's origin); a
@@ -436,7 +458,14 @@ def _bsdf(mat: Material) -> dict:
     if mat.kind == "plastic":
         # polypropylene-like coating (IOR 1.49); nonlinear=False: the base colour is the
         # reflectance the user asked for, not darkened by internal scattering
-        inner = {"type": "roughplastic", "distribution": "ggx", "alpha": mat.roughness, "int_ior": 1.49, "nonlinear": False, "diffuse_reflectance": rgb}
+        inner = {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": mat.roughness,
+            "int_ior": 1.49,
+            "nonlinear": False,
+            "diffuse_reflectance": rgb,
+        }
         if mat.specular_rgb != (1.0, 1.0, 1.0):
             inner["specular_reflectance"] = {"type": "rgb", "value": list(mat.specular_rgb)}
     else:
@@ -509,7 +538,9 @@ def _plane_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
 
 
 def _box_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
-    tw = _to_world(mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2)
+    tw = _to_world(
+        mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2
+    )
     return {"type": "cube", "to_world": tw, "bsdf": bsdf}
 
 
@@ -520,7 +551,13 @@ def _sphere_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
 def _mesh_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
     path = obj.get("file")
     tw = _to_world(mi, translate=obj.get("translate_m"), rotation_deg=obj.get("rotation_deg"), scale=obj.get("scale"))
-    return {"type": Path(path).suffix.lower()[1:], "filename": path, "to_world": tw, "bsdf": bsdf, "face_normals": False}
+    return {
+        "type": Path(path).suffix.lower()[1:],
+        "filename": path,
+        "to_world": tw,
+        "bsdf": bsdf,
+        "face_normals": False,
+    }
 
 
 @dataclass(frozen=True)
@@ -542,7 +579,9 @@ OBJECT_KIND_TABLE: dict[str, ObjectKind] = {
     "plane": ObjectKind(("center_m", "size_m", "rotation_deg", *BOARD_FORM_KEYS), _parse_plane, _plane_to_mitsuba),
     "box": ObjectKind(("center_m", "size_m", "rotation_deg"), _parse_box, _box_to_mitsuba),
     "sphere": ObjectKind(("center_m", "radius_m"), _parse_sphere, _sphere_to_mitsuba, tilts=False),
-    "mesh": ObjectKind(("file", "scale", "translate_m", "rotation_deg"), _parse_mesh, _mesh_to_mitsuba, position_key="translate_m"),
+    "mesh": ObjectKind(
+        ("file", "scale", "translate_m", "rotation_deg"), _parse_mesh, _mesh_to_mitsuba, position_key="translate_m"
+    ),
 }
 # kind -> the keys a scene file may give it
 OBJECT_KINDS = {name: k.keys for name, k in OBJECT_KIND_TABLE.items()}
@@ -567,7 +606,14 @@ def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str):
     props = mi.Properties()
     props.set_id(key)
     props["bsdf"] = mi.load_dict(bsdf)
-    mesh = mi.Mesh(key, vertex_count=nx * ny, face_count=len(faces), has_vertex_normals=False, has_vertex_texcoords=False, props=props)
+    mesh = mi.Mesh(
+        key,
+        vertex_count=nx * ny,
+        face_count=len(faces),
+        has_vertex_normals=False,
+        has_vertex_texcoords=False,
+        props=props,
+    )
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(world.astype(np.float32).ravel())
     params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())

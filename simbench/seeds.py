@@ -18,7 +18,16 @@ import hashlib
 
 import numpy as np
 
-__all__ = ["RngLike", "DEFAULT_SEED", "CHILD_STREAMS", "check_seed", "derive_seed", "child_seed", "repetition_seed", "SeedLog"]
+__all__ = [
+    "RngLike",
+    "DEFAULT_SEED",
+    "CHILD_STREAMS",
+    "check_seed",
+    "derive_seed",
+    "child_seed",
+    "repetition_seed",
+    "SeedLog",
+]
 
 # the paper's year; any non-negative integer works
 DEFAULT_SEED = 2017

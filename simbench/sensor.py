@@ -168,7 +168,15 @@ def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
     return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))
 
 
-def emva_camera(radiance: np.ndarray, *, camera: PhysicalCamera, electrons_per_radiance: float | np.ndarray, exposure_s: float, white_balance: np.ndarray | None = (1.0, 1.0, 1.0), rng: RngLike = None) -> np.ndarray:
+def emva_camera(
+    radiance: np.ndarray,
+    *,
+    camera: PhysicalCamera,
+    electrons_per_radiance: float | np.ndarray,
+    exposure_s: float,
+    white_balance: np.ndarray | None = (1.0, 1.0, 1.0),
+    rng: RngLike = None,
+) -> np.ndarray:
     """Rendered radiance -> recorded image through the EMVA 1288 model and the colour filter
     array of ``camera`` (a :class:`simbench.device.PhysicalCamera`).
 
@@ -241,7 +249,9 @@ def emva_camera(radiance: np.ndarray, *, camera: PhysicalCamera, electrons_per_r
     return out
 
 
-def photon_transfer(frame_a: np.ndarray, frame_b: np.ndarray, dark_a: np.ndarray, dark_b: np.ndarray) -> tuple[float, float]:
+def photon_transfer(
+    frame_a: np.ndarray, frame_b: np.ndarray, dark_a: np.ndarray, dark_b: np.ndarray
+) -> tuple[float, float]:
     """EMVA 1288 photon-transfer point from two frames at one exposure and two dark frames:
     (mean signal above dark, temporal variance above dark), both in DN / DN^2.
 

@@ -120,7 +120,16 @@ class DriveImage:
         self.make = make
 
 
-def cached_radiance(scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
+def cached_radiance(
+    scene: SceneSpec,
+    drive: "np.ndarray | DriveImage | None",
+    *,
+    spp: int,
+    seed: int,
+    max_depth: int,
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+) -> np.ndarray:
     """:func:`simbench.render.render_radiance`, looked up in / stored to ``cache``; ``drive``
     may be a :class:`DriveImage`, built only on a miss."""
     kw = {"spp": spp, "seed": seed, "max_depth": max_depth, "sampler": sampler}
@@ -132,7 +141,15 @@ def cached_radiance(scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *
     if cache is None:
         return render()
     digest = "off" if drive is None else (drive.digest if lazy else array_digest(drive))
-    parts = {"scene": scene_fingerprint(scene), "drive": digest, "spp": int(spp), "seed": int(seed), "max_depth": int(max_depth), "sampler": sampler, **_renderer_id()}
+    parts = {
+        "scene": scene_fingerprint(scene),
+        "drive": digest,
+        "spp": int(spp),
+        "seed": int(seed),
+        "max_depth": int(max_depth),
+        "sampler": sampler,
+        **_renderer_id(),
+    }
     return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
 
 
@@ -160,7 +177,9 @@ def physical_scene(scene: SceneSpec, sensor: SensorModel) -> SceneSpec:
     lens = scene.camera_lens
     if sensor.camera_lens.defocus:
         if not sensor.is_physical:
-            raise ValueError("camera defocus needs the physical (emva) camera model (its pixel pitch sets the aperture)")
+            raise ValueError(
+                "camera defocus needs the physical (emva) camera model (its pixel pitch sets the aperture)"
+            )
         aperture = sensor.camera_lens.aperture_m(rig.camera.focal_px, sensor.camera.pixel_pitch_um)
         lens = (aperture / 2.0, sensor.camera_lens.focus_m)
     ambient = scene.ambient_rgb
@@ -180,7 +199,9 @@ def exposure_phase(render_seed: int) -> float:
     return float(np.random.default_rng(child_seed(render_seed, "dlp_exposure_phase")).random())
 
 
-def projector_drive_for(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0) -> np.ndarray:
+def projector_drive_for(
+    scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0
+) -> np.ndarray:
     """What Mitsuba's ideal projector must show so that the scene is lit as by the modelled
     one: transfer curve, bit-plane timing (video mode: the exposure, from ``phase`` of a frame
     on, :func:`exposure_phase`), black level, DMD layout, defocus (by the depth each projector
@@ -194,17 +215,42 @@ def _bitplane_weights(scene: SceneSpec, sensor: SensorModel, phase: float) -> np
         return None
     if not sensor.is_physical:
         raise ValueError("the projector's video-mode timing needs the physical (emva) camera's exposure time")
-    return video_bitplane_weights(exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase)
+    return video_bitplane_weights(
+        exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase
+    )
 
 
-def _build_drive(scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None, weights: np.ndarray | None) -> np.ndarray:
+def _build_drive(
+    scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None, weights: np.ndarray | None
+) -> np.ndarray:
     prj = sensor.projector
-    drive = emitted_pattern(pattern, transfer=prj.transfer, gamma=prj.gamma, contrast_ratio=prj.contrast_ratio, layout=prj.dmd, bitplane_weights=weights)
+    drive = emitted_pattern(
+        pattern,
+        transfer=prj.transfer,
+        gamma=prj.gamma,
+        contrast_ratio=prj.contrast_ratio,
+        layout=prj.dmd,
+        bitplane_weights=weights,
+    )
     intr = scene.rig.projector
     if prj.lens.defocus:
-        parts = {"scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))), "stride": PROJECTOR_DEPTH_STRIDE}
-        dist = cached_arrays("projector_depth", parts, lambda: {"z": projector_distance(scene, stride=PROJECTOR_DEPTH_STRIDE)}, cache=cache)["z"]
-        drive = defocus_pattern(drive, dist, aperture_m=prj.lens.aperture_m(intr.focal_px, prj.pixel_pitch_um), focal_px=intr.focal_px, focus_m=prj.lens.focus_m)
+        parts = {
+            "scene": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))),
+            "stride": PROJECTOR_DEPTH_STRIDE,
+        }
+        dist = cached_arrays(
+            "projector_depth",
+            parts,
+            lambda: {"z": projector_distance(scene, stride=PROJECTOR_DEPTH_STRIDE)},
+            cache=cache,
+        )["z"]
+        drive = defocus_pattern(
+            drive,
+            dist,
+            aperture_m=prj.lens.aperture_m(intr.focal_px, prj.pixel_pitch_um),
+            focal_px=intr.focal_px,
+            focus_m=prj.lens.focus_m,
+        )
     if intr.has_distortion:
         drive = distorted_projector_drive(drive, intr)
     return np.ascontiguousarray(drive, dtype=np.float32)
@@ -233,7 +279,15 @@ class ProjectorDrive:
     that builds drives - so a run whose renders are all cached never builds a drive (building
     one, with its depth-dependent defocus, took a third of a warm quick run)."""
 
-    def __init__(self, scene: SceneSpec, pattern: np.ndarray, sensor: SensorModel, *, cache: RenderCache | None = None, phase: float = 0.0) -> None:
+    def __init__(
+        self,
+        scene: SceneSpec,
+        pattern: np.ndarray,
+        sensor: SensorModel,
+        *,
+        cache: RenderCache | None = None,
+        phase: float = 0.0,
+    ) -> None:
         self._scene, self._pattern, self._sensor, self._cache = scene, pattern, sensor, cache
         self._weights = _bitplane_weights(scene, sensor, phase)
         self._array: np.ndarray | None = None
@@ -241,7 +295,9 @@ class ProjectorDrive:
 
     def array(self) -> np.ndarray:
         if self._array is None:
-            self._array = _build_drive(self._scene, self._pattern, self._sensor, cache=self._cache, weights=self._weights)
+            self._array = _build_drive(
+                self._scene, self._pattern, self._sensor, cache=self._cache, weights=self._weights
+            )
         return self._array
 
     def _compute_digests(self) -> dict[str, str]:
@@ -264,12 +320,20 @@ class ProjectorDrive:
                     "projector": sensor_to_dict(self._sensor)["projector"],
                     "bitplane_weights": None if self._weights is None else self._weights.tolist(),
                     "rig": rig_to_dict(scene.rig),
-                    "geometry": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))) if prj.lens.defocus else None,
+                    "geometry": scene_fingerprint(
+                        dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))
+                    )
+                    if prj.lens.defocus
+                    else None,
                     "stride": PROJECTOR_DEPTH_STRIDE,
                     "code": _drive_code_digest(),
                     **_renderer_id(),
                 }
-                arrays = self._cache.get_or_make("drive_digests", inputs, lambda: {k: np.frombuffer(v.encode(), np.uint8) for k, v in self._compute_digests().items()})
+                arrays = self._cache.get_or_make(
+                    "drive_digests",
+                    inputs,
+                    lambda: {k: np.frombuffer(v.encode(), np.uint8) for k, v in self._compute_digests().items()},
+                )
                 self._digests = {k: bytes(np.asarray(v, np.uint8)).decode() for k, v in arrays.items()}
         return self._digests
 
@@ -283,8 +347,9 @@ class ProjectorDrive:
         return DriveImage(digest, lambda: _mono(self.array(), p)) if digest else None
 
 
-
-def cached_arrays(kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]], *, cache: RenderCache | None = None) -> dict[str, np.ndarray]:
+def cached_arrays(
+    kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]], *, cache: RenderCache | None = None
+) -> dict[str, np.ndarray]:
     """``make()``'s arrays, looked up in / stored to ``cache`` under ``kind`` and ``parts``
     plus the renderer's identity (variant, Mitsuba version)."""
     return make() if cache is None else cache.get_or_make(kind, {**parts, **_renderer_id()}, make)
@@ -302,12 +367,24 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     objects = []
     for o in scene.objects:
         k = np.clip(material_crosstalk(o.material.rgb, o.material.spectrum)[:, p], 0.0, 1.0)
-        mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white))
+        mat = dataclasses.replace(
+            o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white)
+        )
         objects.append(dataclasses.replace(o, material=mat))
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
-def render_channels(scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sensor: SensorModel, *, spp: int, seed: int, max_depth: int, sampler: str = "independent", cache: RenderCache | None = None) -> np.ndarray:
+def render_channels(
+    scene: SceneSpec,
+    drive: "np.ndarray | ProjectorDrive",
+    sensor: SensorModel,
+    *,
+    spp: int,
+    seed: int,
+    max_depth: int,
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+) -> np.ndarray:
     """Radiance per camera channel on the camera's recorded pixel grid.
 
     Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
@@ -351,7 +428,11 @@ def render_channels(scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sens
 
 def _white_board(scene: SceneSpec) -> dict:
     """The white reference board the camera's exposure and white balance are set on."""
-    return {"reference_depth_m": scene.reference_depth_m, "reference_albedo": REFERENCE_ALBEDO, "projector_scale": scene.projector_scale}
+    return {
+        "reference_depth_m": scene.reference_depth_m,
+        "reference_albedo": REFERENCE_ALBEDO,
+        "projector_scale": scene.projector_scale,
+    }
 
 
 def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
@@ -400,7 +481,10 @@ def acquire(
     if rig != scene.rig:
         log.warning(
             "projector principal point rendered at (%s, %s) instead of (%s, %s); rig.toml records the rendered one",
-            rig.projector.cx_px, rig.projector.cy_px, scene.rig.projector.cx_px, scene.rig.projector.cy_px,
+            rig.projector.cx_px,
+            rig.projector.cy_px,
+            scene.rig.projector.cx_px,
+            scene.rig.projector.cy_px,
         )
     if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
         raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
@@ -410,11 +494,21 @@ def acquire(
     seeds = SeedLog(seed)
     render = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=cache)
     scene = system.prepare(scene)
-    calibration = system.calibrate(scene, seeds=seeds, render=render, frames=with_calibration) if with_reference else None
+    calibration = (
+        system.calibrate(scene, seeds=seeds, render=render, frames=with_calibration) if with_reference else None
+    )
     rec = acquire_recording(system, scene, f"capture/{scene.name}", seeds=seeds, render=render, prepared=True)[0]
     meta = {
         "scene": scene.name,
-        "pattern": {"size_hw": list(pattern.size_hw), "period_px": pattern.period_px, "order": pattern.order, "sequence": pattern.codes().tolist(), "dc": pattern.dc, "amplitude": pattern.amplitude, "channels": pattern.channels},
+        "pattern": {
+            "size_hw": list(pattern.size_hw),
+            "period_px": pattern.period_px,
+            "order": pattern.order,
+            "sequence": pattern.codes().tolist(),
+            "dc": pattern.dc,
+            "amplitude": pattern.amplitude,
+            "channels": pattern.channels,
+        },
         "sensor": sensor_to_dict(sensor),
         "exposure_s": exposure_s(sensor, scene.rig, **_white_board(scene)) if sensor.is_physical else None,
         "white_balance_gains": white_balance_gains(sensor, scene.rig, **_white_board(scene)).tolist(),
@@ -429,7 +523,15 @@ def acquire(
         "versions": versions(),
     }
     reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
-    return Acquisition(scene=scene, pattern=system.pattern_u8, capture=rec.raw, reference=reference, gt=rec.gt, meta=meta, calibration=calibration.frames if calibration is not None else {})
+    return Acquisition(
+        scene=scene,
+        pattern=system.pattern_u8,
+        capture=rec.raw,
+        reference=reference,
+        gt=rec.gt,
+        meta=meta,
+        calibration=calibration.frames if calibration is not None else {},
+    )
 
 
 RENDER_MANIFEST = "meta.json"

@@ -36,7 +36,22 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["watts_per_lux", "MEASURED_DATASETS", "measured_reflectance", "measured_linear_srgb", "material_crosstalk", "crosstalk_report", "PRIMARY_PEAKS_NM", "PRIMARY_FWHM_NM", "CAMERA_DATASET", "wavelengths_nm", "projector_primaries", "camera_sensitivities", "reflectance_spectrum", "crosstalk_matrix"]
+__all__ = [
+    "watts_per_lux",
+    "MEASURED_DATASETS",
+    "measured_reflectance",
+    "measured_linear_srgb",
+    "material_crosstalk",
+    "crosstalk_report",
+    "PRIMARY_PEAKS_NM",
+    "PRIMARY_FWHM_NM",
+    "CAMERA_DATASET",
+    "wavelengths_nm",
+    "projector_primaries",
+    "camera_sensitivities",
+    "reflectance_spectrum",
+    "crosstalk_matrix",
+]
 
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
 PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
@@ -62,7 +77,9 @@ def _colour():
         for name in [n for n in sys.modules if n == "scipy" or n.startswith("scipy.")]:
             if not isinstance(sys.modules[name], types.ModuleType):
                 del sys.modules[name]
-        raise ImportError("colour-science could not import SciPy, which simbench needs; install it: pip install 'scipy>=1.13'")
+        raise ImportError(
+            "colour-science could not import SciPy, which simbench needs; install it: pip install 'scipy>=1.13'"
+        )
     return colour
 
 
@@ -148,7 +165,9 @@ def _measured_sd(name: str):
     colour = _colour()
     dataset, sep, patch = str(name).partition("/")
     if not sep or dataset not in MEASURED_DATASETS:
-        raise ValueError(f"measured spectrum must be '<dataset>/<patch>' with dataset one of {list(MEASURED_DATASETS)}, got {name!r}")
+        raise ValueError(
+            f"measured spectrum must be '<dataset>/<patch>' with dataset one of {list(MEASURED_DATASETS)}, got {name!r}"
+        )
     patches = colour.SDS_COLOURCHECKERS[dataset]
     if patch not in patches:
         raise ValueError(f"{dataset} has no patch {patch!r}; patches: {list(patches)}")
@@ -179,7 +198,10 @@ def measured_linear_srgb(name: str) -> tuple[float, float, float]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sd = colour.SpectralDistribution(dict(zip(wavelengths_nm(), _measured_values(name))))
-        xyz = colour.sd_to_XYZ(sd, colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"], colour.SDS_ILLUMINANTS["D65"]) / 100.0
+        xyz = (
+            colour.sd_to_XYZ(sd, colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"], colour.SDS_ILLUMINANTS["D65"])
+            / 100.0
+        )
         rgb = colour.XYZ_to_RGB(xyz, "sRGB", apply_cctf_encoding=False)
     return tuple(float(round(x, 6)) for x in np.clip(rgb, 0.0, 1.0))
 
@@ -207,14 +229,27 @@ def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
         "",
         "`K[c, p]`: camera channel c (rows R, G, B) recording projector primary p (columns R, G, B) reflected by the",
         "surface, relative to channel p's response to primary p on a perfect white. Primaries: LEDs at "
-        + " / ".join(f"{x:g}" for x in PRIMARY_PEAKS_NM) + " nm (FWHM " + " / ".join(f"{x:g}" for x in PRIMARY_FWHM_NM) + f" nm, assumption); camera: `{CAMERA_DATASET}` sensitivities "
-        "(stand-in for the Flea3); surface spectra: Mallett & Yuksel 2019 from the paint reflectance. See `simbench/spectral.py`.",
+        + " / ".join(f"{x:g}" for x in PRIMARY_PEAKS_NM)
+        + " nm (FWHM "
+        + " / ".join(f"{x:g}" for x in PRIMARY_FWHM_NM)
+        + f" nm, assumption); camera: `{CAMERA_DATASET}` sensitivities "
+        "(stand-in for the Flea3); surface spectra: Mallett & Yuksel 2019 from the paint reflectance. See "
+        "`simbench/spectral.py`.",
         "",
     ]
-    entries = [("perfect white (reflectance 1)", (1.0, 1.0, 1.0))] + [(f"{name} (sRGB {','.join(map(str, c))})", paint_reflectance(c)) for name, c in colours.items()]
+    entries = [("perfect white (reflectance 1)", (1.0, 1.0, 1.0))] + [
+        (f"{name} (sRGB {','.join(map(str, c))})", paint_reflectance(c)) for name, c in colours.items()
+    ]
     for title, rgb in entries:
         k = crosstalk_matrix(rgb)
-        lines += [f"## {title}", "", f"reflectance RGB {tuple(round(x, 3) for x in rgb)}", "", "| camera \\ projector | R | G | B |", "| --- | --- | --- | --- |"]
+        lines += [
+            f"## {title}",
+            "",
+            f"reflectance RGB {tuple(round(x, 3) for x in rgb)}",
+            "",
+            "| camera \\ projector | R | G | B |",
+            "| --- | --- | --- | --- |",
+        ]
         for name, row in zip("RGB", k):
             lines.append(f"| {name} | " + " | ".join(f"{v:.4f}" for v in row) + " |")
         lines.append("")
@@ -226,7 +261,9 @@ def watts_per_lux() -> np.ndarray:
     """W/m^2 of each primary per lux of the D65-balanced white (see
     :func:`simbench.photometry.primary_irradiance_w_m2`), shape (3,)."""
     colour = _colour()
-    cmfs = np.asarray(colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64)
+    cmfs = np.asarray(
+        colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64
+    )
     xy = np.asarray(colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"], dtype=np.float64)
     d65 = np.array([xy[0] / xy[1], 1.0, (1.0 - xy[0] - xy[1]) / xy[1]])
     prim = projector_primaries()

@@ -26,7 +26,10 @@ def plane_hits(rows: np.ndarray, cols: np.ndarray, rig: Rig, *, normal: np.ndarr
     ndarray, shape rows.shape + (3,), float64; NaN where the ray misses (parallel or behind)
     """
     cam = rig.camera
-    rays = np.stack([(cols - cam.cx_px) / cam.focal_px, (rows - cam.cy_px) / cam.focal_px, np.ones_like(rows, dtype=np.float64)], axis=-1)
+    rays = np.stack(
+        [(cols - cam.cx_px) / cam.focal_px, (rows - cam.cy_px) / cam.focal_px, np.ones_like(rows, dtype=np.float64)],
+        axis=-1,
+    )
     n = np.asarray(normal, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.dot(np.asarray(point_m, dtype=np.float64), n) / (rays @ n)

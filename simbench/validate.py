@@ -118,7 +118,9 @@ def numbers(value: object, name: str, n: int, **limits: object) -> tuple[float, 
     return tuple(number(x, f"{name}[{i}]", **limits) for i, x in enumerate(value))
 
 
-def image_size(width: object, height: object, name: str, *, names: tuple[str, str] = ("width_px", "height_px")) -> tuple[int, int]:
+def image_size(
+    width: object, height: object, name: str, *, names: tuple[str, str] = ("width_px", "height_px")
+) -> tuple[int, int]:
     """A (width, height) in pixels: integers in [1, MAX_SIDE_PX], at most MAX_PIXELS in all;
     ``names`` are the two fields' names in messages, ``name`` the image's."""
     w = integer(width, names[0], lo=1, hi=MAX_SIDE_PX)

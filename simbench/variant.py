@@ -124,5 +124,3 @@ def _has_cuda(dr) -> bool:
 
 def is_jit(variant: str) -> bool:
     return variant.startswith(("llvm_", "cuda_"))
-
-

@@ -10,8 +10,21 @@ from pathlib import Path
 
 
 def _row(seed: int) -> dict:
-    return {"plane_mae_mm": 0.1, "gt_mae_mm": float(seed % 97) / 97.0, "gt_rmse_mm": 0.2, "gt_p95_mm": 0.3, "outlier_share": 0.0, "edge5_mae_mm": 0.1,
-            "completeness": 1.0, "stripe_order_errors": 0.0, "stripe_order_error_rate": 0.0, "render_seed": seed, "noise_seed": seed, "error": "", "timing": {}}
+    return {
+        "plane_mae_mm": 0.1,
+        "gt_mae_mm": float(seed % 97) / 97.0,
+        "gt_rmse_mm": 0.2,
+        "gt_p95_mm": 0.3,
+        "outlier_share": 0.0,
+        "edge5_mae_mm": 0.1,
+        "completeness": 1.0,
+        "stripe_order_errors": 0.0,
+        "stripe_order_error_rate": 0.0,
+        "render_seed": seed,
+        "noise_seed": seed,
+        "error": "",
+        "timing": {},
+    }
 
 
 def quick_run(params: dict, *, seed: int, cache_dir) -> dict:

@@ -30,7 +30,13 @@ def acquisitions(variant):
     def get(name: str, seed: int = 7):
         key = (name, seed)
         if key not in cache:
-            cache[key] = acquire(load_scene(SCENES / f"{name}.toml"), pattern=PatternSpec(), sensor=get_sensor("minimal"), spp=16, seed=seed)
+            cache[key] = acquire(
+                load_scene(SCENES / f"{name}.toml"),
+                pattern=PatternSpec(),
+                sensor=get_sensor("minimal"),
+                spp=16,
+                seed=seed,
+            )
         return cache[key]
 
     return get

@@ -166,7 +166,9 @@ def segment_stripes(
     linked_prev[inner] = linked[row[inner], start[inner] - 1]
     if max_gap_px > 0:
         omega32 = (np.float32(min_step_ratio * omega), np.float32(min(max_step_ratio * omega, 0.9 * np.pi)))
-        return _bridge_gaps(wrapped, labels, row, start, stop, linked_prev, omega32, omega, max_gap_px, gap_tolerance_rad)
+        return _bridge_gaps(
+            wrapped, labels, row, start, stop, linked_prev, omega32, omega, max_gap_px, gap_tolerance_rad
+        )
     return Stripes(labels=labels, row=row, start=start, stop=stop, linked_prev=linked_prev)
 
 
@@ -185,7 +187,9 @@ def _bridge_gaps(wrapped, labels, row, start, stop, linked_prev, bounds, omega, 
         if cur >= 0 and row[cur] == y and not linked_prev[s] and 1 <= gap <= max_gap:
             xl, x = stop[cur] - 1, start[s]
             steps = (xl - start[cur]) + (stop[s] - 1 - x)
-            acc = (float(wrapped[y, xl]) - float(wrapped[y, start[cur]])) + (float(wrapped[y, stop[s] - 1]) - float(wrapped[y, x]))
+            acc = (float(wrapped[y, xl]) - float(wrapped[y, start[cur]])) + (
+                float(wrapped[y, stop[s] - 1]) - float(wrapped[y, x])
+            )
             slope = acc / steps if steps >= 2 else omega
             if lo < slope < hi:
                 advance = slope * (x - xl)
@@ -278,7 +282,9 @@ def absolute_column(
 ) -> tuple[np.ndarray, np.ndarray]:
     t = np.float32(period_px)
     # column_from_phase(psi + 2 pi W) without the float64 round trip
-    col0 = (wrapped + np.float32(np.pi)) * (t / np.float32(2 * np.pi)) + position.astype(np.float32) * t - np.float32(0.5)
+    col0 = (
+        (wrapped + np.float32(np.pi)) * (t / np.float32(2 * np.pi)) + position.astype(np.float32) * t - np.float32(0.5)
+    )
     span = np.float32(cycle * period_px)
     k = np.rint((expected_column - col0) / span)
     known = (position >= 0) & np.isfinite(k)

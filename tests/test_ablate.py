@@ -14,7 +14,12 @@ FAST_BASE = {"run.camera_scale": 0.5, "run.spp": 4, "sensor.preset": "minimal"}
 
 
 def _sweep(**kw):
-    data = {"name": "t", "description": "test", "base": dict(FAST_BASE), "axis": [{"name": "decoder.voting", "values": [True, False]}]}
+    data = {
+        "name": "t",
+        "description": "test",
+        "base": dict(FAST_BASE),
+        "axis": [{"name": "decoder.voting", "values": [True, False]}],
+    }
     data.update(kw)
     return sweep_from_dict(data)
 
@@ -27,7 +32,10 @@ def test_unknown_parameters_are_rejected_with_the_valid_names():
     with pytest.raises(ValueError, match="unknown key"):
         sweep_from_dict({"name": "x", "axes": []})
     with pytest.raises(ValueError, match="same number of values"):
-        _sweep(combine="zip", axis=[{"name": "decoder.voting", "values": [True, False]}, {"name": "pattern.order", "values": [3]}])
+        _sweep(
+            combine="zip",
+            axis=[{"name": "decoder.voting", "values": [True, False]}, {"name": "pattern.order", "values": [3]}],
+        )
     with pytest.raises(ValueError, match="at least one"):
         _sweep(axis=[])
 
@@ -40,7 +48,15 @@ def test_grid_and_zip_expansion_with_common_seeds():
     # repetition r has one seed across parameter sets; repetitions differ
     assert len({r["seed"] for r in grid if r["repeat"] == 0}) == 1
     assert {r["seed"] for r in grid if r["repeat"] == 0} != {r["seed"] for r in grid if r["repeat"] == 1}
-    z = expand(_sweep(axis=[{"name": "decoder.voting", "values": [True, False]}, {"name": "pattern.period_px", "values": [15, 21]}], combine="zip"))
+    z = expand(
+        _sweep(
+            axis=[
+                {"name": "decoder.voting", "values": [True, False]},
+                {"name": "pattern.period_px", "values": [15, 21]},
+            ],
+            combine="zip",
+        )
+    )
     assert [(r["params"]["decoder.voting"], r["params"]["pattern.period_px"]) for r in z] == [(True, 15), (False, 21)]
 
 
@@ -73,7 +89,9 @@ def test_phase_method_axis(tmp_path, variant):
     rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
     assert len(list((tmp_path / "cache").glob("radiance-*.npz"))) == 2
     for r in rows[:3]:
-        assert r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0  # small, few-spp renders
+        assert (
+            r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0
+        )  # small, few-spp renders
     assert len({r["gt_mae_mm"] for r in rows[:3]}) == 3  # the axis reaches the decoder
     # both protocols, the board placed off the reference plane (same placement in every run)
     for r in rows[:3]:
@@ -81,12 +99,21 @@ def test_phase_method_axis(tmp_path, variant):
     assert len({r["placement_seed"] for r in rows[:3]}) == 1 and rows[0]["placement_seed"] != ""
     table = _table(tmp_path / "t.csv")
     assert {"ref_plane_mae_mm", "ref_completeness", "placement_seed"} <= set(table[0])
-    assert "phase_method must be one of" in rows[3]["error"] and "'hilbert'" in rows[3]["error"] and "'wfr'" in rows[3]["error"]
+    assert (
+        "phase_method must be one of" in rows[3]["error"]
+        and "'hilbert'" in rows[3]["error"]
+        and "'wfr'" in rows[3]["error"]
+    )
 
 
 @pytest.mark.slow
 def test_interrupted_sweep_resumes_without_redoing_runs(tmp_path, variant):
-    sweep = _sweep(axis=[{"name": "decoder.voting", "values": [True, False]}, {"name": "decoder.neighbour_reach", "values": [0, 3]}])
+    sweep = _sweep(
+        axis=[
+            {"name": "decoder.voting", "values": [True, False]},
+            {"name": "decoder.neighbour_reach", "values": [0, 3]},
+        ]
+    )
     cache = tmp_path / "cache"
     full = tmp_path / "full"
     run_sweep(sweep, out_dir=full, cache_dir=cache, progress=lambda s: None)
@@ -117,13 +144,19 @@ def test_process_pool_and_dask_local_cluster_give_identical_tables(tmp_path, var
     """The issue's acceptance: a two-axis sweep of 24 runs, identical tables both ways."""
     distributed = pytest.importorskip("distributed")
     sweep = _sweep(
-        axis=[{"name": "decoder.sigma_periods", "values": [0.2, 0.25, 0.3]}, {"name": "decoder.neighbour_reach", "values": [0, 1, 2, 3]}],
+        axis=[
+            {"name": "decoder.sigma_periods", "values": [0.2, 0.25, 0.3]},
+            {"name": "decoder.neighbour_reach", "values": [0, 1, 2, 3]},
+        ],
         repeats=2,
     )
     assert len(expand(sweep)) == 24
     cache = tmp_path / "cache"
     run_sweep(sweep, out_dir=tmp_path / "pool", cache_dir=cache, workers=2, progress=lambda s: None)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
         run_sweep(sweep, out_dir=tmp_path / "dask", cache_dir=cache, scheduler=client, progress=lambda s: None)
     a, b = _table(tmp_path / "pool" / "t.csv"), _table(tmp_path / "dask" / "t.csv")
     assert len(a) == 24 and a == b
@@ -135,17 +168,34 @@ def test_process_pool_and_dask_local_cluster_give_identical_tables(tmp_path, var
 
 
 def _marker_sweep(names):
-    return sweep_from_dict({"name": "w", "description": "runner test", "axis": [{"name": "scene.name", "values": list(names)}]})
+    return sweep_from_dict(
+        {"name": "w", "description": "runner test", "axis": [{"name": "scene.name", "values": list(names)}]}
+    )
 
 
 def test_a_killed_worker_costs_its_run_one_retry_and_the_table_is_complete(tmp_path, variant):
     from tests import ablate_helpers
 
     names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2"), str(tmp_path / "ok3")]
-    rows = run_sweep(_marker_sweep(names), out_dir=tmp_path / "out", cache_dir=None, workers=2, variant=variant, progress=lambda s: None, run_fn=ablate_helpers.dies_once)
+    rows = run_sweep(
+        _marker_sweep(names),
+        out_dir=tmp_path / "out",
+        cache_dir=None,
+        workers=2,
+        variant=variant,
+        progress=lambda s: None,
+        run_fn=ablate_helpers.dies_once,
+    )
     assert [r["error"] for r in rows] == ["", "", "", ""]
     assert (tmp_path / "die1").exists()  # it did die once
-    ref = run_sweep(_marker_sweep(names), out_dir=tmp_path / "ref", cache_dir=None, workers=1, progress=lambda s: None, run_fn=ablate_helpers.quick_run)
+    run_sweep(
+        _marker_sweep(names),
+        out_dir=tmp_path / "ref",
+        cache_dir=None,
+        workers=1,
+        progress=lambda s: None,
+        run_fn=ablate_helpers.quick_run,
+    )
     assert (tmp_path / "out" / "w.csv").read_bytes() == (tmp_path / "ref" / "w.csv").read_bytes()
     assert not (tmp_path / "out" / ".w.running").exists()
 
@@ -155,7 +205,15 @@ def test_a_run_that_kills_its_worker_twice_is_recorded_as_failed(tmp_path, varia
     from tests import ablate_helpers
 
     names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2")]
-    rows = run_sweep(_marker_sweep(names), out_dir=tmp_path / "out", cache_dir=None, workers=2, variant=variant, progress=lambda s: None, run_fn=ablate_helpers.always_dies)
+    rows = run_sweep(
+        _marker_sweep(names),
+        out_dir=tmp_path / "out",
+        cache_dir=None,
+        workers=2,
+        variant=variant,
+        progress=lambda s: None,
+        run_fn=ablate_helpers.always_dies,
+    )
     assert [r["error"] for r in rows] == ["", WORKER_DIED, ""]
     assert WORKER_DIED in (tmp_path / "out" / "w.md").read_text()
 
@@ -183,14 +241,17 @@ def test_killing_the_sweep_leaves_no_process_behind(tmp_path):
     code = textwrap.dedent(
         f"""
         import sys
-        sys.path.insert(0, {str(__import__('pathlib').Path(__file__).resolve().parents[1])!r})
+        sys.path.insert(0, {str(__import__("pathlib").Path(__file__).resolve().parents[1])!r})
         from simbench.experiments.ablate import sweep_from_dict, run_sweep
         from tests import ablate_helpers
         sweep = sweep_from_dict({{"name": "k", "axis": [{{"name": "scene.name", "values": ["a", "b", "c"]}}]}})
-        run_sweep(sweep, out_dir={str(tmp_path / 'out')!r}, cache_dir=None, workers=2, variant="scalar_rgb", progress=print, run_fn=ablate_helpers.slow_run)
+        run_sweep(sweep, out_dir={str(tmp_path / "out")!r}, cache_dir=None, workers=2, variant="scalar_rgb",
+                  progress=print, run_fn=ablate_helpers.slow_run)
         """
     )
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     try:
         deadline = time.monotonic() + 120
         kids = []
@@ -218,9 +279,20 @@ def test_board_form_and_projector_timing_are_sweepable():
     from simbench.experiments.ablate.mapping import sensor_for as _sensor
     from simbench.experiments.ablate import DEFAULTS
 
-    sw = sweep_from_dict({"name": "t", "axis": [{"name": "run.board_bow_mm_per_m", "values": [0.0, 1.0]}, {"name": "sensor.projector.timing", "values": ["triggered", "video"]}]})
+    sw = sweep_from_dict(
+        {
+            "name": "t",
+            "axis": [
+                {"name": "run.board_bow_mm_per_m", "values": [0.0, 1.0]},
+                {"name": "sensor.projector.timing", "values": ["triggered", "video"]},
+            ],
+        }
+    )
     runs = expand(sw)
-    assert {(r["params"]["run.board_bow_mm_per_m"], r["params"]["sensor.projector.timing"]) for r in runs} >= {(0.0, "triggered"), (1.0, "video")}
+    assert {(r["params"]["run.board_bow_mm_per_m"], r["params"]["sensor.projector.timing"]) for r in runs} >= {
+        (0.0, "triggered"),
+        (1.0, "video"),
+    }
     sensor = _sensor({**DEFAULTS, "sensor.projector.timing": "video", "sensor.projector.frame_rate_hz": 120.0})
     assert sensor.projector.timing == "video" and sensor.projector.frame_rate_hz == 120.0
     with pytest.raises(ValueError, match="timing"):

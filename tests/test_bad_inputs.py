@@ -122,19 +122,54 @@ def _w(path: str, content: str | bytes):
 
 # --------------------------------------------------------------------------------- pattern
 for opt, bad, msg in [
-    ("--width", "0", "--width"), ("--width", "-1", "--width"), ("--width", "10000000", "--width"), ("--width", "abc", "--width"),
-    ("--width", "1.5", "--width"), ("--width", "", "--width"), ("--height", "0", "--height"), ("--height", "100000", "--height"),
-    ("--height", "x", "--height"), ("--height", "-7", "--height"), ("--period", "0", "--period"), ("--period", "2", "--period"),
-    ("--period", "3", "--period"), ("--period", "-5", "--period"), ("--period", "x", "--period"), ("--period", "1e9", "--period"),
-    ("--order", "0", "--order"), ("--order", "1", "--order"), ("--order", "17", "--order"), ("--order", "x", "--order"),
-    ("--sequence", "0101", "repeats"), ("--sequence", "01x", "0 and 1"), ("--sequence", "", "0 and 1"), ("--sequence", "2", "0 and 1"),
-    ("--channels", "rgg", "permutation"), ("--channels", "rgba", "permutation"), ("--channels", "", "permutation"), ("--channels", "xyz", "permutation"),
+    ("--width", "0", "--width"),
+    ("--width", "-1", "--width"),
+    ("--width", "10000000", "--width"),
+    ("--width", "abc", "--width"),
+    ("--width", "1.5", "--width"),
+    ("--width", "", "--width"),
+    ("--height", "0", "--height"),
+    ("--height", "100000", "--height"),
+    ("--height", "x", "--height"),
+    ("--height", "-7", "--height"),
+    ("--period", "0", "--period"),
+    ("--period", "2", "--period"),
+    ("--period", "3", "--period"),
+    ("--period", "-5", "--period"),
+    ("--period", "x", "--period"),
+    ("--period", "1e9", "--period"),
+    ("--order", "0", "--order"),
+    ("--order", "1", "--order"),
+    ("--order", "17", "--order"),
+    ("--order", "x", "--order"),
+    ("--sequence", "0101", "repeats"),
+    ("--sequence", "01x", "0 and 1"),
+    ("--sequence", "", "0 and 1"),
+    ("--sequence", "2", "0 and 1"),
+    ("--channels", "rgg", "permutation"),
+    ("--channels", "rgba", "permutation"),
+    ("--channels", "", "permutation"),
+    ("--channels", "xyz", "permutation"),
 ]:
     case(f"pattern{opt}={bad!r}", lambda d, o=opt, b=bad: ["pattern", "--out", str(d / "p.png"), o, b], msg)
-case("pattern-width-x-height-too-many-pixels", lambda d: ["pattern", "--out", str(d / "p.png"), "--width", "16384", "--height", "16384"], "Mpx")
+case(
+    "pattern-width-x-height-too-many-pixels",
+    lambda d: ["pattern", "--out", str(d / "p.png"), "--width", "16384", "--height", "16384"],
+    "Mpx",
+)
 case("pattern-out-under-a-file", lambda d: ["pattern", "--out", str(d / "f" / "p.png")], "f", files=_w("f", "x"))
-case("pattern-out-is-a-folder", lambda d: ["pattern", "--out", str(d / "dir")], "dir", setup=lambda d: (d / "dir").mkdir())
-case("pattern-sequence-for-other-order", lambda d: ["pattern", "--out", str(d / "p.png"), "--order", "2", "--sequence", "00010111"], "repeats")
+case(
+    "pattern-out-is-a-folder",
+    lambda d: ["pattern", "--out", str(d / "dir")],
+    "dir",
+    setup=lambda d: (d / "dir").mkdir(),
+)
+case(
+    "pattern-sequence-for-other-order",
+    lambda d: ["pattern", "--out", str(d / "p.png"), "--order", "2", "--sequence", "00010111"],
+    "repeats",
+)
+
 
 # ---------------------------------------------------------------------------------- render
 def _scene(body: str, rig: str | None = None) -> dict:
@@ -184,13 +219,31 @@ for cid, body, msg in [
     ("sphere-radius-missing", '[[object]]\ntype = "sphere"\n', "radius_m"),
     ("mesh-missing", '[[object]]\ntype = "mesh"\nfile = "nope.ply"\n', "nope.ply"),
     ("mesh-not-ply", '[[object]]\ntype = "mesh"\nfile = "s.toml"\n', ".ply or .obj"),
-    ("mesh-scale-negative", f'[[object]]\ntype = "mesh"\nfile = "{SCENES / "meshes" / "pear.ply"}"\nscale = -1\n', "scale"),
+    (
+        "mesh-scale-negative",
+        f'[[object]]\ntype = "mesh"\nfile = "{SCENES / "meshes" / "pear.ply"}"\nscale = -1\n',
+        "scale",
+    ),
     ("duplicate-names", PLANE + PLANE, "unique"),
 ]:
-    case(f"render-scene-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene(body))
-case("render-scene-missing", lambda d: ["render", str(d / "nope.toml"), "--out", str(d / "out")], "scene file not found")
-case("render-scene-is-folder", lambda d: ["render", str(d / "sd"), "--out", str(d / "out")], "sd", setup=lambda d: (d / "sd").mkdir())
-case("render-scene-not-utf8", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "s.toml", files={"s.toml": b"name = \"\xff\xfe\"\n"})
+    case(
+        f"render-scene-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene(body)
+    )
+case(
+    "render-scene-missing", lambda d: ["render", str(d / "nope.toml"), "--out", str(d / "out")], "scene file not found"
+)
+case(
+    "render-scene-is-folder",
+    lambda d: ["render", str(d / "sd"), "--out", str(d / "out")],
+    "sd",
+    setup=lambda d: (d / "sd").mkdir(),
+)
+case(
+    "render-scene-not-utf8",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+    "s.toml",
+    files={"s.toml": b'name = "\xff\xfe"\n'},
+)
 
 for cid, changes, msg in [
     ("width-zero", {"camera.width_px": "0"}, "width_px"),
@@ -216,15 +269,46 @@ for cid, changes, msg in [
     ("rotation-inf", {"pose.rotation_deg": "[0.0, inf, 0.0]"}, "rotation_deg"),
     ("rotation-two", {"pose.rotation_deg": "[0.0, 0.0]"}, "rotation_deg"),
 ]:
-    case(f"render-rig-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene('rig = "rig.toml"\n' + PLANE, _rig_text(**changes)))
-case("render-rig-missing-camera", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "camera", files=_scene('rig = "rig.toml"\n' + PLANE, "[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"))
-case("render-rig-pose-not-table", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], "pose", files=_scene('rig = "rig.toml"\n' + PLANE, TINY_RIG.replace("[pose]\nposition_m", "pose = 3\n[x]\nposition_m")))
+    case(
+        f"render-rig-{cid}",
+        lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+        msg,
+        files=_scene('rig = "rig.toml"\n' + PLANE, _rig_text(**changes)),
+    )
+case(
+    "render-rig-missing-camera",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+    "camera",
+    files=_scene('rig = "rig.toml"\n' + PLANE, "[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"),
+)
+case(
+    "render-rig-pose-not-table",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+    "pose",
+    files=_scene('rig = "rig.toml"\n' + PLANE, TINY_RIG.replace("[pose]\nposition_m", "pose = 3\n[x]\nposition_m")),
+)
 
-for opt, bad, msg in [("--spp", "0", "--spp"), ("--spp", "-1", "--spp"), ("--spp", "x", "--spp"), ("--spp", "1000000", "--spp"), ("--seed", "-1", "--seed"),
-                      ("--seed", "x", "--seed"), ("--seed", str(2**64), "--seed"), ("--max-depth", "0", "--max-depth"), ("--max-depth", "1", "--max-depth"),
-                      ("--max-depth", "x", "--max-depth"), ("--period", "2", "--period"), ("--order", "1", "--order"), ("--channels", "rrb", "permutation"),
-                      ("--sequence", "0101", "repeats")]:
-    case(f"render{opt}={bad}", lambda d, o=opt, b=bad: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), o, b], msg)
+for opt, bad, msg in [
+    ("--spp", "0", "--spp"),
+    ("--spp", "-1", "--spp"),
+    ("--spp", "x", "--spp"),
+    ("--spp", "1000000", "--spp"),
+    ("--seed", "-1", "--seed"),
+    ("--seed", "x", "--seed"),
+    ("--seed", str(2**64), "--seed"),
+    ("--max-depth", "0", "--max-depth"),
+    ("--max-depth", "1", "--max-depth"),
+    ("--max-depth", "x", "--max-depth"),
+    ("--period", "2", "--period"),
+    ("--order", "1", "--order"),
+    ("--channels", "rrb", "permutation"),
+    ("--sequence", "0101", "repeats"),
+]:
+    case(
+        f"render{opt}={bad}",
+        lambda d, o=opt, b=bad: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), o, b],
+        msg,
+    )
 
 SENSOR_OK = (ROOT / "simbench" / "presets" / "minimal.toml").read_text()
 PAPER = (ROOT / "simbench" / "presets" / "paper.toml").read_text()
@@ -255,7 +339,11 @@ for cid, text, msg in [
     ("prnu-above-one", _sensor(PAPER, "prnu = 0.01", "prnu = 2.0"), "prnu"),
     ("exposure-negative", _sensor(PAPER, 'exposure_s = "auto"', "exposure_s = -0.01"), "exposure_s"),
     ("exposure-word", _sensor(PAPER, 'exposure_s = "auto"', 'exposure_s = "manual"'), "auto"),
-    ("auto-fraction-zero", _sensor(PAPER, "auto_exposure_fraction = 0.7", "auto_exposure_fraction = 0.0"), "auto_exposure_fraction"),
+    (
+        "auto-fraction-zero",
+        _sensor(PAPER, "auto_exposure_fraction = 0.7", "auto_exposure_fraction = 0.0"),
+        "auto_exposure_fraction",
+    ),
     ("camera-unknown-key", _sensor(PAPER, "pixel_pitch_um = 5.3", "pixel_pitch_um = 5.3\niso = 100"), "unknown key"),
     ("camera-missing-pitch", _sensor(PAPER, "pixel_pitch_um = 5.3", ""), "pixel_pitch_um"),
     ("camera-model-unknown", _sensor(PAPER, 'model = "emva"', 'model = "ccd"'), "model"),
@@ -274,18 +362,54 @@ for cid, text, msg in [
     ("unknown-table", PAPER + "\n[thermal]\ndrift = 1\n", "unknown key"),
     ("not-toml", "camera = [", "not valid TOML"),
 ]:
-    case(f"render-sensor-{cid}", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "sensor.toml")], msg, files={"sensor.toml": text})
-case("render-sensor-unknown-preset", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", "flea4"], "unknown sensor")
-case("render-sensor-file-missing", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "nope.toml")], "nope.toml")
-case("render-sensor-minimal-crosstalk", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "sensor.toml")], "crosstalk",
-     files={"sensor.toml": SENSOR_OK + "\n[spectral]\ncrosstalk = true\n"})
-case("render-out-foreign-folder", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "mine")], "mine", files={"mine/notes.txt": "my notes"})
-case("render-out-is-a-file", lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "f")], "not a folder", files={"f": "x"})
+    case(
+        f"render-sensor-{cid}",
+        lambda d: [
+            "render",
+            str(SCENES / "white_plane.toml"),
+            "--out",
+            str(d / "out"),
+            "--sensor",
+            str(d / "sensor.toml"),
+        ],
+        msg,
+        files={"sensor.toml": text},
+    )
+case(
+    "render-sensor-unknown-preset",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", "flea4"],
+    "unknown sensor",
+)
+case(
+    "render-sensor-file-missing",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "nope.toml")],
+    "nope.toml",
+)
+case(
+    "render-sensor-minimal-crosstalk",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "out"), "--sensor", str(d / "sensor.toml")],
+    "crosstalk",
+    files={"sensor.toml": SENSOR_OK + "\n[spectral]\ncrosstalk = true\n"},
+)
+case(
+    "render-out-foreign-folder",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "mine")],
+    "mine",
+    files={"mine/notes.txt": "my notes"},
+)
+case(
+    "render-out-is-a-file",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "f")],
+    "not a folder",
+    files={"f": "x"},
+)
 
 # ---------------------------------------------------------------------------------- decode
 
 
-def _decode(d: Path, *extra: str, capture: str = "capture.png", reference: str | None = "reference.png", rig: str = "rig.toml") -> list[str]:
+def _decode(
+    d: Path, *extra: str, capture: str = "capture.png", reference: str | None = "reference.png", rig: str = "rig.toml"
+) -> list[str]:
     r = d / "r"
     argv = ["decode", str(r / capture), "--rig", str(r / rig), "--out", str(d / "depth.npy")]
     if reference is not None:
@@ -322,6 +446,7 @@ for cid, name, content, msg in [
     ("capture-npy-empty", "c.npy", b"", "empty"),
     ("capture-npy-not-npy", "c.npy", b"PK\x03\x04 not numpy", "not a NumPy"),
 ]:
+
     def _setup(d, name=name, content=content):
         if content is None:  # a real PNG cut in half
             render_folder(d)
@@ -337,7 +462,12 @@ for cid, name, content, msg in [
 
     case(f"decode-{cid}", lambda d, n=name: _decode(d, capture=n), msg, setup=_setup)
 case("decode-capture-missing", lambda d: _decode(d, capture="nope.png"), "nope.png", setup=render_folder)
-case("decode-capture-is-folder", lambda d: _decode(d, capture="sub"), "sub", setup=lambda d: (render_folder(d) / "sub").mkdir())
+case(
+    "decode-capture-is-folder",
+    lambda d: _decode(d, capture="sub"),
+    "sub",
+    setup=lambda d: (render_folder(d) / "sub").mkdir(),
+)
 for cid, content, msg in [
     ("reference-black", np.zeros((120, 160, 3), np.uint8), "reference capture decodes at only"),
     ("reference-saturated", np.full((120, 160, 3), 255, np.uint8), "reference capture decodes at only"),
@@ -347,32 +477,108 @@ for cid, content, msg in [
 ]:
     case(f"decode-{cid}", lambda d: _decode(d, reference="ref2.png"), msg, setup=_image_file("ref2.png", content))
 case("decode-reference-missing", lambda d: _decode(d, reference="nope.png"), "nope.png", setup=render_folder)
-case("decode-reference-mode-without-reference", lambda d: _decode(d, reference=None), "--reference", setup=render_folder)
+case(
+    "decode-reference-mode-without-reference", lambda d: _decode(d, reference=None), "--reference", setup=render_folder
+)
 case("decode-rig-missing", lambda d: _decode(d, rig="nope.toml"), "nope.toml", setup=render_folder)
-case("decode-rig-invalid", lambda d: _decode(d, rig="bad.toml"), "focal_px", setup=lambda d: (render_folder(d) / "bad.toml").write_text(_rig_text(**{"camera.focal_px": "0"})))
-case("decode-rig-not-utf8", lambda d: _decode(d, rig="bad.toml"), "UTF-8", setup=lambda d: (render_folder(d) / "bad.toml").write_bytes(b"\xff\xfe\x00"))
-case("decode-rig-other-camera", lambda d: _decode(d, rig="big.toml"), "camera is 320x240", setup=lambda d: (render_folder(d) / "big.toml").write_text(_rig_text(**{"camera.width_px": "320", "camera.height_px": "240"})))
-for opt, bad in [("--z0", "0"), ("--z0", "-1"), ("--z0", "inf"), ("--z0", "nan"), ("--z0", "x"), ("--near", "0"), ("--near", "-1"), ("--far", "nan"), ("--far", "1e9")]:
+case(
+    "decode-rig-invalid",
+    lambda d: _decode(d, rig="bad.toml"),
+    "focal_px",
+    setup=lambda d: (render_folder(d) / "bad.toml").write_text(_rig_text(**{"camera.focal_px": "0"})),
+)
+case(
+    "decode-rig-not-utf8",
+    lambda d: _decode(d, rig="bad.toml"),
+    "UTF-8",
+    setup=lambda d: (render_folder(d) / "bad.toml").write_bytes(b"\xff\xfe\x00"),
+)
+case(
+    "decode-rig-other-camera",
+    lambda d: _decode(d, rig="big.toml"),
+    "camera is 320x240",
+    setup=lambda d: (render_folder(d) / "big.toml").write_text(
+        _rig_text(**{"camera.width_px": "320", "camera.height_px": "240"})
+    ),
+)
+for opt, bad in [
+    ("--z0", "0"),
+    ("--z0", "-1"),
+    ("--z0", "inf"),
+    ("--z0", "nan"),
+    ("--z0", "x"),
+    ("--near", "0"),
+    ("--near", "-1"),
+    ("--far", "nan"),
+    ("--far", "1e9"),
+]:
     case(f"decode{opt}={bad}", lambda d, o=opt, b=bad: _decode(d, o, b), opt, setup=render_folder)
 case("decode-near-beyond-far", lambda d: _decode(d, "--near", "2.0", "--far", "1.0"), "near < far", setup=render_folder)
 case("decode-mode-unknown", lambda d: _decode(d, "--mode", "stereo"), "--mode", setup=render_folder)
 for item, msg in [
-    ("voting=maybe", "voting"), ("voting=1", "voting"), ("voting='true'", "voting"), ("neighbour_reach=[1,2]", "neighbour_reach"),
-    ("neighbour_reach=-1", "neighbour_reach"), ("neighbour_reach=2.5", "neighbour_reach"), ("sigma_periods=0", "sigma_periods"),
-    ("sigma_periods=inf", "sigma_periods"), ("sigma_periods=nan", "sigma_periods"), ("dark_level=2", "dark_level"), ("phase_method=nope", "phase_method"),
-    ("phase_method=1", "phase_method"), ("unknown=1", "name one of"), ("voting", "name=value"), ("mode=stereo", "mode"),
-    ("depth_range_m=[2.0,1.0]", "depth_range_m"), ("depth_range_m=3", "depth_range_m"), ("min_support=0", "min_support"), ("threads=0", "threads"),
-    ("z0_m=-1", "z0_m"), ("saturation_level=0", "saturation_level"), ("max_residual=0", "max_residual"), ("sequence=[0,2,1]", "sequence"),
-    ("sequence='0101'", "sequence"), ("intensity_mode=3", "intensity_mode"), ("camera_period_px=1", "camera_period_px"), ("min_amplitude=-0.1", "min_amplitude"),
-    ("min_reference_coverage=1.5", "min_reference_coverage"), ("color_normalize=yes", "color_normalize"), ("link_check=0", "link_check"),
+    ("voting=maybe", "voting"),
+    ("voting=1", "voting"),
+    ("voting='true'", "voting"),
+    ("neighbour_reach=[1,2]", "neighbour_reach"),
+    ("neighbour_reach=-1", "neighbour_reach"),
+    ("neighbour_reach=2.5", "neighbour_reach"),
+    ("sigma_periods=0", "sigma_periods"),
+    ("sigma_periods=inf", "sigma_periods"),
+    ("sigma_periods=nan", "sigma_periods"),
+    ("dark_level=2", "dark_level"),
+    ("phase_method=nope", "phase_method"),
+    ("phase_method=1", "phase_method"),
+    ("unknown=1", "name one of"),
+    ("voting", "name=value"),
+    ("mode=stereo", "mode"),
+    ("depth_range_m=[2.0,1.0]", "depth_range_m"),
+    ("depth_range_m=3", "depth_range_m"),
+    ("min_support=0", "min_support"),
+    ("threads=0", "threads"),
+    ("z0_m=-1", "z0_m"),
+    ("saturation_level=0", "saturation_level"),
+    ("max_residual=0", "max_residual"),
+    ("sequence=[0,2,1]", "sequence"),
+    ("sequence='0101'", "sequence"),
+    ("intensity_mode=3", "intensity_mode"),
+    ("camera_period_px=1", "camera_period_px"),
+    ("min_amplitude=-0.1", "min_amplitude"),
+    ("min_reference_coverage=1.5", "min_reference_coverage"),
+    ("color_normalize=yes", "color_normalize"),
+    ("link_check=0", "link_check"),
 ]:
     case(f"decode--decoder-{item}", lambda d, i=item: _decode(d, "--decoder", i), msg, setup=render_folder)
-case("decode-out-not-npy", lambda d: _decode(d)[:-5] + [str(d / "depth.png")] + _decode(d)[-2:], "--out", setup=render_folder)
-case("decode-ply-unwritable", lambda d: _decode(d, "--ply", str(d / "f" / "c.ply")), "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+case(
+    "decode-out-not-npy",
+    lambda d: _decode(d)[:-5] + [str(d / "depth.png")] + _decode(d)[-2:],
+    "--out",
+    setup=render_folder,
+)
+case(
+    "decode-ply-unwritable",
+    lambda d: _decode(d, "--ply", str(d / "f" / "c.ply")),
+    "f",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
 case("decode-ply-not-ply", lambda d: _decode(d, "--ply", str(d / "c.txt")), "--ply", setup=render_folder)
-case("decode-debug-dir-unwritable", lambda d: _decode(d, "--debug-dir", str(d / "f" / "stages")), "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
-case("decode-debug-dir-is-a-file", lambda d: _decode(d, "--debug-dir", str(d / "f")), "not a folder", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
-case("decode-out-under-a-file", lambda d: _decode(d)[:-5] + [str(d / "f" / "depth.npy")] + _decode(d)[-2:], "f", setup=lambda d: (render_folder(d), (d / "f").write_text("x")))
+case(
+    "decode-debug-dir-unwritable",
+    lambda d: _decode(d, "--debug-dir", str(d / "f" / "stages")),
+    "f",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
+case(
+    "decode-debug-dir-is-a-file",
+    lambda d: _decode(d, "--debug-dir", str(d / "f")),
+    "not a folder",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
+case(
+    "decode-out-under-a-file",
+    lambda d: _decode(d)[:-5] + [str(d / "f" / "depth.npy")] + _decode(d)[-2:],
+    "f",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
 
 
 def _mixed(d: Path) -> None:
@@ -384,25 +590,119 @@ def _mixed(d: Path) -> None:
 
 
 case("decode-mixed-render-folder", lambda d: _decode(d), "mixes files of two renders", setup=_mixed)
-case("decode-meta-not-json", lambda d: _decode(d), "meta.json", setup=lambda d: (render_folder(d) / "meta.json").write_text("{not json"))
-case("decode-meta-z0-negative", lambda d: _decode(d), "reference_depth_m", setup=lambda d: (render_folder(d) / "meta.json").write_text('{"reference_depth_m": -1}'))
+case(
+    "decode-meta-not-json",
+    lambda d: _decode(d),
+    "meta.json",
+    setup=lambda d: (render_folder(d) / "meta.json").write_text("{not json"),
+)
+case(
+    "decode-meta-z0-negative",
+    lambda d: _decode(d),
+    "reference_depth_m",
+    setup=lambda d: (render_folder(d) / "meta.json").write_text('{"reference_depth_m": -1}'),
+)
 
 # ----------------------------------------------------------------------------------- score
 for cid, argv, msg, setup in [
-    ("depth-missing", lambda d: ["score", str(d / "nope.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "nope.npy", render_folder),
-    ("depth-empty", lambda d: ["score", str(d / "e.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "empty", lambda d: (render_folder(d), (d / "e.npy").write_bytes(b""))),
-    ("depth-png", lambda d: ["score", str(d / "r" / "capture.png"), "--gt", str(d / "r" / "gt_depth.npy")], "not a NumPy", render_folder),
-    ("depth-truncated", lambda d: ["score", str(d / "t.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "t.npy", lambda d: (render_folder(d), (d / "t.npy").write_bytes((d / "r" / "gt_depth.npy").read_bytes()[:200]))),
-    ("depth-wrong-shape", lambda d: ["score", str(d / "w.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.zeros((10, 10), np.float32)))),
-    ("gt-missing", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "nope.npy")], "nope.npy", render_folder),
-    ("gt-3d", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")], "2-D", lambda d: (render_folder(d), np.save(d / "g.npy", np.zeros((2, 3, 4), np.float32)))),
-    ("period-zero", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "0"], "--period", render_folder),
-    ("period-negative", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "-21"], "--period", render_folder),
-    ("period-nan", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "nan"], "--period", render_folder),
-    ("edge-band-negative", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--edge-band", "-3"], "--edge-band", render_folder),
-    ("lit-wrong-shape", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--lit", str(d / "w.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), bool)))),
-    ("column-wrong-shape", lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--column", str(d / "w.npy")], "shape", lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), np.float32)))),
-    ("pickled-object-array", lambda d: ["score", str(d / "o.npy"), "--gt", str(d / "r" / "gt_depth.npy")], "o.npy", lambda d: (render_folder(d), np.save(d / "o.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True))),
+    (
+        "depth-missing",
+        lambda d: ["score", str(d / "nope.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "nope.npy",
+        render_folder,
+    ),
+    (
+        "depth-empty",
+        lambda d: ["score", str(d / "e.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "empty",
+        lambda d: (render_folder(d), (d / "e.npy").write_bytes(b"")),
+    ),
+    (
+        "depth-png",
+        lambda d: ["score", str(d / "r" / "capture.png"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "not a NumPy",
+        render_folder,
+    ),
+    (
+        "depth-truncated",
+        lambda d: ["score", str(d / "t.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "t.npy",
+        lambda d: (render_folder(d), (d / "t.npy").write_bytes((d / "r" / "gt_depth.npy").read_bytes()[:200])),
+    ),
+    (
+        "depth-wrong-shape",
+        lambda d: ["score", str(d / "w.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "shape",
+        lambda d: (render_folder(d), np.save(d / "w.npy", np.zeros((10, 10), np.float32))),
+    ),
+    (
+        "gt-missing",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "nope.npy")],
+        "nope.npy",
+        render_folder,
+    ),
+    (
+        "gt-3d",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")],
+        "2-D",
+        lambda d: (render_folder(d), np.save(d / "g.npy", np.zeros((2, 3, 4), np.float32))),
+    ),
+    (
+        "period-zero",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "0"],
+        "--period",
+        render_folder,
+    ),
+    (
+        "period-negative",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "-21"],
+        "--period",
+        render_folder,
+    ),
+    (
+        "period-nan",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--period", "nan"],
+        "--period",
+        render_folder,
+    ),
+    (
+        "edge-band-negative",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy"), "--edge-band", "-3"],
+        "--edge-band",
+        render_folder,
+    ),
+    (
+        "lit-wrong-shape",
+        lambda d: [
+            "score",
+            str(d / "r" / "depth.npy"),
+            "--gt",
+            str(d / "r" / "gt_depth.npy"),
+            "--lit",
+            str(d / "w.npy"),
+        ],
+        "shape",
+        lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), bool))),
+    ),
+    (
+        "column-wrong-shape",
+        lambda d: [
+            "score",
+            str(d / "r" / "depth.npy"),
+            "--gt",
+            str(d / "r" / "gt_depth.npy"),
+            "--column",
+            str(d / "w.npy"),
+        ],
+        "shape",
+        lambda d: (render_folder(d), np.save(d / "w.npy", np.ones((5, 5), np.float32))),
+    ),
+    (
+        "pickled-object-array",
+        lambda d: ["score", str(d / "o.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "o.npy",
+        lambda d: (render_folder(d), np.save(d / "o.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)),
+    ),
 ]:
     case(f"score-{cid}", argv, msg, setup=setup)
 
@@ -418,20 +718,77 @@ def _recording(d: Path, device: dict, files: dict | None = None) -> None:
 
 
 for cid, argv, msg in [
-    ("render-unknown-system", lambda d: ["render", "--system", "kinect2", str(SCENES / "white_plane.toml"), "--out", str(d / "o")], ("kinect2", "'proposed', 'kinect', 'tof'")),
-    ("render-scene-missing", lambda d: ["render", "--system", "kinect", str(d / "nope.toml"), "--out", str(d / "o")], "nope.toml"),
-    ("render-spp-zero", lambda d: ["render", "--system", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--spp", "0"], "--spp"),
-    ("render-seed-negative", lambda d: ["render", "--system", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--seed", "-1"], "--seed"),
+    (
+        "render-unknown-system",
+        lambda d: ["render", "--system", "kinect2", str(SCENES / "white_plane.toml"), "--out", str(d / "o")],
+        ("kinect2", "'proposed', 'kinect', 'tof'"),
+    ),
+    (
+        "render-scene-missing",
+        lambda d: ["render", "--system", "kinect", str(d / "nope.toml"), "--out", str(d / "o")],
+        "nope.toml",
+    ),
+    (
+        "render-spp-zero",
+        lambda d: ["render", "--system", "tof", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--spp", "0"],
+        "--spp",
+    ),
+    (
+        "render-seed-negative",
+        lambda d: [
+            "render",
+            "--system",
+            "tof",
+            str(SCENES / "white_plane.toml"),
+            "--out",
+            str(d / "o"),
+            "--seed",
+            "-1",
+        ],
+        "--seed",
+    ),
     ("decode-folder-missing", lambda d: ["decode", str(d / "nope"), "--out", str(d / "x.npy")], "nope"),
     ("decode-out-not-npy", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.png")], "--out"),
 ]:
-    case(f"system-{cid}", argv, msg, setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None)
-case("system-decode-device-json-invalid", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "device.json", setup=lambda d: ((d / "rec").mkdir(), (d / "rec" / "device.json").write_text("{")))
-case("system-decode-device-unknown", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], ("unknown depth system", "lidar"), setup=lambda d: _recording(d, {"device": "lidar"}))
-case("system-decode-ir-empty", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "empty", setup=lambda d: _recording(d, {"device": "kinect"}, {"ir.png": b"", "reference.png": b""}))
-case("system-decode-taps-missing", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "taps.npy", setup=lambda d: _recording(d, {"device": "tof"}))
-case("system-decode-taps-wrong-shape", lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")], "shape",
-     setup=lambda d: (_recording(d, {"device": "tof"}), np.save(d / "rec" / "taps.npy", np.zeros((4, 4, 4), np.float32))))
+    case(
+        f"system-{cid}",
+        argv,
+        msg,
+        setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None,
+    )
+case(
+    "system-decode-device-json-invalid",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "device.json",
+    setup=lambda d: ((d / "rec").mkdir(), (d / "rec" / "device.json").write_text("{")),
+)
+case(
+    "system-decode-device-unknown",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    ("unknown depth system", "lidar"),
+    setup=lambda d: _recording(d, {"device": "lidar"}),
+)
+case(
+    "system-decode-ir-empty",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "empty",
+    setup=lambda d: _recording(d, {"device": "kinect"}, {"ir.png": b"", "reference.png": b""}),
+)
+case(
+    "system-decode-taps-missing",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "taps.npy",
+    setup=lambda d: _recording(d, {"device": "tof"}),
+)
+case(
+    "system-decode-taps-wrong-shape",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "shape",
+    setup=lambda d: (
+        _recording(d, {"device": "tof"}),
+        np.save(d / "rec" / "taps.npy", np.zeros((4, 4, 4), np.float32)),
+    ),
+)
 
 # ------------------------------------------------------------------- bench, reproduce, ablate, demo, crosstalk
 for cid, argv, msg in [
@@ -459,23 +816,46 @@ for cid, argv, msg in [
     ("unknown-command", ["calibrate2"], "calibrate2"),
 ]:
     case(cid, lambda d, a=argv: list(a), msg)
-case("reproduce-check-invalid", lambda d: ["reproduce", "table1", "--check", str(d / "t.toml")], "max or min", files={"t.toml": '["a/b"]\nmeasured = 1\n'})
+case(
+    "reproduce-check-invalid",
+    lambda d: ["reproduce", "table1", "--check", str(d / "t.toml")],
+    "max or min",
+    files={"t.toml": '["a/b"]\nmeasured = 1\n'},
+)
 case("crosstalk-out-under-a-file", lambda d: ["crosstalk", "--out", str(d / "f" / "c.md")], "f", files={"f": "x"})
 for cid, body, msg in [
     ("unknown-parameter", 'name = "s"\n[[axis]]\nname = "decoder.votes"\nvalues = [1]\n', "unknown sweep parameter"),
     ("axis-without-values", 'name = "s"\n[[axis]]\nname = "decoder.voting"\n', "axis 1"),
     ("no-axis", 'name = "s"\n', "at least one"),
-    ("combine-unknown", 'name = "s"\ncombine = "cartesian"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "combine"),
+    (
+        "combine-unknown",
+        'name = "s"\ncombine = "cartesian"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n',
+        "combine",
+    ),
     ("repeats-zero", 'name = "s"\nrepeats = 0\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "repeats"),
     ("repeats-bool", 'name = "s"\nrepeats = true\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "repeats"),
     ("seed-negative", 'name = "s"\nseed = -1\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "seed"),
     ("seed-string", 'name = "s"\nseed = "x"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "seed"),
-    ("plot-metric-unknown", 'name = "s"\nplot_metric = "beauty"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "plot_metric"),
+    (
+        "plot-metric-unknown",
+        'name = "s"\nplot_metric = "beauty"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n',
+        "plot_metric",
+    ),
     ("name-with-spaces", 'name = "my sweep"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n', "sweep name"),
-    ("axis-twice", 'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n[[axis]]\nname = "decoder.voting"\nvalues = [false]\n', "twice"),
+    (
+        "axis-twice",
+        'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n[[axis]]\nname = "decoder.voting"\nvalues = '
+        "[false]\n",
+        "twice",
+    ),
     ("not-toml", "name = [", "not valid TOML"),
 ]:
-    case(f"ablate-sweep-{cid}", lambda d: ["ablate", str(d / "s.toml"), "--out", str(d / "abl")], msg, files={"s.toml": body})
+    case(
+        f"ablate-sweep-{cid}",
+        lambda d: ["ablate", str(d / "s.toml"), "--out", str(d / "abl")],
+        msg,
+        files={"s.toml": body},
+    )
 
 
 # ---------------------------------------------------------------------------------- runner
@@ -512,7 +892,17 @@ def test_bad_input_gives_one_line_exit_2_and_no_output(c: Case, tmp_path, monkey
     assert _snapshot(tmp_path) == before, f"left behind: {sorted(_snapshot(tmp_path) - before)}"
 
 
-SAMPLE = ["decode-capture-empty", "decode-capture-truncated-png", "decode-capture-crc-error", "decode-capture-random-bytes", "decode--decoder-voting=maybe", "render-sensor-noise-string", "render-rig-cx-huge", "score-depth-png", "pattern--width='10000000'"]
+SAMPLE = [
+    "decode-capture-empty",
+    "decode-capture-truncated-png",
+    "decode-capture-crc-error",
+    "decode-capture-random-bytes",
+    "decode--decoder-voting=maybe",
+    "render-sensor-noise-string",
+    "render-rig-cx-huge",
+    "score-depth-png",
+    "pattern--width='10000000'",
+]
 
 
 def test_a_sample_in_fresh_processes(tmp_path):
@@ -526,7 +916,14 @@ def test_a_sample_in_fresh_processes(tmp_path):
             ((d / name).write_bytes if isinstance(content, bytes) else (d / name).write_text)(content)
         if c.setup is not None:
             c.setup(d)
-        res = subprocess.run([str(exe), *c.argv(d)], cwd=d, capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONWARNINGS": "default"})
+        res = subprocess.run(
+            [str(exe), *c.argv(d)],
+            cwd=d,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env={**os.environ, "PYTHONWARNINGS": "default"},
+        )
         lines = res.stderr.strip().splitlines()
         assert res.returncode == 2 and len(lines) == 1 and lines[0].startswith("simbench: error:"), (c.id, res.stderr)
     assert len([c for c in CASES if c.id in SAMPLE]) == len(SAMPLE)

@@ -142,9 +142,16 @@ def test_tof_phase_noise_matches_shot_noise_theory():
     z, _ = _plane_phasor(model, 1.0)
     z = np.full(model.camera.size_hw, z[72, 88])
     amp = np.full(model.camera.size_hw, 0.3)
-    stack = np.stack([tof.decode_taps(tof.record_taps(amp, z, model=model, rng=s), model=model).distance_m for s in range(6)])
+    stack = np.stack(
+        [tof.decode_taps(tof.record_taps(amp, z, model=model, rng=s), model=model).distance_m for s in range(6)]
+    )
     n = 0.3 * tof.electrons_per_radiance(model)
-    theory = LIGHT_M_S / (4 * np.pi * model.modulation_hz) * np.sqrt(n / 2 + 2 * model.read_noise_e**2) / (n * model.demodulation_contrast / 2)
+    theory = (
+        LIGHT_M_S
+        / (4 * np.pi * model.modulation_hz)
+        * np.sqrt(n / 2 + 2 * model.read_noise_e**2)
+        / (n * model.demodulation_contrast / 2)
+    )
     assert stack.std() == pytest.approx(theory, rel=0.05)
 
 
@@ -292,8 +299,24 @@ def test_tof_flying_pixels_at_the_depth_step(variant):
 def test_cli_system_render_decode_score(tmp_path, variant, device):
     from simbench.cli import main
 
-    assert main(["render", "--system", device, str(SCENES / "discontinuity.toml"), "--out", str(tmp_path / "rec"), "--spp", "4"]) == 0
-    assert main(["decode", str(tmp_path / "rec"), "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply")]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "--system",
+                device,
+                str(SCENES / "discontinuity.toml"),
+                "--out",
+                str(tmp_path / "rec"),
+                "--spp",
+                "4",
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(["decode", str(tmp_path / "rec"), "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply")]) == 0
+    )
     assert main(["score", str(tmp_path / "d.npy"), "--gt", str(tmp_path / "rec" / "gt_depth.npy")]) == 0
     depth = np.load(tmp_path / "d.npy")
     assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.8

@@ -57,9 +57,18 @@ def test_stage_times_cover_the_decode_without_changing_it():
     plain = decode(capture, rig=rig, params=params, reference=ref)
     with stage_times() as times:
         profiled = decode(capture, rig=rig, params=params, reference=ref)
-    for a, b in ((plain.depth_m, profiled.depth_m), (plain.column_px, profiled.column_px), (plain.valid, profiled.valid)):
+    for a, b in (
+        (plain.depth_m, profiled.depth_m),
+        (plain.column_px, profiled.column_px),
+        (plain.valid, profiled.valid),
+    ):
         assert np.array_equal(a, b, equal_nan=True)
-    for name in ("phase (gabor, Eq. 10-11)", "stripe segmentation and voting", "De Bruijn windows and neighbour correction", "depth (reference matching, Eq. 15)"):
+    for name in (
+        "phase (gabor, Eq. 10-11)",
+        "stripe segmentation and voting",
+        "De Bruijn windows and neighbour correction",
+        "depth (reference matching, Eq. 15)",
+    ):
         assert times.calls[name] == 2 and times.seconds[name] > 0, name  # once per band thread
     assert times.calls["input check and undistortion"] == 1
     with stage("outside"):

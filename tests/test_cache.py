@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simbench.cache import RenderCache, array_digest, scene_fingerprint
-from simbench.scene import load_scene, scene_from_dict
+from simbench.scene import scene_from_dict
 
 from .conftest import SCENES
 
@@ -36,7 +36,9 @@ def test_damaged_entry_is_remade(tmp_path):
     assert np.array_equal(out["a"], np.zeros(3)) and cache.misses == 2
 
 
-@pytest.mark.parametrize("damage", ["truncate", "flip_zip_byte", "flip_array_byte", "empty", "no_checksum", "wrong_checksum"])
+@pytest.mark.parametrize(
+    "damage", ["truncate", "flip_zip_byte", "flip_array_byte", "empty", "no_checksum", "wrong_checksum"]
+)
 def test_every_kind_of_damage_is_remade_and_later_runs_hit(tmp_path, damage):
     """A damaged entry (zip CRC error, truncated file, an array changed behind the zip's back, an
     entry written without or with a wrong checksum) is re-made once; the run after that hits."""
@@ -89,7 +91,9 @@ def test_fingerprint_sees_what_affects_a_render(tmp_path):
     base = {"object": [{"type": "plane", "size_m": [1, 1], "rgb": [0.5, 0.5, 0.5]}]}
     s = scene_from_dict(base)
     assert scene_fingerprint(s) == scene_fingerprint(scene_from_dict(base))
-    assert scene_fingerprint(s) != scene_fingerprint(scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], "rgb": [0.5, 0.5, 0.6]}]}))
+    assert scene_fingerprint(s) != scene_fingerprint(
+        scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], "rgb": [0.5, 0.5, 0.6]}]})
+    )
     assert scene_fingerprint(s) != scene_fingerprint(dataclasses.replace(s, ambient_rgb=(0.1, 0.1, 0.1)))
     # descriptions and names of the scene do not matter; a mesh's bytes do
     assert scene_fingerprint(s) == scene_fingerprint(dataclasses.replace(s, name="other", description="x"))
@@ -132,7 +136,9 @@ def test_decoder_change_does_not_rerender(tmp_path, variant, monkeypatch):
 
     with monkeypatch.context() as m:
         m.setattr(simulate, "_build_drive", no_drive)
-        reproduce(["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+        reproduce(
+            ["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=quiet, command="t"
+        )
     assert sorted((tmp_path / "cache").glob("radiance-*.npz")) == renders
     reproduce(["table3"], config=cfg, out_dir=tmp_path / "c", cache_dir=None, progress=quiet, command="t")
     for f in ("table3.csv", "table3.md", "fig10.png"):
@@ -156,11 +162,16 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     cache = RenderCache(tmp_path / "cache")
     first = ProjectorDrive(scene, pattern, sensor, cache=cache)
     array = projector_drive_for(scene, pattern, sensor)
-    assert first.digests() == {"rgb": array_digest(array), **{f"mono{p}": array_digest(_mono(array, p)) for p in range(3)}}
+    assert first.digests() == {
+        "rgb": array_digest(array),
+        **{f"mono{p}": array_digest(_mono(array, p)) for p in range(3)},
+    }
     second = ProjectorDrive(scene, pattern, sensor, cache=cache)
     assert second.digests() == first.digests() and second._array is None
     red = calibration_frames(pattern)["red"]
-    only_red = ProjectorDrive(scene, red, get_sensor("ideal"), cache=cache).digests()  # a perfect black: green and blue off
+    only_red = ProjectorDrive(
+        scene, red, get_sensor("ideal"), cache=cache
+    ).digests()  # a perfect black: green and blue off
     assert only_red["mono0"] and only_red["mono1"] == "" and only_red["mono2"] == ""
     video = dataclasses.replace(sensor, projector=dataclasses.replace(sensor.projector, timing="video"))
     a = ProjectorDrive(scene, pattern, video, cache=cache, phase=0.1).digests()

@@ -46,8 +46,13 @@ def test_pattern_channels(tmp_path):
 
 
 def test_invalid_rig_field(tmp_path, capsys):
-    (tmp_path / "r.toml").write_text("[camera]\nwidth_px=1280\nheight_px=960\nfocal_px=0\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n")
-    assert main(["decode", str(tmp_path / "c.png"), "--rig", str(tmp_path / "r.toml"), "--out", str(tmp_path / "d.npy")]) == 2
+    (tmp_path / "r.toml").write_text(
+        "[camera]\nwidth_px=1280\nheight_px=960\nfocal_px=0\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"
+    )
+    assert (
+        main(["decode", str(tmp_path / "c.png"), "--rig", str(tmp_path / "r.toml"), "--out", str(tmp_path / "d.npy")])
+        == 2
+    )
     assert "focal_px" in capsys.readouterr().err
 
 
@@ -58,20 +63,78 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_m
     (distortion in rig.toml, undistorted by decode) the error grows but stays sub-millimetre."""
     out = tmp_path / "wp"
     assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(out), "--seed", "3", "--sensor", sensor]) == 0
-    for f in ("capture.png", "reference.png", "gt_depth.npy", "gt_depth.exr", "gt_column.npy", "gt_lit.npy", "rig.toml", "meta.json"):
+    for f in (
+        "capture.png",
+        "reference.png",
+        "gt_depth.npy",
+        "gt_depth.exr",
+        "gt_column.npy",
+        "gt_lit.npy",
+        "rig.toml",
+        "meta.json",
+    ):
         assert (out / f).is_file(), f
     meta = json.loads((out / "meta.json").read_text())
-    assert meta["seed"] == 3 and meta["spp"] == DEFAULT_SPP and meta["sampler"] == DEFAULT_SAMPLER and meta["variant"] == variant
-    assert main(["decode", str(out / "capture.png"), "--reference", str(out / "reference.png"), "--rig", str(out / "rig.toml"),
-                 "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply"), "--debug-dir", str(tmp_path / "dbg")]) == 0
+    assert (
+        meta["seed"] == 3
+        and meta["spp"] == DEFAULT_SPP
+        and meta["sampler"] == DEFAULT_SAMPLER
+        and meta["variant"] == variant
+    )
+    assert (
+        main(
+            [
+                "decode",
+                str(out / "capture.png"),
+                "--reference",
+                str(out / "reference.png"),
+                "--rig",
+                str(out / "rig.toml"),
+                "--out",
+                str(tmp_path / "d.npy"),
+                "--ply",
+                str(tmp_path / "c.ply"),
+                "--debug-dir",
+                str(tmp_path / "dbg"),
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "c.ply").is_file() and (tmp_path / "dbg" / "wrapped_phase.npy").is_file()
     capsys.readouterr()
-    assert main(["score", str(tmp_path / "d.npy"), "--gt", str(out / "gt_depth.npy"), "--column", str(tmp_path / "dbg" / "column.npy"), "--json"]) == 0
+    assert (
+        main(
+            [
+                "score",
+                str(tmp_path / "d.npy"),
+                "--gt",
+                str(out / "gt_depth.npy"),
+                "--column",
+                str(tmp_path / "dbg" / "column.npy"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     m = json.loads(capsys.readouterr().out)
     assert m["mae_mm"] < max_mae_mm and m["completeness"] > 0.99 and m["stripe_order_errors"] == 0
     assert meta["sensor"]["name"] == sensor
     # the same seed renders the same capture, bit for bit
-    assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(tmp_path / "wp2"), "--seed", "3", "--sensor", sensor]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(SCENES / "white_plane.toml"),
+                "--out",
+                str(tmp_path / "wp2"),
+                "--seed",
+                "3",
+                "--sensor",
+                sensor,
+            ]
+        )
+        == 0
+    )
     assert (out / "capture.png").read_bytes() == (tmp_path / "wp2" / "capture.png").read_bytes()
 
 
@@ -90,7 +153,13 @@ def _synthetic_recording(tmp_path):
         img = synthetic_plane_capture(drive, rig, point_m=(0, 0, depth))[0]
         save_png(tmp_path / f"{name}.png", np.round(np.clip(img, 0, 1) * 255).astype(np.uint8))
     save_rig(rig, tmp_path / "rig.toml")
-    return [str(tmp_path / "capture.png"), "--reference", str(tmp_path / "reference.png"), "--rig", str(tmp_path / "rig.toml")]
+    return [
+        str(tmp_path / "capture.png"),
+        "--reference",
+        str(tmp_path / "reference.png"),
+        "--rig",
+        str(tmp_path / "rig.toml"),
+    ]
 
 
 def test_decode_takes_decoder_parameters(tmp_path, capsys):
@@ -127,7 +196,9 @@ def _folder_is_whole(out) -> bool:
     meta = json.loads((out / "meta.json").read_text())
     listed = set(meta["files"].values()) | {"meta.json"}
     present = {p.name for p in out.iterdir()}
-    return present == listed and all(hashlib.sha256((out / n).read_bytes()).hexdigest() == meta["sha256"][k] for k, n in meta["files"].items())
+    return present == listed and all(
+        hashlib.sha256((out / n).read_bytes()).hexdigest() == meta["sha256"][k] for k, n in meta["files"].items()
+    )
 
 
 @pytest.mark.slow
@@ -149,8 +220,23 @@ def test_render_killed_at_any_moment_leaves_a_whole_folder(tmp_path):
     out = tmp_path / "out"
 
     def render(seed):
-        return subprocess.Popen([exe, "render", str(tmp_path / "s.toml"), "--out", str(out), "--sensor", "ideal", "--spp", "4", "--seed", str(seed)],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return subprocess.Popen(
+            [
+                exe,
+                "render",
+                str(tmp_path / "s.toml"),
+                "--out",
+                str(out),
+                "--sensor",
+                "ideal",
+                "--spp",
+                "4",
+                "--seed",
+                str(seed),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
 
     first = render(1)
     assert first.wait(timeout=300) == 0
@@ -169,7 +255,9 @@ def test_render_killed_at_any_moment_leaves_a_whole_folder(tmp_path):
     last = render(7)
     assert last.wait(timeout=300) == 0
     assert _folder_is_whole(out) and json.loads((out / "meta.json").read_text())["seed"] == 7
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "rig.toml", "s.toml"], "a killed run's temporary folder was left"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "rig.toml", "s.toml"], (
+        "a killed run's temporary folder was left"
+    )
 
 
 def _all_parsers():
@@ -199,9 +287,16 @@ def test_every_option_has_help_and_shows_its_default():
                 continue
             name = "/".join(a.option_strings) or a.dest
             assert a.help and len(a.help) > 8, f"{p.prog} {name}: no help text"
-            if a.option_strings and not a.required and a.default not in (None, False) and not isinstance(a, argparse._StoreTrueAction):
+            if (
+                a.option_strings
+                and not a.required
+                and a.default not in (None, False)
+                and not isinstance(a, argparse._StoreTrueAction)
+            ):
                 shown = " ".join(text.split())
-                assert f"default: {a.default}" in shown or "default" in a.help, f"{p.prog} {name}: default {a.default!r} not shown"
+                assert f"default: {a.default}" in shown or "default" in a.help, (
+                    f"{p.prog} {name}: default {a.default!r} not shown"
+                )
 
 
 def test_help_exits_zero_and_usage_errors_are_one_line(capsys):
@@ -209,7 +304,11 @@ def test_help_exits_zero_and_usage_errors_are_one_line(capsys):
     assert "--max-depth" in capsys.readouterr().out
     assert main(["render", str(SCENES / "white_plane.toml"), "--out", "x", "--spp", "zero"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("simbench: error: render: argument --spp") and "see simbench render --help" in err[0]
+    assert (
+        len(err) == 1
+        and err[0].startswith("simbench: error: render: argument --spp")
+        and "see simbench render --help" in err[0]
+    )
 
 
 def test_decode_robust_needs_the_reference_and_its_calibration_frames(tmp_path, capsys):
@@ -225,7 +324,15 @@ def test_decode_robust_needs_the_reference_and_its_calibration_frames(tmp_path, 
     img = np.full(rig.camera.size_hw + (3,), 90, np.uint8)
     for name in ("c.png", "ref.png"):
         save_png(tmp_path / name, img)
-    base = ["decode", str(tmp_path / "c.png"), "--rig", str(tmp_path / "rig.toml"), "--out", str(tmp_path / "d.npy"), "--robust"]
+    base = [
+        "decode",
+        str(tmp_path / "c.png"),
+        "--rig",
+        str(tmp_path / "rig.toml"),
+        "--out",
+        str(tmp_path / "d.npy"),
+        "--robust",
+    ]
     assert main([*base, "--mode", "calibrated"]) == 2
     assert "--reference" in capsys.readouterr().err
     assert main([*base, "--reference", str(tmp_path / "ref.png")]) == 2
@@ -240,15 +347,59 @@ def test_render_calibration_frames_then_robust_decode(tmp_path, capsys, variant)
     its manifest); `simbench decode --robust` finds them there and decodes a measured blue
     board (the hardest crosstalk case of Table 1) by triangulation."""
     out = tmp_path / "blue"
-    assert main(["render", str(SCENES / "plane_measured_blue.toml"), "--out", str(out), "--spp", "4", "--calibration-frames"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(SCENES / "plane_measured_blue.toml"),
+                "--out",
+                str(out),
+                "--spp",
+                "4",
+                "--calibration-frames",
+            ]
+        )
+        == 0
+    )
     meta = json.loads((out / "meta.json").read_text())
     for k in ("dark", "red", "green", "blue"):
         assert (out / f"calibration_{k}.png").is_file() and meta["files"][f"calibration_{k}"] == f"calibration_{k}.png"
         assert any(label.startswith("reference/") and label.endswith(f"/{k}") for label in meta["seeds"])
-    assert main(["decode", str(out / "capture.png"), "--reference", str(out / "reference.png"), "--rig", str(out / "rig.toml"),
-                 "--out", str(tmp_path / "d.npy"), "--robust", "--mode", "calibrated", "--debug-dir", str(tmp_path / "dbg")]) == 0
+    assert (
+        main(
+            [
+                "decode",
+                str(out / "capture.png"),
+                "--reference",
+                str(out / "reference.png"),
+                "--rig",
+                str(out / "rig.toml"),
+                "--out",
+                str(tmp_path / "d.npy"),
+                "--robust",
+                "--mode",
+                "calibrated",
+                "--debug-dir",
+                str(tmp_path / "dbg"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert main(["score", str(tmp_path / "d.npy"), "--gt", str(out / "gt_depth.npy"), "--column", str(tmp_path / "dbg" / "column.npy"), "--json"]) == 0
+    assert (
+        main(
+            [
+                "score",
+                str(tmp_path / "d.npy"),
+                "--gt",
+                str(out / "gt_depth.npy"),
+                "--column",
+                str(tmp_path / "dbg" / "column.npy"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     m = json.loads(capsys.readouterr().out)
     assert m["completeness"] > 0.99 and m["stripe_order_errors"] == 0 and m["mae_mm"] < 0.6
 
@@ -260,7 +411,18 @@ def test_render_reruns_from_the_render_cache(tmp_path, capsys, variant):
 
     (tmp_path / "rig.toml").write_text(TINY_RIG)
     (tmp_path / "s.toml").write_text(TINY_SCENE)
-    base = ["render", str(tmp_path / "s.toml"), "--sensor", "paper", "--spp", "4", "--seed", "5", "--cache", str(tmp_path / "cache")]
+    base = [
+        "render",
+        str(tmp_path / "s.toml"),
+        "--sensor",
+        "paper",
+        "--spp",
+        "4",
+        "--seed",
+        "5",
+        "--cache",
+        str(tmp_path / "cache"),
+    ]
     assert main([*base, "--out", str(tmp_path / "a")]) == 0
     first = capsys.readouterr().out
     assert main([*base, "--out", str(tmp_path / "b")]) == 0
@@ -292,7 +454,11 @@ def test_decode_keeps_the_decoded_reference(tmp_path, capsys):
         outs.append(tmp_path / f"d{i}.npy")
         assert main(["decode", *args, "--out", str(outs[-1]), *extra]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert "reference decoded and cached" in printed[0] and "reference map from the cache" in printed[1] and "reference decoded)" in printed[2]
+    assert (
+        "reference decoded and cached" in printed[0]
+        and "reference map from the cache" in printed[1]
+        and "reference decoded)" in printed[2]
+    )
     assert outs[0].read_bytes() == outs[1].read_bytes() == outs[2].read_bytes()
     entries = sorted((tmp_path / "cache").glob("reference_map-*.npz"))
     assert len(entries) == 1
@@ -317,9 +483,15 @@ def test_cached_reference_key_follows_the_decoder_code(tmp_path, monkeypatch):
     ref = load_image(tmp_path / "reference.png")
     cache = RenderCache(tmp_path / "cache")
     got = persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(), cache=cache)
-    again = persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(threads=1), cache=cache)  # threads do not matter
+    again = persist.cached_decode_reference(
+        ref, rig=rig, params=DecoderParams(threads=1), cache=cache
+    )  # threads do not matter
     fresh = decode_reference(ref, rig=rig, params=DecoderParams())
-    for a, b in ((got.column_px, fresh.column_px), (again.inverse, fresh.inverse), (again.expected_px, fresh.expected_px)):
+    for a, b in (
+        (got.column_px, fresh.column_px),
+        (again.inverse, fresh.inverse),
+        (again.expected_px, fresh.expected_px),
+    ):
         assert np.array_equal(a, b, equal_nan=True)
     assert cache.hits == 1 and cache.misses == 1 and got.z0_m == fresh.z0_m and got.mixing is None
     monkeypatch.setattr(persist, "decoder_fingerprint", lambda: "another decoder")

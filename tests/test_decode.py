@@ -173,7 +173,9 @@ def test_sequence_with_repeated_windows_is_rejected():
         DecoderParams(pattern={"sequence": (0, 2, 1)})
 
 
-@pytest.mark.parametrize("reflectance", [(0.8, 0.04, 0.04), (0.04, 0.8, 0.04), (0.8, 0.04, 0.8)], ids=["red", "green", "pink"])
+@pytest.mark.parametrize(
+    "reflectance", [(0.8, 0.04, 0.04), (0.04, 0.8, 0.04), (0.8, 0.04, 0.8)], ids=["red", "green", "pink"]
+)
 def test_color_normalisation_decodes_coloured_planes(reflectance):
     """A board that absorbs a stripe colour defeats the plain Eq. 9/13 decoder (the red and green
     boards lose most pixels; the pink board's overlay is amplitude-modulated stripe by stripe,

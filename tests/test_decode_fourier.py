@@ -74,7 +74,8 @@ def test_wfr_phase_noise_matches_theory():
 
 
 def test_wfr_follows_a_changed_frequency():
-    """A surface that compresses the fringe by 20 % (a slant): the ridge finds it, the nominal-frequency Gabor fit loses amplitude."""
+    """A surface that compresses the fringe by 20 % (a slant): the ridge finds it, the
+    nominal-frequency Gabor fit loses amplitude."""
     img, psi = _fringe(period=T_CAM / 1.2)
     ones = np.ones_like(img)
     w = wfr_phase(img, certainty=ones, period_px=T_CAM, sigma_x_px=SX, sigma_y_px=SY)

@@ -59,7 +59,8 @@ def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():
             spectral.camera_sensitivities()
         except ImportError as exc:
             print("ERR", exc)
-        assert not any(n == "scipy" or n.startswith("scipy.") for n in sys.modules), sorted(n for n in sys.modules if "scipy" in n)
+        loaded = sorted(n for n in sys.modules if "scipy" in n)
+        assert not any(n == "scipy" or n.startswith("scipy.") for n in sys.modules), loaded
         import numba  # would raise AttributeError: __version__ with colour's mock in place
         print("numba ok")
         """
@@ -72,6 +73,9 @@ def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():
 
 def test_colour_then_numba_in_a_fresh_process():
     """The order `simbench render` takes: colour's crosstalk first, then the decoder's kernels."""
-    res = _run("from simbench import spectral; spectral.camera_sensitivities(); import numba; from simbench.decode import _kernels; print('ok')")
+    res = _run(
+        "from simbench import spectral; spectral.camera_sensitivities(); import numba; from simbench.decode import "
+        "_kernels; print('ok')"
+    )
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().endswith("ok")

@@ -41,7 +41,11 @@ def test_presets_load_and_round_trip(name, tmp_path):
 def test_ideal_has_every_effect_off_and_paper_has_them_on():
     ideal, paper = get_sensor("ideal"), get_sensor("paper")
     assert not ideal.camera.noise and ideal.camera.cfa == "none" and not ideal.crosstalk and ideal.ambient_ratio == 0
-    assert ideal.projector.transfer == "linear" and math.isinf(ideal.projector.contrast_ratio) and ideal.projector.dmd == "square"
+    assert (
+        ideal.projector.transfer == "linear"
+        and math.isinf(ideal.projector.contrast_ratio)
+        and ideal.projector.dmd == "square"
+    )
     assert not ideal.camera_lens.defocus and not ideal.projector.lens.defocus
     assert apply_to_rig(RIG, ideal) == RIG
     for key in EFFECTS:
@@ -63,9 +67,19 @@ def test_every_paper_number_is_cited_or_marked_an_assumption():
             comment.append(s)
             continue
         m = re.match(r"^([a-z_]+)\s*=", s)
-        if m and m.group(1) not in ("name", "description", "model", "noise", "fixed_pattern_seed", "gamma", "transmission"):
+        if m and m.group(1) not in (
+            "name",
+            "description",
+            "model",
+            "noise",
+            "fixed_pattern_seed",
+            "gamma",
+            "transmission",
+        ):
             text = " ".join(comment).lower()
-            assert ("assumption" in text or "datasheet" in text or "guide" in text or "simbench/" in text), f"{m.group(1)} has no source"
+            assert "assumption" in text or "datasheet" in text or "guide" in text or "simbench/" in text, (
+                f"{m.group(1)} has no source"
+            )
         if s.startswith("["):
             comment = []
         elif not s:
@@ -103,7 +117,9 @@ def test_photometry_follows_the_camera_equation():
     e = electrons_per_radiance_s(paper, RIG)
     assert e.shape == (3,) and np.all(e > 0)
     # twice the f-number: a quarter of the light; twice the lumens: twice
-    slow = dataclasses.replace(paper, camera_lens=dataclasses.replace(paper.camera_lens, f_number=2 * paper.camera_lens.f_number))
+    slow = dataclasses.replace(
+        paper, camera_lens=dataclasses.replace(paper.camera_lens, f_number=2 * paper.camera_lens.f_number)
+    )
     assert np.allclose(electrons_per_radiance_s(slow, RIG), e / 4)
     bright = dataclasses.replace(paper, projector=dataclasses.replace(paper.projector, lumens=300.0))
     assert np.allclose(electrons_per_radiance_s(bright, RIG), 2 * e)
@@ -124,7 +140,12 @@ def test_auto_exposure_puts_the_reference_board_at_the_set_fraction(crosstalk):
     t = exposure_s(s, RIG, reference_depth_m=z0, reference_albedo=REFERENCE_ALBEDO)
     k = crosstalk_matrix((REFERENCE_ALBEDO,) * 3) if crosstalk else REFERENCE_ALBEDO * np.eye(3)
     q = (k * channel_weights(s, RIG)).sum(axis=1) / z0**2  # render_channels' output on the board
-    img = emva_camera(np.broadcast_to(q, (4, 4, 3)).copy(), camera=s.camera, electrons_per_radiance=electrons_per_radiance_s(s, RIG) * t, exposure_s=t)
+    img = emva_camera(
+        np.broadcast_to(q, (4, 4, 3)).copy(),
+        camera=s.camera,
+        electrons_per_radiance=electrons_per_radiance_s(s, RIG) * t,
+        exposure_s=t,
+    )
     assert img.max() == round(s.camera.auto_exposure_fraction * 255)
     fixed = dataclasses.replace(s, camera=dataclasses.replace(s.camera, exposure_s=0.004))
     assert exposure_s(fixed, RIG, reference_depth_m=z0, reference_albedo=0.8) == 0.004
@@ -146,11 +167,19 @@ def test_one_push_white_balance_makes_the_reference_board_grey(crosstalk, cfa):
     k = crosstalk_matrix((REFERENCE_ALBEDO,) * 3) if crosstalk else REFERENCE_ALBEDO * np.eye(3)
     images = {}
     for mode in ("off", "one_push"):
-        s = dataclasses.replace(base, crosstalk=crosstalk, camera=dataclasses.replace(base.camera, white_balance=mode, cfa=cfa))
+        s = dataclasses.replace(
+            base, crosstalk=crosstalk, camera=dataclasses.replace(base.camera, white_balance=mode, cfa=cfa)
+        )
         gains = white_balance_gains(s, RIG, **board)
         t = exposure_s(s, RIG, **board)
         q = (k * channel_weights(s, RIG)).sum(axis=1) / z0**2
-        images[mode] = emva_camera(np.broadcast_to(q, (8, 8, 3)).copy(), camera=s.camera, electrons_per_radiance=electrons_per_radiance_s(s, RIG) * t, exposure_s=t, white_balance=gains)
+        images[mode] = emva_camera(
+            np.broadcast_to(q, (8, 8, 3)).copy(),
+            camera=s.camera,
+            electrons_per_radiance=electrons_per_radiance_s(s, RIG) * t,
+            exposure_s=t,
+            white_balance=gains,
+        )
         if mode == "off":
             assert np.array_equal(gains, np.ones(3))
         else:
@@ -166,10 +195,14 @@ def test_white_balance_gain_acts_before_the_adc_clip():
     """A channel with gain > 1 reaches the top of the ADC range before full well."""
     cam = dataclasses.replace(get_sensor("ideal").camera, full_well_e=1000.0)
     rad = np.full((2, 2, 3), 0.6)
-    img = emva_camera(rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(2.0, 1.0, 0.5))
+    img = emva_camera(
+        rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(2.0, 1.0, 0.5)
+    )
     assert img[0, 0].tolist() == [255, round(0.6 * 255), round(0.3 * 255)]
     with pytest.raises(ValueError, match="white_balance"):
-        emva_camera(rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(1.0, 0.0, 1.0))
+        emva_camera(
+            rad, camera=cam, electrons_per_radiance=(1000.0,) * 3, exposure_s=1e-3, white_balance=(1.0, 0.0, 1.0)
+        )
 
 
 def test_paper_preset_balances_white_on_the_camera():
@@ -179,7 +212,18 @@ def test_paper_preset_balances_white_on_the_camera():
     # the LED blue line gives the fewest electrons per unit drive (spectral.py): the largest gain
     assert gains[1] == 1.0 and gains[2] > gains[0] > 1.0
     with pytest.raises(ValueError, match="white_balance"):
-        sensor_from_dict({"camera": {"model": "emva", "pixel_pitch_um": 5.3, "qe": [0.5] * 3, "full_well_e": 1e4, "dark_noise_e": 1.0, "white_balance": "auto"}})
+        sensor_from_dict(
+            {
+                "camera": {
+                    "model": "emva",
+                    "pixel_pitch_um": 5.3,
+                    "qe": [0.5] * 3,
+                    "full_well_e": 1e4,
+                    "dark_noise_e": 1.0,
+                    "white_balance": "auto",
+                }
+            }
+        )
 
 
 def test_apply_to_rig_puts_the_lens_distortion_in_the_rig():

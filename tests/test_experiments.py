@@ -44,21 +44,34 @@ def test_unknown_target_is_rejected():
 
 
 def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
-    measured = {"table1/white/paper/gt_mae_mm": 0.3, "table1/white/paper/completeness": 0.999, "fig9/1.0m/stripe_order_errors": 0, "x/other": 3.0}
+    measured = {
+        "table1/white/paper/gt_mae_mm": 0.3,
+        "table1/white/paper/completeness": 0.999,
+        "fig9/1.0m/stripe_order_errors": 0,
+        "x/other": 3.0,
+    }
     path = write_thresholds(tmp_path / "t.toml", measured, margin=0.25, command="test")
     assert check_thresholds(measured, path) == []
     worse = {**measured, "table1/white/paper/gt_mae_mm": 0.3 * 1.3 + 0.03}
     assert any("gt_mae_mm" in f for f in check_thresholds(worse, path))
-    assert any("completeness" in f for f in check_thresholds({**measured, "table1/white/paper/completeness": 0.95}, path))
-    assert any("stripe_order_errors" in f for f in check_thresholds({**measured, "fig9/1.0m/stripe_order_errors": 100}, path))
+    assert any(
+        "completeness" in f for f in check_thresholds({**measured, "table1/white/paper/completeness": 0.95}, path)
+    )
+    assert any(
+        "stripe_order_errors" in f for f in check_thresholds({**measured, "fig9/1.0m/stripe_order_errors": 100}, path)
+    )
     missing = dict(measured)
     del missing["table1/white/paper/gt_mae_mm"]
     assert any("not measured" in f for f in check_thresholds(missing, path))
-    assert any("not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path))
+    assert any(
+        "not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path)
+    )
 
 
 def test_threshold_rules():
-    t = thresholds_from({"a/mae_mm": 1.0, "a/completeness": 0.5, "a/stripe_order_error_rate": 0.0, "a/nan_mm": math.nan}, margin=0.5)
+    t = thresholds_from(
+        {"a/mae_mm": 1.0, "a/completeness": 0.5, "a/stripe_order_error_rate": 0.0, "a/nan_mm": math.nan}, margin=0.5
+    )
     assert t["a/mae_mm"]["max"] == pytest.approx(1.52)
     assert t["a/completeness"]["min"] == pytest.approx(0.49)
     assert t["a/stripe_order_error_rate"]["max"] == pytest.approx(0.0005)
@@ -83,11 +96,16 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
 
     cfg = RunConfig.preset(quick=True)
     quiet = lambda s: None  # noqa: E731
-    good = reproduce(["table1"], config=cfg, out_dir=tmp_path / "good", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    good = reproduce(
+        ["table1"], config=cfg, out_dir=tmp_path / "good", cache_dir=tmp_path / "cache", progress=quiet, command="t"
+    )
     path = write_thresholds(tmp_path / "t.toml", good, margin=0.25, command="t")
     assert check_thresholds(good, path) == []
     white = {b: good[f"table1/{b}/white/robust/calibrated/completeness"] for b in BOARD_SETS}
-    assert good["table1/paint/white/paper/calibrated/completeness"] > 0.99 and good["table1/paint/white/paper/calibrated/stripe_order_errors"] == 0
+    assert (
+        good["table1/paint/white/paper/calibrated/completeness"] > 0.99
+        and good["table1/paint/white/paper/calibrated/stripe_order_errors"] == 0
+    )
     # issue 17: the colour-robust decoder decodes all seven boards of both sets under the paper
     # sensor model at >= 99 % of the white board's completeness, without stripe-order errors,
     # by both protocols; the paper's decoder loses the paint blue board
@@ -102,13 +120,22 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
                 assert good[f"{key}/stripe_order_error_rate"] <= 1e-4, key
     assert good["table1/paint/blue/paper/calibrated/completeness"] < 0.01
     worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
-    worse = reproduce(["table1"], config=worse_cfg, out_dir=tmp_path / "worse", cache_dir=tmp_path / "cache", progress=quiet, command="t")
+    worse = reproduce(
+        ["table1"],
+        config=worse_cfg,
+        out_dir=tmp_path / "worse",
+        cache_dir=tmp_path / "cache",
+        progress=quiet,
+        command="t",
+    )
     failures = check_thresholds(worse, path)
     # a narrower Gabor window lets more noise through: the white board gets worse by one
     # protocol or the other (triangulation is dominated by the decoder's systematic error)
     assert any("table1/paint/white/paper/" in f for f in failures), failures
     rows = (tmp_path / "good" / "table1.csv").read_text().splitlines()
-    assert len(rows) == 1 + len(BOARD_SETS) * len(COLOURS) * 4 and rows[0].startswith("board_set,colour,material,reflectance,decoder,protocol,paper_mae_mm")
+    assert len(rows) == 1 + len(BOARD_SETS) * len(COLOURS) * 4 and rows[0].startswith(
+        "board_set,colour,material,reflectance,decoder,protocol,paper_mae_mm"
+    )
     prov = json.loads((tmp_path / "good" / "table1.provenance.json").read_text())
     assert set(prov["files"]) == {"table1.csv", "table1.md"} and prov["seeds"]["table1/paint/red"]["render"] > 0
     assert abs(prov["seeds"]["table1/paint/red/placement"]["board_depth_m"]) <= cfg.placement_depth_mm / 1000

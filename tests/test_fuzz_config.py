@@ -32,7 +32,11 @@ scalars = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.text(max_size=12),
 )
-values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=6), st.dictionaries(st.text(max_size=8), inner, max_size=4)), max_leaves=12)
+values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=6), st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+    max_leaves=12,
+)
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
 
 
@@ -146,7 +150,29 @@ def test_sweep_tables(data):
 
 DECODER_FIELDS = [f.name for f in dataclasses.fields(DecoderParams)]
 toml_texts = st.one_of(
-    st.sampled_from(["true", "false", "1", "0", "-1", "0.5", "inf", "-inf", "nan", "1e309", '"ftp"', "ftp", "[1, 2]", "[0.5, 2.0]", "[]", "{}", '"0101"', "maybe", ""]),
+    st.sampled_from(
+        [
+            "true",
+            "false",
+            "1",
+            "0",
+            "-1",
+            "0.5",
+            "inf",
+            "-inf",
+            "nan",
+            "1e309",
+            '"ftp"',
+            "ftp",
+            "[1, 2]",
+            "[0.5, 2.0]",
+            "[]",
+            "{}",
+            '"0101"',
+            "maybe",
+            "",
+        ]
+    ),
     st.text(max_size=10),
     st.floats(allow_nan=True).map(repr),
     st.integers(-(2**65), 2**65).map(str),
@@ -178,7 +204,18 @@ def test_decoder_option_through_the_cli_is_a_result_or_one_line(tmp_path_factory
     d = tmp_path_factory.mktemp("fuzz")
     err = io.StringIO()
     with redirect_stderr(err), redirect_stdout(io.StringIO()):
-        rc = main(["decode", str(d / "c.png"), "--rig", str(d / "rig.toml"), "--out", str(d / "o.npy"), "--decoder", f"{name}={text}"])
+        rc = main(
+            [
+                "decode",
+                str(d / "c.png"),
+                "--rig",
+                str(d / "rig.toml"),
+                "--out",
+                str(d / "o.npy"),
+                "--decoder",
+                f"{name}={text}",
+            ]
+        )
     lines = err.getvalue().strip().splitlines()
     assert rc == 2 and len(lines) == 1 and lines[0].startswith("simbench: error:"), err.getvalue()
     assert not any(d.iterdir())

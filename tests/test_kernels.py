@@ -44,7 +44,10 @@ def test_gabor_fit_matches_numpy(holes, shape):
 
 
 def test_gabor_fit_on_flat_and_empty_images():
-    for img, cert in ((np.zeros((20, 40), np.float32), np.zeros((20, 40), np.float32)), (np.full((20, 40), 0.5, np.float32), np.ones((20, 40), np.float32))):
+    for img, cert in (
+        (np.zeros((20, 40), np.float32), np.zeros((20, 40), np.float32)),
+        (np.full((20, 40), 0.5, np.float32), np.ones((20, 40), np.float32)),
+    ):
         got = phase.gabor_phase(img, certainty=cert, period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
         want = ref.gabor_phase(img, certainty=cert, period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
         for a, b in zip((got.wrapped, got.amplitude, got.offset, got.residual, got.support), want):
@@ -112,7 +115,10 @@ def test_neighbour_correction_matches_numpy(reach, min_support):
     for a, b in zip(got, want):
         same(a, b)
     empty = np.zeros(0, np.int32)
-    for a, b in zip(debruijn.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach), ref.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach)):
+    for a, b in zip(
+        debruijn.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach),
+        ref.neighbour_correct(empty, empty.astype(bool), cycle=cycle, reach=reach),
+    ):
         same(a, b)
 
 
@@ -124,7 +130,9 @@ def test_absolute_column_and_gather_match_numpy():
     for fill, arr in ((-1, per_stripe), (0.0, rng.random(400).astype(np.float32)), (-1, per_stripe.astype(np.int8))):
         same(_per_pixel(arr, labels, fill), ref.per_pixel(arr, labels, fill))
     position = ref.per_pixel(per_stripe, labels, -1)
-    expected = (np.arange(wrapped.shape[1], dtype=np.float32) * 1.1 + rng.normal(0, 30, wrapped.shape)).astype(np.float32)
+    expected = (np.arange(wrapped.shape[1], dtype=np.float32) * 1.1 + rng.normal(0, 30, wrapped.shape)).astype(
+        np.float32
+    )
     expected[0, :5] = np.nan
     for period in (21.0, 15.0, 8.5):
         got = depth.absolute_column(position, wrapped, expected, period_px=period, cycle=8)

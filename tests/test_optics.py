@@ -31,7 +31,9 @@ def test_distortion_matches_opencv_both_ways():
     rng = np.random.default_rng(0)
     x, y = rng.uniform(-0.28, 0.28, 200), rng.uniform(-0.21, 0.21, 200)
     xd, yd = distort_normalized(x, y, DIST)
-    proj, _ = cv2.projectPoints(np.stack([x, y, np.ones_like(x)], -1), np.zeros(3), np.zeros(3), intr.matrix, np.array(DIST))
+    proj, _ = cv2.projectPoints(
+        np.stack([x, y, np.ones_like(x)], -1), np.zeros(3), np.zeros(3), intr.matrix, np.array(DIST)
+    )
     assert np.allclose(proj[:, 0, 0], intr.focal_px * xd + intr.cx_px, atol=1e-9)
     assert np.allclose(proj[:, 0, 1], intr.focal_px * yd + intr.cy_px, atol=1e-9)
     xu, yu = undistort_normalized(xd, yd, DIST)
@@ -57,10 +59,24 @@ def test_remap_maps_are_cached_per_device_with_the_same_bits():
     img = np.random.default_rng(3).integers(0, 256, (240, 320, 3), dtype=np.uint8)
     x, y = _grid(intr)
     xd, yd = distort_normalized(x, y, DIST)
-    fresh = cv2.remap(img, (xd * intr.focal_px + intr.cx_px).astype(np.float32), (yd * intr.focal_px + intr.cy_px).astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    fresh = cv2.remap(
+        img,
+        (xd * intr.focal_px + intr.cx_px).astype(np.float32),
+        (yd * intr.focal_px + intr.cy_px).astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
     assert np.array_equal(undistort_image(img, intr), fresh)
     xu, yu = undistort_normalized(x, y, DIST)
-    fresh = cv2.remap(img, (xu * intr.focal_px + intr.cx_px).astype(np.float32), (yu * intr.focal_px + intr.cy_px).astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    fresh = cv2.remap(
+        img,
+        (xu * intr.focal_px + intr.cx_px).astype(np.float32),
+        (yu * intr.focal_px + intr.cy_px).astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
     assert np.array_equal(distort_image(img, intr), fresh)
     for maps in (_undistort_maps, _distort_maps):
         a, b = maps(intr), maps(dataclasses.replace(intr))
@@ -122,7 +138,11 @@ def test_transfer_curve_and_black_level():
     black = transfer_curve(pat, transfer="linear", contrast_ratio=1000.0)
     assert black[0, 0, 0] == pytest.approx(1e-3) and black[0, 0, 2] == pytest.approx(1.0)
     assert black[0, 0, 2] / black[0, 0, 0] == pytest.approx(1000.0)  # the contrast ratio
-    for bad in ({"transfer": "sRGB"}, {"transfer": "gamma", "gamma": 0.0}, {"transfer": "linear", "contrast_ratio": 0.5}):
+    for bad in (
+        {"transfer": "sRGB"},
+        {"transfer": "gamma", "gamma": 0.0},
+        {"transfer": "linear", "contrast_ratio": 0.5},
+    ):
         with pytest.raises(ValueError):
             transfer_curve(pat, **bad)
     with pytest.raises(ValueError, match="8-bit"):
@@ -136,8 +156,13 @@ def test_video_mode_bitplane_timing_against_its_model():
     from simbench.projector import video_bitplane_weights
 
     for phase in (0.0, 0.37, 0.999):
-        np.testing.assert_allclose(video_bitplane_weights(exposure_s=2 / 60, frame_rate_hz=60.0, phase=phase), 1.0, rtol=1e-9)
-    mean = np.mean([video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=p) for p in (np.arange(3000) + 0.5) / 3000], axis=0)
+        np.testing.assert_allclose(
+            video_bitplane_weights(exposure_s=2 / 60, frame_rate_hz=60.0, phase=phase), 1.0, rtol=1e-9
+        )
+    mean = np.mean(
+        [video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=p) for p in (np.arange(3000) + 0.5) / 3000],
+        axis=0,
+    )
     np.testing.assert_allclose(mean, 1.0, atol=2e-3)
     # a third of a frame from its start: the red third whole (3x its share of a frame's), nothing else
     w = video_bitplane_weights(exposure_s=1 / 180, frame_rate_hz=60.0, phase=0.0)
@@ -150,9 +175,14 @@ def test_video_mode_bitplane_timing_against_its_model():
     pat = np.arange(256, dtype=np.uint8).reshape(1, 256, 1).repeat(3, axis=2)
     ones = transfer_curve(pat, transfer="linear", bitplane_weights=np.ones((3, 8)))
     np.testing.assert_allclose(ones, transfer_curve(pat, transfer="linear"), atol=1e-7)
-    partial = transfer_curve(pat, transfer="linear", bitplane_weights=video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=0.3))
+    partial = transfer_curve(
+        pat, transfer="linear", bitplane_weights=video_bitplane_weights(exposure_s=0.027, frame_rate_hz=60.0, phase=0.3)
+    )
     assert np.abs(partial - ones).max() > 0.1  # levels off by more than a tenth of full scale
-    for bad in ({"exposure_s": 0.0, "frame_rate_hz": 60.0, "phase": 0.0}, {"exposure_s": 0.01, "frame_rate_hz": 60.0, "phase": 1.0}):
+    for bad in (
+        {"exposure_s": 0.0, "frame_rate_hz": 60.0, "phase": 0.0},
+        {"exposure_s": 0.01, "frame_rate_hz": 60.0, "phase": 1.0},
+    ):
         with pytest.raises(ValueError):
             video_bitplane_weights(**bad)
     with pytest.raises(ValueError, match="shape"):
@@ -181,7 +211,11 @@ DRIVE = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear
 
 
 def _distorted_rig(camera=DIST, projector=(0.0,) * 5):
-    return dataclasses.replace(RIG, camera=dataclasses.replace(RIG.camera, distortion=camera), projector=dataclasses.replace(RIG.projector, distortion=projector))
+    return dataclasses.replace(
+        RIG,
+        camera=dataclasses.replace(RIG.camera, distortion=camera),
+        projector=dataclasses.replace(RIG.projector, distortion=projector),
+    )
 
 
 @pytest.mark.parametrize("mode", ["reference", "calibrated"])
@@ -192,7 +226,12 @@ def test_decoder_undistorts_the_camera(mode):
     img, _, z = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1))
     ref, _, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.0))
     seen_img, seen_ref = distort_image(img, rig.camera), distort_image(ref, rig.camera)
-    r = decode(seen_img, rig=rig, params=DecoderParams(mode=mode), reference=decode_reference(seen_ref, rig=rig, params=DecoderParams()))
+    r = decode(
+        seen_img,
+        rig=rig,
+        params=DecoderParams(mode=mode),
+        reference=decode_reference(seen_ref, rig=rig, params=DecoderParams()),
+    )
     assert r.valid.mean() > 0.97
     err = r.depth_m[r.valid] - z[r.valid]
     assert np.sqrt(np.mean(err**2)) < 0.2e-3
@@ -208,9 +247,13 @@ def test_decoder_handles_projector_distortion(mode):
     rig = _distorted_rig(camera=(0.0,) * 5, projector=(-0.05, 0.02, 0.0, 0.0, 0.0))
     img, col, z = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.2))
     ref, _, _ = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.0))
-    r = decode(img, rig=rig, params=DecoderParams(mode=mode), reference=decode_reference(ref, rig=rig, params=DecoderParams()))
+    r = decode(
+        img, rig=rig, params=DecoderParams(mode=mode), reference=decode_reference(ref, rig=rig, params=DecoderParams())
+    )
     assert r.valid.mean() > 0.98
     assert np.sqrt(np.mean((r.column_px[r.valid] - col[r.valid]) ** 2)) < 0.05  # DMD columns
     # 0.03 px of column error in depth: dZ = Z^2 / (f_p B) du (the ideal rig's test uses 0.02 px;
     # near the image ends the reference is extrapolated along its curved column map)
-    assert np.sqrt(np.mean((r.depth_m[r.valid] - z[r.valid]) ** 2)) < 0.03 * 1.2**2 / (rig.projector.focal_px * rig.baseline_m)
+    assert np.sqrt(np.mean((r.depth_m[r.valid] - z[r.valid]) ** 2)) < 0.03 * 1.2**2 / (
+        rig.projector.focal_px * rig.baseline_m
+    )

@@ -3,7 +3,15 @@ import itertools
 import numpy as np
 import pytest
 
-from simbench.pattern import PatternSpec, column_from_phase, de_bruijn, fringe_pattern, phase_from_column, quantize, window_positions
+from simbench.pattern import (
+    PatternSpec,
+    column_from_phase,
+    de_bruijn,
+    fringe_pattern,
+    phase_from_column,
+    quantize,
+    window_positions,
+)
 
 
 def test_paper_sequence():
@@ -39,7 +47,17 @@ def test_window_table_rejects_repeats():
         window_positions(np.array([0, 0, 1, 0, 0, 1]), order=2)
 
 
-@pytest.mark.parametrize("bad", [{"order": 1}, {"period_px": 2}, {"dc": 0.3, "amplitude": 0.5}, {"size_hw": (0, 10)}, {"channels": "rgr"}, {"channels": "rg"}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"order": 1},
+        {"period_px": 2},
+        {"dc": 0.3, "amplitude": 0.5},
+        {"size_hw": (0, 10)},
+        {"channels": "rgr"},
+        {"channels": "rg"},
+    ],
+)
 def test_invalid_specs_raise(bad):
     with pytest.raises(ValueError):
         PatternSpec(**bad)

@@ -25,7 +25,9 @@ def _plane(depth_m: float, rgb=(0.8, 0.8, 0.8), scale: float = 0.5):
     params = dict(obj.params)
     params["center_m"] = (0.0, 0.0, depth_m)
     params["size_m"] = (4.0, 3.0)
-    obj = dataclasses.replace(obj, params=tuple(sorted(params.items())), material=dataclasses.replace(obj.material, rgb=rgb))
+    obj = dataclasses.replace(
+        obj, params=tuple(sorted(params.items())), material=dataclasses.replace(obj.material, rgb=rgb)
+    )
     return dataclasses.replace(scene, objects=(obj,), rig=scale_camera(scene.rig, scale))
 
 
@@ -60,7 +62,9 @@ def test_ambient_light_at_the_stated_ratio(variant):
     scene = physical_scene(_plane(1.0), sensor)
     both = render_channels(scene, _uniform_drive(scene.rig, (1, 1, 1)), sensor, spp=16, seed=2, max_depth=2)
     dark_room = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
-    projector_only = render_channels(dark_room, _uniform_drive(scene.rig, (1, 1, 1)), get_sensor("ideal"), spp=16, seed=2, max_depth=2)
+    projector_only = render_channels(
+        dark_room, _uniform_drive(scene.rig, (1, 1, 1)), get_sensor("ideal"), spp=16, seed=2, max_depth=2
+    )
     ambient = _centre(both).mean(axis=0) - _centre(projector_only).mean(axis=0)
     assert np.allclose(ambient / _centre(projector_only).mean(axis=0), 0.1, rtol=0.03)
 
@@ -80,13 +84,20 @@ def test_crosstalk_renders_match_the_spectral_integral(variant, rgb):
     s, p, rho = camera_sensitivities(), projector_primaries(), reflectance_spectrum(rgb)
     e = electrons_per_radiance_s(sensor, _plane(1.0).rig)
     white = _plane(1.0, rgb=(1.0, 1.0, 1.0))
-    geometry = _centre(render_channels(white, _uniform_drive(white.rig, (1, 1, 1)), get_sensor("ideal"), spp=4, seed=3, max_depth=2)).mean(axis=0)
+    geometry = _centre(
+        render_channels(white, _uniform_drive(white.rig, (1, 1, 1)), get_sensor("ideal"), spp=4, seed=3, max_depth=2)
+    ).mean(axis=0)
     for prim in range(3):
         scene = _plane(1.0, rgb=rgb)
         drive = _uniform_drive(scene.rig, np.eye(3)[prim])
         q = _centre(render_channels(scene, drive, sensor, spp=4, seed=3, max_depth=2)).mean(axis=0)
         # electrons in channel c = q_c * e_c; spectral: geometry * e_p * int(S_c rho P_p) / int(S_p P_p)
-        expected = geometry[prim] * e[prim] * np.einsum("lc,l,l->c", s, rho, p[:, prim]) / np.einsum("l,l->", s[:, prim], p[:, prim])
+        expected = (
+            geometry[prim]
+            * e[prim]
+            * np.einsum("lc,l,l->c", s, rho, p[:, prim])
+            / np.einsum("l,l->", s[:, prim], p[:, prim])
+        )
         assert np.allclose(q * e, expected, rtol=0.01, atol=1e-4 * expected.max()), (prim, q * e, expected)
 
 
@@ -108,7 +119,9 @@ def test_camera_defocus_follows_the_thin_lens(variant):
     scene = _plane(z, scale=1.0)
     pattern = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
     ideal = get_sensor("ideal")
-    wide = dataclasses.replace(ideal, camera_lens=dataclasses.replace(ideal.camera_lens, f_number=1.0, defocus=True, focus_m=1.0))
+    wide = dataclasses.replace(
+        ideal, camera_lens=dataclasses.replace(ideal.camera_lens, f_number=1.0, defocus=True, focus_m=1.0)
+    )
     sharp = render_channels(scene, pattern, ideal, spp=32, seed=4, max_depth=2)
     blurred = render_channels(physical_scene(scene, wide), pattern, wide, spp=64, seed=4, max_depth=2)
     crop = (slice(380, 580), slice(400, 880), 2)  # blue: the cosine fringe
@@ -129,7 +142,11 @@ def test_ideal_sensor_keeps_the_pipeline_accuracy(acquisitions, variant):
     from simbench.metrics import depth_errors
     from simbench.simulate import acquire
 
-    acq = acquire(load_scene(SCENES / "white_plane.toml"), pattern=PatternSpec(), sensor=get_sensor("ideal"), spp=16, seed=7)
+    acq = acquire(
+        load_scene(SCENES / "white_plane.toml"), pattern=PatternSpec(), sensor=get_sensor("ideal"), spp=16, seed=7
+    )
     r = decode(acq.capture, rig=acq.scene.rig, params=DecoderParams(), reference=acq.reference)
-    m = depth_errors(r.depth_m, acq.gt.depth_m, region=acq.gt.lit, column_px=r.column_px, gt_column_px=acq.gt.column_px, period_px=21)
+    m = depth_errors(
+        r.depth_m, acq.gt.depth_m, region=acq.gt.lit, column_px=r.column_px, gt_column_px=acq.gt.column_px, period_px=21
+    )
     assert m["mae_mm"] <= 0.3 and m["completeness"] >= 0.99 and m["stripe_order_errors"] == 0

@@ -51,7 +51,12 @@ def shell_commands(body: str) -> list[str]:
 
 
 def _clean_env(home: Path) -> dict:
-    return {"PATH": f"{BIN}:/usr/bin:/bin", "HOME": str(home), "LANG": "C.UTF-8", "TMPDIR": os.environ.get("TMPDIR", "/tmp")}
+    return {
+        "PATH": f"{BIN}:/usr/bin:/bin",
+        "HOME": str(home),
+        "LANG": "C.UTF-8",
+        "TMPDIR": os.environ.get("TMPDIR", "/tmp"),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +79,9 @@ def test_readme_has_the_blocks_this_test_expects():
     assert "python" in langs
     cmds = [c for lang, body in blocks if lang in ("", "sh", "bash", "console") for c in shell_commands(body)]
     assert any(c.startswith("make reproduce") for c in cmds) and any(c.startswith("make test") for c in cmds)
-    assert all(c.split()[0] in ("make", "simbench") for c in cmds), [c for c in cmds if c.split()[0] not in ("make", "simbench")]
+    assert all(c.split()[0] in ("make", "simbench") for c in cmds), [
+        c for c in cmds if c.split()[0] not in ("make", "simbench")
+    ]
 
 
 def test_make_targets_in_the_readme_exist():

@@ -21,7 +21,15 @@ pytestmark = pytest.mark.slow
 def _score(acq, result, *, band_px: int) -> dict:
     """The demo's scores: errors off a ``band_px`` band at depth edges, completeness over all."""
     band = edge_band(acq.gt.depth_m, object_id=acq.gt.object_id, band_px=band_px) if band_px else None
-    return score(result.depth_m, acq.gt, camera=acq.scene.rig.camera, exclude=band, column_px=result.column_px, period_px=21, detail=True)
+    return score(
+        result.depth_m,
+        acq.gt,
+        camera=acq.scene.rig.camera,
+        exclude=band,
+        column_px=result.column_px,
+        period_px=21,
+        detail=True,
+    )
 
 
 def test_white_plane_acceptance(acquisitions):
@@ -58,7 +66,11 @@ def test_ground_truth_of_a_plane_is_z_depth_and_column(variant, acquisitions):
     assert np.allclose(gt.depth_m, 1.0, atol=1e-6)  # z-depth, not ray distance
     rig = acq.scene.rig
     u = np.arange(1280)
-    expect = rig.projector.focal_px / rig.camera.focal_px * (u - rig.camera.cx_px) - rig.projector.focal_px * 0.093 + rig.projector.cx_px
+    expect = (
+        rig.projector.focal_px / rig.camera.focal_px * (u - rig.camera.cx_px)
+        - rig.projector.focal_px * 0.093
+        + rig.projector.cx_px
+    )
     assert np.allclose(gt.column_px[100], expect, atol=1e-3)
     assert gt.lit.all() and (gt.object_id == 0).all()
 
@@ -94,7 +106,12 @@ def test_inverse_square_falloff(variant):
 def test_off_centre_principal_points(variant):
     """Camera and projector principal points away from the image centre: the render and the
     ground truth agree, and the decoder (calibrated mode) recovers the projector column."""
-    rig = Rig(Intrinsics(640, 480, 1156.266, 300.25, 250.5), Intrinsics(912, 570, 1114.0, 480.5, 270.0), (0.093, 0, 0), (0, 0, 0))
+    rig = Rig(
+        Intrinsics(640, 480, 1156.266, 300.25, 250.5),
+        Intrinsics(912, 570, 1114.0, 480.5, 270.0),
+        (0.093, 0, 0),
+        (0, 0, 0),
+    )
     scene = scene_from_dict({"object": [{"type": "plane", "center_m": [0, 0, 1.0], "size_m": [2, 2]}]})
     scene = dataclasses.replace(scene, rig=rig)
     spec = PatternSpec(size_hw=(570, 912))
@@ -118,7 +135,13 @@ def test_box_mesh_and_ambient(variant, tmp_path):
     trimesh.creation.icosphere(subdivisions=4, radius=1.0).export(tmp_path / "ball.ply")
     data = {
         "object": [
-            {"type": "box", "name": "box", "center_m": [-0.12, 0, 1.0], "size_m": [0.1, 0.1, 0.1], "rotation_deg": [0, 0, 0]},
+            {
+                "type": "box",
+                "name": "box",
+                "center_m": [-0.12, 0, 1.0],
+                "size_m": [0.1, 0.1, 0.1],
+                "rotation_deg": [0, 0, 0],
+            },
             {"type": "mesh", "name": "ball", "file": "ball.ply", "scale": 0.06, "translate_m": [0.12, 0, 1.0]},
             {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
         ],
@@ -162,7 +185,9 @@ def test_formed_board_ground_truth_follows_its_form(variant):
     from simbench.scene import board_form_m, scene_from_dict
 
     form = {"bow_m_per_m": 0.002, "waviness_m": 3e-4, "waviness_phase_rad": 0.3}
-    scene = scene_from_dict({"object": [{"type": "plane", "name": "board", "center_m": [0.02, -0.01, 1.0], "size_m": [1.2, 0.9], **form}]})
+    scene = scene_from_dict(
+        {"object": [{"type": "plane", "name": "board", "center_m": [0.02, -0.01, 1.0], "size_m": [1.2, 0.9], **form}]}
+    )
     scene = dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25))
     gt = ground_truth(scene)
     ok = gt.object_id == 0

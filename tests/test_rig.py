@@ -13,7 +13,13 @@ def test_paper_preset():
 
 
 def test_toml_round_trip(tmp_path):
-    rig = Rig(Intrinsics(640, 480, 500.0, 300.25, 250.0), Intrinsics(800, 600, 700.0, 410.0, 290.5), (0.1, 0.01, -0.02), (1.0, -4.0, 0.5), "x")
+    rig = Rig(
+        Intrinsics(640, 480, 500.0, 300.25, 250.0),
+        Intrinsics(800, 600, 700.0, 410.0, 290.5),
+        (0.1, 0.01, -0.02),
+        (1.0, -4.0, 0.5),
+        "x",
+    )
     path = save_rig(rig, tmp_path / "r.toml")
     assert load_rig(path) == rig
     assert "# simbench rig file" in path.read_text()
@@ -22,12 +28,24 @@ def test_toml_round_trip(tmp_path):
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("[camera]\nwidth_px=10\nheight_px=10\nfocal_px=-1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n", "focal_px"),
-        ("[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\nfoo=1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n", "unknown key"),
+        (
+            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=-1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "focal_px",
+        ),
+        (
+            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\nfoo=1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "unknown key",
+        ),
         ("[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\n", "missing key"),
         ("[camera\n", "not valid TOML"),
-        ("[camera]\nwidth_px=10.5\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n", "width_px"),
-        ('[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n[pose]\nposition_m=[0,0,"a"]\n', "position_m"),
+        (
+            "[camera]\nwidth_px=10.5\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "width_px",
+        ),
+        (
+            '[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n[pose]\nposition_m=[0,0,"a"]\n',
+            "position_m",
+        ),
     ],
 )
 def test_invalid_rig_files_name_the_problem(tmp_path, text, match):

@@ -134,7 +134,14 @@ def _chart(noise=0.002, seed=5):
     edges along the stripes (the case that cuts rows of stripes into short chains)."""
     img, col = _frames((1.0, 1.0, 1.0), depth=1.05, noise=0.0)
     h, w = col.shape
-    tiles = [(0.8, 0.8, 0.8), (0.6, 0.05, 0.04), (0.05, 0.05, 0.05), (0.05, 0.1, 0.5), (0.8, 0.8, 0.8), (0.5, 0.45, 0.05)]
+    tiles = [
+        (0.8, 0.8, 0.8),
+        (0.6, 0.05, 0.04),
+        (0.05, 0.05, 0.05),
+        (0.05, 0.1, 0.5),
+        (0.8, 0.8, 0.8),
+        (0.5, 0.45, 0.05),
+    ]
     rho = np.empty((h, w, 3), np.float32)
     edges = np.linspace(0, w, len(tiles) + 1).round().astype(int)
     for (a, b), t in zip(zip(edges[:-1], edges[1:]), tiles):

@@ -46,7 +46,8 @@ PASSING = [
 # the edge, the link check finds the broken link and drops both stripes of it, about one
 # period each side beyond the 5-px band.
 SHORTFALLS = {
-    "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless depth edge; ~89 % completeness (issue 17 note)",
+    "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless "
+    "depth edge; ~89 % completeness (issue 17 note)",
 }
 
 
@@ -54,7 +55,9 @@ SHORTFALLS = {
 def session(variant, tmp_path_factory):
     from simbench.experiments.common import RunConfig, Session
 
-    return Session(RunConfig(spp=16), out_dir=tmp_path_factory.mktemp("robust"), cache_dir=None, progress=lambda _: None)
+    return Session(
+        RunConfig(spp=16), out_dir=tmp_path_factory.mktemp("robust"), cache_dir=None, progress=lambda _: None
+    )
 
 
 def _scores(session, name: str) -> dict:
@@ -66,13 +69,23 @@ def _scores(session, name: str) -> dict:
     out = {}
     for mode in ("calibrated", "reference"):
         r = session.decode(cap, params, mode=mode)
-        out[mode] = depth_errors(r.depth_m, gt.depth_m, region=gt.lit & ~band, column_px=r.column_px, gt_column_px=gt.column_px, period_px=session.config.decoder.period_px)
+        out[mode] = depth_errors(
+            r.depth_m,
+            gt.depth_m,
+            region=gt.lit & ~band,
+            column_px=r.column_px,
+            gt_column_px=gt.column_px,
+            period_px=session.config.decoder.period_px,
+        )
     return out
 
 
 def _check(scores: dict, name: str) -> None:
     for mode, m in scores.items():
-        what = f"{name} ({mode}): completeness {100 * m['completeness']:.2f} %, MAE {m['mae_mm']:.3f} mm, {m['stripe_order_errors']} stripe-order errors"
+        what = (
+            f"{name} ({mode}): completeness {100 * m['completeness']:.2f} %, MAE {m['mae_mm']:.3f} mm, "
+            f"{m['stripe_order_errors']} stripe-order errors"
+        )
         assert m["completeness"] >= MIN_COMPLETENESS, what
         assert m["mae_mm"] <= MAX_MAE_MM, what
         assert m["stripe_order_errors"] == 0, what
@@ -83,6 +96,12 @@ def test_robust_decoder_holds_beyond_the_papers_scenes(session, name):
     _check(_scores(session, name), name)
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=why, strict=True, raises=AssertionError)) for n, why in SHORTFALLS.items()])
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(n, marks=pytest.mark.xfail(reason=why, strict=True, raises=AssertionError))
+        for n, why in SHORTFALLS.items()
+    ],
+)
 def test_robust_decoder_known_shortfalls(session, name):
     _check(_scores(session, name), name)

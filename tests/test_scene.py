@@ -24,7 +24,15 @@ def test_shipped_scenes_load(path):
         ({"object": [{"type": "mesh", "file": "nope.ply"}]}, "not found"),
         ({"rig": "nope", "object": [{"type": "sphere", "radius_m": 1}]}, "unknown rig"),
         ({"object": [{"type": "sphere", "radius_m": 1}], "bogus": 1}, "unknown key"),
-        ({"object": [{"type": "sphere", "radius_m": 1, "name": "a"}, {"type": "sphere", "radius_m": 1, "name": "a"}]}, "unique"),
+        (
+            {
+                "object": [
+                    {"type": "sphere", "radius_m": 1, "name": "a"},
+                    {"type": "sphere", "radius_m": 1, "name": "a"},
+                ]
+            },
+            "unique",
+        ),
     ],
 )
 def test_broken_scenes_name_the_problem(data, match):
@@ -43,11 +51,15 @@ def test_scene_file_errors(tmp_path):
 def test_placement_is_seeded_bounded_and_leaves_other_objects():
     from simbench.scene import Placement, place_objects, scene_from_dict
 
-    scene = scene_from_dict({"object": [
-        {"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]},
-        {"type": "box", "name": "cube", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
-        {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
-    ]})
+    scene = scene_from_dict(
+        {
+            "object": [
+                {"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]},
+                {"type": "box", "name": "cube", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+            ]
+        }
+    )
     pl = Placement(depth_m=0.01, tilt_deg=2.0)
     a, off_a = place_objects(scene, ["board", "cube"], placement=pl, rng=5)
     b, off_b = place_objects(scene, ["board", "cube"], placement=pl, rng=5)
@@ -85,7 +97,12 @@ def test_measured_spectrum_material():
     k_white = material_crosstalk((1.0, 1.0, 1.0))
     d = np.linalg.solve(k_white, material_crosstalk(None, "ColorChecker N Ohta/blue"))
     assert np.all(np.abs(d - np.diag(np.diag(d))) < 0.02)
-    for bad, match in (({"spectrum": "ColorChecker N Ohta/nope"}, "no patch"), ({"spectrum": "Nope/blue"}, "dataset"), ({"spectrum": 3}, "string"), ({"spectrum": "ColorChecker N Ohta/blue", "rgb": [1, 1, 1]}, "not rgb and spectrum")):
+    for bad, match in (
+        ({"spectrum": "ColorChecker N Ohta/nope"}, "no patch"),
+        ({"spectrum": "Nope/blue"}, "dataset"),
+        ({"spectrum": 3}, "string"),
+        ({"spectrum": "ColorChecker N Ohta/blue", "rgb": [1, 1, 1]}, "not rgb and spectrum"),
+    ):
         with pytest.raises(ValueError, match=match):
             scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], **bad}]})
 
@@ -104,10 +121,16 @@ def test_board_form_against_its_definition():
         for px, py in ((0.5, 0.0), (0.0, -0.5), (0.3, 0.4)):  # 0.5 m from the centre
             assert centre - board_form_m(px, py, size_m=size, bow_m_per_m=0.001) == pytest.approx(0.001, rel=1e-12)
     x = np.linspace(-0.2, 0.2, 4001)
-    w = board_form_m(x, np.full_like(x, 0.1), size_m=(0.4, 0.4), waviness_m=1e-4, waviness_period_m=0.05, waviness_phase_rad=1.0)
+    w = board_form_m(
+        x, np.full_like(x, 0.1), size_m=(0.4, 0.4), waviness_m=1e-4, waviness_period_m=0.05, waviness_phase_rad=1.0
+    )
     assert w.max() == pytest.approx(1e-4, rel=1e-4) and w.min() == pytest.approx(-1e-4, rel=1e-4)
-    assert board_form_m(x + 0.05, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4) == pytest.approx(board_form_m(x, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4), abs=1e-15)
-    assert board_form_m(0.1, 0.2, size_m=(0.4, 0.4), waviness_m=1e-4) == board_form_m(0.1, -0.1, size_m=(0.4, 0.4), waviness_m=1e-4)
+    assert board_form_m(x + 0.05, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4) == pytest.approx(
+        board_form_m(x, 0.0, size_m=(0.4, 0.4), waviness_m=1e-4), abs=1e-15
+    )
+    assert board_form_m(0.1, 0.2, size_m=(0.4, 0.4), waviness_m=1e-4) == board_form_m(
+        0.1, -0.1, size_m=(0.4, 0.4), waviness_m=1e-4
+    )
 
 
 @pytest.mark.parametrize(
@@ -132,19 +155,44 @@ def test_board_form_placement_keeps_the_poses_and_flat_boards_their_keys():
     from simbench.cache import scene_fingerprint
     from simbench.scene import Placement, place_objects
 
-    scene = scene_from_dict({"object": [
-        {"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]},
-        {"type": "box", "name": "cube", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
-    ]})
+    scene = scene_from_dict(
+        {
+            "object": [
+                {"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]},
+                {"type": "box", "name": "cube", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
+            ]
+        }
+    )
     flat, off_flat = place_objects(scene, ["board", "cube"], placement=Placement(), rng=3)
-    formed, off = place_objects(scene, ["board", "cube"], placement=Placement(bow_m_per_m=0.001, waviness_m=5e-5), rng=3)
+    formed, off = place_objects(
+        scene, ["board", "cube"], placement=Placement(bow_m_per_m=0.001, waviness_m=5e-5), rng=3
+    )
     board = dict(formed.objects[0].params)
-    assert abs(board["bow_m_per_m"]) == 0.001 and board["waviness_m"] == 5e-5 and 0 <= board["waviness_phase_rad"] < 2 * np.pi
+    assert (
+        abs(board["bow_m_per_m"]) == 0.001
+        and board["waviness_m"] == 5e-5
+        and 0 <= board["waviness_phase_rad"] < 2 * np.pi
+    )
     for k in ("center_m", "rotation_deg"):
         assert board[k] == dict(flat.objects[0].params)[k]
     assert formed.objects[1] == flat.objects[1]  # boxes do not bow
-    assert off["board"]["depth_m"] == off_flat["board"]["depth_m"] and off["board"]["bow_m_per_m"] == board["bow_m_per_m"]
-    explicit = scene_from_dict({"object": [{"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1], "bow_m_per_m": 0.0, "waviness_m": 0.0}]})
+    assert (
+        off["board"]["depth_m"] == off_flat["board"]["depth_m"] and off["board"]["bow_m_per_m"] == board["bow_m_per_m"]
+    )
+    explicit = scene_from_dict(
+        {
+            "object": [
+                {
+                    "type": "plane",
+                    "name": "board",
+                    "center_m": [0, 0, 1.0],
+                    "size_m": [1, 1],
+                    "bow_m_per_m": 0.0,
+                    "waviness_m": 0.0,
+                }
+            ]
+        }
+    )
     plain = scene_from_dict({"object": [{"type": "plane", "name": "board", "center_m": [0, 0, 1.0], "size_m": [1, 1]}]})
     assert scene_fingerprint(explicit) == scene_fingerprint(plain)
     with pytest.raises(ValueError, match="bow_m_per_m"):
@@ -158,19 +206,30 @@ def test_placement_moves_spheres_and_meshes_too(tmp_path):
     from simbench.scene import Placement, place_objects
 
     (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-    scene = scene_from_dict({"object": [
-        {"type": "mesh", "name": "bust", "file": "m.obj", "translate_m": [0, 0, 1.0]},
-        {"type": "sphere", "name": "ball", "center_m": [0, 0, 0.9], "radius_m": 0.1},
-        {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
-    ]}, base_dir=tmp_path)
+    scene = scene_from_dict(
+        {
+            "object": [
+                {"type": "mesh", "name": "bust", "file": "m.obj", "translate_m": [0, 0, 1.0]},
+                {"type": "sphere", "name": "ball", "center_m": [0, 0, 0.9], "radius_m": 0.1},
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+            ]
+        },
+        base_dir=tmp_path,
+    )
     placed, off = place_objects(scene, ["bust", "ball", "wall"], placement=Placement(), rng=4)
     mesh, ball, wall = (dict(o.params) for o in placed.objects)
-    assert mesh["translate_m"][2] == pytest.approx(1.0 + off["bust"]["depth_m"]) and mesh["rotation_deg"][:2] == pytest.approx(tuple(off["bust"]["tilt_deg"]))
+    assert mesh["translate_m"][2] == pytest.approx(1.0 + off["bust"]["depth_m"]) and mesh["rotation_deg"][
+        :2
+    ] == pytest.approx(tuple(off["bust"]["tilt_deg"]))
     assert ball["center_m"][2] == pytest.approx(0.9 + off["ball"]["depth_m"]) and off["ball"]["tilt_deg"] == [0.0, 0.0]
     assert off["ball"]["depth_m"] != 0.0 and off["bust"]["tilt_deg"] != [0.0, 0.0]
-    boxed = scene_from_dict({"object": [
-        {"type": "box", "name": "bust", "center_m": [0, 0, 1.0], "size_m": [0.1, 0.1, 0.1]},
-        {"type": "box", "name": "ball", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
-        {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
-    ]})
+    boxed = scene_from_dict(
+        {
+            "object": [
+                {"type": "box", "name": "bust", "center_m": [0, 0, 1.0], "size_m": [0.1, 0.1, 0.1]},
+                {"type": "box", "name": "ball", "center_m": [0, 0, 0.9], "size_m": [0.1, 0.1, 0.1]},
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+            ]
+        }
+    )
     assert place_objects(boxed, ["bust", "ball", "wall"], placement=Placement(), rng=4)[1]["wall"] == off["wall"]

@@ -54,7 +54,11 @@ def test_plastic_becomes_roughplastic(variant):
 
     s = scene_from_dict({"object": [{**PLANE, "rgb": [0.2, 0.3, 0.4], "material": "plastic", "roughness": 0.05}]})
     bsdf = object_to_mitsuba(s.objects[0])["bsdf"]["bsdf"]
-    assert bsdf["type"] == "roughplastic" and bsdf["alpha"] == 0.05 and bsdf["diffuse_reflectance"]["value"] == [0.2, 0.3, 0.4]
+    assert (
+        bsdf["type"] == "roughplastic"
+        and bsdf["alpha"] == 0.05
+        and bsdf["diffuse_reflectance"]["value"] == [0.2, 0.3, 0.4]
+    )
 
 
 @pytest.mark.parametrize("name", ["discontinuity", "geometries", "bust", "clutter_pink_cyan", "clutter_pear_hat"])
@@ -87,17 +91,23 @@ def test_table1_and_fig9_scene_sets_are_complete():
 @pytest.mark.slow
 def test_meshes_are_regenerated_identically(tmp_path):
     """scenes/make_meshes.py reproduces the shipped PLY files byte for byte."""
-    subprocess.run([sys.executable, str(SCENES / "make_meshes.py"), str(tmp_path)], check=True, capture_output=True, cwd=ROOT)
+    subprocess.run(
+        [sys.executable, str(SCENES / "make_meshes.py"), str(tmp_path)], check=True, capture_output=True, cwd=ROOT
+    )
     shipped = sorted((SCENES / "meshes").glob("*.ply"))
     assert shipped and sorted(p.name for p in tmp_path.glob("*.ply")) == [p.name for p in shipped]
     for p in shipped:
-        assert hashlib.sha256(p.read_bytes()).digest() == hashlib.sha256((tmp_path / p.name).read_bytes()).digest(), p.name
+        assert hashlib.sha256(p.read_bytes()).digest() == hashlib.sha256((tmp_path / p.name).read_bytes()).digest(), (
+            p.name
+        )
 
 
 def test_malformed_mesh_gives_one_clear_error(tmp_path, variant):
     from simbench.truth import ground_truth
 
     (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
-    scene = scene_from_dict({"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path)
+    scene = scene_from_dict(
+        {"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path
+    )
     with pytest.raises(ValueError, match=r"scene 'mine'.*object 'statue'.*broken.ply"):
         ground_truth(scene)

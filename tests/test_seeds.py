@@ -26,7 +26,10 @@ def test_labels_give_independent_stable_seeds():
 def test_seed_log_records_captures():
     log = SeedLog(7)
     render, noise = log.capture("scene", repeats=2)
-    assert log.used == {"scene/0": {"render": render, "noise": noise[0]}, "scene/1": {"render": render, "noise": noise[1]}}
+    assert log.used == {
+        "scene/0": {"render": render, "noise": noise[0]},
+        "scene/1": {"render": render, "noise": noise[1]},
+    }
     assert render == derive_seed(7, "scene/render") and noise[1] == derive_seed(7, "scene/noise/1")
     log.capture("other")
     assert "other" in log.used

@@ -31,7 +31,9 @@ def test_seeded_and_clipped():
 
 def test_ideal_camera_is_deterministic_quantisation():
     rad = np.full((2, 2, 3), 0.5, np.float32)
-    img = simple_camera(rad, camera=SimpleCamera(exposure=0.8, full_well_e=1e4, read_noise_e=0.0, noise=False), rng=None)
+    img = simple_camera(
+        rad, camera=SimpleCamera(exposure=0.8, full_well_e=1e4, read_noise_e=0.0, noise=False), rng=None
+    )
     assert np.all(img == round(0.5 * 0.8 * 255))
 
 
@@ -52,14 +54,30 @@ def test_photons_per_unit_radiance_matches_the_camera_equation():
     from simbench.photometry import photons_per_unit_radiance
 
     expected = (1 / 16) * (5.3e-6) ** 2 * 0.01 * 520e-9 / (6.62607015e-34 * 299792458.0)
-    got = photons_per_unit_radiance(irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=2.0, pixel_pitch_um=5.3, exposure_s=0.01, lens_transmission=1.0)
+    got = photons_per_unit_radiance(
+        irradiance_1m_w_m2=1.0,
+        wavelength_nm=520,
+        f_number=2.0,
+        pixel_pitch_um=5.3,
+        exposure_s=0.01,
+        lens_transmission=1.0,
+    )
     assert got == pytest.approx(expected, rel=1e-12)
     assert got == pytest.approx(45_970, rel=1e-3)
     # inverse-square in the f-number, linear in exposure
-    half = photons_per_unit_radiance(irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=4.0, pixel_pitch_um=5.3, exposure_s=0.02, lens_transmission=1.0)
+    half = photons_per_unit_radiance(
+        irradiance_1m_w_m2=1.0,
+        wavelength_nm=520,
+        f_number=4.0,
+        pixel_pitch_um=5.3,
+        exposure_s=0.02,
+        lens_transmission=1.0,
+    )
     assert half == pytest.approx(got / 2)
     with pytest.raises(ValueError, match="f_number"):
-        photons_per_unit_radiance(irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=0, pixel_pitch_um=5.3, exposure_s=0.01)
+        photons_per_unit_radiance(
+            irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=0, pixel_pitch_um=5.3, exposure_s=0.01
+        )
 
 
 def test_emva_photon_transfer_returns_gain_and_dark_noise():
@@ -69,7 +87,19 @@ def test_emva_photon_transfer_returns_gain_and_dark_noise():
     from simbench.device import PhysicalCamera
     from simbench.sensor import emva_camera, photon_transfer
 
-    cam = PhysicalCamera(pixel_pitch_um=5.3, qe=(0.5, 0.6, 0.45), full_well_e=10_500.0, dark_noise_e=20.0, gain_dn_per_e=0.35, bits=12, offset_dn=40.0, dark_current_e_s=50.0, prnu=0.01, dsnu_e=5.0, fixed_pattern_seed=3)
+    cam = PhysicalCamera(
+        pixel_pitch_um=5.3,
+        qe=(0.5, 0.6, 0.45),
+        full_well_e=10_500.0,
+        dark_noise_e=20.0,
+        gain_dn_per_e=0.35,
+        bits=12,
+        offset_dn=40.0,
+        dark_current_e_s=50.0,
+        prnu=0.01,
+        dsnu_e=5.0,
+        fixed_pattern_seed=3,
+    )
     photons = 20_000.0
     kw = {"camera": cam, "electrons_per_radiance": np.array(cam.qe) * photons, "exposure_s": 0.01}
     shape = (200, 200, 3)
@@ -97,7 +127,9 @@ def test_emva_saturation_fixed_pattern_and_seeds():
     from simbench.device import PhysicalCamera
     from simbench.sensor import emva_camera
 
-    cam = PhysicalCamera(pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=10.0, prnu=0.02, fixed_pattern_seed=1)
+    cam = PhysicalCamera(
+        pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=10.0, prnu=0.02, fixed_pattern_seed=1
+    )
     assert cam.gain == pytest.approx(255 / 10_000)  # default: full well = full scale
     kw = {"camera": cam, "electrons_per_radiance": (5e4, 5e4, 5e4), "exposure_s": 0.01}
     bright = emva_camera(np.full((8, 8, 3), 1.0), rng=0, **kw)
@@ -120,7 +152,9 @@ def test_bayer_mosaic_and_demosaic_round_trip_a_smooth_image(pattern, method):
     from simbench.sensor import bayer_mosaic, demosaic
 
     yy, xx = np.mgrid[0:64, 0:64]
-    img = np.stack([100 + 50 * np.sin(xx / 9), 120 + 40 * np.cos(yy / 8), 80 + 30 * np.sin((xx + yy) / 11)], -1).astype(np.uint8)
+    img = np.stack([100 + 50 * np.sin(xx / 9), 120 + 40 * np.cos(yy / 8), 80 + 30 * np.sin((xx + yy) / 11)], -1).astype(
+        np.uint8
+    )
     raw = bayer_mosaic(img, pattern=pattern)
     assert raw.shape == (64, 64)
     out = demosaic(raw, pattern=pattern, method=method)
@@ -145,7 +179,9 @@ def test_cfa_keeps_shot_noise_per_pixel():
     from simbench.device import PhysicalCamera
     from simbench.sensor import bayer_mosaic, emva_camera
 
-    base = dict(pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=0.0, bits=16, gain_dn_per_e=1.0)
+    base = dict(
+        pixel_pitch_um=5.3, qe=(0.5, 0.5, 0.5), full_well_e=10_000.0, dark_noise_e=0.0, bits=16, gain_dn_per_e=1.0
+    )
     kw = {"electrons_per_radiance": (2000.0, 4000.0, 1000.0), "exposure_s": 0.01}
     rad = np.ones((200, 200, 3))
     full = emva_camera(rad, camera=PhysicalCamera(**base), rng=0, **kw).astype(float)

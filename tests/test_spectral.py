@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from simbench.scene import paint_reflectance
-from simbench.spectral import camera_sensitivities, crosstalk_matrix, projector_primaries, reflectance_spectrum, wavelengths_nm
+from simbench.spectral import (
+    camera_sensitivities,
+    crosstalk_matrix,
+    projector_primaries,
+    reflectance_spectrum,
+    wavelengths_nm,
+)
 
 
 def test_spectra_share_one_grid_and_peak_where_stated():
@@ -40,7 +46,9 @@ def test_recovered_spectrum_reproduces_its_rgb():
 
 def test_crosstalk_is_linear_in_the_reflectance():
     a, b = np.array([0.8, 0.04, 0.04]), np.array([0.04, 0.3, 0.7])
-    assert np.allclose(crosstalk_matrix(0.5 * a + 0.5 * b), 0.5 * crosstalk_matrix(a) + 0.5 * crosstalk_matrix(b), atol=1e-9)
+    assert np.allclose(
+        crosstalk_matrix(0.5 * a + 0.5 * b), 0.5 * crosstalk_matrix(a) + 0.5 * crosstalk_matrix(b), atol=1e-9
+    )
 
 
 def test_red_surface_under_a_green_stripe_records_a_small_nonzero_signal():

@@ -24,5 +24,8 @@ def test_public_functions_have_type_hints():
         sig = inspect.signature(fn)
         untyped = [p.name for p in sig.parameters.values() if p.annotation is inspect.Parameter.empty]
         if untyped or sig.return_annotation is inspect.Signature.empty:
-            missing.append(f"{qualname}: {untyped or ''}{' no return type' if sig.return_annotation is inspect.Signature.empty else ''}")
+            missing.append(
+                f"{qualname}: "
+                f"{untyped or ''}{' no return type' if sig.return_annotation is inspect.Signature.empty else ''}"
+            )
     assert not missing, "public functions without type hints:\n" + "\n".join(missing)

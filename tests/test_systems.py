@@ -13,7 +13,15 @@ import pytest
 
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec
-from simbench.systems import DepthSystem, SystemDepth, SystemInfo, get_system, register_system, system_names, unregister_system
+from simbench.systems import (
+    DepthSystem,
+    SystemDepth,
+    SystemInfo,
+    get_system,
+    register_system,
+    system_names,
+    unregister_system,
+)
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 
@@ -44,7 +52,12 @@ class IdealDepthCamera:
     def prepare(self, scene: SceneSpec) -> SceneSpec:
         cam = self.model.camera
         # a co-located light the size of the view (Rig needs a baseline: 1 mm)
-        rig = Rig(camera=cam, projector=Intrinsics.centred(cam.width_px + 40, cam.height_px + 40, cam.focal_px), position_m=(0.001, 0.0, 0.0), name="ideal")
+        rig = Rig(
+            camera=cam,
+            projector=Intrinsics.centred(cam.width_px + 40, cam.height_px + 40, cam.focal_px),
+            position_m=(0.001, 0.0, 0.0),
+            name="ideal",
+        )
         return dataclasses.replace(scene, rig=rig, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))
 
     def calibration_key(self, scene):
@@ -64,21 +77,35 @@ class IdealDepthCamera:
         return SystemDepth(depth_m=d, valid=np.isfinite(d))
 
     def bench_inputs(self, *, scene="plane", seed=0):
-        return np.full(self.model.camera.size_hw, 1.1, np.float32), None, self.prepare(SceneSpec(name="bench", rig=Rig(self.model.camera, self.model.camera, (0.001, 0.0, 0.0)), objects=()))
+        return (
+            np.full(self.model.camera.size_hw, 1.1, np.float32),
+            None,
+            self.prepare(
+                SceneSpec(name="bench", rig=Rig(self.model.camera, self.model.camera, (0.001, 0.0, 0.0)), objects=())
+            ),
+        )
 
     def write_recording(self, out_dir, raw, calibration, *, scene, gt, meta, overwrite=False):
         from simbench.baselines.recording import write_device_recording
         from simbench.io import save_npy
 
         writers = {"depth": lambda d: save_npy(d / "depth.npy", raw)}
-        return write_device_recording(out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite)
+        return write_device_recording(
+            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
+        )
 
     def read_recording(self, in_dir):
         from simbench.baselines.recording import read_device_info
         from simbench.io import load_npy
 
         self.model, _ = read_device_info(in_dir, self.name, IdealModel)
-        return load_npy(Path(in_dir) / "depth.npy"), None, self.prepare(SceneSpec(name="rec", rig=Rig(self.model.camera, self.model.camera, (0.001, 0.0, 0.0)), objects=()))
+        return (
+            load_npy(Path(in_dir) / "depth.npy"),
+            None,
+            self.prepare(
+                SceneSpec(name="rec", rig=Rig(self.model.camera, self.model.camera, (0.001, 0.0, 0.0)), objects=())
+            ),
+        )
 
 
 @pytest.fixture
@@ -145,7 +172,9 @@ def test_a_fourth_system_runs_through_table3_and_the_cli(ideal_system, tmp_path,
     from simbench.experiments.table3 import run_table3
 
     cfg = RunConfig.preset(quick=True, camera_scale=0.25)
-    session = Session(cfg, out_dir=tmp_path / "out", cache_dir=tmp_path / "cache", progress=lambda s: None, command="test")
+    session = Session(
+        cfg, out_dir=tmp_path / "out", cache_dir=tmp_path / "cache", progress=lambda s: None, command="test"
+    )
     (tmp_path / "out").mkdir()
     metrics = run_table3(session, systems=(ideal_system,))
     # a noiseless camera with the true depth: the plane fit sees only the faces' flatness
@@ -160,7 +189,21 @@ def test_a_fourth_system_runs_through_table3_and_the_cli(ideal_system, tmp_path,
     assert f"{ideal_system}/table3/discontinuity" in session.seeds_used
 
     rec = tmp_path / "rec"
-    assert main(["render", "--system", ideal_system, str(SCENES / "discontinuity.toml"), "--out", str(rec), "--cache", str(tmp_path / "cache")]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "--system",
+                ideal_system,
+                str(SCENES / "discontinuity.toml"),
+                "--out",
+                str(rec),
+                "--cache",
+                str(tmp_path / "cache"),
+            ]
+        )
+        == 0
+    )
     assert json.loads((rec / "device.json").read_text())["device"] == ideal_system
     assert main(["decode", str(rec), "--out", str(tmp_path / "d.npy")]) == 0
     assert "ideal depth camera" in capsys.readouterr().out

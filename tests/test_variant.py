@@ -7,7 +7,13 @@ from simbench.variant import MIN_LLVM_MAJOR, _llvm_major_from_path, find_libllvm
 
 @pytest.mark.parametrize(
     "name, major",
-    [("libLLVM-19.so", 19), ("libLLVM.so.19.1", 19), ("libLLVM-14.0.6.so.1", 14), ("/usr/lib/llvm-15/lib/libLLVM.so", 15), ("libLLVM-15.so.1", 15)],
+    [
+        ("libLLVM-19.so", 19),
+        ("libLLVM.so.19.1", 19),
+        ("libLLVM-14.0.6.so.1", 14),
+        ("/usr/lib/llvm-15/lib/libLLVM.so", 15),
+        ("libLLVM-15.so.1", 15),
+    ],
 )
 def test_llvm_version_from_file_names(name, major):
     assert _llvm_major_from_path(Path(name)) == major
@@ -38,7 +44,13 @@ ALL = ["scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb"]
 
 @pytest.mark.parametrize(
     "llvm, cuda, expect",
-    [((19, 1, 7), False, "llvm_ad_rgb"), ((16, 0), False, "llvm_ad_rgb"), ((15, 0, 7), False, "scalar_rgb"), (None, False, "scalar_rgb"), ((15, 0), True, "cuda_ad_rgb")],
+    [
+        ((19, 1, 7), False, "llvm_ad_rgb"),
+        ((16, 0), False, "llvm_ad_rgb"),
+        ((15, 0, 7), False, "scalar_rgb"),
+        (None, False, "scalar_rgb"),
+        ((15, 0), True, "cuda_ad_rgb"),
+    ],
 )
 def test_choose_variant(llvm, cuda, expect):
     from simbench.variant import choose_variant

@@ -15,7 +15,8 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
 - Laser speckle: coherent light gives each camera pixel a multiplicative speckle intensity,
   integrated over ``M = P (pixel pitch / speckle grain)^2`` grains of diameter ``2.44 lambda N``,
   with ``P = 2`` polarisation states for depolarising matte surfaces (Goodman, *Speckle
-  Phenomena in Optics*, subjective speckle): gamma distributed with mean 1 and variance ``1/M``.  It is frozen to the surface (the same in every frame of a static scene) and
+  Phenomena in Optics*, subjective speckle): gamma distributed with mean 1 and variance
+  ``1/M``.  It is frozen to the surface (the same in every frame of a static scene) and
   decorrelates between the reference plane and the scene, which is what limits the matching.
   This is the speckle and detector noise Landau et al. (2015) identify; their fitted values
   could not be re-checked here, so the grain statistics come from the optics instead.
@@ -49,7 +50,19 @@ from simbench.seeds import RngLike, child_seed
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
 
-__all__ = ["KinectModel", "KinectCalibration", "KinectDepth", "kinect_rig", "dot_pattern", "device_scene", "speckle", "record_ir", "match", "calibrate", "capture"]
+__all__ = [
+    "KinectModel",
+    "KinectCalibration",
+    "KinectDepth",
+    "kinect_rig",
+    "dot_pattern",
+    "device_scene",
+    "speckle",
+    "record_ir",
+    "match",
+    "calibrate",
+    "capture",
+]
 
 
 @dataclass(frozen=True)
@@ -100,7 +113,17 @@ class KinectModel:
     min_contrast_e: float = 200.0  # assumption: window std below this (e-) = no dots (shadow)
 
     def __post_init__(self) -> None:
-        for name in ("focal_px", "baseline_m", "reference_depth_m", "min_depth_m", "max_depth_m", "wavelength_nm", "f_number", "pixel_pitch_um", "full_well_e"):
+        for name in (
+            "focal_px",
+            "baseline_m",
+            "reference_depth_m",
+            "min_depth_m",
+            "max_depth_m",
+            "wavelength_nm",
+            "f_number",
+            "pixel_pitch_um",
+            "full_well_e",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                 raise ValueError(f"kinect {name} must be a number > 0, got {v!r}")
@@ -111,7 +134,9 @@ class KinectModel:
         if self.disparities < 3:
             raise ValueError(f"kinect disparities must be >= 3, got {self.disparities}")
         if self.disparities * self.subpixel_steps >= 1 << self.code_bits:
-            raise ValueError(f"{self.disparities} disparities x {self.subpixel_steps} steps do not fit {self.code_bits}-bit codes")
+            raise ValueError(
+                f"{self.disparities} disparities x {self.subpixel_steps} steps do not fit {self.code_bits}-bit codes"
+            )
         if not 0 < self.dot_fraction <= 1:
             raise ValueError(f"kinect dot_fraction must be in (0, 1], got {self.dot_fraction}")
 
@@ -170,7 +195,14 @@ def dot_pattern(model: KinectModel) -> np.ndarray:
 
 def device_scene(scene: SceneSpec, model: KinectModel) -> SceneSpec:
     """``scene`` seen by the Kinect: its rig, no lens model, no ambient (IR band-pass)."""
-    return dataclasses.replace(scene, rig=kinect_rig(model), camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0), projector_scale=1.0, reference_depth_m=model.reference_depth_m)
+    return dataclasses.replace(
+        scene,
+        rig=kinect_rig(model),
+        camera_lens=None,
+        ambient_rgb=(0.0, 0.0, 0.0),
+        projector_scale=1.0,
+        reference_depth_m=model.reference_depth_m,
+    )
 
 
 def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng: RngLike) -> np.ndarray:
@@ -185,7 +217,9 @@ def speckle(shape: tuple[int, int], *, grains_per_pixel: float, rng: RngLike) ->
     return np.random.default_rng(rng).gamma(m, 1.0 / m, size=shape).astype(np.float32)
 
 
-def record_ir(radiance: np.ndarray, *, model: KinectModel, electrons_per_radiance: float, speckle_rng: RngLike, rng: RngLike) -> np.ndarray:
+def record_ir(
+    radiance: np.ndarray, *, model: KinectModel, electrons_per_radiance: float, speckle_rng: RngLike, rng: RngLike
+) -> np.ndarray:
     """IR radiance (H, W) -> recorded frame (H, W) uint16 DN: optics blur, speckle, EMVA noise."""
     rad = np.asarray(radiance, dtype=np.float32)
     if rad.shape != (model.height_px, model.width_px):
@@ -376,20 +410,35 @@ def _ir(radiance_rgb: np.ndarray) -> np.ndarray:
     return np.asarray(radiance_rgb, dtype=np.float32).mean(axis=2)
 
 
-def _render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache) -> np.ndarray:
+def _render(
+    scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache
+) -> np.ndarray:
     from simbench.simulate import cached_radiance
 
     drive = np.repeat(dot_pattern(model)[..., None], 3, axis=2)
     return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache))
 
 
-def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sampler: str = "independent", cache: RenderCache | None = None, albedo: float = 0.8) -> KinectCalibration:
+def calibrate(
+    model: KinectModel,
+    *,
+    spp: int,
+    seed: int,
+    max_depth: int = 6,
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+    albedo: float = 0.8,
+) -> KinectCalibration:
     """Record the factory reference: a white plane (``albedo``) at ``reference_depth_m``; the
     exposure is set so that its brightest dots (99.9th percentile) reach ``exposure_fraction``
     of the full well.  Seeds: render ``seed``; speckle and noise derived from it."""
     from simbench.scene import SceneObject
 
-    placeholder = SceneSpec(name="kinect_reference", rig=kinect_rig(model), objects=(SceneObject("plane", "p", (("center_m", (0.0, 0.0, 1.0)), ("size_m", (1.0, 1.0)))),))
+    placeholder = SceneSpec(
+        name="kinect_reference",
+        rig=kinect_rig(model),
+        objects=(SceneObject("plane", "p", (("center_m", (0.0, 0.0, 1.0)), ("size_m", (1.0, 1.0)))),),
+    )
     ref_scene = reference_scene(device_scene(placeholder, model), albedo=albedo)
     rad = _render(ref_scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
     blurred = cv2.GaussianBlur(rad, (0, 0), model.psf_sigma_px) if model.psf_sigma_px > 0 else rad
@@ -403,12 +452,28 @@ def calibrate(model: KinectModel, *, spp: int, seed: int, max_depth: int = 6, sa
     return KinectCalibration(reference=ref, electrons_per_radiance=k)
 
 
-def capture(scene: SceneSpec, model: KinectModel, calibration: KinectCalibration, *, spp: int, seed: int, noise_seeds: list[int], max_depth: int = 6, sampler: str = "independent", cache: RenderCache | None = None) -> list[np.ndarray]:
+def capture(
+    scene: SceneSpec,
+    model: KinectModel,
+    calibration: KinectCalibration,
+    *,
+    spp: int,
+    seed: int,
+    noise_seeds: list[int],
+    max_depth: int = 6,
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+) -> list[np.ndarray]:
     """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
     frozen to the static scene, derives from it) recorded once per noise seed."""
     rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
     speckle_seed = int(child_seed(seed, "kinect_speckle").generate_state(1)[0])
-    return [record_ir(rad, model=model, electrons_per_radiance=calibration.electrons_per_radiance, speckle_rng=speckle_seed, rng=s) for s in noise_seeds]
+    return [
+        record_ir(
+            rad, model=model, electrons_per_radiance=calibration.electrons_per_radiance, speckle_rng=speckle_seed, rng=s
+        )
+        for s in noise_seeds
+    ]
 
 
 class KinectSystem:
@@ -448,12 +513,31 @@ class KinectSystem:
         label = f"{self.seed_prefix}calibration"
         seed = seeds.seed(label)
         seeds.record(label, {"render": seed})
-        return calibrate(self.model, spp=render.spp, seed=seed, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+        return calibrate(
+            self.model,
+            spp=render.spp,
+            seed=seed,
+            max_depth=render.max_depth,
+            sampler=render.sampler,
+            cache=render.cache,
+        )
 
-    def acquire(self, scene: SceneSpec, calibration: KinectCalibration, *, render_seed: int, noise_seeds: list[int], render) -> list[np.ndarray]:
+    def acquire(
+        self, scene: SceneSpec, calibration: KinectCalibration, *, render_seed: int, noise_seeds: list[int], render
+    ) -> list[np.ndarray]:
         if calibration is None:
             raise ValueError("the Kinect needs its calibration (reference image): calibrate first")
-        return capture(scene, self.model, calibration, spp=render.spp, seed=render_seed, noise_seeds=noise_seeds, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+        return capture(
+            scene,
+            self.model,
+            calibration,
+            spp=render.spp,
+            seed=render_seed,
+            noise_seeds=noise_seeds,
+            max_depth=render.max_depth,
+            sampler=render.sampler,
+            cache=render.cache,
+        )
 
     def decode(self, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec | None = None):
         from simbench.systems import SystemDepth
@@ -490,9 +574,23 @@ class KinectSystem:
         k = model.exposure_fraction * model.full_well_e / float(np.percentile(ref_view, 99.9))
         ref = record_ir(ref_view, model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
         cap = record_ir(view(d), model=model, electrons_per_radiance=k, speckle_rng=rng, rng=rng)
-        return cap, KinectCalibration(reference=ref, electrons_per_radiance=k), SceneSpec(name="bench_plane", rig=kinect_rig(model), objects=())
+        return (
+            cap,
+            KinectCalibration(reference=ref, electrons_per_radiance=k),
+            SceneSpec(name="bench_plane", rig=kinect_rig(model), objects=()),
+        )
 
-    def write_recording(self, out_dir, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False):
+    def write_recording(
+        self,
+        out_dir,
+        raw: np.ndarray,
+        calibration: KinectCalibration,
+        *,
+        scene: SceneSpec,
+        gt,
+        meta: dict,
+        overwrite: bool = False,
+    ):
         """``ir.png`` + ``reference.png`` (16-bit grey), ground truth, ``device.json``."""
         from simbench.baselines.recording import write_device_recording
         from simbench.io import save_png
@@ -502,7 +600,9 @@ class KinectSystem:
             "reference": lambda d: save_png(d / "reference.png", np.asarray(calibration.reference, np.uint16)),
         }
         info = {**meta, "electrons_per_radiance": calibration.electrons_per_radiance}
-        return write_device_recording(out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=info, overwrite=overwrite)
+        return write_device_recording(
+            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=info, overwrite=overwrite
+        )
 
     def read_recording(self, in_dir):
         """(IR frame, calibration, scene) of a folder written by :meth:`write_recording`; the
@@ -515,6 +615,18 @@ class KinectSystem:
 
         d = Path(in_dir)
         self.model, info = read_device_info(d, self.name, KinectModel)
-        ir, ref = (load_image(d / f, expected_size_hw=self.model.camera.size_hw, channels=1) for f in ("ir.png", "reference.png"))
-        k = validate.number(info.get("electrons_per_radiance", 1.0), f"{d / 'device.json'}: electrons_per_radiance", lo=0.0, lo_open=True)
-        return ir, KinectCalibration(reference=ref, electrons_per_radiance=k), self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=kinect_rig(self.model), objects=()))
+        ir, ref = (
+            load_image(d / f, expected_size_hw=self.model.camera.size_hw, channels=1)
+            for f in ("ir.png", "reference.png")
+        )
+        k = validate.number(
+            info.get("electrons_per_radiance", 1.0),
+            f"{d / 'device.json'}: electrons_per_radiance",
+            lo=0.0,
+            lo_open=True,
+        )
+        return (
+            ir,
+            KinectCalibration(reference=ref, electrons_per_radiance=k),
+            self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=kinect_rig(self.model), objects=())),
+        )

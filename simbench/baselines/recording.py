@@ -16,7 +16,16 @@ __all__ = ["DEVICE_MANIFEST", "write_device_recording", "read_device_info"]
 DEVICE_MANIFEST = "device.json"
 
 
-def write_device_recording(out_dir: str | Path, name: str, model: object, writers: dict[str, Callable[[Path], Path]], *, gt_depth_m: np.ndarray, info: dict, overwrite: bool = False) -> dict[str, Path]:
+def write_device_recording(
+    out_dir: str | Path,
+    name: str,
+    model: object,
+    writers: dict[str, Callable[[Path], Path]],
+    *,
+    gt_depth_m: np.ndarray,
+    info: dict,
+    overwrite: bool = False,
+) -> dict[str, Path]:
     """Write ``writers`` (key -> function writing one file into the folder it is given and
     returning its path), ``gt_depth.npy``/``.exr`` (z-depth, m) and ``device.json``
     (``{"device": name, **model's parameters, **info, "files": ...}``)."""
@@ -29,7 +38,9 @@ def write_device_recording(out_dir: str | Path, name: str, model: object, writer
             names[key] = write(tmp).name
         names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
         names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", gt_depth_m.astype(np.float32)).name
-        names["device"] = save_json(tmp / DEVICE_MANIFEST, {"device": name, **asdict(model), **info, "files": dict(names)}).name
+        names["device"] = save_json(
+            tmp / DEVICE_MANIFEST, {"device": name, **asdict(model), **info, "files": dict(names)}
+        ).name
     return {k: out / n for k, n in names.items()}
 
 

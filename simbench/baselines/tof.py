@@ -46,7 +46,16 @@ from simbench.seeds import RngLike
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
 
-__all__ = ["ToFModel", "ToFDepth", "tof_rig", "device_scene", "footprint_phasor", "record_taps", "decode_taps", "capture"]
+__all__ = [
+    "ToFModel",
+    "ToFDepth",
+    "tof_rig",
+    "device_scene",
+    "footprint_phasor",
+    "record_taps",
+    "decode_taps",
+    "capture",
+]
 
 
 @dataclass(frozen=True)
@@ -77,7 +86,16 @@ class ToFModel:
     noise: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("fov_x_deg", "modulation_hz", "wavelength_nm", "pixel_pitch_um", "optical_power_w", "f_number", "integration_s", "full_well_e"):
+        for name in (
+            "fov_x_deg",
+            "modulation_hz",
+            "wavelength_nm",
+            "pixel_pitch_um",
+            "optical_power_w",
+            "f_number",
+            "integration_s",
+            "full_well_e",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                 raise ValueError(f"tof {name} must be a number > 0, got {v!r}")
@@ -108,7 +126,12 @@ def tof_rig(model: ToFModel) -> Rig:
     """The ToF camera and its co-located emitter (a projector slightly wider than the view)."""
     w = int(math.ceil(model.width_px * model.emitter_margin))
     h = int(math.ceil(model.height_px * model.emitter_margin))
-    return Rig(camera=model.camera, projector=Intrinsics.centred(w, h, model.focal_px), position_m=_EMITTER_OFFSET_M, name="sr4000")
+    return Rig(
+        camera=model.camera,
+        projector=Intrinsics.centred(w, h, model.focal_px),
+        position_m=_EMITTER_OFFSET_M,
+        name="sr4000",
+    )
 
 
 def _emitter_texture(model: ToFModel) -> np.ndarray:
@@ -122,7 +145,9 @@ def _emitter_texture(model: ToFModel) -> np.ndarray:
 
 def device_scene(scene: SceneSpec, model: ToFModel) -> SceneSpec:
     """``scene`` seen by the ToF camera: its rig, no lens model, no ambient (850 nm filter)."""
-    return dataclasses.replace(scene, rig=tof_rig(model), camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0), projector_scale=1.0)
+    return dataclasses.replace(
+        scene, rig=tof_rig(model), camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0), projector_scale=1.0
+    )
 
 
 def electrons_per_radiance(model: ToFModel) -> float:
@@ -191,7 +216,10 @@ def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, r
     """
     a = np.asarray(amplitude, dtype=np.float64)
     if a.shape != (model.height_px, model.width_px) or phasor.shape != a.shape:
-        raise ValueError(f"amplitude and phasor must have shape {(model.height_px, model.width_px)}, got {a.shape} and {phasor.shape}")
+        raise ValueError(
+            f"amplitude and phasor must have shape {(model.height_px, model.width_px)}, got {a.shape} and "
+            f"{phasor.shape}"
+        )
     n = np.clip(a, 0, None) * electrons_per_radiance(model)
     m = model.demodulation_contrast * np.abs(phasor)
     phi = np.angle(phasor)
@@ -247,13 +275,24 @@ def decode_taps(taps: np.ndarray, *, model: ToFModel) -> ToFDepth:
     )
 
 
-def capture(scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, noise_seeds: list[int], sampler: str = "independent", cache: RenderCache | None = None) -> list[np.ndarray]:
+def capture(
+    scene: SceneSpec,
+    model: ToFModel,
+    *,
+    spp: int,
+    seed: int,
+    noise_seeds: list[int],
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
     from simbench.cache import scene_fingerprint
     from simbench.simulate import cached_arrays, cached_radiance
 
-    rad = cached_radiance(scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache).mean(axis=2)
+    rad = cached_radiance(
+        scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache
+    ).mean(axis=2)
     parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
 
     def make() -> dict:
@@ -301,8 +340,18 @@ class ToFSystem:
     def calibrate(self, scene: SceneSpec, *, seeds, render):
         return None  # the device needs none
 
-    def acquire(self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render) -> list[np.ndarray]:
-        return capture(scene, self.model, spp=render.spp, seed=render_seed, noise_seeds=noise_seeds, sampler=render.sampler, cache=render.cache)
+    def acquire(
+        self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render
+    ) -> list[np.ndarray]:
+        return capture(
+            scene,
+            self.model,
+            spp=render.spp,
+            seed=render_seed,
+            noise_seeds=noise_seeds,
+            sampler=render.sampler,
+            cache=render.cache,
+        )
 
     def decode(self, raw: np.ndarray, calibration=None, *, scene: SceneSpec | None = None):
         from simbench.systems import SystemDepth
@@ -323,15 +372,23 @@ class ToFSystem:
         path = 2 * 1.1 * ray
         phasor = np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S)
         amplitude = np.full(cam.size_hw, 0.8 / 1.1**2)
-        return record_taps(amplitude, phasor, model=model, rng=rng), None, SceneSpec(name="bench_plane", rig=tof_rig(model), objects=())
+        return (
+            record_taps(amplitude, phasor, model=model, rng=rng),
+            None,
+            SceneSpec(name="bench_plane", rig=tof_rig(model), objects=()),
+        )
 
-    def write_recording(self, out_dir, raw: np.ndarray, calibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False):
+    def write_recording(
+        self, out_dir, raw: np.ndarray, calibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False
+    ):
         """``taps.npy`` ((H, W, 4) float32 electrons), ground truth, ``device.json``."""
         from simbench.baselines.recording import write_device_recording
         from simbench.io import save_npy
 
         writers = {"taps": lambda d: save_npy(d / "taps.npy", np.asarray(raw, np.float32))}
-        return write_device_recording(out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite)
+        return write_device_recording(
+            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
+        )
 
     def read_recording(self, in_dir):
         from pathlib import Path
@@ -342,4 +399,8 @@ class ToFSystem:
         d = Path(in_dir)
         self.model, info = read_device_info(d, self.name, ToFModel)
         taps = load_npy(d / "taps.npy", expected_shape=(self.model.height_px, self.model.width_px, 4))
-        return taps, None, self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=tof_rig(self.model), objects=()))
+        return (
+            taps,
+            None,
+            self.prepare(SceneSpec(name=str(info.get("scene", d.name)), rig=tof_rig(self.model), objects=())),
+        )

@@ -12,4 +12,14 @@ from simbench.decode.pipeline import (
     robust_params,
 )
 
-__all__ = ["MODES", "PHASE_METHODS", "DecodeResult", "DecoderParams", "ReferenceMap", "as_float_image", "decode", "decode_reference", "robust_params"]
+__all__ = [
+    "MODES",
+    "PHASE_METHODS",
+    "DecodeResult",
+    "DecoderParams",
+    "ReferenceMap",
+    "as_float_image",
+    "decode",
+    "decode_reference",
+    "robust_params",
+]

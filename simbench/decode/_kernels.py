@@ -37,7 +37,9 @@ _JIT = dict(nogil=True, cache=True, error_model="numpy")
 
 
 @numba.njit(**_JIT)
-def gabor_fit(b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual):  # pragma: no cover - compiled
+def gabor_fit(
+    b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual
+):  # pragma: no cover - compiled
     """Weighted least-squares fringe fit from the window moments, per pixel.
 
     Inputs (float32, (H, W); ``cos1``/``sin1`` (1, W)): the data moments ``b0 = G*(cI)``,
@@ -277,7 +279,9 @@ def _bridge(wrapped, valid, y, xl, x, first, lo, hi, omega, tol):  # pragma: no 
 
 
 @numba.njit(**_JIT)
-def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, start, stop, linked_prev):  # pragma: no cover - compiled
+def segment_stripes(
+    wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, start, stop, linked_prev
+):  # pragma: no cover - compiled
     """Row-wise stripe segmentation; returns the number of stripes.
 
     Between pixels ``x-1`` and ``x`` of a row: ``d = psi[x] - psi[x-1]``, a wrap where

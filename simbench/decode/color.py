@@ -16,7 +16,16 @@ import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["color_code", "mixing_matrix", "unmix", "normalize_channels", "overlay_weights", "Stripes", "segment_stripes", "vote_codes"]
+__all__ = [
+    "color_code",
+    "mixing_matrix",
+    "unmix",
+    "normalize_channels",
+    "overlay_weights",
+    "Stripes",
+    "segment_stripes",
+    "vote_codes",
+]
 
 
 def color_code(rgb: np.ndarray) -> np.ndarray:
@@ -82,7 +91,10 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
             raise ValueError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
         k[:, p] = np.median((f - d)[sel], axis=0)
         if not k[p, p] > 1e-3:
-            raise ValueError(f"projector primary {'RGB'[p]} does not light camera channel {'RGB'[p]} above the dark frame: not a calibration capture")
+            raise ValueError(
+                f"projector primary {'RGB'[p]} does not light camera channel {'RGB'[p]} above the dark frame: not a "
+                f"calibration capture"
+            )
     k /= np.diag(k)[None, :]
     if np.linalg.cond(k) > 1e3:
         raise ValueError(f"the coupling matrix is singular (condition number {np.linalg.cond(k):.3g})")
@@ -114,7 +126,9 @@ def _code_window_px(period_px: float, order: int) -> int:
     return int(np.ceil((order + 1) / 2 * period_px)) + 1
 
 
-def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def normalize_channels(
+    rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Each channel rescaled to its local range across neighbouring stripes.
 
     ``(v - local_min) / (local_max - local_min)`` per channel, over a window along the row wide
@@ -160,7 +174,9 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
         v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
         box = (2 * half + 1, 1)
         lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
-        span = cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
+        span = (
+            cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
+        )
         ok = span >= min_span
         np.divide(v - lo, span, out=out[..., c], where=ok)
         out[..., c][~ok] = 0.0
@@ -169,7 +185,9 @@ def normalize_channels(rgb: np.ndarray, *, period_px: float, order: int, min_spa
     return (out, spans) if return_span else out
 
 
-def overlay_weights(raw: np.ndarray, span: np.ndarray, *, unmixing: np.ndarray | None, period_px: float, order: int, floor: float) -> tuple[np.ndarray, np.ndarray]:
+def overlay_weights(
+    raw: np.ndarray, span: np.ndarray, *, unmixing: np.ndarray | None, period_px: float, order: int, floor: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Inverse noise variances of the normalised code pair (R + G) and fringe channel (B).
 
     A normalised channel ``(u - lo) / span`` has noise ``sigma_u / span``.  ``u`` is the
@@ -289,7 +307,13 @@ def segment_stripes(
         stop,
         linked_prev,
     )
-    return Stripes(labels=labels, row=row[:n].copy(), start=start[:n].copy(), stop=stop[:n].copy(), linked_prev=linked_prev[:n].copy())
+    return Stripes(
+        labels=labels,
+        row=row[:n].copy(),
+        start=start[:n].copy(),
+        stop=stop[:n].copy(),
+        linked_prev=linked_prev[:n].copy(),
+    )
 
 
 def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -311,5 +335,14 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     """
     out = np.empty(stripes.count, np.uint8)
     agreement = np.empty(stripes.count, np.float32)
-    _kernels.vote_codes(np.ascontiguousarray(code, dtype=bool), stripes.labels, stripes.row, stripes.start, stripes.stop, bool(voting), out, agreement)
+    _kernels.vote_codes(
+        np.ascontiguousarray(code, dtype=bool),
+        stripes.labels,
+        stripes.row,
+        stripes.start,
+        stripes.stop,
+        bool(voting),
+        out,
+        agreement,
+    )
     return out, agreement

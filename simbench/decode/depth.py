@@ -57,7 +57,9 @@ def absolute_column(
     column = np.empty(position.shape, np.float32)
     index = np.empty(position.shape, np.int32)
     # column_from_phase(psi + 2 pi W) in float32, one pass (simbench.decode._kernels)
-    _kernels.absolute_column(position, wrapped, expected, np.float32(period_px), np.float32(cycle * period_px), cycle, column, index)
+    _kernels.absolute_column(
+        position, wrapped, expected, np.float32(period_px), np.float32(cycle * period_px), cycle, column, index
+    )
     return column, index
 
 

@@ -60,7 +60,9 @@ def _background(intensity: np.ndarray, certainty: np.ndarray, *, period_px: floa
 
 
 def _support(certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
-    return cv2.sepFilter2D(certainty, cv2.CV_32F, gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px), borderType=cv2.BORDER_CONSTANT)
+    return cv2.sepFilter2D(
+        certainty, cv2.CV_32F, gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px), borderType=cv2.BORDER_CONSTANT
+    )
 
 
 def _result(intensity, certainty, *, background, analytic_re, analytic_im, support, sigma_x_px) -> PhaseResult:
@@ -77,7 +79,9 @@ def _result(intensity, certainty, *, background, analytic_re, analytic_im, suppo
     den = cv2.sepFilter2D(certainty, cv2.CV_32F, kx, _ROW, borderType=cv2.BORDER_CONSTANT)
     residual = np.full_like(support, np.inf)
     ok = good & (den > 1e-3)
-    np.divide(np.sqrt(np.maximum(num, 0) / np.where(ok, den, 1)), amplitude * np.float32(np.sqrt(0.5)), out=residual, where=ok)
+    np.divide(
+        np.sqrt(np.maximum(num, 0) / np.where(ok, den, 1)), amplitude * np.float32(np.sqrt(0.5)), out=residual, where=ok
+    )
     return PhaseResult(wrapped=wrapped, amplitude=amplitude, offset=background, residual=residual, support=support)
 
 
@@ -151,7 +155,9 @@ def _modulated(sigma: float, xi: float) -> tuple[np.ndarray, np.ndarray]:
     return (g * np.cos(xi * u)).astype(np.float32), (g * np.sin(xi * u)).astype(np.float32)
 
 
-def ridge_frequencies(*, period_px: float, sigma_x_px: float, sigma_y_px: float, span: float = 0.35) -> tuple[np.ndarray, float]:
+def ridge_frequencies(
+    *, period_px: float, sigma_x_px: float, sigma_y_px: float, span: float = 0.35
+) -> tuple[np.ndarray, float]:
     """Candidate frequencies (rad/px) of the ridge search.
 
     Along x: the carrier ``w = 2 pi / T`` and steps up to ``(1 +- span) w``, no coarser than

@@ -30,16 +30,34 @@ def decoder_fingerprint() -> str:
     return source_digest(sorted(Path(__file__).parent.glob("*.py")))
 
 
-def cached_decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> ReferenceMap:
+def cached_decode_reference(
+    reference: np.ndarray,
+    *,
+    rig: Rig,
+    params: DecoderParams,
+    primaries: Sequence[np.ndarray] | None = None,
+    dark: np.ndarray | None = None,
+    cache: RenderCache | None = None,
+) -> ReferenceMap:
     """:func:`simbench.decode.decode_reference`, looked up in / stored to ``cache`` (None:
     decoded every time).  Raises what ``decode_reference`` raises (a failed reference is
     never stored)."""
-    ref, store = lookup_decoded_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark, cache=cache)
+    ref, store = lookup_decoded_reference(
+        reference, rig=rig, params=params, primaries=primaries, dark=dark, cache=cache
+    )
     store()
     return ref
 
 
-def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None, cache: RenderCache | None = None) -> tuple[ReferenceMap, Callable[[], None]]:
+def lookup_decoded_reference(
+    reference: np.ndarray,
+    *,
+    rig: Rig,
+    params: DecoderParams,
+    primaries: Sequence[np.ndarray] | None = None,
+    dark: np.ndarray | None = None,
+    cache: RenderCache | None = None,
+) -> tuple[ReferenceMap, Callable[[], None]]:
     """The decoded reference from ``cache``, or decoded now, and a function that stores it
     (nothing to do when it came from the cache): a command stores it only once everything
     else has succeeded, so a failed command leaves nothing behind."""
@@ -50,7 +68,9 @@ def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: Decoder
         settings.pop("threads")
         parts = {
             "reference": array_digest(np.asarray(reference)),
-            "calibration": None if primaries is None else [array_digest(np.asarray(p)) for p in primaries] + [array_digest(np.asarray(dark))],
+            "calibration": None
+            if primaries is None
+            else [array_digest(np.asarray(p)) for p in primaries] + [array_digest(np.asarray(dark))],
             "rig": rig_to_dict(rig),
             "decoder": settings,
             "decoder_source": decoder_fingerprint(),
@@ -59,7 +79,12 @@ def lookup_decoded_reference(reference: np.ndarray, *, rig: Rig, params: Decoder
     fresh = arrays is None
     if fresh:
         ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
-        arrays = {"column_px": ref.column_px, "expected_px": ref.expected_px, "inverse": ref.inverse, "z0_m": np.float64(ref.z0_m)}
+        arrays = {
+            "column_px": ref.column_px,
+            "expected_px": ref.expected_px,
+            "inverse": ref.inverse,
+            "z0_m": np.float64(ref.z0_m),
+        }
         if ref.mixing is not None:
             arrays["mixing"] = ref.mixing
 

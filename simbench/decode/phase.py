@@ -38,7 +38,9 @@ def _weighted(rgb: np.ndarray, weights: tuple[np.ndarray, np.ndarray] | None = N
     # everywhere; each gets its inverse noise variance (one weight for the pair, so a red and
     # a green stripe are weighted alike and the stripe colour cannot bias the fringe)
     if weights is None:
-        raise ValueError("intensity_mode 'weighted' needs normalised channels (color_normalize=True) and their noise weights")
+        raise ValueError(
+            "intensity_mode 'weighted' needs normalised channels (color_normalize=True) and their noise weights"
+        )
     w_code, w_fringe = weights
     num = w_code * (rgb[..., 0] + rgb[..., 1]) + w_fringe * rgb[..., 2]
     den = w_code + w_fringe
@@ -48,7 +50,9 @@ def _weighted(rgb: np.ndarray, weights: tuple[np.ndarray, np.ndarray] | None = N
 INTENSITY_MODES = {"overlay": _overlay, "blue": _blue, "weighted": _weighted}
 
 
-def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay", weights: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+def overlay_intensity(
+    rgb: np.ndarray, *, mode: str = "overlay", weights: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
     """Fringe intensity from a capture.
 
     Parameters
@@ -77,7 +81,9 @@ def overlay_intensity(rgb: np.ndarray, *, mode: str = "overlay", weights: tuple[
     return fn(rgb, weights) if mode == "weighted" else fn(rgb)
 
 
-def certainty_map(rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float, window_periods: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def certainty_map(
+    rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float, window_periods: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Which pixels carry usable fringe samples, and which are lit at all.
 
     A pixel is *unlit* when the brightest pixel within ``window_periods`` fringe periods along
@@ -129,7 +135,9 @@ def _conv(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
     return cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
 
 
-def magnitude(re: np.ndarray, im: np.ndarray, *, tmp: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+def magnitude(
+    re: np.ndarray, im: np.ndarray, *, tmp: np.ndarray | None = None, out: np.ndarray | None = None
+) -> np.ndarray:
     """``sqrt(re^2 + im^2)`` in float32, the same bits wherever the arrays sit in memory.
 
     ``cv2.magnitude`` is not used: with Intel IPP (in the PyPI wheels) its last bit depends on

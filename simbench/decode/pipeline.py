@@ -51,7 +51,18 @@ from simbench.pattern import (
 )
 from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
 
-__all__ = ["DecoderParams", "robust_params", "PHASE_METHODS", "MODES", "ReferenceMap", "DecodeResult", "LazyStages", "as_float_image", "decode_reference", "decode"]
+__all__ = [
+    "DecoderParams",
+    "robust_params",
+    "PHASE_METHODS",
+    "MODES",
+    "ReferenceMap",
+    "DecodeResult",
+    "LazyStages",
+    "as_float_image",
+    "decode_reference",
+    "decode",
+]
 
 PHASE_METHODS = {"gabor": gabor_phase, "ftp": ftp_phase, "wfr": wfr_phase}
 MODES = ("reference", "calibrated")
@@ -173,7 +184,9 @@ class DecoderParams:
             "phase_method": v.choice(self.phase_method, "phase_method", PHASE_METHODS),
             "sigma_periods": v.number(self.sigma_periods, "sigma_periods", lo=0.0, hi=10.0, lo_open=True),
             "sigma_y_ratio": v.number(self.sigma_y_ratio, "sigma_y_ratio", lo=0.0, hi=10.0, lo_open=True),
-            "camera_period_px": v.optional(v.number, self.camera_period_px, "camera_period_px", lo=2.0, hi=float(v.MAX_SIDE_PX), lo_open=True),
+            "camera_period_px": v.optional(
+                v.number, self.camera_period_px, "camera_period_px", lo=2.0, hi=float(v.MAX_SIDE_PX), lo_open=True
+            ),
             "unmix": v.boolean(self.unmix, "unmix"),
             "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
             "voting": v.boolean(self.voting, "voting"),
@@ -247,7 +260,13 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     validity tests then act on signal relative to the local range (``min_amplitude`` on the
     normalised fringe, ``max_residual`` relative to it; the lit test looks across a whole
     code window).  Everything else as ``params``."""
-    return dataclasses.replace(params, unmix=True, color_normalize=True, intensity_mode="weighted", bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS)
+    return dataclasses.replace(
+        params,
+        unmix=True,
+        color_normalize=True,
+        intensity_mode="weighted",
+        bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
+    )
 
 
 @dataclass(frozen=True)
@@ -322,7 +341,10 @@ def _check_capture(image: np.ndarray, expected_size_hw: tuple[int, int] | None) 
     if img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"capture must have shape (H, W, 3), got {img.shape}")
     if expected_size_hw is not None and img.shape[:2] != tuple(expected_size_hw):
-        raise ValueError(f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is {expected_size_hw[1]}x{expected_size_hw[0]}")
+        raise ValueError(
+            f"capture is {img.shape[1]}x{img.shape[0]} (WxH); the rig's camera is "
+            f"{expected_size_hw[1]}x{expected_size_hw[0]}"
+        )
     if img.dtype in (np.uint8, np.uint16):
         return img
     if np.issubdtype(img.dtype, np.floating):
@@ -364,7 +386,15 @@ def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     return out
 
 
-def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: DecoderParams, crop: slice, unmixing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, LazyStages]:
+def _columns(
+    rgb: np.ndarray,
+    expected_column: np.ndarray,
+    *,
+    rig: Rig,
+    params: DecoderParams,
+    crop: slice,
+    unmixing: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, LazyStages]:
     """Stages 1-3 and the absolute column for one band of rows.
 
     ``rgb`` holds the band plus a halo of rows above and below for the phase fit; ``crop``
@@ -377,16 +407,26 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
     with stage("lit and clipped pixels"):
-        certainty, lit = certainty_map(rgb, period_px=t_cam, dark_level=params.dark_level, saturation_level=params.saturation_level, window_periods=window)
+        certainty, lit = certainty_map(
+            rgb,
+            period_px=t_cam,
+            dark_level=params.dark_level,
+            saturation_level=params.saturation_level,
+            window_periods=window,
+        )
     raw = rgb
     weights = None
     with stage("colour unmixing and normalisation"):
         if unmixing is not None:
             rgb = unmix(rgb, unmixing)
         if params.color_normalize:
-            rgb, span = normalize_channels(rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
+            rgb, span = normalize_channels(
+                rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
+            )
             if params.intensity_mode == "weighted":
-                weights = overlay_weights(raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level)
+                weights = overlay_weights(
+                    raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level
+                )
     with stage("intensity overlay (Eq. 9)"):
         intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
     sx = params.sigma_periods * t_cam
@@ -396,8 +436,18 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
         )
     with stage("validity"):
         rgb, intensity, certainty, lit = rgb[crop], intensity[crop], certainty[crop], lit[crop]
-        wrapped, amplitude, residual, support_w = phase.wrapped[crop], phase.amplitude[crop], phase.residual[crop], phase.support[crop]
-        valid = lit & (support_w >= params.min_window_support) & (amplitude >= params.min_amplitude) & (residual <= params.max_residual)
+        wrapped, amplitude, residual, support_w = (
+            phase.wrapped[crop],
+            phase.amplitude[crop],
+            phase.residual[crop],
+            phase.support[crop],
+        )
+        valid = (
+            lit
+            & (support_w >= params.min_window_support)
+            & (amplitude >= params.min_amplitude)
+            & (residual <= params.max_residual)
+        )
     with stage("colour code (Eq. 13)"):
         code = color_code(rgb)
     with stage("stripe segmentation and voting"):
@@ -405,7 +455,9 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
         stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
     with stage("De Bruijn windows and neighbour correction"):
         table = _window_table(params.order, params.sequence)
-        raw_w = window_positions_of_stripes(stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle)
+        raw_w = window_positions_of_stripes(
+            stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle
+        )
         w_fixed, support = neighbour_correct(
             raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
         )
@@ -415,7 +467,9 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     lab = stripes.labels
     with stage("absolute column (Eq. 14)"):
         position = _per_pixel(w_fixed, lab, -1)
-        column, stripe_index = absolute_column(position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle)
+        column, stripe_index = absolute_column(
+            position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle
+        )
     st = LazyStages()
     st.put("intensity", intensity)
     st.put("certainty", certainty)
@@ -432,7 +486,10 @@ def _columns(rgb: np.ndarray, expected_column: np.ndarray, *, rig: Rig, params: 
     st.put("position_raw", lambda: _per_pixel(raw_w, lab, -1))
     st.put("position", position)
     st.put("support", lambda: _per_pixel(support, lab, 0))
-    st.put("unwrapped_phase", lambda: np.where(stripe_index >= 0, wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)))
+    st.put(
+        "unwrapped_phase",
+        lambda: np.where(stripe_index >= 0, wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)),
+    )
     return column, stripe_index, st
 
 
@@ -507,7 +564,10 @@ def _unmixing(mixing: np.ndarray | None, params: DecoderParams) -> np.ndarray | 
     if not params.unmix:
         return None
     if mixing is None:
-        raise ValueError("unmix=True needs the reference plane's calibration captures under each primary (decode_reference(..., primaries=, dark=))")
+        raise ValueError(
+            "unmix=True needs the reference plane's calibration captures under each primary (decode_reference(..., "
+            "primaries=, dark=))"
+        )
     order = list(check_channels(params.channels))
     inv = np.linalg.inv(np.asarray(mixing, np.float64))
     return inv[np.ix_(order, order)]
@@ -524,7 +584,14 @@ def _calibration_region(primaries, dark: np.ndarray) -> np.ndarray:
     return region
 
 
-def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, primaries: Sequence[np.ndarray] | None = None, dark: np.ndarray | None = None) -> ReferenceMap:
+def decode_reference(
+    reference: np.ndarray,
+    *,
+    rig: Rig,
+    params: DecoderParams,
+    primaries: Sequence[np.ndarray] | None = None,
+    dark: np.ndarray | None = None,
+) -> ReferenceMap:
     """Decode a reference-plane capture (a plane at ``params.z0_m``) into its column map.
 
     Done once per calibration; :func:`decode` then matches captures against it.  With
@@ -548,7 +615,12 @@ def decode_reference(reference: np.ndarray, *, rig: Rig, params: DecoderParams, 
         mixing = mixing_matrix(cal[:3], cal[3], region=_calibration_region(cal[:3], cal[3]))
     unmixing = _unmixing(mixing, params)
     predicted = _plane_columns(rig, float(params.z0_m))
-    parts = _run_bands(lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)[0], image, params, rig)
+    parts = _run_bands(
+        lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)[0],
+        image,
+        params,
+        rig,
+    )
     column = np.concatenate(parts, axis=0)
     coverage = float(np.isfinite(column).mean())
     if coverage < params.min_reference_coverage:
@@ -599,7 +671,9 @@ def decode(
     if params.mode == "reference" and reference is None:
         raise ValueError("reference mode needs the reference-plane capture (or use mode='calibrated')")
     if params.unmix and not isinstance(reference, ReferenceMap):
-        raise ValueError("unmix=True needs the decoded reference (decode_reference with its calibration captures under each primary)")
+        raise ValueError(
+            "unmix=True needs the decoded reference (decode_reference with its calibration captures under each primary)"
+        )
     if reference is not None and (params.mode == "reference" or params.unmix):
         ref = reference if isinstance(reference, ReferenceMap) else decode_reference(reference, rig=rig, params=params)
         if ref.column_px.shape != (h, w):
@@ -618,17 +692,23 @@ def decode(
     index_out = np.empty((h, w), np.int32)
 
     def band(img, rows, crop):
-        column, stripe_index, stages = _columns(img, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
+        column, stripe_index, stages = _columns(
+            img, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
+        )
         with stage("depth (reference matching, Eq. 15)" if ref is not None else "depth (triangulation, Eq. 15)"):
             if ref is not None:
                 x_ref = match_reference(column, ref.inverse[rows])
-                depth = depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m)
+                depth = depth_from_disparity(
+                    x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m
+                )
                 # a column the reference row never shows (near the image's ends, for surfaces off
                 # the reference depth) cannot be matched: triangulate it with the calibrated rig
                 beyond = np.isnan(x_ref) & np.isfinite(column)
                 if beyond.any():
                     r_idx, c_idx = np.nonzero(beyond)
-                    depth[beyond] = triangulate_columns(column[beyond], rig, rows=r_idx + rows.start, cols=c_idx).astype(np.float32)
+                    depth[beyond] = triangulate_columns(
+                        column[beyond], rig, rows=r_idx + rows.start, cols=c_idx
+                    ).astype(np.float32)
                 stages.put("reference_x", x_ref)
                 stages.put("triangulated", beyond)
             else:
@@ -637,7 +717,12 @@ def decode(
             valid = valid_out[rows]
             np.greater_equal(depth, zmin, out=valid)
             valid &= depth <= zmax
-            for dst, src, fill in ((depth_out, depth, nan), (conf_out, stages["amplitude"], 0), (col_out, column, nan), (index_out, stripe_index, -1)):
+            for dst, src, fill in (
+                (depth_out, depth, nan),
+                (conf_out, stages["amplitude"], 0),
+                (col_out, column, nan),
+                (index_out, stripe_index, -1),
+            ):
                 dst[rows] = fill
                 np.copyto(dst[rows], src, where=valid)
         return stages

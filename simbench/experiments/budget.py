@@ -40,8 +40,9 @@ def converged_spp(spp: int) -> int:
 def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, SensorModel]]:
     """(key, description, sensor) of each row: the baseline, each effect the ``paper`` model
     switches on, the projector's video-mode gamma and its free-running bit-plane timing
-    (what-ifs: the paper triggered the camera from pattern mode), and the full ``paper`` model.  The render-noise row (:data:`RENDER_ROW`, the ideal sensor
-    rendered with :func:`converged_spp` samples) comes second in :func:`run_budget`."""
+    (what-ifs: the paper triggered the camera from pattern mode), and the full ``paper`` model.
+    The render-noise row (:data:`RENDER_ROW`, the ideal sensor rendered with
+    :func:`converged_spp` samples) comes second in :func:`run_budget`."""
     rows = [("ideal", "ideal: every effect off", ideal)]
     for key, text in EFFECTS.items():
         s = with_effects(ideal, paper, [key], name=f"ideal+{key}")
@@ -50,15 +51,24 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
         rows.append((key, text, s))
     video_mode = dataclasses.replace(paper, projector=dataclasses.replace(paper.projector, transfer="gamma"))
     video = with_effects(ideal, video_mode, ["transfer"], name="ideal+video_gamma")
-    rows.append(("video_gamma", f"what if: projector video mode, gamma {paper.projector.gamma:g} (the paper used pattern mode)", video))
+    rows.append(
+        (
+            "video_gamma",
+            f"what if: projector video mode, gamma {paper.projector.gamma:g} (the paper used pattern mode)",
+            video,
+        )
+    )
     free_running = dataclasses.replace(paper, projector=dataclasses.replace(paper.projector, timing="video"))
     timing = with_effects(ideal, free_running, ["timing"], name="ideal+video_timing")
-    rows.append((
-        "video_timing",
-        f"what if: projector free-running in video mode ({paper.projector.frame_rate_hz:g} Hz, red, green, blue bit-planes in turn), camera not triggered, "
-        "its exposure starting anywhere in a frame (the paper triggered the camera from pattern mode)",
-        timing,
-    ))
+    rows.append(
+        (
+            "video_timing",
+            f"what if: projector free-running in video mode ({paper.projector.frame_rate_hz:g} Hz, red, green, blue "
+            f"bit-planes in turn), camera not triggered, "
+            "its exposure starting anywhere in a frame (the paper triggered the camera from pattern mode)",
+            timing,
+        )
+    )
     rows.append(("paper", "paper: all effects together", paper))
     return rows
 
@@ -71,14 +81,27 @@ def run_budget(session: Session) -> dict:
     specs = budget_rows(ideal, paper)
     configs = {
         RENDER_ROW: dataclasses.replace(cfg, sampler="multijitter", spp=converged_spp(cfg.spp)),
-        FORM_ROW: dataclasses.replace(cfg, board_bow_mm_per_m=1000.0 * BUDGET_BOW_M_PER_M, board_waviness_mm=1000.0 * BUDGET_WAVINESS_M),
+        FORM_ROW: dataclasses.replace(
+            cfg, board_bow_mm_per_m=1000.0 * BUDGET_BOW_M_PER_M, board_waviness_mm=1000.0 * BUDGET_WAVINESS_M
+        ),
     }
-    specs.insert(1, (RENDER_ROW, f"ideal, rendered with {configs[RENDER_ROW].spp} spp multijitter: the ideal row minus this is render noise ({cfg.spp} spp {cfg.sampler} in every other row)", ideal))
+    specs.insert(
+        1,
+        (
+            RENDER_ROW,
+            f"ideal, rendered with {configs[RENDER_ROW].spp} spp multijitter: the ideal row minus this is render "
+            f"noise ({cfg.spp} spp {cfg.sampler} in every other row)",
+            ideal,
+        ),
+    )
     form_text = (
-        f"board form: test and reference boards bowed by {1000 * BUDGET_BOW_M_PER_M:g} mm per metre and rippled by {1000 * BUDGET_WAVINESS_M:g} mm "
+        f"board form: test and reference boards bowed by {1000 * BUDGET_BOW_M_PER_M:g} mm per metre and rippled by "
+        f"{1000 * BUDGET_WAVINESS_M:g} mm "
         "(assumption; `simbench reproduce flatness` sweeps both)"
     )
-    specs.insert([k for k, _, _ in specs].index("video_gamma"), (FORM_ROW, form_text, ideal))  # with the effects, before the what-ifs
+    specs.insert(
+        [k for k, _, _ in specs].index("video_gamma"), (FORM_ROW, form_text, ideal)
+    )  # with the effects, before the what-ifs
     for i, (key, text, sensor) in enumerate(specs):
         with session.timed(f"[budget {i + 1}/{len(specs)}] {key}"):
             sub = session.fork(sensor, config=configs.get(key))
@@ -96,9 +119,27 @@ def run_budget(session: Session) -> dict:
             row["paper_mae_mm"] = PAPER_WHITE_MM
             row["ratio"] = row["plane_mae_mm"] / PAPER_WHITE_MM
             rows.append(row)
-    cols = ["effect", "description", "plane_mae_mm", "paper_mae_mm", "ratio", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors", "stripe_order_error_rate", "ref_plane_mae_mm", "ref_gt_mae_mm", "ref_completeness", "ref_stripe_order_errors"]
+    cols = [
+        "effect",
+        "description",
+        "plane_mae_mm",
+        "paper_mae_mm",
+        "ratio",
+        "gt_mae_mm",
+        "gt_rmse_mm",
+        "completeness",
+        "stripe_order_errors",
+        "stripe_order_error_rate",
+        "ref_plane_mae_mm",
+        "ref_gt_mae_mm",
+        "ref_completeness",
+        "ref_stripe_order_errors",
+    ]
     out = session.out
-    files = [write_table(out / "budget.csv", rows, cols), atomic_write_text(out / "budget.md", _markdown(session, rows, repeats))]
+    files = [
+        write_table(out / "budget.csv", rows, cols),
+        atomic_write_text(out / "budget.md", _markdown(session, rows, repeats)),
+    ]
     session.provenance("budget", files, extra={"sensors": {key: sensor.name for key, _, sensor in specs}})
     return metrics
 
@@ -109,21 +150,47 @@ def _markdown(session: Session, rows: list[dict], repeats: int) -> str:
     lines = [
         "# Error budget: white board at 1.0 m",
         "",
-        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
+        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} "
+        f"spp {cfg.sampler}, "
         f"{repeats} recording(s) per row averaged, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
         "Each row is the `ideal` sensor model (`simbench/presets/ideal.toml`) with one effect of the `paper` model "
-        "(`simbench/presets/paper.toml`, every number cited or marked as an assumption there) switched on; the last row "
-        "is the full `paper` model. Same render, noise and placement seeds in every row (the board is placed with the run's "
-        "placement tolerance, independently of the reference plane). Decoded by triangulation with the rig (Eq. 15) and, "
-        "in its own column, against the separately captured reference plane (Sec. 5.4). *Plane fit* is the paper's Table 1 "
-        "protocol (mean absolute residual to the least-squares plane); the paper's own simulation (Sec. 5.5) gave 0.42 mm on its white board. "
+        "(`simbench/presets/paper.toml`, every number cited or marked as an assumption there) switched on; the last "
+        "row "
+        "is the full `paper` model. Same render, noise and placement seeds in every row (the board is placed with the "
+        "run's "
+        "placement tolerance, independently of the reference plane). Decoded by triangulation with the rig (Eq. 15) "
+        "and, "
+        "in its own column, against the separately captured reference plane (Sec. 5.4). *Plane fit* is the paper's "
+        "Table 1 "
+        "protocol (mean absolute residual to the least-squares plane); the paper's own simulation (Sec. 5.5) gave 0.42 "
+        "mm on its white board. "
         "No parameter was fitted to that number.",
         "",
     ]
-    hdr = ["effect", "triangulation: plane fit (mm)", "paper (mm)", "ours / paper", "GT MAE (mm)", "GT RMSE (mm)", "reference plane: plane fit (mm)", "completeness", "stripe-order errors"]
+    hdr = [
+        "effect",
+        "triangulation: plane fit (mm)",
+        "paper (mm)",
+        "ours / paper",
+        "GT MAE (mm)",
+        "GT RMSE (mm)",
+        "reference plane: plane fit (mm)",
+        "completeness",
+        "stripe-order errors",
+    ]
     body = [
-        [r["description"], f"{r['plane_mae_mm']:.3f}", f"{r['paper_mae_mm']:.2f}", f"{r['ratio']:.2f}", f"{r['gt_mae_mm']:.3f}", f"{r['gt_rmse_mm']:.3f}", f"{r['ref_plane_mae_mm']:.3f}", f"{100 * r['completeness']:.2f} %", f"{r['stripe_order_errors']:.0f}"]
+        [
+            r["description"],
+            f"{r['plane_mae_mm']:.3f}",
+            f"{r['paper_mae_mm']:.2f}",
+            f"{r['ratio']:.2f}",
+            f"{r['gt_mae_mm']:.3f}",
+            f"{r['gt_rmse_mm']:.3f}",
+            f"{r['ref_plane_mae_mm']:.3f}",
+            f"{100 * r['completeness']:.2f} %",
+            f"{r['stripe_order_errors']:.0f}",
+        ]
         for r in rows
     ]
     lines += markdown_table(hdr, body)

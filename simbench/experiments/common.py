@@ -50,7 +50,17 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SCENES_DIR", "RunConfig", "Capture", "Session", "score", "write_table", "markdown_table", "figure_png", "git_commit"]
+__all__ = [
+    "SCENES_DIR",
+    "RunConfig",
+    "Capture",
+    "Session",
+    "score",
+    "write_table",
+    "markdown_table",
+    "figure_png",
+    "git_commit",
+]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -118,7 +128,9 @@ class RunConfig:
 
     @classmethod
     def preset(cls, *, quick: bool, **overrides) -> "RunConfig":
-        base = cls(quick=True, camera_scale=0.5, spp=4, fig9_repeats=3, edge_band_px=3, ply_stride=4) if quick else cls()
+        base = (
+            cls(quick=True, camera_scale=0.5, spp=4, fig9_repeats=3, edge_band_px=3, ply_stride=4) if quick else cls()
+        )
         return dataclasses.replace(base, **overrides)
 
     def to_dict(self) -> dict:
@@ -142,7 +154,16 @@ class Session:
     """Shared state of one reproduction run: config, cache, seeds, the depth systems and their
     calibrations, progress."""
 
-    def __init__(self, config: RunConfig, *, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = log.info, command: str = "", sensor: SensorModel | None = None) -> None:
+    def __init__(
+        self,
+        config: RunConfig,
+        *,
+        out_dir: str | Path,
+        cache_dir: str | Path | None,
+        progress: Callable[[str], None] = log.info,
+        command: str = "",
+        sensor: SensorModel | None = None,
+    ) -> None:
         import mitsuba as mi
 
         self.config = config
@@ -161,7 +182,9 @@ class Session:
 
     @property
     def render(self) -> RenderSettings:
-        return RenderSettings(spp=self.config.spp, sampler=self.config.sampler, max_depth=self.config.max_depth, cache=self.cache)
+        return RenderSettings(
+            spp=self.config.spp, sampler=self.config.sampler, max_depth=self.config.max_depth, cache=self.cache
+        )
 
     @property
     def seeds_used(self) -> dict[str, dict]:
@@ -171,7 +194,14 @@ class Session:
     def fork(self, sensor: SensorModel, *, config: RunConfig | None = None) -> "Session":
         """A session with another sensor model (and optionally other run settings) sharing
         this one's cache, output, seed log and calibrations."""
-        other = Session(config or self.config, out_dir=self.out, cache_dir=None, progress=self.progress, command=self.command, sensor=sensor)
+        other = Session(
+            config or self.config,
+            out_dir=self.out,
+            cache_dir=None,
+            progress=self.progress,
+            command=self.command,
+            sensor=sensor,
+        )
         other.cache = self.cache
         other.seeds = self.seeds
         other._calibrations = self._calibrations
@@ -181,7 +211,12 @@ class Session:
         """The registered depth system ``name`` (:mod:`simbench.systems`) set up for this run."""
         if name not in self._systems:
             cfg = self.config
-            options = SystemOptions(sensor=self.sensor, decoder=cfg.decoder, camera_scale=cfg.camera_scale, reference_form=cfg.reference_form())
+            options = SystemOptions(
+                sensor=self.sensor,
+                decoder=cfg.decoder,
+                camera_scale=cfg.camera_scale,
+                reference_form=cfg.reference_form(),
+            )
             self._systems[name] = get_system(name, options)
         return self._systems[name]
 
@@ -189,7 +224,15 @@ class Session:
         """``system``'s calibration for ``scene`` (prepared), recorded once per run for each
         calibration key, sensor and render setting (``options`` go to its ``calibrate``)."""
         r = self.render
-        key = (system.name, system.calibration_key(scene), getattr(system, "sensor", None), r.spp, r.sampler, r.max_depth, tuple(sorted(options.items())))
+        key = (
+            system.name,
+            system.calibration_key(scene),
+            getattr(system, "sensor", None),
+            r.spp,
+            r.sampler,
+            r.max_depth,
+            tuple(sorted(options.items())),
+        )
         if key not in self._calibrations:
             self._calibrations[key] = system.calibrate(scene, seeds=self.seeds, render=r, **options)
         return self._calibrations[key]
@@ -213,15 +256,22 @@ class Session:
         tolerance, seeds from ``label``); the offsets are recorded with the seeds."""
         seed = self.seeds.seed(f"{label}/placement")
         placed, offsets = place_objects(scene, names, placement=self.config.placement, rng=seed)
-        self.seeds.record(f"{label}/placement", {"placement": seed, **{f"{n}_{k}": v for n, o in offsets.items() for k, v in o.items()}})
+        self.seeds.record(
+            f"{label}/placement",
+            {"placement": seed, **{f"{n}_{k}": v for n, o in offsets.items() for k, v in o.items()}},
+        )
         return placed
 
     def capture(self, scene: SceneSpec, label: str, *, repeats: int = 1) -> list[Capture]:
         """``repeats`` recordings of ``scene`` (prepared) by the proposed sensor, with seeds
         from ``label`` (:func:`simbench.systems.acquire`)."""
-        return acquire(self.proposed, scene, label, seeds=self.seeds, render=self.render, repeats=repeats, prepared=True)
+        return acquire(
+            self.proposed, scene, label, seeds=self.seeds, render=self.render, repeats=repeats, prepared=True
+        )
 
-    def acquire(self, name: str, scene: "str | SceneSpec", label: str, *, repeats: int = 1) -> list[tuple[Recording, SystemDepth]]:
+    def acquire(
+        self, name: str, scene: "str | SceneSpec", label: str, *, repeats: int = 1
+    ) -> list[tuple[Recording, SystemDepth]]:
         """``repeats`` recordings of ``scene`` (a scene of ``scenes/`` or a loaded, not yet
         prepared scene, e.g. one placed by :meth:`place`) by the system ``name`` at its native
         resolution, each with its depth decoded the system's own way; seeds from
@@ -229,7 +279,16 @@ class Session:
         system = self.system(name)
         prepared = system.prepare(self.raw_scene(scene) if isinstance(scene, str) else scene)
         cal = self.calibration(system, prepared)
-        recs = acquire(system, prepared, label, seeds=self.seeds, render=self.render, calibration=cal, repeats=repeats, prepared=True)
+        recs = acquire(
+            system,
+            prepared,
+            label,
+            seeds=self.seeds,
+            render=self.render,
+            calibration=cal,
+            repeats=repeats,
+            prepared=True,
+        )
         return [(rec, system.decode(rec.raw, cal, scene=rec.scene)) for rec in recs]
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
@@ -242,7 +301,11 @@ class Session:
         """``cap`` decoded with ``params`` (Z0 = the scene's reference depth) in ``mode``
         (``reference`` or ``calibrated``; None = ``params.mode``)."""
         mode = mode or params.mode
-        cal = self.calibration(self.proposed, cap.scene, frames=bool(params.unmix)) if mode == "reference" or params.unmix else None
+        cal = (
+            self.calibration(self.proposed, cap.scene, frames=bool(params.unmix))
+            if mode == "reference" or params.unmix
+            else None
+        )
         return self.proposed.decode(cap.raw, cal, scene=cap.scene, params=params, mode=mode).detail
 
     # provenance --------------------------------------------------------------------------
@@ -278,11 +341,26 @@ class _Timer:
             self.progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
 
 
-def score(rec: Recording, result: SystemDepth | DecodeResult, period_px: float | None = None, *, region: np.ndarray | None = None, edge_band_px: int = 0) -> dict:
+def score(
+    rec: Recording,
+    result: SystemDepth | DecodeResult,
+    period_px: float | None = None,
+    *,
+    region: np.ndarray | None = None,
+    edge_band_px: int = 0,
+) -> dict:
     """:func:`simbench.metrics.score` of a recording's decoded depth (a
     :class:`simbench.systems.SystemDepth` or a :class:`DecodeResult`), with its projector
     columns where it has them."""
-    return metrics_score(result.depth_m, rec.gt, camera=rec.scene.rig.camera, region=region, column_px=getattr(result, "column_px", None), period_px=period_px, edge_band_px=edge_band_px)
+    return metrics_score(
+        result.depth_m,
+        rec.gt,
+        camera=rec.scene.rig.camera,
+        region=region,
+        column_px=getattr(result, "column_px", None),
+        period_px=period_px,
+        edge_band_px=edge_band_px,
+    )
 
 
 def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
@@ -312,6 +390,8 @@ def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
 
 def git_commit() -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=SCENES_DIR.parent).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=SCENES_DIR.parent
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

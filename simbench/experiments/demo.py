@@ -58,7 +58,7 @@ def depth_figure(capture: np.ndarray, depth_m: np.ndarray, gt_depth_m: np.ndarra
     axes[0].imshow(capture)
     axes[0].set_title("capture")
     finite = depth_m[np.isfinite(depth_m)]
-    lo, hi = (np.percentile(finite, [1, 99]) if finite.size else (0, 1))
+    lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0, 1)
     im = axes[1].imshow(depth_m, cmap="viridis", vmin=lo, vmax=hi)
     axes[1].set_title("decoded depth (m), NaN = white")
     fig.colorbar(im, ax=axes[1], shrink=0.8)
@@ -72,7 +72,9 @@ def depth_figure(capture: np.ndarray, depth_m: np.ndarray, gt_depth_m: np.ndarra
     return figure_png(fig, dpi=80)
 
 
-def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] = print) -> dict:
+def run_demo(
+    out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] = print
+) -> dict:
     """Render, decode and score each scene; write figures and tables to ``out_dir``.
 
     A Mitsuba variant must already be selected.
@@ -100,17 +102,51 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
         t3 = time.perf_counter()
         band_px = config.edge_band_px if name != "white_plane" else 0
         band = edge_band(acq.gt.depth_m, object_id=acq.gt.object_id, band_px=band_px) if band_px else None
-        m = score(result.depth_m, acq.gt, camera=acq.scene.rig.camera, exclude=band, column_px=result.column_px, period_px=pattern.period_px, detail=True)
+        m = score(
+            result.depth_m,
+            acq.gt,
+            camera=acq.scene.rig.camera,
+            exclude=band,
+            column_px=result.column_px,
+            period_px=pattern.period_px,
+            detail=True,
+        )
         # timings go to the progress log only: result files must be identical on a re-run
         row = {"scene": name, "seeds": acq.meta["seeds"], **m}
         rows.append(row)
-        files[out / f"{name}.png"] = (depth_figure(acq.capture, result.depth_m, acq.gt.depth_m, title=f"{name}: MAE {m['gt_mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"))
-        progress(f"[{i + 1}/{len(config.scenes)}] {name}: MAE {m['gt_mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %, stripe-order errors {m['stripe_order_errors']} (render {t1 - t0:.1f} s, decode {t3 - t2:.2f} s)")
+        files[out / f"{name}.png"] = depth_figure(
+            acq.capture,
+            result.depth_m,
+            acq.gt.depth_m,
+            title=f"{name}: MAE {m['gt_mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %",
+        )
+        progress(
+            f"[{i + 1}/{len(config.scenes)}] {name}: MAE {m['gt_mae_mm']:.3f} mm, completeness "
+            f"{100 * m['completeness']:.2f} %, stripe-order errors {m['stripe_order_errors']} (render {t1 - t0:.1f} s, "
+            f"decode {t3 - t2:.2f} s)"
+        )
     cfg = asdict(config)
-    provenance = {"command": "simbench demo --out " + str(out_dir), "config": cfg, "variant": mi.variant(), "versions": versions(), "git_commit": git_commit()}
+    provenance = {
+        "command": "simbench demo --out " + str(out_dir),
+        "config": cfg,
+        "variant": mi.variant(),
+        "versions": versions(),
+        "git_commit": git_commit(),
+    }
     files[out / "metrics.json"] = json_bytes({"rows": rows})
     files[out / "provenance.json"] = json_bytes(provenance)
-    cols = ["scene", "gt_mae_mm", "gt_rmse_mm", "gt_median_mm", "gt_p95_mm", "completeness", "outlier_share", "stripe_order_errors", "stripe_order_error_rate", "n_scored"]
+    cols = [
+        "scene",
+        "gt_mae_mm",
+        "gt_rmse_mm",
+        "gt_median_mm",
+        "gt_p95_mm",
+        "completeness",
+        "outlier_share",
+        "stripe_order_errors",
+        "stripe_order_error_rate",
+        "n_scored",
+    ]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
@@ -119,8 +155,10 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     md = [
         "# Pipeline demo: white plane, tilted plane, sphere, step",
         "",
-        f"Made by `simbench demo --out {out_dir}` (sensor `{config.sensor}`, {config.spp} spp, base seed {config.seed}, "
-        f"variant `{mi.variant()}`). Errors exclude a {config.edge_band_px}-px band at depth edges (none on the white plane); "
+        f"Made by `simbench demo --out {out_dir}` (sensor `{config.sensor}`, {config.spp} spp, base seed "
+        f"{config.seed}, "
+        f"variant `{mi.variant()}`). Errors exclude a {config.edge_band_px}-px band at depth edges (none on the white "
+        f"plane); "
         "completeness is over the pixels ground truth says are seen and lit.",
         "",
         "| scene | MAE (mm) | RMSE (mm) | p95 (mm) | completeness | outliers > 5 mm | stripe-order errors |",
@@ -128,8 +166,10 @@ def run_demo(out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress
     ]
     for r in rows:
         md.append(
-            f"| {r['scene']} | {r['gt_mae_mm']:.3f} | {r['gt_rmse_mm']:.3f} | {r['gt_p95_mm']:.3f} | {100 * r['completeness']:.2f} % | "
-            f"{100 * r['outlier_share']:.3f} % | {r['stripe_order_errors']} ({100 * r['stripe_order_error_rate']:.3f} %) |"
+            f"| {r['scene']} | {r['gt_mae_mm']:.3f} | {r['gt_rmse_mm']:.3f} | {r['gt_p95_mm']:.3f} | "
+            f"{100 * r['completeness']:.2f} % | "
+            f"{100 * r['outlier_share']:.3f} % | {r['stripe_order_errors']} ({100 * r['stripe_order_error_rate']:.3f} "
+            f"%) |"
         )
     files[out / "summary.md"] = ("\n".join(md) + "\n").encode()
     write_files(files)  # the folder's files together, or none of them

@@ -47,11 +47,24 @@ def run_fig9(session: Session) -> dict:
             for k, cap in enumerate(session.capture(scene, f"fig9/{name}", repeats=cfg.fig9_repeats)):
                 tri = score(cap, session.decode(cap, cfg.decoder, mode="calibrated"), cfg.decoder.period_px)
                 ref = score(cap, session.decode(cap, cfg.decoder, mode="reference"), cfg.decoder.period_px)
-                rows.append({
-                    "sensor": "proposed", "depth_m": z, "repeat": k, "rmse_mm": tri["gt_rmse_mm"], "plane_rms_mm": tri["plane_rms_mm"], "mae_mm": tri["gt_mae_mm"], "bias_mm": tri["bias_mm"],
-                    "completeness": tri["completeness"], "stripe_order_errors": tri["stripe_order_errors"], "ref_rmse_mm": ref["gt_rmse_mm"], "ref_plane_rms_mm": ref["plane_rms_mm"],
-                    "ref_stripe_order_errors": ref["stripe_order_errors"], **cap.seeds, **placement,
-                })
+                rows.append(
+                    {
+                        "sensor": "proposed",
+                        "depth_m": z,
+                        "repeat": k,
+                        "rmse_mm": tri["gt_rmse_mm"],
+                        "plane_rms_mm": tri["plane_rms_mm"],
+                        "mae_mm": tri["gt_mae_mm"],
+                        "bias_mm": tri["bias_mm"],
+                        "completeness": tri["completeness"],
+                        "stripe_order_errors": tri["stripe_order_errors"],
+                        "ref_rmse_mm": ref["gt_rmse_mm"],
+                        "ref_plane_rms_mm": ref["plane_rms_mm"],
+                        "ref_stripe_order_errors": ref["stripe_order_errors"],
+                        **cap.seeds,
+                        **placement,
+                    }
+                )
             for device in SENSORS[1:]:
                 recs = session.acquire(device, raw, f"fig9/{name}", repeats=cfg.fig9_repeats)
                 # per-pixel temporal sigma over the recordings (how Chiabrando et al. measure a ToF camera)
@@ -63,22 +76,72 @@ def run_fig9(session: Session) -> dict:
                 temporal_mm = float(np.nanmean(sigma[lit])) * 1000 if np.isfinite(sigma[lit]).any() else float("nan")
                 for k, (rec, depth) in enumerate(recs):
                     sc = score(rec, depth)
-                    rows.append({"sensor": device, "depth_m": z, "repeat": k, "rmse_mm": sc["gt_rmse_mm"], "plane_rms_mm": sc["plane_rms_mm"], "mae_mm": sc["gt_mae_mm"], "bias_mm": sc["bias_mm"], "completeness": sc["completeness"], "stripe_order_errors": "", "temporal_sigma_mm": temporal_mm, **rec.seeds})
+                    rows.append(
+                        {
+                            "sensor": device,
+                            "depth_m": z,
+                            "repeat": k,
+                            "rmse_mm": sc["gt_rmse_mm"],
+                            "plane_rms_mm": sc["plane_rms_mm"],
+                            "mae_mm": sc["gt_mae_mm"],
+                            "bias_mm": sc["bias_mm"],
+                            "completeness": sc["completeness"],
+                            "stripe_order_errors": "",
+                            "temporal_sigma_mm": temporal_mm,
+                            **rec.seeds,
+                        }
+                    )
         for sensor in SENSORS:
             sel = [r for r in rows if r["depth_m"] == z and r["sensor"] == sensor]
             prefix = f"fig9/{z:.1f}m" if sensor == "proposed" else f"fig9/{sensor}/{z:.1f}m"
-            for key in ("rmse_mm", "plane_rms_mm", "completeness") + (("stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm") if sensor == "proposed" else ("temporal_sigma_mm",)):
-                metrics[f"{prefix}/{key}"] = float(np.mean([r[key] for r in sel])) if key != "stripe_order_errors" else int(max(r[key] for r in sel))
+            for key in ("rmse_mm", "plane_rms_mm", "completeness") + (
+                ("stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm")
+                if sensor == "proposed"
+                else ("temporal_sigma_mm",)
+            ):
+                metrics[f"{prefix}/{key}"] = (
+                    float(np.mean([r[key] for r in sel]))
+                    if key != "stripe_order_errors"
+                    else int(max(r[key] for r in sel))
+                )
     out = session.out
-    cols = ["sensor", "depth_m", "repeat", "rmse_mm", "plane_rms_mm", "mae_mm", "bias_mm", "completeness", "stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm", "ref_stripe_order_errors", "temporal_sigma_mm", "render", "noise", "placement", "board_depth_m", "board_tilt_deg"]
+    cols = [
+        "sensor",
+        "depth_m",
+        "repeat",
+        "rmse_mm",
+        "plane_rms_mm",
+        "mae_mm",
+        "bias_mm",
+        "completeness",
+        "stripe_order_errors",
+        "ref_rmse_mm",
+        "ref_plane_rms_mm",
+        "ref_stripe_order_errors",
+        "temporal_sigma_mm",
+        "render",
+        "noise",
+        "placement",
+        "board_depth_m",
+        "board_tilt_deg",
+    ]
     files = [write_table(out / "fig9.csv", rows, cols)]
-    files.append(atomic_write_bytes(out / "fig9.png", fig9_plot(rows, title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)")))
+    files.append(
+        atomic_write_bytes(
+            out / "fig9.png",
+            fig9_plot(
+                rows, title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)"
+            ),
+        )
+    )
     files.append(atomic_write_text(out / "fig9.md", _markdown(session, rows)))
     session.provenance("fig9", files)
     return metrics
 
 
-def _summary(rows: list[dict], key: str, sensor: str = "proposed") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _summary(
+    rows: list[dict], key: str, sensor: str = "proposed"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     rows = [r for r in rows if r.get("sensor", "proposed") == sensor]
     zs = np.array(sorted({r["depth_m"] for r in rows}))
     vals = [np.array([r[key] for r in rows if r["depth_m"] == z]) for z in zs]
@@ -98,13 +161,39 @@ def fig9_plot(rows: list[dict], *, title: str) -> bytes:
             if not any(r.get("sensor", "proposed") == sensor for r in rows):
                 continue
             zs, mean, lo, hi = _summary(rows, "rmse_mm", sensor)
-            axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="o-", color=f"C{SENSORS.index(sensor)}", capsize=3, label=f"{sensor_label(sensor)}: RMSE vs ground truth")
+            axis.errorbar(
+                zs,
+                mean,
+                yerr=[mean - lo, hi - mean],
+                fmt="o-",
+                color=f"C{SENSORS.index(sensor)}",
+                capsize=3,
+                label=f"{sensor_label(sensor)}: RMSE vs ground truth",
+            )
             if sensor == "proposed":
                 zs, mean, lo, hi = _summary(rows, "plane_rms_mm", sensor)
-                axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="s--", color="C0", alpha=0.6, capsize=3, label="proposed: RMS residual to fitted plane")
+                axis.errorbar(
+                    zs,
+                    mean,
+                    yerr=[mean - lo, hi - mean],
+                    fmt="s--",
+                    color="C0",
+                    alpha=0.6,
+                    capsize=3,
+                    label="proposed: RMS residual to fitted plane",
+                )
                 if axis is ax2 and all("ref_rmse_mm" in r for r in rows if r.get("sensor", "proposed") == "proposed"):
                     zs, mean, lo, hi = _summary(rows, "ref_rmse_mm", sensor)
-                    axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], fmt="^:", color="C3", alpha=0.8, capsize=3, label="proposed, reference-plane protocol: RMSE vs ground truth")
+                    axis.errorbar(
+                        zs,
+                        mean,
+                        yerr=[mean - lo, hi - mean],
+                        fmt="^:",
+                        color="C3",
+                        alpha=0.8,
+                        capsize=3,
+                        label="proposed, reference-plane protocol: RMSE vs ground truth",
+                    )
     zz = np.linspace(min(DEPTHS_M), max(DEPTHS_M), 50)
     if any(r.get("sensor") == "kinect" for r in rows):
         ax.plot(zz, nguyen_kinect_sigma_mm(zz), ":", color="C1", label="real Kinect v1: Nguyen et al. 2012 model")
@@ -127,15 +216,19 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Fig. 9: RMSE against depth",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: `fig9.png`; "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
+        f"model `{cfg.sensor}`, "
+        f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: "
+        f"`fig9.png`; "
         "every recording with its seeds: `fig9.csv`.",
         "",
         "The paper gives Fig. 9 as a chart only, without numbers: what its text says is below the table. Fig. 9 is "
         "measured on the paper's rig (Sec. 6). Each board is placed with a seeded error within "
         f"+-{cfg.placement_depth_mm:g} mm and +-{cfg.placement_tilt_deg:g} deg (`simbench.scene.Placement`), the same "
-        "placement for every sensor. The proposed method is decoded by triangulation with the rig (Eq. 15; RMSE against "
-        "ground truth, and RMS residual to the fitted plane); the reference-plane protocol (Sec. 5.4, reference at 1.0 m) "
+        "placement for every sensor. The proposed method is decoded by triangulation with the rig (Eq. 15; RMSE "
+        "against "
+        "ground truth, and RMS residual to the fitted plane); the reference-plane protocol (Sec. 5.4, reference at 1.0 "
+        "m) "
         "is the extra column.",
         "",
     ]
@@ -157,20 +250,47 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         row.append(f"{tz[0]:.2f}" if tz else "-")
         row.append(f"{CHIABRANDO_TOF[1]:.1f}" if abs(z - CHIABRANDO_TOF[0]) < 1e-9 else "-")
         body.append(row)
-    lines += markdown_table(["depth (m)", "proposed RMSE (mm), triangulation, mean", "min - max", "plane-fit RMS (mm)", "reference-plane protocol RMSE (mm)", "completeness", "Kinect sim RMSE (mm)", "real Kinect sigma_z (Nguyen 2012)", "ratio", "ToF sim RMSE (mm)", "ToF sim per-pixel temporal sigma (mm)", "real SR4000 sigma (Chiabrando 2009)"], body)
+    lines += markdown_table(
+        [
+            "depth (m)",
+            "proposed RMSE (mm), triangulation, mean",
+            "min - max",
+            "plane-fit RMS (mm)",
+            "reference-plane protocol RMSE (mm)",
+            "completeness",
+            "Kinect sim RMSE (mm)",
+            "real Kinect sigma_z (Nguyen 2012)",
+            "ratio",
+            "ToF sim RMSE (mm)",
+            "ToF sim per-pixel temporal sigma (mm)",
+            "real SR4000 sigma (Chiabrando 2009)",
+        ],
+        body,
+    )
     lines += [
         "",
-        "The paper's text: the proposed method's RMSE grows with depth and stays below the Kinect's and the ToF camera's. "
+        "The paper's text: the proposed method's RMSE grows with depth and stays below the Kinect's and the ToF "
+        "camera's. "
         "Real-device columns are published measurements, not the paper's: the Kinect's axial-noise model "
-        "sigma_z = 1.2 mm + 1.9 mm (z - 0.4)^2 (Nguyen, Izadi & Lovell 2012) and the SR4000's per-pixel sigma on a white wall "
-        "at 1.3 m (Chiabrando et al. 2009). The ToF check of the competitor issue (temporal per-pixel sigma at 1.3 m) is "
+        "sigma_z = 1.2 mm + 1.9 mm (z - 0.4)^2 (Nguyen, Izadi & Lovell 2012) and the SR4000's per-pixel sigma on a "
+        "white wall "
+        "at 1.3 m (Chiabrando et al. 2009). The ToF check of the competitor issue (temporal per-pixel sigma at 1.3 m) "
+        "is "
         "in `tests/test_baselines.py`.",
     ]
     trend = "grows" if np.all(np.diff(mean) > 0) else "does not grow monotonically"
     lines += ["", f"Our RMSE {trend} with depth over 0.9-1.4 m."]
     for d, (_, cm, _, _) in comp_rows.items():
         below = np.all(mean < cm)
-        lines.append(f"Proposed RMSE {'below' if below else 'NOT below'} the {sensor_label(d)}'s at {'every' if below else 'some'} depth" + (" (as the paper states)." if below else " (the paper states it is below)."))
+        lines.append(
+            f"Proposed RMSE {'below' if below else 'NOT below'} the {sensor_label(d)}'s at "
+            f"{'every' if below else 'some'} depth"
+            + (" (as the paper states)." if below else " (the paper states it is below).")
+        )
     if cfg.sensor != "paper":
-        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD grid, defocus and distortion are left out."]
+        lines += [
+            "",
+            f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD "
+            f"grid, defocus and distortion are left out.",
+        ]
     return "\n".join(lines) + "\n"

@@ -75,7 +75,11 @@ def stages_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
         ("(c) wrapped phase", st["wrapped_phase"], {"cmap": "twilight"}),
         ("(d) De Bruijn stripes", stripes, {"cmap": "coolwarm"}),
         ("(e) unwrapped phase", st["unwrapped_phase"], {"cmap": "viridis"}),
-        ("(f) depth", result.depth_m, {"cmap": "viridis", "vmin": _depth_range(result.depth_m)[0], "vmax": _depth_range(result.depth_m)[1]}),
+        (
+            "(f) depth",
+            result.depth_m,
+            {"cmap": "viridis", "vmin": _depth_range(result.depth_m)[0], "vmax": _depth_range(result.depth_m)[1]},
+        ),
         ("(g) 3-D view", shaded_view(result.depth_m, cap.scene.rig.camera), {"cmap": "gray", "vmin": 0, "vmax": 1}),
     ]
     for ax, (name, img, kw) in zip(axes, panels):
@@ -118,32 +122,101 @@ def run_figures(session: Session) -> dict:
             cap = session.capture(scene, f"figures/{name}")[0]
             result = session.decode(cap, cfg.decoder)
             band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
-            m = depth_errors(result.depth_m, cap.gt.depth_m, region=cap.gt.lit, exclude=band, column_px=result.column_px, gt_column_px=cap.gt.column_px, period_px=cfg.decoder.period_px)
-            rows.append({"scene": name, "figure": fig_id, **{k: m[k] for k in ("mae_mm", "rmse_mm", "p95_mm", "completeness", "outlier_share", "stripe_order_errors", "stripe_order_error_rate")}, **cap.seeds})
+            m = depth_errors(
+                result.depth_m,
+                cap.gt.depth_m,
+                region=cap.gt.lit,
+                exclude=band,
+                column_px=result.column_px,
+                gt_column_px=cap.gt.column_px,
+                period_px=cfg.decoder.period_px,
+            )
+            rows.append(
+                {
+                    "scene": name,
+                    "figure": fig_id,
+                    **{
+                        k: m[k]
+                        for k in (
+                            "mae_mm",
+                            "rmse_mm",
+                            "p95_mm",
+                            "completeness",
+                            "outlier_share",
+                            "stripe_order_errors",
+                            "stripe_order_error_rate",
+                        )
+                    },
+                    **cap.seeds,
+                }
+            )
             for k in ("mae_mm", "completeness", "stripe_order_error_rate"):
                 metrics[f"figures/{name}/{k}"] = m[k]
-            title = f"paper {fig_id.replace('fig', 'Fig. ')}: {name} - MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"
+            title = (
+                f"paper {fig_id.replace('fig', 'Fig. ')}: {name} - "
+                f"MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"
+            )
             files.append(atomic_write_bytes(out / f"{fig_id}_{name}.png", scene_figure(cap, result, title=title)))
             s = cfg.ply_stride
             pts = points_from_depth(result.depth_m, scene.rig.camera)[::s, ::s]
             ok = np.isfinite(pts[..., 2])
             files.append(save_ply(out / f"{fig_id}_{name}.ply", pts[ok], cap.image[::s, ::s][ok]))
             if name == FIG6_SCENE:
-                files.append(atomic_write_bytes(out / "fig6_stages.png", stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}")))
-    cols = ["scene", "figure", "mae_mm", "rmse_mm", "p95_mm", "completeness", "outlier_share", "stripe_order_errors", "stripe_order_error_rate", "render", "noise"]
+                files.append(
+                    atomic_write_bytes(
+                        out / "fig6_stages.png",
+                        stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}"),
+                    )
+                )
+    cols = [
+        "scene",
+        "figure",
+        "mae_mm",
+        "rmse_mm",
+        "p95_mm",
+        "completeness",
+        "outlier_share",
+        "stripe_order_errors",
+        "stripe_order_error_rate",
+        "render",
+        "noise",
+    ]
     files.append(write_table(out / "summary.csv", rows, cols))
     cam = session.scene(FIG6_SCENE).rig.camera
     md = [
         "# Qualitative figures (paper Fig. 6, 11, 12, 13)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, variant `{session.variant}`). Errors exclude a {cfg.edge_band_px}-px band at depth edges; "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
+        f"model `{cfg.sensor}`, "
+        f"base seed {cfg.seed}, variant `{session.variant}`). Errors exclude a {cfg.edge_band_px}-px band at depth "
+        f"edges; "
         f"completeness is over the seen and lit pixels. Point clouds keep every {cfg.ply_stride}-th pixel per axis.",
         "",
     ]
     md += markdown_table(
-        ["figure", "scene", "MAE (mm)", "RMSE (mm)", "p95 (mm)", "completeness", "outliers > 5 mm", "stripe-order errors"],
-        [[r["figure"], r["scene"], f"{r['mae_mm']:.3f}", f"{r['rmse_mm']:.3f}", f"{r['p95_mm']:.3f}", f"{100 * r['completeness']:.2f} %", f"{100 * r['outlier_share']:.3f} %", f"{r['stripe_order_errors']} ({100 * r['stripe_order_error_rate']:.3f} %)"] for r in rows],
+        [
+            "figure",
+            "scene",
+            "MAE (mm)",
+            "RMSE (mm)",
+            "p95 (mm)",
+            "completeness",
+            "outliers > 5 mm",
+            "stripe-order errors",
+        ],
+        [
+            [
+                r["figure"],
+                r["scene"],
+                f"{r['mae_mm']:.3f}",
+                f"{r['rmse_mm']:.3f}",
+                f"{r['p95_mm']:.3f}",
+                f"{100 * r['completeness']:.2f} %",
+                f"{100 * r['outlier_share']:.3f} %",
+                f"{r['stripe_order_errors']} ({100 * r['stripe_order_error_rate']:.3f} %)",
+            ]
+            for r in rows
+        ],
     )
     files.append(atomic_write_text(out / "summary.md", "\n".join(md) + "\n"))
     session.provenance("figures/figures", files)

@@ -40,7 +40,14 @@ from simbench.metrics import plane_fit_error, points_from_depth
 if TYPE_CHECKING:
     from simbench.experiments.common import Capture
 
-__all__ = ["BOW_LEVELS_MM", "WAVINESS_LEVELS_MM", "QUICK_BOW_LEVELS_MM", "QUICK_WAVINESS_LEVELS_MM", "run_flatness", "surface_form"]
+__all__ = [
+    "BOW_LEVELS_MM",
+    "WAVINESS_LEVELS_MM",
+    "QUICK_BOW_LEVELS_MM",
+    "QUICK_WAVINESS_LEVELS_MM",
+    "run_flatness",
+    "surface_form",
+]
 
 SCENE = "plane_white"
 MODES = ("calibrated", "reference")
@@ -78,14 +85,23 @@ def run_flatness(session: Session) -> dict:
     for i, (kind, bow_mm, wave_mm) in enumerate(levels):
         level = bow_mm if kind == "bow" else wave_mm
         with session.timed(f"[flatness {i + 1}/{len(levels)}] {kind} {level:g} mm"):
-            sub = session.fork(session.sensor, config=dataclasses.replace(cfg, board_bow_mm_per_m=bow_mm, board_waviness_mm=wave_mm))
+            sub = session.fork(
+                session.sensor, config=dataclasses.replace(cfg, board_bow_mm_per_m=bow_mm, board_waviness_mm=wave_mm)
+            )
             scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "flatness/white", ["board"]))
             cap = sub.capture(scene, "flatness/white")[0]
             row = {"form": kind, "level_mm": level, **surface_form(cap)}
             for mode in MODES:
                 s = score(cap, sub.decode(cap, cfg.decoder, mode=mode), cfg.decoder.period_px)
                 prefix = "" if mode == "calibrated" else "ref_"
-                for k in ("plane_mae_mm", "plane_rms_mm", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors"):
+                for k in (
+                    "plane_mae_mm",
+                    "plane_rms_mm",
+                    "gt_mae_mm",
+                    "gt_rmse_mm",
+                    "completeness",
+                    "stripe_order_errors",
+                ):
                     row[prefix + k] = s[k]
                     metrics[f"flatness/{kind}_{level:g}/{mode}/{k}"] = s[k]
             placed = sub.seeds_used["flatness/white/placement"]
@@ -96,17 +112,45 @@ def run_flatness(session: Session) -> dict:
             row["reference_waviness_phase_rad"] = ref_form.get("waviness_phase_rad", "")
             rows.append(row)
     cols = [
-        "form", "level_mm", "form_rms_mm", "form_pv_mm", "plane_mae_mm", "plane_rms_mm", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors",
-        "ref_plane_mae_mm", "ref_plane_rms_mm", "ref_gt_mae_mm", "ref_gt_rmse_mm", "ref_completeness", "ref_stripe_order_errors",
-        "board_bow_mm_per_m", "board_waviness_phase_rad", "reference_bow_mm_per_m", "reference_waviness_phase_rad",
+        "form",
+        "level_mm",
+        "form_rms_mm",
+        "form_pv_mm",
+        "plane_mae_mm",
+        "plane_rms_mm",
+        "gt_mae_mm",
+        "gt_rmse_mm",
+        "completeness",
+        "stripe_order_errors",
+        "ref_plane_mae_mm",
+        "ref_plane_rms_mm",
+        "ref_gt_mae_mm",
+        "ref_gt_rmse_mm",
+        "ref_completeness",
+        "ref_stripe_order_errors",
+        "board_bow_mm_per_m",
+        "board_waviness_phase_rad",
+        "reference_bow_mm_per_m",
+        "reference_waviness_phase_rad",
     ]
     out = session.out
     files = [
         write_table(out / "flatness.csv", rows, cols),
-        atomic_write_bytes(out / "flatness.png", flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness")),
+        atomic_write_bytes(
+            out / "flatness.png",
+            flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness"),
+        ),
         atomic_write_text(out / "flatness.md", _markdown(session, rows)),
     ]
-    session.provenance("flatness", files, extra={"bow_levels_mm": list(BOW_LEVELS_MM), "waviness_levels_mm": list(WAVINESS_LEVELS_MM), "quick": cfg.quick})
+    session.provenance(
+        "flatness",
+        files,
+        extra={
+            "bow_levels_mm": list(BOW_LEVELS_MM),
+            "waviness_levels_mm": list(WAVINESS_LEVELS_MM),
+            "quick": cfg.quick,
+        },
+    )
     return metrics
 
 
@@ -118,7 +162,10 @@ def flatness_plot(rows: list[dict], *, title: str) -> bytes:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
-    for ax, kind, xlabel in ((axes[0], "bow", "bow: sag over a 1 m chord (mm per metre)"), (axes[1], "waviness", "ripple amplitude (mm)")):
+    for ax, kind, xlabel in (
+        (axes[0], "bow", "bow: sag over a 1 m chord (mm per metre)"),
+        (axes[1], "waviness", "ripple amplitude (mm)"),
+    ):
         rs = [r for r in rows if r["form"] == kind]
         if not rs:
             ax.set_visible(False)
@@ -149,23 +196,48 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Error against board flatness",
         "",
-        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
-        f"sensor model `{cfg.sensor}`, the paper's decoder, base seed {cfg.seed}, variant `{session.variant}`). Plot: `flatness.png`.",
+        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} "
+        f"spp {cfg.sampler}, "
+        f"sensor model `{cfg.sensor}`, the paper's decoder, base seed {cfg.seed}, variant `{session.variant}`). Plot: "
+        f"`flatness.png`.",
         "",
-        "The white board, placed as in Table 1, and the reference board get a form error (`simbench.scene.board_form_m`): a bow "
-        f"(paraboloid, the level its sag over a 1 m chord: mm per metre; the board is {sx:g} x {sy:g} m, the camera sees its middle), then a "
-        "ripple across the stripes (50 mm period, the level its amplitude). The bow's sign and the ripple's phase are seeded per "
-        "board, test and reference independently (`board_bow_mm_per_m`, `reference_bow_mm_per_m` in `flatness.csv`). *Form* is the "
-        "rendered surface's own plane-fit RMS where the camera sees it: what a perfect sensor reports under the paper's Table 1 "
-        "protocol. *Plane fit* cannot tell the board's form from sensor error; *GT* (ground truth, the formed surface) can, and "
+        "The white board, placed as in Table 1, and the reference board get a form error "
+        "(`simbench.scene.board_form_m`): a bow "
+        f"(paraboloid, the level its sag over a 1 m chord: mm per metre; the board is {sx:g} x {sy:g} m, the camera "
+        f"sees its middle), then a "
+        "ripple across the stripes (50 mm period, the level its amplitude). The bow's sign and the ripple's phase are "
+        "seeded per "
+        "board, test and reference independently (`board_bow_mm_per_m`, `reference_bow_mm_per_m` in `flatness.csv`). "
+        "*Form* is the "
+        "rendered surface's own plane-fit RMS where the camera sees it: what a perfect sensor reports under the "
+        "paper's Table 1 "
+        "protocol. *Plane fit* cannot tell the board's form from sensor error; *GT* (ground truth, the formed surface) "
+        "can, and "
         "shows what the reference protocol inherits from a bowed reference board.",
         "",
     ]
-    hdr = ["form", "level (mm, bow: mm per m)", "board form RMS (mm)", "triangulation: plane-fit RMS", "triangulation: GT RMSE", "reference: plane-fit RMS", "reference: GT RMSE", "completeness", "stripe-order errors"]
+    hdr = [
+        "form",
+        "level (mm, bow: mm per m)",
+        "board form RMS (mm)",
+        "triangulation: plane-fit RMS",
+        "triangulation: GT RMSE",
+        "reference: plane-fit RMS",
+        "reference: GT RMSE",
+        "completeness",
+        "stripe-order errors",
+    ]
     body = [
         [
-            r["form"], f"{r['level_mm']:g}", f"{r['form_rms_mm']:.3f}", f"{r['plane_rms_mm']:.3f}", f"{r['gt_rmse_mm']:.3f}", f"{r['ref_plane_rms_mm']:.3f}",
-            f"{r['ref_gt_rmse_mm']:.3f}", f"{100 * r['completeness']:.2f} %", f"{r['stripe_order_errors']:.0f}",
+            r["form"],
+            f"{r['level_mm']:g}",
+            f"{r['form_rms_mm']:.3f}",
+            f"{r['plane_rms_mm']:.3f}",
+            f"{r['gt_rmse_mm']:.3f}",
+            f"{r['ref_plane_rms_mm']:.3f}",
+            f"{r['ref_gt_rmse_mm']:.3f}",
+            f"{100 * r['completeness']:.2f} %",
+            f"{r['stripe_order_errors']:.0f}",
         ]
         for r in rows
     ]
@@ -175,9 +247,14 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         same = bowed[0]["board_bow_mm_per_m"] * bowed[0]["reference_bow_mm_per_m"] > 0
         lines += [
             "",
-            f"In this run the test board and the reference board bow {'the same way' if same else 'opposite ways'} (seeded signs): the "
+            f"In this run the test board and the reference board bow {'the same way' if same else 'opposite ways'} "
+            f"(seeded signs): the "
             "reference protocol subtracts the reference's form from the test board's, so its plane fit "
-            f"{'hides the bow (the two cancel) while its error against ground truth grows with it' if same else 'sees about twice the bow'}"
-            " - a protocol that can cancel the error it measures. Triangulation does not use the reference board.",
+            + (
+                "hides the bow (the two cancel) while its error against ground truth grows with it"
+                if same
+                else "sees about twice the bow"
+            )
+            + " - a protocol that can cancel the error it measures. Triangulation does not use the reference board.",
         ]
     return "\n".join(lines) + "\n"

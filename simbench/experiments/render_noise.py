@@ -34,12 +34,24 @@ __all__ = ["CANDIDATES", "QUICK_CANDIDATES", "TARGET_RATIO", "run_render_noise",
 
 # (sampler, spp): independent sampling, and each stratified generator at a count it accepts
 # (simbench.mitsuba_dict.check_sampler); costs are about proportional to spp
-CANDIDATES = (("independent", 16), ("independent", 64), ("stratified", 36), ("multijitter", 16), ("multijitter", 36), ("orthogonal", 25), ("ldsampler", 16), ("ldsampler", 64))
+CANDIDATES = (
+    ("independent", 16),
+    ("independent", 64),
+    ("stratified", 36),
+    ("multijitter", 16),
+    ("multijitter", 36),
+    ("orthogonal", 25),
+    ("ldsampler", 16),
+    ("ldsampler", 64),
+)
 QUICK_CANDIDATES = (("independent", 4), ("multijitter", 4), ("multijitter", 16))
 TARGET_RATIO = 1.0 / 3.0
 REPEATS = 3
 # scene -> (kind, the objects placed as in its experiment)
-SCENES = {"plane_white": ("plane (direct light)", ("board",)), "discontinuity": ("cube and cuboid (interreflections)", PLACED)}
+SCENES = {
+    "plane_white": ("plane (direct light)", ("board",)),
+    "discontinuity": ("cube and cuboid (interreflections)", PLACED),
+}
 
 
 def depth_spread_mm(depths: list[np.ndarray], region: np.ndarray) -> tuple[float, int]:
@@ -95,10 +107,37 @@ def run_render_noise(session: Session) -> dict:
             key = f"render_noise/{name}/{sampler}_{spp}"
             metrics[f"{key}/render_sd_mm"] = render_sd
             metrics[f"{key}/ratio"] = ratio
-            rows.append({"scene": name, "scene_type": kind, "sampler": sampler, "spp": spp, "run_setting": (sampler, spp) == own, "render_sd_mm": render_sd, "camera_sd_mm": camera_sd, "ratio": ratio, "meets_target": bool(ratio <= TARGET_RATIO), "pixels": n})
-    cols = ["scene", "scene_type", "sampler", "spp", "run_setting", "render_sd_mm", "camera_sd_mm", "ratio", "meets_target", "pixels"]
+            rows.append(
+                {
+                    "scene": name,
+                    "scene_type": kind,
+                    "sampler": sampler,
+                    "spp": spp,
+                    "run_setting": (sampler, spp) == own,
+                    "render_sd_mm": render_sd,
+                    "camera_sd_mm": camera_sd,
+                    "ratio": ratio,
+                    "meets_target": bool(ratio <= TARGET_RATIO),
+                    "pixels": n,
+                }
+            )
+    cols = [
+        "scene",
+        "scene_type",
+        "sampler",
+        "spp",
+        "run_setting",
+        "render_sd_mm",
+        "camera_sd_mm",
+        "ratio",
+        "meets_target",
+        "pixels",
+    ]
     out = session.out
-    files = [write_table(out / "render_noise.csv", rows, cols), atomic_write_text(out / "render_noise.md", _markdown(session, rows))]
+    files = [
+        write_table(out / "render_noise.csv", rows, cols),
+        atomic_write_text(out / "render_noise.md", _markdown(session, rows)),
+    ]
     session.provenance("render_noise", files, extra={"repeats": REPEATS, "target_ratio": TARGET_RATIO})
     return metrics
 
@@ -110,22 +149,36 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Render noise against camera noise",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, sensor model `{cfg.sensor}`, {REPEATS} render seeds "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, sensor model `{cfg.sensor}`, {REPEATS} "
+        f"render seeds "
         f"and {REPEATS} noise seeds per scene, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
         "Depth spread (root mean per-pixel variance, decoded by triangulation) from the path tracer's sampling alone "
-        "(renders with different seeds, the camera's temporal noise off) and from the camera alone (one render recorded "
+        "(renders with different seeds, the camera's temporal noise off) and from the camera alone (one render "
+        "recorded "
         "with different noise seeds). Target: render noise at most 1/3 of camera noise on the white board. The run "
-        f"renders with `{cfg.sampler}` at {cfg.spp} spp (marked), which {'meets' if own_meets else 'does not meet'} the target here; "
-        f"the default of full runs (`simbench.mitsuba_dict.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = {DEFAULT_SPP}) was chosen "
-        f"from the full run's table as the cheapest setting that meets it with a margin of 10 % (render / camera <= {0.9 * TARGET_RATIO:.2f}; "
-        "a setting on the limit is not counted, three seeds do not resolve it). Stratified generators help most where the integrand is smooth "
+        f"renders with `{cfg.sampler}` at {cfg.spp} spp (marked), which {'meets' if own_meets else 'does not meet'} "
+        f"the target here; "
+        f"the default of full runs (`simbench.mitsuba_dict.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = "
+        f"{DEFAULT_SPP}) was chosen "
+        f"from the full run's table as the cheapest setting that meets it with a margin of 10 % (render / camera <= "
+        f"{0.9 * TARGET_RATIO:.2f}; "
+        "a setting on the limit is not counted, three seeds do not resolve it). Stratified generators help most where "
+        "the integrand is smooth "
         "over the pixel (direct light on a plane); interreflected light of mesh scenes converges more slowly.",
         "",
     ]
     hdr = ["scene", "sampler", "spp", "render noise (mm)", "camera noise (mm)", "render / camera", "<= 1/3"]
     body = [
-        [r["scene_type"], r["sampler"] + (" (run)" if r["run_setting"] else ""), str(r["spp"]), f"{r['render_sd_mm']:.4f}", f"{r['camera_sd_mm']:.4f}", f"{r['ratio']:.2f}", "yes" if r["meets_target"] else "no"]
+        [
+            r["scene_type"],
+            r["sampler"] + (" (run)" if r["run_setting"] else ""),
+            str(r["spp"]),
+            f"{r['render_sd_mm']:.4f}",
+            f"{r['camera_sd_mm']:.4f}",
+            f"{r['ratio']:.2f}",
+            "yes" if r["meets_target"] else "no",
+        ]
         for r in rows
     ]
     lines += markdown_table(hdr, body)

@@ -28,9 +28,25 @@ from simbench.io import atomic_write_text, read_toml, save_json
 
 log = logging.getLogger(__name__)
 
-__all__ = ["TARGETS", "check_targets", "reproduce", "load_thresholds", "check_thresholds", "thresholds_from", "write_thresholds"]
+__all__ = [
+    "TARGETS",
+    "check_targets",
+    "reproduce",
+    "load_thresholds",
+    "check_thresholds",
+    "thresholds_from",
+    "write_thresholds",
+]
 
-TARGETS: dict[str, Callable[[Session], dict]] = {"table1": run_table1, "table3": run_table3, "fig9": run_fig9, "figures": run_figures, "budget": run_budget, "render_noise": run_render_noise, "flatness": run_flatness}
+TARGETS: dict[str, Callable[[Session], dict]] = {
+    "table1": run_table1,
+    "table3": run_table3,
+    "fig9": run_fig9,
+    "figures": run_figures,
+    "budget": run_budget,
+    "render_noise": run_render_noise,
+    "flatness": run_flatness,
+}
 
 
 def _resolve(targets: list[str]) -> list[str]:
@@ -47,7 +63,15 @@ def check_targets(targets: list[str]) -> list[str]:
     return _resolve(targets)
 
 
-def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cache_dir: str | Path | None, progress: Callable[[str], None] = log.info, command: str = "") -> dict:
+def reproduce(
+    targets: list[str],
+    *,
+    config: RunConfig,
+    out_dir: str | Path,
+    cache_dir: str | Path | None,
+    progress: Callable[[str], None] = log.info,
+    command: str = "",
+) -> dict:
     """Run the targets; returns ``{metric path: value}`` of all of them (also written to
     ``<out_dir>/metrics.json`` merged with earlier runs' metrics of other targets)."""
     names = _resolve(targets)
@@ -64,7 +88,10 @@ def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cac
         except (ValueError, AttributeError):
             merged = {}
     save_json(path, dict(sorted({**merged, **metrics}.items())))
-    progress(f"cache: {session.cache.hits} hits, {session.cache.misses} made (renders, ground truth, decoded references, drive digests); results in {out_dir}")
+    progress(
+        f"cache: {session.cache.hits} hits, {session.cache.misses} made (renders, ground truth, decoded references, "
+        f"drive digests); results in {out_dir}"
+    )
     return metrics
 
 
@@ -77,6 +104,7 @@ def reproduce(targets: list[str], *, config: RunConfig, out_dir: str | Path, cac
 # The margin (default 0.25) covers run-to-run differences between machines (the llvm and
 # scalar variants sample differently); a change to the decoder that makes a key error 25 %
 # worse fails CI.
+
 
 def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
     leaf = name.rsplit("/", 1)[-1]

@@ -24,7 +24,16 @@ from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, 
 if TYPE_CHECKING:
     from simbench.scene import SceneSpec
 
-__all__ = ["PAPER_TABLE1", "COLOURS", "BOARD_SETS", "MEASURED_PATCHES", "DECODERS", "PROTOCOLS", "board_scene", "run_table1"]
+__all__ = [
+    "PAPER_TABLE1",
+    "COLOURS",
+    "BOARD_SETS",
+    "MEASURED_PATCHES",
+    "DECODERS",
+    "PROTOCOLS",
+    "board_scene",
+    "run_table1",
+]
 
 COLOURS = tuple(PAPER_TABLE1)
 # The measured set: ColorChecker N Ohta patches chosen by name.  The chart's row of saturated
@@ -74,7 +83,9 @@ def run_table1(session: Session) -> dict:
                     row = {
                         "board_set": board_set,
                         "colour": colour,
-                        "material": " ".join(map(str, PAPER_TABLE1[colour][0])) if board_set == "paint" else MEASURED_PATCHES[colour],
+                        "material": " ".join(map(str, PAPER_TABLE1[colour][0]))
+                        if board_set == "paint"
+                        else MEASURED_PATCHES[colour],
                         "reflectance": " ".join(f"{c:.3f}" for c in mat.rgb),
                         "decoder": decoder,
                         "protocol": mode,
@@ -88,13 +99,39 @@ def run_table1(session: Session) -> dict:
                     for k, v in s.items():
                         metrics[f"table1/{board_set}/{colour}/{decoder}/{mode}/{k}"] = v
     cols = [
-        "board_set", "colour", "material", "reflectance", "decoder", "protocol", "paper_mae_mm", "plane_mae_mm", "ratio", "plane_rms_mm", "gt_mae_mm", "gt_rmse_mm", "bias_mm",
-        "completeness", "stripe_order_errors", "stripe_order_error_rate", "render", "noise", "placement", f"{BOARD}_depth_m", f"{BOARD}_tilt_deg",
+        "board_set",
+        "colour",
+        "material",
+        "reflectance",
+        "decoder",
+        "protocol",
+        "paper_mae_mm",
+        "plane_mae_mm",
+        "ratio",
+        "plane_rms_mm",
+        "gt_mae_mm",
+        "gt_rmse_mm",
+        "bias_mm",
+        "completeness",
+        "stripe_order_errors",
+        "stripe_order_error_rate",
+        "render",
+        "noise",
+        "placement",
+        f"{BOARD}_depth_m",
+        f"{BOARD}_tilt_deg",
     ]
     out = session.out
     files = [write_table(out / "table1.csv", rows, cols)]
     files.append(atomic_write_text(out / "table1.md", _markdown(session, rows)))
-    session.provenance("table1", files, extra={"measured_patches": MEASURED_PATCHES, "placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg}})
+    session.provenance(
+        "table1",
+        files,
+        extra={
+            "measured_patches": MEASURED_PATCHES,
+            "placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg},
+        },
+    )
     return metrics
 
 
@@ -108,8 +145,10 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Table 1: colour boards at 1.0 m (the paper's simulation, Sec. 5.5)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, variant `{session.variant}`); seeds and placement per capture in `table1.csv`, everything "
+        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
+        f"model `{cfg.sensor}`, "
+        f"base seed {cfg.seed}, variant `{session.variant}`); seeds and placement per capture in `table1.csv`, "
+        f"everything "
         "else in `table1.provenance.json`.",
         "",
         "The paper's Table 1 comes from its own 3ds Max simulation (Sec. 5.5), not from its rig; ours is a physically "
@@ -122,33 +161,69 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "*GT MAE* is against rendered ground truth (triangulation). Completeness is over the pixels ground truth says "
         "are seen and lit; a stripe-order error is a pixel whose projector column is off by more than half a period.",
         "",
-        "Board sets: *paint*, the paper's sRGB values as matte paint (`simbench.scene.paint_reflectance`: 0.04-0.80, an "
-        "assumption); *measured*, the ColorChecker patch of the same name (N. Ohta's measured spectra in colour-science; "
+        "Board sets: *paint*, the paper's sRGB values as matte paint (`simbench.scene.paint_reflectance`: 0.04-0.80, "
+        "an "
+        "assumption); *measured*, the ColorChecker patch of the same name (N. Ohta's measured spectra in "
+        "colour-science; "
         "pink = magenta; chosen by name, see `simbench/experiments/table1.py`), rendered through the spectral path.",
     ]
-    titles = {"paper": "the paper's decoder (Eq. 9 overlay, Eq. 13 code)", "robust": "our colour-robust decoder (not in the paper)"}
-    hdr = ["colour", "board", "paper (mm)", "triangulation: plane fit (mm)", "ratio", "reference plane: plane fit (mm)", "ratio", "GT MAE (mm)", "completeness", "stripe-order errors"]
+    titles = {
+        "paper": "the paper's decoder (Eq. 9 overlay, Eq. 13 code)",
+        "robust": "our colour-robust decoder (not in the paper)",
+    }
+    hdr = [
+        "colour",
+        "board",
+        "paper (mm)",
+        "triangulation: plane fit (mm)",
+        "ratio",
+        "reference plane: plane fit (mm)",
+        "ratio",
+        "GT MAE (mm)",
+        "completeness",
+        "stripe-order errors",
+    ]
     for board_set in BOARD_SETS:
         for decoder in DECODERS:
             lines += ["", f"## {board_set} boards, {titles[decoder]}", ""]
             body = []
             for colour in COLOURS:
-                by = {r["protocol"]: r for r in rows if r["board_set"] == board_set and r["colour"] == colour and r["decoder"] == decoder}
+                by = {
+                    r["protocol"]: r
+                    for r in rows
+                    if r["board_set"] == board_set and r["colour"] == colour and r["decoder"] == decoder
+                }
                 if not by:
                     continue
                 t, ref = by["calibrated"], by["reference"]
-                body.append([
-                    colour, t["material"], f"{t['paper_mae_mm']:.2f}", _fmt(t["plane_mae_mm"]), _fmt(t["ratio"], ".2f"), _fmt(ref["plane_mae_mm"]), _fmt(ref["ratio"], ".2f"),
-                    _fmt(t["gt_mae_mm"]), f"{100 * t['completeness']:.2f} %", str(t["stripe_order_errors"]),
-                ])
+                body.append(
+                    [
+                        colour,
+                        t["material"],
+                        f"{t['paper_mae_mm']:.2f}",
+                        _fmt(t["plane_mae_mm"]),
+                        _fmt(t["ratio"], ".2f"),
+                        _fmt(ref["plane_mae_mm"]),
+                        _fmt(ref["ratio"], ".2f"),
+                        _fmt(t["gt_mae_mm"]),
+                        f"{100 * t['completeness']:.2f} %",
+                        str(t["stripe_order_errors"]),
+                    ]
+                )
             lines += markdown_table(hdr, body)
     lines += [
         "",
-        "The colour-robust decoder separates the projector's primaries with the coupling matrix measured on the reference "
+        "The colour-robust decoder separates the projector's primaries with the coupling matrix measured on the "
+        "reference "
         "plane (Caspi, Kiryati & Shamir 1998: the plane under black and under each primary, four frames once per "
         "calibration), normalises each channel by its local range across neighbouring stripes, and weights the "
         "normalised channels by their noise (`simbench.decode.robust_params`).",
     ]
     if cfg.sensor != "paper":
-        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: colour crosstalk, the Bayer mosaic, the DMD grid, defocus and distortion are left out, so errors are expected below the paper's. No parameter was fitted to the paper."]
+        lines += [
+            "",
+            f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: colour crosstalk, the Bayer "
+            f"mosaic, the DMD grid, defocus and distortion are left out, so errors are expected below the paper's. No "
+            f"parameter was fitted to the paper.",
+        ]
     return "\n".join(lines).rstrip() + "\n"

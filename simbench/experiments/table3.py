@@ -69,14 +69,30 @@ def _competitor_faces(session: Session, raw, systems) -> dict:
     for name in systems:
         with session.timed(f"[table3] {name}"):
             rec, depth = session.acquire(name, raw, f"table3/{SCENE}")[0]
-            band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=max(1, int(round(session.config.edge_band_px * rec.scene.rig.camera.focal_px / main_focal_px))))
+            band = edge_band(
+                rec.gt.depth_m,
+                object_id=rec.gt.object_id,
+                band_px=max(1, int(round(session.config.edge_band_px * rec.scene.rig.camera.focal_px / main_focal_px))),
+            )
             faces, scores = {}, {}
             for obj in PAPER_TABLE3:
                 face = front_face_mask(rec.scene, rec.gt, obj) & ~band
                 faces[obj] = face
                 sc = score(rec, depth, region=face)
-                scores[obj] = {"plane_mae_mm": sc["plane_mae_mm"], "gt_mae_mm": sc["gt_mae_mm"], "completeness": sc["completeness"], "face_pixels": int(face.sum()), "seeds": rec.seeds}
-            out[name] = {"recording": rec, "depth": depth, "label": session.system(name).info().label, "faces": faces, "scores": scores}
+                scores[obj] = {
+                    "plane_mae_mm": sc["plane_mae_mm"],
+                    "gt_mae_mm": sc["gt_mae_mm"],
+                    "completeness": sc["completeness"],
+                    "face_pixels": int(face.sum()),
+                    "seeds": rec.seeds,
+                }
+            out[name] = {
+                "recording": rec,
+                "depth": depth,
+                "label": session.system(name).info().label,
+                "faces": faces,
+                "scores": scores,
+            }
     return out
 
 
@@ -106,39 +122,86 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS) -> d
             for (d, m), result in results.items():
                 sc = score(cap, result, cfg.decoder.period_px, region=face)
                 key = f"{d}_{m}"
-                row.update({f"{key}_plane_mae_mm": sc["plane_mae_mm"], f"{key}_ratio": sc["plane_mae_mm"] / paper[0], f"{key}_gt_mae_mm": sc["gt_mae_mm"], f"{key}_completeness": sc["completeness"], f"{key}_stripe_order_errors": sc["stripe_order_errors"]})
+                row.update(
+                    {
+                        f"{key}_plane_mae_mm": sc["plane_mae_mm"],
+                        f"{key}_ratio": sc["plane_mae_mm"] / paper[0],
+                        f"{key}_gt_mae_mm": sc["gt_mae_mm"],
+                        f"{key}_completeness": sc["completeness"],
+                        f"{key}_stripe_order_errors": sc["stripe_order_errors"],
+                    }
+                )
                 for k in ("plane_mae_mm", "gt_mae_mm", "completeness", "stripe_order_errors"):
                     metrics[f"table3/{name}/{d}/{m}/{k}"] = sc[k]
             for d, c in competitors.items():
                 if d in PAPER_COMPETITORS:
                     row[f"paper_{d}_mm"] = paper[PAPER_COMPETITORS[d][1]]
-                row.update({f"{d}_mm": c["scores"][name]["plane_mae_mm"], f"{d}_gt_mae_mm": c["scores"][name]["gt_mae_mm"], f"{d}_completeness": c["scores"][name]["completeness"]})
-            row.update({
-                **cap.seeds,
-                **session.seeds_used[f"{label}/placement"],
-                **{f"{d}_{k}_seed": v for d in competitors for k, v in competitors[d]["scores"][name]["seeds"].items()},
-            })
+                row.update(
+                    {
+                        f"{d}_mm": c["scores"][name]["plane_mae_mm"],
+                        f"{d}_gt_mae_mm": c["scores"][name]["gt_mae_mm"],
+                        f"{d}_completeness": c["scores"][name]["completeness"],
+                    }
+                )
+            row.update(
+                {
+                    **cap.seeds,
+                    **session.seeds_used[f"{label}/placement"],
+                    **{
+                        f"{d}_{k}_seed": v
+                        for d in competitors
+                        for k, v in competitors[d]["scores"][name]["seeds"].items()
+                    },
+                }
+            )
             rows.append(row)
             for d in competitors:
                 for k in ("plane_mae_mm", "gt_mae_mm", "completeness"):
                     metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
         result = results[("paper", "calibrated")]
-        whole = depth_errors(result.depth_m, cap.gt.depth_m, region=cap.gt.lit, exclude=band, column_px=result.column_px, gt_column_px=cap.gt.column_px, period_px=cfg.decoder.period_px)
+        whole = depth_errors(
+            result.depth_m,
+            cap.gt.depth_m,
+            region=cap.gt.lit,
+            exclude=band,
+            column_px=result.column_px,
+            gt_column_px=cap.gt.column_px,
+            period_px=cfg.decoder.period_px,
+        )
         metrics["table3/scene/completeness"] = whole["completeness"]
         metrics["table3/scene/stripe_order_errors"] = whole["stripe_order_errors"]
     out = session.out
     cols = ["object", "paper_mm", "face_pixels"]
-    cols += [f"{d}_{m}_{k}" for d, m in VARIANTS for k in ("plane_mae_mm", "ratio", "gt_mae_mm", "completeness", "stripe_order_errors")]
-    cols += [c for d in competitors for c in ([f"paper_{d}_mm"] if d in PAPER_COMPETITORS else []) + [f"{d}_mm", f"{d}_gt_mae_mm", f"{d}_completeness"]]
+    cols += [
+        f"{d}_{m}_{k}"
+        for d, m in VARIANTS
+        for k in ("plane_mae_mm", "ratio", "gt_mae_mm", "completeness", "stripe_order_errors")
+    ]
+    cols += [
+        c
+        for d in competitors
+        for c in ([f"paper_{d}_mm"] if d in PAPER_COMPETITORS else [])
+        + [f"{d}_mm", f"{d}_gt_mae_mm", f"{d}_completeness"]
+    ]
     cols += ["render", "noise", "placement"]
     cols += [f"{n}_{k}" for n in PLACED for k in ("depth_m", "tilt_deg")]
     cols += [f"{d}_{k}_seed" for d in competitors for k in ("render", "noise")]
     files = [write_table(out / "table3.csv", rows, cols)]
     files.append(atomic_write_text(out / "table3.md", _markdown(session, rows, whole, competitors)))
     panels = [("proposed", cap.scene.rig.camera, cap.gt.depth_m, result.depth_m, faces)]
-    panels += [(c["label"], c["recording"].scene.rig.camera, c["recording"].gt.depth_m, c["depth"].depth_m, c["faces"]) for c in competitors.values()]
-    files.append(atomic_write_bytes(out / "fig10.png", cross_section_figure(panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)")))
-    session.provenance("table3", files, extra={"placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg}})
+    panels += [
+        (c["label"], c["recording"].scene.rig.camera, c["recording"].gt.depth_m, c["depth"].depth_m, c["faces"])
+        for c in competitors.values()
+    ]
+    files.append(
+        atomic_write_bytes(
+            out / "fig10.png",
+            cross_section_figure(panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)"),
+        )
+    )
+    session.provenance(
+        "table3", files, extra={"placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg}}
+    )
     return metrics
 
 
@@ -148,11 +211,14 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
     lines = [
         "# Table 3: depth discontinuity (plaster cube next to a cuboid)",
         "",
-        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
+        f"Made by `{session.command}` (scene `scenes/{SCENE}.toml`, {cam.width_px}x{cam.height_px} camera, {cfg.spp} "
+        f"spp {cfg.sampler}, "
         f"sensor model `{cfg.sensor}`, base seed {cfg.seed}, variant `{session.variant}`).",
         "",
-        "The paper's Table 3 is measured on its rig (Sec. 6). The cube and the cuboid are each placed with a seeded error "
-        f"within +-{cfg.placement_depth_mm:g} mm in depth and +-{cfg.placement_tilt_deg:g} deg of tilt (`simbench.scene.Placement`), "
+        "The paper's Table 3 is measured on its rig (Sec. 6). The cube and the cuboid are each placed with a seeded "
+        "error "
+        f"within +-{cfg.placement_depth_mm:g} mm in depth and +-{cfg.placement_tilt_deg:g} deg of tilt "
+        f"(`simbench.scene.Placement`), "
         "independently of the reference plane; offsets in `table3.csv`. Scored over each object's front face (ground "
         f"truth within 1 mm of the face plane) minus a {cfg.edge_band_px}-px band at depth edges. *Plane fit* = the "
         "paper's protocol, mean absolute residual (mm) to the least-squares plane of the decoded face; *GT MAE* = "
@@ -160,9 +226,24 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         "separately captured reference plane (Sec. 5.4). Cross-section (paper's decoder, triangulation): `fig10.png`.",
         "",
     ]
-    hdr = ["object", "paper (mm)", "triangulation: plane fit (mm)", "ratio", "reference: plane fit (mm)", "ratio", "robust decoder, triangulation (mm)", "GT MAE (mm)", "completeness", "stripe-order errors"]
+    hdr = [
+        "object",
+        "paper (mm)",
+        "triangulation: plane fit (mm)",
+        "ratio",
+        "reference: plane fit (mm)",
+        "ratio",
+        "robust decoder, triangulation (mm)",
+        "GT MAE (mm)",
+        "completeness",
+        "stripe-order errors",
+    ]
     for d, c in competitors.items():
-        hdr += [f"{PAPER_COMPETITORS[d][0]}: paper / sim (mm)", "ratio"] if d in PAPER_COMPETITORS else [f"{c['label']} (mm)"]
+        hdr += (
+            [f"{PAPER_COMPETITORS[d][0]}: paper / sim (mm)", "ratio"]
+            if d in PAPER_COMPETITORS
+            else [f"{c['label']} (mm)"]
+        )
 
     def short(d: str) -> str:
         return PAPER_COMPETITORS[d][0] if d in PAPER_COMPETITORS else competitors[d]["label"]
@@ -178,9 +259,16 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
 
     body = [
         [
-            r["object"], f"{r['paper_mm']:.4f}", f"{r['paper_calibrated_plane_mae_mm']:.4f}", f"{r['paper_calibrated_ratio']:.2f}",
-            f"{r['paper_reference_plane_mae_mm']:.4f}", f"{r['paper_reference_ratio']:.2f}", f"{r['robust_calibrated_plane_mae_mm']:.4f}",
-            f"{r['paper_calibrated_gt_mae_mm']:.4f}", f"{100 * r['paper_calibrated_completeness']:.2f} %", str(r["paper_calibrated_stripe_order_errors"]),
+            r["object"],
+            f"{r['paper_mm']:.4f}",
+            f"{r['paper_calibrated_plane_mae_mm']:.4f}",
+            f"{r['paper_calibrated_ratio']:.2f}",
+            f"{r['paper_reference_plane_mae_mm']:.4f}",
+            f"{r['paper_reference_ratio']:.2f}",
+            f"{r['robust_calibrated_plane_mae_mm']:.4f}",
+            f"{r['paper_calibrated_gt_mae_mm']:.4f}",
+            f"{100 * r['paper_calibrated_completeness']:.2f} %",
+            str(r["paper_calibrated_stripe_order_errors"]),
         ]
         + competitor_cells(r)
         for r in rows
@@ -189,28 +277,46 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
     lines += [
         "",
         "Stripe-order errors on the faces, per decoder and protocol: "
-        + "; ".join(f"{r['object']}: " + ", ".join(f"{d} {m} {r[f'{d}_{m}_stripe_order_errors']}" for d, m in VARIANTS) for r in rows)
+        + "; ".join(
+            f"{r['object']}: " + ", ".join(f"{d} {m} {r[f'{d}_{m}_stripe_order_errors']}" for d, m in VARIANTS)
+            for r in rows
+        )
         + ".",
         "",
-        f"Whole scene (lit pixels outside the edge band, paper's decoder, triangulation): completeness {100 * whole['completeness']:.2f} %, "
+        f"Whole scene (lit pixels outside the edge band, paper's decoder, triangulation): completeness "
+        f"{100 * whole['completeness']:.2f} %, "
         f"MAE {whole['mae_mm']:.3f} mm, stripe-order errors {whole['stripe_order_errors']}.",
         "",
         (
-            "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera (176x144) of "
-            "`simbench/baselines/`, on the same scene from the same camera centre, scored with the same protocol at their own "
+            "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera "
+            "(176x144) of "
+            "`simbench/baselines/`, on the same scene from the same camera centre, scored with the same protocol at "
+            "their own "
             "resolutions (edge band scaled to the same angle). "
             if tuple(competitors) == COMPETITORS
-            else "Competitors: " + ", ".join(c["label"] for c in competitors.values()) + " (`simbench.systems`), on the same scene, "
+            else "Competitors: "
+            + ", ".join(c["label"] for c in competitors.values())
+            + " (`simbench.systems`), on the same scene, "
             "scored with the same protocol at their own resolutions (edge band scaled to the same angle). "
         )
         + "Their completeness on the faces: "
-        + "; ".join(f"{r['object']}: " + ", ".join(f"{short(d)} {100 * r[f'{d}_completeness']:.1f} %" for d in competitors) for r in rows)
+        + "; ".join(
+            f"{r['object']}: " + ", ".join(f"{short(d)} {100 * r[f'{d}_completeness']:.1f} %" for d in competitors)
+            for r in rows
+        )
         + ". Their ground-truth MAE: "
-        + "; ".join(f"{r['object']}: " + ", ".join(f"{short(d)} {r[f'{d}_gt_mae_mm']:.3f} mm" for d in competitors) for r in rows)
+        + "; ".join(
+            f"{r['object']}: " + ", ".join(f"{short(d)} {r[f'{d}_gt_mae_mm']:.3f} mm" for d in competitors)
+            for r in rows
+        )
         + ". Left out of the competitors: multipath and wiggling (ToF), the Kinect's proprietary post-filters.",
     ]
     if cfg.sensor != "paper":
-        lines += ["", f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD grid, defocus and distortion are left out."]
+        lines += [
+            "",
+            f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD "
+            f"grid, defocus and distortion are left out.",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -224,7 +330,14 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(len(panels), 2, figsize=(13, 3.6 * len(panels)), constrained_layout=True, gridspec_kw={"width_ratios": [1, 1.6]}, squeeze=False)
+    fig, axes = plt.subplots(
+        len(panels),
+        2,
+        figsize=(13, 3.6 * len(panels)),
+        constrained_layout=True,
+        gridspec_kw={"width_ratios": [1, 1.6]},
+        squeeze=False,
+    )
     for (label, cam, gt_depth, depth, faces), (ax0, ax) in zip(panels, axes):
         any_face = np.logical_or.reduce(list(faces.values()))
         rows = np.flatnonzero(any_face.any(axis=1))
@@ -236,7 +349,9 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
         ax0.set_xticks([])
         ax0.set_yticks([])
         ax.plot(xn, gt_depth[row] * 1000, color="0.6", lw=2.5, label="ground truth")
-        ax.plot(xn, depth[row] * 1000, color="C0", lw=0.8, marker="." if depth.shape[1] < 400 else None, ms=3, label=label)
+        ax.plot(
+            xn, depth[row] * 1000, color="C0", lw=0.8, marker="." if depth.shape[1] < 400 else None, ms=3, label=label
+        )
         for name, face in faces.items():
             xs = np.flatnonzero(face[row] & np.isfinite(depth[row]))
             if xs.size > 2:

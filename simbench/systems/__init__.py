@@ -143,13 +143,25 @@ class DepthSystem(Protocol):
 
     def calibrate(self, scene: SceneSpec, *, seeds, render: RenderSettings) -> Any: ...
 
-    def acquire(self, scene: SceneSpec, calibration: Any, *, render_seed: int, noise_seeds: list[int], render: RenderSettings) -> list[np.ndarray]: ...
+    def acquire(
+        self, scene: SceneSpec, calibration: Any, *, render_seed: int, noise_seeds: list[int], render: RenderSettings
+    ) -> list[np.ndarray]: ...
 
     def decode(self, raw: np.ndarray, calibration: Any, *, scene: SceneSpec) -> SystemDepth: ...
 
     def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, Any, SceneSpec | None]: ...
 
-    def write_recording(self, out_dir: Path, raw: np.ndarray, calibration: Any, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False) -> dict[str, Path]: ...
+    def write_recording(
+        self,
+        out_dir: Path,
+        raw: np.ndarray,
+        calibration: Any,
+        *,
+        scene: SceneSpec,
+        gt,
+        meta: dict,
+        overwrite: bool = False,
+    ) -> dict[str, Path]: ...
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, Any, SceneSpec | None]: ...
 
@@ -197,7 +209,17 @@ def get_system(name: str, options: SystemOptions | None = None) -> DepthSystem:
     return system
 
 
-def acquire(system: DepthSystem, scene: SceneSpec, label: str, *, seeds: SeedLog, render: RenderSettings, calibration: Any = None, repeats: int = 1, prepared: bool = False) -> list[Recording]:
+def acquire(
+    system: DepthSystem,
+    scene: SceneSpec,
+    label: str,
+    *,
+    seeds: SeedLog,
+    render: RenderSettings,
+    calibration: Any = None,
+    repeats: int = 1,
+    prepared: bool = False,
+) -> list[Recording]:
     """``repeats`` recordings of ``scene`` by ``system`` (one render, one camera-noise draw
     each): the one acquisition path of the CLI, the experiments and the sweeps.
 
@@ -213,7 +235,10 @@ def acquire(system: DepthSystem, scene: SceneSpec, label: str, *, seeds: SeedLog
     render_seed, noise_seeds = seeds.capture(system.seed_prefix + label, repeats=repeats)
     raws = system.acquire(scene, calibration, render_seed=render_seed, noise_seeds=noise_seeds, render=render)
     gt = cached_ground_truth(scene, cache=render.cache)
-    return [Recording(system=system.name, scene=scene, raw=raw, gt=gt, seeds={"render": render_seed, "noise": n}) for raw, n in zip(raws, noise_seeds)]
+    return [
+        Recording(system=system.name, scene=scene, raw=raw, gt=gt, seeds={"render": render_seed, "noise": n})
+        for raw, n in zip(raws, noise_seeds)
+    ]
 
 
 # recording folders name their system in one of these files
@@ -238,7 +263,9 @@ def system_of_recording(in_dir: str | Path) -> str:
             if name not in _SYSTEMS:
                 raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
             return name
-    raise FileNotFoundError(f"{d} holds no {' or '.join(RECORDING_MANIFESTS)}: not a recording folder (`simbench render --out`)")
+    raise FileNotFoundError(
+        f"{d} holds no {' or '.join(RECORDING_MANIFESTS)}: not a recording folder (`simbench render --out`)"
+    )
 
 
 register_system("proposed", "simbench.systems.proposed:ColourFringeSystem")

@@ -58,9 +58,19 @@ class ReferenceCalibration:
             primaries = None
             if params.unmix:
                 if not self.frames:
-                    raise ValueError("this decoder unmixes the primaries: the calibration needs its frames (calibrate with frames=True)")
+                    raise ValueError(
+                        "this decoder unmixes the primaries: the calibration needs its frames (calibrate with "
+                        "frames=True)"
+                    )
                 primaries = [self.frames[k] for k in ("red", "green", "blue")]
-            self._maps[params] = cached_decode_reference(self.image, rig=self.rig, params=params, primaries=primaries, dark=self.frames.get("dark"), cache=self.cache)
+            self._maps[params] = cached_decode_reference(
+                self.image,
+                rig=self.rig,
+                params=params,
+                primaries=primaries,
+                dark=self.frames.get("dark"),
+                cache=self.cache,
+            )
         return self._maps[params]
 
 
@@ -117,9 +127,17 @@ class ColourFringeSystem:
         return f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
 
     def calibration_key(self, scene: SceneSpec) -> tuple:
-        return (scene.rig, scene.reference_depth_m, scene.projector_scale, scene.ambient_rgb, tuple(sorted(self.reference_form.items())))
+        return (
+            scene.rig,
+            scene.reference_depth_m,
+            scene.projector_scale,
+            scene.ambient_rgb,
+            tuple(sorted(self.reference_form.items())),
+        )
 
-    def calibrate(self, scene: SceneSpec, *, seeds, render: RenderSettings, frames: bool | None = None) -> ReferenceCalibration:
+    def calibrate(
+        self, scene: SceneSpec, *, seeds, render: RenderSettings, frames: bool | None = None
+    ) -> ReferenceCalibration:
         """Record the reference plane behind ``scene`` (prepared) and, with ``frames`` (default:
         when the decoder unmixes), the calibration frames; seeds from :meth:`reference_label`."""
         from simbench.pattern import calibration_frames
@@ -136,9 +154,20 @@ class ColourFringeSystem:
 
     def _record(self, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, pattern_u8=None) -> np.ndarray:
         render_seed, noise = seeds.capture(label)
-        return self.acquire(scene, None, render_seed=render_seed, noise_seeds=noise, render=render, pattern_u8=pattern_u8)[0]
+        return self.acquire(
+            scene, None, render_seed=render_seed, noise_seeds=noise, render=render, pattern_u8=pattern_u8
+        )[0]
 
-    def acquire(self, scene: SceneSpec, calibration, *, render_seed: int, noise_seeds: list[int], render: RenderSettings, pattern_u8: np.ndarray | None = None) -> list[np.ndarray]:
+    def acquire(
+        self,
+        scene: SceneSpec,
+        calibration,
+        *,
+        render_seed: int,
+        noise_seeds: list[int],
+        render: RenderSettings,
+        pattern_u8: np.ndarray | None = None,
+    ) -> list[np.ndarray]:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
         once per noise seed (a static scene measured again differs by camera noise only)."""
         from simbench.simulate import (
@@ -148,11 +177,34 @@ class ColourFringeSystem:
             render_channels,
         )
 
-        drive = ProjectorDrive(scene, self.pattern_u8 if pattern_u8 is None else pattern_u8, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
-        q = render_channels(scene, drive, self.sensor, spp=render.spp, seed=render_seed, max_depth=render.max_depth, sampler=render.sampler, cache=render.cache)
+        drive = ProjectorDrive(
+            scene,
+            self.pattern_u8 if pattern_u8 is None else pattern_u8,
+            self.sensor,
+            cache=render.cache,
+            phase=exposure_phase(render_seed),
+        )
+        q = render_channels(
+            scene,
+            drive,
+            self.sensor,
+            spp=render.spp,
+            seed=render_seed,
+            max_depth=render.max_depth,
+            sampler=render.sampler,
+            cache=render.cache,
+        )
         return [record(q, sensor=self.sensor, scene=scene, rng=n) for n in noise_seeds]
 
-    def decode(self, raw: np.ndarray, calibration: ReferenceCalibration | None, *, scene: SceneSpec, params=None, mode: str | None = None) -> SystemDepth:
+    def decode(
+        self,
+        raw: np.ndarray,
+        calibration: ReferenceCalibration | None,
+        *,
+        scene: SceneSpec,
+        params=None,
+        mode: str | None = None,
+    ) -> SystemDepth:
         """``raw`` decoded with ``params`` (default: the system's decoder; Z0 = the scene's
         reference depth) in ``mode`` (``reference`` or ``calibrated``; None = the params')."""
         from simbench.decode import decode
@@ -162,12 +214,17 @@ class ColourFringeSystem:
         ref = None
         if params.mode == "reference" or params.unmix:
             if calibration is None:
-                raise ValueError(f"decoding in {params.mode} mode{' with unmixing' if params.unmix else ''} needs the reference calibration")
+                raise ValueError(
+                    f"decoding in {params.mode} mode{' with unmixing' if params.unmix else ''} needs the reference "
+                    f"calibration"
+                )
             ref = calibration.reference_map(dataclasses.replace(params, mode="reference"))
         r = decode(raw, rig=scene.rig, params=params, reference=ref)
         return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
 
-    def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
+    def bench_inputs(
+        self, *, scene: str = "plane", seed: int = 0
+    ) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of the decoder benchmark (``simbench bench``), made in
         numpy without the renderer (:mod:`simbench.synthetic`), deterministic for a seed: the
         paper's rig, a plane at 1.1 m, the reference at 1.0 m, the minimal camera's noise.
@@ -196,12 +253,34 @@ class ColourFringeSystem:
         rng = np.random.default_rng(seed)
         capture = simple_camera(rad / 1.21, camera=cam, rng=rng)
         reference = simple_camera(ref_rad, camera=cam, rng=rng)
-        return capture, ReferenceCalibration(rig=rig, image=reference), SceneSpec(name=f"bench_{scene}", rig=rig, objects=(), reference_depth_m=1.0)
+        return (
+            capture,
+            ReferenceCalibration(rig=rig, image=reference),
+            SceneSpec(name=f"bench_{scene}", rig=rig, objects=(), reference_depth_m=1.0),
+        )
 
-    def write_recording(self, out_dir: Path, raw: np.ndarray, calibration: ReferenceCalibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False) -> dict[str, Path]:
+    def write_recording(
+        self,
+        out_dir: Path,
+        raw: np.ndarray,
+        calibration: ReferenceCalibration,
+        *,
+        scene: SceneSpec,
+        gt,
+        meta: dict,
+        overwrite: bool = False,
+    ) -> dict[str, Path]:
         from simbench.simulate import Acquisition, write_acquisition
 
-        acq = Acquisition(scene=scene, pattern=self.pattern_u8, capture=raw, reference=calibration.image, gt=gt, meta=meta, calibration=calibration.frames)
+        acq = Acquisition(
+            scene=scene,
+            pattern=self.pattern_u8,
+            capture=raw,
+            reference=calibration.image,
+            gt=gt,
+            meta=meta,
+            calibration=calibration.frames,
+        )
         return write_acquisition(acq, out_dir, overwrite=overwrite)
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
@@ -217,10 +296,14 @@ class ColourFringeSystem:
         d = Path(in_dir)
         meta = json.loads((d / RENDER_MANIFEST).read_text(encoding="utf-8"))
         rig = load_rig(d / "rig.toml")
-        z0 = validate.number(meta.get("reference_depth_m", 1.0), f"{d / RENDER_MANIFEST}: reference_depth_m", lo=0.0, lo_open=True)
+        z0 = validate.number(
+            meta.get("reference_depth_m", 1.0), f"{d / RENDER_MANIFEST}: reference_depth_m", lo=0.0, lo_open=True
+        )
         capture = load_image(d / "capture.png", expected_size_hw=rig.camera.size_hw)
         frames = {}
         for name in (n for n in ("dark", "red", "green", "blue") if (d / f"calibration_{n}.png").is_file()):
             frames[name] = load_image(d / f"calibration_{name}.png", expected_size_hw=rig.camera.size_hw)
-        cal = ReferenceCalibration(rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames)
+        cal = ReferenceCalibration(
+            rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames
+        )
         return capture, cal, SceneSpec(name=str(meta.get("scene", d.name)), rig=rig, objects=(), reference_depth_m=z0)

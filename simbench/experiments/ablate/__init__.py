@@ -5,7 +5,8 @@ A sweep file (TOML)::
     name = "period"                      # results/ablations/<name>.csv/.md/.png
     description = "fringe period T"
     repeats = 2                          # recordings per parameter set (own seeds each)
-    seed = 2017                          # base seed (default simbench.seeds.DEFAULT_SEED): repetition r uses the same seeds in every
+    seed = 2017                          # base seed (default: simbench.seeds.DEFAULT_SEED);
+                                         # repetition r uses the same seeds in every
                                          # parameter set (common random numbers)
     plot_metric = "gt_mae_mm"            # y of the plot (default gt_mae_mm)
 
@@ -63,4 +64,16 @@ from simbench.experiments.ablate.spec import (
     sweep_from_dict,
 )
 
-__all__ = ["PARAMETERS", "DEFAULTS", "Sweep", "load_sweep", "sweep_from_dict", "expand", "run_one", "run_sweep", "WORKER_DIED", "BUILTIN_STUDIES", "STUDIES_DIR"]
+__all__ = [
+    "PARAMETERS",
+    "DEFAULTS",
+    "Sweep",
+    "load_sweep",
+    "sweep_from_dict",
+    "expand",
+    "run_one",
+    "run_sweep",
+    "WORKER_DIED",
+    "BUILTIN_STUDIES",
+    "STUDIES_DIR",
+]

@@ -38,11 +38,21 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         decoder = decoder_for(params)
         sensor = sensor_for(params)
         config = RunConfig(
-            sensor=sensor.name, spp=int(params["run.spp"]), sampler=str(params["run.sampler"]), camera_scale=float(params["run.camera_scale"]), max_depth=int(params["run.max_depth"]), seed=int(seed),
-            placement_depth_mm=float(params["run.placement_depth_mm"]), placement_tilt_deg=float(params["run.placement_tilt_deg"]),
-            board_bow_mm_per_m=float(params["run.board_bow_mm_per_m"]), board_waviness_mm=float(params["run.board_waviness_mm"]), decoder=decoder,
+            sensor=sensor.name,
+            spp=int(params["run.spp"]),
+            sampler=str(params["run.sampler"]),
+            camera_scale=float(params["run.camera_scale"]),
+            max_depth=int(params["run.max_depth"]),
+            seed=int(seed),
+            placement_depth_mm=float(params["run.placement_depth_mm"]),
+            placement_tilt_deg=float(params["run.placement_tilt_deg"]),
+            board_bow_mm_per_m=float(params["run.board_bow_mm_per_m"]),
+            board_waviness_mm=float(params["run.board_waviness_mm"]),
+            decoder=decoder,
         )
-        session = Session(config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor)
+        session = Session(
+            config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor
+        )
         raw = scene_for(params)
         # every object placed by hand, each with its own seeded error (as Table 1 places its board)
         scene = session.prepare(session.place(raw, "ablate", [o.name for o in raw.objects]))
@@ -52,15 +62,29 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         row = {}
         for mode, prefix in MODES.items():
             result = session.decode(cap, decoder, mode=mode)
-            row.update({prefix + k: float(v) for k, v in score(cap, result, decoder.period_px, edge_band_px=EDGE_BAND_PX).items()})
+            row.update(
+                {
+                    prefix + k: float(v)
+                    for k, v in score(cap, result, decoder.period_px, edge_band_px=EDGE_BAND_PX).items()
+                }
+            )
         t3 = time.perf_counter()
         placement = session.seeds_used["ablate/placement"]
-        row.update(render_seed=cap.seeds["render"], noise_seed=cap.seeds["noise"], placement_seed=placement["placement"], error="")
+        row.update(
+            render_seed=cap.seeds["render"],
+            noise_seed=cap.seeds["noise"],
+            placement_seed=placement["placement"],
+            error="",
+        )
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row
     except Exception as exc:  # noqa: BLE001 - a failing run is recorded, not fatal
         msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
-        return {"error": msg, "traceback": traceback.format_exc(limit=4), "timing": {"setup_s": time.perf_counter() - t0}}
+        return {
+            "error": msg,
+            "traceback": traceback.format_exc(limit=4),
+            "timing": {"setup_s": time.perf_counter() - t0},
+        }
 
 
 def _worker_init(variant: str | None, parent_pid: int) -> None:
@@ -98,7 +122,17 @@ def _tracked(run_fn, marker_dir: str, key: str, params: dict, seed: int, cache_d
 WORKER_DIED = "worker process died twice on this run (killed, or out of memory)"
 
 
-def _run_pool(todo: list[dict], *, workers: int, variant: str | None, cache: str | None, finished, run_fn, marker_dir: Path, progress) -> None:
+def _run_pool(
+    todo: list[dict],
+    *,
+    workers: int,
+    variant: str | None,
+    cache: str | None,
+    finished,
+    run_fn,
+    marker_dir: Path,
+    progress,
+) -> None:
     """Run ``todo`` on a process pool.  A worker that dies (kill -9, the OOM killer) breaks the
     pool: the runs it held (their marker files are left) are retried once, each alone in a
     fresh pool; a run that kills its worker again is recorded as failed.  Runs that were only
@@ -116,8 +150,13 @@ def _run_pool(todo: list[dict], *, workers: int, variant: str | None, cache: str
     while rounds:
         batch, n_workers = rounds.pop(0)
         broken: list[dict] = []
-        with ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init, initargs=(variant, os.getpid())) as pool:
-            futs = {pool.submit(_tracked, run_fn, str(marker_dir), r["key"], r["params"], r["seed"], cache): r for r in batch}
+        with ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=ctx, initializer=_worker_init, initargs=(variant, os.getpid())
+        ) as pool:
+            futs = {
+                pool.submit(_tracked, run_fn, str(marker_dir), r["key"], r["params"], r["seed"], cache): r
+                for r in batch
+            }
             for f in as_completed(futs):
                 try:
                     res = f.result()
@@ -139,7 +178,9 @@ def _run_pool(todo: list[dict], *, workers: int, variant: str | None, cache: str
                 finished(r, {"error": WORKER_DIED, "timing": {}})
             else:
                 retry.append(r)
-        progress(f"a worker process died (runs {sorted(r['run'] for r in suspects)} were on it): retrying them one at a time")
+        progress(
+            f"a worker process died (runs {sorted(r['run'] for r in suspects)} were on it): retrying them one at a time"
+        )
         rounds = [(rs, 1) for rs in ([r] for r in retry)] + ([(queued, workers)] if queued else []) + rounds
     marker_dir.rmdir()
 
@@ -203,14 +244,27 @@ def run_sweep(
         rec = {"key": run["key"], "run": run["run"], **res}
         _append(log, rec)
         done[run["key"]] = rec
-        status = f"error: {res['error']}" if res.get("error") else f"{sweep.plot_metric} {res.get(sweep.plot_metric, float('nan')):.4g}"
+        status = (
+            f"error: {res['error']}"
+            if res.get("error")
+            else f"{sweep.plot_metric} {res.get(sweep.plot_metric, float('nan')):.4g}"
+        )
         progress(f"[ablate {sweep.name} {n}/{len(todo)}] run {run['run']}: {status}")
 
     if todo:
         if scheduler is not None:
             _run_dask(todo, scheduler, cache, finished, run_fn)
         elif workers > 1:
-            _run_pool(todo, workers=workers, variant=variant, cache=cache, finished=finished, run_fn=run_fn, marker_dir=out / f".{sweep.name}.running", progress=progress)
+            _run_pool(
+                todo,
+                workers=workers,
+                variant=variant,
+                cache=cache,
+                finished=finished,
+                run_fn=run_fn,
+                marker_dir=out / f".{sweep.name}.running",
+                progress=progress,
+            )
         else:
             for r in todo:
                 finished(r, run_fn(r["params"], seed=r["seed"], cache_dir=cache))
@@ -236,5 +290,3 @@ def _run_dask(todo: list[dict], scheduler, cache, finished, run_fn) -> None:
     finally:
         if client is not scheduler:
             client.close()
-
-

@@ -30,7 +30,12 @@ def sensor_for(params: dict) -> SensorModel:
     if "sensor.effects" in params:
         effects = params["sensor.effects"]
         effects = [effects] if isinstance(effects, str) else list(effects)
-        sensor = with_effects(get_sensor("ideal"), get_sensor(params.get("sensor.source", "paper")), effects, name="ideal+" + "+".join(effects) if effects else "ideal")
+        sensor = with_effects(
+            get_sensor("ideal"),
+            get_sensor(params.get("sensor.source", "paper")),
+            effects,
+            name="ideal+" + "+".join(effects) if effects else "ideal",
+        )
     else:
         sensor = get_sensor(params["sensor.preset"])
     overrides = {k: v for k, v in params.items() if k.startswith("sensor.") and k not in PARAMETERS}
@@ -42,7 +47,10 @@ def sensor_for(params: dict) -> SensorModel:
             for t in tables:
                 node = node[t]
             if key not in node:
-                raise ValueError(f"unknown sensor field {k!r}; fields of [{'.'.join(tables)}]: {sorted(x for x in node if not isinstance(node[x], dict))}")
+                raise ValueError(
+                    f"unknown sensor field {k!r}; fields of [{'.'.join(tables)}]: "
+                    f"{sorted(x for x in node if not isinstance(node[x], dict))}"
+                )
             node[key] = list(v) if isinstance(v, tuple) else v
         data["name"] = f"{sensor.name}*"
         sensor = sensor_from_dict(data, where="sweep sensor")
@@ -89,5 +97,3 @@ def decoder_for(params: dict) -> DecoderParams:
     if "pattern.sequence" in params:
         pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
     return DecoderParams(pattern=PatternSpec(**pattern), **fields)
-
-

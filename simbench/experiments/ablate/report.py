@@ -32,7 +32,13 @@ def sweep_rows(sweep: Sweep, runs: list[dict], done: dict) -> list[dict]:
         row = {"run": r["run"], "repeat": r["repeat"], **{k: _fmt(r["params"].get(k)) for k in axis_names}}
         for k in METRICS + REF_METRICS:
             row[k] = rec.get(k, float("nan"))
-        row.update(seed=r["seed"], render_seed=rec.get("render_seed", ""), noise_seed=rec.get("noise_seed", ""), placement_seed=rec.get("placement_seed", ""), error=rec.get("error", "not run"))
+        row.update(
+            seed=r["seed"],
+            render_seed=rec.get("render_seed", ""),
+            noise_seed=rec.get("noise_seed", ""),
+            placement_seed=rec.get("placement_seed", ""),
+            error=rec.get("error", "not run"),
+        )
         rows.append(row)
     return rows
 
@@ -50,18 +56,44 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
     from simbench.simulate import versions
 
     axis_names = [k for k, _ in sweep.axes]
-    cols = ["run", "repeat", *axis_names, *METRICS, *REF_METRICS, "seed", "render_seed", "noise_seed", "placement_seed", "error"]
+    cols = [
+        "run",
+        "repeat",
+        *axis_names,
+        *METRICS,
+        *REF_METRICS,
+        "seed",
+        "render_seed",
+        "noise_seed",
+        "placement_seed",
+        "error",
+    ]
     files = [write_table(out / f"{sweep.name}.csv", rows, cols)]
     timing_rows = [{"run": r["run"], **done.get(r["key"], {}).get("timing", {})} for r in runs]
-    files.append(write_table(out / f"{sweep.name}.timings.csv", timing_rows, ["run", "setup_s", "render_record_s", "decode_s"]))
+    files.append(
+        write_table(out / f"{sweep.name}.timings.csv", timing_rows, ["run", "setup_s", "render_record_s", "decode_s"])
+    )
     files.append(atomic_write_text(out / f"{sweep.name}.md", _markdown(sweep, rows, command)))
     files.append(atomic_write_bytes(out / f"{sweep.name}.png", _plot(sweep, rows)))
     base = {k: _fmt(v) for k, v in {**DEFAULTS, **sweep.base}.items()}
-    save_json(out / f"{sweep.name}.provenance.json", {
-        "command": command, "sweep_file": sweep.path, "sweep": {"name": sweep.name, "base": base, "axes": [[k, [_fmt(v) for v in vs]] for k, vs in sweep.axes], "combine": sweep.combine, "repeats": sweep.repeats, "seed": sweep.seed},
-        "versions": versions(), "git_commit": git_commit(),
-        "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
-    })
+    save_json(
+        out / f"{sweep.name}.provenance.json",
+        {
+            "command": command,
+            "sweep_file": sweep.path,
+            "sweep": {
+                "name": sweep.name,
+                "base": base,
+                "axes": [[k, [_fmt(v) for v in vs]] for k, vs in sweep.axes],
+                "combine": sweep.combine,
+                "repeats": sweep.repeats,
+                "seed": sweep.seed,
+            },
+            "versions": versions(),
+            "git_commit": git_commit(),
+            "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
+        },
+    )
 
 
 def _groups(sweep: Sweep, rows: list[dict]) -> list[tuple[tuple, list[dict]]]:
@@ -87,14 +119,17 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
         "",
         sweep.description,
         "",
-        f"Made by `{command}` (sweep `{sweep.path}`; {sweep.combine} over {', '.join(axis_names)}; {sweep.repeats} repetition(s) "
-        f"with the same seeds in every parameter set, base seed {sweep.seed}). Every run with its seeds: `{sweep.name}.csv`; "
+        f"Made by `{command}` (sweep `{sweep.path}`; {sweep.combine} over {', '.join(axis_names)}; {sweep.repeats} "
+        f"repetition(s) "
+        f"with the same seeds in every parameter set, base seed {sweep.seed}). Every run with its seeds: "
+        f"`{sweep.name}.csv`; "
         f"timings: `{sweep.name}.timings.csv`; plot: `{sweep.name}.png`.",
         "",
         "Fixed: " + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in sorted(base.items()) if k not in axis_names) + ".",
         "",
         "Every object of the scene is placed with the run's placement tolerance (seeded, independent of the reference "
-        "plane; `run.placement_depth_mm`, `run.placement_tilt_deg`). Decoded by triangulation with the rig (paper Eq. 15; "
+        "plane; `run.placement_depth_mm`, `run.placement_tilt_deg`). Decoded by triangulation with the rig (paper Eq. "
+        "15; "
         "the first columns) and against the separately captured reference plane (Sec. 5.4; `ref. plane` columns).",
         "",
         "Mean over repetitions (failed runs left out; `errors` counts them):",
@@ -103,14 +138,35 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
     body = []
     for combo, group in _groups(sweep, rows):
         errs = sum(1 for r in group if r["error"])
-        body.append([
-            *combo, *(f"{_mean(group, k):.4g}" for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm")), f"{100 * _mean(group, 'outlier_share'):.3f} %",
-            f"{100 * _mean(group, 'completeness'):.2f} %", f"{_mean(group, 'stripe_order_errors'):.0f}",
-            *(f"{_mean(group, k):.4g}" for k in ("ref_plane_mae_mm", "ref_gt_mae_mm")), f"{100 * _mean(group, 'ref_completeness'):.2f} %", str(errs),
-        ])
+        body.append(
+            [
+                *combo,
+                *(
+                    f"{_mean(group, k):.4g}"
+                    for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm")
+                ),
+                f"{100 * _mean(group, 'outlier_share'):.3f} %",
+                f"{100 * _mean(group, 'completeness'):.2f} %",
+                f"{_mean(group, 'stripe_order_errors'):.0f}",
+                *(f"{_mean(group, k):.4g}" for k in ("ref_plane_mae_mm", "ref_gt_mae_mm")),
+                f"{100 * _mean(group, 'ref_completeness'):.2f} %",
+                str(errs),
+            ]
+        )
     header = [
-        *axis_names, "plane fit (mm)", "GT MAE (mm)", "GT RMSE (mm)", "GT p95 (mm)", f"MAE off edges (mm, {EDGE_BAND_PX} px)", "outliers (> 5 mm)", "completeness", "stripe-order errors",
-        "ref. plane: plane fit (mm)", "ref. plane: GT MAE (mm)", "ref. plane: completeness", "errors",
+        *axis_names,
+        "plane fit (mm)",
+        "GT MAE (mm)",
+        "GT RMSE (mm)",
+        "GT p95 (mm)",
+        f"MAE off edges (mm, {EDGE_BAND_PX} px)",
+        "outliers (> 5 mm)",
+        "completeness",
+        "stripe-order errors",
+        "ref. plane: plane fit (mm)",
+        "ref. plane: GT MAE (mm)",
+        "ref. plane: completeness",
+        "errors",
     ]
     lines += markdown_table(header, body)
     failures = sorted({r["error"] for r in rows if r["error"]})
@@ -136,7 +192,14 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
     for s in series:
         means, lo, hi = [], [], []
         for xv in x_vals:
-            vals = [r[sweep.plot_metric] for r in rows if r[x_name] == xv and tuple(r[k] for k in series_names) == s and not r["error"] and math.isfinite(r[sweep.plot_metric])]
+            vals = [
+                r[sweep.plot_metric]
+                for r in rows
+                if r[x_name] == xv
+                and tuple(r[k] for k in series_names) == s
+                and not r["error"]
+                and math.isfinite(r[sweep.plot_metric])
+            ]
             means.append(np.mean(vals) if vals else np.nan)
             lo.append(np.min(vals) if vals else np.nan)
             hi.append(np.max(vals) if vals else np.nan)

@@ -17,12 +17,35 @@ from simbench.seeds import DEFAULT_SEED, repetition_seed
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PARAMETERS", "DEFAULTS", "METRICS", "REF_METRICS", "MODES", "EDGE_BAND_PX", "Sweep", "sweep_from_dict", "load_sweep", "expand", "BUILTIN_STUDIES", "STUDIES_DIR"]
+__all__ = [
+    "PARAMETERS",
+    "DEFAULTS",
+    "METRICS",
+    "REF_METRICS",
+    "MODES",
+    "EDGE_BAND_PX",
+    "Sweep",
+    "sweep_from_dict",
+    "load_sweep",
+    "expand",
+    "BUILTIN_STUDIES",
+    "STUDIES_DIR",
+]
 
 STUDIES_DIR = Path(__file__).resolve().parents[2] / "studies"
 # by triangulation with the rig (paper Eq. 15), then the same scores against the separately
 # captured reference plane (Sec. 5.4), prefixed ``ref_``
-METRICS = ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "outlier_share", "edge5_mae_mm", "completeness", "stripe_order_errors", "stripe_order_error_rate")
+METRICS = (
+    "plane_mae_mm",
+    "gt_mae_mm",
+    "gt_rmse_mm",
+    "gt_p95_mm",
+    "outlier_share",
+    "edge5_mae_mm",
+    "completeness",
+    "stripe_order_errors",
+    "stripe_order_error_rate",
+)
 REF_METRICS = ("ref_plane_mae_mm", "ref_gt_mae_mm", "ref_edge5_mae_mm", "ref_completeness", "ref_stripe_order_errors")
 MODES = {"calibrated": "", "reference": "ref_"}
 EDGE_BAND_PX = 5  # edge5_mae_mm: the MAE outside this band at depth edges (issue 2's protocol for shapes)
@@ -33,7 +56,9 @@ def _decoder_fields() -> dict[str, str]:
 
     # mode: every run is scored in both modes (MODES)
     skip = {"pattern", "z0_m", "threads", "mode"}
-    return {f"decoder.{f.name}": f"DecoderParams.{f.name}" for f in dataclasses.fields(DecoderParams) if f.name not in skip}
+    return {
+        f"decoder.{f.name}": f"DecoderParams.{f.name}" for f in dataclasses.fields(DecoderParams) if f.name not in skip
+    }
 
 
 def _parameters() -> dict[str, str]:
@@ -55,7 +80,8 @@ def _parameters() -> dict[str, str]:
         "run.max_depth": "path length",
         "run.placement_depth_mm": "placement tolerance in depth (every object placed, seeded)",
         "run.placement_tilt_deg": "placement tolerance in tilt",
-        "run.board_bow_mm_per_m": "bow of every placed board and the reference board (mm of sag per metre, seeded sign)",
+        "run.board_bow_mm_per_m": "bow of every placed board and the reference board (mm of sag per metre, seeded "
+        "sign)",
         "run.board_waviness_mm": "ripple amplitude of every placed board and the reference board (mm, seeded phase)",
     }
     p.update(_decoder_fields())
@@ -64,7 +90,18 @@ def _parameters() -> dict[str, str]:
 
 PARAMETERS = _parameters()
 _SENSOR_TABLES = ("camera", "camera.lens", "projector", "projector.lens", "spectral", "ambient")
-DEFAULTS = {"scene.name": "plane_white", "sensor.preset": "paper", "run.spp": DEFAULT_SPP, "run.sampler": DEFAULT_SAMPLER, "run.camera_scale": 1.0, "run.max_depth": 6, "run.placement_depth_mm": 10.0, "run.placement_tilt_deg": 2.0, "run.board_bow_mm_per_m": 0.0, "run.board_waviness_mm": 0.0}
+DEFAULTS = {
+    "scene.name": "plane_white",
+    "sensor.preset": "paper",
+    "run.spp": DEFAULT_SPP,
+    "run.sampler": DEFAULT_SAMPLER,
+    "run.camera_scale": 1.0,
+    "run.max_depth": 6,
+    "run.placement_depth_mm": 10.0,
+    "run.placement_tilt_deg": 2.0,
+    "run.board_bow_mm_per_m": 0.0,
+    "run.board_waviness_mm": 0.0,
+}
 
 
 def _check_name(name: str) -> None:
@@ -74,7 +111,8 @@ def _check_name(name: str) -> None:
     if name.startswith("sensor.") and table[len("sensor.") :] in _SENSOR_TABLES and key:
         return
     raise ValueError(
-        f"unknown sweep parameter {name!r}; valid: {sorted(PARAMETERS)} and sensor.<table>.<key> with <table> one of {list(_SENSOR_TABLES)}"
+        f"unknown sweep parameter {name!r}; valid: {sorted(PARAMETERS)} and sensor.<table>.<key> with <table> one of "
+        f"{list(_SENSOR_TABLES)}"
     )
 
 
@@ -147,7 +185,16 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
         raise ValueError(f"{where}: {exc}") from None
 
 
-BUILTIN_STUDIES = ("design_choices", "debruijn_order", "period", "pattern_colours", "phase_method", "voting", "noise_ambient", "surface_colour")
+BUILTIN_STUDIES = (
+    "design_choices",
+    "debruijn_order",
+    "period",
+    "pattern_colours",
+    "phase_method",
+    "voting",
+    "noise_ambient",
+    "surface_colour",
+)
 
 
 def load_sweep(path_or_name: str | Path) -> Sweep:
@@ -175,11 +222,11 @@ def expand(sweep: Sweep) -> list[dict]:
         params = {**DEFAULTS, **sweep.base, **dict(zip(names, combo))}
         for r in range(sweep.repeats):
             seed = repetition_seed(sweep.seed, r)
-            key = hashlib.sha256(json.dumps({"params": params, "repeat": r, "seed": seed}, sort_keys=True, default=str).encode()).hexdigest()[:16]
+            key = hashlib.sha256(
+                json.dumps({"params": params, "repeat": r, "seed": seed}, sort_keys=True, default=str).encode()
+            ).hexdigest()[:16]
             runs.append({"run": len(runs), "repeat": r, "params": params, "seed": seed, "key": key})
     return runs
 
 
 # ------------------------------------------------------------------------------ one run
-
-
