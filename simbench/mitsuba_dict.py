@@ -7,10 +7,12 @@ Nothing here imports Mitsuba at module import time (:mod:`simbench.variant`).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from types import ModuleType
 
 import numpy as np
 
+from simbench.cache import RenderCache
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec, object_to_mitsuba
 
@@ -21,6 +23,7 @@ __all__ = [
     "DEFAULT_SAMPLER",
     "DEFAULT_SPP",
     "check_sampler",
+    "RenderSettings",
     "mitsuba_scene",
     "load_scene_dict",
 ]
@@ -124,6 +127,17 @@ SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler
 # Independent sampling would need ~150-190 spp for it (1.02 at 16 spp, falling as 1/sqrt(spp)).
 DEFAULT_SAMPLER = "multijitter"
 DEFAULT_SPP = 36
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How a scene is rendered: samples per pixel, Mitsuba sampler, path length, and the render
+    cache renders are looked up in and stored to (None: none)."""
+
+    spp: int
+    sampler: str
+    max_depth: int = 6
+    cache: RenderCache | None = None
 
 
 def check_sampler(sampler: str, spp: int) -> None:

@@ -21,7 +21,7 @@ import numpy as np
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.mitsuba_dict import realised_rig
+from simbench.mitsuba_dict import RenderSettings, realised_rig
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.pattern import PatternSpec
 from simbench.photometry import (
@@ -379,13 +379,11 @@ def render_channels(
     drive: "np.ndarray | ProjectorDrive",
     sensor: SensorModel,
     *,
-    spp: int,
     seed: int,
-    max_depth: int,
-    sampler: str = "independent",
-    cache: RenderCache | None = None,
+    render: RenderSettings,
 ) -> np.ndarray:
-    """Radiance per camera channel on the camera's recorded pixel grid.
+    """Radiance per camera channel on the camera's recorded pixel grid, rendered with ``seed``
+    and ``render``'s settings (through its cache).
 
     Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
     projector primary p (the drive's channel p in all three channels, materials replaced by
@@ -405,7 +403,7 @@ def render_channels(
     """
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
-    kw = {"spp": spp, "max_depth": max_depth, "sampler": sampler, "cache": cache}
+    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
     lazy = isinstance(drive, ProjectorDrive)
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)

@@ -173,29 +173,28 @@ def _marker_sweep(names):
     )
 
 
+def _run_markers(names, out_dir, run_fn, *, workers: int, variant: str | None = None) -> list[dict]:
+    """The marker sweep over ``names`` run quietly with ``run_fn`` (tests/ablate_helpers.py)."""
+    kw = {"variant": variant} if variant else {}
+    return run_sweep(
+        _marker_sweep(names),
+        out_dir=out_dir,
+        cache_dir=None,
+        workers=workers,
+        progress=lambda s: None,
+        run_fn=run_fn,
+        **kw,
+    )
+
+
 def test_a_killed_worker_costs_its_run_one_retry_and_the_table_is_complete(tmp_path, variant):
     from tests import ablate_helpers
 
     names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2"), str(tmp_path / "ok3")]
-    rows = run_sweep(
-        _marker_sweep(names),
-        out_dir=tmp_path / "out",
-        cache_dir=None,
-        workers=2,
-        variant=variant,
-        progress=lambda s: None,
-        run_fn=ablate_helpers.dies_once,
-    )
+    rows = _run_markers(names, tmp_path / "out", ablate_helpers.dies_once, workers=2, variant=variant)
     assert [r["error"] for r in rows] == ["", "", "", ""]
     assert (tmp_path / "die1").exists()  # it did die once
-    run_sweep(
-        _marker_sweep(names),
-        out_dir=tmp_path / "ref",
-        cache_dir=None,
-        workers=1,
-        progress=lambda s: None,
-        run_fn=ablate_helpers.quick_run,
-    )
+    _run_markers(names, tmp_path / "ref", ablate_helpers.quick_run, workers=1)
     assert (tmp_path / "out" / "w.csv").read_bytes() == (tmp_path / "ref" / "w.csv").read_bytes()
     assert not (tmp_path / "out" / ".w.running").exists()
 
@@ -205,15 +204,7 @@ def test_a_run_that_kills_its_worker_twice_is_recorded_as_failed(tmp_path, varia
     from tests import ablate_helpers
 
     names = [str(tmp_path / "ok1"), str(tmp_path / "die1"), str(tmp_path / "ok2")]
-    rows = run_sweep(
-        _marker_sweep(names),
-        out_dir=tmp_path / "out",
-        cache_dir=None,
-        workers=2,
-        variant=variant,
-        progress=lambda s: None,
-        run_fn=ablate_helpers.always_dies,
-    )
+    rows = _run_markers(names, tmp_path / "out", ablate_helpers.always_dies, workers=2, variant=variant)
     assert [r["error"] for r in rows] == ["", WORKER_DIED, ""]
     assert WORKER_DIED in (tmp_path / "out" / "w.md").read_text()
 

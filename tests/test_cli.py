@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import pytest
 
@@ -57,6 +58,26 @@ def test_invalid_rig_field(tmp_path, capsys):
 
 
 @pytest.mark.slow
+def _score_json(capsys, depth: Path, *, gt: Path, column: Path) -> dict:
+    """`simbench score DEPTH --gt GT --column COLUMN --json`, parsed."""
+    capsys.readouterr()
+    assert main(["score", str(depth), "--gt", str(gt), "--column", str(column), "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def _decode_render_folder(out: Path, depth: Path, *extra: str) -> int:
+    """`simbench decode` of a render folder's capture with its reference and rig."""
+    argv = [
+        "decode",
+        str(out / "capture.png"),
+        "--reference",
+        str(out / "reference.png"),
+        "--rig",
+        str(out / "rig.toml"),
+    ]
+    return main([*argv, "--out", str(depth), *extra])
+
+
 @pytest.mark.parametrize("sensor, max_mae_mm", [("minimal", 0.3), ("paper", 1.0)])
 def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_mae_mm):
     """The pipeline issue's bound with the minimal camera; with the physical paper model
@@ -82,41 +103,13 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_m
         and meta["variant"] == variant
     )
     assert (
-        main(
-            [
-                "decode",
-                str(out / "capture.png"),
-                "--reference",
-                str(out / "reference.png"),
-                "--rig",
-                str(out / "rig.toml"),
-                "--out",
-                str(tmp_path / "d.npy"),
-                "--ply",
-                str(tmp_path / "c.ply"),
-                "--debug-dir",
-                str(tmp_path / "dbg"),
-            ]
+        _decode_render_folder(
+            out, tmp_path / "d.npy", "--ply", str(tmp_path / "c.ply"), "--debug-dir", str(tmp_path / "dbg")
         )
         == 0
     )
     assert (tmp_path / "c.ply").is_file() and (tmp_path / "dbg" / "wrapped_phase.npy").is_file()
-    capsys.readouterr()
-    assert (
-        main(
-            [
-                "score",
-                str(tmp_path / "d.npy"),
-                "--gt",
-                str(out / "gt_depth.npy"),
-                "--column",
-                str(tmp_path / "dbg" / "column.npy"),
-                "--json",
-            ]
-        )
-        == 0
-    )
-    m = json.loads(capsys.readouterr().out)
+    m = _score_json(capsys, tmp_path / "d.npy", gt=out / "gt_depth.npy", column=tmp_path / "dbg" / "column.npy")
     assert m["mae_mm"] < max_mae_mm and m["completeness"] > 0.99 and m["stripe_order_errors"] == 0
     assert meta["sensor"]["name"] == sensor
     # the same seed renders the same capture, bit for bit
@@ -366,41 +359,12 @@ def test_render_calibration_frames_then_robust_decode(tmp_path, capsys, variant)
         assert (out / f"calibration_{k}.png").is_file() and meta["files"][f"calibration_{k}"] == f"calibration_{k}.png"
         assert any(label.startswith("reference/") and label.endswith(f"/{k}") for label in meta["seeds"])
     assert (
-        main(
-            [
-                "decode",
-                str(out / "capture.png"),
-                "--reference",
-                str(out / "reference.png"),
-                "--rig",
-                str(out / "rig.toml"),
-                "--out",
-                str(tmp_path / "d.npy"),
-                "--robust",
-                "--mode",
-                "calibrated",
-                "--debug-dir",
-                str(tmp_path / "dbg"),
-            ]
+        _decode_render_folder(
+            out, tmp_path / "d.npy", "--robust", "--mode", "calibrated", "--debug-dir", str(tmp_path / "dbg")
         )
         == 0
     )
-    capsys.readouterr()
-    assert (
-        main(
-            [
-                "score",
-                str(tmp_path / "d.npy"),
-                "--gt",
-                str(out / "gt_depth.npy"),
-                "--column",
-                str(tmp_path / "dbg" / "column.npy"),
-                "--json",
-            ]
-        )
-        == 0
-    )
-    m = json.loads(capsys.readouterr().out)
+    m = _score_json(capsys, tmp_path / "d.npy", gt=out / "gt_depth.npy", column=tmp_path / "dbg" / "column.npy")
     assert m["completeness"] > 0.99 and m["stripe_order_errors"] == 0 and m["mae_mm"] < 0.6
 
 
@@ -482,10 +446,14 @@ def test_cached_reference_key_follows_the_decoder_code(tmp_path, monkeypatch):
     rig = load_rig(tmp_path / "rig.toml")
     ref = load_image(tmp_path / "reference.png")
     cache = RenderCache(tmp_path / "cache")
-    got = persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(), cache=cache)
-    again = persist.cached_decode_reference(
-        ref, rig=rig, params=DecoderParams(threads=1), cache=cache
-    )  # threads do not matter
+
+    def cached(params):
+        result, store = persist.lookup_decoded_reference(ref, rig=rig, params=params, cache=cache)
+        store()
+        return result
+
+    got = cached(DecoderParams())
+    again = cached(DecoderParams(threads=1))  # threads do not matter
     fresh = decode_reference(ref, rig=rig, params=DecoderParams())
     for a, b in (
         (got.column_px, fresh.column_px),
@@ -495,5 +463,5 @@ def test_cached_reference_key_follows_the_decoder_code(tmp_path, monkeypatch):
         assert np.array_equal(a, b, equal_nan=True)
     assert cache.hits == 1 and cache.misses == 1 and got.z0_m == fresh.z0_m and got.mixing is None
     monkeypatch.setattr(persist, "decoder_fingerprint", lambda: "another decoder")
-    persist.cached_decode_reference(ref, rig=rig, params=DecoderParams(), cache=cache)
+    cached(DecoderParams())
     assert cache.misses == 2

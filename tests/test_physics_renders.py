@@ -40,15 +40,24 @@ def _centre(img: np.ndarray, half: int = 20) -> np.ndarray:
     return img[h // 2 - half : h // 2 + half, w // 2 - half : w // 2 + half].reshape(-1, img.shape[-1])
 
 
+def _render(scene, drive, sensor, *, spp: int, seed: int, max_depth: int) -> np.ndarray:
+    """:func:`simbench.simulate.render_channels` with independent sampling and no cache."""
+    from simbench.mitsuba_dict import RenderSettings
+    from simbench.simulate import render_channels
+
+    return render_channels(
+        scene, drive, sensor, seed=seed, render=RenderSettings(spp=spp, sampler="independent", max_depth=max_depth)
+    )
+
+
 def test_inverse_square_falloff(variant):
     """On the axis, a plane facing the projector receives E ~ 1/z^2 (a point source)."""
-    from simbench.simulate import render_channels
 
     ideal = get_sensor("ideal")
     vals = []
     for z in (0.9, 1.4):
         scene = _plane(z)
-        q = render_channels(scene, _uniform_drive(scene.rig, (1, 1, 1)), ideal, spp=4, seed=1, max_depth=2)
+        q = _render(scene, _uniform_drive(scene.rig, (1, 1, 1)), ideal, spp=4, seed=1, max_depth=2)
         vals.append(_centre(q).mean(axis=0))
     assert np.allclose(vals[1] / vals[0], (0.9 / 1.4) ** 2, rtol=0.01)
 
@@ -56,13 +65,13 @@ def test_inverse_square_falloff(variant):
 def test_ambient_light_at_the_stated_ratio(variant):
     """Ambient ratio r: on a surface at Z0 the ambient irradiance is r times the projector's
     white irradiance there (constant environment: E = pi L)."""
-    from simbench.simulate import physical_scene, render_channels
+    from simbench.simulate import physical_scene
 
     sensor = dataclasses.replace(get_sensor("ideal"), ambient_ratio=0.1)
     scene = physical_scene(_plane(1.0), sensor)
-    both = render_channels(scene, _uniform_drive(scene.rig, (1, 1, 1)), sensor, spp=16, seed=2, max_depth=2)
+    both = _render(scene, _uniform_drive(scene.rig, (1, 1, 1)), sensor, spp=16, seed=2, max_depth=2)
     dark_room = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
-    projector_only = render_channels(
+    projector_only = _render(
         dark_room, _uniform_drive(scene.rig, (1, 1, 1)), get_sensor("ideal"), spp=16, seed=2, max_depth=2
     )
     ambient = _centre(both).mean(axis=0) - _centre(projector_only).mean(axis=0)
@@ -77,7 +86,6 @@ def test_crosstalk_renders_match_the_spectral_integral(variant, rgb):
     a perfect white, within 1 % (box-filtered direct light on a plane has no render noise
     to speak of)."""
     from simbench.photometry import electrons_per_radiance_s
-    from simbench.simulate import render_channels
     from simbench.spectral import camera_sensitivities, projector_primaries, reflectance_spectrum
 
     sensor = with_effects(get_sensor("ideal"), get_sensor("paper"), ["crosstalk"])
@@ -85,12 +93,12 @@ def test_crosstalk_renders_match_the_spectral_integral(variant, rgb):
     e = electrons_per_radiance_s(sensor, _plane(1.0).rig)
     white = _plane(1.0, rgb=(1.0, 1.0, 1.0))
     geometry = _centre(
-        render_channels(white, _uniform_drive(white.rig, (1, 1, 1)), get_sensor("ideal"), spp=4, seed=3, max_depth=2)
+        _render(white, _uniform_drive(white.rig, (1, 1, 1)), get_sensor("ideal"), spp=4, seed=3, max_depth=2)
     ).mean(axis=0)
     for prim in range(3):
         scene = _plane(1.0, rgb=rgb)
         drive = _uniform_drive(scene.rig, np.eye(3)[prim])
-        q = _centre(render_channels(scene, drive, sensor, spp=4, seed=3, max_depth=2)).mean(axis=0)
+        q = _centre(_render(scene, drive, sensor, spp=4, seed=3, max_depth=2)).mean(axis=0)
         # electrons in channel c = q_c * e_c; spectral: geometry * e_p * int(S_c rho P_p) / int(S_p P_p)
         expected = (
             geometry[prim]
@@ -113,7 +121,7 @@ def test_camera_defocus_follows_the_thin_lens(variant):
     """A fringe on a plane at 1.4 m seen by a camera focused at 1.0 m through a wide aperture
     loses contrast by the blur disc's transfer function 2 J1(x) / x, x = pi c / T (c the blur
     circle, T the fringe period in camera pixels), within 5 %."""
-    from simbench.simulate import physical_scene, render_channels
+    from simbench.simulate import physical_scene
 
     z = 1.4
     scene = _plane(z, scale=1.0)
@@ -122,8 +130,8 @@ def test_camera_defocus_follows_the_thin_lens(variant):
     wide = dataclasses.replace(
         ideal, camera_lens=dataclasses.replace(ideal.camera_lens, f_number=1.0, defocus=True, focus_m=1.0)
     )
-    sharp = render_channels(scene, pattern, ideal, spp=32, seed=4, max_depth=2)
-    blurred = render_channels(physical_scene(scene, wide), pattern, wide, spp=64, seed=4, max_depth=2)
+    sharp = _render(scene, pattern, ideal, spp=32, seed=4, max_depth=2)
+    blurred = _render(physical_scene(scene, wide), pattern, wide, spp=64, seed=4, max_depth=2)
     crop = (slice(380, 580), slice(400, 880), 2)  # blue: the cosine fringe
     a0, k0 = _fringe_amplitude(sharp[crop])
     a1, _ = _fringe_amplitude(blurred[crop])

@@ -1,4 +1,4 @@
-"""A decoded reference plane, computed once and kept: :func:`cached_decode_reference`.
+"""A decoded reference plane, computed once and kept: :func:`lookup_decoded_reference`.
 
 Decoding the reference plane (and measuring its coupling matrix) is done once per calibration,
 yet a command-line decode or an experiment run would redo it every time.  The decoded map is
@@ -21,32 +21,13 @@ from simbench.cache import RenderCache, array_digest, source_digest
 from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
 
-__all__ = ["cached_decode_reference", "lookup_decoded_reference", "decoder_fingerprint"]
+__all__ = ["lookup_decoded_reference", "decoder_fingerprint"]
 
 
 @lru_cache(maxsize=1)
 def decoder_fingerprint() -> str:
     """SHA-256 over the decoder package's source files (name and bytes, in name order)."""
     return source_digest(sorted(Path(__file__).parent.glob("*.py")))
-
-
-def cached_decode_reference(
-    reference: np.ndarray,
-    *,
-    rig: Rig,
-    params: DecoderParams,
-    primaries: Sequence[np.ndarray] | None = None,
-    dark: np.ndarray | None = None,
-    cache: RenderCache | None = None,
-) -> ReferenceMap:
-    """:func:`simbench.decode.decode_reference`, looked up in / stored to ``cache`` (None:
-    decoded every time).  Raises what ``decode_reference`` raises (a failed reference is
-    never stored)."""
-    ref, store = lookup_decoded_reference(
-        reference, rig=rig, params=params, primaries=primaries, dark=dark, cache=cache
-    )
-    store()
-    return ref
 
 
 def lookup_decoded_reference(
@@ -58,9 +39,11 @@ def lookup_decoded_reference(
     dark: np.ndarray | None = None,
     cache: RenderCache | None = None,
 ) -> tuple[ReferenceMap, Callable[[], None]]:
-    """The decoded reference from ``cache``, or decoded now, and a function that stores it
-    (nothing to do when it came from the cache): a command stores it only once everything
-    else has succeeded, so a failed command leaves nothing behind."""
+    """:func:`simbench.decode.decode_reference` looked up in ``cache`` (None: decoded every
+    time), and a function that stores it there (nothing to do when it came from the cache): a
+    command stores it only once everything else has succeeded, so a failed command leaves
+    nothing behind.  Raises what ``decode_reference`` raises (a failed reference is never
+    stored)."""
     parts = None
     arrays = None
     if cache is not None and cache.root is not None:

@@ -29,6 +29,7 @@ from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
 from simbench.io import atomic_write_text, save_json
+from simbench.metrics import depth_errors, edge_band
 from simbench.metrics import score as metrics_score
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
 from simbench.pattern import PatternSpec
@@ -48,6 +49,8 @@ from simbench.systems import (
 if TYPE_CHECKING:
     import matplotlib.figure
 
+    from simbench.rig import Intrinsics
+
 log = logging.getLogger(__name__)
 
 __all__ = [
@@ -56,6 +59,9 @@ __all__ = [
     "Capture",
     "Session",
     "score",
+    "scene_errors",
+    "made_by",
+    "sensor_caveat",
     "write_table",
     "markdown_table",
     "figure_png",
@@ -360,6 +366,41 @@ def score(
         column_px=getattr(result, "column_px", None),
         period_px=period_px,
         edge_band_px=edge_band_px,
+    )
+
+
+def made_by(session: "Session", camera: Intrinsics) -> str:
+    """The opening of a result file's "Made by" line: command, camera, samples, sensor model."""
+    cfg = session.config
+    return (
+        f"Made by `{session.command}` ({camera.width_px}x{camera.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
+        f"sensor model `{cfg.sensor}`, "
+    )
+
+
+def sensor_caveat(config: RunConfig) -> list[str]:
+    """The Markdown lines that say a run did not use the physical ``paper`` sensor model."""
+    if config.sensor == "paper":
+        return []
+    return [
+        "",
+        f"**Caveat:** sensor model `{config.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD "
+        f"grid, defocus and distortion are left out.",
+    ]
+
+
+def scene_errors(rec: Recording, result: DecodeResult, *, period_px: float, edge_band_px: int) -> dict:
+    """:func:`simbench.metrics.depth_errors` of a whole scene: over the lit pixels, the error
+    statistics off an ``edge_band_px`` band at depth edges (completeness over all of them)."""
+    band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=edge_band_px)
+    return depth_errors(
+        result.depth_m,
+        rec.gt.depth_m,
+        region=rec.gt.lit,
+        exclude=band,
+        column_px=result.column_px,
+        gt_column_px=rec.gt.column_px,
+        period_px=period_px,
     )
 
 

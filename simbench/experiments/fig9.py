@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
+from simbench.experiments.common import Session, figure_png, made_by, markdown_table, score, sensor_caveat, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import CHIABRANDO_TOF, nguyen_kinect_sigma_mm
 
@@ -148,6 +148,12 @@ def _summary(
     return zs, np.array([v.mean() for v in vals]), np.array([v.min() for v in vals]), np.array([v.max() for v in vals])
 
 
+def _errorbar(axis, rows: list[dict], key: str, sensor: str, **style) -> None:
+    """Mean of ``key`` per depth with min-max bars."""
+    zs, mean, lo, hi = _summary(rows, key, sensor)
+    axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], capsize=3, **style)
+
+
 def fig9_plot(rows: list[dict], *, title: str) -> bytes:
     """PNG: mean RMSE per depth with min-max bars (from the rows of ``fig9.csv``)."""
     import matplotlib
@@ -160,40 +166,14 @@ def fig9_plot(rows: list[dict], *, title: str) -> bytes:
         for i, sensor in enumerate(sensors):
             if not any(r.get("sensor", "proposed") == sensor for r in rows):
                 continue
-            zs, mean, lo, hi = _summary(rows, "rmse_mm", sensor)
-            axis.errorbar(
-                zs,
-                mean,
-                yerr=[mean - lo, hi - mean],
-                fmt="o-",
-                color=f"C{SENSORS.index(sensor)}",
-                capsize=3,
-                label=f"{sensor_label(sensor)}: RMSE vs ground truth",
-            )
+            label = f"{sensor_label(sensor)}: RMSE vs ground truth"
+            _errorbar(axis, rows, "rmse_mm", sensor, fmt="o-", color=f"C{SENSORS.index(sensor)}", label=label)
             if sensor == "proposed":
-                zs, mean, lo, hi = _summary(rows, "plane_rms_mm", sensor)
-                axis.errorbar(
-                    zs,
-                    mean,
-                    yerr=[mean - lo, hi - mean],
-                    fmt="s--",
-                    color="C0",
-                    alpha=0.6,
-                    capsize=3,
-                    label="proposed: RMS residual to fitted plane",
-                )
+                label = "proposed: RMS residual to fitted plane"
+                _errorbar(axis, rows, "plane_rms_mm", sensor, fmt="s--", color="C0", alpha=0.6, label=label)
                 if axis is ax2 and all("ref_rmse_mm" in r for r in rows if r.get("sensor", "proposed") == "proposed"):
-                    zs, mean, lo, hi = _summary(rows, "ref_rmse_mm", sensor)
-                    axis.errorbar(
-                        zs,
-                        mean,
-                        yerr=[mean - lo, hi - mean],
-                        fmt="^:",
-                        color="C3",
-                        alpha=0.8,
-                        capsize=3,
-                        label="proposed, reference-plane protocol: RMSE vs ground truth",
-                    )
+                    label = "proposed, reference-plane protocol: RMSE vs ground truth"
+                    _errorbar(axis, rows, "ref_rmse_mm", sensor, fmt="^:", color="C3", alpha=0.8, label=label)
     zz = np.linspace(min(DEPTHS_M), max(DEPTHS_M), 50)
     if any(r.get("sensor") == "kinect" for r in rows):
         ax.plot(zz, nguyen_kinect_sigma_mm(zz), ":", color="C1", label="real Kinect v1: Nguyen et al. 2012 model")
@@ -216,9 +196,8 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Fig. 9: RMSE against depth",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
-        f"model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: "
+        made_by(session, cam)
+        + f"base seed {cfg.seed}, {cfg.fig9_repeats} recordings per depth, variant `{session.variant}`). Plot: "
         f"`fig9.png`; "
         "every recording with its seeds: `fig9.csv`.",
         "",
@@ -287,10 +266,5 @@ def _markdown(session: Session, rows: list[dict]) -> str:
             f"{'every' if below else 'some'} depth"
             + (" (as the paper states)." if below else " (the paper states it is below).")
         )
-    if cfg.sensor != "paper":
-        lines += [
-            "",
-            f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD "
-            f"grid, defocus and distortion are left out.",
-        ]
+    lines += sensor_caveat(cfg)
     return "\n".join(lines) + "\n"

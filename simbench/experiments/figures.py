@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.experiments.common import Session, figure_png, markdown_table, write_table
+from simbench.experiments.common import Session, figure_png, made_by, markdown_table, scene_errors, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text, save_ply
-from simbench.metrics import depth_errors, edge_band, points_from_depth
+from simbench.metrics import points_from_depth
 
 if TYPE_CHECKING:
     from simbench.decode.pipeline import DecodeResult
@@ -28,6 +28,17 @@ __all__ = ["FIGURE_SCENES", "FIG6_SCENE", "run_figures", "shaded_view", "stages_
 # scene -> paper figure
 FIGURE_SCENES = {"geometries": "fig11", "bust": "fig12", "clutter_pink_cyan": "fig13a", "clutter_pear_hat": "fig13b"}
 FIG6_SCENE = "geometries"
+
+# the scores of each figure's scene (simbench.metrics.depth_errors keys), in summary.csv
+SUMMARY_KEYS = (
+    "mae_mm",
+    "rmse_mm",
+    "p95_mm",
+    "completeness",
+    "outlier_share",
+    "stripe_order_errors",
+    "stripe_order_error_rate",
+)
 
 
 def shaded_view(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
@@ -121,35 +132,8 @@ def run_figures(session: Session) -> dict:
             scene = session.scene(name)
             cap = session.capture(scene, f"figures/{name}")[0]
             result = session.decode(cap, cfg.decoder)
-            band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
-            m = depth_errors(
-                result.depth_m,
-                cap.gt.depth_m,
-                region=cap.gt.lit,
-                exclude=band,
-                column_px=result.column_px,
-                gt_column_px=cap.gt.column_px,
-                period_px=cfg.decoder.period_px,
-            )
-            rows.append(
-                {
-                    "scene": name,
-                    "figure": fig_id,
-                    **{
-                        k: m[k]
-                        for k in (
-                            "mae_mm",
-                            "rmse_mm",
-                            "p95_mm",
-                            "completeness",
-                            "outlier_share",
-                            "stripe_order_errors",
-                            "stripe_order_error_rate",
-                        )
-                    },
-                    **cap.seeds,
-                }
-            )
+            m = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
+            rows.append({"scene": name, "figure": fig_id, **{k: m[k] for k in SUMMARY_KEYS}, **cap.seeds})
             for k in ("mae_mm", "completeness", "stripe_order_error_rate"):
                 metrics[f"figures/{name}/{k}"] = m[k]
             title = (
@@ -168,27 +152,14 @@ def run_figures(session: Session) -> dict:
                         stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}"),
                     )
                 )
-    cols = [
-        "scene",
-        "figure",
-        "mae_mm",
-        "rmse_mm",
-        "p95_mm",
-        "completeness",
-        "outlier_share",
-        "stripe_order_errors",
-        "stripe_order_error_rate",
-        "render",
-        "noise",
-    ]
+    cols = ["scene", "figure", *SUMMARY_KEYS, "render", "noise"]
     files.append(write_table(out / "summary.csv", rows, cols))
     cam = session.scene(FIG6_SCENE).rig.camera
     md = [
         "# Qualitative figures (paper Fig. 6, 11, 12, 13)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
-        f"model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, variant `{session.variant}`). Errors exclude a {cfg.edge_band_px}-px band at depth "
+        made_by(session, cam)
+        + f"base seed {cfg.seed}, variant `{session.variant}`). Errors exclude a {cfg.edge_band_px}-px band at depth "
         f"edges; "
         f"completeness is over the seen and lit pixels. Point clouds keep every {cfg.ply_stride}-th pixel per axis.",
         "",

@@ -58,6 +58,9 @@ WAVINESS_LEVELS_MM = (0.02, 0.05, 0.1, 0.2)
 QUICK_BOW_LEVELS_MM = (0.0, 1.0)
 QUICK_WAVINESS_LEVELS_MM = (0.1,)
 
+# the scores of each board, by both protocols (reference-plane ones prefixed ref_)
+SCORE_KEYS = ("plane_mae_mm", "plane_rms_mm", "gt_mae_mm", "gt_rmse_mm", "completeness", "stripe_order_errors")
+
 
 def surface_form(cap: Capture) -> dict:
     """Plane-fit RMS and peak-to-valley (mm) of the rendered surface over the lit pixels: the
@@ -94,14 +97,7 @@ def run_flatness(session: Session) -> dict:
             for mode in MODES:
                 s = score(cap, sub.decode(cap, cfg.decoder, mode=mode), cfg.decoder.period_px)
                 prefix = "" if mode == "calibrated" else "ref_"
-                for k in (
-                    "plane_mae_mm",
-                    "plane_rms_mm",
-                    "gt_mae_mm",
-                    "gt_rmse_mm",
-                    "completeness",
-                    "stripe_order_errors",
-                ):
+                for k in SCORE_KEYS:
                     row[prefix + k] = s[k]
                     metrics[f"flatness/{kind}_{level:g}/{mode}/{k}"] = s[k]
             placed = sub.seeds_used["flatness/white/placement"]
@@ -116,18 +112,8 @@ def run_flatness(session: Session) -> dict:
         "level_mm",
         "form_rms_mm",
         "form_pv_mm",
-        "plane_mae_mm",
-        "plane_rms_mm",
-        "gt_mae_mm",
-        "gt_rmse_mm",
-        "completeness",
-        "stripe_order_errors",
-        "ref_plane_mae_mm",
-        "ref_plane_rms_mm",
-        "ref_gt_mae_mm",
-        "ref_gt_rmse_mm",
-        "ref_completeness",
-        "ref_stripe_order_errors",
+        *SCORE_KEYS,
+        *(f"ref_{k}" for k in SCORE_KEYS),
         "board_bow_mm_per_m",
         "board_waviness_phase_rad",
         "reference_bow_mm_per_m",

@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, markdown_table, score, write_table
+from simbench.experiments.common import Session, made_by, markdown_table, score, write_table
 from simbench.io import atomic_write_text
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
 
@@ -145,9 +145,8 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     lines = [
         "# Table 1: colour boards at 1.0 m (the paper's simulation, Sec. 5.5)",
         "",
-        f"Made by `{session.command}` ({cam.width_px}x{cam.height_px} camera, {cfg.spp} spp {cfg.sampler}, sensor "
-        f"model `{cfg.sensor}`, "
-        f"base seed {cfg.seed}, variant `{session.variant}`); seeds and placement per capture in `table1.csv`, "
+        made_by(session, cam)
+        + f"base seed {cfg.seed}, variant `{session.variant}`); seeds and placement per capture in `table1.csv`, "
         f"everything "
         "else in `table1.provenance.json`.",
         "",

@@ -21,14 +21,16 @@ from simbench.experiments.common import (
     Session,
     figure_png,
     markdown_table,
+    scene_errors,
     score,
+    sensor_caveat,
     write_table,
 )
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import (
     PAPER_TABLE3,  # paper Table 3 (mm): object -> (proposed, Kinect, ToF)
 )
-from simbench.metrics import depth_errors, edge_band, points_from_depth
+from simbench.metrics import edge_band, points_from_depth
 from simbench.rig import rotation_xyz_deg
 
 if TYPE_CHECKING:
@@ -159,15 +161,7 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS) -> d
                 for k in ("plane_mae_mm", "gt_mae_mm", "completeness"):
                     metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
         result = results[("paper", "calibrated")]
-        whole = depth_errors(
-            result.depth_m,
-            cap.gt.depth_m,
-            region=cap.gt.lit,
-            exclude=band,
-            column_px=result.column_px,
-            gt_column_px=cap.gt.column_px,
-            period_px=cfg.decoder.period_px,
-        )
+        whole = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
         metrics["table3/scene/completeness"] = whole["completeness"]
         metrics["table3/scene/stripe_order_errors"] = whole["stripe_order_errors"]
     out = session.out
@@ -311,12 +305,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         )
         + ". Left out of the competitors: multipath and wiggling (ToF), the Kinect's proprietary post-filters.",
     ]
-    if cfg.sensor != "paper":
-        lines += [
-            "",
-            f"**Caveat:** sensor model `{cfg.sensor}`, not the physical `paper` one: crosstalk, Bayer mosaic, DMD "
-            f"grid, defocus and distortion are left out.",
-        ]
+    lines += sensor_caveat(cfg)
     return "\n".join(lines) + "\n"
 
 

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from simbench.cache import RenderCache
+from simbench.mitsuba_dict import RenderSettings
 from simbench.scene import SceneSpec
 
 if TYPE_CHECKING:
@@ -79,16 +79,6 @@ class SystemInfo:
     size_hw: tuple[int, int]
     captures: int
     numbers: dict[str, tuple[Any, str]] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class RenderSettings:
-    """How a system renders: samples per pixel, Mitsuba sampler, path length, render cache."""
-
-    spp: int
-    sampler: str
-    max_depth: int = 6
-    cache: RenderCache | None = None
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ class ReferenceCalibration:
     """The proposed sensor's calibration: the recorded reference plane (``image``), with the
     calibration frames (``frames``: name -> image, :data:`simbench.pattern.CALIBRATION_FRAMES`)
     when a decoder unmixes the primaries; decoded reference maps are kept per decoder setting
-    (and in the render cache: :func:`simbench.decode.persist.cached_decode_reference`)."""
+    (and in the render cache: :func:`simbench.decode.persist.lookup_decoded_reference`)."""
 
     rig: object
     image: np.ndarray
@@ -52,7 +52,7 @@ class ReferenceCalibration:
 
     def reference_map(self, params) -> ReferenceMap:
         """The reference decoded with ``params`` (mode and Z0 as given)."""
-        from simbench.decode.persist import cached_decode_reference
+        from simbench.decode.persist import lookup_decoded_reference
 
         if params not in self._maps:
             primaries = None
@@ -63,7 +63,7 @@ class ReferenceCalibration:
                         "frames=True)"
                     )
                 primaries = [self.frames[k] for k in ("red", "green", "blue")]
-            self._maps[params] = cached_decode_reference(
+            ref, store = lookup_decoded_reference(
                 self.image,
                 rig=self.rig,
                 params=params,
@@ -71,6 +71,8 @@ class ReferenceCalibration:
                 dark=self.frames.get("dark"),
                 cache=self.cache,
             )
+            store()
+            self._maps[params] = ref
         return self._maps[params]
 
 
@@ -184,16 +186,7 @@ class ColourFringeSystem:
             cache=render.cache,
             phase=exposure_phase(render_seed),
         )
-        q = render_channels(
-            scene,
-            drive,
-            self.sensor,
-            spp=render.spp,
-            seed=render_seed,
-            max_depth=render.max_depth,
-            sampler=render.sampler,
-            cache=render.cache,
-        )
+        q = render_channels(scene, drive, self.sensor, seed=render_seed, render=render)
         return [record(q, sensor=self.sensor, scene=scene, rng=n) for n in noise_seeds]
 
     def decode(
