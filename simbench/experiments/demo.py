@@ -112,7 +112,14 @@ def run_demo(
             detail=True,
         )
         # timings go to the progress log only: result files must be identical on a re-run
-        row = {"scene": name, "seeds": acq.meta["seeds"], **m}
+        capture_seeds = acq.meta["seeds"][f"capture/{scene.name}"]
+        row = {
+            "scene": name,
+            **m,
+            "render_seed": capture_seeds["render"],
+            "noise_seed": capture_seeds["noise"],
+            "seeds": acq.meta["seeds"],
+        }
         rows.append(row)
         files[out / f"{name}.png"] = depth_figure(
             acq.capture,
@@ -146,6 +153,8 @@ def run_demo(
         "stripe_order_errors",
         "stripe_order_error_rate",
         "n_scored",
+        "render_seed",
+        "noise_seed",
     ]
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore", lineterminator="\n")
