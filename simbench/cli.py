@@ -469,7 +469,9 @@ def _cmd_demo(args) -> int:
     cfg = DemoConfig(spp=spp, sampler=sampler, seed=args.seed, sensor=args.camera)
     if args.scenes:
         cfg = replace(cfg, scenes=tuple(args.scenes))
-    run_demo(args.out, config=cfg, progress=lambda s: print(s, flush=True))
+    run_demo(
+        args.out, config=cfg, cache_dir=None if args.no_cache else args.cache, progress=lambda s: print(s, flush=True)
+    )
     print(f"wrote {args.out}/summary.md, metrics.json, provenance.json and one figure per scene")
     return 0
 
@@ -808,6 +810,7 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="render, decode and score the pipeline scenes into a results folder", **kw)
     s.add_argument("--out", default="results/demo", help="output folder")
     _add_render_options(s)
+    _add_cache_options(s)
     s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed")
     s.add_argument(
         "--sensor",

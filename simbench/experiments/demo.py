@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench.cache import RenderCache
 from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.device import get_sensor
 from simbench.experiments.common import SCENES_DIR, figure_png, git_commit
@@ -73,9 +74,14 @@ def depth_figure(capture: np.ndarray, depth_m: np.ndarray, gt_depth_m: np.ndarra
 
 
 def run_demo(
-    out_dir: str | Path, *, config: DemoConfig = DemoConfig(), progress: Callable[[str], None] = print
+    out_dir: str | Path,
+    *,
+    config: DemoConfig = DemoConfig(),
+    cache_dir: str | Path | None = None,
+    progress: Callable[[str], None] = log.info,
 ) -> dict:
-    """Render, decode and score each scene; write figures and tables to ``out_dir``.
+    """Render (through the render cache in ``cache_dir``; None: none), decode and score each
+    scene; write figures and tables to ``out_dir``.
 
     A Mitsuba variant must already be selected.
     """
@@ -86,6 +92,7 @@ def run_demo(
     out = Path(out_dir)
     sensor = get_sensor(config.sensor)
     pattern = config.decoder.pattern
+    cache = RenderCache(cache_dir)
     rows = []
     scenes = [load_scene(SCENES_DIR / f"{name}.toml") for name in config.scenes]  # all checked before rendering
     files: dict[Path, bytes] = {}
@@ -93,7 +100,9 @@ def run_demo(
         t0 = time.perf_counter()
         # seeds from the base seed and each capture's label (simbench.seeds): scenes sharing a
         # rig and Z0 share the reference capture
-        acq = acquire(scene, pattern=pattern, sensor=sensor, spp=config.spp, sampler=config.sampler, seed=config.seed)
+        acq = acquire(
+            scene, pattern=pattern, sensor=sensor, spp=config.spp, sampler=config.sampler, seed=config.seed, cache=cache
+        )
         t1 = time.perf_counter()
         params = dataclasses.replace(config.decoder, z0_m=scene.reference_depth_m)
         ref = decode_reference(acq.reference, rig=acq.scene.rig, params=params)
