@@ -461,17 +461,15 @@ def _cmd_score(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from simbench.experiments.demo import DemoConfig, run_demo
+    from simbench.experiments.demo import DEFAULT_SCENES, demo_config, run_demo
     from simbench.variant import select_variant
 
     spp, sampler = _render_settings(args)
     select_variant(args.variant)
-    cfg = DemoConfig(spp=spp, sampler=sampler, seed=args.seed, sensor=args.camera)
-    if args.scenes:
-        cfg = replace(cfg, scenes=tuple(args.scenes))
-    run_demo(
-        args.out, config=cfg, cache_dir=None if args.no_cache else args.cache, progress=lambda s: print(s, flush=True)
-    )
+    cfg = demo_config(spp=spp, sampler=sampler, seed=args.seed, sensor=args.camera)
+    scenes = tuple(args.scenes) if args.scenes else DEFAULT_SCENES
+    cache_dir = None if args.no_cache else args.cache
+    run_demo(args.out, config=cfg, scenes=scenes, cache_dir=cache_dir, progress=lambda s: print(s, flush=True))
     print(f"wrote {args.out}/summary.md, metrics.json, provenance.json and one figure per scene")
     return 0
 

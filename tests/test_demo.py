@@ -24,11 +24,12 @@ def test_demo_rerun_takes_its_renders_from_the_cache_and_writes_the_same_results
         return original(self, kind, parts, tracked)
 
     monkeypatch.setattr(RenderCache, "get_or_make", counting)
-    cfg = demo.DemoConfig(scenes=("white_plane",), spp=4, sampler="independent")
-    demo.run_demo(tmp_path / "a", config=cfg, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    cfg = demo.demo_config(spp=4, sampler="independent")
+    kw = {"config": cfg, "scenes": ("white_plane",), "cache_dir": tmp_path / "cache", "progress": lambda s: None}
+    demo.run_demo(tmp_path / "a", **kw)
     first = list(made)
     made.clear()
-    demo.run_demo(tmp_path / "b", config=cfg, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    demo.run_demo(tmp_path / "b", **kw)
     assert "radiance" in first and made == []
     assert (tmp_path / "a" / "metrics.json").read_bytes() == (tmp_path / "b" / "metrics.json").read_bytes()
     row = next(csv.DictReader((tmp_path / "b" / "summary.csv").read_text().splitlines()))
