@@ -157,9 +157,12 @@ def _cmd_render(args) -> int:
     from simbench.io import check_output_directory
     from simbench.variant import select_variant
     from simbench.scene import load_scene
-    from simbench.systems import get_system
+    from simbench.device import get_sensor
+    from simbench.systems import SystemOptions, get_system, system_names
 
-    system = get_system(args.system)  # an unknown name fails before anything else
+    if args.system not in system_names():  # an unknown name fails before anything else
+        get_system(args.system)
+    system = get_system(args.system, SystemOptions(sensor=get_sensor(args.camera)))
     scene = load_scene(args.scene)
     spp, sampler = _render_settings(args)
     manifest = "meta.json" if args.system == "proposed" else "device.json"

@@ -25,6 +25,7 @@ __all__ = [
     "check_seed",
     "derive_seed",
     "child_seed",
+    "frame_seed",
     "repetition_seed",
     "SeedLog",
 ]
@@ -40,6 +41,9 @@ CHILD_STREAMS = {
     "ambient_render": 3,  # the ambient-only render beside the projector render (simbench.simulate)
     "dlp_exposure_phase": 5,  # where the exposure starts in a video-mode DLP frame (simbench.simulate)
 }
+
+# the numbered frames of a multi-shot recording (a 3-word entropy: never equal to a child stream)
+FRAME_STREAM = 16
 
 
 def check_seed(seed: object) -> int:
@@ -61,6 +65,12 @@ def child_seed(seed: int, stream: str) -> np.random.SeedSequence:
     if stream not in CHILD_STREAMS:
         raise ValueError(f"unknown seed stream {stream!r}; valid: {sorted(CHILD_STREAMS)}")
     return np.random.SeedSequence([int(seed), CHILD_STREAMS[stream]])
+
+
+def frame_seed(seed: int, frame: int) -> np.random.SeedSequence:
+    """The camera-noise stream of frame ``frame`` of a multi-shot recording whose noise seed is
+    ``seed`` (each exposure of a sequence has its own noise)."""
+    return np.random.SeedSequence([check_seed(seed), FRAME_STREAM, int(frame)])
 
 
 def repetition_seed(base: int, repeat: int) -> int:

@@ -116,7 +116,8 @@ def ideal_system():
 
 
 def test_builtin_systems_are_registered_and_describe_themselves():
-    assert system_names()[:3] == ["proposed", "kinect", "tof"]
+    assert system_names()[:4] == ["proposed", "kinect", "tof", "phase_shift"]
+    assert get_system("phase_shift").info().captures == 12
     for name in ("proposed", "kinect", "tof"):
         system = get_system(name)
         assert isinstance(system, DepthSystem) and system.name == name
@@ -128,7 +129,9 @@ def test_builtin_systems_are_registered_and_describe_themselves():
 
 
 def test_unknown_system_lists_the_registered_ones():
-    with pytest.raises(ValueError, match=r"unknown depth system 'lidar'; registered: \['proposed', 'kinect', 'tof'\]"):
+    with pytest.raises(
+        ValueError, match=r"unknown depth system 'lidar'; registered: \['proposed', 'kinect', 'tof', 'phase_shift'\]"
+    ):
         get_system("lidar")
 
 
@@ -145,7 +148,7 @@ def test_registry_rejects_duplicates_and_wrong_objects(ideal_system):
         unregister_system("broken")
 
 
-@pytest.mark.parametrize("name", ["proposed", "kinect", "tof"])
+@pytest.mark.parametrize("name", ["proposed", "kinect", "tof", "phase_shift"])
 def test_bench_inputs_decode_to_the_plane(name):
     """Every built-in system decodes its benchmark plane at 1.1 m (the benchmark's input)."""
     system = get_system(name)

@@ -356,14 +356,14 @@ def score(
     edge_band_px: int = 0,
 ) -> dict:
     """:func:`simbench.metrics.score` of a recording's decoded depth (a
-    :class:`simbench.systems.SystemDepth` or a :class:`DecodeResult`), with its projector
-    columns where it has them."""
+    :class:`simbench.systems.SystemDepth` or a :class:`DecodeResult`), with stripe-order errors
+    where it has projector columns and ``period_px`` is given."""
     return metrics_score(
         result.depth_m,
         rec.gt,
         camera=rec.scene.rig.camera,
         region=region,
-        column_px=getattr(result, "column_px", None),
+        column_px=getattr(result, "column_px", None) if period_px is not None else None,
         period_px=period_px,
         edge_band_px=edge_band_px,
     )

@@ -12,8 +12,9 @@ numbers).  Experiments, the benchmark and the CLI loop over systems by name.
 
 Systems are registered by name (:func:`register_system`, the way Mitsuba registers plugins):
 the built-in ones are ``proposed`` (:mod:`simbench.systems.proposed`, the paper's colour
-sequence coded fringe sensor), ``kinect`` (:mod:`simbench.baselines.kinect`) and ``tof``
-(:mod:`simbench.baselines.tof`).  A new system is one module with a class following
+sequence coded fringe sensor), ``kinect`` (:mod:`simbench.baselines.kinect`), ``tof``
+(:mod:`simbench.baselines.tof`) and ``phase_shift`` (:mod:`simbench.systems.phase_shift`, the
+multi-shot reference on the proposed sensor's projector and camera).  A new system is one module with a class following
 :class:`DepthSystem` plus one :func:`register_system` call; :func:`get_system` builds a system by
 name from the run's :class:`SystemOptions` and lists the registered names when one is unknown.
 """
@@ -72,13 +73,16 @@ class SystemOptions:
 class SystemInfo:
     """What a system is: ``label`` for tables and plots, native ``size_hw`` (H, W) of its depth
     map, ``captures`` camera exposures per depth map (1 = single shot), ``numbers``: cited device
-    numbers, name -> (value, source)."""
+    numbers, name -> (value, source); ``period_px``: see below."""
 
     name: str
     label: str
     size_hw: tuple[int, int]
     captures: int
     numbers: dict[str, tuple[Any, str]] = field(default_factory=dict)
+    # the fringe period (projector px) of a structured-light system's columns: a decoded column
+    # off by more than half of it is a stripe-order error; None = no columns
+    period_px: float | None = None
 
 
 @dataclass(frozen=True)
@@ -261,3 +265,4 @@ def system_of_recording(in_dir: str | Path) -> str:
 register_system("proposed", "simbench.systems.proposed:ColourFringeSystem")
 register_system("kinect", "simbench.baselines.kinect:KinectSystem")
 register_system("tof", "simbench.baselines.tof:ToFSystem")
+register_system("phase_shift", "simbench.systems.phase_shift:PhaseShiftSystem")

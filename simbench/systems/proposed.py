@@ -106,6 +106,7 @@ class ColourFringeSystem:
             label="proposed (Li et al.)",
             size_hw=cam.size_hw,
             captures=1,
+            period_px=self.pattern.period_px,
             numbers={
                 "period_px": (self.pattern.period_px, "paper Sec. 3 (T = 21 projector px)"),
                 "debruijn_order": (self.pattern.order, "paper Eq. 7-8 (B(2, 3))"),

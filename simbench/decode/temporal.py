@@ -1,0 +1,183 @@
+"""Multi-shot structured light: N-step phase shifting with complementary Gray-code unwrapping.
+
+The accuracy reference of the field for static scenes, decoded pixel by pixel from a sequence of
+captures: ``N`` cosine fringes shifted by ``2 pi / N`` (period ``T`` projector px, the same
+phase convention as the paper's pattern, :func:`simbench.pattern.phase_from_column`) give the
+wrapped phase, the mean intensity ``A`` and the modulation ``B`` at every pixel; ``bits + 1``
+binary Gray-code frames, thresholded at ``A``, number the half periods, and the complementary
+choice between the period number and the half-period-shifted one removes the order errors at
+period borders, where a Gray-code transition and the phase wrap never coincide exactly in a
+real image.
+
+References
+----------
+.. [1] J. H. Bruning, D. R. Herriott, J. E. Gallagher, D. P. Rosenfeld, A. D. White, D. J.
+   Brangaccio, "Digital wavefront measuring interferometer for testing optical surfaces and
+   lenses", Applied Optics 13(11), 2693-2703, 1974 (N-step phase shifting).
+.. [2] Q. Zhang, X. Su, L. Xiang, X. Sun, "3-D shape measurement based on complementary
+   Gray-code light", Optics and Lasers in Engineering 50(4), 574-579, 2012.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simbench import validate
+from simbench.literature import PAPER_PERIOD_PX
+from simbench.pattern import column_from_phase, phase_from_column
+
+__all__ = [
+    "PhaseShiftSpec",
+    "phase_shift_frames",
+    "wrapped_phase",
+    "gray_order",
+    "decode_phase_shift",
+    "TemporalResult",
+]
+
+
+@dataclass(frozen=True)
+class PhaseShiftSpec:
+    """A phase-shifting + Gray-code sequence.
+
+    size_hw : projector pattern size (height, width), px
+    period_px : fringe period T, projector px (default: the paper's 21 px, so both systems
+        sample the surface at the same spatial frequency; assumption: a lab would choose
+        about this for this projector)
+    steps : phase steps N (>= 4; N steps are blind to the fringe's harmonics up to N - 2, which
+        a projector's gamma or a camera's saturation bring)
+    min_modulation : modulation ``B`` (image units, 0-1) below which a pixel is invalid (no
+        fringe: shadow, black surface); 0.02 is the single-shot decoder's ``min_amplitude``
+    """
+
+    size_hw: tuple[int, int] = (1140, 1824)
+    period_px: int = PAPER_PERIOD_PX
+    steps: int = 4
+    min_modulation: float = 0.02
+
+    def __post_init__(self) -> None:
+        w, h = validate.image_size(
+            self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height")
+        )
+        object.__setattr__(self, "size_hw", (h, w))
+        object.__setattr__(
+            self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
+        )
+        object.__setattr__(self, "steps", validate.integer(self.steps, "steps", lo=4, hi=64))
+        object.__setattr__(
+            self, "min_modulation", validate.number(self.min_modulation, "min_modulation", lo=0.0, hi=1.0)
+        )
+
+    @property
+    def gray_bits(self) -> int:
+        """Gray-code frames: enough bits to number every half period of the width."""
+        half_periods = math.ceil(2 * self.size_hw[1] / self.period_px)
+        return max(1, math.ceil(math.log2(half_periods)))
+
+    @property
+    def captures(self) -> int:
+        """Camera exposures per depth map: N fringes + the Gray-code frames."""
+        return self.steps + self.gray_bits
+
+
+def _half_period_index(spec: PhaseShiftSpec) -> np.ndarray:
+    """j = floor(2 s / T) of every projector column, s = u + 0.5 the column's centre measured
+    from the pattern's left edge (the phase convention of :func:`phase_from_column`)."""
+    s = np.arange(spec.size_hw[1], dtype=np.float64) + 0.5
+    return np.floor(2.0 * s / spec.period_px).astype(np.int64)
+
+
+def phase_shift_frames(spec: PhaseShiftSpec) -> np.ndarray:
+    """The projector frames, shape (N + bits, H, W), float32 in [0, 1]: the N shifted fringes
+    ``0.5 + 0.5 cos(phi(u) - 2 pi n / N)``, then the Gray code of the half-period index,
+    most significant bit first (white = 1)."""
+    h, w = spec.size_hw
+    phi = phase_from_column(np.arange(w, dtype=np.float64), period_px=spec.period_px)
+    rows = [0.5 + 0.5 * np.cos(phi - 2.0 * np.pi * n / spec.steps) for n in range(spec.steps)]
+    j = _half_period_index(spec)
+    gray = j ^ (j >> 1)
+    bits = spec.gray_bits
+    rows += [((gray >> (bits - 1 - b)) & 1).astype(np.float64) for b in range(bits)]
+    return np.broadcast_to(np.stack(rows)[:, None, :], (len(rows), h, w)).astype(np.float32)
+
+
+def wrapped_phase(frames: np.ndarray, *, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(wrapped phase in [-pi, pi), mean intensity A, modulation B) of N phase-shifted images
+    ``I_n = A + B cos(phi - 2 pi n / N)``, shape (N, H, W) -> each (H, W) float64.
+
+    The least-squares estimate: ``phi = atan2(sum I_n sin d_n, sum I_n cos d_n)``; with
+    independent noise of standard deviation sigma in every image its phase noise is
+    ``sqrt(2 / N) sigma / B``.
+    """
+    i = np.asarray(frames, dtype=np.float64)
+    if i.ndim != 3 or i.shape[0] != steps:
+        raise ValueError(f"need {steps} phase-shifted images of shape (H, W), got {i.shape}")
+    d = 2.0 * np.pi * np.arange(steps) / steps
+    s = np.tensordot(np.sin(d), i, axes=1)
+    c = np.tensordot(np.cos(d), i, axes=1)
+    phi = np.arctan2(s, c)
+    phi = np.where(phi >= np.pi, phi - 2.0 * np.pi, phi)
+    return phi, i.mean(axis=0), 2.0 / steps * np.hypot(s, c)
+
+
+def gray_order(bit_images: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """The half-period index j of every pixel from its Gray-code images (MSB first) read
+    against ``threshold`` (the mean intensity), shape (bits, H, W) -> (H, W) int64."""
+    b = np.asarray(bit_images, dtype=np.float64) > np.asarray(threshold, dtype=np.float64)[None]
+    gray = np.zeros(b.shape[1:], np.int64)
+    for plane in b:
+        gray = (gray << 1) | plane.astype(np.int64)
+    j = gray.copy()
+    shift = gray >> 1
+    while shift.any():
+        j ^= shift
+        shift >>= 1
+    return j
+
+
+@dataclass(frozen=True)
+class TemporalResult:
+    """column_px (H, W) float64, NaN invalid; valid (H, W) bool; modulation (H, W) float64
+    (``B``, the confidence); wrapped (H, W) float64; order (H, W) int64, the period number."""
+
+    column_px: np.ndarray
+    valid: np.ndarray
+    modulation: np.ndarray
+    wrapped: np.ndarray
+    order: np.ndarray
+
+
+def decode_phase_shift(frames: np.ndarray, *, spec: PhaseShiftSpec) -> TemporalResult:
+    """Projector column of every pixel from the images of :func:`phase_shift_frames` (same
+    order), shape (N + bits, H, W) float in [0, 1].
+
+    The wrapped phase gives the position inside a period, ``f = (phi + pi) / 2 pi``; the Gray
+    code numbers the half periods ``j``, so that ``k1 = j // 2`` changes at period borders and
+    ``k2 = (j + 1) // 2`` in their middles.  Near a border (``f < 1/4``: ``k2``; ``f > 3/4``:
+    ``k2 - 1``) the period number comes from ``k2``, elsewhere from ``k1``: each is read where
+    its own transitions are a quarter period away, so a Gray-code edge blurred or shifted by up
+    to a quarter period causes no order error (complementary Gray code, Zhang et al. 2012).
+
+    References
+    ----------
+    .. [1] Q. Zhang, X. Su, L. Xiang, X. Sun, "3-D shape measurement based on complementary
+       Gray-code light", Optics and Lasers in Engineering 50(4), 574-579, 2012.
+    """
+    f = np.asarray(frames)
+    if f.ndim != 3 or f.shape[0] != spec.captures:
+        raise ValueError(
+            f"need {spec.captures} images (N = {spec.steps} fringes + {spec.gray_bits} Gray-code frames), "
+            f"got shape {f.shape}"
+        )
+    phi, mean, mod = wrapped_phase(f[: spec.steps], steps=spec.steps)
+    j = gray_order(f[spec.steps :], mean)
+    frac = (phi + np.pi) / (2.0 * np.pi)
+    k1, k2 = j >> 1, (j + 1) >> 1
+    k = np.where(frac < 0.25, k2, np.where(frac > 0.75, k2 - 1, k1))
+    column = column_from_phase(phi + 2.0 * np.pi * k, period_px=spec.period_px)
+    w = spec.size_hw[1]
+    valid = np.isfinite(column) & (mod >= spec.min_modulation) & (column >= -0.5) & (column <= w - 0.5)
+    return TemporalResult(column_px=np.where(valid, column, np.nan), valid=valid, modulation=mod, wrapped=phi, order=k)

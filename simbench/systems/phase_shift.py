@@ -1,0 +1,196 @@
+"""The multi-shot reference as a depth system: N-step phase shifting with complementary
+Gray-code unwrapping (:mod:`simbench.decode.temporal`) on the proposed sensor's projector and
+camera, triangulated with the rig.
+
+It sees a scene exactly as the proposed sensor does (same rig, sensor model, lenses, ambient
+light: :meth:`simbench.systems.proposed.ColourFringeSystem.prepare`) and projects grey frames
+(the same drive in the three primaries); the camera records each, and the decoder reads the
+mean of the three colour channels.  It needs ``N + bits`` exposures of a static scene (18 with
+the defaults): the price single-shot sensing avoids.  No reference plane: the column is
+triangulated with the rig (paper Eq. 15's geometry).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, phase_shift_frames
+from simbench.mitsuba_dict import RenderSettings
+from simbench.scene import SceneSpec
+from simbench.systems import SystemDepth, SystemInfo, SystemOptions
+
+__all__ = ["PhaseShiftSystem", "DEPTH_RANGE_M"]
+
+# depths outside are invalid (the working range of simbench.decode.DecoderParams' default)
+DEPTH_RANGE_M = (0.75, 1.75)
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """A recorded colour image as one grey image in [0, 1], float32."""
+    img = np.asarray(image)
+    scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
+    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
+
+
+class PhaseShiftSystem:
+    """The multi-shot reference (module docstring); ``options`` gives the sensor model and the
+    camera scale (the proposed sensor's), ``spec`` the sequence."""
+
+    name = "phase_shift"
+    seed_prefix = "phase_shift/"
+
+    def __init__(self, options: SystemOptions | None = None, *, spec: PhaseShiftSpec | None = None) -> None:
+        from simbench.systems.proposed import ColourFringeSystem
+
+        self._optics = ColourFringeSystem(options)
+        self.sensor = self._optics.sensor
+        self.spec = spec if spec is not None else PhaseShiftSpec()
+        self._frames_u8 = None
+
+    def info(self) -> SystemInfo:
+        s = self.spec
+        return SystemInfo(
+            name=self.name,
+            label=f"{s.steps}-step phase shifting + Gray code (simulated)",
+            size_hw=self._optics.info().size_hw,
+            captures=s.captures,
+            period_px=s.period_px,
+            numbers={
+                "steps": (s.steps, "assumption: the common choice; N steps are blind to fringe harmonics up to N - 2"),
+                "period_px": (s.period_px, "the paper's period (same spatial frequency as the proposed pattern)"),
+                "gray_bits": (s.gray_bits, "complementary Gray code over the projector width (Zhang et al. 2012)"),
+            },
+        )
+
+    def frames_u8(self) -> np.ndarray:
+        """The projector frames as 8-bit RGB drives, shape (K, Hp, Wp, 3)."""
+        if self._frames_u8 is None:
+            from simbench.pattern import quantize
+
+            grey = phase_shift_frames(self.spec)
+            self._frames_u8 = quantize(np.repeat(grey[..., None], 3, axis=-1))
+        return self._frames_u8
+
+    def prepare(self, scene: SceneSpec) -> SceneSpec:
+        return self._optics.prepare(scene)
+
+    def calibration_key(self, scene: SceneSpec) -> None:
+        return None
+
+    def calibrate(self, scene: SceneSpec, *, seeds: object, render: RenderSettings) -> None:
+        return None  # triangulation with the rig: nothing to record
+
+    def acquire(
+        self,
+        scene: SceneSpec,
+        calibration: None,
+        *,
+        render_seed: int,
+        noise_seeds: list[int],
+        render: RenderSettings,
+    ) -> list[np.ndarray]:
+        """Every frame rendered once (the same sampler seed: one static scene) and recorded
+        once per noise seed with its own camera noise (:func:`simbench.seeds.frame_seed`);
+        each recording has shape (K, H, W), float32 grey in [0, 1]."""
+        from simbench.seeds import frame_seed
+        from simbench.simulate import ProjectorDrive, exposure_phase, record, render_channels
+
+        if tuple(self.spec.size_hw) != scene.rig.projector.size_hw:
+            raise ValueError(
+                f"pattern size {self.spec.size_hw} differs from the projector's {scene.rig.projector.size_hw}"
+            )
+        phase = exposure_phase(render_seed)
+        qs = []
+        for frame in self.frames_u8():
+            drive = ProjectorDrive(scene, frame, self.sensor, cache=render.cache, phase=phase)
+            qs.append(render_channels(scene, drive, self.sensor, seed=render_seed, render=render))
+        return [
+            np.stack(
+                [_grey(record(q, sensor=self.sensor, scene=scene, rng=frame_seed(n, k))) for k, q in enumerate(qs)]
+            )
+            for n in noise_seeds
+        ]
+
+    def decode(self, raw: np.ndarray, calibration: None = None, *, scene: SceneSpec) -> SystemDepth:
+        """Undistort each frame with the camera's lens (as the rig file records it), decode
+        the columns (:func:`simbench.decode.temporal.decode_phase_shift`) and triangulate."""
+        from simbench.optics import undistort_image
+        from simbench.rig import triangulate_columns
+
+        frames = np.asarray(raw, dtype=np.float32)
+        cam = scene.rig.camera
+        if frames.shape[1:] != cam.size_hw:
+            raise ValueError(f"frames of shape {frames.shape[1:]} do not match the camera's {cam.size_hw}")
+        if cam.has_distortion:
+            frames = np.stack([undistort_image(f, cam) for f in frames])
+        r = decode_phase_shift(frames, spec=self.spec)
+        z = triangulate_columns(r.column_px, scene.rig)
+        near, far = DEPTH_RANGE_M
+        with np.errstate(invalid="ignore"):
+            valid = r.valid & (z >= near) & (z <= far)
+        return SystemDepth(
+            depth_m=np.where(valid, z, np.nan).astype(np.float32),
+            valid=valid,
+            confidence=r.modulation.astype(np.float32),
+            column_px=np.where(valid, r.column_px, np.nan),
+            detail=r,
+        )
+
+    def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, None, SceneSpec]:
+        """(frames, None, scene) of a plane at 1.1 m in the paper's rig made in numpy
+        (:mod:`simbench.synthetic`), with the minimal camera's noise; deterministic for a seed."""
+        from simbench.device import get_sensor
+        from simbench.projector import transfer_curve
+        from simbench.rig import paper_rig
+        from simbench.sensor import simple_camera
+        from simbench.synthetic import synthetic_plane_capture
+
+        if scene != "plane":
+            raise ValueError(f"the {self.name} benchmark has only the plane, not {scene!r}")
+        rig = paper_rig()
+        cam = get_sensor("minimal").camera
+        rng = np.random.default_rng(seed)
+        frames = []
+        for frame in self.frames_u8():
+            rad = synthetic_plane_capture(
+                transfer_curve(frame, transfer="linear"), rig, point_m=(0, 0, 1.1), supersample=2
+            )[0]
+            frames.append(_grey(simple_camera(rad / 1.21, camera=cam, rng=rng)))
+        return np.stack(frames), None, SceneSpec(name="bench_plane", rig=rig, objects=())
+
+    def write_recording(
+        self,
+        out_dir: Path,
+        raw: np.ndarray,
+        calibration: None,
+        *,
+        scene: SceneSpec,
+        gt: object,
+        meta: dict,
+        overwrite: bool = False,
+    ) -> dict[str, Path]:
+        """``frames.npy`` ((K, H, W) float32 grey), ``rig.toml``, ground truth, ``device.json``."""
+        from simbench.baselines.recording import write_device_recording
+        from simbench.io import save_npy
+        from simbench.rig import save_rig
+
+        writers = {
+            "frames": lambda d: save_npy(d / "frames.npy", np.asarray(raw, np.float32)),
+            "rig": lambda d: save_rig(scene.rig, d / "rig.toml"),
+        }
+        return write_device_recording(
+            out_dir, self.name, self.spec, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
+        )
+
+    def read_recording(self, in_dir: Path) -> tuple[np.ndarray, None, SceneSpec]:
+        from simbench.baselines.recording import read_device_info
+        from simbench.io import load_npy
+        from simbench.rig import load_rig
+
+        d = Path(in_dir)
+        self.spec, info = read_device_info(d, self.name, PhaseShiftSpec)
+        rig = load_rig(d / "rig.toml")
+        frames = load_npy(d / "frames.npy", expected_shape=(self.spec.captures, *rig.camera.size_hw))
+        return frames, None, SceneSpec(name=str(info.get("scene", d.name)), rig=rig, objects=())
