@@ -58,26 +58,16 @@ def test_remap_maps_are_cached_per_device_with_the_same_bits():
     intr = Intrinsics(320, 240, 578.0, 159.5, 119.5, DIST)
     img = np.random.default_rng(3).integers(0, 256, (240, 320, 3), dtype=np.uint8)
     x, y = _grid(intr)
-    xd, yd = distort_normalized(x, y, DIST)
-    fresh = cv2.remap(
-        img,
-        (xd * intr.focal_px + intr.cx_px).astype(np.float32),
-        (yd * intr.focal_px + intr.cy_px).astype(np.float32),
-        cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=0,
-    )
-    assert np.array_equal(undistort_image(img, intr), fresh)
-    xu, yu = undistort_normalized(x, y, DIST)
-    fresh = cv2.remap(
-        img,
-        (xu * intr.focal_px + intr.cx_px).astype(np.float32),
-        (yu * intr.focal_px + intr.cy_px).astype(np.float32),
-        cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=0,
-    )
-    assert np.array_equal(distort_image(img, intr), fresh)
+
+    def remap(xn, yn):  # the image sampled at normalised coordinates, maps built afresh
+        mx, my = (
+            (xn * intr.focal_px + intr.cx_px).astype(np.float32),
+            (yn * intr.focal_px + intr.cy_px).astype(np.float32),
+        )
+        return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    assert np.array_equal(undistort_image(img, intr), remap(*distort_normalized(x, y, DIST)))
+    assert np.array_equal(distort_image(img, intr), remap(*undistort_normalized(x, y, DIST)))
     for maps in (_undistort_maps, _distort_maps):
         a, b = maps(intr), maps(dataclasses.replace(intr))
         assert a[0] is b[0] and not a[0].flags.writeable

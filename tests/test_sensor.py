@@ -54,30 +54,15 @@ def test_photons_per_unit_radiance_matches_the_camera_equation():
     from simbench.photometry import photons_per_unit_radiance
 
     expected = (1 / 16) * (5.3e-6) ** 2 * 0.01 * 520e-9 / (6.62607015e-34 * 299792458.0)
-    got = photons_per_unit_radiance(
-        irradiance_1m_w_m2=1.0,
-        wavelength_nm=520,
-        f_number=2.0,
-        pixel_pitch_um=5.3,
-        exposure_s=0.01,
-        lens_transmission=1.0,
-    )
+    base = {"irradiance_1m_w_m2": 1.0, "wavelength_nm": 520, "f_number": 2.0, "pixel_pitch_um": 5.3, "exposure_s": 0.01}
+    got = photons_per_unit_radiance(**base, lens_transmission=1.0)
     assert got == pytest.approx(expected, rel=1e-12)
     assert got == pytest.approx(45_970, rel=1e-3)
     # inverse-square in the f-number, linear in exposure
-    half = photons_per_unit_radiance(
-        irradiance_1m_w_m2=1.0,
-        wavelength_nm=520,
-        f_number=4.0,
-        pixel_pitch_um=5.3,
-        exposure_s=0.02,
-        lens_transmission=1.0,
-    )
+    half = photons_per_unit_radiance(**{**base, "f_number": 4.0, "exposure_s": 0.02}, lens_transmission=1.0)
     assert half == pytest.approx(got / 2)
     with pytest.raises(ValueError, match="f_number"):
-        photons_per_unit_radiance(
-            irradiance_1m_w_m2=1.0, wavelength_nm=520, f_number=0, pixel_pitch_um=5.3, exposure_s=0.01
-        )
+        photons_per_unit_radiance(**{**base, "f_number": 0})
 
 
 def test_emva_photon_transfer_returns_gain_and_dark_noise():

@@ -27,7 +27,7 @@ import numpy as np
 
 from simbench import validate
 from simbench.literature import PAPER_PERIOD_PX
-from simbench.pattern import column_from_phase, phase_from_column
+from simbench.pattern import PatternSpec, column_from_phase, phase_from_column
 
 __all__ = [
     "PhaseShiftSpec",
@@ -59,13 +59,10 @@ class PhaseShiftSpec:
     min_modulation: float = 0.02
 
     def __post_init__(self) -> None:
-        w, h = validate.image_size(
-            self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height")
-        )
-        object.__setattr__(self, "size_hw", (h, w))
-        object.__setattr__(
-            self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
-        )
+        # size and period checked as the single-shot pattern's are
+        geometry = PatternSpec(size_hw=self.size_hw, period_px=self.period_px)
+        object.__setattr__(self, "size_hw", geometry.size_hw)
+        object.__setattr__(self, "period_px", geometry.period_px)
         object.__setattr__(self, "steps", validate.integer(self.steps, "steps", lo=4, hi=64))
         object.__setattr__(
             self, "min_modulation", validate.number(self.min_modulation, "min_modulation", lo=0.0, hi=1.0)
