@@ -158,7 +158,7 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     sensor = get_sensor("paper")
     session = Session(RunConfig.preset(quick=True), out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
     scene = physical_scene(session.scene("plane_white"), sensor)
-    pattern = session.pattern_u8
+    pattern = session.proposed.pattern_u8
     cache = RenderCache(tmp_path / "cache")
     first = ProjectorDrive(scene, pattern, sensor, cache=cache)
     array = projector_drive_for(scene, pattern, sensor)

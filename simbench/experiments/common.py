@@ -183,8 +183,6 @@ class Session:
         self._systems: dict[str, DepthSystem] = {}
         self._calibrations: dict = {}
         self.proposed = self.system("proposed")
-        self.pattern = self.proposed.pattern
-        self.pattern_u8 = self.proposed.pattern_u8
 
     @property
     def render(self) -> RenderSettings:
@@ -228,12 +226,12 @@ class Session:
 
     def calibration(self, system: DepthSystem, scene: SceneSpec, **options) -> object:
         """``system``'s calibration for ``scene`` (prepared), recorded once per run for each
-        calibration key, sensor and render setting (``options`` go to its ``calibrate``)."""
+        calibration key (the system says what it depends on) and render setting (``options`` go
+        to its ``calibrate``)."""
         r = self.render
         key = (
             system.name,
             system.calibration_key(scene),
-            getattr(system, "sensor", None),
             r.spp,
             r.sampler,
             r.max_depth,

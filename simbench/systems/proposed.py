@@ -130,7 +130,9 @@ class ColourFringeSystem:
         return f"reference/{scene.rig.name}/{scene.reference_depth_m:g}/{scene.projector_scale:g}/{scene.ambient_rgb}"
 
     def calibration_key(self, scene: SceneSpec) -> tuple:
+        """One reference capture per rig, lighting, reference-board form and sensor model."""
         return (
+            self.sensor,
             scene.rig,
             scene.reference_depth_m,
             scene.projector_scale,
