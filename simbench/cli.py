@@ -123,6 +123,18 @@ def _render_settings(args) -> tuple[int, str]:
 _MAX_DEPTH = _int(2, 1024)
 
 
+def _distortion_models() -> list[str]:
+    from simbench.calibration.procedure import DISTORTION_MODELS
+
+    return list(DISTORTION_MODELS)
+
+
+def _samplers() -> tuple[str, ...]:
+    from simbench.mitsuba_dict import SAMPLERS
+
+    return SAMPLERS
+
+
 def _system_names() -> list[str]:
     from simbench.systems import system_names
 
@@ -270,6 +282,75 @@ def _z0_for(reference: Path, z0: float | None) -> float:
             meta["reference_depth_m"], f"{reference.parent / 'meta.json'}: reference_depth_m", lo=0.0, lo_open=True
         )
     return 1.0
+
+
+def _cmd_calibrate(args) -> int:
+    from simbench.calibration import calibrate_rig, get_target, true_rig
+    from simbench.calibration.report import write_calibration
+    from simbench.device import get_sensor
+    from simbench.io import check_output_directory
+    from simbench.mitsuba_dict import RenderSettings, check_sampler
+    from simbench.rig import get_rig
+    from simbench.variant import select_variant
+
+    rig = get_rig(args.rig)
+    target = get_target(args.target)
+    sensor = get_sensor(args.camera)
+    check_sampler(args.sampler, args.spp)
+    check_sampler(args.sampler, args.corner_spp)
+    check_output_directory(args.out, manifest="calibration.json", overwrite=args.overwrite)
+    variant = select_variant(args.variant)
+    cache = _cache_of(args)
+    render = RenderSettings(spp=args.spp, sampler=args.sampler, max_depth=args.max_depth, cache=cache)
+    t0 = time.perf_counter()
+
+    def progress(done: int, total: int) -> None:
+        print(f"simbench: pose {done}/{total} ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+    result = calibrate_rig(
+        rig,
+        target=target,
+        sensor=sensor,
+        poses=args.poses,
+        seed=args.seed,
+        render=render,
+        corner_spp=args.corner_spp,
+        distortion=args.distortion,
+        progress=progress,
+    )
+    settings = {
+        "rig": str(args.rig),
+        "target": str(args.target),
+        "sensor": str(args.camera),
+        "poses": args.poses,
+        "seed": args.seed,
+        "spp": args.spp,
+        "corner_spp": args.corner_spp,
+        "sampler": args.sampler,
+        "max_depth": args.max_depth,
+        "distortion": args.distortion,
+        "variant": variant,
+    }
+    command = "simbench " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] else "simbench calibrate"
+    files = write_calibration(
+        args.out,
+        result,
+        target=target,
+        truth=true_rig(rig, sensor),
+        settings=settings,
+        command=command,
+        overwrite=args.overwrite,
+    )
+    rms = result.rms_px
+    cached = f", {cache.hits} of {cache.hits + cache.misses} poses from the cache" if cache.root is not None else ""
+    print(
+        f"calibrated {rig.name} through sensor model {args.camera} from {len(result.used_views)} of {args.poses} poses "
+        f"({variant}{cached}) in {time.perf_counter() - t0:.1f} s: reprojection RMS camera {rms['camera']:.3f} px, "
+        f"projector {rms['projector']:.3f} px, stereo {rms['stereo']:.3f} px -> {Path(args.out)}/"
+    )
+    for key, path in files.items():
+        print(f"  {key:9s} {path.name}")
+    return 0
 
 
 def _cmd_decode(args) -> int:
@@ -486,6 +567,16 @@ def _decode_recording(args) -> int:
 
     system = get_system(system_of_recording(args.capture))
     raw, cal, scene = system.read_recording(Path(args.capture))
+    if args.rig is not None:  # e.g. the rig `simbench calibrate` estimated, instead of the recorded one
+        from simbench.rig import load_rig
+
+        rig = load_rig(args.rig)
+        if rig.camera.size_hw != scene.rig.camera.size_hw:
+            raise ValueError(
+                f"--rig {args.rig}: camera {rig.camera.width_px}x{rig.camera.height_px}, but the recording's is "
+                f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
+            )
+        scene = replace(scene, rig=rig)
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
@@ -737,6 +828,50 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_render)
 
+    s = sub.add_parser(
+        "calibrate",
+        help="calibrate a rig as a lab does: a printed target at seeded poses, rendered through the sensor model, "
+        "solved with OpenCV; writes the estimated rig (rig.toml), a report and a figure",
+        **kw,
+    )
+    s.add_argument("--rig", default="paper", help="the rig to calibrate: a preset (paper) or a rig TOML file")
+    s.add_argument(
+        "--target", default="checkerboard", help="calibration target: a preset (checkerboard) or a target TOML file"
+    )
+    s.add_argument(
+        "--sensor",
+        "--camera",
+        dest="camera",
+        default="paper",
+        help="sensor model the calibration images go through (a preset or a sensor TOML file)",
+    )
+    s.add_argument("--poses", type=_int(3, 200), default=10, help="target poses (OpenCV asks for >= 10)")
+    s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed of the poses, renders and noise")
+    s.add_argument(
+        "--spp", type=_SPP, default=1, help="samples per pixel of the phase-shifting and Gray-code frames (default 1)"
+    )
+    s.add_argument(
+        "--corner-spp", type=_SPP, default=16, help="samples per pixel of the white frames the corners are found in"
+    )
+    s.add_argument(
+        "--sampler",
+        choices=_samplers(),
+        default="multijitter",
+        help="Mitsuba sample generator (multijitter: stratified edges for the corner detector)",
+    )
+    s.add_argument("--max-depth", type=_MAX_DEPTH, default=2, help="longest light path (2: direct light; one board)")
+    s.add_argument(
+        "--distortion",
+        choices=_distortion_models(),
+        default="radial",
+        help="lens model fitted: radial (k1, k2) or radial_tangential (also p1, p2, Bouguet's default)",
+    )
+    s.add_argument("--out", required=True, help="output folder (written whole or not at all)")
+    s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds other files")
+    _add_cache_options(s)
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
+    s.set_defaults(fn=_cmd_calibrate)
+
     s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)", **kw)
     s.add_argument(
         "capture",
@@ -744,7 +879,11 @@ def _parser() -> argparse.ArgumentParser:
         "--system; its reference, rig and calibration frames are used)",
     )
     s.add_argument("--reference", help="reference-plane capture (reference mode)")
-    s.add_argument("--rig", help="rig TOML file (required unless CAPTURE is a render folder)")
+    s.add_argument(
+        "--rig",
+        help="rig TOML file (required unless CAPTURE is a render folder; given with a folder, it replaces the folder's "
+        "rig: e.g. the rig.toml of `simbench calibrate`)",
+    )
     s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
     s.add_argument("--ply", help="also write the point cloud as PLY")
     s.add_argument("--debug-dir", help="write every decoder stage here")

@@ -40,7 +40,9 @@ __all__ = [
     "rig_to_dict",
     "load_rig",
     "save_rig",
+    "rig_toml",
     "rotation_xyz_deg",
+    "angles_xyz_deg",
     "pixel_rays",
     "project_to_projector",
     "triangulate_columns",
@@ -130,6 +132,18 @@ def rotation_xyz_deg(angles_deg: tuple[float, float, float]) -> np.ndarray:
     ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
     return rz @ ry @ rx
+
+
+def angles_xyz_deg(rotation: np.ndarray) -> tuple[float, float, float]:
+    """The angles (degrees) about x, y, z of a rotation matrix, the inverse of
+    :func:`rotation_xyz_deg` (the angle about y in [-90, 90])."""
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape != (3, 3) or not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise ValueError(f"not a rotation matrix: {r.tolist()}")
+    ay = math.asin(float(np.clip(-r[2, 0], -1.0, 1.0)))
+    ax = math.atan2(r[2, 1], r[2, 2])
+    az = math.atan2(r[1, 0], r[0, 0])
+    return tuple(math.degrees(a) for a in (ax, ay, az))
 
 
 @dataclass(frozen=True)
@@ -318,11 +332,16 @@ _RIG_HEADER = """\
 """
 
 
-def save_rig(rig: Rig, path: str | Path) -> Path:
-    """Write a rig TOML file (atomically) that :func:`load_rig` reads back to an equal rig."""
+def rig_toml(rig: Rig) -> str:
+    """The text of a rig TOML file (:func:`save_rig`), with its explanatory header."""
     import tomli_w
 
-    return atomic_write_text(Path(path), _RIG_HEADER + tomli_w.dumps(rig_to_dict(rig)))
+    return _RIG_HEADER + tomli_w.dumps(rig_to_dict(rig))
+
+
+def save_rig(rig: Rig, path: str | Path) -> Path:
+    """Write a rig TOML file (atomically) that :func:`load_rig` reads back to an equal rig."""
+    return atomic_write_text(Path(path), rig_toml(rig))
 
 
 def load_rig(path: str | Path) -> Rig:
@@ -378,6 +397,10 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
     return prj.focal_px * x + prj.cx_px, prj.focal_px * y + prj.cy_px, z
 
 
+# fixed-point steps of triangulate_columns through projector distortion in a non-rectified rig
+TRIANGULATION_ITERATIONS = 4
+
+
 def triangulate_columns(
     column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None
 ) -> np.ndarray:
@@ -403,24 +426,36 @@ def triangulate_columns(
     else:
         rx = (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px
         ry = (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px
+    r = rig.rotation
+    t = np.asarray(rig.position_m)
+
+    def plane_depth(ideal_col: np.ndarray) -> np.ndarray:
+        # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f;
+        # normal n = R @ (1, 0, -a); plane n.(X - t) = 0; ray X = Z * (rx, ry, 1).
+        a = (ideal_col - prj.cx_px) / prj.focal_px
+        nx, ny, nz = r[0, 0] - a * r[0, 2], r[1, 0] - a * r[1, 2], r[2, 0] - a * r[2, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz)
+
     if prj.has_distortion:
         from simbench.optics import undistort_projector_columns
 
+        # a decoded DMD column is an ideal column only together with its projector row: in a
+        # rectified rig that row's normalised y is the camera pixel's, exactly
+        ideal = undistort_projector_columns(col, ry, prj)
         if not rig.is_rectified:
-            raise ValueError(
-                "triangulating through projector distortion needs a rectified rig (parallel axes, baseline along +x)"
-            )
-        col = undistort_projector_columns(col, ry, prj)
-    # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f.
-    a = (col - prj.cx_px) / prj.focal_px
-    r = rig.rotation
-    t = np.asarray(rig.position_m)
-    # normal n = R @ (1, 0, -a); plane n.(X - t) = 0; ray X = Z * (rx, ry, 1).
-    nx, ny, nz = r[0, 0] - a * r[0, 2], r[1, 0] - a * r[1, 2], r[2, 0] - a * r[2, 2]
-    num = nx * t[0] + ny * t[1] + nz * t[2]
-    den = nx * rx + ny * ry + nz
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = num / den
+            # any other rig (a calibrated one is never exactly rectified): the row where the
+            # point lands in the projector, from the depth so far; a fixed point that gains
+            # ~3 orders of magnitude per step for a near-rectified rig
+            for _ in range(TRIANGULATION_ITERATIONS):
+                z = plane_depth(ideal)
+                x_cam = np.stack(np.broadcast_arrays(z * rx, z * ry, z), axis=-1) - t
+                x_prj = x_cam @ r  # R^T (X - t), row vectors
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    y_prj = x_prj[..., 1] / x_prj[..., 2]
+                ideal = undistort_projector_columns(col, np.where(np.isfinite(y_prj), y_prj, ry), prj)
+        col = ideal
+    z = plane_depth(col)
     return np.where(np.isfinite(z) & (z > 0), z, np.nan)
 
 

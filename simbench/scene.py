@@ -35,6 +35,13 @@ A plane may also have a form error, as real boards do (:func:`board_form_m`): ``
 (default :data:`WAVINESS_PERIOD_M`) and ``waviness_phase_rad``; such a plane is rendered as a
 displaced grid mesh (:data:`BOARD_GRID`, :data:`RIPPLE_CELLS`).
 
+A ``target`` is a printed calibration checkerboard (:mod:`simbench.calibration`): a plane of
+``squares = [columns, rows]`` squares of side ``square_m`` inside a white margin of
+``margin_squares`` squares, the dark squares of reflectance ``ink_rgb`` (default: the paint
+minimum, :data:`PAINT_MIN_REFLECTANCE`), the paper of the material's ``rgb``; it takes a
+plane's ``center_m``, ``rotation_deg`` and form keys, and its square in the top left corner
+(board x and y smallest) is dark.
+
 Spheres take ``center_m`` and ``radius_m``; meshes take ``file`` (PLY/OBJ, relative to the
 scene file), ``scale`` (uniform, mesh units to metres), ``translate_m`` and ``rotation_deg``.
 All coordinates are in the camera frame (x right, y down, z forward, metres).
@@ -72,6 +79,8 @@ __all__ = [
     "place_objects",
     "object_to_mitsuba",
     "paint_reflectance",
+    "target_texture",
+    "target_size_m",
 ]
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
@@ -499,6 +508,49 @@ def _parse_plane(d: dict, where: str, base_dir: Path) -> dict:
     return {**_parse_board(d, where, base_dir, dims=2), **_board_form(d, where)}
 
 
+def target_size_m(squares: tuple[int, int], square_m: float, margin_squares: int) -> tuple[float, float]:
+    """Printed size (x, y) of a checkerboard target with its margin, metres."""
+    return tuple(float((n + 2 * margin_squares) * square_m) for n in squares)
+
+
+def target_texture(
+    squares: tuple[int, int], margin_squares: int, *, paper_rgb: Sequence[float], ink_rgb: Sequence[float]
+) -> np.ndarray:
+    """The printed target, one texel per square: shape (rows + 2 m, columns + 2 m, 3) float32,
+    row 0 at the board's smallest y; the first square of the checkerboard is dark."""
+    cols, rows = squares
+    m = margin_squares
+    tex = np.empty((rows + 2 * m, cols + 2 * m, 3), np.float32)
+    tex[:] = np.asarray(paper_rgb, np.float32)
+    j, i = np.mgrid[0:rows, 0:cols]
+    tex[m : m + rows, m : m + cols][(i + j) % 2 == 0] = np.asarray(ink_rgb, np.float32)
+    return tex
+
+
+def _parse_target(d: dict, where: str, base_dir: Path) -> dict:
+    # assumption: a checkerboard has 2-64 squares a side of 1 mm - 0.5 m
+    squares = tuple(validate.integer(n, f"{where}: squares", lo=2, hi=64) for n in _list(d.get("squares"), 2, where))
+    square_m = validate.number(d.get("square_m"), f"{where}: square_m", lo=0.001, hi=0.5)
+    margin = validate.integer(d.get("margin_squares", 1), f"{where}: margin_squares", lo=0, hi=10)
+    ink = validate.numbers(d.get("ink_rgb", (PAINT_MIN_REFLECTANCE,) * 3), f"{where}: ink_rgb", 3, lo=0.0, hi=1.0)
+    p: dict[str, object] = {
+        "center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m"),
+        "rotation_deg": _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg"),
+        "squares": squares,
+        "square_m": square_m,
+        "margin_squares": margin,
+        "ink_rgb": ink,
+        "size_m": target_size_m(squares, square_m, margin),
+    }
+    return {**p, **_board_form(d, where)}
+
+
+def _list(value: object, n: int, where: str) -> list:
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise ValueError(f"{where}: squares must be a list of {n} integers [columns, rows], got {value!r}")
+    return list(value)
+
+
 def _parse_box(d: dict, where: str, base_dir: Path) -> dict:
     return _parse_board(d, where, base_dir, dims=3)
 
@@ -537,6 +589,24 @@ def _plane_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
     return {"type": "rectangle", "to_world": tw, "flip_normals": True, "bsdf": bsdf}
 
 
+def _target_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
+    tex = target_texture(
+        obj.get("squares"), obj.get("margin_squares"), paper_rgb=obj.material.rgb, ink_rgb=obj.get("ink_rgb")
+    )
+    # nearest texels: the squares' edges are sharp; the path tracer's samples antialias them
+    reflectance = {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(tex),
+        "raw": True,
+        "filter_type": "nearest",
+        "wrap_mode": "clamp",
+    }
+    textured = {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": reflectance}}
+    if any(obj.get(k) for k in BOARD_FORM_KEYS):
+        return _formed_board(mi, obj, textured, key, texcoords=True)
+    return _plane_to_mitsuba(mi, obj, textured, key)
+
+
 def _box_to_mitsuba(mi, obj: SceneObject, bsdf: dict, key: str):
     tw = _to_world(
         mi, translate=obj.get("center_m"), rotation_deg=obj.get("rotation_deg"), scale=np.asarray(obj.get("size_m")) / 2
@@ -572,12 +642,21 @@ class ObjectKind:
     to_mitsuba: Callable
     position_key: str = "center_m"
     tilts: bool = True
+    # parameters holding reflectances besides the material's (seen through the camera's
+    # channels like it: simbench.simulate's crosstalk path maps them too)
+    colour_keys: tuple[str, ...] = ()
 
 
 # adding an object kind is one entry here
 OBJECT_KIND_TABLE: dict[str, ObjectKind] = {
     "plane": ObjectKind(("center_m", "size_m", "rotation_deg", *BOARD_FORM_KEYS), _parse_plane, _plane_to_mitsuba),
     "box": ObjectKind(("center_m", "size_m", "rotation_deg"), _parse_box, _box_to_mitsuba),
+    "target": ObjectKind(
+        ("center_m", "rotation_deg", "squares", "square_m", "margin_squares", "ink_rgb", *BOARD_FORM_KEYS),
+        _parse_target,
+        _target_to_mitsuba,
+        colour_keys=("ink_rgb",),
+    ),
     "sphere": ObjectKind(("center_m", "radius_m"), _parse_sphere, _sphere_to_mitsuba, tilts=False),
     "mesh": ObjectKind(
         ("file", "scale", "translate_m", "rotation_deg"), _parse_mesh, _mesh_to_mitsuba, position_key="translate_m"
@@ -587,7 +666,7 @@ OBJECT_KIND_TABLE: dict[str, ObjectKind] = {
 OBJECT_KINDS = {name: k.keys for name, k in OBJECT_KIND_TABLE.items()}
 
 
-def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str):
+def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str, *, texcoords: bool = False):
     """A plane with a form error as a Mitsuba mesh: a grid (:data:`BOARD_GRID`,
     :data:`RIPPLE_CELLS`) displaced by :func:`board_form_m` towards the camera (local -z: the
     plane faces the camera along -z before its rotation), placed like the flat plane."""
@@ -611,11 +690,15 @@ def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str):
         vertex_count=nx * ny,
         face_count=len(faces),
         has_vertex_normals=False,
-        has_vertex_texcoords=False,
+        has_vertex_texcoords=texcoords,
         props=props,
     )
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(world.astype(np.float32).ravel())
+    if texcoords:
+        # the flat rectangle's texture coordinates: (x / sx + 1/2, y / sy + 1/2) in the board frame
+        uv = np.stack([x.ravel() / sx + 0.5, y.ravel() / sy + 0.5], axis=1)
+        params["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
     params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
     params.update()
     return mesh

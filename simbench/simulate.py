@@ -33,7 +33,7 @@ from simbench.photometry import (
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import render_radiance
 from simbench.rig import rig_to_dict, save_rig
-from simbench.scene import SceneSpec
+from simbench.scene import OBJECT_KIND_TABLE, SceneSpec
 from simbench.seeds import RngLike, child_seed
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
 from simbench.spectral import crosstalk_matrix, material_crosstalk
@@ -370,7 +370,10 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
         mat = dataclasses.replace(
             o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white)
         )
-        objects.append(dataclasses.replace(o, material=mat))
+        params = dict(o.params)
+        for key in OBJECT_KIND_TABLE[o.kind].colour_keys:  # a target's ink, say
+            params[key] = tuple(float(x) for x in np.clip(material_crosstalk(params[key], None)[:, p], 0.0, 1.0))
+        objects.append(dataclasses.replace(o, material=mat, params=tuple(sorted(params.items()))))
     return dataclasses.replace(scene, objects=tuple(objects))
 
 

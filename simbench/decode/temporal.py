@@ -30,6 +30,7 @@ from simbench.literature import PAPER_PERIOD_PX
 from simbench.pattern import PatternSpec, column_from_phase, phase_from_column
 
 __all__ = [
+    "AXES",
     "PhaseShiftSpec",
     "phase_shift_frames",
     "wrapped_phase",
@@ -37,6 +38,9 @@ __all__ = [
     "decode_phase_shift",
     "TemporalResult",
 ]
+
+
+AXES = ("columns", "rows")
 
 
 @dataclass(frozen=True)
@@ -51,12 +55,16 @@ class PhaseShiftSpec:
         a projector's gamma or a camera's saturation bring)
     min_modulation : modulation ``B`` (image units, 0-1) below which a pixel is invalid (no
         fringe: shadow, black surface); 0.02 is the single-shot decoder's ``min_amplitude``
+    axis : ``"columns"`` (vertical fringes: every pixel gets its projector column, what
+        triangulation needs) or ``"rows"`` (horizontal fringes, projector rows: with the
+        columns, a projector pixel per camera pixel, what calibrating the projector needs)
     """
 
     size_hw: tuple[int, int] = (1140, 1824)
     period_px: int = PAPER_PERIOD_PX
     steps: int = 4
     min_modulation: float = 0.02
+    axis: str = "columns"
 
     def __post_init__(self) -> None:
         # size and period checked as the single-shot pattern's are
@@ -67,11 +75,17 @@ class PhaseShiftSpec:
         object.__setattr__(
             self, "min_modulation", validate.number(self.min_modulation, "min_modulation", lo=0.0, hi=1.0)
         )
+        object.__setattr__(self, "axis", validate.choice(self.axis, "axis", AXES))
+
+    @property
+    def extent_px(self) -> int:
+        """Projector pixels along the coded axis (the width for columns, the height for rows)."""
+        return self.size_hw[1] if self.axis == "columns" else self.size_hw[0]
 
     @property
     def gray_bits(self) -> int:
         """Gray-code frames: enough bits to number every half period of the width."""
-        half_periods = math.ceil(2 * self.size_hw[1] / self.period_px)
+        half_periods = math.ceil(2 * self.extent_px / self.period_px)
         return max(1, math.ceil(math.log2(half_periods)))
 
     @property
@@ -81,24 +95,26 @@ class PhaseShiftSpec:
 
 
 def _half_period_index(spec: PhaseShiftSpec) -> np.ndarray:
-    """j = floor(2 s / T) of every projector column, s = u + 0.5 the column's centre measured
-    from the pattern's left edge (the phase convention of :func:`phase_from_column`)."""
-    s = np.arange(spec.size_hw[1], dtype=np.float64) + 0.5
+    """j = floor(2 s / T) of every projector column (or row), s = u + 0.5 the column's centre
+    measured from the pattern's left edge (the phase convention of :func:`phase_from_column`)."""
+    s = np.arange(spec.extent_px, dtype=np.float64) + 0.5
     return np.floor(2.0 * s / spec.period_px).astype(np.int64)
 
 
 def phase_shift_frames(spec: PhaseShiftSpec) -> np.ndarray:
     """The projector frames, shape (N + bits, H, W), float32 in [0, 1]: the N shifted fringes
     ``0.5 + 0.5 cos(phi(u) - 2 pi n / N)``, then the Gray code of the half-period index,
-    most significant bit first (white = 1)."""
+    most significant bit first (white = 1); ``u`` is the column (or, ``axis = "rows"``, the
+    row)."""
     h, w = spec.size_hw
-    phi = phase_from_column(np.arange(w, dtype=np.float64), period_px=spec.period_px)
+    phi = phase_from_column(np.arange(spec.extent_px, dtype=np.float64), period_px=spec.period_px)
     rows = [0.5 + 0.5 * np.cos(phi - 2.0 * np.pi * n / spec.steps) for n in range(spec.steps)]
     j = _half_period_index(spec)
     gray = j ^ (j >> 1)
     bits = spec.gray_bits
     rows += [((gray >> (bits - 1 - b)) & 1).astype(np.float64) for b in range(bits)]
-    return np.broadcast_to(np.stack(rows)[:, None, :], (len(rows), h, w)).astype(np.float32)
+    profile = np.stack(rows)[:, None, :] if spec.axis == "columns" else np.stack(rows)[:, :, None]
+    return np.broadcast_to(profile, (len(rows), h, w)).astype(np.float32)
 
 
 def wrapped_phase(frames: np.ndarray, *, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -148,8 +164,8 @@ class TemporalResult:
 
 
 def decode_phase_shift(frames: np.ndarray, *, spec: PhaseShiftSpec) -> TemporalResult:
-    """Projector column of every pixel from the images of :func:`phase_shift_frames` (same
-    order), shape (N + bits, H, W) float in [0, 1].
+    """Projector column (or row, ``spec.axis``) of every pixel from the images of
+    :func:`phase_shift_frames` (same order), shape (N + bits, H, W) float in [0, 1].
 
     The wrapped phase gives the position inside a period, ``f = (phi + pi) / 2 pi``; the Gray
     code numbers the half periods ``j``, so that ``k1 = j // 2`` changes at period borders and
@@ -175,6 +191,6 @@ def decode_phase_shift(frames: np.ndarray, *, spec: PhaseShiftSpec) -> TemporalR
     k1, k2 = j >> 1, (j + 1) >> 1
     k = np.where(frac < 0.25, k2, np.where(frac > 0.75, k2 - 1, k1))
     column = column_from_phase(phi + 2.0 * np.pi * k, period_px=spec.period_px)
-    w = spec.size_hw[1]
+    w = spec.extent_px
     valid = np.isfinite(column) & (mod >= spec.min_modulation) & (column >= -0.5) & (column <= w - 0.5)
     return TemporalResult(column_px=np.where(valid, column, np.nan), valid=valid, modulation=mod, wrapped=phi, order=k)
