@@ -845,7 +845,7 @@ def _parser() -> argparse.ArgumentParser:
         default="paper",
         help="sensor model the calibration images go through (a preset or a sensor TOML file)",
     )
-    s.add_argument("--poses", type=_int(3, 200), default=10, help="target poses (OpenCV asks for >= 10)")
+    s.add_argument("--poses", type=_int(3, 200), default=10, help="target poses (OpenCV asks for >= 10; default 10)")
     s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed of the poses, renders and noise")
     s.add_argument(
         "--spp", type=_SPP, default=1, help="samples per pixel of the phase-shifting and Gray-code frames (default 1)"

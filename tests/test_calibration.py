@@ -253,18 +253,19 @@ def test_noise_free_calibration_recovers_the_true_rig(tmp_path, variant):
 
 
 @pytest.mark.slow
-def test_cli_calibrates_under_the_paper_sensor_and_decode_takes_the_rig(tmp_path, variant, capsys):
-    """`simbench calibrate` through the paper sensor (noise, Bayer mosaic, lens distortion):
-    reprojection RMS in the published range, the distortion found, the report written; a rerun
-    comes from the cache; `simbench decode --rig` reads the rig file."""
+def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
+    """`simbench calibrate` through the paper sensor (noise, Bayer mosaic, crosstalk, lens
+    distortion; 3 poses, the minimum): reprojection RMS in the published range, the camera's
+    distortion found, the report written, a rerun from the cache with the same rig.  (The
+    README runs `simbench decode FOLDER --rig` on such a rig; `make quick` checks the tables'
+    calibrated-rig columns against thresholds.)"""
     from simbench.calibration.report import PUBLISHED_RMS_PX
     from simbench.cli import main
 
     out, cache = tmp_path / "cal", tmp_path / "cache"
-    argv = ["calibrate", "--poses", "6", "--out", str(out), "--cache", str(cache)]
+    argv = ["calibrate", "--poses", "3", "--out", str(out), "--cache", str(cache)]
     assert main(argv) == 0
-    first = capsys.readouterr().out
-    assert "reprojection RMS" in first
+    assert "reprojection RMS" in capsys.readouterr().out
     info = json.loads((out / "calibration.json").read_text())
     lo, hi = PUBLISHED_RMS_PX
     assert lo <= info["rms_px"]["camera"] <= hi and lo <= info["rms_px"]["projector"] <= hi, info["rms_px"]
@@ -274,14 +275,8 @@ def test_cli_calibrates_under_the_paper_sensor_and_decode_takes_the_rig(tmp_path
     report = (out / "report.md").read_text()
     assert "Estimated rig against the true rig" in report and "camera focal" in report
     assert main(argv + ["--overwrite"]) == 0
-    assert "6 of 6 poses from the cache" in capsys.readouterr().out
+    assert "3 of 3 poses from the cache" in capsys.readouterr().out
     assert json.loads((out / "calibration.json").read_text())["rig"] == info["rig"]  # deterministic
+    from simbench.rig import load_rig
 
-    rec = tmp_path / "rec"
-    render = ["render", "--system", "phase_shift", "scenes/white_plane.toml", "--out", str(rec), "--spp", "1"]
-    assert main(render + ["--cache", str(cache)]) == 0
-    d = tmp_path / "d.npy"
-    assert main(["decode", str(rec), "--rig", str(out / "rig.toml"), "--out", str(d)]) == 0
-    depth, gt = np.load(d), np.load(rec / "gt_depth.npy")
-    lit = np.isfinite(gt) & np.isfinite(depth)
-    assert lit.mean() > 0.9 and np.median(np.abs(depth - gt)[lit]) < 0.005
+    assert load_rig(out / "rig.toml").camera.has_distortion

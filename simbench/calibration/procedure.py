@@ -37,7 +37,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,11 +62,27 @@ __all__ = [
     "true_rig",
     "MIN_WINDOW_POINTS",
     "DISTORTION_MODELS",
+    "DEFAULT_TARGET",
+    "DEFAULT_POSES",
+    "CALIBRATION_SPP",
+    "CALIBRATION_CORNER_SPP",
+    "CALIBRATION_SAMPLER",
     "calibration_frames",
     "corner_spacing_px",
 ]
 
 log = logging.getLogger(__name__)
+
+# The defaults of a calibration run (simbench calibrate, and experiments with rig =
+# "calibrated"): the default target; the sequences at 1 sample per pixel (their sampling noise
+# averages out over a local homography's ~1000 pixels), the white frames at 16 (the corner
+# detector reads edge-pixel coverage: observe_pose), stratified (multijitter) samples; direct
+# light only (one board: nothing to interreflect).
+DEFAULT_TARGET = "checkerboard"
+CALIBRATION_SPP = 1
+CALIBRATION_CORNER_SPP = 16
+CALIBRATION_SAMPLER = "multijitter"
+DEFAULT_POSES = 10
 
 # the local homography needs this many decoded pixels around a corner (assumption: a 4-point
 # homography fitted to >= 50 points averages the phase noise down by > 3x)
@@ -272,7 +289,7 @@ def observe_pose(
     index: int,
     seed: int,
     render: RenderSettings,
-    corner_spp: int = 16,
+    corner_spp: int = CALIBRATION_CORNER_SPP,
     frames_u8: list[np.ndarray] | None = None,
 ) -> CalibrationView:
     """Render and record one pose (the white frame and both sequences), find the corners and
@@ -419,6 +436,21 @@ def _intrinsics(k: np.ndarray, dist: np.ndarray, size_hw: tuple[int, int]) -> In
     return Intrinsics(w, h, float(k[0, 0]), float(k[0, 2]), float(k[1, 2]), tuple(float(d) for d in dist[:5]))
 
 
+@contextmanager
+def _opencv_single_thread() -> Iterator[None]:
+    """OpenCV's solvers on one thread: its multi-threaded Levenberg-Marquardt sums in a varying
+    order (measured: the focal length differs in the 12th digit from run to run), one thread is
+    bit-reproducible, and the solve takes well under a second either way."""
+    import cv2
+
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def solve_calibration(
     views: list[CalibrationView],
     *,
@@ -432,6 +464,11 @@ def solve_calibration(
     Needs >= 3 views with their corners found (Zhang's minimum for a full pinhole); a corner
     enters the projector's and the stereo solve only with its projector coordinates.
     """
+    with _opencv_single_thread():
+        return _solve(views, target, camera_hw, projector_hw, distortion)
+
+
+def _solve(views, target, camera_hw, projector_hw, distortion) -> CalibrationResult:
     import cv2
 
     obj_all = target.object_points()
@@ -538,10 +575,10 @@ def calibrate_rig(
     *,
     target: CalibrationTarget,
     sensor: object,
-    poses: int = 10,
+    poses: int = DEFAULT_POSES,
     seed: int = DEFAULT_SEED,
     render: RenderSettings,
-    corner_spp: int = 16,
+    corner_spp: int = CALIBRATION_CORNER_SPP,
     distortion: str = "radial",
     progress: Callable[[int, int], None] | None = None,
 ) -> CalibrationResult:

@@ -24,7 +24,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simbench import validate
 from simbench.cache import RenderCache
+from simbench.calibration import CalibrationResult, CalibrationTarget, get_target
+from simbench.calibration.procedure import (
+    CALIBRATION_CORNER_SPP,
+    CALIBRATION_SAMPLER,
+    CALIBRATION_SPP,
+    DEFAULT_POSES,
+    DEFAULT_TARGET,
+)
 from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
@@ -32,6 +41,7 @@ from simbench.io import atomic_write_text, save_json
 from simbench.metrics import depth_errors, edge_band
 from simbench.metrics import score as metrics_score
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+from simbench.rig import Rig
 from simbench.pattern import PatternSpec
 from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
 from simbench.seeds import DEFAULT_SEED, SeedLog, derive_seed
@@ -62,6 +72,10 @@ __all__ = [
     "scene_errors",
     "made_by",
     "sensor_caveat",
+    "calibration_summary",
+    "calibration_sentence",
+    "other_rig",
+    "RIGS",
     "write_table",
     "markdown_table",
     "figure_png",
@@ -69,6 +83,8 @@ __all__ = [
 ]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
+# the rigs a decoder may be given (RunConfig.rig)
+RIGS = ("true", "calibrated")
 
 
 @dataclass(frozen=True)
@@ -92,6 +108,14 @@ class RunConfig:
     board_bow_mm_per_m, board_waviness_mm : form error of every placed board and of the reference
         board (:func:`simbench.scene.board_form_m`: the bow's sag over a 1 m chord, the
         ripple's amplitude; seeded bow sign and ripple phase per board); 0 = flat
+    rig : the rig the proposed sensor and the multi-shot reference decode with: ``"true"`` (the
+        rig the scene is rendered with) or ``"calibrated"`` (the one ``simbench calibrate``
+        estimates through the run's sensor model; :meth:`Session.calibrated_rig`)
+    calibration_poses, calibration_bow_mm_per_m, calibration_waviness_mm : that calibration's
+        effort: target poses and the printed target's form error (the default target,
+        :mod:`simbench.calibration`)
+    compare_rigs : Table 1, Table 3 and Fig. 9 also decode every capture with the other rig
+        (:func:`other_rig`); costs one calibration per run (~4 min at 1280x960 on 2 cores, cached)
     """
 
     quick: bool = False
@@ -109,10 +133,27 @@ class RunConfig:
     board_bow_mm_per_m: float = 0.0
     board_waviness_mm: float = 0.0
     decoder: DecoderParams = field(default_factory=DecoderParams)
+    rig: str = "true"
+    calibration_poses: int = DEFAULT_POSES
+    calibration_bow_mm_per_m: float = 0.0
+    calibration_waviness_mm: float = 0.0
+    compare_rigs: bool = True
 
     def __post_init__(self) -> None:
         check_sampler(self.sampler, self.spp)
         self.placement  # validates the placement and board form
+        validate.choice(self.rig, "rig", RIGS)
+        validate.integer(self.calibration_poses, "calibration_poses", lo=3, hi=200)
+        validate.boolean(self.compare_rigs, "compare_rigs")
+        self.calibration_target()  # validates the target's form
+
+    def calibration_target(self) -> CalibrationTarget:
+        """The printed target of the run's calibration: the default one with the run's form error."""
+        return dataclasses.replace(
+            get_target(DEFAULT_TARGET),
+            bow_m_per_m=self.calibration_bow_mm_per_m / 1000.0,
+            waviness_m=self.calibration_waviness_mm / 1000.0,
+        )
 
     @property
     def placement(self) -> Placement:
@@ -135,7 +176,17 @@ class RunConfig:
     @classmethod
     def preset(cls, *, quick: bool, **overrides) -> "RunConfig":
         base = (
-            cls(quick=True, camera_scale=0.5, spp=4, fig9_repeats=3, edge_band_px=3, ply_stride=4) if quick else cls()
+            cls(
+                quick=True,
+                camera_scale=0.5,
+                spp=4,
+                fig9_repeats=3,
+                edge_band_px=3,
+                ply_stride=4,
+                calibration_poses=6,
+            )
+            if quick
+            else cls()
         )
         return dataclasses.replace(base, **overrides)
 
@@ -154,6 +205,11 @@ class RunConfig:
 
 # one recording of a scene by a depth system (the proposed sensor's: ``image`` is its capture)
 Capture = Recording
+
+
+def _same_calibration(a: RunConfig, b: RunConfig) -> bool:
+    keys = ("seed", "camera_scale", "calibration_poses", "calibration_bow_mm_per_m", "calibration_waviness_mm")
+    return all(getattr(a, k) == getattr(b, k) for k in keys)
 
 
 class Session:
@@ -182,6 +238,7 @@ class Session:
         self.seeds = SeedLog(config.seed)
         self._systems: dict[str, DepthSystem] = {}
         self._calibrations: dict = {}
+        self._rigs: dict = {}
         self.proposed = self.system("proposed")
 
     @property
@@ -209,6 +266,8 @@ class Session:
         other.cache = self.cache
         other.seeds = self.seeds
         other._calibrations = self._calibrations
+        if other.sensor == self.sensor and (config is None or _same_calibration(config, self.config)):
+            other._rigs = self._rigs
         return other
 
     def system(self, name: str) -> DepthSystem:
@@ -240,6 +299,46 @@ class Session:
         if key not in self._calibrations:
             self._calibrations[key] = system.calibrate(scene, seeds=self.seeds, render=r, **options)
         return self._calibrations[key]
+
+    # the rig the decoders believe ------------------------------------------------------
+    def calibration_result(self, scene: SceneSpec) -> CalibrationResult:
+        """The calibration of ``scene``'s rig (prepared: at the run's camera resolution, with the
+        sensor's lenses) as a lab would make it: the run's target and pose count through the
+        run's sensor model (:func:`simbench.calibration.calibrate_rig`; seeds from the run's
+        base seed, observations in the render cache), made once per rig and run."""
+        from simbench.calibration import calibrate_rig
+
+        cfg = self.config
+        rig = scene.rig
+        # the ideal rig behind the prepared one: the sensor model puts its lenses back
+        ideal = Rig(rig.camera.undistorted, rig.projector.undistorted, rig.position_m, rig.rotation_deg, rig.name)
+        if ideal not in self._rigs:
+            with self.timed(f"[calibration] {cfg.calibration_poses} target poses through sensor model {cfg.sensor}"):
+                self._rigs[ideal] = calibrate_rig(
+                    ideal,
+                    target=cfg.calibration_target(),
+                    sensor=self.sensor,
+                    poses=cfg.calibration_poses,
+                    seed=cfg.seed,
+                    render=RenderSettings(
+                        spp=CALIBRATION_SPP, sampler=CALIBRATION_SAMPLER, max_depth=2, cache=self.cache
+                    ),
+                    corner_spp=CALIBRATION_CORNER_SPP,
+                )
+            self.seeds.record("calibration", {"base": cfg.seed, "poses": cfg.calibration_poses})
+        return self._rigs[ideal]
+
+    def calibrated_rig(self, scene: SceneSpec) -> Rig:
+        """The rig :meth:`calibration_result` estimates for ``scene`` (prepared)."""
+        return self.calibration_result(scene).rig
+
+    def decode_scene(self, scene: SceneSpec, *, rig: str | None = None) -> SceneSpec:
+        """``scene`` (prepared) as a decoder sees it: with the true rig, or with the calibrated
+        one (``rig``: ``"true"`` or ``"calibrated"``; None = the run's :attr:`RunConfig.rig`)."""
+        choice = validate.choice(rig or self.config.rig, "rig", RIGS)
+        if choice == "true":
+            return scene
+        return dataclasses.replace(scene, rig=self.calibrated_rig(scene))
 
     # scenes and captures -------------------------------------------------------------
     def raw_scene(self, name: str) -> SceneSpec:
@@ -274,12 +373,13 @@ class Session:
         )
 
     def acquire(
-        self, name: str, scene: "str | SceneSpec", label: str, *, repeats: int = 1
+        self, name: str, scene: "str | SceneSpec", label: str, *, repeats: int = 1, rig: str | None = None
     ) -> list[tuple[Recording, SystemDepth]]:
         """``repeats`` recordings of ``scene`` (a scene of ``scenes/`` or a loaded, not yet
         prepared scene, e.g. one placed by :meth:`place`) by the system ``name`` at its native
-        resolution, each with its depth decoded the system's own way; seeds from
-        ``system.seed_prefix + label``, the calibration recorded once per run."""
+        resolution, each with its depth decoded the system's own way (with ``rig``, see
+        :meth:`decode_recording`); seeds from ``system.seed_prefix + label``, the calibration
+        recorded once per run."""
         system = self.system(name)
         prepared = system.prepare(self.raw_scene(scene) if isinstance(scene, str) else scene)
         cal = self.calibration(system, prepared)
@@ -293,7 +393,16 @@ class Session:
             repeats=repeats,
             prepared=True,
         )
-        return [(rec, system.decode(rec.raw, cal, scene=rec.scene)) for rec in recs]
+        return [(rec, self.decode_recording(name, rec, rig=rig)) for rec in recs]
+
+    def decode_recording(self, name: str, rec: Recording, *, rig: str | None = None) -> SystemDepth:
+        """``rec`` of system ``name`` decoded the system's own way; a system that decodes with the
+        scene's rig (:attr:`simbench.systems.SystemInfo.uses_scene_rig`) gets the true or the
+        calibrated one (``rig``; None = the run's), the others their own devices'."""
+        system = self.system(name)
+        cal = self.calibration(system, rec.scene)
+        scene = self.decode_scene(rec.scene, rig=rig) if system.info().uses_scene_rig else rec.scene
+        return system.decode(rec.raw, cal, scene=scene)
 
     def reference(self, scene: SceneSpec, params: DecoderParams) -> ReferenceMap:
         """The proposed sensor's reference plane behind ``scene`` decoded with ``params``
@@ -301,16 +410,20 @@ class Session:
         when the decoder unmixes)."""
         return self.calibration(self.proposed, scene, frames=bool(params.unmix)).reference_map(params)
 
-    def decode(self, cap: Capture, params: DecoderParams, *, mode: str | None = None) -> DecodeResult:
+    def decode(
+        self, cap: Capture, params: DecoderParams, *, mode: str | None = None, rig: str | None = None
+    ) -> DecodeResult:
         """``cap`` decoded with ``params`` (Z0 = the scene's reference depth) in ``mode``
-        (``reference`` or ``calibrated``; None = ``params.mode``)."""
+        (``reference`` or ``calibrated``; None = ``params.mode``) with the true or the calibrated
+        rig (``rig``; None = the run's :attr:`RunConfig.rig`)."""
         mode = mode or params.mode
         cal = (
             self.calibration(self.proposed, cap.scene, frames=bool(params.unmix))
             if mode == "reference" or params.unmix
             else None
         )
-        return self.proposed.decode(cap.raw, cal, scene=cap.scene, params=params, mode=mode).detail
+        scene = self.decode_scene(cap.scene, rig=rig)
+        return self.proposed.decode(cap.raw, cal, scene=scene, params=params, mode=mode).detail
 
     # provenance --------------------------------------------------------------------------
     def provenance(self, name: str, files: list[Path], extra: dict | None = None) -> Path:
@@ -374,6 +487,52 @@ def made_by(session: "Session", camera: Intrinsics) -> str:
         f"Made by `{session.command}` ({camera.width_px}x{camera.height_px} camera, {cfg.spp} spp {cfg.sampler}, "
         f"sensor model `{cfg.sensor}`, "
     )
+
+
+def calibration_sentence(session: Session, scene: SceneSpec) -> str:
+    """One paragraph: how the run's calibrated rig of ``scene`` (prepared) was made and how far it
+    is from the truth."""
+    s = calibration_summary(session, scene)
+    e = s["errors"]
+    rms = s["rms_px"]
+    return (
+        "The calibrated rig is what `simbench calibrate` estimates through the same sensor model: the default "
+        f"target ({s['target']}) at {s['poses']} seeded poses, white frames and phase-shifting + Gray-code "
+        "sequences in columns and rows, OpenCV's camera and stereo calibration (`simbench.calibration`). "
+        f"Reprojection RMS: camera {rms['camera']:.3f} px, projector {rms['projector']:.3f} px. Against the true "
+        f"rig: focal lengths {e['camera_focal_pct']:+.3f} % (camera) and {e['projector_focal_pct']:+.3f} % "
+        f"(projector), principal points ({e['camera_cx_px']:+.2f}, {e['camera_cy_px']:+.2f}) px and "
+        f"({e['projector_cx_px']:+.2f}, {e['projector_cy_px']:+.2f}) px, baseline {e['baseline_mm']:+.3f} mm, "
+        f"projector rotation {e['rotation_deg']:.3f} deg."
+    )
+
+
+def other_rig(session: Session) -> str | None:
+    """The rig the extra columns decode with: the calibrated one in a run on the true rig, the
+    true one in a run on the calibrated rig; None when the run leaves them out
+    (:attr:`RunConfig.compare_rigs`)."""
+    if not session.config.compare_rigs:
+        return None
+    return "calibrated" if session.config.rig == "true" else "true"
+
+
+def calibration_summary(session: Session, scene: SceneSpec) -> dict:
+    """The calibration of ``scene``'s rig (prepared; :meth:`Session.calibration_result`): its
+    settings, reprojection RMS and per-parameter errors against the true rig (provenance)."""
+    from simbench.calibration import rig_errors
+
+    calibration = session.calibration_result(scene)
+    cfg = session.config
+    target = cfg.calibration_target()
+    truth = scene.rig
+    return {
+        "target": f"{target.squares[0]} x {target.squares[1]} squares of {1000 * target.square_m:g} mm, bow "
+        f"{cfg.calibration_bow_mm_per_m:g} mm/m, waviness {cfg.calibration_waviness_mm:g} mm",
+        "poses": cfg.calibration_poses,
+        "used_views": list(calibration.used_views),
+        "rms_px": calibration.rms_px,
+        "errors": rig_errors(calibration.rig, truth),
+    }
 
 
 def sensor_caveat(config: RunConfig) -> list[str]:

@@ -17,7 +17,18 @@ import warnings
 
 import numpy as np
 
-from simbench.experiments.common import Session, figure_png, made_by, markdown_table, score, sensor_caveat, write_table
+from simbench.experiments.common import (
+    Session,
+    calibration_sentence,
+    calibration_summary,
+    figure_png,
+    made_by,
+    markdown_table,
+    other_rig,
+    score,
+    sensor_caveat,
+    write_table,
+)
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import CHIABRANDO_TOF, nguyen_kinect_sigma_mm
 
@@ -46,9 +57,23 @@ def run_fig9(session: Session) -> dict:
             raw = session.place(session.raw_scene(name), f"fig9/{name}", ["board"])
             placement = session.seeds_used[f"fig9/{name}/placement"]
             scene = session.prepare(raw)
+            other = other_rig(session)
             for k, cap in enumerate(session.capture(scene, f"fig9/{name}", repeats=cfg.fig9_repeats)):
                 tri = score(cap, session.decode(cap, cfg.decoder, mode="calibrated"), cfg.decoder.period_px)
                 ref = score(cap, session.decode(cap, cfg.decoder, mode="reference"), cfg.decoder.period_px)
+                extra = {}
+                if other:
+                    tri_o = score(
+                        cap, session.decode(cap, cfg.decoder, mode="calibrated", rig=other), cfg.decoder.period_px
+                    )
+                    ref_o = score(
+                        cap, session.decode(cap, cfg.decoder, mode="reference", rig=other), cfg.decoder.period_px
+                    )
+                    extra = {
+                        "other_rig_rmse_mm": tri_o["gt_rmse_mm"],
+                        "other_rig_plane_rms_mm": tri_o["plane_rms_mm"],
+                        "other_rig_ref_rmse_mm": ref_o["gt_rmse_mm"],
+                    }
                 rows.append(
                     {
                         "sensor": "proposed",
@@ -63,6 +88,7 @@ def run_fig9(session: Session) -> dict:
                         "ref_rmse_mm": ref["gt_rmse_mm"],
                         "ref_plane_rms_mm": ref["plane_rms_mm"],
                         "ref_stripe_order_errors": ref["stripe_order_errors"],
+                        **extra,
                         **cap.seeds,
                         **placement,
                     }
@@ -76,8 +102,13 @@ def run_fig9(session: Session) -> dict:
                     sigma = np.nanstd(stack, axis=0, ddof=1) if len(recs) > 1 else np.full(stack.shape[1:], np.nan)
                 lit = recs[0][0].gt.lit
                 temporal_mm = float(np.nanmean(sigma[lit])) * 1000 if np.isfinite(sigma[lit]).any() else float("nan")
+                info = session.system(device).info()
                 for k, (rec, depth) in enumerate(recs):
-                    sc = score(rec, depth, session.system(device).info().period_px)
+                    sc = score(rec, depth, info.period_px)
+                    extra = {}
+                    if info.uses_scene_rig and other:
+                        so = score(rec, session.decode_recording(device, rec, rig=other), info.period_px)
+                        extra = {"other_rig_rmse_mm": so["gt_rmse_mm"], "other_rig_plane_rms_mm": so["plane_rms_mm"]}
                     rows.append(
                         {
                             "sensor": device,
@@ -90,17 +121,20 @@ def run_fig9(session: Session) -> dict:
                             "completeness": sc["completeness"],
                             "stripe_order_errors": sc.get("stripe_order_errors", ""),
                             "temporal_sigma_mm": temporal_mm,
+                            **extra,
                             **rec.seeds,
                         }
                     )
         for sensor in SENSORS:
             sel = [r for r in rows if r["depth_m"] == z and r["sensor"] == sensor]
             prefix = f"fig9/{z:.1f}m" if sensor == "proposed" else f"fig9/{sensor}/{z:.1f}m"
-            for key in ("rmse_mm", "plane_rms_mm", "completeness") + (
+            keys = ("rmse_mm", "plane_rms_mm", "completeness") + (
                 ("stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm")
                 if sensor == "proposed"
                 else ("temporal_sigma_mm",)
-            ):
+            )
+            keys += tuple(k for k in ("other_rig_rmse_mm", "other_rig_ref_rmse_mm") if k in sel[0])
+            for key in keys:
                 metrics[f"{prefix}/{key}"] = (
                     float(np.mean([r[key] for r in sel]))
                     if key != "stripe_order_errors"
@@ -121,6 +155,9 @@ def run_fig9(session: Session) -> dict:
         "ref_plane_rms_mm",
         "ref_stripe_order_errors",
         "temporal_sigma_mm",
+        "other_rig_rmse_mm",
+        "other_rig_plane_rms_mm",
+        "other_rig_ref_rmse_mm",
         "render",
         "noise",
         "placement",
@@ -132,12 +169,14 @@ def run_fig9(session: Session) -> dict:
         atomic_write_bytes(
             out / "fig9.png",
             fig9_plot(
-                rows, title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)"
+                rows,
+                title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)",
+                other_rig_name=other_rig(session),
             ),
         )
     )
     files.append(atomic_write_text(out / "fig9.md", _markdown(session, rows)))
-    session.provenance("fig9", files)
+    session.provenance("fig9", files, extra={"calibration": calibration_summary(session, scene)} if other else None)
     return metrics
 
 
@@ -156,8 +195,10 @@ def _errorbar(axis, rows: list[dict], key: str, sensor: str, **style) -> None:
     axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], capsize=3, **style)
 
 
-def fig9_plot(rows: list[dict], *, title: str) -> bytes:
-    """PNG: mean RMSE per depth with min-max bars (from the rows of ``fig9.csv``)."""
+def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "calibrated") -> bytes:
+    """PNG: mean RMSE per depth with min-max bars (from the rows of ``fig9.csv``); dashed: the
+    same recordings decoded with the other rig (``other_rig_name``, the calibrated one in a run
+    on the true rig)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -170,6 +211,11 @@ def fig9_plot(rows: list[dict], *, title: str) -> bytes:
                 continue
             label = f"{sensor_label(sensor)}: RMSE vs ground truth"
             _errorbar(axis, rows, "rmse_mm", sensor, fmt="o-", color=f"C{SENSORS.index(sensor)}", label=label)
+            own = [r for r in rows if r.get("sensor", "proposed") == sensor]
+            if own and all(isinstance(r.get("other_rig_rmse_mm"), float) for r in own):
+                label = f"{sensor_label(sensor)}: with the {other_rig_name} rig"
+                color = f"C{SENSORS.index(sensor)}"
+                _errorbar(axis, rows, "other_rig_rmse_mm", sensor, fmt="x--", color=color, alpha=0.7, label=label)
             if sensor == "proposed":
                 label = "proposed: RMS residual to fitted plane"
                 _errorbar(axis, rows, "plane_rms_mm", sensor, fmt="s--", color="C0", alpha=0.6, label=label)
@@ -218,6 +264,15 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     _, comp, _, _ = _summary(rows, "completeness")
     _, rmean, _, _ = _summary(rows, "ref_rmse_mm")
     comp_rows = {d: _summary(rows, "rmse_mm", d) for d in SENSORS[1:] if any(r.get("sensor") == d for r in rows)}
+    has_other = {
+        d: all(isinstance(r.get("other_rig_rmse_mm"), float) for r in rows if r.get("sensor", "proposed") == d)
+        for d in SENSORS
+        if any(r.get("sensor", "proposed") == d for r in rows)
+    }
+    om = _summary(rows, "other_rig_rmse_mm")[1] if has_other.get("proposed") else None
+    orf = _summary(rows, "other_rig_ref_rmse_mm")[1] if has_other.get("proposed") else None
+    other = {d: _summary(rows, "other_rig_rmse_mm", d) for d in SENSORS[1:] if has_other.get(d)}
+    rig_name = other_rig(session)
     body = []
     for i, (z, m, a, b, p, c, rm) in enumerate(zip(zs, mean, lo, hi, pmean, comp, rmean)):
         row = [f"{z:.1f}", f"{m:.3f}", f"{a:.3f} - {b:.3f}", f"{p:.3f}", f"{rm:.3f}", f"{100 * c:.2f} %"]
@@ -232,6 +287,11 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         row.append(f"{CHIABRANDO_TOF[1]:.1f}" if abs(z - CHIABRANDO_TOF[0]) < 1e-9 else "-")
         ps = comp_rows.get("phase_shift")
         row.append(f"{ps[1][i]:.3f}" if ps is not None else "-")
+        if rig_name:
+            row.append(f"{om[i]:.3f}" if om is not None else "-")
+            row.append(f"{orf[i]:.3f}" if orf is not None else "-")
+            ops = other.get("phase_shift")
+            row.append(f"{ops[1][i]:.3f}" if ops is not None else "-")
         body.append(row)
     lines += markdown_table(
         [
@@ -248,7 +308,16 @@ def _markdown(session: Session, rows: list[dict]) -> str:
             "ToF sim per-pixel temporal sigma (mm)",
             "real SR4000 sigma (Chiabrando 2009)",
             "phase shifting RMSE (mm)",
-        ],
+        ]
+        + (
+            [
+                f"proposed, {rig_name} rig: RMSE (mm)",
+                f"proposed, {rig_name} rig, reference protocol (mm)",
+                f"phase shifting, {rig_name} rig (mm)",
+            ]
+            if rig_name
+            else []
+        ),
         body,
     )
     lines += [
@@ -262,6 +331,13 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "is "
         "in `tests/test_baselines.py`.",
     ]
+    if rig_name:
+        lines += [
+            "",
+            f"Every depth-system column above decodes with the {session.config.rig} rig; the last three decode the "
+            f"same recordings with the {rig_name} one (dashed in the plot). "
+            + calibration_sentence(session, session.scene("plane_depth_100cm")),
+        ]
     trend = "grows" if np.all(np.diff(mean) > 0) else "does not grow monotonically"
     lines += ["", f"Our RMSE {trend} with depth over 0.9-1.4 m."]
     for d, (_, cm, _, _) in comp_rows.items():

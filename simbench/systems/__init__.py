@@ -83,6 +83,10 @@ class SystemInfo:
     # the fringe period (projector px) of a structured-light system's columns: a decoded column
     # off by more than half of it is a stripe-order error; None = no columns
     period_px: float | None = None
+    # the system decodes with the scene's projector-camera rig, the rig a lab estimates with
+    # simbench.calibration: experiments can hand it the calibrated rig instead of the true one
+    # (the competitors carry their own factory-calibrated devices)
+    uses_scene_rig: bool = False
 
 
 @dataclass(frozen=True)

@@ -57,6 +57,7 @@ class PhaseShiftSystem:
             size_hw=self._optics.info().size_hw,
             captures=s.captures,
             period_px=s.period_px,
+            uses_scene_rig=True,
             numbers={
                 "steps": (s.steps, "assumption: the common choice; N steps are blind to fringe harmonics up to N - 2"),
                 "period_px": (s.period_px, "the paper's period (same spatial frequency as the proposed pattern)"),

@@ -50,11 +50,18 @@ class ReferenceCalibration:
     cache: object = None
     _maps: dict = field(default_factory=dict, repr=False)
 
-    def reference_map(self, params) -> ReferenceMap:
-        """The reference decoded with ``params`` (mode and Z0 as given)."""
+    def reference_map(self, params, *, rig=None) -> ReferenceMap:
+        """The reference decoded with ``params`` (mode and Z0 as given) and ``rig`` (the rig the
+        decoder believes; None = the rig the reference was recorded with)."""
         from simbench.decode.persist import lookup_decoded_reference
 
-        if params not in self._maps:
+        rig = self.rig if rig is None else rig
+        if rig.camera.size_hw != self.rig.camera.size_hw:
+            raise ValueError(
+                f"rig camera {rig.camera.size_hw} does not match the reference's {self.rig.camera.size_hw}"
+            )
+        key = (params, rig)
+        if key not in self._maps:
             primaries = None
             if params.unmix:
                 if not self.frames:
@@ -65,15 +72,15 @@ class ReferenceCalibration:
                 primaries = [self.frames[k] for k in ("red", "green", "blue")]
             ref, store = lookup_decoded_reference(
                 self.image,
-                rig=self.rig,
+                rig=rig,
                 params=params,
                 primaries=primaries,
                 dark=self.frames.get("dark"),
                 cache=self.cache,
             )
             store()
-            self._maps[params] = ref
-        return self._maps[params]
+            self._maps[key] = ref
+        return self._maps[key]
 
 
 class ColourFringeSystem:
@@ -107,6 +114,7 @@ class ColourFringeSystem:
             size_hw=cam.size_hw,
             captures=1,
             period_px=self.pattern.period_px,
+            uses_scene_rig=True,
             numbers={
                 "period_px": (self.pattern.period_px, "paper Sec. 3 (T = 21 projector px)"),
                 "debruijn_order": (self.pattern.order, "paper Eq. 7-8 (B(2, 3))"),
@@ -202,7 +210,9 @@ class ColourFringeSystem:
         mode: str | None = None,
     ) -> SystemDepth:
         """``raw`` decoded with ``params`` (default: the system's decoder; Z0 = the scene's
-        reference depth) in ``mode`` (``reference`` or ``calibrated``; None = the params')."""
+        reference depth) in ``mode`` (``reference`` or ``calibrated``; None = the params'), with
+        ``scene.rig`` (which may be a calibrated rig rather than the one the scene was rendered
+        with; the reference map is then decoded with it too)."""
         from simbench.decode import decode
 
         params = params if params is not None else self.decoder
@@ -214,7 +224,7 @@ class ColourFringeSystem:
                     f"decoding in {params.mode} mode{' with unmixing' if params.unmix else ''} needs the reference "
                     f"calibration"
                 )
-            ref = calibration.reference_map(dataclasses.replace(params, mode="reference"))
+            ref = calibration.reference_map(dataclasses.replace(params, mode="reference"), rig=scene.rig)
         r = decode(raw, rig=scene.rig, params=params, reference=ref)
         return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
 

@@ -49,6 +49,10 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
             board_bow_mm_per_m=float(params["run.board_bow_mm_per_m"]),
             board_waviness_mm=float(params["run.board_waviness_mm"]),
             decoder=decoder,
+            rig=str(params["run.rig"]),
+            calibration_poses=int(params["run.calibration_poses"]),
+            calibration_bow_mm_per_m=float(params["run.calibration_bow_mm_per_m"]),
+            calibration_waviness_mm=float(params["run.calibration_waviness_mm"]),
         )
         session = Session(
             config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor

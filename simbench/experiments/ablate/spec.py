@@ -83,6 +83,10 @@ def _parameters() -> dict[str, str]:
         "run.board_bow_mm_per_m": "bow of every placed board and the reference board (mm of sag per metre, seeded "
         "sign)",
         "run.board_waviness_mm": "ripple amplitude of every placed board and the reference board (mm, seeded phase)",
+        "run.rig": "the rig the decoder believes: true, or calibrated (simbench calibrate through the run's sensor)",
+        "run.calibration_poses": "target poses of that calibration",
+        "run.calibration_bow_mm_per_m": "bow of the printed calibration target (mm of sag per metre)",
+        "run.calibration_waviness_mm": "ripple amplitude of the printed calibration target (mm)",
     }
     p.update(_decoder_fields())
     return p
@@ -101,6 +105,10 @@ DEFAULTS = {
     "run.placement_tilt_deg": 2.0,
     "run.board_bow_mm_per_m": 0.0,
     "run.board_waviness_mm": 0.0,
+    "run.rig": "true",
+    "run.calibration_poses": 10,
+    "run.calibration_bow_mm_per_m": 0.0,
+    "run.calibration_waviness_mm": 0.0,
 }
 
 
@@ -194,6 +202,7 @@ BUILTIN_STUDIES = (
     "voting",
     "noise_ambient",
     "surface_colour",
+    "calibration_effort",
 )
 
 
