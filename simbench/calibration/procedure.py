@@ -45,7 +45,7 @@ import numpy as np
 
 from simbench.calibration.poses import DEPTH_RANGE_M, Pose, calibration_poses
 from simbench.calibration.target import CalibrationTarget
-from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, phase_shift_frames
+from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
 from simbench.mitsuba_dict import RenderSettings
 from simbench.rig import Intrinsics, Rig, angles_xyz_deg
 from simbench.seeds import DEFAULT_SEED, derive_seed, frame_seed
@@ -140,12 +140,6 @@ def _grey_u8(image: np.ndarray) -> np.ndarray:
     else:
         scale = 255.0
     return np.clip(np.rint(img.astype(np.float64).mean(axis=-1) * scale), 0, 255).astype(np.uint8)
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    img = np.asarray(image)
-    scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
-    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
 
 
 def find_corners(image_u8: np.ndarray, *, target: CalibrationTarget) -> np.ndarray | None:
@@ -381,7 +375,7 @@ def _observe(scene, target, sensor, cols, rows, render, render_seed, noise_seed,
         log.warning("%s: the target's corners were not found; the pose is left out", scene.name)
         return None, None
     n_cols = cols.captures
-    stack = np.stack([_grey(g) for g in grey[1:]])
+    stack = np.stack([grey_frame(g) for g in grey[1:]])
     c = decode_phase_shift(stack[:n_cols], spec=cols)
     r = decode_phase_shift(stack[n_cols:], spec=rows)
     # the window: half the corner spacing (a square), so a window sees its corner's squares only

@@ -31,6 +31,7 @@ from simbench.pattern import PatternSpec, column_from_phase, phase_from_column
 
 __all__ = [
     "AXES",
+    "grey_frame",
     "PhaseShiftSpec",
     "phase_shift_frames",
     "wrapped_phase",
@@ -149,6 +150,15 @@ def gray_order(bit_images: np.ndarray, threshold: np.ndarray) -> np.ndarray:
         j ^= shift
         shift >>= 1
     return j
+
+
+def grey_frame(image: np.ndarray) -> np.ndarray:
+    """A recorded colour frame (H, W, 3), integer or float, as the grey image the sequences are
+    decoded from: the mean of its channels in [0, 1], float32 (grey frames light the three
+    primaries alike)."""
+    img = np.asarray(image)
+    scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
+    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
 
 
 @dataclass(frozen=True)

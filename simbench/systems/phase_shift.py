@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, phase_shift_frames
+from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
 from simbench.mitsuba_dict import RenderSettings
 from simbench.scene import SceneSpec
 from simbench.systems import SystemDepth, SystemInfo, SystemOptions
@@ -25,13 +25,6 @@ __all__ = ["PhaseShiftSystem", "DEPTH_RANGE_M"]
 
 # depths outside are invalid (the working range of simbench.decode.DecoderParams' default)
 DEPTH_RANGE_M = (0.75, 1.75)
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    """A recorded colour image as one grey image in [0, 1], float32."""
-    img = np.asarray(image)
-    scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
-    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
 
 
 class PhaseShiftSystem:
@@ -109,7 +102,7 @@ class PhaseShiftSystem:
             qs.append(render_channels(scene, drive, self.sensor, seed=render_seed, render=render))
         return [
             np.stack(
-                [_grey(record(q, sensor=self.sensor, scene=scene, rng=frame_seed(n, k))) for k, q in enumerate(qs)]
+                [grey_frame(record(q, sensor=self.sensor, scene=scene, rng=frame_seed(n, k))) for k, q in enumerate(qs)]
             )
             for n in noise_seeds
         ]
@@ -158,7 +151,7 @@ class PhaseShiftSystem:
             rad = synthetic_plane_capture(
                 transfer_curve(frame, transfer="linear"), rig, point_m=(0, 0, 1.1), supersample=2
             )[0]
-            frames.append(_grey(simple_camera(rad / 1.21, camera=cam, rng=rng)))
+            frames.append(grey_frame(simple_camera(rad / 1.21, camera=cam, rng=rng)))
         return np.stack(frames), None, SceneSpec(name="bench_plane", rig=rig, objects=())
 
     def write_recording(
