@@ -123,6 +123,20 @@ def _render_settings(args) -> tuple[int, str]:
 _MAX_DEPTH = _int(2, 1024)
 
 
+def _calibration_defaults() -> dict:
+    """The defaults of `simbench calibrate`: those the experiments' calibrated rig uses, so
+    that both share their cached observations."""
+    from simbench.calibration import procedure as p
+
+    return {
+        "poses": p.DEFAULT_POSES,
+        "spp": p.CALIBRATION_SPP,
+        "corner_spp": p.CALIBRATION_CORNER_SPP,
+        "sampler": p.CALIBRATION_SAMPLER,
+        "max_depth": p.CALIBRATION_MAX_DEPTH,
+    }
+
+
 def _distortion_models() -> list[str]:
     from simbench.calibration.procedure import DISTORTION_MODELS
 
@@ -845,21 +859,38 @@ def _parser() -> argparse.ArgumentParser:
         default="paper",
         help="sensor model the calibration images go through (a preset or a sensor TOML file)",
     )
-    s.add_argument("--poses", type=_int(3, 200), default=10, help="target poses (OpenCV asks for >= 10; default 10)")
+    cal = _calibration_defaults()
+    s.add_argument(
+        "--poses",
+        type=_int(3, 200),
+        default=cal["poses"],
+        help=f"target poses (OpenCV asks for >= 10; default {cal['poses']})",
+    )
     s.add_argument("--seed", type=_SEED, default=DEFAULT_SEED, help="base seed of the poses, renders and noise")
     s.add_argument(
-        "--spp", type=_SPP, default=1, help="samples per pixel of the phase-shifting and Gray-code frames (default 1)"
+        "--spp",
+        type=_SPP,
+        default=cal["spp"],
+        help=f"samples per pixel of the phase-shifting and Gray-code frames (default {cal['spp']})",
     )
     s.add_argument(
-        "--corner-spp", type=_SPP, default=16, help="samples per pixel of the white frames the corners are found in"
+        "--corner-spp",
+        type=_SPP,
+        default=cal["corner_spp"],
+        help=f"samples per pixel of the white frames the corners are found in (default {cal['corner_spp']})",
     )
     s.add_argument(
         "--sampler",
         choices=_samplers(),
-        default="multijitter",
+        default=cal["sampler"],
         help="Mitsuba sample generator (multijitter: stratified edges for the corner detector)",
     )
-    s.add_argument("--max-depth", type=_MAX_DEPTH, default=2, help="longest light path (2: direct light; one board)")
+    s.add_argument(
+        "--max-depth",
+        type=_MAX_DEPTH,
+        default=cal["max_depth"],
+        help=f"longest light path (default {cal['max_depth']}: direct light; one board)",
+    )
     s.add_argument(
         "--distortion",
         choices=_distortion_models(),

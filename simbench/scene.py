@@ -529,7 +529,7 @@ def target_texture(
 
 def _parse_target(d: dict, where: str, base_dir: Path) -> dict:
     # assumption: a checkerboard has 2-64 squares a side of 1 mm - 0.5 m
-    squares = tuple(validate.integer(n, f"{where}: squares", lo=2, hi=64) for n in _list(d.get("squares"), 2, where))
+    squares = _squares(d.get("squares"), where)
     square_m = validate.number(d.get("square_m"), f"{where}: square_m", lo=0.001, hi=0.5)
     margin = validate.integer(d.get("margin_squares", 1), f"{where}: margin_squares", lo=0, hi=10)
     ink = validate.numbers(d.get("ink_rgb", (PAINT_MIN_REFLECTANCE,) * 3), f"{where}: ink_rgb", 3, lo=0.0, hi=1.0)
@@ -545,10 +545,10 @@ def _parse_target(d: dict, where: str, base_dir: Path) -> dict:
     return {**p, **_board_form(d, where)}
 
 
-def _list(value: object, n: int, where: str) -> list:
-    if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise ValueError(f"{where}: squares must be a list of {n} integers [columns, rows], got {value!r}")
-    return list(value)
+def _squares(value: object, where: str) -> tuple[int, int]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ValueError(f"{where}: squares must be a list of 2 integers [columns, rows], got {value!r}")
+    return tuple(validate.integer(n, f"{where}: squares", lo=2, hi=64) for n in value)
 
 
 def _parse_box(d: dict, where: str, base_dir: Path) -> dict:

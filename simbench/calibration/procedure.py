@@ -67,6 +67,7 @@ __all__ = [
     "CALIBRATION_SPP",
     "CALIBRATION_CORNER_SPP",
     "CALIBRATION_SAMPLER",
+    "CALIBRATION_MAX_DEPTH",
     "calibration_frames",
     "corner_spacing_px",
 ]
@@ -82,6 +83,7 @@ DEFAULT_TARGET = "checkerboard"
 CALIBRATION_SPP = 1
 CALIBRATION_CORNER_SPP = 16
 CALIBRATION_SAMPLER = "multijitter"
+CALIBRATION_MAX_DEPTH = 2
 DEFAULT_POSES = 10
 
 # the local homography needs this many decoded pixels around a corner (assumption: a 4-point
@@ -94,8 +96,8 @@ OBSERVATION_VERSION = 2
 # toolbox's default (k3 stays 0 in both, as there).  The tangential terms model a decentred
 # lens element; they trade off against the principal point: on the default rig and target,
 # noise-free, 15 poses, the principal point comes out 1.2-1.6 px off with them and 0.0-0.3 px
-# without (measured with simbench calibrate --distortion), so a lab whose lenses are centred - machine-vision
-# lenses and DLP projection optics are - fixes them at 0.
+# without (measured with simbench calibrate --distortion), so a lab whose lenses are centred -
+# machine-vision lenses and DLP projection optics are - fixes them at 0.
 DISTORTION_MODELS = {
     "radial": ("CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_K3", "CALIB_ZERO_TANGENT_DIST"),
     "radial_tangential": ("CALIB_FIX_ASPECT_RATIO", "CALIB_FIX_K3"),
@@ -299,7 +301,7 @@ def observe_pose(
     frames' renders are not (up to 3 x 25 images a pose)."""
     from simbench.cache import scene_fingerprint
     from simbench.device import sensor_to_dict
-    from simbench.simulate import _renderer_id, physical_scene
+    from simbench.simulate import cached_arrays, physical_scene
 
     scene = physical_scene(_pose_scene(target, pose, rig, index), sensor)
     render_seed = derive_seed(seed, f"calibration/pose{index}/render")
@@ -314,22 +316,18 @@ def observe_pose(
             "projector_px": np.zeros((0, 2)) if proj is None else proj,
         }
 
-    if render.cache is None:
-        arrays = make()
-    else:
-        parts = {
-            "scene": scene_fingerprint(scene),
-            "sensor": sensor_to_dict(sensor),
-            "spp": render.spp,
-            "corner_spp": corner_spp,
-            "sampler": render.sampler,
-            "max_depth": render.max_depth,
-            "seeds": [render_seed, noise_seed],
-            "sequences": [dataclasses.asdict(cols), dataclasses.asdict(rows)],
-            "version": OBSERVATION_VERSION,
-            **_renderer_id(),
-        }
-        arrays = render.cache.get_or_make("calibration_view", parts, make)
+    parts = {
+        "scene": scene_fingerprint(scene),
+        "sensor": sensor_to_dict(sensor),
+        "spp": render.spp,
+        "corner_spp": corner_spp,
+        "sampler": render.sampler,
+        "max_depth": render.max_depth,
+        "seeds": [render_seed, noise_seed],
+        "sequences": [dataclasses.asdict(cols), dataclasses.asdict(rows)],
+        "version": OBSERVATION_VERSION,
+    }
+    arrays = cached_arrays("calibration_view", parts, make, cache=render.cache)
     found = len(arrays["camera_px"]) > 0
     return CalibrationView(
         pose=pose,
@@ -591,8 +589,6 @@ def calibrate_rig(
     distortion : the lens model fitted (:data:`DISTORTION_MODELS`)
     progress : called with (poses done, poses) after each pose
     """
-    if tuple(rig.projector.size_hw) != tuple(PhaseShiftSpec(size_hw=rig.projector.size_hw).size_hw):
-        raise ValueError(f"projector size {rig.projector.size_hw} cannot carry the calibration sequences")
     plan = calibration_poses(target, rig, count=poses, rng=derive_seed(seed, "calibration/poses"))
     views = []
     frames = calibration_frames(rig.projector.size_hw)  # the same for every pose

@@ -29,6 +29,7 @@ from simbench.cache import RenderCache
 from simbench.calibration import CalibrationResult, CalibrationTarget, get_target
 from simbench.calibration.procedure import (
     CALIBRATION_CORNER_SPP,
+    CALIBRATION_MAX_DEPTH,
     CALIBRATION_SAMPLER,
     CALIBRATION_SPP,
     DEFAULT_POSES,
@@ -321,7 +322,10 @@ class Session:
                     poses=cfg.calibration_poses,
                     seed=cfg.seed,
                     render=RenderSettings(
-                        spp=CALIBRATION_SPP, sampler=CALIBRATION_SAMPLER, max_depth=2, cache=self.cache
+                        spp=CALIBRATION_SPP,
+                        sampler=CALIBRATION_SAMPLER,
+                        max_depth=CALIBRATION_MAX_DEPTH,
+                        cache=self.cache,
                     ),
                     corner_spp=CALIBRATION_CORNER_SPP,
                 )

@@ -50,6 +50,7 @@ def sensor_label(name: str) -> str:
 def run_fig9(session: Session) -> dict:
     cfg = session.config
     rows, metrics = [], {}
+    other = other_rig(session)
     for i, z in enumerate(DEPTHS_M):
         name = f"plane_depth_{int(round(z * 100)):03d}cm"
         with session.timed(f"[fig9 {i + 1}/{len(DEPTHS_M)}] {z:.1f} m x {cfg.fig9_repeats}"):
@@ -57,7 +58,6 @@ def run_fig9(session: Session) -> dict:
             raw = session.place(session.raw_scene(name), f"fig9/{name}", ["board"])
             placement = session.seeds_used[f"fig9/{name}/placement"]
             scene = session.prepare(raw)
-            other = other_rig(session)
             for k, cap in enumerate(session.capture(scene, f"fig9/{name}", repeats=cfg.fig9_repeats)):
                 tri = score(cap, session.decode(cap, cfg.decoder, mode="calibrated"), cfg.decoder.period_px)
                 ref = score(cap, session.decode(cap, cfg.decoder, mode="reference"), cfg.decoder.period_px)
@@ -189,6 +189,12 @@ def _summary(
     return zs, np.array([v.mean() for v in vals]), np.array([v.min() for v in vals]), np.array([v.max() for v in vals])
 
 
+def _has_other_rig(rows: list[dict], sensor: str) -> bool:
+    """Whether every row of ``sensor`` carries its other-rig RMSE (rows of a run that compared rigs)."""
+    own = [r for r in rows if r.get("sensor", "proposed") == sensor]
+    return bool(own) and all(isinstance(r.get("other_rig_rmse_mm"), float) for r in own)
+
+
 def _errorbar(axis, rows: list[dict], key: str, sensor: str, **style) -> None:
     """Mean of ``key`` per depth with min-max bars."""
     zs, mean, lo, hi = _summary(rows, key, sensor)
@@ -211,8 +217,7 @@ def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "cal
                 continue
             label = f"{sensor_label(sensor)}: RMSE vs ground truth"
             _errorbar(axis, rows, "rmse_mm", sensor, fmt="o-", color=f"C{SENSORS.index(sensor)}", label=label)
-            own = [r for r in rows if r.get("sensor", "proposed") == sensor]
-            if own and all(isinstance(r.get("other_rig_rmse_mm"), float) for r in own):
+            if _has_other_rig(rows, sensor):
                 label = f"{sensor_label(sensor)}: with the {other_rig_name} rig"
                 color = f"C{SENSORS.index(sensor)}"
                 _errorbar(axis, rows, "other_rig_rmse_mm", sensor, fmt="x--", color=color, alpha=0.7, label=label)
@@ -264,11 +269,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
     _, comp, _, _ = _summary(rows, "completeness")
     _, rmean, _, _ = _summary(rows, "ref_rmse_mm")
     comp_rows = {d: _summary(rows, "rmse_mm", d) for d in SENSORS[1:] if any(r.get("sensor") == d for r in rows)}
-    has_other = {
-        d: all(isinstance(r.get("other_rig_rmse_mm"), float) for r in rows if r.get("sensor", "proposed") == d)
-        for d in SENSORS
-        if any(r.get("sensor", "proposed") == d for r in rows)
-    }
+    has_other = {d: _has_other_rig(rows, d) for d in SENSORS}
     om = _summary(rows, "other_rig_rmse_mm")[1] if has_other.get("proposed") else None
     orf = _summary(rows, "other_rig_ref_rmse_mm")[1] if has_other.get("proposed") else None
     other = {d: _summary(rows, "other_rig_rmse_mm", d) for d in SENSORS[1:] if has_other.get(d)}
