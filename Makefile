@@ -8,7 +8,8 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml scripts/setup_system.sh
+# (the install also compiles the decoder's C loops, simbench/decode/_ckernels.c)
+$(STAMP): pyproject.toml scripts/setup_system.sh simbench/decode/_ckernels.c
 	bash scripts/setup_system.sh
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -57,4 +58,4 @@ bench: setup
 
 clean:
 	rm -rf $(VENV) .pytest_cache .benchmarks .cache
-	find simbench -name '*.nbi' -o -name '*.nbc' | xargs rm -f
+	rm -rf build simbench/decode/*.so

@@ -83,9 +83,9 @@ VERSIONED_DISTRIBUTIONS = {
     "mitsuba": "mitsuba",
     "drjit": "drjit",
     "numpy": "numpy",
-    # the decoder's convolutions (OpenCV) and fused loops (numba)
+    # the decoder's convolutions (OpenCV); its fused loops are simbench's own C
+    # (simbench/decode/_ckernels.c, compiled at install: the C compiler is recorded too)
     "opencv": "opencv-python-headless",
-    "numba": "numba",
     "colour": "colour-science",
     "scipy": "scipy",
 }
@@ -102,6 +102,9 @@ def versions() -> dict:
         except metadata.PackageNotFoundError:
             out[key] = "not installed"
     out["python"] = platform.python_version()
+    from simbench.decode._kernels import compiler
+
+    out["decoder_kernels_compiler"] = compiler()
     return out
 
 

@@ -62,8 +62,9 @@ def _colour():
     """colour-science, imported so that it cannot poison the interpreter.
 
     Without SciPy, colour-science puts a ``MagicMock`` into ``sys.modules["scipy"]`` and makes
-    its spline interpolators subclasses of it; numba, imported later, then fails reading the
-    mock's version, and colour's SciPy-backed features would return mocks instead of numbers.
+    its spline interpolators subclasses of it; a package imported later that reads SciPy's
+    version (numba, scikit-image) then fails on the mock, and colour's SciPy-backed features
+    would return mocks instead of numbers.
     SciPy is therefore a dependency of simbench; if it is missing anyway we fail here, with the
     fix, instead of later with a riddle.
     """

@@ -1,4 +1,4 @@
-"""The decoder's stages as whole-image numpy expressions (their form before the fused numba
+"""The decoder's stages as whole-image numpy expressions (their form before the fused C
 loops of :mod:`simbench.decode._kernels`); ``tests/test_kernels.py`` checks that each kernel
 gives the same bits."""
 

@@ -1,4 +1,4 @@
-"""The fused numba loops (simbench.decode._kernels) give the same bits as the whole-image numpy
+"""The fused C loops (simbench.decode._kernels) give the same bits as the whole-image numpy
 expressions they replaced (tests/numpy_reference.py), on realistic and on awkward inputs."""
 
 import numpy as np

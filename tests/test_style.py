@@ -10,7 +10,7 @@ import simbench
 def _public_functions():
     for info in pkgutil.walk_packages(simbench.__path__, "simbench."):
         if info.name.split(".")[-1].startswith("_") or info.name == "simbench.cli":
-            continue  # private modules (numba kernels); the CLI's functions are argparse glue
+            continue  # private modules (the C kernels' wrappers); the CLI's functions are argparse glue
         module = importlib.import_module(info.name)
         for name in getattr(module, "__all__", ()):
             obj = getattr(module, name)

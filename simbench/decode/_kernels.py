@@ -1,23 +1,33 @@
-"""Fused per-pixel loops of the decoder (numba).
+"""The decoder's fused per-pixel loops: C functions (``_ckernels.c``) behind checked wrappers.
 
 Each kernel replaces a chain of whole-image numpy passes by one loop over the pixels, so an
-image-sized intermediate is never written to memory: the decoder is memory-bound (measured on
-the 2-core reference machine: ~70 % of a 1280x960 decode was elementwise numpy passes), and a
-fused loop reads its inputs once.
+image-sized intermediate is never written to memory, and evaluates the same IEEE float
+operations in the same order as the numpy expression it replaces (the docstrings give it), so
+results are bit-identical to it: the C file is compiled without fused multiply-add or
+reassociation (``pyproject.toml``), and ``tests/test_kernels.py`` compares every kernel with its
+numpy form (``tests/numpy_reference.py``).
 
-Every kernel evaluates the same float32 operations in the same order as the numpy expression it
-replaces (the docstrings give it), so results are bit-identical to it; numba is used without
-``fastmath`` (no reassociation, no fused multiply-add), and the tests compare each kernel with
-its numpy form.  Kernels release the GIL (``nogil``): the decoder runs them in its row-band
-threads.  Compiled code is cached on disk (``cache=True``), so only the first process compiles.
+The C file is built into the package when it is installed (``pip install -e .``, which
+``make setup`` runs) and loaded with :mod:`ctypes`, which releases the GIL around every call:
+the decoder runs the kernels in its row-band threads.  Loading costs about a millisecond, where
+a JIT compiler's start-up cost a command-line decode ~0.6 s.
+
+The wrappers check dtype, shape and C-contiguity of every array before the call (a mismatch
+raises ``TypeError``/``ValueError`` instead of reading stray memory).
 """
 
 from __future__ import annotations
 
-import numba
+import ctypes
+import importlib.util
+import re
+from functools import lru_cache
+from pathlib import Path
+
 import numpy as np
 
 __all__ = [
+    "compiler",
     "gabor_fit",
     "wrap_to_pi",
     "gather",
@@ -30,16 +40,68 @@ __all__ = [
     "vote_codes",
 ]
 
-# error_model="numpy": a float division by zero gives inf/NaN as in numpy instead of raising, which
-# also drops the per-division zero test that keeps LLVM from vectorising the loops (measured:
-# gabor_fit 15.7 -> 1.6 ms on 480x1280)
-_JIT = dict(nogil=True, cache=True, error_model="numpy")
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_F = ctypes.c_float
+_D = ctypes.c_double
+_SIGNATURES = {
+    "gabor_fit": (None, [_I, _I] + [_P] * 16),
+    "wrap_to_pi": (None, [_I, _P]),
+    "gather": (None, [_I, _I, _P, _P, _P, _P]),
+    "absolute_column": (None, [_I, _P, _P, _P, _F, _F, _I, _P, _P]),
+    "match_reference": (None, [_I, _I, _I, _P, _P, _P]),
+    "depth_from_disparity": (None, [_I, _I, _P, _F, _F, _P]),
+    "chain_extent": (None, [_I, _P, _P, _P]),
+    "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
+    "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P]),
+    "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
+}
 
 
-@numba.njit(**_JIT)
-def gabor_fit(
-    b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual
-):  # pragma: no cover - compiled
+def _built_file() -> str:
+    spec = importlib.util.find_spec("simbench.decode._ckernels")
+    if spec is None or spec.origin is None:
+        raise ImportError(
+            "simbench's compiled decoder kernels (simbench/decode/_ckernels.c) are not built: "
+            "run `make setup` (or `pip install -e .`; it needs a C compiler)"
+        )
+    return spec.origin
+
+
+def compiler() -> str:
+    """The compiler that built the kernels, as it signed the shared library (``.comment``
+    section, e.g. ``GCC: (Debian 12.2.0-14) 12.2.0``), for provenance; "unknown" if unsigned."""
+    data = Path(_built_file()).read_bytes()
+    found = re.findall(rb"(GCC: \([^\x00]*\) [^\x00]+|clang version [^\x00]+)", data)
+    return found[0].decode(errors="replace").strip() if found else "unknown"
+
+
+@lru_cache(maxsize=1)
+def _library() -> ctypes.CDLL:
+    lib = ctypes.CDLL(_built_file())
+    for name, (restype, argtypes) in _SIGNATURES.items():
+        fn = getattr(lib, name)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    return lib
+
+
+def _ptr(a: np.ndarray, name: str, dtype, shape: tuple | None = None, *, writable: bool = False) -> int:
+    """The data address of ``a`` after checking what the C function assumes of it."""
+    if not isinstance(a, np.ndarray):
+        raise TypeError(f"{name}: expected an ndarray, got {type(a).__name__}")
+    if a.dtype != dtype:
+        raise TypeError(f"{name}: expected dtype {np.dtype(dtype)}, got {a.dtype}")
+    if not a.flags.c_contiguous:
+        raise ValueError(f"{name}: must be C-contiguous")
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+    if writable and not a.flags.writeable:
+        raise ValueError(f"{name}: must be writable")
+    return a.ctypes.data
+
+
+def gabor_fit(b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual) -> None:
     """Weighted least-squares fringe fit from the window moments, per pixel.
 
     Inputs (float32, (H, W); ``cos1``/``sin1`` (1, W)): the data moments ``b0 = G*(cI)``,
@@ -51,297 +113,178 @@ def gabor_fit(
     ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]]`` are solved by the adjugate, in the
     operation order of the numpy form (``_solver`` and ``gabor_phase`` in tests/numpy_reference.py).
     """
-    h, w = b0.shape
-    half = np.float32(0.5)
-    zero = np.float32(0.0)
-    one = np.float32(1.0)
-    s_min = np.float32(0.05)
-    det_min = np.float32(1e-4)
-    rms = np.float32(np.sqrt(0.5))
-    inf = np.float32(np.inf)
-    for y in range(h):
-        for x in range(w):
-            s1 = s1m[y, x]
-            sc = scm[y, x]
-            ss = ssm[y, x]
-            sc2 = sc2m[y, x]
-            ss2 = ss2m[y, x]
-            c = cos1[0, x]
-            s = sin1[0, x]
-            scc = half * (s1 + sc2)
-            sss = half * (s1 - sc2)
-            scs = half * ss2
-            c00 = scc * sss - scs * scs
-            c01 = ss * scs - sc * sss
-            c02 = sc * scs - ss * scc
-            c11 = s1 * sss - ss * ss
-            c12 = sc * ss - s1 * scs
-            c22 = s1 * scc - sc * sc
-            det = s1 * c00 + sc * c01 + ss * c02
-            good = (s1 > s_min) and (det > det_min * s1 * s1 * s1)
-            inv = one / det if good else zero
-            inv_s1 = one / s1 if good else zero
-            k0 = c00 * inv
-            k1 = c01 * inv
-            k2 = c02 * inv
-            p0 = (c01 * c + c02 * s) * inv
-            p1 = (c11 * c + c12 * s) * inv
-            p2 = (c12 * c + c22 * s) * inv
-            q0 = (c01 * s - c02 * c) * inv
-            q1 = (c11 * s - c12 * c) * inv
-            q2 = (c12 * s - c22 * c) * inv
-            d0 = b0[y, x]
-            d1 = b1[y, x]
-            d2 = b2[y, x]
-            a = k0 * d0 + k1 * d1 + k2 * d2
-            r = p0 * d0 + p1 * d1 + p2 * d2
-            i = q0 * d0 + q1 * d1 + q2 * d2
-            a0[y, x] = a
-            re[y, x] = r
-            im[y, x] = i
-            m = np.sqrt(r * r + i * i)
-            e = e2[y, x] - a * d0
-            e = e - (c * d1 + s * d2) * r
-            e = e - (s * d1 - c * d2) * i
-            if e < zero:  # np.maximum(e, 0): NaN stays NaN
-                e = zero
-            e = np.sqrt(e * inv_s1)
-            t = m * rms
-            amp[y, x] = m if good else zero
-            residual[y, x] = e / t if (good and m > zero) else inf
+    f4 = np.float32
+    shape = b0.shape
+    h, w = shape
+    inputs = dict(b0=b0, b1=b1, b2=b2, e2=e2, s1=s1m, sc=scm, ss=ssm, sc2=sc2m, ss2=ss2m)
+    outputs = dict(re=re, im=im, a0=a0, amp=amp, residual=residual)
+    ptrs = [_ptr(a, k, f4, shape) for k, a in inputs.items()]
+    ptrs += [_ptr(a, k, f4, (1, w)) for k, a in (("cos1", cos1), ("sin1", sin1))]
+    ptrs += [_ptr(a, k, f4, shape, writable=True) for k, a in outputs.items()]
+    _library().gabor_fit(h, w, *ptrs)
 
 
-@numba.njit(**_JIT)
-def wrap_to_pi(phase):  # pragma: no cover - compiled
+def wrap_to_pi(phase) -> None:
     """In place: ``phase[phase >= pi] -= 2 pi`` (float32; cv2.phase gives [0, 2 pi])."""
-    pi = np.float32(np.pi)
-    two_pi = np.float32(2 * np.pi)
-    flat = phase.reshape(-1)
-    for j in range(flat.size):
-        if flat[j] >= pi:
-            flat[j] -= two_pi
+    _library().wrap_to_pi(phase.size, _ptr(phase, "phase", np.float32, writable=True))
 
 
-@numba.njit(**_JIT)
-def gather(per_stripe, labels, fill, out):  # pragma: no cover - compiled
-    """``out = per_stripe[labels]``, ``fill`` where the label is -1."""
-    lab = labels.reshape(-1)
-    dst = out.reshape(-1)
-    for j in range(lab.size):
-        s = lab[j]
-        dst[j] = per_stripe[s] if s >= 0 else fill
+def gather(per_stripe, labels, fill, out) -> None:
+    """``out = per_stripe[labels]``, ``fill`` where the label is -1 (``labels`` int32)."""
+    dtype = per_stripe.dtype
+    n = labels.size
+    if out.shape != labels.shape:
+        raise ValueError(f"out: expected shape {labels.shape}, got {out.shape}")
+    if n and per_stripe.size == 0 and (labels >= 0).any():
+        raise ValueError("labels refer to stripes, but per_stripe is empty")
+    fill_arr = np.array(fill, dtype=dtype)
+    _library().gather(
+        n,
+        dtype.itemsize,
+        _ptr(per_stripe, "per_stripe", dtype),
+        _ptr(labels, "labels", np.int32),
+        fill_arr.ctypes.data,
+        _ptr(out, "out", dtype, writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def absolute_column(position, wrapped, expected, t, span, cycle, column, index):  # pragma: no cover - compiled
+def absolute_column(position, wrapped, expected, t, span, cycle, column, index) -> None:
     """Per pixel (float32): ``col0 = (psi + pi) * (t / 2 pi) + W t - 0.5``,
     ``k = rint((expected - col0) / span)``; where ``W >= 0`` and ``k`` is finite:
     ``column = col0 + k span``, ``index = W + L k``; else NaN and -1."""
-    pi = np.float32(np.pi)
-    scale = t / np.float32(2 * np.pi)
-    half = np.float32(0.5)
-    nan = np.float32(np.nan)
-    pos = position.reshape(-1)
-    psi = wrapped.reshape(-1)
-    exp = expected.reshape(-1)
-    col = column.reshape(-1)
-    idx = index.reshape(-1)
-    for j in range(pos.size):
-        p = pos[j]
-        c0 = (psi[j] + pi) * scale + np.float32(p) * t - half
-        k = np.float32(np.rint((exp[j] - c0) / span))
-        if p >= 0 and np.isfinite(k):
-            col[j] = c0 + k * span
-            idx[j] = p + cycle * np.int32(k)
-        else:
-            col[j] = nan
-            idx[j] = -1
+    shape = position.shape
+    _library().absolute_column(
+        position.size,
+        _ptr(position, "position", np.int32),
+        _ptr(wrapped, "wrapped", np.float32, shape),
+        _ptr(expected, "expected", np.float32, shape),
+        float(np.float32(t)),
+        float(np.float32(span)),
+        int(cycle),
+        _ptr(column, "column", np.float32, shape, writable=True),
+        _ptr(index, "index", np.int32, shape, writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def match_reference(column, table, out):  # pragma: no cover - compiled
+def match_reference(column, table, out) -> None:
     """Linear look-up of each pixel's column in its row of the inverse table: the table's
     last column is NaN, and a column outside ``[0, width]`` (or NaN) gives NaN."""
     h, w = column.shape
-    width = table.shape[1] - 2
-    fw = np.float32(width)
-    nan = np.float32(np.nan)
-    for y in range(h):
-        for x in range(w):
-            c = column[y, x]
-            if c >= np.float32(0) and c <= fw:
-                fi = np.floor(c)
-                if fi >= fw:
-                    fi = np.float32(width - 1)
-                f = c - fi
-                i = np.int64(fi)
-                x0 = table[y, i]
-                x1 = table[y, i + 1]
-                out[y, x] = x0 + f * (x1 - x0)
-            else:
-                out[y, x] = nan
+    if table.ndim != 2 or table.shape[0] != h or table.shape[1] < 3:
+        raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
+    _library().match_reference(
+        h,
+        w,
+        table.shape[1],
+        _ptr(column, "column", np.float32),
+        _ptr(table, "table", np.float32),
+        _ptr(out, "out", np.float32, (h, w), writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def depth_from_disparity(x_ref, inv_z0, inv_fb, out):  # pragma: no cover - compiled
+def depth_from_disparity(x_ref, inv_z0, inv_fb, out) -> None:
     """``z = 1 / (1/Z0 + (x - x_ref) / (f B))`` (float32), NaN unless ``z > 0``."""
     h, w = x_ref.shape
-    one = np.float32(1.0)
-    nan = np.float32(np.nan)
-    for y in range(h):
-        for x in range(w):
-            d = np.float32(x) - x_ref[y, x]
-            z = one / (inv_z0 + d * inv_fb)
-            out[y, x] = z if z > np.float32(0) else nan
+    _library().depth_from_disparity(
+        h,
+        w,
+        _ptr(x_ref, "x_ref", np.float32),
+        float(np.float32(inv_z0)),
+        float(np.float32(inv_fb)),
+        _ptr(out, "out", np.float32, (h, w), writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def chain_extent(linked_prev, left, right):  # pragma: no cover - compiled
+def chain_extent(linked_prev, left, right) -> None:
     """Linked stripes before (``left``) and after (``right``) each stripe in its chain."""
     n = linked_prev.size
-    start = 0
-    for j in range(n):
-        if not linked_prev[j]:
-            start = j
-        left[j] = j - start
-    end = n - 1
-    for j in range(n - 1, -1, -1):
-        right[j] = end - j
-        if not linked_prev[j]:
-            end = j - 1
+    _library().chain_extent(
+        n,
+        _ptr(linked_prev, "linked_prev", np.bool_),
+        _ptr(left, "left", np.int64, (n,), writable=True),
+        _ptr(right, "right", np.int64, (n,), writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def neighbour_correct(positions, left, right, cycle, reach, min_support, out, support):  # pragma: no cover - compiled
+def neighbour_correct(positions, left, right, cycle, reach, min_support, out, support) -> None:
     """Plurality of the positions predicted by the stripe and its linked neighbours within
     ``reach`` (``W[j + o] - o mod L``); kept when it has ``min_support`` votes and beats every
     other candidate, else -1 (``support`` = its votes, 0 if dropped)."""
     n = positions.size
-    counts = np.zeros(cycle, np.int64)
-    for j in range(n):
-        counts[:] = 0
-        for off in range(-reach, reach + 1):
-            src = j + off
-            ok = (left[j] >= -off) if off < 0 else (right[j] >= off)
-            if ok and src >= 0 and src < n:
-                p = positions[src]
-                if p >= 0:
-                    counts[(p - off) % cycle] += 1
-        best = 0
-        for v in range(1, cycle):
-            if counts[v] > counts[best]:
-                best = v
-        votes = counts[best]
-        rival = -1
-        for v in range(cycle):
-            if v != best and counts[v] > rival:
-                rival = counts[v]
-        if votes >= min_support and votes > rival:
-            out[j] = best
-            support[j] = votes
-        else:
-            out[j] = -1
-            support[j] = 0
+    cycle = int(cycle)
+    if cycle < 1:
+        raise ValueError(f"cycle must be >= 1, got {cycle}")
+    counts = np.empty(cycle, np.int64)
+    _library().neighbour_correct(
+        n,
+        _ptr(positions, "positions", np.int32),
+        _ptr(left, "left", np.int64, (n,)),
+        _ptr(right, "right", np.int64, (n,)),
+        cycle,
+        int(reach),
+        int(min_support),
+        counts.ctypes.data,
+        _ptr(out, "out", np.int32, (n,), writable=True),
+        _ptr(support, "support", np.int32, (n,), writable=True),
+    )
 
 
-@numba.njit(**_JIT)
-def _bridge(wrapped, valid, y, xl, x, first, lo, hi, omega, tol):  # pragma: no cover - compiled
-    """Wraps (0 or 1) across the invalid gap between pixels ``xl`` and ``x`` of row ``y``, or -1.
-
-    ``first`` is the first pixel of the stripe ending at ``xl``.  The phase slope is the mean
-    step of that stripe and of the run continuing from ``x`` (up to its first wrap or break;
-    the nominal ``omega`` if both have fewer than 2 steps together), in float64; the gap's
-    advance ``slope * (x - xl)`` chooses the wrap count ``k``, accepted when the wrapped phase
-    at ``x`` lies within ``tol`` of the prediction.
-    """
-    w = wrapped.shape[1]
-    neg_pi = np.float32(-np.pi)
-    steps = xl - first
-    acc = np.float64(wrapped[y, xl]) - np.float64(wrapped[y, first])
-    j = x
-    while j + 1 < w and valid[y, j + 1]:
-        d = wrapped[y, j + 1] - wrapped[y, j]
-        if d < neg_pi or not (d > lo and d < hi):
-            break
-        j += 1
-    steps += j - x
-    acc += np.float64(wrapped[y, j]) - np.float64(wrapped[y, x])
-    slope = acc / steps if steps >= 2 else omega
-    if not (slope > lo and slope < hi):
-        return -1
-    advance = slope * (x - xl)
-    d = np.float64(wrapped[y, x]) - np.float64(wrapped[y, xl])
-    two_pi = 2.0 * np.pi
-    k = np.floor((advance - d) / two_pi + 0.5)
-    if (k == 0.0 or k == 1.0) and abs(d + two_pi * k - advance) <= tol:
-        return np.int64(k)
-    return -1
-
-
-@numba.njit(**_JIT)
-def segment_stripes(
-    wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, start, stop, linked_prev
-):  # pragma: no cover - compiled
+def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, start, stop, linked_prev) -> int:
     """Row-wise stripe segmentation; returns the number of stripes.
 
     Between pixels ``x-1`` and ``x`` of a row: ``d = psi[x] - psi[x-1]``, a wrap where
-    ``d < -pi`` (then ``step = d + 2 pi``), a plausible step when ``lo < step < hi``; with both
-    pixels valid the stripe continues (plausible, no wrap), or the next stripe starts linked to
-    it (plausible wrap); any other valid pixel starts an unlinked stripe, unless it ends a gap
-    of 1 to ``max_gap`` invalid pixels after the row's last stripe that :func:`_bridge`
-    crosses: with no wrap the stripe continues after the gap, with one the next starts linked.
+    ``d < -pi`` (then ``step = d + 2 pi``), a plausible step when ``lo < step < hi`` (``lo``,
+    ``hi`` float32); with both pixels valid the stripe continues (plausible, no wrap), or the
+    next stripe starts linked to it (plausible wrap); any other valid pixel starts an unlinked
+    stripe, unless it ends a gap of 1 to ``max_gap`` invalid pixels after the row's last stripe
+    that the bridge crosses: with no wrap the stripe continues after the gap, with one the next
+    starts linked.
+
+    The bridge (wraps, 0 or 1, across the gap between pixels ``xl`` and ``x``): the phase slope
+    is the mean step of the stripe ending at ``xl`` and of the run continuing from ``x`` (up to
+    its first wrap or break; the nominal ``omega`` if both have fewer than 2 steps together), in
+    float64; the gap's advance ``slope * (x - xl)`` chooses the wrap count ``k``, accepted when
+    the wrapped phase at ``x`` lies within ``tol`` of the prediction.
+
     ``row``/``start``/``stop``/``linked_prev`` must hold one entry per possible stripe (H*W).
     """
     h, w = wrapped.shape
-    neg_pi = np.float32(-np.pi)
-    two_pi = np.float32(2 * np.pi)
-    s = -1
-    for y in range(h):
-        for x in range(w):
-            if not valid[y, x]:
-                labels[y, x] = -1
-                continue
-            cont = False
-            link = False
-            if x > 0 and valid[y, x - 1]:
-                d = wrapped[y, x] - wrapped[y, x - 1]
-                wrap = d < neg_pi
-                step = d + two_pi if wrap else d
-                if step > lo and step < hi:
-                    cont = not wrap
-                    link = wrap
-            elif max_gap > 0 and s >= 0 and row[s] == y and x - stop[s] <= max_gap:
-                k = _bridge(wrapped, valid, y, stop[s] - 1, x, start[s], lo, hi, omega, tol)
-                cont = k == 0
-                link = k == 1
-            if not cont:
-                s += 1
-                row[s] = y
-                start[s] = x
-                linked_prev[s] = link
-            labels[y, x] = s
-            stop[s] = x + 1
-    return s + 1
+    n = h * w
+    return int(
+        _library().segment_stripes(
+            h,
+            w,
+            _ptr(wrapped, "wrapped", np.float32),
+            _ptr(valid, "valid", np.bool_, (h, w)),
+            float(np.float32(lo)),
+            float(np.float32(hi)),
+            int(max_gap),
+            float(omega),
+            float(tol),
+            _ptr(labels, "labels", np.int32, (h, w), writable=True),
+            _ptr(row, "row", np.int32, (n,), writable=True),
+            _ptr(start, "start", np.int32, (n,), writable=True),
+            _ptr(stop, "stop", np.int32, (n,), writable=True),
+            _ptr(linked_prev, "linked_prev", np.bool_, (n,), writable=True),
+        )
+    )
 
 
-@numba.njit(**_JIT)
-def vote_codes(code, labels, row, start, stop, voting, out, agreement):  # pragma: no cover - compiled
+def vote_codes(code, labels, row, start, stop, voting, out, agreement) -> None:
     """Per stripe: share of its pixels with code 1 (float64; pixels of a gap it was bridged
     across are not its own); the code is the majority (ties give 1) or, without voting, the
     middle pixel's; ``agreement`` = share agreeing with it."""
+    h, w = labels.shape
     n = row.size
-    for s in range(n):
-        y = row[s]
-        ones = 0
-        count = 0
-        for x in range(start[s], stop[s]):
-            if labels[y, x] == s:
-                ones += code[y, x]
-                count += 1
-        frac = ones / count if count > 0 else 0.5
-        if voting:
-            c = 1 if frac >= 0.5 else 0
-        else:
-            c = 1 if code[y, (start[s] + stop[s] - 1) // 2] else 0
-        out[s] = c
-        agreement[s] = np.float32(frac if c == 1 else 1.0 - frac)
+    _library().vote_codes(
+        n,
+        w,
+        _ptr(code, "code", np.bool_, (h, w)),
+        _ptr(labels, "labels", np.int32),
+        _ptr(row, "row", np.int32),
+        _ptr(start, "start", np.int32, (n,)),
+        _ptr(stop, "stop", np.int32, (n,)),
+        int(bool(voting)),
+        _ptr(out, "out", np.uint8, (n,), writable=True),
+        _ptr(agreement, "agreement", np.float32, (n,), writable=True),
+    )

@@ -26,8 +26,10 @@ __all__ = ["lookup_decoded_reference", "decoder_fingerprint"]
 
 @lru_cache(maxsize=1)
 def decoder_fingerprint() -> str:
-    """SHA-256 over the decoder package's source files (name and bytes, in name order)."""
-    return source_digest(sorted(Path(__file__).parent.glob("*.py")))
+    """SHA-256 over the decoder package's source files, Python and C (name and bytes, in name
+    order)."""
+    here = Path(__file__).parent
+    return source_digest(sorted([*here.glob("*.py"), *here.glob("*.c")]))
 
 
 def lookup_decoded_reference(

@@ -1,0 +1,317 @@
+/*
+ * The decoder's fused per-pixel loops, in C (called through ctypes: simbench/decode/_kernels.py).
+ *
+ * Every loop evaluates the same IEEE operations, in the same order and precision, as the numpy
+ * expression it replaces (tests/numpy_reference.py; tests/test_kernels.py compares the bits).
+ * That holds because the build (pyproject.toml) compiles with -ffp-contract=off (no fused
+ * multiply-add) and without -ffast-math (no reassociation): vectorising a loop across pixels
+ * then changes no result, whatever the machine's vector width.  -fno-math-errno only lets sqrtf
+ * be a single instruction (its value is the same).
+ *
+ * All arrays are C-contiguous; the Python wrappers check dtypes, shapes and contiguity before
+ * calling, so nothing here validates its pointers.  The functions hold no state and ctypes
+ * releases the GIL around each call, so the decoder's row-band threads run them in parallel.
+ *
+ * A module init function is included only so that the interpreter can locate the built file
+ * through the import system (importlib.util.find_spec); the module itself is empty.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#define PI_F ((float)3.14159265358979323846)
+#define TWO_PI_F ((float)6.28318530717958647692)
+#define TWO_PI_D 6.28318530717958647692
+
+/* Weighted least-squares fringe fit from the window moments (simbench.decode._kernels.gabor_fit
+ * documents the arguments). */
+void gabor_fit(int64_t h, int64_t w, const float *restrict b0, const float *restrict b1, const float *restrict b2,
+               const float *restrict e2, const float *restrict s1m, const float *restrict scm,
+               const float *restrict ssm, const float *restrict sc2m, const float *restrict ss2m,
+               const float *restrict cos1, const float *restrict sin1, float *restrict re, float *restrict im,
+               float *restrict a0, float *restrict amp, float *restrict residual) {
+    const float half = 0.5f, zero = 0.0f, one = 1.0f, s_min = 0.05f, det_min = 1e-4f;
+    const float rms = (float)0.70710678118654752440;
+    const float inf = INFINITY;
+    for (int64_t y = 0; y < h; y++) {
+        const int64_t o = y * w;
+        for (int64_t x = 0; x < w; x++) {
+            const int64_t j = o + x;
+            const float s1 = s1m[j], sc = scm[j], ss = ssm[j], sc2 = sc2m[j], ss2 = ss2m[j];
+            const float c = cos1[x], s = sin1[x];
+            const float scc = half * (s1 + sc2);
+            const float sss = half * (s1 - sc2);
+            const float scs = half * ss2;
+            const float c00 = scc * sss - scs * scs;
+            const float c01 = ss * scs - sc * sss;
+            const float c02 = sc * scs - ss * scc;
+            const float c11 = s1 * sss - ss * ss;
+            const float c12 = sc * ss - s1 * scs;
+            const float c22 = s1 * scc - sc * sc;
+            const float det = s1 * c00 + sc * c01 + ss * c02;
+            const int good = (s1 > s_min) && (det > det_min * s1 * s1 * s1);
+            const float inv = good ? one / det : zero;
+            const float inv_s1 = good ? one / s1 : zero;
+            const float k0 = c00 * inv, k1 = c01 * inv, k2 = c02 * inv;
+            const float p0 = (c01 * c + c02 * s) * inv;
+            const float p1 = (c11 * c + c12 * s) * inv;
+            const float p2 = (c12 * c + c22 * s) * inv;
+            const float q0 = (c01 * s - c02 * c) * inv;
+            const float q1 = (c11 * s - c12 * c) * inv;
+            const float q2 = (c12 * s - c22 * c) * inv;
+            const float d0 = b0[j], d1 = b1[j], d2 = b2[j];
+            const float a = k0 * d0 + k1 * d1 + k2 * d2;
+            const float r = p0 * d0 + p1 * d1 + p2 * d2;
+            const float i = q0 * d0 + q1 * d1 + q2 * d2;
+            a0[j] = a;
+            re[j] = r;
+            im[j] = i;
+            const float m = sqrtf(r * r + i * i);
+            float e = e2[j] - a * d0;
+            e = e - (c * d1 + s * d2) * r;
+            e = e - (s * d1 - c * d2) * i;
+            if (e < zero) e = zero; /* np.maximum(e, 0): NaN stays NaN */
+            e = sqrtf(e * inv_s1);
+            const float t = m * rms;
+            amp[j] = good ? m : zero;
+            residual[j] = (good && m > zero) ? e / t : inf;
+        }
+    }
+}
+
+/* In place: phase[phase >= pi] -= 2 pi (cv2.phase gives [0, 2 pi]). */
+void wrap_to_pi(int64_t n, float *restrict phase) {
+    for (int64_t j = 0; j < n; j++)
+        if (phase[j] >= PI_F) phase[j] -= TWO_PI_F;
+}
+
+/* out[j] = per_stripe[labels[j]], fill where the label is negative; items of any size. */
+void gather(int64_t n, int64_t itemsize, const void *restrict per_stripe, const int32_t *restrict labels,
+            const void *restrict fill, void *restrict out) {
+    const char *src = (const char *)per_stripe;
+    char *dst = (char *)out;
+    if (itemsize == 4) {
+        const int32_t *s4 = (const int32_t *)per_stripe;
+        int32_t f4;
+        memcpy(&f4, fill, 4);
+        int32_t *d4 = (int32_t *)out;
+        for (int64_t j = 0; j < n; j++) d4[j] = labels[j] >= 0 ? s4[labels[j]] : f4;
+        return;
+    }
+    if (itemsize == 1) {
+        const int8_t *s1 = (const int8_t *)per_stripe;
+        const int8_t f1 = *(const int8_t *)fill;
+        int8_t *d1 = (int8_t *)out;
+        for (int64_t j = 0; j < n; j++) d1[j] = labels[j] >= 0 ? s1[labels[j]] : f1;
+        return;
+    }
+    for (int64_t j = 0; j < n; j++) {
+        const int32_t s = labels[j];
+        memcpy(dst + j * itemsize, s >= 0 ? src + (int64_t)s * itemsize : (const char *)fill, (size_t)itemsize);
+    }
+}
+
+/* col0 = (psi + pi) * (t / 2 pi) + W t - 0.5, k = rint((expected - col0) / span); where W >= 0 and
+ * k is finite: column = col0 + k span, index = W + L k; else NaN and -1. */
+void absolute_column(int64_t n, const int32_t *restrict position, const float *restrict wrapped,
+                     const float *restrict expected, float t, float span, int64_t cycle, float *restrict column,
+                     int32_t *restrict index) {
+    const float scale = t / TWO_PI_F;
+    for (int64_t j = 0; j < n; j++) {
+        const int32_t p = position[j];
+        const float c0 = (wrapped[j] + PI_F) * scale + (float)p * t - 0.5f;
+        const float k = rintf((expected[j] - c0) / span);
+        if (p >= 0 && isfinite(k)) {
+            column[j] = c0 + k * span;
+            index[j] = (int32_t)((int64_t)p + cycle * (int64_t)(int32_t)k);
+        } else {
+            column[j] = NAN;
+            index[j] = -1;
+        }
+    }
+}
+
+/* Linear look-up of each pixel's column in its row of the inverse table (h rows of tw entries, the
+ * last one NaN); a column outside [0, tw - 2] (or NaN) gives NaN. */
+void match_reference(int64_t h, int64_t w, int64_t tw, const float *restrict column, const float *restrict table,
+                     float *restrict out) {
+    const int64_t width = tw - 2;
+    const float fw = (float)width;
+    for (int64_t y = 0; y < h; y++) {
+        const float *row = table + y * tw;
+        for (int64_t x = 0; x < w; x++) {
+            const float c = column[y * w + x];
+            if (c >= 0.0f && c <= fw) {
+                float fi = floorf(c);
+                if (fi >= fw) fi = (float)(width - 1);
+                const float f = c - fi;
+                const int64_t i = (int64_t)fi;
+                const float x0 = row[i], x1 = row[i + 1];
+                out[y * w + x] = x0 + f * (x1 - x0);
+            } else {
+                out[y * w + x] = NAN;
+            }
+        }
+    }
+}
+
+/* z = 1 / (1/Z0 + (x - x_ref) / (f B)), NaN unless z > 0. */
+void depth_from_disparity(int64_t h, int64_t w, const float *restrict x_ref, float inv_z0, float inv_fb,
+                          float *restrict out) {
+    for (int64_t y = 0; y < h; y++)
+        for (int64_t x = 0; x < w; x++) {
+            const float d = (float)x - x_ref[y * w + x];
+            const float z = 1.0f / (inv_z0 + d * inv_fb);
+            out[y * w + x] = z > 0.0f ? z : NAN;
+        }
+}
+
+/* Linked stripes before (left) and after (right) each stripe in its chain. */
+void chain_extent(int64_t n, const uint8_t *restrict linked_prev, int64_t *restrict left, int64_t *restrict right) {
+    int64_t start = 0;
+    for (int64_t j = 0; j < n; j++) {
+        if (!linked_prev[j]) start = j;
+        left[j] = j - start;
+    }
+    int64_t end = n - 1;
+    for (int64_t j = n - 1; j >= 0; j--) {
+        right[j] = end - j;
+        if (!linked_prev[j]) end = j - 1;
+    }
+}
+
+static inline int64_t pymod(int64_t a, int64_t m) {
+    const int64_t r = a % m;
+    return r < 0 ? r + m : r;
+}
+
+/* Plurality of the positions predicted by the stripe and its linked neighbours within reach
+ * (W[j + o] - o mod L); kept when it has min_support votes and beats every other candidate,
+ * else -1.  counts: scratch of cycle entries. */
+void neighbour_correct(int64_t n, const int32_t *restrict positions, const int64_t *restrict left,
+                       const int64_t *restrict right, int64_t cycle, int64_t reach, int64_t min_support,
+                       int64_t *restrict counts, int32_t *restrict out, int32_t *restrict support) {
+    for (int64_t j = 0; j < n; j++) {
+        for (int64_t v = 0; v < cycle; v++) counts[v] = 0;
+        for (int64_t off = -reach; off <= reach; off++) {
+            const int64_t src = j + off;
+            const int ok = off < 0 ? (left[j] >= -off) : (right[j] >= off);
+            if (ok && src >= 0 && src < n) {
+                const int32_t p = positions[src];
+                if (p >= 0) counts[pymod((int64_t)p - off, cycle)] += 1;
+            }
+        }
+        int64_t best = 0;
+        for (int64_t v = 1; v < cycle; v++)
+            if (counts[v] > counts[best]) best = v;
+        const int64_t votes = counts[best];
+        int64_t rival = -1;
+        for (int64_t v = 0; v < cycle; v++)
+            if (v != best && counts[v] > rival) rival = counts[v];
+        if (votes >= min_support && votes > rival) {
+            out[j] = (int32_t)best;
+            support[j] = (int32_t)votes;
+        } else {
+            out[j] = -1;
+            support[j] = 0;
+        }
+    }
+}
+
+/* Wraps (0 or 1) across the invalid gap between pixels xl and x of one row, or -1
+ * (simbench.decode._kernels documents the rule). */
+static int64_t bridge(const float *restrict wr, const uint8_t *restrict valid, int64_t w, int64_t xl, int64_t x,
+                      int64_t first, float lo, float hi, double omega, double tol) {
+    int64_t steps = xl - first;
+    double acc = (double)wr[xl] - (double)wr[first];
+    int64_t j = x;
+    while (j + 1 < w && valid[j + 1]) {
+        const float d = wr[j + 1] - wr[j];
+        if (d < -PI_F || !(d > lo && d < hi)) break;
+        j += 1;
+    }
+    steps += j - x;
+    acc += (double)wr[j] - (double)wr[x];
+    const double slope = steps >= 2 ? acc / (double)steps : omega;
+    if (!(slope > (double)lo && slope < (double)hi)) return -1;
+    const double advance = slope * (double)(x - xl);
+    const double d = (double)wr[x] - (double)wr[xl];
+    const double k = floor((advance - d) / TWO_PI_D + 0.5);
+    if ((k == 0.0 || k == 1.0) && fabs(d + TWO_PI_D * k - advance) <= tol) return (int64_t)k;
+    return -1;
+}
+
+/* Row-wise stripe segmentation; returns the number of stripes (simbench.decode._kernels
+ * documents the rule).  row/start/stop/linked_prev hold one entry per possible stripe. */
+int64_t segment_stripes(int64_t h, int64_t w, const float *restrict wrapped, const uint8_t *restrict valid, float lo,
+                        float hi, int64_t max_gap, double omega, double tol, int32_t *restrict labels,
+                        int32_t *restrict row, int32_t *restrict start, int32_t *restrict stop,
+                        uint8_t *restrict linked_prev) {
+    int64_t s = -1;
+    for (int64_t y = 0; y < h; y++) {
+        const float *wr = wrapped + y * w;
+        const uint8_t *va = valid + y * w;
+        int32_t *lab = labels + y * w;
+        for (int64_t x = 0; x < w; x++) {
+            if (!va[x]) {
+                lab[x] = -1;
+                continue;
+            }
+            int cont = 0, link = 0;
+            if (x > 0 && va[x - 1]) {
+                const float d = wr[x] - wr[x - 1];
+                const int wrap = d < -PI_F;
+                const float step = wrap ? d + TWO_PI_F : d;
+                if (step > lo && step < hi) {
+                    cont = !wrap;
+                    link = wrap;
+                }
+            } else if (max_gap > 0 && s >= 0 && row[s] == y && x - stop[s] <= max_gap) {
+                const int64_t k = bridge(wr, va, w, stop[s] - 1, x, start[s], lo, hi, omega, tol);
+                cont = k == 0;
+                link = k == 1;
+            }
+            if (!cont) {
+                s += 1;
+                row[s] = (int32_t)y;
+                start[s] = (int32_t)x;
+                linked_prev[s] = (uint8_t)link;
+            }
+            lab[x] = (int32_t)s;
+            stop[s] = (int32_t)(x + 1);
+        }
+    }
+    return s + 1;
+}
+
+/* Per stripe: share of its pixels with code 1 (float64; pixels of a bridged gap are not its own);
+ * the code is the majority (ties give 1) or, without voting, the middle pixel's; agreement =
+ * share agreeing with it. */
+void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_t *restrict labels,
+                const int32_t *restrict row, const int32_t *restrict start, const int32_t *restrict stop,
+                int64_t voting, uint8_t *restrict out, float *restrict agreement) {
+    for (int64_t s = 0; s < n; s++) {
+        const int64_t o = (int64_t)row[s] * w;
+        int64_t ones = 0, count = 0;
+        for (int64_t x = start[s]; x < stop[s]; x++)
+            if (labels[o + x] == s) {
+                ones += code[o + x];
+                count += 1;
+            }
+        const double frac = count > 0 ? (double)ones / (double)count : 0.5;
+        uint8_t c;
+        if (voting)
+            c = frac >= 0.5 ? 1 : 0;
+        else
+            c = code[o + ((int64_t)start[s] + stop[s] - 1) / 2] ? 1 : 0;
+        out[s] = c;
+        agreement[s] = (float)(c == 1 ? frac : 1.0 - frac);
+    }
+}
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels", NULL, -1, NULL};
+
+PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }
