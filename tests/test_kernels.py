@@ -183,3 +183,153 @@ def test_gap_bridging_matches_numpy(seed):
     for voting in (True, False):
         for a, b in zip(color.vote_codes(code, got, voting=voting), ref.vote_codes(code, want, voting=voting)):
             same(a, b)
+
+
+def capture_band(dtype, seed=5, h=30, w=170):
+    """An RGB capture with dark regions, clipped pixels and values on the thresholds."""
+    rng = np.random.default_rng(seed)
+    img = rng.random((h, w, 3))
+    img[:, 40:90] *= 0.03  # unlit
+    img[5:9, 100:130] = 1.0  # clipped
+    img[12, :, :] = 0.04  # exactly at dark_level (in float32)
+    if dtype == np.uint8:
+        return np.round(img * 255).astype(np.uint8)
+    if dtype == np.uint16:
+        return np.round(img * 65535).astype(np.uint16)
+    return img.astype(np.float32)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
+@pytest.mark.parametrize("order", [(0, 1, 2), (2, 0, 1)])
+@pytest.mark.parametrize("mode", ["overlay", "blue"])
+@pytest.mark.parametrize("w", [170, 9, 1])
+def test_front_end_matches_the_stages_it_fuses(dtype, order, mode, w):
+    """One pass = as_float_image + certainty_map + overlay_intensity + color_code, bit for bit,
+    also where the row is shorter than the lit window."""
+    from simbench.decode import _kernels
+    from simbench.decode.pipeline import as_float_image
+
+    img = capture_band(dtype, w=w)
+    for window, sat in ((1.0, 1.0), (8.0, 0.9)):
+        rgb = as_float_image(img)[..., list(order)]
+        cert, lit = phase.certainty_map(
+            rgb, period_px=T_CAM, dark_level=0.04, saturation_level=sat, window_periods=window
+        )
+        shape = img.shape[:2]
+        got = dict(
+            intensity=np.empty(shape, np.float32),
+            certainty=np.empty(shape, np.float32),
+            lit=np.empty(shape, bool),
+            code=np.empty(shape, bool),
+        )
+        _kernels.front_end(
+            img,
+            list(order),
+            {"overlay": 0, "blue": 1}[mode],
+            phase.certainty_window_px(T_CAM, window),
+            0.04,
+            sat,
+            *got.values(),
+        )
+        same(got["intensity"], phase.overlay_intensity(rgb, mode=mode))
+        same(got["certainty"], cert)
+        same(got["lit"], lit)
+        same(got["code"], color.color_code(rgb))
+        if w > 100 and window == 1.0:
+            assert got["lit"].any() and not got["lit"].all()
+
+
+def test_validity_matches_numpy():
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(6)
+    shape = (20, 50)
+    lit = rng.random(shape) < 0.8
+    support, amp, res = (rng.random(shape).astype(np.float32) for _ in range(3))
+    amp[0, :3] = np.float32(0.02)  # on the threshold, as numpy compares it (float32)
+    res[1, :3] = np.nan
+    for max_res in (0.6, np.inf):
+        got = np.empty(shape, bool)
+        _kernels.validity(lit, support, amp, res, 0.5, 0.02, max_res, got)
+        same(got, lit & (support >= 0.5) & (amp >= 0.02) & (res <= max_res))
+
+
+@pytest.mark.parametrize("distorted_projector", [False, True])
+def test_depth_reference_matches_matching_depth_and_triangulation(distorted_projector):
+    """The fused reference-mode depth = match_reference + depth_from_disparity, and the
+    pixels the reference row does not show triangulated as simbench.rig.triangulate_columns
+    does (in the kernel for an undistorted projector, by the caller otherwise)."""
+    import dataclasses
+
+    from simbench.decode import _kernels
+    from simbench.decode.pipeline import _triangulation_values
+    from simbench.rig import paper_rig, triangulate_columns
+
+    rig = dataclasses.replace(paper_rig(), position_m=(0.09, 0.004, -0.002), rotation_deg=(0.4, -1.5, 0.3))
+    if distorted_projector:
+        rig = dataclasses.replace(rig, projector=dataclasses.replace(rig.projector, distortion=(0.05, 0, 0, 0, 0)))
+    rng = np.random.default_rng(7)
+    h, w, row0 = 30, 200, 400
+    width = rig.projector.width_px
+    table = np.sort(rng.uniform(0, w, (h, width + 2)), axis=1).astype(np.float32)
+    table[:, -1] = np.nan
+    table[:, :300] = np.nan  # columns the reference rows do not show
+    column = rng.uniform(-5, width + 5, (h, w)).astype(np.float32)
+    column[rng.random(column.shape) < 0.1] = np.nan
+    inv_z0, inv_fb = 1.0, 1.0 / (rig.camera.focal_px * rig.baseline_m)
+    values = _triangulation_values(rig)
+    assert (values is None) == distorted_projector
+    x_ref, z, beyond = np.empty((h, w), np.float32), np.empty((h, w), np.float32), np.empty((h, w), bool)
+    _kernels.depth_reference(column, table, row0, inv_z0, inv_fb, values, x_ref, z, beyond)
+    want_x = depth.match_reference(column, table)
+    same(x_ref, want_x)
+    want_z = depth.depth_from_disparity(want_x, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=1.0)
+    want_beyond = np.isnan(want_x) & np.isfinite(column)
+    same(beyond, want_beyond)
+    assert 0.05 < beyond.mean() < 0.5
+    r, c = np.nonzero(want_beyond)
+    tri = triangulate_columns(column[want_beyond], rig, rows=r + row0, cols=c).astype(np.float32)
+    if distorted_projector:
+        assert np.isnan(z[want_beyond]).all()
+        z[want_beyond] = tri
+    else:
+        assert np.isfinite(tri).any()
+    want_z[want_beyond] = tri
+    same(z, want_z)
+
+
+def test_assemble_output_matches_numpy():
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(8)
+    shape = (10, 40)
+    z = rng.uniform(0.5, 2.0, shape).astype(np.float32)
+    z[0, :4] = [np.nan, np.float32(0.75), np.float32(1.75), np.inf]
+    amp, col = rng.random(shape).astype(np.float32), rng.uniform(0, 1800, shape).astype(np.float32)
+    idx = rng.integers(-1, 80, shape).astype(np.int32)
+    outs = [np.full(shape, 7, dt) for dt in (np.float32, bool, np.float32, np.float32, np.int32)]
+    _kernels.assemble_output(z, amp, col, idx, 0.75, 1.75, *outs)
+    valid = (z >= 0.75) & (z <= 1.75)
+    same(outs[1], valid)
+    same(outs[0], np.where(valid, z, np.float32(np.nan)))
+    same(outs[2], np.where(valid, amp, np.float32(0)))
+    same(outs[3], np.where(valid, col, np.float32(np.nan)))
+    same(outs[4], np.where(valid, idx, np.int32(-1)))
+
+
+def test_kernel_wrappers_refuse_what_the_c_code_cannot_read():
+    from simbench.decode import _kernels
+
+    a = np.zeros((4, 6), np.float32)
+    with pytest.raises(TypeError, match="dtype"):
+        _kernels.wrap_to_pi(a.astype(np.float64))
+    with pytest.raises(ValueError, match="contiguous"):
+        _kernels.wrap_to_pi(a[:, ::2])
+    with pytest.raises(ValueError, match="shape"):
+        _kernels.validity(np.zeros((4, 6), bool), a, a, a[:2], 0.5, 0.0, 1.0, np.empty((4, 6), bool))
+    with pytest.raises(ValueError, match="writable"):
+        ro = a.copy()
+        ro.setflags(write=False)
+        _kernels.wrap_to_pi(ro)
+    with pytest.raises(TypeError, match="uint8, uint16 or float32"):
+        _kernels.front_end(np.zeros((2, 3, 3), np.int32), [0, 1, 2], 0, 3, 0.04, 1.0, *([None] * 4))

@@ -18,6 +18,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
@@ -120,42 +121,40 @@ void absolute_column(int64_t n, const int32_t *restrict position, const float *r
                      const float *restrict expected, float t, float span, int64_t cycle, float *restrict column,
                      int32_t *restrict index) {
     const float scale = t / TWO_PI_F;
+    const uint32_t ucycle = (uint32_t)cycle;
     for (int64_t j = 0; j < n; j++) {
         const int32_t p = position[j];
         const float c0 = (wrapped[j] + PI_F) * scale + (float)p * t - 0.5f;
         const float k = rintf((expected[j] - c0) / span);
-        if (p >= 0 && isfinite(k)) {
-            column[j] = c0 + k * span;
-            index[j] = (int32_t)((int64_t)p + cycle * (int64_t)(int32_t)k);
-        } else {
-            column[j] = NAN;
-            index[j] = -1;
-        }
+        /* branch-free so that the loop vectorises: W + L k in wrapping int32 arithmetic, with
+         * x86's conversion of an out-of-range k (INT32_MIN), as the numpy form computes it */
+        const int ok = (p >= 0) & (fabsf(k) <= FLT_MAX);
+        const int in_range = fabsf(k) < 2147483648.0f;
+        const int32_t ki = (int32_t)(in_range ? k : 0.0f);
+        const uint32_t uk = in_range ? (uint32_t)ki : 0x80000000u;
+        column[j] = ok ? c0 + k * span : NAN;
+        index[j] = ok ? (int32_t)((uint32_t)p + ucycle * uk) : -1;
     }
 }
 
 /* Linear look-up of each pixel's column in its row of the inverse table (h rows of tw entries, the
  * last one NaN); a column outside [0, tw - 2] (or NaN) gives NaN. */
+static inline float lookup(const float *restrict row, int64_t width, float c) {
+    const float fw = (float)width;
+    const int ok = (c >= 0.0f) & (c <= fw);
+    const float cc = ok ? c : 0.0f;
+    float fi = floorf(cc);
+    fi = fi >= fw ? (float)(width - 1) : fi;
+    const float f = cc - fi;
+    const int32_t i = (int32_t)fi; /* 32-bit: the loop vectorises with AVX2 gathers */
+    const float x0 = row[i], x1 = row[i + 1];
+    return ok ? x0 + f * (x1 - x0) : NAN;
+}
+
 void match_reference(int64_t h, int64_t w, int64_t tw, const float *restrict column, const float *restrict table,
                      float *restrict out) {
-    const int64_t width = tw - 2;
-    const float fw = (float)width;
-    for (int64_t y = 0; y < h; y++) {
-        const float *row = table + y * tw;
-        for (int64_t x = 0; x < w; x++) {
-            const float c = column[y * w + x];
-            if (c >= 0.0f && c <= fw) {
-                float fi = floorf(c);
-                if (fi >= fw) fi = (float)(width - 1);
-                const float f = c - fi;
-                const int64_t i = (int64_t)fi;
-                const float x0 = row[i], x1 = row[i + 1];
-                out[y * w + x] = x0 + f * (x1 - x0);
-            } else {
-                out[y * w + x] = NAN;
-            }
-        }
-    }
+    for (int64_t y = 0; y < h; y++)
+        for (int64_t x = 0; x < w; x++) out[y * w + x] = lookup(table + y * tw, tw - 2, column[y * w + x]);
 }
 
 /* z = 1 / (1/Z0 + (x - x_ref) / (f B)), NaN unless z > 0. */
@@ -309,6 +308,127 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
             c = code[o + ((int64_t)start[s] + stop[s] - 1) / 2] ? 1 : 0;
         out[s] = c;
         agreement[s] = (float)(c == 1 ? frac : 1.0 - frac);
+    }
+}
+
+/* One band of a capture (h rows of w interleaved 3-channel pixels: dtype 0 = uint8, 1 = uint16,
+ * 2 = float32; the channels read as R = code 1, G = code 0, B = fringe are ch[0..2]) to the
+ * decoder's first images, in one pass (simbench.decode.pipeline's default path):
+ *   float conversion   v / 255 or v / 65535 as v * (float)(1/255) (numpy's multiply in float32)
+ *   intensity          paper Eq. 9 (R + G + B) / 2 as (0.5 R + 0.5 G) + 0.5 B (cv2.transform's
+ *                      float32 sum), or B alone (mode 1)
+ *   code               paper Eq. 13: R >= G
+ *   lit, certainty     certainty_map: the channel peak's maximum over a row window of `width`
+ *                      pixels (clamped at the row's ends: cv2.dilate with a replicated border)
+ *                      >= dark_level; certain = lit and the peak < saturation_level
+ * peak: scratch of 2 w floats.  Thresholds are float32, as numpy compares float32 images with a
+ * Python float. */
+#define FRONT_END_ROW(T, SCALE)                                                                            \
+    for (int64_t x = 0; x < w; x++) {                                                                  \
+        const T *p = (const T *)image + (y * w + x) * 3;                                                \
+        const float R = (float)p[ch0] SCALE, G = (float)p[ch1] SCALE, B = (float)p[ch2] SCALE;          \
+        const float m = R > G ? R : G;                                                                  \
+        peak[x] = m > B ? m : B;                                                                        \
+        inten[x] = mode == 0 ? (half * R + half * G) + half * B : B;                                    \
+        cd[x] = R >= G;                                                                                 \
+    }
+
+void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, int64_t ch0, int64_t ch1,
+               int64_t ch2, int64_t mode, int64_t width, float dark_level, float saturation_level,
+               float *restrict intensity, float *restrict certainty, uint8_t *restrict lit, uint8_t *restrict code,
+               float *restrict peak) {
+    const float k8 = (float)(1.0 / 255.0), k16 = (float)(1.0 / 65535.0), half = 0.5f;
+    const int64_t r = width / 2;
+    float *restrict m = peak + w; /* the row maximum: second half of the scratch */
+    for (int64_t y = 0; y < h; y++) {
+        float *inten = intensity + y * w;
+        uint8_t *cd = code + y * w;
+        if (dtype == 0) {
+            FRONT_END_ROW(uint8_t, *k8)
+        } else if (dtype == 1) {
+            FRONT_END_ROW(uint16_t, *k16)
+        } else {
+            FRONT_END_ROW(float, )
+        }
+        /* maximum over [x - r, x + r] clipped to the row: with a replicated border the values
+         * beyond the ends repeat the end pixels, which the clipped window holds already */
+        for (int64_t x = 0; x < w; x++) m[x] = peak[x];
+        for (int64_t k = 1; k <= r && k < w; k++) {
+            for (int64_t x = 0; x < w - k; x++) m[x] = peak[x + k] > m[x] ? peak[x + k] : m[x];
+            for (int64_t x = k; x < w; x++) m[x] = peak[x - k] > m[x] ? peak[x - k] : m[x];
+        }
+        float *cert = certainty + y * w;
+        uint8_t *li = lit + y * w;
+        for (int64_t x = 0; x < w; x++) {
+            const int l = m[x] >= dark_level;
+            li[x] = (uint8_t)l;
+            cert[x] = (l & (peak[x] < saturation_level)) ? 1.0f : 0.0f;
+        }
+    }
+}
+
+/* The phase-valid mask: lit, window support, fringe amplitude and fit residual within their
+ * limits (float32 thresholds). */
+void validity(int64_t n, const uint8_t *restrict lit, const float *restrict support, const float *restrict amplitude,
+              const float *restrict residual, float min_support, float min_amplitude, float max_residual,
+              uint8_t *restrict valid) {
+    for (int64_t j = 0; j < n; j++)
+        valid[j] = lit[j] & (support[j] >= min_support) & (amplitude[j] >= min_amplitude) &
+                   (residual[j] <= max_residual);
+}
+
+/* Reference-mode depth of one band (h rows from image row row0): match each column in the
+ * reference's inverse table (match_reference), depth from the disparity (depth_from_disparity);
+ * a decoded column the reference row does not show (beyond) is triangulated with the rig when
+ * `triangulate` (an undistorted projector; simbench.rig.triangulate_columns in float64, in its
+ * operation order: plane normal R (1, 0, -a) with a = (u - cx_p) / f_p, ray (rx, ry, 1)),
+ * else left NaN for the caller.  rig: f_c, cx_c, cy_c, f_p, cx_p, R (row-major 3x3), t (3). */
+void depth_reference(int64_t h, int64_t w, int64_t row0, int64_t tw, const float *restrict column,
+                     const float *restrict table, float inv_z0, float inv_fb, int64_t triangulate,
+                     const double *restrict rig, float *restrict x_ref, float *restrict depth,
+                     uint8_t *restrict beyond) {
+    const double fc = rig[0], cxc = rig[1], cyc = rig[2], fp = rig[3], cxp = rig[4];
+    const double *R = rig + 5, *t = rig + 14;
+    for (int64_t y = 0; y < h; y++) {
+        const float *row = table + y * tw;
+        const double ry = ((double)(row0 + y) - cyc) / fc;
+        const float *col = column + y * w;
+        float *xr = x_ref + y * w, *z = depth + y * w;
+        uint8_t *out = beyond + y * w;
+        /* two simple loops: each vectorises (one with gathers), the fused one did not */
+        for (int64_t x = 0; x < w; x++) xr[x] = lookup(row, tw - 2, col[x]);
+        for (int32_t x = 0; x < (int32_t)w; x++) {
+            const float d = (float)x - xr[x];
+            const float zz = 1.0f / (inv_z0 + d * inv_fb);
+            z[x] = zz > 0.0f ? zz : NAN;
+            out[x] = isnan(xr[x]) & (fabsf(col[x]) <= FLT_MAX);
+        }
+        if (!triangulate) continue;
+        for (int64_t x = 0; x < w; x++) {
+            const int64_t j = y * w + x;
+            if (!beyond[j]) continue;
+            const double rx = ((double)x - cxc) / fc;
+            const double a = ((double)column[j] - cxp) / fp;
+            const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
+            const double z = (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz);
+            depth[j] = (float)((fabs(z) <= DBL_MAX && z > 0.0) ? z : NAN);
+        }
+    }
+}
+
+/* The decoder's outputs for a band: valid = zmin <= depth <= zmax (float32), and depth, confidence
+ * (the fringe amplitude), column and stripe index where valid, NaN / 0 / NaN / -1 elsewhere. */
+void assemble_output(int64_t n, const float *restrict depth, const float *restrict amplitude,
+                     const float *restrict column, const int32_t *restrict index, float zmin, float zmax,
+                     float *restrict depth_out, uint8_t *restrict valid_out, float *restrict conf_out,
+                     float *restrict col_out, int32_t *restrict index_out) {
+    for (int64_t j = 0; j < n; j++) {
+        const int v = (depth[j] >= zmin) & (depth[j] <= zmax);
+        valid_out[j] = (uint8_t)v;
+        depth_out[j] = v ? depth[j] : NAN;
+        conf_out[j] = v ? amplitude[j] : 0.0f;
+        col_out[j] = v ? column[j] : NAN;
+        index_out[j] = v ? index[j] : -1;
     }
 }
 

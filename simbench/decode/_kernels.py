@@ -38,6 +38,10 @@ __all__ = [
     "neighbour_correct",
     "segment_stripes",
     "vote_codes",
+    "front_end",
+    "validity",
+    "depth_reference",
+    "assemble_output",
 ]
 
 _P = ctypes.c_void_p
@@ -55,7 +59,12 @@ _SIGNATURES = {
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
     "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P]),
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
+    "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
+    "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
+    "depth_reference": (None, [_I, _I, _I, _I, _P, _P, _F, _F, _I, _P, _P, _P, _P]),
+    "assemble_output": (None, [_I, _P, _P, _P, _P, _F, _F, _P, _P, _P, _P, _P]),
 }
+_IMAGE_DTYPES = {np.dtype(np.uint8): 0, np.dtype(np.uint16): 1, np.dtype(np.float32): 2}
 
 
 def _built_file() -> str:
@@ -287,4 +296,107 @@ def vote_codes(code, labels, row, start, stop, voting, out, agreement) -> None:
         int(bool(voting)),
         _ptr(out, "out", np.uint8, (n,), writable=True),
         _ptr(agreement, "agreement", np.float32, (n,), writable=True),
+    )
+
+
+def front_end(image, order, mode, width, dark_level, saturation_level, intensity, certainty, lit, code) -> None:
+    """One pass from a band of the capture (H, W, 3), uint8/uint16/float32, to the decoder's
+    first images: ``intensity`` (paper Eq. 9 as ``(0.5 R + 0.5 G) + 0.5 B``, mode 0, or the
+    fringe channel alone, mode 1), ``code`` (Eq. 13, ``R >= G``), ``lit`` and ``certainty``
+    (:func:`simbench.decode.phase.certainty_map` with a row window of ``width`` pixels), with
+    channels read in ``order`` (the indices of code 1, code 0 and the fringe) and converted as
+    :func:`simbench.decode.pipeline.as_float_image` does.  The same bits as the numpy/OpenCV
+    stages it replaces (tests/test_kernels.py)."""
+    h, w, _ = image.shape
+    try:
+        dtype = _IMAGE_DTYPES[image.dtype]
+    except KeyError:
+        raise TypeError(f"image: expected uint8, uint16 or float32, got {image.dtype}") from None
+    if image.shape[2] != 3 or sorted(order) != [0, 1, 2]:
+        raise ValueError(f"image must be (H, W, 3) and order a permutation of 0, 1, 2: {image.shape}, {order}")
+    peak = np.empty(2 * w, np.float32)
+    _library().front_end(
+        h,
+        w,
+        _ptr(image, "image", image.dtype),
+        dtype,
+        *(int(c) for c in order),
+        int(mode),
+        int(width),
+        float(np.float32(dark_level)),
+        float(np.float32(saturation_level)),
+        _ptr(intensity, "intensity", np.float32, (h, w), writable=True),
+        _ptr(certainty, "certainty", np.float32, (h, w), writable=True),
+        _ptr(lit, "lit", np.bool_, (h, w), writable=True),
+        _ptr(code, "code", np.bool_, (h, w), writable=True),
+        peak.ctypes.data,
+    )
+
+
+def validity(lit, support, amplitude, residual, min_support, min_amplitude, max_residual, valid) -> None:
+    """``valid = lit & (support >= min_support) & (amplitude >= min_amplitude) &
+    (residual <= max_residual)``, thresholds in float32."""
+    shape = lit.shape
+    _library().validity(
+        lit.size,
+        _ptr(lit, "lit", np.bool_),
+        _ptr(support, "support", np.float32, shape),
+        _ptr(amplitude, "amplitude", np.float32, shape),
+        _ptr(residual, "residual", np.float32, shape),
+        float(np.float32(min_support)),
+        float(np.float32(min_amplitude)),
+        float(np.float32(max_residual)),
+        _ptr(valid, "valid", np.bool_, shape, writable=True),
+    )
+
+
+def depth_reference(column, table, row0, inv_z0, inv_fb, rig_values, x_ref, depth, beyond) -> None:
+    """Reference-mode depth of a band whose first row is image row ``row0``: the look-up of
+    :func:`match_reference` (into ``x_ref``), the depth of :func:`depth_from_disparity`, and
+    ``beyond`` = the reference row does not show the decoded column.  With ``rig_values``
+    (float64: camera focal, cx, cy, projector focal, cx, the rotation row-major, the position;
+    only for an undistorted projector) those pixels are triangulated as
+    :func:`simbench.rig.triangulate_columns` does, in float64; with None they stay NaN."""
+    h, w = column.shape
+    if table.ndim != 2 or table.shape[0] != h or table.shape[1] < 3:
+        raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
+    values = np.zeros(17) if rig_values is None else np.ascontiguousarray(rig_values, np.float64)
+    if values.shape != (17,):
+        raise ValueError(f"rig_values: expected 17 numbers, got {values.shape}")
+    _library().depth_reference(
+        h,
+        w,
+        int(row0),
+        table.shape[1],
+        _ptr(column, "column", np.float32),
+        _ptr(table, "table", np.float32),
+        float(np.float32(inv_z0)),
+        float(np.float32(inv_fb)),
+        int(rig_values is not None),
+        values.ctypes.data,
+        _ptr(x_ref, "x_ref", np.float32, (h, w), writable=True),
+        _ptr(depth, "depth", np.float32, (h, w), writable=True),
+        _ptr(beyond, "beyond", np.bool_, (h, w), writable=True),
+    )
+
+
+def assemble_output(
+    depth, amplitude, column, index, zmin, zmax, depth_out, valid_out, conf_out, col_out, index_out
+) -> None:
+    """The decoder's outputs: ``valid = (depth >= zmin) & (depth <= zmax)`` (float32), and
+    ``depth``, ``amplitude``, ``column``, ``index`` where valid, NaN / 0 / NaN / -1 elsewhere."""
+    shape = depth.shape
+    _library().assemble_output(
+        depth.size,
+        _ptr(depth, "depth", np.float32),
+        _ptr(amplitude, "amplitude", np.float32, shape),
+        _ptr(column, "column", np.float32, shape),
+        _ptr(index, "index", np.int32, shape),
+        float(np.float32(zmin)),
+        float(np.float32(zmax)),
+        _ptr(depth_out, "depth_out", np.float32, shape, writable=True),
+        _ptr(valid_out, "valid_out", np.bool_, shape, writable=True),
+        _ptr(conf_out, "conf_out", np.float32, shape, writable=True),
+        _ptr(col_out, "col_out", np.float32, shape, writable=True),
+        _ptr(index_out, "index_out", np.int32, shape, writable=True),
     )

@@ -20,7 +20,7 @@ import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_map", "PhaseResult", "gabor_phase"]
+__all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_window_px", "certainty_map", "PhaseResult", "gabor_phase"]
 
 
 def _overlay(rgb: np.ndarray) -> np.ndarray:
@@ -81,6 +81,12 @@ def overlay_intensity(
     return fn(rgb, weights) if mode == "weighted" else fn(rgb)
 
 
+def certainty_window_px(period_px: float, window_periods: float = 1.0) -> int:
+    """Width in pixels (odd, at least 3) of the row window over which :func:`certainty_map`
+    looks for a lit pixel."""
+    return max(3, int(round(window_periods * period_px)) | 1)
+
+
 def certainty_map(
     rgb: np.ndarray, *, period_px: float, dark_level: float, saturation_level: float, window_periods: float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -99,7 +105,7 @@ def certainty_map(
     """
     r, g, b = cv2.split(rgb)
     peak = cv2.max(cv2.max(r, g), b)
-    width = max(3, int(round(window_periods * period_px)) | 1)
+    width = certainty_window_px(period_px, window_periods)
     local_max = cv2.dilate(peak, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE)
     lit = local_max >= dark_level
     return (lit & (peak < saturation_level)).astype(np.float32), lit

@@ -30,14 +30,13 @@ from simbench.decode.debruijn import (
 from simbench.decode.depth import (
     absolute_column,
     depth_calibrated,
-    depth_from_disparity,
     inverse_column_table,
-    match_reference,
 )
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import (
     INTENSITY_MODES,
     certainty_map,
+    certainty_window_px,
     gabor_phase,
     overlay_intensity,
 )
@@ -386,8 +385,25 @@ def _per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     return out
 
 
+def _fused_front_end(params: DecoderParams, unmixing: np.ndarray | None, image: np.ndarray) -> bool:
+    """Whether a band takes the one-pass front end (:func:`simbench.decode._kernels.front_end`):
+    the paper's channels as they are (no unmixing or normalisation), intensity by Eq. 9 or the
+    fringe channel, a contiguous uint8/uint16/float32 capture."""
+    return (
+        unmixing is None
+        and not params.color_normalize
+        and params.intensity_mode in _FUSED_INTENSITY
+        and image.dtype in (np.uint8, np.uint16, np.float32)
+        and image.flags.c_contiguous
+    )
+
+
+_FUSED_INTENSITY = {"overlay": 0, "blue": 1}
+
+
 def _columns(
-    rgb: np.ndarray,
+    image: np.ndarray,
+    order: list[int],
     expected_column: np.ndarray,
     *,
     rig: Rig,
@@ -397,8 +413,10 @@ def _columns(
 ) -> tuple[np.ndarray, np.ndarray, LazyStages]:
     """Stages 1-3 and the absolute column for one band of rows.
 
-    ``rgb`` holds the band plus a halo of rows above and below for the phase fit; ``crop``
-    selects the band's own rows, to which everything after the fit is restricted.
+    ``image`` is the band of the checked capture (any dtype :func:`as_float_image` takes,
+    channels in the capture's order; ``order`` lists the indices of code 1, code 0 and the
+    fringe) plus a halo of rows above and below for the phase fit; ``crop`` selects the band's
+    own rows, to which everything after the fit is restricted.
     Returns (column, stripe_index, stages) for the cropped rows.
     """
     t_cam = params.camera_period(rig)
@@ -406,50 +424,79 @@ def _columns(
     # "lit" looks across the neighbouring stripes: twice the normalisation window, so that
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
-    with stage("lit and clipped pixels"):
-        certainty, lit = certainty_map(
-            rgb,
-            period_px=t_cam,
-            dark_level=params.dark_level,
-            saturation_level=params.saturation_level,
-            window_periods=window,
-        )
-    raw = rgb
-    weights = None
-    with stage("colour unmixing and normalisation"):
-        if unmixing is not None:
-            rgb = unmix(rgb, unmixing)
-        if params.color_normalize:
-            rgb, span = normalize_channels(
-                rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
+    if _fused_front_end(params, unmixing, image):
+        # the same bits as the general path below, in one pass over the capture
+        with stage("front end (float, lit/clipped, Eq. 9, Eq. 13)"):
+            hb, wb = image.shape[:2]
+            intensity = np.empty((hb, wb), np.float32)
+            certainty = np.empty((hb, wb), np.float32)
+            lit = np.empty((hb, wb), bool)
+            code_full = np.empty((hb, wb), bool)
+            _kernels.front_end(
+                image,
+                order,
+                _FUSED_INTENSITY[params.intensity_mode],
+                certainty_window_px(t_cam, window),
+                params.dark_level,
+                params.saturation_level,
+                intensity,
+                certainty,
+                lit,
+                code_full,
             )
-            if params.intensity_mode == "weighted":
-                weights = overlay_weights(
-                    raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level
+            code = code_full[crop]
+    else:
+        with stage("to float"):
+            rgb = _to_float(image if order == [0, 1, 2] else image[..., order])
+        with stage("lit and clipped pixels"):
+            certainty, lit = certainty_map(
+                rgb,
+                period_px=t_cam,
+                dark_level=params.dark_level,
+                saturation_level=params.saturation_level,
+                window_periods=window,
+            )
+        raw = rgb
+        weights = None
+        with stage("colour unmixing and normalisation"):
+            if unmixing is not None:
+                rgb = unmix(rgb, unmixing)
+            if params.color_normalize:
+                rgb, span = normalize_channels(
+                    rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
                 )
-    with stage("intensity overlay (Eq. 9)"):
-        intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
+                if params.intensity_mode == "weighted":
+                    weights = overlay_weights(
+                        raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level
+                    )
+        with stage("intensity overlay (Eq. 9)"):
+            intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
+        with stage("colour code (Eq. 13)"):
+            code = color_code(rgb[crop])
     sx = params.sigma_periods * t_cam
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         phase = PHASE_METHODS[params.phase_method](
             intensity, certainty=certainty, period_px=t_cam, sigma_x_px=sx, sigma_y_px=sx * params.sigma_y_ratio
         )
     with stage("validity"):
-        rgb, intensity, certainty, lit = rgb[crop], intensity[crop], certainty[crop], lit[crop]
+        intensity, certainty, lit = intensity[crop], certainty[crop], lit[crop]
         wrapped, amplitude, residual, support_w = (
             phase.wrapped[crop],
             phase.amplitude[crop],
             phase.residual[crop],
             phase.support[crop],
         )
-        valid = (
-            lit
-            & (support_w >= params.min_window_support)
-            & (amplitude >= params.min_amplitude)
-            & (residual <= params.max_residual)
+        valid = np.empty(lit.shape, bool)
+        _kernels.validity(
+            lit,
+            support_w,
+            amplitude,
+            residual,
+            params.min_window_support,
+            params.min_amplitude,
+            params.max_residual,
+            valid,
         )
-    with stage("colour code (Eq. 13)"):
-        code = color_code(rgb)
     with stage("stripe segmentation and voting"):
         stripes = segment_stripes(wrapped, valid, period_px=t_cam, max_gap_px=int(params.bridge_gap_periods * t_cam))
         stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
@@ -516,9 +563,26 @@ def _bands(height: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo
 
 
+def _triangulation_values(rig: Rig) -> np.ndarray | None:
+    """The rig as :func:`simbench.decode._kernels.depth_reference` triangulates with it (camera
+    focal, cx, cy; projector focal, cx; rotation; position), or None when the projector has lens
+    distortion (its columns are undistorted by :func:`simbench.rig.triangulate_columns`)."""
+    if rig.projector.has_distortion:
+        return None
+    cam, prj = rig.camera, rig.projector
+    return np.concatenate(
+        [
+            [cam.focal_px, cam.cx_px, cam.cy_px, prj.focal_px, prj.cx_px],
+            np.asarray(rig.rotation, np.float64).ravel(),
+            np.asarray(rig.position_m, np.float64),
+        ]
+    )
+
+
 def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
-    """Apply ``fn(float_rgb_with_halo, rows, crop)`` to each band, in parallel threads
-    (``image`` is a checked capture; each band converts its own rows to float)."""
+    """Apply ``fn(band_with_halo, order, rows, crop)`` to each band, in parallel threads
+    (``image`` is a checked capture, each band a view of its rows; ``order``: the channel
+    indices of code 1, code 0 and the fringe)."""
     h = image.shape[0]
     bands, halo = _bands(h, params, rig)
     order = list(check_channels(params.channels))
@@ -526,10 +590,7 @@ def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
     def work(band):
         r0, r1 = band
         a0, a1 = max(0, r0 - halo), min(h, r1 + halo)
-        rows = image[a0:a1] if order == [0, 1, 2] else image[a0:a1][..., order]
-        with stage("to float"):
-            rows = _to_float(rows)
-        return fn(rows, slice(r0, r1), slice(r0 - a0, r1 - a0))
+        return fn(image[a0:a1], order, slice(r0, r1), slice(r0 - a0, r1 - a0))
 
     if len(bands) == 1:
         return [work(bands[0])]
@@ -616,7 +677,9 @@ def decode_reference(
     unmixing = _unmixing(mixing, params)
     predicted = _plane_columns(rig, float(params.z0_m))
     parts = _run_bands(
-        lambda img, rows, crop: _columns(img, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)[0],
+        lambda img, order, rows, crop: _columns(
+            img, order, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
+        )[0],
         image,
         params,
         rig,
@@ -684,27 +747,36 @@ def decode(
     else:
         ref = None  # calibrated mode uses the reference for its coupling matrix only
         expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
-    nan = np.float32(np.nan)
+    rig_values = _triangulation_values(rig)
     depth_out = np.empty((h, w), np.float32)
     valid_out = np.empty((h, w), bool)
     conf_out = np.empty((h, w), np.float32)
     col_out = np.empty((h, w), np.float32)
     index_out = np.empty((h, w), np.int32)
 
-    def band(img, rows, crop):
+    def band(img, order, rows, crop):
         column, stripe_index, stages = _columns(
-            img, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
+            img, order, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
         )
         with stage("depth (reference matching, Eq. 15)" if ref is not None else "depth (triangulation, Eq. 15)"):
             if ref is not None:
-                x_ref = match_reference(column, ref.inverse[rows])
-                depth = depth_from_disparity(
-                    x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=ref.z0_m
+                x_ref, depth, beyond = (np.empty(column.shape, dt) for dt in (np.float32, np.float32, bool))
+                # match_reference + depth_from_disparity in one pass; a column the reference row
+                # never shows (near the image's ends, for surfaces off the reference depth)
+                # cannot be matched: it is triangulated with the calibrated rig (in the same
+                # pass unless the projector has lens distortion)
+                _kernels.depth_reference(
+                    column,
+                    ref.inverse[rows],
+                    rows.start,
+                    1.0 / ref.z0_m,
+                    1.0 / (rig.camera.focal_px * rig.baseline_m),
+                    rig_values,
+                    x_ref,
+                    depth,
+                    beyond,
                 )
-                # a column the reference row never shows (near the image's ends, for surfaces off
-                # the reference depth) cannot be matched: triangulate it with the calibrated rig
-                beyond = np.isnan(x_ref) & np.isfinite(column)
-                if beyond.any():
+                if rig_values is None and beyond.any():
                     r_idx, c_idx = np.nonzero(beyond)
                     depth[beyond] = triangulate_columns(
                         column[beyond], rig, rows=r_idx + rows.start, cols=c_idx
@@ -714,17 +786,19 @@ def decode(
             else:
                 depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
         with stage("output"):
-            valid = valid_out[rows]
-            np.greater_equal(depth, zmin, out=valid)
-            valid &= depth <= zmax
-            for dst, src, fill in (
-                (depth_out, depth, nan),
-                (conf_out, stages["amplitude"], 0),
-                (col_out, column, nan),
-                (index_out, stripe_index, -1),
-            ):
-                dst[rows] = fill
-                np.copyto(dst[rows], src, where=valid)
+            _kernels.assemble_output(
+                depth,
+                stages["amplitude"],
+                column,
+                stripe_index,
+                zmin,
+                zmax,
+                depth_out[rows],
+                valid_out[rows],
+                conf_out[rows],
+                col_out[rows],
+                index_out[rows],
+            )
         return stages
 
     parts = _run_bands(band, image, params, rig)
