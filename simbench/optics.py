@@ -111,7 +111,9 @@ def _distort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
 def _undistort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
     """Where the ideal pixel is recorded: K D(K^-1 q)."""
     x, y = _grid(intr)
-    xd, yd = distort_normalized(x, y, intr.distortion)
+    # a row of x and a column of y: the terms of one coordinate are computed once per row or
+    # column, each pixel's value still by the same float64 operations (the same bits)
+    xd, yd = distort_normalized(x[:1], y[:, :1], intr.distortion)
     return _readonly_map(xd * intr.focal_px + intr.cx_px), _readonly_map(yd * intr.focal_px + intr.cy_px)
 
 
