@@ -110,6 +110,18 @@ def _ptr(a: np.ndarray, name: str, dtype, shape: tuple | None = None, *, writabl
     return a.ctypes.data
 
 
+def _f32(x) -> float:
+    """``x`` rounded to float32 (as numpy rounds a Python float compared with a float32 image),
+    for a C ``float`` argument."""
+    return float(np.float32(x))
+
+
+def _check_table(table: np.ndarray, h: int) -> None:
+    """The inverse column table of :func:`match_reference`: one row per image row, >= 3 entries."""
+    if table.ndim != 2 or table.shape[0] != h or table.shape[1] < 3:
+        raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
+
+
 def gabor_fit(b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual) -> None:
     """Weighted least-squares fringe fit from the window moments, per pixel.
 
@@ -167,8 +179,8 @@ def absolute_column(position, wrapped, expected, t, span, cycle, column, index) 
         _ptr(position, "position", np.int32),
         _ptr(wrapped, "wrapped", np.float32, shape),
         _ptr(expected, "expected", np.float32, shape),
-        float(np.float32(t)),
-        float(np.float32(span)),
+        _f32(t),
+        _f32(span),
         int(cycle),
         _ptr(column, "column", np.float32, shape, writable=True),
         _ptr(index, "index", np.int32, shape, writable=True),
@@ -179,8 +191,7 @@ def match_reference(column, table, out) -> None:
     """Linear look-up of each pixel's column in its row of the inverse table: the table's
     last column is NaN, and a column outside ``[0, width]`` (or NaN) gives NaN."""
     h, w = column.shape
-    if table.ndim != 2 or table.shape[0] != h or table.shape[1] < 3:
-        raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
+    _check_table(table, h)
     _library().match_reference(
         h,
         w,
@@ -198,8 +209,8 @@ def depth_from_disparity(x_ref, inv_z0, inv_fb, out) -> None:
         h,
         w,
         _ptr(x_ref, "x_ref", np.float32),
-        float(np.float32(inv_z0)),
-        float(np.float32(inv_fb)),
+        _f32(inv_z0),
+        _f32(inv_fb),
         _ptr(out, "out", np.float32, (h, w), writable=True),
     )
 
@@ -265,8 +276,8 @@ def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, st
             w,
             _ptr(wrapped, "wrapped", np.float32),
             _ptr(valid, "valid", np.bool_, (h, w)),
-            float(np.float32(lo)),
-            float(np.float32(hi)),
+            _f32(lo),
+            _f32(hi),
             int(max_gap),
             float(omega),
             float(tol),
@@ -323,8 +334,8 @@ def front_end(image, order, mode, width, dark_level, saturation_level, intensity
         *(int(c) for c in order),
         int(mode),
         int(width),
-        float(np.float32(dark_level)),
-        float(np.float32(saturation_level)),
+        _f32(dark_level),
+        _f32(saturation_level),
         _ptr(intensity, "intensity", np.float32, (h, w), writable=True),
         _ptr(certainty, "certainty", np.float32, (h, w), writable=True),
         _ptr(lit, "lit", np.bool_, (h, w), writable=True),
@@ -343,9 +354,9 @@ def validity(lit, support, amplitude, residual, min_support, min_amplitude, max_
         _ptr(support, "support", np.float32, shape),
         _ptr(amplitude, "amplitude", np.float32, shape),
         _ptr(residual, "residual", np.float32, shape),
-        float(np.float32(min_support)),
-        float(np.float32(min_amplitude)),
-        float(np.float32(max_residual)),
+        _f32(min_support),
+        _f32(min_amplitude),
+        _f32(max_residual),
         _ptr(valid, "valid", np.bool_, shape, writable=True),
     )
 
@@ -358,8 +369,7 @@ def depth_reference(column, table, row0, inv_z0, inv_fb, rig_values, x_ref, dept
     only for an undistorted projector) those pixels are triangulated as
     :func:`simbench.rig.triangulate_columns` does, in float64; with None they stay NaN."""
     h, w = column.shape
-    if table.ndim != 2 or table.shape[0] != h or table.shape[1] < 3:
-        raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
+    _check_table(table, h)
     values = np.zeros(17) if rig_values is None else np.ascontiguousarray(rig_values, np.float64)
     if values.shape != (17,):
         raise ValueError(f"rig_values: expected 17 numbers, got {values.shape}")
@@ -370,8 +380,8 @@ def depth_reference(column, table, row0, inv_z0, inv_fb, rig_values, x_ref, dept
         table.shape[1],
         _ptr(column, "column", np.float32),
         _ptr(table, "table", np.float32),
-        float(np.float32(inv_z0)),
-        float(np.float32(inv_fb)),
+        _f32(inv_z0),
+        _f32(inv_fb),
         int(rig_values is not None),
         values.ctypes.data,
         _ptr(x_ref, "x_ref", np.float32, (h, w), writable=True),
@@ -392,8 +402,8 @@ def assemble_output(
         _ptr(amplitude, "amplitude", np.float32, shape),
         _ptr(column, "column", np.float32, shape),
         _ptr(index, "index", np.int32, shape),
-        float(np.float32(zmin)),
-        float(np.float32(zmax)),
+        _f32(zmin),
+        _f32(zmax),
         _ptr(depth_out, "depth_out", np.float32, shape, writable=True),
         _ptr(valid_out, "valid_out", np.bool_, shape, writable=True),
         _ptr(conf_out, "conf_out", np.float32, shape, writable=True),
