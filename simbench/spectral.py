@@ -30,13 +30,20 @@ Data and assumptions (nothing here is fitted to the paper's results):
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
+import os
+import tempfile
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 
 __all__ = [
+    "memo_path",
     "watts_per_lux",
     "MEASURED_DATASETS",
     "measured_reflectance",
@@ -56,6 +63,77 @@ __all__ = [
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
 PRIMARY_FWHM_NM = (20.0, 35.0, 20.0)  # assumption
 CAMERA_DATASET = "Nikon 5100 (NPL)"  # stands in for the Flea3 FL3-U3-13E4C (module docstring)
+
+
+# What the renders need from colour-science - a few numbers per material and sensor - is kept on
+# disk, so that a rerun does not import it (~1.3 s: colour imports SciPy and matplotlib).  The
+# memo file is named by colour-science's version and this file's bytes (constants and code), its
+# entries by function and arguments; values are stored as Python floats (exact round trip).
+# SIMBENCH_CACHE_DIR sets its folder (default: $XDG_CACHE_HOME/simbench or ~/.cache/simbench);
+# set to an empty string it turns the memo off.
+_MEMO: dict | None = None
+
+
+def memo_path() -> Path | None:
+    """The file of the spectral memo (see above), or None when it is off."""
+    root = os.environ.get("SIMBENCH_CACHE_DIR")
+    if root == "":
+        return None
+    if root is None:
+        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "simbench"
+    from importlib import metadata
+
+    try:
+        version = metadata.version("colour-science")
+    except metadata.PackageNotFoundError:
+        return None
+    digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
+    return Path(root) / f"spectral-colour{version}-{digest}.json"
+
+
+def _read_memo(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}  # missing or damaged: recompute (and rewrite) what is asked for
+    return data if isinstance(data, dict) else {}
+
+
+def _persistent(fn: Callable) -> Callable:
+    """``fn`` (hashable arguments; an array or a tuple of floats out) remembered in the memo
+    file: computed at most once per colour-science version and version of this module."""
+
+    @functools.wraps(fn)
+    def wrapper(*args):
+        global _MEMO
+        path = memo_path()
+        key = f"{fn.__name__}{args!r}"
+        if path is not None:
+            if _MEMO is None:
+                _MEMO = _read_memo(path)
+            hit = _MEMO.get(key)
+            if isinstance(hit, dict) and hit.get("kind") in ("array", "tuple"):
+                if hit["kind"] == "tuple":
+                    return tuple(float(x) for x in hit["value"])
+                out = np.asarray(hit["value"], dtype=np.float64)
+                out.setflags(write=False)
+                return out
+        value = fn(*args)
+        if path is not None:
+            entry = {"kind": "tuple" if isinstance(value, tuple) else "array", "value": np.asarray(value).tolist()}
+            _MEMO[key] = entry
+            try:  # merge with what other processes wrote meanwhile; replace atomically
+                path.parent.mkdir(parents=True, exist_ok=True)
+                merged = {**_read_memo(path), key: entry}
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".spectral-", suffix=".tmp")
+                with os.fdopen(fd, "w") as f:
+                    json.dump(merged, f)
+                os.replace(tmp, path)
+            except OSError:
+                pass  # an unwritable cache folder costs time, not results
+        return value
+
+    return wrapper
 
 
 def _colour():
@@ -143,6 +221,7 @@ def crosstalk_matrix(rgb: Sequence[float]) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
+@_persistent
 def _crosstalk_matrix(rgb: tuple[float, float, float]) -> np.ndarray:
     return _crosstalk_of(reflectance_spectrum(rgb))
 
@@ -192,6 +271,7 @@ def measured_reflectance(name: str) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
+@_persistent
 def measured_linear_srgb(name: str) -> tuple[float, float, float]:
     """Linear sRGB reflectance (D65, CIE 1931 2 deg) of a measured patch, clipped to [0, 1]:
     what a renderer without spectra shows for it."""
@@ -216,6 +296,7 @@ def material_crosstalk(rgb: Sequence[float], spectrum: str | None = None) -> np.
 
 
 @lru_cache(maxsize=64)
+@_persistent
 def _spectrum_crosstalk(name: str) -> np.ndarray:
     return _crosstalk_of(_measured_values(name))
 
@@ -258,6 +339,7 @@ def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
 
 
 @lru_cache(maxsize=1)
+@_persistent
 def watts_per_lux() -> np.ndarray:
     """W/m^2 of each primary per lux of the D65-balanced white (see
     :func:`simbench.photometry.primary_irradiance_w_m2`), shape (3,)."""

@@ -65,3 +65,48 @@ def test_red_surface_under_a_green_stripe_records_a_small_nonzero_signal():
 def test_bad_reflectance_is_rejected():
     with pytest.raises(ValueError, match="reflectance"):
         reflectance_spectrum([1.2, 0, 0])
+
+
+_MEMO_PROBE = """
+import json, sys
+import numpy as np
+from simbench import spectral
+values = [
+    spectral.watts_per_lux(),
+    spectral.crosstalk_matrix((0.8, 0.3, 0.1)),
+    spectral.material_crosstalk((0.5, 0.5, 0.5), "ColorChecker N Ohta/dark skin"),
+    np.asarray(spectral.measured_linear_srgb("BabelColor Average/foliage")),
+]
+print(json.dumps({"bits": [np.asarray(v, np.float64).tobytes().hex() for v in values],
+                  "colour": "colour" in sys.modules, "path": str(spectral.memo_path())}))
+"""
+
+
+def _probe(cache_dir) -> dict:
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "SIMBENCH_CACHE_DIR": str(cache_dir)}
+    res = subprocess.run([sys.executable, "-c", _MEMO_PROBE], capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def test_spectral_memo_skips_colour_on_a_rerun_with_the_same_bits(tmp_path):
+    """A render needs a few numbers from colour-science; the memo keeps them, so a second process
+    neither imports colour (~1.3 s) nor gets other values; a damaged memo is recomputed; an empty
+    SIMBENCH_CACHE_DIR turns the memo off."""
+    first = _probe(tmp_path)
+    assert first["colour"]
+    memo = tmp_path / first["path"].rsplit("/", 1)[-1]
+    assert memo.exists() and "colour" in memo.name
+    again = _probe(tmp_path)
+    assert not again["colour"] and again["bits"] == first["bits"]
+    memo.write_text("{not json")
+    damaged = _probe(tmp_path)
+    assert damaged["colour"] and damaged["bits"] == first["bits"]
+    assert _probe(tmp_path)["bits"] == first["bits"]  # rewritten whole
+    off = _probe("")
+    assert off["colour"] and off["path"] == "None" and off["bits"] == first["bits"]
