@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from simbench.decode.color import Stripes
-from simbench.decode.phase import _basis, _conv, gaussian_kernel, magnitude
+from simbench.decode.phase import _basis, gaussian_kernel, magnitude
 
 
 def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
@@ -47,6 +47,11 @@ def _dot3(m, b, *, out: np.ndarray, tmp: np.ndarray) -> None:
     for mi, bi in zip(m[1:], b[1:]):
         np.multiply(mi, bi, out=tmp)
         out += tmp
+
+
+def _conv(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+    """The Gaussian window sum as OpenCV's separable filter (zero outside the image)."""
+    return cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
 
 
 @lru_cache(maxsize=8)

@@ -27,58 +27,224 @@
 #define TWO_PI_F ((float)6.28318530717958647692)
 #define TWO_PI_D 6.28318530717958647692
 
-/* Weighted least-squares fringe fit from the window moments (simbench.decode._kernels.gabor_fit
- * documents the arguments). */
-void gabor_fit(int64_t h, int64_t w, const float *restrict b0, const float *restrict b1, const float *restrict b2,
-               const float *restrict e2, const float *restrict s1m, const float *restrict scm,
-               const float *restrict ssm, const float *restrict sc2m, const float *restrict ss2m,
-               const float *restrict cos1, const float *restrict sin1, float *restrict re, float *restrict im,
-               float *restrict a0, float *restrict amp, float *restrict residual) {
+/* Weighted least-squares fringe fit of one pixel from its nine window sums: data b0 = G*(cI),
+ * b1 = G*(cI cos), b2 = G*(cI sin), e2 = G*(cI I); certainty s1 = G*c, sc = G*(c cos),
+ * ss = G*(c sin), sc2 = G*(c cos2), ss2 = G*(c sin2).  The normal equations M p = b with
+ * M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]] are solved by the adjugate, in the operation
+ * order of the numpy form (_solver and gabor_phase in tests/numpy_reference.py). */
+static inline void fit_pixel(float s1, float sc, float ss, float sc2, float ss2, float c, float s, float d0, float d1,
+                             float d2, float e2, float *restrict re, float *restrict im, float *restrict a0,
+                             float *restrict amp, float *restrict residual) {
     const float half = 0.5f, zero = 0.0f, one = 1.0f, s_min = 0.05f, det_min = 1e-4f;
     const float rms = (float)0.70710678118654752440;
-    const float inf = INFINITY;
-    for (int64_t y = 0; y < h; y++) {
-        const int64_t o = y * w;
+    const float scc = half * (s1 + sc2);
+    const float sss = half * (s1 - sc2);
+    const float scs = half * ss2;
+    const float c00 = scc * sss - scs * scs;
+    const float c01 = ss * scs - sc * sss;
+    const float c02 = sc * scs - ss * scc;
+    const float c11 = s1 * sss - ss * ss;
+    const float c12 = sc * ss - s1 * scs;
+    const float c22 = s1 * scc - sc * sc;
+    const float det = s1 * c00 + sc * c01 + ss * c02;
+    const int good = (s1 > s_min) & (det > det_min * s1 * s1 * s1);
+    const float inv = good ? one / det : zero;
+    const float inv_s1 = good ? one / s1 : zero;
+    const float k0 = c00 * inv, k1 = c01 * inv, k2 = c02 * inv;
+    const float p0 = (c01 * c + c02 * s) * inv;
+    const float p1 = (c11 * c + c12 * s) * inv;
+    const float p2 = (c12 * c + c22 * s) * inv;
+    const float q0 = (c01 * s - c02 * c) * inv;
+    const float q1 = (c11 * s - c12 * c) * inv;
+    const float q2 = (c12 * s - c22 * c) * inv;
+    const float a = k0 * d0 + k1 * d1 + k2 * d2;
+    const float r = p0 * d0 + p1 * d1 + p2 * d2;
+    const float i = q0 * d0 + q1 * d1 + q2 * d2;
+    *a0 = a;
+    *re = r;
+    *im = i;
+    const float m = sqrtf(r * r + i * i);
+    float e = e2 - a * d0;
+    e = e - (c * d1 + s * d2) * r;
+    e = e - (s * d1 - c * d2) * i;
+    e = e < zero ? zero : e; /* np.maximum(e, 0): NaN stays NaN */
+    e = sqrtf(e * inv_s1);
+    const float t = m * rms;
+    *amp = good ? m : zero;
+    *residual = (good & (m > zero)) ? e / t : INFINITY;
+}
+
+/* Eight float lanes (GCC/Clang vector extension: AVX on machines that have it, two SSE halves
+ * otherwise; lane-wise IEEE arithmetic, so the same bits on either).  Loads and stores go through
+ * memcpy: unaligned. */
+typedef float v8f __attribute__((vector_size(32)));
+static inline v8f ld8(const float *p) {
+    v8f v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+static inline void st8(float *p, v8f v) { memcpy(p, &v, sizeof v); }
+
+/* Horizontal Gaussian-window sums of one zero-padded row p (p[-r..w+r) readable) with the half
+ * kernels g (even), gc = g cos(w k) (even) and gs = g sin(w k) (odd):
+ *   G = sum g_k p(x-k),  C = sum gc_k p(x-k),  S = sum gs_k p(x-k)
+ * the last two only when C is not NULL.  Eight pixels at a time, the sums held in registers
+ * over the kernel taps, in the tap order of the scalar tail. */
+static void row_sums(int64_t w, int64_t r, const float *restrict p, const float *restrict g,
+                     const float *restrict gc, const float *restrict gs, float *restrict G, float *restrict C,
+                     float *restrict S) {
+    int64_t x = 0;
+    if (C == NULL) {
+        for (; x + 8 <= w; x += 8) {
+            v8f acc = g[0] * ld8(p + x);
+            for (int64_t k = 1; k <= r; k++) acc += g[k] * (ld8(p + x - k) + ld8(p + x + k));
+            st8(G + x, acc);
+        }
+        for (; x < w; x++) {
+            float acc = g[0] * p[x];
+            for (int64_t k = 1; k <= r; k++) acc += g[k] * (p[x - k] + p[x + k]);
+            G[x] = acc;
+        }
+        return;
+    }
+    for (; x + 8 <= w; x += 8) {
+        const v8f mid = ld8(p + x);
+        v8f a = g[0] * mid, c = gc[0] * mid, s = {0};
+        for (int64_t k = 1; k <= r; k++) {
+            const v8f lo = ld8(p + x - k), hi = ld8(p + x + k);
+            const v8f sum = lo + hi, dif = lo - hi;
+            a += g[k] * sum;
+            c += gc[k] * sum;
+            s += gs[k] * dif;
+        }
+        st8(G + x, a);
+        st8(C + x, c);
+        st8(S + x, s);
+    }
+    for (; x < w; x++) {
+        float a = g[0] * p[x], c = gc[0] * p[x], s = 0.0f;
+        for (int64_t k = 1; k <= r; k++) {
+            const float sum = p[x - k] + p[x + k], dif = p[x - k] - p[x + k];
+            a += g[k] * sum;
+            c += gc[k] * sum;
+            s += gs[k] * dif;
+        }
+        G[x] = a;
+        C[x] = c;
+        S[x] = s;
+    }
+}
+
+/* The vertical window sum of one plane at one output row: out = ky0 row[0] + sum ky_k (row[-k] +
+ * row[k]), rows given by pointers (a zero row beyond the image). */
+static void column_sums(int64_t w, int64_t r, const float *const *rows, const float *restrict ky,
+                        float *restrict out) {
+    int64_t x = 0;
+    for (; x + 8 <= w; x += 8) {
+        v8f acc = ky[0] * ld8(rows[0] + x);
+        for (int64_t k = 1; k <= r; k++) acc += ky[k] * (ld8(rows[-k] + x) + ld8(rows[k] + x));
+        st8(out + x, acc);
+    }
+    for (; x < w; x++) {
+        float acc = ky[0] * rows[0][x];
+        for (int64_t k = 1; k <= r; k++) acc += ky[k] * (rows[-k][x] + rows[k][x]);
+        out[x] = acc;
+    }
+}
+
+/* Normalised-convolution Gabor fit of one band (paper Eq. 10-11; simbench.decode.phase.gabor_phase
+ * documents the model): h rows of intensity and certainty in, the fit for rows [y0, y1) out.
+ *
+ * The window sums of c I, c I cos, c I sin, c I^2 (and, unless the certainty moments come in
+ * `moments`, of c, c cos, c sin, c cos2, c sin2) are separable Gaussian sums with zero outside
+ * the image.  Along x, the sums of f cos(w x') and f sin(w x') come from two sums of f itself,
+ * with the window carrying the carrier (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so each
+ * input row is read once for all of them; along y each sum is a symmetric weighted sum of rows.
+ * Then the per-pixel fit (fit_pixel).
+ *
+ * kx, kc1, ks1, kc2, ks2: half kernels (rx + 1) of the x window g, g cos(w k), g sin(w k),
+ * g cos(2 w k), g sin(2 w k); ky (ry + 1).  basis: cos1, sin1, cos2, sin2 (w each).
+ * moments: NULL, or 5 arrays of (y1 - y0) rows (s1, sc, ss, sc2, ss2) to read (have_moments)
+ * or to write (!have_moments).  scratch: 9 h w + 9 w + 3 (w + 2 rx) + w floats.
+ * Outputs (y1 - y0) rows: re, im, a0, amp, residual, support (= s1). */
+void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
+                int64_t y0, int64_t y1, int64_t rx, const float *restrict kx, const float *restrict kc1,
+                const float *restrict ks1, const float *restrict kc2, const float *restrict ks2, int64_t ry,
+                const float *restrict ky, const float *restrict cos1, const float *restrict sin1,
+                const float *restrict cos2, const float *restrict sin2, float *const *moments, int64_t have_moments,
+                float *restrict scratch, float *restrict re, float *restrict im, float *restrict a0,
+                float *restrict amp, float *restrict residual, float *restrict support) {
+    const int64_t n_sums = have_moments ? 4 : 9;
+    const int64_t hw = h * w;
+    float *H = scratch;                /* n_sums planes of h x w horizontal sums */
+    float *V = scratch + 9 * hw;       /* n_sums rows of vertical sums */
+    float *pad = V + 9 * w;            /* three zero-padded input rows */
+    const int64_t pw = w + 2 * rx;
+    float *p_ci = pad + rx, *p_cii = pad + pw + rx, *p_c = pad + 2 * pw + rx;
+    for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
+    float *G = V, *C = V + w, *S = V + 2 * w, *E = V + 3 * w; /* row temporaries */
+    float *Gc = V + 4 * w, *Cc = V + 5 * w, *Sc = V + 6 * w, *C2 = V + 7 * w, *S2 = V + 8 * w;
+    const int64_t ya = y0 - ry < 0 ? 0 : y0 - ry, yb = y1 + ry > h ? h : y1 + ry;
+    for (int64_t y = ya; y < yb; y++) {
+        const float *I = intensity + y * w, *c = certainty + y * w;
         for (int64_t x = 0; x < w; x++) {
-            const int64_t j = o + x;
-            const float s1 = s1m[j], sc = scm[j], ss = ssm[j], sc2 = sc2m[j], ss2 = ss2m[j];
-            const float c = cos1[x], s = sin1[x];
-            const float scc = half * (s1 + sc2);
-            const float sss = half * (s1 - sc2);
-            const float scs = half * ss2;
-            const float c00 = scc * sss - scs * scs;
-            const float c01 = ss * scs - sc * sss;
-            const float c02 = sc * scs - ss * scc;
-            const float c11 = s1 * sss - ss * ss;
-            const float c12 = sc * ss - s1 * scs;
-            const float c22 = s1 * scc - sc * sc;
-            const float det = s1 * c00 + sc * c01 + ss * c02;
-            const int good = (s1 > s_min) && (det > det_min * s1 * s1 * s1);
-            const float inv = good ? one / det : zero;
-            const float inv_s1 = good ? one / s1 : zero;
-            const float k0 = c00 * inv, k1 = c01 * inv, k2 = c02 * inv;
-            const float p0 = (c01 * c + c02 * s) * inv;
-            const float p1 = (c11 * c + c12 * s) * inv;
-            const float p2 = (c12 * c + c22 * s) * inv;
-            const float q0 = (c01 * s - c02 * c) * inv;
-            const float q1 = (c11 * s - c12 * c) * inv;
-            const float q2 = (c12 * s - c22 * c) * inv;
-            const float d0 = b0[j], d1 = b1[j], d2 = b2[j];
-            const float a = k0 * d0 + k1 * d1 + k2 * d2;
-            const float r = p0 * d0 + p1 * d1 + p2 * d2;
-            const float i = q0 * d0 + q1 * d1 + q2 * d2;
-            a0[j] = a;
-            re[j] = r;
-            im[j] = i;
-            const float m = sqrtf(r * r + i * i);
-            float e = e2[j] - a * d0;
-            e = e - (c * d1 + s * d2) * r;
-            e = e - (s * d1 - c * d2) * i;
-            if (e < zero) e = zero; /* np.maximum(e, 0): NaN stays NaN */
-            e = sqrtf(e * inv_s1);
-            const float t = m * rms;
-            amp[j] = good ? m : zero;
-            residual[j] = (good && m > zero) ? e / t : inf;
+            const float ci = c[x] * I[x];
+            p_ci[x] = ci;
+            p_cii[x] = ci * I[x];
+            p_c[x] = c[x];
+        }
+        row_sums(w, rx, p_ci, kx, kc1, ks1, G, C, S);
+        row_sums(w, rx, p_cii, kx, NULL, NULL, E, NULL, NULL);
+        float *h0 = H + y * w, *h1 = H + hw + y * w, *h2 = H + 2 * hw + y * w, *h3 = H + 3 * hw + y * w;
+        for (int64_t x = 0; x < w; x++) {
+            h0[x] = G[x];
+            h1[x] = cos1[x] * C[x] + sin1[x] * S[x];
+            h2[x] = sin1[x] * C[x] - cos1[x] * S[x];
+            h3[x] = E[x];
+        }
+        if (!have_moments) {
+            row_sums(w, rx, p_c, kx, kc1, ks1, Gc, Cc, Sc);
+            row_sums(w, rx, p_c, kx, kc2, ks2, E, C2, S2);
+            float *h4 = H + 4 * hw + y * w, *h5 = H + 5 * hw + y * w, *h6 = H + 6 * hw + y * w;
+            float *h7 = H + 7 * hw + y * w, *h8 = H + 8 * hw + y * w;
+            for (int64_t x = 0; x < w; x++) {
+                h4[x] = Gc[x];
+                h5[x] = cos1[x] * Cc[x] + sin1[x] * Sc[x];
+                h6[x] = sin1[x] * Cc[x] - cos1[x] * Sc[x];
+                h7[x] = cos2[x] * C2[x] + sin2[x] * S2[x];
+                h8[x] = sin2[x] * C2[x] - cos2[x] * S2[x];
+            }
+        }
+    }
+    const float *rowp[2 * ry + 1]; /* the rows of one vertical sum */
+    float *zero_row = pad + 3 * pw; /* w zeros: the rows beyond the image */
+    for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f;
+    for (int64_t y = y0; y < y1; y++) {
+        for (int64_t q = 0; q < n_sums; q++) {
+            const float *Hq = H + q * hw;
+            for (int64_t k = -ry; k <= ry; k++) rowp[ry + k] = (y + k >= 0 && y + k < h) ? Hq + (y + k) * w : zero_row;
+            column_sums(w, ry, rowp + ry, ky, V + q * w);
+        }
+        const int64_t o = (y - y0) * w;
+        const float *m0, *m1, *m2, *m3, *m4;
+        if (have_moments) {
+            m0 = moments[0] + o, m1 = moments[1] + o, m2 = moments[2] + o, m3 = moments[3] + o, m4 = moments[4] + o;
+        } else {
+            m0 = V + 4 * w, m1 = V + 5 * w, m2 = V + 6 * w, m3 = V + 7 * w, m4 = V + 8 * w;
+            if (moments != NULL)
+                for (int64_t x = 0; x < w; x++) {
+                    moments[0][o + x] = m0[x];
+                    moments[1][o + x] = m1[x];
+                    moments[2][o + x] = m2[x];
+                    moments[3][o + x] = m3[x];
+                    moments[4][o + x] = m4[x];
+                }
+        }
+        const float *v0 = V, *v1 = V + w, *v2 = V + 2 * w, *v3 = V + 3 * w;
+        for (int64_t x = 0; x < w; x++) {
+            fit_pixel(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], re + o + x,
+                      im + o + x, a0 + o + x, amp + o + x, residual + o + x);
+            support[o + x] = m0[x];
         }
     }
 }

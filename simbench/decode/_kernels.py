@@ -28,7 +28,7 @@ import numpy as np
 
 __all__ = [
     "compiler",
-    "gabor_fit",
+    "gabor_band",
     "wrap_to_pi",
     "gather",
     "absolute_column",
@@ -49,7 +49,10 @@ _I = ctypes.c_int64
 _F = ctypes.c_float
 _D = ctypes.c_double
 _SIGNATURES = {
-    "gabor_fit": (None, [_I, _I] + [_P] * 16),
+    "gabor_band": (
+        None,
+        [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 6,
+    ),
     "wrap_to_pi": (None, [_I, _P]),
     "gather": (None, [_I, _I, _P, _P, _P, _P]),
     "absolute_column": (None, [_I, _P, _P, _P, _F, _F, _I, _P, _P]),
@@ -122,27 +125,66 @@ def _check_table(table: np.ndarray, h: int) -> None:
         raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
 
 
-def gabor_fit(b0, b1, b2, e2, s1m, scm, ssm, sc2m, ss2m, cos1, sin1, re, im, a0, amp, residual) -> None:
-    """Weighted least-squares fringe fit from the window moments, per pixel.
+def gabor_band(
+    intensity, certainty, y0, y1, half_kernels, basis, moments, fill_moments, re, im, a0, amp, residual, support
+) -> None:
+    """Normalised-convolution Gabor fit (paper Eq. 10-11) of the rows ``y0:y1`` of a band.
 
-    Inputs (float32, (H, W); ``cos1``/``sin1`` (1, W)): the data moments ``b0 = G*(cI)``,
-    ``b1 = G*(cI cos)``, ``b2 = G*(cI sin)``, ``e2 = G*(cI I)`` and the certainty moments
-    ``s1 = G*c``, ``sc = G*(c cos)``, ``ss = G*(c sin)``, ``sc2 = G*(c cos2)``, ``ss2 = G*(c sin2)``.
-    Outputs: ``a0`` and the carrier-rotated ``re``, ``im`` of the fit, the amplitude
-    ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular) and the RMS residual
-    relative to ``amp/sqrt 2`` (inf there).  The normal equations ``M p = b`` with
-    ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]]`` are solved by the adjugate, in the
-    operation order of the numpy form (``_solver`` and ``gabor_phase`` in tests/numpy_reference.py).
+    ``intensity``, ``certainty``: (H, W) float32; ``half_kernels``: the centre-and-one-side
+    halves of the x window g, of g cos(w k), g sin(w k), g cos(2 w k), g sin(2 w k) (all of one
+    length) and of the y window; ``basis``: cos(w x), sin(w x), cos(2 w x), sin(2 w x), each (W,).
+    ``moments``: None (the certainty's window sums are computed), or 5 arrays (y1 - y0, W)
+    holding the sums ``G*c``, ``G*(c cos)``, ``G*(c sin)``, ``G*(c cos2)``, ``G*(c sin2)``: read,
+    or with ``fill_moments`` computed from ``certainty`` and written there.  Outputs
+    (y1 - y0, W): ``a0`` and the carrier-rotated ``re``, ``im`` of the fit
+    ``I ~ a0 + re cos(w x) + im sin(w x)``, the amplitude ``sqrt(re^2 + im^2)`` (0 where the
+    normal equations are singular: window weight <= 0.05 or a near-singular determinant), the
+    RMS residual relative to ``amp/sqrt 2`` (inf there) and the window's certain weight.
+
+    Window sums are zero outside the image; along x the carrier rides on the window
+    (``cos(w (x - k)) = cos wx cos wk + sin wx sin wk``), so one pass over a row gives all of its
+    sums; the normal equations are solved by the adjugate (``_solver`` in
+    tests/numpy_reference.py, which does the same with OpenCV's separable filter: equal to
+    float32 rounding, tests/test_kernels.py).
     """
+    h, w = intensity.shape
+    if not 0 <= y0 < y1 <= h:
+        raise ValueError(f"rows {y0}:{y1} are not inside the band's {h} rows")
     f4 = np.float32
-    shape = b0.shape
-    h, w = shape
-    inputs = dict(b0=b0, b1=b1, b2=b2, e2=e2, s1=s1m, sc=scm, ss=ssm, sc2=sc2m, ss2=ss2m)
-    outputs = dict(re=re, im=im, a0=a0, amp=amp, residual=residual)
-    ptrs = [_ptr(a, k, f4, shape) for k, a in inputs.items()]
-    ptrs += [_ptr(a, k, f4, (1, w)) for k, a in (("cos1", cos1), ("sin1", sin1))]
-    ptrs += [_ptr(a, k, f4, shape, writable=True) for k, a in outputs.items()]
-    _library().gabor_fit(h, w, *ptrs)
+    kx, kc1, ks1, kc2, ks2, ky = half_kernels
+    rx = kx.size - 1
+    n = y1 - y0
+    have = moments is not None and not fill_moments
+    mptr = (ctypes.c_void_p * 5)()
+    if moments is not None:
+        if len(moments) != 5:
+            raise ValueError(f"moments: expected 5 arrays, got {len(moments)}")
+        for j, m in enumerate(moments):
+            mptr[j] = _ptr(m, f"moments[{j}]", f4, (n, w), writable=not have)
+    scratch = np.empty(9 * h * w + 9 * w + 3 * (w + 2 * rx) + w, f4)
+    _library().gabor_band(
+        h,
+        w,
+        _ptr(intensity, "intensity", f4),
+        _ptr(certainty, "certainty", f4, (h, w)),
+        int(y0),
+        int(y1),
+        rx,
+        *(
+            _ptr(k, name, f4, (rx + 1,))
+            for k, name in zip((kx, kc1, ks1, kc2, ks2), ("kx", "kc1", "ks1", "kc2", "ks2"))
+        ),
+        ky.size - 1,
+        _ptr(ky, "ky", f4),
+        *(_ptr(b, name, f4, (w,)) for b, name in zip(basis, ("cos1", "sin1", "cos2", "sin2"))),
+        mptr if moments is not None else None,
+        int(have),
+        scratch.ctypes.data,
+        *(
+            _ptr(a, name, f4, (n, w), writable=True)
+            for a, name in zip((re, im, a0, amp, residual, support), ("re", "im", "a0", "amp", "residual", "support"))
+        ),
+    )
 
 
 def wrap_to_pi(phase) -> None:

@@ -8,6 +8,12 @@ shadow, or where a channel is saturated).  Where the window is complete this is 
 Gabor response with its DC leakage removed; at image borders and around invalid pixels it stays
 unbiased for a fringe of the nominal frequency, where a plain Gabor filter would not.  The fit
 residual relative to the fringe amplitude flags pixels whose window straddles a depth edge.
+
+The window sums and the fit run in one C kernel (:func:`simbench.decode._kernels.gabor_band`):
+each row is read once for all of its sums (the carrier rides on the window), in registers,
+eight pixels at a time; ``tests/numpy_reference.py`` keeps the same fit written with OpenCV's
+separable filters, which it matches to float32 rounding (tests/test_kernels.py,
+tests/test_accuracy_guard.py).
 """
 
 from __future__ import annotations
@@ -137,10 +143,6 @@ def gaussian_kernel(sigma: float) -> np.ndarray:
     return (k / k.sum()).astype(np.float32)
 
 
-def _conv(img: np.ndarray, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
-    return cv2.sepFilter2D(img, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
-
-
 def magnitude(
     re: np.ndarray, im: np.ndarray, *, tmp: np.ndarray | None = None, out: np.ndarray | None = None
 ) -> np.ndarray:
@@ -159,20 +161,45 @@ def magnitude(
 @lru_cache(maxsize=8)
 def _basis(width: int, omega: float):
     x = np.arange(width, dtype=np.float64) * omega
-    rows = [np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)]
-    out = tuple(r.astype(np.float32)[None, :] for r in rows)
+    out = tuple(np.ascontiguousarray(r, dtype=np.float32) for r in (np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)))
     for a in out:
         a.setflags(write=False)
     return out
 
 
 @lru_cache(maxsize=8)
+def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
+    """Half (centre and one side) of the window's x kernel g, of g cos(w k), g sin(w k),
+    g cos(2 w k), g sin(2 w k), and of the y kernel (float32; products taken in float64 from
+    the float32 g)."""
+    gx, gy = gaussian_kernel(sx), gaussian_kernel(sy)
+    rx, ry = len(gx) // 2, len(gy) // 2
+    g = gx[rx:].astype(np.float64)
+    k = np.arange(rx + 1, dtype=np.float64)
+    out = [gx[rx:]] + [(g * f(m * omega * k)).astype(np.float32) for m in (1, 2) for f in (np.cos, np.sin)]
+    out = [out[0], out[1], out[2], out[3], out[4], gy[ry:]]
+    out = tuple(np.ascontiguousarray(a, dtype=np.float32) for a in out)
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _fit(
+    intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, moments=None, fill=False
+) -> tuple:
+    """The band fit of :func:`simbench.decode._kernels.gabor_band`: (re, im, a0, amp, residual,
+    support); ``moments`` and ``fill`` as it takes them."""
+    h, w = intensity.shape
+    out = tuple(np.empty((h, w), np.float32) for _ in range(6))
+    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), moments, fill, *out)
+    return out
+
+
+@lru_cache(maxsize=8)
 def _full_moments(shape: tuple[int, int], omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
     """The certainty moments of an all-certain image (reused across captures of one rig)."""
-    cos1, sin1, cos2, sin2 = _basis(shape[1], omega)
-    kx, ky = gaussian_kernel(sx), gaussian_kernel(sy)
-    ones = np.ones(shape, np.float32)
-    moments = tuple(_conv(ones * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
+    moments = tuple(np.empty(shape, np.float32) for _ in range(5))
+    _fit(np.zeros(shape, np.float32), np.ones(shape, np.float32), omega, sx, sy, moments, fill=True)
     for a in moments:
         a.setflags(write=False)
     return moments
@@ -216,30 +243,16 @@ def gabor_phase(
     .. [2] D. Gabor, "Theory of communication", J. IEE 93(26), 429-457, 1946.
     """
     check_phase_inputs(intensity, certainty, period_px)
-    h, w = intensity.shape
     omega = round(2.0 * np.pi / period_px, 12)
-    kx, ky = gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px)
-    cos1, sin1, cos2, sin2 = _basis(w, omega)
-    intensity = intensity.astype(np.float32, copy=False)
-    c = certainty.astype(np.float32, copy=False)
-    if c.min() >= 1.0:
-        moments = _full_moments((h, w), omega, float(sigma_x_px), float(sigma_y_px))
-        ci = intensity
-    else:
-        moments = tuple(_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2))
-        ci = c * intensity
-    b0 = _conv(ci, kx, ky)
-    b1 = _conv(ci * cos1, kx, ky)
-    b2 = _conv(ci * sin1, kx, ky)
-    e2 = _conv(ci * intensity, kx, ky)
-    # the fit (normal equations solved by the adjugate, paper Eq. 10-11), amplitude and
-    # residual in one pass over the pixels: see simbench.decode._kernels.gabor_fit
-    a0, re, im, amp, residual = (np.empty_like(b0) for _ in range(5))
-    _kernels.gabor_fit(b0, b1, b2, e2, *moments, cos1, sin1, re, im, a0, amp, residual)
+    intensity = np.ascontiguousarray(intensity, dtype=np.float32)
+    c = np.ascontiguousarray(certainty, dtype=np.float32)
+    sx, sy = float(sigma_x_px), float(sigma_y_px)
+    # all certain (a fully lit plane): the certainty moments are the rig's, computed once
+    moments = _full_moments(intensity.shape, omega, sx, sy) if c.min() >= 1.0 else None
+    re, im, a0, amp, residual, s1 = _fit(intensity, c, omega, sx, sy, moments)
     # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
     wrapped = cv2.phase(re, im)
     _kernels.wrap_to_pi(wrapped)
-    s1 = moments[0]
     return PhaseResult(
         wrapped=wrapped,
         amplitude=amp,
