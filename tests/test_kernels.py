@@ -354,15 +354,17 @@ def test_kernel_wrappers_refuse_what_the_c_code_cannot_read():
     from simbench.decode import _kernels
 
     a = np.zeros((4, 6), np.float32)
+    lit, valid = np.zeros((4, 6), bool), np.empty((4, 6), bool)
     with pytest.raises(TypeError, match="dtype"):
-        _kernels.wrap_to_pi(a.astype(np.float64))
+        _kernels.validity(lit, a.astype(np.float64), a, a, 0.5, 0.0, 1.0, valid)
     with pytest.raises(ValueError, match="contiguous"):
-        _kernels.wrap_to_pi(a[:, ::2])
+        _kernels.validity(lit, a, a, a, 0.5, 0.0, 1.0, np.empty((4, 12), bool)[:, ::2])
     with pytest.raises(ValueError, match="shape"):
-        _kernels.validity(np.zeros((4, 6), bool), a, a, a[:2], 0.5, 0.0, 1.0, np.empty((4, 6), bool))
+        _kernels.validity(lit, a, a, a[:2], 0.5, 0.0, 1.0, valid)
     with pytest.raises(ValueError, match="writable"):
-        ro = a.copy()
-        ro.setflags(write=False)
-        _kernels.wrap_to_pi(ro)
+        valid.setflags(write=False)
+        _kernels.validity(lit, a, a, a, 0.5, 0.0, 1.0, valid)
     with pytest.raises(TypeError, match="uint8, uint16 or float32"):
         _kernels.front_end(np.zeros((2, 3, 3), np.int32), [0, 1, 2], 0, 3, 0.04, 1.0, *([None] * 4))
+    with pytest.raises(ValueError, match="rows"):
+        _kernels.gabor_band(a, a, 2, 9, None, None, None, False, *([a] * 5))

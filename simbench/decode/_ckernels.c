@@ -23,6 +23,10 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Row helpers stay out of line: inlined, their restrict parameters would be lost and the
+ * vectoriser would give up on the alias checks their loops need. */
+#define ROW_FN static __attribute__((noinline))
+
 #define PI_F ((float)3.14159265358979323846)
 #define TWO_PI_F ((float)6.28318530717958647692)
 #define TWO_PI_D 6.28318530717958647692
@@ -90,15 +94,19 @@ static inline void st8(float *p, v8f v) { memcpy(p, &v, sizeof v); }
  *   G = sum g_k p(x-k),  C = sum gc_k p(x-k),  S = sum gs_k p(x-k)
  * the last two only when C is not NULL.  Eight pixels at a time, the sums held in registers
  * over the kernel taps, in the tap order of the scalar tail. */
-static void row_sums(int64_t w, int64_t r, const float *restrict p, const float *restrict g,
+ROW_FN void row_sums(int64_t w, int64_t r, const float *restrict p, const float *restrict g,
                      const float *restrict gc, const float *restrict gs, float *restrict G, float *restrict C,
                      float *restrict S) {
+    /* four vectors (32 pixels) per block: twelve independent sums hide the adds' latency */
+    enum { NV = 4 };
     int64_t x = 0;
     if (C == NULL) {
-        for (; x + 8 <= w; x += 8) {
-            v8f acc = g[0] * ld8(p + x);
-            for (int64_t k = 1; k <= r; k++) acc += g[k] * (ld8(p + x - k) + ld8(p + x + k));
-            st8(G + x, acc);
+        for (; x + 8 * NV <= w; x += 8 * NV) {
+            v8f acc[NV];
+            for (int v = 0; v < NV; v++) acc[v] = g[0] * ld8(p + x + 8 * v);
+            for (int64_t k = 1; k <= r; k++)
+                for (int v = 0; v < NV; v++) acc[v] += g[k] * (ld8(p + x + 8 * v - k) + ld8(p + x + 8 * v + k));
+            for (int v = 0; v < NV; v++) st8(G + x + 8 * v, acc[v]);
         }
         for (; x < w; x++) {
             float acc = g[0] * p[x];
@@ -107,19 +115,29 @@ static void row_sums(int64_t w, int64_t r, const float *restrict p, const float 
         }
         return;
     }
-    for (; x + 8 <= w; x += 8) {
-        const v8f mid = ld8(p + x);
-        v8f a = g[0] * mid, c = gc[0] * mid, s = {0};
-        for (int64_t k = 1; k <= r; k++) {
-            const v8f lo = ld8(p + x - k), hi = ld8(p + x + k);
-            const v8f sum = lo + hi, dif = lo - hi;
-            a += g[k] * sum;
-            c += gc[k] * sum;
-            s += gs[k] * dif;
+    for (; x + 8 * NV <= w; x += 8 * NV) {
+        v8f a[NV], c[NV], s[NV];
+        for (int v = 0; v < NV; v++) {
+            const v8f mid = ld8(p + x + 8 * v);
+            a[v] = g[0] * mid;
+            c[v] = gc[0] * mid;
+            s[v] = (v8f){0};
         }
-        st8(G + x, a);
-        st8(C + x, c);
-        st8(S + x, s);
+        for (int64_t k = 1; k <= r; k++) {
+            const float gk = g[k], ck = gc[k], sk = gs[k];
+            for (int v = 0; v < NV; v++) {
+                const v8f lo = ld8(p + x + 8 * v - k), hi = ld8(p + x + 8 * v + k);
+                const v8f sum = lo + hi, dif = lo - hi;
+                a[v] += gk * sum;
+                c[v] += ck * sum;
+                s[v] += sk * dif;
+            }
+        }
+        for (int v = 0; v < NV; v++) {
+            st8(G + x + 8 * v, a[v]);
+            st8(C + x + 8 * v, c[v]);
+            st8(S + x + 8 * v, s[v]);
+        }
     }
     for (; x < w; x++) {
         float a = g[0] * p[x], c = gc[0] * p[x], s = 0.0f;
@@ -136,19 +154,86 @@ static void row_sums(int64_t w, int64_t r, const float *restrict p, const float 
 }
 
 /* The vertical window sum of one plane at one output row: out = ky0 row[0] + sum ky_k (row[-k] +
- * row[k]), rows given by pointers (a zero row beyond the image). */
-static void column_sums(int64_t w, int64_t r, const float *const *rows, const float *restrict ky,
+ * row[k]), rows given by pointers (a zero row beyond the image); 32 pixels per block. */
+ROW_FN void column_sums(int64_t w, int64_t r, const float *const *rows, const float *restrict ky,
                         float *restrict out) {
+    enum { NV = 4 };
     int64_t x = 0;
-    for (; x + 8 <= w; x += 8) {
-        v8f acc = ky[0] * ld8(rows[0] + x);
-        for (int64_t k = 1; k <= r; k++) acc += ky[k] * (ld8(rows[-k] + x) + ld8(rows[k] + x));
-        st8(out + x, acc);
+    for (; x + 8 * NV <= w; x += 8 * NV) {
+        v8f acc[NV];
+        for (int v = 0; v < NV; v++) acc[v] = ky[0] * ld8(rows[0] + x + 8 * v);
+        for (int64_t k = 1; k <= r; k++) {
+            const float *up = rows[-k] + x, *down = rows[k] + x;
+            for (int v = 0; v < NV; v++) acc[v] += ky[k] * (ld8(up + 8 * v) + ld8(down + 8 * v));
+        }
+        for (int v = 0; v < NV; v++) st8(out + x + 8 * v, acc[v]);
     }
     for (; x < w; x++) {
         float acc = ky[0] * rows[0][x];
         for (int64_t k = 1; k <= r; k++) acc += ky[k] * (rows[-k][x] + rows[k][x]);
         out[x] = acc;
+    }
+}
+
+/* atan2(y, x) in (-pi, pi], vectorisable (no library call, selects instead of branches): the
+ * octant reduction and polynomial of Cephes' atanf (S. L. Moshier), relative error ~1e-7;
+ * atan2(0, 0) = 0. */
+static inline float atan2_poly(float y, float x) {
+    const float ax = fabsf(x), ay = fabsf(y);
+    const float mx = ax > ay ? ax : ay, mn = ax > ay ? ay : ax;
+    float a = mx > 0.0f ? mn / mx : 0.0f; /* in [0, 1] */
+    const int big = a > 0.41421356237309504880f; /* tan(pi/8) */
+    const float base = big ? 0.78539816339744830962f : 0.0f;
+    a = big ? (a - 1.0f) / (a + 1.0f) : a;
+    const float z = a * a;
+    float r = base + ((((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
+                       3.33329491539e-1f) * z * a + a);
+    r = ay > ax ? 1.57079632679489661923f - r : r;
+    r = x < 0.0f ? PI_F - r : r;
+    return y < 0.0f ? -r : r;
+}
+
+
+/* The x sums of f cos and f sin from the window-carried sums C, S (see gabor_band):
+ * out_c = cos C + sin S, out_s = sin C - cos S; and the plain sum copied. */
+ROW_FN void carrier_row(int64_t w, const float *restrict G, const float *restrict C, const float *restrict S,
+                        const float *restrict cs, const float *restrict sn, float *restrict out_g,
+                        float *restrict out_c, float *restrict out_s) {
+    for (int64_t x = 0; x < w; x++) {
+        if (out_g != NULL) out_g[x] = G[x];
+        out_c[x] = cs[x] * C[x] + sn[x] * S[x];
+        out_s[x] = sn[x] * C[x] - cs[x] * S[x];
+    }
+}
+
+ROW_FN void copy_row(int64_t w, const float *restrict src, float *restrict dst) {
+    for (int64_t x = 0; x < w; x++) dst[x] = src[x];
+}
+
+ROW_FN void input_rows(int64_t w, const float *restrict I, const float *restrict c, float *restrict p_ci,
+                       float *restrict p_cii, float *restrict p_c) {
+    for (int64_t x = 0; x < w; x++) {
+        const float ci = c[x] * I[x];
+        p_ci[x] = ci;
+        p_cii[x] = ci * I[x];
+        p_c[x] = c[x];
+    }
+}
+
+/* The fit and the phase of one output row (see gabor_band). */
+ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m1, const float *restrict m2,
+                    const float *restrict m3, const float *restrict m4, const float *restrict cos1,
+                    const float *restrict sin1, const float *restrict v0, const float *restrict v1,
+                    const float *restrict v2, const float *restrict v3, float *restrict wrapped,
+                    float *restrict amp, float *restrict a0, float *restrict residual, float *restrict support) {
+    for (int64_t x = 0; x < w; x++) {
+        float re, im;
+        fit_pixel(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], &re, &im, a0 + x,
+                  amp + x, residual + x);
+        /* I ~ a0 + R cos(w x - theta): the local phase psi = w x - theta = atan2(im, re) */
+        const float psi = atan2_poly(im, re);
+        wrapped[x] = psi >= PI_F ? psi - TWO_PI_F : psi;
+        support[x] = m0[x];
     }
 }
 
@@ -159,70 +244,63 @@ static void column_sums(int64_t w, int64_t r, const float *const *rows, const fl
  * `moments`, of c, c cos, c sin, c cos2, c sin2) are separable Gaussian sums with zero outside
  * the image.  Along x, the sums of f cos(w x') and f sin(w x') come from two sums of f itself,
  * with the window carrying the carrier (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so each
- * input row is read once for all of them; along y each sum is a symmetric weighted sum of rows.
- * Then the per-pixel fit (fit_pixel).
+ * input row is read once for all of them; the x sums of the rows within ry of the output row
+ * live in a ring of 2 ry + 1 rows per sum (cache-resident); along y each sum is a symmetric
+ * weighted sum of those rows.  Then the per-pixel fit (fit_pixel) and the phase
+ * psi = atan2(im, re) in [-pi, pi).
  *
  * kx, kc1, ks1, kc2, ks2: half kernels (rx + 1) of the x window g, g cos(w k), g sin(w k),
  * g cos(2 w k), g sin(2 w k); ky (ry + 1).  basis: cos1, sin1, cos2, sin2 (w each).
  * moments: NULL, or 5 arrays of (y1 - y0) rows (s1, sc, ss, sc2, ss2) to read (have_moments)
- * or to write (!have_moments).  scratch: 9 h w + 9 w + 3 (w + 2 rx) + w floats.
- * Outputs (y1 - y0) rows: re, im, a0, amp, residual, support (= s1). */
+ * or to write (!have_moments).  scratch: gabor_scratch_floats(w, rx, ry) floats.
+ * Outputs (y1 - y0) rows: wrapped, amp, a0, residual, support (= s1). */
+int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
+    return 9 * (2 * ry + 1) * w + 18 * w + 3 * (w + 2 * rx) + w;
+}
+
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
                 int64_t y0, int64_t y1, int64_t rx, const float *restrict kx, const float *restrict kc1,
                 const float *restrict ks1, const float *restrict kc2, const float *restrict ks2, int64_t ry,
                 const float *restrict ky, const float *restrict cos1, const float *restrict sin1,
                 const float *restrict cos2, const float *restrict sin2, float *const *moments, int64_t have_moments,
-                float *restrict scratch, float *restrict re, float *restrict im, float *restrict a0,
-                float *restrict amp, float *restrict residual, float *restrict support) {
+                float *restrict scratch, float *restrict wrapped, float *restrict amp, float *restrict a0,
+                float *restrict residual, float *restrict support) {
     const int64_t n_sums = have_moments ? 4 : 9;
-    const int64_t hw = h * w;
-    float *H = scratch;                /* n_sums planes of h x w horizontal sums */
-    float *V = scratch + 9 * hw;       /* n_sums rows of vertical sums */
-    float *pad = V + 9 * w;            /* three zero-padded input rows */
+    const int64_t R = 2 * ry + 1;
     const int64_t pw = w + 2 * rx;
+    float *ring = scratch;           /* n_sums rings of R rows of x sums */
+    float *V = ring + 9 * R * w;     /* n_sums rows of window sums */
+    float *T = V + 9 * w;            /* 9 row temporaries of the x pass */
+    float *pad = T + 9 * w;          /* three zero-padded input rows */
+    float *zero_row = pad + 3 * pw;  /* w zeros: the rows beyond the image */
     float *p_ci = pad + rx, *p_cii = pad + pw + rx, *p_c = pad + 2 * pw + rx;
-    for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
-    float *G = V, *C = V + w, *S = V + 2 * w, *E = V + 3 * w; /* row temporaries */
-    float *Gc = V + 4 * w, *Cc = V + 5 * w, *Sc = V + 6 * w, *C2 = V + 7 * w, *S2 = V + 8 * w;
-    const int64_t ya = y0 - ry < 0 ? 0 : y0 - ry, yb = y1 + ry > h ? h : y1 + ry;
-    for (int64_t y = ya; y < yb; y++) {
-        const float *I = intensity + y * w, *c = certainty + y * w;
-        for (int64_t x = 0; x < w; x++) {
-            const float ci = c[x] * I[x];
-            p_ci[x] = ci;
-            p_cii[x] = ci * I[x];
-            p_c[x] = c[x];
-        }
-        row_sums(w, rx, p_ci, kx, kc1, ks1, G, C, S);
-        row_sums(w, rx, p_cii, kx, NULL, NULL, E, NULL, NULL);
-        float *h0 = H + y * w, *h1 = H + hw + y * w, *h2 = H + 2 * hw + y * w, *h3 = H + 3 * hw + y * w;
-        for (int64_t x = 0; x < w; x++) {
-            h0[x] = G[x];
-            h1[x] = cos1[x] * C[x] + sin1[x] * S[x];
-            h2[x] = sin1[x] * C[x] - cos1[x] * S[x];
-            h3[x] = E[x];
-        }
-        if (!have_moments) {
-            row_sums(w, rx, p_c, kx, kc1, ks1, Gc, Cc, Sc);
-            row_sums(w, rx, p_c, kx, kc2, ks2, E, C2, S2);
-            float *h4 = H + 4 * hw + y * w, *h5 = H + 5 * hw + y * w, *h6 = H + 6 * hw + y * w;
-            float *h7 = H + 7 * hw + y * w, *h8 = H + 8 * hw + y * w;
-            for (int64_t x = 0; x < w; x++) {
-                h4[x] = Gc[x];
-                h5[x] = cos1[x] * Cc[x] + sin1[x] * Sc[x];
-                h6[x] = sin1[x] * Cc[x] - cos1[x] * Sc[x];
-                h7[x] = cos2[x] * C2[x] + sin2[x] * S2[x];
-                h8[x] = sin2[x] * C2[x] - cos2[x] * S2[x];
+    for (int64_t j = 0; j < 3 * pw + w; j++) pad[j] = 0.0f;
+    float *G = T, *C = T + w, *S = T + 2 * w, *E = T + 3 * w;
+    float *Gc = T + 4 * w, *Cc = T + 5 * w, *Sc = T + 6 * w, *C2 = T + 7 * w, *S2 = T + 8 * w;
+    const float *rowp[2 * ry + 1]; /* the rows of one vertical sum */
+    int64_t next = y0 - ry < 0 ? 0 : y0 - ry; /* the next row whose x sums are due */
+    for (int64_t y = y0; y < y1; y++) {
+        const int64_t last = y + ry < h ? y + ry : h - 1;
+        for (; next <= last; next++) {
+            input_rows(w, intensity + next * w, certainty + next * w, p_ci, p_cii, p_c);
+            const int64_t slot = (next % R) * w;
+            float *hq[9];
+            for (int64_t q = 0; q < 9; q++) hq[q] = ring + q * R * w + slot;
+            row_sums(w, rx, p_ci, kx, kc1, ks1, G, C, S);
+            row_sums(w, rx, p_cii, kx, NULL, NULL, E, NULL, NULL);
+            carrier_row(w, G, C, S, cos1, sin1, hq[0], hq[1], hq[2]);
+            copy_row(w, E, hq[3]);
+            if (!have_moments) {
+                row_sums(w, rx, p_c, kx, kc1, ks1, Gc, Cc, Sc);
+                row_sums(w, rx, p_c, kx, kc2, ks2, E, C2, S2);
+                carrier_row(w, Gc, Cc, Sc, cos1, sin1, hq[4], hq[5], hq[6]);
+                carrier_row(w, NULL, C2, S2, cos2, sin2, NULL, hq[7], hq[8]);
             }
         }
-    }
-    const float *rowp[2 * ry + 1]; /* the rows of one vertical sum */
-    float *zero_row = pad + 3 * pw; /* w zeros: the rows beyond the image */
-    for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f;
-    for (int64_t y = y0; y < y1; y++) {
         for (int64_t q = 0; q < n_sums; q++) {
-            const float *Hq = H + q * hw;
-            for (int64_t k = -ry; k <= ry; k++) rowp[ry + k] = (y + k >= 0 && y + k < h) ? Hq + (y + k) * w : zero_row;
+            const float *Rq = ring + q * R * w;
+            for (int64_t k = -ry; k <= ry; k++)
+                rowp[ry + k] = (y + k >= 0 && y + k < h) ? Rq + ((y + k) % R) * w : zero_row;
             column_sums(w, ry, rowp + ry, ky, V + q * w);
         }
         const int64_t o = (y - y0) * w;
@@ -232,27 +310,11 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
         } else {
             m0 = V + 4 * w, m1 = V + 5 * w, m2 = V + 6 * w, m3 = V + 7 * w, m4 = V + 8 * w;
             if (moments != NULL)
-                for (int64_t x = 0; x < w; x++) {
-                    moments[0][o + x] = m0[x];
-                    moments[1][o + x] = m1[x];
-                    moments[2][o + x] = m2[x];
-                    moments[3][o + x] = m3[x];
-                    moments[4][o + x] = m4[x];
-                }
+                for (int64_t q = 0; q < 5; q++) copy_row(w, V + (4 + q) * w, moments[q] + o);
         }
-        const float *v0 = V, *v1 = V + w, *v2 = V + 2 * w, *v3 = V + 3 * w;
-        for (int64_t x = 0; x < w; x++) {
-            fit_pixel(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], re + o + x,
-                      im + o + x, a0 + o + x, amp + o + x, residual + o + x);
-            support[o + x] = m0[x];
-        }
+        fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, V, V + w, V + 2 * w, V + 3 * w, wrapped + o, amp + o, a0 + o,
+                residual + o, support + o);
     }
-}
-
-/* In place: phase[phase >= pi] -= 2 pi (cv2.phase gives [0, 2 pi]). */
-void wrap_to_pi(int64_t n, float *restrict phase) {
-    for (int64_t j = 0; j < n; j++)
-        if (phase[j] >= PI_F) phase[j] -= TWO_PI_F;
 }
 
 /* out[j] = per_stripe[labels[j]], fill where the label is negative; items of any size. */

@@ -21,6 +21,7 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import re
+import threading
 from functools import lru_cache
 from pathlib import Path
 
@@ -29,7 +30,6 @@ import numpy as np
 __all__ = [
     "compiler",
     "gabor_band",
-    "wrap_to_pi",
     "gather",
     "absolute_column",
     "match_reference",
@@ -51,9 +51,9 @@ _D = ctypes.c_double
 _SIGNATURES = {
     "gabor_band": (
         None,
-        [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 6,
+        [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 5,
     ),
-    "wrap_to_pi": (None, [_I, _P]),
+    "gabor_scratch_floats": (_I, [_I, _I, _I]),
     "gather": (None, [_I, _I, _P, _P, _P, _P]),
     "absolute_column": (None, [_I, _P, _P, _P, _F, _F, _I, _P, _P]),
     "match_reference": (None, [_I, _I, _I, _P, _P, _P]),
@@ -125,8 +125,20 @@ def _check_table(table: np.ndarray, h: int) -> None:
         raise ValueError(f"table: expected shape ({h}, >= 3), got {table.shape}")
 
 
+_SCRATCH = threading.local()
+
+
+def _scratch(n: int) -> np.ndarray:
+    """A float32 buffer of at least ``n`` values, one per thread, kept between calls: a fresh
+    one per call would cost its page faults every time (~20 % of a band's Gabor fit)."""
+    buf = getattr(_SCRATCH, "buf", None)
+    if buf is None or buf.size < n:
+        buf = _SCRATCH.buf = np.empty(n, np.float32)
+    return buf
+
+
 def gabor_band(
-    intensity, certainty, y0, y1, half_kernels, basis, moments, fill_moments, re, im, a0, amp, residual, support
+    intensity, certainty, y0, y1, half_kernels, basis, moments, fill_moments, wrapped, amp, a0, residual, support
 ) -> None:
     """Normalised-convolution Gabor fit (paper Eq. 10-11) of the rows ``y0:y1`` of a band.
 
@@ -136,23 +148,24 @@ def gabor_band(
     ``moments``: None (the certainty's window sums are computed), or 5 arrays (y1 - y0, W)
     holding the sums ``G*c``, ``G*(c cos)``, ``G*(c sin)``, ``G*(c cos2)``, ``G*(c sin2)``: read,
     or with ``fill_moments`` computed from ``certainty`` and written there.  Outputs
-    (y1 - y0, W): ``a0`` and the carrier-rotated ``re``, ``im`` of the fit
-    ``I ~ a0 + re cos(w x) + im sin(w x)``, the amplitude ``sqrt(re^2 + im^2)`` (0 where the
-    normal equations are singular: window weight <= 0.05 or a near-singular determinant), the
-    RMS residual relative to ``amp/sqrt 2`` (inf there) and the window's certain weight.
+    (y1 - y0, W): the wrapped phase ``atan2(im, re)`` in [-pi, pi) of the fit
+    ``I ~ a0 + re cos(w x) + im sin(w x)`` (a polynomial atan2, ~1e-7 rad), the amplitude
+    ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular: window weight <= 0.05 or
+    a near-singular determinant), ``a0``, the RMS residual relative to ``amp/sqrt 2`` (inf
+    there) and the window's certain weight.
 
     Window sums are zero outside the image; along x the carrier rides on the window
     (``cos(w (x - k)) = cos wx cos wk + sin wx sin wk``), so one pass over a row gives all of its
     sums; the normal equations are solved by the adjugate (``_solver`` in
-    tests/numpy_reference.py, which does the same with OpenCV's separable filter: equal to
-    float32 rounding, tests/test_kernels.py).
+    tests/numpy_reference.py, which does the same with OpenCV's separable filter and cv2.phase:
+    equal to float32 rounding, tests/test_kernels.py).
     """
     h, w = intensity.shape
     if not 0 <= y0 < y1 <= h:
         raise ValueError(f"rows {y0}:{y1} are not inside the band's {h} rows")
     f4 = np.float32
     kx, kc1, ks1, kc2, ks2, ky = half_kernels
-    rx = kx.size - 1
+    rx, ry = kx.size - 1, ky.size - 1
     n = y1 - y0
     have = moments is not None and not fill_moments
     mptr = (ctypes.c_void_p * 5)()
@@ -161,8 +174,9 @@ def gabor_band(
             raise ValueError(f"moments: expected 5 arrays, got {len(moments)}")
         for j, m in enumerate(moments):
             mptr[j] = _ptr(m, f"moments[{j}]", f4, (n, w), writable=not have)
-    scratch = np.empty(9 * h * w + 9 * w + 3 * (w + 2 * rx) + w, f4)
-    _library().gabor_band(
+    lib = _library()
+    scratch = _scratch(lib.gabor_scratch_floats(w, rx, ry))
+    lib.gabor_band(
         h,
         w,
         _ptr(intensity, "intensity", f4),
@@ -174,7 +188,7 @@ def gabor_band(
             _ptr(k, name, f4, (rx + 1,))
             for k, name in zip((kx, kc1, ks1, kc2, ks2), ("kx", "kc1", "ks1", "kc2", "ks2"))
         ),
-        ky.size - 1,
+        ry,
         _ptr(ky, "ky", f4),
         *(_ptr(b, name, f4, (w,)) for b, name in zip(basis, ("cos1", "sin1", "cos2", "sin2"))),
         mptr if moments is not None else None,
@@ -182,14 +196,9 @@ def gabor_band(
         scratch.ctypes.data,
         *(
             _ptr(a, name, f4, (n, w), writable=True)
-            for a, name in zip((re, im, a0, amp, residual, support), ("re", "im", "a0", "amp", "residual", "support"))
+            for a, name in zip((wrapped, amp, a0, residual, support), ("wrapped", "amp", "a0", "residual", "support"))
         ),
     )
-
-
-def wrap_to_pi(phase) -> None:
-    """In place: ``phase[phase >= pi] -= 2 pi`` (float32; cv2.phase gives [0, 2 pi])."""
-    _library().wrap_to_pi(phase.size, _ptr(phase, "phase", np.float32, writable=True))
 
 
 def gather(per_stripe, labels, fill, out) -> None:

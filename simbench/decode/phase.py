@@ -187,10 +187,10 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
 def _fit(
     intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, moments=None, fill=False
 ) -> tuple:
-    """The band fit of :func:`simbench.decode._kernels.gabor_band`: (re, im, a0, amp, residual,
+    """The band fit of :func:`simbench.decode._kernels.gabor_band`: (wrapped, amp, a0, residual,
     support); ``moments`` and ``fill`` as it takes them."""
     h, w = intensity.shape
-    out = tuple(np.empty((h, w), np.float32) for _ in range(6))
+    out = tuple(np.empty((h, w), np.float32) for _ in range(5))
     _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), moments, fill, *out)
     return out
 
@@ -249,10 +249,7 @@ def gabor_phase(
     sx, sy = float(sigma_x_px), float(sigma_y_px)
     # all certain (a fully lit plane): the certainty moments are the rig's, computed once
     moments = _full_moments(intensity.shape, omega, sx, sy) if c.min() >= 1.0 else None
-    re, im, a0, amp, residual, s1 = _fit(intensity, c, omega, sx, sy, moments)
-    # I ~ a0 + R cos(w x - theta); the local phase at x is psi = w x - theta = atan2(im, re)
-    wrapped = cv2.phase(re, im)
-    _kernels.wrap_to_pi(wrapped)
+    wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy, moments)
     return PhaseResult(
         wrapped=wrapped,
         amplitude=amp,
