@@ -59,6 +59,23 @@ def test_gabor_fit_matches_numpy(holes, shape):
     close_fit(phase.gabor_phase(img, certainty=cert, **kw), ref.gabor_phase(img, certainty=cert, **kw))
 
 
+@pytest.mark.parametrize("phi0", [0.0, 1.0, -2.5, 3.1, np.pi])
+def test_gabor_fit_recovers_a_known_fringe_phase(phi0):
+    """A pure fringe ``0.5 + 0.3 cos(w x + phi0)``: away from the borders (where the window is
+    whole) the wrapped phase is ``w x + phi0`` in [-pi, pi) to 2e-6 rad (measured ~1e-6: float32
+    sums; the polynomial atan2 adds ~1e-7) and the amplitude 0.3 to 1e-6."""
+    h, w = 40, 400
+    psi = 2 * np.pi / T_CAM * np.arange(w) + phi0
+    img = np.broadcast_to((0.5 + 0.3 * np.cos(psi)).astype(np.float32), (h, w)).copy()
+    kw = dict(period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
+    r = phase.gabor_phase(img, certainty=np.ones((h, w), np.float32), **kw)
+    inner = slice(20, w - 20)
+    d = np.angle(np.exp(1j * (r.wrapped[:, inner].astype(np.float64) - psi[inner])))
+    assert np.abs(d).max() <= 2e-6
+    assert np.abs(r.amplitude[:, inner] - 0.3).max() <= 1e-6
+    assert (r.wrapped >= -np.pi).all() and (r.wrapped < np.pi).all()
+
+
 def test_gabor_fit_is_the_same_for_any_band_split():
     """The decoder's row bands carry a halo of 3 sigma_y rows: the fit of the band's own rows
     must then be the bits of the whole image's (zero beyond the image, never beyond the band)."""
