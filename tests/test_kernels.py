@@ -76,6 +76,24 @@ def test_gabor_fit_recovers_a_known_fringe_phase(phi0):
     assert (r.wrapped >= -np.pi).all() and (r.wrapped < np.pi).all()
 
 
+def test_gabor_fit_of_a_lit_band_is_the_same_with_cached_moments():
+    """A fully lit band's certainty moments are kept per band shape: the first fit writes them
+    out while it uses them, later ones read them; all give the bits of the fit that computes
+    every window sum itself."""
+    img, _ = fringe(50, 130, seed=4, holes=False)
+    ones = np.ones(img.shape, np.float32)
+    kw = dict(period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
+    phase._MOMENTS.clear()
+    first = phase.gabor_phase(img, certainty=ones, **kw)
+    assert len(phase._MOMENTS) == 1
+    again = phase.gabor_phase(img, certainty=ones, **kw)
+    omega = round(2.0 * np.pi / T_CAM, 12)
+    inline = phase._fit(img, ones, omega, kw["sigma_x_px"], kw["sigma_y_px"])
+    for j, f in enumerate(("wrapped", "amplitude", "offset", "residual", "support")):
+        same(getattr(again, f), getattr(first, f))
+        same(inline[j], getattr(first, f))
+
+
 def test_gabor_fit_is_the_same_for_any_band_split():
     """The decoder's row bands carry a halo of 3 sigma_y rows: the fit of the band's own rows
     must then be the bits of the whole image's (zero beyond the image, never beyond the band)."""

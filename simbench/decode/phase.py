@@ -18,6 +18,7 @@ tests/test_accuracy_guard.py).
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -195,14 +196,31 @@ def _fit(
     return out
 
 
-@lru_cache(maxsize=8)
-def _full_moments(shape: tuple[int, int], omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
-    """The certainty moments of an all-certain image (reused across captures of one rig)."""
-    moments = tuple(np.empty(shape, np.float32) for _ in range(5))
-    _fit(np.zeros(shape, np.float32), np.ones(shape, np.float32), omega, sx, sy, moments, fill=True)
+# The certainty moments of an all-certain band (a fully lit plane), per band shape and window:
+# the same for every capture of one rig.  The first such capture computes them in its own fit
+# (the kernel writes them out while it uses them, so a cached and a fresh fit give the same
+# bits); later ones read them.  A small dict rather than lru_cache: the entry is made by the fit.
+_MOMENTS: dict[tuple, tuple[np.ndarray, ...]] = {}
+_MOMENTS_LOCK = threading.Lock()
+_MOMENTS_MAX = 8
+
+
+def _fit_all_certain(intensity: np.ndarray, ones: np.ndarray, omega: float, sx: float, sy: float) -> tuple:
+    """:func:`_fit` of a band whose certainty ``ones`` is 1 everywhere."""
+    key = (intensity.shape, omega, sx, sy)
+    with _MOMENTS_LOCK:
+        moments = _MOMENTS.get(key)
+    if moments is not None:
+        return _fit(intensity, ones, omega, sx, sy, moments)
+    moments = tuple(np.empty(intensity.shape, np.float32) for _ in range(5))
+    out = _fit(intensity, ones, omega, sx, sy, moments, fill=True)
     for a in moments:
         a.setflags(write=False)
-    return moments
+    with _MOMENTS_LOCK:
+        if len(_MOMENTS) >= _MOMENTS_MAX:
+            _MOMENTS.pop(next(iter(_MOMENTS)))
+        _MOMENTS[key] = moments
+    return out
 
 
 def check_phase_inputs(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
@@ -247,9 +265,10 @@ def gabor_phase(
     intensity = np.ascontiguousarray(intensity, dtype=np.float32)
     c = np.ascontiguousarray(certainty, dtype=np.float32)
     sx, sy = float(sigma_x_px), float(sigma_y_px)
-    # all certain (a fully lit plane): the certainty moments are the rig's, computed once
-    moments = _full_moments(intensity.shape, omega, sx, sy) if c.min() >= 1.0 else None
-    wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy, moments)
+    if c.min() >= 1.0:
+        wrapped, amp, a0, residual, s1 = _fit_all_certain(intensity, c, omega, sx, sy)
+    else:
+        wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy)
     return PhaseResult(
         wrapped=wrapped,
         amplitude=amp,
