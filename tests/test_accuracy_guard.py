@@ -16,8 +16,8 @@ import pytest
 
 from simbench.decode import DecoderParams, decode, pipeline
 from simbench.decode.phase import PhaseResult
-from simbench.metrics import edge_band, score
 from tests import numpy_reference as ref
+from tests.scoring import acquisition_scores
 
 pytestmark = pytest.mark.slow
 
@@ -32,26 +32,18 @@ def _opencv_gabor(intensity, *, certainty, period_px, sigma_x_px, sigma_y_px):
     return PhaseResult(wrapped=wrapped, amplitude=amp, offset=a0, residual=residual, support=support)
 
 
-def _scores(acq, result) -> dict:
-    band = edge_band(acq.gt.depth_m, object_id=acq.gt.object_id, band_px=5)
-    return score(
-        result.depth_m,
-        acq.gt,
-        camera=acq.scene.rig.camera,
-        exclude=band,
-        column_px=result.column_px,
-        period_px=21,
-    )
-
-
 @pytest.mark.parametrize("name", SCENES)
 def test_fast_gabor_keeps_the_accuracy_of_the_opencv_form(acquisitions, name, monkeypatch):
     acq = acquisitions(name)
     rig = acq.scene.rig
-    fast = _scores(acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference))
+    fast = acquisition_scores(
+        acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference), band_px=5
+    )
     with monkeypatch.context() as m:
         m.setitem(pipeline.PHASE_METHODS, "gabor", _opencv_gabor)
-        plain = _scores(acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference))
+        plain = acquisition_scores(
+            acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference), band_px=5
+        )
     assert np.isfinite(plain["gt_mae_mm"]) and plain["completeness"] > 0.5
     assert fast["gt_mae_mm"] <= 1.05 * plain["gt_mae_mm"], (fast, plain)
     assert fast["completeness"] >= plain["completeness"] - 1e-5, (fast, plain)

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from simbench.decode import DecoderParams, decode
-from simbench.metrics import edge_band, score
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.truth import ground_truth
 from simbench.mitsuba_dict import mitsuba_scene
@@ -14,29 +13,16 @@ from simbench.render import render_radiance
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import scene_from_dict
 from simbench.projector import transfer_curve
+from tests.scoring import acquisition_scores
 
 pytestmark = pytest.mark.slow
-
-
-def _score(acq, result, *, band_px: int) -> dict:
-    """The demo's scores: errors off a ``band_px`` band at depth edges, completeness over all."""
-    band = edge_band(acq.gt.depth_m, object_id=acq.gt.object_id, band_px=band_px) if band_px else None
-    return score(
-        result.depth_m,
-        acq.gt,
-        camera=acq.scene.rig.camera,
-        exclude=band,
-        column_px=result.column_px,
-        period_px=21,
-        detail=True,
-    )
 
 
 def test_white_plane_acceptance(acquisitions):
     """Issue 2: MAE <= 0.3 mm, completeness >= 99 %, no stripe-order error (16 spp, noise on)."""
     acq = acquisitions("white_plane")
     r = decode(acq.capture, rig=acq.scene.rig, params=DecoderParams(), reference=acq.reference)
-    m = _score(acq, r, band_px=0)
+    m = acquisition_scores(acq, r, band_px=0)
     assert m["gt_mae_mm"] <= 0.3
     assert m["completeness"] >= 0.99
     assert m["stripe_order_errors"] == 0
@@ -47,7 +33,7 @@ def test_shapes_acceptance(acquisitions, name):
     """Issue 2: completeness >= 95 %, order errors <= 0.5 %, MAE <= 1 mm outside a 5-px edge band."""
     acq = acquisitions(name)
     r = decode(acq.capture, rig=acq.scene.rig, params=DecoderParams(), reference=acq.reference)
-    m = _score(acq, r, band_px=5)
+    m = acquisition_scores(acq, r, band_px=5)
     assert m["completeness"] >= 0.95
     assert m["stripe_order_error_rate"] <= 0.005
     assert m["gt_mae_mm"] <= 1.0
@@ -56,7 +42,7 @@ def test_shapes_acceptance(acquisitions, name):
 def test_calibrated_mode_on_the_step(acquisitions):
     acq = acquisitions("step")
     r = decode(acq.capture, rig=acq.scene.rig, params=DecoderParams(mode="calibrated"))
-    m = _score(acq, r, band_px=5)
+    m = acquisition_scores(acq, r, band_px=5)
     assert m["completeness"] >= 0.95 and m["gt_mae_mm"] <= 1.0 and m["stripe_order_error_rate"] <= 0.005
 
 
@@ -167,10 +153,12 @@ def test_alternative_phase_methods_meet_the_pipeline_limits(acquisitions, method
     (measured at seed 7: white plane MAE 0.14 / 0.065 mm, step 0.22 / 0.27 mm; Gabor 0.047 / 0.068)."""
     params = DecoderParams(phase_method=method)
     acq = acquisitions("white_plane")
-    m = _score(acq, decode(acq.capture, rig=acq.scene.rig, params=params, reference=acq.reference), band_px=0)
+    r = decode(acq.capture, rig=acq.scene.rig, params=params, reference=acq.reference)
+    m = acquisition_scores(acq, r, band_px=0)
     assert m["gt_mae_mm"] <= 0.3 and m["completeness"] >= 0.99 and m["stripe_order_errors"] == 0
     acq = acquisitions("step")
-    m = _score(acq, decode(acq.capture, rig=acq.scene.rig, params=params, reference=acq.reference), band_px=5)
+    r = decode(acq.capture, rig=acq.scene.rig, params=params, reference=acq.reference)
+    m = acquisition_scores(acq, r, band_px=5)
     assert m["gt_mae_mm"] <= 1.0 and m["completeness"] >= 0.95 and m["stripe_order_error_rate"] <= 0.005
 
 
