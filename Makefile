@@ -8,8 +8,8 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-# (the install also compiles the decoder's C loops, simbench/decode/_ckernels.c)
-$(STAMP): pyproject.toml scripts/setup_system.sh simbench/decode/_ckernels.c
+# (the install also compiles simbench's C loops, simbench/_ckernels.c)
+$(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c
 	bash scripts/setup_system.sh
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
@@ -58,4 +58,4 @@ bench: setup
 
 clean:
 	rm -rf $(VENV) .pytest_cache .benchmarks .cache
-	rm -rf build simbench/decode/*.so
+	rm -rf build simbench/*.so

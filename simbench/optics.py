@@ -30,6 +30,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simbench import native
+
 if TYPE_CHECKING:
     from simbench.rig import Intrinsics
 
@@ -90,11 +92,41 @@ def undistort_normalized(
     return x, y
 
 
-def _grid(intr) -> tuple[np.ndarray, np.ndarray]:
+_BROWN = {
+    "brown_maps": (
+        None,
+        [native.I64, native.I64, native.F64, native.F64, native.F64, native.P, native.I64, native.I64] + [native.P] * 3,
+    )
+}
+UNDISTORT_ITERATIONS = 30  # undistort_normalized's default
+
+
+def _maps(intr, *, inverse: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The remap grids of :func:`distort_normalized` (``inverse`` False) or
+    :func:`undistort_normalized` (True) on the camera's pixels, computed in C (simbench/_ckernels.c:
+    the same float64 operations in the same order, so the same bits as those functions;
+    tests/test_optics.py), ~20x faster than numpy (the inverse's 30 fixed-point steps cost
+    ~0.5 s per camera in numpy)."""
     h, w = intr.size_hw
-    x = (np.arange(w, dtype=np.float64) - intr.cx_px) / intr.focal_px
-    y = (np.arange(h, dtype=np.float64) - intr.cy_px) / intr.focal_px
-    return np.broadcast_to(x[None, :], (h, w)), np.broadcast_to(y[:, None], (h, w))
+    d = np.asarray(_coeffs(intr.distortion), np.float64)
+    mx, my = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
+    scratch = np.empty(3 * w, np.float64)
+    native.bind(_BROWN).brown_maps(
+        h,
+        w,
+        float(intr.focal_px),
+        float(intr.cx_px),
+        float(intr.cy_px),
+        d.ctypes.data,
+        int(inverse),
+        UNDISTORT_ITERATIONS,
+        scratch.ctypes.data,
+        native.ptr(mx, "map_x", np.float32, writable=True),
+        native.ptr(my, "map_y", np.float32, writable=True),
+    )
+    for m in (mx, my):
+        m.setflags(write=False)
+    return mx, my
 
 
 # The remap maps depend on the intrinsics alone (a frozen, hashable dataclass): computed once per
@@ -102,25 +134,13 @@ def _grid(intr) -> tuple[np.ndarray, np.ndarray]:
 @lru_cache(maxsize=8)
 def _distort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
     """Where the recorded pixel's light comes from in the ideal image: K D^-1(K^-1 p)."""
-    xd, yd = _grid(intr)
-    x, y = undistort_normalized(xd, yd, intr.distortion)
-    return _readonly_map(x * intr.focal_px + intr.cx_px), _readonly_map(y * intr.focal_px + intr.cy_px)
+    return _maps(intr, inverse=True)
 
 
 @lru_cache(maxsize=8)
 def _undistort_maps(intr) -> tuple[np.ndarray, np.ndarray]:
     """Where the ideal pixel is recorded: K D(K^-1 q)."""
-    x, y = _grid(intr)
-    # a row of x and a column of y: the terms of one coordinate are computed once per row or
-    # column, each pixel's value still by the same float64 operations (the same bits)
-    xd, yd = distort_normalized(x[:1], y[:, :1], intr.distortion)
-    return _readonly_map(xd * intr.focal_px + intr.cx_px), _readonly_map(yd * intr.focal_px + intr.cy_px)
-
-
-def _readonly_map(m: np.ndarray) -> np.ndarray:
-    out = np.ascontiguousarray(m, dtype=np.float32)
-    out.setflags(write=False)
-    return out
+    return _maps(intr, inverse=False)
 
 
 def _remap(img: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int) -> np.ndarray:

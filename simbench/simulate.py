@@ -83,8 +83,8 @@ VERSIONED_DISTRIBUTIONS = {
     "mitsuba": "mitsuba",
     "drjit": "drjit",
     "numpy": "numpy",
-    # the decoder's convolutions (OpenCV); its fused loops are simbench's own C
-    # (simbench/decode/_ckernels.c, compiled at install: the C compiler is recorded too)
+    # OpenCV (remaps, filters); simbench's own C loops (simbench/_ckernels.c, compiled at
+    # install: the C compiler is recorded too)
     "opencv": "opencv-python-headless",
     "colour": "colour-science",
     "scipy": "scipy",
@@ -102,9 +102,9 @@ def versions() -> dict:
         except metadata.PackageNotFoundError:
             out[key] = "not installed"
     out["python"] = platform.python_version()
-    from simbench.decode._kernels import compiler
+    from simbench.native import compiler
 
-    out["decoder_kernels_compiler"] = compiler()
+    out["c_compiler"] = compiler()
     return out
 
 

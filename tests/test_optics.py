@@ -50,14 +50,22 @@ def test_distort_then_undistort_image_recovers_a_smooth_image():
     assert not np.allclose(distort_image(img, intr)[inner], img[inner], atol=0.01)  # it did distort
 
 
+def pixel_grid(intr):
+    """Normalised coordinates of the camera's pixel centres, float64, (H, W) each."""
+    h, w = intr.size_hw
+    x = (np.arange(w, dtype=np.float64) - intr.cx_px) / intr.focal_px
+    y = (np.arange(h, dtype=np.float64) - intr.cy_px) / intr.focal_px
+    return np.broadcast_to(x[None, :], (h, w)), np.broadcast_to(y[:, None], (h, w))
+
+
 def test_remap_maps_are_cached_per_device_with_the_same_bits():
     """The undistortion and distortion maps are built once per intrinsics and reused (read-only);
     the images are bit-identical to remapping with maps built afresh from the model."""
-    from simbench.optics import _distort_maps, _grid, _undistort_maps
+    from simbench.optics import _distort_maps, _undistort_maps
 
     intr = Intrinsics(320, 240, 578.0, 159.5, 119.5, DIST)
     img = np.random.default_rng(3).integers(0, 256, (240, 320, 3), dtype=np.uint8)
-    x, y = _grid(intr)
+    x, y = pixel_grid(intr)
 
     def remap(xn, yn):  # the image sampled at normalised coordinates, maps built afresh
         mx, my = (
@@ -247,3 +255,21 @@ def test_decoder_handles_projector_distortion(mode):
     assert np.sqrt(np.mean((r.depth_m[r.valid] - z[r.valid]) ** 2)) < 0.03 * 1.2**2 / (
         rig.projector.focal_px * rig.baseline_m
     )
+
+
+@pytest.mark.parametrize("distortion", [(-0.21, 0.1, 0.0, 0.0, 0.0), (0.12, -0.05, 0.002, -0.0015, 0.01)])
+def test_remap_grids_are_the_bits_of_the_numpy_lens_model(distortion):
+    """The C remap grids (simbench/_ckernels.c) = the float64 numpy forms of distort_normalized /
+    undistort_normalized on the pixel grid, cast to float32: the same operations in the same
+    order, no fused multiply-add."""
+    from simbench import optics
+    from simbench.rig import Intrinsics
+
+    intr = Intrinsics(width_px=97, height_px=61, focal_px=80.0, cx_px=50.3, cy_px=28.9, distortion=distortion)
+    gx, gy = pixel_grid(intr)
+    for inverse, model in ((False, optics.distort_normalized), (True, optics.undistort_normalized)):
+        u, v = model(gx, gy, distortion)
+        mx, my = optics._maps(intr, inverse=inverse)
+        assert np.array_equal(mx, (u * intr.focal_px + intr.cx_px).astype(np.float32))
+        assert np.array_equal(my, (v * intr.focal_px + intr.cy_px).astype(np.float32))
+        assert not mx.flags.writeable

@@ -1,34 +1,25 @@
-"""The decoder's fused per-pixel loops: C functions (``_ckernels.c``) behind checked wrappers.
+"""The decoder's fused per-pixel loops: C functions (``simbench/_ckernels.c``) behind checked
+wrappers (loaded and checked by :mod:`simbench.native`).
 
 Each kernel replaces a chain of whole-image numpy passes by one loop over the pixels, so an
 image-sized intermediate is never written to memory, and evaluates the same IEEE float
 operations in the same order as the numpy expression it replaces (the docstrings give it), so
-results are bit-identical to it: the C file is compiled without fused multiply-add or
-reassociation (``pyproject.toml``), and ``tests/test_kernels.py`` compares every kernel with its
-numpy form (``tests/numpy_reference.py``).
-
-The C file is built into the package when it is installed (``pip install -e .``, which
-``make setup`` runs) and loaded with :mod:`ctypes`, which releases the GIL around every call:
-the decoder runs the kernels in its row-band threads.  Loading costs about a millisecond, where
-a JIT compiler's start-up cost a command-line decode ~0.6 s.
-
-The wrappers check dtype, shape and C-contiguity of every array before the call (a mismatch
-raises ``TypeError``/``ValueError`` instead of reading stray memory).
+results are bit-identical to it; ``tests/test_kernels.py`` compares every kernel with its numpy
+form (``tests/numpy_reference.py``).  The one exception is the Gabor fit (:func:`gabor_band`),
+which sums in another order: equal to float32 rounding.
 """
 
 from __future__ import annotations
 
 import ctypes
-import importlib.util
-import re
 import threading
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
+from simbench import native
+
 __all__ = [
-    "compiler",
     "gabor_band",
     "gather",
     "absolute_column",
@@ -70,53 +61,13 @@ _SIGNATURES = {
 _IMAGE_DTYPES = {np.dtype(np.uint8): 0, np.dtype(np.uint16): 1, np.dtype(np.float32): 2}
 
 
-def _built_file() -> str:
-    spec = importlib.util.find_spec("simbench.decode._ckernels")
-    if spec is None or spec.origin is None:
-        raise ImportError(
-            "simbench's compiled decoder kernels (simbench/decode/_ckernels.c) are not built: "
-            "run `make setup` (or `pip install -e .`; it needs a C compiler)"
-        )
-    return spec.origin
-
-
-def compiler() -> str:
-    """The compiler that built the kernels, as it signed the shared library (``.comment``
-    section, e.g. ``GCC: (Debian 12.2.0-14) 12.2.0``), for provenance; "unknown" if unsigned."""
-    data = Path(_built_file()).read_bytes()
-    found = re.findall(rb"(GCC: \([^\x00]*\) [^\x00]+|clang version [^\x00]+)", data)
-    return found[0].decode(errors="replace").strip() if found else "unknown"
-
-
 @lru_cache(maxsize=1)
-def _library() -> ctypes.CDLL:
-    lib = ctypes.CDLL(_built_file())
-    for name, (restype, argtypes) in _SIGNATURES.items():
-        fn = getattr(lib, name)
-        fn.restype = restype
-        fn.argtypes = argtypes
-    return lib
+def _library():
+    return native.bind(_SIGNATURES)
 
 
-def _ptr(a: np.ndarray, name: str, dtype, shape: tuple | None = None, *, writable: bool = False) -> int:
-    """The data address of ``a`` after checking what the C function assumes of it."""
-    if not isinstance(a, np.ndarray):
-        raise TypeError(f"{name}: expected an ndarray, got {type(a).__name__}")
-    if a.dtype != dtype:
-        raise TypeError(f"{name}: expected dtype {np.dtype(dtype)}, got {a.dtype}")
-    if not a.flags.c_contiguous:
-        raise ValueError(f"{name}: must be C-contiguous")
-    if shape is not None and a.shape != shape:
-        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
-    if writable and not a.flags.writeable:
-        raise ValueError(f"{name}: must be writable")
-    return a.ctypes.data
-
-
-def _f32(x) -> float:
-    """``x`` rounded to float32 (as numpy rounds a Python float compared with a float32 image),
-    for a C ``float`` argument."""
-    return float(np.float32(x))
+_ptr = native.ptr
+_f32 = native.f32
 
 
 def _check_table(table: np.ndarray, h: int) -> None:

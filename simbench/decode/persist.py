@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import native
 from simbench.cache import RenderCache, array_digest, source_digest
 from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
@@ -26,10 +27,9 @@ __all__ = ["lookup_decoded_reference", "decoder_fingerprint"]
 
 @lru_cache(maxsize=1)
 def decoder_fingerprint() -> str:
-    """SHA-256 over the decoder package's source files, Python and C (name and bytes, in name
-    order)."""
-    here = Path(__file__).parent
-    return source_digest(sorted([*here.glob("*.py"), *here.glob("*.c")]))
+    """SHA-256 over the decoder package's source files and the C loops it calls (name and
+    bytes, in name order)."""
+    return source_digest(sorted([*Path(__file__).parent.glob("*.py"), native.SOURCE]))
 
 
 def lookup_decoded_reference(
