@@ -178,15 +178,17 @@ ROW_FN void column_sums(int64_t w, int64_t r, const float *const *rows, const fl
 }
 
 /* atan2(y, x) in (-pi, pi], vectorisable (no library call, selects instead of branches): the
- * octant reduction and polynomial of Cephes' atanf (S. L. Moshier), relative error ~1e-7;
- * atan2(0, 0) = 0. */
+ * octant reduction and polynomial of Cephes' atanf (S. L. Moshier), error ~1e-7 rad (tested
+ * through the Gabor fit of a known fringe); atan2(0, 0) = 0. */
 static inline float atan2_poly(float y, float x) {
     const float ax = fabsf(x), ay = fabsf(y);
     const float mx = ax > ay ? ax : ay, mn = ax > ay ? ay : ax;
-    float a = mx > 0.0f ? mn / mx : 0.0f; /* in [0, 1] */
-    const int big = a > 0.41421356237309504880f; /* tan(pi/8) */
+    /* t = mn / mx in [0, 1]; above tan(pi/8), atan t = pi/4 + atan((t - 1) / (t + 1)), which is
+     * (mn - mx) / (mn + mx): one division either way */
+    const int big = mn > 0.41421356237309504880f * mx;
     const float base = big ? 0.78539816339744830962f : 0.0f;
-    a = big ? (a - 1.0f) / (a + 1.0f) : a;
+    const float num = big ? mn - mx : mn, den = big ? mn + mx : mx;
+    const float a = den > 0.0f ? num / den : 0.0f;
     const float z = a * a;
     float r = base + ((((8.05374449538e-2f * z - 1.38776856032e-1f) * z + 1.99777106478e-1f) * z -
                        3.33329491539e-1f) * z * a + a);
@@ -244,11 +246,11 @@ ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m
  *
  * The window sums of c I, c I cos, c I sin, c I^2 (and, unless the certainty moments come in
  * `moments`, of c, c cos, c sin, c cos2, c sin2) are separable Gaussian sums with zero outside
- * the image.  Along x, the sums of f cos(w x') and f sin(w x') come from two sums of f itself,
- * with the window carrying the carrier (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so each
- * input row is read once for all of them; the x sums of the rows within ry of the output row
- * live in a ring of 2 ry + 1 rows per sum (cache-resident); along y each sum is a symmetric
- * weighted sum of those rows.  Then the per-pixel fit (fit_pixel) and the phase
+ * the image, taken along y first: the products c I, c I^2 (and c) of the rows within ry of the
+ * output row live in a ring of 2 ry + 1 rows (cache-resident), and their column sums make one
+ * padded row per product.  Along x, the sums of f cos(w x') and f sin(w x') come from sums of f
+ * itself with the window carrying the carrier (cos(w (x - k)) = cos wx cos wk + sin wx sin wk),
+ * so two or three rows feed all nine sums.  Then the per-pixel fit (fit_pixel) and the phase
  * psi = atan2(im, re) in [-pi, pi).
  *
  * kx, kc1, ks1, kc2, ks2: half kernels (rx + 1) of the x window g, g cos(w k), g sin(w k),
@@ -257,7 +259,7 @@ ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m
  * or to write (!have_moments).  scratch: gabor_scratch_floats(w, rx, ry) floats.
  * Outputs (y1 - y0) rows: wrapped, amp, a0, residual, support (= s1). */
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 9 * (2 * ry + 1) * w + 18 * w + 3 * (w + 2 * rx) + w;
+    return 3 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w;
 }
 
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
@@ -267,55 +269,54 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 const float *restrict cos2, const float *restrict sin2, float *const *moments, int64_t have_moments,
                 float *restrict scratch, float *restrict wrapped, float *restrict amp, float *restrict a0,
                 float *restrict residual, float *restrict support) {
-    const int64_t n_sums = have_moments ? 4 : 9;
+    const int64_t n_products = have_moments ? 2 : 3; /* c I, c I^2 (, c) */
     const int64_t R = 2 * ry + 1;
     const int64_t pw = w + 2 * rx;
-    float *ring = scratch;           /* n_sums rings of R rows of x sums */
-    float *V = ring + 9 * R * w;     /* n_sums rows of window sums */
-    float *T = V + 9 * w;            /* 9 row temporaries of the x pass */
-    float *pad = T + 9 * w;          /* three zero-padded input rows */
-    float *zero_row = pad + 3 * pw;  /* w zeros: the rows beyond the image */
-    float *p_ci = pad + rx, *p_cii = pad + pw + rx, *p_c = pad + 2 * pw + rx;
-    for (int64_t j = 0; j < 3 * pw + w; j++) pad[j] = 0.0f;
+    float *ring = scratch;               /* n_products rings of R product rows */
+    float *pad = ring + 3 * R * w;       /* n_products zero-padded column-sum rows */
+    float *T = pad + 3 * pw;             /* 9 row temporaries of the x sums */
+    float *B = T + 9 * w;                /* the 9 window sums of the output row */
+    float *zero_row = B + 9 * w;         /* w zeros: the rows beyond the image */
+    for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
+    for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f;
+    float *v_ci = pad + rx, *v_cii = pad + pw + rx, *v_c = pad + 2 * pw + rx;
     float *G = T, *C = T + w, *S = T + 2 * w, *E = T + 3 * w;
     float *Gc = T + 4 * w, *Cc = T + 5 * w, *Sc = T + 6 * w, *C2 = T + 7 * w, *S2 = T + 8 * w;
-    const float *rowp[2 * ry + 1]; /* the rows of one vertical sum */
-    int64_t next = y0 - ry < 0 ? 0 : y0 - ry; /* the next row whose x sums are due */
+    float *b0 = B, *b1 = B + w, *b2 = B + 2 * w, *G2 = B + 3 * w;
+    float *s1 = B + 4 * w, *sc = B + 5 * w, *ss = B + 6 * w, *sc2 = B + 7 * w, *ss2 = B + 8 * w;
+    const float *rowp[2 * ry + 1]; /* the rows of one column sum */
+    int64_t next = y0 - ry < 0 ? 0 : y0 - ry; /* the next row whose products are due */
     for (int64_t y = y0; y < y1; y++) {
         const int64_t last = y + ry < h ? y + ry : h - 1;
         for (; next <= last; next++) {
-            input_rows(w, intensity + next * w, certainty + next * w, p_ci, p_cii, p_c);
             const int64_t slot = (next % R) * w;
-            float *hq[9];
-            for (int64_t q = 0; q < 9; q++) hq[q] = ring + q * R * w + slot;
-            row_sums(w, rx, p_ci, kx, kc1, ks1, G, C, S);
-            row_sums(w, rx, p_cii, kx, NULL, NULL, E, NULL, NULL);
-            carrier_row(w, G, C, S, cos1, sin1, hq[0], hq[1], hq[2]);
-            copy_row(w, E, hq[3]);
-            if (!have_moments) {
-                row_sums(w, rx, p_c, kx, kc1, ks1, Gc, Cc, Sc);
-                row_sums(w, rx, p_c, kx, kc2, ks2, E, C2, S2);
-                carrier_row(w, Gc, Cc, Sc, cos1, sin1, hq[4], hq[5], hq[6]);
-                carrier_row(w, NULL, C2, S2, cos2, sin2, NULL, hq[7], hq[8]);
-            }
+            input_rows(w, intensity + next * w, certainty + next * w, ring + slot, ring + R * w + slot,
+                       ring + 2 * R * w + slot);
         }
-        for (int64_t q = 0; q < n_sums; q++) {
+        for (int64_t q = 0; q < n_products; q++) {
             const float *Rq = ring + q * R * w;
             for (int64_t k = -ry; k <= ry; k++)
                 rowp[ry + k] = (y + k >= 0 && y + k < h) ? Rq + ((y + k) % R) * w : zero_row;
-            column_sums(w, ry, rowp + ry, ky, V + q * w);
+            column_sums(w, ry, rowp + ry, ky, pad + q * pw + rx);
         }
+        row_sums(w, rx, v_ci, kx, kc1, ks1, G, C, S);
+        row_sums(w, rx, v_cii, kx, NULL, NULL, E, NULL, NULL);
+        carrier_row(w, G, C, S, cos1, sin1, b0, b1, b2);
         const int64_t o = (y - y0) * w;
         const float *m0, *m1, *m2, *m3, *m4;
         if (have_moments) {
             m0 = moments[0] + o, m1 = moments[1] + o, m2 = moments[2] + o, m3 = moments[3] + o, m4 = moments[4] + o;
         } else {
-            m0 = V + 4 * w, m1 = V + 5 * w, m2 = V + 6 * w, m3 = V + 7 * w, m4 = V + 8 * w;
+            row_sums(w, rx, v_c, kx, kc1, ks1, Gc, Cc, Sc);
+            row_sums(w, rx, v_c, kx, kc2, ks2, G2, C2, S2); /* G2: the same as Gc, unused */
+            carrier_row(w, Gc, Cc, Sc, cos1, sin1, s1, sc, ss);
+            carrier_row(w, NULL, C2, S2, cos2, sin2, NULL, sc2, ss2);
+            m0 = s1, m1 = sc, m2 = ss, m3 = sc2, m4 = ss2;
             if (moments != NULL)
-                for (int64_t q = 0; q < 5; q++) copy_row(w, V + (4 + q) * w, moments[q] + o);
+                for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, moments[q] + o);
         }
-        fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, V, V + w, V + 2 * w, V + 3 * w, wrapped + o, amp + o, a0 + o,
-                residual + o, support + o);
+        fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
+                support + o);
     }
 }
 
