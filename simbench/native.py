@@ -57,7 +57,7 @@ def bind(signatures: dict[str, tuple]) -> ctypes.CDLL:
     return lib
 
 
-def ptr(a: np.ndarray, name: str, dtype, shape: tuple | None = None, *, writable: bool = False) -> int:
+def ptr(a: np.ndarray, name: str, dtype: np.dtype | type, shape: tuple | None = None, *, writable: bool = False) -> int:
     """The data address of ``a`` after checking what the C function assumes of it."""
     if not isinstance(a, np.ndarray):
         raise TypeError(f"{name}: expected an ndarray, got {type(a).__name__}")
@@ -72,7 +72,7 @@ def ptr(a: np.ndarray, name: str, dtype, shape: tuple | None = None, *, writable
     return a.ctypes.data
 
 
-def f32(x) -> float:
+def f32(x: float) -> float:
     """``x`` rounded to float32 (as numpy rounds a Python float compared with a float32 image),
     for a C ``float`` argument."""
     return float(np.float32(x))
