@@ -425,6 +425,26 @@ void neighbour_correct(int64_t n, const int32_t *restrict positions, const int64
                        const int64_t *restrict right, int64_t cycle, int64_t reach, int64_t min_support,
                        int64_t *restrict counts, int32_t *restrict out, int32_t *restrict support) {
     for (int64_t j = 0; j < n; j++) {
+        /* fast path, the same decision: when the stripe's own W has a strict majority of the
+         * predictions it is the plurality, with every rival below it */
+        const int32_t p0 = positions[j];
+        if (p0 >= 0 && p0 < cycle) {
+            int64_t agree = 0, total = 0;
+            for (int64_t off = -reach; off <= reach; off++) {
+                const int64_t src = j + off;
+                const int ok = off < 0 ? (left[j] >= -off) : (right[j] >= off);
+                if (ok && src >= 0 && src < n && positions[src] >= 0) {
+                    total += 1;
+                    agree += pymod((int64_t)positions[src] - off, cycle) == p0;
+                }
+            }
+            if (2 * agree > total) {
+                const int keep = agree >= min_support;
+                out[j] = keep ? p0 : -1;
+                support[j] = keep ? (int32_t)agree : 0;
+                continue;
+            }
+        }
         for (int64_t v = 0; v < cycle; v++) counts[v] = 0;
         for (int64_t off = -reach; off <= reach; off++) {
             const int64_t src = j + off;

@@ -168,14 +168,17 @@ def test_segmentation_edge_cases():
             same(a, b)
 
 
+@pytest.mark.parametrize("corrupt", [0.15, 0.6], ids=["mostly-right", "mostly-wrong"])
 @pytest.mark.parametrize("reach,min_support", [(1, 1), (2, 2), (3, 2), (4, 3)])
-def test_neighbour_correction_matches_numpy(reach, min_support):
+def test_neighbour_correction_matches_numpy(reach, min_support, corrupt):
+    """Also where most stripes are wrong, so that the kernel's majority shortcut and its full
+    count both decide often."""
     rng = np.random.default_rng(reach)
     n, cycle = 5000, 8
     linked = rng.random(n) > 0.1
     linked[0] = False
     true = np.arange(n) % cycle
-    positions = np.where(rng.random(n) < 0.15, rng.integers(-1, cycle, n), true).astype(np.int32)
+    positions = np.where(rng.random(n) < corrupt, rng.integers(-1, cycle, n), true).astype(np.int32)
     for a, b in zip(debruijn.chain_extent(linked), ref.chain_extent(linked)):
         same(a.astype(np.int64), b.astype(np.int64))
     got = debruijn.neighbour_correct(positions, linked, cycle=cycle, reach=reach, min_support=min_support)
