@@ -214,14 +214,15 @@ ROW_FN void copy_row(int64_t w, const float *restrict src, float *restrict dst) 
     for (int64_t x = 0; x < w; x++) dst[x] = src[x];
 }
 
+/* The products c I, c I^2 of one row, and c itself unless p_c is NULL. */
 ROW_FN void input_rows(int64_t w, const float *restrict I, const float *restrict c, float *restrict p_ci,
                        float *restrict p_cii, float *restrict p_c) {
     for (int64_t x = 0; x < w; x++) {
         const float ci = c[x] * I[x];
         p_ci[x] = ci;
         p_cii[x] = ci * I[x];
-        p_c[x] = c[x];
     }
+    if (p_c != NULL) copy_row(w, c, p_c);
 }
 
 /* The fit and the phase of one output row (see gabor_band). */
@@ -291,7 +292,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
         for (; next <= last; next++) {
             const int64_t slot = (next % R) * w;
             input_rows(w, intensity + next * w, certainty + next * w, ring + slot, ring + R * w + slot,
-                       ring + 2 * R * w + slot);
+                       have_moments ? NULL : ring + 2 * R * w + slot);
         }
         for (int64_t q = 0; q < n_products; q++) {
             const float *Rq = ring + q * R * w;

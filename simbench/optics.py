@@ -73,8 +73,12 @@ def distort_normalized(x: np.ndarray, y: np.ndarray, distortion: Sequence[float]
     return xd, yd
 
 
+# fixed-point steps of the inverse lens model (converged to 1e-9 within measurement lenses' images)
+UNDISTORT_ITERATIONS = 30
+
+
 def undistort_normalized(
-    xd: np.ndarray, yd: np.ndarray, distortion: Sequence[float], *, iterations: int = 30
+    xd: np.ndarray, yd: np.ndarray, distortion: Sequence[float], *, iterations: int = UNDISTORT_ITERATIONS
 ) -> tuple[np.ndarray, np.ndarray]:
     """Invert :func:`distort_normalized` by fixed-point iteration (OpenCV's method); converges
     for the moderate distortion of measurement lenses (tested to 1e-9 within the image)."""
@@ -98,7 +102,6 @@ _BROWN = {
         [native.I64, native.I64, native.F64, native.F64, native.F64, native.P, native.I64, native.I64] + [native.P] * 3,
     )
 }
-UNDISTORT_ITERATIONS = 30  # undistort_normalized's default
 
 
 def _maps(intr, *, inverse: bool) -> tuple[np.ndarray, np.ndarray]:

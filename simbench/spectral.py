@@ -34,13 +34,14 @@ import functools
 import hashlib
 import json
 import os
-import tempfile
 import warnings
 from collections.abc import Callable, Sequence
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+
+from simbench.io import atomic_write_text
 
 __all__ = [
     "memo_path",
@@ -87,8 +88,12 @@ def memo_path() -> Path | None:
         version = metadata.version("colour-science")
     except metadata.PackageNotFoundError:
         return None
-    digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
-    return Path(root) / f"spectral-colour{version}-{digest}.json"
+    return Path(root) / f"spectral-colour{version}-{_source_digest()}.json"
+
+
+@lru_cache(maxsize=1)
+def _source_digest() -> str:
+    return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 
 
 def _read_memo(path: Path) -> dict:
@@ -123,12 +128,7 @@ def _persistent(fn: Callable) -> Callable:
             entry = {"kind": "tuple" if isinstance(value, tuple) else "array", "value": np.asarray(value).tolist()}
             _MEMO[key] = entry
             try:  # merge with what other processes wrote meanwhile; replace atomically
-                path.parent.mkdir(parents=True, exist_ok=True)
-                merged = {**_read_memo(path), key: entry}
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".spectral-", suffix=".tmp")
-                with os.fdopen(fd, "w") as f:
-                    json.dump(merged, f)
-                os.replace(tmp, path)
+                atomic_write_text(path, json.dumps({**_read_memo(path), key: entry}))
             except OSError:
                 pass  # an unwritable cache folder costs time, not results
         return value

@@ -35,10 +35,7 @@ __all__ = [
     "assemble_output",
 ]
 
-_P = ctypes.c_void_p
-_I = ctypes.c_int64
-_F = ctypes.c_float
-_D = ctypes.c_double
+_P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
 _SIGNATURES = {
     "gabor_band": (
         None,

@@ -177,9 +177,8 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
     rx, ry = len(gx) // 2, len(gy) // 2
     g = gx[rx:].astype(np.float64)
     k = np.arange(rx + 1, dtype=np.float64)
-    out = [gx[rx:]] + [(g * f(m * omega * k)).astype(np.float32) for m in (1, 2) for f in (np.cos, np.sin)]
-    out = [out[0], out[1], out[2], out[3], out[4], gy[ry:]]
-    out = tuple(np.ascontiguousarray(a, dtype=np.float32) for a in out)
+    carried = [g * f(m * omega * k) for m in (1, 2) for f in (np.cos, np.sin)]
+    out = tuple(np.ascontiguousarray(a, dtype=np.float32) for a in (gx[rx:], *carried, gy[ry:]))
     for a in out:
         a.setflags(write=False)
     return out
