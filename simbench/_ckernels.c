@@ -742,3 +742,122 @@ void brown_maps(int64_t h, int64_t w, double f, double cx, double cy, const doub
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels", NULL, -1, NULL};
 
 PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }
+
+/* Lanes of the projector-column triangulation: pixels processed together, so that every step
+ * is a loop over the lanes that the compiler vectorises. */
+enum { TL = 8 };
+
+/* a == b, or both NaN: a further step from a gives b's result again */
+static inline int settled(double a, double b) { return (a == b) | ((a != a) & (b != b)); }
+
+/* The ideal (pinhole) normalised x of TL DMD columns, each on the projector row of normalised y:
+ * Newton's method on fx D_x(x, y) + cx = u_d from x = the distorted target (0 where that is not
+ * finite), `steps` steps (simbench.optics.undistort_projector_columns, in its operation order).
+ * A step that leaves every lane's x unchanged leaves them unchanged forever, so stopping there
+ * gives the same bits; Newton gets there in 3-5 steps for a measurement lens. */
+ROW_FN void undistort_lanes(const double *restrict target, const double *restrict y, const double *restrict d,
+                            int64_t steps, double *restrict x) {
+    const double k1 = d[0], k2 = d[1], p1 = d[2], p2 = d[3], k3 = d[4];
+    for (int l = 0; l < TL; l++) x[l] = fabs(target[l]) <= DBL_MAX ? target[l] : 0.0;
+    for (int64_t i = 0; i < steps; i++) {
+        double next[TL];
+        int moved = 0;
+        for (int l = 0; l < TL; l++) {
+            const double r2 = x[l] * x[l] + y[l] * y[l];
+            const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+            const double dradial = 2.0 * x[l] * (k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3));
+            const double f = x[l] * radial + 2.0 * p1 * x[l] * y[l] + p2 * (r2 + 2.0 * x[l] * x[l]) - target[l];
+            const double fp = radial + x[l] * dradial + 2.0 * p1 * y[l] + 6.0 * p2 * x[l];
+            next[l] = x[l] - f / fp;
+        }
+        for (int l = 0; l < TL; l++) moved |= !settled(next[l], x[l]);
+        for (int l = 0; l < TL; l++) x[l] = next[l];
+        if (!moved) break;
+    }
+}
+
+/* Camera z where the rays (rx, ry, 1) meet the planes of the ideal projector columns u:
+ * n = R (1, 0, -a), a = (u - cx_p) / f_p, n.(X - t) = 0 (the numpy form's plane_depth, in its
+ * operation order). */
+ROW_FN void plane_depth_lanes(const double *restrict u, const double *restrict rx, const double *restrict ry,
+                              double fp, double cxp, const double *restrict R, const double *restrict t,
+                              double *restrict z) {
+    for (int l = 0; l < TL; l++) {
+        const double a = (u[l] - cxp) / fp;
+        const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
+        z[l] = (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx[l] + ny * ry[l] + nz);
+    }
+}
+
+/* TL pixels of triangulate_columns (below): camera z from DMD columns u at rays rx, ry. */
+static void triangulate_lanes(const double *restrict u, const double *restrict rx, const double *restrict ry,
+                              const double *restrict rig, int64_t distorted, int64_t newton_steps,
+                              int64_t refine_steps, double *restrict depth) {
+    const double fp = rig[3], cxp = rig[4];
+    const double *R = rig + 5, *t = rig + 14, *d = rig + 17;
+    double ideal[TL], z[TL];
+    for (int l = 0; l < TL; l++) ideal[l] = u[l];
+    if (distorted) {
+        double target[TL], x[TL], y[TL];
+        for (int l = 0; l < TL; l++) target[l] = (u[l] - cxp) / fp;
+        undistort_lanes(target, ry, d, newton_steps, x);
+        for (int l = 0; l < TL; l++) ideal[l] = fabs(u[l]) <= DBL_MAX ? x[l] * fp + cxp : NAN;
+        /* a rig that is not rectified: the projector row where the point lands, from the depth
+         * so far; stopped, like the Newton steps, once a step changes no lane */
+        for (int64_t s = 0; s < refine_steps; s++) {
+            plane_depth_lanes(ideal, rx, ry, fp, cxp, R, t, z);
+            for (int l = 0; l < TL; l++) {
+                const double x0 = z[l] * rx[l] - t[0], x1 = z[l] * ry[l] - t[1], x2 = z[l] - t[2];
+                /* R^T (X - t): the projector-frame y and z, term by term */
+                const double yp = x0 * R[1] + x1 * R[4] + x2 * R[7];
+                const double zp = x0 * R[2] + x1 * R[5] + x2 * R[8];
+                const double yr = yp / zp;
+                y[l] = fabs(yr) <= DBL_MAX ? yr : ry[l];
+            }
+            undistort_lanes(target, y, d, newton_steps, x);
+            int moved = 0;
+            for (int l = 0; l < TL; l++) {
+                const double next = fabs(u[l]) <= DBL_MAX ? x[l] * fp + cxp : NAN;
+                moved |= !settled(next, ideal[l]);
+                ideal[l] = next;
+            }
+            if (!moved) break;
+        }
+    }
+    plane_depth_lanes(ideal, rx, ry, fp, cxp, R, t, z);
+    for (int l = 0; l < TL; l++) depth[l] = (fabs(z[l]) <= DBL_MAX && z[l] > 0.0) ? z[l] : NAN;
+}
+
+/* simbench.rig.triangulate_columns for n camera pixels: column (DMD columns, NaN = unknown) in,
+ * camera z out (NaN where the ray is parallel to the plane or meets it behind).  The pixels are
+ * rows[j], cols[j], or with rows NULL the grid of rows row0.. and columns 0..grid_w-1 in row-major
+ * order.  rig: f_c, cx_c, cy_c, f_p, cx_p, R (row-major 3x3), t (3), k1, k2, p1, p2, k3 of the
+ * projector.  distorted: undo the projector's lens (newton_steps Newton steps) on the projector
+ * row of the camera row (exact in a rectified rig), then refine_steps times on the row where the
+ * point lands (any other rig).  Unknown columns give NaN without being computed (every step
+ * keeps a NaN); the others go TL at a time. */
+void triangulate_columns(int64_t n, const double *restrict column, const double *restrict rows,
+                         const double *restrict cols, int64_t row0, int64_t grid_w, const double *restrict rig,
+                         int64_t distorted, int64_t newton_steps, int64_t refine_steps, double *restrict depth) {
+    const double fc = rig[0], cxc = rig[1], cyc = rig[2];
+    double u[TL], rx[TL], ry[TL], z[TL];
+    int64_t at[TL];
+    int m = 0;
+    for (int64_t j = 0, gx = 0, gy = row0; j < n; j++) {
+        if (isnan(column[j])) {
+            depth[j] = NAN;
+        } else {
+            u[m] = column[j];
+            rx[m] = ((rows == NULL ? (double)gx : cols[j]) - cxc) / fc;
+            ry[m] = ((rows == NULL ? (double)gy : rows[j]) - cyc) / fc;
+            at[m++] = j;
+        }
+        if (++gx == grid_w) gx = 0, gy++;
+        if (m == TL || (j == n - 1 && m > 0)) {
+            for (int l = m; l < TL; l++) u[l] = NAN, rx[l] = ry[l] = 0.0; /* idle lanes */
+            triangulate_lanes(u, rx, ry, rig, distorted, newton_steps, refine_steps, z);
+            for (int l = 0; l < m; l++) depth[at[l]] = z[l];
+            m = 0;
+        }
+    }
+}

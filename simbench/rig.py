@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench import validate
+from simbench import native, validate
 from simbench.io import atomic_write_text, read_toml
 
 __all__ = [
@@ -399,12 +399,41 @@ def project_to_projector(points_m: np.ndarray, rig: Rig) -> tuple[np.ndarray, np
 
 # fixed-point steps of triangulate_columns through projector distortion in a non-rectified rig
 TRIANGULATION_ITERATIONS = 4
+# Newton steps of one projector-column undistortion (simbench.optics.undistort_projector_columns)
+COLUMN_NEWTON_STEPS = 8
+
+_TRIANGULATE = {
+    "triangulate_columns": (
+        None,
+        [native.I64, native.P, native.P, native.P, native.I64, native.I64, native.P]
+        + [native.I64, native.I64, native.I64, native.P],
+    )
+}
+
+
+def triangulation_values(rig: Rig) -> np.ndarray:
+    """The rig as the compiled triangulation reads it (float64, 22 numbers): camera focal, cx,
+    cy, projector focal, cx, the rotation row-major, the position, the projector's distortion."""
+    cam, prj = rig.camera, rig.projector
+    values = [cam.focal_px, cam.cx_px, cam.cy_px, prj.focal_px, prj.cx_px, *rig._r.ravel(), *rig.position_m]
+    return np.array(values + [float(x) for x in prj.distortion], np.float64)
 
 
 def triangulate_columns(
-    column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None
+    column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None, row0: int = 0
 ) -> np.ndarray:
     """Depth (camera z, metres) where each camera pixel's ray meets its projector column's plane.
+
+    The plane of projector column u is ``x - a z = 0`` in the projector's frame,
+    ``a = (u - cx) / f`` (an ideal pinhole).  A projector with lens distortion shows DMD
+    column u_d where the ideal column is u: a decoded DMD column gives the ideal one only together
+    with its projector row (:func:`simbench.optics.undistort_projector_columns`).  In a rectified
+    rig that row's normalised y is the camera pixel's, exactly; in any other (a calibrated rig is
+    never exactly rectified) the row where the point lands comes from the depth so far, a fixed
+    point (:data:`TRIANGULATION_ITERATIONS` steps) that gains ~3 orders of magnitude per step for
+    a near-rectified rig.  Computed in C (simbench/_ckernels.c) in float64, in the operation
+    order of the numpy form kept in tests/numpy_reference.py (same bits, tests/test_rig.py),
+    with each iteration stopped once it changes nothing (which changes no bit either).
 
     Parameters
     ----------
@@ -412,51 +441,40 @@ def triangulate_columns(
         Projector column (OpenCV coordinates) seen by each camera pixel; NaN = unknown.
     rows, cols : ndarray, optional
         Camera pixel coordinates when ``column_px`` is not a full (H, W) image.
+    row0 : int
+        Image row of ``column_px``'s first row when it is a band of full-width rows (no
+        ``rows``/``cols``).
 
     Returns
     -------
     ndarray, same shape, float64; NaN where the ray is parallel to the plane or behind.
     """
-    cam, prj = rig.camera, rig.projector
-    col = np.asarray(column_px, dtype=np.float64)
+    col = np.ascontiguousarray(column_px, dtype=np.float64)
+    out = np.empty(col.shape, np.float64)
     if rows is None:
-        h, w = col.shape
-        rx = ((np.arange(w) - cam.cx_px) / cam.focal_px)[None, :]
-        ry = ((np.arange(h) - cam.cy_px) / cam.focal_px)[:, None]
+        if col.ndim != 2:
+            raise ValueError(f"column_px: expected an (H, W) image without rows/cols, got shape {col.shape}")
+        r_ptr = c_ptr = None
+        grid_w = col.shape[1]
     else:
-        rx = (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px
-        ry = (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px
-    r = rig.rotation
-    t = np.asarray(rig.position_m)
-
-    def plane_depth(ideal_col: np.ndarray) -> np.ndarray:
-        # Plane of projector column u in the projector frame: x - a*z = 0, a = (u - cx)/f;
-        # normal n = R @ (1, 0, -a); plane n.(X - t) = 0; ray X = Z * (rx, ry, 1).
-        a = (ideal_col - prj.cx_px) / prj.focal_px
-        nx, ny, nz = r[0, 0] - a * r[0, 2], r[1, 0] - a * r[1, 2], r[2, 0] - a * r[2, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz)
-
-    if prj.has_distortion:
-        from simbench.optics import undistort_projector_columns
-
-        # a decoded DMD column is an ideal column only together with its projector row: in a
-        # rectified rig that row's normalised y is the camera pixel's, exactly
-        ideal = undistort_projector_columns(col, ry, prj)
-        if not rig.is_rectified:
-            # any other rig (a calibrated one is never exactly rectified): the row where the
-            # point lands in the projector, from the depth so far; a fixed point that gains
-            # ~3 orders of magnitude per step for a near-rectified rig
-            for _ in range(TRIANGULATION_ITERATIONS):
-                z = plane_depth(ideal)
-                x_cam = np.stack(np.broadcast_arrays(z * rx, z * ry, z), axis=-1) - t
-                x_prj = x_cam @ r  # R^T (X - t), row vectors
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    y_prj = x_prj[..., 1] / x_prj[..., 2]
-                ideal = undistort_projector_columns(col, np.where(np.isfinite(y_prj), y_prj, ry), prj)
-        col = ideal
-    z = plane_depth(col)
-    return np.where(np.isfinite(z) & (z > 0), z, np.nan)
+        r64, c64 = (np.ascontiguousarray(np.broadcast_to(a, col.shape), np.float64) for a in (rows, cols))
+        r_ptr, c_ptr = r64.ctypes.data, c64.ctypes.data
+        grid_w = 1
+    prj = rig.projector
+    native.bind(_TRIANGULATE).triangulate_columns(
+        col.size,
+        col.ctypes.data,
+        r_ptr,
+        c_ptr,
+        int(row0),
+        grid_w,
+        triangulation_values(rig).ctypes.data,
+        int(prj.has_distortion),
+        COLUMN_NEWTON_STEPS,
+        0 if rig.is_rectified else TRIANGULATION_ITERATIONS,
+        out.ctypes.data,
+    )
+    return out
 
 
 def projector_column_at_depth(

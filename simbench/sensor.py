@@ -10,6 +10,7 @@ physics (crosstalk, projector, lenses, ambient light) are configured by
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,6 +27,7 @@ __all__ = [
     "CFA_PATTERNS",
     "DEMOSAIC_METHODS",
     "bayer_mosaic",
+    "fixed_pattern",
     "demosaic",
     "emva_camera",
     "photon_transfer",
@@ -168,6 +170,20 @@ def demosaic(raw: np.ndarray, *, pattern: str, method: str) -> np.ndarray:
     return cv2.cvtColor(raw, getattr(cv2, f"COLOR_{stem}2RGB{DEMOSAIC_METHODS[method]}"))
 
 
+@lru_cache(maxsize=4)
+def fixed_pattern(shape: tuple[int, ...], *, seed: int, prnu: float, dsnu_e: float) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's fixed-pattern noise (:func:`emva_camera`): the per-pixel gain factor
+    ``max(1 + prnu N, 0)`` and dark offset ``dsnu_e N'`` (e-), N, N' standard normal drawn in that
+    order from ``seed``.  A property of the sensor, the same in every frame, so it is drawn once
+    per process and shape and returned read-only."""
+    fp = np.random.default_rng(seed)
+    gain = np.clip(1.0 + prnu * fp.standard_normal(shape), 0.0, None)
+    dark = dsnu_e * fp.standard_normal(shape)
+    for a in (gain, dark):
+        a.setflags(write=False)
+    return gain, dark
+
+
 def emva_camera(
     radiance: np.ndarray,
     *,
@@ -228,9 +244,8 @@ def emva_camera(
         gain = bayer_mosaic(np.broadcast_to(gain, rad.shape), pattern=camera.cfa)
     shape = mean_e.shape
     if camera.prnu > 0 or camera.dsnu_e > 0:
-        fp = np.random.default_rng(camera.fixed_pattern_seed)
-        mean_e = mean_e * np.clip(1.0 + camera.prnu * fp.standard_normal(shape), 0.0, None)
-        dark_fp = camera.dsnu_e * fp.standard_normal(shape)
+        gain_fp, dark_fp = fixed_pattern(shape, seed=camera.fixed_pattern_seed, prnu=camera.prnu, dsnu_e=camera.dsnu_e)
+        mean_e = mean_e * gain_fp
     else:
         dark_fp = 0.0
     mean_e = mean_e + camera.dark_current_e_s * exposure_s

@@ -332,3 +332,46 @@ def per_pixel(per_stripe: np.ndarray, labels: np.ndarray, fill) -> np.ndarray:
     ext[:-1] = per_stripe
     ext[-1] = fill
     return ext[labels]
+
+
+def triangulate_columns(column_px: np.ndarray, rig, *, rows: np.ndarray = None, cols: np.ndarray = None) -> np.ndarray:
+    """simbench.rig.triangulate_columns in numpy (float64), the operation order the C loop keeps:
+    a fixed number of Newton steps per undistortion and of fixed-point steps, and R^T (X - t)
+    summed term by term (a BLAS matmul may fuse or reorder them)."""
+    from simbench.optics import undistort_projector_columns
+    from simbench.rig import COLUMN_NEWTON_STEPS, TRIANGULATION_ITERATIONS
+
+    cam, prj = rig.camera, rig.projector
+    col = np.asarray(column_px, dtype=np.float64)
+    if rows is None:
+        h, w = col.shape
+        rx = ((np.arange(w) - cam.cx_px) / cam.focal_px)[None, :]
+        ry = ((np.arange(h) - cam.cy_px) / cam.focal_px)[:, None]
+    else:
+        rx = (np.asarray(cols, dtype=np.float64) - cam.cx_px) / cam.focal_px
+        ry = (np.asarray(rows, dtype=np.float64) - cam.cy_px) / cam.focal_px
+    r = rig.rotation
+    t = np.asarray(rig.position_m)
+
+    def plane_depth(ideal_col: np.ndarray) -> np.ndarray:
+        a = (ideal_col - prj.cx_px) / prj.focal_px
+        nx, ny, nz = r[0, 0] - a * r[0, 2], r[1, 0] - a * r[1, 2], r[2, 0] - a * r[2, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz)
+
+    if prj.has_distortion:
+        ideal = undistort_projector_columns(col, ry, prj, iterations=COLUMN_NEWTON_STEPS)
+        if not rig.is_rectified:
+            for _ in range(TRIANGULATION_ITERATIONS):
+                z = plane_depth(ideal)
+                x0, x1, x2 = z * rx - t[0], z * ry - t[1], z - t[2]
+                yp = x0 * r[0, 1] + x1 * r[1, 1] + x2 * r[2, 1]
+                zp = x0 * r[0, 2] + x1 * r[1, 2] + x2 * r[2, 2]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    y_prj = yp / zp
+                ideal = undistort_projector_columns(
+                    col, np.where(np.isfinite(y_prj), y_prj, ry), prj, iterations=COLUMN_NEWTON_STEPS
+                )
+        col = ideal
+    z = plane_depth(col)
+    return np.where(np.isfinite(z) & (z > 0), z, np.nan)

@@ -173,3 +173,17 @@ def test_cfa_keeps_shot_noise_per_pixel():
     assert full[..., 1].var() == pytest.approx(4000.0, rel=0.05)
     raw_green = bayer_mosaic(full, pattern="RGGB")[0::2, 1::2]
     assert raw_green.mean() == pytest.approx(4000.0, rel=0.01)
+
+
+def test_fixed_pattern_is_drawn_once_with_the_bits_of_a_fresh_draw():
+    """The per-process fixed-pattern cache changes nothing: the same numbers as drawing from the
+    sensor's seed, read-only so no frame can alter the sensor."""
+    from simbench.sensor import fixed_pattern
+
+    gain, dark = fixed_pattern((6, 8), seed=123, prnu=0.01, dsnu_e=5.0)
+    fp = np.random.default_rng(123)
+    assert np.array_equal(gain, np.clip(1.0 + 0.01 * fp.standard_normal((6, 8)), 0.0, None))
+    assert np.array_equal(dark, 5.0 * fp.standard_normal((6, 8)))
+    assert fixed_pattern((6, 8), seed=123, prnu=0.01, dsnu_e=5.0)[0] is gain
+    with pytest.raises(ValueError):
+        gain[0, 0] = 2.0

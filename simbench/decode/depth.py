@@ -150,6 +150,9 @@ def depth_calibrated(column: np.ndarray, rig: Rig, *, rows: np.ndarray | None = 
     if rows is None:
         return triangulate_columns(column, rig)
     h, w = column.shape
-    rr = np.broadcast_to(np.asarray(rows)[:, None], (h, w))
+    rows = np.asarray(rows)
+    if rows.shape == (h,) and h > 0 and np.array_equal(rows, np.arange(rows[0], rows[0] + h)):
+        return triangulate_columns(column, rig, row0=int(rows[0]))  # a band of consecutive rows
+    rr = np.broadcast_to(rows[:, None], (h, w))
     cc = np.broadcast_to(np.arange(w)[None, :], (h, w))
     return triangulate_columns(column, rig, rows=rr, cols=cc)

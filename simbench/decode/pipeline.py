@@ -48,7 +48,7 @@ from simbench.pattern import (
     code_sequence,
     window_positions,
 )
-from simbench.rig import Rig, projector_column_at_depth, triangulate_columns
+from simbench.rig import Rig, projector_column_at_depth, triangulate_columns, triangulation_values
 
 __all__ = [
     "DecoderParams",
@@ -564,19 +564,12 @@ def _bands(height: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int
 
 
 def _triangulation_values(rig: Rig) -> np.ndarray | None:
-    """The rig as :func:`simbench.decode._kernels.depth_reference` triangulates with it (camera
-    focal, cx, cy; projector focal, cx; rotation; position), or None when the projector has lens
+    """The rig as :func:`simbench.decode._kernels.depth_reference` triangulates with it (the first
+    17 of :func:`simbench.rig.triangulation_values`), or None when the projector has lens
     distortion (its columns are undistorted by :func:`simbench.rig.triangulate_columns`)."""
     if rig.projector.has_distortion:
         return None
-    cam, prj = rig.camera, rig.projector
-    return np.concatenate(
-        [
-            [cam.focal_px, cam.cx_px, cam.cy_px, prj.focal_px, prj.cx_px],
-            np.asarray(rig.rotation, np.float64).ravel(),
-            np.asarray(rig.position_m, np.float64),
-        ]
-    )
+    return triangulation_values(rig)[:17]
 
 
 def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
