@@ -44,13 +44,19 @@ lint: setup
 	$(VENV)/bin/ruff check simbench tests scenes
 	$(VENV)/bin/ruff format --check simbench tests scenes
 
+# Test processes (pytest-xdist), each test file kept in one of them (--dist loadfile: a file's
+# module fixtures, e.g. its renders, are made once).  2 = the cores CI has; TEST_WORKERS=0 runs
+# everything in this process.
+TEST_WORKERS ?= 2
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=10
+
 # The whole test suite, slow renders included (after the lint).
 test: lint
-	$(PY) -m pytest -q
+	$(PYTEST)
 
 # Developers' loop: everything but the Mitsuba renders.
 test-fast: setup
-	$(PY) -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 bench: setup
 	$(VENV)/bin/simbench bench --repeats 30
