@@ -585,13 +585,42 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
         cd[x] = R >= G;                                                                                 \
     }
 
+static inline float max_f(float a, float b) { return b > a ? b : a; }
+
+/* m[x] = the maximum of p over [x - r, x + r] clipped to [0, w) (finite values: a maximum is exact,
+ * whatever the order), by van Herk / Gil-Werman: with blocks of k = 2r + 1 pixels, the prefix
+ * maxima g within each block and the suffix maxima s give every full window from two of them,
+ * max(s[x - r], g[x + r]), in three comparisons per pixel whatever r; the windows the row's ends
+ * clip (x < r, x >= w - r) are taken directly.  g, s: w floats of scratch each. */
+ROW_FN void window_max(int64_t w, int64_t r, const float *restrict p, float *restrict m, float *restrict g,
+                       float *restrict s) {
+    const int64_t k = 2 * r + 1;
+    for (int64_t b = 0; b < w; b += k) {
+        const int64_t e = b + k < w ? b + k : w;
+        g[b] = p[b];
+        for (int64_t x = b + 1; x < e; x++) g[x] = max_f(g[x - 1], p[x]);
+        s[e - 1] = p[e - 1];
+        for (int64_t x = e - 2; x >= b; x--) s[x] = max_f(s[x + 1], p[x]);
+    }
+    for (int64_t x = r; x < w - r; x++) m[x] = max_f(s[x - r], g[x + r]);
+    const int64_t left = r < w ? r : w, right = w - r > left ? w - r : left;
+    for (int64_t x = 0; x < w; x++) {
+        if (x == left) x = right; /* the full windows are done */
+        if (x >= w) break;
+        const int64_t a = x - r < 0 ? 0 : x - r, e = x + r < w ? x + r : w - 1;
+        float v = p[a];
+        for (int64_t j = a + 1; j <= e; j++) v = max_f(v, p[j]);
+        m[x] = v;
+    }
+}
+
 void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, int64_t ch0, int64_t ch1,
                int64_t ch2, int64_t mode, int64_t width, float dark_level, float saturation_level,
                float *restrict intensity, float *restrict certainty, uint8_t *restrict lit, uint8_t *restrict code,
                float *restrict peak) {
     const float k8 = (float)(1.0 / 255.0), k16 = (float)(1.0 / 65535.0), half = 0.5f;
     const int64_t r = width / 2;
-    float *restrict m = peak + w; /* the row maximum: second half of the scratch */
+    float *restrict m = peak + w; /* the row maximum, then two scratch rows (window_max) */
     for (int64_t y = 0; y < h; y++) {
         float *inten = intensity + y * w;
         uint8_t *cd = code + y * w;
@@ -604,11 +633,7 @@ void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, 
         }
         /* maximum over [x - r, x + r] clipped to the row: with a replicated border the values
          * beyond the ends repeat the end pixels, which the clipped window holds already */
-        for (int64_t x = 0; x < w; x++) m[x] = peak[x];
-        for (int64_t k = 1; k <= r && k < w; k++) {
-            for (int64_t x = 0; x < w - k; x++) m[x] = peak[x + k] > m[x] ? peak[x + k] : m[x];
-            for (int64_t x = k; x < w; x++) m[x] = peak[x - k] > m[x] ? peak[x - k] : m[x];
-        }
+        window_max(w, r, peak, m, m + w, m + 2 * w);
         float *cert = certainty + y * w;
         uint8_t *li = lit + y * w;
         for (int64_t x = 0; x < w; x++) {

@@ -273,7 +273,7 @@ def capture_band(dtype, seed=5, h=30, w=170):
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32])
 @pytest.mark.parametrize("order", [(0, 1, 2), (2, 0, 1)])
 @pytest.mark.parametrize("mode", ["overlay", "blue"])
-@pytest.mark.parametrize("w", [170, 9, 1])
+@pytest.mark.parametrize("w", [170, 15, 9, 1])
 def test_front_end_matches_the_stages_it_fuses(dtype, order, mode, w):
     """One pass = as_float_image + certainty_map + overlay_intensity + color_code, bit for bit,
     also where the row is shorter than the lit window."""

@@ -324,7 +324,7 @@ def front_end(image, order, mode, width, dark_level, saturation_level, intensity
         raise TypeError(f"image: expected uint8, uint16 or float32, got {image.dtype}") from None
     if image.shape[2] != 3 or sorted(order) != [0, 1, 2]:
         raise ValueError(f"image must be (H, W, 3) and order a permutation of 0, 1, 2: {image.shape}, {order}")
-    peak = np.empty(2 * w, np.float32)
+    peak = np.empty(4 * w, np.float32)  # the row's peak, its window maximum, two scratch rows
     _library().front_end(
         h,
         w,
