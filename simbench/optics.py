@@ -280,21 +280,31 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     lo = np.floor(pos).astype(np.int64)
     frac = (pos - lo).astype(np.float32)
     used = np.bincount(lo.ravel(), minlength=len(levels) + 1)
+    # the rows and columns where a pixel interpolates from level k lie where the row's (column's)
+    # lowest level <= k and highest >= k - 1: each level's sum is taken over that box only (the
+    # zero weights outside it would add exact zeros; a board whose blur grows across the image
+    # puts each level in a narrow strip)
+    row_lo, row_hi = lo.min(axis=1), lo.max(axis=1)
+    col_lo, col_hi = lo.min(axis=0), lo.max(axis=0)
     out = np.zeros_like(src)
     for k, s in enumerate(levels):
         if used[k] == 0 and (k == 0 or used[k - 1] == 0):
             continue  # no pixel interpolates from this level
+        rows = np.flatnonzero((row_lo <= k) & (row_hi >= k - 1))
+        cols = np.flatnonzero((col_lo <= k) & (col_hi >= k - 1))
+        box = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
         cur = (
             src
             if s == 0.0
             else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
-        )
+        )[box]
         if cur.ndim == 2 and src.ndim == 3:
             cur = cur[..., None]
-        w_lo = np.where(lo == k, 1.0 - frac, 0.0).astype(np.float32)
-        w_hi = np.where(lo == k - 1, frac, 0.0).astype(np.float32)
+        lo_box, frac_box = lo[box], frac[box]
+        w_lo = np.where(lo_box == k, 1.0 - frac_box, 0.0).astype(np.float32)
+        w_hi = np.where(lo_box == k - 1, frac_box, 0.0).astype(np.float32)
         w = w_lo + w_hi
         if src.ndim == 3:
             w = w[..., None]
-        out += w * cur
+        out[box] += w * cur
     return out

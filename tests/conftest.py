@@ -40,15 +40,3 @@ def acquisitions(variant):
         return cache[key]
 
     return get
-
-
-# The files holding the longest tests (`--durations` on 2 cores, 2026-11-24: the README's
-# commands 220 s, the calibrations 90-110 s each, the cache's reruns 70 s, the CLI's end-to-end
-# render 64 s), collected first: `make test` hands whole files to two pytest-xdist processes in
-# collection order, and a long file handed out last would run alone at the end.
-_LONG_FIRST = ("test_readme.py", "test_calibration.py", "test_cache.py", "test_cli.py", "test_robust_scenes.py")
-
-
-def pytest_collection_modifyitems(config, items) -> None:
-    rank = {name: i for i, name in enumerate(_LONG_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the rest keep their order
