@@ -587,6 +587,14 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
 
 static inline float max_f(float a, float b) { return b > a ? b : a; }
 
+/* the maximum of p over [x - r, x + r] clipped to [0, w), directly */
+static inline float clipped_max(int64_t w, int64_t r, const float *restrict p, int64_t x) {
+    const int64_t a = x - r < 0 ? 0 : x - r, e = x + r < w ? x + r : w - 1;
+    float v = p[a];
+    for (int64_t j = a + 1; j <= e; j++) v = max_f(v, p[j]);
+    return v;
+}
+
 /* m[x] = the maximum of p over [x - r, x + r] clipped to [0, w) (finite values: a maximum is exact,
  * whatever the order), by van Herk / Gil-Werman: with blocks of k = 2r + 1 pixels, the prefix
  * maxima g within each block and the suffix maxima s give every full window from two of them,
@@ -604,14 +612,8 @@ ROW_FN void window_max(int64_t w, int64_t r, const float *restrict p, float *res
     }
     for (int64_t x = r; x < w - r; x++) m[x] = max_f(s[x - r], g[x + r]);
     const int64_t left = r < w ? r : w, right = w - r > left ? w - r : left;
-    for (int64_t x = 0; x < w; x++) {
-        if (x == left) x = right; /* the full windows are done */
-        if (x >= w) break;
-        const int64_t a = x - r < 0 ? 0 : x - r, e = x + r < w ? x + r : w - 1;
-        float v = p[a];
-        for (int64_t j = a + 1; j <= e; j++) v = max_f(v, p[j]);
-        m[x] = v;
-    }
+    for (int64_t x = 0; x < left; x++) m[x] = clipped_max(w, r, p, x);
+    for (int64_t x = right; x < w; x++) m[x] = clipped_max(w, r, p, x);
 }
 
 void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, int64_t ch0, int64_t ch1,
@@ -654,6 +656,16 @@ void validity(int64_t n, const uint8_t *restrict lit, const float *restrict supp
                    (residual[j] <= max_residual);
 }
 
+/* Camera z where the ray (rx, ry, 1) meets the plane of ideal projector column u: n = R (1, 0, -a),
+ * a = (u - cx_p) / f_p, n.(X - t) = 0 (simbench.rig.triangulate_columns' numpy form, in its
+ * operation order).  R row-major 3x3, t the projector's position. */
+static inline double plane_depth(double u, double rx, double ry, double fp, double cxp, const double *restrict R,
+                                 const double *restrict t) {
+    const double a = (u - cxp) / fp;
+    const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
+    return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz);
+}
+
 /* Reference-mode depth of one band (h rows from image row row0): match each column in the
  * reference's inverse table (match_reference), depth from the disparity (depth_from_disparity);
  * a decoded column the reference row does not show (beyond) is triangulated with the rig when
@@ -684,10 +696,7 @@ void depth_reference(int64_t h, int64_t w, int64_t row0, int64_t tw, const float
         for (int64_t x = 0; x < w; x++) {
             const int64_t j = y * w + x;
             if (!beyond[j]) continue;
-            const double rx = ((double)x - cxc) / fc;
-            const double a = ((double)column[j] - cxp) / fp;
-            const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
-            const double z = (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz);
+            const double z = plane_depth((double)column[j], ((double)x - cxc) / fc, ry, fp, cxp, R, t);
             depth[j] = (float)((fabs(z) <= DBL_MAX && z > 0.0) ? z : NAN);
         }
     }
@@ -801,17 +810,11 @@ ROW_FN void undistort_lanes(const double *restrict target, const double *restric
     }
 }
 
-/* Camera z where the rays (rx, ry, 1) meet the planes of the ideal projector columns u:
- * n = R (1, 0, -a), a = (u - cx_p) / f_p, n.(X - t) = 0 (the numpy form's plane_depth, in its
- * operation order). */
+/* plane_depth of TL lanes */
 ROW_FN void plane_depth_lanes(const double *restrict u, const double *restrict rx, const double *restrict ry,
                               double fp, double cxp, const double *restrict R, const double *restrict t,
                               double *restrict z) {
-    for (int l = 0; l < TL; l++) {
-        const double a = (u[l] - cxp) / fp;
-        const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
-        z[l] = (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx[l] + ny * ry[l] + nz);
-    }
+    for (int l = 0; l < TL; l++) z[l] = plane_depth(u[l], rx[l], ry[l], fp, cxp, R, t);
 }
 
 /* TL pixels of triangulate_columns (below): camera z from DMD columns u at rays rx, ry. */

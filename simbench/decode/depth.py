@@ -137,22 +137,14 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
     return out
 
 
-def depth_calibrated(column: np.ndarray, rig: Rig, *, rows: np.ndarray | None = None) -> np.ndarray:
+def depth_calibrated(column: np.ndarray, rig: Rig, *, row0: int = 0) -> np.ndarray:
     """Depth by intersecting each camera ray with its projector column's plane.
 
-    ``rows`` gives the image rows of ``column`` when it is a band of the image.
+    ``row0`` is the image row of ``column``'s first row when it is a band of the image.
 
     References
     ----------
     .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
        Pattern", Sensors 17(11), 2558, 2017, Eq. 15.
     """
-    if rows is None:
-        return triangulate_columns(column, rig)
-    h, w = column.shape
-    rows = np.asarray(rows)
-    if rows.shape == (h,) and h > 0 and np.array_equal(rows, np.arange(rows[0], rows[0] + h)):
-        return triangulate_columns(column, rig, row0=int(rows[0]))  # a band of consecutive rows
-    rr = np.broadcast_to(rows[:, None], (h, w))
-    cc = np.broadcast_to(np.arange(w)[None, :], (h, w))
-    return triangulate_columns(column, rig, rows=rr, cols=cc)
+    return triangulate_columns(column, rig, row0=row0)

@@ -777,7 +777,7 @@ def decode(
                 stages.put("reference_x", x_ref)
                 stages.put("triangulated", beyond)
             else:
-                depth = depth_calibrated(column, rig, rows=np.arange(rows.start, rows.stop)).astype(np.float32)
+                depth = depth_calibrated(column, rig, row0=rows.start).astype(np.float32)
         with stage("output"):
             _kernels.assemble_output(
                 depth,
