@@ -349,24 +349,26 @@ void gather(int64_t n, int64_t itemsize, const void *restrict per_stripe, const 
 
 /* col0 = (psi + pi) * (t / 2 pi) + W t - 0.5, k = rint((expected - col0) / span); where W >= 0 and
  * k is finite: column = col0 + k span, index = W + L k; else NaN and -1. */
+static inline void column_of_pixel(int32_t p, float wrapped, float expected, float t, float scale, float span,
+                                   uint32_t ucycle, float *restrict column, int32_t *restrict index) {
+    const float c0 = (wrapped + PI_F) * scale + (float)p * t - 0.5f;
+    const float k = rintf((expected - c0) / span);
+    /* branch-free so that the loop vectorises: W + L k in wrapping int32 arithmetic, with
+     * x86's conversion of an out-of-range k (INT32_MIN), as the numpy form computes it */
+    const int ok = (p >= 0) & (fabsf(k) <= FLT_MAX);
+    const int in_range = fabsf(k) < 2147483648.0f;
+    const int32_t ki = (int32_t)(in_range ? k : 0.0f);
+    const uint32_t uk = in_range ? (uint32_t)ki : 0x80000000u;
+    *column = ok ? c0 + k * span : NAN;
+    *index = ok ? (int32_t)((uint32_t)p + ucycle * uk) : -1;
+}
+
 void absolute_column(int64_t n, const int32_t *restrict position, const float *restrict wrapped,
                      const float *restrict expected, float t, float span, int64_t cycle, float *restrict column,
                      int32_t *restrict index) {
     const float scale = t / TWO_PI_F;
-    const uint32_t ucycle = (uint32_t)cycle;
-    for (int64_t j = 0; j < n; j++) {
-        const int32_t p = position[j];
-        const float c0 = (wrapped[j] + PI_F) * scale + (float)p * t - 0.5f;
-        const float k = rintf((expected[j] - c0) / span);
-        /* branch-free so that the loop vectorises: W + L k in wrapping int32 arithmetic, with
-         * x86's conversion of an out-of-range k (INT32_MIN), as the numpy form computes it */
-        const int ok = (p >= 0) & (fabsf(k) <= FLT_MAX);
-        const int in_range = fabsf(k) < 2147483648.0f;
-        const int32_t ki = (int32_t)(in_range ? k : 0.0f);
-        const uint32_t uk = in_range ? (uint32_t)ki : 0x80000000u;
-        column[j] = ok ? c0 + k * span : NAN;
-        index[j] = ok ? (int32_t)((uint32_t)p + ucycle * uk) : -1;
-    }
+    for (int64_t j = 0; j < n; j++)
+        column_of_pixel(position[j], wrapped[j], expected[j], t, scale, span, (uint32_t)cycle, column + j, index + j);
 }
 
 /* Linear look-up of each pixel's column in its row of the inverse table (h rows of tw entries, the
@@ -666,58 +668,6 @@ static inline double plane_depth(double u, double rx, double ry, double fp, doub
     return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz);
 }
 
-/* Reference-mode depth of one band (h rows from image row row0): match each column in the
- * reference's inverse table (match_reference), depth from the disparity (depth_from_disparity);
- * a decoded column the reference row does not show (beyond) is triangulated with the rig when
- * `triangulate` (an undistorted projector; simbench.rig.triangulate_columns in float64, in its
- * operation order: plane normal R (1, 0, -a) with a = (u - cx_p) / f_p, ray (rx, ry, 1)),
- * else left NaN for the caller.  rig: f_c, cx_c, cy_c, f_p, cx_p, R (row-major 3x3), t (3). */
-void depth_reference(int64_t h, int64_t w, int64_t row0, int64_t tw, const float *restrict column,
-                     const float *restrict table, float inv_z0, float inv_fb, int64_t triangulate,
-                     const double *restrict rig, float *restrict x_ref, float *restrict depth,
-                     uint8_t *restrict beyond) {
-    const double fc = rig[0], cxc = rig[1], cyc = rig[2], fp = rig[3], cxp = rig[4];
-    const double *R = rig + 5, *t = rig + 14;
-    for (int64_t y = 0; y < h; y++) {
-        const float *row = table + y * tw;
-        const double ry = ((double)(row0 + y) - cyc) / fc;
-        const float *col = column + y * w;
-        float *xr = x_ref + y * w, *z = depth + y * w;
-        uint8_t *out = beyond + y * w;
-        /* two simple loops: each vectorises (one with gathers), the fused one did not */
-        for (int64_t x = 0; x < w; x++) xr[x] = lookup(row, tw - 2, col[x]);
-        for (int32_t x = 0; x < (int32_t)w; x++) {
-            const float d = (float)x - xr[x];
-            const float zz = 1.0f / (inv_z0 + d * inv_fb);
-            z[x] = zz > 0.0f ? zz : NAN;
-            out[x] = isnan(xr[x]) & (fabsf(col[x]) <= FLT_MAX);
-        }
-        if (!triangulate) continue;
-        for (int64_t x = 0; x < w; x++) {
-            const int64_t j = y * w + x;
-            if (!beyond[j]) continue;
-            const double z = plane_depth((double)column[j], ((double)x - cxc) / fc, ry, fp, cxp, R, t);
-            depth[j] = (float)((fabs(z) <= DBL_MAX && z > 0.0) ? z : NAN);
-        }
-    }
-}
-
-/* The decoder's outputs for a band: valid = zmin <= depth <= zmax (float32), and depth, confidence
- * (the fringe amplitude), column and stripe index where valid, NaN / 0 / NaN / -1 elsewhere. */
-void assemble_output(int64_t n, const float *restrict depth, const float *restrict amplitude,
-                     const float *restrict column, const int32_t *restrict index, float zmin, float zmax,
-                     float *restrict depth_out, uint8_t *restrict valid_out, float *restrict conf_out,
-                     float *restrict col_out, int32_t *restrict index_out) {
-    for (int64_t j = 0; j < n; j++) {
-        const int v = (depth[j] >= zmin) & (depth[j] <= zmax);
-        valid_out[j] = (uint8_t)v;
-        depth_out[j] = v ? depth[j] : NAN;
-        conf_out[j] = v ? amplitude[j] : 0.0f;
-        col_out[j] = v ? column[j] : NAN;
-        index_out[j] = v ? index[j] : -1;
-    }
-}
-
 /* Brown-Conrady lens model on the pixel grid of a camera (simbench.optics: distort_normalized,
  * undistort_normalized), in float64 and in numpy's operation order, so the maps are the bits
  * numpy gives; one row at a time so that every loop runs over contiguous pixels.
@@ -888,4 +838,146 @@ void triangulate_columns(int64_t n, const double *restrict column, const double 
             m = 0;
         }
     }
+}
+
+/* The decoder's last stages for a band in one pass per row (simbench.decode.pipeline), the same
+ * bits as the steps it fuses (tests/test_kernels.py):
+ *   1. the stripe position W of each pixel (labels into stripe_position, -1 without a stripe)
+ *      and its projector column and stripe index (absolute_column, paper Eq. 14);
+ *   2. depth: with a table, reference matching (match_reference + depth_from_disparity, paper
+ *      Sec. 5.4) and the columns the reference row does not show triangulated; without (NULL),
+ *      every column triangulated (triangulate_columns: rig, distorted, newton_steps and
+ *      refine_steps as it takes them);
+ *   3. the outputs: valid = zmin <= depth <= zmax (float32), and depth, confidence (the fringe
+ *      amplitude), column and stripe index where valid, NaN / 0 / NaN / -1 elsewhere.
+ * Pixels to triangulate wait in lanes of TL (across rows) and get their outputs when the lanes
+ * are full.  scratch: 4 w floats. */
+static inline void emit(int64_t j, float z, float amplitude, float column, int32_t index, float zmin, float zmax,
+                        float *restrict depth_out, uint8_t *restrict valid_out, float *restrict conf_out,
+                        float *restrict col_out, int32_t *restrict index_out) {
+    const int v = (z >= zmin) & (z <= zmax);
+    valid_out[j] = (uint8_t)v;
+    depth_out[j] = v ? z : NAN;
+    conf_out[j] = v ? amplitude : 0.0f;
+    col_out[j] = v ? column : NAN;
+    index_out[j] = v ? index : -1;
+}
+
+typedef struct {
+    double u[TL], rx[TL], ry[TL];
+    int64_t at[TL];
+    float column[TL];
+    int32_t index[TL];
+    int m;
+} Pending;
+
+static void flush(Pending *q, const float *restrict amplitude, const double *restrict rig, int64_t distorted,
+                  int64_t newton_steps, int64_t refine_steps, float zmin, float zmax, float *restrict depth_out,
+                  uint8_t *restrict valid_out, float *restrict conf_out, float *restrict col_out,
+                  int32_t *restrict index_out) {
+    if (q->m == 0) return;
+    double z[TL];
+    for (int l = q->m; l < TL; l++) q->u[l] = NAN, q->rx[l] = q->ry[l] = 0.0; /* idle lanes */
+    triangulate_lanes(q->u, q->rx, q->ry, rig, distorted, newton_steps, refine_steps, z);
+    for (int l = 0; l < q->m; l++) {
+        const int64_t j = q->at[l];
+        emit(j, (float)z[l], amplitude[j], q->column[l], q->index[l], zmin, zmax, depth_out, valid_out, conf_out,
+             col_out, index_out);
+    }
+    q->m = 0;
+}
+
+/* index[x] = stripe_position[labels[x]], -1 without a stripe; scalar: the vectorised form is a
+ * gather, slower than scalar loads on the AMD cores measured (Zen 4). */
+ROW_FN __attribute__((optimize("no-tree-vectorize"))) void positions_of_row(int64_t w, const int32_t *restrict labels,
+                                                                           const int32_t *restrict stripe_position,
+                                                                           int32_t *restrict index) {
+    for (int64_t x = 0; x < w; x++) index[x] = labels[x] >= 0 ? stripe_position[labels[x]] : -1;
+}
+
+ROW_FN void columns_of_row(int64_t w, const int32_t *restrict labels, const int32_t *restrict stripe_position,
+                           const float *restrict wrapped, const float *restrict expected, float t, float span,
+                           int64_t cycle, float *restrict column, int32_t *restrict index) {
+    const float scale = t / TWO_PI_F;
+    /* the look-up first, into index: the column loop then vectorises */
+    positions_of_row(w, labels, stripe_position, index);
+    for (int64_t x = 0; x < w; x++)
+        column_of_pixel(index[x], wrapped[x], expected[x], t, scale, span, (uint32_t)cycle, column + x, index + x);
+}
+
+/* depth by reference matching of one row; beyond: the reference row does not show the column */
+ROW_FN void reference_depth_row(int64_t w, const float *restrict table_row, int64_t width,
+                                const float *restrict column, float inv_z0, float inv_fb, float *restrict depth,
+                                uint8_t *restrict beyond) {
+    for (int64_t x = 0; x < w; x++) depth[x] = lookup(table_row, width, column[x]); /* x_ref for now */
+    for (int32_t x = 0; x < (int32_t)w; x++) {
+        const float xr = depth[x];
+        const float d = (float)x - xr;
+        const float zz = 1.0f / (inv_z0 + d * inv_fb);
+        depth[x] = zz > 0.0f ? zz : NAN;
+        beyond[x] = isnan(xr) & (fabsf(column[x]) <= FLT_MAX);
+    }
+}
+
+/* calibrated mode: no depth yet; every known column is triangulated */
+ROW_FN void unknown_depth_row(int64_t w, const float *restrict column, float *restrict depth, uint8_t *restrict beyond) {
+    for (int64_t x = 0; x < w; x++) {
+        depth[x] = NAN;
+        beyond[x] = !isnan(column[x]);
+    }
+}
+
+ROW_FN void emit_row(int64_t w, const float *restrict depth, const float *restrict amplitude,
+                     const float *restrict column, const int32_t *restrict index, float zmin, float zmax,
+                     float *restrict depth_out, uint8_t *restrict valid_out, float *restrict conf_out,
+                     float *restrict col_out, int32_t *restrict index_out) {
+    for (int64_t x = 0; x < w; x++)
+        emit(x, depth[x], amplitude[x], column[x], index[x], zmin, zmax, depth_out, valid_out, conf_out, col_out,
+             index_out);
+}
+
+void decode_tail(int64_t h, int64_t w, int64_t row0, const int32_t *restrict labels,
+                 const int32_t *restrict stripe_position, const float *restrict wrapped,
+                 const float *restrict expected, const float *restrict amplitude, float t, float span, int64_t cycle,
+                 int64_t tw, const float *restrict table, float inv_z0, float inv_fb, const double *restrict rig,
+                 int64_t distorted, int64_t newton_steps, int64_t refine_steps, float zmin, float zmax,
+                 float *restrict scratch, float *restrict depth_out, uint8_t *restrict valid_out,
+                 float *restrict conf_out, float *restrict col_out, int32_t *restrict index_out) {
+    const double fc = rig[0], cxc = rig[1], cyc = rig[2];
+    float *column = scratch, *depth = scratch + w;
+    int32_t *index = (int32_t *)(scratch + 2 * w);
+    uint8_t *beyond = (uint8_t *)(scratch + 3 * w);
+    Pending q;
+    q.m = 0;
+    for (int64_t y = 0; y < h; y++) {
+        const int64_t o = y * w;
+        columns_of_row(w, labels + o, stripe_position, wrapped + o, expected + o, t, span, cycle, column, index);
+        if (table != NULL)
+            reference_depth_row(w, table + y * tw, tw - 2, column, inv_z0, inv_fb, depth, beyond);
+        else
+            unknown_depth_row(w, column, depth, beyond);
+        /* the pixels to triangulate get their outputs again when their lanes are done */
+        emit_row(w, depth, amplitude + o, column, index, zmin, zmax, depth_out + o, valid_out + o, conf_out + o,
+                 col_out + o, index_out + o);
+        const double ry = ((double)(row0 + y) - cyc) / fc;
+        for (int64_t x = 0; x < w; x++) {
+            uint64_t eight;
+            if (x + 8 <= w && (memcpy(&eight, beyond + x, 8), eight == 0)) {
+                x += 7; /* eight pixels at a time through the (long) runs with none */
+                continue;
+            }
+            if (!beyond[x]) continue;
+            q.u[q.m] = column[x];
+            q.rx[q.m] = ((double)x - cxc) / fc;
+            q.ry[q.m] = ry;
+            q.at[q.m] = o + x;
+            q.column[q.m] = column[x];
+            q.index[q.m] = index[x];
+            if (++q.m == TL)
+                flush(&q, amplitude, rig, distorted, newton_steps, refine_steps, zmin, zmax, depth_out, valid_out,
+                      conf_out, col_out, index_out);
+        }
+    }
+    flush(&q, amplitude, rig, distorted, newton_steps, refine_steps, zmin, zmax, depth_out, valid_out, conf_out,
+          col_out, index_out);
 }

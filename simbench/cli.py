@@ -643,11 +643,19 @@ def _cmd_ablate(args) -> int:
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark, stage_table
 
-    res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene)
+    rig = None
+    if args.rig is not None:
+        from simbench.rig import load_rig
+
+        rig = load_rig(args.rig)
+    res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene, rig=rig, mode=args.mode)
+    setup = ", ".join(
+        [res["scene"]] + ([f"rig {args.rig}"] if rig is not None else []) + ([f"{args.mode} mode"] if args.mode else [])
+    )
     print(
         json.dumps(res, indent=2)
         if args.json
-        else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({res['scene']}): median "
+        else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({setup}): median "
         f"{res['median_ms']:.1f} ms, "
         f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)"
     )
@@ -1062,6 +1070,18 @@ def _parser() -> argparse.ArgumentParser:
         default="plane",
         choices=["plane", "shadow"],
         help="proposed decoder: a fully lit plane, or with a projector shadow (the path real scenes take)",
+    )
+    s.add_argument(
+        "--rig",
+        default=None,
+        help="proposed decoder: decode with this rig (TOML, e.g. from simbench calibrate; the capture is made with "
+        "the paper's rig), its lens distortion included",
+    )
+    s.add_argument(
+        "--mode",
+        default=None,
+        choices=["reference", "calibrated"],
+        help="proposed decoder: reference-plane matching or triangulation with the rig (default: the decoder's)",
     )
     s.add_argument("--repeats", type=_int(1, 100000), default=20, help="timed decodes (after one warm-up)")
     s.add_argument(

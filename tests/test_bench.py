@@ -67,7 +67,7 @@ def test_stage_times_cover_the_decode_without_changing_it():
         "phase (gabor, Eq. 10-11)",
         "stripe segmentation and voting",
         "De Bruijn windows and neighbour correction",
-        "depth (reference matching, Eq. 15)",
+        "column, depth, output (Eq. 14-15, reference matching)",
     ):
         assert times.calls[name] == 2 and times.seconds[name] > 0, name  # once per band thread
     assert times.calls["input check and undistortion"] == 1
@@ -79,3 +79,30 @@ def test_stage_times_cover_the_decode_without_changing_it():
     table = stage_table(res["stages_ms"])
     assert "phase (gabor" in table and table.splitlines()[-1].startswith("sum over threads")
     assert run_decode_benchmark(repeats=1, warmup=0, device="kinect")["stages_ms"] == {}
+
+
+def test_benchmark_with_another_rig_and_mode():
+    """`simbench bench --rig RIG --mode calibrated`: the capture decoded with a rig whose lenses
+    distort (undistortion and triangulation through the projector's lens in the timed decode)."""
+    import dataclasses
+
+    from simbench.experiments.bench import run_decode_benchmark
+    from simbench.rig import paper_rig, scale_camera
+
+    rig = paper_rig()
+    rig = dataclasses.replace(
+        rig,
+        name="calibrated-like",
+        position_m=(rig.position_m[0], 0.002, -0.001),
+        rotation_deg=(0.2, -0.5, 0.1),
+        camera=dataclasses.replace(rig.camera, distortion=(-0.05, 0.02, 0.0, 0.0, 0.0)),
+        projector=dataclasses.replace(rig.projector, distortion=(0.03, 0.0, 0.0, 0.0, 0.0)),
+    )
+    res = run_decode_benchmark(repeats=1, warmup=0, rig=rig, mode="calibrated")
+    assert res["rig"] == "calibrated-like" and res["mode"] == "calibrated"
+    assert res["stages_ms"]["column, depth, output (Eq. 14-15, triangulation)"] > 0
+    assert res["stages_ms"]["input check and undistortion"] > 0
+    with pytest.raises(ValueError, match="camera is 640x480"):
+        run_decode_benchmark(repeats=1, rig=scale_camera(rig, 0.5))
+    with pytest.raises(ValueError, match="proposed decoder"):
+        run_decode_benchmark(repeats=1, device="tof", mode="calibrated")

@@ -28,6 +28,8 @@ def test_pattern_command(tmp_path, capsys):
         (["pattern", "--out", "p.png", "--sequence", "01x"], "0 and 1"),
         (["pattern", "--out", "p.png", "--channels", "rgg"], "permutation of 'rgb'"),
         (["bench", "--device", "tof", "--scene", "shadow", "--repeats", "1"], "only the plane"),
+        (["bench", "--rig", "missing.toml", "--repeats", "1"], "rig file not found"),
+        (["bench", "--device", "tof", "--mode", "calibrated", "--repeats", "1"], "proposed decoder"),
     ],
 )
 def test_errors_are_one_line_and_nonzero(tmp_path, monkeypatch, capsys, argv, match):

@@ -325,67 +325,100 @@ def test_validity_matches_numpy():
         same(got, lit & (support >= 0.5) & (amp >= 0.02) & (res <= max_res))
 
 
-@pytest.mark.parametrize("distorted_projector", [False, True])
-def test_depth_reference_matches_matching_depth_and_triangulation(distorted_projector):
-    """The fused reference-mode depth = match_reference + depth_from_disparity, and the
-    pixels the reference row does not show triangulated as simbench.rig.triangulate_columns
-    does (in the kernel for an undistorted projector, by the caller otherwise)."""
+def tail_rig(distorted_projector: bool, rectified: bool):
     import dataclasses
 
-    from simbench.decode import _kernels
-    from simbench.decode.pipeline import _triangulation_values
-    from simbench.rig import paper_rig, triangulate_columns
+    from simbench.rig import paper_rig
 
-    rig = dataclasses.replace(paper_rig(), position_m=(0.09, 0.004, -0.002), rotation_deg=(0.4, -1.5, 0.3))
+    rig = paper_rig()
+    if not rectified:
+        rig = dataclasses.replace(rig, position_m=(0.09, 0.004, -0.002), rotation_deg=(0.4, -1.5, 0.3))
     if distorted_projector:
-        rig = dataclasses.replace(rig, projector=dataclasses.replace(rig.projector, distortion=(0.05, 0, 0, 0, 0)))
+        rig = dataclasses.replace(
+            rig, projector=dataclasses.replace(rig.projector, distortion=(0.05, -0.01, 0.001, 0.0005, 0.0))
+        )
+    return rig
+
+
+@pytest.mark.parametrize("mode", ["reference", "calibrated"])
+@pytest.mark.parametrize("distorted_projector", [False, True])
+@pytest.mark.parametrize("rectified", [True, False])
+def test_decode_tail_gives_the_bits_of_its_steps(mode, distorted_projector, rectified):
+    """The fused tail (simbench.decode._kernels.decode_tail) = the stripe positions per pixel,
+    the absolute column (Eq. 14), reference matching and depth from the disparity with the
+    columns the reference row does not show triangulated (reference mode) or every column
+    triangulated (calibrated mode), then the outputs of the depth range - each step in its numpy
+    form (tests/numpy_reference.py), one after the other."""
+    from simbench.decode import _kernels
+    from simbench.rig import (
+        COLUMN_NEWTON_STEPS,
+        TRIANGULATION_ITERATIONS,
+        projector_column_at_depth,
+        triangulation_values,
+    )
+
+    rig = tail_rig(distorted_projector, rectified)
     rng = np.random.default_rng(7)
-    h, w, row0 = 30, 200, 400
+    h, w, row0, cycle, t = 30, 203, 400, 8, 21
+    wrapped = rng.uniform(-np.pi, np.pi, (h, w)).astype(np.float32)
+    n_stripes = 500
+    labels = rng.integers(-1, n_stripes, (h, w)).astype(np.int32)
+    position = rng.integers(-1, cycle, n_stripes).astype(np.int32)
+    # columns chosen near those of a plane at 1.1 m, so that many triangulate into the range
+    expected = projector_column_at_depth(1.1, rig)[row0 : row0 + h, :w].astype(np.float32)
+    expected[0, :3] = np.nan
+    amplitude = rng.random((h, w)).astype(np.float32)
     width = rig.projector.width_px
     table = np.sort(rng.uniform(0, w, (h, width + 2)), axis=1).astype(np.float32)
     table[:, -1] = np.nan
-    table[:, :300] = np.nan  # columns the reference rows do not show
-    column = rng.uniform(-5, width + 5, (h, w)).astype(np.float32)
-    column[rng.random(column.shape) < 0.1] = np.nan
-    inv_z0, inv_fb = 1.0, 1.0 / (rig.camera.focal_px * rig.baseline_m)
-    values = _triangulation_values(rig)
-    assert (values is None) == distorted_projector
-    x_ref, z, beyond = np.empty((h, w), np.float32), np.empty((h, w), np.float32), np.empty((h, w), bool)
-    _kernels.depth_reference(column, table, row0, inv_z0, inv_fb, values, x_ref, z, beyond)
-    want_x = depth.match_reference(column, table)
-    same(x_ref, want_x)
-    want_z = depth.depth_from_disparity(want_x, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=1.0)
-    want_beyond = np.isnan(want_x) & np.isfinite(column)
-    same(beyond, want_beyond)
-    assert 0.05 < beyond.mean() < 0.5
-    r, c = np.nonzero(want_beyond)
-    tri = triangulate_columns(column[want_beyond], rig, rows=r + row0, cols=c).astype(np.float32)
-    if distorted_projector:
-        assert np.isnan(z[want_beyond]).all()
-        z[want_beyond] = tri
+    table[:, : int(np.nanmedian(expected))] = np.nan  # columns the reference rows do not show
+    position_map = ref.per_pixel(position, labels, -1)
+    column, index = ref.absolute_column(position_map, wrapped, expected, period_px=t, cycle=cycle)
+    rows, cols = np.mgrid[row0 : row0 + h, :w]
+    if mode == "reference":
+        x_ref = ref.match_reference(column, table)
+        z = ref.depth_from_disparity(x_ref, focal_px=rig.camera.focal_px, baseline_m=rig.baseline_m, z0_m=1.0)
+        beyond = np.isnan(x_ref) & np.isfinite(column)
+        assert 0.05 < beyond.mean() < 0.6 and np.isfinite(z).mean() > 0.2
     else:
-        assert np.isfinite(tri).any()
-    want_z[want_beyond] = tri
-    same(z, want_z)
-
-
-def test_assemble_output_matches_numpy():
-    from simbench.decode import _kernels
-
-    rng = np.random.default_rng(8)
-    shape = (10, 40)
-    z = rng.uniform(0.5, 2.0, shape).astype(np.float32)
-    z[0, :4] = [np.nan, np.float32(0.75), np.float32(1.75), np.inf]
-    amp, col = rng.random(shape).astype(np.float32), rng.uniform(0, 1800, shape).astype(np.float32)
-    idx = rng.integers(-1, 80, shape).astype(np.int32)
-    outs = [np.full(shape, 7, dt) for dt in (np.float32, bool, np.float32, np.float32, np.int32)]
-    _kernels.assemble_output(z, amp, col, idx, 0.75, 1.75, *outs)
-    valid = (z >= 0.75) & (z <= 1.75)
+        beyond = ~np.isnan(column)
+        z = np.full((h, w), np.nan, np.float32)
+    z[beyond] = ref.triangulate_columns(column[beyond], rig, rows=rows[beyond], cols=cols[beyond]).astype(np.float32)
+    # the range ends at two of the depths, so that both comparisons meet an equal value
+    zmin, zmax = (float(np.nanquantile(z, q, method="lower")) for q in (0.2, 0.9))
+    outs = [np.full((h, w), 7, dt) for dt in (np.float32, bool, np.float32, np.float32, np.int32)]
+    _kernels.decode_tail(
+        labels,
+        position,
+        wrapped,
+        expected,
+        amplitude,
+        t=t,
+        cycle=cycle,
+        row0=row0,
+        table=table if mode == "reference" else None,
+        inv_z0=1.0,
+        inv_fb=1.0 / (rig.camera.focal_px * rig.baseline_m),
+        rig_values=triangulation_values(rig),
+        distorted=distorted_projector,
+        newton_steps=COLUMN_NEWTON_STEPS,
+        refine_steps=0 if rectified else TRIANGULATION_ITERATIONS,
+        zmin=zmin,
+        zmax=zmax,
+        depth_out=outs[0],
+        valid_out=outs[1],
+        conf_out=outs[2],
+        col_out=outs[3],
+        index_out=outs[4],
+    )
+    valid = (z >= np.float32(zmin)) & (z <= np.float32(zmax))
+    assert 0.1 < valid.mean() < 0.9 and (valid & beyond).any()
+    assert mode == "calibrated" or (valid & ~beyond).any()
     same(outs[1], valid)
     same(outs[0], np.where(valid, z, np.float32(np.nan)))
-    same(outs[2], np.where(valid, amp, np.float32(0)))
-    same(outs[3], np.where(valid, col, np.float32(np.nan)))
-    same(outs[4], np.where(valid, idx, np.int32(-1)))
+    same(outs[2], np.where(valid, amplitude, np.float32(0)))
+    same(outs[3], np.where(valid, column, np.float32(np.nan)))
+    same(outs[4], np.where(valid, index, np.int32(-1)))
 
 
 def test_kernel_wrappers_refuse_what_the_c_code_cannot_read():

@@ -31,8 +31,7 @@ __all__ = [
     "vote_codes",
     "front_end",
     "validity",
-    "depth_reference",
-    "assemble_output",
+    "decode_tail",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -52,8 +51,10 @@ _SIGNATURES = {
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
-    "depth_reference": (None, [_I, _I, _I, _I, _P, _P, _F, _F, _I, _P, _P, _P, _P]),
-    "assemble_output": (None, [_I, _P, _P, _P, _P, _F, _F, _P, _P, _P, _P, _P]),
+    "decode_tail": (
+        None,
+        [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
+    ),
 }
 _IMAGE_DTYPES = {np.dtype(np.uint8): 0, np.dtype(np.uint16): 1, np.dtype(np.float32): 2}
 
@@ -360,49 +361,81 @@ def validity(lit, support, amplitude, residual, min_support, min_amplitude, max_
     )
 
 
-def depth_reference(column, table, row0, inv_z0, inv_fb, rig_values, x_ref, depth, beyond) -> None:
-    """Reference-mode depth of a band whose first row is image row ``row0``: the look-up of
-    :func:`match_reference` (into ``x_ref``), the depth of :func:`depth_from_disparity`, and
-    ``beyond`` = the reference row does not show the decoded column.  With ``rig_values``
-    (float64: camera focal, cx, cy, projector focal, cx, the rotation row-major, the position;
-    only for an undistorted projector) those pixels are triangulated as
-    :func:`simbench.rig.triangulate_columns` does, in float64; with None they stay NaN."""
-    h, w = column.shape
-    _check_table(table, h)
-    values = np.zeros(17) if rig_values is None else np.ascontiguousarray(rig_values, np.float64)
-    if values.shape != (17,):
-        raise ValueError(f"rig_values: expected 17 numbers, got {values.shape}")
-    _library().depth_reference(
+def decode_tail(
+    labels,
+    stripe_position,
+    wrapped,
+    expected,
+    amplitude,
+    *,
+    t,
+    cycle,
+    row0,
+    table,
+    inv_z0,
+    inv_fb,
+    rig_values,
+    distorted,
+    newton_steps,
+    refine_steps,
+    zmin,
+    zmax,
+    depth_out,
+    valid_out,
+    conf_out,
+    col_out,
+    index_out,
+) -> None:
+    """The decoder's last stages for a band whose first row is image row ``row0``, in one pass:
+
+    1. ``position = stripe_position[labels]`` (-1 without a stripe, :func:`gather`) and the
+       projector column and stripe index of :func:`absolute_column` (span ``cycle * t``);
+    2. depth: with ``table`` (reference mode), :func:`match_reference` and
+       :func:`depth_from_disparity`, and the pixels whose column the table's row does not show
+       (x_ref NaN, column finite) triangulated as :func:`simbench.rig.triangulate_columns`
+       does (``rig_values``: :func:`simbench.rig.triangulation_values`; ``distorted``,
+       ``newton_steps``, ``refine_steps`` as it passes them); with ``table`` None (calibrated
+       mode), every pixel triangulated so;
+    3. the outputs: ``valid = (depth >= zmin) & (depth <= zmax)`` (float32), and ``depth``, the
+       ``amplitude``, the column and the index where valid, NaN / 0 / NaN / -1 elsewhere.
+
+    The same bits as those steps one after the other (tests/test_kernels.py), without their
+    image-sized intermediates.
+    """
+    h, w = labels.shape
+    shape = (h, w)
+    if table is not None:
+        _check_table(table, h)
+    values = np.ascontiguousarray(rig_values, np.float64)
+    if values.shape != (22,):
+        raise ValueError(f"rig_values: expected 22 numbers, got {values.shape}")
+    n_stripes = stripe_position.size
+    if n_stripes == 0 and (labels >= 0).any():
+        raise ValueError("labels refer to stripes, but stripe_position is empty")
+    scratch = np.empty(4 * max(w, 1), np.float32)
+    _library().decode_tail(
         h,
         w,
         int(row0),
-        table.shape[1],
-        _ptr(column, "column", np.float32),
-        _ptr(table, "table", np.float32),
+        _ptr(labels, "labels", np.int32),
+        _ptr(stripe_position, "stripe_position", np.int32),
+        _ptr(wrapped, "wrapped", np.float32, shape),
+        _ptr(expected, "expected", np.float32, shape),
+        _ptr(amplitude, "amplitude", np.float32, shape),
+        _f32(t),
+        _f32(int(cycle) * float(t)),
+        int(cycle),
+        table.shape[1] if table is not None else 0,
+        _ptr(table, "table", np.float32) if table is not None else None,
         _f32(inv_z0),
         _f32(inv_fb),
-        int(rig_values is not None),
         values.ctypes.data,
-        _ptr(x_ref, "x_ref", np.float32, (h, w), writable=True),
-        _ptr(depth, "depth", np.float32, (h, w), writable=True),
-        _ptr(beyond, "beyond", np.bool_, (h, w), writable=True),
-    )
-
-
-def assemble_output(
-    depth, amplitude, column, index, zmin, zmax, depth_out, valid_out, conf_out, col_out, index_out
-) -> None:
-    """The decoder's outputs: ``valid = (depth >= zmin) & (depth <= zmax)`` (float32), and
-    ``depth``, ``amplitude``, ``column``, ``index`` where valid, NaN / 0 / NaN / -1 elsewhere."""
-    shape = depth.shape
-    _library().assemble_output(
-        depth.size,
-        _ptr(depth, "depth", np.float32),
-        _ptr(amplitude, "amplitude", np.float32, shape),
-        _ptr(column, "column", np.float32, shape),
-        _ptr(index, "index", np.int32, shape),
+        int(bool(distorted)),
+        int(newton_steps),
+        int(refine_steps),
         _f32(zmin),
         _f32(zmax),
+        scratch.ctypes.data,
         _ptr(depth_out, "depth_out", np.float32, shape, writable=True),
         _ptr(valid_out, "valid_out", np.bool_, shape, writable=True),
         _ptr(conf_out, "conf_out", np.float32, shape, writable=True),

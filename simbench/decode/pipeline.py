@@ -7,7 +7,7 @@ import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -29,8 +29,8 @@ from simbench.decode.debruijn import (
 )
 from simbench.decode.depth import (
     absolute_column,
-    depth_calibrated,
     inverse_column_table,
+    match_reference,
 )
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import (
@@ -48,7 +48,13 @@ from simbench.pattern import (
     code_sequence,
     window_positions,
 )
-from simbench.rig import Rig, projector_column_at_depth, triangulate_columns, triangulation_values
+from simbench.rig import (
+    COLUMN_NEWTON_STEPS,
+    TRIANGULATION_ITERATIONS,
+    Rig,
+    projector_column_at_depth,
+    triangulation_values,
+)
 
 __all__ = [
     "DecoderParams",
@@ -401,6 +407,38 @@ def _fused_front_end(params: DecoderParams, unmixing: np.ndarray | None, image: 
 _FUSED_INTENSITY = {"overlay": 0, "blue": 1}
 
 
+@dataclass(frozen=True)
+class BandStripes:
+    """What the stripe stages leave for the absolute column (paper Eq. 14) of a band's rows.
+
+    labels : ndarray, shape (h, W), int32; stripe of each pixel, -1 none
+    position : ndarray, shape (n_stripes,), int32; W of each stripe after the neighbour
+        correction, -1 unknown
+    wrapped, expected, amplitude : ndarray, shape (h, W), float32; the wrapped phase, the
+        column the cycle number is chosen against, the fringe amplitude
+    """
+
+    labels: np.ndarray
+    position: np.ndarray
+    wrapped: np.ndarray
+    expected: np.ndarray
+    amplitude: np.ndarray
+    period_px: int
+    cycle: int
+
+    def position_map(self) -> np.ndarray:
+        """W per pixel, -1 unknown."""
+        return _per_pixel(self.position, self.labels, -1)
+
+    @cached_property
+    def columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """(column_px, stripe_index) per pixel, before the depth range is applied
+        (:func:`simbench.decode.depth.absolute_column`)."""
+        return absolute_column(
+            self.position_map(), self.wrapped, self.expected, period_px=self.period_px, cycle=self.cycle
+        )
+
+
 def _columns(
     image: np.ndarray,
     order: list[int],
@@ -411,13 +449,14 @@ def _columns(
     crop: slice,
     unmixing: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, LazyStages]:
-    """Stages 1-3 and the absolute column for one band of rows.
+    """Stages 1-3 for one band of rows.
 
     ``image`` is the band of the checked capture (any dtype :func:`as_float_image` takes,
     channels in the capture's order; ``order`` lists the indices of code 1, code 0 and the
     fringe) plus a halo of rows above and below for the phase fit; ``crop`` selects the band's
     own rows, to which everything after the fit is restricted.
-    Returns (column, stripe_index, stages) for the cropped rows.
+    Returns (:class:`BandStripes`, stages) for the cropped rows; the stage images of the
+    absolute column (``position``, ``column``, ``unwrapped_phase``) are made on access.
     """
     t_cam = params.camera_period(rig)
     # with normalised channels a stripe whose colour the surface absorbs is still usable, so
@@ -512,11 +551,15 @@ def _columns(
             w_fixed = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
             support = np.where(w_fixed >= 0, support, 0)
     lab = stripes.labels
-    with stage("absolute column (Eq. 14)"):
-        position = _per_pixel(w_fixed, lab, -1)
-        column, stripe_index = absolute_column(
-            position, wrapped, expected_column, period_px=params.period_px, cycle=params.cycle
-        )
+    band = BandStripes(
+        labels=lab,
+        position=w_fixed.astype(np.int32, copy=False),
+        wrapped=wrapped,
+        expected=np.ascontiguousarray(expected_column, dtype=np.float32),
+        amplitude=amplitude,
+        period_px=params.period_px,
+        cycle=params.cycle,
+    )
     st = LazyStages()
     st.put("intensity", intensity)
     st.put("certainty", certainty)
@@ -531,13 +574,16 @@ def _columns(
     st.put("stripe_code", lambda: _per_pixel(stripe_code.astype(np.int8), lab, -1))
     st.put("stripe_agreement", lambda: _per_pixel(agreement, lab, 0.0))
     st.put("position_raw", lambda: _per_pixel(raw_w, lab, -1))
-    st.put("position", position)
+    st.put("position", band.position_map)
     st.put("support", lambda: _per_pixel(support, lab, 0))
-    st.put(
-        "unwrapped_phase",
-        lambda: np.where(stripe_index >= 0, wrapped + np.float32(2 * np.pi) * stripe_index, np.float32(np.nan)),
-    )
-    return column, stripe_index, st
+    st.put("column", lambda: band.columns[0])
+
+    def unwrapped():
+        index = band.columns[1]
+        return np.where(index >= 0, wrapped + np.float32(2 * np.pi) * index, np.float32(np.nan))
+
+    st.put("unwrapped_phase", unwrapped)
+    return band, st
 
 
 @lru_cache(maxsize=16)
@@ -561,15 +607,6 @@ def _bands(height: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int
     n = max(1, min(params.threads or os.cpu_count() or 1, height // max(4 * halo, 32) or 1))
     edges = np.linspace(0, height, n + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo
-
-
-def _triangulation_values(rig: Rig) -> np.ndarray | None:
-    """The rig as :func:`simbench.decode._kernels.depth_reference` triangulates with it (the first
-    17 of :func:`simbench.rig.triangulation_values`), or None when the projector has lens
-    distortion (its columns are undistorted by :func:`simbench.rig.triangulate_columns`)."""
-    if rig.projector.has_distortion:
-        return None
-    return triangulation_values(rig)[:17]
 
 
 def _run_bands(fn, image: np.ndarray, params: DecoderParams, rig: Rig) -> list:
@@ -672,7 +709,7 @@ def decode_reference(
     parts = _run_bands(
         lambda img, order, rows, crop: _columns(
             img, order, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
-        )[0],
+        )[0].columns[0],
         image,
         params,
         rig,
@@ -740,58 +777,48 @@ def decode(
     else:
         ref = None  # calibrated mode uses the reference for its coupling matrix only
         expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
-    rig_values = _triangulation_values(rig)
+    rig_values = triangulation_values(rig)
+    prj = rig.projector
     depth_out = np.empty((h, w), np.float32)
     valid_out = np.empty((h, w), bool)
     conf_out = np.empty((h, w), np.float32)
     col_out = np.empty((h, w), np.float32)
     index_out = np.empty((h, w), np.int32)
+    inv_fb = 1.0 / (rig.camera.focal_px * rig.baseline_m)
 
     def band(img, order, rows, crop):
-        column, stripe_index, stages = _columns(
-            img, order, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
-        )
-        with stage("depth (reference matching, Eq. 15)" if ref is not None else "depth (triangulation, Eq. 15)"):
-            if ref is not None:
-                x_ref, depth, beyond = (np.empty(column.shape, dt) for dt in (np.float32, np.float32, bool))
-                # match_reference + depth_from_disparity in one pass; a column the reference row
-                # never shows (near the image's ends, for surfaces off the reference depth)
-                # cannot be matched: it is triangulated with the calibrated rig (in the same
-                # pass unless the projector has lens distortion)
-                _kernels.depth_reference(
-                    column,
-                    ref.inverse[rows],
-                    rows.start,
-                    1.0 / ref.z0_m,
-                    1.0 / (rig.camera.focal_px * rig.baseline_m),
-                    rig_values,
-                    x_ref,
-                    depth,
-                    beyond,
-                )
-                if rig_values is None and beyond.any():
-                    r_idx, c_idx = np.nonzero(beyond)
-                    depth[beyond] = triangulate_columns(
-                        column[beyond], rig, rows=r_idx + rows.start, cols=c_idx
-                    ).astype(np.float32)
-                stages.put("reference_x", x_ref)
-                stages.put("triangulated", beyond)
-            else:
-                depth = depth_calibrated(column, rig, row0=rows.start).astype(np.float32)
-        with stage("output"):
-            _kernels.assemble_output(
-                depth,
-                stages["amplitude"],
-                column,
-                stripe_index,
-                zmin,
-                zmax,
-                depth_out[rows],
-                valid_out[rows],
-                conf_out[rows],
-                col_out[rows],
-                index_out[rows],
+        stripes, stages = _columns(img, order, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
+        # paper Eq. 14-15: a column the reference row never shows (near the image's ends, for
+        # surfaces off the reference depth) cannot be matched: it is triangulated with the rig
+        how = "reference matching" if ref is not None else "triangulation"
+        with stage(f"column, depth, output (Eq. 14-15, {how})"):
+            _kernels.decode_tail(
+                stripes.labels,
+                stripes.position,
+                stripes.wrapped,
+                stripes.expected,
+                stripes.amplitude,
+                t=params.period_px,
+                cycle=params.cycle,
+                row0=rows.start,
+                table=ref.inverse[rows] if ref is not None else None,
+                inv_z0=1.0 / ref.z0_m if ref is not None else 0.0,
+                inv_fb=inv_fb,
+                rig_values=rig_values,
+                distorted=prj.has_distortion,
+                newton_steps=COLUMN_NEWTON_STEPS,
+                refine_steps=0 if rig.is_rectified else TRIANGULATION_ITERATIONS,
+                zmin=zmin,
+                zmax=zmax,
+                depth_out=depth_out[rows],
+                valid_out=valid_out[rows],
+                conf_out=conf_out[rows],
+                col_out=col_out[rows],
+                index_out=index_out[rows],
             )
+        if ref is not None:
+            stages.put("reference_x", lambda: match_reference(stripes.columns[0], ref.inverse[rows]))
+            stages.put("triangulated", lambda: np.isnan(stages["reference_x"]) & np.isfinite(stripes.columns[0]))
         return stages
 
     parts = _run_bands(band, image, params, rig)

@@ -13,6 +13,7 @@ moments convolved per capture: 5 more convolutions per band).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import statistics
 import time
@@ -20,7 +21,9 @@ import time
 import cv2
 
 from simbench.decode import DecoderParams
+from simbench.decode.pipeline import MODES
 from simbench.decode.profile import stage_times
+from simbench.rig import Rig
 from simbench.systems import get_system, system_names
 from simbench.systems.proposed import BENCH_SCENES
 from simbench.systems.proposed import BENCH_SHADOW as SHADOW
@@ -47,23 +50,50 @@ def competitor_inputs(device: str, *, seed: int = 0, model: object = None) -> tu
     return system.model, raw, cal
 
 
-def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "proposed", scene: str = "plane") -> dict:
+def run_decode_benchmark(
+    *,
+    repeats: int = 20,
+    warmup: int = 2,
+    device: str = "proposed",
+    scene: str = "plane",
+    rig: Rig | None = None,
+    mode: str | None = None,
+) -> dict:
     """Time one decode by the depth system ``device`` (any registered name,
     :mod:`simbench.systems`) of its benchmark inputs (``bench_inputs``) at its native
     resolution; returns median/min/max in ms and the set-up, and ``stages_ms``: each profiled
     stage's mean time per decode, summed over the row-band threads that ran it
     (:mod:`simbench.decode.profile`; the proposed decoder's stages).  ``scene``: see the
-    module doc (the competitors have only the plane)."""
+    module doc (the competitors have only the plane).
+
+    The proposed decoder only: ``rig`` decodes the capture (made with the paper's rig) with
+    another rig of the same camera size, e.g. one from ``simbench calibrate`` (its lens
+    distortion then costs what it costs: the capture is undistorted, columns triangulated
+    through the projector's lens); ``mode`` (``reference`` or ``calibrated``) overrides the
+    decoder's mode.  The reference map is decoded once, before the timed runs."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if device not in system_names():
         raise ValueError(f"unknown benchmark device {device!r}; valid: {system_names()}")
+    if device != "proposed" and (rig is not None or mode is not None):
+        raise ValueError(f"a rig and a decoder mode apply to the proposed decoder, not to {device!r}")
+    if mode is not None and mode not in MODES:
+        raise ValueError(f"unknown decoder mode {mode!r}; valid: {list(MODES)}")
     system = get_system(device)
     raw, cal, spec = system.bench_inputs(scene=scene)
     h, w = raw.shape[:2]
+    if rig is not None:
+        if rig.camera.size_hw != (h, w):
+            raise ValueError(
+                f"the rig's camera is {rig.camera.size_hw[1]}x{rig.camera.size_hw[0]}; the benchmark capture is "
+                f"{w}x{h} (the paper's camera)"
+            )
+        spec = dataclasses.replace(spec, rig=rig)
+
+    extra = {"mode": mode} if mode is not None else {}
 
     def run():
-        system.decode(raw, cal, scene=spec)
+        system.decode(raw, cal, scene=spec, **extra)
 
     for _ in range(warmup):
         run()
@@ -76,6 +106,8 @@ def run_decode_benchmark(*, repeats: int = 20, warmup: int = 2, device: str = "p
     return {
         "device": device,
         "scene": scene,
+        "rig": spec.rig.name if spec is not None else None,
+        "mode": mode,
         "size_wh": [w, h],
         "repeats": repeats,
         "median_ms": statistics.median(times),

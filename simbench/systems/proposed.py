@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,6 +30,7 @@ from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOpti
 
 if TYPE_CHECKING:
     from simbench.decode.pipeline import ReferenceMap
+    from simbench.pattern import PatternSpec
 
 __all__ = ["ColourFringeSystem", "ReferenceCalibration", "BENCH_SCENES", "BENCH_SHADOW"]
 
@@ -36,6 +38,18 @@ BENCH_SCENES = ("plane", "shadow")
 # the ``shadow`` benchmark scene's region without projector light (rows, columns)
 BENCH_SHADOW = (slice(330, 630), slice(440, 840))
 
+
+
+@lru_cache(maxsize=8)
+def pattern_u8(spec: PatternSpec) -> np.ndarray:
+    """The projector's 8-bit frame of ``spec`` (:func:`simbench.pattern.fringe_pattern`,
+    quantised), made once per process and pattern (read-only: every system built with the
+    pattern shares it; an experiment builds dozens)."""
+    from simbench.pattern import fringe_pattern, quantize
+
+    frame = quantize(fringe_pattern(spec))
+    frame.setflags(write=False)
+    return frame
 
 @dataclass
 class ReferenceCalibration:
@@ -94,7 +108,6 @@ class ColourFringeSystem:
     def __init__(self, options: SystemOptions | None = None) -> None:
         from simbench.decode import DecoderParams
         from simbench.device import get_sensor
-        from simbench.pattern import fringe_pattern, quantize
 
         options = options or SystemOptions()
         self.sensor = options.sensor if options.sensor is not None else get_sensor("paper")
@@ -102,7 +115,7 @@ class ColourFringeSystem:
         self.camera_scale = float(options.camera_scale)
         self.reference_form = dict(options.reference_form)
         self.pattern = self.decoder.pattern
-        self.pattern_u8 = quantize(fringe_pattern(self.pattern))
+        self.pattern_u8 = pattern_u8(self.pattern)
 
     def info(self) -> SystemInfo:
         from simbench.rig import paper_rig, scale_camera
