@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import cv2
@@ -129,7 +130,15 @@ def depth_errors(
 
 def points_from_depth(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
     """Camera-frame 3-D points of every pixel, shape (H, W, 3); NaN where depth is NaN."""
-    return pixel_rays(camera) * np.asarray(depth_m, dtype=np.float64)[..., None]
+    return _rays(camera) * np.asarray(depth_m, dtype=np.float64)[..., None]
+
+
+@lru_cache(maxsize=8)
+def _rays(camera: Intrinsics) -> np.ndarray:
+    """:func:`simbench.rig.pixel_rays`, made once per camera (read-only): every score needs them."""
+    rays = pixel_rays(camera)
+    rays.setflags(write=False)
+    return rays
 
 
 # assumption: a plane fit (3 parameters) says something about a surface only from ~100 points
@@ -157,11 +166,15 @@ def plane_fit_error(
        Pattern", Sensors 17(11), 2558, 2017, Table 1 and Sec. 6 (error against the least-
        squares plane).
     """
-    pts = points_from_depth(depth_m, camera)
-    ok = np.isfinite(pts[..., 2])
+    d = np.asarray(depth_m, dtype=np.float64)
+    if d.shape != tuple(camera.size_hw):
+        raise ValueError(f"depth map {d.shape} does not match the camera {tuple(camera.size_hw)}")
+    ok = np.isfinite(d)  # the rays' z is 1: a point is finite where its depth is
     if mask is not None:
         ok &= mask
-    p = pts[ok]
+    # the points of the pixels that count only (points_from_depth(depth_m, camera)[ok], the
+    # same products without the whole image's)
+    p = _rays(camera)[ok] * d[ok][:, None]
     if len(p) < max(3, min_points):
         return {
             "mean_abs_residual_mm": float("nan"),
