@@ -143,8 +143,16 @@ def cached_radiance(
 
     if cache is None:
         return render()
-    digest = "off" if drive is None else (drive.digest if lazy else array_digest(drive))
-    parts = {
+    parts = _radiance_parts(scene, drive, **kw)
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
+
+
+def _radiance_parts(
+    scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *, spp: int, seed: int, max_depth: int, sampler: str
+) -> dict:
+    """The render cache key's parts of a :func:`cached_radiance` render."""
+    digest = "off" if drive is None else (drive.digest if isinstance(drive, DriveImage) else array_digest(drive))
+    return {
         "scene": scene_fingerprint(scene),
         "drive": digest,
         "spp": int(spp),
@@ -153,7 +161,6 @@ def cached_radiance(
         "sampler": sampler,
         **_renderer_id(),
     }
-    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
@@ -407,27 +414,76 @@ def render_channels(
     -------
     ndarray, shape (H, W, 3), float32, in units of each channel's own primary
     """
+    return _sum_channels(_channel_plan(scene, drive, sensor, seed=seed), scene, render)
+
+
+@dataclass(frozen=True)
+class _Render:
+    """One :func:`cached_radiance` render of :func:`render_channels`: ``drive`` None is the
+    ambient light alone."""
+
+    scene: SceneSpec
+    drive: "np.ndarray | DriveImage | None"
+    seed: int
+
+
+def _channel_plan(
+    scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sensor: SensorModel, *, seed: int
+) -> list[tuple[_Render | None, _Render | None, np.ndarray | None]]:
+    """The renders :func:`render_channels` sums, without rendering or reading them: per group
+    (one group, or one per primary with crosstalk) the projector's render (None: the primary
+    lights nothing), the ambient light's (None: no ambient light) and the channel weights
+    (None without crosstalk)."""
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
-    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
     lazy = isinstance(drive, ProjectorDrive)
     if not sensor.crosstalk:
-        q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
-        if ambient:
-            q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
+        amb = _Render(scene, None, _ambient_seed(seed)) if ambient else None
+        return [(_Render(dark, drive.image() if lazy else drive, seed), amb, None)]
+    weights = channel_weights(sensor, scene.rig)
+    groups = []
+    for p in range(3):
+        mono = drive.primary(p) if lazy else _mono(drive, p)
+        # the same seed for each primary: the sum has one render's sampling pattern; a
+        # primary the drive leaves off (calibration frames) lights nothing
+        lit = mono is not None if lazy else mono.any()
+        amb = _Render(_primary_scene(scene, p), None, _ambient_seed(seed)) if ambient else None
+        groups.append(
+            (_Render(_primary_scene(dark, p), mono, seed) if lit else None, amb, weights[:, p].astype(np.float32))
+        )
+    return groups
+
+
+def _sum_channels(groups: list, scene: SceneSpec, render: RenderSettings) -> np.ndarray:
+    """:func:`render_channels` of a :func:`_channel_plan`."""
+    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
+
+    def radiance(r: _Render) -> np.ndarray:
+        return cached_radiance(r.scene, r.drive, seed=r.seed, **kw)
+
+    if groups[0][2] is None:  # no crosstalk: one render per channel's own primary
+        main, amb, _ = groups[0]
+        q = radiance(main)
+        if amb is not None:
+            q = q + radiance(amb)
     else:
-        weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
-        for p in range(3):
-            mono = drive.primary(p) if lazy else _mono(drive, p)
-            # the same seed for each primary: the sum has one render's sampling pattern; a
-            # primary the drive leaves off (calibration frames) lights nothing
-            lit = mono is not None if lazy else mono.any()
-            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if lit else np.zeros_like(q)
-            if ambient:
-                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
-            q += r * weights[:, p].astype(np.float32)
+        for main, amb, w in groups:
+            r = radiance(main) if main is not None else np.zeros_like(q)
+            if amb is not None:
+                r = r + radiance(amb)
+            q += r * w
     return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
+
+
+def _plan_parts(groups: list, render: RenderSettings) -> list:
+    """The cache key's parts of everything a :func:`_channel_plan` reads."""
+    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler}
+
+    def one(r: _Render | None):
+        return None if r is None else _radiance_parts(r.scene, r.drive, seed=r.seed, **kw)
+
+    return [[one(main), one(amb), None if w is None else w.tolist()] for main, amb, w in groups]
 
 
 def _white_board(scene: SceneSpec) -> dict:
@@ -450,6 +506,112 @@ def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike
     per_radiance = electrons_per_radiance_s(sensor, scene.rig) * t
     gains = white_balance_gains(sensor, scene.rig, **board)
     return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, white_balance=gains, rng=rng)
+
+
+def record_channels(
+    scene: SceneSpec,
+    drive: "np.ndarray | ProjectorDrive",
+    sensor: SensorModel,
+    *,
+    seed: int,
+    render: RenderSettings,
+    rngs: list,
+) -> list[np.ndarray]:
+    """``[record(render_channels(...), rng=n) for n in rngs]``: one render of the scene
+    recorded once per noise seed, each recording looked up in / stored to ``render.cache``.
+
+    A recording is a pure function of its renders, the camera's distortion and noise model,
+    the exposure and white balance, and its integer noise seed; it is cached under those (the
+    renders by their own cache keys, the exposure numbers by value, the sensor model, the
+    versions of numpy and OpenCV that draw the noise and demosaic, and the bytes of the code
+    between radiance and recording), so a run whose recordings are cached reads neither renders
+    nor draws noise.  A seed that is not an integer (a Generator) is recorded afresh.
+    """
+    groups = _channel_plan(scene, drive, sensor, seed=seed)
+    q: np.ndarray | None = None
+
+    def recorded(n) -> np.ndarray:
+        nonlocal q
+        if q is None:
+            q = _sum_channels(groups, scene, render)
+        return record(q, sensor=sensor, scene=scene, rng=n)
+
+    cache = render.cache
+    if cache is None or cache.root is None:
+        return [recorded(n) for n in rngs]
+    base = {
+        "channels": _plan_parts(groups, render),
+        "rig": rig_to_dict(scene.rig),
+        "sensor": sensor_to_dict(sensor),
+        "exposure": _recording_settings(sensor, scene),
+        "code": _recording_code_digest(),
+        **_recording_libraries(),
+    }
+    out = []
+    for n in rngs:
+        key = _seed_key(n)
+        if key is None:
+            out.append(recorded(n))
+        else:
+            out.append(
+                cache.get_or_make("recording", {**base, "rng": key}, lambda n=n: {"image": recorded(n)})["image"]
+            )
+    return out
+
+
+def _seed_key(rng) -> "int | dict | None":
+    """A noise seed as cache-key data: an integer, or a SeedSequence by what its streams are
+    drawn from (entropy, spawn key, pool size); None for anything else (a Generator's state
+    moves on as it draws)."""
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        return int(rng)
+    if isinstance(rng, np.random.SeedSequence):
+        entropy = rng.entropy
+        return {
+            "entropy": [int(e) for e in entropy] if isinstance(entropy, (list, tuple, np.ndarray)) else int(entropy),
+            "spawn_key": [int(k) for k in rng.spawn_key],
+            "pool_size": int(rng.pool_size),
+        }
+    return None
+
+
+def _recording_settings(sensor: SensorModel, scene: SceneSpec) -> dict:
+    """The numbers :func:`record` sets the camera with (by value: they come from colour data
+    and photometry, whatever their source)."""
+    if isinstance(sensor.camera, SimpleCamera):
+        return {}
+    board = _white_board(scene)
+    t = exposure_s(sensor, scene.rig, **board)
+    return {
+        "exposure_s": float(t),
+        "electrons_per_radiance": (electrons_per_radiance_s(sensor, scene.rig) * t).tolist(),
+        "white_balance": np.asarray(white_balance_gains(sensor, scene.rig, **board)).tolist(),
+    }
+
+
+@lru_cache(maxsize=1)
+def _recording_code_digest() -> str:
+    """SHA-256 of the code between a render and a recording: the channel sum and the camera
+    (this module, the sensor and photometry models, spectral data handling, the lens model and
+    its compiled maps)."""
+    import simbench.device
+    import simbench.native
+    import simbench.optics
+    import simbench.photometry
+    import simbench.sensor
+    import simbench.spectral
+
+    modules = (simbench.sensor, simbench.photometry, simbench.spectral, simbench.device, simbench.optics)
+    return source_digest([*(m.__file__ for m in modules), sys.modules[__name__].__file__, simbench.native.SOURCE])
+
+
+@lru_cache(maxsize=1)
+def _recording_libraries() -> dict:
+    """The libraries whose algorithms a recording's bits depend on: numpy (the noise draws),
+    OpenCV (demosaicing, remapping)."""
+    import cv2
+
+    return {"numpy": np.__version__, "opencv": cv2.__version__}
 
 
 def acquire(

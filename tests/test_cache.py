@@ -177,3 +177,65 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     a = ProjectorDrive(scene, pattern, video, cache=cache, phase=0.1).digests()
     b = ProjectorDrive(scene, pattern, video, cache=cache, phase=0.6).digests()
     assert a["rgb"] != b["rgb"] != first.digests()["rgb"]
+
+
+def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, variant, monkeypatch):
+    """record_channels gives record(render_channels(...)) for each noise seed (an integer or a
+    SeedSequence); a second call reads the cached recordings, neither renders nor camera noise
+    (renders deleted, the camera model broken); another seed, sensor setting or reference depth
+    is another recording; a Generator is recorded afresh, never cached."""
+    from simbench import simulate
+    from simbench.device import get_sensor
+    from simbench.mitsuba_dict import RenderSettings
+    from simbench.rig import scale_camera
+    from simbench.scene import load_scene
+    from simbench.simulate import ProjectorDrive, physical_scene, record, record_channels, render_channels
+    from simbench.systems.proposed import pattern_u8
+    from simbench.pattern import PatternSpec
+
+    sensor = get_sensor("paper")
+    assert sensor.crosstalk  # the per-primary renders and their weights are in the key
+    scene = load_scene(SCENES / "white_plane.toml")
+    scene = physical_scene(dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.1)), sensor)
+    pattern = pattern_u8(PatternSpec())
+    # an integer, and two SeedSequences that differ as a multi-shot sequence's frames do
+    seeds = [11, np.random.SeedSequence([11, 7, 2]), np.random.SeedSequence([11, 7, 3])]
+    plain = RenderSettings(spp=4, sampler="independent")
+    q = render_channels(scene, ProjectorDrive(scene, pattern, sensor), sensor, seed=3, render=plain)
+    fresh = [record(q, sensor=sensor, scene=scene, rng=n) for n in seeds]
+    cache = RenderCache(tmp_path / "cache")
+    cached = dataclasses.replace(plain, cache=cache)
+
+    def recordings(**kw):
+        args = {"scene": scene, "sensor": sensor, "seeds": seeds} | kw
+        drive = ProjectorDrive(args["scene"], pattern, args["sensor"], cache=cache)
+        return record_channels(args["scene"], drive, args["sensor"], seed=3, render=cached, rngs=args["seeds"])
+
+    first = recordings()
+    for a, b in zip(first, fresh):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    files = sorted((tmp_path / "cache").glob("recording-*.npz"))
+    assert len(files) == 3
+    for f in (tmp_path / "cache").glob("radiance-*.npz"):
+        f.unlink()
+
+    def broken(*args, **kwargs):
+        raise AssertionError("a cached recording was recorded again")
+
+    with monkeypatch.context() as m:
+        m.setattr(simulate, "emva_camera", broken)
+        again = recordings()
+    for a, b in zip(again, first):
+        assert np.array_equal(a, b)
+    noisier = dataclasses.replace(
+        sensor, camera=dataclasses.replace(sensor.camera, dark_noise_e=sensor.camera.dark_noise_e + 1)
+    )
+    farther = dataclasses.replace(scene, reference_depth_m=scene.reference_depth_m + 0.1)
+    made = cache.misses
+    recordings(seeds=[12])
+    recordings(sensor=noisier, seeds=[11])
+    recordings(scene=farther, seeds=[11])
+    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 6
+    assert cache.misses > made
+    recordings(seeds=[np.random.default_rng(11)])
+    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 6

@@ -89,8 +89,8 @@ def reproduce(
             merged = {}
     save_json(path, dict(sorted({**merged, **metrics}.items())))
     progress(
-        f"cache: {session.cache.hits} hits, {session.cache.misses} made (renders, ground truth, decoded references, "
-        f"drive digests); results in {out_dir}"
+        f"cache: {session.cache.hits} hits, {session.cache.misses} made (renders, recordings, ground truth, decoded "
+        f"references, drive digests); results in {out_dir}"
     )
     return metrics
 

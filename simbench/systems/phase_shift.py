@@ -96,23 +96,20 @@ class PhaseShiftSystem:
         once per noise seed with its own camera noise (:func:`simbench.seeds.frame_seed`);
         each recording has shape (K, H, W), float32 grey in [0, 1]."""
         from simbench.seeds import frame_seed
-        from simbench.simulate import ProjectorDrive, exposure_phase, record, render_channels
+        from simbench.simulate import ProjectorDrive, exposure_phase, record_channels
 
         if tuple(self.spec.size_hw) != scene.rig.projector.size_hw:
             raise ValueError(
                 f"pattern size {self.spec.size_hw} differs from the projector's {scene.rig.projector.size_hw}"
             )
         phase = exposure_phase(render_seed)
-        qs = []
-        for frame in self.frames_u8():
+        frames = []  # per projector frame, its recording per noise seed (grey)
+        for k, frame in enumerate(self.frames_u8()):
             drive = ProjectorDrive(scene, frame, self.sensor, cache=render.cache, phase=phase)
-            qs.append(render_channels(scene, drive, self.sensor, seed=render_seed, render=render))
-        return [
-            np.stack(
-                [grey_frame(record(q, sensor=self.sensor, scene=scene, rng=frame_seed(n, k))) for k, q in enumerate(qs)]
-            )
-            for n in noise_seeds
-        ]
+            seeds = [frame_seed(n, k) for n in noise_seeds]
+            recordings = record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds)
+            frames.append([grey_frame(r) for r in recordings])
+        return [np.stack([f[i] for f in frames]) for i in range(len(noise_seeds))]
 
     def decode(self, raw: np.ndarray, calibration: None = None, *, scene: SceneSpec) -> SystemDepth:
         """Undistort each frame with the camera's lens (as the rig file records it), decode

@@ -39,7 +39,6 @@ BENCH_SCENES = ("plane", "shadow")
 BENCH_SHADOW = (slice(330, 630), slice(440, 840))
 
 
-
 @lru_cache(maxsize=8)
 def pattern_u8(spec: PatternSpec) -> np.ndarray:
     """The projector's 8-bit frame of ``spec`` (:func:`simbench.pattern.fringe_pattern`,
@@ -50,6 +49,7 @@ def pattern_u8(spec: PatternSpec) -> np.ndarray:
     frame = quantize(fringe_pattern(spec))
     frame.setflags(write=False)
     return frame
+
 
 @dataclass
 class ReferenceCalibration:
@@ -195,13 +195,9 @@ class ColourFringeSystem:
         pattern_u8: np.ndarray | None = None,
     ) -> list[np.ndarray]:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
-        once per noise seed (a static scene measured again differs by camera noise only)."""
-        from simbench.simulate import (
-            ProjectorDrive,
-            exposure_phase,
-            record,
-            render_channels,
-        )
+        once per noise seed (a static scene measured again differs by camera noise only;
+        recordings cached, :func:`simbench.simulate.record_channels`)."""
+        from simbench.simulate import ProjectorDrive, exposure_phase, record_channels
 
         drive = ProjectorDrive(
             scene,
@@ -210,8 +206,7 @@ class ColourFringeSystem:
             cache=render.cache,
             phase=exposure_phase(render_seed),
         )
-        q = render_channels(scene, drive, self.sensor, seed=render_seed, render=render)
-        return [record(q, sensor=self.sensor, scene=scene, rng=n) for n in noise_seeds]
+        return record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=noise_seeds)
 
     def decode(
         self,
