@@ -41,6 +41,7 @@ __all__ = [
     "code_sequence",
     "fringe_pattern",
     "quantize",
+    "grey_drive",
     "column_from_phase",
     "phase_from_column",
 ]
@@ -295,6 +296,15 @@ def quantize(pattern: np.ndarray, *, bits: int = 8) -> np.ndarray:
     levels = (1 << bits) - 1
     q = np.rint(np.clip(pattern, 0.0, 1.0) * levels)
     return q.astype(np.uint8 if bits <= 8 else np.uint16)
+
+
+def grey_drive(grey: np.ndarray, *, bits: int = 8) -> np.ndarray:
+    """Grey [0, 1] frames (..., H, W) as the projector's RGB input (..., H, W, 3): each pixel
+    quantised once (:func:`quantize`), the same value in the three channels."""
+    q = quantize(grey, bits=bits)
+    out = np.empty((*q.shape, 3), q.dtype)
+    out[...] = q[..., None]
+    return out
 
 
 # the projector frames of the colour-robust decoder's calibration (Caspi, Kiryati and Shamir

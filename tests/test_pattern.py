@@ -105,3 +105,16 @@ def test_quantize():
     assert q.dtype == np.uint8 and q.tolist() == [[0, 128, 255, 255]]
     with pytest.raises(ValueError):
         quantize(np.array([np.nan]))
+
+
+@pytest.mark.parametrize("bits", [8, 10])
+def test_grey_drive_is_the_quantised_grey_in_three_channels(bits):
+    """grey_drive quantises each pixel once: the same as quantising the frames copied into
+    three channels (values outside [0, 1] clipped, uint8 up to 8 bits, uint16 above)."""
+    from simbench.pattern import grey_drive, quantize
+
+    grey = np.random.default_rng(1).uniform(-0.2, 1.2, (2, 5, 7)).astype(np.float32)
+    got = grey_drive(grey, bits=bits)
+    want = quantize(np.repeat(grey[..., None], 3, axis=-1), bits=bits)
+    assert got.dtype == want.dtype and got.shape == (2, 5, 7, 3) and np.array_equal(got, want)
+    assert got.flags.c_contiguous

@@ -339,11 +339,11 @@ def observe_pose(
 def calibration_frames(projector_hw: tuple[int, int]) -> list[np.ndarray]:
     """The projector frames of one pose as 8-bit grey drives (Hp, Wp, 3): white, then the
     column sequence, then the row sequence (:func:`simbench.decode.temporal.phase_shift_frames`)."""
-    from simbench.pattern import quantize
+    from simbench.pattern import grey_drive
 
     cols, rows = _sequences(projector_hw)
     grey = [np.ones((1, *projector_hw), np.float32), phase_shift_frames(cols), phase_shift_frames(rows)]
-    return [quantize(np.repeat(f[..., None], 3, axis=-1)) for f in np.concatenate(grey)]
+    return list(grey_drive(np.concatenate(grey)))
 
 
 def _observe(scene, target, sensor, cols, rows, render, render_seed, noise_seed, corner_spp, frames):

@@ -32,10 +32,9 @@ DEPTH_RANGE_M = (0.75, 1.75)
 def _frames_u8(spec: PhaseShiftSpec) -> np.ndarray:
     """:meth:`PhaseShiftSystem.frames_u8`: made once per sequence and process (~0.4 s at the
     paper projector's size; every system instance and acquisition of a run shares them)."""
-    from simbench.pattern import quantize
+    from simbench.pattern import grey_drive
 
-    grey = phase_shift_frames(spec)
-    frames = quantize(np.repeat(grey[..., None], 3, axis=-1))
+    frames = grey_drive(phase_shift_frames(spec))
     frames.setflags(write=False)
     return frames
 
