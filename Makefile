@@ -61,6 +61,7 @@ test-fast: setup
 bench: setup
 	$(VENV)/bin/simbench bench --repeats 30
 	$(VENV)/bin/simbench bench --scene shadow --repeats 30
+	$(VENV)/bin/simbench bench --rig results/calibration/rig.toml --mode calibrated --repeats 10
 
 clean:
 	rm -rf $(VENV) .pytest_cache .benchmarks .cache

@@ -106,3 +106,14 @@ def test_benchmark_with_another_rig_and_mode():
         run_decode_benchmark(repeats=1, rig=scale_camera(rig, 0.5))
     with pytest.raises(ValueError, match="proposed decoder"):
         run_decode_benchmark(repeats=1, device="tof", mode="calibrated")
+
+
+@pytest.mark.parametrize(
+    ("device", "size_wh"),
+    [("proposed", [1280, 960]), ("kinect", [640, 480]), ("tof", [176, 144]), ("phase_shift", [1280, 960])],
+)
+def test_benchmark_reports_each_systems_image_size(device, size_wh):
+    """An image, an image of taps and a multi-shot stack of frames (K, H, W) alike."""
+    from simbench.experiments.bench import run_decode_benchmark
+
+    assert run_decode_benchmark(repeats=1, warmup=0, device=device)["size_wh"] == size_wh

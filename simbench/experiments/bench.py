@@ -81,7 +81,8 @@ def run_decode_benchmark(
         raise ValueError(f"unknown decoder mode {mode!r}; valid: {list(MODES)}")
     system = get_system(device)
     raw, cal, spec = system.bench_inputs(scene=scene)
-    h, w = raw.shape[:2]
+    # an image (H, W), (H, W, channels or taps), or a multi-shot stack of frames (K, H, W)
+    h, w = raw.shape[1:3] if raw.ndim == 3 and raw.shape[2] > 4 else raw.shape[:2]
     if rig is not None:
         if rig.camera.size_hw != (h, w):
             raise ValueError(
