@@ -143,16 +143,8 @@ def cached_radiance(
 
     if cache is None:
         return render()
-    parts = _radiance_parts(scene, drive, **kw)
-    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
-
-
-def _radiance_parts(
-    scene: SceneSpec, drive: "np.ndarray | DriveImage | None", *, spp: int, seed: int, max_depth: int, sampler: str
-) -> dict:
-    """The render cache key's parts of a :func:`cached_radiance` render."""
-    digest = "off" if drive is None else (drive.digest if isinstance(drive, DriveImage) else array_digest(drive))
-    return {
+    digest = "off" if drive is None else (drive.digest if lazy else array_digest(drive))
+    parts = {
         "scene": scene_fingerprint(scene),
         "drive": digest,
         "spp": int(spp),
@@ -161,6 +153,7 @@ def _radiance_parts(
         "sampler": sampler,
         **_renderer_id(),
     }
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
 
 
 def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
@@ -318,30 +311,33 @@ class ProjectorDrive:
             out[f"mono{p}"] = array_digest(m) if m.any() else ""  # "" = the primary lights nothing
         return out
 
+    def inputs(self) -> dict:
+        """Everything the drive is made from (pattern bytes, projector model, exposure phase,
+        rig, the scene's geometry when defocus depends on it, the code that builds drives):
+        a key for what depends on the drive, known without building it."""
+        prj = self._sensor.projector
+        scene = self._scene
+        return {
+            "pattern": array_digest(self._pattern),
+            "projector": sensor_to_dict(self._sensor)["projector"],
+            "bitplane_weights": None if self._weights is None else self._weights.tolist(),
+            "rig": rig_to_dict(scene.rig),
+            "geometry": scene_fingerprint(dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0)))
+            if prj.lens.defocus
+            else None,
+            "stride": PROJECTOR_DEPTH_STRIDE,
+            "code": _drive_code_digest(),
+            **_renderer_id(),
+        }
+
     def digests(self) -> dict[str, str]:
         if self._digests is None:
             if self._cache is None or self._cache.root is None:
                 self._digests = self._compute_digests()
             else:
-                prj = self._sensor.projector
-                scene = self._scene
-                inputs = {
-                    "pattern": array_digest(self._pattern),
-                    "projector": sensor_to_dict(self._sensor)["projector"],
-                    "bitplane_weights": None if self._weights is None else self._weights.tolist(),
-                    "rig": rig_to_dict(scene.rig),
-                    "geometry": scene_fingerprint(
-                        dataclasses.replace(scene, camera_lens=None, ambient_rgb=(0.0, 0.0, 0.0))
-                    )
-                    if prj.lens.defocus
-                    else None,
-                    "stride": PROJECTOR_DEPTH_STRIDE,
-                    "code": _drive_code_digest(),
-                    **_renderer_id(),
-                }
                 arrays = self._cache.get_or_make(
                     "drive_digests",
-                    inputs,
+                    self.inputs(),
                     lambda: {k: np.frombuffer(v.encode(), np.uint8) for k, v in self._compute_digests().items()},
                 )
                 self._digests = {k: bytes(np.asarray(v, np.uint8)).decode() for k, v in arrays.items()}
@@ -476,16 +472,6 @@ def _sum_channels(groups: list, scene: SceneSpec, render: RenderSettings) -> np.
     return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
 
 
-def _plan_parts(groups: list, render: RenderSettings) -> list:
-    """The cache key's parts of everything a :func:`_channel_plan` reads."""
-    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler}
-
-    def one(r: _Render | None):
-        return None if r is None else _radiance_parts(r.scene, r.drive, seed=r.seed, **kw)
-
-    return [[one(main), one(amb), None if w is None else w.tolist()] for main, amb, w in groups]
-
-
 def _white_board(scene: SceneSpec) -> dict:
     """The white reference board the camera's exposure and white balance are set on."""
     return {
@@ -520,32 +506,35 @@ def record_channels(
     """``[record(render_channels(...), rng=n) for n in rngs]``: one render of the scene
     recorded once per noise seed, each recording looked up in / stored to ``render.cache``.
 
-    A recording is a pure function of its renders, the camera's distortion and noise model,
-    the exposure and white balance, and its integer noise seed; it is cached under those (the
-    renders by their own cache keys, the exposure numbers by value, the sensor model, the
-    versions of numpy and OpenCV that draw the noise and demosaic, and the bytes of the code
-    between radiance and recording), so a run whose recordings are cached reads neither renders
-    nor draws noise.  A seed that is not an integer (a Generator) is recorded afresh.
+    A recording is a pure function of what its renders are made from and of the camera; it is
+    cached under those inputs - the scene's render fingerprint, the drive's inputs
+    (:meth:`ProjectorDrive.inputs`, or an array's digest), the render seed and settings, the
+    renderer, the sensor model, the exposure numbers by value, the noise seed, the versions of
+    numpy, OpenCV and colour-science (noise draws, demosaicing, crosstalk data) and the bytes of
+    the code between a scene and a recording - so a run whose recordings are cached builds no
+    drive, reads no render and draws no noise.  A seed that is not an integer or a SeedSequence
+    (a Generator) is recorded afresh.
     """
-    groups = _channel_plan(scene, drive, sensor, seed=seed)
     q: np.ndarray | None = None
 
     def recorded(n) -> np.ndarray:
         nonlocal q
         if q is None:
-            q = _sum_channels(groups, scene, render)
+            q = _sum_channels(_channel_plan(scene, drive, sensor, seed=seed), scene, render)
         return record(q, sensor=sensor, scene=scene, rng=n)
 
     cache = render.cache
     if cache is None or cache.root is None:
         return [recorded(n) for n in rngs]
     base = {
-        "channels": _plan_parts(groups, render),
-        "rig": rig_to_dict(scene.rig),
+        "scene": scene_fingerprint(scene),
+        "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
+        "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
         "sensor": sensor_to_dict(sensor),
         "exposure": _recording_settings(sensor, scene),
         "code": _recording_code_digest(),
         **_recording_libraries(),
+        **_renderer_id(),
     }
     out = []
     for n in rngs:
@@ -591,27 +580,45 @@ def _recording_settings(sensor: SensorModel, scene: SceneSpec) -> dict:
 
 @lru_cache(maxsize=1)
 def _recording_code_digest() -> str:
-    """SHA-256 of the code between a render and a recording: the channel sum and the camera
+    """SHA-256 of the code between a scene and a recording: the renders (scene dicts, render
+    calls; also behind RENDER_VERSION, which every key holds), the channel sum and the camera
     (this module, the sensor and photometry models, spectral data handling, the lens model and
     its compiled maps)."""
     import simbench.device
+    import simbench.mitsuba_dict
     import simbench.native
     import simbench.optics
     import simbench.photometry
+    import simbench.render
     import simbench.sensor
     import simbench.spectral
 
-    modules = (simbench.sensor, simbench.photometry, simbench.spectral, simbench.device, simbench.optics)
+    modules = (
+        simbench.sensor,
+        simbench.photometry,
+        simbench.spectral,
+        simbench.device,
+        simbench.optics,
+        simbench.render,
+        simbench.mitsuba_dict,
+    )
     return source_digest([*(m.__file__ for m in modules), sys.modules[__name__].__file__, simbench.native.SOURCE])
 
 
 @lru_cache(maxsize=1)
 def _recording_libraries() -> dict:
-    """The libraries whose algorithms a recording's bits depend on: numpy (the noise draws),
-    OpenCV (demosaicing, remapping)."""
+    """The libraries whose algorithms or data a recording's bits depend on: numpy (the noise
+    draws), OpenCV (demosaicing, remapping), colour-science (the crosstalk of the primaries'
+    renders; its version read without importing it)."""
+    from importlib import metadata
+
     import cv2
 
-    return {"numpy": np.__version__, "opencv": cv2.__version__}
+    try:
+        colour = metadata.version("colour-science")
+    except metadata.PackageNotFoundError:
+        colour = "not installed"
+    return {"numpy": np.__version__, "opencv": cv2.__version__, "colour-science": colour}
 
 
 def acquire(

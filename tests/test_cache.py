@@ -181,9 +181,10 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
 
 def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, variant, monkeypatch):
     """record_channels gives record(render_channels(...)) for each noise seed (an integer or a
-    SeedSequence); a second call reads the cached recordings, neither renders nor camera noise
-    (renders deleted, the camera model broken); another seed, sensor setting or reference depth
-    is another recording; a Generator is recorded afresh, never cached."""
+    SeedSequence); a second call reads the cached recordings, neither renders, drive digests nor
+    camera noise (renders deleted, the camera model and the digests broken); another noise seed,
+    sensor setting, reference depth, pattern or render seed is another recording; a Generator is
+    recorded afresh, never cached."""
     from simbench import simulate
     from simbench.device import get_sensor
     from simbench.mitsuba_dict import RenderSettings
@@ -207,9 +208,11 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     cached = dataclasses.replace(plain, cache=cache)
 
     def recordings(**kw):
-        args = {"scene": scene, "sensor": sensor, "seeds": seeds} | kw
-        drive = ProjectorDrive(args["scene"], pattern, args["sensor"], cache=cache)
-        return record_channels(args["scene"], drive, args["sensor"], seed=3, render=cached, rngs=args["seeds"])
+        args = {"scene": scene, "sensor": sensor, "seeds": seeds, "pattern": pattern, "seed": 3} | kw
+        drive = ProjectorDrive(args["scene"], args["pattern"], args["sensor"], cache=cache)
+        return record_channels(
+            args["scene"], drive, args["sensor"], seed=args["seed"], render=cached, rngs=args["seeds"]
+        )
 
     first = recordings()
     for a, b in zip(first, fresh):
@@ -224,6 +227,7 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
 
     with monkeypatch.context() as m:
         m.setattr(simulate, "emva_camera", broken)
+        m.setattr(ProjectorDrive, "digests", broken)  # keyed by the drive's inputs: no digest read
         again = recordings()
     for a, b in zip(again, first):
         assert np.array_equal(a, b)
@@ -235,7 +239,9 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     recordings(seeds=[12])
     recordings(sensor=noisier, seeds=[11])
     recordings(scene=farther, seeds=[11])
-    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 6
+    recordings(pattern=pattern[:, ::-1].copy(), seeds=[11])
+    recordings(seed=4, seeds=[11])
+    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 8
     assert cache.misses > made
     recordings(seeds=[np.random.default_rng(11)])
-    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 6
+    assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 8
