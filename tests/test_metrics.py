@@ -49,3 +49,30 @@ def test_points_from_depth():
     cam = Intrinsics.centred(3, 3, 1.0)
     p = points_from_depth(np.full((3, 3), 2.0), cam)
     assert np.allclose(p[0, 0], [-2, -2, 2])
+
+
+@pytest.mark.parametrize("scale", [0.25, 0.5, 1.0])
+def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
+    """The Table 1 protocol computed on the counted pixels only equals, bit for bit, the form
+    that made every pixel's point first (tests/numpy_reference.py): the same products, the mean
+    summed in the same order, the same scatter matrix."""
+    from simbench.metrics import plane_fit_error
+    from simbench.rig import paper_rig, scale_camera
+    from tests import numpy_reference as ref
+
+    cam = scale_camera(paper_rig(), scale).camera
+    rng = np.random.default_rng(int(scale * 8))
+    h, w = cam.size_hw
+    y, x = np.mgrid[:h, :w]
+    depth = (1.1 + 2e-4 * (x - w / 2) - 1e-4 * (y - h / 3) + rng.normal(0, 3e-4, (h, w))).astype(np.float32)
+    depth[rng.random((h, w)) < 0.1] = np.nan
+    depth[: h // 5, : w // 4] = np.nan
+    mask = rng.random((h, w)) < 0.8
+    for m in (None, mask):
+        got, want = plane_fit_error(depth, cam, mask=m), ref.plane_fit_error(depth, cam, mask=m)
+        assert got == want and got["n_points"] > 1000
+    few = np.full((h, w), np.nan, np.float32)
+    few[5, 5:20] = 1.0
+    assert plane_fit_error(few, cam)["n_points"] == 15 and np.isnan(plane_fit_error(few, cam)["mean_abs_residual_mm"])
+    with pytest.raises(ValueError, match="does not match the camera"):
+        plane_fit_error(depth[:, :-1], cam)
