@@ -20,7 +20,7 @@ from simbench.rig import Intrinsics, pixel_rays
 if TYPE_CHECKING:
     from simbench.truth import GroundTruth
 
-__all__ = ["edge_band", "depth_errors", "plane_fit_error", "points_from_depth", "score"]
+__all__ = ["edge_band", "depth_errors", "plane_fit_error", "fit_plane", "points_from_depth", "score"]
 
 
 def edge_band(
@@ -174,7 +174,16 @@ def plane_fit_error(
         ok &= mask
     # the points of the pixels that count only (points_from_depth(depth_m, camera)[ok], the
     # same products without the whole image's)
-    p = _rays(camera)[ok] * d[ok][:, None]
+    return fit_plane(_rays(camera)[ok] * d[ok][:, None], min_points=min_points)
+
+
+def fit_plane(points_m: np.ndarray, *, min_points: int = MIN_PLANE_POINTS) -> dict:
+    """The least-squares plane through ``points_m`` (N, 3), float64 metres, and the residuals
+    of the points from it (:func:`plane_fit_error`'s scores; NaN with fewer than
+    ``min_points`` points)."""
+    p = np.asarray(points_m, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"points_m must have shape (N, 3), got {p.shape}")
     if len(p) < max(3, min_points):
         return {
             "mean_abs_residual_mm": float("nan"),

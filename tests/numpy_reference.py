@@ -379,23 +379,12 @@ def triangulate_columns(column_px: np.ndarray, rig, *, rows: np.ndarray = None, 
 
 def plane_fit_error(depth_m: np.ndarray, camera, *, mask: np.ndarray | None = None, min_points: int = 100) -> dict:
     """simbench.metrics.plane_fit_error as first written: every pixel's point, then the masked
-    ones, their mean by ``mean(axis=0)`` and the scatter matrix of the centred points."""
+    ones (the plane fit itself is simbench.metrics.fit_plane's)."""
+    from simbench.metrics import fit_plane
     from simbench.rig import pixel_rays
 
     pts = pixel_rays(camera) * np.asarray(depth_m, dtype=np.float64)[..., None]
     ok = np.isfinite(pts[..., 2])
     if mask is not None:
         ok &= mask
-    p = pts[ok]
-    if len(p) < max(3, min_points):
-        return {"n_points": int(len(p))}
-    q = p - p.mean(axis=0)
-    _, vecs = np.linalg.eigh(q.T @ q)
-    normal = vecs[:, 0]
-    r = q @ normal * 1000.0
-    return {
-        "mean_abs_residual_mm": float(np.mean(np.abs(r))),
-        "rms_residual_mm": float(np.sqrt(np.mean(r**2))),
-        "normal": [float(x) for x in normal],
-        "n_points": int(len(p)),
-    }
+    return fit_plane(pts[ok], min_points=min_points)

@@ -54,9 +54,9 @@ def test_points_from_depth():
 @pytest.mark.parametrize("scale", [0.25, 0.5, 1.0])
 def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
     """The Table 1 protocol computed on the counted pixels only equals, bit for bit, the form
-    that made every pixel's point first (tests/numpy_reference.py): the same products, the mean
-    summed in the same order, the same scatter matrix."""
-    from simbench.metrics import plane_fit_error
+    that made every pixel's point first (tests/numpy_reference.py): the same points in the same
+    order go to the same plane fit (simbench.metrics.fit_plane)."""
+    from simbench.metrics import fit_plane, plane_fit_error
     from simbench.rig import paper_rig, scale_camera
     from tests import numpy_reference as ref
 
@@ -76,3 +76,5 @@ def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
     assert plane_fit_error(few, cam)["n_points"] == 15 and np.isnan(plane_fit_error(few, cam)["mean_abs_residual_mm"])
     with pytest.raises(ValueError, match="does not match the camera"):
         plane_fit_error(depth[:, :-1], cam)
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        fit_plane(np.zeros((200, 2)))
