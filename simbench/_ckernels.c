@@ -866,7 +866,6 @@ static inline void emit(int64_t j, float z, float amplitude, float column, int32
 typedef struct {
     double u[TL], rx[TL], ry[TL];
     int64_t at[TL];
-    float column[TL];
     int32_t index[TL];
     int m;
 } Pending;
@@ -881,7 +880,8 @@ static void flush(Pending *q, const float *restrict amplitude, const double *res
     triangulate_lanes(q->u, q->rx, q->ry, rig, distorted, newton_steps, refine_steps, z);
     for (int l = 0; l < q->m; l++) {
         const int64_t j = q->at[l];
-        emit(j, (float)z[l], amplitude[j], q->column[l], q->index[l], zmin, zmax, depth_out, valid_out, conf_out,
+        /* u holds the float32 column exactly */
+        emit(j, (float)z[l], amplitude[j], (float)q->u[l], q->index[l], zmin, zmax, depth_out, valid_out, conf_out,
              col_out, index_out);
     }
     q->m = 0;
@@ -971,7 +971,6 @@ void decode_tail(int64_t h, int64_t w, int64_t row0, const int32_t *restrict lab
             q.rx[q.m] = ((double)x - cxc) / fc;
             q.ry[q.m] = ry;
             q.at[q.m] = o + x;
-            q.column[q.m] = column[x];
             q.index[q.m] = index[x];
             if (++q.m == TL)
                 flush(&q, amplitude, rig, distorted, newton_steps, refine_steps, zmin, zmax, depth_out, valid_out,

@@ -419,6 +419,13 @@ def triangulation_values(rig: Rig) -> np.ndarray:
     return np.array(values + [float(x) for x in prj.distortion], np.float64)
 
 
+def triangulation_steps(rig: Rig) -> tuple[bool, int, int]:
+    """How the compiled triangulation treats ``rig``'s projector: (undo its lens distortion,
+    Newton steps per undistortion, fixed-point steps for the row where the point lands - none
+    in a rectified rig, where it is the camera pixel's)."""
+    return rig.projector.has_distortion, COLUMN_NEWTON_STEPS, 0 if rig.is_rectified else TRIANGULATION_ITERATIONS
+
+
 def triangulate_columns(
     column_px: np.ndarray, rig: Rig, *, rows: np.ndarray = None, cols: np.ndarray = None, row0: int = 0
 ) -> np.ndarray:
@@ -460,7 +467,7 @@ def triangulate_columns(
         r64, c64 = (np.ascontiguousarray(np.broadcast_to(a, col.shape), np.float64) for a in (rows, cols))
         r_ptr, c_ptr = r64.ctypes.data, c64.ctypes.data
         grid_w = 1
-    prj = rig.projector
+    distorted, newton_steps, refine_steps = triangulation_steps(rig)
     native.bind(_TRIANGULATE).triangulate_columns(
         col.size,
         col.ctypes.data,
@@ -469,9 +476,9 @@ def triangulate_columns(
         int(row0),
         grid_w,
         triangulation_values(rig).ctypes.data,
-        int(prj.has_distortion),
-        COLUMN_NEWTON_STEPS,
-        0 if rig.is_rectified else TRIANGULATION_ITERATIONS,
+        int(distorted),
+        newton_steps,
+        refine_steps,
         out.ctypes.data,
     )
     return out

@@ -410,65 +410,26 @@ def render_channels(
     -------
     ndarray, shape (H, W, 3), float32, in units of each channel's own primary
     """
-    return _sum_channels(_channel_plan(scene, drive, sensor, seed=seed), scene, render)
-
-
-@dataclass(frozen=True)
-class _Render:
-    """One :func:`cached_radiance` render of :func:`render_channels`: ``drive`` None is the
-    ambient light alone."""
-
-    scene: SceneSpec
-    drive: "np.ndarray | DriveImage | None"
-    seed: int
-
-
-def _channel_plan(
-    scene: SceneSpec, drive: "np.ndarray | ProjectorDrive", sensor: SensorModel, *, seed: int
-) -> list[tuple[_Render | None, _Render | None, np.ndarray | None]]:
-    """The renders :func:`render_channels` sums, without rendering or reading them: per group
-    (one group, or one per primary with crosstalk) the projector's render (None: the primary
-    lights nothing), the ambient light's (None: no ambient light) and the channel weights
-    (None without crosstalk)."""
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
+    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
     lazy = isinstance(drive, ProjectorDrive)
     if not sensor.crosstalk:
-        amb = _Render(scene, None, _ambient_seed(seed)) if ambient else None
-        return [(_Render(dark, drive.image() if lazy else drive, seed), amb, None)]
-    weights = channel_weights(sensor, scene.rig)
-    groups = []
-    for p in range(3):
-        mono = drive.primary(p) if lazy else _mono(drive, p)
-        # the same seed for each primary: the sum has one render's sampling pattern; a
-        # primary the drive leaves off (calibration frames) lights nothing
-        lit = mono is not None if lazy else mono.any()
-        amb = _Render(_primary_scene(scene, p), None, _ambient_seed(seed)) if ambient else None
-        groups.append(
-            (_Render(_primary_scene(dark, p), mono, seed) if lit else None, amb, weights[:, p].astype(np.float32))
-        )
-    return groups
-
-
-def _sum_channels(groups: list, scene: SceneSpec, render: RenderSettings) -> np.ndarray:
-    """:func:`render_channels` of a :func:`_channel_plan`."""
-    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
-
-    def radiance(r: _Render) -> np.ndarray:
-        return cached_radiance(r.scene, r.drive, seed=r.seed, **kw)
-
-    if groups[0][2] is None:  # no crosstalk: one render per channel's own primary
-        main, amb, _ = groups[0]
-        q = radiance(main)
-        if amb is not None:
-            q = q + radiance(amb)
+        q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
+        if ambient:
+            q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
     else:
+        weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
-        for main, amb, w in groups:
-            r = radiance(main) if main is not None else np.zeros_like(q)
-            if amb is not None:
-                r = r + radiance(amb)
-            q += r * w
+        for p in range(3):
+            mono = drive.primary(p) if lazy else _mono(drive, p)
+            # the same seed for each primary: the sum has one render's sampling pattern; a
+            # primary the drive leaves off (calibration frames) lights nothing
+            lit = mono is not None if lazy else mono.any()
+            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if lit else np.zeros_like(q)
+            if ambient:
+                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
+            q += r * weights[:, p].astype(np.float32)
     return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
 
 
@@ -487,11 +448,16 @@ def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike
     cam = sensor.camera
     if isinstance(cam, SimpleCamera):
         return simple_camera(q, camera=cam, rng=rng)
+    t, per_radiance, gains = _camera_settings(sensor, scene)
+    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, white_balance=gains, rng=rng)
+
+
+def _camera_settings(sensor: SensorModel, scene: SceneSpec) -> tuple[float, np.ndarray, np.ndarray]:
+    """The physical camera's exposure, electrons per unit radiance over it and white-balance
+    gains, all set on the white reference board."""
     board = _white_board(scene)
     t = exposure_s(sensor, scene.rig, **board)
-    per_radiance = electrons_per_radiance_s(sensor, scene.rig) * t
-    gains = white_balance_gains(sensor, scene.rig, **board)
-    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, white_balance=gains, rng=rng)
+    return t, electrons_per_radiance_s(sensor, scene.rig) * t, white_balance_gains(sensor, scene.rig, **board)
 
 
 def record_channels(
@@ -520,7 +486,7 @@ def record_channels(
     def recorded(n) -> np.ndarray:
         nonlocal q
         if q is None:
-            q = _sum_channels(_channel_plan(scene, drive, sensor, seed=seed), scene, render)
+            q = render_channels(scene, drive, sensor, seed=seed, render=render)
         return record(q, sensor=sensor, scene=scene, rng=n)
 
     cache = render.cache
@@ -569,12 +535,11 @@ def _recording_settings(sensor: SensorModel, scene: SceneSpec) -> dict:
     and photometry, whatever their source)."""
     if isinstance(sensor.camera, SimpleCamera):
         return {}
-    board = _white_board(scene)
-    t = exposure_s(sensor, scene.rig, **board)
+    t, per_radiance, gains = _camera_settings(sensor, scene)
     return {
         "exposure_s": float(t),
-        "electrons_per_radiance": (electrons_per_radiance_s(sensor, scene.rig) * t).tolist(),
-        "white_balance": np.asarray(white_balance_gains(sensor, scene.rig, **board)).tolist(),
+        "electrons_per_radiance": np.asarray(per_radiance).tolist(),
+        "white_balance": np.asarray(gains).tolist(),
     }
 
 

@@ -8,7 +8,9 @@
   capture shows the same projector column gives the disparity ``d = x - x_r`` and
   ``1/Z = 1/Z0 + d/(f*B)``, which is Eq. 15 (``Z = f*B/d_total``) with the reference's own
   disparity ``f*B/Z0`` added.  Exact for a rectified rig (parallel axes, baseline along x).
-* Calibrated mode: the camera ray meets the plane of the projector column (any rig pose).
+* Calibrated mode: the camera ray meets the plane of the projector column (any rig pose;
+  :func:`simbench.rig.triangulate_columns`, in the decoder fused into
+  :func:`simbench.decode._kernels.decode_tail`).
 """
 
 from __future__ import annotations
@@ -16,9 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from simbench.decode import _kernels
-from simbench.rig import Rig, triangulate_columns
 
-__all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity", "depth_calibrated"]
+__all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity"]
 
 
 def absolute_column(
@@ -135,16 +136,3 @@ def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: floa
     out = np.empty(x_ref.shape, np.float32)
     _kernels.depth_from_disparity(x_ref, np.float32(1.0 / z0_m), np.float32(1.0 / (focal_px * baseline_m)), out)
     return out
-
-
-def depth_calibrated(column: np.ndarray, rig: Rig, *, row0: int = 0) -> np.ndarray:
-    """Depth by intersecting each camera ray with its projector column's plane.
-
-    ``row0`` is the image row of ``column``'s first row when it is a band of the image.
-
-    References
-    ----------
-    .. [1] F. Li et al., "Single-Shot Dense Depth Sensing with Color Sequence Coded Fringe
-       Pattern", Sensors 17(11), 2558, 2017, Eq. 15.
-    """
-    return triangulate_columns(column, rig, row0=row0)

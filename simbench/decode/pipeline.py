@@ -48,13 +48,7 @@ from simbench.pattern import (
     code_sequence,
     window_positions,
 )
-from simbench.rig import (
-    COLUMN_NEWTON_STEPS,
-    TRIANGULATION_ITERATIONS,
-    Rig,
-    projector_column_at_depth,
-    triangulation_values,
-)
+from simbench.rig import Rig, projector_column_at_depth, triangulation_steps, triangulation_values
 
 __all__ = [
     "DecoderParams",
@@ -448,7 +442,7 @@ def _columns(
     params: DecoderParams,
     crop: slice,
     unmixing: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, LazyStages]:
+) -> tuple[BandStripes, LazyStages]:
     """Stages 1-3 for one band of rows.
 
     ``image`` is the band of the checked capture (any dtype :func:`as_float_image` takes,
@@ -778,7 +772,7 @@ def decode(
         ref = None  # calibrated mode uses the reference for its coupling matrix only
         expected = _plane_columns(rig, 2.0 / (1.0 / zmin + 1.0 / zmax))
     rig_values = triangulation_values(rig)
-    prj = rig.projector
+    distorted, newton_steps, refine_steps = triangulation_steps(rig)
     depth_out = np.empty((h, w), np.float32)
     valid_out = np.empty((h, w), bool)
     conf_out = np.empty((h, w), np.float32)
@@ -805,9 +799,9 @@ def decode(
                 inv_z0=1.0 / ref.z0_m if ref is not None else 0.0,
                 inv_fb=inv_fb,
                 rig_values=rig_values,
-                distorted=prj.has_distortion,
-                newton_steps=COLUMN_NEWTON_STEPS,
-                refine_steps=0 if rig.is_rectified else TRIANGULATION_ITERATIONS,
+                distorted=distorted,
+                newton_steps=newton_steps,
+                refine_steps=refine_steps,
                 zmin=zmin,
                 zmax=zmax,
                 depth_out=depth_out[rows],

@@ -247,7 +247,6 @@ class ColourFringeSystem:
         light, which sends the decoder down the path every scene with shadows takes).
         """
         from simbench.device import get_sensor
-        from simbench.pattern import fringe_pattern, quantize
         from simbench.projector import transfer_curve
         from simbench.rig import paper_rig
         from simbench.sensor import simple_camera
@@ -257,7 +256,7 @@ class ColourFringeSystem:
             raise ValueError(f"unknown benchmark scene {scene!r}; valid: {list(BENCH_SCENES)}")
         rig = paper_rig()
         pattern = dataclasses.replace(self.pattern, size_hw=rig.projector.size_hw)
-        drive = transfer_curve(quantize(fringe_pattern(pattern)), transfer="linear")
+        drive = transfer_curve(pattern_u8(pattern), transfer="linear")
         cam = get_sensor("minimal").camera
         rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.1), supersample=2)
         ref_rad, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=2)
