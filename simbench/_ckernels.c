@@ -37,12 +37,16 @@
  * b1 = G*(cI cos), b2 = G*(cI sin), e2 = G*(cI I); certainty s1 = G*c, sc = G*(c cos),
  * ss = G*(c sin), sc2 = G*(c cos2), ss2 = G*(c sin2).  The normal equations M p = b with
  * M = [[s1, sc, ss], [sc, scc, scs], [ss, scs, sss]] are solved by the adjugate, in the operation
- * order of the numpy form (_solver and gabor_phase in tests/numpy_reference.py). */
-static inline void fit_pixel(float s1, float sc, float ss, float sc2, float ss2, float c, float s, float d0, float d1,
-                             float d2, float e2, float *restrict re, float *restrict im, float *restrict a0,
-                             float *restrict amp, float *restrict residual) {
+ * order of the numpy form (_solver and gabor_phase in tests/numpy_reference.py).
+ *
+ * In two steps: the solver's rows from the certainty sums alone (fit_solver: k (offset), p (re),
+ * q (im), 1/s1, all 0 where the window is too thin or the system near-singular), then their
+ * products with the data (fit_apply).  A window wholly certain has the certainty sums of an
+ * all-ones band, so its solver can be made once (gabor_band's table). */
+enum { SOLVER = 10 }; /* k0 k1 k2 p0 p1 p2 q0 q1 q2 inv_s1 */
+static inline void fit_solver(float s1, float sc, float ss, float sc2, float ss2, float c, float s,
+                              float *restrict k) {
     const float half = 0.5f, zero = 0.0f, one = 1.0f, s_min = 0.05f, det_min = 1e-4f;
-    const float rms = (float)0.70710678118654752440;
     const float scc = half * (s1 + sc2);
     const float sss = half * (s1 - sc2);
     const float scs = half * ss2;
@@ -55,17 +59,28 @@ static inline void fit_pixel(float s1, float sc, float ss, float sc2, float ss2,
     const float det = s1 * c00 + sc * c01 + ss * c02;
     const int good = (s1 > s_min) & (det > det_min * s1 * s1 * s1);
     const float inv = good ? one / det : zero;
-    const float inv_s1 = good ? one / s1 : zero;
-    const float k0 = c00 * inv, k1 = c01 * inv, k2 = c02 * inv;
-    const float p0 = (c01 * c + c02 * s) * inv;
-    const float p1 = (c11 * c + c12 * s) * inv;
-    const float p2 = (c12 * c + c22 * s) * inv;
-    const float q0 = (c01 * s - c02 * c) * inv;
-    const float q1 = (c11 * s - c12 * c) * inv;
-    const float q2 = (c12 * s - c22 * c) * inv;
-    const float a = k0 * d0 + k1 * d1 + k2 * d2;
-    const float r = p0 * d0 + p1 * d1 + p2 * d2;
-    const float i = q0 * d0 + q1 * d1 + q2 * d2;
+    k[9] = good ? one / s1 : zero;
+    k[0] = c00 * inv, k[1] = c01 * inv, k[2] = c02 * inv;
+    k[3] = (c01 * c + c02 * s) * inv;
+    k[4] = (c11 * c + c12 * s) * inv;
+    k[5] = (c12 * c + c22 * s) * inv;
+    k[6] = (c01 * s - c02 * c) * inv;
+    k[7] = (c11 * s - c12 * c) * inv;
+    k[8] = (c12 * s - c22 * c) * inv;
+}
+
+/* The fit of one pixel from its solver k (fit_solver; good where k[9] = 1/s1 is not 0) and data
+ * sums: offset a0, re, im, amplitude (0 where not good) and the RMS residual relative to
+ * amp/sqrt 2 (inf where not good or amp is 0). */
+static inline void fit_apply(const float *restrict k, float c, float s, float d0, float d1, float d2, float e2,
+                             float *restrict re, float *restrict im, float *restrict a0, float *restrict amp,
+                             float *restrict residual) {
+    const float zero = 0.0f;
+    const float rms = (float)0.70710678118654752440;
+    const int good = k[9] != zero;
+    const float a = k[0] * d0 + k[1] * d1 + k[2] * d2;
+    const float r = k[3] * d0 + k[4] * d1 + k[5] * d2;
+    const float i = k[6] * d0 + k[7] * d1 + k[8] * d2;
     *a0 = a;
     *re = r;
     *im = i;
@@ -74,7 +89,7 @@ static inline void fit_pixel(float s1, float sc, float ss, float sc2, float ss2,
     e = e - (c * d1 + s * d2) * r;
     e = e - (s * d1 - c * d2) * i;
     e = e < zero ? zero : e; /* np.maximum(e, 0): NaN stays NaN */
-    e = sqrtf(e * inv_s1);
+    e = sqrtf(e * k[9]);
     const float t = m * rms;
     *amp = good ? m : zero;
     *residual = (good & (m > zero)) ? e / t : INFINITY;
@@ -155,13 +170,14 @@ ROW_FN void row_sums(int64_t w, int64_t r, const float *restrict p, const float 
     }
 }
 
-/* The vertical window sum of one plane at one output row: out = ky0 row[0] + sum ky_k (row[-k] +
- * row[k]), rows given by pointers (a zero row beyond the image); 32 pixels per block. */
-ROW_FN void column_sums(int64_t w, int64_t r, const float *const *rows, const float *restrict ky,
+/* The vertical window sum of one plane at one output row, columns [x0, x1): out = ky0 row[0] +
+ * sum ky_k (row[-k] + row[k]), rows given by pointers (a zero row beyond the image); 32 pixels
+ * per block (lane-wise, so a column's bits do not depend on the range it is summed in). */
+ROW_FN void column_sums(int64_t x0, int64_t x1, int64_t r, const float *const *rows, const float *restrict ky,
                         float *restrict out) {
     enum { NV = 4 };
-    int64_t x = 0;
-    for (; x + 8 * NV <= w; x += 8 * NV) {
+    int64_t x = x0;
+    for (; x + 8 * NV <= x1; x += 8 * NV) {
         v8f acc[NV];
         for (int v = 0; v < NV; v++) acc[v] = ky[0] * ld8(rows[0] + x + 8 * v);
         for (int64_t k = 1; k <= r; k++) {
@@ -170,7 +186,7 @@ ROW_FN void column_sums(int64_t w, int64_t r, const float *const *rows, const fl
         }
         for (int v = 0; v < NV; v++) st8(out + x + 8 * v, acc[v]);
     }
-    for (; x < w; x++) {
+    for (; x < x1; x++) {
         float acc = ky[0] * rows[0][x];
         for (int64_t k = 1; k <= r; k++) acc += ky[k] * (rows[-k][x] + rows[k][x]);
         out[x] = acc;
@@ -225,96 +241,207 @@ ROW_FN void input_rows(int64_t w, const float *restrict I, const float *restrict
     if (p_c != NULL) copy_row(w, c, p_c);
 }
 
-/* The fit and the phase of one output row (see gabor_band). */
+/* psi = atan2(im, re) in [-pi, pi): I ~ a0 + R cos(w x - theta), the local phase w x - theta */
+static inline float phase_of(float re, float im) {
+    const float psi = atan2_poly(im, re);
+    return psi >= PI_F ? psi - TWO_PI_F : psi;
+}
+
+/* The fit and the phase of one output row (see gabor_band) from its certainty sums m0..m4. */
 ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m1, const float *restrict m2,
                     const float *restrict m3, const float *restrict m4, const float *restrict cos1,
                     const float *restrict sin1, const float *restrict v0, const float *restrict v1,
                     const float *restrict v2, const float *restrict v3, float *restrict wrapped,
                     float *restrict amp, float *restrict a0, float *restrict residual, float *restrict support) {
     for (int64_t x = 0; x < w; x++) {
-        float re, im;
-        fit_pixel(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], &re, &im, a0 + x,
-                  amp + x, residual + x);
-        /* I ~ a0 + R cos(w x - theta): the local phase psi = w x - theta = atan2(im, re) */
-        const float psi = atan2_poly(im, re);
-        wrapped[x] = psi >= PI_F ? psi - TWO_PI_F : psi;
+        float k[SOLVER], re, im;
+        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], k);
+        fit_apply(k, cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], &re, &im, a0 + x, amp + x, residual + x);
+        wrapped[x] = phase_of(re, im);
         support[x] = m0[x];
     }
+}
+
+/* fit_row of a row whose every window is wholly certain, from the all-ones band's solver rows
+ * (SOLVER planes of one table row, plane stride `stride`) and its s1 row. */
+ROW_FN void fit_row_solved(int64_t w, const float *restrict solver, int64_t stride, const float *restrict m0,
+                           const float *restrict cos1, const float *restrict sin1, const float *restrict v0,
+                           const float *restrict v1, const float *restrict v2, const float *restrict v3,
+                           float *restrict wrapped, float *restrict amp, float *restrict a0,
+                           float *restrict residual, float *restrict support) {
+    for (int64_t x = 0; x < w; x++) {
+        float k[SOLVER], re, im;
+        for (int j = 0; j < SOLVER; j++) k[j] = solver[j * stride + x];
+        fit_apply(k, cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], &re, &im, a0 + x, amp + x, residual + x);
+        wrapped[x] = phase_of(re, im);
+        support[x] = m0[x];
+    }
+}
+
+/* The solver rows (fit_solver, SOLVER planes of stride `stride`) of one row's certainty sums. */
+ROW_FN void solver_row(int64_t w, const float *restrict m0, const float *restrict m1, const float *restrict m2,
+                       const float *restrict m3, const float *restrict m4, const float *restrict cos1,
+                       const float *restrict sin1, int64_t stride, float *restrict solver) {
+    for (int64_t x = 0; x < w; x++) {
+        float k[SOLVER];
+        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], k);
+        for (int j = 0; j < SOLVER; j++) solver[j * stride + x] = k[j];
+    }
+}
+
+/* The row of the all-certain table (see gabor_band) that holds output row y of an h-row band:
+ * the certainty moments of an all-ones band differ only within ry rows of its top and bottom, so
+ * min(h, 2 ry + 1) rows hold them all (the top ry, one interior row, the bottom ry). */
+static inline int64_t table_row(int64_t y, int64_t h, int64_t ry) {
+    const int64_t n = h < 2 * ry + 1 ? h : 2 * ry + 1;
+    if (n == h || y < ry) return y;
+    return y >= h - ry ? y - (h - n) : ry;
+}
+
+/* The certainty's window sums (s1, sc, ss, sc2, ss2: rows 4-8 of B) of pixels [a, b) of one
+ * output row from the column sums of c in the zero-padded row v_c (columns [a - rx, b + rx)
+ * current); T: row temporaries. */
+static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const float *restrict v_c,
+                           const float *restrict kx, const float *restrict kc1, const float *restrict ks1,
+                           const float *restrict kc2, const float *restrict ks2, const float *restrict cos1,
+                           const float *restrict sin1, const float *restrict cos2, const float *restrict sin2,
+                           float *restrict T, float *restrict B) {
+    float *Gc = T + 4 * w, *Cc = T + 5 * w, *Sc = T + 6 * w, *C2 = T + 7 * w, *S2 = T + 8 * w;
+    float *G2 = B + 3 * w; /* the same as Gc, unused */
+    float *s1 = B + 4 * w, *sc = B + 5 * w, *ss = B + 6 * w, *sc2 = B + 7 * w, *ss2 = B + 8 * w;
+    const int64_t n = b - a;
+    row_sums(n, rx, v_c + a, kx, kc1, ks1, Gc + a, Cc + a, Sc + a);
+    row_sums(n, rx, v_c + a, kx, kc2, ks2, G2 + a, C2 + a, S2 + a);
+    carrier_row(n, Gc + a, Cc + a, Sc + a, cos1 + a, sin1 + a, s1 + a, sc + a, ss + a);
+    carrier_row(n, NULL, C2 + a, S2 + a, cos2 + a, sin2 + a, NULL, sc2 + a, ss2 + a);
 }
 
 /* Normalised-convolution Gabor fit of one band (paper Eq. 10-11; simbench.decode.phase.gabor_phase
  * documents the model): h rows of intensity and certainty in, the fit for rows [y0, y1) out.
  *
- * The window sums of c I, c I cos, c I sin, c I^2 (and, unless the certainty moments come in
- * `moments`, of c, c cos, c sin, c cos2, c sin2) are separable Gaussian sums with zero outside
- * the image, taken along y first: the products c I, c I^2 (and c) of the rows within ry of the
- * output row live in a ring of 2 ry + 1 rows (cache-resident), and their column sums make one
- * padded row per product.  Along x, the sums of f cos(w x') and f sin(w x') come from sums of f
- * itself with the window carrying the carrier (cos(w (x - k)) = cos wx cos wk + sin wx sin wk),
- * so two or three rows feed all nine sums.  Then the per-pixel fit (fit_pixel) and the phase
- * psi = atan2(im, re) in [-pi, pi).
+ * The window sums of c I, c I cos, c I sin, c I^2 and of c, c cos, c sin, c cos2, c sin2 are
+ * separable Gaussian sums with zero outside the image, taken along y first: the products c I,
+ * c I^2 and c of the rows within ry of the output row live in a ring of 2 ry + 1 rows
+ * (cache-resident), and their column sums make one padded row per product.  Along x, the sums
+ * of f cos(w x') and f sin(w x') come from sums of f itself with the window carrying the carrier
+ * (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so one row feeds three sums.  Then the
+ * per-pixel fit (fit_solver, fit_apply) and the phase psi = atan2(im, re) in [-pi, pi).
+ *
+ * The certainty's five sums are half the work, and wherever c is exactly 1 across a pixel's
+ * whole window (inside the image) they are the sums of an all-ones band at that row: the same
+ * operations on the same values, so the same bits.  `table` (TABLE_PLANES planes of
+ * min(h, 2 ry + 1) rows, see table_row) holds those (planes 0-4) and their solver (fit_solver,
+ * planes 5-14); with it, and fill_table 0, only the pixels whose window holds a c != 1 get their
+ * certainty sums computed (a per-column count of such rows in the y window, and its running
+ * count over the x window, find them), and a row with none in reach is fitted with the table's
+ * solver.  With fill_table 1 every sum is computed and the certainty sums and solver are
+ * written into the table (made from an all-ones band).  table NULL: every sum computed,
+ * nothing written.
  *
  * kx, kc1, ks1, kc2, ks2: half kernels (rx + 1) of the x window g, g cos(w k), g sin(w k),
  * g cos(2 w k), g sin(2 w k); ky (ry + 1).  basis: cos1, sin1, cos2, sin2 (w each).
- * moments: NULL, or 5 arrays of (y1 - y0) rows (s1, sc, ss, sc2, ss2) to read (have_moments)
- * or to write (!have_moments).  scratch: gabor_scratch_floats(w, rx, ry) floats.
+ * scratch: gabor_scratch_floats(w, rx, ry) floats.
  * Outputs (y1 - y0) rows: wrapped, amp, a0, residual, support (= s1). */
+enum { TABLE_PLANES = 5 + SOLVER };
+int64_t gabor_table_planes(void) { return TABLE_PLANES; }
+
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 3 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w;
+    return 3 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1;
 }
 
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
                 int64_t y0, int64_t y1, int64_t rx, const float *restrict kx, const float *restrict kc1,
                 const float *restrict ks1, const float *restrict kc2, const float *restrict ks2, int64_t ry,
                 const float *restrict ky, const float *restrict cos1, const float *restrict sin1,
-                const float *restrict cos2, const float *restrict sin2, float *const *moments, int64_t have_moments,
+                const float *restrict cos2, const float *restrict sin2, float *restrict table, int64_t fill_table,
                 float *restrict scratch, float *restrict wrapped, float *restrict amp, float *restrict a0,
                 float *restrict residual, float *restrict support) {
-    const int64_t n_products = have_moments ? 2 : 3; /* c I, c I^2 (, c) */
+    const int skip = table != NULL && !fill_table; /* certain windows' sums from the table */
     const int64_t R = 2 * ry + 1;
     const int64_t pw = w + 2 * rx;
-    float *ring = scratch;               /* n_products rings of R product rows */
-    float *pad = ring + 3 * R * w;       /* n_products zero-padded column-sum rows */
+    const int64_t tw = (h < R ? h : R) * w; /* one table plane */
+    float *ring = scratch;               /* 3 rings of R product rows: c I, c I^2, c */
+    float *pad = ring + 3 * R * w;       /* 3 zero-padded column-sum rows */
     float *T = pad + 3 * pw;             /* 9 row temporaries of the x sums */
     float *B = T + 9 * w;                /* the 9 window sums of the output row */
     float *zero_row = B + 9 * w;         /* w zeros: the rows beyond the image */
+    int32_t *uncertain = (int32_t *)(zero_row + w); /* per column: rows with c != 1 in the y window */
+    int32_t *before = uncertain + w;     /* w + 1: columns with such rows left of x */
     for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
-    for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f;
+    for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f, uncertain[x] = 0;
     float *v_ci = pad + rx, *v_cii = pad + pw + rx, *v_c = pad + 2 * pw + rx;
     float *G = T, *C = T + w, *S = T + 2 * w, *E = T + 3 * w;
-    float *Gc = T + 4 * w, *Cc = T + 5 * w, *Sc = T + 6 * w, *C2 = T + 7 * w, *S2 = T + 8 * w;
-    float *b0 = B, *b1 = B + w, *b2 = B + 2 * w, *G2 = B + 3 * w;
+    float *b0 = B, *b1 = B + w, *b2 = B + 2 * w;
     float *s1 = B + 4 * w, *sc = B + 5 * w, *ss = B + 6 * w, *sc2 = B + 7 * w, *ss2 = B + 8 * w;
     const float *rowp[2 * ry + 1]; /* the rows of one column sum */
-    int64_t next = y0 - ry < 0 ? 0 : y0 - ry; /* the next row whose products are due */
+    int32_t in_row[2 * ry + 1]; /* per ring slot: the row's pixels with c != 1 */
+    int64_t in_window = 0;      /* their sum over the rows in the y window */
+    const int64_t first = y0 - ry < 0 ? 0 : y0 - ry;
+    int64_t next = first; /* the next row whose products are due */
     for (int64_t y = y0; y < y1; y++) {
         const int64_t last = y + ry < h ? y + ry : h - 1;
+        if (skip && y - ry - 1 >= first && in_row[(y - ry - 1) % R] > 0) {
+            const float *c = certainty + (y - ry - 1) * w;
+            for (int64_t x = 0; x < w; x++) uncertain[x] -= c[x] != 1.0f;
+            in_window -= in_row[(y - ry - 1) % R];
+        }
         for (; next <= last; next++) {
             const int64_t slot = (next % R) * w;
-            input_rows(w, intensity + next * w, certainty + next * w, ring + slot, ring + R * w + slot,
-                       have_moments ? NULL : ring + 2 * R * w + slot);
+            const float *c = certainty + next * w;
+            input_rows(w, intensity + next * w, c, ring + slot, ring + R * w + slot, ring + 2 * R * w + slot);
+            if (skip) {
+                int32_t n = 0;
+                for (int64_t x = 0; x < w; x++) {
+                    const int32_t u = c[x] != 1.0f;
+                    uncertain[x] += u;
+                    n += u;
+                }
+                in_row[next % R] = n;
+                in_window += n;
+            }
         }
-        for (int64_t q = 0; q < n_products; q++) {
+        for (int64_t q = 0; q < 3; q++) {
             const float *Rq = ring + q * R * w;
             for (int64_t k = -ry; k <= ry; k++)
                 rowp[ry + k] = (y + k >= 0 && y + k < h) ? Rq + ((y + k) % R) * w : zero_row;
-            column_sums(w, ry, rowp + ry, ky, pad + q * pw + rx);
-        }
+            if (q < 2 || !skip) column_sums(0, w, ry, rowp + ry, ky, pad + q * pw + rx);
+        } /* rowp: the rows of c now, for the column sums of uncertain windows */
         row_sums(w, rx, v_ci, kx, kc1, ks1, G, C, S);
         row_sums(w, rx, v_cii, kx, NULL, NULL, E, NULL, NULL);
         carrier_row(w, G, C, S, cos1, sin1, b0, b1, b2);
         const int64_t o = (y - y0) * w;
-        const float *m0, *m1, *m2, *m3, *m4;
-        if (have_moments) {
-            m0 = moments[0] + o, m1 = moments[1] + o, m2 = moments[2] + o, m3 = moments[3] + o, m4 = moments[4] + o;
+        const float *m0 = s1, *m1 = sc, *m2 = ss, *m3 = sc2, *m4 = ss2;
+        if (!skip) {
+            certainty_sums(0, w, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
+            if (table != NULL) {
+                const int64_t t = table_row(y, h, ry) * w;
+                for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, table + q * tw + t);
+                solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, tw, table + 5 * tw + t);
+            }
         } else {
-            row_sums(w, rx, v_c, kx, kc1, ks1, Gc, Cc, Sc);
-            row_sums(w, rx, v_c, kx, kc2, ks2, G2, C2, S2); /* G2: the same as Gc, unused */
-            carrier_row(w, Gc, Cc, Sc, cos1, sin1, s1, sc, ss);
-            carrier_row(w, NULL, C2, S2, cos2, sin2, NULL, sc2, ss2);
-            m0 = s1, m1 = sc, m2 = ss, m3 = sc2, m4 = ss2;
-            if (moments != NULL)
-                for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, moments[q] + o);
+            const int64_t t = table_row(y, h, ry) * w;
+            if (in_window == 0) {
+                fit_row_solved(w, table + 5 * tw + t, tw, table + t, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o,
+                               a0 + o, residual + o, support + o);
+                continue;
+            } else {
+                for (int64_t q = 0; q < 5; q++) copy_row(w, table + q * tw + t, B + (4 + q) * w);
+                before[0] = 0;
+                for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + (uncertain[x] > 0);
+                /* runs [a, b) of pixels whose x window [x - rx, x + rx] meets such a column */
+                int64_t done = 0; /* columns of v_c summed so far: [.., done) */
+                for (int64_t a = 0; a < w;) {
+                    while (a < w && before[a + rx + 1 < w ? a + rx + 1 : w] == before[a - rx > 0 ? a - rx : 0]) a++;
+                    if (a == w) break;
+                    int64_t b = a + 1;
+                    while (b < w && before[b + rx + 1 < w ? b + rx + 1 : w] != before[b - rx > 0 ? b - rx : 0]) b++;
+                    const int64_t lo = a - rx > done ? a - rx : done, hi = b + rx < w ? b + rx : w;
+                    if (lo < hi) column_sums(lo, hi, ry, rowp + ry, ky, v_c);
+                    done = hi;
+                    certainty_sums(a, b, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
+                    a = b;
+                }
+            }
         }
         fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
                 support + o);

@@ -76,22 +76,54 @@ def test_gabor_fit_recovers_a_known_fringe_phase(phi0):
     assert (r.wrapped >= -np.pi).all() and (r.wrapped < np.pi).all()
 
 
-def test_gabor_fit_of_a_lit_band_is_the_same_with_cached_moments():
-    """A fully lit band's certainty moments are kept per band shape: the first fit writes them
-    out while it uses them, later ones read them; all give the bits of the fit that computes
-    every window sum itself."""
-    img, _ = fringe(50, 130, seed=4, holes=False)
-    ones = np.ones(img.shape, np.float32)
-    kw = dict(period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
-    phase._MOMENTS.clear()
-    first = phase.gabor_phase(img, certainty=ones, **kw)
-    assert len(phase._MOMENTS) == 1
-    again = phase.gabor_phase(img, certainty=ones, **kw)
+def certainty_cases(h, w, seed):
+    """Certainty maps that put uncertain pixels where the kernel's bookkeeping could slip: none,
+    everywhere, a single pixel at each corner and edge (inside rx / ry of the border), holes
+    and scattered pixels, weights other than 0 and 1, and a weight one ulp above 1."""
+    rng = np.random.default_rng(seed)
+    ones = np.ones((h, w), np.float32)
+    yield "all-certain", ones
+    yield "none-certain", np.zeros((h, w), np.float32)
+    for y, x in ((0, 0), (h - 1, w - 1), (h // 2, 2), (min(3, h - 1), w // 2), (h - 1, w - 5)):
+        c = ones.copy()
+        c[y, x] = 0
+        yield f"one-pixel-{y}-{x}", c
+    yield "holes", fringe(h, w, seed=seed)[1]
+    c = ones.copy()
+    graded = rng.random((h, w)) < 0.3
+    c[graded] = rng.uniform(0, 1, graded.sum())
+    yield "graded", c
+    c = ones.copy()
+    c[h // 2, w // 3] = np.nextafter(np.float32(1), np.float32(2))
+    yield "above-one", c
+
+
+@pytest.mark.parametrize("shape", [(1, 64), (7, 23), (20, 100), (21, 100), (22, 100), (90, 300)])
+def test_gabor_fit_reading_the_all_certain_table_gives_the_bits_of_computing_every_sum(shape):
+    """The certainty's window sums of every pixel whose window is wholly certain come from the
+    all-ones table (phase._all_certain_table): the fit must be the bits of the one that computes
+    every sum itself (table None), on any certainty, band height (below, at and above the table's
+    2 ry + 1 = 21 rows) and output row range."""
+    from simbench.decode import _kernels
+
+    h, w = shape
+    img, _ = fringe(h, w, seed=4, holes=False)
     omega = round(2.0 * np.pi / T_CAM, 12)
-    inline = phase._fit(img, ones, omega, kw["sigma_x_px"], kw["sigma_y_px"])
-    for j, f in enumerate(("wrapped", "amplitude", "offset", "residual", "support")):
-        same(getattr(again, f), getattr(first, f))
-        same(inline[j], getattr(first, f))
+    sx, sy = 0.25 * T_CAM, 0.15 * T_CAM
+    kernels, basis = phase._half_kernels(omega, sx, sy), phase._basis(w, omega)
+    ry = kernels[-1].size - 1
+    assert ry == 10
+    table = phase._all_certain_table(min(h, 2 * ry + 1), w, omega, sx, sy)
+    for name, cert in certainty_cases(h, w, seed=h):
+        for y0, y1 in {(0, h), (h // 3, h), (0, max(1, h - 4)), (h // 2, h // 2 + 1)}:
+            want = tuple(np.empty((y1 - y0, w), np.float32) for _ in range(5))
+            got = tuple(np.empty((y1 - y0, w), np.float32) for _ in range(5))
+            _kernels.gabor_band(img, cert, y0, y1, kernels, basis, None, False, *want)
+            _kernels.gabor_band(img, cert, y0, y1, kernels, basis, table, False, *got)
+            for g, x in zip(got, want):
+                assert np.array_equal(g, x, equal_nan=True), (name, y0, y1)
+    whole = phase.gabor_phase(img, certainty=np.ones((h, w), np.float32), period_px=T_CAM, sigma_x_px=sx, sigma_y_px=sy)
+    assert np.array_equal(whole.support[min(ry, h - 1)], table[0, min(ry, h - 1)])
 
 
 def test_gabor_fit_is_the_same_for_any_band_split():

@@ -11,7 +11,6 @@ which sums in another order: equal to float32 rounding.
 
 from __future__ import annotations
 
-import ctypes
 import threading
 from functools import lru_cache
 
@@ -41,6 +40,7 @@ _SIGNATURES = {
         [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 5,
     ),
     "gabor_scratch_floats": (_I, [_I, _I, _I]),
+    "gabor_table_planes": (_I, []),
     "gather": (None, [_I, _I, _P, _P, _P, _P]),
     "absolute_column": (None, [_I, _P, _P, _P, _F, _F, _I, _P, _P]),
     "match_reference": (None, [_I, _I, _I, _P, _P, _P]),
@@ -87,16 +87,19 @@ def _scratch(n: int) -> np.ndarray:
 
 
 def gabor_band(
-    intensity, certainty, y0, y1, half_kernels, basis, moments, fill_moments, wrapped, amp, a0, residual, support
+    intensity, certainty, y0, y1, half_kernels, basis, table, fill_table, wrapped, amp, a0, residual, support
 ) -> None:
     """Normalised-convolution Gabor fit (paper Eq. 10-11) of the rows ``y0:y1`` of a band.
 
     ``intensity``, ``certainty``: (H, W) float32; ``half_kernels``: the centre-and-one-side
     halves of the x window g, of g cos(w k), g sin(w k), g cos(2 w k), g sin(2 w k) (all of one
     length) and of the y window; ``basis``: cos(w x), sin(w x), cos(2 w x), sin(2 w x), each (W,).
-    ``moments``: None (the certainty's window sums are computed), or 5 arrays (y1 - y0, W)
-    holding the sums ``G*c``, ``G*(c cos)``, ``G*(c sin)``, ``G*(c cos2)``, ``G*(c sin2)``: read,
-    or with ``fill_moments`` computed from ``certainty`` and written there.  Outputs
+    ``table``: None (every window sum computed), or an array (:func:`gabor_table_planes`,
+    min(H, 2 ry + 1), W) holding the certainty's sums ``G*c``, ``G*(c cos)``, ``G*(c sin)``,
+    ``G*(c cos2)``, ``G*(c sin2)`` of an all-ones band and the normal equations' solution from
+    them (rows: the top ``ry`` rows, one interior row, the bottom ``ry`` rows): read for every
+    pixel whose window holds only ``c == 1`` (the same bits as computing them), or, with
+    ``fill_table``, computed from ``certainty`` (then all ones) and written there.  Outputs
     (y1 - y0, W): the wrapped phase ``atan2(im, re)`` in [-pi, pi) of the fit
     ``I ~ a0 + re cos(w x) + im sin(w x)`` (a polynomial atan2, ~1e-7 rad), the amplitude
     ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular: window weight <= 0.05 or
@@ -116,14 +119,9 @@ def gabor_band(
     kx, kc1, ks1, kc2, ks2, ky = half_kernels
     rx, ry = kx.size - 1, ky.size - 1
     n = y1 - y0
-    have = moments is not None and not fill_moments
-    mptr = (ctypes.c_void_p * 5)()
-    if moments is not None:
-        if len(moments) != 5:
-            raise ValueError(f"moments: expected 5 arrays, got {len(moments)}")
-        for j, m in enumerate(moments):
-            mptr[j] = _ptr(m, f"moments[{j}]", f4, (n, w), writable=not have)
     lib = _library()
+    if table is not None:
+        table = _ptr(table, "table", f4, (gabor_table_planes(), min(h, 2 * ry + 1), w), writable=bool(fill_table))
     scratch = _scratch(lib.gabor_scratch_floats(w, rx, ry))
     lib.gabor_band(
         h,
@@ -140,14 +138,19 @@ def gabor_band(
         ry,
         _ptr(ky, "ky", f4),
         *(_ptr(b, name, f4, (w,)) for b, name in zip(basis, ("cos1", "sin1", "cos2", "sin2"))),
-        mptr if moments is not None else None,
-        int(have),
+        table,
+        int(bool(fill_table)),
         scratch.ctypes.data,
         *(
             _ptr(a, name, f4, (n, w), writable=True)
             for a, name in zip((wrapped, amp, a0, residual, support), ("wrapped", "amp", "a0", "residual", "support"))
         ),
     )
+
+
+def gabor_table_planes() -> int:
+    """Planes of :func:`gabor_band`'s all-certain table (5 window sums, the solver's 10 maps)."""
+    return _library().gabor_table_planes()
 
 
 def gather(per_stripe, labels, fill, out) -> None:

@@ -18,7 +18,6 @@ tests/test_accuracy_guard.py).
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -184,42 +183,28 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
     return out
 
 
-def _fit(
-    intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, moments=None, fill=False
-) -> tuple:
+def _fit(intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, table=None) -> tuple:
     """The band fit of :func:`simbench.decode._kernels.gabor_band`: (wrapped, amp, a0, residual,
-    support); ``moments`` and ``fill`` as it takes them."""
+    support); ``table`` as it takes it (read)."""
     h, w = intensity.shape
     out = tuple(np.empty((h, w), np.float32) for _ in range(5))
-    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), moments, fill, *out)
+    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), table, False, *out)
     return out
 
 
-# The certainty moments of an all-certain band (a fully lit plane), per band shape and window:
-# the same for every capture of one rig.  The first such capture computes them in its own fit
-# (the kernel writes them out while it uses them, so a cached and a fresh fit give the same
-# bits); later ones read them.  A small dict rather than lru_cache: the entry is made by the fit.
-_MOMENTS: dict[tuple, tuple[np.ndarray, ...]] = {}
-_MOMENTS_LOCK = threading.Lock()
-_MOMENTS_MAX = 8
-
-
-def _fit_all_certain(intensity: np.ndarray, ones: np.ndarray, omega: float, sx: float, sy: float) -> tuple:
-    """:func:`_fit` of a band whose certainty ``ones`` is 1 everywhere."""
-    key = (intensity.shape, omega, sx, sy)
-    with _MOMENTS_LOCK:
-        moments = _MOMENTS.get(key)
-    if moments is not None:
-        return _fit(intensity, ones, omega, sx, sy, moments)
-    moments = tuple(np.empty(intensity.shape, np.float32) for _ in range(5))
-    out = _fit(intensity, ones, omega, sx, sy, moments, fill=True)
-    for a in moments:
-        a.setflags(write=False)
-    with _MOMENTS_LOCK:
-        if len(_MOMENTS) >= _MOMENTS_MAX:
-            _MOMENTS.pop(next(iter(_MOMENTS)))
-        _MOMENTS[key] = moments
-    return out
+@lru_cache(maxsize=16)
+def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float) -> np.ndarray:
+    """The certainty's window sums of an all-ones band and the fit's solver from them, which
+    every pixel whose window is wholly certain shares: ``n = min(H, 2 ry + 1)`` rows (as
+    :func:`simbench.decode._kernels.gabor_band` takes them), made from an all-ones band of ``n``
+    rows in a fraction of a millisecond."""
+    kernels = _half_kernels(omega, sx, sy)
+    ones = np.ones((n, w), np.float32)
+    table = np.empty((_kernels.gabor_table_planes(), n, w), np.float32)
+    out = tuple(np.empty((n, w), np.float32) for _ in range(5))
+    _kernels.gabor_band(ones, ones, 0, n, kernels, _basis(w, omega), table, True, *out)
+    table.setflags(write=False)
+    return table
 
 
 def check_phase_inputs(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
@@ -264,10 +249,9 @@ def gabor_phase(
     intensity = np.ascontiguousarray(intensity, dtype=np.float32)
     c = np.ascontiguousarray(certainty, dtype=np.float32)
     sx, sy = float(sigma_x_px), float(sigma_y_px)
-    if c.min() >= 1.0:
-        wrapped, amp, a0, residual, s1 = _fit_all_certain(intensity, c, omega, sx, sy)
-    else:
-        wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy)
+    h, w = intensity.shape
+    n = min(h, 2 * (_half_kernels(omega, sx, sy)[-1].size - 1) + 1)
+    wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy))
     return PhaseResult(
         wrapped=wrapped,
         amplitude=amp,

@@ -5,10 +5,10 @@ Decodes one 1280x960 capture of a plane at 1.1 m against a decoded reference at 
 captures are analytic (numpy, :mod:`simbench.synthetic`) with the minimal camera's noise, so
 the benchmark needs no renderer and measures only the decoder.
 
-Two scenes (``--scene``): ``plane``, fully lit, where the Gabor stage reuses the rig's cached
-window moments; and ``shadow``, the same plane with a 400x300-px projector shadow, which makes
-the decoder take the path every real scene with shadows or clipped pixels takes (certainty
-moments convolved per capture: 5 more convolutions per band).
+Two scenes (``--scene``): ``plane``, fully lit, where the Gabor stage takes every certainty
+window sum from the all-ones table; and ``shadow``, the same plane with a 400x300-px projector
+shadow, which makes the decoder take the path every real scene with shadows or clipped pixels
+takes (the certainty's window sums computed for the pixels whose window reaches the shadow).
 """
 
 from __future__ import annotations
