@@ -230,15 +230,14 @@ ROW_FN void copy_row(int64_t w, const float *restrict src, float *restrict dst) 
     for (int64_t x = 0; x < w; x++) dst[x] = src[x];
 }
 
-/* The products c I, c I^2 of one row, and c itself unless p_c is NULL. */
+/* The products c I, c I^2 of one row. */
 ROW_FN void input_rows(int64_t w, const float *restrict I, const float *restrict c, float *restrict p_ci,
-                       float *restrict p_cii, float *restrict p_c) {
+                       float *restrict p_cii) {
     for (int64_t x = 0; x < w; x++) {
         const float ci = c[x] * I[x];
         p_ci[x] = ci;
         p_cii[x] = ci * I[x];
     }
-    if (p_c != NULL) copy_row(w, c, p_c);
 }
 
 /* psi = atan2(im, re) in [-pi, pi): I ~ a0 + R cos(w x - theta), the local phase w x - theta */
@@ -321,9 +320,10 @@ static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const fl
  *
  * The window sums of c I, c I cos, c I sin, c I^2 and of c, c cos, c sin, c cos2, c sin2 are
  * separable Gaussian sums with zero outside the image, taken along y first: the products c I,
- * c I^2 and c of the rows within ry of the output row live in a ring of 2 ry + 1 rows
- * (cache-resident), and their column sums make one padded row per product.  Along x, the sums
- * of f cos(w x') and f sin(w x') come from sums of f itself with the window carrying the carrier
+ * c I^2 of the rows within ry of the output row live in a ring of 2 ry + 1 rows (cache-resident;
+ * c is read where it is), and the column sums of c I, c I^2, c make one padded row each.  Along
+ * x, the sums of f cos(w x') and f sin(w x') come from sums of f itself with the window carrying
+ * the carrier
  * (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so one row feeds three sums.  Then the
  * per-pixel fit (fit_solver, fit_apply) and the phase psi = atan2(im, re) in [-pi, pi).
  *
@@ -346,7 +346,7 @@ enum { TABLE_PLANES = 5 + SOLVER };
 int64_t gabor_table_planes(void) { return TABLE_PLANES; }
 
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 3 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1;
+    return 2 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1;
 }
 
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
@@ -360,8 +360,8 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
     const int64_t R = 2 * ry + 1;
     const int64_t pw = w + 2 * rx;
     const int64_t tw = (h < R ? h : R) * w; /* one table plane */
-    float *ring = scratch;               /* 3 rings of R product rows: c I, c I^2, c */
-    float *pad = ring + 3 * R * w;       /* 3 zero-padded column-sum rows */
+    float *ring = scratch;               /* 2 rings of R product rows: c I, c I^2 */
+    float *pad = ring + 2 * R * w;       /* 3 zero-padded column-sum rows: c I, c I^2, c */
     float *T = pad + 3 * pw;             /* 9 row temporaries of the x sums */
     float *B = T + 9 * w;                /* the 9 window sums of the output row */
     float *zero_row = B + 9 * w;         /* w zeros: the rows beyond the image */
@@ -388,7 +388,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
         for (; next <= last; next++) {
             const int64_t slot = (next % R) * w;
             const float *c = certainty + next * w;
-            input_rows(w, intensity + next * w, c, ring + slot, ring + R * w + slot, ring + 2 * R * w + slot);
+            input_rows(w, intensity + next * w, c, ring + slot, ring + R * w + slot);
             if (skip) {
                 int32_t n = 0;
                 for (int64_t x = 0; x < w; x++) {
@@ -400,10 +400,12 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 in_window += n;
             }
         }
-        for (int64_t q = 0; q < 3; q++) {
+        for (int64_t q = 0; q < 3; q++) { /* c I and c I^2 from their rings, c from the input */
             const float *Rq = ring + q * R * w;
             for (int64_t k = -ry; k <= ry; k++)
-                rowp[ry + k] = (y + k >= 0 && y + k < h) ? Rq + ((y + k) % R) * w : zero_row;
+                rowp[ry + k] = (y + k < 0 || y + k >= h) ? zero_row
+                               : q < 2                   ? Rq + ((y + k) % R) * w
+                                                         : certainty + (y + k) * w;
             if (q < 2 || !skip) column_sums(0, w, ry, rowp + ry, ky, pad + q * pw + rx);
         } /* rowp: the rows of c now, for the column sums of uncertain windows */
         row_sums(w, rx, v_ci, kx, kc1, ks1, G, C, S);
@@ -624,32 +626,63 @@ static int64_t bridge(const float *restrict wr, const uint8_t *restrict valid, i
     return -1;
 }
 
+/* What the step from pixel x - 1 to x of one row says (segment_stripes): the stripe continues,
+ * the next starts linked (a plausible wrap) or unlinked (an implausible step), x ends a gap (or
+ * starts the row) and may be bridged, or x is invalid. */
+enum { STEP_CONT = 0, STEP_LINK, STEP_NEW, STEP_GAP, STEP_INVALID };
+ROW_FN void step_classes(int64_t w, const float *restrict wr, const uint8_t *restrict va, float lo, float hi,
+                         uint8_t *restrict cls) {
+    cls[0] = va[0] ? STEP_GAP : STEP_INVALID;
+    for (int64_t x = 1; x < w; x++) {
+        const float d = wr[x] - wr[x - 1];
+        const int wrap = d < -PI_F;
+        const float step = wrap ? d + TWO_PI_F : d;
+        const uint8_t both = (step > lo && step < hi) ? (wrap ? STEP_LINK : STEP_CONT) : STEP_NEW;
+        cls[x] = !va[x] ? STEP_INVALID : va[x - 1] ? both : STEP_GAP;
+    }
+}
+
+/* The end of the run of bytes equal to 0 (STEP_CONT) starting at x: eight at a time. */
+static inline int64_t run_end(const uint8_t *restrict cls, int64_t x, int64_t w) {
+    for (; x + 8 <= w; x += 8) {
+        uint64_t v;
+        memcpy(&v, cls + x, 8);
+        if (v != 0) return x + __builtin_ctzll(v) / 8; /* little-endian: the first byte is lowest */
+    }
+    while (x < w && cls[x] == STEP_CONT) x++;
+    return x;
+}
+
 /* Row-wise stripe segmentation; returns the number of stripes (simbench.decode._kernels
- * documents the rule).  row/start/stop/linked_prev hold one entry per possible stripe. */
+ * documents the rule).  row/start/stop/linked_prev hold one entry per possible stripe; cls: w
+ * bytes of scratch.  Each row's steps are classified first (step_classes, across pixels), then
+ * runs of continuing pixels are labelled at once. */
 int64_t segment_stripes(int64_t h, int64_t w, const float *restrict wrapped, const uint8_t *restrict valid, float lo,
                         float hi, int64_t max_gap, double omega, double tol, int32_t *restrict labels,
                         int32_t *restrict row, int32_t *restrict start, int32_t *restrict stop,
-                        uint8_t *restrict linked_prev) {
+                        uint8_t *restrict linked_prev, uint8_t *restrict cls) {
     int64_t s = -1;
+    if (w == 0) return 0;
     for (int64_t y = 0; y < h; y++) {
         const float *wr = wrapped + y * w;
         const uint8_t *va = valid + y * w;
         int32_t *lab = labels + y * w;
-        for (int64_t x = 0; x < w; x++) {
-            if (!va[x]) {
-                lab[x] = -1;
+        step_classes(w, wr, va, lo, hi, cls);
+        for (int64_t x = 0; x < w;) {
+            const uint8_t c = cls[x];
+            if (c == STEP_CONT) { /* x - 1 is labelled s */
+                const int64_t e = run_end(cls, x + 1, w);
+                for (int64_t j = x; j < e; j++) lab[j] = (int32_t)s;
+                stop[s] = (int32_t)e;
+                x = e;
                 continue;
             }
-            int cont = 0, link = 0;
-            if (x > 0 && va[x - 1]) {
-                const float d = wr[x] - wr[x - 1];
-                const int wrap = d < -PI_F;
-                const float step = wrap ? d + TWO_PI_F : d;
-                if (step > lo && step < hi) {
-                    cont = !wrap;
-                    link = wrap;
-                }
-            } else if (max_gap > 0 && s >= 0 && row[s] == y && x - stop[s] <= max_gap) {
+            if (c == STEP_INVALID) {
+                lab[x++] = -1;
+                continue;
+            }
+            int cont = 0, link = c == STEP_LINK;
+            if (c == STEP_GAP && max_gap > 0 && s >= 0 && row[s] == y && x - stop[s] <= max_gap) {
                 const int64_t k = bridge(wr, va, w, stop[s] - 1, x, start[s], lo, hi, omega, tol);
                 cont = k == 0;
                 link = k == 1;
@@ -662,6 +695,7 @@ int64_t segment_stripes(int64_t h, int64_t w, const float *restrict wrapped, con
             }
             lab[x] = (int32_t)s;
             stop[s] = (int32_t)(x + 1);
+            x++;
         }
     }
     return s + 1;
@@ -702,7 +736,7 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
  *   lit, certainty     certainty_map: the channel peak's maximum over a row window of `width`
  *                      pixels (clamped at the row's ends: cv2.dilate with a replicated border)
  *                      >= dark_level; certain = lit and the peak < saturation_level
- * peak: scratch of 2 w floats.  Thresholds are float32, as numpy compares float32 images with a
+ * peak: scratch of 2 w + 1 floats.  Thresholds are float32, as numpy compares float32 images with a
  * Python float. */
 #define FRONT_END_ROW(T, SCALE)                                                                            \
     for (int64_t x = 0; x < w; x++) {                                                                  \
@@ -714,44 +748,13 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
         cd[x] = R >= G;                                                                                 \
     }
 
-static inline float max_f(float a, float b) { return b > a ? b : a; }
-
-/* the maximum of p over [x - r, x + r] clipped to [0, w), directly */
-static inline float clipped_max(int64_t w, int64_t r, const float *restrict p, int64_t x) {
-    const int64_t a = x - r < 0 ? 0 : x - r, e = x + r < w ? x + r : w - 1;
-    float v = p[a];
-    for (int64_t j = a + 1; j <= e; j++) v = max_f(v, p[j]);
-    return v;
-}
-
-/* m[x] = the maximum of p over [x - r, x + r] clipped to [0, w) (finite values: a maximum is exact,
- * whatever the order), by van Herk / Gil-Werman: with blocks of k = 2r + 1 pixels, the prefix
- * maxima g within each block and the suffix maxima s give every full window from two of them,
- * max(s[x - r], g[x + r]), in three comparisons per pixel whatever r; the windows the row's ends
- * clip (x < r, x >= w - r) are taken directly.  g, s: w floats of scratch each. */
-ROW_FN void window_max(int64_t w, int64_t r, const float *restrict p, float *restrict m, float *restrict g,
-                       float *restrict s) {
-    const int64_t k = 2 * r + 1;
-    for (int64_t b = 0; b < w; b += k) {
-        const int64_t e = b + k < w ? b + k : w;
-        g[b] = p[b];
-        for (int64_t x = b + 1; x < e; x++) g[x] = max_f(g[x - 1], p[x]);
-        s[e - 1] = p[e - 1];
-        for (int64_t x = e - 2; x >= b; x--) s[x] = max_f(s[x + 1], p[x]);
-    }
-    for (int64_t x = r; x < w - r; x++) m[x] = max_f(s[x - r], g[x + r]);
-    const int64_t left = r < w ? r : w, right = w - r > left ? w - r : left;
-    for (int64_t x = 0; x < left; x++) m[x] = clipped_max(w, r, p, x);
-    for (int64_t x = right; x < w; x++) m[x] = clipped_max(w, r, p, x);
-}
-
 void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, int64_t ch0, int64_t ch1,
                int64_t ch2, int64_t mode, int64_t width, float dark_level, float saturation_level,
                float *restrict intensity, float *restrict certainty, uint8_t *restrict lit, uint8_t *restrict code,
                float *restrict peak) {
     const float k8 = (float)(1.0 / 255.0), k16 = (float)(1.0 / 65535.0), half = 0.5f;
     const int64_t r = width / 2;
-    float *restrict m = peak + w; /* the row maximum, then two scratch rows (window_max) */
+    int32_t *restrict before = (int32_t *)(peak + w); /* w + 1 counts */
     for (int64_t y = 0; y < h; y++) {
         float *inten = intensity + y * w;
         uint8_t *cd = code + y * w;
@@ -762,16 +765,25 @@ void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, 
         } else {
             FRONT_END_ROW(float, )
         }
-        /* maximum over [x - r, x + r] clipped to the row: with a replicated border the values
-         * beyond the ends repeat the end pixels, which the clipped window holds already */
-        window_max(w, r, peak, m, m + w, m + 2 * w);
         float *cert = certainty + y * w;
         uint8_t *li = lit + y * w;
+        /* lit: the peak's maximum over [x - r, x + r] clipped to the row (with a replicated
+         * border the values beyond the ends repeat the end pixels, which the clipped window holds
+         * already) >= dark_level, i.e. some pixel of the window is bright: a running count of
+         * bright pixels finds them (for finite captures, the only ones the decoder takes). */
+        int64_t bright = 0;
         for (int64_t x = 0; x < w; x++) {
-            const int l = m[x] >= dark_level;
-            li[x] = (uint8_t)l;
-            cert[x] = (l & (peak[x] < saturation_level)) ? 1.0f : 0.0f;
+            const int b = peak[x] >= dark_level;
+            li[x] = (uint8_t)b;
+            bright += b;
         }
+        if (bright > 0 && bright < w) {
+            before[0] = 0;
+            for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + li[x];
+            for (int64_t x = 0; x < w; x++)
+                li[x] = before[x + r + 1 < w ? x + r + 1 : w] > before[x - r > 0 ? x - r : 0];
+        } /* else every window holds bright pixels (li all 1) or none does (all 0) */
+        for (int64_t x = 0; x < w; x++) cert[x] = (li[x] & (peak[x] < saturation_level)) ? 1.0f : 0.0f;
     }
 }
 

@@ -295,6 +295,9 @@ def capture_band(dtype, seed=5, h=30, w=170):
     img[:, 40:90] *= 0.03  # unlit
     img[5:9, 100:130] = 1.0  # clipped
     img[12, :, :] = 0.04  # exactly at dark_level (in float32)
+    img[15, :, :] *= 0.03  # a row with no lit window
+    img[16, :, :] = np.maximum(img[16], 0.5)  # a row that is all bright
+    img[18, w // 2] *= 0.03  # one dark pixel in a bright row
     if dtype == np.uint8:
         return np.round(img * 255).astype(np.uint8)
     if dtype == np.uint16:

@@ -47,7 +47,7 @@ _SIGNATURES = {
     "depth_from_disparity": (None, [_I, _I, _P, _F, _F, _P]),
     "chain_extent": (None, [_I, _P, _P, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
-    "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P]),
+    "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P, _P]),
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
@@ -273,6 +273,7 @@ def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, st
     """
     h, w = wrapped.shape
     n = h * w
+    cls = np.empty(max(w, 1), np.uint8)  # a row's step classes
     return int(
         _library().segment_stripes(
             h,
@@ -289,6 +290,7 @@ def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, st
             _ptr(start, "start", np.int32, (n,), writable=True),
             _ptr(stop, "stop", np.int32, (n,), writable=True),
             _ptr(linked_prev, "linked_prev", np.bool_, (n,), writable=True),
+            cls.ctypes.data,
         )
     )
 
@@ -328,7 +330,7 @@ def front_end(image, order, mode, width, dark_level, saturation_level, intensity
         raise TypeError(f"image: expected uint8, uint16 or float32, got {image.dtype}") from None
     if image.shape[2] != 3 or sorted(order) != [0, 1, 2]:
         raise ValueError(f"image must be (H, W, 3) and order a permutation of 0, 1, 2: {image.shape}, {order}")
-    peak = np.empty(4 * w, np.float32)  # the row's peak, its window maximum, two scratch rows
+    peak = np.empty(2 * w + 1, np.float32)  # the row's peak, then w + 1 counts of bright pixels
     _library().front_end(
         h,
         w,
