@@ -280,7 +280,11 @@ class ProjectorDrive:
     digests are kept in ``cache`` under a key of the drive's inputs - pattern bytes, projector
     model, exposure phase, rig, the scene's geometry when defocus depends on it, and the code
     that builds drives - so a run whose renders are all cached never builds a drive (building
-    one, with its depth-dependent defocus, took a third of a warm quick run)."""
+    one, with its depth-dependent defocus, took a third of a warm quick run).
+
+    ``pattern_digest``: :func:`simbench.cache.array_digest` of ``pattern``, for a caller that
+    keeps the pattern and its digest made once (hashing a projector frame per drive was ~6 ms;
+    a phase-shift sequence makes 25 drives per acquisition); None: hashed here."""
 
     def __init__(
         self,
@@ -290,8 +294,10 @@ class ProjectorDrive:
         *,
         cache: RenderCache | None = None,
         phase: float = 0.0,
+        pattern_digest: str | None = None,
     ) -> None:
         self._scene, self._pattern, self._sensor, self._cache = scene, pattern, sensor, cache
+        self._pattern_digest = pattern_digest
         self._weights = _bitplane_weights(scene, sensor, phase)
         self._array: np.ndarray | None = None
         self._digests: dict[str, str] | None = None
@@ -318,7 +324,7 @@ class ProjectorDrive:
         prj = self._sensor.projector
         scene = self._scene
         return {
-            "pattern": array_digest(self._pattern),
+            "pattern": array_digest(self._pattern) if self._pattern_digest is None else self._pattern_digest,
             "projector": sensor_to_dict(self._sensor)["projector"],
             "bitplane_weights": None if self._weights is None else self._weights.tolist(),
             "rig": rig_to_dict(scene.rig),

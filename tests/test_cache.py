@@ -179,6 +179,27 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     assert a["rgb"] != b["rgb"] != first.digests()["rgb"]
 
 
+def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests():
+    """The proposed pattern and the phase-shift frames are made and hashed once per process;
+    a drive given that digest has the inputs (the cache key) of one that hashes the pattern."""
+    from simbench.device import get_sensor
+    from simbench.scene import load_scene
+    from simbench.simulate import ProjectorDrive, physical_scene
+    from simbench.systems import phase_shift, proposed
+    from simbench.systems.phase_shift import PhaseShiftSystem
+
+    sensor = get_sensor("paper")
+    system = proposed.ColourFringeSystem()
+    scene = physical_scene(system.prepare(load_scene("scenes/white_plane.toml")), sensor)
+    kept = proposed.pattern_digest(system.pattern)
+    assert kept == array_digest(system.pattern_u8)
+    with_digest = ProjectorDrive(scene, system.pattern_u8, sensor, pattern_digest=kept).inputs()
+    assert with_digest == ProjectorDrive(scene, system.pattern_u8, sensor).inputs()
+    shifts = PhaseShiftSystem()
+    digests = phase_shift._frame_digests(shifts.spec)
+    assert list(digests) == [array_digest(f) for f in shifts.frames_u8()] and len(set(digests)) == len(digests)
+
+
 def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, variant, monkeypatch):
     """record_channels gives record(render_channels(...)) for each noise seed (an integer or a
     SeedSequence); a second call reads the cached recordings, neither renders, drive digests nor

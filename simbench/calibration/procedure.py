@@ -37,9 +37,10 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -286,7 +287,7 @@ def observe_pose(
     seed: int,
     render: RenderSettings,
     corner_spp: int = CALIBRATION_CORNER_SPP,
-    frames_u8: list[np.ndarray] | None = None,
+    frames_u8: Sequence[np.ndarray] | None = None,
 ) -> CalibrationView:
     """Render and record one pose (the white frame and both sequences), find the corners and
     decode their projector coordinates.  The white frame is rendered with ``corner_spp``
@@ -294,8 +295,8 @@ def observe_pose(
     the squares' edges, which a few path-tracing samples make noisy (a real pixel integrates
     its area exactly; measured on the default rig: corner RMS 0.06 px at 16 multijittered
     samples, 0.1-0.2 px at 4-16 independent ones), while the sequences' sampling noise
-    averages out over the ~1000 pixels of a local homography.  ``frames_u8``: the drives of
-    :func:`calibration_frames` (made once for many poses; None: made here).  ``rig`` is the
+    averages out over the ~1000 pixels of a local homography.  ``frames_u8``: drives in place of
+    :func:`calibration_frames` (None: those, made once per process when a pose is not cached).  ``rig`` is the
     ideal rig (the sensor model adds its lenses, :func:`simbench.simulate.physical_scene`);
     the observations are cached in ``render.cache`` by everything that affects them, the
     frames' renders are not (up to 3 x 25 images a pose)."""
@@ -336,14 +337,19 @@ def observe_pose(
     )
 
 
-def calibration_frames(projector_hw: tuple[int, int]) -> list[np.ndarray]:
-    """The projector frames of one pose as 8-bit grey drives (Hp, Wp, 3): white, then the
-    column sequence, then the row sequence (:func:`simbench.decode.temporal.phase_shift_frames`)."""
+@lru_cache(maxsize=2)
+def calibration_frames(projector_hw: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """The projector frames of one pose as 8-bit grey drives (Hp, Wp, 3, read-only): white,
+    then the column sequence, then the row sequence
+    (:func:`simbench.decode.temporal.phase_shift_frames`).  Made once per projector size and
+    process (~1.2 s at the paper projector's), and only when a pose is not in the cache."""
     from simbench.pattern import grey_drive
 
-    cols, rows = _sequences(projector_hw)
+    cols, rows = _sequences(tuple(projector_hw))
     grey = [np.ones((1, *projector_hw), np.float32), phase_shift_frames(cols), phase_shift_frames(rows)]
-    return list(grey_drive(np.concatenate(grey)))
+    frames = grey_drive(np.concatenate(grey))
+    frames.setflags(write=False)
+    return tuple(frames)
 
 
 def _observe(scene, target, sensor, cols, rows, render, render_seed, noise_seed, corner_spp, frames):
@@ -591,7 +597,6 @@ def calibrate_rig(
     """
     plan = calibration_poses(target, rig, count=poses, rng=derive_seed(seed, "calibration/poses"))
     views = []
-    frames = calibration_frames(rig.projector.size_hw)  # the same for every pose
     for k, pose in enumerate(plan):
         views.append(
             observe_pose(
@@ -603,7 +608,6 @@ def calibrate_rig(
                 seed=seed,
                 render=render,
                 corner_spp=corner_spp,
-                frames_u8=frames,
             )
         )
         if progress is not None:

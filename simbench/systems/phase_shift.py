@@ -39,6 +39,14 @@ def _frames_u8(spec: PhaseShiftSpec) -> np.ndarray:
     return frames
 
 
+@lru_cache(maxsize=2)
+def _frame_digests(spec: PhaseShiftSpec) -> tuple[str, ...]:
+    """:func:`simbench.cache.array_digest` of each of :func:`_frames_u8`, once per process."""
+    from simbench.cache import array_digest
+
+    return tuple(array_digest(f) for f in _frames_u8(spec))
+
+
 class PhaseShiftSystem:
     """The multi-shot reference (module docstring); ``options`` gives the sensor model and the
     camera scale (the proposed sensor's), ``spec`` the sequence."""
@@ -103,8 +111,8 @@ class PhaseShiftSystem:
             )
         phase = exposure_phase(render_seed)
         frames = []  # per projector frame, its recording per noise seed (grey)
-        for k, frame in enumerate(self.frames_u8()):
-            drive = ProjectorDrive(scene, frame, self.sensor, cache=render.cache, phase=phase)
+        for k, (frame, digest) in enumerate(zip(self.frames_u8(), _frame_digests(self.spec))):
+            drive = ProjectorDrive(scene, frame, self.sensor, cache=render.cache, phase=phase, pattern_digest=digest)
             seeds = [frame_seed(n, k) for n in noise_seeds]
             recordings = record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds)
             frames.append([grey_frame(r) for r in recordings])

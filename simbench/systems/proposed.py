@@ -51,6 +51,14 @@ def pattern_u8(spec: PatternSpec) -> np.ndarray:
     return frame
 
 
+@lru_cache(maxsize=8)
+def pattern_digest(spec: PatternSpec) -> str:
+    """:func:`simbench.cache.array_digest` of :func:`pattern_u8`, once per process and pattern."""
+    from simbench.cache import array_digest
+
+    return array_digest(pattern_u8(spec))
+
+
 @dataclass
 class ReferenceCalibration:
     """The proposed sensor's calibration: the recorded reference plane (``image``), with the
@@ -205,6 +213,7 @@ class ColourFringeSystem:
             self.sensor,
             cache=render.cache,
             phase=exposure_phase(render_seed),
+            pattern_digest=pattern_digest(self.pattern) if pattern_u8 is None else None,
         )
         return record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=noise_seeds)
 
