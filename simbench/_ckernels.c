@@ -862,6 +862,34 @@ void brown_maps(int64_t h, int64_t w, double f, double cx, double cy, const doub
     }
 }
 
+/* The plane fit's centred points (simbench.metrics.plane_fit_error): for the pixels that count
+ * (finite depth, and mask[j] where a mask is given), in row-major order, the point p = ray *
+ * depth; the centroid c = (sum of p) / count with the sums taken row after row (as numpy's sum
+ * over axis 0 of an (N, 3) array adds them); q = p - c written to points (N x 3).  Returns N. */
+int64_t centred_points(int64_t n, const double *restrict depth, const double *restrict rays,
+                       const uint8_t *restrict mask, double *restrict points) {
+    int64_t m = 0;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+    for (int64_t j = 0; j < n; j++) {
+        const double d = depth[j];
+        if (!isfinite(d) || (mask != NULL && !mask[j])) continue;
+        double *p = points + 3 * m++;
+        p[0] = rays[3 * j] * d, p[1] = rays[3 * j + 1] * d, p[2] = rays[3 * j + 2] * d;
+        if (m == 1) {
+            s0 = p[0], s1 = p[1], s2 = p[2];
+        } else {
+            s0 += p[0], s1 += p[1], s2 += p[2];
+        }
+    }
+    if (m == 0) return 0;
+    const double c0 = s0 / (double)m, c1 = s1 / (double)m, c2 = s2 / (double)m;
+    for (int64_t i = 0; i < m; i++) {
+        double *p = points + 3 * i;
+        p[0] -= c0, p[1] -= c1, p[2] -= c2;
+    }
+    return m;
+}
+
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels", NULL, -1, NULL};
 
 PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }

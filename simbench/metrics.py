@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from simbench import native
 from simbench.rig import Intrinsics, pixel_rays
 
 if TYPE_CHECKING:
@@ -166,15 +167,39 @@ def plane_fit_error(
        Pattern", Sensors 17(11), 2558, 2017, Table 1 and Sec. 6 (error against the least-
        squares plane).
     """
-    d = np.asarray(depth_m, dtype=np.float64)
+    d = np.ascontiguousarray(depth_m, dtype=np.float64)
     if d.shape != tuple(camera.size_hw):
         raise ValueError(f"depth map {d.shape} does not match the camera {tuple(camera.size_hw)}")
-    ok = np.isfinite(d)  # the rays' z is 1: a point is finite where its depth is
     if mask is not None:
-        ok &= mask
-    # the points of the pixels that count only (points_from_depth(depth_m, camera)[ok], the
-    # same products without the whole image's)
-    return fit_plane(_rays(camera)[ok] * d[ok][:, None], min_points=min_points)
+        mask = np.ascontiguousarray(mask, dtype=bool)
+        if mask.shape != d.shape:
+            raise ValueError(f"mask {mask.shape} does not match the depth map {d.shape}")
+    # the points of the pixels that count (finite depth - the rays' z is 1 - and in the mask):
+    # points_from_depth(depth_m, camera)[ok] and fit_plane's centring, in one C pass with
+    # numpy's operations in numpy's order (tests/test_metrics.py compares the bits)
+    points = np.empty((d.size, 3))
+    n = native.bind(_CENTRED).centred_points(
+        d.size,
+        native.ptr(d, "depth", np.float64),
+        native.ptr(_rays(camera), "rays", np.float64, (*d.shape, 3)),
+        None if mask is None else native.ptr(mask, "mask", np.bool_),
+        native.ptr(points, "points", np.float64, writable=True),
+    )
+    if n < max(3, min_points):
+        return _no_plane(n)
+    return _plane_of_centred(points[:n])
+
+
+_CENTRED = {"centred_points": (native.I64, [native.I64, native.P, native.P, native.P, native.P])}
+
+
+def _no_plane(n: int) -> dict:
+    return {
+        "mean_abs_residual_mm": float("nan"),
+        "rms_residual_mm": float("nan"),
+        "normal": [float("nan")] * 3,
+        "n_points": int(n),
+    }
 
 
 def fit_plane(points_m: np.ndarray, *, min_points: int = MIN_PLANE_POINTS) -> dict:
@@ -185,14 +210,12 @@ def fit_plane(points_m: np.ndarray, *, min_points: int = MIN_PLANE_POINTS) -> di
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f"points_m must have shape (N, 3), got {p.shape}")
     if len(p) < max(3, min_points):
-        return {
-            "mean_abs_residual_mm": float("nan"),
-            "rms_residual_mm": float("nan"),
-            "normal": [float("nan")] * 3,
-            "n_points": int(len(p)),
-        }
-    c = p.mean(axis=0)
-    q = p - c
+        return _no_plane(len(p))
+    return _plane_of_centred(p - p.mean(axis=0))
+
+
+def _plane_of_centred(q: np.ndarray) -> dict:
+    """:func:`fit_plane`'s scores of the points ``q`` (N, 3) less their centroid."""
     # the least-squares plane's normal: the scatter matrix's eigenvector of least eigenvalue
     # (the same as the last right singular vector of q, at 3x3 instead of N x 3 cost)
     _, vecs = np.linalg.eigh(q.T @ q)
@@ -202,7 +225,7 @@ def fit_plane(points_m: np.ndarray, *, min_points: int = MIN_PLANE_POINTS) -> di
         "mean_abs_residual_mm": float(np.mean(np.abs(r))),
         "rms_residual_mm": float(np.sqrt(np.mean(r**2))),
         "normal": [float(x) for x in normal],
-        "n_points": int(len(p)),
+        "n_points": int(len(q)),
     }
 
 

@@ -68,9 +68,14 @@ def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
     depth[rng.random((h, w)) < 0.1] = np.nan
     depth[: h // 5, : w // 4] = np.nan
     mask = rng.random((h, w)) < 0.8
-    for m in (None, mask):
-        got, want = plane_fit_error(depth, cam, mask=m), ref.plane_fit_error(depth, cam, mask=m)
-        assert got == want and got["n_points"] > 1000
+    depth[h // 2, : w // 3] = np.inf
+    for d in (depth, depth.astype(np.float64) + rng.normal(0, 1e-9, (h, w))):
+        for m in (None, mask):
+            got, want = plane_fit_error(d, cam, mask=m), ref.plane_fit_error(d, cam, mask=m)
+            assert got == want and got["n_points"] > 1000
+    assert plane_fit_error(np.full((h, w), np.nan), cam)["n_points"] == 0
+    with pytest.raises(ValueError, match="mask"):
+        plane_fit_error(depth, cam, mask=mask[:, :-1])
     few = np.full((h, w), np.nan, np.float32)
     few[5, 5:20] = 1.0
     assert plane_fit_error(few, cam)["n_points"] == 15 and np.isnan(plane_fit_error(few, cam)["mean_abs_residual_mm"])
