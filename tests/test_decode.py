@@ -150,6 +150,31 @@ def test_result_does_not_depend_on_threads(mode, reference):
     assert all(len(v) == 1 for v in rows_of.values())
 
 
+def _decode_in_child(img, reference, queue):
+    queue.put(decode(img, rig=RIG, params=DecoderParams(threads=2), reference=reference).depth_m)
+
+
+def test_band_threads_are_kept_and_a_forked_child_starts_its_own(reference):
+    """The row bands run on threads kept per process: a second decode starts none, and a child
+    forked after a decode (which inherits the pool but not its threads) decodes too, the same."""
+    import multiprocessing as mp
+    import threading
+
+    img, _, _ = _tilted(10, depth=1.2)
+    first = decode(img, rig=RIG, params=DecoderParams(threads=2), reference=reference)
+    threads = set(threading.enumerate())
+    again = decode(img, rig=RIG, params=DecoderParams(threads=2), reference=reference)
+    assert set(threading.enumerate()) == threads and any(t.name.startswith("simbench-band") for t in threads)
+    assert np.array_equal(again.depth_m, first.depth_m, equal_nan=True)
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_decode_in_child, args=(img, reference, queue))
+    child.start()
+    depth = queue.get(timeout=120)
+    child.join(timeout=30)
+    assert child.exitcode == 0 and np.array_equal(depth, first.depth_m, equal_nan=True)
+
+
 def test_custom_sequence_pattern_decodes():
     """Any cyclic binary sequence with unique windows: here B(2, 4) reversed, and a
     12-stripe sequence whose windows of 4 are unique but which is not a De Bruijn sequence."""
