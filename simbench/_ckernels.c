@@ -332,8 +332,8 @@ static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const fl
  * operations on the same values, so the same bits.  `table` (TABLE_PLANES planes of
  * min(h, 2 ry + 1) rows, see table_row) holds those (planes 0-4) and their solver (fit_solver,
  * planes 5-14); with it, and fill_table 0, only the pixels whose window holds a c != 1 get their
- * certainty sums computed (a per-column count of such rows in the y window, and its running
- * count over the x window, find them), and a row with none in reach is fitted with the table's
+ * certainty sums and solver computed (a per-column count of such rows in the y window, and its
+ * running count over the x window, find them); every other pixel is fitted with the table's
  * solver.  With fill_table 1 every sum is computed and the certainty sums and solver are
  * written into the table (made from an all-ones band).  table NULL: every sum computed,
  * nothing written.
@@ -346,7 +346,7 @@ enum { TABLE_PLANES = 5 + SOLVER };
 int64_t gabor_table_planes(void) { return TABLE_PLANES; }
 
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 2 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1;
+    return 2 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1 + SOLVER * w;
 }
 
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
@@ -367,6 +367,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
     float *zero_row = B + 9 * w;         /* w zeros: the rows beyond the image */
     int32_t *uncertain = (int32_t *)(zero_row + w); /* per column: rows with c != 1 in the y window */
     int32_t *before = uncertain + w;     /* w + 1: columns with such rows left of x */
+    float *K = (float *)(before + w + 1); /* SOLVER rows: the solver of a row with uncertain windows */
     for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
     for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f, uncertain[x] = 0;
     float *v_ci = pad + rx, *v_cii = pad + pw + rx, *v_c = pad + 2 * pw + rx;
@@ -427,7 +428,9 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                                a0 + o, residual + o, support + o);
                 continue;
             } else {
+                /* the table's sums and solver, then those of the runs of uncertain windows */
                 for (int64_t q = 0; q < 5; q++) copy_row(w, table + q * tw + t, B + (4 + q) * w);
+                for (int64_t q = 0; q < SOLVER; q++) copy_row(w, table + (5 + q) * tw + t, K + q * w);
                 before[0] = 0;
                 for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + (uncertain[x] > 0);
                 /* runs [a, b) of pixels whose x window [x - rx, x + rx] meets such a column */
@@ -441,8 +444,12 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                     if (lo < hi) column_sums(lo, hi, ry, rowp + ry, ky, v_c);
                     done = hi;
                     certainty_sums(a, b, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
+                    solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, w, K + a);
                     a = b;
                 }
+                fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
+                               support + o);
+                continue;
             }
         }
         fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
