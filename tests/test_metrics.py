@@ -51,6 +51,31 @@ def test_points_from_depth():
     assert np.allclose(p[0, 0], [-2, -2, 2])
 
 
+@pytest.mark.parametrize("dtypes", [(np.float32, np.float32), (np.float32, np.float64), (np.float64, np.float32)])
+def test_depth_errors_give_the_bits_of_the_whole_map_float64_form(dtypes):
+    """depth_errors gathers the scored pixels before widening float32 maps to float64: the
+    statistics are the bits of the form that widened both whole maps first."""
+    from tests import numpy_reference as ref
+
+    rng = np.random.default_rng(len(str(dtypes)))
+    h, w = 120, 170
+    gt = (1.0 + 0.01 * rng.random((h, w))).astype(dtypes[1])
+    d = (gt + rng.normal(0, 3e-4, (h, w))).astype(dtypes[0])
+    far = rng.random((h, w)) < 0.1  # gross errors: a float32 difference would round
+    d[far] = (3.0 + rng.random(far.sum())).astype(dtypes[0])
+    d[rng.random((h, w)) < 0.05] = np.nan
+    gt[rng.random((h, w)) < 0.02] = np.nan
+    region = rng.random((h, w)) < 0.8
+    for exclude in (None, rng.random((h, w)) < 0.1):
+        got = depth_errors(d, gt, region=region, exclude=exclude)
+        want = ref.depth_errors_error_stats(d, gt, region=region, exclude=exclude)
+        assert {k: got[k] for k in want} == want and want["n_scored"] > 1000
+    empty = depth_errors(np.full((h, w), np.nan, np.float32), gt, region=region)
+    assert empty["n_valid"] == 0 and np.isnan(empty["mae_mm"])
+    ints = depth_errors(np.ones((h, w), np.int32), gt, region=region)  # non-float maps are widened
+    assert ints["n_valid"] == ints["n_region"] > 0
+
+
 @pytest.mark.parametrize("scale", [0.25, 0.5, 1.0])
 def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
     """The Table 1 protocol computed on the counted pixels only equals, bit for bit, the form
