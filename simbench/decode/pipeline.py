@@ -596,8 +596,9 @@ def _plane_columns(rig: Rig, z_m: float) -> np.ndarray:
 
 # A band's float32 images stay under 4 MiB: numpy asks for transparent huge pages
 # (madvise MADV_HUGEPAGE) for allocations from 4 MiB on, and first-touching a band's fresh
-# huge pages cost ~8 ms of a 24 ms single-thread decode of a 1280x960 capture (measured,
-# 2026-11-24: one band of 960 rows vs two of 480 on one thread; the same bits).
+# huge pages made back-to-back single-thread decodes of a 1280x960 capture average 37 ms
+# instead of 26.5 (measured 2026-11-24: one band of 960 rows vs two of 480 on one thread,
+# 12-14 ms vs 3 ms of system time; the same bits).
 _BAND_IMAGE_BYTES = 4 << 20
 
 
@@ -612,7 +613,8 @@ def _bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple[li
     rows = max(1, (_BAND_IMAGE_BYTES - 1) // (4 * max(width, 1)) - 2 * halo)  # per band
     n = min(threads, most)
     if -(-height // n) > rows:
-        n = min(most, -(-(-(-height // rows)) // n) * n)
+        need = -(-height // rows)  # bands the size limit asks for
+        n = min(most, -(-need // n) * n)  # rounded up to a multiple of the threads
     edges = np.linspace(0, height, n + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo, min(threads, n)
 
