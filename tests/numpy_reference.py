@@ -413,3 +413,18 @@ def depth_errors_error_stats(depth_m, gt_depth_m, *, region, exclude=None) -> di
         "max_mm": float(a.max()) if a.size else float("nan"),
         "bias_mm": float(err.mean()) if a.size else float("nan"),
     }
+
+
+def gray_order(bit_images, threshold) -> np.ndarray:
+    """simbench.decode.temporal.gray_order as first written: the stack widened to float64, the
+    Gray code decoded by shifts."""
+    b = np.asarray(bit_images, dtype=np.float64) > np.asarray(threshold, dtype=np.float64)[None]
+    gray = np.zeros(b.shape[1:], np.int64)
+    for plane in b:
+        gray = (gray << 1) | plane.astype(np.int64)
+    j = gray.copy()
+    shift = gray >> 1
+    while shift.any():
+        j ^= shift
+        shift >>= 1
+    return j

@@ -127,3 +127,27 @@ def test_cli_renders_and_decodes_a_phase_shift_recording(tmp_path, variant, caps
     depth, gt = np.load(tmp_path / "d.npy"), np.load(rec / "gt_depth.npy")
     lit = np.isfinite(gt)
     assert np.isfinite(depth[lit]).mean() > 0.99 and np.nanmean(np.abs(depth - gt)[lit]) < 5e-4
+
+
+@pytest.mark.parametrize("bits", [1, 2, 7, 16, 18])
+def test_gray_order_gives_the_bits_of_the_shift_form(bits):
+    """gray_order compares without widening the stack and decodes the Gray code by a table
+    (a loop above 16 bits): the half-period indices of the first form, for float32, float64
+    and integer images, thresholds on the values included."""
+    from tests import numpy_reference as ref
+
+    rng = np.random.default_rng(bits)
+    h, w = 30, 40
+    threshold = rng.random((h, w)).astype(np.float32).astype(np.float64)  # float32 images can equal it
+    for images in (
+        rng.random((bits, h, w)).astype(np.float32),
+        rng.random((bits, h, w)),
+        rng.integers(0, 2, (bits, h, w)),
+        np.broadcast_to(threshold.astype(np.float32), (bits, h, w)),
+    ):
+        got = gray_order(images, threshold)
+        assert got.dtype == np.int64 and np.array_equal(got, ref.gray_order(images, threshold))
+    if bits <= 12:  # every code decodes to its own index
+        codes = np.arange(1 << bits)
+        planes = ((codes ^ (codes >> 1)) >> np.arange(bits)[::-1, None]) & 1  # MSB first
+        assert np.array_equal(gray_order(planes[:, None, :], np.full((1, codes.size), 0.5)), codes[None])

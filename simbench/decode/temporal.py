@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -140,16 +141,35 @@ def wrapped_phase(frames: np.ndarray, *, steps: int) -> tuple[np.ndarray, np.nda
 def gray_order(bit_images: np.ndarray, threshold: np.ndarray) -> np.ndarray:
     """The half-period index j of every pixel from its Gray-code images (MSB first) read
     against ``threshold`` (the mean intensity), shape (bits, H, W) -> (H, W) int64."""
-    b = np.asarray(bit_images, dtype=np.float64) > np.asarray(threshold, dtype=np.float64)[None]
-    gray = np.zeros(b.shape[1:], np.int64)
-    for plane in b:
-        gray = (gray << 1) | plane.astype(np.int64)
+    images = np.asarray(bit_images)
+    if images.dtype.kind != "f":
+        images = images.astype(np.float64)
+    # float32 images are compared with the float64 threshold in float64, element by element
+    # (exact), without a float64 copy of the whole stack
+    threshold = np.asarray(threshold, dtype=np.float64)
+    gray = np.zeros(images.shape[1:], np.int64)
+    for plane in images:
+        gray <<= 1
+        gray |= plane > threshold
+    return _gray_to_binary(images.shape[0])[gray] if images.shape[0] <= 16 else _gray_to_binary_loop(gray)
+
+
+def _gray_to_binary_loop(gray: np.ndarray) -> np.ndarray:
+    """Binary-reflected Gray code to binary: j = g ^ (g >> 1) ^ (g >> 2) ^ ..."""
     j = gray.copy()
     shift = gray >> 1
     while shift.any():
         j ^= shift
         shift >>= 1
     return j
+
+
+@lru_cache(maxsize=4)
+def _gray_to_binary(bits: int) -> np.ndarray:
+    """:func:`_gray_to_binary_loop` of every ``bits``-bit code, as a look-up table (int64)."""
+    table = _gray_to_binary_loop(np.arange(1 << bits, dtype=np.int64))
+    table.setflags(write=False)
+    return table
 
 
 def grey_frame(image: np.ndarray) -> np.ndarray:
