@@ -428,3 +428,10 @@ def gray_order(bit_images, threshold) -> np.ndarray:
         j ^= shift
         shift >>= 1
     return j
+
+
+def grey_frame(image) -> np.ndarray:
+    """simbench.decode.temporal.grey_frame as first written: numpy's mean over the channels."""
+    img = np.asarray(image)
+    scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
+    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)

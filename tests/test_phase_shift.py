@@ -151,3 +151,23 @@ def test_gray_order_gives_the_bits_of_the_shift_form(bits):
         codes = np.arange(1 << bits)
         planes = ((codes ^ (codes >> 1)) >> np.arange(bits)[::-1, None]) & 1  # MSB first
         assert np.array_equal(gray_order(planes[:, None, :], np.full((1, codes.size), 0.5)), codes[None])
+
+
+def test_grey_frame_gives_the_bits_of_numpys_channel_mean():
+    """grey_frame adds the channels in whole-image passes: the bits of numpy's float32 mean
+    over the last axis, signed zeros, NaN and infinities included, for every capture dtype."""
+    from simbench.decode.temporal import grey_frame
+    from tests import numpy_reference as ref
+
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (40, 50, 3)).astype(np.uint8), rng.integers(0, 65536, (40, 50, 3)).astype(np.uint16)]
+    special = rng.random((40, 50, 3)).astype(np.float32)
+    special[0] = -0.0
+    special[1, :, 0] = -0.0
+    special[2, :, 1] = np.nan
+    special[3, :, 2] = np.inf
+    frames += [special, rng.random((40, 50, 3)), rng.random((2, 40, 50, 3)).astype(np.float32), special[..., :2]]
+    for f in frames:
+        got, want = grey_frame(f), ref.grey_frame(f)
+        assert got.dtype == want.dtype == np.float32 and got.shape == want.shape
+        assert np.array_equal(got, want, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(want))

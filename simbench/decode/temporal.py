@@ -178,7 +178,17 @@ def grey_frame(image: np.ndarray) -> np.ndarray:
     primaries alike)."""
     img = np.asarray(image)
     scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
-    return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
+    f = img.astype(np.float32) / np.float32(scale)
+    if f.shape[-1] != 3:
+        return f.mean(axis=-1)
+    # the channel mean as numpy's float32 mean over the last axis adds and divides,
+    # ((0 + R) + G) + B then / 3, in whole-image passes (the axis-(-1) reduction over 3 values
+    # per pixel was 6x slower)
+    grey = f[..., 0] + np.float32(0.0)
+    grey += f[..., 1]
+    grey += f[..., 2]
+    grey /= np.float32(3)
+    return grey
 
 
 @dataclass(frozen=True)
