@@ -321,3 +321,20 @@ def test_cli_system_render_decode_score(tmp_path, variant, device):
     depth = np.load(tmp_path / "d.npy")
     assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.8
     assert main(["decode", str(tmp_path / "missing"), "--out", str(tmp_path / "x.npy")]) == 2
+
+
+def test_kinect_dot_drive_is_keyed_by_a_digest_kept_per_model(monkeypatch):
+    """The dot projector's drive enters the render cache's key by its digest, made once per
+    model and process: the digest of the drive itself, and a later lookup builds no drive."""
+    from simbench.baselines import kinect
+    from simbench.cache import array_digest
+
+    model = kinect.KinectModel()
+    kinect._dot_drive_digest.cache_clear()
+    digest = kinect._dot_drive_digest(model)
+    assert digest == array_digest(np.repeat(kinect.dot_pattern(model)[..., None], 3, axis=2))
+    monkeypatch.setattr(kinect, "dot_pattern", lambda m: (_ for _ in ()).throw(AssertionError("drive built")))
+    assert kinect._dot_drive_digest(model) == digest
+    other = dataclasses.replace(model, pattern_seed=model.pattern_seed + 1)
+    monkeypatch.undo()
+    assert kinect._dot_drive_digest(other) != digest

@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import cv2
@@ -410,12 +411,27 @@ def _ir(radiance_rgb: np.ndarray) -> np.ndarray:
     return np.asarray(radiance_rgb, dtype=np.float32).mean(axis=2)
 
 
+def _dot_drive(model: KinectModel) -> np.ndarray:
+    """The dot texture as the projector's RGB drive (the same in the three channels)."""
+    return np.repeat(dot_pattern(model)[..., None], 3, axis=2)
+
+
+@lru_cache(maxsize=4)
+def _dot_drive_digest(model: KinectModel) -> str:
+    """:func:`simbench.cache.array_digest` of :func:`_dot_drive`, once per process and model:
+    making and hashing the drive was ~150 ms per render lookup."""
+    from simbench.cache import array_digest
+
+    return array_digest(_dot_drive(model))
+
+
 def _render(
     scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache
 ) -> np.ndarray:
-    from simbench.simulate import cached_radiance
+    from simbench.simulate import DriveImage, cached_radiance
 
-    drive = np.repeat(dot_pattern(model)[..., None], 3, axis=2)
+    # the drive by its digest, made only for a render the cache does not hold
+    drive = DriveImage(_dot_drive_digest(model), lambda: _dot_drive(model))
     return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache))
 
 
