@@ -390,46 +390,6 @@ def plane_fit_error(depth_m: np.ndarray, camera, *, mask: np.ndarray | None = No
     return fit_plane(pts[ok], min_points=min_points)
 
 
-def depth_errors_error_stats(depth_m, gt_depth_m, *, region, exclude=None) -> dict:
-    """The error statistics of simbench.metrics.depth_errors as first written: both maps
-    converted to float64 whole, then the scored pixels gathered."""
-    d = np.asarray(depth_m, dtype=np.float64)
-    g = np.asarray(gt_depth_m, dtype=np.float64)
-    region = region & np.isfinite(g)
-    valid = region & np.isfinite(d)
-    scored = valid if exclude is None else valid & ~exclude
-    err = (d[scored] - g[scored]) * 1000.0
-    a = np.abs(err)
-    n_region = int(region.sum())
-    return {
-        "n_region": n_region,
-        "n_valid": int(valid.sum()),
-        "completeness": float(valid.sum() / n_region) if n_region else float("nan"),
-        "n_scored": int(scored.sum()),
-        "mae_mm": float(a.mean()) if a.size else float("nan"),
-        "rmse_mm": float(np.sqrt(np.mean(err**2))) if a.size else float("nan"),
-        "median_mm": float(np.median(a)) if a.size else float("nan"),
-        "p95_mm": float(np.percentile(a, 95)) if a.size else float("nan"),
-        "max_mm": float(a.max()) if a.size else float("nan"),
-        "bias_mm": float(err.mean()) if a.size else float("nan"),
-    }
-
-
-def gray_order(bit_images, threshold) -> np.ndarray:
-    """simbench.decode.temporal.gray_order as first written: the stack widened to float64, the
-    Gray code decoded by shifts."""
-    b = np.asarray(bit_images, dtype=np.float64) > np.asarray(threshold, dtype=np.float64)[None]
-    gray = np.zeros(b.shape[1:], np.int64)
-    for plane in b:
-        gray = (gray << 1) | plane.astype(np.int64)
-    j = gray.copy()
-    shift = gray >> 1
-    while shift.any():
-        j ^= shift
-        shift >>= 1
-    return j
-
-
 def grey_frame(image) -> np.ndarray:
     """simbench.decode.temporal.grey_frame as first written: numpy's mean over the channels."""
     img = np.asarray(image)

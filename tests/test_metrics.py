@@ -52,11 +52,9 @@ def test_points_from_depth():
 
 
 @pytest.mark.parametrize("dtypes", [(np.float32, np.float32), (np.float32, np.float64), (np.float64, np.float32)])
-def test_depth_errors_give_the_bits_of_the_whole_map_float64_form(dtypes):
-    """depth_errors gathers the scored pixels before widening float32 maps to float64: the
-    statistics are the bits of the form that widened both whole maps first."""
-    from tests import numpy_reference as ref
-
+def test_depth_errors_of_float32_maps_are_those_of_the_maps_widened_first(dtypes):
+    """depth_errors gathers the scored pixels before widening float32 maps to float64: every
+    score is the bits of the same maps widened to float64 whole first (the form it had)."""
     rng = np.random.default_rng(len(str(dtypes)))
     h, w = 120, 170
     gt = (1.0 + 0.01 * rng.random((h, w))).astype(dtypes[1])
@@ -66,10 +64,11 @@ def test_depth_errors_give_the_bits_of_the_whole_map_float64_form(dtypes):
     d[rng.random((h, w)) < 0.05] = np.nan
     gt[rng.random((h, w)) < 0.02] = np.nan
     region = rng.random((h, w)) < 0.8
+    col = (rng.random((h, w)) * 900).astype(np.float32)
     for exclude in (None, rng.random((h, w)) < 0.1):
-        got = depth_errors(d, gt, region=region, exclude=exclude)
-        want = ref.depth_errors_error_stats(d, gt, region=region, exclude=exclude)
-        assert {k: got[k] for k in want} == want and want["n_scored"] > 1000
+        kw = dict(region=region, exclude=exclude, column_px=col, gt_column_px=col + 11 * far, period_px=21.0)
+        got = depth_errors(d, gt, **kw)
+        assert got == depth_errors(d.astype(np.float64), gt.astype(np.float64), **kw) and got["n_scored"] > 1000
     empty = depth_errors(np.full((h, w), np.nan, np.float32), gt, region=region)
     assert empty["n_valid"] == 0 and np.isnan(empty["mae_mm"])
     ints = depth_errors(np.ones((h, w), np.int32), gt, region=region)  # non-float maps are widened

@@ -130,27 +130,32 @@ def test_cli_renders_and_decodes_a_phase_shift_recording(tmp_path, variant, caps
 
 
 @pytest.mark.parametrize("bits", [1, 2, 7, 16, 18])
-def test_gray_order_gives_the_bits_of_the_shift_form(bits):
-    """gray_order compares without widening the stack and decodes the Gray code by a table
-    (a loop above 16 bits): the half-period indices of the first form, for float32, float64
-    and integer images, thresholds on the values included."""
-    from tests import numpy_reference as ref
+def test_gray_order_reads_every_code_and_compares_float32_exactly(bits):
+    """gray_order decodes the Gray code by a table up to 16 bits (the shift loop above): every
+    code gives its index; and it compares float32 images with the float64 threshold without
+    widening the stack: the indices of the same images widened first, for images equal to the
+    threshold too."""
+    from simbench.decode import temporal
 
+    codes = np.arange(1 << min(bits, 12))
+    planes = ((codes ^ (codes >> 1)) >> np.arange(min(bits, 12))[::-1, None]) & 1  # MSB first
+    assert np.array_equal(gray_order(planes[:, None, :], np.full((1, codes.size), 0.5)), codes[None])
+    if bits <= 16:
+        every = np.arange(1 << bits, dtype=np.int64)
+        assert np.array_equal(temporal._gray_to_binary(bits), temporal._gray_to_binary_loop(every))
     rng = np.random.default_rng(bits)
     h, w = 30, 40
     threshold = rng.random((h, w)).astype(np.float32).astype(np.float64)  # float32 images can equal it
     for images in (
         rng.random((bits, h, w)).astype(np.float32),
-        rng.random((bits, h, w)),
-        rng.integers(0, 2, (bits, h, w)),
         np.broadcast_to(threshold.astype(np.float32), (bits, h, w)),
     ):
         got = gray_order(images, threshold)
-        assert got.dtype == np.int64 and np.array_equal(got, ref.gray_order(images, threshold))
-    if bits <= 12:  # every code decodes to its own index
-        codes = np.arange(1 << bits)
-        planes = ((codes ^ (codes >> 1)) >> np.arange(bits)[::-1, None]) & 1  # MSB first
-        assert np.array_equal(gray_order(planes[:, None, :], np.full((1, codes.size), 0.5)), codes[None])
+        assert got.dtype == np.int64 and np.array_equal(got, gray_order(images.astype(np.float64), threshold))
+    at = np.broadcast_to(threshold.astype(np.float32), (bits, h, w))
+    assert not gray_order(at, threshold).any()  # a bit exactly at the threshold reads 0
+    ones = np.ones((bits, 2, 2), np.int32)  # integer images are widened
+    assert np.array_equal(gray_order(ones, np.zeros((2, 2))), gray_order(ones.astype(np.float64), np.zeros((2, 2))))
 
 
 def test_grey_frame_gives_the_bits_of_numpys_channel_mean():
