@@ -261,8 +261,9 @@ ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m
     }
 }
 
-/* fit_row of a row whose every window is wholly certain, from the all-ones band's solver rows
- * (SOLVER planes of one table row, plane stride `stride`) and its s1 row. */
+/* fit_row from solver rows made before (SOLVER planes of stride `stride`) and the s1 row: the
+ * all-ones band's, for a row whose every window is wholly certain, or the row's own, the table's
+ * with the uncertain runs' written over them. */
 ROW_FN void fit_row_solved(int64_t w, const float *restrict solver, int64_t stride, const float *restrict m0,
                            const float *restrict cos1, const float *restrict sin1, const float *restrict v0,
                            const float *restrict v1, const float *restrict v2, const float *restrict v3,
