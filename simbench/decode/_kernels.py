@@ -121,7 +121,8 @@ def gabor_band(
     n = y1 - y0
     lib = _library()
     if table is not None:
-        table = _ptr(table, "table", f4, (gabor_table_planes(), min(h, 2 * ry + 1), w), writable=bool(fill_table))
+        shape = (gabor_table_planes(), gabor_table_rows(h, half_kernels), w)
+        table = _ptr(table, "table", f4, shape, writable=bool(fill_table))
     scratch = _scratch(lib.gabor_scratch_floats(w, rx, ry))
     lib.gabor_band(
         h,
@@ -146,6 +147,14 @@ def gabor_band(
             for a, name in zip((wrapped, amp, a0, residual, support), ("wrapped", "amp", "a0", "residual", "support"))
         ),
     )
+
+
+def gabor_table_rows(height: int, half_kernels) -> int:
+    """Rows of :func:`gabor_band`'s all-certain table for a band of ``height`` rows: an all-ones
+    band's certainty sums differ only within ``ry`` rows of its top and bottom, so the top ``ry``
+    rows, one interior row and the bottom ``ry`` rows hold them all (``min(H, 2 ry + 1)``)."""
+    ry = half_kernels[-1].size - 1
+    return min(height, 2 * ry + 1)
 
 
 def gabor_table_planes() -> int:

@@ -195,9 +195,9 @@ def _fit(intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, 
 @lru_cache(maxsize=16)
 def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float) -> np.ndarray:
     """The certainty's window sums of an all-ones band and the fit's solver from them, which
-    every pixel whose window is wholly certain shares: ``n = min(H, 2 ry + 1)`` rows (as
-    :func:`simbench.decode._kernels.gabor_band` takes them), made from an all-ones band of ``n``
-    rows in a fraction of a millisecond."""
+    every pixel whose window is wholly certain shares: ``n`` rows
+    (:func:`simbench.decode._kernels.gabor_table_rows`), made from an all-ones band of ``n`` rows
+    in a fraction of a millisecond."""
     kernels = _half_kernels(omega, sx, sy)
     ones = np.ones((n, w), np.float32)
     table = np.empty((_kernels.gabor_table_planes(), n, w), np.float32)
@@ -250,7 +250,7 @@ def gabor_phase(
     c = np.ascontiguousarray(certainty, dtype=np.float32)
     sx, sy = float(sigma_x_px), float(sigma_y_px)
     h, w = intensity.shape
-    n = min(h, 2 * (_half_kernels(omega, sx, sy)[-1].size - 1) + 1)
+    n = _kernels.gabor_table_rows(h, _half_kernels(omega, sx, sy))
     wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy))
     return PhaseResult(
         wrapped=wrapped,
