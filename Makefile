@@ -8,8 +8,8 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP)
 
-# (the install also compiles simbench's C loops, simbench/_ckernels.c)
-$(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c
+# (the install also compiles simbench's C loops, simbench/_ckernels.c and simbench/_lens.c)
+$(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c simbench/_lens.c
 	bash scripts/setup_system.sh
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip

@@ -1,7 +1,9 @@
 /*
  * simbench's compiled loops, in C (loaded by simbench/native.py): the decoder's fused per-pixel
- * loops (wrappers in simbench/decode/_kernels.py) and the lens model's remap grids
- * (simbench/optics.py).
+ * loops (wrappers in simbench/decode/_kernels.py), the projector-column triangulation
+ * (simbench/rig.py) and the plane fit's centred points (simbench/metrics.py).  The lens model's
+ * remap grids are in simbench/_lens.c, built into the same library: recordings depend on them
+ * alone (simbench.simulate hashes that file), so an edit here re-records nothing.
  *
  * Every loop evaluates the same IEEE operations, in the same order and precision, as the numpy
  * expression it replaces (tests/numpy_reference.py; tests/test_kernels.py compares the bits).
@@ -813,61 +815,6 @@ static inline double plane_depth(double u, double rx, double ry, double fp, doub
     const double a = (u - cxp) / fp;
     const double nx = R[0] - a * R[2], ny = R[3] - a * R[5], nz = R[6] - a * R[8];
     return (nx * t[0] + ny * t[1] + nz * t[2]) / (nx * rx + ny * ry + nz);
-}
-
-/* Brown-Conrady lens model on the pixel grid of a camera (simbench.optics: distort_normalized,
- * undistort_normalized), in float64 and in numpy's operation order, so the maps are the bits
- * numpy gives; one row at a time so that every loop runs over contiguous pixels.
- * grid x = (j - cx) / f, y = (i - cy) / f; map = (float)(model(x, y) * f + c). */
-ROW_FN void brown_forward_row(int64_t w, const double *restrict x, double y, const double *restrict d,
-                             double *restrict xd, double *restrict yd) {
-    const double k1 = d[0], k2 = d[1], p1 = d[2], p2 = d[3], k3 = d[4];
-    for (int64_t j = 0; j < w; j++) {
-        const double r2 = x[j] * x[j] + y * y;
-        const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        xd[j] = x[j] * radial + 2.0 * p1 * x[j] * y + p2 * (r2 + 2.0 * x[j] * x[j]);
-        yd[j] = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x[j] * y;
-    }
-}
-
-ROW_FN void brown_inverse_step(int64_t w, const double *restrict xd, double yd, const double *restrict d,
-                              double *restrict x, double *restrict y) {
-    const double k1 = d[0], k2 = d[1], p1 = d[2], p2 = d[3], k3 = d[4];
-    for (int64_t j = 0; j < w; j++) {
-        const double r2 = x[j] * x[j] + y[j] * y[j];
-        const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        const double dx = 2.0 * p1 * x[j] * y[j] + p2 * (r2 + 2.0 * x[j] * x[j]);
-        const double dy = p1 * (r2 + 2.0 * y[j] * y[j]) + 2.0 * p2 * x[j] * y[j];
-        x[j] = (xd[j] - dx) / radial;
-        y[j] = (yd - dy) / radial;
-    }
-}
-
-ROW_FN void to_pixels(int64_t w, const double *restrict u, double f, double c, float *restrict out) {
-    for (int64_t j = 0; j < w; j++) out[j] = (float)(u[j] * f + c);
-}
-
-/* inverse = 0: where each ideal pixel is recorded, K D(K^-1 q); inverse = 1: where each
- * recorded pixel's light comes from, K D^-1(K^-1 p) by `iterations` fixed-point steps (OpenCV's
- * method).  scratch: 3 w doubles. */
-void brown_maps(int64_t h, int64_t w, double f, double cx, double cy, const double *restrict d, int64_t inverse,
-                int64_t iterations, double *restrict scratch, float *restrict map_x, float *restrict map_y) {
-    double *gx = scratch, *a = scratch + w, *b = scratch + 2 * w;
-    for (int64_t j = 0; j < w; j++) gx[j] = ((double)j - cx) / f;
-    for (int64_t i = 0; i < h; i++) {
-        const double gy = ((double)i - cy) / f;
-        if (!inverse) {
-            brown_forward_row(w, gx, gy, d, a, b);
-        } else {
-            for (int64_t j = 0; j < w; j++) {
-                a[j] = gx[j];
-                b[j] = gy;
-            }
-            for (int64_t k = 0; k < iterations; k++) brown_inverse_step(w, gx, gy, d, a, b);
-        }
-        to_pixels(w, a, f, cx, map_x + i * w);
-        to_pixels(w, b, f, cy, map_y + i * w);
-    }
 }
 
 /* The plane fit's centred points (simbench.metrics.plane_fit_error): for the pixels that count

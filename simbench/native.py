@@ -1,6 +1,7 @@
-"""simbench's compiled loops (``simbench/_ckernels.c``): loading, argument checks, provenance.
+"""simbench's compiled loops (``simbench/_ckernels.c``, ``simbench/_lens.c``): loading, argument
+checks, provenance.
 
-The C file is built into the package when it is installed (``pip install -e .``, which
+The C files are built into the package when it is installed (``pip install -e .``, which
 ``make setup`` runs; a C compiler is needed) and loaded here with :mod:`ctypes`, which releases
 the GIL around every call, so threads run the loops in parallel.  It is compiled without fused
 multiply-add or reassociation (``pyproject.toml``), so every loop gives the bits of the numpy
@@ -22,9 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SOURCE", "bind", "ptr", "f32", "compiler"]
+__all__ = ["SOURCE", "LENS_SOURCE", "SOURCES", "bind", "ptr", "f32", "compiler"]
 
+# the decoder's loops, the triangulation and the plane fit
 SOURCE = Path(__file__).with_name("_ckernels.c")
+# the lens model's remap grids: the only loops between a scene and a recording
+LENS_SOURCE = Path(__file__).with_name("_lens.c")
+# every C source of the one library, in name order
+SOURCES = (SOURCE, LENS_SOURCE)
 
 P = ctypes.c_void_p
 I64 = ctypes.c_int64
@@ -36,7 +42,7 @@ def _built_file() -> str:
     spec = importlib.util.find_spec("simbench._ckernels")
     if spec is None or spec.origin is None:
         raise ImportError(
-            "simbench's compiled loops (simbench/_ckernels.c) are not built: "
+            "simbench's compiled loops (simbench/_ckernels.c, _lens.c) are not built: "
             "run `make setup` (or `pip install -e .`; it needs a C compiler)"
         )
     return spec.origin

@@ -106,7 +106,7 @@ _BROWN = {
 
 def _maps(intr, *, inverse: bool) -> tuple[np.ndarray, np.ndarray]:
     """The remap grids of :func:`distort_normalized` (``inverse`` False) or
-    :func:`undistort_normalized` (True) on the camera's pixels, computed in C (simbench/_ckernels.c:
+    :func:`undistort_normalized` (True) on the camera's pixels, computed in C (simbench/_lens.c:
     the same float64 operations in the same order, so the same bits as those functions;
     tests/test_optics.py), ~20x faster than numpy (the inverse's 30 fixed-point steps cost
     ~0.5 s per camera in numpy)."""

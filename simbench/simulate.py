@@ -83,7 +83,7 @@ VERSIONED_DISTRIBUTIONS = {
     "mitsuba": "mitsuba",
     "drjit": "drjit",
     "numpy": "numpy",
-    # OpenCV (remaps, filters); simbench's own C loops (simbench/_ckernels.c, compiled at
+    # OpenCV (remaps, filters); simbench's own C loops (simbench/_lens.c, compiled at
     # install: the C compiler is recorded too)
     "opencv": "opencv-python-headless",
     "colour": "colour-science",
@@ -573,7 +573,7 @@ def _recording_code_digest() -> str:
         simbench.render,
         simbench.mitsuba_dict,
     )
-    return source_digest([*(m.__file__ for m in modules), sys.modules[__name__].__file__, simbench.native.SOURCE])
+    return source_digest([*(m.__file__ for m in modules), sys.modules[__name__].__file__, simbench.native.LENS_SOURCE])
 
 
 @lru_cache(maxsize=1)

@@ -266,3 +266,28 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     assert cache.misses > made
     recordings(seeds=[np.random.default_rng(11)])
     assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 8
+
+
+def test_recording_key_holds_the_lens_loops_and_not_the_decoders(tmp_path, monkeypatch):
+    """A recording's code digest changes with the lens model's C source (simbench/_lens.c) and not
+    with the decoder's (simbench/_ckernels.c), so an edit of a decoder loop re-records nothing; the
+    loops a recording calls (the lens maps) are defined in the hashed file, and only there."""
+    from simbench import native, optics, simulate
+
+    for name in optics._BROWN:
+        assert f"void {name}(" in native.LENS_SOURCE.read_text()
+        assert f"void {name}(" not in native.SOURCE.read_text()
+
+    def digest():
+        simulate._recording_code_digest.cache_clear()
+        return simulate._recording_code_digest()
+
+    base = digest()
+    for attr in ("SOURCE", "LENS_SOURCE"):
+        edited = tmp_path / getattr(native, attr).name
+        edited.write_bytes(getattr(native, attr).read_bytes() + b"\n/* edited */\n")
+        with monkeypatch.context() as m:
+            m.setattr(native, attr, edited)
+            changed = digest() != base
+        assert changed == (attr == "LENS_SOURCE"), attr
+    assert digest() == base

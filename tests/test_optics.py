@@ -259,7 +259,7 @@ def test_decoder_handles_projector_distortion(mode):
 
 @pytest.mark.parametrize("distortion", [(-0.21, 0.1, 0.0, 0.0, 0.0), (0.12, -0.05, 0.002, -0.0015, 0.01)])
 def test_remap_grids_are_the_bits_of_the_numpy_lens_model(distortion):
-    """The C remap grids (simbench/_ckernels.c) = the float64 numpy forms of distort_normalized /
+    """The C remap grids (simbench/_lens.c) = the float64 numpy forms of distort_normalized /
     undistort_normalized on the pixel grid, cast to float32: the same operations in the same
     order, no fused multiply-add."""
     from simbench import optics

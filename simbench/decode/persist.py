@@ -29,7 +29,7 @@ __all__ = ["lookup_decoded_reference", "decoder_fingerprint"]
 def decoder_fingerprint() -> str:
     """SHA-256 over the decoder package's source files and the C loops it calls (name and
     bytes, in name order)."""
-    return source_digest(sorted([*Path(__file__).parent.glob("*.py"), native.SOURCE]))
+    return source_digest(sorted([*Path(__file__).parent.glob("*.py"), *native.SOURCES]))
 
 
 def lookup_decoded_reference(
