@@ -1118,6 +1118,9 @@ def _report_library_messages() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
+    from simbench.threads import single_thread_blas
+
+    single_thread_blas()
     _report_library_messages()
     try:
         args = _parser().parse_args(argv)

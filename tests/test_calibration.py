@@ -192,6 +192,35 @@ def test_solve_recovers_the_rig_from_exact_observations():
     assert res.used_views == tuple(range(10))
 
 
+def test_solve_gives_the_same_bits_whatever_the_blas_thread_count():
+    """The solve runs BLAS on one thread (and OpenCV): a multi-threaded OpenBLAS sums in an
+    order set by its thread count, so the rig would depend on the machine's core count
+    (measured: noisy views gave another rig with 2 threads than with 1)."""
+    from threadpoolctl import threadpool_limits
+
+    from simbench.rig import rig_to_dict
+
+    truth = _distorted_rig()
+    rng = np.random.default_rng(5)
+    views = [
+        dataclasses.replace(
+            v,
+            camera_px=v.camera_px + rng.normal(0, 0.3, v.camera_px.shape),
+            projector_px=v.projector_px + rng.normal(0, 0.3, v.projector_px.shape),
+        )
+        for v in _exact_views(truth, 12)
+    ]
+
+    def solve(threads: int) -> tuple:
+        with threadpool_limits(threads, user_api="blas"):
+            res = solve_calibration(
+                views, target=TARGET, camera_hw=truth.camera.size_hw, projector_hw=truth.projector.size_hw
+            )
+        return rig_to_dict(res.rig), res.rms_px
+
+    assert solve(1) == solve(2)
+
+
 def test_solve_needs_three_views_and_leaves_out_missing_ones():
     truth = paper_rig()
     views = _exact_views(truth, 5)

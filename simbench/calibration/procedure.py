@@ -435,16 +435,21 @@ def _intrinsics(k: np.ndarray, dist: np.ndarray, size_hw: tuple[int, int]) -> In
 
 
 @contextmanager
-def _opencv_single_thread() -> Iterator[None]:
-    """OpenCV's solvers on one thread: its multi-threaded Levenberg-Marquardt sums in a varying
-    order (measured: the focal length differs in the 12th digit from run to run), one thread is
-    bit-reproducible, and the solve takes well under a second either way."""
+def _single_thread_solvers() -> Iterator[None]:
+    """OpenCV's solvers and BLAS on one thread, so that the calibration does not depend on the
+    machine's core count.  OpenCV's multi-threaded Levenberg-Marquardt sums in a varying order
+    (measured: the focal length differs in the 12th digit from run to run); a multi-threaded
+    OpenBLAS sums in an order set by its thread count (measured: the calibrated rig's errors
+    differ in the 10th digit between 1 and 2 threads).  One thread is bit-reproducible, and the
+    solve takes well under a second either way."""
     import cv2
+    from threadpoolctl import threadpool_limits
 
     before = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        yield
+        with threadpool_limits(1, user_api="blas"):
+            yield
     finally:
         cv2.setNumThreads(before)
 
@@ -462,7 +467,7 @@ def solve_calibration(
     Needs >= 3 views with their corners found (Zhang's minimum for a full pinhole); a corner
     enters the projector's and the stereo solve only with its projector coordinates.
     """
-    with _opencv_single_thread():
+    with _single_thread_solvers():
         return _solve(views, target, camera_hw, projector_hw, distortion)
 
 

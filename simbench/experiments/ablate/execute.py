@@ -92,9 +92,11 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
 
 
 def _worker_init(variant: str | None, parent_pid: int) -> None:
+    from simbench.threads import single_thread_blas
     from simbench.variant import select_variant
 
     _die_with_parent(parent_pid)
+    single_thread_blas()
     select_variant(variant)
 
 

@@ -1,0 +1,61 @@
+"""BLAS thread counts set by the entry points (simbench.threads), in fresh interpreters: an
+in-process test would see whatever BLAS settings earlier tests left."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+_REPORT = textwrap.dedent(
+    """
+    import json, os
+    from threadpoolctl import threadpool_info
+    def blas():
+        return [i for i in threadpool_info() if i["user_api"] == "blas"]
+    def report():
+        return {
+            "threads": sorted({(i["filepath"], i["num_threads"]) for i in blas()}),
+            "env": os.environ.get("OPENBLAS_NUM_THREADS"),
+        }
+    """
+)
+
+
+def _run(code: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    out = subprocess.run(
+        [sys.executable, "-c", _REPORT + textwrap.dedent(code)], capture_output=True, text=True, timeout=300, env=env
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_the_cli_runs_blas_on_one_thread_also_in_libraries_loaded_later():
+    """After ``simbench`` starts, numpy's BLAS and a BLAS loaded afterwards (SciPy's own) run on
+    one thread, and spawned children inherit it through the environment; a process that only
+    imports simbench keeps its BLAS settings."""
+    untouched = _run(
+        """
+        import numpy, simbench.cli, simbench.experiments.reproduce
+        print(json.dumps(report()))
+        """
+    )
+    assert untouched["env"] is None
+    cli = _run(
+        """
+        import contextlib, io
+        import numpy
+        from simbench.cli import main
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(["--help"]) == 0
+        import scipy.linalg
+        scipy.linalg.eigh([[2.0, 1.0], [1.0, 2.0]])
+        print(json.dumps(report()))
+        """
+    )
+    assert cli["env"] == "1"
+    assert len(cli["threads"]) >= 2, cli  # numpy's BLAS and SciPy's
+    assert all(n == 1 for _, n in cli["threads"]), cli
