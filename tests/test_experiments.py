@@ -140,3 +140,62 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
     prov = json.loads((tmp_path / "good" / "table1.provenance.json").read_text())
     assert set(prov["files"]) == {"table1.csv", "table1.md"} and prov["seeds"]["table1/paint/red"]["render"] > 0
     assert abs(prov["seeds"]["table1/paint/red/placement"]["board_depth_m"]) <= cfg.placement_depth_mm / 1000
+
+
+def test_a_target_records_the_seeds_of_calibrations_it_reuses(variant, tmp_path):
+    """Each target's session has a seed log of its own; a calibration made for one target and
+    reused by another is recorded in both logs (a target's provenance must not depend on which
+    targets ran before it)."""
+    from simbench.experiments.common import Session
+
+    made = []
+
+    class Fake:
+        name = "fake"
+
+        def calibration_key(self, scene):
+            return scene
+
+        def calibrate(self, scene, *, seeds, render):
+            made.append(scene)
+            seeds.record(f"fake/{scene}", {"render": seeds.seed(f"fake/{scene}")})
+            return f"calibration of {scene}"
+
+    session = Session(RunConfig.preset(quick=True), out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
+    first, second = session.for_target(), session.for_target()
+    first.seeds.record("first/capture", {"render": 1})
+    assert first.calibration(Fake(), "a") == second.calibration(Fake(), "a") == "calibration of a"
+    assert made == ["a"]
+    assert second.seeds_used == {"fake/a": {"render": label_seed(session.config.seed, "fake/a")}}
+    assert set(first.seeds_used) == {"first/capture", "fake/a"}
+    assert session.seeds_used == {}
+
+
+@pytest.mark.slow
+def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path, variant):
+    """A target's outputs, provenance included, are the same bytes whether it runs alone, after
+    another target in the same process, or on worker processes (--workers 2)."""
+    from simbench.experiments.reproduce import reproduce
+
+    cfg = RunConfig.preset(quick=True, compare_rigs=False)
+
+    def run(targets, out, workers=1):
+        reproduce(
+            targets,
+            config=cfg,
+            out_dir=tmp_path / out,
+            cache_dir=tmp_path / "cache",
+            progress=lambda s: None,
+            command="t",
+            workers=workers,
+        )
+        return {
+            p.relative_to(tmp_path / out): p.read_bytes() for p in sorted((tmp_path / out).rglob("*")) if p.is_file()
+        }
+
+    together = run(["budget", "flatness"], "together")
+    alone = run(["flatness"], "alone")
+    workers = run(["budget", "flatness"], "workers", workers=2)
+    assert workers == together
+    flatness = {p: b for p, b in together.items() if p.name.startswith("flatness")}
+    assert len(flatness) >= 3 and flatness == {p: b for p, b in alone.items() if p.name != "metrics.json"}

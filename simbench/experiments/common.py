@@ -9,6 +9,7 @@ run alone; every result row records them.
 
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import hashlib
@@ -271,6 +272,14 @@ class Session:
             other._rigs = self._rigs
         return other
 
+    def for_target(self) -> "Session":
+        """A session for one target of a run: this one's cache, systems and calibrations, with a
+        seed log of its own, so that a target's provenance lists the seeds it used (calibrations
+        it reuses included) whatever ran before it, in this process or in another."""
+        other = copy.copy(self)
+        other.seeds = SeedLog(self.config.seed)
+        return other
+
     def system(self, name: str) -> DepthSystem:
         """The registered depth system ``name`` (:mod:`simbench.systems`) set up for this run."""
         if name not in self._systems:
@@ -298,8 +307,11 @@ class Session:
             tuple(sorted(options.items())),
         )
         if key not in self._calibrations:
-            self._calibrations[key] = system.calibrate(scene, seeds=self.seeds, render=r, **options)
-        return self._calibrations[key]
+            log = SeedLog(self.seeds.base)
+            self._calibrations[key] = (system.calibrate(scene, seeds=log, render=r, **options), log.used)
+        calibration, seeds = self._calibrations[key]
+        self.seeds.used.update(seeds)  # every session that uses it records its seeds
+        return calibration
 
     # the rig the decoders believe ------------------------------------------------------
     def calibration_result(self, scene: SceneSpec) -> CalibrationResult:
@@ -329,7 +341,7 @@ class Session:
                     ),
                     corner_spp=CALIBRATION_CORNER_SPP,
                 )
-            self.seeds.record("calibration", {"base": cfg.seed, "poses": cfg.calibration_poses})
+        self.seeds.record("calibration", {"base": cfg.seed, "poses": cfg.calibration_poses})
         return self._rigs[ideal]
 
     def calibrated_rig(self, scene: SceneSpec) -> Rig:
