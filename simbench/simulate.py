@@ -284,12 +284,13 @@ class ProjectorDrive:
 
     ``pattern_digest``: :func:`simbench.cache.array_digest` of ``pattern``, for a caller that
     keeps the pattern and its digest made once (hashing a projector frame per drive was ~6 ms;
-    a phase-shift sequence makes 25 drives per acquisition); None: hashed here."""
+    a phase-shift sequence makes 25 drives per acquisition); None: hashed here.  ``pattern`` may
+    be a :class:`DriveImage` (its digest known, the pattern made only if the drive is built)."""
 
     def __init__(
         self,
         scene: SceneSpec,
-        pattern: np.ndarray,
+        pattern: "np.ndarray | DriveImage",
         sensor: SensorModel,
         *,
         cache: RenderCache | None = None,
@@ -297,16 +298,15 @@ class ProjectorDrive:
         pattern_digest: str | None = None,
     ) -> None:
         self._scene, self._pattern, self._sensor, self._cache = scene, pattern, sensor, cache
-        self._pattern_digest = pattern_digest
+        self._pattern_digest = pattern.digest if isinstance(pattern, DriveImage) else pattern_digest
         self._weights = _bitplane_weights(scene, sensor, phase)
         self._array: np.ndarray | None = None
         self._digests: dict[str, str] | None = None
 
     def array(self) -> np.ndarray:
         if self._array is None:
-            self._array = _build_drive(
-                self._scene, self._pattern, self._sensor, cache=self._cache, weights=self._weights
-            )
+            pattern = self._pattern.make() if isinstance(self._pattern, DriveImage) else self._pattern
+            self._array = _build_drive(self._scene, pattern, self._sensor, cache=self._cache, weights=self._weights)
         return self._array
 
     def _compute_digests(self) -> dict[str, str]:

@@ -179,12 +179,15 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     assert a["rgb"] != b["rgb"] != first.digests()["rgb"]
 
 
-def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests():
+def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests(tmp_path, monkeypatch, variant):
     """The proposed pattern and the phase-shift frames are made and hashed once per process;
-    a drive given that digest has the inputs (the cache key) of one that hashes the pattern."""
+    a drive given that digest has the inputs (the cache key) of one that hashes the pattern,
+    and so has a drive of a DriveImage, which makes its pattern only when the drive is built.
+    The phase-shift frames' digests are also kept in the render cache: a process that finds
+    them there never makes the frames."""
     from simbench.device import get_sensor
     from simbench.scene import load_scene
-    from simbench.simulate import ProjectorDrive, physical_scene
+    from simbench.simulate import DriveImage, ProjectorDrive, physical_scene
     from simbench.systems import phase_shift, proposed
     from simbench.systems.phase_shift import PhaseShiftSystem
 
@@ -195,9 +198,23 @@ def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests():
     assert kept == array_digest(system.pattern_u8)
     with_digest = ProjectorDrive(scene, system.pattern_u8, sensor, pattern_digest=kept).inputs()
     assert with_digest == ProjectorDrive(scene, system.pattern_u8, sensor).inputs()
+    made = []
+    lazy = ProjectorDrive(scene, DriveImage(kept, lambda: made.append(1) or system.pattern_u8), sensor)
+    assert lazy.inputs() == with_digest and made == []
+    assert np.array_equal(lazy.array(), ProjectorDrive(scene, system.pattern_u8, sensor).array()) and made == [1]
     shifts = PhaseShiftSystem()
-    digests = phase_shift._frame_digests(shifts.spec)
+    cache = RenderCache(tmp_path / "cache")
+    monkeypatch.setattr(phase_shift, "_digests", {})
+    digests = phase_shift._frame_digests(shifts.spec, cache)
     assert list(digests) == [array_digest(f) for f in shifts.frames_u8()] and len(set(digests)) == len(digests)
+    assert cache.misses == 1 and phase_shift._frame_digests(shifts.spec) == digests
+    monkeypatch.setattr(phase_shift, "_digests", {})  # another process: the frames' digests from the cache
+
+    def no_frames(spec):
+        raise AssertionError("the frames were made again")
+
+    monkeypatch.setattr(phase_shift, "_frames_u8", no_frames)
+    assert phase_shift._frame_digests(shifts.spec, cache) == digests and cache.hits == 1
 
 
 def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, variant, monkeypatch):
