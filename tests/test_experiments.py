@@ -172,9 +172,11 @@ def test_a_target_records_the_seeds_of_calibrations_it_reuses(variant, tmp_path)
 
 
 @pytest.mark.slow
-def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path, variant):
+def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path, variant, monkeypatch):
     """A target's outputs, provenance included, are the same bytes whether it runs alone, after
-    another target in the same process, or on worker processes (--workers 2)."""
+    another target in the same process, or on two workers (this process and a spawned one); a
+    target that fails on this process's side fails the run."""
+    from simbench.experiments import reproduce as module
     from simbench.experiments.reproduce import reproduce
 
     cfg = RunConfig.preset(quick=True, compare_rigs=False)
@@ -199,3 +201,11 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     assert workers == together
     flatness = {p: b for p, b in together.items() if p.name.startswith("flatness")}
     assert len(flatness) >= 3 and flatness == {p: b for p, b in alone.items() if p.name != "metrics.json"}
+
+    def broken(session):
+        raise ValueError("budget broke")
+
+    # budget (the longer) is this process's; flatness runs on the spawned worker
+    monkeypatch.setitem(module.TARGETS, "budget", broken)
+    with pytest.raises(ValueError, match="budget broke"):
+        run(["budget", "flatness"], "broken", workers=2)

@@ -79,8 +79,8 @@ def reproduce(
 
     Each target runs with a seed log of its own (:meth:`Session.for_target`), so its outputs,
     provenance included, do not depend on which targets ran before it; ``workers`` > 1 runs the
-    targets in that many worker processes (spawned; each target whole, longest first), with the
-    same outputs as one process.  That pays on a warm cache, where every target is decoding and
+    targets on that many workers (this process and spawned ones; each target whole, longest
+    first), with the same outputs as one process.  That pays on a warm cache, where every target is decoding and
     scoring; on a cold one the renders already use every core, and targets that need the same
     render (the calibrated rig: Table 1, Table 3 and Fig. 9) may each make it."""
     names = _resolve(targets)
@@ -89,11 +89,10 @@ def reproduce(
     metrics: dict = {}
     if workers == 1 or len(names) == 1:
         for name in names:
-            with session.timed(f"{name} done"):
-                metrics.update(TARGETS[name](session.for_target()))
-        hits, misses = session.cache.hits, session.cache.misses
+            metrics.update(_run_target(session, name))
     else:
-        metrics, hits, misses = _run_in_workers(names, session=session, workers=workers, progress=progress)
+        metrics = _run_in_workers(names, session=session, workers=workers, progress=progress)
+    hits, misses = session.cache.hits, session.cache.misses
     path = Path(out_dir) / "metrics.json"
     merged = {}
     if path.is_file():
@@ -109,7 +108,12 @@ def reproduce(
     return metrics
 
 
-# The order targets start in on worker processes: the longest first (warm quick run on 2 cores:
+def _run_target(session: Session, name: str) -> dict:
+    with session.timed(f"{name} done"):
+        return TARGETS[name](session.for_target())
+
+
+# The order targets are taken in by the workers: the longest first (warm quick run on 2 cores:
 # fig9 7.0 s, table1 3.2 s, table3 2.1 s, figures 1.7 s, budget 1.0 s, the others 0.5 s), so that
 # no long target starts last.
 _LONGEST_FIRST = ("fig9", "table1", "table3", "figures", "budget", "render_noise", "flatness")
@@ -133,19 +137,21 @@ def _worker_run(name: str) -> tuple[dict, int, int]:
     """One target on a worker: its metrics and the cache hits and misses it counted."""
     session = _worker_session
     hits, misses = session.cache.hits, session.cache.misses
-    with session.timed(f"{name} done"):
-        metrics = TARGETS[name](session.for_target())
+    metrics = _run_target(session, name)
     return metrics, session.cache.hits - hits, session.cache.misses - misses
 
 
-def _run_in_workers(
-    names: list[str], *, session: Session, workers: int, progress: Callable[[str], None]
-) -> tuple[dict, int, int]:
+def _run_in_workers(names: list[str], *, session: Session, workers: int, progress: Callable[[str], None]) -> dict:
+    """The targets on ``workers`` workers: this process (it has its imports and its session
+    already) and ``workers - 1`` spawned processes, each taking the next target, longest first,
+    when it is free.  The cache's hits and misses of the spawned ones are added to ``session``'s."""
     import multiprocessing as mp
     import threading
+    from collections import deque
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
+    workers = min(workers, len(names))
     ctx = mp.get_context("spawn")  # a forked Mitsuba/Dr.Jit process is not safe to use
     messages = ctx.Queue()
 
@@ -155,23 +161,58 @@ def _run_in_workers(
 
     relay_thread = threading.Thread(target=relay, daemon=True)
     relay_thread.start()
-    order = sorted(names, key=lambda n: _LONGEST_FIRST.index(n) if n in _LONGEST_FIRST else len(_LONGEST_FIRST))
+    todo = deque(sorted(names, key=lambda n: _LONGEST_FIRST.index(n) if n in _LONGEST_FIRST else len(_LONGEST_FIRST)))
+    done: dict[str, dict] = {}
+    failed: list[BaseException] = []
+    counts: list[tuple[int, int]] = []  # the spawned workers' cache hits and misses, per target
     cache_root = None if session.cache.root is None else str(session.cache.root)
     args = (session.config, str(session.out), cache_root, session.command, session.variant, messages)
-    metrics, hits, misses = {}, 0, 0
+
+    def feed(pool: ProcessPoolExecutor) -> None:
+        while todo and not failed:
+            try:
+                name = todo.popleft()
+            except IndexError:
+                return
+            try:
+                done[name], hits, misses = pool.submit(_worker_run, name).result()
+            except BaseException as exc:  # noqa: BLE001 - re-raised in the parent's thread
+                failed.append(exc)
+                return
+            counts.append((hits, misses))
+
     try:
         with ProcessPoolExecutor(
-            max_workers=min(workers, len(names)), mp_context=ctx, initializer=_worker_start, initargs=args
+            max_workers=workers - 1, mp_context=ctx, initializer=_worker_start, initargs=args
         ) as pool:
-            for m, h, n in [f.result() for f in [pool.submit(_worker_run, name) for name in order]]:
-                metrics.update(m)
-                hits, misses = hits + h, misses + n
+            first = todo.popleft()  # this process starts at once; the spawned ones import first
+            feeders = [threading.Thread(target=feed, args=(pool,), daemon=True) for _ in range(workers - 1)]
+            for t in feeders:
+                t.start()
+            try:
+                done[first] = _run_target(session, first)
+                while todo and not failed:
+                    try:
+                        name = todo.popleft()
+                    except IndexError:
+                        break
+                    done[name] = _run_target(session, name)
+            except BaseException:
+                todo.clear()  # the spawned workers finish the target they hold, then stop
+                raise
+            finally:
+                for t in feeders:
+                    t.join()
+        if failed:
+            raise failed[0]
+        session.cache.hits += sum(h for h, _ in counts)  # after the feeders: no other thread counts
+        session.cache.misses += sum(m for _, m in counts)
     except BrokenProcessPool as exc:
         raise RuntimeError("a reproduce worker process died (killed, or out of memory)") from exc
     finally:
         messages.put(None)
         relay_thread.join()
-    return metrics, hits, misses
+    return {k: v for name in names for k, v in done[name].items()}
 
 
 # ---------------------------------------------------------------------------------------
