@@ -7,7 +7,8 @@ image, spp, seed, path length, the Mitsuba variant and version, and :data:`RENDE
 camera-only change therefore never re-renders.  Entries are ``.npz`` files written atomically,
 so an interrupted run leaves no half-written entry, and each carries a SHA-256 of its arrays:
 an entry damaged later (truncated, bit-flipped) fails the check and is re-made; delete the
-directory to clear the cache.
+directory to clear the cache.  Processes may share a cache: an entry two of them miss at once is
+made by one while the other waits (:meth:`RenderCache.get_or_make`).
 """
 
 from __future__ import annotations
@@ -105,12 +106,25 @@ class RenderCache:
         return f"{kind}-{_digest({'kind': kind, 'render_version': RENDER_VERSION, **parts})[:32]}"
 
     def get_or_make(self, kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-        """The arrays stored under ``(kind, parts)``, made by ``make()`` and stored on a miss."""
+        """The arrays stored under ``(kind, parts)``, made by ``make()`` and stored on a miss.
+
+        Processes sharing the cache (``simbench reproduce --workers``, ablation workers) make
+        an entry once: a miss is made under an exclusive lock on the entry's key, and a process
+        that waited for another's lock reads what that one stored (a hit, not a miss)."""
         out = self.lookup(kind, parts)
         if out is None:
-            out = make()
-            self.store(kind, parts, out)
+            with _KeyLock(self.root, self.key(kind, parts)) as waited:
+                if waited and (out := self._read(kind, parts)) is not None:
+                    self.misses -= 1
+                    self.hits += 1
+                    return out
+                out = make()
+                self.store(kind, parts, out)
         return out
+
+    def _read(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
+        path = self.root / f"{self.key(kind, parts)}.npz"
+        return _read_entry(path) if path.is_file() else None
 
     def lookup(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
         """The arrays stored under ``(kind, parts)``, or None (a miss; a damaged entry is
@@ -139,6 +153,59 @@ class RenderCache:
 
 
 _DIGEST_KEY = "__sha256__"
+
+# How long a process waits for another's lock on one entry before making the entry itself (the
+# longest single entry, a full-resolution calibration view's renders, takes ~1 min on 2 cores).
+# A backstop only: a process holding one key and waiting for a second while another holds the
+# second and waits for the first would need each entry to be made from the other, and then one
+# process alone would never finish either.
+LOCK_WAIT_S = 1800.0
+
+
+class _KeyLock:
+    """An exclusive lock (``flock``) on one cache key among processes, held while the entry is
+    made; entering says whether it had to wait for another holder.  No root: no lock.  The lock
+    file is removed after the entry is stored; a process that opened it before only finds the
+    entry there.  After ``LOCK_WAIT_S`` a waiter goes on without the lock (a warning): the
+    entry may then be made twice, never wrongly (entries are written atomically)."""
+
+    def __init__(self, root: Path | None, key: str) -> None:
+        self.path = None if root is None else root / f"{key}.lock"
+        self.fd: int | None = None
+
+    def __enter__(self) -> bool:
+        if self.path is None:
+            return False
+        import fcntl
+        import os
+        import time
+        import warnings
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        waited, deadline = False, time.monotonic() + LOCK_WAIT_S
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                self.fd = fd
+                return waited
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    os.close(fd)
+                    warnings.warn(
+                        f"cache entry {self.path.stem}: another process held it {LOCK_WAIT_S:.0f} s; making it here too"
+                    )
+                    return True
+                waited = True
+                time.sleep(0.05)
+
+    def __exit__(self, *exc) -> None:
+        if self.fd is not None:
+            import os
+
+            self.path.unlink(missing_ok=True)
+            os.close(self.fd)  # closing releases the lock
+            self.fd = None
 
 
 def _arrays_digest(arrays: dict[str, np.ndarray]) -> str:

@@ -308,3 +308,58 @@ def test_recording_key_holds_the_lens_loops_and_not_the_decoders(tmp_path, monke
             changed = digest() != base
         assert changed == (attr == "LENS_SOURCE"), attr
     assert digest() == base
+
+
+def _make_once(root: str, log: str, start) -> tuple[int, int, list]:
+    """In a spawned process: get_or_make of one key whose make takes a while and logs itself."""
+    import os
+    import time
+
+    cache = RenderCache(root)
+    start.wait()  # both processes look up together
+
+    def make():
+        with open(log, "a") as fh:
+            fh.write(f"{os.getpid()}\n")
+        time.sleep(0.5)
+        return {"a": np.arange(5.0)}
+
+    out = cache.get_or_make("shared", {"x": 1}, make)
+    return cache.hits, cache.misses, out["a"].tolist()
+
+
+def test_processes_sharing_the_cache_make_an_entry_once(tmp_path):
+    """Two processes missing the same entry at once: one makes it, the other waits for its lock
+    and reads it (a hit); no lock file is left behind."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = mp.get_context("spawn")
+    start = ctx.Manager().Barrier(2)
+    log = tmp_path / "made.txt"
+    with ProcessPoolExecutor(2, mp_context=ctx) as pool:
+        futures = [pool.submit(_make_once, str(tmp_path / "cache"), str(log), start) for _ in range(2)]
+        results = sorted(f.result() for f in futures)
+    assert len(log.read_text().split()) == 1
+    assert results == [(0, 1, [0.0, 1.0, 2.0, 3.0, 4.0]), (1, 0, [0.0, 1.0, 2.0, 3.0, 4.0])]
+    assert [p.name for p in (tmp_path / "cache").iterdir() if p.suffix != ".npz"] == []
+
+
+def test_a_failed_make_frees_its_key_and_entries_nest(tmp_path):
+    """A make that raises leaves neither an entry nor a lock, and the key can be made after; an
+    entry made from another entry (nested keys) is made, each once."""
+
+    def fails():
+        raise RuntimeError("make failed")
+
+    cache = RenderCache(tmp_path)
+    with pytest.raises(RuntimeError, match="make failed"):
+        cache.get_or_make("k", {}, fails)
+    assert list(tmp_path.iterdir()) == []
+    assert cache.get_or_make("k", {}, lambda: {"a": np.ones(2)})["a"].tolist() == [1.0, 1.0]
+
+    def outer():
+        return {"b": cache.get_or_make("inner", {}, lambda: {"c": np.full(2, 3.0)})["c"] * 2}
+
+    assert cache.get_or_make("outer", {}, outer)["b"].tolist() == [6.0, 6.0]
+    assert sorted(p.suffix for p in tmp_path.iterdir()) == [".npz"] * 3 and cache.misses == 4
