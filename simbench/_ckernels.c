@@ -97,35 +97,47 @@ static inline void fit_apply(const float *restrict k, float c, float s, float d0
     *residual = (good & (m > zero)) ? e / t : INFINITY;
 }
 
-/* Eight float lanes (GCC/Clang vector extension: AVX on machines that have it, two SSE halves
- * otherwise; lane-wise IEEE arithmetic, so the same bits on either).  Loads and stores go through
- * memcpy: unaligned. */
-typedef float v8f __attribute__((vector_size(32)));
-static inline v8f ld8(const float *p) {
-    v8f v;
+/* Float lanes (GCC/Clang vector extension): sixteen where the machine has AVX-512 (one zmm
+ * register), eight otherwise (AVX, or two SSE halves).  The arithmetic is lane-wise IEEE, so every
+ * width, and the scalar tails, give the same bits.  Loads and stores go through memcpy:
+ * unaligned. */
+#if defined(__AVX512F__)
+#define LANES 16
+#else
+#define LANES 8
+#endif
+typedef float vf __attribute__((vector_size(4 * LANES)));
+static inline vf ldv(const float *p) {
+    vf v;
     memcpy(&v, p, sizeof v);
     return v;
 }
-static inline void st8(float *p, v8f v) { memcpy(p, &v, sizeof v); }
+static inline void stv(float *p, vf v) { memcpy(p, &v, sizeof v); }
 
 /* Horizontal Gaussian-window sums of one zero-padded row p (p[-r..w+r) readable) with the half
  * kernels g (even), gc = g cos(w k) (even) and gs = g sin(w k) (odd):
  *   G = sum g_k p(x-k),  C = sum gc_k p(x-k),  S = sum gs_k p(x-k)
- * the last two only when C is not NULL.  Eight pixels at a time, the sums held in registers
+ * the last two only when C is not NULL.  A vector of pixels at a time, the sums held in registers
  * over the kernel taps, in the tap order of the scalar tail. */
 ROW_FN void row_sums(int64_t w, int64_t r, const float *restrict p, const float *restrict g,
                      const float *restrict gc, const float *restrict gs, float *restrict G, float *restrict C,
                      float *restrict S) {
-    /* four vectors (32 pixels) per block: twelve independent sums hide the adds' latency */
+    /* four vectors per block: twelve independent sums hide the adds' latency; then single vectors */
     enum { NV = 4 };
     int64_t x = 0;
     if (C == NULL) {
-        for (; x + 8 * NV <= w; x += 8 * NV) {
-            v8f acc[NV];
-            for (int v = 0; v < NV; v++) acc[v] = g[0] * ld8(p + x + 8 * v);
+        for (; x + LANES * NV <= w; x += LANES * NV) {
+            vf acc[NV];
+            for (int v = 0; v < NV; v++) acc[v] = g[0] * ldv(p + x + LANES * v);
             for (int64_t k = 1; k <= r; k++)
-                for (int v = 0; v < NV; v++) acc[v] += g[k] * (ld8(p + x + 8 * v - k) + ld8(p + x + 8 * v + k));
-            for (int v = 0; v < NV; v++) st8(G + x + 8 * v, acc[v]);
+                for (int v = 0; v < NV; v++)
+                    acc[v] += g[k] * (ldv(p + x + LANES * v - k) + ldv(p + x + LANES * v + k));
+            for (int v = 0; v < NV; v++) stv(G + x + LANES * v, acc[v]);
+        }
+        for (; x + LANES <= w; x += LANES) {
+            vf acc = g[0] * ldv(p + x);
+            for (int64_t k = 1; k <= r; k++) acc += g[k] * (ldv(p + x - k) + ldv(p + x + k));
+            stv(G + x, acc);
         }
         for (; x < w; x++) {
             float acc = g[0] * p[x];
@@ -134,29 +146,43 @@ ROW_FN void row_sums(int64_t w, int64_t r, const float *restrict p, const float 
         }
         return;
     }
-    for (; x + 8 * NV <= w; x += 8 * NV) {
-        v8f a[NV], c[NV], s[NV];
+    for (; x + LANES * NV <= w; x += LANES * NV) {
+        vf a[NV], c[NV], s[NV];
         for (int v = 0; v < NV; v++) {
-            const v8f mid = ld8(p + x + 8 * v);
+            const vf mid = ldv(p + x + LANES * v);
             a[v] = g[0] * mid;
             c[v] = gc[0] * mid;
-            s[v] = (v8f){0};
+            s[v] = (vf){0};
         }
         for (int64_t k = 1; k <= r; k++) {
             const float gk = g[k], ck = gc[k], sk = gs[k];
             for (int v = 0; v < NV; v++) {
-                const v8f lo = ld8(p + x + 8 * v - k), hi = ld8(p + x + 8 * v + k);
-                const v8f sum = lo + hi, dif = lo - hi;
+                const vf lo = ldv(p + x + LANES * v - k), hi = ldv(p + x + LANES * v + k);
+                const vf sum = lo + hi, dif = lo - hi;
                 a[v] += gk * sum;
                 c[v] += ck * sum;
                 s[v] += sk * dif;
             }
         }
         for (int v = 0; v < NV; v++) {
-            st8(G + x + 8 * v, a[v]);
-            st8(C + x + 8 * v, c[v]);
-            st8(S + x + 8 * v, s[v]);
+            stv(G + x + LANES * v, a[v]);
+            stv(C + x + LANES * v, c[v]);
+            stv(S + x + LANES * v, s[v]);
         }
+    }
+    for (; x + LANES <= w; x += LANES) {
+        const vf mid = ldv(p + x);
+        vf a = g[0] * mid, c = gc[0] * mid, s = (vf){0};
+        for (int64_t k = 1; k <= r; k++) {
+            const vf lo = ldv(p + x - k), hi = ldv(p + x + k);
+            const vf sum = lo + hi, dif = lo - hi;
+            a += g[k] * sum;
+            c += gc[k] * sum;
+            s += gs[k] * dif;
+        }
+        stv(G + x, a);
+        stv(C + x, c);
+        stv(S + x, s);
     }
     for (; x < w; x++) {
         float a = g[0] * p[x], c = gc[0] * p[x], s = 0.0f;
@@ -173,20 +199,26 @@ ROW_FN void row_sums(int64_t w, int64_t r, const float *restrict p, const float 
 }
 
 /* The vertical window sum of one plane at one output row, columns [x0, x1): out = ky0 row[0] +
- * sum ky_k (row[-k] + row[k]), rows given by pointers (a zero row beyond the image); 32 pixels
- * per block (lane-wise, so a column's bits do not depend on the range it is summed in). */
+ * sum ky_k (row[-k] + row[k]), rows given by pointers (a zero row beyond the image); four
+ * vectors per block, then single vectors, then single pixels (lane-wise, so a column's bits do
+ * not depend on the range it is summed in). */
 ROW_FN void column_sums(int64_t x0, int64_t x1, int64_t r, const float *const *rows, const float *restrict ky,
                         float *restrict out) {
     enum { NV = 4 };
     int64_t x = x0;
-    for (; x + 8 * NV <= x1; x += 8 * NV) {
-        v8f acc[NV];
-        for (int v = 0; v < NV; v++) acc[v] = ky[0] * ld8(rows[0] + x + 8 * v);
+    for (; x + LANES * NV <= x1; x += LANES * NV) {
+        vf acc[NV];
+        for (int v = 0; v < NV; v++) acc[v] = ky[0] * ldv(rows[0] + x + LANES * v);
         for (int64_t k = 1; k <= r; k++) {
             const float *up = rows[-k] + x, *down = rows[k] + x;
-            for (int v = 0; v < NV; v++) acc[v] += ky[k] * (ld8(up + 8 * v) + ld8(down + 8 * v));
+            for (int v = 0; v < NV; v++) acc[v] += ky[k] * (ldv(up + LANES * v) + ldv(down + LANES * v));
         }
-        for (int v = 0; v < NV; v++) st8(out + x + 8 * v, acc[v]);
+        for (int v = 0; v < NV; v++) stv(out + x + LANES * v, acc[v]);
+    }
+    for (; x + LANES <= x1; x += LANES) {
+        vf acc = ky[0] * ldv(rows[0] + x);
+        for (int64_t k = 1; k <= r; k++) acc += ky[k] * (ldv(rows[-k] + x) + ldv(rows[k] + x));
+        stv(out + x, acc);
     }
     for (; x < x1; x++) {
         float acc = ky[0] * rows[0][x];
