@@ -877,6 +877,31 @@ int64_t centred_points(int64_t n, const double *restrict depth, const double *re
     return m;
 }
 
+/* depth_errors' per-pixel pass (simbench.metrics): in row-major order, a pixel counts (region)
+ * where region[j] and the ground truth is finite, is valid where it counts and the depth is
+ * finite, and is scored where valid and not excluded (exclude may be NULL); the errors of the
+ * scored pixels, ((double)depth - (double)gt) * 1000 (millimetres: numpy's float64 operations on
+ * the gathered values), go to err in order.  Maps are float32 (f32 = 1) or float64.  counts:
+ * pixels that count, valid ones.  Returns the number scored. */
+int64_t scored_errors(int64_t n, const void *restrict depth, int64_t depth_f32, const void *restrict gt,
+                      int64_t gt_f32, const uint8_t *restrict region, const uint8_t *restrict exclude,
+                      uint8_t *restrict valid, double *restrict err, int64_t *restrict counts) {
+    int64_t n_region = 0, n_valid = 0, m = 0;
+    for (int64_t j = 0; j < n; j++) {
+        const double g = gt_f32 ? (double)((const float *)gt)[j] : ((const double *)gt)[j];
+        const double d = depth_f32 ? (double)((const float *)depth)[j] : ((const double *)depth)[j];
+        const int counts_here = region[j] && isfinite(g);
+        const int v = counts_here && isfinite(d);
+        valid[j] = (uint8_t)v;
+        n_region += counts_here;
+        n_valid += v;
+        if (v && !(exclude != NULL && exclude[j])) err[m++] = (d - g) * 1000.0;
+    }
+    counts[0] = n_region;
+    counts[1] = n_valid;
+    return m;
+}
+
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels", NULL, -1, NULL};
 
 PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }

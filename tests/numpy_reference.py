@@ -395,3 +395,31 @@ def grey_frame(image) -> np.ndarray:
     img = np.asarray(image)
     scale = float(np.iinfo(img.dtype).max) if np.issubdtype(img.dtype, np.integer) else 1.0
     return (img.astype(np.float32) / np.float32(scale)).mean(axis=-1)
+
+
+def depth_errors(depth_m, gt_depth_m, *, region, exclude=None, outlier_mm: float = 5.0) -> dict:
+    """simbench.metrics.depth_errors' error scores as first written: whole-image masks, float64
+    maps, numpy's median and percentile."""
+    d = np.asarray(depth_m, dtype=np.float64)
+    g = np.asarray(gt_depth_m, dtype=np.float64)
+    region = region & np.isfinite(g)
+    valid = region & np.isfinite(d)
+    scored = valid if exclude is None else valid & ~exclude
+    err = (d[scored] - g[scored]) * 1000.0
+    a = np.abs(err)
+    n_region = int(region.sum())
+    n_valid = int(valid.sum())
+    nan = float("nan")
+    return {
+        "n_region": n_region,
+        "n_valid": n_valid,
+        "completeness": float(np.int64(n_valid) / n_region) if n_region else nan,
+        "n_scored": int(scored.sum()),
+        "mae_mm": float(a.mean()) if a.size else nan,
+        "rmse_mm": float(np.sqrt(np.mean(err**2))) if a.size else nan,
+        "median_mm": float(np.median(a)) if a.size else nan,
+        "p95_mm": float(np.percentile(a, 95)) if a.size else nan,
+        "max_mm": float(a.max()) if a.size else nan,
+        "bias_mm": float(err.mean()) if a.size else nan,
+        "outlier_share": float(np.mean(a > outlier_mm)) if a.size else nan,
+    }

@@ -75,6 +75,45 @@ def test_depth_errors_of_float32_maps_are_those_of_the_maps_widened_first(dtypes
     assert ints["n_valid"] == ints["n_region"] > 0
 
 
+@pytest.mark.parametrize("dtypes", [(np.float32, np.float32), (np.float64, np.float64), (np.float32, np.float64)])
+def test_depth_errors_give_the_bits_of_the_whole_image_numpy_form(dtypes):
+    """The C pass (masks, counts, gathers) and the one-partition median and p95 give every
+    error score's bits of the numpy form (tests/numpy_reference.py), with NaN in either map,
+    pixels outside the region, excluded pixels, gross errors and an empty selection."""
+    from tests import numpy_reference as ref
+
+    rng = np.random.default_rng(7)
+    for h, w in ((1, 1), (1, 2), (3, 5), (97, 131), (240, 320)):
+        gt = (1.0 + 0.01 * rng.random((h, w))).astype(dtypes[1])
+        d = (gt + rng.normal(0, 3e-4, (h, w))).astype(dtypes[0])
+        d[rng.random((h, w)) < 0.1] = 3.0
+        d[rng.random((h, w)) < 0.05] = np.nan
+        gt[rng.random((h, w)) < 0.02] = np.nan
+        region = rng.random((h, w)) < 0.9
+        for exclude in (None, rng.random((h, w)) < 0.1, np.ones((h, w), bool)):
+            got = depth_errors(d, gt, region=region, exclude=exclude)
+            want = ref.depth_errors(d, gt, region=region, exclude=exclude)
+            assert set(want) <= set(got)
+            for k, v in want.items():
+                assert (np.isnan(v) and np.isnan(got[k])) or (got[k] == v and type(got[k]) is type(v)), (h, w, k)
+
+
+def test_median_and_p95_of_one_partition_are_numpys():
+    """numpy's median and 95th percentile, bit for bit, on every size from 1 to 300 and a large
+    one, with ties, zeros and values of very different sizes."""
+    from simbench.metrics import _median_and_p95
+
+    rng = np.random.default_rng(3)
+    for n in [*range(1, 301), 99_991, 100_000]:
+        for a in (
+            np.abs(rng.normal(0, 1, n)),
+            np.round(rng.random(n) * 4) / 4,  # ties
+            np.abs(rng.standard_cauchy(n)),
+            np.zeros(n),
+        ):
+            assert _median_and_p95(a) == (float(np.median(a)), float(np.percentile(a, 95))), n
+
+
 @pytest.mark.parametrize("scale", [0.25, 0.5, 1.0])
 def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
     """The Table 1 protocol computed on the counted pixels only equals, bit for bit, the form
