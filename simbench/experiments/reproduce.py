@@ -80,9 +80,9 @@ def reproduce(
     Each target runs with a seed log of its own (:meth:`Session.for_target`), so its outputs,
     provenance included, do not depend on which targets ran before it; ``workers`` > 1 runs the
     targets on that many workers (this process and spawned ones; each target whole, longest
-    first), with the same outputs as one process.  That pays on a warm cache, where every target is decoding and
-    scoring; on a cold one the renders already use every core, and targets that need the same
-    render (the calibrated rig: Table 1, Table 3 and Fig. 9) may each make it."""
+    first), with the same outputs as one process.  That pays on a warm cache, where every target
+    is decoding and scoring; on a cold one the renders already use every core (an entry two
+    workers need is made once: :meth:`simbench.cache.RenderCache.get_or_make`)."""
     names = _resolve(targets)
     workers = validate.integer(workers, "workers", lo=1)
     session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=progress, command=command)
