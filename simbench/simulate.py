@@ -282,10 +282,10 @@ class ProjectorDrive:
     that builds drives - so a run whose renders are all cached never builds a drive (building
     one, with its depth-dependent defocus, took a third of a warm quick run).
 
-    ``pattern_digest``: :func:`simbench.cache.array_digest` of ``pattern``, for a caller that
-    keeps the pattern and its digest made once (hashing a projector frame per drive was ~6 ms;
-    a phase-shift sequence makes 25 drives per acquisition); None: hashed here.  ``pattern`` may
-    be a :class:`DriveImage` (its digest known, the pattern made only if the drive is built)."""
+    ``pattern`` is an array (hashed here) or a :class:`DriveImage`: its digest known, for a
+    caller that keeps the pattern's digest (hashing a projector frame per drive was ~6 ms; a
+    phase-shift sequence makes 25 drives per acquisition), and the pattern made only if the
+    drive is built."""
 
     def __init__(
         self,
@@ -295,10 +295,8 @@ class ProjectorDrive:
         *,
         cache: RenderCache | None = None,
         phase: float = 0.0,
-        pattern_digest: str | None = None,
     ) -> None:
         self._scene, self._pattern, self._sensor, self._cache = scene, pattern, sensor, cache
-        self._pattern_digest = pattern.digest if isinstance(pattern, DriveImage) else pattern_digest
         self._weights = _bitplane_weights(scene, sensor, phase)
         self._array: np.ndarray | None = None
         self._digests: dict[str, str] | None = None
@@ -324,7 +322,7 @@ class ProjectorDrive:
         prj = self._sensor.projector
         scene = self._scene
         return {
-            "pattern": array_digest(self._pattern) if self._pattern_digest is None else self._pattern_digest,
+            "pattern": self._pattern.digest if isinstance(self._pattern, DriveImage) else array_digest(self._pattern),
             "projector": sensor_to_dict(self._sensor)["projector"],
             "bitplane_weights": None if self._weights is None else self._weights.tolist(),
             "rig": rig_to_dict(scene.rig),

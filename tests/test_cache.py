@@ -196,7 +196,7 @@ def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests(tmp_path, monke
     scene = physical_scene(system.prepare(load_scene("scenes/white_plane.toml")), sensor)
     kept = proposed.pattern_digest(system.pattern)
     assert kept == array_digest(system.pattern_u8)
-    with_digest = ProjectorDrive(scene, system.pattern_u8, sensor, pattern_digest=kept).inputs()
+    with_digest = ProjectorDrive(scene, DriveImage(kept, lambda: system.pattern_u8), sensor).inputs()
     assert with_digest == ProjectorDrive(scene, system.pattern_u8, sensor).inputs()
     made = []
     lazy = ProjectorDrive(scene, DriveImage(kept, lambda: made.append(1) or system.pattern_u8), sensor)

@@ -205,16 +205,12 @@ class ColourFringeSystem:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
         once per noise seed (a static scene measured again differs by camera noise only;
         recordings cached, :func:`simbench.simulate.record_channels`)."""
-        from simbench.simulate import ProjectorDrive, exposure_phase, record_channels
+        from simbench.simulate import DriveImage, ProjectorDrive, exposure_phase, record_channels
 
-        drive = ProjectorDrive(
-            scene,
-            self.pattern_u8 if pattern_u8 is None else pattern_u8,
-            self.sensor,
-            cache=render.cache,
-            phase=exposure_phase(render_seed),
-            pattern_digest=pattern_digest(self.pattern) if pattern_u8 is None else None,
-        )
+        pattern = pattern_u8
+        if pattern is None:  # the run's pattern, by its kept digest: made only for a render not cached
+            pattern = DriveImage(pattern_digest(self.pattern), lambda: self.pattern_u8)
+        drive = ProjectorDrive(scene, pattern, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
         return record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=noise_seeds)
 
     def decode(
