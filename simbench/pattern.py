@@ -77,21 +77,19 @@ def de_bruijn(order: int, *, alphabet: int = 2) -> np.ndarray:
     if alphabet**order > 1 << 20:
         raise ValueError(f"B({alphabet},{order}) would have {alphabet**order} symbols; too long")
     k, n = int(alphabet), int(order)
-    a = [0] * (k * n)
+    # the Lyndon words over the alphabet whose length divides n, in lexicographic order, made
+    # one from the last (iteratively: a recursive closure would be a reference cycle per call)
     out: list[int] = []
-
-    def db(t: int, p: int) -> None:
-        if t > n:
-            if n % p == 0:
-                out.extend(a[1 : p + 1])
-            return
-        a[t] = a[t - p]
-        db(t + 1, p)
-        for j in range(a[t - p] + 1, k):
-            a[t] = j
-            db(t + 1, t)
-
-    db(1, 1)
+    word = [-1]
+    while word:
+        word[-1] += 1
+        m = len(word)
+        if n % m == 0:
+            out.extend(word)
+        while len(word) < n:
+            word.append(word[len(word) - m])
+        while word and word[-1] == k - 1:
+            word.pop()
     return np.asarray(out, dtype=np.uint8)
 
 

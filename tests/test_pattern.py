@@ -19,6 +19,13 @@ def test_paper_sequence():
     assert "".join(map(str, de_bruijn(3))) == "00010111"
 
 
+def test_sequences_are_the_lexicographically_smallest():
+    """The Fredricksen-Kessler-Maiorana (Lyndon word) sequences of the published tables."""
+    assert "".join(map(str, de_bruijn(4))) == "0000100110101111"
+    assert "".join(map(str, de_bruijn(2, alphabet=3))) == "001021122"
+    assert "".join(map(str, de_bruijn(2, alphabet=4))) == "0010203112132233"
+
+
 @pytest.mark.parametrize("order", range(2, 9))
 @pytest.mark.parametrize("alphabet", [2, 3])
 def test_every_cyclic_window_occurs_exactly_once(order, alphabet):

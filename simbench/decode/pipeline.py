@@ -311,21 +311,32 @@ class DecodeResult:
 
 
 class LazyStages(Mapping):
-    """Stage images computed on first access, so a decode only pays for the ones it needs."""
+    """Stage images computed on first access, so a decode only pays for the ones it needs.
+
+    A stage made from another stage takes the mapping as its argument (``put(..., derived=True)``)
+    instead of closing over it: a closure over the mapping that holds it is a reference cycle,
+    which kept every band's intermediate images (~40 MB a decode) alive until Python's cyclic
+    collector ran, so each decode wrote into freshly faulted memory and a process grew to ~1 GB.
+    """
 
     def __init__(self) -> None:
-        self._make: dict[str, Callable[[], np.ndarray]] = {}
+        self._make: dict[str, tuple[Callable, bool]] = {}
         self._done: dict[str, np.ndarray] = {}
 
-    def put(self, name: str, value) -> None:
+    def put(self, name: str, value, *, derived: bool = False) -> None:
+        """``value``: an image, a function of no arguments making it, or with ``derived`` a
+        function of this mapping making it."""
+        if derived and not callable(value):
+            raise TypeError(f"stage {name!r}: a derived stage needs a function of the stages")
         if callable(value):
-            self._make[name] = value
+            self._make[name] = (value, derived)
         else:
-            self._make[name] = lambda v=value: v
+            self._make[name] = (lambda v=value: v, False)
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self._done:
-            self._done[name] = self._make[name]()
+            make, derived = self._make[name]
+            self._done[name] = make(self) if derived else make()
         return self._done[name]
 
     def __iter__(self) -> Iterator[str]:
@@ -835,7 +846,11 @@ def decode(
             )
         if ref is not None:
             stages.put("reference_x", lambda: match_reference(stripes.columns[0], ref.inverse[rows]))
-            stages.put("triangulated", lambda: np.isnan(stages["reference_x"]) & np.isfinite(stripes.columns[0]))
+            stages.put(
+                "triangulated",
+                lambda st: np.isnan(st["reference_x"]) & np.isfinite(stripes.columns[0]),
+                derived=True,
+            )
         return stages
 
     parts = _run_bands(band, image, params, rig)
