@@ -355,8 +355,9 @@ static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const fl
  *
  * The window sums of c I, c I cos, c I sin, c I^2 and of c, c cos, c sin, c cos2, c sin2 are
  * separable Gaussian sums with zero outside the image, taken along y first: the products c I,
- * c I^2 of the rows within ry of the output row live in a ring of 2 ry + 1 rows (cache-resident;
- * c is read where it is), and the column sums of c I, c I^2, c make one padded row each.  Along
+ * c I^2 of the rows within ry of a block of KB output rows live in a ring of 2 ry + KB rows
+ * (cache-resident; c is read where it is), and the column sums of c I, c I^2, c make KB padded
+ * rows each (see KB below).  Along
  * x, the sums of f cos(w x') and f sin(w x') come from sums of f itself with the window carrying
  * the carrier
  * (cos(w (x - k)) = cos wx cos wk + sin wx sin wk), so one row feeds three sums.  Then the
@@ -380,8 +381,35 @@ static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const fl
 enum { TABLE_PLANES = 5 + SOLVER };
 int64_t gabor_table_planes(void) { return TABLE_PLANES; }
 
+/* The column sums are made for blocks of KB output rows, in tiles of TW columns: a tile's
+ * 2 ry + KB product rows stay in L1 while its KB sums read them, where one output row at a time
+ * over the whole width read its 2 ry + 1 rows from L2 for every row (L2-bound: ~2.5 of a band's
+ * ~9 ms).  The same operations on the same values per column, so the same bits. */
+enum { KB = 8, TW = 256 };
+
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 2 * (2 * ry + 1) * w + 3 * (w + 2 * rx) + 18 * w + w + 2 * w + 1 + SOLVER * w;
+    return 2 * (2 * ry + KB) * w + 3 * KB * (w + 2 * rx) + 18 * w + w + 2 * w + 1 + SOLVER * w;
+}
+
+/* rowp[-ry..ry]: the rows of output row y's y window, zero_row beyond the image; rows of the
+ * ring (n_slots rows of w) when ring is not NULL, else of the image `base`. */
+static inline void window_rows(const float **rowp, int64_t y, int64_t ry, int64_t h, const float *ring,
+                               int64_t n_slots, const float *base, int64_t w, const float *zero_row) {
+    /* the first ring row's slot by one division, then steps (rows above the image are zero rows) */
+    int64_t slot = ring != NULL && y - ry >= 0 ? (y - ry) % n_slots : 0;
+    for (int64_t k = -ry; k <= ry; k++) {
+        const int64_t r = y + k;
+        if (r < 0 || r >= h) {
+            rowp[k] = zero_row;
+            continue;
+        }
+        if (ring == NULL) {
+            rowp[k] = base + r * w;
+            continue;
+        }
+        rowp[k] = ring + slot * w;
+        slot = slot + 1 == n_slots ? 0 : slot + 1;
+    }
 }
 
 void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const float *restrict certainty,
@@ -393,102 +421,112 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 float *restrict residual, float *restrict support) {
     const int skip = table != NULL && !fill_table; /* certain windows' sums from the table */
     const int64_t R = 2 * ry + 1;
+    const int64_t RR = R + KB - 1; /* product rows a block of KB output rows reads */
     const int64_t pw = w + 2 * rx;
     const int64_t tw = (h < R ? h : R) * w; /* one table plane */
-    float *ring = scratch;               /* 2 rings of R product rows: c I, c I^2 */
-    float *pad = ring + 2 * R * w;       /* 3 zero-padded column-sum rows: c I, c I^2, c */
-    float *T = pad + 3 * pw;             /* 9 row temporaries of the x sums */
+    float *ring = scratch;               /* 2 rings of RR product rows: c I, c I^2 */
+    float *pad = ring + 2 * RR * w;      /* 3 planes of KB zero-padded column-sum rows: c I, c I^2, c */
+    float *T = pad + 3 * KB * pw;        /* 9 row temporaries of the x sums */
     float *B = T + 9 * w;                /* the 9 window sums of the output row */
     float *zero_row = B + 9 * w;         /* w zeros: the rows beyond the image */
     int32_t *uncertain = (int32_t *)(zero_row + w); /* per column: rows with c != 1 in the y window */
     int32_t *before = uncertain + w;     /* w + 1: columns with such rows left of x */
     float *K = (float *)(before + w + 1); /* SOLVER rows: the solver of a row with uncertain windows */
-    for (int64_t j = 0; j < 3 * pw; j++) pad[j] = 0.0f;
+    for (int64_t j = 0; j < 3 * KB * pw; j++) pad[j] = 0.0f;
     for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f, uncertain[x] = 0;
-    float *v_ci = pad + rx, *v_cii = pad + pw + rx, *v_c = pad + 2 * pw + rx;
     float *G = T, *C = T + w, *S = T + 2 * w, *E = T + 3 * w;
     float *b0 = B, *b1 = B + w, *b2 = B + 2 * w;
     float *s1 = B + 4 * w, *sc = B + 5 * w, *ss = B + 6 * w, *sc2 = B + 7 * w, *ss2 = B + 8 * w;
     const float *rowp[2 * ry + 1]; /* the rows of one column sum */
-    int32_t in_row[2 * ry + 1]; /* per ring slot: the row's pixels with c != 1 */
+    int32_t in_row[2 * ry + 1]; /* per slot (row % R): the row's pixels with c != 1 */
     int64_t in_window = 0;      /* their sum over the rows in the y window */
     const int64_t first = y0 - ry < 0 ? 0 : y0 - ry;
-    int64_t next = first; /* the next row whose products are due */
-    for (int64_t y = y0; y < y1; y++) {
-        const int64_t last = y + ry < h ? y + ry : h - 1;
-        if (skip && y - ry - 1 >= first && in_row[(y - ry - 1) % R] > 0) {
-            const float *c = certainty + (y - ry - 1) * w;
-            for (int64_t x = 0; x < w; x++) uncertain[x] -= c[x] != 1.0f;
-            in_window -= in_row[(y - ry - 1) % R];
-        }
-        for (; next <= last; next++) {
-            const int64_t slot = (next % R) * w;
-            const float *c = certainty + next * w;
-            input_rows(w, intensity + next * w, c, ring + slot, ring + R * w + slot);
-            if (skip) {
-                int32_t n = 0;
-                for (int64_t x = 0; x < w; x++) {
-                    const int32_t u = c[x] != 1.0f;
-                    uncertain[x] += u;
-                    n += u;
-                }
-                in_row[next % R] = n;
-                in_window += n;
-            }
+    int64_t next = first;    /* the next row whose products are due */
+    int64_t counted = first; /* the next row whose uncertain pixels are due */
+    for (int64_t yb = y0; yb < y1; yb += KB) {
+        const int64_t kb = y1 - yb < KB ? y1 - yb : KB;
+        const int64_t last_b = yb + kb - 1 + ry < h ? yb + kb - 1 + ry : h - 1;
+        for (; next <= last_b; next++) {
+            const int64_t slot = (next % RR) * w;
+            input_rows(w, intensity + next * w, certainty + next * w, ring + slot, ring + RR * w + slot);
         }
         for (int64_t q = 0; q < 3; q++) { /* c I and c I^2 from their rings, c from the input */
-            const float *Rq = ring + q * R * w;
-            for (int64_t k = -ry; k <= ry; k++)
-                rowp[ry + k] = (y + k < 0 || y + k >= h) ? zero_row
-                               : q < 2                   ? Rq + ((y + k) % R) * w
-                                                         : certainty + (y + k) * w;
-            if (q < 2 || !skip) column_sums(0, w, ry, rowp + ry, ky, pad + q * pw + rx);
-        } /* rowp: the rows of c now, for the column sums of uncertain windows */
-        row_sums(w, rx, v_ci, kx, kc1, ks1, G, C, S);
-        row_sums(w, rx, v_cii, kx, NULL, NULL, E, NULL, NULL);
-        carrier_row(w, G, C, S, cos1, sin1, b0, b1, b2);
-        const int64_t o = (y - y0) * w;
-        const float *m0 = s1, *m1 = sc, *m2 = ss, *m3 = sc2, *m4 = ss2;
-        if (!skip) {
-            certainty_sums(0, w, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
-            if (table != NULL) {
-                const int64_t t = table_row(y, h, ry) * w;
-                for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, table + q * tw + t);
-                solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, tw, table + 5 * tw + t);
+            if (q == 2 && skip) break;    /* c only where a window is uncertain, per row below */
+            for (int64_t x0 = 0; x0 < w; x0 += TW) {
+                const int64_t x1 = x0 + TW < w ? x0 + TW : w;
+                for (int64_t k = 0; k < kb; k++) {
+                    window_rows(rowp + ry, yb + k, ry, h, q < 2 ? ring + q * RR * w : NULL, RR, certainty, w,
+                                zero_row);
+                    column_sums(x0, x1, ry, rowp + ry, ky, pad + (q * KB + k) * pw + rx);
+                }
             }
-        } else {
+        }
+        for (int64_t k = 0; k < kb; k++) {
+            const int64_t y = yb + k;
+            const int64_t last = y + ry < h ? y + ry : h - 1;
+            float *v_ci = pad + k * pw + rx, *v_cii = pad + (KB + k) * pw + rx, *v_c = pad + (2 * KB + k) * pw + rx;
+            if (skip) {
+                if (y - ry - 1 >= first && in_row[(y - ry - 1) % R] > 0) {
+                    const float *c = certainty + (y - ry - 1) * w;
+                    for (int64_t x = 0; x < w; x++) uncertain[x] -= c[x] != 1.0f;
+                    in_window -= in_row[(y - ry - 1) % R];
+                }
+                for (; counted <= last; counted++) {
+                    const float *c = certainty + counted * w;
+                    int32_t n = 0;
+                    for (int64_t x = 0; x < w; x++) {
+                        const int32_t u = c[x] != 1.0f;
+                        uncertain[x] += u;
+                        n += u;
+                    }
+                    in_row[counted % R] = n;
+                    in_window += n;
+                }
+            }
+            row_sums(w, rx, v_ci, kx, kc1, ks1, G, C, S);
+            row_sums(w, rx, v_cii, kx, NULL, NULL, E, NULL, NULL);
+            carrier_row(w, G, C, S, cos1, sin1, b0, b1, b2);
+            const int64_t o = (y - y0) * w;
+            if (!skip) {
+                certainty_sums(0, w, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
+                if (table != NULL) {
+                    const int64_t t = table_row(y, h, ry) * w;
+                    for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, table + q * tw + t);
+                    solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, tw, table + 5 * tw + t);
+                }
+                fit_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o,
+                        residual + o, support + o);
+                continue;
+            }
             const int64_t t = table_row(y, h, ry) * w;
             if (in_window == 0) {
                 fit_row_solved(w, table + 5 * tw + t, tw, table + t, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o,
                                a0 + o, residual + o, support + o);
                 continue;
-            } else {
-                /* the table's sums and solver, then those of the runs of uncertain windows */
-                for (int64_t q = 0; q < 5; q++) copy_row(w, table + q * tw + t, B + (4 + q) * w);
-                for (int64_t q = 0; q < SOLVER; q++) copy_row(w, table + (5 + q) * tw + t, K + q * w);
-                before[0] = 0;
-                for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + (uncertain[x] > 0);
-                /* runs [a, b) of pixels whose x window [x - rx, x + rx] meets such a column */
-                int64_t done = 0; /* columns of v_c summed so far: [.., done) */
-                for (int64_t a = 0; a < w;) {
-                    while (a < w && before[a + rx + 1 < w ? a + rx + 1 : w] == before[a - rx > 0 ? a - rx : 0]) a++;
-                    if (a == w) break;
-                    int64_t b = a + 1;
-                    while (b < w && before[b + rx + 1 < w ? b + rx + 1 : w] != before[b - rx > 0 ? b - rx : 0]) b++;
-                    const int64_t lo = a - rx > done ? a - rx : done, hi = b + rx < w ? b + rx : w;
-                    if (lo < hi) column_sums(lo, hi, ry, rowp + ry, ky, v_c);
-                    done = hi;
-                    certainty_sums(a, b, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
-                    solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, w, K + a);
-                    a = b;
-                }
-                fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
-                               support + o);
-                continue;
             }
+            /* the table's sums and solver, then those of the runs of uncertain windows */
+            window_rows(rowp + ry, y, ry, h, NULL, 0, certainty, w, zero_row);
+            for (int64_t q = 0; q < 5; q++) copy_row(w, table + q * tw + t, B + (4 + q) * w);
+            for (int64_t q = 0; q < SOLVER; q++) copy_row(w, table + (5 + q) * tw + t, K + q * w);
+            before[0] = 0;
+            for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + (uncertain[x] > 0);
+            /* runs [a, b) of pixels whose x window [x - rx, x + rx] meets such a column */
+            int64_t done = 0; /* columns of v_c summed so far: [.., done) */
+            for (int64_t a = 0; a < w;) {
+                while (a < w && before[a + rx + 1 < w ? a + rx + 1 : w] == before[a - rx > 0 ? a - rx : 0]) a++;
+                if (a == w) break;
+                int64_t b = a + 1;
+                while (b < w && before[b + rx + 1 < w ? b + rx + 1 : w] != before[b - rx > 0 ? b - rx : 0]) b++;
+                const int64_t lo = a - rx > done ? a - rx : done, hi = b + rx < w ? b + rx : w;
+                if (lo < hi) column_sums(lo, hi, ry, rowp + ry, ky, v_c);
+                done = hi;
+                certainty_sums(a, b, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
+                solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, w, K + a);
+                a = b;
+            }
+            fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
+                           support + o);
         }
-        fit_row(w, m0, m1, m2, m3, m4, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
-                support + o);
     }
 }
 

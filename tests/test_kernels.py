@@ -141,6 +141,30 @@ def test_gabor_fit_is_the_same_for_any_band_split():
             same(getattr(part, f)[a - lo : b - lo], getattr(whole, f)[a:b])
 
 
+def test_gabor_fit_rows_do_not_depend_on_the_output_range():
+    """The column sums are made for blocks of output rows in tiles of columns (the block's
+    product rows stay in L1): rows y0:y1 of a band must be the bits of the same rows of the whole
+    band's fit, for ranges that start anywhere in a block, with and without the all-ones table,
+    on images wider than a tile."""
+    from simbench.decode import _kernels
+
+    h, w = 90, 600
+    img, _ = fringe(h, w, seed=7, holes=False)
+    omega = round(2.0 * np.pi / T_CAM, 12)
+    sx, sy = 0.25 * T_CAM, 0.15 * T_CAM
+    kernels, basis = phase._half_kernels(omega, sx, sy), phase._basis(w, omega)
+    table = phase._all_certain_table(_kernels.gabor_table_rows(h, kernels), w, omega, sx, sy)
+    for name, cert in certainty_cases(h, w, seed=3):
+        for tab in (None, table):
+            whole = tuple(np.empty((h, w), np.float32) for _ in range(5))
+            _kernels.gabor_band(img, cert, 0, h, kernels, basis, tab, False, *whole)
+            for y0, y1 in ((1, 90), (5, 6), (7, 40), (13, 77), (83, 90)):
+                part = tuple(np.empty((y1 - y0, w), np.float32) for _ in range(5))
+                _kernels.gabor_band(img, cert, y0, y1, kernels, basis, tab, False, *part)
+                for p, x in zip(part, whole):
+                    assert np.array_equal(p, x[y0:y1], equal_nan=True), (name, tab is None, y0, y1)
+
+
 def test_gabor_fit_on_flat_and_empty_images():
     kw = dict(period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
     empty = phase.gabor_phase(np.zeros((20, 40), np.float32), certainty=np.zeros((20, 40), np.float32), **kw)
