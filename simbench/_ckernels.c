@@ -586,10 +586,11 @@ static inline float lookup(const float *restrict row, int64_t width, float c) {
     const float fw = (float)width;
     const int ok = (c >= 0.0f) & (c <= fw);
     const float cc = ok ? c : 0.0f;
-    float fi = floorf(cc);
-    fi = fi >= fw ? (float)(width - 1) : fi;
-    const float f = cc - fi;
-    const int32_t i = (int32_t)fi; /* 32-bit: the loop vectorises with AVX2 gathers */
+    /* floor by truncation (cc >= 0) and the clamp in int32: no floorf and no float compare
+     * feeding the index, so the loops vectorise (gathers); the bits of floorf and a float clamp */
+    int32_t i = (int32_t)cc;
+    i = i > (int32_t)(width - 1) ? (int32_t)(width - 1) : i;
+    const float f = cc - (float)i;
     const float x0 = row[i], x1 = row[i + 1];
     return ok ? x0 + f * (x1 - x0) : NAN;
 }
@@ -816,53 +817,73 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
  *   lit, certainty     certainty_map: the channel peak's maximum over a row window of `width`
  *                      pixels (clamped at the row's ends: cv2.dilate with a replicated border)
  *                      >= dark_level; certain = lit and the peak < saturation_level
- * peak: scratch of 2 w + 1 floats.  Thresholds are float32, as numpy compares float32 images with a
+ * scratch: front_end_scratch_floats(w, width) floats.  Thresholds are float32, as numpy compares float32 images with a
  * Python float. */
-#define FRONT_END_ROW(T, SCALE)                                                                            \
+#define FRONT_END_ROW(T, SCALE, C0, C1, C2)                                                                \
     for (int64_t x = 0; x < w; x++) {                                                                  \
         const T *p = (const T *)image + (y * w + x) * 3;                                                \
-        const float R = (float)p[ch0] SCALE, G = (float)p[ch1] SCALE, B = (float)p[ch2] SCALE;          \
+        const float R = (float)p[C0] SCALE, G = (float)p[C1] SCALE, B = (float)p[C2] SCALE;             \
         const float m = R > G ? R : G;                                                                  \
-        peak[x] = m > B ? m : B;                                                                        \
+        const float pk = m > B ? m : B;                                                                 \
+        peak[x] = pk;                                                                                   \
         inten[x] = mode == 0 ? (half * R + half * G) + half * B : B;                                    \
         cd[x] = R >= G;                                                                                 \
+        const int b = pk >= dark_level;                                                                 \
+        li[x] = (uint8_t)b;                                                                             \
+        bright += b;                                                                                    \
     }
+/* the channels in the capture's order as constants (the deinterleaving vectorises), else as read */
+#define FRONT_END_ROWS(T, SCALE)                                                                           \
+    if (ch0 == 0 && ch1 == 1 && ch2 == 2) {                                                            \
+        FRONT_END_ROW(T, SCALE, 0, 1, 2)                                                               \
+    } else {                                                                                           \
+        FRONT_END_ROW(T, SCALE, ch0, ch1, ch2)                                                         \
+    }
+
+int64_t front_end_scratch_floats(int64_t w, int64_t width) { return w + (2 * (w + 2 * (width / 2)) + 3) / 4 + 1; }
 
 void front_end(int64_t h, int64_t w, const void *restrict image, int64_t dtype, int64_t ch0, int64_t ch1,
                int64_t ch2, int64_t mode, int64_t width, float dark_level, float saturation_level,
                float *restrict intensity, float *restrict certainty, uint8_t *restrict lit, uint8_t *restrict code,
-               float *restrict peak) {
+               float *restrict scratch) {
     const float k8 = (float)(1.0 / 255.0), k16 = (float)(1.0 / 65535.0), half = 0.5f;
-    const int64_t r = width / 2;
-    int32_t *restrict before = (int32_t *)(peak + w); /* w + 1 counts */
+    const int64_t r = width / 2, n = w + 2 * r, span = 2 * r + 1;
+    float *restrict peak = scratch;
+    uint8_t *A = (uint8_t *)(scratch + w), *Bf = A + n; /* the padded row and its doubling */
+    for (int64_t i = 0; i < n; i++) A[i] = 0;
     for (int64_t y = 0; y < h; y++) {
-        float *inten = intensity + y * w;
-        uint8_t *cd = code + y * w;
+        float *restrict inten = intensity + y * w;
+        uint8_t *restrict cd = code + y * w;
+        uint8_t *restrict li = lit + y * w;
+        int64_t bright = 0;
         if (dtype == 0) {
-            FRONT_END_ROW(uint8_t, *k8)
+            FRONT_END_ROWS(uint8_t, *k8)
         } else if (dtype == 1) {
-            FRONT_END_ROW(uint16_t, *k16)
+            FRONT_END_ROWS(uint16_t, *k16)
         } else {
-            FRONT_END_ROW(float, )
+            FRONT_END_ROWS(float, )
         }
-        float *cert = certainty + y * w;
-        uint8_t *li = lit + y * w;
         /* lit: the peak's maximum over [x - r, x + r] clipped to the row (with a replicated
          * border the values beyond the ends repeat the end pixels, which the clipped window holds
-         * already) >= dark_level, i.e. some pixel of the window is bright: a running count of
-         * bright pixels finds them (for finite captures, the only ones the decoder takes). */
-        int64_t bright = 0;
-        for (int64_t x = 0; x < w; x++) {
-            const int b = peak[x] >= dark_level;
-            li[x] = (uint8_t)b;
-            bright += b;
-        }
+         * already) >= dark_level, i.e. some pixel of the window is bright (for finite captures,
+         * the only ones the decoder takes): the OR of the bright flags over the window, zero
+         * beyond the row, by doubling (after step p, each flag is the OR of the p from it on),
+         * then two overlapping spans of the largest such p cover the window. */
         if (bright > 0 && bright < w) {
-            before[0] = 0;
-            for (int64_t x = 0; x < w; x++) before[x + 1] = before[x] + li[x];
-            for (int64_t x = 0; x < w; x++)
-                li[x] = before[x + r + 1 < w ? x + r + 1 : w] > before[x - r > 0 ? x - r : 0];
+            uint8_t *src = A, *dst = Bf;
+            for (int64_t x = 0; x < w; x++) src[r + x] = li[x];
+            int64_t p = 1;
+            for (; 2 * p <= span; p *= 2) {
+                for (int64_t i = 0; i + p < n; i++) dst[i] = src[i] | src[i + p];
+                for (int64_t i = n - p > 0 ? n - p : 0; i < n; i++) dst[i] = src[i];
+                uint8_t *t = src;
+                src = dst;
+                dst = t;
+            }
+            for (int64_t x = 0; x < w; x++) li[x] = src[x] | src[x + span - p];
+            for (int64_t i = 0; i < n; i++) A[i] = 0; /* the padding zero again for the next row */
         } /* else every window holds bright pixels (li all 1) or none does (all 0) */
+        float *restrict cert = certainty + y * w;
         for (int64_t x = 0; x < w; x++) cert[x] = (li[x] & (peak[x] < saturation_level)) ? 1.0f : 0.0f;
     }
 }

@@ -369,6 +369,29 @@ def test_front_end_matches_the_stages_it_fuses(dtype, order, mode, w):
             assert got["lit"].any() and not got["lit"].all()
 
 
+def test_front_end_lit_window_of_a_row_does_not_see_the_row_before():
+    """The lit window is made per row (the OR of the bright flags by doubling, over a padded
+    row): rows lit only at one end, after rows lit at the other, keep the clipped window's rule."""
+    from simbench.decode import _kernels
+
+    h, w = 6, 120
+    img = np.zeros((h, w, 3), np.uint8)
+    img[0, :3] = 200  # bright at the left end only
+    img[1, -1] = 200  # then only at the right end
+    img[2, 40] = 200
+    img[3, :] = 200
+    img[4, 2] = 200
+    img[5, -3:] = 200
+    width = phase.certainty_window_px(T_CAM, 1.0)
+    rgb = np.asarray(img, np.float32) * np.float32(1 / 255)
+    _, lit = phase.certainty_map(rgb, period_px=T_CAM, dark_level=0.04, saturation_level=1.0, window_periods=1.0)
+    got = [np.empty((h, w), np.float32), np.empty((h, w), np.float32), np.empty((h, w), bool), np.empty((h, w), bool)]
+    _kernels.front_end(img, [0, 1, 2], 0, width, 0.04, 1.0, *got)
+    same(got[2], lit)
+    r = width // 2
+    assert got[2][1].tolist() == [False] * (w - 1 - r) + [True] * (r + 1)
+
+
 def test_validity_matches_numpy():
     from simbench.decode import _kernels
 

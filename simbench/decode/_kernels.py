@@ -40,6 +40,7 @@ _SIGNATURES = {
         [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 5,
     ),
     "gabor_scratch_floats": (_I, [_I, _I, _I]),
+    "front_end_scratch_floats": (_I, [_I, _I]),
     "gabor_table_planes": (_I, []),
     "gather": (None, [_I, _I, _P, _P, _P, _P]),
     "absolute_column": (None, [_I, _P, _P, _P, _F, _F, _I, _P, _P]),
@@ -339,7 +340,7 @@ def front_end(image, order, mode, width, dark_level, saturation_level, intensity
         raise TypeError(f"image: expected uint8, uint16 or float32, got {image.dtype}") from None
     if image.shape[2] != 3 or sorted(order) != [0, 1, 2]:
         raise ValueError(f"image must be (H, W, 3) and order a permutation of 0, 1, 2: {image.shape}, {order}")
-    peak = np.empty(2 * w + 1, np.float32)  # the row's peak, then w + 1 counts of bright pixels
+    scratch = np.empty(_library().front_end_scratch_floats(w, int(width)), np.float32)  # the row's peak and flags
     _library().front_end(
         h,
         w,
@@ -354,7 +355,7 @@ def front_end(image, order, mode, width, dark_level, saturation_level, intensity
         _ptr(certainty, "certainty", np.float32, (h, w), writable=True),
         _ptr(lit, "lit", np.bool_, (h, w), writable=True),
         _ptr(code, "code", np.bool_, (h, w), writable=True),
-        peak.ctypes.data,
+        scratch.ctypes.data,
     )
 
 
