@@ -377,7 +377,7 @@ static void certainty_sums(int64_t a, int64_t b, int64_t w, int64_t rx, const fl
  * kx, kc1, ks1, kc2, ks2: half kernels (rx + 1) of the x window g, g cos(w k), g sin(w k),
  * g cos(2 w k), g sin(2 w k); ky (ry + 1).  basis: cos1, sin1, cos2, sin2 (w each).
  * scratch: gabor_scratch_floats(w, rx, ry) floats.
- * Outputs (y1 - y0) rows: wrapped, amp, a0, residual, support (= s1). */
+ * Outputs (y1 - y0) rows: wrapped, amp, a0 (NULL: not written), residual, support (= s1). */
 enum { TABLE_PLANES = 5 + SOLVER };
 int64_t gabor_table_planes(void) { return TABLE_PLANES; }
 
@@ -388,7 +388,7 @@ int64_t gabor_table_planes(void) { return TABLE_PLANES; }
 enum { KB = 8, TW = 256 };
 
 int64_t gabor_scratch_floats(int64_t w, int64_t rx, int64_t ry) {
-    return 2 * (2 * ry + KB) * w + 3 * KB * (w + 2 * rx) + 18 * w + w + 2 * w + 1 + SOLVER * w;
+    return 2 * (2 * ry + KB) * w + 3 * KB * (w + 2 * rx) + 18 * w + w + 2 * w + 1 + SOLVER * w + w;
 }
 
 /* rowp[-ry..ry]: the rows of output row y's y window, zero_row beyond the image; rows of the
@@ -432,6 +432,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
     int32_t *uncertain = (int32_t *)(zero_row + w); /* per column: rows with c != 1 in the y window */
     int32_t *before = uncertain + w;     /* w + 1: columns with such rows left of x */
     float *K = (float *)(before + w + 1); /* SOLVER rows: the solver of a row with uncertain windows */
+    float *a0_sink = K + SOLVER * w;      /* a0's row when a0 is NULL (not asked for) */
     for (int64_t j = 0; j < 3 * KB * pw; j++) pad[j] = 0.0f;
     for (int64_t x = 0; x < w; x++) zero_row[x] = 0.0f, uncertain[x] = 0;
     float *G = T, *C = T + w, *S = T + 2 * w, *E = T + 3 * w;
@@ -487,6 +488,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
             row_sums(w, rx, v_cii, kx, NULL, NULL, E, NULL, NULL);
             carrier_row(w, G, C, S, cos1, sin1, b0, b1, b2);
             const int64_t o = (y - y0) * w;
+            float *a0_out = a0 != NULL ? a0 + o : a0_sink;
             if (!skip) {
                 certainty_sums(0, w, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
                 if (table != NULL) {
@@ -494,14 +496,14 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                     for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, table + q * tw + t);
                     solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, tw, table + 5 * tw + t);
                 }
-                fit_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o,
+                fit_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0_out,
                         residual + o, support + o);
                 continue;
             }
             const int64_t t = table_row(y, h, ry) * w;
             if (in_window == 0) {
                 fit_row_solved(w, table + 5 * tw + t, tw, table + t, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o,
-                               a0 + o, residual + o, support + o);
+                               a0_out, residual + o, support + o);
                 continue;
             }
             /* the table's sums and solver, then those of the runs of uncertain windows */
@@ -524,7 +526,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, w, K + a);
                 a = b;
             }
-            fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0 + o, residual + o,
+            fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0_out, residual + o,
                            support + o);
         }
     }

@@ -165,6 +165,21 @@ def test_gabor_fit_rows_do_not_depend_on_the_output_range():
                     assert np.array_equal(p, x[y0:y1], equal_nan=True), (name, tab is None, y0, y1)
 
 
+@pytest.mark.parametrize("method", ["gabor", "ftp", "wfr"])
+def test_phase_without_the_offset_gives_the_same_bits_otherwise(method):
+    """offset=False (the decoder's call: no stage reads the offset, and the Gabor kernel then
+    does not write it) leaves every other output bit for bit as it was."""
+    from simbench.decode.pipeline import PHASE_METHODS
+
+    img, cert = fringe(60, 300, holes=True)
+    kw = dict(certainty=cert, period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
+    full = PHASE_METHODS[method](img, **kw)
+    lean = PHASE_METHODS[method](img, offset=False, **kw)
+    assert lean.offset is None and full.offset.shape == img.shape
+    for f in ("wrapped", "amplitude", "residual", "support"):
+        same(getattr(lean, f), getattr(full, f))
+
+
 def test_gabor_fit_on_flat_and_empty_images():
     kw = dict(period_px=T_CAM, sigma_x_px=5.0, sigma_y_px=3.0)
     empty = phase.gabor_phase(np.zeros((20, 40), np.float32), certainty=np.zeros((20, 40), np.float32), **kw)

@@ -104,7 +104,8 @@ def gabor_band(
     (y1 - y0, W): the wrapped phase ``atan2(im, re)`` in [-pi, pi) of the fit
     ``I ~ a0 + re cos(w x) + im sin(w x)`` (a polynomial atan2, ~1e-7 rad), the amplitude
     ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular: window weight <= 0.05 or
-    a near-singular determinant), ``a0``, the RMS residual relative to ``amp/sqrt 2`` (inf
+    a near-singular determinant), ``a0`` (None: not written, which saves a fifth of the outputs'
+    memory traffic), the RMS residual relative to ``amp/sqrt 2`` (inf
     there) and the window's certain weight.
 
     Window sums are zero outside the image; along x the carrier rides on the window
@@ -144,7 +145,7 @@ def gabor_band(
         int(bool(fill_table)),
         scratch.ctypes.data,
         *(
-            _ptr(a, name, f4, (n, w), writable=True)
+            None if a is None and name == "a0" else _ptr(a, name, f4, (n, w), writable=True)
             for a, name in zip((wrapped, amp, a0, residual, support), ("wrapped", "amp", "a0", "residual", "support"))
         ),
     )

@@ -65,7 +65,7 @@ def _support(certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.
     )
 
 
-def _result(intensity, certainty, *, background, analytic_re, analytic_im, support, sigma_x_px) -> PhaseResult:
+def _result(intensity, certainty, *, background, analytic_re, analytic_im, support, sigma_x_px, offset) -> PhaseResult:
     """PhaseResult from the analytic fringe ``(B/2) exp(i psi)`` (normalised to a full window)."""
     kx = gaussian_kernel(sigma_x_px)
     wrapped = cv2.phase(analytic_re, analytic_im)
@@ -82,7 +82,13 @@ def _result(intensity, certainty, *, background, analytic_re, analytic_im, suppo
     np.divide(
         np.sqrt(np.maximum(num, 0) / np.where(ok, den, 1)), amplitude * np.float32(np.sqrt(0.5)), out=residual, where=ok
     )
-    return PhaseResult(wrapped=wrapped, amplitude=amplitude, offset=background, residual=residual, support=support)
+    return PhaseResult(
+        wrapped=wrapped,
+        amplitude=amplitude,
+        offset=background if offset else None,
+        residual=residual,
+        support=support,
+    )
 
 
 @lru_cache(maxsize=8)
@@ -105,6 +111,7 @@ def ftp_phase(
     period_px: float,
     sigma_x_px: float,
     sigma_y_px: float,
+    offset: bool = True,
 ) -> PhaseResult:
     """Wrapped phase by Fourier transform profilometry (Takeda et al. 1982), row by row.
 
@@ -117,6 +124,8 @@ def ftp_phase(
     sigma_x_px, sigma_y_px : float
         The decoder's analysis window; FTP's filter is global, so they set only the windows of
         ``support`` and ``residual`` (as for the Gabor stage).
+    offset : bool
+        Whether to return the background (``PhaseResult.offset``; None otherwise).
 
     Returns
     -------
@@ -145,6 +154,7 @@ def ftp_phase(
         analytic_im=np.ascontiguousarray(analytic.imag, dtype=np.float32),
         support=_support(c, sigma_x_px, sigma_y_px),
         sigma_x_px=sigma_x_px,
+        offset=offset,
     )
 
 
@@ -185,6 +195,7 @@ def wfr_phase(
     period_px: float,
     sigma_x_px: float,
     sigma_y_px: float,
+    offset: bool = True,
 ) -> PhaseResult:
     """Wrapped phase by windowed Fourier ridges (Kemao 2007) with the decoder's Gaussian window.
 
@@ -196,6 +207,8 @@ def wfr_phase(
         Nominal fringe period in camera pixels (centre of the frequency search).
     sigma_x_px, sigma_y_px : float
         Standard deviations of the Gaussian window.
+    offset : bool
+        Whether to return the background (``PhaseResult.offset``; None otherwise).
 
     Returns
     -------
@@ -253,4 +266,5 @@ def wfr_phase(
         analytic_im=best_im * scale,
         support=support,
         sigma_x_px=sigma_x_px,
+        offset=offset,
     )

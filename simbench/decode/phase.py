@@ -123,14 +123,15 @@ class PhaseResult:
 
     wrapped : wrapped phase psi in [-pi, pi) (see :mod:`simbench.pattern` for the convention)
     amplitude : fringe amplitude B of the local fit (intensity units); 0 where unfit
-    offset : local mean A of the fit
+    offset : local mean A of the fit; None when not asked for (``offset=False``: the decoder does
+        not use it, and the Gabor kernel then does not write it)
     residual : RMS fit residual divided by the RMS of the fitted fringe (``amplitude/sqrt 2``)
     support : share of the window's weight on certain samples (1 = complete window)
     """
 
     wrapped: np.ndarray
     amplitude: np.ndarray
-    offset: np.ndarray
+    offset: np.ndarray | None
     residual: np.ndarray
     support: np.ndarray
 
@@ -183,11 +184,13 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
     return out
 
 
-def _fit(intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, table=None) -> tuple:
+def _fit(
+    intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, table=None, offset: bool = True
+) -> tuple:
     """The band fit of :func:`simbench.decode._kernels.gabor_band`: (wrapped, amp, a0, residual,
-    support); ``table`` as it takes it (read)."""
+    support), a0 None unless ``offset``; ``table`` as it takes it (read)."""
     h, w = intensity.shape
-    out = tuple(np.empty((h, w), np.float32) for _ in range(5))
+    out = tuple(None if q == 2 and not offset else np.empty((h, w), np.float32) for q in range(5))
     _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), table, False, *out)
     return out
 
@@ -222,6 +225,7 @@ def gabor_phase(
     period_px: float,
     sigma_x_px: float,
     sigma_y_px: float,
+    offset: bool = True,
 ) -> PhaseResult:
     """Wrapped phase of a vertical-stripe fringe by a Gaussian-windowed (Gabor) fit.
 
@@ -233,6 +237,8 @@ def gabor_phase(
         Nominal fringe period in camera pixels (the Gabor carrier, paper Eq. 10).
     sigma_x_px, sigma_y_px : float
         Standard deviations of the Gaussian envelope.
+    offset : bool
+        Whether to return the fit's offset (``PhaseResult.offset``; None otherwise).
 
     Returns
     -------
@@ -251,7 +257,9 @@ def gabor_phase(
     sx, sy = float(sigma_x_px), float(sigma_y_px)
     h, w = intensity.shape
     n = _kernels.gabor_table_rows(h, _half_kernels(omega, sx, sy))
-    wrapped, amp, a0, residual, s1 = _fit(intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy))
+    wrapped, amp, a0, residual, s1 = _fit(
+        intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy), offset=offset
+    )
     return PhaseResult(
         wrapped=wrapped,
         amplitude=amp,
