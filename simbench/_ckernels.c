@@ -634,6 +634,8 @@ void chain_extent(int64_t n, const uint8_t *restrict linked_prev, int64_t *restr
 }
 
 static inline int64_t pymod(int64_t a, int64_t m) {
+    if (a >= 0 && a < m) return a; /* the common case here, without a division */
+    if (a < 0 && a >= -m) return a + m;
     const int64_t r = a % m;
     return r < 0 ? r + m : r;
 }
@@ -797,12 +799,12 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
                 int64_t voting, uint8_t *restrict out, float *restrict agreement) {
     for (int64_t s = 0; s < n; s++) {
         const int64_t o = (int64_t)row[s] * w;
-        int64_t ones = 0, count = 0;
-        for (int64_t x = start[s]; x < stop[s]; x++)
-            if (labels[o + x] == s) {
-                ones += code[o + x];
-                count += 1;
-            }
+        int32_t ones = 0, count = 0; /* branch-free int32 sums: the loop vectorises */
+        for (int64_t x = start[s]; x < stop[s]; x++) {
+            const int32_t m = labels[o + x] == (int32_t)s;
+            ones += m & code[o + x];
+            count += m;
+        }
         const double frac = count > 0 ? (double)ones / (double)count : 0.5;
         uint8_t c;
         if (voting)
@@ -824,8 +826,8 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
  *   lit, certainty     certainty_map: the channel peak's maximum over a row window of `width`
  *                      pixels (clamped at the row's ends: cv2.dilate with a replicated border)
  *                      >= dark_level; certain = lit and the peak < saturation_level
- * scratch: front_end_scratch_floats(w, width) floats.  Thresholds are float32, as numpy compares float32 images with a
- * Python float. */
+ * scratch: front_end_scratch_floats(w, width) floats.  Thresholds are float32, as numpy compares
+ * float32 images with a Python float. */
 #define FRONT_END_ROW(T, SCALE, C0, C1, C2)                                                                \
     for (int64_t x = 0; x < w; x++) {                                                                  \
         const T *p = (const T *)image + (y * w + x) * 3;                                                \
