@@ -640,6 +640,38 @@ static inline int64_t pymod(int64_t a, int64_t m) {
     return r < 0 ? r + m : r;
 }
 
+/* W of each stripe from its window of `order` binary codes (simbench.decode.debruijn
+ * window_positions_of_stripes): stripes j - hw .. j - hw + order - 1, hw = (order - 1) / 2, all in
+ * j's chain (left/right: chain_extent), read as a binary number into `table`; -1 where the
+ * window leaves the chain or the table does not hold it. */
+void window_positions(int64_t n, const uint8_t *restrict code, const int64_t *restrict left,
+                      const int64_t *restrict right, int64_t order, const int32_t *restrict table, int64_t cycle,
+                      int32_t *restrict out) {
+    const int64_t hw = (order - 1) / 2;
+    for (int64_t j = 0; j < n; j++) {
+        if (left[j] < hw || right[j] < order - 1 - hw) {
+            out[j] = -1;
+            continue;
+        }
+        int64_t c = 0;
+        for (int64_t k = 0; k < order; k++) c = 2 * c + code[j - hw + k];
+        const int64_t q = table[c];
+        out[j] = q >= 0 ? (int32_t)((q + hw) % cycle) : -1;
+    }
+}
+
+/* Both stripes of every link whose positions do not follow each other (W[j] != W[j-1] + 1 mod
+ * cycle, both known) set to -1 (simbench.decode.debruijn.drop_broken_links); the rule is read on
+ * the positions as given. */
+void drop_broken_links(int64_t n, const int32_t *restrict positions, const uint8_t *restrict linked_prev,
+                       int64_t cycle, int32_t *restrict out) {
+    for (int64_t j = 0; j < n; j++) out[j] = positions[j];
+    for (int64_t j = 1; j < n; j++) {
+        const int64_t prev = positions[j - 1], cur = positions[j];
+        if (linked_prev[j] && prev >= 0 && cur >= 0 && pymod(cur - prev, cycle) != 1) out[j] = out[j - 1] = -1;
+    }
+}
+
 /* Plurality of the positions predicted by the stripe and its linked neighbours within reach
  * (W[j + o] - o mod L); kept when it has min_support votes and beats every other candidate,
  * else -1.  counts: scratch of cycle entries. */

@@ -240,6 +240,41 @@ def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return idx - chain_start, last[chain_id] - idx
 
 
+def window_positions_of_stripes(stripe_code, linked_prev, *, order, table, cycle):
+    n = stripe_code.size
+    h = (order - 1) // 2
+    left, right = chain_extent(linked_prev)
+    ok = (left >= h) & (right >= order - 1 - h)
+    code = np.zeros(n, dtype=np.int64)
+    for j in range(order):
+        shifted = np.zeros(n, dtype=np.int64)
+        off = j - h
+        if off < 0:
+            shifted[-off:] = stripe_code[: n + off]
+        elif off > 0:
+            shifted[:-off] = stripe_code[off:]
+        else:
+            shifted[:] = stripe_code
+        code = code * 2 + shifted
+    q = table[code]
+    ok &= q >= 0
+    return np.where(ok, (q + h) % cycle, -1).astype(np.int32)
+
+
+def drop_broken_links(positions, linked_prev, *, cycle):
+    w = positions.astype(np.int64)
+    n = w.size
+    out = positions.astype(np.int32, copy=True)
+    if n < 2:
+        return out
+    prev, cur = w[:-1], w[1:]
+    broken = linked_prev[1:] & (prev >= 0) & (cur >= 0) & ((cur - prev) % cycle != 1)
+    idx = np.flatnonzero(broken) + 1
+    out[idx] = -1
+    out[idx - 1] = -1
+    return out
+
+
 def neighbour_correct(
     positions: np.ndarray,
     linked_prev: np.ndarray,

@@ -264,6 +264,44 @@ def test_neighbour_correction_matches_numpy(reach, min_support, corrupt):
         same(a, b)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("order", [2, 3, 4, 5])
+def test_window_positions_and_broken_links_match_numpy(seed, order):
+    """The stripes' De Bruijn windows and the broken-link rule in C: the numpy forms' outputs,
+    on chains of every length (1 to many), unknown positions and tables with holes."""
+    from simbench.pattern import de_bruijn, window_positions
+
+    rng = np.random.default_rng(seed)
+    n = 3000
+    code = rng.integers(0, 2, n).astype(np.uint8)
+    linked = rng.random(n) < 0.85
+    linked[0] = False
+    cycle = 1 << order
+    table = window_positions(de_bruijn(order), order=order)
+    table[rng.random(table.size) < 0.1] = -1
+    got = debruijn.window_positions_of_stripes(code, linked, order=order, table=table, cycle=cycle)
+    same(got, ref.window_positions_of_stripes(code, linked, order=order, table=table, cycle=cycle))
+    assert (got >= 0).mean() > 0.3
+    successive = np.arange(n) + rng.integers(0, 2, n) * (rng.random(n) < 0.05)  # a few links broken
+    positions = np.where(rng.random(n) < 0.1, -1, successive % cycle).astype(np.int32)
+    dropped = debruijn.drop_broken_links(positions, linked, cycle=cycle)
+    same(dropped, ref.drop_broken_links(positions, linked, cycle=cycle))
+    assert 0 < (dropped != positions).sum() < n // 4
+    for m in (0, 1, 2):
+        same(
+            debruijn.drop_broken_links(positions[:m], linked[:m], cycle=cycle),
+            ref.drop_broken_links(positions[:m], linked[:m], cycle=cycle),
+        )
+        same(
+            debruijn.window_positions_of_stripes(code[:m], linked[:m], order=order, table=table, cycle=cycle),
+            ref.window_positions_of_stripes(code[:m], linked[:m], order=order, table=table, cycle=cycle),
+        )
+    with pytest.raises(ValueError, match="0 or 1"):
+        debruijn.window_positions_of_stripes(code + 1, linked, order=order, table=table, cycle=cycle)
+    with pytest.raises(ValueError, match="2\\*\\*order"):
+        debruijn.window_positions_of_stripes(code, linked, order=order, table=table[:-1], cycle=cycle)
+
+
 def test_absolute_column_and_gather_match_numpy():
     wrapped, valid, _ = stripes_input(3)
     rng = np.random.default_rng(3)

@@ -25,6 +25,8 @@ __all__ = [
     "match_reference",
     "depth_from_disparity",
     "chain_extent",
+    "window_positions",
+    "drop_broken_links",
     "neighbour_correct",
     "segment_stripes",
     "vote_codes",
@@ -47,6 +49,8 @@ _SIGNATURES = {
     "match_reference": (None, [_I, _I, _I, _P, _P, _P]),
     "depth_from_disparity": (None, [_I, _I, _P, _F, _F, _P]),
     "chain_extent": (None, [_I, _P, _P, _P]),
+    "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
+    "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
     "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P, _P]),
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
@@ -237,6 +241,41 @@ def chain_extent(linked_prev, left, right) -> None:
         _ptr(linked_prev, "linked_prev", np.bool_),
         _ptr(left, "left", np.int64, (n,), writable=True),
         _ptr(right, "right", np.int64, (n,), writable=True),
+    )
+
+
+def window_positions(code, left, right, order, table, cycle, out) -> None:
+    """W of each stripe from its window of ``order`` binary codes (``code`` uint8 0/1, read as
+    a binary number into ``table`` of 2**order int32 entries), -1 where the window leaves the
+    stripe's chain (``left``, ``right``: :func:`chain_extent`) or ``table`` holds -1."""
+    n = code.size
+    order = int(order)
+    if order < 1 or table.size != 1 << order:
+        raise ValueError(f"table: expected 2**order = {1 << max(order, 0)} entries for order {order}, got {table.size}")
+    if n and int(code.max()) > 1:
+        raise ValueError("stripe codes must be 0 or 1")
+    _library().window_positions(
+        n,
+        _ptr(code, "code", np.uint8),
+        _ptr(left, "left", np.int64, (n,)),
+        _ptr(right, "right", np.int64, (n,)),
+        order,
+        _ptr(table, "table", np.int32),
+        int(cycle),
+        _ptr(out, "out", np.int32, (n,), writable=True),
+    )
+
+
+def drop_broken_links(positions, linked_prev, cycle, out) -> None:
+    """``out`` = ``positions`` with both stripes of every link whose positions do not follow
+    each other (``W[j] != W[j-1] + 1 mod cycle``, both known) at -1."""
+    n = positions.size
+    _library().drop_broken_links(
+        n,
+        _ptr(positions, "positions", np.int32),
+        _ptr(linked_prev, "linked_prev", np.bool_, (n,)),
+        int(cycle),
+        _ptr(out, "out", np.int32, (n,), writable=True),
     )
 
 

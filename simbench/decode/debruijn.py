@@ -47,24 +47,20 @@ def window_positions_of_stripes(
     -------
     ndarray, shape (S,), int32; -1 where the window is incomplete or unknown
     """
-    n = stripe_code.size
-    h = (order - 1) // 2
+    if int(cycle) < 1:
+        raise ValueError(f"cycle must be >= 1, got {cycle}")
     left, right = chain_extent(linked_prev)
-    ok = (left >= h) & (right >= order - 1 - h)
-    code = np.zeros(n, dtype=np.int64)
-    for j in range(order):
-        shifted = np.zeros(n, dtype=np.int64)
-        off = j - h
-        if off < 0:
-            shifted[-off:] = stripe_code[: n + off]
-        elif off > 0:
-            shifted[:-off] = stripe_code[off:]
-        else:
-            shifted[:] = stripe_code
-        code = code * 2 + shifted
-    q = table[code]
-    ok &= q >= 0
-    return np.where(ok, (q + h) % cycle, -1).astype(np.int32)
+    out = np.empty(stripe_code.size, np.int32)
+    _kernels.window_positions(
+        np.ascontiguousarray(stripe_code, dtype=np.uint8),
+        left,
+        right,
+        order,
+        np.ascontiguousarray(table, dtype=np.int32),
+        cycle,
+        out,
+    )
+    return out
 
 
 def neighbour_correct(
@@ -126,14 +122,10 @@ def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: 
     -------
     ndarray, shape (S,), int32; ``positions`` with the dropped stripes at -1
     """
-    w = positions.astype(np.int64)
-    n = w.size
-    out = positions.astype(np.int32, copy=True)
-    if n < 2:
-        return out
-    prev, cur = w[:-1], w[1:]
-    broken = linked_prev[1:] & (prev >= 0) & (cur >= 0) & ((cur - prev) % cycle != 1)
-    idx = np.flatnonzero(broken) + 1
-    out[idx] = -1
-    out[idx - 1] = -1
+    if int(cycle) < 1:
+        raise ValueError(f"cycle must be >= 1, got {cycle}")
+    out = np.empty(positions.size, np.int32)
+    _kernels.drop_broken_links(
+        np.ascontiguousarray(positions, dtype=np.int32), np.ascontiguousarray(linked_prev, dtype=bool), cycle, out
+    )
     return out
