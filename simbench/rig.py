@@ -166,6 +166,7 @@ class Rig:
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     name: str = "custom"
     _r: np.ndarray = field(init=False, repr=False, compare=False)
+    _rectified: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # assumption: a projector within 10 m of the camera; angles within one turn
@@ -179,6 +180,17 @@ class Rig:
         if np.linalg.norm(self.position_m) < 1e-6:
             raise ValueError("projector position_m coincides with the camera: no baseline")
         object.__setattr__(self, "_r", rotation_xyz_deg(self.rotation_deg))
+        # once: every decode asks (its triangulation steps), and np.allclose costs ~0.1 ms
+        object.__setattr__(
+            self,
+            "_rectified",
+            bool(
+                np.allclose(self._r, np.eye(3), atol=1e-9)
+                and abs(self.position_m[1]) < 1e-9
+                and abs(self.position_m[2]) < 1e-9
+                and self.position_m[0] > 0
+            ),
+        )
 
     @property
     def rotation(self) -> np.ndarray:
@@ -192,12 +204,7 @@ class Rig:
     @property
     def is_rectified(self) -> bool:
         """Parallel optical axes, baseline along +x: the geometry of paper Sec. 5.4."""
-        return bool(
-            np.allclose(self._r, np.eye(3), atol=1e-9)
-            and abs(self.position_m[1]) < 1e-9
-            and abs(self.position_m[2]) < 1e-9
-            and self.position_m[0] > 0
-        )
+        return self._rectified
 
 
 def paper_rig() -> Rig:

@@ -29,7 +29,7 @@ from simbench.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
 
 if TYPE_CHECKING:
-    from simbench.decode.pipeline import ReferenceMap
+    from simbench.decode.pipeline import DecoderParams, ReferenceMap
     from simbench.pattern import PatternSpec
 
 __all__ = ["ColourFringeSystem", "ReferenceCalibration", "BENCH_SCENES", "BENCH_SHADOW"]
@@ -57,6 +57,13 @@ def pattern_digest(spec: PatternSpec) -> str:
     from simbench.cache import array_digest
 
     return array_digest(pattern_u8(spec))
+
+
+@lru_cache(maxsize=64)
+def _with(params: DecoderParams, **changes) -> DecoderParams:
+    """``dataclasses.replace(params, **changes)``, once per distinct call: each replace validates
+    every field again (~0.1 ms, serial work before a decode's band threads start)."""
+    return dataclasses.replace(params, **changes)
 
 
 @dataclass
@@ -229,7 +236,7 @@ class ColourFringeSystem:
         from simbench.decode import decode
 
         params = params if params is not None else self.decoder
-        params = dataclasses.replace(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
+        params = _with(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
         ref = None
         if params.mode == "reference" or params.unmix:
             if calibration is None:
@@ -237,7 +244,7 @@ class ColourFringeSystem:
                     f"decoding in {params.mode} mode{' with unmixing' if params.unmix else ''} needs the reference "
                     f"calibration"
                 )
-            ref = calibration.reference_map(dataclasses.replace(params, mode="reference"), rig=scene.rig)
+            ref = calibration.reference_map(_with(params, mode="reference"), rig=scene.rig)
         r = decode(raw, rig=scene.rig, params=params, reference=ref)
         return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
 
