@@ -244,12 +244,20 @@ def chain_extent(linked_prev, left, right) -> None:
     )
 
 
+def _cycle(cycle) -> int:
+    """The De Bruijn cycle length, checked: the kernels take positions modulo it."""
+    cycle = int(cycle)
+    if cycle < 1:
+        raise ValueError(f"cycle must be >= 1, got {cycle}")
+    return cycle
+
+
 def window_positions(code, left, right, order, table, cycle, out) -> None:
     """W of each stripe from its window of ``order`` binary codes (``code`` uint8 0/1, read as
     a binary number into ``table`` of 2**order int32 entries), -1 where the window leaves the
     stripe's chain (``left``, ``right``: :func:`chain_extent`) or ``table`` holds -1."""
     n = code.size
-    order = int(order)
+    order, cycle = int(order), _cycle(cycle)
     if order < 1 or table.size != 1 << order:
         raise ValueError(f"table: expected 2**order = {1 << max(order, 0)} entries for order {order}, got {table.size}")
     if n and int(code.max()) > 1:
@@ -261,7 +269,7 @@ def window_positions(code, left, right, order, table, cycle, out) -> None:
         _ptr(right, "right", np.int64, (n,)),
         order,
         _ptr(table, "table", np.int32),
-        int(cycle),
+        cycle,
         _ptr(out, "out", np.int32, (n,), writable=True),
     )
 
@@ -274,7 +282,7 @@ def drop_broken_links(positions, linked_prev, cycle, out) -> None:
         n,
         _ptr(positions, "positions", np.int32),
         _ptr(linked_prev, "linked_prev", np.bool_, (n,)),
-        int(cycle),
+        _cycle(cycle),
         _ptr(out, "out", np.int32, (n,), writable=True),
     )
 
@@ -284,9 +292,7 @@ def neighbour_correct(positions, left, right, cycle, reach, min_support, out, su
     ``reach`` (``W[j + o] - o mod L``); kept when it has ``min_support`` votes and beats every
     other candidate, else -1 (``support`` = its votes, 0 if dropped)."""
     n = positions.size
-    cycle = int(cycle)
-    if cycle < 1:
-        raise ValueError(f"cycle must be >= 1, got {cycle}")
+    cycle = _cycle(cycle)
     counts = np.empty(cycle, np.int64)
     _library().neighbour_correct(
         n,

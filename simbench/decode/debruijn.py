@@ -47,8 +47,6 @@ def window_positions_of_stripes(
     -------
     ndarray, shape (S,), int32; -1 where the window is incomplete or unknown
     """
-    if int(cycle) < 1:
-        raise ValueError(f"cycle must be >= 1, got {cycle}")
     left, right = chain_extent(linked_prev)
     out = np.empty(stripe_code.size, np.int32)
     _kernels.window_positions(
@@ -122,8 +120,6 @@ def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: 
     -------
     ndarray, shape (S,), int32; ``positions`` with the dropped stripes at -1
     """
-    if int(cycle) < 1:
-        raise ValueError(f"cycle must be >= 1, got {cycle}")
     out = np.empty(positions.size, np.int32)
     _kernels.drop_broken_links(
         np.ascontiguousarray(positions, dtype=np.int32), np.ascontiguousarray(linked_prev, dtype=bool), cycle, out
