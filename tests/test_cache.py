@@ -363,3 +363,38 @@ def test_a_failed_make_frees_its_key_and_entries_nest(tmp_path):
 
     assert cache.get_or_make("outer", {}, outer)["b"].tolist() == [6.0, 6.0]
     assert sorted(p.suffix for p in tmp_path.iterdir()) == [".npz"] * 3 and cache.misses == 4
+
+
+def test_made_entries_are_counted_per_kind_with_their_own_time(tmp_path, monkeypatch):
+    """A recording made around a render it needs is counted as one recording and one render,
+    each with its own seconds (the recording's less the render's); a failed make is not counted."""
+    import simbench.cache as module
+
+    clock = [0.0]
+    monkeypatch.setattr(module.time, "perf_counter", lambda: clock[0])
+    cache = RenderCache(tmp_path)
+
+    def render():
+        clock[0] += 3.0
+        return {"r": np.ones(2)}
+
+    def record():
+        clock[0] += 1.0
+        cache.get_or_make("radiance", {"x": 1}, render)
+        clock[0] += 0.5
+        return {"i": np.ones(2)}
+
+    cache.get_or_make("recording", {"x": 1}, record)
+    cache.get_or_make("recording", {"x": 1}, record)  # a hit: nothing made
+    assert cache.made == {"recording": (1, 1.5), "radiance": (1, 3.0)}
+
+    def broken():
+        clock[0] += 7.0
+        raise RuntimeError("render failed")
+
+    with pytest.raises(RuntimeError, match="render failed"):
+        cache.get_or_make("radiance", {"x": 2}, broken)
+    assert cache.made["radiance"] == (1, 3.0) and cache.misses == 3
+    cache.add_made({"radiance": (2, 4.0), "truth": (1, 0.5)})  # a worker's counts
+    assert cache.made_summary() == "radiance 3 (7.0 s), recording 1 (1.5 s), truth 1 (0.5 s)"
+    assert RenderCache(None).made_summary() == "nothing"

@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import math
+import re
 
 import pytest
 
@@ -180,14 +181,16 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     from simbench.experiments.reproduce import reproduce
 
     cfg = RunConfig.preset(quick=True, compare_rigs=False)
+    messages = []
 
     def run(targets, out, workers=1):
+        messages.clear()
         reproduce(
             targets,
             config=cfg,
             out_dir=tmp_path / out,
             cache_dir=tmp_path / "cache",
-            progress=lambda s: None,
+            progress=messages.append,
             command="t",
             workers=workers,
         )
@@ -196,7 +199,14 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
         }
 
     workers = run(["budget", "flatness"], "workers", workers=2)  # first: two processes fill one cache
+    # every miss was made on one of the two processes and counted to its kind (the spawned
+    # worker's counts, flatness's renders among them, merged into this process's)
+    (summary,) = [m for m in messages if m.startswith("cache: ")]
+    made = dict(re.findall(r"(\w+) (\d+) \([\d.]+ s\)", messages[-1].removeprefix("made: ")))
+    assert messages[-1].startswith("made: ") and {"radiance", "recording", "truth"} <= set(made)
+    assert sum(map(int, made.values())) == int(re.search(r"(\d+) made", summary).group(1)) > 0
     together = run(["budget", "flatness"], "together")
+    assert not any(m.startswith("made: ") for m in messages)  # warm: nothing made
     alone = run(["flatness"], "alone")
     assert workers == together
     flatness = {p: b for p, b in together.items() if p.name.startswith("flatness")}

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from functools import lru_cache
 from pathlib import Path
 
@@ -63,7 +64,8 @@ def lookup_decoded_reference(
         arrays = cache.lookup("reference_map", parts)
     fresh = arrays is None
     if fresh:
-        ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
+        with nullcontext() if cache is None else cache.making("reference_map"):
+            ref = decode_reference(reference, rig=rig, params=params, primaries=primaries, dark=dark)
         arrays = {
             "column_px": ref.column_px,
             "expected_px": ref.expected_px,

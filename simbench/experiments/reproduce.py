@@ -80,9 +80,10 @@ def reproduce(
     Each target runs with a seed log of its own (:meth:`Session.for_target`), so its outputs,
     provenance included, do not depend on which targets ran before it; ``workers`` > 1 runs the
     targets on that many workers (this process and spawned ones; each target whole, longest
-    first), with the same outputs as one process.  That pays on a warm cache, where every target
-    is decoding and scoring; on a cold one the renders already use every core (an entry two
-    workers need is made once: :meth:`simbench.cache.RenderCache.get_or_make`)."""
+    first), with the same outputs as one process.  It pays on a warm cache, where every target
+    is decoding and scoring, and on a cold one too, where the targets' single-threaded work
+    overlaps the other worker's renders (an entry two workers need is made once:
+    :meth:`simbench.cache.RenderCache.get_or_make`)."""
     names = _resolve(targets)
     workers = validate.integer(workers, "workers", lo=1)
     session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=progress, command=command)
@@ -101,10 +102,10 @@ def reproduce(
         except (ValueError, AttributeError):
             merged = {}
     save_json(path, dict(sorted({**merged, **metrics}.items())))
-    progress(
-        f"cache: {hits} hits, {misses} made (renders, recordings, ground truth, decoded "
-        f"references, drive digests); results in {out_dir}"
-    )
+    progress(f"cache: {hits} hits, {misses} made; results in {out_dir}")
+    if session.cache.made:
+        # summed over the workers: on a cold cache, where the run's time went
+        progress(f"made: {session.cache.made_summary()}")
     return metrics
 
 
@@ -133,18 +134,19 @@ def _worker_start(config: RunConfig, out_dir: str, cache_dir: str | None, comman
     _worker_session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=messages.put, command=command)
 
 
-def _worker_run(name: str) -> tuple[dict, int, int]:
-    """One target on a worker: its metrics and the cache hits and misses it counted."""
-    session = _worker_session
-    hits, misses = session.cache.hits, session.cache.misses
-    metrics = _run_target(session, name)
-    return metrics, session.cache.hits - hits, session.cache.misses - misses
+def _worker_run(name: str) -> tuple[dict, int, int, dict]:
+    """One target on a worker: its metrics, and the cache hits, misses and entries made
+    (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per target)."""
+    cache = _worker_session.cache
+    cache.hits, cache.misses, cache.made = 0, 0, {}
+    metrics = _run_target(_worker_session, name)
+    return metrics, cache.hits, cache.misses, cache.made
 
 
 def _run_in_workers(names: list[str], *, session: Session, workers: int, progress: Callable[[str], None]) -> dict:
     """The targets on ``workers`` workers: this process (it has its imports and its session
     already) and ``workers - 1`` spawned processes, each taking the next target, longest first,
-    when it is free.  The cache's hits and misses of the spawned ones are added to ``session``'s."""
+    when it is free.  The cache's counts of the spawned ones are added to ``session``'s."""
     import multiprocessing as mp
     import threading
     from collections import deque
@@ -164,7 +166,7 @@ def _run_in_workers(names: list[str], *, session: Session, workers: int, progres
     todo = deque(sorted(names, key=lambda n: _LONGEST_FIRST.index(n) if n in _LONGEST_FIRST else len(_LONGEST_FIRST)))
     done: dict[str, dict] = {}
     failed: list[BaseException] = []
-    counts: list[tuple[int, int]] = []  # the spawned workers' cache hits and misses, per target
+    counts: list[tuple[int, int, dict]] = []  # the spawned workers' cache hits, misses and entries made, per target
     cache_root = None if session.cache.root is None else str(session.cache.root)
     args = (session.config, str(session.out), cache_root, session.command, session.variant, messages)
 
@@ -175,11 +177,11 @@ def _run_in_workers(names: list[str], *, session: Session, workers: int, progres
             except IndexError:
                 return
             try:
-                done[name], hits, misses = pool.submit(_worker_run, name).result()
+                done[name], *count = pool.submit(_worker_run, name).result()
             except BaseException as exc:  # noqa: BLE001 - re-raised in the parent's thread
                 failed.append(exc)
                 return
-            counts.append((hits, misses))
+            counts.append(tuple(count))
 
     try:
         with ProcessPoolExecutor(
@@ -205,8 +207,10 @@ def _run_in_workers(names: list[str], *, session: Session, workers: int, progres
                     t.join()
         if failed:
             raise failed[0]
-        session.cache.hits += sum(h for h, _ in counts)  # after the feeders: no other thread counts
-        session.cache.misses += sum(m for _, m in counts)
+        session.cache.hits += sum(c[0] for c in counts)  # after the feeders: no other thread counts
+        session.cache.misses += sum(c[1] for c in counts)
+        for c in counts:
+            session.cache.add_made(c[2])
     except BrokenProcessPool as exc:
         raise RuntimeError("a reproduce worker process died (killed, or out of memory)") from exc
     finally:

@@ -5,9 +5,10 @@ camera, triangulated with the rig.
 It sees a scene exactly as the proposed sensor does (same rig, sensor model, lenses, ambient
 light: :meth:`simbench.systems.proposed.ColourFringeSystem.prepare`) and projects grey frames
 (the same drive in the three primaries); the camera records each, and the decoder reads the
-mean of the three colour channels.  It needs ``N + bits`` exposures of a static scene (18 with
-the defaults): the price single-shot sensing avoids.  No reference plane: the column is
-triangulated with the rig (paper Eq. 15's geometry).
+mean of the three colour channels.  It needs ``N + bits`` exposures of a static scene (12 with
+the defaults: 4 steps, and 8 Gray-code bits for the 174 half periods of 1824 columns): the
+price single-shot sensing avoids.  No reference plane: the column is triangulated with the rig
+(paper Eq. 15's geometry).
 """
 
 from __future__ import annotations
