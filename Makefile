@@ -20,8 +20,10 @@ $(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c simbench/_
 # The main job: the paper's Table 1, Table 3, Fig. 9 and figures into results/ (renders are
 # cached in .cache/simbench), the rig calibration's report (its observations were made, and
 # cached, by the tables' calibrated-rig columns), then the pipeline demo into results/demo.
+# On 2 worker processes: the same files as one (from an empty cache 40 min 42 s, measured at
+# cb8f020 before the 36-spp renders went to passes; ~50 min on one).
 reproduce: setup
-	$(VENV)/bin/simbench reproduce all
+	$(VENV)/bin/simbench reproduce all --workers 2
 	$(VENV)/bin/simbench calibrate --out results/calibration --overwrite
 	$(VENV)/bin/simbench demo --out results/demo
 	$(VENV)/bin/simbench crosstalk --out results/crosstalk.md

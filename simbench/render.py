@@ -31,7 +31,9 @@ def render_radiance(
         Linear projector output per channel (after the projector's transfer curve); None =
         projector off.
     spp, seed : int
-        Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm).
+        Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm,
+        where a count other than a power of two is rendered in passes,
+        :func:`simbench.mitsuba_dict.samples_per_pass`).
     max_depth : int
         Path length limit (>= 3 gives one interreflection bounce).
     sampler : str
@@ -45,5 +47,13 @@ def render_radiance(
     import mitsuba as mi
 
     d, _ = mitsuba_scene(scene, drive, spp=spp, max_depth=max_depth, sampler=sampler)
-    img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
-    return np.array(img, dtype=np.float32)
+    level = mi.log_level()
+    if "samples_per_pass" in d["integrator"]:
+        # Mitsuba warns that the setting is deprecated (passes cost time; here they are what
+        # makes the image repeatable) and that a multi-pass render is evaluated at once
+        mi.set_log_level(mi.LogLevel.Error)
+    try:
+        img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
+        return np.array(img, dtype=np.float32)
+    finally:
+        mi.set_log_level(level)

@@ -398,3 +398,23 @@ def test_made_entries_are_counted_per_kind_with_their_own_time(tmp_path, monkeyp
     cache.add_made({"radiance": (2, 4.0), "truth": (1, 0.5)})  # a worker's counts
     assert cache.made_summary() == "radiance 3 (7.0 s), recording 1 (1.5 s), truth 1 (0.5 s)"
     assert RenderCache(None).made_summary() == "nothing"
+
+
+def test_samples_per_pass_keep_every_pixel_in_one_dr_jit_work_unit(variant):
+    """A pass's sample count divides 16384 (the work unit of a large wavefront) and 4 (the
+    SIMD packet, the unit's granularity on a small one), and the passes make up the count;
+    a power of two on a full-resolution render stays one pass (its images, and cache keys,
+    unchanged)."""
+    from simbench.mitsuba_dict import pass_settings, samples_per_pass
+
+    full, small = 1280 * 960, 160 * 120
+    for spp in (1, 2, 3, 4, 9, 16, 25, 36, 49, 64, 100, 256):
+        for pixels in (full, small):
+            n = samples_per_pass(spp, pixels=pixels)
+            assert spp % n == 0 and 16384 % n == 0
+            assert n == spp or 4 % n == 0
+    assert [samples_per_pass(s, pixels=full) for s in (1, 4, 9, 16, 25, 36, 64)] == [1, 4, 1, 16, 1, 4, 64]
+    assert [samples_per_pass(s, pixels=small) for s in (4, 16, 36, 64)] == [4, 4, 4, 4]
+    assert samples_per_pass(4, pixels=640 * 480) == 4 and samples_per_pass(16, pixels=640 * 480) == 16
+    jit = {} if variant.startswith("scalar") else {"samples_per_pass": 4}  # scalar: a pixel is one thread's
+    assert pass_settings(36, pixels=full) == jit and pass_settings(64, pixels=full) == {}
