@@ -114,6 +114,25 @@ def test_array_digest_sees_dtype_shape_and_values():
     assert array_digest(a) != array_digest(b)
 
 
+def test_array_digest_is_the_sha256_of_the_arrays_bytes():
+    """The cache's keys stay what they were: the dtype, the shape and tobytes()' bytes, for
+    views, byte orders and record dtypes too (the digest hashes them without tobytes' copy)."""
+    import hashlib
+
+    rng = np.random.default_rng(5)
+    arrays = [
+        rng.random((40, 60, 3), dtype=np.float32),
+        rng.random((5, 7))[::2, 1::3].T,
+        np.arange(7, dtype=">i2"),
+        np.array([True, False, True]),
+        np.zeros(0),
+        np.zeros(3, dtype=[("a", "<i4"), ("b", "<f8")]),
+    ]
+    for a in arrays:
+        c = np.ascontiguousarray(a)
+        assert array_digest(a) == hashlib.sha256(f"{c.dtype.str}{c.shape}".encode() + c.tobytes()).hexdigest()
+
+
 @pytest.mark.slow
 def test_decoder_change_does_not_rerender(tmp_path, variant, monkeypatch):
     """A second run with other decoder settings takes every render from the cache without even
