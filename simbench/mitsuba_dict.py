@@ -7,6 +7,8 @@ Nothing here imports Mitsuba at module import time (:mod:`simbench.variant`).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from types import ModuleType
 
@@ -25,6 +27,9 @@ __all__ = [
     "check_sampler",
     "samples_per_pass",
     "pass_settings",
+    "film_settings",
+    "atomic_film_adds",
+    "FILM_CHANNELS",
     "RenderSettings",
     "mitsuba_scene",
     "load_scene_dict",
@@ -199,6 +204,41 @@ def pass_settings(spp: int, *, pixels: int) -> dict:
 
     per_pass = samples_per_pass(spp, pixels=pixels)
     return {} if per_pass == spp or mi.variant().startswith("scalar") else {"samples_per_pass": per_pass}
+
+
+# Dr.Jit's LLVM backend adds into a small array (at most dr.expand_threshold() entries, 2^20 by
+# default) through one copy per thread, the copies summed at the end ("expand" mode): a pixel's
+# value then depends on which threads took its samples.  The film of a small render (H x W x
+# FILM_CHANNELS entries) is such an array: a 176x144 render (the ToF camera's) in passes of 4
+# samples differed in 32000-76000 of its 76032 values between renders with one seed.  Renders
+# run with the threshold at 0 (:func:`atomic_film_adds`): atomic adds, in sample order within
+# a work unit, as on a large film.
+FILM_CHANNELS = 4  # R, G, B and the filter weight: Mitsuba's hdrfilm, pixel_format "rgb"
+_DRJIT_EXPAND_THRESHOLD = 1 << 20  # Dr.Jit's default, under which its renders expanded
+
+
+@contextmanager
+def atomic_film_adds() -> Iterator[None]:
+    """Dr.Jit's scatter-adds into the film as atomic adds whatever the film's size (the block
+    above), restored after."""
+    import drjit as dr
+
+    before = dr.expand_threshold()
+    dr.set_expand_threshold(0)
+    try:
+        yield
+    finally:
+        dr.set_expand_threshold(before)
+
+
+def film_settings(*, pixels: int) -> dict:
+    """``{"film_adds": "atomic"}`` for a JIT render whose film Dr.Jit's default would have
+    added into by expansion (:func:`atomic_film_adds` changed its last bits), else nothing:
+    part of a render's cache key, so that such renders cached before are not reused."""
+    import mitsuba as mi
+
+    small = int(pixels) * FILM_CHANNELS <= _DRJIT_EXPAND_THRESHOLD
+    return {"film_adds": "atomic"} if small and not mi.variant().startswith("scalar") else {}
 
 
 def mitsuba_scene(

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simbench.mitsuba_dict import load_scene_dict, mitsuba_scene
+from simbench.mitsuba_dict import atomic_film_adds, load_scene_dict, mitsuba_scene
 from simbench.scene import SceneSpec
 
 __all__ = ["render_radiance"]
@@ -33,7 +33,8 @@ def render_radiance(
     spp, seed : int
         Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm,
         where a count other than a power of two is rendered in passes,
-        :func:`simbench.mitsuba_dict.samples_per_pass`).
+        :func:`simbench.mitsuba_dict.samples_per_pass`, and the film takes atomic adds,
+        :func:`simbench.mitsuba_dict.atomic_film_adds`).
     max_depth : int
         Path length limit (>= 3 gives one interreflection bounce).
     sampler : str
@@ -53,7 +54,8 @@ def render_radiance(
         # makes the image repeatable) and that a multi-pass render is evaluated at once
         mi.set_log_level(mi.LogLevel.Error)
     try:
-        img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
+        with atomic_film_adds():
+            img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
         return np.array(img, dtype=np.float32)
     finally:
         mi.set_log_level(level)

@@ -21,7 +21,7 @@ import numpy as np
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.mitsuba_dict import RenderSettings, pass_settings, realised_rig
+from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings, realised_rig
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.pattern import PatternSpec
 from simbench.photometry import (
@@ -152,6 +152,7 @@ def cached_radiance(
         "max_depth": int(max_depth),
         "sampler": sampler,
         **pass_settings(spp, pixels=scene.rig.camera.width_px * scene.rig.camera.height_px),
+        **film_settings(pixels=scene.rig.camera.width_px * scene.rig.camera.height_px),
         **_renderer_id(),
     }
     return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]

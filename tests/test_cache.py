@@ -437,3 +437,25 @@ def test_samples_per_pass_keep_every_pixel_in_one_dr_jit_work_unit(variant):
     assert samples_per_pass(4, pixels=640 * 480) == 4 and samples_per_pass(16, pixels=640 * 480) == 16
     jit = {} if variant.startswith("scalar") else {"samples_per_pass": 4}  # scalar: a pixel is one thread's
     assert pass_settings(36, pixels=full) == jit and pass_settings(64, pixels=full) == {}
+
+
+def test_film_settings_mark_the_films_dr_jit_added_into_by_expansion(variant):
+    """A render's cache key says "film_adds: atomic" exactly where Dr.Jit's default threshold
+    would have added into the film through per-thread copies (H x W x the film's channels <=
+    2^20 entries; the channel count read from Mitsuba's film): the ToF camera's and the small
+    test renders, not 640x480 or 1280x960, whose images and keys are unchanged."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from simbench.mitsuba_dict import FILM_CHANNELS, atomic_film_adds, film_settings
+
+    film = {"type": "hdrfilm", "width": 8, "height": 4, "rfilter": {"type": "box"}, "pixel_format": "rgb"}
+    scene = mi.load_dict({"type": "scene", "sensor": {"type": "perspective", "film": film}})
+    assert scene.sensors()[0].film().prepare([]) == FILM_CHANNELS
+    jit = {} if variant.startswith("scalar") else {"film_adds": "atomic"}
+    assert film_settings(pixels=176 * 144) == jit and film_settings(pixels=512 * 512) == jit
+    assert film_settings(pixels=640 * 480) == {} and film_settings(pixels=1280 * 960) == {}
+    before = dr.expand_threshold()
+    with atomic_film_adds():
+        assert dr.expand_threshold() == 0
+    assert dr.expand_threshold() == before
