@@ -1,10 +1,10 @@
 /*
- * The lens model's remap grids (simbench/optics.py), in C: compiled into the same library as
+ * The lens model's remap grids and its layered defocus blur (simbench/optics.py), in C: compiled into the same library as
  * simbench/_ckernels.c (pyproject.toml), with the same flags and the same contract (every loop
  * gives the bits of the numpy expression it replaces; tests/test_optics.py compares them).
  *
- * A file of its own because recordings depend on it: simbench.simulate puts this file's digest,
- * and not the decoder's loops, in every recording's cache key.
+ * A file of its own because recordings and projector drives depend on it: simbench.simulate puts
+ * this file's digest, and not the decoder's loops, in every recording's and drive's cache key.
  */
 #include <stdint.h>
 
@@ -63,5 +63,23 @@ void brown_maps(int64_t h, int64_t w, double f, double cx, double cy, const doub
         }
         to_pixels(w, a, f, cx, map_x + i * w);
         to_pixels(w, b, f, cy, map_y + i * w);
+    }
+}
+
+/* One level of simbench.optics.depth_varying_blur, added to out over the box of rows r0..r1-1
+ * and columns c0..c1-1: a pixel whose lower level lo is k weighs the level's image cur by
+ * 1 - frac, one whose lo is k - 1 by frac, any other by 0; out += weight * cur, channel by
+ * channel (numpy's float32 operations: the weight as the sum of the two where()s, the product,
+ * then the sum).  lo, frac: (H, w_full); cur, out: (H, w_full, c). */
+void blur_level_add(int64_t w_full, int64_t c, int64_t r0, int64_t r1, int64_t c0, int64_t c1, int64_t k,
+                    const int64_t *restrict lo, const float *restrict frac, const float *restrict cur,
+                    float *restrict out) {
+    for (int64_t i = r0; i < r1; i++) {
+        for (int64_t j = c0; j < c1; j++) {
+            const int64_t at = i * w_full + j, l = lo[at];
+            const float f = frac[at];
+            const float w = (l == k ? 1.0f - f : 0.0f) + (l == k - 1 ? f : 0.0f);
+            for (int64_t ch = 0; ch < c; ch++) out[at * c + ch] += w * cur[at * c + ch];
+        }
     }
 }

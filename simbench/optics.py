@@ -132,6 +132,9 @@ def _maps(intr, *, inverse: bool) -> tuple[np.ndarray, np.ndarray]:
     return mx, my
 
 
+_BLUR = {"blur_level_add": (None, [native.I64] * 7 + [native.P] * 4)}
+
+
 # The remap maps depend on the intrinsics alone (a frozen, hashable dataclass): computed once per
 # device and reused, read-only (issue 16: rebuilding the map was most of an undistortion's time)
 @lru_cache(maxsize=8)
@@ -268,7 +271,7 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     """
     import cv2
 
-    src = np.asarray(img, dtype=np.float32)
+    src = np.ascontiguousarray(img, dtype=np.float32)
     sig = np.nan_to_num(np.asarray(sigma_px, dtype=np.float64), nan=0.0, posinf=0.0)
     if sig.shape != src.shape[:2]:
         raise ValueError(f"sigma map shape {sig.shape} differs from the image's {src.shape[:2]}")
@@ -286,25 +289,34 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     # puts each level in a narrow strip)
     row_lo, row_hi = lo.min(axis=1), lo.max(axis=1)
     col_lo, col_hi = lo.min(axis=0), lo.max(axis=0)
+    h, w = sig.shape
+    c = 1 if src.ndim == 2 else src.shape[2]
     out = np.zeros_like(src)
+    lib = native.bind(_BLUR)
     for k, s in enumerate(levels):
         if used[k] == 0 and (k == 0 or used[k - 1] == 0):
             continue  # no pixel interpolates from this level
         rows = np.flatnonzero((row_lo <= k) & (row_hi >= k - 1))
         cols = np.flatnonzero((col_lo <= k) & (col_hi >= k - 1))
-        box = np.s_[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
         cur = (
             src
             if s == 0.0
             else cv2.GaussianBlur(src, (0, 0), sigmaX=float(s), sigmaY=float(s), borderType=cv2.BORDER_REPLICATE)
-        )[box]
-        if cur.ndim == 2 and src.ndim == 3:
-            cur = cur[..., None]
-        lo_box, frac_box = lo[box], frac[box]
-        w_lo = np.where(lo_box == k, 1.0 - frac_box, 0.0).astype(np.float32)
-        w_hi = np.where(lo_box == k - 1, frac_box, 0.0).astype(np.float32)
-        w = w_lo + w_hi
-        if src.ndim == 3:
-            w = w[..., None]
-        out[box] += w * cur
+        )
+        cur = np.ascontiguousarray(cur, dtype=np.float32).reshape(h, w, c)  # cv2 drops a single channel
+        # each pixel's weight and the sum in C: one pass instead of numpy's eight (~0.15 s a
+        # projector drive), with the bits of its float32 where / multiply / add
+        lib.blur_level_add(
+            w,
+            c,
+            int(rows[0]),
+            int(rows[-1]) + 1,
+            int(cols[0]),
+            int(cols[-1]) + 1,
+            k,
+            native.ptr(lo, "lo", np.int64, (h, w)),
+            native.ptr(frac, "frac", np.float32, (h, w)),
+            native.ptr(cur, "level", np.float32, (h, w, c)),
+            native.ptr(out, "out", np.float32, out.shape, writable=True),
+        )
     return out

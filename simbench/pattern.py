@@ -277,7 +277,7 @@ def fringe_pattern(spec: PatternSpec) -> np.ndarray:
     row[:, list(check_channels(spec.channels))] = np.stack(
         [code * intensity, (1.0 - code) * intensity, intensity], axis=-1
     )
-    return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32)
+    return np.broadcast_to(row[None, :, :], (h, w, 3)).astype(np.float32, order="C")  # K order: column-major
 
 
 def quantize(pattern: np.ndarray, *, bits: int = 8) -> np.ndarray:

@@ -263,12 +263,14 @@ def _build_drive(
 
 @lru_cache(maxsize=1)
 def _drive_code_digest() -> str:
-    """SHA-256 of the modules that build a projector drive (a changed model never reuses the
-    digests an older one cached)."""
+    """SHA-256 of the code that builds a projector drive, its C loops included (a changed model
+    never reuses the digests an older one cached)."""
+    import simbench.native
     import simbench.optics
     import simbench.projector
 
-    return source_digest(m.__file__ for m in (simbench.projector, simbench.optics, sys.modules[__name__]))
+    modules = (simbench.projector, simbench.optics, sys.modules[__name__])
+    return source_digest([*(m.__file__ for m in modules), simbench.native.LENS_SOURCE])
 
 
 def _mono(drive: np.ndarray, p: int) -> np.ndarray:

@@ -304,19 +304,21 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 8
 
 
-def test_recording_key_holds_the_lens_loops_and_not_the_decoders(tmp_path, monkeypatch):
-    """A recording's code digest changes with the lens model's C source (simbench/_lens.c) and not
-    with the decoder's (simbench/_ckernels.c), so an edit of a decoder loop re-records nothing; the
-    loops a recording calls (the lens maps) are defined in the hashed file, and only there."""
+@pytest.mark.parametrize("key", ["_recording_code_digest", "_drive_code_digest"])
+def test_recording_and_drive_keys_hold_the_lens_loops_and_not_the_decoders(key, tmp_path, monkeypatch):
+    """A recording's and a projector drive's code digests change with the lens model's C source
+    (simbench/_lens.c) and not with the decoder's (simbench/_ckernels.c), so an edit of a decoder
+    loop re-records nothing; the loops they call (the lens maps, the defocus blur's levels) are
+    defined in the hashed file, and only there."""
     from simbench import native, optics, simulate
 
-    for name in optics._BROWN:
+    for name in [*optics._BROWN, *optics._BLUR]:
         assert f"void {name}(" in native.LENS_SOURCE.read_text()
         assert f"void {name}(" not in native.SOURCE.read_text()
 
     def digest():
-        simulate._recording_code_digest.cache_clear()
-        return simulate._recording_code_digest()
+        getattr(simulate, key).cache_clear()
+        return getattr(simulate, key)()
 
     base = digest()
     for attr in ("SOURCE", "LENS_SOURCE"):

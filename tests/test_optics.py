@@ -111,6 +111,44 @@ def test_depth_varying_blur_is_exact_for_constant_sigma():
         depth_varying_blur(img, np.zeros((3, 3)))
 
 
+def _layered_blur_numpy(img, sigma_px, step_px=0.25):
+    """depth_varying_blur as numpy computed it before its per-level sum went to C (the reference
+    the C loop must give the bits of)."""
+    src = np.asarray(img, dtype=np.float32)
+    sig = np.nan_to_num(np.asarray(sigma_px, dtype=np.float64), nan=0.0, posinf=0.0)
+    levels = np.arange(0.0, float(sig.max()) + step_px, step_px)
+    pos = np.clip(sig / step_px, 0.0, len(levels) - 1.0)
+    lo = np.floor(pos).astype(np.int64)
+    frac = (pos - lo).astype(np.float32)
+    out = np.zeros_like(src)
+    for k, s in enumerate(levels):
+        cur = src if s == 0.0 else cv2.GaussianBlur(src, (0, 0), float(s), float(s), borderType=cv2.BORDER_REPLICATE)
+        if cur.ndim == 2 and src.ndim == 3:
+            cur = cur[..., None]
+        w = np.where(lo == k, 1.0 - frac, 0.0).astype(np.float32) + np.where(lo == k - 1, frac, 0.0).astype(np.float32)
+        out += (w[..., None] if src.ndim == 3 else w) * cur
+    return out
+
+
+@pytest.mark.parametrize("channels", [None, 1, 3])
+def test_depth_varying_blur_gives_the_bits_of_its_numpy_form(channels):
+    """The per-level weights and sums run in C (simbench/_lens.c): the same float32 operations as
+    numpy's, so the same bits, for sigma growing across the image (levels in strips: the C loop
+    sums over boxes), a level no pixel uses, NaN sigma, and a non-contiguous image."""
+    rng = np.random.default_rng(3)
+    shape = (70, 90) if channels is None else (70, 90, channels)
+    img = rng.random(shape).astype(np.float32)
+    sigma = np.linspace(0.0, 2.3, 90)[None, :] * np.ones((70, 1))
+    sigma[:, 40:50] = 3.1  # skips the levels between 2.3 and 3.0
+    sigma[5:9, 60:70] = np.nan
+    got = depth_varying_blur(img, sigma)
+    assert got.shape == img.shape and got.dtype == np.float32
+    assert np.array_equal(got, _layered_blur_numpy(img, sigma))
+    wide = np.zeros((70, 180) + shape[2:], np.float32)
+    wide[:, ::2] = img
+    assert np.array_equal(depth_varying_blur(wide[:, ::2], sigma), got)
+
+
 def test_projector_defocus_lowers_fringe_contrast_by_the_gaussian_mtf():
     """A Gaussian blur of standard deviation s multiplies a fringe of period T by
     exp(-2 pi^2 s^2 / T^2) (its transfer function)."""

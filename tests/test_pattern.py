@@ -94,6 +94,9 @@ def test_eq8_channels_and_stripe_colours():
     # brightest at stripe centres, darkest at borders
     assert np.argmax(b[:21]) == 10 and np.argmin(b[:21]) in (0, 20)
     assert np.all(p == p[:1])
+    # row-major, as OpenCV and every pixel loop after it read images (a broadcast row's astype
+    # kept numpy's K order: column-major, which made each pass over a projector drive strided)
+    assert p.flags.c_contiguous and quantize(p).flags.c_contiguous
 
 
 @pytest.mark.parametrize("channels", ["rbg", "gbr", "brg"])

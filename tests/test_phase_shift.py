@@ -17,6 +17,7 @@ def test_sequence_size():
     assert SPEC.gray_bits == 8 and SPEC.captures == 12
     frames = phase_shift_frames(SPEC)
     assert frames.shape == (12, 1140, 1824) and frames.dtype == np.float32
+    assert frames.flags.c_contiguous  # each frame row-major, as OpenCV reads images
     assert frames.min() >= 0 and frames.max() <= 1
     with pytest.raises(ValueError, match="steps"):
         PhaseShiftSpec(steps=3)

@@ -116,7 +116,7 @@ def phase_shift_frames(spec: PhaseShiftSpec) -> np.ndarray:
     bits = spec.gray_bits
     rows += [((gray >> (bits - 1 - b)) & 1).astype(np.float64) for b in range(bits)]
     profile = np.stack(rows)[:, None, :] if spec.axis == "columns" else np.stack(rows)[:, :, None]
-    return np.broadcast_to(profile, (len(rows), h, w)).astype(np.float32)
+    return np.broadcast_to(profile, (len(rows), h, w)).astype(np.float32, order="C")  # K order: column-major
 
 
 def wrapped_phase(frames: np.ndarray, *, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
