@@ -20,8 +20,8 @@ $(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c simbench/_
 # The main job: the paper's Table 1, Table 3, Fig. 9 and figures into results/ (renders are
 # cached in .cache/simbench), the rig calibration's report (its observations were made, and
 # cached, by the tables' calibrated-rig columns), then the pipeline demo into results/demo.
-# On 2 worker processes: the same files as one (from an empty cache 40 min 42 s, measured at
-# cb8f020 before the 36-spp renders went to passes; ~50 min on one).
+# On 2 worker processes: the same files as one (from an empty cache 46 min 38 s, measured at
+# bd53040 with the 36-spp renders in passes).
 reproduce: setup
 	$(VENV)/bin/simbench reproduce all --workers 2
 	$(VENV)/bin/simbench calibrate --out results/calibration --overwrite
@@ -33,7 +33,7 @@ ablations: setup
 	$(VENV)/bin/simbench ablate builtin --fresh --workers 2
 
 # The CI benchmark: the quick run checked against the committed thresholds, on 2 worker processes
-# (the same files as one; from a cold cache 156 s instead of 189 s on 2 cores, warm 9.5 s not 13.9 s).
+# (the same files as one; from a cold cache 140 s on 2 cores, warm 9.5 s not 13.9 s in one process).
 quick: setup
 	$(VENV)/bin/simbench reproduce all --quick --workers 2 --out .cache/quick --check results/quick/thresholds.toml
 
