@@ -38,17 +38,12 @@ def test_a_plane_decodes_to_its_true_column():
     with 2 x 2 rays), no order errors, every lit pixel decoded."""
     from simbench.projector import transfer_curve
     from simbench.rig import paper_rig
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.synthetic import synthetic_plane_sequence
     from simbench.systems.phase_shift import PhaseShiftSystem
 
-    rig = paper_rig()
-    frames, col = [], None
-    for f in PhaseShiftSystem().frames_u8():
-        rad, col, _ = synthetic_plane_capture(
-            transfer_curve(f, transfer="linear"), rig, point_m=(0, 0, 1.1), supersample=6
-        )
-        frames.append(rad.mean(axis=-1) / 1.21)
-    r = decode_phase_shift(np.stack(frames), spec=SPEC)
+    drives = np.stack([transfer_curve(f, transfer="linear") for f in PhaseShiftSystem().frames_u8()])
+    rad, col, _ = synthetic_plane_sequence(drives, paper_rig(), point_m=(0, 0, 1.1), supersample=6)
+    r = decode_phase_shift(rad.mean(axis=-1) / 1.21, spec=SPEC)
     err = r.column_px - col
     assert r.valid.mean() == 1.0
     assert np.sqrt(np.mean(err**2)) < 0.06 and np.abs(err).max() < 0.5
