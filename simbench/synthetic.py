@@ -15,7 +15,7 @@ import numpy as np
 
 from simbench.rig import Rig, project_to_projector
 
-__all__ = ["plane_hits", "synthetic_plane_capture", "synthetic_plane_sequence"]
+__all__ = ["plane_hits", "synthetic_plane_capture"]
 
 
 def plane_hits(rows: np.ndarray, cols: np.ndarray, rig: Rig, *, normal: np.ndarray, point_m: np.ndarray) -> np.ndarray:
@@ -46,12 +46,14 @@ def synthetic_plane_capture(
     albedo: float = 0.8,
     supersample: int = 4,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Noise-free capture of a plane lit by the projector.
+    """Noise-free capture of a plane lit by the projector, or of a sequence of drives (the plane
+    traced once for all its frames: 12 phase-shift frames at 6 x 6 rays took 40 s one by one;
+    each image has the bits a capture of its drive alone gets).
 
     Parameters
     ----------
-    drive : ndarray, shape (Hp, Wp, 3), float32
-        Projector output per channel.
+    drive : ndarray, shape (Hp, Wp, 3) or (N, Hp, Wp, 3), float32
+        Projector output per channel (of each frame).
     rig : Rig
     normal, point_m : 3-vectors
         The plane.
@@ -61,39 +63,16 @@ def synthetic_plane_capture(
 
     Returns
     -------
-    image : ndarray, shape (H, W, 3), float32 (radiance)
+    image : ndarray, shape (H, W, 3) or (N, H, W, 3), float32 (radiance)
     column_px : ndarray, shape (H, W), float64; true projector column at pixel centres
     depth_m : ndarray, shape (H, W), float32; true z-depth at pixel centres
     """
-    images, column_px, depth_m = synthetic_plane_sequence(
-        np.asarray(drive)[None], rig, normal=normal, point_m=point_m, albedo=albedo, supersample=supersample
-    )
-    return images[0], column_px, depth_m
-
-
-def synthetic_plane_sequence(
-    drives: np.ndarray,
-    rig: Rig,
-    *,
-    normal: Sequence[float] = (0.0, 0.0, -1.0),
-    point_m: Sequence[float] = (0.0, 0.0, 1.0),
-    albedo: float = 0.8,
-    supersample: int = 4,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`synthetic_plane_capture` of each of ``drives`` (N, Hp, Wp, 3), the plane's
-    geometry traced once for all (a multi-shot sequence: 12 frames at 6 x 6 rays took 40 s one by
-    one); each image has the bits :func:`synthetic_plane_capture` gives it.
-
-    Returns
-    -------
-    images : ndarray, shape (N, H, W, 3), float32; column_px, depth_m as
-    :func:`synthetic_plane_capture`'s
-    """
     h, w = rig.camera.size_hw
     hp, wp = rig.projector.size_hw
-    drives = np.asarray(drives)
+    drive = np.asarray(drive)
+    drives = drive[None] if drive.ndim == 3 else drive
     if drives.ndim != 4 or drives.shape[1:] != (hp, wp, 3):
-        raise ValueError(f"drive shape {drives.shape[1:]} does not match the projector {(hp, wp, 3)}")
+        raise ValueError(f"drive shape {drive.shape} does not match the projector {(hp, wp, 3)}")
     imgs = np.zeros((len(drives), h, w, 3), np.float64)
     offs = (np.arange(supersample) + 0.5) / supersample - 0.5
     rr, cc = np.meshgrid(np.arange(h, dtype=np.float64), np.arange(w, dtype=np.float64), indexing="ij")
@@ -106,9 +85,10 @@ def synthetic_plane_sequence(
             inside = np.isfinite(u) & (iu >= 0) & (iu < wp) & (iv >= 0) & (iv < hp)
             iu = np.where(inside, iu, 0).astype(np.intp)
             iv = np.where(inside, iv, 0).astype(np.intp)
-            for img, drive in zip(imgs, drives):
-                img += np.where(inside[..., None], drive[iv, iu], 0.0)
+            for img, frame in zip(imgs, drives):
+                img += np.where(inside[..., None], frame[iv, iu], 0.0)
     imgs *= albedo / supersample**2
     centre = plane_hits(rr, cc, rig, normal=normal, point_m=point_m)
     u, _, _ = project_to_projector(centre, rig)
-    return imgs.astype(np.float32), u, centre[..., 2].astype(np.float32)
+    images = imgs.astype(np.float32)
+    return images[0] if drive.ndim == 3 else images, u, centre[..., 2].astype(np.float32)

@@ -38,11 +38,11 @@ def test_a_plane_decodes_to_its_true_column():
     with 2 x 2 rays), no order errors, every lit pixel decoded."""
     from simbench.projector import transfer_curve
     from simbench.rig import paper_rig
-    from simbench.synthetic import synthetic_plane_sequence
+    from simbench.synthetic import synthetic_plane_capture
     from simbench.systems.phase_shift import PhaseShiftSystem
 
     drives = np.stack([transfer_curve(f, transfer="linear") for f in PhaseShiftSystem().frames_u8()])
-    rad, col, _ = synthetic_plane_sequence(drives, paper_rig(), point_m=(0, 0, 1.1), supersample=6)
+    rad, col, _ = synthetic_plane_capture(drives, paper_rig(), point_m=(0, 0, 1.1), supersample=6)
     r = decode_phase_shift(rad.mean(axis=-1) / 1.21, spec=SPEC)
     err = r.column_px - col
     assert r.valid.mean() == 1.0

@@ -180,7 +180,7 @@ class PhaseShiftSystem:
         from simbench.projector import transfer_curve
         from simbench.rig import paper_rig
         from simbench.sensor import simple_camera
-        from simbench.synthetic import synthetic_plane_sequence
+        from simbench.synthetic import synthetic_plane_capture
 
         if scene != "plane":
             raise ValueError(f"the {self.name} benchmark has only the plane, not {scene!r}")
@@ -188,7 +188,7 @@ class PhaseShiftSystem:
         cam = get_sensor("minimal").camera
         rng = np.random.default_rng(seed)
         drives = np.stack([transfer_curve(frame, transfer="linear") for frame in self.frames_u8()])
-        radiance = synthetic_plane_sequence(drives, rig, point_m=(0, 0, 1.1), supersample=2)[0]
+        radiance = synthetic_plane_capture(drives, rig, point_m=(0, 0, 1.1), supersample=2)[0]
         frames = [grey_frame(simple_camera(rad / 1.21, camera=cam, rng=rng)) for rad in radiance]
         return np.stack(frames), None, SceneSpec(name="bench_plane", rig=rig, objects=())
 
