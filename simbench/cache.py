@@ -6,20 +6,30 @@ image, spp, seed, path length, the Mitsuba variant and version, and :data:`RENDE
 (bumped when simbench's rendering code changes what it produces).  A decoder-only or
 camera-only change therefore never re-renders.  Entries are ``.npz`` files written atomically,
 so an interrupted run leaves no half-written entry, and each carries a SHA-256 of its arrays:
-an entry damaged later (truncated, bit-flipped) fails the check and is re-made; delete the
-directory to clear the cache.  Processes may share a cache: an entry two of them miss at once is
-made by one while the other waits (:meth:`RenderCache.get_or_make`).
+an entry damaged later (truncated, bit-flipped) fails the check and is re-made.  Processes may
+share a cache: an entry two of them miss at once is made by one while the other waits
+(:meth:`RenderCache.get_or_make`).
+
+A cache grows with every scene, setting and code change that makes new keys (a full paper run
+holds ~16 GB).  Each hit marks its entry's modification time as its last use, so
+:func:`cache_usage` tells what a cache holds and :func:`prune_cache` removes the entries used
+least recently (``simbench cache info|prune``).  A disk that fills up does not stop a run: an
+entry that cannot be stored for lack of space is logged once and the run goes on uncached.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import json
+import logging
+import os
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -29,7 +39,19 @@ from simbench.io import atomic_write_bytes
 from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
 
-__all__ = ["RENDER_VERSION", "RenderCache", "scene_fingerprint", "array_digest", "source_digest"]
+__all__ = [
+    "RENDER_VERSION",
+    "CacheEntry",
+    "RenderCache",
+    "array_digest",
+    "cache_entries",
+    "cache_usage",
+    "prune_cache",
+    "scene_fingerprint",
+    "source_digest",
+]
+
+log = logging.getLogger(__name__)
 
 RENDER_VERSION = 1
 
@@ -99,7 +121,8 @@ class RenderCache:
     entries found unreadable or failing their checksum (removed and re-made), ``made`` the
     entries made per kind: ``{kind: (count, seconds)}``, the seconds spent in their ``make``
     with the entries made inside it (a recording's render) counted to their own kind.  That is
-    where a cold run's time goes (:meth:`made_summary`).
+    where a cold run's time goes (:meth:`made_summary`).  ``unstored`` counts the entries made
+    but not stored because the cache's disk was full (logged once per cache object).
     """
 
     def __init__(self, root: str | Path | None) -> None:
@@ -107,6 +130,7 @@ class RenderCache:
         self.hits = 0
         self.misses = 0
         self.damaged = 0
+        self.unstored = 0
         self.made: dict[str, tuple[int, float]] = {}
         self._lock = threading.Lock()
         self._local = threading.local()  # per thread: the nested makes' seconds, innermost last
@@ -167,7 +191,10 @@ class RenderCache:
 
     def _read(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
         path = self.root / f"{self.key(kind, parts)}.npz"
-        return _read_entry(path) if path.is_file() else None
+        out = _read_entry(path) if path.is_file() else None
+        if out is not None:
+            _mark_used(path)
+        return out
 
     def lookup(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
         """The arrays stored under ``(kind, parts)``, or None (a miss; a damaged entry is
@@ -179,6 +206,7 @@ class RenderCache:
         if path.is_file():
             out = _read_entry(path)
             if out is not None:
+                _mark_used(path)
                 self.hits += 1
                 return out
             path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
@@ -187,15 +215,46 @@ class RenderCache:
         return None
 
     def store(self, kind: str, parts: dict, arrays: dict[str, np.ndarray]) -> None:
-        """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum)."""
+        """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum).
+
+        A full disk (or quota) does not raise: the entry is not stored (``unstored``), the
+        first time is logged, and the caller goes on with the arrays it has.  Any other
+        error writing the cache (a read-only folder, say) raises."""
         if self.root is None:
             return
         buf = io.BytesIO()
         np.savez(buf, **arrays, **{_DIGEST_KEY: np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8)})
-        atomic_write_bytes(self.root / f"{self.key(kind, parts)}.npz", buf.getvalue())
+        try:
+            atomic_write_bytes(self.root / f"{self.key(kind, parts)}.npz", buf.getvalue())
+        except OSError as exc:
+            if exc.errno not in _DISK_FULL:
+                raise
+            with self._lock:
+                self.unstored += 1
+                first = self.unstored == 1
+            if first:
+                log.warning(
+                    "render cache %s: no space left on its disk (%s); the run goes on, storing no entry that does not "
+                    "fit (`simbench cache info --cache %s` shows what it holds, `simbench cache prune` frees space)",
+                    self.root,
+                    os.strerror(exc.errno),
+                    self.root,
+                )
 
 
 _DIGEST_KEY = "__sha256__"
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _mark_used(path: Path) -> None:
+    """Set an entry's modification time to now: its last use, which :func:`prune_cache` orders
+    by (access times are not kept on ``noatime``/``relatime`` mounts).  A read-only cache
+    keeps its times."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
 
 # How long a process waits for another's lock on one entry before making the entry itself (the
 # longest single entry, a full-resolution calibration view's renders, takes ~1 min on 2 cores).
@@ -220,8 +279,6 @@ class _KeyLock:
         if self.path is None:
             return False
         import fcntl
-        import os
-        import time
         import warnings
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -244,8 +301,6 @@ class _KeyLock:
 
     def __exit__(self, *exc) -> None:
         if self.fd is not None:
-            import os
-
             self.path.unlink(missing_ok=True)
             os.close(self.fd)  # closing releases the lock
             self.fd = None
@@ -273,3 +328,141 @@ def _read_entry(path: Path) -> dict[str, np.ndarray] | None:
     if stored is None or stored.dtype != np.uint8 or stored.tobytes().hex() != _arrays_digest(out):
         return None
     return out
+
+
+# ---------------------------------------------------------------------------------------
+# What a cache holds, and pruning it.
+
+
+@dataclass(frozen=True)
+class CacheEntry:
+    """One stored entry: its file, kind (``radiance``, ``recording``, ...), size and last use
+    (the time of its last hit or, never hit, of its writing; seconds since the epoch)."""
+
+    path: Path
+    kind: str
+    size_bytes: int
+    last_used_s: float
+
+
+# How old a writer's temporary file must be to count as left by a killed process: writing one
+# entry (at most ~60 MB) takes seconds, so an hour leaves any live writer alone.
+STALE_TEMP_S = 3600.0
+
+
+def cache_entries(root: str | Path) -> list[CacheEntry]:
+    """Every entry in the cache folder ``root``, least recently used first (ties by name).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``root`` is not a folder.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such cache folder")
+    out = []
+    with os.scandir(root) as it:
+        for e in it:
+            if e.name.startswith(".") or not e.name.endswith(".npz") or "-" not in e.name:
+                continue
+            try:
+                st = e.stat(follow_symlinks=False)
+            except FileNotFoundError:  # removed meanwhile by another process
+                continue
+            out.append(CacheEntry(Path(e.path), e.name.rsplit("-", 1)[0], st.st_size, st.st_mtime))
+    out.sort(key=lambda c: (c.last_used_s, c.path.name))
+    return out
+
+
+def cache_usage(root: str | Path) -> dict[str, tuple[int, int]]:
+    """``{kind: (entries, bytes)}`` of the cache folder ``root``, the largest kind first."""
+    usage: dict[str, tuple[int, int]] = {}
+    for c in cache_entries(root):
+        n, b = usage.get(c.kind, (0, 0))
+        usage[c.kind] = (n + 1, b + c.size_bytes)
+    return dict(sorted(usage.items(), key=lambda kv: (-kv[1][1], kv[0])))
+
+
+def prune_cache(
+    root: str | Path,
+    *,
+    max_bytes: int | None = None,
+    unused_for_s: float | None = None,
+    dry_run: bool = False,
+    now_s: float | None = None,
+) -> list[CacheEntry]:
+    """Remove the cache's least recently used entries; returns those removed (or, with
+    ``dry_run``, those that would be), least recently used first.
+
+    Removed are every entry not used for ``unused_for_s`` seconds, then the least recently
+    used of the rest until they hold at most ``max_bytes``.  Temporary files of writers killed
+    mid-write (older than :data:`STALE_TEMP_S`) and lock files no process holds go too.  Safe
+    beside a running simbench: an entry removed under it is a miss, made again.
+
+    Parameters
+    ----------
+    root : str or Path
+        The cache folder.
+    max_bytes : int, optional
+        The most the kept entries may hold, bytes (>= 0).
+    unused_for_s : float, optional
+        Entries last used longer ago than this are removed, seconds (>= 0).
+    dry_run : bool
+        Only list what would be removed.
+    now_s : float, optional
+        The present, seconds since the epoch (default: now).
+
+    Raises
+    ------
+    ValueError
+        Neither bound is given, or one is negative.
+    FileNotFoundError
+        ``root`` is not a folder.
+    """
+    if max_bytes is None and unused_for_s is None:
+        raise ValueError("prune_cache needs max_bytes or unused_for_s (or both)")
+    if max_bytes is not None and max_bytes < 0:
+        raise ValueError(f"max_bytes must be >= 0, got {max_bytes}")
+    if unused_for_s is not None and not unused_for_s >= 0:
+        raise ValueError(f"unused_for_s must be >= 0, got {unused_for_s}")
+    now_s = time.time() if now_s is None else now_s
+    entries = cache_entries(root)
+    total = sum(c.size_bytes for c in entries)
+    removed = []
+    for c in entries:  # least recently used first
+        too_old = unused_for_s is not None and now_s - c.last_used_s > unused_for_s
+        too_big = max_bytes is not None and total > max_bytes
+        if not (too_old or too_big):
+            continue
+        removed.append(c)
+        total -= c.size_bytes
+        if not dry_run:
+            c.path.unlink(missing_ok=True)
+    if not dry_run:
+        _remove_leftovers(Path(root), now_s=now_s)
+    return removed
+
+
+def _remove_leftovers(root: Path, *, now_s: float) -> None:
+    """Temporary files of killed writers, and lock files no process holds."""
+    import fcntl
+
+    for p in root.glob(".*.tmp"):
+        try:
+            if now_s - p.stat().st_mtime > STALE_TEMP_S:
+                p.unlink(missing_ok=True)
+        except FileNotFoundError:
+            pass
+    for p in root.glob("*.lock"):
+        try:
+            fd = os.open(p, os.O_RDWR)
+        except FileNotFoundError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # a process is making this entry
+            os.close(fd)
+            continue
+        p.unlink(missing_ok=True)  # as the holder does when it has stored its entry
+        os.close(fd)

@@ -78,6 +78,27 @@ def _float(**limits):
 _SEED = _int(0, 2**63 - 1)
 _SPP = _int(1, 1 << 16)
 
+_SIZE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def _size_bytes(text: str) -> int:
+    """An argparse type: a size in bytes, ``du``'s way (``500M``, ``10G``, ``1.5GiB``; K, M,
+    G, T are powers of 1024)."""
+    import re
+
+    m = re.fullmatch(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([KMGT]?)(?:i?B)?\s*", text, flags=re.IGNORECASE)
+    if m is None:
+        raise argparse.ArgumentTypeError(f"expected a size such as 500M, 10G or 1.5GiB, got {text!r}")
+    return int(float(m.group(1)) * _SIZE_UNITS[m.group(2).upper()])
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if abs(n) < 1024 or unit == "GiB" and abs(n) < 1024**2:
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TiB"
+
 
 def _add_render_options(s, *, quick_spp: int | None = None) -> None:
     """--spp and --sampler, one definition for every subcommand that renders."""
@@ -508,6 +529,55 @@ def _finite_range(a: np.ndarray) -> tuple[float, float]:
 def _to_u8(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
     x = (np.nan_to_num(np.asarray(a, dtype=np.float64), nan=lo) - lo) / max(hi - lo, 1e-12)
     return np.rint(np.clip(x, 0, 1) * 255).astype(np.uint8)
+
+
+def _cmd_cache_info(args) -> int:
+    import shutil
+    import time
+
+    from simbench.cache import cache_entries
+
+    entries = cache_entries(args.cache)
+    kinds: dict[str, list] = {}
+    for c in entries:
+        kinds.setdefault(c.kind, []).append(c)
+    total = sum(c.size_bytes for c in entries)
+    free = shutil.disk_usage(args.cache).free
+    print(f"cache {args.cache}: {len(entries)} entries, {_human_bytes(total)} ({_human_bytes(free)} free on its disk)")
+    if not entries:
+        return 0
+
+    def day(t: float) -> str:
+        return time.strftime("%Y-%m-%d", time.localtime(t))
+
+    rows = sorted(kinds.items(), key=lambda kv: (-sum(c.size_bytes for c in kv[1]), kv[0]))
+    print(f"{'kind':<18} {'entries':>8} {'size':>11}   last used")
+    for kind, cs in rows:
+        used = f"{day(cs[0].last_used_s)} .. {day(cs[-1].last_used_s)}"  # least recently used first
+        print(f"{kind:<18} {len(cs):>8} {_human_bytes(sum(c.size_bytes for c in cs)):>11}   {used}")
+    return 0
+
+
+def _cmd_cache_prune(args) -> int:
+    from simbench.cache import cache_entries, prune_cache
+
+    if args.max_size is None and args.unused_days is None:
+        raise ValueError("cache prune: give --max-size, --unused-days or both (what to keep)")
+    before = cache_entries(args.cache)
+    removed = prune_cache(
+        args.cache,
+        max_bytes=args.max_size,
+        unused_for_s=None if args.unused_days is None else args.unused_days * 86400.0,
+        dry_run=args.dry_run,
+    )
+    gone = sum(c.size_bytes for c in removed)
+    left = sum(c.size_bytes for c in before) - gone
+    verb = "would remove" if args.dry_run else "removed"
+    print(
+        f"cache {args.cache}: {verb} {len(removed)} entries ({_human_bytes(gone)}), the least recently used; "
+        f"{len(before) - len(removed)} kept ({_human_bytes(left)})"
+    )
+    return 0
 
 
 def _cmd_score(args) -> int:
@@ -1071,6 +1141,33 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
 
+    s = sub.add_parser("cache", help="what the render cache holds, and pruning it", **kw)
+    cache_sub = s.add_subparsers(dest="cache_command", required=True, parser_class=_Parser)
+    c = cache_sub.add_parser("info", help="entries and size per kind, when they were last used, free disk", **kw)
+    c.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    c.set_defaults(fn=_cmd_cache_info)
+    c = cache_sub.add_parser(
+        "prune",
+        help="remove the least recently used entries (a hit marks an entry used; removed ones are made again "
+        "when next needed)",
+        **kw,
+    )
+    c.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    c.add_argument(
+        "--max-size",
+        type=_size_bytes,
+        default=None,
+        help="keep at most this much, the most recently used (e.g. 10G; K, M, G, T are powers of 1024)",
+    )
+    c.add_argument(
+        "--unused-days",
+        type=_float(lo=0.0),
+        default=None,
+        help="remove every entry not used for this many days",
+    )
+    c.add_argument("--dry-run", action="store_true", help="only say what would be removed")
+    c.set_defaults(fn=_cmd_cache_prune)
+
     s = sub.add_parser("bench", help="benchmark a decoder at its native resolution (the paper's: 1280x960)", **kw)
     s.add_argument(
         "--system", "--device", dest="device", default="proposed", choices=_system_names(), help="whose decoder"
@@ -1149,7 +1246,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as exc:  # bad input: missing or unreadable files, invalid values
         if args.debug:
             raise
-        print(f"simbench: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - anything else is a bug: say so in one line
         if args.debug:
@@ -1160,6 +1257,27 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+
+
+def _disk_full_hint(exc: BaseException, args) -> str:
+    """For a full disk: how much is free where the write failed, and how to free the cache."""
+    import errno
+    import shutil
+
+    if not isinstance(exc, OSError) or exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+        return ""
+    where = Path(exc.filename) if exc.filename else Path(".")
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    try:
+        free = f"{_human_bytes(shutil.disk_usage(where).free)} free there now; "
+    except OSError:
+        free = ""
+    cache = getattr(args, "cache", None) or ".cache/simbench"
+    return (
+        f" ({free}`simbench cache info --cache {cache}` shows what the render cache holds, "
+        f"`simbench cache prune --cache {cache} --max-size SIZE` frees it)"
+    )
 
 
 def _one_line(exc: BaseException) -> str:

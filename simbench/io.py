@@ -55,9 +55,12 @@ def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
         os.chmod(tmp, _file_mode())
         yield tmp
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError) and exc.filename is None and exc.errno is not None:
+            # a failed write or fsync does not say which file: "[Errno 28] No space left on device: 'PATH'"
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
         raise
 
 

@@ -461,3 +461,123 @@ def test_film_settings_mark_the_films_dr_jit_added_into_by_expansion(variant):
     with atomic_film_adds():
         assert dr.expand_threshold() == 0
     assert dr.expand_threshold() == before
+
+
+# ---------------------------------------------------------------------------------------
+# What a cache holds, pruning it, and a full disk.
+
+
+def _entry_path(cache, kind, parts):
+    return cache.root / f"{cache.key(kind, parts)}.npz"
+
+
+def _aged(path, age_s, now_s):
+    import os
+
+    os.utime(path, (now_s - age_s, now_s - age_s))
+
+
+def test_a_hit_marks_its_entry_used_and_pruning_removes_the_least_recently_used(tmp_path):
+    """Three entries written long ago; one is hit now: a size bound keeps the hit one and the
+    most recently written of the others, and a dry run removes nothing."""
+    import time
+
+    from simbench.cache import cache_entries, cache_usage, prune_cache
+
+    cache = RenderCache(tmp_path)
+    now = time.time()
+    for i, age_days in enumerate((30, 20, 10)):
+        cache.get_or_make("radiance", {"i": i}, lambda: {"a": np.zeros(1000, np.float32)})
+        _aged(_entry_path(cache, "radiance", {"i": i}), age_days * 86400, now)
+    cache.get_or_make("truth", {"i": 9}, lambda: {"d": np.zeros(10, np.float32)})
+    _aged(_entry_path(cache, "truth", {"i": 9}), 1, now)  # file times tick coarsely: written before the hit
+    size = _entry_path(cache, "radiance", {"i": 0}).stat().st_size
+    assert cache.get_or_make("radiance", {"i": 0}, lambda: pytest.fail("a hit")) is not None
+    assert cache_entries(tmp_path)[-1].path == _entry_path(cache, "radiance", {"i": 0})  # the hit: the latest use
+    assert cache_usage(tmp_path)["radiance"] == (3, 3 * size)
+
+    truth_size = _entry_path(cache, "truth", {"i": 9}).stat().st_size
+    keep = 2 * size + truth_size
+    would = prune_cache(tmp_path, max_bytes=keep, dry_run=True)
+    assert [c.path for c in would] == [_entry_path(cache, "radiance", {"i": 1})]
+    assert len(cache_entries(tmp_path)) == 4
+    removed = prune_cache(tmp_path, max_bytes=keep)
+    assert removed == would
+    left = {c.path for c in cache_entries(tmp_path)}
+    assert left == {_entry_path(cache, "radiance", {"i": i}) for i in (0, 2)} | {_entry_path(cache, "truth", {"i": 9})}
+    assert cache.get_or_make("radiance", {"i": 1}, lambda: {"a": np.ones(1000, np.float32)})["a"][0] == 1  # re-made
+
+
+def test_pruning_by_age_and_its_bounds(tmp_path):
+    import time
+
+    from simbench.cache import cache_entries, prune_cache
+
+    cache = RenderCache(tmp_path)
+    now = time.time()
+    for i, age_days in enumerate((9, 6, 1)):
+        cache.store("recording", {"i": i}, {"a": np.zeros(10)})
+        _aged(_entry_path(cache, "recording", {"i": i}), age_days * 86400, now)
+    removed = prune_cache(tmp_path, unused_for_s=5 * 86400, now_s=now)
+    assert {c.path for c in removed} == {_entry_path(cache, "recording", {"i": i}) for i in (0, 1)}
+    assert [c.path for c in cache_entries(tmp_path)] == [_entry_path(cache, "recording", {"i": 2})]
+    assert prune_cache(tmp_path, max_bytes=0, dry_run=True)  # 0 empties it
+    with pytest.raises(ValueError, match="max_bytes or unused_for_s"):
+        prune_cache(tmp_path)
+    with pytest.raises(ValueError, match=">= 0"):
+        prune_cache(tmp_path, max_bytes=-1)
+    with pytest.raises(FileNotFoundError, match="no such cache folder"):
+        prune_cache(tmp_path / "nope", max_bytes=0)
+
+
+def test_pruning_removes_killed_writers_leftovers_and_only_those(tmp_path):
+    """A temporary file older than STALE_TEMP_S and a lock no process holds go; a fresh
+    temporary (a live writer's) and a held lock stay."""
+    import fcntl
+    import os
+    import time
+
+    from simbench.cache import STALE_TEMP_S, prune_cache
+
+    now = time.time()
+    old_tmp, new_tmp = tmp_path / ".radiance-aa.x1.tmp", tmp_path / ".radiance-bb.x2.tmp"
+    free_lock, held_lock = tmp_path / "radiance-cc.lock", tmp_path / "radiance-dd.lock"
+    for p in (old_tmp, new_tmp, free_lock, held_lock):
+        p.write_bytes(b"")
+    _aged(old_tmp, STALE_TEMP_S + 60, now)
+    fd = os.open(held_lock, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        prune_cache(tmp_path, max_bytes=1 << 30, now_s=now)
+    finally:
+        os.close(fd)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([new_tmp.name, held_lock.name])
+
+
+def test_a_full_disk_leaves_entries_unstored_and_the_run_going(tmp_path, monkeypatch, caplog):
+    """ENOSPC (or a quota) writing an entry: the made arrays are returned, nothing is stored,
+    one warning names the cache and how to free it; other write errors still raise."""
+    import errno
+    import logging
+
+    import simbench.cache as module
+
+    def full(path, data):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(module, "atomic_write_bytes", full)
+    cache = RenderCache(tmp_path)
+    with caplog.at_level(logging.WARNING, logger="simbench.cache"):
+        a = cache.get_or_make("radiance", {"x": 1}, lambda: {"a": np.arange(3.0)})
+        b = cache.get_or_make("radiance", {"x": 2}, lambda: {"a": np.arange(4.0)})
+    assert np.array_equal(a["a"], np.arange(3.0)) and np.array_equal(b["a"], np.arange(4.0))
+    assert cache.unstored == 2 and not list(tmp_path.glob("*.npz")) and not list(tmp_path.glob("*.lock"))
+    (record,) = caplog.records
+    assert str(tmp_path) in record.getMessage() and "simbench cache prune" in record.getMessage()
+
+    def denied(path, data):
+        raise PermissionError(errno.EACCES, "Permission denied", str(path))
+
+    monkeypatch.setattr(module, "atomic_write_bytes", denied)
+    with pytest.raises(PermissionError):
+        cache.get_or_make("radiance", {"x": 3}, lambda: {"a": np.arange(2.0)})

@@ -467,3 +467,57 @@ def test_cached_reference_key_follows_the_decoder_code(tmp_path, monkeypatch):
     monkeypatch.setattr(persist, "decoder_fingerprint", lambda: "another decoder")
     cached(DecoderParams())
     assert cache.misses == 2
+
+
+def test_cache_info_and_prune(tmp_path, capsys):
+    """``simbench cache info`` lists kinds with counts and sizes; ``prune`` removes the least
+    recently used down to a size (a dry run removes nothing) and needs a bound."""
+    import numpy as np
+
+    from simbench.cache import RenderCache, cache_entries
+
+    d = tmp_path / "c"
+    cache = RenderCache(d)
+    for i in range(3):
+        cache.store("radiance", {"i": i}, {"a": np.zeros(50_000, np.float32)})
+    cache.store("truth", {"i": 0}, {"a": np.zeros(10, np.float32)})
+    assert main(["cache", "info", "--cache", str(d)]) == 0
+    out = capsys.readouterr().out
+    assert f"cache {d}: 4 entries" in out
+    (radiance,) = [line.split() for line in out.splitlines() if line.startswith("radiance ")]
+    assert radiance[1] == "3" and radiance[3] == "KiB" and float(radiance[2]) == pytest.approx(3 * 195.6, rel=0.01)
+
+    assert main(["cache", "prune", "--cache", str(d), "--max-size", "300K", "--dry-run"]) == 0
+    assert "would remove 2 entries" in capsys.readouterr().out and len(cache_entries(d)) == 4
+    assert main(["cache", "prune", "--cache", str(d), "--max-size", "0.3M"]) == 0
+    assert "removed 2 entries" in capsys.readouterr().out and len(cache_entries(d)) == 2
+    assert main(["cache", "prune", "--cache", str(d)]) == 2
+    assert "give --max-size, --unused-days or both" in capsys.readouterr().err
+    assert main(["cache", "prune", "--cache", str(d), "--max-size", "lots"]) == 2
+    assert "expected a size such as 500M" in capsys.readouterr().err
+    assert main(["cache", "info", "--cache", str(tmp_path / "none")]) == 2
+    assert "no such cache folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("text", "n"), [("0", 0), ("12345", 12345), ("500M", 500 << 20), ("10g", 10 << 30), ("1.5GiB", 3 << 29)]
+)
+def test_cache_sizes_are_read_the_way_du_writes_them(text, n):
+    from simbench.cli import _size_bytes
+
+    assert _size_bytes(text) == n
+
+
+def test_a_full_disk_is_one_line_saying_where_and_how_to_free_the_cache(tmp_path, monkeypatch, capsys):
+    import errno
+    import os
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    assert main(["pattern", "--out", str(tmp_path / "p.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "No space left on device" in err and "p.png" in err
+    assert "free there now" in err and "simbench cache prune --cache .cache/simbench" in err
+    assert not list(tmp_path.iterdir())

@@ -59,3 +59,22 @@ def test_failed_output_directory_leaves_nothing_and_keeps_the_error(tmp_path):
             (tmp / "x.txt").write_text("x")
             raise RuntimeError("boom")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_write_names_its_file_keeps_the_old_one_and_leaves_no_temporary(tmp_path, monkeypatch):
+    """A full disk reported by fsync (or write) carries no file name of its own: the error
+    names the target; the previous file is untouched."""
+    import errno
+    import os
+
+    target = tmp_path / "x.txt"
+    atomic_write_text(target, "old")
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError, match=r"No space left on device: '.*x\.txt'") as info:
+        atomic_write_text(target, "new")
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(target)
+    assert [p.name for p in tmp_path.iterdir()] == ["x.txt"] and target.read_text() == "old"

@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -66,7 +67,10 @@ def workdir(tmp_path_factory):
     (d / "scenes").symlink_to(ROOT / "scenes")
     (d / "simbench").mkdir()
     (d / "simbench" / "studies").symlink_to(ROOT / "simbench" / "studies")
-    return d
+    yield d
+    # the README's commands write ~0.7 GB here (their render cache and outputs): freed when the
+    # module ends, not with the session, so CI's disk holds one such module's files at a time
+    shutil.rmtree(d, ignore_errors=True)
 
 
 def _run(argv: list[str], cwd: Path, home: Path, timeout: float = 900) -> subprocess.CompletedProcess:
