@@ -11,7 +11,9 @@ share a cache: an entry two of them miss at once is made by one while the other 
 (:meth:`RenderCache.get_or_make`).
 
 A cache grows with every scene, setting and code change that makes new keys (a full paper run
-holds ~16 GB).  Each hit marks its entry's modification time as its last use, so
+holds ~16 GB).  Each hit marks its entry's modification time as its last use, and the last use of
+the entries it was made from (an entry made inside another's ``make`` is recorded as its source:
+a warm run reads recordings, not the renders under them, and those must not look unused), so
 :func:`cache_usage` tells what a cache holds and :func:`prune_cache` removes the entries used
 least recently (``simbench cache info|prune``).  A disk that fills up does not stop a run: an
 entry that cannot be stored for lack of space is logged once and the run goes on uncached.
@@ -133,26 +135,42 @@ class RenderCache:
         self.unstored = 0
         self.made: dict[str, tuple[int, float]] = {}
         self._lock = threading.Lock()
-        self._local = threading.local()  # per thread: the nested makes' seconds, innermost last
+        # per thread, innermost last: the nested makes' seconds, and the keys each has used
+        self._local = threading.local()
 
     @contextmanager
-    def making(self, kind: str) -> Iterator[None]:
+    def making(self, kind: str) -> Iterator[set[str]]:
         """Count the block as one entry of ``kind`` made (when it does not raise), with its
-        time less that of the entries made inside it."""
+        time less that of the entries made inside it.  Yields the set of the keys of entries
+        read or stored inside the block in this thread (and of their own sources): what the
+        entry is made from, to pass to :meth:`store`."""
         stack = self._local.__dict__.setdefault("nested_s", [])
+        frames = self._local.__dict__.setdefault("sources", [])
         stack.append(0.0)
+        frames.append(set())
         t0 = time.perf_counter()
         ok = False
         try:
-            yield
+            yield frames[-1]
             ok = True
         finally:
             elapsed = time.perf_counter() - t0
             own = elapsed - stack.pop()
+            frames.pop()
             if stack:
                 stack[-1] += elapsed
             if ok:
                 self.add_made({kind: (1, own)})
+
+    def _used(self, path: Path, sources: Iterable[str]) -> None:
+        """An entry was read: mark it and its sources used, and note them as sources of the
+        entries being made around this read (in this thread)."""
+        sources = list(sources)
+        for p in (path, *(self.root / f"{k}.npz" for k in sources)):
+            _mark_used(p)
+        for frame in self._local.__dict__.get("sources", ()):
+            frame.add(path.stem)
+            frame.update(sources)
 
     def add_made(self, made: dict[str, tuple[int, float]]) -> None:
         """Add another count of made entries (a worker process's) to :attr:`made`."""
@@ -184,16 +202,16 @@ class RenderCache:
                     self.misses -= 1
                     self.hits += 1
                     return out
-                with self.making(kind):
+                with self.making(kind) as sources:
                     out = make()
-                self.store(kind, parts, out)
+                self.store(kind, parts, out, sources=sources)
         return out
 
     def _read(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
         path = self.root / f"{self.key(kind, parts)}.npz"
         out = _read_entry(path) if path.is_file() else None
         if out is not None:
-            _mark_used(path)
+            self._used(path, _pop_sources(out))
         return out
 
     def lookup(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
@@ -206,7 +224,7 @@ class RenderCache:
         if path.is_file():
             out = _read_entry(path)
             if out is not None:
-                _mark_used(path)
+                self._used(path, _pop_sources(out))
                 self.hits += 1
                 return out
             path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
@@ -214,18 +232,26 @@ class RenderCache:
         self.misses += 1
         return None
 
-    def store(self, kind: str, parts: dict, arrays: dict[str, np.ndarray]) -> None:
-        """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum).
+    def store(self, kind: str, parts: dict, arrays: dict[str, np.ndarray], *, sources: Iterable[str] = ()) -> None:
+        """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum), with the
+        keys of the entries they were made from (``sources``, from :meth:`making`).
 
         A full disk (or quota) does not raise: the entry is not stored (``unstored``), the
         first time is logged, and the caller goes on with the arrays it has.  Any other
         error writing the cache (a read-only folder, say) raises."""
         if self.root is None:
             return
+        sources = sorted(sources)
+        if sources:
+            arrays = {**arrays, _SOURCES_KEY: np.frombuffer("\n".join(sources).encode("ascii"), np.uint8)}
         buf = io.BytesIO()
         np.savez(buf, **arrays, **{_DIGEST_KEY: np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8)})
+        path = self.root / f"{self.key(kind, parts)}.npz"
         try:
-            atomic_write_bytes(self.root / f"{self.key(kind, parts)}.npz", buf.getvalue())
+            atomic_write_bytes(path, buf.getvalue())
+            for frame in self._local.__dict__.get("sources", ()):  # a store inside another entry's make
+                frame.add(path.stem)
+                frame.update(sources)
         except OSError as exc:
             if exc.errno not in _DISK_FULL:
                 raise
@@ -243,6 +269,14 @@ class RenderCache:
 
 
 _DIGEST_KEY = "__sha256__"
+_SOURCES_KEY = "__sources__"  # the keys of the entries an entry was made from, newline-separated ASCII
+
+
+def _pop_sources(arrays: dict[str, np.ndarray]) -> list[str]:
+    raw = arrays.pop(_SOURCES_KEY, None)
+    return [] if raw is None or raw.size == 0 else raw.tobytes().decode("ascii").split("\n")
+
+
 _DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 
 

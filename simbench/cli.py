@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import time
 from dataclasses import replace
@@ -548,10 +549,10 @@ def _cmd_cache_info(args) -> int:
         return 0
 
     def day(t: float) -> str:
-        return time.strftime("%Y-%m-%d", time.localtime(t))
+        return time.strftime("%Y-%m-%d %H:%M", time.localtime(t))
 
     rows = sorted(kinds.items(), key=lambda kv: (-sum(c.size_bytes for c in kv[1]), kv[0]))
-    print(f"{'kind':<18} {'entries':>8} {'size':>11}   last used")
+    print(f"{'kind':<18} {'entries':>8} {'size':>11}   last used (least .. most recently)")
     for kind, cs in rows:
         used = f"{day(cs[0].last_used_s)} .. {day(cs[-1].last_used_s)}"  # least recently used first
         print(f"{kind:<18} {len(cs):>8} {_human_bytes(sum(c.size_bytes for c in cs)):>11}   {used}")
@@ -1238,6 +1239,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("simbench: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `simbench ... | head`: the reader has gone; stop quietly, as `yes | head` does
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush is not a 2nd error
+        except (OSError, ValueError, AttributeError):  # a stdout without a descriptor (a test's buffer)
+            pass
+        return 141
     except MemoryError:
         if args.debug:
             raise

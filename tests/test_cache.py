@@ -581,3 +581,35 @@ def test_a_full_disk_leaves_entries_unstored_and_the_run_going(tmp_path, monkeyp
     monkeypatch.setattr(module, "atomic_write_bytes", denied)
     with pytest.raises(PermissionError):
         cache.get_or_make("radiance", {"x": 3}, lambda: {"a": np.arange(2.0)})
+
+
+def test_a_hit_marks_what_its_entry_was_made_from_used_too(tmp_path):
+    """A recording made from a render (made inside it) and a ground truth (a hit inside it,
+    itself made from a drive): a later hit of the recording alone marks all four used, so
+    pruning after warm runs, which read recordings and not renders, keeps the renders.  An
+    entry read elsewhere marks nothing of the others."""
+    import time
+
+    from simbench.cache import cache_entries, prune_cache
+
+    cache = RenderCache(tmp_path)
+    cache.get_or_make(
+        "truth", {"i": 0}, lambda: {"d": cache.get_or_make("drive", {"i": 0}, lambda: {"p": np.ones(4)})["p"] * 2}
+    )
+    cache.get_or_make("other", {"i": 0}, lambda: {"o": np.zeros(2)})
+
+    def record():
+        r = cache.get_or_make("radiance", {"i": 0}, lambda: {"r": np.full(3, 5.0)})["r"]
+        t = cache.get_or_make("truth", {"i": 0}, lambda: pytest.fail("a hit"))["d"]
+        return {"image": r.sum() + t}
+
+    out = cache.get_or_make("recording", {"i": 0}, record)
+    assert set(out) == {"image"} and out["image"].shape == (4,)
+    now = time.time()
+    for c in cache_entries(tmp_path):
+        _aged(c.path, 10 * 86400, now)
+    again = cache.get_or_make("recording", {"i": 0}, lambda: pytest.fail("a hit"))
+    assert set(again) == {"image"} and np.array_equal(again["image"], out["image"])
+    removed = prune_cache(tmp_path, unused_for_s=86400)
+    assert [c.kind for c in removed] == ["other"]
+    assert sorted(c.kind for c in cache_entries(tmp_path)) == ["drive", "radiance", "recording", "truth"]

@@ -521,3 +521,24 @@ def test_a_full_disk_is_one_line_saying_where_and_how_to_free_the_cache(tmp_path
     assert err.count("\n") == 1 and "No space left on device" in err and "p.png" in err
     assert "free there now" in err and "simbench cache prune --cache .cache/simbench" in err
     assert not list(tmp_path.iterdir())
+
+
+def test_a_closed_output_pipe_ends_quietly(tmp_path):
+    """``simbench ... | head``: output to a reader that has gone stops the command without an
+    error line or traceback, with the status a SIGPIPE'd program has (141)."""
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from simbench.cache import RenderCache
+
+    RenderCache(tmp_path).store("radiance", {}, {"a": np.zeros(1)})
+    exe = Path(sys.executable).parent / "simbench"
+    proc = subprocess.Popen(
+        [str(exe), "cache", "info", "--cache", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    proc.stdout.close()  # before the process has imported anything: its first write fails
+    with proc.stderr:
+        err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141 and err == ""
