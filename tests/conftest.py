@@ -40,3 +40,11 @@ def acquisitions(variant):
         return cache[key]
 
     return get
+
+
+@pytest.fixture(autouse=True)
+def _in_a_fresh_folder(tmp_path, monkeypatch):
+    """Every test runs in its own empty working folder: the CLI's relative defaults (the render
+    cache ``.cache/simbench``, ``results/...``) land there, not in the checkout, so a test never
+    reads a developer's warm cache (and passes for it) or leaves files behind."""
+    monkeypatch.chdir(tmp_path)

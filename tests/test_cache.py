@@ -212,7 +212,7 @@ def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests(tmp_path, monke
 
     sensor = get_sensor("paper")
     system = proposed.ColourFringeSystem()
-    scene = physical_scene(system.prepare(load_scene("scenes/white_plane.toml")), sensor)
+    scene = physical_scene(system.prepare(load_scene(SCENES / "white_plane.toml")), sensor)
     kept = proposed.pattern_digest(system.pattern)
     assert kept == array_digest(system.pattern_u8)
     with_digest = ProjectorDrive(scene, DriveImage(kept, lambda: system.pattern_u8), sensor).inputs()

@@ -9,6 +9,8 @@ import pytest
 
 from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, gray_order, phase_shift_frames, wrapped_phase
 
+from .conftest import SCENES
+
 SPEC = PhaseShiftSpec()
 
 
@@ -114,7 +116,7 @@ def test_cli_renders_and_decodes_a_phase_shift_recording(tmp_path, variant, caps
     from simbench.cli import main
 
     rec = tmp_path / "rec"
-    argv = ["render", "--system", "phase_shift", "scenes/white_plane.toml", "--out", str(rec), "--spp", "4"]
+    argv = ["render", "--system", "phase_shift", str(SCENES / "white_plane.toml"), "--out", str(rec), "--spp", "4"]
     assert main(argv + ["--sensor", "minimal", "--cache", str(tmp_path / "cache")]) == 0
     info = json.loads((rec / "device.json").read_text())
     assert info["device"] == "phase_shift" and info["steps"] == 4 and (rec / "rig.toml").is_file()
