@@ -79,6 +79,9 @@ def _float(**limits):
 _SEED = _int(0, 2**63 - 1)
 _SPP = _int(1, 1 << 16)
 
+# the render cache's folder, relative to the working folder (every command that renders or reads it)
+DEFAULT_CACHE = ".cache/simbench"
+
 _SIZE_UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
@@ -120,7 +123,7 @@ def _add_render_options(s, *, quick_spp: int | None = None) -> None:
 def _add_cache_options(s) -> None:
     s.add_argument(
         "--cache",
-        default=".cache/simbench",
+        default=DEFAULT_CACHE,
         help="render cache folder (renders and ground truth keyed by everything that affects them)",
     )
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
@@ -1035,7 +1038,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     s.add_argument(
         "--cache",
-        default=".cache/simbench",
+        default=DEFAULT_CACHE,
         help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and "
         "decoder code)",
     )
@@ -1083,7 +1086,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
-    s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    s.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
     s.add_argument("--seed", type=_SEED, default=None, help=f"base seed (default {DEFAULT_SEED})")
     _add_render_options(s, quick_spp=4)
@@ -1137,7 +1140,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead"
     )
-    s.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    s.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
     s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
@@ -1145,7 +1148,7 @@ def _parser() -> argparse.ArgumentParser:
     s = sub.add_parser("cache", help="what the render cache holds, and pruning it", **kw)
     cache_sub = s.add_subparsers(dest="cache_command", required=True, parser_class=_Parser)
     c = cache_sub.add_parser("info", help="entries and size per kind, when they were last used, free disk", **kw)
-    c.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    c.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
     c.set_defaults(fn=_cmd_cache_info)
     c = cache_sub.add_parser(
         "prune",
@@ -1153,7 +1156,7 @@ def _parser() -> argparse.ArgumentParser:
         "when next needed)",
         **kw,
     )
-    c.add_argument("--cache", default=".cache/simbench", help="render cache folder")
+    c.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
     c.add_argument(
         "--max-size",
         type=_size_bytes,
@@ -1280,7 +1283,7 @@ def _disk_full_hint(exc: BaseException, args) -> str:
         free = f"{_human_bytes(shutil.disk_usage(where).free)} free there now; "
     except OSError:
         free = ""
-    cache = getattr(args, "cache", None) or ".cache/simbench"
+    cache = getattr(args, "cache", None) or DEFAULT_CACHE
     return (
         f" ({free}`simbench cache info --cache {cache}` shows what the render cache holds, "
         f"`simbench cache prune --cache {cache} --max-size SIZE` frees it)"
