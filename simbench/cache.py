@@ -21,7 +21,6 @@ entry that cannot be stored for lack of space is logged once and the run goes on
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import io
 import json
@@ -37,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench.io import atomic_write_bytes
+from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes
 from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
 
@@ -168,8 +167,13 @@ class RenderCache:
         sources = list(sources)
         for p in (path, *(self.root / f"{k}.npz" for k in sources)):
             _mark_used(p)
+        self._note_source(path.stem, sources)
+
+    def _note_source(self, key: str, sources: Iterable[str]) -> None:
+        """Record entry ``key`` and its own sources as sources of every entry being made in this
+        thread around its read or store."""
         for frame in self._local.__dict__.get("sources", ()):
-            frame.add(path.stem)
+            frame.add(key)
             frame.update(sources)
 
     def add_made(self, made: dict[str, tuple[int, float]]) -> None:
@@ -249,11 +253,9 @@ class RenderCache:
         path = self.root / f"{self.key(kind, parts)}.npz"
         try:
             atomic_write_bytes(path, buf.getvalue())
-            for frame in self._local.__dict__.get("sources", ()):  # a store inside another entry's make
-                frame.add(path.stem)
-                frame.update(sources)
+            self._note_source(path.stem, sources)
         except OSError as exc:
-            if exc.errno not in _DISK_FULL:
+            if exc.errno not in DISK_FULL_ERRNOS:
                 raise
             with self._lock:
                 self.unstored += 1
@@ -275,9 +277,6 @@ _SOURCES_KEY = "__sources__"  # the keys of the entries an entry was made from, 
 def _pop_sources(arrays: dict[str, np.ndarray]) -> list[str]:
     raw = arrays.pop(_SOURCES_KEY, None)
     return [] if raw is None or raw.size == 0 else raw.tobytes().decode("ascii").split("\n")
-
-
-_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 
 
 def _mark_used(path: Path) -> None:

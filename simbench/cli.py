@@ -97,8 +97,9 @@ def _size_bytes(text: str) -> int:
 
 
 def _human_bytes(n: float) -> str:
+    """``n`` bytes in the largest binary unit it reaches, as ``du -h`` writes sizes."""
     for unit in ("B", "KiB", "MiB", "GiB"):
-        if abs(n) < 1024 or unit == "GiB" and abs(n) < 1024**2:
+        if abs(n) < 1024:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
     return f"{n:.1f} TiB"
@@ -1271,10 +1272,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def _disk_full_hint(exc: BaseException, args) -> str:
     """For a full disk: how much is free where the write failed, and how to free the cache."""
-    import errno
     import shutil
 
-    if not isinstance(exc, OSError) or exc.errno not in (errno.ENOSPC, errno.EDQUOT):
+    from simbench.io import DISK_FULL_ERRNOS
+
+    if not isinstance(exc, OSError) or exc.errno not in DISK_FULL_ERRNOS:
         return ""
     where = Path(exc.filename) if exc.filename else Path(".")
     while not where.exists() and where != where.parent:

@@ -7,6 +7,7 @@ so an interrupted run never leaves a half-written result behind.
 from __future__ import annotations
 
 import io
+import errno
 import json
 import os
 import re
@@ -196,6 +197,10 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+# the errors of a write that found no room: a full disk, or a full quota
+DISK_FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
