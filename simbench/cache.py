@@ -193,16 +193,25 @@ class RenderCache:
     def key(self, kind: str, parts: dict) -> str:
         return f"{kind}-{_digest({'kind': kind, 'render_version': RENDER_VERSION, **parts})[:32]}"
 
-    def get_or_make(self, kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    def get_or_make(
+        self, kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]], *, wait: bool = True
+    ) -> dict[str, np.ndarray] | None:
         """The arrays stored under ``(kind, parts)``, made by ``make()`` and stored on a miss.
 
         Processes sharing the cache (``simbench reproduce --workers``, ablation workers) make
         an entry once: a miss is made under an exclusive lock on the entry's key, and a process
-        that waited for another's lock reads what that one stored (a hit, not a miss)."""
+        that waited for another's lock reads what that one stored (a hit, not a miss).
+        ``wait=False``: None, at once, when another process is making the entry - for a caller
+        with several entries to make, to make the others first (and come back for this one)."""
         out = self.lookup(kind, parts)
         if out is None:
-            with _KeyLock(self.root, self.key(kind, parts)) as waited:
-                if waited and (out := self._read(kind, parts)) is not None:
+            lock = _KeyLock(self.root, self.key(kind, parts))
+            if not wait and not lock.acquire_now():
+                self.misses -= 1  # not looked up yet, as far as the counts go: the caller comes back
+                return None
+            with lock:
+                # stored by another process since the lookup (it held the lock, or had just let it go)
+                if self.root is not None and (out := self._read(kind, parts)) is not None:
                     self.misses -= 1
                     self.hits += 1
                     return out
@@ -308,8 +317,25 @@ class _KeyLock:
         self.path = None if root is None else root / f"{key}.lock"
         self.fd: int | None = None
 
+    def acquire_now(self) -> bool:
+        """Take the lock if no other holder has it (then entering does not wait); False if one
+        has.  No root: True."""
+        if self.path is None or self.fd is not None:
+            return True
+        import fcntl
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return False
+        self.fd = fd
+        return True
+
     def __enter__(self) -> bool:
-        if self.path is None:
+        if self.path is None or self.fd is not None:
             return False
         import fcntl
         import warnings

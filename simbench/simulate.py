@@ -362,11 +362,17 @@ class ProjectorDrive:
 
 
 def cached_arrays(
-    kind: str, parts: dict, make: Callable[[], dict[str, np.ndarray]], *, cache: RenderCache | None = None
-) -> dict[str, np.ndarray]:
+    kind: str,
+    parts: dict,
+    make: Callable[[], dict[str, np.ndarray]],
+    *,
+    cache: RenderCache | None = None,
+    wait: bool = True,
+) -> dict[str, np.ndarray] | None:
     """``make()``'s arrays, looked up in / stored to ``cache`` under ``kind`` and ``parts``
-    plus the renderer's identity (variant, Mitsuba version)."""
-    return make() if cache is None else cache.get_or_make(kind, {**parts, **_renderer_id()}, make)
+    plus the renderer's identity (variant, Mitsuba version); ``wait=False``: None when another
+    process is making them (:meth:`simbench.cache.RenderCache.get_or_make`)."""
+    return make() if cache is None else cache.get_or_make(kind, {**parts, **_renderer_id()}, make, wait=wait)
 
 
 def _ambient_seed(seed: int) -> int:

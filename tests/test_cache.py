@@ -366,6 +366,36 @@ def test_processes_sharing_the_cache_make_an_entry_once(tmp_path):
     assert [p.name for p in (tmp_path / "cache").iterdir() if p.suffix != ".npz"] == []
 
 
+def test_a_caller_that_does_not_wait_skips_an_entry_another_holder_is_making(tmp_path):
+    """``wait=False``: None at once while another holder has the entry's lock (nothing made,
+    nothing counted), the entry made once the lock is free; and a holder that gets the lock
+    after the entry was stored reads it rather than making it again."""
+    from simbench.cache import _KeyLock
+
+    cache = RenderCache(tmp_path)
+    made = []
+
+    def make():
+        made.append(1)
+        return {"a": np.arange(3.0)}
+
+    other = _KeyLock(tmp_path, cache.key("k", {"x": 1}))  # its own open file: another holder to flock
+    assert other.acquire_now()
+    assert cache.get_or_make("k", {"x": 1}, make, wait=False) is None
+    assert made == [] and (cache.hits, cache.misses) == (0, 0)
+    other.__exit__(None, None, None)
+    assert cache.get_or_make("k", {"x": 1}, make, wait=False)["a"].tolist() == [0.0, 1.0, 2.0]
+    assert made == [1] and (cache.hits, cache.misses) == (0, 1)
+
+    # the lookup missed, then the maker stored the entry and let the lock go: read, not made
+    lookup = cache.lookup
+    cache.lookup = lambda kind, parts: (setattr(cache, "misses", cache.misses + 1), None)[1]
+    assert cache.get_or_make("k", {"x": 1}, make)["a"].tolist() == [0.0, 1.0, 2.0]
+    cache.lookup = lookup
+    assert made == [1] and (cache.hits, cache.misses) == (1, 1)
+    assert RenderCache(None).get_or_make("k", {}, make, wait=False)["a"].tolist() == [0.0, 1.0, 2.0]
+
+
 def test_a_failed_make_frees_its_key_and_entries_nest(tmp_path):
     """A make that raises leaves neither an entry nor a lock, and the key can be made after; an
     entry made from another entry (nested keys) is made, each once."""

@@ -236,6 +236,36 @@ def test_solve_needs_three_views_and_leaves_out_missing_ones():
     assert res.used_views == (0, 2, 3, 4) and math.isnan(res.view_rms_px["camera"][1])
 
 
+def test_processes_sharing_a_cache_share_the_poses(monkeypatch):
+    """calibrate_rig observes first the poses no other process is observing (``wait=False``),
+    then waits for the others; the views reach the solve in pose order whatever the order they
+    were observed in, so the rig is the one a lone process finds."""
+    import simbench.calibration.procedure as procedure
+    from simbench.mitsuba_dict import RenderSettings
+
+    truth = paper_rig()
+    exact = _exact_views(truth, 5)
+    calls, busy = [], {1, 3}  # poses another process is observing when this one comes to them
+
+    def observe(target, pose, rig, *, index, wait, **kw):
+        calls.append((index, wait))
+        return None if (index in busy and not wait) else dataclasses.replace(exact[index], pose=pose)
+
+    monkeypatch.setattr(procedure, "observe_pose", observe)
+    render = RenderSettings(spp=1, sampler="multijitter", max_depth=2, cache=None)
+    progress = []
+    shared = procedure.calibrate_rig(
+        truth, target=TARGET, sensor=None, poses=5, seed=3, render=render, progress=lambda k, n: progress.append((k, n))
+    )
+    assert calls == [(0, False), (1, False), (2, False), (3, False), (4, False), (1, True), (3, True)]
+    assert progress == [(k, 5) for k in range(1, 6)]
+    busy.clear()
+    calls.clear()
+    alone = procedure.calibrate_rig(truth, target=TARGET, sensor=None, poses=5, seed=3, render=render)
+    assert calls == [(k, False) for k in range(5)]
+    assert shared.rig == alone.rig and shared.view_rms_px == alone.view_rms_px
+
+
 def test_rig_errors_signs():
     truth = paper_rig()
     longer = Rig(truth.camera, truth.projector, (0.094, 0.0, 0.0), (0.0, 0.0, 1.0), "x")

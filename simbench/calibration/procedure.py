@@ -288,7 +288,8 @@ def observe_pose(
     render: RenderSettings,
     corner_spp: int = CALIBRATION_CORNER_SPP,
     frames_u8: Sequence[np.ndarray] | None = None,
-) -> CalibrationView:
+    wait: bool = True,
+) -> CalibrationView | None:
     """Render and record one pose (the white frame and both sequences), find the corners and
     decode their projector coordinates.  The white frame is rendered with ``corner_spp``
     samples (at least ``render.spp``): the corner detector reads the coverage of the pixels on
@@ -299,7 +300,8 @@ def observe_pose(
     :func:`calibration_frames` (None: those, made once per process when a pose is not cached).  ``rig`` is the
     ideal rig (the sensor model adds its lenses, :func:`simbench.simulate.physical_scene`);
     the observations are cached in ``render.cache`` by everything that affects them, the
-    frames' renders are not (up to 3 x 25 images a pose)."""
+    frames' renders are not (up to 3 x 25 images a pose).  ``wait=False``: None when another
+    process sharing the cache is observing the pose (its observation is then read later)."""
     from simbench.cache import scene_fingerprint
     from simbench.device import sensor_to_dict
     from simbench.simulate import cached_arrays, physical_scene
@@ -328,7 +330,9 @@ def observe_pose(
         "sequences": [dataclasses.asdict(cols), dataclasses.asdict(rows)],
         "version": OBSERVATION_VERSION,
     }
-    arrays = cached_arrays("calibration_view", parts, make, cache=render.cache)
+    arrays = cached_arrays("calibration_view", parts, make, cache=render.cache, wait=wait)
+    if arrays is None:
+        return None
     found = len(arrays["camera_px"]) > 0
     return CalibrationView(
         pose=pose,
@@ -603,22 +607,19 @@ def calibrate_rig(
     progress : called with (poses done, poses) after each pose
     """
     plan = calibration_poses(target, rig, count=poses, rng=derive_seed(seed, "calibration/poses"))
-    views = []
-    for k, pose in enumerate(plan):
-        views.append(
-            observe_pose(
-                target,
-                pose,
-                rig,
-                sensor=sensor,
-                index=k,
-                seed=seed,
-                render=render,
-                corner_spp=corner_spp,
+    views: list[CalibrationView | None] = [None] * len(plan)
+    # Processes sharing the cache (reproduce's workers, which all calibrate the run's rig
+    # first) share the poses: first those no other process is observing, then the rest, read
+    # once their observer has stored them (on one process: every pose in the first pass).
+    for wait in (False, True):
+        for k, pose in enumerate(plan):
+            if views[k] is not None:
+                continue
+            views[k] = observe_pose(
+                target, pose, rig, sensor=sensor, index=k, seed=seed, render=render, corner_spp=corner_spp, wait=wait
             )
-        )
-        if progress is not None:
-            progress(k + 1, len(plan))
+            if views[k] is not None and progress is not None:
+                progress(sum(v is not None for v in views), len(plan))
     return solve_calibration(
         views,
         target=target,
