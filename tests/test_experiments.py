@@ -172,6 +172,30 @@ def test_a_target_records_the_seeds_of_calibrations_it_reuses(variant, tmp_path)
     assert session.seeds_used == {}
 
 
+def test_the_rig_calibration_reports_the_poses_it_makes(variant, tmp_path, monkeypatch):
+    """A run's rig calibration prints a line for each pose that took a while (made, on a cold
+    cache) and none for poses read from the cache at once."""
+    import simbench.calibration as calibration
+    import simbench.experiments.common as common
+
+    now = [0.0]
+
+    def calibrate_rig(rig, *, poses, progress, **kw):
+        for k, seconds in enumerate([5.0, 25.0, 0.2, 0.2]):  # two poses made, two read
+            now[0] += seconds
+            progress(k + 1, poses)
+        return "result"
+
+    monkeypatch.setattr(calibration, "calibrate_rig", calibrate_rig)
+    monkeypatch.setattr(common.time, "perf_counter", lambda: now[0])
+    lines = []
+    cfg = RunConfig.preset(quick=True, calibration_poses=4)
+    session = common.Session(cfg, out_dir=tmp_path, cache_dir=None, progress=lines.append)
+    assert session.calibration_result(session.scene("plane_white")) == "result"
+    assert lines[:2] == ["[calibration] pose 1/4 observed (5 s)", "[calibration] pose 2/4 observed (30 s)"]
+    assert lines[2:] == ["[calibration] 4 target poses through sensor model paper (30.4 s)"]
+
+
 @pytest.mark.slow
 def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path, variant, monkeypatch):
     """A target's outputs, provenance included, are the same bytes whether it runs alone, after

@@ -87,6 +87,8 @@ __all__ = [
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 # the rigs a decoder may be given (RunConfig.rig)
 RIGS = ("true", "calibrated")
+# a calibration pose that took this long gets a progress line (one made, not one read from the cache)
+POSE_PROGRESS_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -326,6 +328,17 @@ class Session:
         # the ideal rig behind the prepared one: the sensor model puts its lenses back
         ideal = Rig(rig.camera.undistorted, rig.projector.undistorted, rig.position_m, rig.rotation_deg, rig.name)
         if ideal not in self._rigs:
+            t0 = last = time.perf_counter()
+
+            def pose_done(k: int, n: int) -> None:
+                # on a cold cache a pose takes seconds (~20 s at the full resolution); from the
+                # cache, all of them a second: no line per pose then
+                nonlocal last
+                now = time.perf_counter()
+                if now - last >= POSE_PROGRESS_S:
+                    self.progress(f"[calibration] pose {k}/{n} observed ({now - t0:.0f} s)")
+                last = now
+
             with self.timed(f"[calibration] {cfg.calibration_poses} target poses through sensor model {cfg.sensor}"):
                 self._rigs[ideal] = calibrate_rig(
                     ideal,
@@ -340,6 +353,7 @@ class Session:
                         cache=self.cache,
                     ),
                     corner_spp=CALIBRATION_CORNER_SPP,
+                    progress=pose_done,
                 )
         self.seeds.record("calibration", {"base": cfg.seed, "poses": cfg.calibration_poses})
         return self._rigs[ideal]
