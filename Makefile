@@ -33,7 +33,7 @@ ablations: setup
 	$(VENV)/bin/simbench ablate builtin --fresh --workers 2
 
 # The CI benchmark: the quick run checked against the committed thresholds, on 2 worker processes
-# (the same files as one; from a cold cache 132 s on 2 cores, warm 9.5 s not 13.9 s in one process).
+# (the same files as one; from a cold cache 120 s on 2 cores, warm 9.5 s not 13.9 s in one process).
 quick: setup
 	$(VENV)/bin/simbench reproduce all --quick --workers 2 --out .cache/quick --check results/quick/thresholds.toml
 

@@ -1,11 +1,15 @@
 /*
- * The lens model's remap grids and its layered defocus blur (simbench/optics.py), in C: compiled into the same library as
- * simbench/_ckernels.c (pyproject.toml), with the same flags and the same contract (every loop
- * gives the bits of the numpy expression it replaces; tests/test_optics.py compares them).
+ * The lens model's remap grids and its layered defocus blur (simbench/optics.py), and the
+ * projector's DMD layout and 8-bit transfer (simbench/projector.py), in C: compiled into the same
+ * library as simbench/_ckernels.c (pyproject.toml), with the same flags and the same contract
+ * (every loop gives the bits of the numpy expression it replaces; tests/test_optics.py and
+ * tests/test_projector.py compare them).
  *
  * A file of its own because recordings and projector drives depend on it: simbench.simulate puts
  * this file's digest, and not the decoder's loops, in every recording's and drive's cache key.
  */
+#include <float.h>
+#include <math.h>
 #include <stdint.h>
 
 /* Row helpers stay out of line, as in _ckernels.c. */
@@ -72,7 +76,7 @@ void brown_maps(int64_t h, int64_t w, double f, double cx, double cy, const doub
  * channel (numpy's float32 operations: the weight as the sum of the two where()s, the product,
  * then the sum).  lo, frac: (H, w_full); cur, out: (H, w_full, c). */
 void blur_level_add(int64_t w_full, int64_t c, int64_t r0, int64_t r1, int64_t c0, int64_t c1, int64_t k,
-                    const int64_t *restrict lo, const float *restrict frac, const float *restrict cur,
+                    const int32_t *restrict lo, const float *restrict frac, const float *restrict cur,
                     float *restrict out) {
     for (int64_t i = r0; i < r1; i++) {
         for (int64_t j = c0; j < c1; j++) {
@@ -82,4 +86,87 @@ void blur_level_add(int64_t w_full, int64_t c, int64_t r0, int64_t r1, int64_t c
             for (int64_t ch = 0; ch < c; ch++) out[at * c + ch] += w * cur[at * c + ch];
         }
     }
+}
+
+/* The layered blur's level map (simbench.optics.depth_varying_blur), in float64 as numpy
+ * computes it: sigma with NaN and +inf as 0 and -inf as -DBL_MAX (np.nan_to_num); its largest
+ * value (at least 0) from blur_sigma_max; then pos = clip(sigma / step, 0, top), lo = floor(pos),
+ * frac = (float)(pos - lo), the count of pixels per lo (used, top + 2 entries, zeroed here) and
+ * each row's and column's lowest and highest lo. */
+static inline double finite_sigma(double v) {
+    if (v != v) return 0.0;
+    if (v > DBL_MAX) return 0.0;
+    if (v < -DBL_MAX) return -DBL_MAX;
+    return v;
+}
+
+double blur_sigma_max(int64_t n, const double *restrict sigma) {
+    double m = 0.0;
+    for (int64_t i = 0; i < n; i++) {
+        const double v = finite_sigma(sigma[i]);
+        if (v > m) m = v;
+    }
+    return m;
+}
+
+void blur_levels(int64_t h, int64_t w, const double *restrict sigma, double step, double top, int32_t *restrict lo,
+                 float *restrict frac, int64_t *restrict used, int32_t *restrict row_lo, int32_t *restrict row_hi,
+                 int32_t *restrict col_lo, int32_t *restrict col_hi) {
+    const int64_t levels = (int64_t)top + 1;
+    for (int64_t k = 0; k <= levels; k++) used[k] = 0;
+    for (int64_t j = 0; j < w; j++) {
+        col_lo[j] = INT32_MAX;
+        col_hi[j] = INT32_MIN;
+    }
+    for (int64_t i = 0; i < h; i++) {
+        int32_t rlo = INT32_MAX, rhi = INT32_MIN;
+        for (int64_t j = 0; j < w; j++) {
+            const int64_t at = i * w + j;
+            double pos = finite_sigma(sigma[at]) / step;
+            pos = pos < 0.0 ? 0.0 : pos;
+            pos = pos > top ? top : pos;
+            const double fl = floor(pos);
+            const int32_t l = (int32_t)fl;
+            lo[at] = l;
+            frac[at] = (float)(pos - fl);
+            used[l]++;
+            rlo = l < rlo ? l : rlo;
+            rhi = l > rhi ? l : rhi;
+            col_lo[j] = l < col_lo[j] ? l : col_lo[j];
+            col_hi[j] = l > col_hi[j] ? l : col_hi[j];
+        }
+        row_lo[i] = rlo;
+        row_hi[i] = rhi;
+    }
+}
+
+/* The DMD's diamond layout (simbench.projector.dmd_layout): even rows show the mean of column
+ * pairs (0, 1), (2, 3), ...; odd rows of pairs (1, 2), (3, 4), ..., their first and last columns
+ * the edge mirrors' own values; out = 0.5f * (a + b) in float32, as numpy.  (h, w, c), w even. */
+void dmd_diamond(int64_t h, int64_t w, int64_t c, const float *restrict in, float *restrict out) {
+    for (int64_t i = 0; i < h; i++) {
+        const float *src = in + i * w * c;
+        float *dst = out + i * w * c;
+        const int64_t first = i % 2;  /* the row's first paired column */
+        if (first) {
+            for (int64_t ch = 0; ch < c; ch++) {
+                dst[ch] = src[ch];
+                dst[(w - 1) * c + ch] = src[(w - 1) * c + ch];
+            }
+        }
+        for (int64_t j = first; j + 1 < w - first; j += 2) {
+            for (int64_t ch = 0; ch < c; ch++) {
+                const float pair = 0.5f * (src[j * c + ch] + src[(j + 1) * c + ch]);
+                dst[j * c + ch] = pair;
+                dst[(j + 1) * c + ch] = pair;
+            }
+        }
+    }
+}
+
+/* A per-channel lookup table applied to an 8-bit image: out[p, ch] = table[code[p, ch], ch];
+ * code (n, c) uint8, table (256, c) float32. */
+void lut_u8(int64_t n, int64_t c, const uint8_t *restrict code, const float *restrict table, float *restrict out) {
+    for (int64_t p = 0; p < n; p++)
+        for (int64_t ch = 0; ch < c; ch++) out[p * c + ch] = table[code[p * c + ch] * c + ch];
 }

@@ -132,7 +132,11 @@ def _maps(intr, *, inverse: bool) -> tuple[np.ndarray, np.ndarray]:
     return mx, my
 
 
-_BLUR = {"blur_level_add": (None, [native.I64] * 7 + [native.P] * 4)}
+_BLUR = {
+    "blur_sigma_max": (native.F64, [native.I64, native.P]),
+    "blur_levels": (None, [native.I64, native.I64, native.P, native.F64, native.F64] + [native.P] * 7),
+    "blur_level_add": (None, [native.I64] * 7 + [native.P] * 4),
+}
 
 
 # The remap maps depend on the intrinsics alone (a frozen, hashable dataclass): computed once per
@@ -272,27 +276,41 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
     import cv2
 
     src = np.ascontiguousarray(img, dtype=np.float32)
-    sig = np.nan_to_num(np.asarray(sigma_px, dtype=np.float64), nan=0.0, posinf=0.0)
+    sig = np.ascontiguousarray(sigma_px, dtype=np.float64)
     if sig.shape != src.shape[:2]:
         raise ValueError(f"sigma map shape {sig.shape} differs from the image's {src.shape[:2]}")
-    smax = float(sig.max(initial=0.0))
+    if not step_px > 0:
+        raise ValueError(f"step_px must be > 0, got {step_px}")
+    lib = native.bind(_BLUR)
+    h, w = sig.shape
+    # sigma's NaN and +inf count as 0 (np.nan_to_num); in C, in numpy's float64 operations
+    smax = lib.blur_sigma_max(sig.size, native.ptr(sig, "sigma", np.float64, (h, w)))
     if smax <= 0.0:
         return src.copy()
     levels = np.arange(0.0, smax + step_px, step_px)
-    pos = np.clip(sig / step_px, 0.0, len(levels) - 1.0)
-    lo = np.floor(pos).astype(np.int64)
-    frac = (pos - lo).astype(np.float32)
-    used = np.bincount(lo.ravel(), minlength=len(levels) + 1)
+    # each pixel between levels lo and lo + 1 at frac (pos = clip(sigma / step, 0, top)), the
+    # pixels per level, and each row's and column's lowest and highest lo: one pass in C
+    lo = np.empty((h, w), np.int32)
+    frac = np.empty((h, w), np.float32)
+    used = np.empty(len(levels) + 1, np.int64)
+    row_lo, row_hi, col_lo, col_hi = (np.empty(n, np.int32) for n in (h, h, w, w))
+    lib.blur_levels(
+        h,
+        w,
+        native.ptr(sig, "sigma", np.float64, (h, w)),
+        float(step_px),
+        float(len(levels) - 1),
+        native.ptr(lo, "lo", np.int32, (h, w), writable=True),
+        native.ptr(frac, "frac", np.float32, (h, w), writable=True),
+        native.ptr(used, "used", np.int64, (len(levels) + 1,), writable=True),
+        *(native.ptr(a, "extent", np.int32, a.shape, writable=True) for a in (row_lo, row_hi, col_lo, col_hi)),
+    )
     # the rows and columns where a pixel interpolates from level k lie where the row's (column's)
     # lowest level <= k and highest >= k - 1: each level's sum is taken over that box only (the
     # zero weights outside it would add exact zeros; a board whose blur grows across the image
     # puts each level in a narrow strip)
-    row_lo, row_hi = lo.min(axis=1), lo.max(axis=1)
-    col_lo, col_hi = lo.min(axis=0), lo.max(axis=0)
-    h, w = sig.shape
     c = 1 if src.ndim == 2 else src.shape[2]
     out = np.zeros_like(src)
-    lib = native.bind(_BLUR)
     for k, s in enumerate(levels):
         if used[k] == 0 and (k == 0 or used[k - 1] == 0):
             continue  # no pixel interpolates from this level
@@ -314,7 +332,7 @@ def depth_varying_blur(img: np.ndarray, sigma_px: np.ndarray, *, step_px: float 
             int(cols[0]),
             int(cols[-1]) + 1,
             k,
-            native.ptr(lo, "lo", np.int64, (h, w)),
+            native.ptr(lo, "lo", np.int32, (h, w)),
             native.ptr(frac, "frac", np.float32, (h, w)),
             native.ptr(cur, "level", np.float32, (h, w, c)),
             native.ptr(out, "out", np.float32, out.shape, writable=True),

@@ -304,6 +304,7 @@ class ProjectorDrive:
         self._weights = _bitplane_weights(scene, sensor, phase)
         self._array: np.ndarray | None = None
         self._digests: dict[str, str] | None = None
+        self._monos: dict[int, np.ndarray] = {}  # the single-primary drives hashed, for their renders
 
     def array(self) -> np.ndarray:
         if self._array is None:
@@ -315,9 +316,14 @@ class ProjectorDrive:
         a = self.array()
         out = {"rgb": array_digest(a)}
         for p in range(3):
-            m = _mono(a, p)
+            m = self._mono(p)
             out[f"mono{p}"] = array_digest(m) if m.any() else ""  # "" = the primary lights nothing
         return out
+
+    def _mono(self, p: int) -> np.ndarray:
+        if p not in self._monos:
+            self._monos[p] = _mono(self.array(), p)
+        return self._monos[p]
 
     def inputs(self) -> dict:
         """Everything the drive is made from (pattern bytes, projector model, exposure phase,
@@ -358,7 +364,7 @@ class ProjectorDrive:
     def primary(self, p: int) -> DriveImage | None:
         """Primary ``p`` alone in all three channels, or None where the drive leaves it off."""
         digest = self.digests()[f"mono{p}"]
-        return DriveImage(digest, lambda: _mono(self.array(), p)) if digest else None
+        return DriveImage(digest, lambda: self._mono(p)) if digest else None
 
 
 def cached_arrays(

@@ -309,12 +309,15 @@ def test_recording_and_drive_keys_hold_the_lens_loops_and_not_the_decoders(key, 
     """A recording's and a projector drive's code digests change with the lens model's C source
     (simbench/_lens.c) and not with the decoder's (simbench/_ckernels.c), so an edit of a decoder
     loop re-records nothing; the loops they call (the lens maps, the defocus blur's levels) are
-    defined in the hashed file, and only there."""
-    from simbench import native, optics, simulate
+    defined in the hashed file, and only there (the projector model's too: drives depend on them)."""
+    import re
 
-    for name in [*optics._BROWN, *optics._BLUR]:
-        assert f"void {name}(" in native.LENS_SOURCE.read_text()
-        assert f"void {name}(" not in native.SOURCE.read_text()
+    from simbench import native, optics, projector, simulate
+
+    lens, kernels = native.LENS_SOURCE.read_text(), native.SOURCE.read_text()
+    for name in [*optics._BROWN, *optics._BLUR, *projector._LUT, *projector._DMD]:
+        defined = re.compile(rf"^\w+ {name}\(", re.M)
+        assert defined.search(lens) and not defined.search(kernels), name
 
     def digest():
         getattr(simulate, key).cache_clear()

@@ -192,7 +192,7 @@ def test_the_rig_calibration_reports_the_poses_it_makes(variant, tmp_path, monke
     cfg = RunConfig.preset(quick=True, calibration_poses=4)
     session = common.Session(cfg, out_dir=tmp_path, cache_dir=None, progress=lines.append)
     assert session.calibration_result(session.scene("plane_white")) == "result"
-    assert lines[:2] == ["[calibration] pose 1/4 observed (5 s)", "[calibration] pose 2/4 observed (30 s)"]
+    assert lines[:2] == ["[calibration] 1/4 poses observed (5 s)", "[calibration] 2/4 poses observed (30 s)"]
     assert lines[2:] == ["[calibration] 4 target poses through sensor model paper (30.4 s)"]
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import cv2
 import numpy as np
@@ -141,6 +142,7 @@ def test_depth_varying_blur_gives_the_bits_of_its_numpy_form(channels):
     sigma = np.linspace(0.0, 2.3, 90)[None, :] * np.ones((70, 1))
     sigma[:, 40:50] = 3.1  # skips the levels between 2.3 and 3.0
     sigma[5:9, 60:70] = np.nan
+    sigma[12, 3] = np.inf  # in focus, as NaN
     got = depth_varying_blur(img, sigma)
     assert got.shape == img.shape and got.dtype == np.float32
     assert np.array_equal(got, _layered_blur_numpy(img, sigma))
@@ -240,6 +242,73 @@ def test_diamond_dmd_pairs_columns_with_alternate_row_offsets():
         dmd_layout(drive[:, :9], layout="diamond")
 
 
+def _transfer_numpy(pattern, *, transfer, gamma=2.2, contrast_ratio=math.inf, bitplane_weights=None):
+    """transfer_curve as numpy computed it on the whole image before its table lookup went to C."""
+    v = pattern.astype(np.float32) / np.float32(255.0)
+    if transfer == "gamma":
+        v = v ** np.float32(gamma)
+    if bitplane_weights is not None:
+        w = np.asarray(bitplane_weights, np.float64)
+        codes = np.arange(256)
+        shown = codes if transfer == "linear" else np.round((codes / 255.0) ** gamma * 255.0)
+        bits = (shown.astype(np.int64)[:, None] >> np.arange(8)) & 1
+        lut = (bits * (2.0 ** np.arange(8)) @ w.T / 255.0).astype(np.float32)
+        v = np.stack([lut[pattern[..., c], c] for c in range(3)], axis=-1)
+    black = np.float32(0.0 if math.isinf(contrast_ratio) else 1.0 / contrast_ratio)
+    if black > 0:
+        v = black + (np.float32(1.0) - black) * v
+    return v.astype(np.float32)
+
+
+def _diamond_numpy(drive):
+    """dmd_layout's diamond as numpy computed it before it went to C."""
+    out = np.empty_like(drive)
+    even = drive[0::2]
+    pair = 0.5 * (even[:, 0::2] + even[:, 1::2])
+    out[0::2, 0::2] = pair
+    out[0::2, 1::2] = pair
+    odd = drive[1::2]
+    pair = 0.5 * (odd[:, 1:-1:2] + odd[:, 2::2])
+    out[1::2, 1:-1:2] = pair
+    out[1::2, 2::2] = pair
+    out[1::2, 0] = odd[:, 0]
+    out[1::2, -1] = odd[:, -1]
+    return out
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"transfer": "linear"},
+        {"transfer": "gamma", "gamma": 2.2, "contrast_ratio": 1500.0},
+        {"transfer": "gamma", "gamma": 1.8, "bitplane_weights": "video"},
+        {"transfer": "linear", "contrast_ratio": 1000.0, "bitplane_weights": "video"},
+    ],
+)
+def test_the_projector_model_gives_the_bits_of_its_numpy_form(settings):
+    """The transfer (a table of the 256 codes' values, looked up in C) and the diamond DMD layout
+    (in C) give the bits numpy gave on the whole image - for a real pattern size (the paper
+    projector's, every code in every channel, odd and even heights) - so projector drives, and
+    the render cache keys made from them, did not change when they moved to C."""
+    from simbench.projector import video_bitplane_weights
+
+    if settings.get("bitplane_weights") == "video":
+        settings = {
+            **settings,
+            "bitplane_weights": video_bitplane_weights(exposure_s=0.0213, frame_rate_hz=60.0, phase=0.41),
+        }
+    rng = np.random.default_rng(5)
+    pattern = rng.integers(0, 256, (1140, 1824, 3), dtype=np.uint8)
+    pattern[0, :256] = np.arange(256, dtype=np.uint8)[:, None]
+    drive = transfer_curve(pattern, **settings)
+    assert drive.dtype == np.float32 and np.array_equal(drive, _transfer_numpy(pattern, **settings))
+    assert np.array_equal(transfer_curve(pattern[:, ::-1], **settings), drive[:, ::-1])  # a non-contiguous pattern
+    for rows in (1140, 7):
+        assert np.array_equal(dmd_layout(drive[:rows], layout="diamond"), _diamond_numpy(drive[:rows]))
+    assert np.array_equal(dmd_layout(drive[..., 1], layout="diamond"), _diamond_numpy(drive[..., 1]))
+
+
+# the decoder with lens distortion -------------------------------------------------------
 # the decoder with lens distortion -------------------------------------------------------
 
 RIG = paper_rig()

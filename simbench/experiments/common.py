@@ -336,7 +336,7 @@ class Session:
                 nonlocal last
                 now = time.perf_counter()
                 if now - last >= POSE_PROGRESS_S:
-                    self.progress(f"[calibration] pose {k}/{n} observed ({now - t0:.0f} s)")
+                    self.progress(f"[calibration] {k}/{n} poses observed ({now - t0:.0f} s)")
                 last = now
 
             with self.timed(f"[calibration] {cfg.calibration_poses} target poses through sensor model {cfg.sensor}"):
