@@ -2,8 +2,8 @@
  * The lens model's remap grids and its layered defocus blur (simbench/optics.py), and the
  * projector's DMD layout and 8-bit transfer (simbench/projector.py), in C: compiled into the same
  * library as simbench/_ckernels.c (pyproject.toml), with the same flags and the same contract
- * (every loop gives the bits of the numpy expression it replaces; tests/test_optics.py and
- * tests/test_projector.py compare them).
+ * (every loop gives the bits of the numpy expression it replaces; tests/test_optics.py compares
+ * them).
  *
  * A file of its own because recordings and projector drives depend on it: simbench.simulate puts
  * this file's digest, and not the decoder's loops, in every recording's and drive's cache key.

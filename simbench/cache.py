@@ -308,18 +308,19 @@ LOCK_WAIT_S = 1800.0
 
 class _KeyLock:
     """An exclusive lock (``flock``) on one cache key among processes, held while the entry is
-    made; entering says whether it had to wait for another holder.  No root: no lock.  The lock
-    file is removed after the entry is stored; a process that opened it before only finds the
-    entry there.  After ``LOCK_WAIT_S`` a waiter goes on without the lock (a warning): the
-    entry may then be made twice, never wrongly (entries are written atomically)."""
+    made; entering waits for another holder to let it go.  No root: no lock.  The lock file is
+    removed after the entry is stored; whoever takes the lock next finds the entry there
+    (:meth:`RenderCache.get_or_make` reads it).  After ``LOCK_WAIT_S`` a waiter goes on
+    without the lock (a warning): the entry may then be made twice, never wrongly (entries are
+    written atomically)."""
 
     def __init__(self, root: Path | None, key: str) -> None:
         self.path = None if root is None else root / f"{key}.lock"
         self.fd: int | None = None
 
     def acquire_now(self) -> bool:
-        """Take the lock if no other holder has it (then entering does not wait); False if one
-        has.  No root: True."""
+        """Take the lock if no other holder has it (entering then goes straight on); False if
+        one has.  No root: True."""
         if self.path is None or self.fd is not None:
             return True
         import fcntl
@@ -334,29 +335,17 @@ class _KeyLock:
         self.fd = fd
         return True
 
-    def __enter__(self) -> bool:
-        if self.path is None or self.fd is not None:
-            return False
-        import fcntl
+    def __enter__(self) -> None:
         import warnings
 
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        waited, deadline = False, time.monotonic() + LOCK_WAIT_S
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                self.fd = fd
-                return waited
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    os.close(fd)
-                    warnings.warn(
-                        f"cache entry {self.path.stem}: another process held it {LOCK_WAIT_S:.0f} s; making it here too"
-                    )
-                    return True
-                waited = True
-                time.sleep(0.05)
+        deadline = time.monotonic() + LOCK_WAIT_S
+        while not self.acquire_now():
+            if time.monotonic() > deadline:
+                warnings.warn(
+                    f"cache entry {self.path.stem}: another process held it {LOCK_WAIT_S:.0f} s; making it here too"
+                )
+                return
+            time.sleep(0.05)
 
     def __exit__(self, *exc) -> None:
         if self.fd is not None:

@@ -316,11 +316,11 @@ class ProjectorDrive:
         a = self.array()
         out = {"rgb": array_digest(a)}
         for p in range(3):
-            m = self._mono(p)
+            m = self._primary_drive(p)
             out[f"mono{p}"] = array_digest(m) if m.any() else ""  # "" = the primary lights nothing
         return out
 
-    def _mono(self, p: int) -> np.ndarray:
+    def _primary_drive(self, p: int) -> np.ndarray:
         if p not in self._monos:
             self._monos[p] = _mono(self.array(), p)
         return self._monos[p]
@@ -364,7 +364,7 @@ class ProjectorDrive:
     def primary(self, p: int) -> DriveImage | None:
         """Primary ``p`` alone in all three channels, or None where the drive leaves it off."""
         digest = self.digests()[f"mono{p}"]
-        return DriveImage(digest, lambda: self._mono(p)) if digest else None
+        return DriveImage(digest, lambda: self._primary_drive(p)) if digest else None
 
 
 def cached_arrays(

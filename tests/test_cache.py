@@ -399,6 +399,20 @@ def test_a_caller_that_does_not_wait_skips_an_entry_another_holder_is_making(tmp
     assert RenderCache(None).get_or_make("k", {}, make, wait=False)["a"].tolist() == [0.0, 1.0, 2.0]
 
 
+def test_a_lock_held_too_long_is_passed_with_a_warning(tmp_path, monkeypatch):
+    """The backstop: a waiter whose entry another holder keeps locked past ``LOCK_WAIT_S`` makes
+    the entry itself, with a warning that names it."""
+    import simbench.cache as cache_module
+
+    monkeypatch.setattr(cache_module, "LOCK_WAIT_S", 0.2)
+    cache = RenderCache(tmp_path)
+    other = cache_module._KeyLock(tmp_path, cache.key("k", {}))
+    assert other.acquire_now()
+    with pytest.warns(UserWarning, match="another process held it"):
+        assert cache.get_or_make("k", {}, lambda: {"a": np.ones(2)})["a"].tolist() == [1.0, 1.0]
+    other.__exit__(None, None, None)
+
+
 def test_a_failed_make_frees_its_key_and_entries_nest(tmp_path):
     """A make that raises leaves neither an entry nor a lock, and the key can be made after; an
     entry made from another entry (nested keys) is made, each once."""
