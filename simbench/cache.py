@@ -17,6 +17,12 @@ a warm run reads recordings, not the renders under them, and those must not look
 :func:`cache_usage` tells what a cache holds and :func:`prune_cache` removes the entries used
 least recently (``simbench cache info|prune``).  A disk that fills up does not stop a run: an
 entry that cannot be stored for lack of space is logged once and the run goes on uncached.
+
+A cache folder carries a marker, :data:`MARKER_NAME` (a ``CACHEDIR.TAG`` of the Cache Directory
+Tagging Specification, so that backup tools skip it, naming simbench and the cache's format).
+A folder that holds other files and no marker is refused as a cache, and pruning touches only a
+marked folder, and in it only the files whose names and contents are a cache's own: a user's
+``my-data.npz`` or ``uv.lock`` in a folder given as ``--cache`` by mistake is never removed.
 """
 
 from __future__ import annotations
@@ -26,7 +32,9 @@ import io
 import json
 import logging
 import os
+import re
 import threading
+import zipfile
 import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -41,8 +49,12 @@ from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
 
 __all__ = [
+    "CACHE_FORMAT",
+    "MARKER_NAME",
     "RENDER_VERSION",
     "CacheEntry",
+    "NotACacheError",
+    "PruneResult",
     "RenderCache",
     "array_digest",
     "cache_entries",
@@ -55,6 +67,105 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 RENDER_VERSION = 1
+
+# The cache folder's marker: a CACHEDIR.TAG (Cache Directory Tagging Specification, Bryan Ford
+# 2004: its first line is this signature) whose second line names simbench and the format of the
+# folder's files (entry names, lock and temporary files); bumped when that layout changes.
+CACHE_FORMAT = 1
+MARKER_NAME = "CACHEDIR.TAG"
+_TAG_SIGNATURE = "Signature: 8a477f597d28d172789f06886806bc55"
+_MARKER_LINE = "# simbench render cache, format "
+_MARKER_TEXT = (
+    f"{_TAG_SIGNATURE}\n{_MARKER_LINE}{CACHE_FORMAT}\n"
+    "# This folder's entries are re-made when missing; `simbench cache info|prune` manages it.\n"
+    "# Backup tools that follow the Cache Directory Tagging Specification skip it.\n"
+)
+
+# A cache's own files: entries ``KIND-KEY.npz``, locks ``KIND-KEY.lock`` and the temporary files of
+# atomic writes ``.KIND-KEY.RANDOM.tmp`` (simbench.io's mkstemp), KEY 32 hex digits (RenderCache.key)
+_KIND = r"[a-z][a-z0-9_]*"
+_KEY = r"[0-9a-f]{32}"
+_ENTRY_RE = re.compile(rf"({_KIND})-{_KEY}\.npz")
+_LOCK_RE = re.compile(rf"{_KIND}-{_KEY}\.lock")
+_TEMP_RE = re.compile(rf"\.(?:{_KIND}-{_KEY}|CACHEDIR)\.[A-Za-z0-9_]+\.tmp")
+
+
+class NotACacheError(ValueError):
+    """A folder given as a render cache is not one (no simbench marker, and other files in it),
+    or is one of another format."""
+
+
+def _marker_format(root: Path) -> int | None:
+    """The format named by ``root``'s simbench marker; None when it has none (or another tool's
+    CACHEDIR.TAG)."""
+    try:
+        lines = (root / MARKER_NAME).read_text(encoding="utf-8", errors="replace").splitlines()
+    except (FileNotFoundError, NotADirectoryError, IsADirectoryError):
+        return None
+    if len(lines) < 2 or lines[0] != _TAG_SIGNATURE or not lines[1].startswith(_MARKER_LINE):
+        return None
+    try:
+        return int(lines[1][len(_MARKER_LINE) :])
+    except ValueError:
+        return None
+
+
+def _is_own_name(name: str) -> bool:
+    return bool(_ENTRY_RE.fullmatch(name) or _LOCK_RE.fullmatch(name) or _TEMP_RE.fullmatch(name))
+
+
+def check_cache_folder(root: str | Path) -> Path:
+    """``root`` as a cache folder of this format, or :class:`NotACacheError`.
+
+    A marked folder of another format is refused; an unmarked one is refused when it holds
+    anything but a cache's own files (an unmarked folder of those alone is a cache made before
+    the marker existed).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``root`` is not a folder.
+    NotACacheError
+        See above.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such cache folder")
+    fmt = _marker_format(root)
+    if fmt == CACHE_FORMAT:
+        return root
+    if fmt is not None:
+        raise NotACacheError(
+            f"{root}: a simbench render cache of format {fmt}, not {CACHE_FORMAT} (another simbench version's); "
+            "use a new folder"
+        )
+    others = sorted(e.name for e in os.scandir(root) if not _is_own_name(e.name))
+    if others:
+        shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        raise NotACacheError(
+            f"{root}: not a simbench render cache (no {MARKER_NAME} of simbench's) and it holds other files "
+            f"({shown}); give an empty or new folder as the cache"
+        )
+    return root
+
+
+def claim_cache_folder(root: str | Path) -> Path:
+    """Make ``root`` a cache folder (created if missing, the marker written), or
+    :class:`NotACacheError` when it holds other things (:func:`check_cache_folder`).  A
+    folder that cannot be written keeps no marker (reading it still works)."""
+    root = Path(root)
+    if not root.exists():
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return root  # reported by the first store, with its file
+    check_cache_folder(root)
+    if _marker_format(root) is None:
+        try:
+            atomic_write_bytes(root / MARKER_NAME, _MARKER_TEXT.encode())
+        except OSError as exc:
+            log.debug("render cache %s: no marker written (%s)", root, exc)
+    return root
 
 
 @lru_cache(maxsize=64)
@@ -124,10 +235,17 @@ class RenderCache:
     with the entries made inside it (a recording's render) counted to their own kind.  That is
     where a cold run's time goes (:meth:`made_summary`).  ``unstored`` counts the entries made
     but not stored because the cache's disk was full (logged once per cache object).
+
+    A folder holding other files than a cache's raises :class:`NotACacheError` here; the
+    folder and its marker are written with the first entry (:func:`claim_cache_folder`), so a
+    command that fails before storing anything leaves no folder behind.
     """
 
     def __init__(self, root: str | Path | None) -> None:
         self.root = None if root is None else Path(root)
+        if self.root is not None and self.root.exists():
+            check_cache_folder(self.root)  # a wrong folder is refused before any work
+        self._claimed = False
         self.hits = 0
         self.misses = 0
         self.damaged = 0
@@ -205,6 +323,7 @@ class RenderCache:
         with several entries to make, to make the others first (and come back for this one)."""
         out = self.lookup(kind, parts)
         if out is None:
+            self._claim()
             lock = _KeyLock(self.root, self.key(kind, parts))
             if not wait and not lock.acquire_now():
                 self.misses -= 1  # not looked up yet, as far as the counts go: the caller comes back
@@ -219,6 +338,12 @@ class RenderCache:
                     out = make()
                 self.store(kind, parts, out, sources=sources)
         return out
+
+    def _claim(self) -> None:
+        """Create the folder with its marker before the first lock or entry is written."""
+        if self.root is not None and not self._claimed:
+            claim_cache_folder(self.root)
+            self._claimed = True
 
     def _read(self, kind: str, parts: dict) -> dict[str, np.ndarray] | None:
         path = self.root / f"{self.key(kind, parts)}.npz"
@@ -254,6 +379,7 @@ class RenderCache:
         error writing the cache (a read-only folder, say) raises."""
         if self.root is None:
             return
+        self._claim()
         sources = sorted(sources)
         if sources:
             arrays = {**arrays, _SOURCES_KEY: np.frombuffer("\n".join(sources).encode("ascii"), np.uint8)}
@@ -398,27 +524,42 @@ class CacheEntry:
 STALE_TEMP_S = 3600.0
 
 
+def _is_entry_file(path: str) -> bool:
+    """Whether the file is an entry this cache wrote: a zip whose members include the arrays'
+    checksum (read from the zip's directory alone, not the arrays)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return f"{_DIGEST_KEY}.npy" in z.namelist()
+    except (OSError, zipfile.BadZipFile, ValueError):
+        return False
+
+
 def cache_entries(root: str | Path) -> list[CacheEntry]:
     """Every entry in the cache folder ``root``, least recently used first (ties by name).
+
+    Only the cache's own entries: a file named as one (``KIND-KEY.npz``) that is a zip holding
+    the checksum an entry carries.  A damaged entry (its zip directory unreadable) is not listed;
+    a look-up removes it.
 
     Raises
     ------
     FileNotFoundError
         ``root`` is not a folder.
+    NotACacheError
+        ``root`` is not a simbench render cache (:func:`check_cache_folder`).
     """
-    root = Path(root)
-    if not root.is_dir():
-        raise FileNotFoundError(f"{root}: no such cache folder")
+    root = check_cache_folder(root)
     out = []
     with os.scandir(root) as it:
         for e in it:
-            if e.name.startswith(".") or not e.name.endswith(".npz") or "-" not in e.name:
+            m = _ENTRY_RE.fullmatch(e.name)
+            if m is None or not e.is_file(follow_symlinks=False) or not _is_entry_file(e.path):
                 continue
             try:
                 st = e.stat(follow_symlinks=False)
             except FileNotFoundError:  # removed meanwhile by another process
                 continue
-            out.append(CacheEntry(Path(e.path), e.name.rsplit("-", 1)[0], st.st_size, st.st_mtime))
+            out.append(CacheEntry(Path(e.path), m.group(1), st.st_size, st.st_mtime))
     out.sort(key=lambda c: (c.last_used_s, c.path.name))
     return out
 
@@ -432,6 +573,21 @@ def cache_usage(root: str | Path) -> dict[str, tuple[int, int]]:
     return dict(sorted(usage.items(), key=lambda kv: (-kv[1][1], kv[0])))
 
 
+@dataclass(frozen=True)
+class PruneResult:
+    """What :func:`prune_cache` removed (or, in a dry run, would remove): ``entries``, least
+    recently used first, and ``leftovers``, the temporary files of killed writers and the lock
+    files no process holds."""
+
+    entries: list[CacheEntry]
+    leftovers: list[Path]
+
+    @property
+    def paths(self) -> list[Path]:
+        """Every file removed (or to be), entries first."""
+        return [c.path for c in self.entries] + list(self.leftovers)
+
+
 def prune_cache(
     root: str | Path,
     *,
@@ -439,14 +595,16 @@ def prune_cache(
     unused_for_s: float | None = None,
     dry_run: bool = False,
     now_s: float | None = None,
-) -> list[CacheEntry]:
-    """Remove the cache's least recently used entries; returns those removed (or, with
-    ``dry_run``, those that would be), least recently used first.
+) -> PruneResult:
+    """Remove the cache's least recently used entries; returns what was removed (or, with
+    ``dry_run``, all that would be).
 
     Removed are every entry not used for ``unused_for_s`` seconds, then the least recently
     used of the rest until they hold at most ``max_bytes``.  Temporary files of writers killed
     mid-write (older than :data:`STALE_TEMP_S`) and lock files no process holds go too.  Safe
-    beside a running simbench: an entry removed under it is a miss, made again.
+    beside a running simbench: an entry removed under it is a miss, made again.  Only a marked
+    cache folder is pruned, and only its own files (:func:`cache_entries`): nothing else in it
+    is touched.
 
     Parameters
     ----------
@@ -467,6 +625,9 @@ def prune_cache(
         Neither bound is given, or one is negative.
     FileNotFoundError
         ``root`` is not a folder.
+    NotACacheError
+        ``root`` is not a simbench render cache, or is unmarked (made before caches were
+        marked: a run with it marks it).
     """
     if max_bytes is None and unused_for_s is None:
         raise ValueError("prune_cache needs max_bytes or unused_for_s (or both)")
@@ -474,6 +635,12 @@ def prune_cache(
         raise ValueError(f"max_bytes must be >= 0, got {max_bytes}")
     if unused_for_s is not None and not unused_for_s >= 0:
         raise ValueError(f"unused_for_s must be >= 0, got {unused_for_s}")
+    root = check_cache_folder(root)
+    if _marker_format(root) is None:  # pruning asks for proof, not a guess from the names
+        raise NotACacheError(
+            f"{root}: no {MARKER_NAME} of simbench's, so it is not pruned (a render with --cache {root} marks a "
+            "folder that holds only cache entries)"
+        )
     now_s = time.time() if now_s is None else now_s
     entries = cache_entries(root)
     total = sum(c.size_bytes for c in entries)
@@ -487,30 +654,41 @@ def prune_cache(
         total -= c.size_bytes
         if not dry_run:
             c.path.unlink(missing_ok=True)
-    if not dry_run:
-        _remove_leftovers(Path(root), now_s=now_s)
-    return removed
+    return PruneResult(removed, _leftovers(root, now_s=now_s, remove=not dry_run))
 
 
-def _remove_leftovers(root: Path, *, now_s: float) -> None:
-    """Temporary files of killed writers, and lock files no process holds."""
+def _leftovers(root: Path, *, now_s: float, remove: bool) -> list[Path]:
+    """Temporary files of killed writers, and lock files no process holds (removed if
+    ``remove``); only files named as the cache's own, and no lock with content (ours are
+    empty)."""
     import fcntl
 
-    for p in root.glob(".*.tmp"):
+    out = []
+    for e in os.scandir(root):
+        if not e.is_file(follow_symlinks=False):
+            continue
+        p = Path(e.path)
         try:
-            if now_s - p.stat().st_mtime > STALE_TEMP_S:
-                p.unlink(missing_ok=True)
-        except FileNotFoundError:
-            pass
-    for p in root.glob("*.lock"):
-        try:
-            fd = os.open(p, os.O_RDWR)
+            st = e.stat(follow_symlinks=False)
         except FileNotFoundError:
             continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:  # a process is making this entry
+        if _TEMP_RE.fullmatch(e.name):
+            if now_s - st.st_mtime > STALE_TEMP_S:
+                out.append(p)
+                if remove:
+                    p.unlink(missing_ok=True)
+        elif _LOCK_RE.fullmatch(e.name) and st.st_size == 0:
+            try:
+                fd = os.open(p, os.O_RDWR)
+            except FileNotFoundError:
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:  # a process is making this entry
+                os.close(fd)
+                continue
+            out.append(p)
+            if remove:
+                p.unlink(missing_ok=True)  # as the holder does when it has stored its entry
             os.close(fd)
-            continue
-        p.unlink(missing_ok=True)  # as the holder does when it has stored its entry
-        os.close(fd)
+    return sorted(out)

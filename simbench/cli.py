@@ -569,17 +569,22 @@ def _cmd_cache_prune(args) -> int:
     if args.max_size is None and args.unused_days is None:
         raise ValueError("cache prune: give --max-size, --unused-days or both (what to keep)")
     before = cache_entries(args.cache)
-    removed = prune_cache(
+    result = prune_cache(
         args.cache,
         max_bytes=args.max_size,
         unused_for_s=None if args.unused_days is None else args.unused_days * 86400.0,
         dry_run=args.dry_run,
     )
+    removed = result.entries
     gone = sum(c.size_bytes for c in removed)
     left = sum(c.size_bytes for c in before) - gone
     verb = "would remove" if args.dry_run else "removed"
+    if args.dry_run:
+        for path in result.paths:
+            print(f"would remove {path}")
+    extra = f" and {len(result.leftovers)} leftovers of killed writers" if result.leftovers else ""
     print(
-        f"cache {args.cache}: {verb} {len(removed)} entries ({_human_bytes(gone)}), the least recently used; "
+        f"cache {args.cache}: {verb} {len(removed)} entries ({_human_bytes(gone)}), the least recently used{extra}; "
         f"{len(before) - len(removed)} kept ({_human_bytes(left)})"
     )
     return 0
@@ -682,11 +687,13 @@ def _decode_recording(args) -> int:
 
 
 def _cmd_ablate(args) -> int:
-    from simbench.experiments.ablate import BUILTIN_STUDIES, load_sweep, run_sweep
+    from simbench.experiments.ablate import BUILTIN_STUDIES, check_sweep, load_sweep, run_sweep
     from simbench.variant import select_variant
 
     names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
+    for sweep in sweeps:
+        check_sweep(sweep)  # and every run's values
     select_variant(args.variant)
     command = (
         "simbench ablate " + " ".join(sys.argv[2:])

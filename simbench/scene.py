@@ -50,9 +50,11 @@ All coordinates are in the camera frame (x right, y down, z forward, metres).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +64,8 @@ from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rotation_xyz_deg
 from simbench.seeds import RngLike
 
+log = logging.getLogger(__name__)
+
 __all__ = [
     "Material",
     "SceneObject",
@@ -69,6 +73,7 @@ __all__ = [
     "OBJECT_KINDS",
     "ObjectKind",
     "OBJECT_KIND_TABLE",
+    "check_mesh_file",
     "load_scene",
     "scene_from_dict",
     "reference_scene",
@@ -562,16 +567,92 @@ def _parse_sphere(d: dict, where: str, base_dir: Path) -> dict:
     }
 
 
+# Assumption: the largest mesh a scene may hold.  Mitsuba keeps 32-bit vertex indices and
+# (llvm/cuda variants) the whole mesh in memory with its BVH, ~100 bytes a face: 2**25 faces
+# (33.5 M, ~3.4 GB) fits this project's 24 GiB machines with room for the films; a scanned
+# statue at 0.1 mm holds ~10 M.  The file bound keeps an accidental multi-gigabyte file from
+# being read whole before that check (binary PLY: 12 bytes a vertex, 13 a face).
+MESH_MAX_FACES = 1 << 25
+MESH_MAX_VERTICES = 1 << 25
+MESH_MAX_FILE_BYTES = 2 << 30
+
+
+@lru_cache(maxsize=32)
+def check_mesh_file(path: str, mtime_ns: int = 0, size: int = 0) -> tuple[int, int]:
+    """Check a PLY/OBJ mesh before it reaches Mitsuba, whose loaders trust the file: a face
+    that indexes a missing vertex crashes the process or renders garbage.  Returns
+    ``(vertices, faces)``; ``mtime_ns`` and ``size`` only key the memo (a changed file is read
+    again).
+
+    Checked: the file's size (:data:`MESH_MAX_FILE_BYTES`), that it parses (trimesh, without
+    merging or repairing anything), at least one face, vertex and face counts
+    (:data:`MESH_MAX_VERTICES`, :data:`MESH_MAX_FACES`), every face index within the vertex
+    list, every vertex finite, and at least one face of non-zero area.  Single zero-area
+    faces are legal (scanned meshes have them; they are never hit) and only logged.
+
+    Raises
+    ------
+    ValueError
+        The mesh fails a check (one line naming the file and what is wrong).
+    """
+    name = Path(path).name
+    if size > MESH_MAX_FILE_BYTES:
+        raise ValueError(
+            f"mesh {name}: {size / 2**30:.1f} GiB, larger than the {MESH_MAX_FILE_BYTES >> 30} GiB allowed"
+        )
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, process=False, validate=False, force="mesh")
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = np.asarray(mesh.faces)
+    except Exception as exc:  # noqa: BLE001 - any parser failure is a malformed file
+        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"mesh {name}: not a readable {Path(path).suffix[1:].upper()} mesh ({first})") from None
+    if faces.ndim != 2 or faces.shape[0] == 0 or faces.shape[1] != 3:
+        raise ValueError(f"mesh {name}: no triangle faces (faces of shape {faces.shape})")
+    if len(vertices) > MESH_MAX_VERTICES or len(faces) > MESH_MAX_FACES:
+        raise ValueError(
+            f"mesh {name}: {len(vertices)} vertices and {len(faces)} faces; at most {MESH_MAX_VERTICES} and "
+            f"{MESH_MAX_FACES} are allowed"
+        )
+    bad = (faces < 0) | (faces >= len(vertices))
+    if bad.any():
+        f = int(np.argmax(bad.any(axis=1)))
+        raise ValueError(
+            f"mesh {name}: face {f} indexes vertex {int(faces[f][bad[f]][0])}, but the mesh has {len(vertices)} "
+            f"vertices (0..{len(vertices) - 1}); {int(bad.any(axis=1).sum())} faces index missing vertices"
+        )
+    if not np.isfinite(vertices).all():
+        v = int(np.argmax(~np.isfinite(vertices).all(axis=1)))
+        raise ValueError(f"mesh {name}: vertex {v} is not finite ({vertices[v].tolist()})")
+    tri = vertices[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if not (area2 > 0).any():
+        raise ValueError(f"mesh {name}: every one of its {len(faces)} faces has zero area (nothing to render)")
+    if not (area2 > 0).all():
+        log.info("mesh %s: %d of %d faces have zero area", name, int((area2 == 0).sum()), len(faces))
+    return len(vertices), len(faces)
+
+
 def _parse_mesh(d: dict, where: str, base_dir: Path) -> dict:
     if "file" not in d:
         raise ValueError(f"{where}: missing file")
     path = Path(str(d["file"]))
     if not path.is_absolute():
         path = base_dir / path
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"{where}: mesh file not found: {path}")
+    if not path.is_file():
+        what = "a folder" if path.is_dir() else "not a regular file (a pipe or device?)"
+        raise ValueError(f"{where}: mesh file {path} is {what}")
     if path.suffix.lower() not in (".ply", ".obj"):
         raise ValueError(f"{where}: mesh must be .ply or .obj, got {path.name}")
+    st = path.stat()
+    try:
+        check_mesh_file(str(path.resolve()), st.st_mtime_ns, st.st_size)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
     return {
         "file": str(path.resolve()),
         "scale": validate.number(d.get("scale", 1.0), f"{where}: scale", lo=0.0, lo_open=True),

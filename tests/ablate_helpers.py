@@ -49,3 +49,10 @@ def always_dies(params: dict, *, seed: int, cache_dir) -> dict:
 def slow_run(params: dict, *, seed: int, cache_dir) -> dict:
     time.sleep(600)
     return _row(seed)
+
+
+def fails_on_marker(params: dict, *, seed: int, cache_dir) -> dict:
+    """Fails as run_one records a failure when ``scene.name`` is ``fail``."""
+    if params["scene.name"] == "fail":
+        return {"error": "RuntimeError: failed on purpose", "traceback": "", "timing": {}}
+    return _row(seed)

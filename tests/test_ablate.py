@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from simbench.experiments.ablate import BUILTIN_STUDIES, expand, load_sweep, run_sweep, sweep_from_dict
+from simbench.experiments.ablate import BUILTIN_STUDIES, check_sweep, expand, load_sweep, run_sweep, sweep_from_dict
 
 FAST_BASE = {"run.camera_scale": 0.5, "run.spp": 4, "sensor.preset": "minimal"}
 
@@ -72,20 +72,35 @@ def _table(path):
 
 
 @pytest.mark.slow
-def test_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path, variant):
+def test_a_value_that_cannot_run_fails_the_sweep_before_any_run(tmp_path):
+    """Issue 33: an invalid value was a failed row after the other runs (exit 0, files
+    written); now the whole sweep is checked first and nothing is run or written."""
     sweep = _sweep(axis=[{"name": "decoder.sigma_periods", "values": [0.25, -1.0]}])
-    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
-    assert rows[0]["error"] == "" and rows[0]["completeness"] > 0.9
-    assert "sigma" in rows[1]["error"]
-    md = (tmp_path / "t.md").read_text()
-    assert "Errors:" in md
+    with pytest.raises(ValueError, match=r"sweep 't', run 1 \{'decoder.sigma_periods': -1.0\}: sigma_periods"):
+        run_sweep(sweep, out_dir=tmp_path / "out", cache_dir=tmp_path / "cache", progress=lambda s: None)
+    assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
+    unknown = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "hilbert"]}])
+    with pytest.raises(ValueError, match="phase_method must be one of.*'wfr'.*'hilbert'|'hilbert'.*'wfr'"):
+        check_sweep(unknown)
+
+
+def test_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path):
+    """A run that fails when it runs (not a value the check could see) is a row with its
+    error; the others run, and the report lists the errors."""
+    from tests.ablate_helpers import fails_on_marker
+
+    sweep = _sweep(axis=[{"name": "scene.name", "values": ["ok", "fail"]}])
+    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=None, progress=lambda s: None, run_fn=fails_on_marker)
+    assert rows[0]["error"] == "" and "RuntimeError: failed on purpose" in rows[1]["error"]
+    assert "Errors:" in (tmp_path / "t.md").read_text()
 
 
 @pytest.mark.slow
 def test_phase_method_axis(tmp_path, variant):
     """Every registered phase method runs through a sweep; the decoder-only axis renders the scene
-    once (one capture and one reference radiance in the cache); an unknown method is a recorded error."""
-    sweep = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "ftp", "wfr", "hilbert"]}])
+    once (one capture and one reference radiance in the cache) (an unknown method is refused before
+    any run: test_a_value_that_cannot_run_fails_the_sweep_before_any_run)."""
+    sweep = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "ftp", "wfr"]}])
     rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
     assert len(list((tmp_path / "cache").glob("radiance-*.npz"))) == 2
     for r in rows[:3]:
@@ -99,11 +114,6 @@ def test_phase_method_axis(tmp_path, variant):
     assert len({r["placement_seed"] for r in rows[:3]}) == 1 and rows[0]["placement_seed"] != ""
     table = _table(tmp_path / "t.csv")
     assert {"ref_plane_mae_mm", "ref_completeness", "placement_seed"} <= set(table[0])
-    assert (
-        "phase_method must be one of" in rows[3]["error"]
-        and "'hilbert'" in rows[3]["error"]
-        and "'wfr'" in rows[3]["error"]
-    )
 
 
 @pytest.mark.slow

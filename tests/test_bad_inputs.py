@@ -812,6 +812,11 @@ for cid, argv, msg in [
     ("demo-seed-word", ["demo", "--seed", "x"], "--seed"),
     ("demo-unknown-scene", ["demo", "--out", "demo", "--scenes", "white_plane", "no_such_scene"], "no_such_scene"),
     ("demo-sensor-unknown", ["demo", "--out", "demo", "--sensor", "flea4"], "unknown sensor"),
+    # issue 33: a scene name read ../../x.toml and wrote x.png outside --out
+    ("demo-scene-traversal", ["demo", "--out", "demo", "--scenes", "../../../elsewhere/evil"], "not a name of scenes/"),
+    ("demo-scene-absolute", ["demo", "--out", "demo", "--scenes", "/etc/passwd"], "not a name of scenes/"),
+    ("demo-scene-dotdot", ["demo", "--out", "demo", "--scenes", ".."], "not a name of scenes/"),
+    ("demo-scene-empty", ["demo", "--out", "demo", "--scenes", ""], "not a name of scenes/"),
     ("no-command", [], "required"),
     ("unknown-command", ["calibrate2"], "calibrate2"),
 ]:
@@ -849,6 +854,20 @@ for cid, body, msg in [
         "twice",
     ),
     ("not-toml", "name = [", "not valid TOML"),
+    # issue 33: values that validate nowhere but in the run gave exit 0 and "1 runs (1 failed)"
+    ("voting-maybe", 'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true, "maybe"]\n', "voting"),
+    ("spp-zero", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4, 0]\n', "run.spp"),
+    ("spp-nan", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4, nan]\n', "run.spp"),
+    ("spp-float", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4.5]\n', "run.spp"),
+    ("sensor-dev-zero", 'name = "s"\n[[axis]]\nname = "sensor.preset"\nvalues = ["/dev/zero"]\n', "unknown sensor"),
+    ("sensor-toml-missing", 'name = "s"\n[[axis]]\nname = "sensor.preset"\nvalues = ["x.toml"]\n', "x.toml"),
+    ("camera-scale-zero", 'name = "s"\n[[axis]]\nname = "run.camera_scale"\nvalues = [0.0]\n', "run.camera_scale"),
+    ("rig-unknown", 'name = "s"\n[[axis]]\nname = "run.rig"\nvalues = ["guessed"]\n', "rig"),
+    (
+        "scene-traversal",
+        'name = "s"\n[[axis]]\nname = "scene.name"\nvalues = ["plane_white", "../../tmp/evil"]\n',
+        "not a name of scenes/",
+    ),
 ]:
     case(
         f"ablate-sweep-{cid}",

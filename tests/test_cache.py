@@ -366,7 +366,7 @@ def test_processes_sharing_the_cache_make_an_entry_once(tmp_path):
         results = sorted(f.result() for f in futures)
     assert len(log.read_text().split()) == 1
     assert results == [(0, 1, [0.0, 1.0, 2.0, 3.0, 4.0]), (1, 0, [0.0, 1.0, 2.0, 3.0, 4.0])]
-    assert [p.name for p in (tmp_path / "cache").iterdir() if p.suffix != ".npz"] == []
+    assert [p.name for p in (tmp_path / "cache").iterdir() if p.suffix != ".npz"] == ["CACHEDIR.TAG"]
 
 
 def test_a_caller_that_does_not_wait_skips_an_entry_another_holder_is_making(tmp_path):
@@ -423,14 +423,14 @@ def test_a_failed_make_frees_its_key_and_entries_nest(tmp_path):
     cache = RenderCache(tmp_path)
     with pytest.raises(RuntimeError, match="make failed"):
         cache.get_or_make("k", {}, fails)
-    assert list(tmp_path.iterdir()) == []
+    assert [p.name for p in tmp_path.iterdir()] == ["CACHEDIR.TAG"]
     assert cache.get_or_make("k", {}, lambda: {"a": np.ones(2)})["a"].tolist() == [1.0, 1.0]
 
     def outer():
         return {"b": cache.get_or_make("inner", {}, lambda: {"c": np.full(2, 3.0)})["c"] * 2}
 
     assert cache.get_or_make("outer", {}, outer)["b"].tolist() == [6.0, 6.0]
-    assert sorted(p.suffix for p in tmp_path.iterdir()) == [".npz"] * 3 and cache.misses == 4
+    assert sorted(p.suffix for p in tmp_path.glob("*-*")) == [".npz"] * 3 and cache.misses == 4
 
 
 def test_made_entries_are_counted_per_kind_with_their_own_time(tmp_path, monkeypatch):
@@ -546,7 +546,7 @@ def test_a_hit_marks_its_entry_used_and_pruning_removes_the_least_recently_used(
     truth_size = _entry_path(cache, "truth", {"i": 9}).stat().st_size
     keep = 2 * size + truth_size
     would = prune_cache(tmp_path, max_bytes=keep, dry_run=True)
-    assert [c.path for c in would] == [_entry_path(cache, "radiance", {"i": 1})]
+    assert would.paths == [_entry_path(cache, "radiance", {"i": 1})]
     assert len(cache_entries(tmp_path)) == 4
     removed = prune_cache(tmp_path, max_bytes=keep)
     assert removed == would
@@ -566,9 +566,9 @@ def test_pruning_by_age_and_its_bounds(tmp_path):
         cache.store("recording", {"i": i}, {"a": np.zeros(10)})
         _aged(_entry_path(cache, "recording", {"i": i}), age_days * 86400, now)
     removed = prune_cache(tmp_path, unused_for_s=5 * 86400, now_s=now)
-    assert {c.path for c in removed} == {_entry_path(cache, "recording", {"i": i}) for i in (0, 1)}
+    assert set(removed.paths) == {_entry_path(cache, "recording", {"i": i}) for i in (0, 1)}
     assert [c.path for c in cache_entries(tmp_path)] == [_entry_path(cache, "recording", {"i": 2})]
-    assert prune_cache(tmp_path, max_bytes=0, dry_run=True)  # 0 empties it
+    assert prune_cache(tmp_path, max_bytes=0, dry_run=True).entries  # 0 empties it
     with pytest.raises(ValueError, match="max_bytes or unused_for_s"):
         prune_cache(tmp_path)
     with pytest.raises(ValueError, match=">= 0"):
@@ -584,21 +584,24 @@ def test_pruning_removes_killed_writers_leftovers_and_only_those(tmp_path):
     import os
     import time
 
-    from simbench.cache import STALE_TEMP_S, prune_cache
+    from simbench.cache import STALE_TEMP_S, claim_cache_folder, prune_cache
 
     now = time.time()
-    old_tmp, new_tmp = tmp_path / ".radiance-aa.x1.tmp", tmp_path / ".radiance-bb.x2.tmp"
-    free_lock, held_lock = tmp_path / "radiance-cc.lock", tmp_path / "radiance-dd.lock"
+    claim_cache_folder(tmp_path)  # marks it
+    old_tmp, new_tmp = tmp_path / f".radiance-{'a' * 32}.x1_k9.tmp", tmp_path / f".radiance-{'b' * 32}.x2.tmp"
+    free_lock, held_lock = tmp_path / f"radiance-{'c' * 32}.lock", tmp_path / f"radiance-{'d' * 32}.lock"
     for p in (old_tmp, new_tmp, free_lock, held_lock):
         p.write_bytes(b"")
     _aged(old_tmp, STALE_TEMP_S + 60, now)
     fd = os.open(held_lock, os.O_RDWR)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        prune_cache(tmp_path, max_bytes=1 << 30, now_s=now)
+        would = prune_cache(tmp_path, max_bytes=1 << 30, now_s=now, dry_run=True)
+        assert would.paths == sorted([old_tmp, free_lock]) and old_tmp.exists() and free_lock.exists()
+        assert prune_cache(tmp_path, max_bytes=1 << 30, now_s=now) == would
     finally:
         os.close(fd)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([new_tmp.name, held_lock.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["CACHEDIR.TAG", new_tmp.name, held_lock.name])
 
 
 def test_a_full_disk_leaves_entries_unstored_and_the_run_going(tmp_path, monkeypatch, caplog):
@@ -658,5 +661,102 @@ def test_a_hit_marks_what_its_entry_was_made_from_used_too(tmp_path):
     again = cache.get_or_make("recording", {"i": 0}, lambda: pytest.fail("a hit"))
     assert set(again) == {"image"} and np.array_equal(again["image"], out["image"])
     removed = prune_cache(tmp_path, unused_for_s=86400)
-    assert [c.kind for c in removed] == ["other"]
+    assert [c.kind for c in removed.entries] == ["other"]
     assert sorted(c.kind for c in cache_entries(tmp_path)) == ["drive", "radiance", "recording", "truth"]
+
+
+# A user's files in a folder given as the cache by mistake: every one a name the old pruning took
+# for a cache's own (``*-*.npz``, ``*.lock``, ``.*.tmp``), or close to one.
+_USERS_FILES = {
+    "my-data.npz": None,  # a real .npz of the user's (written below)
+    "uv.lock": b"version = 1\n",
+    "Cargo.lock": b"# cargo\n",
+    ".notes.tmp": b"draft\n",
+    f"radiance-{'e' * 32}.npz": b"not a zip",  # named as an entry, not one
+    f"radiance-{'f' * 32}.lock": b"pid 42\n",  # named as a lock, but ours are empty
+    "README.md": b"# my project\n",
+}
+
+
+def _users_folder(path):
+    import os
+
+    path.mkdir(parents=True, exist_ok=True)
+    for name, data in _USERS_FILES.items():
+        if data is None:
+            np.savez(path / name, a=np.arange(3))
+        else:
+            (path / name).write_bytes(data)
+    old = 0.0  # 1970: older than any bound, and than STALE_TEMP_S
+    for p in path.iterdir():
+        os.utime(p, (old, old))
+    return {p.name: p.read_bytes() for p in path.iterdir()}
+
+
+def test_a_folder_of_a_users_files_is_neither_a_cache_nor_pruned(tmp_path):
+    """Issue 33: ``cache prune --cache SOME_PROJECT_DIR --max-size 0`` deleted ``my-data.npz``,
+    ``uv.lock`` and old ``.*.tmp``.  Such a folder is refused for pruning and listing and as a
+    cache to render into, and nothing in it changes."""
+    from simbench.cache import NotACacheError, cache_entries, prune_cache
+
+    before = _users_folder(tmp_path / "project")
+    for call in (
+        lambda: prune_cache(tmp_path / "project", max_bytes=0),
+        lambda: prune_cache(tmp_path / "project", max_bytes=0, dry_run=True),
+        lambda: cache_entries(tmp_path / "project"),
+        lambda: RenderCache(tmp_path / "project"),
+    ):
+        with pytest.raises(NotACacheError, match="not a simbench render cache.*Cargo.lock"):
+            call()
+    assert {p.name: p.read_bytes() for p in (tmp_path / "project").iterdir()} == before
+
+
+def test_a_marked_cache_prunes_only_its_own_files(tmp_path):
+    """A user's files copied into a real cache stay through a prune to size 0; its entries go."""
+    import os
+
+    from simbench.cache import MARKER_NAME, cache_entries, prune_cache
+
+    cache = RenderCache(tmp_path)
+    cache.store("radiance", {"i": 0}, {"a": np.zeros(10)})
+    entry = _entry_path(cache, "radiance", {"i": 0})
+    users = _users_folder(tmp_path)
+    del users[entry.name], users[MARKER_NAME]
+    assert [c.path for c in cache_entries(tmp_path)] == [entry]
+    result = prune_cache(tmp_path, max_bytes=0, unused_for_s=0)
+    assert result.paths == [entry] and not entry.exists()
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.name != MARKER_NAME} == users
+    assert os.path.isfile(tmp_path / MARKER_NAME)
+
+
+def test_the_cache_marker(tmp_path):
+    """A new folder is made and marked with its first entry (a CACHEDIR.TAG: backup tools skip
+    it); an unmarked folder of cache files alone (made before markers) is read, and marked
+    when written to; another format, or another tool's tag, is refused; pruning an unmarked
+    folder is refused even when its names look like ours."""
+    from simbench.cache import CACHE_FORMAT, MARKER_NAME, NotACacheError, prune_cache
+
+    cache = RenderCache(tmp_path / "new" / "cache")
+    assert not (tmp_path / "new").exists()  # nothing written before the first entry
+    cache.store("truth", {"i": 1}, {"d": np.ones(2)})
+    tag = (tmp_path / "new" / "cache" / MARKER_NAME).read_text()
+    assert tag.startswith("Signature: 8a477f597d28d172789f06886806bc55\n") and f"format {CACHE_FORMAT}" in tag
+
+    legacy = tmp_path / "legacy"
+    legacy.mkdir()
+    entry = _entry_path(cache, "truth", {"i": 1})
+    (legacy / entry.name).write_bytes(entry.read_bytes())
+    with pytest.raises(NotACacheError, match="not pruned"):
+        prune_cache(legacy, max_bytes=0)
+    assert (legacy / entry.name).exists()
+    old = RenderCache(legacy)
+    assert old.lookup("truth", {"i": 1})["d"][0] == 1 and not (legacy / MARKER_NAME).exists()
+    old.store("truth", {"i": 2}, {"d": np.zeros(2)})
+    assert (legacy / MARKER_NAME).read_text() == tag
+
+    (legacy / MARKER_NAME).write_text(tag.replace(f"format {CACHE_FORMAT}", f"format {CACHE_FORMAT + 1}"))
+    with pytest.raises(NotACacheError, match=f"format {CACHE_FORMAT + 1}"):
+        RenderCache(legacy)
+    (legacy / MARKER_NAME).write_text("Signature: 8a477f597d28d172789f06886806bc55\n# cargo\n")
+    with pytest.raises(NotACacheError, match="other files.*CACHEDIR.TAG"):
+        RenderCache(legacy)

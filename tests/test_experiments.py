@@ -243,3 +243,20 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     monkeypatch.setitem(module.TARGETS, "budget", broken)
     with pytest.raises(ValueError, match="budget broke"):
         run(["budget", "flatness"], "broken", workers=2)
+
+
+def test_library_scene_names_stay_inside_the_library(tmp_path):
+    from pathlib import Path
+
+    """Issue 33: a scene name became a path (``../../elsewhere/evil``); only stems of scenes/."""
+    from simbench.experiments.common import SCENES_DIR, library_scene_path
+
+    assert library_scene_path("white_plane") == SCENES_DIR / "white_plane.toml"
+    evil = tmp_path / "evil.toml"
+    evil.write_text("name = 'evil'\n")
+    rel = Path("..") / Path(*[".."] * len(SCENES_DIR.parts)) / str(evil.with_suffix(""))[1:]
+    for name in (str(rel), str(evil.with_suffix("")), "../scenes/white_plane", "a/b", "", ".", "..", "x\x00", 3, None):
+        with pytest.raises(ValueError, match="not a name of scenes/"):
+            library_scene_path(name)
+    with pytest.raises(ValueError, match="no scene 'no_such'.*white_plane"):
+        library_scene_path("no_such")

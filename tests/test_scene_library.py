@@ -102,12 +102,10 @@ def test_meshes_are_regenerated_identically(tmp_path):
         )
 
 
-def test_malformed_mesh_gives_one_clear_error(tmp_path, variant):
-    from simbench.truth import ground_truth
-
+def test_malformed_mesh_gives_one_clear_error(tmp_path):
+    """Caught when the scene is read (simbench.scene.check_mesh_file), before Mitsuba loads it."""
     (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
-    scene = scene_from_dict(
-        {"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path
-    )
-    with pytest.raises(ValueError, match=r"scene 'mine'.*object 'statue'.*broken.ply"):
-        ground_truth(scene)
+    with pytest.raises(ValueError, match=r"object\[0\] 'statue'.*broken.ply"):
+        scene_from_dict(
+            {"name": "mine", "object": [{"type": "mesh", "name": "statue", "file": "broken.ply"}]}, base_dir=tmp_path
+        )

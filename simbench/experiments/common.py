@@ -15,6 +15,7 @@ import dataclasses
 import hashlib
 import io
 import logging
+import re
 import subprocess
 import sys
 import time
@@ -67,6 +68,7 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "SCENES_DIR",
+    "library_scene_path",
     "RunConfig",
     "Capture",
     "Session",
@@ -85,6 +87,34 @@ __all__ = [
 ]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
+# a scene of the library by name: a file name's stem, no folder (nothing outside SCENES_DIR)
+_SCENE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+
+
+def library_scene_path(name: object) -> Path:
+    """The file of the library scene ``name`` (``scenes/NAME.toml``).
+
+    A name is a file stem of ``scenes/``: a path (``../elsewhere/evil``, ``/etc/x``), an empty
+    name or a non-string is refused, so a name can neither read a file outside the library nor,
+    where it names an output (``NAME.png``), write outside its folder.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not a scene name, or no such scene exists (the error lists those that do).
+    """
+    available = sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+    if not isinstance(name, str) or not _SCENE_NAME.fullmatch(name) or ".." in name:
+        raise ValueError(
+            f"scene name {name!r} is not a name of scenes/ (no folders or paths; give a scene file as a path where a "
+            f"command takes one); scenes: {available}"
+        )
+    path = SCENES_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise ValueError(f"no scene {name!r} in {SCENES_DIR}; scenes: {available}")
+    return path
+
+
 # the rigs a decoder may be given (RunConfig.rig)
 RIGS = ("true", "calibrated")
 # a calibration pose that took this long gets a progress line (one made, not one read from the cache)
@@ -373,7 +403,7 @@ class Session:
     # scenes and captures -------------------------------------------------------------
     def raw_scene(self, name: str) -> SceneSpec:
         """A scene of ``scenes/`` as its file says (before :meth:`prepare`)."""
-        return load_scene(SCENES_DIR / f"{name}.toml")
+        return load_scene(library_scene_path(name))
 
     def scene(self, name: str) -> SceneSpec:
         """A scene of ``scenes/`` as the proposed sensor sees it (:meth:`prepare`)."""

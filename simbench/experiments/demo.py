@@ -20,7 +20,7 @@ import numpy as np
 from simbench.cache import RenderCache
 from simbench.decode import decode, decode_reference
 from simbench.device import get_sensor
-from simbench.experiments.common import SCENES_DIR, RunConfig, figure_png, git_commit
+from simbench.experiments.common import RunConfig, figure_png, git_commit, library_scene_path
 from simbench.io import json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.scene import load_scene
@@ -88,7 +88,7 @@ def run_demo(
     pattern = config.decoder.pattern
     cache = RenderCache(cache_dir)
     rows = []
-    names, scenes = scenes, [load_scene(SCENES_DIR / f"{name}.toml") for name in scenes]  # all checked before rendering
+    names, scenes = scenes, [load_scene(library_scene_path(name)) for name in scenes]  # all checked before rendering
     files: dict[Path, bytes] = {}
     for i, (name, scene) in enumerate(zip(names, scenes)):
         t0 = time.perf_counter()

@@ -53,6 +53,7 @@ The package: :mod:`~simbench.experiments.ablate.spec` (the sweep file and its ex
 """
 
 from simbench.experiments.ablate.execute import WORKER_DIED, run_one, run_sweep
+from simbench.experiments.ablate.mapping import check_sweep
 from simbench.experiments.ablate.spec import (
     BUILTIN_STUDIES,
     DEFAULTS,
@@ -73,6 +74,7 @@ __all__ = [
     "expand",
     "run_one",
     "run_sweep",
+    "check_sweep",
     "WORKER_DIED",
     "BUILTIN_STUDIES",
     "STUDIES_DIR",

@@ -12,7 +12,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from simbench.experiments.ablate.mapping import decoder_for, scene_for, sensor_for
+from simbench.experiments.ablate.mapping import check_sweep, decoder_for, run_config_for, scene_for, sensor_for
 from simbench.experiments.ablate.report import sweep_rows, write_sweep
 from simbench.experiments.ablate.spec import EDGE_BAND_PX, MODES, Sweep, expand
 
@@ -28,7 +28,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
     try:
         import sys
 
-        from simbench.experiments.common import RunConfig, Session, score
+        from simbench.experiments.common import Session, score
         from simbench.variant import select_variant
 
         # a Dask worker arrives here without an entry point: choose the variant first (it must
@@ -37,23 +37,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
             select_variant(None)
         decoder = decoder_for(params)
         sensor = sensor_for(params)
-        config = RunConfig(
-            sensor=sensor.name,
-            spp=int(params["run.spp"]),
-            sampler=str(params["run.sampler"]),
-            camera_scale=float(params["run.camera_scale"]),
-            max_depth=int(params["run.max_depth"]),
-            seed=int(seed),
-            placement_depth_mm=float(params["run.placement_depth_mm"]),
-            placement_tilt_deg=float(params["run.placement_tilt_deg"]),
-            board_bow_mm_per_m=float(params["run.board_bow_mm_per_m"]),
-            board_waviness_mm=float(params["run.board_waviness_mm"]),
-            decoder=decoder,
-            rig=str(params["run.rig"]),
-            calibration_poses=int(params["run.calibration_poses"]),
-            calibration_bow_mm_per_m=float(params["run.calibration_bow_mm_per_m"]),
-            calibration_waviness_mm=float(params["run.calibration_waviness_mm"]),
-        )
+        config = run_config_for(params, seed=seed, sensor=sensor, decoder=decoder)
         session = Session(
             config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor
         )
@@ -232,8 +216,14 @@ def run_sweep(
     process pool of ``workers`` processes (1 = in this process).  ``run_fn`` runs one
     parameter set (:func:`run_one`; another module-level function with its signature can
     stand in, e.g. to test the runner).  A pool worker that dies costs its runs one retry;
-    a run that kills its worker twice is recorded as failed (:func:`_run_pool`).
+    a run that kills its worker twice is recorded as failed (:func:`_run_pool`).  For
+    :func:`run_one`, every run's values are checked first
+    (:func:`~simbench.experiments.ablate.mapping.check_sweep`, which builds what it builds): a
+    value that cannot run raises ``ValueError`` before anything is run or written.  A stand-in
+    ``run_fn`` reads the parameters its own way, and checks them itself.
     """
+    if run_fn is run_one:
+        check_sweep(sweep)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     runs = expand(sweep)

@@ -10,13 +10,15 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from simbench.decode import DecoderParams
     from simbench.device import SensorModel
+    from simbench.experiments.ablate.spec import Sweep
+    from simbench.experiments.common import RunConfig
     from simbench.scene import SceneSpec
 
 from simbench.experiments.ablate.spec import PARAMETERS
 
 log = logging.getLogger(__name__)
 
-__all__ = ["sensor_for", "scene_for", "decoder_for"]
+__all__ = ["sensor_for", "scene_for", "decoder_for", "run_config_for", "check_sweep"]
 
 
 def sensor_for(params: dict) -> SensorModel:
@@ -58,10 +60,10 @@ def sensor_for(params: dict) -> SensorModel:
 
 
 def scene_for(params: dict) -> SceneSpec:
-    from simbench.experiments.common import SCENES_DIR
+    from simbench.experiments.common import library_scene_path
     from simbench.scene import load_scene, paint_reflectance
 
-    scene = load_scene(SCENES_DIR / f"{params['scene.name']}.toml")
+    scene = load_scene(library_scene_path(params["scene.name"]))
     objs = list(scene.objects)
     if "scene.srgb8" in params:
         rgb = paint_reflectance(params["scene.srgb8"])
@@ -97,3 +99,71 @@ def decoder_for(params: dict) -> DecoderParams:
     if "pattern.sequence" in params:
         pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
     return DecoderParams(pattern=PatternSpec(**pattern), **fields)
+
+
+def run_config_for(params: dict, *, seed: int, sensor: SensorModel, decoder: DecoderParams) -> RunConfig:
+    """The run settings of one parameter set (``run.*``), each value checked as the command
+    line checks it (an integer is not NaN, a sample count not 0)."""
+    from simbench import validate
+    from simbench.experiments.common import RunConfig
+
+    def num(name: str, **limits) -> float:
+        return validate.number(params[name], name, **limits)
+
+    def integer(name: str, **limits) -> int:
+        return validate.integer(params[name], name, **limits)
+
+    return RunConfig(
+        sensor=sensor.name,
+        spp=integer("run.spp", lo=1, hi=1 << 16),
+        sampler=validate.choice(params["run.sampler"], "run.sampler", _samplers()),
+        camera_scale=num("run.camera_scale", lo=0.0, lo_open=True, hi=4.0),
+        max_depth=integer("run.max_depth", lo=2, hi=1024),
+        seed=int(seed),
+        placement_depth_mm=num("run.placement_depth_mm", lo=0.0),
+        placement_tilt_deg=num("run.placement_tilt_deg", lo=0.0),
+        board_bow_mm_per_m=num("run.board_bow_mm_per_m"),
+        board_waviness_mm=num("run.board_waviness_mm", lo=0.0),
+        decoder=decoder,
+        rig=str(params["run.rig"]),
+        calibration_poses=integer("run.calibration_poses", lo=3, hi=200),
+        calibration_bow_mm_per_m=num("run.calibration_bow_mm_per_m"),
+        calibration_waviness_mm=num("run.calibration_waviness_mm", lo=0.0),
+    )
+
+
+def _samplers() -> tuple[str, ...]:
+    from simbench.mitsuba_dict import SAMPLERS
+
+    return SAMPLERS
+
+
+def check_sweep(sweep: Sweep) -> None:
+    """Build every run's sensor, decoder, scene and run settings without rendering anything:
+    a value that cannot run (``decoder.voting = "maybe"``, ``run.spp = 0``, a sensor preset
+    that is no TOML file, a scene name outside ``scenes/``) fails here, before the first run,
+    not as a failed row after minutes of others.
+
+    Raises
+    ------
+    ValueError
+        Naming the sweep, the run's parameter values and what is wrong.
+    """
+    from simbench.experiments.ablate.spec import expand
+
+    seen: set[str] = set()
+    for run in expand(sweep):
+        params = run["params"]
+        key = repr(sorted(params.items(), key=lambda kv: kv[0]))
+        if key in seen:  # repeats differ only in their seed
+            continue
+        seen.add(key)
+        try:
+            decoder = decoder_for(params)
+            sensor = sensor_for(params)
+            run_config_for(params, seed=run["seed"], sensor=sensor, decoder=decoder)
+            scene_for(params)
+        except (ValueError, TypeError, OSError) as exc:
+            axes = {k: params[k] for k, _ in sweep.axes}
+            msg = (str(exc).splitlines() or [type(exc).__name__])[0]
+            raise ValueError(f"sweep {sweep.name!r}, run {run['run']} {axes}: {msg}") from None
