@@ -200,9 +200,32 @@ def _pattern_spec(args, size_hw: tuple[int, int]):
         sequence = None if args.sequence is None else parse_sequence(args.sequence)
     except ValueError as exc:
         raise ValueError(f"--sequence: {exc}") from None
-    return PatternSpec(
-        size_hw=size_hw, period_px=args.period, order=args.order, sequence=sequence, channels=args.channels
-    )
+    given = {"period_px": args.period, "order": args.order, "channels": args.channels}
+    return PatternSpec(size_hw=size_hw, sequence=sequence, **{k: v for k, v in given.items() if v is not None})
+
+
+def _recorded_pattern(args, recorded):
+    """The pattern a recording folder records, with any pattern option given on the command line
+    checked against it: a contradiction is an error, never a silent re-decode with other values."""
+    from simbench.pattern import parse_sequence
+    from simbench.systems.proposed import describe_pattern
+
+    given = {
+        "--period": (args.period, recorded.period_px),
+        "--order": (args.order, recorded.order),
+        "--channels": (args.channels, recorded.channels),
+        "--sequence": (
+            None if args.sequence is None else parse_sequence(args.sequence),
+            tuple(int(c) for c in recorded.codes()),
+        ),
+    }
+    for option, (value, rec) in given.items():
+        if value is not None and value != rec:
+            raise ValueError(
+                f"{option} {args.sequence if option == '--sequence' else value} contradicts the recording, made with "
+                f"the pattern {describe_pattern(recorded)} (meta.json); leave {option} out to decode it as recorded"
+            )
+    return recorded
 
 
 def _cmd_render(args) -> int:
@@ -283,45 +306,39 @@ def _render_system(args, system, scene, *, spp: int, sampler: str, cache, varian
 
 
 def _manifest_of(path: Path) -> dict | None:
-    """The ``meta.json`` of the render folder holding ``path``, if there is a readable one."""
-    meta = path.parent / "meta.json"
-    if not meta.is_file():
+    """The sealed ``meta.json`` of the render folder holding ``path`` (checked: the manifest's
+    own seal, and ``path``'s recorded SHA-256 when it lists it), or None when there is none.
+    A folder mixing the files of two renders, or whose meta.json was edited, is refused."""
+    from simbench.manifest import ManifestError, file_sha256, read_manifest
+    from simbench.simulate import RENDER_MANIFEST
+
+    meta = path.parent / RENDER_MANIFEST
+    if not meta.exists():
         return None
-    try:
-        data = json.loads(meta.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError):
-        raise ValueError(f"{meta}: not a readable meta.json") from None
-    return data if isinstance(data, dict) else None
-
-
-def _check_manifest(path: Path) -> None:
-    """A file listed in its folder's meta.json must have the SHA-256 recorded there: a folder
-    mixing the files of two renders (an interrupted older version, a hand copy) is refused."""
-    import hashlib
-
-    meta = _manifest_of(path)
-    if not meta or not isinstance(meta.get("files"), dict) or not isinstance(meta.get("sha256"), dict):
-        return
-    for key, name in meta["files"].items():
-        if name == path.name and key in meta["sha256"]:
-            if hashlib.sha256(path.read_bytes()).hexdigest() != meta["sha256"][key]:
-                raise ValueError(
-                    f"{path} does not match {path.parent / 'meta.json'} (SHA-256 differs): the folder mixes files of "
-                    f"two renders"
-                )
+    data = read_manifest(meta, verify_files=False)
+    for key, name in data["files"].items():
+        if name == path.name and file_sha256(path) != data["sha256"][key]:
+            raise ManifestError(
+                f"{path} does not match {meta} (SHA-256 differs): the folder mixes files of two renders"
+            )
+    return data
 
 
 def _z0_for(reference: Path, z0: float | None) -> float:
-    if z0 is not None:
-        return z0
-    meta = _manifest_of(reference)
-    if meta is not None and "reference_depth_m" in meta:
-        from simbench import validate
+    """Z0: the reference's folder records it (a --z0 that contradicts it is an error); without
+    a recording, --z0 or 1 m."""
+    from simbench.systems.proposed import recorded_z0
 
-        return validate.number(
-            meta["reference_depth_m"], f"{reference.parent / 'meta.json'}: reference_depth_m", lo=0.0, lo_open=True
+    meta = _manifest_of(reference)
+    if meta is None:
+        return z0 if z0 is not None else 1.0
+    recorded = recorded_z0(meta, where=str(reference.parent / "meta.json"))
+    if z0 is not None and z0 != recorded:
+        raise ValueError(
+            f"--z0 {z0:g} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at Z0 = "
+            f"{recorded:g} m; leave --z0 out to decode it as recorded"
         )
-    return 1.0
+    return recorded
 
 
 def _cmd_calibrate(args) -> int:
@@ -408,23 +425,31 @@ def _cmd_decode(args) -> int:
     if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
         raise ValueError(f"--debug-dir {args.debug_dir} exists and is not a folder")
     _decoder_overrides(DecoderParams(), args.decoder or [])  # bad values fail before any file is read
+    overrides = []  # explicit options that replace what a recording holds, announced with the result
     if Path(args.capture).is_dir():
+        from simbench.manifest import read_manifest
+        from simbench.simulate import RENDER_MANIFEST
         from simbench.systems import system_of_recording
 
         if system_of_recording(args.capture) != "proposed":
             return _decode_recording(args)
         folder = Path(args.capture)
+        read_manifest(folder / RENDER_MANIFEST)  # the whole folder as recorded: every file's SHA-256
         args.capture = str(folder / "capture.png")
+        if args.rig is not None:
+            overrides.append(f"rig {args.rig} instead of the recorded rig.toml")
+        if args.reference is not None:
+            overrides.append(f"reference {args.reference} instead of the recorded reference.png")
         args.rig = args.rig or str(folder / "rig.toml")
         args.reference = args.reference or str(folder / "reference.png")
     if args.rig is None:
         if not Path(args.capture).exists():
             raise FileNotFoundError(f"{args.capture} not found")
         raise ValueError("--rig is required when CAPTURE is an image (or give a folder written by `simbench render`)")
+    _check_outputs_apart_from_inputs(args)
     rig = load_rig(args.rig)
-    for p in (args.capture, args.reference, args.rig):
-        if p is not None and Path(p).is_file():
-            _check_manifest(Path(p))
+    manifests = {p: _manifest_of(Path(p)) for p in (args.capture, args.reference, args.rig) if p and Path(p).is_file()}
+    _check_same_recording_rig(args, manifests)
     capture = load_image(args.capture, expected_size_hw=rig.camera.size_hw)
     reference = None
     z0 = args.z0 if args.z0 is not None else 1.0
@@ -433,9 +458,23 @@ def _cmd_decode(args) -> int:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
         z0 = _z0_for(Path(args.reference), args.z0)
-    params = DecoderParams(
-        pattern=_pattern_spec(args, rig.projector.size_hw), mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far)
-    )
+    recorded = manifests.get(args.capture)
+    if recorded is not None and recorded["files"].get("capture") != Path(args.capture).name:
+        recorded = None  # an image beside a recording, not its capture: decoded as any image
+    if recorded is not None:
+        from simbench.systems.proposed import recorded_pattern
+
+        pattern = _recorded_pattern(
+            args, recorded_pattern(recorded, where=str(Path(args.capture).parent / "meta.json"))
+        )
+        if pattern.size_hw != rig.projector.size_hw:
+            raise ValueError(
+                f"the recording's pattern is {pattern.size_hw[1]}x{pattern.size_hw[0]}, the rig's projector "
+                f"{rig.projector.width_px}x{rig.projector.height_px}: --rig {args.rig} is not this recording's rig"
+            )
+    else:
+        pattern = _pattern_spec(args, rig.projector.size_hw)
+    params = DecoderParams(pattern=pattern, mode=args.mode, z0_m=z0, depth_range_m=(args.near, args.far))
     if args.robust:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
@@ -459,9 +498,10 @@ def _cmd_decode(args) -> int:
             else ", reference decoded" + ("" if cache.root is None else " and cached")
         )
     )
+    over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
     msg = (
         f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms "
-        f"({args.mode} mode, Z0 = {z0} m{ref_note}) -> {args.out}"
+        f"({args.mode} mode, Z0 = {z0} m{ref_note}{over}) -> {args.out}"
     )
     if args.ply:
         pts = points_from_depth(result.depth_m, rig.camera)
@@ -487,6 +527,44 @@ def _cmd_decode(args) -> int:
     return 0
 
 
+def _check_outputs_apart_from_inputs(args) -> None:
+    """No output of a decode may overwrite a recording's file (``--out FOLDER/gt_depth.npy``
+    replaced the ground truth) or one of its inputs."""
+    from simbench.manifest import listed_files
+
+    protected: set[Path] = set()
+    folders: set[Path] = set()  # recording folders among the inputs'
+    for p in (args.capture, args.reference, args.rig, getattr(args, "calibration", None)):
+        if p:
+            protected.add(Path(p).resolve())
+            listed = listed_files(Path(p).parent / "meta.json")
+            protected |= listed
+            folders |= {f.parent for f in listed}
+    outputs = [Path(args.out)] + ([Path(args.ply)] if args.ply else [])
+    if args.debug_dir and Path(args.debug_dir).resolve() in folders:
+        raise ValueError(f"--debug-dir {args.debug_dir} is a recording's folder: its stage images would mix with it")
+    for out in outputs:
+        if out.resolve() in protected:
+            raise ValueError(
+                f"{out} is a file of the recording being decoded (or an input): choose another output path"
+            )
+
+
+def _check_same_recording_rig(args, manifests: dict) -> None:
+    """A reference from another recording folder must have been recorded with the capture's rig
+    (their manifests' rig.toml digests): a reference of another baseline decodes to wrong
+    depths everywhere without a word."""
+    cap, ref = manifests.get(args.capture), manifests.get(args.reference)
+    if cap is None or ref is None or cap is ref:
+        return
+    a, b = cap["sha256"].get("rig"), ref["sha256"].get("rig")
+    if a is not None and b is not None and a != b:
+        raise ValueError(
+            f"--reference {args.reference} was recorded with another rig than {args.capture} (their folders' rig.toml "
+            "differ): a reference plane belongs to the rig it was captured with"
+        )
+
+
 def _calibrated_reference(args, rig, params, reference, *, cache=None):
     """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
     the reference capture (``reference``, or read from --reference in calibrated mode) and the
@@ -510,7 +588,7 @@ def _calibrated_reference(args, rig, params, reference, *, cache=None):
             f"render --calibration-frames`, or give --calibration FOLDER)"
         )
     for p in paths.values():
-        _check_manifest(p)
+        _manifest_of(p)
     frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
     if reference is None:
         reference = load_image(args.reference, expected_size_hw=rig.camera.size_hw)
@@ -857,13 +935,15 @@ def _cmd_crosstalk(args) -> int:
 
 def _add_pattern_options(s: argparse.ArgumentParser) -> None:
     """The pattern's options, shared by every command that makes or reads the pattern."""
-    s.add_argument("--period", type=_int(4, 16384), default=21, help="fringe period T in projector pixels")
-    s.add_argument("--order", type=_int(2, 16), default=3, help="window length n (De Bruijn cycle = 2**n stripes)")
+    # None = not given: a recording folder is decoded with the pattern it records, and an option
+    # given explicitly that contradicts it is an error (_recorded_pattern)
+    s.add_argument("--period", type=_int(4, 16384), help="fringe period T in projector pixels (default: 21)")
+    s.add_argument("--order", type=_int(2, 16), help="window length n (De Bruijn cycle = 2**n stripes; default: 3)")
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
     s.add_argument(
         "--channels",
-        default="rgb",
-        help="colour channels of code 1, code 0 and the fringe (rgb: the paper's red/green stripes, blue fringe)",
+        help="colour channels of code 1, code 0 and the fringe (rgb: the paper's red/green stripes, blue fringe; "
+        "default: rgb)",
     )
 
 

@@ -7,7 +7,6 @@ recorded.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import logging
 import platform
 import sys
@@ -21,6 +20,7 @@ import numpy as np
 from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
 from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
+from simbench.manifest import seal_manifest
 from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings, realised_rig
 from simbench.optics import distort_image, distorted_projector_drive
 from simbench.pattern import PatternSpec
@@ -633,7 +633,7 @@ def acquire(
     from simbench.seeds import SeedLog
     from simbench.systems import RenderSettings, SystemOptions
     from simbench.systems import acquire as acquire_recording
-    from simbench.systems.proposed import ColourFringeSystem
+    from simbench.systems.proposed import ColourFringeSystem, pattern_record
 
     rig = realised_rig(scene.rig)
     if rig != scene.rig:
@@ -658,15 +658,7 @@ def acquire(
     rec = acquire_recording(system, scene, f"capture/{scene.name}", seeds=seeds, render=render, prepared=True)[0]
     meta = {
         "scene": scene.name,
-        "pattern": {
-            "size_hw": list(pattern.size_hw),
-            "period_px": pattern.period_px,
-            "order": pattern.order,
-            "sequence": pattern.codes().tolist(),
-            "dc": pattern.dc,
-            "amplitude": pattern.amplitude,
-            "channels": pattern.channels,
-        },
+        "pattern": pattern_record(pattern),
         "sensor": sensor_to_dict(sensor),
         "exposure_s": exposure_s(sensor, scene.rig, **_white_board(scene)) if sensor.is_physical else None,
         "white_balance_gains": white_balance_gains(sensor, scene.rig, **_white_board(scene)).tolist(),
@@ -724,6 +716,5 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
         save_npy(tmp / names["gt_lit"], acq.gt.lit)
         save_npy(tmp / names["gt_object_id"], acq.gt.object_id)
         save_rig(acq.scene.rig, tmp / names["rig"])
-        digests = {k: hashlib.sha256((tmp / n).read_bytes()).hexdigest() for k, n in names.items()}
-        save_json(tmp / RENDER_MANIFEST, {**acq.meta, "files": names, "sha256": digests})
+        save_json(tmp / RENDER_MANIFEST, seal_manifest(tmp, {"system": "proposed", **acq.meta}, names))
     return {**{k: out / n for k, n in names.items()}, "meta": out / RENDER_MANIFEST}

@@ -9,7 +9,6 @@ anything else appearing in the folder afterwards is a partial output and fails t
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -75,7 +74,6 @@ _IMAGES: list = []
 
 def render_folder(d: Path) -> Path:
     """A small, valid render folder (synthetic plane at 1.1 m, reference at 1.0 m) in ``d/r``."""
-    import hashlib
 
     from simbench.io import save_npy, save_png
 
@@ -92,10 +90,20 @@ def render_folder(d: Path) -> Path:
     save_npy(r / "gt_lit.npy", np.ones((120, 160), bool))
     save_npy(r / "gt_column.npy", np.zeros((120, 160), np.float32))
     save_npy(r / "depth.npy", gt)
-    names = {"capture": "capture.png", "reference": "reference.png", "rig": "rig.toml", "gt_depth": "gt_depth.npy"}
-    sha = {k: hashlib.sha256((r / n).read_bytes()).hexdigest() for k, n in names.items()}
-    (r / "meta.json").write_text(json.dumps({"reference_depth_m": 1.0, "files": names, "sha256": sha}))
+    _seal(r, reference_depth_m=1.0)
     return r
+
+
+def _seal(r: Path, **meta) -> None:
+    """``r/meta.json`` as ``simbench render`` writes it (simbench.manifest), with ``meta``."""
+    from simbench.io import save_json
+    from simbench.manifest import seal_manifest
+    from simbench.pattern import PatternSpec
+    from simbench.systems.proposed import pattern_record
+
+    names = {"capture": "capture.png", "reference": "reference.png", "rig": "rig.toml", "gt_depth": "gt_depth.npy"}
+    pattern = pattern_record(PatternSpec(size_hw=(285, 456)))
+    save_json(r / "meta.json", seal_manifest(r, {"system": "proposed", "pattern": pattern, **meta}, names))
 
 
 @dataclass
@@ -600,7 +608,7 @@ case(
     "decode-meta-z0-negative",
     lambda d: _decode(d),
     "reference_depth_m",
-    setup=lambda d: (render_folder(d) / "meta.json").write_text('{"reference_depth_m": -1}'),
+    setup=lambda d: _seal(render_folder(d), reference_depth_m=-1),
 )
 
 # ----------------------------------------------------------------------------------- score
@@ -710,11 +718,14 @@ for cid, argv, msg, setup in [
 
 
 def _recording(d: Path, device: dict, files: dict | None = None) -> None:
+    from simbench.io import save_json
+    from simbench.manifest import seal_manifest
+
     rec = d / "rec"
     rec.mkdir()
-    (rec / "device.json").write_text(json.dumps(device))
     for name, content in (files or {}).items():
         (rec / name).write_bytes(content)
+    save_json(rec / "device.json", seal_manifest(rec, device, {Path(n).stem: n for n in files or {}}))
 
 
 for cid, argv, msg in [

@@ -4,12 +4,13 @@ the folder written whole or not at all (:func:`simbench.io.output_directory`).""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+
+from simbench.manifest import read_manifest, seal_manifest
 
 __all__ = ["DEVICE_MANIFEST", "write_device_recording", "read_device_info"]
 
@@ -28,7 +29,8 @@ def write_device_recording(
 ) -> dict[str, Path]:
     """Write ``writers`` (key -> function writing one file into the folder it is given and
     returning its path), ``gt_depth.npy``/``.exr`` (z-depth, m) and ``device.json``
-    (``{"device": name, **model's parameters, **info, "files": ...}``)."""
+    (``{"device": name, **model's parameters, **info}``, sealed with every file's SHA-256:
+    :func:`simbench.manifest.seal_manifest`)."""
     from simbench.io import output_directory, save_exr, save_json, save_npy
 
     out = Path(out_dir)
@@ -38,23 +40,22 @@ def write_device_recording(
             names[key] = write(tmp).name
         names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
         names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", gt_depth_m.astype(np.float32)).name
-        names["device"] = save_json(
-            tmp / DEVICE_MANIFEST, {"device": name, **asdict(model), **info, "files": dict(names)}
-        ).name
-    return {k: out / n for k, n in names.items()}
+        manifest = seal_manifest(tmp, {"device": name, **asdict(model), **info}, names)
+        save_json(tmp / DEVICE_MANIFEST, manifest)
+    return {**{k: out / n for k, n in names.items()}, "device": out / DEVICE_MANIFEST}
 
 
 def read_device_info(in_dir: str | Path, name: str, model_cls: type) -> tuple[object, dict]:
     """(the device model, the rest of ``device.json``) of a folder written by
-    :func:`write_device_recording` for the device ``name``."""
+    :func:`write_device_recording` for the device ``name``; its manifest and every file it
+    lists checked against their recorded SHA-256 (:func:`simbench.manifest.read_manifest`)."""
     path = Path(in_dir) / DEVICE_MANIFEST
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found: not a competitor recording folder")
-    try:
-        info = json.loads(path.read_text())
-        device = info.pop("device")
-    except (ValueError, KeyError, AttributeError, UnicodeDecodeError):
-        raise ValueError(f"{path}: not a valid device file") from None
+    info = read_manifest(path)  # sealed, every file as recorded
+    device = info.pop("device", None)
+    if not isinstance(device, str):
+        raise ValueError(f"{path}: not a valid device file (no device name)")
     if device != name:
         raise ValueError(f"{path}: a {device!r} recording, not {name!r}")
     fields = model_cls.__dataclass_fields__

@@ -258,7 +258,7 @@ def system_of_recording(in_dir: str | Path) -> str:
             if not isinstance(info, dict):
                 raise ValueError(f"{path}: not a valid recording manifest")
             name = info.get("system", info.get("device", "proposed"))
-            if name not in _SYSTEMS:
+            if not isinstance(name, str) or name not in _SYSTEMS:
                 raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
             return name
     raise FileNotFoundError(

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simbench.manifest import read_manifest
 from simbench.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
 
@@ -32,7 +33,16 @@ if TYPE_CHECKING:
     from simbench.decode.pipeline import DecoderParams, ReferenceMap
     from simbench.pattern import PatternSpec
 
-__all__ = ["ColourFringeSystem", "ReferenceCalibration", "BENCH_SCENES", "BENCH_SHADOW"]
+__all__ = [
+    "ColourFringeSystem",
+    "ReferenceCalibration",
+    "BENCH_SCENES",
+    "BENCH_SHADOW",
+    "pattern_record",
+    "recorded_pattern",
+    "recorded_z0",
+    "describe_pattern",
+]
 
 BENCH_SCENES = ("plane", "shadow")
 # the ``shadow`` benchmark scene's region without projector light (rows, columns)
@@ -310,20 +320,24 @@ class ColourFringeSystem:
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of a folder written by :meth:`write_recording`
-        (``simbench render``); the scene carries the recorded rig and Z0, no objects."""
-        import json
-
-        from simbench import validate
+        (``simbench render``); the scene carries the recorded rig and Z0, no objects.  The
+        manifest and every file are checked (:func:`simbench.manifest.read_manifest`), and a
+        folder recorded with another pattern than this system's is refused (it would decode
+        wrongly without a word)."""
         from simbench.io import load_image
         from simbench.rig import load_rig
         from simbench.simulate import RENDER_MANIFEST
 
         d = Path(in_dir)
-        meta = json.loads((d / RENDER_MANIFEST).read_text(encoding="utf-8"))
+        meta = read_manifest(d / RENDER_MANIFEST)
+        recorded = recorded_pattern(meta, where=str(d / RENDER_MANIFEST))
+        if recorded != self.pattern:
+            raise ValueError(
+                f"{d}: recorded with the pattern {describe_pattern(recorded)}, but this system decodes "
+                f"{describe_pattern(self.pattern)}"
+            )
         rig = load_rig(d / "rig.toml")
-        z0 = validate.number(
-            meta.get("reference_depth_m", 1.0), f"{d / RENDER_MANIFEST}: reference_depth_m", lo=0.0, lo_open=True
-        )
+        z0 = recorded_z0(meta, where=str(d / RENDER_MANIFEST))
         capture = load_image(d / "capture.png", expected_size_hw=rig.camera.size_hw)
         frames = {}
         for name in (n for n in ("dark", "red", "green", "blue") if (d / f"calibration_{n}.png").is_file()):
@@ -332,3 +346,66 @@ class ColourFringeSystem:
             rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames
         )
         return capture, cal, SceneSpec(name=str(meta.get("scene", d.name)), rig=rig, objects=(), reference_depth_m=z0)
+
+
+def pattern_record(pattern: PatternSpec) -> dict:
+    """The pattern as a render folder's manifest records it (:func:`recorded_pattern` reads it)."""
+    return {
+        "size_hw": list(pattern.size_hw),
+        "period_px": pattern.period_px,
+        "order": pattern.order,
+        "sequence": pattern.codes().tolist(),
+        "dc": pattern.dc,
+        "amplitude": pattern.amplitude,
+        "channels": pattern.channels,
+    }
+
+
+def recorded_pattern(meta: dict, *, where: str) -> PatternSpec:
+    """The pattern a render folder's manifest (``meta.json``) records it was captured with.
+
+    Raises
+    ------
+    ValueError
+        No pattern recorded, or one that is not a valid pattern.
+    """
+    from simbench.pattern import PatternSpec, de_bruijn
+
+    p = meta.get("pattern")
+    if not isinstance(p, dict):
+        raise ValueError(f"{where}: records no pattern, so it cannot be decoded as recorded")
+    try:
+        order = p["order"]
+        codes = p.get("sequence")
+        default = de_bruijn(order).tolist() if isinstance(order, int) and 2 <= order <= 16 else None
+        sequence = None if codes is None or (default is not None and list(codes) == list(default)) else tuple(codes)
+        return PatternSpec(
+            size_hw=tuple(p["size_hw"]),
+            period_px=p["period_px"],
+            order=order,
+            sequence=sequence,
+            dc=p.get("dc", 0.5),
+            amplitude=p.get("amplitude", 0.5),
+            channels=p.get("channels", "rgb"),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: its pattern is not valid ({exc})") from None
+
+
+def recorded_z0(meta: dict, *, where: str) -> float:
+    """The reference plane's depth a render folder's manifest records (Z0, m)."""
+    from simbench import validate
+
+    if "reference_depth_m" not in meta:
+        raise ValueError(f"{where}: records no reference_depth_m (Z0)")
+    # the bounds of a scene file's reference_depth_m (simbench.scene)
+    return validate.number(meta["reference_depth_m"], f"{where}: reference_depth_m", lo=0.0, lo_open=True, hi=100.0)
+
+
+def describe_pattern(p: PatternSpec) -> str:
+    """One line naming what tells two patterns apart."""
+    seq = "".join(map(str, p.codes()))
+    return (
+        f"period {p.period_px} px, order {p.order}, codes {seq}, channels {p.channels}, dc {p.dc:g}, amplitude "
+        f"{p.amplitude:g}, {p.size_hw[1]}x{p.size_hw[0]}"
+    )
