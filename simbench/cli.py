@@ -674,10 +674,12 @@ def _cmd_score(args) -> int:
 
     if args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
-    gt = load_npy(args.gt)
-    if gt.ndim != 2:
-        raise ValueError(f"{args.gt}: ground truth must be a 2-D depth map, got shape {gt.shape}")
-    depth = load_npy(args.depth, expected_shape=gt.shape)
+    gt = _depth_map(load_npy(args.gt), args.gt, what="ground truth")
+    if not np.isfinite(gt).any():
+        raise ValueError(f"{args.gt}: the ground truth has no finite depth: nothing to score against")
+    depth = _depth_map(load_npy(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
+    if Path(args.gt).is_file():
+        _manifest_of(Path(args.gt))  # a ground truth inside a recording folder: as recorded
     gt_dir = Path(args.gt).parent
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
@@ -697,8 +699,14 @@ def _cmd_score(args) -> int:
             "period_px": args.period,
         }
     m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
-    if args.json:
-        print(json.dumps(m, indent=2, sort_keys=True))
+    if not m["n_region"]:
+        raise ValueError(
+            f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
+            "holds no pixel with a finite ground truth off the edge band"
+        )
+    if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
+        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
+        print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
     else:
         print(
             f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 "
@@ -714,6 +722,15 @@ def _cmd_score(args) -> int:
                 f"pixels)"
             )
     return 0
+
+
+def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:
+    """A 2-D real depth map (metres) as float64, or a one-line error naming the file."""
+    if a.ndim != 2:
+        raise ValueError(f"{path}: {what} must be a 2-D depth map, got shape {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{path}: {what} must hold real numbers (metres), got dtype {a.dtype}")
+    return a
 
 
 def _cmd_demo(args) -> int:

@@ -359,10 +359,21 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
         raise FileNotFoundError(f"image not found: {path}")
     if path.suffix.lower() == ".npy":
         img = load_npy(path)
+        if img.dtype.kind == "f":
+            finite = img[np.isfinite(img)]
+            if finite.size and (finite.min() < 0.0 or finite.max() > 1.0):
+                raise ValueError(
+                    f"{path}: a float capture holds values in [0, 1] of full scale, this one spans "
+                    f"[{finite.min():g}, {finite.max():g}] (8-bit values? divide by 255, or save it as uint8)"
+                )
     else:
         data = np.fromfile(path, dtype=np.uint8)
         if data.size == 0:
             raise ValueError(f"{path}: an empty file, not an image")
+        # a PNG's IHDR colour type (byte 25): OpenCV expands grey+alpha to BGRA, which would pass as RGB
+        if channels == 3 and data.size > 25 and data[:8].tobytes() == b"\x89PNG\r\n\x1a\n" and data[25] in (0, 4):
+            kind = "grey+alpha" if data[25] == 4 else "grey"
+            raise ValueError(f"{path}: a {kind} PNG, expected an RGB image (a colour capture)")
         with _captured_stderr() as messages:
             try:
                 img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)

@@ -425,6 +425,19 @@ def _decode(
     return argv + list(extra)
 
 
+def _grey_alpha_png(h: int, w: int) -> bytes:
+    """A valid 8-bit grey+alpha PNG (colour type 4) of a mid-grey, opaque image."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+
+    rows = b"".join(b"\x00" + bytes([128, 255]) * w for _ in range(h))
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 4, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b"")
+
+
 def _image_file(name: str, content) -> object:
     def setup(d: Path) -> None:
         render_folder(d)
@@ -453,10 +466,17 @@ for cid, name, content, msg in [
     ("capture-npy-int64", "c.npy", np.zeros((120, 160, 3), np.int64), "dtype"),
     ("capture-npy-empty", "c.npy", b"", "empty"),
     ("capture-npy-not-npy", "c.npy", b"PK\x03\x04 not numpy", "not a NumPy"),
+    # issue 33: read as RGB and decoded to 0 % with exit 0; floats on the 8-bit scale accepted
+    ("capture-grey-alpha-png", "c.png", b"GA", "grey+alpha PNG"),
+    ("capture-npy-0-255", "c.npy", np.full((120, 160, 3), 200.0, np.float32), "8-bit values"),
+    ("capture-npy-negative", "c.npy", np.full((120, 160, 3), -0.5, np.float32), "spans [-0.5"),
 ]:
 
     def _setup(d, name=name, content=content):
-        if content is None:  # a real PNG cut in half
+        if isinstance(content, bytes) and content == b"GA":  # OpenCV cannot write grey+alpha: a PNG by hand
+            render_folder(d)
+            (d / "r" / name).write_bytes(_grey_alpha_png(120, 160))
+        elif content is None:  # a real PNG cut in half
             render_folder(d)
             data = (d / "r" / "capture.png").read_bytes()
             (d / "r" / name).write_bytes(data[: len(data) // 2])
@@ -654,6 +674,38 @@ for cid, argv, msg, setup in [
         lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")],
         "2-D",
         lambda d: (render_folder(d), np.save(d / "g.npy", np.zeros((2, 3, 4), np.float32))),
+    ),
+    # issue 33: exit 0 with "completeness nan % of 0 pixels"; a complex map with a warning; a
+    # structured dtype as an internal error; a ground truth overwritten in its recording folder
+    (
+        "gt-all-nan",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")],
+        "no finite depth",
+        lambda d: (render_folder(d), np.save(d / "g.npy", np.full((120, 160), np.nan, np.float32))),
+    ),
+    (
+        "depth-complex",
+        lambda d: ["score", str(d / "c.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "real numbers",
+        lambda d: (render_folder(d), np.save(d / "c.npy", np.ones((120, 160), np.complex64))),
+    ),
+    (
+        "depth-structured",
+        lambda d: ["score", str(d / "c.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "real numbers",
+        lambda d: (render_folder(d), np.save(d / "c.npy", np.zeros((120, 160), [("a", "f4"), ("b", "i2")]))),
+    ),
+    (
+        "gt-replaced-in-its-folder",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "mixes files of two renders",
+        lambda d: (render_folder(d), np.save(d / "r" / "gt_depth.npy", np.full((120, 160), 1.2, np.float32))),
+    ),
+    (
+        "lit-region-empty",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "no pixel to score",
+        lambda d: (render_folder(d), np.save(d / "r" / "gt_lit.npy", np.zeros((120, 160), bool))),
     ),
     (
         "period-zero",

@@ -532,3 +532,21 @@ def test_a_closed_output_pipe_ends_quietly(tmp_path):
     with proc.stderr:
         err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 141 and err == ""
+
+
+def test_score_json_is_strict_json_when_nothing_decoded(tmp_path, capsys):
+    """Issue 33: ``--json`` printed bare NaN (not JSON) for a depth map with no valid pixel."""
+    import numpy as np
+
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    np.save(tmp_path / "none.npy", np.full((120, 160), np.nan, np.float32))
+    assert main(["score", str(tmp_path / "none.npy"), "--gt", str(r / "gt_depth.npy"), "--json"]) == 0
+    out = capsys.readouterr().out
+
+    def no_constants(name):
+        raise AssertionError(f"{name} in --json output")
+
+    m = json.loads(out, parse_constant=no_constants)
+    assert m["completeness"] == 0 and m["mae_mm"] is None and m["n_region"] == 120 * 160
