@@ -1342,11 +1342,15 @@ def main(argv: list[str] | None = None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
+    previous = _on_sigterm_raise()
     try:
         return args.fn(args)
     except KeyboardInterrupt:
         print("simbench: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print("simbench: terminated (SIGTERM); partial outputs and cache locks removed", file=sys.stderr)
+        return 143
     except BrokenPipeError:  # `simbench ... | head`: the reader has gone; stop quietly, as `yes | head` does
         try:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush is not a 2nd error
@@ -1372,6 +1376,40 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+    finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
+
+
+class _Terminated(BaseException):
+    """SIGTERM (``kill``, a job scheduler's stop) raised in the main thread, as Ctrl-C raises
+    KeyboardInterrupt: the ``with`` blocks unwind, so temporary folders go and cache locks are
+    released and removed, and the exit says so."""
+
+
+def _on_sigterm_raise():
+    """Turn SIGTERM into :class:`_Terminated` while a command runs; returns the handler to
+    restore (None off the main thread, where signals cannot be handled)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        f = frame
+        while f is not None:
+            # an exception raised inside an import breaks a C extension's initialisation (Mitsuba's
+            # aborts the interpreter at exit): ask again once the import is done
+            if f.f_code.co_filename.startswith("<frozen importlib"):
+                threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGTERM)).start()
+                return
+            f = f.f_back
+        raise _Terminated()
+
+    return signal.signal(signal.SIGTERM, handler)
 
 
 def _disk_full_hint(exc: BaseException, args) -> str:

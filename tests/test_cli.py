@@ -550,3 +550,48 @@ def test_score_json_is_strict_json_when_nothing_decoded(tmp_path, capsys):
 
     m = json.loads(out, parse_constant=no_constants)
     assert m["completeness"] == 0 and m["mae_mm"] is None and m["n_region"] == 120 * 160
+
+
+@pytest.mark.slow
+def test_sigterm_ends_a_run_cleanly(tmp_path):
+    """Issue 33: SIGTERM exited 143 with no message and left lock files in the cache.  Now it
+    unwinds like Ctrl-C: one line, exit 143, no lock, no temporary folder, the old folder whole.
+    The signal is sent while the run holds a cache lock (making an entry), twice: at the first
+    lock seen and at a later one."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from tests.test_bad_inputs import TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    exe = str(Path(sys.executable).parent / "simbench")
+
+    def render(seed, cache):
+        argv = [exe, "render", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"), "--overwrite"]
+        argv += ["--sensor", "ideal", "--spp", "4", "--seed", str(seed), "--cache", str(tmp_path / cache)]
+        return subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    first = render(1, "c0")
+    first.communicate(timeout=300)
+    assert first.returncode == 0
+    for k, nth_lock in enumerate((1, 3)):
+        cache = tmp_path / f"c{k + 1}"
+        p = render(10 + k, cache.name)
+        seen: set[str] = set()
+        deadline = time.monotonic() + 120
+        while len(seen) < nth_lock and p.poll() is None and time.monotonic() < deadline:
+            seen |= {x.name for x in cache.glob("*.lock")} if cache.exists() else set()
+            time.sleep(0.002)
+        assert len(seen) >= nth_lock, "the run ended before holding the lock to interrupt"
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=120)
+        assert p.returncode == 143 and err.strip().splitlines() == [
+            "simbench: terminated (SIGTERM); partial outputs and cache locks removed"
+        ], (p.returncode, err)
+        assert not list(cache.glob("*.lock")) and not list(cache.glob(".*.tmp"))
+        assert _folder_is_whole(tmp_path / "out")
+    assert not [x.name for x in tmp_path.iterdir() if x.name.startswith(".out")], "a temporary folder was left"
