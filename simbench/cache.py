@@ -59,6 +59,9 @@ __all__ = [
     "array_digest",
     "cache_entries",
     "cache_usage",
+    "check_cache_folder",
+    "check_cache_location",
+    "claim_cache_folder",
     "prune_cache",
     "scene_fingerprint",
     "source_digest",
@@ -146,6 +149,24 @@ def check_cache_folder(root: str | Path) -> Path:
             f"{root}: not a simbench render cache (no {MARKER_NAME} of simbench's) and it holds other files "
             f"({shown}); give an empty or new folder as the cache"
         )
+    return root
+
+
+def check_cache_location(root: str | Path, *, what: str = "cache") -> Path:
+    """Check, before any work, that ``root`` can serve as a cache folder: a marked cache or
+    one that can be made there (not a file, not under a file, writable).
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and what stands in the way (:class:`NotACacheError` for a folder of
+        other files).
+    """
+    from simbench.io import check_output_folder
+
+    root = check_output_folder(root, what=what)
+    if root.exists():
+        check_cache_folder(root)
     return root
 
 

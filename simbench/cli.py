@@ -242,6 +242,15 @@ def _cmd_render(args) -> int:
     spp, sampler = _render_settings(args)
     manifest = "meta.json" if args.system == "proposed" else "device.json"
     check_output_directory(args.out, manifest=manifest, overwrite=args.overwrite)  # before minutes of rendering
+    if not args.no_cache:
+        from simbench.cache import check_cache_location
+
+        cache_dir, out_dir = Path(args.cache).resolve(), Path(args.out).resolve()
+        if cache_dir == out_dir or out_dir in cache_dir.parents or cache_dir in out_dir.parents:
+            raise ValueError(
+                f"--cache {args.cache} and --out {args.out} overlap: the render cache needs its own folder"
+            )
+        check_cache_location(args.cache, what="--cache")
     variant = select_variant(args.variant)
     t0 = time.perf_counter()
     cache = _cache_of(args)
@@ -447,6 +456,7 @@ def _cmd_decode(args) -> int:
             raise FileNotFoundError(f"{args.capture} not found")
         raise ValueError("--rig is required when CAPTURE is an image (or give a folder written by `simbench render`)")
     _check_outputs_apart_from_inputs(args)
+    _check_decode_outputs(args)
     rig = load_rig(args.rig)
     manifests = {p: _manifest_of(Path(p)) for p in (args.capture, args.reference, args.rig) if p and Path(p).is_file()}
     _check_same_recording_rig(args, manifests)
@@ -521,8 +531,10 @@ def _cmd_decode(args) -> int:
         msg += f", stages in {d}/"
     if len({p.resolve() for p in files}) != len(files):
         raise ValueError("--out, --ply and the --debug-dir files must be different paths")
+    # only now, the decode done: a failed decode leaves nothing behind, not even a cache entry; and
+    # before the outputs, so that a cache that cannot take the entry fails with no output written
+    store_reference()
     write_files(files)
-    store_reference()  # only now: a failed decode leaves nothing behind, not even a cache entry
     print(msg)
     return 0
 
@@ -537,7 +549,8 @@ def _check_outputs_apart_from_inputs(args) -> None:
     for p in (args.capture, args.reference, args.rig, getattr(args, "calibration", None)):
         if p:
             protected.add(Path(p).resolve())
-            listed = listed_files(Path(p).parent / "meta.json")
+            folder = Path(p) if Path(p).is_dir() else Path(p).parent
+            listed = listed_files(folder / "meta.json") | listed_files(folder / "device.json")
             protected |= listed
             folders |= {f.parent for f in listed}
     outputs = [Path(args.out)] + ([Path(args.ply)] if args.ply else [])
@@ -548,6 +561,24 @@ def _check_outputs_apart_from_inputs(args) -> None:
             raise ValueError(
                 f"{out} is a file of the recording being decoded (or an input): choose another output path"
             )
+
+
+def _check_decode_outputs(args) -> None:
+    """Every output of a decode writable before the decode starts: --out, --ply, --debug-dir
+    and the reference cache (a folder in the way, a file above one, no permission)."""
+    from simbench.cache import check_cache_location
+    from simbench.io import check_output_file, check_output_folder
+
+    check_output_file(args.out, what="--out")
+    if args.ply:
+        check_output_file(args.ply, what="--ply")
+    if args.debug_dir:
+        check_output_folder(args.debug_dir, what="--debug-dir")
+        debug, out = Path(args.debug_dir).resolve(), Path(args.out).resolve()
+        if debug == out or out in debug.parents:
+            raise ValueError(f"--debug-dir {args.debug_dir} is --out {args.out} or under it: give another folder")
+    if not args.no_cache:
+        check_cache_location(args.cache, what="--cache")
 
 
 def _check_same_recording_rig(args, manifests: dict) -> None:
@@ -755,6 +786,8 @@ def _decode_recording(args) -> int:
     from simbench.systems import get_system, system_of_recording
 
     system = get_system(system_of_recording(args.capture))
+    _check_outputs_apart_from_inputs(args)
+    _check_decode_outputs(args)
     raw, cal, scene = system.read_recording(Path(args.capture))
     if args.rig is not None:  # e.g. the rig `simbench calibrate` estimated, instead of the recorded one
         from simbench.rig import load_rig

@@ -261,6 +261,40 @@ def _make_parents(path: Path) -> list[Path]:
     return missing
 
 
+def check_output_file(path: str | Path, *, what: str = "output") -> Path:
+    """Check, before any work, that ``path`` can be written as a file: not an existing folder
+    (or device), not under a file, in a folder this process may write.  Returns the path.
+
+    Raises
+    ------
+    ValueError
+        Naming the path and what stands in the way.
+    """
+    path = Path(path)
+    if str(path) == "":
+        raise ValueError(f"{what}: an empty path")
+    if path.exists() and not path.is_file():
+        kind = "a folder" if path.is_dir() else "not a regular file"
+        raise ValueError(f"{what} {path} is {kind}; give a file path")
+    check_output_folder(path.parent, what=what)
+    return path
+
+
+def check_output_folder(path: str | Path, *, what: str = "output") -> Path:
+    """Check that ``path`` is, or can be created as, a folder this process may write in."""
+    path = Path(path) if str(path) else Path(".")
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{what}: {path} is a file, not a folder")
+    d = path
+    while not d.exists():
+        d = d.parent
+    if not d.is_dir():
+        raise ValueError(f"{what}: {d} is a file, so {path} cannot be created")
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise ValueError(f"{what}: cannot write in {d} (permission denied or a read-only file system)")
+    return path
+
+
 def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     """Write several files all or nothing.
 
@@ -273,6 +307,8 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     -------
     list of Path, the destinations in the order given
     """
+    for path in files:
+        check_output_file(path)  # a folder in the way fails before anything is written
     staged: list[tuple[str, Path]] = []
     created: list[Path] = []
     try:
@@ -296,8 +332,13 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
             except OSError:
                 pass
         raise
-    for tmp, path in staged:
-        os.replace(tmp, path)
+    try:
+        for tmp, path in staged:
+            os.replace(tmp, path)
+    finally:  # a rename that failed leaves no temporary file behind
+        for tmp, _ in staged:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
     return [path for _, path in staged]
 
 

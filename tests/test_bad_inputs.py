@@ -609,6 +609,73 @@ case(
 )
 
 
+# issue 33: partial outputs - each was exit 2 with depth.npy (or a .tmp) already written
+case(
+    "decode-cache-is-a-file",
+    lambda d: _decode(d, "--cache", str(d / "f")),
+    "is a file, not a folder",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
+case(
+    "decode-cache-under-a-file",
+    lambda d: _decode(d, "--cache", str(d / "f" / "cache")),
+    "is a file, so",
+    setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
+)
+case(
+    "decode-cache-of-other-files",
+    lambda d: _decode(d, "--cache", str(d / "mine")),
+    "not a simbench render cache",
+    setup=lambda d: (render_folder(d), (d / "mine").mkdir(), (d / "mine" / "notes.txt").write_text("x")),
+)
+case(
+    "decode-ply-is-a-folder",
+    lambda d: _decode(d, "--ply", str(d / "p.ply")),
+    "is a folder",
+    setup=lambda d: (render_folder(d), (d / "p.ply").mkdir()),
+)
+case(
+    "decode-out-is-a-folder",
+    lambda d: ["decode", str(d / "r"), "--out", str(d / "o.npy")],
+    "is a folder",
+    setup=lambda d: (render_folder(d), (d / "o.npy").mkdir()),
+)
+case(
+    "decode-debug-dir-is-out",
+    lambda d: _decode(d, "--debug-dir", str(d / "depth.npy")),
+    "is --out",
+    setup=render_folder,
+)
+case(
+    "decode-out-over-the-ground-truth",
+    lambda d: ["decode", str(d / "r"), "--out", str(d / "r" / "gt_depth.npy")],
+    "a file of the recording",
+    setup=render_folder,
+)
+case(
+    "decode-out-empty",
+    lambda d: ["decode", str(d / "r"), "--out", ""],
+    "--out",
+    setup=render_folder,
+)
+case(
+    "system-decode-out-over-its-ground-truth",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "rec" / "gt_depth.npy")],
+    "a file of the recording",
+    setup=lambda d: _recording(d, {"device": "tof"}, {"gt_depth.npy": b"x"}),
+)
+case(
+    "render-cache-is-out",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x")],
+    "overlap",
+)
+case(
+    "render-cache-inside-out",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x" / "c")],
+    "overlap",
+)
+
+
 def _mixed(d: Path) -> None:
     """capture.png replaced after meta.json was written (what a killed older version left)."""
     from simbench.io import save_png
