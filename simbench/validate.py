@@ -68,7 +68,10 @@ def number(
     what = f"a {'' if allow_inf else 'finite '}number{' ' + rng if rng else ''}"
     if not _is_real(value):
         raise ValueError(f"{name} must be {what}, got {value!r}")
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an integer beyond a float's range (10**400)
+        v = math.inf if value > 0 else -math.inf
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
         raise ValueError(f"{name} must be {what}, got {value!r}")
     if lo is not None and (v < lo or (lo_open and v == lo)):

@@ -75,6 +75,13 @@ def choose_variant(
     if requested:
         if requested not in available:
             raise ValueError(f"unknown Mitsuba variant {requested!r}; available: {available}")
+        if requested.startswith("cuda_") and not cuda:
+            raise ValueError(f"variant {requested} needs a CUDA GPU, and none is usable here; available: {available}")
+        if not requested.endswith("_rgb"):
+            # simbench renders three primaries as RGB channels (spectral and polarised variants
+            # return other layouts)
+            usable = [v for v in available if v.endswith("_rgb")]
+            raise ValueError(f"variant {requested}: simbench renders in an RGB variant; usable here: {usable}")
         if requested.startswith("llvm_") and not llvm_ok:
             raise ValueError(
                 f"variant {requested} needs libLLVM >= {MIN_LLVM_MAJOR} (found: {llvm_text}); "
@@ -109,7 +116,11 @@ def select_variant(requested: str | None = None) -> str:
     variant, notice = choose_variant(requested, available=list(mi.variants()), llvm_version=llvm, cuda=_has_cuda(dr))
     if notice:
         log.warning(notice)
-    mi.set_variant(variant)
+    try:
+        mi.set_variant(variant)
+    except (ImportError, RuntimeError, AttributeError) as exc:
+        msg = (str(exc).splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"Mitsuba variant {variant} cannot be used here ({msg}); use --variant scalar_rgb") from None
     return variant
 
 

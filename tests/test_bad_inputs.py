@@ -697,6 +697,17 @@ case(
     "reference_depth_m",
     setup=lambda d: _seal(render_folder(d), reference_depth_m=-1),
 )
+case(
+    "decode-meta-z0-overflow",  # issue 33: an OverflowError, exit 1 (sealed, so only the value is wrong)
+    lambda d: _decode(d),
+    "reference_depth_m",
+    setup=lambda d: _seal(render_folder(d), reference_depth_m=10**400),
+)
+case(
+    "render-variant-cuda-without-gpu",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--variant", "cuda_ad_rgb"],
+    "cuda_ad_rgb",
+)
 
 # ----------------------------------------------------------------------------------- score
 for cid, argv, msg, setup in [

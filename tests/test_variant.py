@@ -106,3 +106,15 @@ print(v)
     assert np.allclose(a["depth"], b["depth"], atol=1e-5, equal_nan=True)
     assert np.allclose(a["col"], b["col"], atol=1e-3, equal_nan=True)
     assert abs(a["rad"].mean() - b["rad"].mean()) < 0.01 * b["rad"].mean()  # different samplers, same physics
+
+
+def test_variants_that_cannot_render_here_are_refused_with_one_line():
+    """Issue 33: ``--variant cuda_ad_rgb`` without a GPU and ``scalar_spectral`` (listed as
+    available) were an ImportError and a RuntimeError, exit 1."""
+    from simbench.variant import choose_variant
+
+    with pytest.raises(ValueError, match="needs a CUDA GPU"):
+        choose_variant("cuda_ad_rgb", available=ALL, llvm_version=(19, 1, 0), cuda=False)
+    assert choose_variant("cuda_ad_rgb", available=ALL, llvm_version=None, cuda=True)[0] == "cuda_ad_rgb"
+    with pytest.raises(ValueError, match="RGB variant; usable here: .*scalar_rgb"):
+        choose_variant("scalar_spectral", available=[*ALL, "scalar_spectral"], llvm_version=(19, 1, 0), cuda=False)
