@@ -882,6 +882,7 @@ def _cmd_reproduce(args) -> int:
     from simbench.device import get_sensor
     from simbench.experiments.reproduce import (
         check_targets,
+        check_threshold_names,
         check_thresholds,
         load_thresholds,
         reproduce,
@@ -892,7 +893,11 @@ def _cmd_reproduce(args) -> int:
     # everything a user can get wrong is checked before the first render
     check_targets(args.targets)
     if args.check:
-        load_thresholds(args.check)
+        check_threshold_names(load_thresholds(args.check), args.targets, path=args.check)
+    if args.write_thresholds:
+        from simbench.io import check_output_file
+
+        check_output_file(args.write_thresholds, what="--write-thresholds")
     if args.camera is not None:
         get_sensor(args.camera)
     overrides = {

@@ -968,6 +968,24 @@ case(
     "max or min",
     files={"t.toml": '["a/b"]\nmeasured = 1\n'},
 )
+case(
+    "reproduce-check-unknown-target",  # issue 33: reported only after the run
+    lambda d: ["reproduce", "table1", "--quick", "--check", str(d / "t.toml")],
+    "'table2/white/gt_mae_mm' is not made by the targets",
+    files={"t.toml": '["table2/white/gt_mae_mm"]\nmax = 1\n'},
+)
+case(
+    "reproduce-check-metric-of-another-target",
+    lambda d: ["reproduce", "table1", "--quick", "--check", str(d / "t.toml")],
+    "not made by the targets",
+    files={"t.toml": '["fig9/x/rmse_mm"]\nmax = 1\n'},
+)
+case(
+    "reproduce-write-thresholds-a-folder",  # issue 33: wrote every result, then failed
+    lambda d: ["reproduce", "table1", "--quick", "--write-thresholds", str(d / "dir")],
+    "is a folder",
+    setup=lambda d: (d / "dir").mkdir(),
+)
 case("crosstalk-out-under-a-file", lambda d: ["crosstalk", "--out", str(d / "f" / "c.md")], "f", files={"f": "x"})
 for cid, body, msg in [
     ("unknown-parameter", 'name = "s"\n[[axis]]\nname = "decoder.votes"\nvalues = [1]\n', "unknown sweep parameter"),

@@ -288,6 +288,21 @@ def load_thresholds(path: str | Path) -> dict:
     return table
 
 
+def check_threshold_names(table: dict, targets: list[str], *, path: str | Path = "thresholds") -> None:
+    """Before a run: every metric a thresholds file names must come from one of the targets the
+    run makes (``TARGET/.../METRIC``), so a misnamed or unselected metric fails at once rather
+    than as "not measured" after the run.  (The parts between the target and the metric depend
+    on what the run makes; they are checked after it, as ``not measured``.)"""
+    names = set(check_targets(targets))
+    for name in table:
+        parts = str(name).split("/")
+        if len(parts) < 2 or parts[0] not in names:
+            raise ValueError(
+                f"{path}: metric {name!r} is not made by the targets of this run ({sorted(names)}); metric names are "
+                "TARGET/.../METRIC as in results/quick/thresholds.toml"
+            )
+
+
 def check_thresholds(metrics: dict, thresholds_path: str | Path) -> list[str]:
     """Failures (one line each) of ``metrics`` against a thresholds file; empty = pass.
 
