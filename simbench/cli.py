@@ -287,6 +287,7 @@ def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
         with_calibration=args.calibration_frames,
         cache=cache,
     )
+    _check_visible(acq.gt, scene)
     return write_acquisition(acq, args.out, overwrite=args.overwrite)
 
 
@@ -301,6 +302,7 @@ def _render_system(args, system, scene, *, spp: int, sampler: str, cache, varian
     prepared = system.prepare(scene)
     cal = system.calibrate(prepared, seeds=seeds, render=render)
     rec = acquire(system, prepared, scene.name, seeds=seeds, render=render, calibration=cal, prepared=True)[0]
+    _check_visible(rec.gt, scene)
     meta = {
         "scene": str(args.scene),
         "spp": spp,
@@ -312,6 +314,16 @@ def _render_system(args, system, scene, *, spp: int, sampler: str, cache, varian
     return system.write_recording(
         Path(args.out), rec.raw, cal, scene=rec.scene, gt=rec.gt, meta=meta, overwrite=args.overwrite
     )
+
+
+def _check_visible(gt, scene) -> None:
+    """A render in which no object of the scene reaches the camera is an error, not a folder of
+    black images (objects behind the camera, far outside its view, or too small to see)."""
+    if not np.isfinite(gt.depth_m).any():
+        raise ValueError(
+            f"scene {scene.name!r}: no object is visible to the camera (every one is behind it, outside its field of "
+            "view or smaller than a pixel); nothing was written"
+        )
 
 
 def _manifest_of(path: Path) -> dict | None:

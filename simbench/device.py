@@ -115,6 +115,11 @@ class Lens:
         return focal_px * pixel_pitch_um * 1e-6 / self.f_number
 
 
+def _bits(bits: object) -> int:
+    """The ADC's bits, checked (the offset's bound needs them before the other fields)."""
+    return validate.choice(validate.integer(bits, "bits"), "bits", (8, 10, 12, 16))
+
+
 @dataclass(frozen=True)
 class PhysicalCamera:
     """A colour camera after EMVA 1288 with a colour filter array (see :mod:`simbench.sensor`).
@@ -144,19 +149,31 @@ class PhysicalCamera:
 
     def __post_init__(self) -> None:
         v = validate
+        # Physical ranges (issue 33: offset_dn, dark_current_e_s or dsnu_e = 1e30 validated and
+        # made every capture 255).  Each bound is far outside any camera sold, inside what the
+        # model means:
+        # - full well: machine-vision and scientific sensors hold 2-500 ke- (EMVA 1288 datasheets;
+        #   large-pixel CCDs ~1 Me-): at most 1e7 e-;
+        # - read (dark) noise and DSNU: a few e- (CMOS) to tens of e- (old CCDs): at most 1e4 e-;
+        # - dark current: 1-100 e-/s uncooled at room temperature, ~1e4 e-/s hot: at most 1e6 e-/s;
+        # - gain: at most 1e4 DN/e- (a 16-bit ADC over a 6.5 e- full well);
+        # - black level (offset): a few % of the ADC range; at most half of it, else the capture
+        #   has no room for a signal.
         _set(
             self,
             {
                 "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
                 "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
-                "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
-                "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0),
+                "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True, hi=1e7),
+                "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0, hi=1e4),
                 "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
-                "gain_dn_per_e": v.optional(v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True),
-                "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0),
-                "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0),
+                "gain_dn_per_e": v.optional(
+                    v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True, hi=1e4
+                ),
+                "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0, hi=0.5 * ((1 << _bits(self.bits)) - 1)),
+                "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0, hi=1e6),
                 "prnu": v.number(self.prnu, "prnu", lo=0.0, hi=1.0),
-                "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0),
+                "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0, hi=1e4),
                 "fixed_pattern_seed": v.integer(self.fixed_pattern_seed, "fixed_pattern_seed", lo=0, hi=2**63 - 1),
                 "exposure_s": v.optional(v.number, self.exposure_s, "exposure_s", lo=0.0, hi=3600.0, lo_open=True),
                 "auto_exposure_fraction": v.number(

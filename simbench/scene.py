@@ -176,6 +176,8 @@ def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
         validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0),
         dtype=np.float64,
     )
+    if not np.array_equal(v, np.round(v)):
+        raise ValueError(f"srgb8 holds 8-bit integers 0-255 (rgb takes reflectances in [0, 1]), got {list(srgb8)!r}")
     c = v / 255.0
     lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
@@ -234,8 +236,28 @@ class SceneSpec:
     base_dir: Path = field(default=Path("."), compare=False)
 
 
+# Physical ranges of scene geometry (issue 33: objects at z = 1e308, spheres of radius 1e30 and
+# rotations of 1e308 deg validated and rendered an empty image).  Assumption: structured light
+# works within 100 m of the camera (the same bound as reference_depth_m), so positions lie within
+# +-SCENE_EXTENT_M on each axis and sizes up to it; an angle beyond one turn is a typo, not a pose.
+SCENE_EXTENT_M = 100.0
+MAX_ANGLE_DEG = 360.0
+# a mesh's unit: from micrometres (1e-6) to kilometres (1e3) per file unit
+MESH_SCALE_RANGE = (1e-6, 1e3)
+# Assumption: the projector scale multiplies the sensor model's projector output (the
+# LightCrafter 4500's 150 lm by default); 1000x is 150,000 lm, twice the brightest cinema
+# projectors (~75,000 lm), so a larger factor is an error, not a projector
+MAX_PROJECTOR_SCALE = 1e3
+
+
 def _vec(v: object, n: int, where: str, *, positive: bool = False) -> tuple[float, ...]:
-    return validate.numbers(v, where, n, lo=0.0 if positive else None, lo_open=positive)
+    """A position (or, ``positive``, a size) in metres within the scene's extent."""
+    lo = 0.0 if positive else -SCENE_EXTENT_M
+    return validate.numbers(v, where, n, lo=lo, hi=SCENE_EXTENT_M, lo_open=positive)
+
+
+def _angles(v: object, where: str) -> tuple[float, ...]:
+    return validate.numbers(v, where, 3, lo=-MAX_ANGLE_DEG, hi=MAX_ANGLE_DEG)
 
 
 def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
@@ -249,7 +271,9 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
     unknown = sorted(set(d) - set(allowed))
     if unknown:
         raise ValueError(f"{where} ({kind}): unknown key(s) {unknown}; valid keys: {list(allowed)}")
-    name = str(d.get("name", f"{kind}{index}"))
+    name = d.get("name", f"{kind}{index}")
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"{where}: name must be a non-empty string, got {name!r}")
     where = f"object[{index}] {name!r}"
     p = OBJECT_KIND_TABLE[kind].parse(d, where, base_dir)
     try:
@@ -297,7 +321,7 @@ def scene_from_dict(data: dict, *, base_dir: Path = Path("."), where: str = "sce
             raise ValueError("[projector] takes only: scale")
         if not isinstance(amb, dict) or sorted(set(amb) - {"rgb"}):
             raise ValueError("[ambient] takes only: rgb")
-        scale = validate.number(proj.get("scale", 1.0), "projector.scale", lo=0.0, lo_open=True)
+        scale = validate.number(proj.get("scale", 1.0), "projector.scale", lo=0.0, lo_open=True, hi=MAX_PROJECTOR_SCALE)
         # assumption: structured light works within 100 m
         z0 = validate.number(data.get("reference_depth_m", 1.0), "reference_depth_m", lo=0.0, hi=100.0, lo_open=True)
         ambient = validate.numbers(amb.get("rgb", (0, 0, 0)), "ambient.rgb", 3, lo=0.0)
@@ -306,6 +330,9 @@ def scene_from_dict(data: dict, *, base_dir: Path = Path("."), where: str = "sce
     names = [o.name for o in objects]
     if len(set(names)) != len(names):
         raise ValueError(f"{where}: object names must be unique, got {names}")
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise ValueError(f"{where}: {key} must be a string, got {data[key]!r}")
     return SceneSpec(
         name=str(data.get("name", "scene")),
         rig=rig,
@@ -505,7 +532,7 @@ def _parse_board(d: dict, where: str, base_dir: Path, *, dims: int) -> dict:
     if "size_m" not in d:
         raise ValueError(f"{where}: missing size_m")
     p["size_m"] = _vec(d["size_m"], dims, f"{where}.size_m", positive=True)
-    p["rotation_deg"] = _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg")
+    p["rotation_deg"] = _angles(d.get("rotation_deg", (0, 0, 0)), f"{where}.rotation_deg")
     return p
 
 
@@ -540,7 +567,7 @@ def _parse_target(d: dict, where: str, base_dir: Path) -> dict:
     ink = validate.numbers(d.get("ink_rgb", (PAINT_MIN_REFLECTANCE,) * 3), f"{where}: ink_rgb", 3, lo=0.0, hi=1.0)
     p: dict[str, object] = {
         "center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m"),
-        "rotation_deg": _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg"),
+        "rotation_deg": _angles(d.get("rotation_deg", (0, 0, 0)), f"{where}.rotation_deg"),
         "squares": squares,
         "square_m": square_m,
         "margin_squares": margin,
@@ -563,7 +590,7 @@ def _parse_box(d: dict, where: str, base_dir: Path) -> dict:
 def _parse_sphere(d: dict, where: str, base_dir: Path) -> dict:
     return {
         "center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m"),
-        "radius_m": validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True),
+        "radius_m": validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True, hi=SCENE_EXTENT_M),
     }
 
 
@@ -655,9 +682,11 @@ def _parse_mesh(d: dict, where: str, base_dir: Path) -> dict:
         raise ValueError(f"{where}: {exc}") from None
     return {
         "file": str(path.resolve()),
-        "scale": validate.number(d.get("scale", 1.0), f"{where}: scale", lo=0.0, lo_open=True),
+        "scale": validate.number(
+            d.get("scale", 1.0), f"{where}: scale", lo=MESH_SCALE_RANGE[0], hi=MESH_SCALE_RANGE[1]
+        ),
         "translate_m": _vec(d.get("translate_m", (0, 0, 0)), 3, f"{where}.translate_m"),
-        "rotation_deg": _vec(d.get("rotation_deg", (0, 0, 0)), 3, f"{where}.rotation_deg"),
+        "rotation_deg": _angles(d.get("rotation_deg", (0, 0, 0)), f"{where}.rotation_deg"),
     }
 
 

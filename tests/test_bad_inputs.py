@@ -233,10 +233,31 @@ for cid, body, msg in [
         "scale",
     ),
     ("duplicate-names", PLANE + PLANE, "unique"),
+    # issue 33: values that validated and rendered nothing (exit 0); bounds in simbench.scene
+    ("center-1e308", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 1e308]"), "center_m"),
+    ("center-beyond-100m", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 150.0]"), "center_m"),
+    ("sphere-radius-1e30", '[[object]]\ntype = "sphere"\nradius_m = 1e30\n', "radius_m"),
+    ("rotation-1e308", PLANE + "rotation_deg = [0.0, 1e308, 0.0]\n", "rotation_deg"),
+    ("rotation-beyond-a-turn", PLANE + "rotation_deg = [400.0, 0.0, 0.0]\n", "rotation_deg"),
+    ("srgb8-fraction", PLANE + "srgb8 = [0.5, 0.5, 0.5]\n", "8-bit integers"),
+    ("name-table", '[[object]]\ntype = "sphere"\nradius_m = 0.1\nname = {x = 1}\n', "name must be a non-empty string"),
+    ("scene-name-table", "name = {x = 1}\n" + PLANE, "name must be a string"),
+    ("projector-scale-1e300", "[projector]\nscale = 1e300\n" + PLANE, "projector.scale"),
+    (
+        "mesh-scale-huge",
+        f'[[object]]\ntype = "mesh"\nfile = "{SCENES / "meshes" / "pear.ply"}"\nscale = 1e30\n',
+        "scale",
+    ),
 ]:
     case(
         f"render-scene-{cid}", lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")], msg, files=_scene(body)
     )
+case(  # issue 33: a folder of black images, exit 0 (the tiny rig, 1 spp: a render of ~1 s)
+    "render-scene-behind-the-camera",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out"), "--spp", "1", "--no-cache", "--sensor", "ideal"],
+    "no object is visible",
+    files=_scene('rig = "rig.toml"\n' + PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, -1.0]"), TINY_RIG),
+)
 case(
     "render-scene-missing", lambda d: ["render", str(d / "nope.toml"), "--out", str(d / "out")], "scene file not found"
 )
@@ -341,6 +362,12 @@ for cid, text, msg in [
     ("dark-noise-negative", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = -1.0"), "dark_noise_e"),
     ("dark-noise-inf", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = inf"), "dark_noise_e"),
     ("bits-9", _sensor(PAPER, "bits = 8", "bits = 9"), "bits"),
+    # issue 33: validated and made every capture 255 (exit 0); bounds argued in simbench.device
+    ("offset-1e30", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 1e30"), "offset_dn"),
+    ("offset-above-half-range", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 200.0"), "offset_dn"),
+    ("dark-current-1e30", _sensor(PAPER, "dark_current_e_s = 0.0", "dark_current_e_s = 1e30"), "dark_current_e_s"),
+    ("dsnu-1e30", _sensor(PAPER, "dsnu_e = 5.0", "dsnu_e = 1e30"), "dsnu_e"),
+    ("full-well-1e30", _sensor(PAPER, "full_well_e = 10000.0", "full_well_e = 1e30"), "full_well_e"),
     ("bits-string", _sensor(PAPER, "bits = 8", 'bits = "8"'), "bits"),
     ("cfa-unknown", _sensor(PAPER, 'cfa = "RGGB"', 'cfa = "RGBW"'), "cfa"),
     ("demosaic-unknown", _sensor(PAPER, 'demosaic = "bilinear"', 'demosaic = "ai"'), "demosaic"),
