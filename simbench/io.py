@@ -136,10 +136,13 @@ def check_output_directory(path: str | Path, *, manifest: str, overwrite: bool =
     """ValueError unless :func:`output_directory` could write ``path`` (call it before long
     work, so that a wrong ``--out`` fails at once)."""
     path = Path(path)
+    if path.is_symlink():  # the swap would replace the link, not the folder it names
+        raise ValueError(f"{path} is a symbolic link (to {os.readlink(path)}): give the folder itself as the output")
     if path.exists() and not path.is_dir():
         raise ValueError(f"{path} exists and is not a folder")
     if path.is_dir():
         _check_replaceable(path, manifest, overwrite)
+    check_output_folder(path.parent, what=str(path))  # the new folder is built beside it, then swapped in
 
 
 @contextmanager

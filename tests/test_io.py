@@ -78,3 +78,21 @@ def test_a_failed_write_names_its_file_keeps_the_old_one_and_leaves_no_temporary
         atomic_write_text(target, "new")
     assert info.value.errno == errno.ENOSPC and info.value.filename == str(target)
     assert [p.name for p in tmp_path.iterdir()] == ["x.txt"] and target.read_text() == "old"
+
+
+def test_an_output_folder_given_as_a_symbolic_link_is_refused_before_any_work(tmp_path):
+    """Issue 33: ``render --out LINK`` (a link to an earlier render) swapped the new render in,
+    then failed on rmtree of the link, leaving a temporary folder."""
+    import os
+
+    from simbench.io import check_output_directory, output_directory
+
+    with output_directory(tmp_path / "real", manifest="m.json") as d:
+        (d / "m.json").write_text('{"files": {}}')
+    os.symlink(tmp_path / "real", tmp_path / "link")
+    with pytest.raises(ValueError, match="is a symbolic link"):
+        check_output_directory(tmp_path / "link", manifest="m.json")
+    with pytest.raises(ValueError, match="is a symbolic link"):
+        with output_directory(tmp_path / "link", manifest="m.json"):
+            pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"] and (tmp_path / "link").is_symlink()
