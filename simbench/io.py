@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import validate
+
 __all__ = [
     "check_output_directory",
     "atomic_write_bytes",
@@ -345,6 +347,31 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     return [path for _, path in staged]
 
 
+# The largest array simbench reads from a file: an RGB image of the largest supported size in
+# float64 (validate.MAX_PIXELS x 3 x 8 bytes = 1.5 GiB); a header announcing more (a sparse
+# 64 GiB file, say) is refused before memory is asked for.
+MAX_ARRAY_BYTES = validate.MAX_PIXELS * 3 * 8
+
+
+def _check_npy_size(fh, path: Path) -> None:
+    """Refuse an .npy whose header announces more than :data:`MAX_ARRAY_BYTES` (``fh`` just
+    past the magic string)."""
+    fh.seek(0)
+    try:
+        fmt = np.lib.format
+        version = fmt.read_magic(fh)
+        read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read(fh)
+    except (ValueError, OSError, EOFError):
+        return  # np.load reports a damaged header with its own message
+    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if nbytes > MAX_ARRAY_BYTES:
+        raise ValueError(
+            f"{path}: the array is {'x'.join(map(str, shape))} {dtype} ({nbytes / 2**30:.1f} GiB), more than the "
+            f"{MAX_ARRAY_BYTES / 2**30:.1f} GiB of the largest image simbench reads"
+        )
+
+
 def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None) -> np.ndarray:
     """Load an .npy array (no pickles); errors name the file and what is wrong."""
     path = Path(path)
@@ -352,6 +379,8 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
         raise FileNotFoundError(f"file not found: {path}")
     with open(path, "rb") as fh:
         magic = fh.read(6)
+        if magic == b"\x93NUMPY":
+            _check_npy_size(fh, path)
     if magic != b"\x93NUMPY":
         what = "an empty file" if not magic else "not a NumPy .npy file"
         raise ValueError(f"{path}: {what} (expected an array saved with numpy.save)")

@@ -516,6 +516,20 @@ for cid, name, content, msg in [
             _image_file(name, content)(d)
 
     case(f"decode-{cid}", lambda d, n=name: _decode(d, capture=n), msg, setup=_setup)
+def _sparse_npy(path: Path) -> None:
+    """A 9.6 GiB .npy that takes a few kB of disk (its data never written)."""
+    from numpy.lib.format import open_memmap
+
+    del_ = open_memmap(path, mode="w+", dtype=np.float64, shape=(20000, 20000, 3))
+    del del_
+
+
+case(  # issue 33: "out of memory" without the file
+    "decode-capture-npy-sparse-huge",
+    lambda d: _decode(d, capture="huge.npy"),
+    ("huge.npy", "GiB", "more than"),
+    setup=lambda d: _sparse_npy(render_folder(d) / "huge.npy"),
+)
 case("decode-capture-missing", lambda d: _decode(d, capture="nope.png"), "nope.png", setup=render_folder)
 case(
     "decode-capture-is-folder",
