@@ -48,6 +48,14 @@ def _file_mode() -> int:
     return 0o666 & ~mask
 
 
+def _raise_with_filename(exc: BaseException, path: Path) -> None:
+    """A failed write or fsync does not say which file ("[Errno 28] No space left on device"):
+    raise it again naming ``path``, so the message and the free-space hint point at the right
+    disk.  Other exceptions are left to the caller's ``raise``."""
+    if isinstance(exc, OSError) and exc.filename is None and exc.errno is not None:
+        raise OSError(exc.errno, exc.strerror, str(path)) from exc
+
+
 @contextmanager
 def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
     """A temporary file beside ``path`` that replaces it when the block succeeds."""
@@ -61,9 +69,7 @@ def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
     except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.filename is None and exc.errno is not None:
-            # a failed write or fsync does not say which file: "[Errno 28] No space left on device: 'PATH'"
-            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        _raise_with_filename(exc, path)
         raise
 
 
@@ -188,13 +194,14 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
             os.rename(path, old)
             os.rename(tmp, path)
             shutil.rmtree(old)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         for c in reversed(created):  # innermost first
             try:
                 c.rmdir()
             except OSError:
                 break
+        _raise_with_filename(exc, path)
         raise
 
 
@@ -327,7 +334,7 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
                 fh.flush()
                 os.fsync(fh.fileno())
             os.chmod(tmp, _file_mode())
-    except BaseException:
+    except BaseException as exc:
         for tmp, _ in staged:
             if os.path.exists(tmp):
                 os.unlink(tmp)
@@ -336,6 +343,7 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
                 m.rmdir()
             except OSError:
                 pass
+        _raise_with_filename(exc, path)
         raise
     try:
         for tmp, path in staged:

@@ -96,3 +96,26 @@ def test_an_output_folder_given_as_a_symbolic_link_is_refused_before_any_work(tm
         with output_directory(tmp_path / "link", manifest="m.json"):
             pass
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"] and (tmp_path / "link").is_symlink()
+
+
+def test_a_full_disk_names_the_file_in_every_writer(tmp_path, monkeypatch):
+    """Issue 33: a full disk named no file (so the CLI's free-space hint measured the working
+    folder's disk, not the one written): write_files and output_directory name their target."""
+    import errno
+    import os
+
+    from simbench.io import output_directory, write_files
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError) as info:
+        write_files({tmp_path / "a.npy": b"1", tmp_path / "sub" / "b.npy": b"2"})
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "a.npy")
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    with pytest.raises(OSError) as info:
+        with output_directory(tmp_path / "out", manifest="m.json"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert info.value.filename == str(tmp_path / "out") and list(tmp_path.iterdir()) == []
