@@ -1382,6 +1382,10 @@ def _report_library_messages() -> None:
     logger.setLevel(logging.WARNING)
 
 
+# options that name files or folders (an empty value is refused for every one)
+_PATH_OPTIONS = ("out", "ply", "debug_dir", "write_thresholds", "cache", "calibration", "reference", "rig", "gt", "lit")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
     from simbench.threads import single_thread_blas
@@ -1392,6 +1396,10 @@ def main(argv: list[str] | None = None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
+    empty = [name for name in _PATH_OPTIONS if getattr(args, name, None) == ""]
+    if empty:  # "" would mean the working folder to some writers (demo, reproduce wrote into it)
+        print(f"simbench: error: --{empty[0].replace('_', '-')}: an empty path; give a file or folder", file=sys.stderr)
+        return 2
     previous = _on_sigterm_raise()
     try:
         return args.fn(args)

@@ -516,6 +516,8 @@ for cid, name, content, msg in [
             _image_file(name, content)(d)
 
     case(f"decode-{cid}", lambda d, n=name: _decode(d, capture=n), msg, setup=_setup)
+
+
 def _sparse_npy(path: Path) -> None:
     """A 9.6 GiB .npy that takes a few kB of disk (its data never written)."""
     from numpy.lib.format import open_memmap
@@ -1027,6 +1029,18 @@ case(
     "is a folder",
     setup=lambda d: (d / "dir").mkdir(),
 )
+# issue 33: an empty --out was the working folder to demo, reproduce and ablate (files written there)
+for cid, argv in [
+    ("pattern", ["pattern", "--out", ""]),
+    ("render", ["render", str(SCENES / "white_plane.toml"), "--out", ""]),
+    ("demo", ["demo", "--out", ""]),
+    ("reproduce", ["reproduce", "table1", "--quick", "--out", ""]),
+    ("ablate", ["ablate", "period", "--out", ""]),
+    ("crosstalk", ["crosstalk", "--out", ""]),
+    ("calibrate", ["calibrate", "--out", ""]),
+    ("render-cache", ["render", str(SCENES / "white_plane.toml"), "--out", "o", "--cache", ""]),
+]:
+    case(f"{cid}-empty-path", lambda d, a=argv: list(a), "an empty path")
 case("crosstalk-out-under-a-file", lambda d: ["crosstalk", "--out", str(d / "f" / "c.md")], "f", files={"f": "x"})
 for cid, body, msg in [
     ("unknown-parameter", 'name = "s"\n[[axis]]\nname = "decoder.votes"\nvalues = [1]\n', "unknown sweep parameter"),
