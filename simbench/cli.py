@@ -506,6 +506,8 @@ def _cmd_decode(args) -> int:
         reference, store_reference = _calibrated_reference(args, rig, params, reference, cache=cache)
     elif reference is not None:
         reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
+    if reference is not None:
+        _check_reference_plane(reference, rig, args)
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -591,6 +593,21 @@ def _check_decode_outputs(args) -> None:
             raise ValueError(f"--debug-dir {args.debug_dir} is --out {args.out} or under it: give another folder")
     if not args.no_cache:
         check_cache_location(args.cache, what="--cache")
+
+
+def _check_reference_plane(reference, rig, args) -> None:
+    """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
+    of another rig (or a wrong --z0) decoded 100 % at hundreds of mm of error before."""
+    from simbench.decode import REFERENCE_Z0_TOLERANCE, reference_plane_offset
+
+    offset = reference_plane_offset(reference, rig)
+    if np.isfinite(offset) and abs(offset) > REFERENCE_Z0_TOLERANCE:
+        z = reference.z0_m * (1 + offset)
+        raise ValueError(
+            f"the reference plane {args.reference} triangulates with the rig {args.rig} to Z = {z:.3f} m, not its Z0 = "
+            f"{reference.z0_m:g} m ({100 * offset:+.1f} %, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it "
+            "captured with this rig, and at this Z0?"
+        )
 
 
 def _check_same_recording_rig(args, manifests: dict) -> None:

@@ -595,3 +595,23 @@ def test_sigterm_ends_a_run_cleanly(tmp_path):
         assert not list(cache.glob("*.lock")) and not list(cache.glob(".*.tmp"))
         assert _folder_is_whole(tmp_path / "out")
     assert not [x.name for x in tmp_path.iterdir() if x.name.startswith(".out")], "a temporary folder was left"
+
+
+def test_a_cache_that_cannot_take_the_reference_leaves_no_output(tmp_path, capsys, monkeypatch):
+    """Issue 33: ``decode --cache`` whose entry could not be stored (an entry that is a folder,
+    a read-only mount) failed with exit 2 after depth.npy was written."""
+    import errno
+
+    import simbench.cache as cache_module
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+
+    def refuse(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system", str(tmp_path / "c" / "x.npz"))
+
+    monkeypatch.setattr(cache_module, "atomic_write_bytes", refuse)
+    out = tmp_path / "d.npy"
+    rc = main(["decode", str(r), "--out", str(out), "--ply", str(tmp_path / "p.ply"), "--cache", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Read-only file system" in err and not out.exists() and not (tmp_path / "p.ply").exists()

@@ -75,9 +75,12 @@ def test_a_folder_decodes_with_its_recorded_pattern(tmp_path, capsys):
         "--reference",
         tmp_path / "reference.png",
     ]
-    assert _run([*argv, "--out", tmp_path / "wrong.npy"], capsys)[0] == 0
-    wrong = np.load(tmp_path / "wrong.npy")
-    assert np.isfinite(wrong).mean() < 0.8 or np.nanmean(np.abs(wrong - 1.1)) > 5e-3
+    rc, _, err = _run([*argv, "--out", tmp_path / "wrong.npy"], capsys)
+    if rc == 0:
+        wrong = np.load(tmp_path / "wrong.npy")
+        assert np.isfinite(wrong).mean() < 0.8 or np.nanmean(np.abs(wrong - 1.1)) > 5e-3
+    else:  # the reference, decoded with the wrong pattern, does not triangulate to Z0
+        assert rc == 2 and "triangulates" in err, err
     for option, value in (("--order", "3"), ("--period", "25"), ("--channels", "grb"), ("--sequence", "00010111")):
         rc, _, err = _run(["decode", r, "--out", tmp_path / "x.npy", option, value], capsys)
         assert rc == 2 and f"{option} {value} contradicts the recording" in err and "order 4" in err, err
@@ -222,3 +225,52 @@ def test_the_seal_covers_its_own_content(tmp_path):
     (tmp_path / "m.json").write_text(json.dumps(bad))
     with pytest.raises(ManifestError, match="not a file name in the folder"):
         read_manifest(tmp_path / "m.json")
+
+
+def _tiny_plane_png(path: Path, rig_text: str, z_m: float) -> None:
+    import tomllib
+
+    from simbench.io import save_png
+    from simbench.pattern import PatternSpec, fringe_pattern, quantize
+    from simbench.rig import rig_from_dict
+    from simbench.synthetic import synthetic_plane_capture
+
+    rig = rig_from_dict(tomllib.loads(rig_text))
+    drive = quantize(fringe_pattern(PatternSpec(size_hw=rig.projector.size_hw))).astype(np.float32) / 255
+    img = synthetic_plane_capture(drive, rig, point_m=(0, 0, z_m))[0]
+    save_png(path, np.round(np.clip(img, 0, 1) * 255).astype(np.uint8))
+
+
+def test_reference_plane_offset_against_its_closed_form(tmp_path):
+    """A synthetic reference at Z decoded as if at Z0 = 1 m lies at (Z - Z0) / Z0 to first order."""
+    import tomllib
+
+    from simbench.decode import DecoderParams, decode_reference, reference_plane_offset
+    from simbench.io import load_image
+    from simbench.pattern import PatternSpec
+    from simbench.rig import rig_from_dict
+
+    rig = rig_from_dict(tomllib.loads(TINY_RIG))
+    params = DecoderParams(pattern=PatternSpec(size_hw=rig.projector.size_hw), z0_m=1.0)
+    for z, tol in ((1.0, 0.002), (1.02, 0.003), (0.98, 0.003)):
+        _tiny_plane_png(tmp_path / "ref.png", TINY_RIG, z)
+        ref = decode_reference(load_image(tmp_path / "ref.png"), rig=rig, params=params)
+        assert reference_plane_offset(ref, rig) == pytest.approx(z - 1.0, abs=tol)
+
+
+def test_a_bare_reference_of_another_rig_or_depth_is_refused(tmp_path, capsys):
+    """No recording to compare rigs by: the reference is triangulated with the rig instead.  A
+    0.120 m-baseline reference against the 0.093 m rig, and a --z0 that is not the plane's."""
+    from .test_bad_inputs import _rig_text
+
+    other = _rig_text(**{"pose.position_m": "[0.120, 0.0, 0.0]"})
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    _tiny_plane_png(tmp_path / "cap.png", TINY_RIG, 1.1)
+    _tiny_plane_png(tmp_path / "ref.png", TINY_RIG, 1.0)
+    _tiny_plane_png(tmp_path / "ref_other.png", other, 1.0)
+    base = ["decode", tmp_path / "cap.png", "--rig", tmp_path / "rig.toml", "--out", tmp_path / "d.npy", "--no-cache"]
+    assert _run([*base, "--reference", tmp_path / "ref.png"], capsys)[0] == 0
+    rc, _, err = _run([*base, "--reference", tmp_path / "ref_other.png"], capsys)
+    assert rc == 2 and "not its Z0 = 1 m" in err and "captured with this rig" in err, err
+    rc, _, err = _run([*base, "--reference", tmp_path / "ref.png", "--z0", "1.1"], capsys)
+    assert rc == 2 and "not its Z0 = 1.1 m" in err, err

@@ -285,6 +285,11 @@ def test_a_bad_mesh_is_refused_with_one_line(tmp_path, vertices, faces, match):
 
 
 def test_mesh_files_that_are_no_mesh(tmp_path):
+    import os
+
+    os.mkfifo(tmp_path / "pipe.ply")  # reading it would block for ever; said "not found" before
+    with pytest.raises(ValueError, match="pipe.ply is not a regular file"):
+        scene_from_dict({"object": [{"type": "mesh", "file": "pipe.ply"}]}, base_dir=tmp_path)
     (tmp_path / "d.ply").mkdir()
     with pytest.raises(ValueError, match="d.ply is a folder"):
         scene_from_dict(

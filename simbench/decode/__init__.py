@@ -8,7 +8,9 @@ from simbench.decode.pipeline import (
     ReferenceMap,
     as_float_image,
     decode,
+    REFERENCE_Z0_TOLERANCE,
     decode_reference,
+    reference_plane_offset,
     robust_params,
 )
 
@@ -21,5 +23,7 @@ __all__ = [
     "as_float_image",
     "decode",
     "decode_reference",
+    "reference_plane_offset",
+    "REFERENCE_Z0_TOLERANCE",
     "robust_params",
 ]

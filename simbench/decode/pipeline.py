@@ -60,6 +60,8 @@ __all__ = [
     "LazyStages",
     "as_float_image",
     "decode_reference",
+    "reference_plane_offset",
+    "REFERENCE_Z0_TOLERANCE",
     "decode",
 ]
 
@@ -752,6 +754,33 @@ def decode_reference(
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
     return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m, mixing=mixing)
+
+
+# How far a decoded reference plane may lie from Z0, relative (assumption: a lab places its
+# reference board within 1 % of Z0 - simbench.scene.Placement's +-10 mm at 1 m - and a
+# calibrated rig adds well under 0.5 %; a reference of another rig lies far outside: a 0.120 m
+# baseline read as 0.093 m puts the plane ~29 % off).
+REFERENCE_Z0_TOLERANCE = 0.03
+
+
+def reference_plane_offset(reference: ReferenceMap, rig: Rig) -> float:
+    """Where a decoded reference plane lies relative to Z0 by triangulation with ``rig``:
+    the median over its decoded pixels of ``(Z - Z0) / Z0`` (to first order in the column's
+    change with depth); NaN when nothing decoded.
+
+    Reference mode matches captures against the reference and so cannot itself tell a
+    reference of another rig, or a wrong Z0: depths then come out wrong everywhere, without a
+    word.  Triangulating the reference with the rig can (:data:`REFERENCE_Z0_TOLERANCE`).
+    """
+    z0 = float(reference.z0_m)
+    dz = 0.01 * z0
+    c0 = projector_column_at_depth(z0, rig)
+    slope = (projector_column_at_depth(z0 + dz, rig) - c0) / dz  # columns per metre
+    col = reference.column_px
+    ok = np.isfinite(col) & np.isfinite(slope) & (np.abs(slope) > 1e-6)
+    if not ok.any():
+        return float("nan")
+    return float(np.median((col[ok] - c0[ok]) / slope[ok])) / z0
 
 
 def decode(
