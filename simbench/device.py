@@ -214,7 +214,8 @@ class ProjectorModel:
         _set(
             self,
             {
-                "lumens": v.number(self.lumens, "lumens", lo=0.0, lo_open=True),
+                # assumption: at most 1e6 lm, 13x the brightest cinema projectors (~75,000 lm)
+                "lumens": v.number(self.lumens, "lumens", lo=0.0, lo_open=True, hi=1e6),
                 "transfer": v.choice(self.transfer, "transfer", TRANSFERS),
                 # assumption: display gammas lie in (0, 10]; 2.2 is the video standard
                 "gamma": v.number(self.gamma, "gamma", lo=0.0, hi=10.0, lo_open=True),

@@ -974,6 +974,33 @@ case(
     ),
 )
 
+
+def _npy(a: np.ndarray) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, a)
+    return buf.getvalue()
+
+
+case(  # issue 33: negative taps decoded with exit 0 (sealed: the writer itself wrote them)
+    "system-decode-taps-negative",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "non-negative",
+    setup=lambda d: _recording(d, {"device": "tof"}, {"taps.npy": _npy(np.full((144, 176, 4), -1.0, np.float32))}),
+)
+case(
+    "system-decode-taps-shifted-after-recording",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
+    "not the file recorded",
+    setup=lambda d: (
+        _recording(
+            d, {"device": "tof"}, {"taps.npy": _npy(np.arange(144 * 176 * 4, dtype=np.float32).reshape(144, 176, 4))}
+        ),
+        np.save(d / "rec" / "taps.npy", np.roll(np.load(d / "rec" / "taps.npy"), 5, axis=1)),
+    ),
+)
+
 # ------------------------------------------------------------------- bench, reproduce, ablate, demo, crosstalk
 for cid, argv, msg in [
     ("bench-repeats-zero", ["bench", "--repeats", "0"], "--repeats"),
@@ -1135,12 +1162,25 @@ SAMPLE = [
     "render-rig-cx-huge",
     "score-depth-png",
     "pattern--width='10000000'",
+    # issue 33's process-level cases: a sparse 9.6 GiB file, an unusable Mitsuba variant, numbers
+    # beyond a float, paths out of their folder, a render of nothing
+    "decode-capture-npy-sparse-huge",
+    "render-variant-cuda-without-gpu",
+    "decode-meta-z0-overflow",
+    "demo-scene-traversal",
+    "ablate-sweep-sensor-dev-zero",
+    "score-gt-all-nan",
+    "decode-out-over-the-ground-truth",
+    "render-scene-projector-scale-1e300",
+    "render-scene-behind-the-camera",
+    "system-decode-taps-negative",
 ]
 
 
 def test_a_sample_in_fresh_processes(tmp_path):
     """The same cases through the installed `simbench` script: one line, exit 2, no traceback."""
     exe = Path(sys.executable).parent / "simbench"
+    assert set(SAMPLE) <= {c.id for c in CASES}, "a sampled case id is not in the table"
     for c in [c for c in CASES if c.id in SAMPLE]:
         d = tmp_path / c.id.replace("/", "_")
         d.mkdir()

@@ -399,6 +399,10 @@ class ToFSystem:
         d = Path(in_dir)
         self.model, info = read_device_info(d, self.name, ToFModel)
         taps = load_npy(d / "taps.npy", expected_shape=(self.model.height_px, self.model.width_px, 4))
+        if taps.dtype.kind != "f" or not np.isfinite(taps).all() or (taps < 0).any():
+            raise ValueError(
+                f"{d / 'taps.npy'}: taps are finite, non-negative electron counts (float), got {taps.dtype}"
+            )
         return (
             taps,
             None,
