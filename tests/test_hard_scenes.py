@@ -1,0 +1,96 @@
+"""The hard-scene library (issue 35, ``scenes/hard_*.toml``) and its experiment.
+
+The scenes are written by ``scenes/make_hard_scenes.py``; the committed files must be exactly
+what it writes, and each scene must be what its description says (checked on its ground truth:
+a corner is concave, a box is seen from inside, an object stands before its wall and casts a
+shadow, every scene fills the view).  How the decoders do on them is measured by
+``simbench reproduce hard_scenes`` (results/hard_scenes.md) and, one scene per class, held by
+the quick run's thresholds in CI."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from simbench.experiments.hard_scenes import HARD_SCENES, QUICK_SCENES, confidence_curve
+
+from .conftest import SCENES
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("make_hard_scenes", SCENES / "make_hard_scenes.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_committed_scenes_are_what_the_generator_writes(tmp_path):
+    written = _generator().main(tmp_path)
+    assert sorted(p.stem for p in written) == sorted(HARD_SCENES) == sorted(p.stem for p in SCENES.glob("hard_*.toml"))
+    for p in written:
+        assert p.read_bytes() == (SCENES / p.name).read_bytes(), f"{p.name}: run scenes/make_hard_scenes.py"
+    assert set(QUICK_SCENES) <= set(HARD_SCENES)
+    assert len({HARD_SCENES[s] for s in QUICK_SCENES}) == len(set(HARD_SCENES.values()))  # one of each class
+
+
+def _truth(name: str):
+    """Ground truth of a hard scene at a quarter of the paper camera's resolution."""
+    import dataclasses
+
+    from simbench.rig import scale_camera
+    from simbench.scene import load_scene
+    from simbench.truth import ground_truth
+
+    scene = load_scene(SCENES / f"{name}.toml")
+    return ground_truth(dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25)))
+
+
+@pytest.mark.parametrize("name", sorted(HARD_SCENES))
+def test_every_hard_scene_fills_the_view(name, variant):
+    gt = _truth(name)
+    assert np.isfinite(gt.depth_m).all(), "a pixel sees nothing"
+    assert 0.8 < np.nanmin(gt.depth_m) and np.nanmax(gt.depth_m) < 1.4  # the decoder's range: 0.75-1.75 m
+
+
+@pytest.mark.parametrize("name", ["hard_corner_060", "hard_corner_090", "hard_corner_120"])
+def test_corners_are_concave_with_the_crease_farthest(name, variant):
+    gt = _truth(name)
+    row = gt.depth_m[gt.depth_m.shape[0] // 2]
+    crease = int(np.argmax(row))
+    assert abs(row[crease] - 1.35) < 0.005 and abs(crease - row.size / 2) < 3
+    assert np.all(np.diff(row[: crease - 1]) > 0) and np.all(np.diff(row[crease + 1 :]) < 0)
+    assert (gt.object_id[:, : crease - 2] == 0).all() and (gt.object_id[:, crease + 2 :] == 1).all()
+
+
+def test_the_box_is_seen_from_inside_with_its_five_faces(variant):
+    gt = _truth("hard_box_interior")
+    seen = set(np.unique(gt.object_id[gt.object_id >= 0]).tolist())
+    assert {0, 1, 2, 3, 4} <= seen  # back, left, right, top, bottom
+
+
+@pytest.mark.parametrize("name", ["hard_box_before_wall", "hard_sphere_before_wall", "hard_stairs_deep"])
+def test_objects_before_walls_cast_shadows_on_them(name, variant):
+    gt = _truth(name)
+    wall = max(
+        range(int(gt.object_id.max()) + 1), key=lambda i: np.nanmean(np.where(gt.object_id == i, gt.depth_m, np.nan))
+    )
+    on_wall = gt.object_id == wall
+    assert on_wall.mean() > 0.3 and (~gt.lit & on_wall).mean() > 0.005  # a shadow on the wall
+
+
+def test_the_confidence_curve_keeps_the_most_confident_pixels():
+    """Closed form: 10 decoded pixels of 20, confidence 1..10, the two least confident wrong."""
+    region = np.ones((4, 5), bool)
+    depth = np.full((4, 5), np.nan)
+    gt = np.ones((4, 5))
+    conf = np.zeros((4, 5))
+    flat = depth.reshape(-1)
+    flat[:10] = 1.0
+    flat[:2] = 1.5  # 500 mm wrong
+    conf.reshape(-1)[:10] = np.arange(1, 11)
+    curve = {c["keep"]: c for c in confidence_curve(depth, conf, gt, region, keep=(1.0, 0.8, 0.5))}
+    assert curve[1.0]["completeness"] == 0.5 and curve[1.0]["wrong_share"] == 0.2
+    assert curve[0.8]["completeness"] == pytest.approx(0.4) and curve[0.8]["wrong_share"] == 0.0
+    assert curve[0.5]["completeness"] == pytest.approx(0.25) and curve[0.5]["wrong_share"] == 0.0
