@@ -25,7 +25,15 @@ from pathlib import Path
 
 from simbench.io import json_bytes
 
-__all__ = ["MANIFEST_FORMAT", "ManifestError", "seal_manifest", "read_manifest", "listed_files", "file_sha256"]
+__all__ = [
+    "MANIFEST_FORMAT",
+    "ManifestError",
+    "seal_manifest",
+    "read_manifest",
+    "json_object",
+    "listed_files",
+    "file_sha256",
+]
 
 # bumped when the manifest's layout changes (a reader refuses other formats)
 MANIFEST_FORMAT = 2
@@ -67,6 +75,17 @@ def seal_manifest(folder: str | Path, data: dict, files: dict[str, str]) -> dict
     return sealed
 
 
+def json_object(path: str | Path) -> dict:
+    """The JSON object in the manifest file ``path`` (unchecked), or :class:`ManifestError`."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        raise ManifestError(f"{path}: not valid JSON, so not a recording manifest") from None
+    if not isinstance(data, dict):
+        raise ManifestError(f"{path}: not a JSON object, so not a recording manifest")
+    return data
+
+
 def read_manifest(path: str | Path, *, verify_files: bool = True) -> dict:
     """The manifest at ``path``, checked: a JSON object of this format whose own SHA-256
     matches, listing its files with their SHA-256; with ``verify_files`` every listed file
@@ -82,12 +101,7 @@ def read_manifest(path: str | Path, *, verify_files: bool = True) -> dict:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found: not a recording folder (`simbench render --out`)")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError):
-        raise ManifestError(f"{path}: not valid JSON") from None
-    if not isinstance(data, dict):
-        raise ManifestError(f"{path}: not a JSON object")
+    data = json_object(path)
     fmt = data.get("manifest_format")
     if fmt != MANIFEST_FORMAT or not isinstance(data.get(_SELF_KEY), str):
         raise ManifestError(

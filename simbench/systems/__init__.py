@@ -245,18 +245,13 @@ RECORDING_MANIFESTS = ("device.json", "meta.json")
 
 def system_of_recording(in_dir: str | Path) -> str:
     """The system name a recording folder (``simbench render --out``) was written by."""
-    import json
+    from simbench.manifest import json_object
 
     d = Path(in_dir)
     for manifest in RECORDING_MANIFESTS:
         path = d / manifest
         if path.is_file():
-            try:
-                info = json.loads(path.read_text(encoding="utf-8"))
-            except (ValueError, UnicodeDecodeError):
-                raise ValueError(f"{path}: not a valid recording manifest") from None
-            if not isinstance(info, dict):
-                raise ValueError(f"{path}: not a valid recording manifest")
+            info = json_object(path)  # its seal is checked by the system's reader
             name = info.get("system", info.get("device", "proposed"))
             if not isinstance(name, str) or name not in _SYSTEMS:
                 raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
