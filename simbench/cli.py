@@ -327,22 +327,24 @@ def _check_visible(gt, scene) -> None:
 
 
 def _manifest_of(path: Path) -> dict | None:
-    """The sealed ``meta.json`` of the render folder holding ``path`` (checked: the manifest's
-    own seal, and ``path``'s recorded SHA-256 when it lists it), or None when there is none.
-    A folder mixing the files of two renders, or whose meta.json was edited, is refused."""
+    """The sealed manifest (``meta.json``, or a competitor's ``device.json``) of the recording
+    folder holding ``path`` (checked: the manifest's own seal, and ``path``'s recorded SHA-256
+    when it lists it), or None when there is none.  A folder mixing the files of two renders,
+    or whose manifest was edited, is refused."""
     from simbench.manifest import ManifestError, file_sha256, read_manifest
-    from simbench.simulate import RENDER_MANIFEST
 
-    meta = path.parent / RENDER_MANIFEST
-    if not meta.exists():
-        return None
-    data = read_manifest(meta, verify_files=False)
-    for key, name in data["files"].items():
-        if name == path.name and file_sha256(path) != data["sha256"][key]:
-            raise ManifestError(
-                f"{path} does not match {meta} (SHA-256 differs): the folder mixes files of two renders"
-            )
-    return data
+    for name in ("meta.json", "device.json"):
+        meta = path.parent / name
+        if not meta.exists():
+            continue
+        data = read_manifest(meta, verify_files=False)
+        for key, listed in data["files"].items():
+            if listed == path.name and file_sha256(path) != data["sha256"][key]:
+                raise ManifestError(
+                    f"{path} does not match {meta} (SHA-256 differs): the folder mixes files of two renders"
+                )
+        return data
+    return None
 
 
 def _z0_for(reference: Path, z0: float | None) -> float:
@@ -738,10 +740,12 @@ def _cmd_score(args) -> int:
     if not np.isfinite(gt).any():
         raise ValueError(f"{args.gt}: the ground truth has no finite depth: nothing to score against")
     depth = _depth_map(load_npy(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
-    if Path(args.gt).is_file():
-        _manifest_of(Path(args.gt))  # a ground truth inside a recording folder: as recorded
     gt_dir = Path(args.gt).parent
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
+    col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
+    for p in (Path(args.gt), lit_path, col_gt_path):  # inside a recording folder: as recorded
+        if p.is_file():
+            _manifest_of(p)
     region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
     exclude = None
     if args.edge_band < 0:
@@ -752,7 +756,6 @@ def _cmd_score(args) -> int:
         exclude = edge_band(gt, object_id=obj, band_px=args.edge_band)
     kw = {}
     if args.column:
-        col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
         kw = {
             "column_px": load_npy(args.column, expected_shape=gt.shape),
             "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape),
@@ -814,7 +817,27 @@ def _decode_recording(args) -> int:
     from simbench.metrics import points_from_depth
     from simbench.systems import get_system, system_of_recording
 
-    system = get_system(system_of_recording(args.capture))
+    name = system_of_recording(args.capture)
+    system = get_system(name)
+    # the proposed sensor's options mean nothing to another system's folder: refused, not ignored
+    given = {
+        "--z0": args.z0,
+        "--period": args.period,
+        "--order": args.order,
+        "--sequence": args.sequence,
+        "--channels": args.channels,
+        "--reference": args.reference,
+        "--calibration": args.calibration,
+        "--robust": args.robust or None,
+        "--decoder": args.decoder or None,
+        "--mode": None if args.mode == "reference" else args.mode,
+    }
+    stray = [k for k, v in given.items() if v is not None]
+    if stray:
+        raise ValueError(
+            f"{args.capture} is a {name} recording: {', '.join(stray)} apply to the proposed sensor's folders only "
+            f"(a {name} folder decodes the {name} way, with what it recorded)"
+        )
     _check_outputs_apart_from_inputs(args)
     _check_decode_outputs(args)
     raw, cal, scene = system.read_recording(Path(args.capture))
@@ -832,8 +855,10 @@ def _decode_recording(args) -> int:
     res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
     files = {Path(args.out): npy_bytes(res.depth_m)}
+    over = f"; overriding the recording: rig {args.rig} instead of the recorded one" if args.rig is not None else ""
     msg = (
-        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}) -> {args.out}"
+        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}{over}) -> "
+        f"{args.out}"
     )
     if args.ply:
         files[Path(args.ply)] = ply_bytes(points_from_depth(res.depth_m, scene.rig.camera)[res.valid])
@@ -1400,7 +1425,21 @@ def _report_library_messages() -> None:
 
 
 # options that name files or folders (an empty value is refused for every one)
-_PATH_OPTIONS = ("out", "ply", "debug_dir", "write_thresholds", "cache", "calibration", "reference", "rig", "gt", "lit")
+_PATH_OPTIONS = (
+    "out",
+    "ply",
+    "debug_dir",
+    "write_thresholds",
+    "check",
+    "cache",
+    "calibration",
+    "reference",
+    "rig",
+    "gt",
+    "lit",
+    "column",
+    "gt_column",
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1437,25 +1476,34 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print("simbench: error: out of memory (the inputs ask for more than this machine has)", file=sys.stderr)
         return 2
-    except (ValueError, OSError) as exc:  # bad input: missing or unreadable files, invalid values
-        if args.debug:
-            raise
-        print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
-        return 2
-    except Exception as exc:  # noqa: BLE001 - anything else is a bug: say so in one line
-        if args.debug:
-            raise
-        print(
-            f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback "
-            f"and please report it",
-            file=sys.stderr,
-        )
-        return 1
+    except Exception as exc:  # noqa: BLE001 - SIGTERM re-wrapped by a render (simbench.termination)
+        from simbench import termination
+
+        if not termination.requested():
+            return _report_error(exc, args)
+        print("simbench: terminated (SIGTERM); partial outputs and cache locks removed", file=sys.stderr)
+        return 143
     finally:
         if previous is not None:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
+
+
+def _report_error(exc: Exception, args) -> int:
+    """One line for a failed command: exit 2 for bad input (missing or unreadable files,
+    invalid values), 1 for anything else, a bug (``--debug``: the traceback instead)."""
+    if args.debug:
+        raise exc
+    if isinstance(exc, (ValueError, OSError)):
+        print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
+        return 2
+    print(
+        f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback "
+        f"and please report it",
+        file=sys.stderr,
+    )
+    return 1
 
 
 class _Terminated(BaseException):
@@ -1482,6 +1530,9 @@ def _on_sigterm_raise():
                 threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGTERM)).start()
                 return
             f = f.f_back
+        from simbench import termination
+
+        termination.request()
         raise _Terminated()
 
     return signal.signal(signal.SIGTERM, handler)

@@ -104,7 +104,9 @@ class Lens:
                 "f_number": v.number(self.f_number, "f_number", lo=0.5, hi=64.0),
                 "transmission": v.number(self.transmission, "transmission", lo=0.0, hi=1.0, lo_open=True),
                 "defocus": v.boolean(self.defocus, "defocus"),
-                "focus_m": v.number(self.focus_m, "focus_m", lo=0.0, lo_open=True),
+                # assumption: machine-vision lenses focus from ~0.1 m; beyond 1 km is infinity for
+                # any scene within the scenes' 100 m (a focus of 1e20 m made every capture black)
+                "focus_m": v.number(self.focus_m, "focus_m", lo=0.05, hi=1e3),
                 # assumption: |coefficient| <= 10; beyond, Brown-Conrady folds over inside any normal view
                 "distortion": v.numbers(self.distortion, "distortion (k1, k2, p1, p2, k3)", 5, lo=-10.0, hi=10.0),
             },

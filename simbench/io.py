@@ -21,6 +21,7 @@ import numpy as np
 from simbench import validate
 
 __all__ = [
+    "check_not_protected",
     "check_output_directory",
     "atomic_write_bytes",
     "atomic_write_text",
@@ -56,9 +57,41 @@ def _raise_with_filename(exc: BaseException, path: Path) -> None:
         raise OSError(exc.errno, exc.strerror, str(path)) from exc
 
 
+# Files simbench writes to mark what a folder is: a recording's manifests (simbench.manifest) and
+# the render cache's marker (simbench.cache).  No output may replace one, or a file a manifest
+# lists: a recording would no longer decode, a cache would be refused.
+_MANIFEST_NAMES = ("meta.json", "device.json")
+_CACHE_MARKER = "CACHEDIR.TAG"
+
+
+def check_not_protected(path: str | Path) -> None:
+    """ValueError when ``path`` is an existing recording manifest, a file its folder's
+    manifest lists, or a render cache's marker (new files beside them are fine)."""
+    path = Path(path)
+    if not path.is_file():
+        return
+    if path.name == _CACHE_MARKER and "simbench render cache" in path.read_text(errors="replace")[:200]:
+        raise ValueError(f"{path} is a simbench render cache's marker; choose another output path")
+    for name in _MANIFEST_NAMES:
+        m = path.parent / name
+        if not m.is_file():
+            continue
+        try:
+            files = json.loads(m.read_text(encoding="utf-8")).get("files", {})
+        except (ValueError, UnicodeDecodeError, AttributeError, OSError):
+            continue
+        listed = set(files.values()) if isinstance(files, dict) else set()
+        if path.name == name or path.name in listed:
+            raise ValueError(
+                f"{path} belongs to the recording in {path.parent} (listed in its {name}): writing it would break the "
+                "recording; choose another output path"
+            )
+
+
 @contextmanager
 def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
     """A temporary file beside ``path`` that replaces it when the block succeeds."""
+    check_not_protected(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
     os.close(fd)
@@ -288,6 +321,7 @@ def check_output_file(path: str | Path, *, what: str = "output") -> Path:
     if path.exists() and not path.is_file():
         kind = "a folder" if path.is_dir() else "not a regular file"
         raise ValueError(f"{what} {path} is {kind}; give a file path")
+    check_not_protected(path)
     check_output_folder(path.parent, what=what)
     return path
 
@@ -440,13 +474,6 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
         raise FileNotFoundError(f"image not found: {path}")
     if path.suffix.lower() == ".npy":
         img = load_npy(path)
-        if img.dtype.kind == "f":
-            finite = img[np.isfinite(img)]
-            if finite.size and (finite.min() < 0.0 or finite.max() > 1.0):
-                raise ValueError(
-                    f"{path}: a float capture holds values in [0, 1] of full scale, this one spans "
-                    f"[{finite.min():g}, {finite.max():g}] (8-bit values? divide by 255, or save it as uint8)"
-                )
     else:
         data = np.fromfile(path, dtype=np.uint8)
         if data.size == 0:
@@ -469,6 +496,13 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
             img = img[..., :3]
         if img.ndim == 3:
             img = img[..., ::-1]
+    if img.dtype.kind == "f":  # .npy or a float TIFF/EXR
+        finite = img[np.isfinite(img)]
+        if finite.size and (finite.min() < 0.0 or finite.max() > 1.0):
+            raise ValueError(
+                f"{path}: a float capture holds values in [0, 1] of full scale, this one spans "
+                f"[{finite.min():g}, {finite.max():g}] (8-bit values? divide by 255, or save it as uint8)"
+            )
     if channels == 1:
         if img.ndim != 2:
             raise ValueError(f"{path}: expected a single-channel image, got shape {img.shape}")

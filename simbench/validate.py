@@ -36,6 +36,12 @@ def _is_real(value: object) -> bool:
     return isinstance(value, _numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+def _shown(value: object) -> str:
+    """``repr(value)``, cut to 40 characters (an integer of 400 digits is one line's worth)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _range_text(lo, hi, lo_open: bool, hi_open: bool) -> str:
     if lo is not None and hi is not None:
         return f"in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
@@ -67,17 +73,17 @@ def number(
     rng = _range_text(lo, hi, lo_open, hi_open)
     what = f"a {'' if allow_inf else 'finite '}number{' ' + rng if rng else ''}"
     if not _is_real(value):
-        raise ValueError(f"{name} must be {what}, got {value!r}")
+        raise ValueError(f"{name} must be {what}, got {_shown(value)}")
     try:
         v = float(value)
     except OverflowError:  # an integer beyond a float's range (10**400)
         v = math.inf if value > 0 else -math.inf
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
-        raise ValueError(f"{name} must be {what}, got {value!r}")
+        raise ValueError(f"{name} must be {what}, got {_shown(value)}")
     if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise ValueError(f"{name} must be {what}, got {value!r}")
+        raise ValueError(f"{name} must be {what}, got {_shown(value)}")
     if hi is not None and (v > hi or (hi_open and v == hi)):
-        raise ValueError(f"{name} must be {what}, got {value!r}")
+        raise ValueError(f"{name} must be {what}, got {_shown(value)}")
     return v
 
 

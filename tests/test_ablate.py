@@ -298,3 +298,24 @@ def test_board_form_and_projector_timing_are_sweepable():
     assert sensor.projector.timing == "video" and sensor.projector.frame_rate_hz == 120.0
     with pytest.raises(ValueError, match="timing"):
         _sensor({**DEFAULTS, "sensor.projector.timing": "free"})
+
+
+def test_a_termination_inside_a_run_stops_the_sweep_instead_of_recording_a_failure(monkeypatch, tmp_path):
+    """Issue 33 audit: SIGTERM raised inside a Mitsuba render comes back wrapped as a
+    RuntimeError, which run_one recorded as a failed run before going on with the sweep."""
+    from simbench import termination
+    from simbench.experiments.ablate import run_one
+    from simbench.experiments.common import Session
+
+    def render_interrupted(self, *args, **kwargs):
+        termination.request()
+        raise RuntimeError("drjit.custom(<_RenderOp>): _Terminated")
+
+    monkeypatch.setattr(Session, "capture", render_interrupted)
+    params = expand(_sweep(axis=[{"name": "decoder.voting", "values": [True]}]))[0]["params"]
+    try:
+        with pytest.raises(RuntimeError, match="_Terminated"):
+            run_one(params, seed=1, cache_dir=None)
+    finally:
+        termination._REQUESTED.clear()
+    assert "error" in run_one({**params, "run.spp": 0}, seed=1, cache_dir=None)  # without it: a recorded failure

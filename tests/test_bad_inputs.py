@@ -94,6 +94,22 @@ def render_folder(d: Path) -> Path:
     return r
 
 
+def _relist(r: Path, key: str, name: str, array) -> None:
+    """Add ``array`` to the sealed folder ``r`` as ``name``, then replace it after the seal."""
+    import json
+
+    np.save(r / name, np.ones_like(array))
+    data = json.loads((r / "meta.json").read_text())
+    from simbench.io import save_json
+    from simbench.manifest import seal_manifest
+
+    files = {**data["files"], key: name}
+    (r / "meta.json").unlink()
+    save_json(r / "meta.json", seal_manifest(r, {k: v for k, v in data.items()}, files))
+    (r / name).unlink()
+    np.save(r / name, array)
+
+
 def _seal(r: Path, **meta) -> None:
     """``r/meta.json`` as ``simbench render`` writes it (simbench.manifest), with ``meta``."""
     from simbench.io import save_json
@@ -103,6 +119,7 @@ def _seal(r: Path, **meta) -> None:
 
     names = {"capture": "capture.png", "reference": "reference.png", "rig": "rig.toml", "gt_depth": "gt_depth.npy"}
     pattern = pattern_record(PatternSpec(size_hw=(285, 456)))
+    (r / "meta.json").unlink(missing_ok=True)  # a written manifest is protected: sealed anew
     save_json(r / "meta.json", seal_manifest(r, {"system": "proposed", "pattern": pattern, **meta}, names))
 
 
@@ -367,6 +384,7 @@ for cid, text, msg in [
     ("offset-above-half-range", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 200.0"), "offset_dn"),
     ("dark-current-1e30", _sensor(PAPER, "dark_current_e_s = 0.0", "dark_current_e_s = 1e30"), "dark_current_e_s"),
     ("dsnu-1e30", _sensor(PAPER, "dsnu_e = 5.0", "dsnu_e = 1e30"), "dsnu_e"),
+    ("focus-1e20", _sensor(PAPER, "focus_m = 1.0", "focus_m = 1e20"), "focus_m"),
     ("full-well-1e30", _sensor(PAPER, "full_well_e = 10000.0", "full_well_e = 1e30"), "full_well_e"),
     ("bits-string", _sensor(PAPER, "bits = 8", 'bits = "8"'), "bits"),
     ("cfa-unknown", _sensor(PAPER, 'cfa = "RGGB"', 'cfa = "RGBW"'), "cfa"),
@@ -707,6 +725,46 @@ case(
     "a file of the recording",
     setup=lambda d: _recording(d, {"device": "tof"}, {"gt_depth.npy": b"x"}),
 )
+# issue 33 audit: other commands wrote over a recording's files and the cache's marker (exit 0)
+case(
+    "decode-out-over-another-recordings-truth",
+    lambda d: ["decode", str(d / "r"), "--out", str(d / "rec" / "gt_depth.npy")],
+    "belongs to the recording",
+    setup=lambda d: (render_folder(d), _recording(d, {"device": "tof"}, {"gt_depth.npy": _npy(np.ones((2, 2)))})),
+)
+case(
+    "pattern-out-over-a-recordings-capture",
+    lambda d: ["pattern", "--out", str(d / "r" / "capture.png")],
+    "belongs to the recording",
+    setup=render_folder,
+)
+case(
+    "crosstalk-out-over-a-manifest",
+    lambda d: ["crosstalk", "--out", str(d / "r" / "meta.json")],
+    "belongs to the recording",
+    setup=render_folder,
+)
+case(
+    "pattern-out-over-the-cache-marker",
+    lambda d: ["pattern", "--out", str(d / "c" / "CACHEDIR.TAG")],
+    "render cache's marker",
+    setup=lambda d: __import__("simbench.cache", fromlist=["claim_cache_folder"]).claim_cache_folder(d / "c"),
+)
+case(  # issue 33 audit: the proposed sensor's options were ignored for other systems' folders
+    "system-decode-proposed-options",
+    lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy"), "--z0", "1.1", "--order", "4"],
+    "apply to the proposed sensor's folders only",
+    setup=lambda d: _recording(d, {"device": "tof"}),
+)
+case(
+    "decode-capture-float-tiff-0-255",
+    lambda d: _decode(d, capture="c.tiff"),
+    "8-bit values",
+    setup=lambda d: (
+        render_folder(d),
+        __import__("cv2").imwrite(str(d / "r" / "c.tiff"), np.full((120, 160, 3), 200.0, np.float32)),
+    ),
+)
 case(
     "render-cache-is-out",
     lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x")],
@@ -724,6 +782,7 @@ def _mixed(d: Path) -> None:
     from simbench.io import save_png
 
     r = render_folder(d)
+    (r / "capture.png").unlink()  # simbench itself refuses to write over a recorded file
     save_png(r / "capture.png", np.roll(_IMAGES[0], 3, axis=1))
 
 
@@ -821,6 +880,23 @@ for cid, argv, msg, setup in [
         lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
         "mixes files of two renders",
         lambda d: (render_folder(d), np.save(d / "r" / "gt_depth.npy", np.full((120, 160), 1.2, np.float32))),
+    ),
+    (  # issue 33 audit: only gt_depth.npy was checked, and only in proposed folders
+        "lit-replaced-in-its-folder",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "r" / "gt_depth.npy")],
+        "mixes files of two renders",
+        lambda d: (render_folder(d), _relist(d / "r", "gt_lit", "gt_lit.npy", np.zeros((120, 160), bool))),
+    ),
+    (
+        "competitor-truth-replaced",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "rec" / "gt_depth.npy")],
+        "mixes files of two renders",
+        lambda d: (
+            render_folder(d),
+            _recording(d, {"device": "tof"}, {"gt_depth.npy": _npy(np.ones((120, 160), np.float32))}),
+            (d / "rec" / "gt_depth.npy").unlink(),
+            np.save(d / "rec" / "gt_depth.npy", np.full((120, 160), 2.0, np.float32)),
+        ),
     ),
     (
         "lit-region-empty",
@@ -983,11 +1059,11 @@ def _npy(a: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-case(  # issue 33: negative taps decoded with exit 0 (sealed: the writer itself wrote them)
-    "system-decode-taps-negative",
+case(  # sealed, so the writer itself wrote them (read noise makes dim taps negative: legal; NaN is not)
+    "system-decode-taps-nan",
     lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
-    "non-negative",
-    setup=lambda d: _recording(d, {"device": "tof"}, {"taps.npy": _npy(np.full((144, 176, 4), -1.0, np.float32))}),
+    "finite electron counts",
+    setup=lambda d: _recording(d, {"device": "tof"}, {"taps.npy": _npy(np.full((144, 176, 4), np.nan, np.float32))}),
 )
 case(
     "system-decode-taps-shifted-after-recording",
@@ -1064,6 +1140,7 @@ for cid, argv in [
     ("reproduce", ["reproduce", "table1", "--quick", "--out", ""]),
     ("ablate", ["ablate", "period", "--out", ""]),
     ("crosstalk", ["crosstalk", "--out", ""]),
+    ("reproduce-check", ["reproduce", "table1", "--quick", "--check", ""]),
     ("calibrate", ["calibrate", "--out", ""]),
     ("render-cache", ["render", str(SCENES / "white_plane.toml"), "--out", "o", "--cache", ""]),
 ]:
@@ -1100,6 +1177,8 @@ for cid, body, msg in [
     ("spp-zero", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4, 0]\n', "run.spp"),
     ("spp-nan", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4, nan]\n', "run.spp"),
     ("spp-float", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4.5]\n', "run.spp"),
+    ("scene-depth-1e308", 'name = "s"\n[[axis]]\nname = "scene.depth_m"\nvalues = [1e308]\n', "scene.depth_m"),
+    ("scene-tilt-nan", 'name = "s"\n[[axis]]\nname = "scene.tilt_deg"\nvalues = [nan]\n', "scene.tilt_deg"),
     ("sensor-dev-zero", 'name = "s"\n[[axis]]\nname = "sensor.preset"\nvalues = ["/dev/zero"]\n', "unknown sensor"),
     ("sensor-toml-missing", 'name = "s"\n[[axis]]\nname = "sensor.preset"\nvalues = ["x.toml"]\n', "x.toml"),
     ("camera-scale-zero", 'name = "s"\n[[axis]]\nname = "run.camera_scale"\nvalues = [0.0]\n', "run.camera_scale"),
@@ -1173,7 +1252,7 @@ SAMPLE = [
     "decode-out-over-the-ground-truth",
     "render-scene-projector-scale-1e300",
     "render-scene-behind-the-camera",
-    "system-decode-taps-negative",
+    "system-decode-taps-nan",
 ]
 
 

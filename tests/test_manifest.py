@@ -274,3 +274,26 @@ def test_a_bare_reference_of_another_rig_or_depth_is_refused(tmp_path, capsys):
     assert rc == 2 and "not its Z0 = 1 m" in err and "captured with this rig" in err, err
     rc, _, err = _run([*base, "--reference", tmp_path / "ref.png", "--z0", "1.1"], capsys)
     assert rc == 2 and "not its Z0 = 1.1 m" in err, err
+
+
+def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
+    """Issue 33 audit: read noise makes dim taps negative (render scenes/sphere.toml --system tof);
+    a check for non-negative taps refused every such folder."""
+    from simbench.baselines.recording import write_device_recording
+    from simbench.baselines.tof import ToFModel
+    from simbench.systems import get_system
+
+    model = ToFModel()
+    rng = np.random.default_rng(0)
+    taps = rng.normal(100.0, 60.0, (model.height_px, model.width_px, 4)).astype(np.float32)
+    assert (taps < 0).any()
+    write_device_recording(
+        tmp_path / "rec",
+        "tof",
+        model,
+        {"taps": lambda d: (np.save(d / "taps.npy", taps), d / "taps.npy")[1]},
+        gt_depth_m=np.ones((model.height_px, model.width_px), np.float32),
+        info={},
+    )
+    raw, _, _ = get_system("tof").read_recording(tmp_path / "rec")
+    assert np.array_equal(raw, taps)

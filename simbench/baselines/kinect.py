@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from simbench import validate
 from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX
 from simbench.rig import Intrinsics, Rig
 from simbench.scene import SceneSpec, reference_scene
@@ -125,9 +126,9 @@ class KinectModel:
             "pixel_pitch_um",
             "full_well_e",
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
-                raise ValueError(f"kinect {name} must be a number > 0, got {v!r}")
+            # finite and positive; depths within the scenes' 100 m (simbench.scene.SCENE_EXTENT_M)
+            hi = 100.0 if name.endswith("depth_m") else None
+            validate.number(getattr(self, name), f"kinect {name}", lo=0.0, lo_open=True, hi=hi)
         if not self.min_depth_m < self.max_depth_m:
             raise ValueError("kinect min_depth_m must be below max_depth_m")
         if self.window_px < 3 or self.window_px % 2 == 0:

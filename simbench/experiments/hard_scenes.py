@@ -80,7 +80,14 @@ def _scores(rec, depth, period_px, region) -> dict:
     }
 
 
-def confidence_curve(depth_m, confidence, gt_depth_m, region, *, keep=KEEP_FRACTIONS) -> list[dict]:
+def confidence_curve(
+    depth_m: np.ndarray,
+    confidence: np.ndarray,
+    gt_depth_m: np.ndarray,
+    region: np.ndarray,
+    *,
+    keep: tuple[float, ...] = KEEP_FRACTIONS,
+) -> list[dict]:
     """Completeness and wrong share (> :data:`WRONG_MM`) when only the ``keep`` share of the
     decoded pixels of ``region`` with the highest ``confidence`` is kept (ties kept together)."""
     decoded = region & np.isfinite(depth_m)

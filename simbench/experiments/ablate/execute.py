@@ -67,6 +67,10 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row
     except Exception as exc:  # noqa: BLE001 - a failing run is recorded, not fatal
+        from simbench import termination
+
+        if termination.requested():  # SIGTERM, re-wrapped by a render: stop, record nothing
+            raise
         msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
         return {
             "error": msg,

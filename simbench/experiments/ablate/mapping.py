@@ -68,6 +68,13 @@ def scene_for(params: dict) -> SceneSpec:
     if "scene.srgb8" in params:
         rgb = paint_reflectance(params["scene.srgb8"])
         objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, rgb=rgb)) for o in objs]
+    from simbench import validate
+    from simbench.scene import MAX_ANGLE_DEG, SCENE_EXTENT_M
+
+    if "scene.depth_m" in params:
+        validate.number(params["scene.depth_m"], "scene.depth_m", lo=0.0, lo_open=True, hi=SCENE_EXTENT_M)
+    if "scene.tilt_deg" in params:
+        validate.number(params["scene.tilt_deg"], "scene.tilt_deg", lo=-MAX_ANGLE_DEG, hi=MAX_ANGLE_DEG)
     if "scene.depth_m" in params or "scene.tilt_deg" in params:
         first = dict(objs[0].params)
         key = "center_m" if "center_m" in first else "translate_m"
