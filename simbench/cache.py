@@ -132,6 +132,8 @@ def check_cache_folder(root: str | Path) -> Path:
         See above.
     """
     root = Path(root)
+    if root.exists() and not root.is_dir():
+        raise NotACacheError(f"{root} is a file, not a cache folder")
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: no such cache folder")
     fmt = _marker_format(root)

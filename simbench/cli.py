@@ -358,8 +358,8 @@ def _z0_for(reference: Path, z0: float | None) -> float:
     recorded = recorded_z0(meta, where=str(reference.parent / "meta.json"))
     if z0 is not None and z0 != recorded:
         raise ValueError(
-            f"--z0 {z0:g} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at Z0 = "
-            f"{recorded:g} m; leave --z0 out to decode it as recorded"
+            f"--z0 {z0!r} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at Z0 = "
+            f"{recorded!r} m; leave --z0 out to decode it as recorded"
         )
     return recorded
 

@@ -80,7 +80,7 @@ def choose_variant(
         if not requested.endswith("_rgb"):
             # simbench renders three primaries as RGB channels (spectral and polarised variants
             # return other layouts)
-            usable = [v for v in available if v.endswith("_rgb")]
+            usable = [v for v in available if v.endswith("_rgb") and (cuda or not v.startswith("cuda_"))]
             raise ValueError(f"variant {requested}: simbench renders in an RGB variant; usable here: {usable}")
         if requested.startswith("llvm_") and not llvm_ok:
             raise ValueError(
