@@ -437,7 +437,7 @@ def _cmd_decode(args) -> int:
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode, robust_params
     from simbench.decode.persist import lookup_decoded_reference
-    from simbench.io import load_image, npy_bytes, ply_bytes, png_bytes, write_files
+    from simbench.io import json_bytes, load_image, npy_bytes, ply_bytes, png_bytes, write_files
     from simbench.metrics import points_from_depth
     from simbench.rig import load_rig
 
@@ -544,6 +544,8 @@ def _cmd_decode(args) -> int:
         files[d / "wrapped_phase.png"] = png_bytes(_to_u8(result.stages["wrapped_phase"], -np.pi, np.pi))
         files[d / "intensity.png"] = png_bytes(_to_u8(result.stages["intensity"], 0.0, 1.0))
         files[d / "depth.png"] = png_bytes(_to_u8(result.depth_m, *_finite_range(result.depth_m)))
+        stages = sorted(p.name for p in files if p.parent == d)
+        files[d / "stages.json"] = json_bytes({"command": "simbench decode", "capture": args.capture, "files": stages})
         msg += f", stages in {d}/"
     if len({p.resolve() for p in files}) != len(files):
         raise ValueError("--out, --ply and the --debug-dir files must be different paths")
@@ -583,13 +585,13 @@ def _check_decode_outputs(args) -> None:
     """Every output of a decode writable before the decode starts: --out, --ply, --debug-dir
     and the reference cache (a folder in the way, a file above one, no permission)."""
     from simbench.cache import check_cache_location
-    from simbench.io import check_output_file, check_output_folder
+    from simbench.io import check_output_file, check_own_folder
 
     check_output_file(args.out, what="--out")
     if args.ply:
         check_output_file(args.ply, what="--ply")
     if args.debug_dir:
-        check_output_folder(args.debug_dir, what="--debug-dir")
+        check_own_folder(args.debug_dir, marker="stages.json", written_by="simbench decode", what="--debug-dir")
         debug, out = Path(args.debug_dir).resolve(), Path(args.out).resolve()
         if debug == out or out in debug.parents:
             raise ValueError(f"--debug-dir {args.debug_dir} is --out {args.out} or under it: give another folder")

@@ -22,6 +22,7 @@ from simbench import validate
 
 __all__ = [
     "check_not_protected",
+    "check_own_folder",
     "check_output_directory",
     "atomic_write_bytes",
     "atomic_write_text",
@@ -338,6 +339,34 @@ def check_output_folder(path: str | Path, *, what: str = "output") -> Path:
         raise ValueError(f"{what}: {d} is a file, so {path} cannot be created")
     if not os.access(d, os.W_OK | os.X_OK):
         raise ValueError(f"{what}: cannot write in {d} (permission denied or a read-only file system)")
+    return path
+
+
+def check_own_folder(path: str | Path, *, marker: str, written_by: str, what: str) -> Path:
+    """A folder a command fills file by file (not swapped in whole) may be new, empty, or one it
+    filled before - recognised by its ``marker`` file, a JSON object whose ``"command"`` starts
+    with ``written_by``.  Any other non-empty folder is refused: its files are a user's, and
+    same-named outputs would replace them.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and how to proceed.
+    """
+    path = Path(path)
+    check_output_folder(path, what=what)
+    if not path.is_dir() or not any(path.iterdir()):
+        return path
+    try:
+        record = json.loads((path / marker).read_text(encoding="utf-8"))
+        ours = isinstance(record, dict) and str(record.get("command", "")).startswith(written_by)
+    except (OSError, ValueError, UnicodeDecodeError):
+        ours = False
+    if not ours:
+        raise ValueError(
+            f"{what} {path} holds files that `{written_by}` did not write (no {marker} of its own): its outputs would "
+            "replace files of the same name; give a new or empty folder"
+        )
     return path
 
 

@@ -765,6 +765,18 @@ case(
         __import__("cv2").imwrite(str(d / "r" / "c.tiff"), np.full((120, 160, 3), 200.0, np.float32)),
     ),
 )
+case(  # issue 33 audit: demo and --debug-dir replaced a user's same-named files
+    "demo-out-a-users-folder",
+    lambda d: ["demo", "--out", str(d / "mine"), "--scenes", "sphere"],
+    "did not write",
+    files={"mine/sphere.png": b"my picture", "mine/notes.txt": "x"},
+)
+case(
+    "decode-debug-dir-a-users-folder",
+    lambda d: _decode(d, "--debug-dir", str(d / "mine")),
+    "did not write",
+    setup=lambda d: (render_folder(d), (d / "mine").mkdir(), (d / "mine" / "depth.png").write_bytes(b"mine")),
+)
 case(
     "render-cache-is-out",
     lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x")],

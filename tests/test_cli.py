@@ -615,3 +615,17 @@ def test_a_cache_that_cannot_take_the_reference_leaves_no_output(tmp_path, capsy
     rc = main(["decode", str(r), "--out", str(out), "--ply", str(tmp_path / "p.ply"), "--cache", str(tmp_path / "c")])
     err = capsys.readouterr().err
     assert rc == 2 and "Read-only file system" in err and not out.exists() and not (tmp_path / "p.ply").exists()
+
+
+def test_a_debug_dir_is_reused_by_later_decodes(tmp_path, capsys):
+    """--debug-dir writes stages.json (the folder is recognised as a decode's), so decoding again
+    into it replaces its stage images; a folder of someone else's files is refused (test_bad_inputs)."""
+    import json
+
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    for _ in range(2):
+        assert main(["decode", str(r), "--out", str(tmp_path / "d.npy"), "--debug-dir", str(tmp_path / "dbg")]) == 0
+    listed = json.loads((tmp_path / "dbg" / "stages.json").read_text())["files"]
+    assert sorted(listed) == sorted(p.name for p in (tmp_path / "dbg").iterdir() if p.name != "stages.json")

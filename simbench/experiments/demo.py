@@ -21,7 +21,7 @@ from simbench.cache import RenderCache
 from simbench.decode import decode, decode_reference
 from simbench.device import get_sensor
 from simbench.experiments.common import RunConfig, figure_png, git_commit, library_scene_path
-from simbench.io import json_bytes, write_files
+from simbench.io import check_own_folder, json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.scene import load_scene
 from simbench.simulate import acquire
@@ -89,6 +89,7 @@ def run_demo(
     cache = RenderCache(cache_dir)
     rows = []
     names, scenes = scenes, [load_scene(library_scene_path(name)) for name in scenes]  # all checked before rendering
+    check_own_folder(out, marker="provenance.json", written_by="simbench demo", what="demo --out")
     files: dict[Path, bytes] = {}
     for i, (name, scene) in enumerate(zip(names, scenes)):
         t0 = time.perf_counter()
