@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes
+from simbench.manifest import file_sha256
 from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
 
@@ -193,11 +194,8 @@ def claim_cache_folder(root: str | Path) -> Path:
 
 @lru_cache(maxsize=64)
 def _file_digest(path: str, mtime_ns: int, size: int) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    """:func:`simbench.manifest.file_sha256`, memoised by the file's time and size."""
+    return file_sha256(path)
 
 
 def source_digest(paths: Iterable[str | Path]) -> str:

@@ -790,7 +790,7 @@ def _cmd_score(args) -> int:
 
 
 def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:
-    """A 2-D real depth map (metres) as float64, or a one-line error naming the file."""
+    """``a`` if it is a 2-D map of real numbers (metres), else a one-line error naming the file."""
     if a.ndim != 2:
         raise ValueError(f"{path}: {what} must be a 2-D depth map, got shape {a.shape}")
     if a.dtype.kind not in "fiu":
@@ -1465,7 +1465,7 @@ def main(argv: list[str] | None = None) -> int:
         print("simbench: interrupted", file=sys.stderr)
         return 130
     except _Terminated:
-        print("simbench: terminated (SIGTERM); partial outputs and cache locks removed", file=sys.stderr)
+        print(_TERMINATED_LINE, file=sys.stderr)
         return 143
     except BrokenPipeError:  # `simbench ... | head`: the reader has gone; stop quietly, as `yes | head` does
         try:
@@ -1483,7 +1483,7 @@ def main(argv: list[str] | None = None) -> int:
 
         if not termination.requested():
             return _report_error(exc, args)
-        print("simbench: terminated (SIGTERM); partial outputs and cache locks removed", file=sys.stderr)
+        print(_TERMINATED_LINE, file=sys.stderr)
         return 143
     finally:
         if previous is not None:
@@ -1506,6 +1506,9 @@ def _report_error(exc: Exception, args) -> int:
         file=sys.stderr,
     )
     return 1
+
+
+_TERMINATED_LINE = "simbench: terminated (SIGTERM); partial outputs and cache locks removed"
 
 
 class _Terminated(BaseException):
