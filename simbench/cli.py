@@ -502,6 +502,8 @@ def _cmd_decode(args) -> int:
     if args.robust:
         params = robust_params(params)
     params = _decoder_overrides(params, args.decoder or [])
+    if args.min_confidence is not None:
+        params = replace(params, min_confidence=args.min_confidence)
     cache = RenderCache(None if args.no_cache else args.cache)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:
@@ -514,7 +516,7 @@ def _cmd_decode(args) -> int:
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
     # every output is written, or none is (an unwritable --ply must not leave depth.npy behind)
-    files = {Path(args.out): npy_bytes(result.depth_m)}
+    files = {Path(args.out): npy_bytes(result.depth_m), _confidence_path(args): npy_bytes(result.confidence)}
     ref_note = (
         ""
         if reference is None
@@ -525,9 +527,13 @@ def _cmd_decode(args) -> int:
         )
     )
     over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
+    threshold = (
+        f"holes below {params.min_confidence:g}" if params.min_confidence > 0 else "no threshold: every decoded pixel"
+    )
     msg = (
         f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms "
-        f"({args.mode} mode, Z0 = {z0} m{ref_note}{over}) -> {args.out}"
+        f"({args.mode} mode, Z0 = {z0} m{ref_note}{over}) -> {args.out}, confidence (fringe SNR; {threshold}) -> "
+        f"{_confidence_path(args)}"
     )
     if args.ply:
         pts = points_from_depth(result.depth_m, rig.camera)
@@ -548,7 +554,7 @@ def _cmd_decode(args) -> int:
         files[d / "stages.json"] = json_bytes({"command": "simbench decode", "capture": args.capture, "files": stages})
         msg += f", stages in {d}/"
     if len({p.resolve() for p in files}) != len(files):
-        raise ValueError("--out, --ply and the --debug-dir files must be different paths")
+        raise ValueError("--out, --confidence, --ply and the --debug-dir files must be different paths")
     # only now, the decode done: a failed decode leaves nothing behind, not even a cache entry; and
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     store_reference()
@@ -571,7 +577,7 @@ def _check_outputs_apart_from_inputs(args) -> None:
             listed = listed_files(folder / "meta.json") | listed_files(folder / "device.json")
             protected |= listed
             folders |= {f.parent for f in listed}
-    outputs = [Path(args.out)] + ([Path(args.ply)] if args.ply else [])
+    outputs = [Path(args.out), _confidence_path(args)] + ([Path(args.ply)] if args.ply else [])
     if args.debug_dir and Path(args.debug_dir).resolve() in folders:
         raise ValueError(f"--debug-dir {args.debug_dir} is a recording's folder: its stage images would mix with it")
     for out in outputs:
@@ -581,6 +587,15 @@ def _check_outputs_apart_from_inputs(args) -> None:
             )
 
 
+def _confidence_path(args) -> Path:
+    """Where ``decode`` writes the confidence map: ``--confidence``, else NAME_confidence.npy
+    beside ``--out``."""
+    if args.confidence:
+        return Path(args.confidence)
+    out = Path(args.out)
+    return out.with_name(f"{out.stem}_confidence.npy")
+
+
 def _check_decode_outputs(args) -> None:
     """Every output of a decode writable before the decode starts: --out, --ply, --debug-dir
     and the reference cache (a folder in the way, a file above one, no permission)."""
@@ -588,6 +603,9 @@ def _check_decode_outputs(args) -> None:
     from simbench.io import check_output_file, check_own_folder
 
     check_output_file(args.out, what="--out")
+    check_output_file(_confidence_path(args), what="--confidence")
+    if Path(args.out).resolve() == _confidence_path(args).resolve():
+        raise ValueError(f"--confidence {_confidence_path(args)} is --out: give another path")
     if args.ply:
         check_output_file(args.ply, what="--ply")
     if args.debug_dir:
@@ -856,11 +874,17 @@ def _decode_recording(args) -> int:
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
-    files = {Path(args.out): npy_bytes(res.depth_m)}
+    info = system.info()
+    res = _apply_min_confidence(res, args.min_confidence, name)
+    confidence = res.confidence if res.confidence is not None else np.zeros(res.depth_m.shape, np.float32)
+    files = {Path(args.out): npy_bytes(res.depth_m), _confidence_path(args): npy_bytes(confidence)}
     over = f"; overriding the recording: rig {args.rig} instead of the recorded one" if args.rig is not None else ""
+    meaning = info.confidence + (
+        f"; and, by --min-confidence, below {args.min_confidence:g}" if args.min_confidence is not None else ""
+    )
     msg = (
-        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({system.info().label}{over}) -> "
-        f"{args.out}"
+        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms ({info.label}{over}) -> "
+        f"{args.out}, confidence ({meaning}) -> {_confidence_path(args)}"
     )
     if args.ply:
         files[Path(args.ply)] = ply_bytes(points_from_depth(res.depth_m, scene.rig.camera)[res.valid])
@@ -868,6 +892,25 @@ def _decode_recording(args) -> int:
     write_files(files)
     print(msg)
     return 0
+
+
+def _apply_min_confidence(res, min_confidence: float | None, name: str):
+    """``res`` (a :class:`simbench.systems.SystemDepth`) with the decoded pixels whose confidence
+    is below ``min_confidence`` made holes (their confidence kept); None = as the system gives it."""
+    if min_confidence is None:
+        return res
+    if res.confidence is None:
+        raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
+    conf = np.asarray(res.confidence, np.float32)
+    with np.errstate(invalid="ignore"):
+        doubtful = res.valid & ~(conf >= np.float32(min_confidence))
+    return replace(
+        res,
+        depth_m=np.where(doubtful, np.float32(np.nan), res.depth_m).astype(np.float32),
+        valid=res.valid & ~doubtful,
+        column_px=None if res.column_px is None else np.where(doubtful, np.nan, res.column_px),
+        confidence=conf,
+    )
 
 
 def _cmd_ablate(args) -> int:
@@ -1198,6 +1241,19 @@ def _parser() -> argparse.ArgumentParser:
         "rig: e.g. the rig.toml of `simbench calibrate`)",
     )
     s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
+    s.add_argument(
+        "--confidence",
+        help="confidence map to write (.npy, float32, the system's own unit: the proposed sensor's is the fringe SNR; "
+        "default: NAME_confidence.npy beside --out)",
+    )
+    s.add_argument(
+        "--min-confidence",
+        type=_float(lo=0.0, hi=1e6),
+        default=None,
+        help="the operating point: decoded pixels whose confidence is below it become holes (default: the decoder's "
+        "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
+        "competitor's validity threshold)",
+    )
     s.add_argument("--ply", help="also write the point cloud as PLY")
     s.add_argument("--debug-dir", help="write every decoder stage here")
     s.add_argument(
@@ -1429,6 +1485,7 @@ def _report_library_messages() -> None:
 # options that name files or folders (an empty value is refused for every one)
 _PATH_OPTIONS = (
     "out",
+    "confidence",
     "ply",
     "debug_dir",
     "write_thresholds",

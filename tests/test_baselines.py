@@ -320,6 +320,16 @@ def test_cli_system_render_decode_score(tmp_path, variant, device):
     assert main(["score", str(tmp_path / "d.npy"), "--gt", str(tmp_path / "rec" / "gt_depth.npy")]) == 0
     depth = np.load(tmp_path / "d.npy")
     assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.8
+    # the confidence map beside the depth, in the system's unit; a threshold above the
+    # system's own turns the least confident decoded pixels into holes, and keeps their confidence
+    conf = np.load(tmp_path / "d_confidence.npy")
+    assert conf.dtype == np.float32 and conf.shape == depth.shape
+    cut = float(np.quantile(conf[np.isfinite(depth)], 0.25))
+    out = tmp_path / "cut.npy"
+    assert main(["decode", str(tmp_path / "rec"), "--out", str(out), "--min-confidence", str(cut)]) == 0
+    kept = np.isfinite(np.load(out))
+    assert np.array_equal(kept, np.isfinite(depth) & (conf >= np.float32(cut)))
+    assert np.array_equal(np.load(tmp_path / "cut_confidence.npy"), conf, equal_nan=True)
     assert main(["decode", str(tmp_path / "missing"), "--out", str(tmp_path / "x.npy")]) == 2
 
 

@@ -162,6 +162,35 @@ def test_decode_takes_decoder_parameters(tmp_path, capsys):
     assert "phase_method must be one of" in err and "'nope'" in err and "'ftp'" in err and "'wfr'" in err
 
 
+def test_decode_writes_the_confidence_beside_the_depth_and_applies_the_operating_point(tmp_path, capsys):
+    """The confidence (fringe SNR) goes beside --out (or to --confidence); --min-confidence
+    turns the decoded pixels below it into holes and leaves the confidence map as it was."""
+    import numpy as np
+
+    args = _synthetic_recording(tmp_path)
+    assert main(["decode", *args, "--out", str(tmp_path / "d.npy")]) == 0
+    out = capsys.readouterr().out
+    assert "d_confidence.npy" in out and "fringe SNR" in out and "no threshold" in out
+    depth, conf = np.load(tmp_path / "d.npy"), np.load(tmp_path / "d_confidence.npy")
+    assert conf.dtype == np.float32 and conf.shape == depth.shape
+    assert (conf[np.isfinite(depth)] > 0).all() and (conf[~np.isfinite(depth)] == 0).all()
+    cut = float(np.quantile(conf[np.isfinite(depth)], 0.5))
+    argv = ["decode", *args, "--out", str(tmp_path / "e.npy"), "--confidence", str(tmp_path / "c.npy")]
+    assert main([*argv, "--min-confidence", str(cut)]) == 0
+    assert f"holes below {cut:g}" in capsys.readouterr().out
+    kept = np.isfinite(np.load(tmp_path / "e.npy"))
+    assert np.array_equal(kept, np.isfinite(depth) & (conf >= np.float32(cut)))
+    assert np.array_equal(np.load(tmp_path / "c.npy"), conf)
+    assert not (tmp_path / "e_confidence.npy").exists()
+    for bad, match in (
+        (["--confidence", str(tmp_path / "e.npy")], "--confidence"),
+        (["--min-confidence", "-1"], "--min-confidence"),
+        (["--confidence", args[0]], "input"),
+    ):
+        assert main([*argv[:-2], *bad]) == 2
+        assert match in capsys.readouterr().err
+
+
 TINY_SCENE = """\
 name = "tiny"
 rig = "rig.toml"

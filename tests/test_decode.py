@@ -342,3 +342,65 @@ def test_a_dropped_result_frees_its_images_without_the_cyclic_collector(referenc
     assert st["b"].tolist() == [2.0, 2.0, 2.0]
     with pytest.raises(TypeError, match="derived stage needs a function"):
         st.put("c", np.ones(3), derived=True)
+
+
+@pytest.mark.parametrize(("b", "sigma"), [(0.3, 0.01), (0.1, 0.02), (0.2, 0.06)])
+def test_confidence_is_the_fringe_rms_over_the_noise_rms(b, sigma):
+    """Statistical tier: for a cosine of amplitude B under white noise of standard deviation
+    sigma, the fringe SNR (simbench.decode.phase.fringe_snr) is B / (sigma sqrt 2).  Tolerance
+    5 %: the fit's three parameters absorb ~3 of the window's ~(4 pi sigma_x sigma_y) effective
+    samples, which raises the SNR by ~2 % at the decoder's window (measured 2-3 %)."""
+    from simbench.decode.phase import fringe_snr, gabor_phase
+
+    rng = np.random.default_rng(7)
+    h, w, t = 160, 320, 12.0
+    x = np.arange(w)[None, :] * np.ones((h, 1))
+    img = (0.4 + b * np.cos(2 * np.pi * x / t + 0.3) + rng.normal(0.0, sigma, (h, w))).astype(np.float32)
+    fit = gabor_phase(
+        img, certainty=np.ones((h, w), np.float32), period_px=t, sigma_x_px=0.25 * t, sigma_y_px=0.15 * t, offset=False
+    )
+    snr = np.median(fringe_snr(fit.residual)[20:-20, 20:-20])
+    assert snr == pytest.approx(b / (sigma * np.sqrt(2.0)), rel=0.05)
+
+
+def test_confidence_of_an_unfit_or_perfect_window():
+    from simbench.decode.phase import MAX_FRINGE_SNR, fringe_snr
+
+    got = fringe_snr(np.array([[np.nan, np.inf, 0.0, 0.5, -1.0]], np.float32))
+    assert got.dtype == np.float32
+    assert got.tolist() == [[0.0, 0.0, MAX_FRINGE_SNR, 2.0, 0.0]]
+
+
+def test_the_operating_point_turns_doubtful_pixels_into_holes_and_keeps_their_confidence(reference):
+    """min_confidence: the decode with no threshold, less the pixels whose confidence is below it
+    (bit for bit); their confidence stays, the rest of the output is that of a hole."""
+    rng = np.random.default_rng(3)
+    img, _, _ = _tilted(25, 1.1)
+    noisy = np.clip(img + rng.normal(0.0, 0.04, img.shape), 0.0, 1.0).astype(np.float32)
+    base = DecoderParams(mode="calibrated")
+    everything = decode(noisy, rig=RIG, params=base)
+    threshold = float(np.quantile(everything.confidence[everything.valid], 0.3))
+    kept = decode(noisy, rig=RIG, params=DecoderParams(mode="calibrated", min_confidence=threshold))
+    doubtful = everything.valid & (everything.confidence < threshold)
+    assert 0.2 < doubtful.sum() / everything.valid.sum() < 0.4
+    assert np.array_equal(kept.valid, everything.valid & ~doubtful)
+    assert np.array_equal(kept.confidence, everything.confidence)
+    assert np.isnan(kept.depth_m[doubtful]).all() and np.isnan(kept.column_px[doubtful]).all()
+    assert (kept.stripe_index[doubtful] == -1).all()
+    same = kept.valid
+    assert np.array_equal(kept.depth_m[same], everything.depth_m[same])
+    assert np.array_equal(kept.column_px[same], everything.column_px[same])
+    from simbench.experiments.hard_scenes import with_threshold
+
+    after = with_threshold(everything, threshold)
+    for name in ("depth_m", "valid", "confidence", "column_px", "stripe_index"):
+        assert np.array_equal(getattr(after, name), getattr(kept, name), equal_nan=True), name
+
+
+def test_the_paper_decoder_has_no_operating_point_and_the_robust_one_has():
+    from simbench.decode import ROBUST_MIN_CONFIDENCE, robust_params
+
+    assert DecoderParams().min_confidence == 0.0
+    assert robust_params().min_confidence == ROBUST_MIN_CONFIDENCE > 0.0
+    with pytest.raises(ValueError, match="min_confidence"):
+        DecoderParams(min_confidence=-1.0)

@@ -80,7 +80,7 @@ def test_objects_before_walls_cast_shadows_on_them(name, variant):
     assert on_wall.mean() > 0.3 and (~gt.lit & on_wall).mean() > 0.005  # a shadow on the wall
 
 
-def test_the_confidence_curve_keeps_the_most_confident_pixels():
+def test_the_confidence_curve_keeps_the_pixels_at_or_above_each_threshold():
     """Closed form: 10 decoded pixels of 20, confidence 1..10, the two least confident wrong."""
     region = np.ones((4, 5), bool)
     depth = np.full((4, 5), np.nan)
@@ -90,7 +90,34 @@ def test_the_confidence_curve_keeps_the_most_confident_pixels():
     flat[:10] = 1.0
     flat[:2] = 1.5  # 500 mm wrong
     conf.reshape(-1)[:10] = np.arange(1, 11)
-    curve = {c["keep"]: c for c in confidence_curve(depth, conf, gt, region, keep=(1.0, 0.8, 0.5))}
-    assert curve[1.0]["completeness"] == 0.5 and curve[1.0]["wrong_share"] == 0.2
-    assert curve[0.8]["completeness"] == pytest.approx(0.4) and curve[0.8]["wrong_share"] == 0.0
-    assert curve[0.5]["completeness"] == pytest.approx(0.25) and curve[0.5]["wrong_share"] == 0.0
+    curve = {c["threshold"]: c for c in confidence_curve(depth, conf, gt, region, thresholds=(0.0, 3.0, 6.0, 11.0))}
+    assert curve[0.0]["completeness"] == 0.5 and curve[0.0]["wrong_share"] == 0.2
+    assert curve[3.0]["completeness"] == pytest.approx(0.4) and curve[3.0]["wrong_share"] == 0.0
+    assert curve[6.0]["completeness"] == pytest.approx(0.25) and curve[6.0]["wrong_share"] == 0.0
+    assert curve[11.0]["completeness"] == 0.0 and np.isnan(curve[11.0]["wrong_share"])
+
+
+def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_goals():
+    """Closed form: scene a meets both goals at 2 and 3, scene b at 3 and 4, scene c never: 3
+    (two scenes); with b meeting them at 2 too, the lower of 2 and 3."""
+    from simbench.experiments.hard_scenes import operating_point
+
+    def rows(scene, met):
+        return [
+            {
+                "scene": scene,
+                "decoder": "robust",
+                "threshold": float(t),
+                "completeness": 0.99 if t in met else 0.5,
+                "wrong_share": 0.0,
+            }
+            for t in (0, 2, 3, 4)
+        ]
+
+    curves = rows("a", {2, 3}) + rows("b", {3, 4}) + rows("c", set())
+    assert operating_point(curves) == 3.0
+    assert operating_point(rows("a", {2, 3}) + rows("b", {2, 3, 4})) == 2.0
+    wrong = [dict(c, wrong_share=0.01) if c["threshold"] == 3.0 else c for c in curves]
+    assert operating_point(wrong) == 2.0  # 1 % wrong at 3: a meets them at 2, b at 4; the lower wins
+    with pytest.raises(ValueError, match="paper"):
+        operating_point(curves, decoder="paper")

@@ -512,6 +512,10 @@ class KinectSystem:
             label="Kinect v1 (simulated)",
             size_hw=(m.height_px, m.width_px),
             captures=1,
+            confidence=(
+                f"normalised cross-correlation of the best speckle match (-1 to 1); pixels below {m.min_ncc:g} are "
+                "holes"
+            ),
             numbers={
                 "focal_px": (m.focal_px, "Khoshelham & Oude Elberink 2012 (~580 px calibrated)"),
                 "baseline_m": (m.baseline_m, "Khoshelham & Oude Elberink 2012"),

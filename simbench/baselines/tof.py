@@ -326,6 +326,9 @@ class ToFSystem:
             label="SR4000 ToF (simulated)",
             size_hw=(m.height_px, m.width_px),
             captures=1,
+            confidence=(
+                f"demodulated amplitude of the four taps (electrons); pixels below {m.min_amplitude_e:g} e- are holes"
+            ),
             numbers={
                 "size_wh": ((m.width_px, m.height_px), "MESA SR4000 data sheet, as quoted by Chiabrando et al. 2009"),
                 "fov_x_deg": (m.fov_x_deg, "MESA SR4000 data sheet, as quoted by Chiabrando et al. 2009"),

@@ -9,6 +9,7 @@ from simbench.decode.pipeline import (
     as_float_image,
     decode,
     REFERENCE_Z0_TOLERANCE,
+    ROBUST_MIN_CONFIDENCE,
     decode_reference,
     reference_plane_offset,
     robust_params,
@@ -26,4 +27,5 @@ __all__ = [
     "reference_plane_offset",
     "REFERENCE_Z0_TOLERANCE",
     "robust_params",
+    "ROBUST_MIN_CONFIDENCE",
 ]

@@ -458,7 +458,8 @@ def decode_tail(
        ``newton_steps``, ``refine_steps`` as it passes them); with ``table`` None (calibrated
        mode), every pixel triangulated so;
     3. the outputs: ``valid = (depth >= zmin) & (depth <= zmax)`` (float32), and ``depth``, the
-       ``amplitude``, the column and the index where valid, NaN / 0 / NaN / -1 elsewhere.
+       per-pixel confidence given as ``amplitude`` (the decoder passes the fringe SNR), the
+       column and the index where valid, NaN / 0 / NaN / -1 elsewhere.
 
     The same bits as those steps one after the other (tests/test_kernels.py), without their
     image-sized intermediates.

@@ -26,7 +26,16 @@ import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["INTENSITY_MODES", "overlay_intensity", "certainty_window_px", "certainty_map", "PhaseResult", "gabor_phase"]
+__all__ = [
+    "INTENSITY_MODES",
+    "overlay_intensity",
+    "certainty_window_px",
+    "certainty_map",
+    "PhaseResult",
+    "gabor_phase",
+    "fringe_snr",
+    "MAX_FRINGE_SNR",
+]
 
 
 def _overlay(rgb: np.ndarray) -> np.ndarray:
@@ -134,6 +143,38 @@ class PhaseResult:
     offset: np.ndarray | None
     residual: np.ndarray
     support: np.ndarray
+
+
+# The largest fringe SNR reported: a noise-free synthetic fringe fits to rounding error (residual
+# ~1e-7), whose reciprocal says nothing more than "perfect" (assumption: 1e4 is far above any
+# rendered or real capture: a 12-bit camera's quantisation alone limits it to ~1e3).
+MAX_FRINGE_SNR = 1.0e4
+
+
+def fringe_snr(residual: np.ndarray) -> np.ndarray:
+    """The fringe's signal-to-residual ratio per pixel: the RMS of the fitted fringe
+    (``amplitude / sqrt 2``) over the RMS of what the local cosine fit leaves in its window, i.e.
+    ``1 / residual`` of :class:`PhaseResult`; the decoder's confidence.
+
+    Everything the fit's model (offset + one cosine of the nominal period) does not explain lowers
+    it: sensor and render noise (for white noise of standard deviation sigma and fringe amplitude
+    B, ``SNR = B / (sigma sqrt 2)``), a depth edge or an albedo step in the window, a second fringe
+    of another phase added by interreflection or a specular lobe, a chirp.  0 where the fit did not
+    run (residual NaN or infinite), at most :data:`MAX_FRINGE_SNR`.
+
+    Parameters
+    ----------
+    residual : ndarray, shape (H, W), float32
+        :attr:`PhaseResult.residual`.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32
+    """
+    r = np.asarray(residual, np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        snr = np.where(np.isfinite(r) & (r >= 0), 1.0 / np.maximum(r, 1.0 / MAX_FRINGE_SNR), 0.0)
+    return snr.astype(np.float32, copy=False)
 
 
 def gaussian_kernel(sigma: float) -> np.ndarray:

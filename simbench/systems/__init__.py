@@ -80,6 +80,9 @@ class SystemInfo:
     size_hw: tuple[int, int]
     captures: int
     numbers: dict[str, tuple[Any, str]] = field(default_factory=dict)
+    # what SystemDepth.confidence is, with its unit and the operating point the system's own
+    # decoder applies (pixels below it are holes): written beside the depth by `simbench decode`
+    confidence: str = ""
     # the fringe period (projector px) of a structured-light system's columns: a decoded column
     # off by more than half of it is a stripe-order error; None = no columns
     period_px: float | None = None

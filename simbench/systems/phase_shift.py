@@ -99,6 +99,10 @@ class PhaseShiftSystem:
             captures=s.captures,
             period_px=s.period_px,
             uses_scene_rig=True,
+            confidence=(
+                f"fringe modulation B of the {s.steps}-step fit (full-scale units, 0-1); pixels below "
+                f"{s.min_modulation:g} are holes"
+            ),
             numbers={
                 "steps": (s.steps, "assumption: the common choice; N steps are blind to fringe harmonics up to N - 2"),
                 "period_px": (s.period_px, "the paper's period (same spatial frequency as the proposed pattern)"),

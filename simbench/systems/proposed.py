@@ -153,6 +153,15 @@ class ColourFringeSystem:
             captures=1,
             period_px=self.pattern.period_px,
             uses_scene_rig=True,
+            confidence=(
+                "fringe SNR: the RMS of the fitted fringe over the RMS of the local fit's residual "
+                "(simbench.decode.phase.fringe_snr); "
+                + (
+                    f"pixels below {self.decoder.min_confidence:g} are holes"
+                    if self.decoder.min_confidence > 0
+                    else "no threshold (the paper's decoder describes none)"
+                )
+            ),
             numbers={
                 "period_px": (self.pattern.period_px, "paper Sec. 3 (T = 21 projector px)"),
                 "debruijn_order": (self.pattern.order, "paper Eq. 7-8 (B(2, 3))"),
