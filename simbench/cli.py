@@ -957,9 +957,14 @@ def _cmd_bench(args) -> int:
         from simbench.rig import load_rig
 
         rig = load_rig(args.rig)
-    res = run_decode_benchmark(repeats=args.repeats, device=args.device, scene=args.scene, rig=rig, mode=args.mode)
+    res = run_decode_benchmark(
+        repeats=args.repeats, device=args.device, scene=args.scene, rig=rig, mode=args.mode, robust=args.robust
+    )
     setup = ", ".join(
-        [res["scene"]] + ([f"rig {args.rig}"] if rig is not None else []) + ([f"{args.mode} mode"] if args.mode else [])
+        [res["scene"]]
+        + ([f"rig {args.rig}"] if rig is not None else [])
+        + ([f"{args.mode} mode"] if args.mode else [])
+        + (["colour-robust decoder"] if args.robust else [])
     )
     print(
         json.dumps(res, indent=2)
@@ -1448,6 +1453,11 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         choices=["reference", "calibrated"],
         help="proposed decoder: reference-plane matching or triangulation with the rig (default: the decoder's)",
+    )
+    s.add_argument(
+        "--robust",
+        action="store_true",
+        help="proposed decoder: time our colour-robust decoder (with its calibration frames) instead of the paper's",
     )
     s.add_argument("--repeats", type=_int(1, 100000), default=20, help="timed decodes (after one warm-up)")
     s.add_argument(

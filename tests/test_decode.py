@@ -404,3 +404,59 @@ def test_the_paper_decoder_has_no_operating_point_and_the_robust_one_has():
     assert robust_params().min_confidence == ROBUST_MIN_CONFIDENCE > 0.0
     with pytest.raises(ValueError, match="min_confidence"):
         DecoderParams(min_confidence=-1.0)
+
+
+@pytest.mark.parametrize("dark", [0.05, 0.3])
+def test_phase_stability_flags_the_pixels_an_albedo_step_biases(dark):
+    """Exact tier: a noise-free fringe on a print whose albedo steps from 1 to ``dark`` across
+    the stripes.  Every pixel whose phase the window's straddling biases by more than 0.15 rad
+    (0.5 projector px, ~2.4 mm at 1 m) scores below the colour-robust decoder's operating
+    point once the stability term is folded in; away from the step the confidence is the fringe
+    SNR.  On the milder step the fringe SNR alone lets such a pixel through (measured: x = 120,
+    0.19 rad off at SNR 3.4, the phase moving 0.14 rad when the window is halved)."""
+    from simbench.decode import ROBUST_MIN_CONFIDENCE, STABILITY_KAPPA_RAD, STABILITY_WINDOW_SCALE
+    from simbench.decode.phase import fringe_snr, gabor_phase
+    from simbench.decode.pipeline import phase_change
+
+    h, w, t = 80, 240, 12.4
+    x = np.arange(w)[None, :] * np.ones((h, 1))
+    true = np.angle(np.exp(1j * (2 * np.pi * (x + 0.5) / t - np.pi + 0.7)))
+    img = (np.where(x < 120.3, 1.0, dark) * (0.5 + 0.5 * np.cos(true))).astype(np.float32)
+    kw = dict(certainty=np.ones((h, w), np.float32), period_px=t, sigma_y_px=0.15 * t, offset=False)
+    wide = gabor_phase(img, sigma_x_px=0.25 * t, **kw)
+    narrow = gabor_phase(img, sigma_x_px=0.25 * t * STABILITY_WINDOW_SCALE, **kw)
+    snr = fringe_snr(wide.residual)[40]
+    with np.errstate(divide="ignore"):
+        conf = np.fmin(snr, STABILITY_KAPPA_RAD / phase_change(wide.wrapped, narrow.wrapped)[40])
+    biased = phase_change(wide.wrapped, true)[40] > 0.15
+    assert 3 <= biased.sum() <= 12 and (np.abs(np.nonzero(biased)[0] - 121) <= 8).all()
+    assert (conf[biased] < ROBUST_MIN_CONFIDENCE).all()
+    if dark == 0.3:
+        assert (snr[biased] >= ROBUST_MIN_CONFIDENCE).any()
+    far = slice(20, 100)
+    assert np.array_equal(conf[far], snr[far]) and (conf[far] > 100).all()
+
+
+def test_the_robust_decoders_confidence_is_the_lower_of_its_two_terms(reference):
+    """End to end: DecodeResult.confidence is, where a depth came out, the stage ``confidence``:
+    fmin(fringe SNR, kappa / phase change) of the stages ``fit_residual`` and ``phase_change``;
+    the paper's decoder has no phase_change stage and its confidence is the fringe SNR."""
+    from simbench.decode import STABILITY_KAPPA_RAD
+    from simbench.decode.phase import fringe_snr
+
+    rng = np.random.default_rng(5)
+    img, _, _ = _tilted(20, 1.05)
+    noisy = np.clip(img + rng.normal(0.0, 0.02, img.shape), 0.0, 1.0).astype(np.float32)
+    for stability in (False, True):
+        p = DecoderParams(mode="calibrated", phase_stability=stability)
+        r = decode(noisy, rig=RIG, params=p)
+        snr = fringe_snr(r.stages["fit_residual"])
+        if stability:
+            with np.errstate(divide="ignore"):
+                want = np.fmin(snr, np.float32(STABILITY_KAPPA_RAD) / r.stages["phase_change"])
+            assert (want[r.valid] < snr[r.valid]).any()
+        else:
+            assert "phase_change" not in r.stages
+            want = snr
+        assert np.array_equal(r.confidence[r.valid], want[r.valid])
+        assert np.array_equal(r.stages["confidence"], want)

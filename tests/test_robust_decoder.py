@@ -104,7 +104,9 @@ def test_robust_decoder_decodes_coloured_boards_under_crosstalk(calibration, boa
     """Under the coupling K the paper's decoder loses or misreads saturated boards (the blue
     fringe leaking into green makes every red stripe on a blue board read green); the robust
     decoder recovers the projector column on every board, with noise, at >= 99 % of the pixels
-    and without a stripe-order error."""
+    and without a stripe-order error.  At its operating point (ROBUST_MIN_CONFIDENCE) the
+    pixels of low confidence are holes: >= 98 % stay (measured 98.3 % on the green board, whose
+    weak red stripes are noisiest, 99.2-99.7 % on the others)."""
     ref, f = calibration
     p = robust_params(DecoderParams(mode=mode))
     rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
@@ -112,11 +114,12 @@ def test_robust_decoder_decodes_coloured_boards_under_crosstalk(calibration, boa
     r = decode(img, rig=RIG, params=p, reference=rmap)
     lit = np.isfinite(col)
     err = r.column_px[r.valid] - col[r.valid]
-    assert r.valid[lit].mean() >= 0.99
+    assert (r.valid | (r.confidence > 0))[lit].mean() >= 0.99  # decoded, before the operating point
+    assert r.valid[lit].mean() >= 0.98
     assert np.all(np.abs(err) < 0.5 * 21)  # no stripe-order error
     # the weak stripes (0.04 of the light, 0.03 peak against noise 0.002) are noisy: measured
-    # 0.12 projector px RMS on the red board, 0.02-0.06 on the others; a quarter pixel bounds
-    # it with room, and is still 40x under the half period an order error costs
+    # 0.14 projector px RMS on the green board, 0.12 on the red, 0.09-0.10 on the others; a
+    # quarter pixel bounds it with room, and is still 40x under the half period an order error costs
     assert np.sqrt(np.mean(err**2)) < 0.25
 
 

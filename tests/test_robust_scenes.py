@@ -7,7 +7,9 @@ default sampler at 16 instead of 36 spp (a noisier capture than the full run's, 
 hold a fortiori; it halves the test's time), and decoded by triangulation (paper Eq. 15) and
 against the reference plane.
 The bound of the issue: completeness >= 97 % of the lit pixels off a 5-px band at the edges,
-MAE against ground truth <= 0.6 mm, no stripe-order errors.  The band lies along every edge
+MAE against ground truth <= 0.6 mm, no stripe-order errors; and issue 35's: at the decoder's
+operating point (``ROBUST_MIN_CONFIDENCE``) at most 0.1 % of the decoded pixels more than 5 mm
+from ground truth.  The band lies along every edge
 of the ground truth (depth discontinuities and object boundaries, :func:`simbench.metrics.
 edge_band`), the printed chart's tile edges included; completeness and MAE are both taken off
 it.  (Counting the pixels beside the printed edges as well, the chart decodes at ~96 %: the
@@ -16,6 +18,7 @@ phase fit fails within ~4-10 px of an edge, more beside the saturated red and or
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from simbench.decode import robust_params
@@ -25,6 +28,8 @@ pytestmark = pytest.mark.slow
 
 MIN_COMPLETENESS = 0.97
 MAX_MAE_MM = 0.6
+MAX_WRONG_SHARE = 0.001  # of the decoded pixels, more than WRONG_MM wrong (issue 35)
+WRONG_MM = 5.0
 BAND_PX = 5
 
 PASSING = [
@@ -32,7 +37,6 @@ PASSING = [
     "robust_purplish_blue",
     "robust_violet",
     "robust_dark",
-    "robust_printed",
     "robust_tilt_x45",
     "robust_tilt_y45",
     "step",
@@ -46,8 +50,14 @@ PASSING = [
 # the edge, the link check finds the broken link and drops both stripes of it, about one
 # period each side beyond the 5-px band.
 SHORTFALLS = {
+    # measured 2026-11-25 (16 spp, calibrated mode): at the operating point 95.2 % complete, 0.50 % of
+    # the decoded pixels > 5 mm wrong; with no threshold 97.9 % but 1.2 % wrong (its earlier pass
+    # checked completeness, MAE and stripe order only).  The wrong pixels and the holes lie beside
+    # the tile edges, where the window straddles an albedo step, and on the saturated tiles.
+    "robust_printed": "printed albedo edges and saturated tiles bias the phase: 95.2 % complete and 0.50 % > 5 mm "
+    "wrong at the operating point (issue 35)",
     "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless "
-    "depth edge; ~89 % completeness (issue 17 note)",
+    "depth edge; ~89 % completeness (issue 17 note; 90.5 % and none > 5 mm wrong at the operating point, 2026-11-25)",
 }
 
 
@@ -69,7 +79,10 @@ def _scores(session, name: str) -> dict:
     out = {}
     for mode in ("calibrated", "reference"):
         r = session.decode(cap, params, mode=mode)
-        out[mode] = depth_errors(
+        region = gt.lit & ~band
+        decoded = region & np.isfinite(r.depth_m)
+        wrong = float(np.mean(np.abs(r.depth_m - gt.depth_m)[decoded] > WRONG_MM / 1000.0)) if decoded.any() else 1.0
+        out[mode] = {"wrong_share": wrong} | depth_errors(
             r.depth_m,
             gt.depth_m,
             region=gt.lit & ~band,
@@ -84,11 +97,12 @@ def _check(scores: dict, name: str) -> None:
     for mode, m in scores.items():
         what = (
             f"{name} ({mode}): completeness {100 * m['completeness']:.2f} %, MAE {m['mae_mm']:.3f} mm, "
-            f"{m['stripe_order_errors']} stripe-order errors"
+            f"{m['stripe_order_errors']} stripe-order errors, {100 * m['wrong_share']:.3f} % > {WRONG_MM:g} mm wrong"
         )
         assert m["completeness"] >= MIN_COMPLETENESS, what
         assert m["mae_mm"] <= MAX_MAE_MM, what
         assert m["stripe_order_errors"] == 0, what
+        assert m["wrong_share"] <= MAX_WRONG_SHARE, what
 
 
 @pytest.mark.parametrize("name", PASSING)

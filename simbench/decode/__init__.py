@@ -10,6 +10,8 @@ from simbench.decode.pipeline import (
     decode,
     REFERENCE_Z0_TOLERANCE,
     ROBUST_MIN_CONFIDENCE,
+    STABILITY_KAPPA_RAD,
+    STABILITY_WINDOW_SCALE,
     decode_reference,
     reference_plane_offset,
     robust_params,
@@ -28,4 +30,6 @@ __all__ = [
     "REFERENCE_Z0_TOLERANCE",
     "robust_params",
     "ROBUST_MIN_CONFIDENCE",
+    "STABILITY_KAPPA_RAD",
+    "STABILITY_WINDOW_SCALE",
 ]

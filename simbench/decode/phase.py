@@ -172,9 +172,11 @@ def fringe_snr(residual: np.ndarray) -> np.ndarray:
     ndarray, shape (H, W), float32
     """
     r = np.asarray(residual, np.float32)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        snr = np.where(np.isfinite(r) & (r >= 0), 1.0 / np.maximum(r, 1.0 / MAX_FRINGE_SNR), 0.0)
-    return snr.astype(np.float32, copy=False)
+    snr = np.maximum(r, np.float32(1.0 / MAX_FRINGE_SNR))
+    np.reciprocal(snr, out=snr)
+    with np.errstate(invalid="ignore"):
+        snr[~(r >= 0) | ~np.isfinite(r)] = 0.0
+    return snr
 
 
 def gaussian_kernel(sigma: float) -> np.ndarray:

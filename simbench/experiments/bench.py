@@ -58,6 +58,7 @@ def run_decode_benchmark(
     scene: str = "plane",
     rig: Rig | None = None,
     mode: str | None = None,
+    robust: bool = False,
 ) -> dict:
     """Time one decode by the depth system ``device`` (any registered name,
     :mod:`simbench.systems`) of its benchmark inputs (``bench_inputs``) at its native
@@ -70,17 +71,19 @@ def run_decode_benchmark(
     another rig of the same camera size, e.g. one from ``simbench calibrate`` (its lens
     distortion then costs what it costs: the capture is undistorted, columns triangulated
     through the projector's lens); ``mode`` (``reference`` or ``calibrated``) overrides the
-    decoder's mode.  The reference map is decoded once, before the timed runs."""
+    decoder's mode; ``robust`` times our colour-robust decoder
+    (:func:`simbench.decode.robust_params`: its calibration frames come with the inputs) instead
+    of the paper's.  The reference map is decoded once, before the timed runs."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if device not in system_names():
         raise ValueError(f"unknown benchmark device {device!r}; valid: {system_names()}")
-    if device != "proposed" and (rig is not None or mode is not None):
-        raise ValueError(f"a rig and a decoder mode apply to the proposed decoder, not to {device!r}")
+    if device != "proposed" and (rig is not None or mode is not None or robust):
+        raise ValueError(f"a rig, a decoder mode and --robust apply to the proposed decoder, not to {device!r}")
     if mode is not None and mode not in MODES:
         raise ValueError(f"unknown decoder mode {mode!r}; valid: {list(MODES)}")
     system = get_system(device)
-    raw, cal, spec = system.bench_inputs(scene=scene)
+    raw, cal, spec = system.bench_inputs(scene=scene, **({"frames": True} if robust else {}))
     # an image (H, W), (H, W, channels or taps), or a multi-shot stack of frames (K, H, W)
     h, w = raw.shape[1:3] if raw.ndim == 3 and raw.shape[2] > 4 else raw.shape[:2]
     if rig is not None:
@@ -92,6 +95,10 @@ def run_decode_benchmark(
         spec = dataclasses.replace(spec, rig=rig)
 
     extra = {"mode": mode} if mode is not None else {}
+    if robust:
+        from simbench.decode import robust_params
+
+        extra["params"] = robust_params(system.decoder)
 
     def run():
         system.decode(raw, cal, scene=spec, **extra)
@@ -109,6 +116,7 @@ def run_decode_benchmark(
         "scene": scene,
         "rig": spec.rig.name if spec is not None else None,
         "mode": mode,
+        "decoder": "robust" if robust else ("paper" if device == "proposed" else None),
         "size_wh": [w, h],
         "repeats": repeats,
         "median_ms": statistics.median(times),

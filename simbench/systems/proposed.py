@@ -268,7 +268,7 @@ class ColourFringeSystem:
         return SystemDepth(depth_m=r.depth_m, valid=r.valid, confidence=r.confidence, column_px=r.column_px, detail=r)
 
     def bench_inputs(
-        self, *, scene: str = "plane", seed: int = 0
+        self, *, scene: str = "plane", seed: int = 0, frames: bool = False
     ) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of the decoder benchmark (``simbench bench``), made in
         numpy without the renderer (:mod:`simbench.synthetic`), deterministic for a seed: the
@@ -276,6 +276,8 @@ class ColourFringeSystem:
 
         ``scene``: ``plane`` (fully lit) or ``shadow`` (:data:`BENCH_SHADOW` gets no projector
         light, which sends the decoder down the path every scene with shadows takes).
+        ``frames``: the calibration also holds the reference plane under black and each primary
+        (:data:`simbench.pattern.CALIBRATION_FRAMES`), which the colour-robust decoder needs.
         """
         from simbench.device import get_sensor
         from simbench.projector import transfer_curve
@@ -297,9 +299,18 @@ class ColourFringeSystem:
         rng = np.random.default_rng(seed)
         capture = simple_camera(rad / 1.21, camera=cam, rng=rng)
         reference = simple_camera(ref_rad, camera=cam, rng=rng)
+        extra = {}
+        if frames:
+            from simbench.pattern import calibration_frames
+
+            for name, frame in calibration_frames(pattern_u8(pattern)).items():
+                flat, _, _ = synthetic_plane_capture(
+                    transfer_curve(frame, transfer="linear"), rig, point_m=(0, 0, 1.0), supersample=2
+                )
+                extra[name] = simple_camera(flat, camera=cam, rng=rng)
         return (
             capture,
-            ReferenceCalibration(rig=rig, image=reference),
+            ReferenceCalibration(rig=rig, image=reference, frames=extra),
             SceneSpec(name=f"bench_{scene}", rig=rig, objects=(), reference_depth_m=1.0),
         )
 
