@@ -20,7 +20,8 @@ Both decoders run with no confidence threshold first; the table gives the paper'
 (the paper describes no confidence) and the colour-robust decoder at its operating point
 (:data:`simbench.decode.ROBUST_MIN_CONFIDENCE`).  Beside it, for both decoders: completeness
 against the wrong share when only the decoded pixels whose confidence (the fringe SNR,
-:func:`simbench.decode.phase.fringe_snr`) reaches each of :data:`CONFIDENCE_THRESHOLDS` are kept -
+:func:`simbench.decode.phase.fringe_snr`, for the colour-robust decoder capped by the phase's
+stability) reaches each of :data:`CONFIDENCE_THRESHOLDS` are kept -
 the curves the operating point is chosen from.  What it cannot see: errors under 5 mm that are
 systematic (the MAE shows them), and pixels the ground truth calls unlit (shadows are not scored).
 
@@ -81,7 +82,7 @@ REFERENCE_SYSTEM = "phase_shift"
 WRONG_MM = 5.0  # the issue's "wrong": more than 5 mm from ground truth
 GOAL_COMPLETENESS = 0.97  # issue 35's goals per scene
 GOAL_WRONG_SHARE = 0.001
-# fringe-SNR thresholds the curves are drawn at (0: every decoded pixel)
+# confidence thresholds the curves are drawn at (0: every decoded pixel)
 CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0)
 SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "stripe_order_errors")
 
@@ -238,7 +239,7 @@ def _curve_plot(curves: list[dict], operating: dict) -> bytes:
         ax.axvline(97, color="k", ls="--", lw=1, label="goal: 97 % complete")
         ax.set_yscale("log")
         ax.set_xlabel("completeness (% of lit pixels off the edge band)")
-        ax.set_title(f"{titles[d]}: fringe SNR >= threshold (square: operating point {operating[d]:g})", fontsize=9)
+        ax.set_title(f"{titles[d]}: confidence >= threshold (square: operating point {operating[d]:g})", fontsize=9)
         ax.grid(alpha=0.3, which="both")
     axes[0].set_ylabel("decoded pixels > 5 mm wrong (%; 1e-4 = none)")
     axes[1].legend(fontsize=6, ncol=2)
@@ -291,7 +292,7 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "Plot: `hard_scenes_confidence.png`; every number: `hard_scenes.csv`, `hard_scenes_confidence.csv`.",
         "",
         "The proposed sensor's capture decoded by triangulation with the paper's decoder (no confidence threshold: "
-        "the paper describes none) and with our colour-robust decoder at its operating point (fringe SNR >= "
+        "the paper describes none) and with our colour-robust decoder at its operating point (confidence >= "
         f"{operating['robust']:g}: pixels below are holes), beside the multi-shot phase-shifting reference (12 "
         "exposures on the same projector and camera). "
         f"Scored over the lit pixels off a {cfg.edge_band_px}-px band at every depth edge and object boundary: "
@@ -305,7 +306,9 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "",
         "Every decoded pixel carries a confidence, the fringe SNR: the RMS of the fitted fringe over the RMS of what "
         "the local cosine fit leaves in its window (`simbench.decode.phase.fringe_snr`). Noise, a depth edge or an "
-        "albedo step inside the window, and a second fringe added by interreflection or a highlight all lower it. "
+        "albedo step inside the window, and a second fringe added by a highlight all lower it. The colour-robust "
+        "decoder caps it by the phase's stability, 0.4 rad over the phase's change when the window is halved "
+        "(`DecoderParams.phase_stability`): a window straddling an edge or a crease is biased, less so when narrower. "
         "Keeping only the pixels at or above a threshold, over the scenes above (the rule that chose the "
         "colour-robust decoder's operating point, `simbench.experiments.hard_scenes.operating_point`: the threshold "
         "under which the most scenes meet both goals, of equals the lowest; it was applied to the full-resolution "
@@ -314,7 +317,7 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         *markdown_table(
             [
                 "decoder",
-                "fringe SNR >=",
+                "confidence >=",
                 "worst completeness",
                 "median completeness",
                 "worst > 5 mm",
