@@ -175,8 +175,8 @@ class DecoderParams:
         fringe SNR and :data:`STABILITY_KAPPA_RAD` over the phase's change (the colour-robust
         decoder; off = the fringe SNR alone, and no second fit).
     min_confidence : float
-        The operating point: decoded pixels whose confidence (the fringe SNR,
-        :func:`simbench.decode.phase.fringe_snr`) is below it become holes (NaN depth, not valid);
+        The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
+        is below it become holes (NaN depth, not valid);
         their confidence stays in :attr:`DecodeResult.confidence`, so a user can see why and
         choose another.  0 (the paper's decoder: the paper describes no confidence) keeps every
         decoded pixel; :func:`robust_params` sets :data:`ROBUST_MIN_CONFIDENCE`.
@@ -350,7 +350,8 @@ class DecodeResult:
     depth_m : ndarray, shape (H, W), float32; NaN where invalid
     valid : ndarray, shape (H, W), bool
     confidence : ndarray, shape (H, W), float32; the fringe SNR
-        (:func:`simbench.decode.phase.fringe_snr`) of every pixel the decoder found a depth for,
+        (:func:`simbench.decode.phase.fringe_snr`; with ``params.phase_stability`` capped at
+        :data:`STABILITY_KAPPA_RAD` over the phase's change) of every pixel the decoder found a depth for,
         those below ``params.min_confidence`` (now holes) included; 0 where it found none
     column_px : ndarray, shape (H, W), float32; decoded projector column, NaN if invalid
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
