@@ -1533,6 +1533,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except _Terminated:
         print(_TERMINATED_LINE, file=sys.stderr)
+        _quiet_finalizers(args)
         return 143
     except BrokenPipeError:  # `simbench ... | head`: the reader has gone; stop quietly, as `yes | head` does
         try:
@@ -1551,6 +1552,7 @@ def main(argv: list[str] | None = None) -> int:
         if not termination.requested():
             return _report_error(exc, args)
         print(_TERMINATED_LINE, file=sys.stderr)
+        _quiet_finalizers(args)
         return 143
     finally:
         if previous is not None:
@@ -1576,6 +1578,15 @@ def _report_error(exc: Exception, args) -> int:
 
 
 _TERMINATED_LINE = "simbench: terminated (SIGTERM); partial outputs and cache locks removed"
+
+
+def _quiet_finalizers(args) -> None:
+    """After SIGTERM, objects the signal interrupted half-built may fail in their finalizers at
+    exit (a ``ZipFile`` whose ``__init__`` it cut short: "Exception ignored in ZipFile.__del__",
+    seen in CI), which printed tracebacks after the one-line message: those are dropped (kept
+    with ``--debug``).  Their files are the temporaries the unwinding already removed."""
+    if not getattr(args, "debug", False):
+        sys.unraisablehook = lambda unraisable: None
 
 
 class _Terminated(BaseException):
