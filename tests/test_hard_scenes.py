@@ -121,3 +121,28 @@ def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_
     assert operating_point(wrong) == 2.0  # 1 % wrong at 3: a meets them at 2, b at 4; the lower wins
     with pytest.raises(ValueError, match="paper"):
         operating_point(curves, decoder="paper")
+
+
+def test_the_committed_operating_point_is_the_rules_pick_on_the_committed_full_resolution_curves():
+    """ROBUST_MIN_CONFIDENCE was chosen by operating_point on the full-resolution hard scenes;
+    results/hard_scenes_confidence.csv (`simbench reproduce hard_scenes`) holds those curves, and
+    the rule must still pick the constant from them (a changed decoder re-derives both)."""
+    import csv
+
+    from simbench.decode import ROBUST_MIN_CONFIDENCE
+    from simbench.experiments.hard_scenes import operating_point
+
+    from .conftest import ROOT
+
+    with open(ROOT / "results" / "hard_scenes_confidence.csv", newline="") as f:
+        rows = [
+            {
+                **r,
+                "threshold": float(r["threshold"]),
+                "completeness": float(r["completeness"]),
+                "wrong_share": float(r["wrong_share"]) if r["wrong_share"] not in ("", "nan") else float("nan"),
+            }
+            for r in csv.DictReader(f)
+        ]
+    assert {r["scene"] for r in rows} == set(HARD_SCENES)
+    assert operating_point(rows) == ROBUST_MIN_CONFIDENCE

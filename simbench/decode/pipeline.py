@@ -85,13 +85,14 @@ ROBUST_BRIDGE_GAP_PERIODS = 0.95
 # simbench.experiments.hard_scenes.operating_point (the threshold under which the most scenes meet
 # issue 35's goals, >= 97 % complete and <= 0.1 % of the decoded pixels > 5 mm wrong; of equals,
 # the lowest) on the 19 hard scenes at full resolution (1280x960, 36 spp, sensor `paper`, seed
-# 2017), measured 2026-11-25 over thresholds 0, 2, 3, 4, 5, 6, 8: 13 scenes meet both at 3, 12
-# at 2, 11 at 4, 6 with no threshold.  At 3: box before wall 98.1 % complete / 0 % wrong (no
+# 2017; results/hard_scenes_confidence.csv, `simbench reproduce hard_scenes`, from which
+# tests/test_hard_scenes.py checks the rule still picks it): 12 scenes meet both at 3, 11 at 2
+# and at 4 and 5, 9 with no threshold.  At 3: box before wall 98.1 % complete / 0 % wrong (no
 # threshold: 98.6 % / 0.25 %), sphere before wall 97.7 % / 0.04 % (98.9 % / 0.31 %), 90-degree
 # corner 99.6 % / 0 % (100 % / 0.21 %), glossy boards 98.0-99.6 % / 0 % (0.09 %).  Short of the
 # goals there: the printed charts, the box interior (77 %), the deep stairs (95.8 %, none wrong)
-# and the 60-degree corner (0.43 % wrong, -5 to -7 mm within 9 px of the crease, stable across
-# window widths).  Not tuned on any table of the paper; a white board scores ~30.
+# and the 60-degree corner (0.42 % wrong, -5 to -12 mm beside the crease, stable across window
+# widths: interreflection, none with direct light only).  Not tuned on any table of the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
 # again with a window half as wide along x, and a pixel whose phase moves by |dpsi| between the two
