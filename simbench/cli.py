@@ -532,7 +532,8 @@ def _cmd_decode(args) -> int:
     )
     msg = (
         f"decoded {result.valid.mean() * 100:.2f} % of pixels in {dt * 1000:.0f} ms "
-        f"({args.mode} mode, Z0 = {z0} m{ref_note}{over}) -> {args.out}, confidence (fringe SNR; {threshold}) -> "
+        f"({args.mode} mode, Z0 = {z0} m{ref_note}{over}) -> {args.out}, confidence (fringe SNR"
+        f"{', capped by the phase stability' if params.phase_stability else ''}; {threshold}) -> "
         f"{_confidence_path(args)}"
     )
     if args.ply:
