@@ -1617,9 +1617,13 @@ def _on_sigterm_raise():
         from simbench import termination
 
         termination.request()
-        raise _Terminated()
+        termination.run_or_hold(_raise_terminated)  # not inside a cache lock's taking or letting go
 
     return signal.signal(signal.SIGTERM, handler)
+
+
+def _raise_terminated() -> None:
+    raise _Terminated()
 
 
 def _disk_full_hint(exc: BaseException, args) -> str:
