@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes
+from simbench import termination
 from simbench.manifest import file_sha256
 from simbench.rig import rig_to_dict
 from simbench.scene import SceneSpec
@@ -470,15 +471,19 @@ class _KeyLock:
 
     def acquire_now(self) -> bool:
         """Take the lock if no other holder has it (entering then goes straight on); False if
-        one has.  No root: True.  A SIGTERM that arrives meanwhile is raised once the lock is
-        held, and lets it go with its file (:func:`_signals_held`)."""
+        one has.  No root: True.  The command line's SIGTERM exception is held back while the
+        lock file is made and taken (:func:`simbench.termination.held`: raised between the two,
+        it left the file behind; CI saw it, rarely, under load) and, raised once the lock is held,
+        lets it go with its file.  A signal mask would not do: the kernel gives the signal to a
+        thread that does not block it (Dr.Jit's, the decoder's) and Python runs the handler in
+        the main thread at once."""
         if self.path is None or self.fd is not None:
             return True
         import fcntl
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
-            with _signals_held():
+            with termination.held():
                 fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
                 try:
                     fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -507,25 +512,13 @@ class _KeyLock:
         self.release()
 
     def release(self) -> None:
-        """Remove the lock file and let the lock go (nothing if not held); a signal meanwhile
-        waits until both are done."""
+        """Remove the lock file and let the lock go (nothing if not held); SIGTERM's exception
+        meanwhile waits until both are done (:func:`simbench.termination.held`)."""
         if self.fd is not None:
-            with _signals_held():
+            with termination.held():
                 self.path.unlink(missing_ok=True)
                 os.close(self.fd)  # closing releases the lock
                 self.fd = None
-
-
-def _signals_held():
-    """SIGTERM's exception (the command line's handler, :mod:`simbench.termination`) held back
-    while a lock file is made and taken, or removed and let go, and raised on leaving: raised
-    between creating a lock file and holding it, or between holding it and removing it, it
-    skipped the removal and left the file behind (CI's SIGTERM test saw it, rarely, under load).
-    A signal mask would not do: signals go to whichever thread does not block them (Dr.Jit's
-    and the decoder's threads), and Python runs the handler in the main thread at once."""
-    from simbench import termination
-
-    return termination.held()
 
 
 def _arrays_digest(arrays: dict[str, np.ndarray]) -> str:

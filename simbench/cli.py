@@ -876,7 +876,12 @@ def _decode_recording(args) -> int:
     res = system.decode(raw, cal, scene=scene)
     dt = time.perf_counter() - t0
     info = system.info()
-    res = _apply_min_confidence(res, args.min_confidence, name)
+    if args.min_confidence is not None:
+        if res.confidence is None:
+            raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
+        from simbench.decode.pipeline import apply_min_confidence
+
+        res = apply_min_confidence(res, args.min_confidence)
     confidence = res.confidence if res.confidence is not None else np.zeros(res.depth_m.shape, np.float32)
     files = {Path(args.out): npy_bytes(res.depth_m), _confidence_path(args): npy_bytes(confidence)}
     over = f"; overriding the recording: rig {args.rig} instead of the recorded one" if args.rig is not None else ""
@@ -893,25 +898,6 @@ def _decode_recording(args) -> int:
     write_files(files)
     print(msg)
     return 0
-
-
-def _apply_min_confidence(res, min_confidence: float | None, name: str):
-    """``res`` (a :class:`simbench.systems.SystemDepth`) with the decoded pixels whose confidence
-    is below ``min_confidence`` made holes (their confidence kept); None = as the system gives it."""
-    if min_confidence is None:
-        return res
-    if res.confidence is None:
-        raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
-    conf = np.asarray(res.confidence, np.float32)
-    with np.errstate(invalid="ignore"):
-        doubtful = res.valid & ~(conf >= np.float32(min_confidence))
-    return replace(
-        res,
-        depth_m=np.where(doubtful, np.float32(np.nan), res.depth_m).astype(np.float32),
-        valid=res.valid & ~doubtful,
-        column_px=None if res.column_px is None else np.where(doubtful, np.nan, res.column_px),
-        confidence=conf,
-    )
 
 
 def _cmd_ablate(args) -> int:

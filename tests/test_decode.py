@@ -390,9 +390,9 @@ def test_the_operating_point_turns_doubtful_pixels_into_holes_and_keeps_their_co
     same = kept.valid
     assert np.array_equal(kept.depth_m[same], everything.depth_m[same])
     assert np.array_equal(kept.column_px[same], everything.column_px[same])
-    from simbench.experiments.hard_scenes import with_threshold
+    from simbench.decode.pipeline import apply_min_confidence
 
-    after = with_threshold(everything, threshold)
+    after = apply_min_confidence(everything, threshold)
     for name in ("depth_m", "valid", "confidence", "column_px", "stripe_index"):
         assert np.array_equal(getattr(after, name), getattr(kept, name), equal_nan=True), name
 

@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
+from typing import TypeVar
 
 import numpy as np
 
@@ -59,6 +60,7 @@ __all__ = [
     "STABILITY_KAPPA_RAD",
     "STABILITY_WINDOW_SCALE",
     "phase_change",
+    "apply_min_confidence",
     "PHASE_METHODS",
     "MODES",
     "ReferenceMap",
@@ -92,7 +94,8 @@ ROBUST_BRIDGE_GAP_PERIODS = 0.95
 # corner 99.6 % / 0 % (100 % / 0.21 %), glossy boards 98.0-99.6 % / 0 % (0.09 %).  Short of the
 # goals there: the printed charts, the box interior (77 %), the deep stairs (95.8 %, none wrong)
 # and the 60-degree corner (0.42 % wrong, -5 to -12 mm beside the crease, stable across window
-# widths: interreflection, none with direct light only).  Not tuned on any table of the paper; a white board scores ~30.
+# widths: interreflection, none with direct light only).  Not tuned on any table of the paper; a
+# white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
 # again with a window half as wide along x, and a pixel whose phase moves by |dpsi| between the two
@@ -674,6 +677,31 @@ def _columns(
 
     st.put("unwrapped_phase", unwrapped)
     return band, st
+
+
+_R = TypeVar("_R")
+
+
+def apply_min_confidence(result: _R, min_confidence: float) -> _R:
+    """``result`` - a :class:`DecodeResult` decoded with no threshold, or any depth result with
+    ``depth_m``, ``valid`` and ``confidence`` (and optionally ``column_px``, ``stripe_index``),
+    e.g. :class:`simbench.systems.SystemDepth` - with the valid pixels whose confidence is not
+    at least ``min_confidence`` made holes, their confidence kept: for a DecodeResult the same
+    bits :func:`decode` gives with that ``min_confidence`` (tests/test_decode.py), without
+    decoding again."""
+    conf = np.asarray(result.confidence, np.float32)
+    with np.errstate(invalid="ignore"):
+        doubtful = result.valid & ~(conf >= np.float32(min_confidence))
+    changes = {
+        "depth_m": np.where(doubtful, np.float32(np.nan), result.depth_m).astype(np.float32, copy=False),
+        "valid": result.valid & ~doubtful,
+        "confidence": conf,
+    }
+    if getattr(result, "column_px", None) is not None:
+        changes["column_px"] = np.where(doubtful, np.float32(np.nan), result.column_px)
+    if getattr(result, "stripe_index", None) is not None:
+        changes["stripe_index"] = np.where(doubtful, np.int32(-1), result.stripe_index)
+    return dataclasses.replace(result, **changes)
 
 
 def phase_change(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -35,7 +35,8 @@ import dataclasses
 
 import numpy as np
 
-from simbench.decode import DecodeResult, robust_params
+from simbench.decode import robust_params
+from simbench.decode.pipeline import apply_min_confidence
 from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
@@ -47,7 +48,6 @@ __all__ = [
     "WRONG_MM",
     "run_hard_scenes",
     "confidence_curve",
-    "with_threshold",
     "operating_point",
     "GOAL_COMPLETENESS",
     "GOAL_WRONG_SHARE",
@@ -147,20 +147,6 @@ def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
     return max(thresholds, key=lambda t: (meeting(t), -t))
 
 
-def with_threshold(result: DecodeResult, min_confidence: float) -> DecodeResult:
-    """``result`` (a :class:`simbench.decode.DecodeResult` decoded with no threshold) as the
-    decoder gives it with ``min_confidence``: the same bits (the threshold is the decoder's
-    last step, tests/test_hard_scenes.py), without decoding again."""
-    doubtful = result.valid & (result.confidence < np.float32(min_confidence))
-    return dataclasses.replace(
-        result,
-        depth_m=np.where(doubtful, np.float32(np.nan), result.depth_m),
-        valid=result.valid & ~doubtful,
-        column_px=np.where(doubtful, np.float32(np.nan), result.column_px),
-        stripe_index=np.where(doubtful, np.int32(-1), result.stripe_index),
-    )
-
-
 def run_hard_scenes(session: Session) -> dict:
     cfg = session.config
     names = QUICK_SCENES if cfg.quick else tuple(HARD_SCENES)
@@ -179,7 +165,7 @@ def run_hard_scenes(session: Session) -> dict:
             row = {"scene": name, "class": HARD_SCENES[name], "scored_pixels": int(region.sum()), **cap.seeds}
             for d in DECODERS:
                 full = session.decode(cap, params[d], mode="calibrated")
-                result = with_threshold(full, operating[d])
+                result = apply_min_confidence(full, operating[d])
                 for k, v in _scores(cap, result, cfg.decoder.period_px, region).items():
                     row[f"{d}_{k}"] = v
                     metrics[f"hard_scenes/{name}/{d}/{k}"] = v
