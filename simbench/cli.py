@@ -1036,11 +1036,15 @@ def _cmd_reproduce(args) -> int:
 
 
 def _decoder_overrides(params, items: list[str]):
-    """``name=value`` pairs applied to DecoderParams (values parsed as TOML scalars)."""
+    """``name=value`` pairs applied to DecoderParams (values parsed as TOML scalars);
+    ``without=NAME`` (or a list) switches the paper decoder's added checks off
+    (:func:`simbench.decode.without_checks`)."""
     import dataclasses
     import tomllib
 
-    names = {f.name for f in dataclasses.fields(params)}
+    from simbench.decode import without_checks
+
+    names = {f.name for f in dataclasses.fields(params)} | {"without"}
     changes = {}
     for item in items:
         key, sep, text = item.partition("=")
@@ -1050,11 +1054,12 @@ def _decoder_overrides(params, items: list[str]):
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             value = text  # a bare word: phase_method=ftp
-        if isinstance(value, list) and key in ("depth_range_m", "sequence"):
+        if isinstance(value, list) and key in ("depth_range_m", "sequence", "stripe_step_ratio"):
             value = tuple(value)
         changes[key] = value
     try:
-        return replace(params, **changes)
+        without = changes.pop("without", "none")
+        return without_checks(replace(params, **changes), without)
     except ValueError as exc:
         raise ValueError(f"--decoder: {exc}") from None
 
@@ -1152,8 +1157,8 @@ def _parser() -> argparse.ArgumentParser:
         "--camera",
         dest="camera",
         default="paper",
-        help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; minimal: noise only; ideal: nothing) "
-        "or a sensor TOML file",
+        help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; paper_sim: the paper's 3ds Max "
+        "simulation, a linear noise-free RGB camera; minimal: noise only; ideal: nothing) or a sensor TOML file",
     )
     _add_pattern_options(s)
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")

@@ -1,7 +1,7 @@
 """Sensor models: the physical camera and projector between the pattern and the recorded pixels,
 as one frozen configuration (:class:`SensorModel`) read from a TOML preset.
 
-Presets live in ``simbench/presets/<name>.toml`` (``ideal``, ``minimal``, ``paper``); a path to
+Presets live in ``simbench/presets/<name>.toml`` (``ideal``, ``minimal``, ``paper``, ``paper_sim``); a path to
 any TOML file with the same layout works too.  Every effect is switchable:
 
 =====================  =================================================================
@@ -68,7 +68,7 @@ __all__ = [
 ]
 
 PRESETS_DIR = Path(__file__).resolve().parent / "presets"
-SENSOR_PRESETS = ("ideal", "minimal", "paper")
+SENSOR_PRESETS = ("ideal", "minimal", "paper", "paper_sim")
 _NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
 # Point Grey Flea3 USB 3.0 Technical Reference (rev. 9/27/2012), Sec. 7.8 "White Balance": off
 # (one gain for every pixel of the Bayer tiling) or red and blue gains relative to green, set by

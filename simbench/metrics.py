@@ -5,6 +5,8 @@
 * :func:`plane_fit_error` - paper Table 1: mean absolute residual to a least-squares plane.
 * :func:`edge_band` - pixels near depth discontinuities, to exclude from edge-sensitive scores.
 * :func:`score` - the scores every experiment reports, one protocol for every depth system.
+* :func:`code_stripes` - what a capture holds in the stripes of each code, and how often the
+  paper's colour code (Eq. 13) reads them right: why a board can or cannot be decoded.
 """
 
 from __future__ import annotations
@@ -16,12 +18,21 @@ import cv2
 import numpy as np
 
 from simbench import native
+from simbench.pattern import PatternSpec, check_channels
 from simbench.rig import Intrinsics, pixel_rays
 
 if TYPE_CHECKING:
     from simbench.truth import GroundTruth
 
-__all__ = ["edge_band", "depth_errors", "plane_fit_error", "fit_plane", "points_from_depth", "score"]
+__all__ = [
+    "edge_band",
+    "depth_errors",
+    "plane_fit_error",
+    "fit_plane",
+    "points_from_depth",
+    "score",
+    "code_stripes",
+]
 
 
 def edge_band(
@@ -391,4 +402,56 @@ def score(
                 f"edge{edge_band_px}_mae_mm": off_edges["mae_mm"],
             }
         )
+    return out
+
+
+def code_stripes(
+    image: np.ndarray, column_px: np.ndarray, *, pattern: PatternSpec, where: np.ndarray | None = None
+) -> dict:
+    """What a capture holds in the stripes of each code, from the true projector column.
+
+    Each pixel is put in the stripe its true column ``column_px`` lies in (:mod:`simbench.pattern`:
+    stripe ``s`` spans columns ``s*T - 0.5 .. (s+1)*T - 0.5``) and so gets its true code; over
+    the pixels of each code, the mean of every camera channel and the share whose colour code
+    by paper Eq. 13 (the code-1 channel at least the code-0 one, on the raw channels) is the
+    true code.  A board whose stripes of one code hold nothing in either code channel reads 0
+    for that code whatever a decoder does after Eq. 13.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3), uint8, uint16 or float (full scale 1)
+    column_px : ndarray, shape (H, W), float; NaN where no projector column lights the pixel
+    pattern : PatternSpec
+        Its period, codes and channel assignment.
+    where : ndarray, shape (H, W), bool, optional
+        Pixels to use (e.g. ground truth's ``lit``); default every pixel with a column.
+
+    Returns
+    -------
+    dict
+        ``code{k}_mean`` (tuple of 3 floats, the R, G, B means in full-scale units),
+        ``code{k}_eq13`` (share of the code-``k`` pixels Eq. 13 reads as ``k``) and
+        ``code{k}_pixels`` for ``k`` in 1, 0; NaN means where a code has no pixel.
+    """
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"image must have shape (H, W, 3), got {img.shape}")
+    col = np.asarray(column_px, dtype=np.float64)
+    if col.shape != img.shape[:2]:
+        raise ValueError(f"column_px shape {col.shape} does not match the image's {img.shape[:2]}")
+    scale = {np.dtype(np.uint8): 1 / 255, np.dtype(np.uint16): 1 / 65535}.get(img.dtype, 1.0)
+    use = np.isfinite(col) if where is None else (np.asarray(where, bool) & np.isfinite(col))
+    codes = pattern.codes()
+    stripe = np.floor((col[use] + 0.5) / pattern.period_px).astype(np.int64)
+    code = codes[np.mod(stripe, codes.size)]
+    px = img[use].astype(np.float64) * scale
+    one, zero, _ = check_channels(pattern.channels)
+    reads_one = px[:, one] >= px[:, zero]  # paper Eq. 13
+    out: dict = {}
+    for k in (1, 0):
+        sel = code == k
+        n = int(sel.sum())
+        out[f"code{k}_mean"] = tuple(float(x) for x in px[sel].mean(axis=0)) if n else (float("nan"),) * 3
+        out[f"code{k}_eq13"] = float((reads_one[sel] == bool(k)).mean()) if n else float("nan")
+        out[f"code{k}_pixels"] = n
     return out

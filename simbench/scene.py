@@ -84,6 +84,7 @@ __all__ = [
     "place_objects",
     "object_to_mitsuba",
     "paint_reflectance",
+    "linear_srgb8",
     "target_texture",
     "target_size_m",
 ]
@@ -165,21 +166,34 @@ def _board_form(d: dict, where: str) -> dict:
     return p
 
 
-def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
-    """Linear diffuse reflectance of a matte paint printed as 8-bit sRGB ``srgb8``.
-
-    ``rho = rho_min + (rho_max - rho_min) * linear(srgb8 / 255)`` per channel, with the sRGB
-    decoding curve (IEC 61966-2-1) and the paint range above: pure red (255, 0, 0) becomes
-    (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
-    """
+def linear_srgb8(srgb8: Sequence[int]) -> tuple[float, float, float]:
+    """The linear values of the 8-bit sRGB colour ``srgb8`` (IEC 61966-2-1 decoding curve):
+    (255, 0, 0) -> (1, 0, 0).  A renderer's material colour as the paper's 3ds Max simulation
+    (Sec. 5.5) would take a colour-picker value; no real surface reflects so purely
+    (:func:`paint_reflectance`)."""
     v = np.asarray(
         validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0),
         dtype=np.float64,
     )
     if not np.array_equal(v, np.round(v)):
         raise ValueError(f"srgb8 holds 8-bit integers 0-255 (rgb takes reflectances in [0, 1]), got {list(srgb8)!r}")
+    return tuple(float(round(x, 6)) for x in _srgb_decode(v))
+
+
+def _srgb_decode(v: np.ndarray) -> np.ndarray:
     c = v / 255.0
-    lin = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
+    """Linear diffuse reflectance of a matte paint printed as 8-bit sRGB ``srgb8``.
+
+    ``rho = rho_min + (rho_max - rho_min) * linear(srgb8 / 255)`` per channel, with the sRGB
+    decoding curve (IEC 61966-2-1, :func:`linear_srgb8`) and the paint range above: pure red
+    (255, 0, 0) becomes (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
+    """
+    linear_srgb8(srgb8)  # checks it
+    lin = _srgb_decode(np.asarray(srgb8, dtype=np.float64))
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
     return tuple(float(round(x, 6)) for x in rho)
 

@@ -60,6 +60,23 @@ def test_grid_and_zip_expansion_with_common_seeds():
     assert [(r["params"]["decoder.voting"], r["params"]["pattern.period_px"]) for r in z] == [(True, 15), (False, 21)]
 
 
+def test_the_paper_decoders_added_checks_are_an_axis():
+    """decoder.without switches the named checks off (simbench.decode.without_checks); an unknown
+    name fails the sweep's check before any run."""
+    from simbench.decode import PAPER_ADDED_CHECKS, DecoderParams
+    from simbench.experiments.ablate.mapping import decoder_for
+
+    assert decoder_for({"decoder.without": "none"}) == DecoderParams()
+    assert decoder_for({"decoder.without": "max_residual"}).max_residual == float("inf")
+    both = decoder_for({"decoder.without": ["min_support", "link_check"], "decoder.voting": False})
+    assert both.min_support == 1 and not both.link_check and not both.voting
+    everything = decoder_for({"decoder.without": "all"})
+    for check in PAPER_ADDED_CHECKS.values():
+        assert all(getattr(everything, k) == v for k, v in check.off.items())
+    with pytest.raises(ValueError, match="unknown decoder check.*'colour'.*valid"):
+        check_sweep(_sweep(axis=[{"name": "decoder.without", "values": ["none", "colour"]}]))
+
+
 def test_builtin_studies_load():
     for name in BUILTIN_STUDIES:
         sweep = load_sweep(name)

@@ -635,6 +635,10 @@ for item, msg in [
     ("min_reference_coverage=1.5", "min_reference_coverage"),
     ("color_normalize=yes", "color_normalize"),
     ("link_check=0", "link_check"),
+    ("without=colour", "unknown decoder check"),
+    ("without=[1]", "unknown decoder check"),
+    ("stripe_step_ratio=[3.0,0.3]", "stripe_step_ratio"),
+    ("stripe_step_ratio=[-1.0,3.0]", "stripe_step_ratio"),
 ]:
     case(f"decode--decoder-{item}", lambda d, i=item: _decode(d, "--decoder", i), msg, setup=render_folder)
 case(

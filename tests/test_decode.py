@@ -240,6 +240,67 @@ def test_color_normalisation_decodes_coloured_planes(reflectance):
     assert plain.valid[lit].mean() < 0.5 or plain_rms > 5 * np.sqrt(np.mean(err**2))
 
 
+@pytest.mark.parametrize("reflectance", [(0.0, 1.0, 1.0), (1.0, 0.0, 1.0)], ids=["cyan", "pink"])
+def test_color_normalisation_reads_code_from_one_channel(reflectance):
+    """The paper's-simulation boards that reflect nothing in one code channel (Table 1's cyan and
+    pink as linear RGB material colour, 2 % ambient, 8 bits): the code is in the other channel
+    alone (a red stripe on cyan is where green is dark), and the normalised decoder reads it
+    (:func:`simbench.decode.color.normalized_color_code`).  Comparing with the empty channel's 0
+    read nearly every stripe as one code and wrote wrong columns (cyan: 24 % decoded, half of it
+    a stripe or more off)."""
+    img, col, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1), supersample=2, albedo=1.0)
+    rho = np.asarray(reflectance, np.float32)
+    lit = np.isfinite(col)
+    capture = np.rint(np.clip(0.9 * (img + 0.02) * rho, 0, 1) * 255).astype(np.uint8)
+    r = decode(capture, rig=RIG, params=DecoderParams(mode="calibrated", color_normalize=True))
+    err = r.column_px[r.valid] - col[r.valid]
+    assert r.valid[lit].mean() > 0.99
+    assert np.all(np.abs(err) < 0.5 * 21)
+
+
+def test_normalized_color_code_falls_back_on_the_fringe():
+    """Unit cases: both code channels present -> Eq. 13; one absent -> the other against half the
+    fringe (or 0.25 without a fringe); neither -> 1 (Eq. 13's tie)."""
+    from simbench.decode.color import normalized_color_code
+
+    rgb = np.array([[[0.9, 0.1, 0.9], [0.0, 0.8, 0.9], [0.0, 0.2, 0.9], [0.6, 0.0, 0.0], [0.1, 0.0, 0.0], [0, 0, 0.5]]])
+    span = np.array([[[1, 1, 1], [0, 1, 1], [0, 1, 1], [1, 0, 0], [1, 0, 0], [0, 0, 1]]], np.float32)
+    assert normalized_color_code(rgb.astype(np.float32), span).tolist() == [[True, False, True, True, False, True]]
+
+
+def test_without_checks_switches_exactly_the_named_checks_off():
+    from simbench.decode import PAPER_ADDED_CHECKS, without_checks
+
+    base = DecoderParams()
+    assert without_checks(base, "none") == base
+    for name, check in PAPER_ADDED_CHECKS.items():
+        off = without_checks(base, name)
+        changed = {f for f in check.off if getattr(off, f) != getattr(base, f)}
+        assert changed == set(check.off), name  # each check is on by default, and only its fields move
+    assert without_checks(base, "all") == without_checks(base, list(PAPER_ADDED_CHECKS))
+    with pytest.raises(ValueError, match="unknown decoder check.*valid"):
+        without_checks(base, ["lit_test", "voting"])
+
+
+def test_the_residual_check_is_what_stands_between_a_red_board_and_wrong_depths():
+    """The paper's decoder on a red paint board (0.8, 0.04, 0.04), noise-free: its Eq. 9 overlay is
+    the fringe in the red stripes and 1/20 of it in the green ones, so a Gabor window over both
+    fits badly.  The residual check (ours, PAPER_ADDED_CHECKS) rejects those fits (nothing
+    decodes); switched off, the decoder writes depths from them: 81 % of the pixels, 40 % of
+    those more than half a projector pixel off (up to 3.5 px; measured)."""
+    from simbench.decode import without_checks
+
+    img, col, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1), supersample=2, albedo=1.0)
+    red = img * np.asarray((0.8, 0.04, 0.04), np.float32)
+    lit = np.isfinite(col)
+    base = DecoderParams(mode="calibrated")
+    with_check = decode(red, rig=RIG, params=base)
+    without = decode(red, rig=RIG, params=without_checks(base, "max_residual"))
+    assert without.valid[lit].mean() > with_check.valid[lit].mean() + 0.5
+    err = np.abs(without.column_px - col)[without.valid & ~with_check.valid]
+    assert (err > 0.5).mean() > 0.3
+
+
 def test_color_normalisation_keeps_white_plane_accuracy(reference):
     img, col, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.1))
     ref = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.0))[0]

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from simbench.metrics import depth_errors, edge_band, plane_fit_error, points_from_depth
+from simbench.metrics import code_stripes, depth_errors, edge_band, plane_fit_error, points_from_depth
+from simbench.pattern import PatternSpec, fringe_pattern
 from simbench.rig import Intrinsics
 
 
@@ -146,3 +147,41 @@ def test_plane_fit_error_gives_the_bits_of_the_whole_image_form(scale):
         plane_fit_error(depth[:, :-1], cam)
     with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
         fit_plane(np.zeros((200, 2)))
+
+
+def _board(reflectance, ambient: float = 0.02):
+    """A capture whose camera column x sees projector column x: linear RGB reflectance times
+    (the pattern + ambient), 8 bits; and its true column."""
+    spec = PatternSpec()
+    drive = fringe_pattern(spec)[:8, :400]
+    img = np.rint(np.clip(0.9 * (drive + ambient) * np.asarray(reflectance), 0, 1) * 255).astype(np.uint8)
+    col = np.broadcast_to(np.arange(400, dtype=np.float64), (8, 400)).copy()
+    col[:, :3] = np.nan  # unlit pixels are left out
+    return img, col, spec
+
+
+def test_code_stripes_of_a_white_and_a_red_board():
+    """Closed form: on a white board each code's stripes hold its own channel's fringe (mean
+    0.9 * (0.5 + 0.02) of full scale, the cosine's mean 0.5) and the ambient in the other (0.9 * 0.02);
+    Eq. 13 reads them right except where both sit at the fringe's dark border (R = G).  A pure red
+    board leaves only the ambient in the green-coded stripes' red and nothing in their green, so
+    Eq. 13 (R >= G) reads every one of them as red: 0 % right."""
+    img, col, spec = _board((1.0, 1.0, 1.0))
+    c = code_stripes(img, col, pattern=spec)
+    assert c["code1_mean"][0] == pytest.approx(0.9 * 0.52, abs=0.01)
+    assert c["code1_mean"][1] == pytest.approx(0.9 * 0.02, abs=0.003)
+    assert c["code0_mean"][1] == pytest.approx(0.9 * 0.52, abs=0.01)
+    assert c["code1_eq13"] == 1.0 and c["code0_eq13"] > 0.9
+    assert c["code1_pixels"] + c["code0_pixels"] == 8 * 397
+    img, col, spec = _board((1.0, 0.0, 0.0))
+    c = code_stripes(img, col, pattern=spec, where=np.ones(col.shape, bool))
+    assert c["code0_mean"][:2] == pytest.approx((0.9 * 0.02, 0.0), abs=0.003)
+    assert c["code0_eq13"] == 0.0 and c["code1_eq13"] == 1.0
+
+
+def test_code_stripes_checks_shapes():
+    img, col, spec = _board((1.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="does not match"):
+        code_stripes(img, col[:, :10], pattern=spec)
+    with pytest.raises(ValueError, match="shape"):
+        code_stripes(img[..., 0], col, pattern=spec)

@@ -7,7 +7,14 @@ import sys
 import numpy as np
 import pytest
 
-from simbench.scene import PAINT_MAX_REFLECTANCE, PAINT_MIN_REFLECTANCE, load_scene, paint_reflectance, scene_from_dict
+from simbench.scene import (
+    PAINT_MAX_REFLECTANCE,
+    PAINT_MIN_REFLECTANCE,
+    linear_srgb8,
+    load_scene,
+    paint_reflectance,
+    scene_from_dict,
+)
 
 from .conftest import ROOT, SCENES
 
@@ -22,10 +29,18 @@ def test_paint_reflectance_end_points_and_srgb_curve():
     assert paint_reflectance([128, 128, 128])[0] == pytest.approx(0.04 + 0.76 * 0.21586, abs=1e-4)
 
 
-@pytest.mark.parametrize("bad", [[256, 0, 0], [-1, 0, 0], [1, 2], [np.nan, 0, 0]])
-def test_paint_reflectance_rejects_bad_colours(bad):
+def test_linear_srgb8_is_the_srgb_decoding_curve():
+    """The paper's-simulation material colour: 255 -> 1, 0 -> 0, 128 -> 0.21586, 10 -> 10/255/12.92
+    (the curve's linear toe)."""
+    assert linear_srgb8([255, 0, 128]) == pytest.approx((1.0, 0.0, 0.21586), abs=1e-5)
+    assert linear_srgb8([10, 10, 10])[0] == pytest.approx(10 / 255 / 12.92, abs=1e-6)
+
+
+@pytest.mark.parametrize("bad", [[256, 0, 0], [-1, 0, 0], [1, 2], [np.nan, 0, 0], [0.5, 0, 0]])
+@pytest.mark.parametrize("fn", [paint_reflectance, linear_srgb8])
+def test_srgb8_colours_reject_bad_values(bad, fn):
     with pytest.raises(ValueError, match="srgb8"):
-        paint_reflectance(bad)
+        fn(bad)
 
 
 @pytest.mark.parametrize(

@@ -2,6 +2,9 @@
 
 from simbench.decode.pipeline import (
     MODES,
+    PAPER_ADDED_CHECKS,
+    AddedCheck,
+    without_checks,
     PHASE_METHODS,
     DecodeResult,
     DecoderParams,
@@ -9,6 +12,7 @@ from simbench.decode.pipeline import (
     as_float_image,
     decode,
     REFERENCE_Z0_TOLERANCE,
+    ROBUST_MIN_AMPLITUDE,
     ROBUST_MIN_CONFIDENCE,
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
@@ -19,6 +23,9 @@ from simbench.decode.pipeline import (
 
 __all__ = [
     "MODES",
+    "PAPER_ADDED_CHECKS",
+    "AddedCheck",
+    "without_checks",
     "PHASE_METHODS",
     "DecodeResult",
     "DecoderParams",
@@ -29,6 +36,7 @@ __all__ = [
     "reference_plane_offset",
     "REFERENCE_Z0_TOLERANCE",
     "robust_params",
+    "ROBUST_MIN_AMPLITUDE",
     "ROBUST_MIN_CONFIDENCE",
     "STABILITY_KAPPA_RAD",
     "STABILITY_WINDOW_SCALE",

@@ -22,6 +22,7 @@ __all__ = [
     "unmix",
     "normalize_channels",
     "overlay_weights",
+    "normalized_color_code",
     "Stripes",
     "segment_stripes",
     "vote_codes",
@@ -41,6 +42,38 @@ def color_code(rgb: np.ndarray) -> np.ndarray:
        Pattern", Sensors 17(11), 2558, 2017, Eq. 13.
     """
     return rgb[..., 0] >= rgb[..., 1]
+
+
+def normalized_color_code(rgb: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """Eq. 13 on channels normalised by :func:`normalize_channels` (R = code 1, G = code 0,
+    B = the fringe, as the decoder orders them), where a code channel may carry nothing.
+
+    Where both code channels have a local range it is Eq. 13 (R >= G).  Where one of them has
+    none (``span`` 0: a cyan surface reflects no red, a pink one no green), it says nothing
+    about the code, and comparing the other with its 0 reads the stripes wrong (a red stripe's
+    green at its local minimum ties with it or wins by a quantisation step: on the
+    paper's-simulation cyan board 24 % of the pixels decoded, half of them a whole stripe or
+    more wrong).  The pattern puts ``C * I`` in one code channel and ``(1 - C) * I`` in the other
+    (Eq. 7-8), so the present channel is the fringe ``I`` on its own stripes and 0 on the
+    others: it is compared with half the normalised fringe ``I``, the middle of the two, taken
+    from the fringe channel (or 0.5, half its mean, where that has no range either).  Where
+    neither code channel has a range the code is 1, like Eq. 13's tie.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32; normalised channels (0 where a channel has no range)
+    span : ndarray, shape (H, W, 3), float32; their local ranges, 0 = none
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    has_r, has_g = span[..., 0] > 0, span[..., 1] > 0
+    half = np.where(span[..., 2] > 0, np.float32(0.5) * b, np.float32(0.25))
+    r = np.where(has_r | ~has_g, r, half)
+    g = np.where(has_g | ~has_r, g, half)
+    return r >= g
 
 
 def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: np.ndarray | None = None) -> np.ndarray:
@@ -156,7 +189,7 @@ def normalize_channels(
         De Bruijn window length n.
     min_span : float
         A channel whose local range is below this (full-scale units) carries no fringe there;
-        it is set to 0.
+        it is set to 0 (for the colour code see :func:`normalized_color_code`).
     return_span : bool
         Also return the local ranges.
 

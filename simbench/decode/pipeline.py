@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -18,6 +19,7 @@ from simbench.decode.color import (
     color_code,
     mixing_matrix,
     normalize_channels,
+    normalized_color_code,
     overlay_weights,
     segment_stripes,
     unmix,
@@ -55,8 +57,12 @@ from simbench.rig import Rig, projector_column_at_depth, triangulation_steps, tr
 
 __all__ = [
     "DecoderParams",
+    "AddedCheck",
+    "PAPER_ADDED_CHECKS",
+    "without_checks",
     "robust_params",
     "ROBUST_MIN_CONFIDENCE",
+    "ROBUST_MIN_AMPLITUDE",
     "STABILITY_KAPPA_RAD",
     "STABILITY_WINDOW_SCALE",
     "phase_change",
@@ -82,6 +88,11 @@ MODES = ("reference", "calibrated")
 # scenes/robust_printed.toml: the phase fit fails for 6-11 px beside most printed edges and for
 # 20-26 px beside the saturated red and orange tiles, whose fits are poor anyway)
 ROBUST_BRIDGE_GAP_PERIODS = 0.95
+# The colour-robust decoder's floor on the fitted amplitude of its normalised fringe (units of the
+# local range, so relative: a fringe with 2 % of the local range is none; assumption, the value
+# the paper's decoder once used in full-scale units, kept so that the robust decoder's results
+# did not move when the paper's decoder dropped it)
+ROBUST_MIN_AMPLITUDE = 0.02
 # The colour-robust decoder's operating point: the confidence (fringe SNR, capped by the phase's
 # stability) below which a decoded pixel is a hole.  Chosen by the rule of
 # simbench.experiments.hard_scenes.operating_point (the threshold under which the most scenes meet
@@ -114,6 +125,20 @@ STABILITY_KAPPA_RAD = 0.4
 @dataclass(frozen=True)
 class DecoderParams:
     """Decoder settings (defaults: the paper's pattern, our choices where the paper is silent).
+
+    The defaults are the paper's decoder as we read it: its stages (Eq. 9 overlay, Gabor phase
+    Eq. 10-11, Eq. 13 colour code, voting Sec. 5.2, De Bruijn windows with the neighbour
+    correction Sec. 5.3, Eq. 14 cycle number, Eq. 15 depth) with the checks it needs and does not
+    describe, each ours, named in :data:`PAPER_ADDED_CHECKS` with its reason and switchable by
+    :func:`without_checks`: ``lit_test`` (``dark_level``), ``max_residual``,
+    ``window_support``, ``stripe_step``, ``min_support``, ``link_check``; the built-in study
+    ``paper_checks`` measures what each buys on the seven colour boards.  All are relative to the
+    local fringe, the window or the period but the lit test, an absolute floor on any light in a
+    period of the row (it buys 17 points of completeness on the high-contrast printed chart,
+    ``hard_chart_high``, and nothing on the boards).  The fitted-amplitude floor
+    (``min_amplitude``, absolute) bought nothing on the boards or the 19 hard scenes and is 0 for
+    the paper's decoder; the colour-robust decoder keeps it on its normalised fringe
+    (:data:`ROBUST_MIN_AMPLITUDE`, relative to the local range).
 
     Attributes
     ----------
@@ -163,11 +188,17 @@ class DecoderParams:
     link_check : bool
         After the correction, drop both stripes of any link whose W do not follow each other
         (a depth edge hidden in a smooth phase; :func:`simbench.decode.debruijn.drop_broken_links`).
+    stripe_step_ratio : tuple of float
+        (low, high): a step of the wrapped phase between neighbouring pixels of a row, after a
+        wrap is unwrapped, outside ``[low, high] * 2 pi / T_cam`` ends a run of stripes without a
+        link (:func:`simbench.decode.color.segment_stripes`; the high end never exceeds 0.9 pi,
+        so that a wrap stays a wrap).  ``(0, inf)`` keeps only that cap.
     dark_level, saturation_level : float
         In [0, 1] of full scale: a period-wide row maximum below ``dark_level`` is unlit;
         any channel at or above ``saturation_level`` is clipped.
     min_amplitude : float
-        Minimum fringe amplitude (full-scale units) for a valid pixel.
+        Minimum fitted fringe amplitude for a valid pixel: full-scale units, or units of the local
+        range with ``color_normalize``.  0 for the paper's decoder (see above).
     max_residual : float
         Maximum fit residual relative to the fringe RMS (rejects windows over depth edges; it
         also grows with shading gradients and fringe chirp, so it cannot be tight).
@@ -213,9 +244,10 @@ class DecoderParams:
     min_support: int = 3
     bridge_gap_periods: float = 0.0
     link_check: bool = True
+    stripe_step_ratio: tuple[float, float] = (0.3, 3.0)
     dark_level: float = 0.04
     saturation_level: float = 1.0
-    min_amplitude: float = 0.02
+    min_amplitude: float = 0.0
     max_residual: float = 0.6
     min_window_support: float = 0.5
     phase_stability: bool = False
@@ -244,6 +276,13 @@ class DecoderParams:
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
             "bridge_gap_periods": v.number(self.bridge_gap_periods, "bridge_gap_periods", lo=0.0, hi=1.0),
             "link_check": v.boolean(self.link_check, "link_check"),
+            "stripe_step_ratio": v.numbers(
+                list(self.stripe_step_ratio) if isinstance(self.stripe_step_ratio, tuple) else self.stripe_step_ratio,
+                "stripe_step_ratio",
+                2,
+                lo=0.0,
+                allow_inf=True,
+            ),
             "dark_level": v.number(self.dark_level, "dark_level", lo=0.0, hi=1.0),
             "saturation_level": v.number(self.saturation_level, "saturation_level", lo=0.0, hi=1.0, lo_open=True),
             "min_amplitude": v.number(self.min_amplitude, "min_amplitude", lo=0.0, hi=1.0),
@@ -260,6 +299,8 @@ class DecoderParams:
         lo, hi = fixed["depth_range_m"]
         if not lo < hi:
             raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
+        if not fixed["stripe_step_ratio"][0] < fixed["stripe_step_ratio"][1]:
+            raise ValueError(f"stripe_step_ratio must satisfy low < high, got {self.stripe_step_ratio}")
         if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
             raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
         for name, value in fixed.items():
@@ -309,10 +350,10 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     the coupling matrix measured on the reference plane (Caspi et al. 1998) and each channel
     normalised by its local range across neighbouring stripes, so that the code (Eq. 13) and
     the fringe (Eq. 9) no longer depend on the surface colour or on a stripe's colour; its
-    validity tests then act on signal relative to the local range (``min_amplitude`` on the
-    normalised fringe, ``max_residual`` relative to it; the lit test looks across a whole
-    code window).  Its confidence folds in the phase's stability against the window's width
-    (``phase_stability``) and its operating point makes the pixels below
+    validity tests then act on signal relative to the local range (``min_amplitude``,
+    :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it;
+    the lit test looks across a whole code window).  Its confidence folds in the phase's
+    stability against the window's width (``phase_stability``) and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes.  Everything else as ``params``."""
     return dataclasses.replace(
         params,
@@ -320,9 +361,78 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         color_normalize=True,
         intensity_mode="weighted",
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
+        min_amplitude=ROBUST_MIN_AMPLITUDE,
         phase_stability=True,
         min_confidence=ROBUST_MIN_CONFIDENCE,
     )
+
+
+@dataclass(frozen=True)
+class AddedCheck:
+    """A check in the paper's decoder that the paper does not describe (ours): the
+    :class:`DecoderParams` values that switch it off, and why it is there."""
+
+    off: dict
+    reason: str
+
+
+# The checks our reading of the paper's decoder adds to its stages (Eq. 9, Gabor Eq. 10-11,
+# Eq. 13, voting, De Bruijn windows with the neighbour correction, Eq. 14-15), each switchable
+# (without_checks) and measured by the built-in study simbench/studies/paper_checks.toml
+# (results/ablations/paper_checks.md).  Kept beside them, as the paper's stages need them: the
+# clipped-sample test (a sample at full scale has lost its fringe value) and the working depth
+# range (Eq. 14's cycle number k is chosen for it).
+PAPER_ADDED_CHECKS = {
+    "lit_test": AddedCheck(
+        {"dark_level": 0.0},
+        "a pixel whose row holds nothing above dark_level (full scale) within a period is unlit "
+        "(projector shadow, black surface) and takes no part in any phase fit, so that windows "
+        "beside a shadow fit the lit samples alone; an absolute level",
+    ),
+    "max_residual": AddedCheck(
+        {"max_residual": math.inf},
+        "a fit whose residual exceeds max_residual of the fitted fringe's RMS (a fringe SNR below "
+        "1/max_residual) is no phase: windows over depth edges, shadows and stripe-by-stripe "
+        "amplitude changes; relative to the local fringe",
+    ),
+    "window_support": AddedCheck(
+        {"min_window_support": 0.0},
+        "a phase fitted on less than min_window_support of its window's weight (the rest unlit or "
+        "clipped) is no phase; relative to the window",
+    ),
+    "stripe_step": AddedCheck(
+        {"stripe_step_ratio": (0.0, math.inf)},
+        "a phase step between neighbouring pixels outside stripe_step_ratio of the nominal slope "
+        "ends a run of stripes (a depth edge); relative to the fringe period",
+    ),
+    "min_support": AddedCheck(
+        {"min_support": 1},
+        "a stripe's De Bruijn position needs min_support agreeing windows among its neighbours "
+        "(Sec. 5.3 says one error 'can be checked by its neighborhoods', not how many agree)",
+    ),
+    "link_check": AddedCheck(
+        {"link_check": False},
+        "both stripes of a link whose positions do not follow each other after the correction "
+        "are dropped (a depth edge hidden in a smooth phase)",
+    ),
+}
+
+
+def without_checks(params: DecoderParams, names: str | Sequence[str]) -> DecoderParams:
+    """``params`` with the added checks ``names`` (keys of :data:`PAPER_ADDED_CHECKS`, a name or
+    a list; ``"none"`` for none, ``"all"`` for all) switched off."""
+    names = [names] if isinstance(names, str) else list(names)
+    if names == ["none"]:
+        return params
+    if names == ["all"]:
+        names = list(PAPER_ADDED_CHECKS)
+    unknown = sorted(set(names) - set(PAPER_ADDED_CHECKS))
+    if unknown:
+        raise ValueError(f"unknown decoder check(s) {unknown}; valid: {sorted(PAPER_ADDED_CHECKS)}, 'none' or 'all'")
+    changes: dict = {}
+    for n in names:
+        changes.update(PAPER_ADDED_CHECKS[n].off)
+    return dataclasses.replace(params, **changes)
 
 
 @dataclass(frozen=True)
@@ -561,7 +671,7 @@ def _columns(
                 window_periods=window,
             )
         raw = rgb
-        weights = None
+        weights = span = None
         with stage("colour unmixing and normalisation"):
             if unmixing is not None:
                 rgb = unmix(rgb, unmixing)
@@ -576,7 +686,7 @@ def _columns(
         with stage("intensity overlay (Eq. 9)"):
             intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
         with stage("colour code (Eq. 13)"):
-            code = color_code(rgb[crop])
+            code = color_code(rgb[crop]) if span is None else normalized_color_code(rgb[crop], span[crop])
     sx = params.sigma_periods * t_cam
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
@@ -619,7 +729,14 @@ def _columns(
             valid,
         )
     with stage("stripe segmentation and voting"):
-        stripes = segment_stripes(wrapped, valid, period_px=t_cam, max_gap_px=int(params.bridge_gap_periods * t_cam))
+        stripes = segment_stripes(
+            wrapped,
+            valid,
+            period_px=t_cam,
+            min_step_ratio=params.stripe_step_ratio[0],
+            max_step_ratio=params.stripe_step_ratio[1],
+            max_gap_px=int(params.bridge_gap_periods * t_cam),
+        )
         stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
     with stage("De Bruijn windows and neighbour correction"):
         table = _window_table(params.order, params.sequence)

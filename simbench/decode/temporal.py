@@ -56,7 +56,8 @@ class PhaseShiftSpec:
     steps : phase steps N (>= 4; N steps are blind to the fringe's harmonics up to N - 2, which
         a projector's gamma or a camera's saturation bring)
     min_modulation : modulation ``B`` (image units, 0-1) below which a pixel is invalid (no
-        fringe: shadow, black surface); 0.02 is the single-shot decoder's ``min_amplitude``
+        fringe: shadow, black surface; assumption: 2 % of full scale, a few times an 8-bit
+        camera's noise in a fringe fitted over N frames)
     axis : ``"columns"`` (vertical fringes: every pixel gets its projector column, what
         triangulation needs) or ``"rows"`` (horizontal fringes, projector rows: with the
         columns, a projector pixel per camera pixel, what calibrating the projector needs)

@@ -94,18 +94,19 @@ def scene_for(params: dict) -> SceneSpec:
 
 
 def decoder_for(params: dict) -> DecoderParams:
-    from simbench.decode import DecoderParams
+    from simbench.decode import DecoderParams, without_checks
     from simbench.pattern import PatternSpec, parse_sequence
 
     fields = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("decoder.")}
-    for k in ("depth_range_m",):
+    without = fields.pop("without", "none")
+    for k in ("depth_range_m", "stripe_step_ratio"):
         if k in fields and isinstance(fields[k], list):
             fields[k] = tuple(fields[k])
     kinds = {"pattern.period_px": int, "pattern.order": int, "pattern.channels": str}
     pattern = {k.split(".", 1)[1]: kinds[k](v) for k, v in params.items() if k in kinds}
     if "pattern.sequence" in params:
         pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
-    return DecoderParams(pattern=PatternSpec(**pattern), **fields)
+    return without_checks(DecoderParams(pattern=PatternSpec(**pattern), **fields), without)
 
 
 def run_config_for(params: dict, *, seed: int, sensor: SensorModel, decoder: DecoderParams) -> RunConfig:

@@ -74,6 +74,8 @@ def _parameters() -> dict[str, str]:
         "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
         "scene.depth_m": "move the scene so its first object's centre is at this depth",
         "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",
+        "decoder.without": "the paper decoder's added checks switched off (simbench.decode.PAPER_ADDED_CHECKS): "
+        "none, all, a name or a list of names",
         "run.spp": "samples per pixel",
         "run.sampler": "Mitsuba sample generator",
         "run.camera_scale": "camera resolution factor",
@@ -202,6 +204,7 @@ BUILTIN_STUDIES = (
     "voting",
     "noise_ambient",
     "surface_colour",
+    "paper_checks",
     "calibration_effort",
 )
 
