@@ -1,5 +1,5 @@
-"""Lens effects between the ideal pinhole renders and the devices: Brown-Conrady distortion and
-thin-lens defocus.
+"""Lens effects between the ideal pinhole renders and the devices: Brown-Conrady distortion,
+thin-lens defocus and lateral chromatic aberration.
 
 Distortion (OpenCV's model, coefficients ``(k1, k2, p1, p2, k3)`` on normalised coordinates)::
 
@@ -14,6 +14,20 @@ Distortion (OpenCV's model, coefficients ``(k1, k2, p1, p2, k3)`` on normalised 
 * Projector (an inverse camera): the DMD pixel that lights the ray ``(x, y)`` is ``K D(x, y)``.
   Mitsuba's projector is an ideal pinhole, so its texture at ideal pixel ``q`` is the DMD
   image at ``K D(K^-1 q)`` (:func:`distorted_projector_drive`).
+
+Lateral colour (transverse chromatic aberration): a lens's magnification depends on the
+wavelength, so each colour channel's image is scaled about the principal point by its own
+factor ``1 + m_c`` - to first order, the radial term of the aberration, growing linearly with
+the distance from the axis.  It is given as ``shift_px``, each channel's radial displacement at
+the farthest image corner (``m_c = shift_c / r_corner``; positive outward): datasheets quote it
+so, in micrometres at full field.  Camera: the recorded channel ``c`` at pixel ``p`` comes from
+``c0 + (p - c0) / (1 + m_c)`` of the image without it (:func:`lateral_colour_image`, after the
+distortion).  Projector: channel ``c`` of the DMD image is projected magnified by ``1 + m_c``,
+so before the distortion the drive is resampled the same way.  Longitudinal colour (a focus
+shift per wavelength) is not modelled: a symmetric blur biases no phase, and for the paper's
+lenses the blur it adds is too small to lower the fringe's contrast measurably (README, "The
+sensor model": a 5 um focus shift blurs the camera's image by sigma ~0.06 px and the projector's
+by ~0.12 DMD px, a contrast loss below 1e-3 at the 21-px period).
 
 Defocus of a thin lens of aperture diameter ``A`` focused at distance ``s``: a point at
 distance ``z`` is spread over a blur circle of diameter ``A f |1/z - 1/s|`` in pixels of a
@@ -41,6 +55,8 @@ __all__ = [
     "distort_image",
     "undistort_image",
     "distorted_projector_drive",
+    "lateral_colour_magnification",
+    "lateral_colour_image",
     "undistort_projector_columns",
     "blur_circle_px",
     "blur_sigma_px",
@@ -211,6 +227,72 @@ def distorted_projector_drive(drive: np.ndarray, intr: Intrinsics) -> np.ndarray
     interpolating keeps every edge where the lens puts it, softened over one texel.
     """
     return undistort_image(drive, intr, interpolation="linear")
+
+
+def lateral_colour_magnification(intr: Intrinsics, shift_px: Sequence[float]) -> np.ndarray:
+    """Each channel's relative magnification ``m_c`` from its radial displacement ``shift_px`` at
+    the image corner farthest from the principal point (module docstring).
+
+    Returns
+    -------
+    ndarray, shape (3,), float64
+    """
+    h, w = intr.size_hw
+    corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
+    r = float(np.max(np.hypot(corners[:, 0] - intr.cx_px, corners[:, 1] - intr.cy_px)))
+    shift = np.asarray(shift_px, dtype=np.float64)
+    if shift.shape != (3,) or not np.all(np.isfinite(shift)):
+        raise ValueError(f"shift_px must be 3 finite numbers (R, G, B), got {shift_px!r}")
+    return shift / r
+
+
+@lru_cache(maxsize=16)
+def _magnify_maps(size_hw: tuple[int, int], cx: float, cy: float, m: float) -> tuple[np.ndarray, np.ndarray]:
+    h, w = size_hw
+    x = cx + (np.arange(w, dtype=np.float64) - cx) / (1.0 + m)
+    y = cy + (np.arange(h, dtype=np.float64) - cy) / (1.0 + m)
+    mx = np.ascontiguousarray(np.broadcast_to(x.astype(np.float32), (h, w)))
+    my = np.ascontiguousarray(np.broadcast_to(y.astype(np.float32)[:, None], (h, w)))
+    for a in (mx, my):
+        a.setflags(write=False)
+    return mx, my
+
+
+def lateral_colour_image(img: np.ndarray, intr: Intrinsics, *, shift_px: Sequence[float]) -> np.ndarray:
+    """``img`` with channel ``c`` scaled about the principal point by ``1 + m_c`` (module
+    docstring; :func:`lateral_colour_magnification`): ``out_c(p) = img_c(c0 + (p - c0) / (1 + m_c))``,
+    bilinear, zero where the source falls outside the image.  For the camera, what it records
+    from the image without lateral colour; for the projector, the drive its lens projects as the
+    undispersed one would.
+
+    Parameters
+    ----------
+    img : ndarray, shape (H, W, 3), on ``intr``'s pixel grid
+    intr : simbench.rig.Intrinsics
+    shift_px : 3 floats, each channel's radial displacement (px) at the farthest corner
+
+    Returns
+    -------
+    ndarray, same shape and dtype (``img`` itself where every shift is 0)
+    """
+    import cv2
+
+    src = np.asarray(img)
+    if src.ndim != 3 or src.shape[2] != 3 or src.shape[:2] != tuple(intr.size_hw):
+        raise ValueError(f"image of shape {src.shape} is not (H, W, 3) on the {intr.size_hw} grid")
+    mags = lateral_colour_magnification(intr, shift_px)
+    if not np.any(mags):
+        return img
+    out = np.empty_like(src)
+    for c, m in enumerate(mags):
+        if m == 0.0:
+            out[..., c] = src[..., c]
+            continue
+        mx, my = _magnify_maps(tuple(intr.size_hw), float(intr.cx_px), float(intr.cy_px), float(m))
+        plane = np.ascontiguousarray(src[..., c], dtype=np.float32)
+        moved = cv2.remap(plane, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        out[..., c] = moved.astype(src.dtype, copy=False)
+    return out
 
 
 def undistort_projector_columns(

@@ -22,7 +22,7 @@ from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
 from simbench.manifest import seal_manifest
 from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings, realised_rig
-from simbench.optics import distort_image, distorted_projector_drive
+from simbench.optics import distort_image, distorted_projector_drive, lateral_colour_image
 from simbench.pattern import PatternSpec
 from simbench.photometry import (
     channel_weights,
@@ -256,6 +256,8 @@ def _build_drive(
             focal_px=intr.focal_px,
             focus_m=prj.lens.focus_m,
         )
+    # the lens disperses what the DMD shows, then distorts it (simbench.optics)
+    drive = lateral_colour_image(drive, intr, shift_px=prj.lens.lateral_colour_px)
     if intr.has_distortion:
         drive = distorted_projector_drive(drive, intr)
     return np.ascontiguousarray(drive, dtype=np.float32)
@@ -421,7 +423,9 @@ def render_channels(
     coloured by one bounce's crosstalk only (an approximation, as is the coating's
     specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
     per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
-    primary's materials: light of the projector's white.  Then the camera lens distortion.
+    primary's materials: light of the projector's white.  Then the camera lens distortion and
+    lateral colour (per camera channel: an approximation where a channel sees several primaries'
+    wavelengths, exact for narrow-band light).
 
     ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for` (or a
     :class:`ProjectorDrive`, built only for renders the cache does not hold).
@@ -450,7 +454,10 @@ def render_channels(
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
-    return distort_image(q, scene.rig.camera).astype(np.float32, copy=False)
+    q = distort_image(q, scene.rig.camera)
+    return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
+        np.float32, copy=False
+    )
 
 
 def _white_board(scene: SceneSpec) -> dict:

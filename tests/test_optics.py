@@ -380,3 +380,59 @@ def test_remap_grids_are_the_bits_of_the_numpy_lens_model(distortion):
         assert np.array_equal(mx, (u * intr.focal_px + intr.cx_px).astype(np.float32))
         assert np.array_equal(my, (v * intr.focal_px + intr.cy_px).astype(np.float32))
         assert not mx.flags.writeable
+
+
+def test_lateral_colour_magnifies_each_channel_about_the_principal_point():
+    """Closed form: a vertical line at column x0 in channel c lands at c0 + (x0 - c0)(1 + m_c), with
+    m_c = shift_c / r_corner (r_corner from the principal point to the farthest corner); a channel
+    with no shift keeps its bits.  Tolerance 0.05 px: OpenCV's bilinear remap places samples on a
+    1/32-px grid."""
+    from simbench.optics import lateral_colour_image, lateral_colour_magnification
+
+    intr = Intrinsics(width_px=320, height_px=240, focal_px=500.0, cx_px=150.5, cy_px=110.0)
+    img = np.zeros((240, 320, 3), np.float32)
+    xs = np.arange(320)
+    x0 = 290.0
+    img[...] = np.exp(-0.5 * ((xs - x0) / 1.5) ** 2)[None, :, None]
+    shift = (1.0, 0.0, -0.6)
+    out = lateral_colour_image(img, intr, shift_px=shift)
+    m = lateral_colour_magnification(intr, shift)
+    r_corner = math.hypot(319 - 150.5, 239 - 110.0)
+    assert m == pytest.approx(np.asarray(shift) / r_corner)
+    row = out[110]
+    for c in range(3):
+        centroid = float((row[:, c] * xs).sum() / row[:, c].sum())
+        assert centroid == pytest.approx(150.5 + (x0 - 150.5) * (1 + m[c]), abs=0.05)
+    assert np.array_equal(out[..., 1], img[..., 1])
+    assert lateral_colour_image(img, intr, shift_px=(0, 0, 0)) is img
+    with pytest.raises(ValueError, match="not \\(H, W, 3\\)"):
+        lateral_colour_image(img[:10], intr, shift_px=shift)
+
+
+def test_lateral_colour_biases_the_overlay_phase_by_half_the_code_channels_shift():
+    """The paper's Eq. 9 adds the code channels (R, G: the fringe on their stripes) to the fringe
+    channel (B).  With R and G magnified by 1 + m and B not, the code channels' fringe is shifted by
+    m (x - cx) camera px at column x, and the overlay - two equal cosines - by half of that, so pixel
+    x shows the column that was m (x - cx) / 2 px further in: the decoded projector column is off by
+    -m (x - cx) / 2 * f_p / f_c (closed form, first order in the shift; 0.32 px, ~1.5 mm at 1 m, at
+    the right edge for a 1-px shift at the corner); within 25 % over the outer columns."""
+    from simbench.optics import lateral_colour_image, lateral_colour_magnification
+
+    rig = paper_rig()
+    drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
+    img, col, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=2)
+    shift = (1.0, 1.0, 0.0)
+    moved = lateral_colour_image(img, rig.camera, shift_px=shift)
+    r = decode(moved, rig=rig, params=DecoderParams(mode="calibrated"))
+    m = lateral_colour_magnification(rig.camera, shift)[0]
+    cam = rig.camera
+    xs = np.arange(cam.width_px)
+    predicted = (-m * (xs - cam.cx_px) / 2 * rig.projector.focal_px / cam.focal_px)[None, :]
+    err = r.column_px - col
+    outer = np.zeros(err.shape, bool)
+    outer[200:760, 1100:1240] = True
+    ok = outer & r.valid
+    assert ok.sum() > 10000
+    measured, expected = float(np.median(err[ok])), float(np.median(np.broadcast_to(predicted, err.shape)[ok]))
+    assert expected < -0.1  # the effect is there to see
+    assert measured == pytest.approx(expected, rel=0.25)

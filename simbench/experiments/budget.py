@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from simbench.device import EFFECTS, SensorModel, get_sensor, with_effects
+from simbench.device import EFFECTS, PAPER_LATERAL_COLOUR_PX, SensorModel, get_sensor, with_effects, with_lateral_colour
 from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
@@ -40,7 +40,9 @@ def converged_spp(spp: int) -> int:
 def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, SensorModel]]:
     """(key, description, sensor) of each row: the baseline, each effect the ``paper`` model
     switches on, the projector's video-mode gamma and its free-running bit-plane timing
-    (what-ifs: the paper triggered the camera from pattern mode), and the full ``paper`` model.
+    (what-ifs: the paper triggered the camera from pattern mode), the lenses' lateral colour
+    (what-if: not in the ``paper`` model yet, :data:`simbench.device.PAPER_LATERAL_COLOUR_PX`),
+    and the full ``paper`` model.
     The render-noise row (:data:`RENDER_ROW`, the ideal sensor rendered with
     :func:`converged_spp` samples) comes second in :func:`run_budget`."""
     rows = [("ideal", "ideal: every effect off", ideal)]
@@ -67,6 +69,20 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
             f"bit-planes in turn), camera not triggered, "
             "its exposure starting anywhere in a frame (the paper triggered the camera from pattern mode)",
             timing,
+        )
+    )
+    dispersing = with_lateral_colour(
+        paper, camera_px=PAPER_LATERAL_COLOUR_PX["camera"], projector_px=PAPER_LATERAL_COLOUR_PX["projector"]
+    )
+    colour = with_effects(ideal, dispersing, ["lateral_colour"], name="ideal+lateral_colour")
+    cam, prj = PAPER_LATERAL_COLOUR_PX["camera"], PAPER_LATERAL_COLOUR_PX["projector"]
+    rows.append(
+        (
+            "lateral_colour",
+            f"what if: lateral chromatic aberration of both lenses, red and blue {cam[0] - cam[2]:g} camera px and "
+            f"{prj[0] - prj[2]:g} DMD px apart at the corner (assumption, `simbench.device.PAPER_LATERAL_COLOUR_PX`; "
+            "not in the paper model yet), not corrected by the decoder",
+            colour,
         )
     )
     rows.append(("paper", "paper: all effects together", paper))

@@ -12,11 +12,13 @@ their own resolutions (the edge band scaled to the same angle).  Writes ``table3
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.decode import robust_params
+from simbench.device import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
 from simbench.experiments.common import (
     Session,
     calibration_sentence,
@@ -110,6 +112,23 @@ def _competitor_faces(session: Session, raw, systems) -> dict:
 
 
 PLACED = ("cube", "cuboid")
+
+
+def what_if_sensors(paper: SensorModel) -> dict[str, tuple[str, SensorModel]]:
+    """Physical effects not (yet) in the run's sensor model, each measured on Table 3's scene with
+    the same placement and seeds: name -> (description, the run's model with it)."""
+    cam, prj = PAPER_LATERAL_COLOUR_PX["camera"], PAPER_LATERAL_COLOUR_PX["projector"]
+    return {
+        "lateral_colour": (
+            f"lateral colour of both lenses, red and blue {cam[0] - cam[2]:g} camera px and {prj[0] - prj[2]:g} DMD px "
+            "apart at the corner (`simbench.device.PAPER_LATERAL_COLOUR_PX`, an argued bound)",
+            with_lateral_colour(paper, camera_px=cam, projector_px=prj),
+        ),
+    }
+
+
+WHAT_IF_VARIANTS = (("paper", "calibrated"), ("paper", "reference"))
+WHAT_IF_KEYS = ("plane_mae_mm", "gt_mae_mm", "completeness")
 VARIANTS = (("paper", "calibrated"), ("paper", "reference"), ("robust", "calibrated"), ("robust", "reference"))
 # beside the run's rig (RunConfig.rig), each decoder is scored with the other one too
 RIG_KEYS = ("plane_mae_mm", "gt_mae_mm", "completeness")
@@ -185,6 +204,17 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
                     metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
                 for k, v in competitors[d]["scores"][name].get("other_rig", {}).items():
                     metrics[f"table3/{name}/{d}/rig_{other}/{k}"] = v
+        for effect, (_, sensor) in what_if_sensors(session.sensor).items():
+            sub = session.fork(dataclasses.replace(sensor, name=f"{session.sensor.name}+{effect}"))
+            w_scene = sub.prepare(raw)
+            w_cap = sub.capture(w_scene, label)[0]
+            for d, m in WHAT_IF_VARIANTS:
+                w_result = sub.decode(w_cap, params[d], mode=m)
+                for row in rows:
+                    sc = score(w_cap, w_result, cfg.decoder.period_px, region=faces[row["object"]])
+                    for k in WHAT_IF_KEYS:
+                        row[f"{effect}_{d}_{m}_{k}"] = sc[k]
+                        metrics[f"table3/{row['object']}/what_if/{effect}/{d}/{m}/{k}"] = sc[k]
         result = results[("paper", "calibrated")]
         whole = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
         metrics["table3/scene/completeness"] = whole["completeness"]
@@ -203,6 +233,9 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
         for c in ([f"paper_{d}_mm"] if d in PAPER_COMPETITORS else [])
         + [f"{d}_mm", f"{d}_gt_mae_mm", f"{d}_completeness"]
         + ([f"{d}_rig_{other}_{k}" for k in RIG_KEYS] if "other_rig" in competitors[d]["scores"][PLACED[0]] else [])
+    ]
+    cols += [
+        f"{e}_{d}_{m}_{k}" for e in what_if_sensors(session.sensor) for d, m in WHAT_IF_VARIANTS for k in WHAT_IF_KEYS
     ]
     cols += ["render", "noise", "placement"]
     cols += [f"{n}_{k}" for n in PLACED for k in ("depth_m", "tilt_deg")]
@@ -229,6 +262,51 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
         },
     )
     return metrics
+
+
+def _what_if_section(session: Session, rows: list[dict]) -> list[str]:
+    """The effects not in the run's sensor model, measured (:func:`what_if_sensors`)."""
+    effects = what_if_sensors(session.sensor)
+    lines = [
+        "",
+        "## What if: effects not in the sensor model, measured",
+        "",
+        "The same scene, placement and seeds, recorded through the run's sensor model with one more effect (the "
+        "reference plane too), decoded by the paper's decoder; the change against the table above is what the effect "
+        "adds. " + " ".join(f"*{e}*: {text}." for e, (text, _) in effects.items()),
+        "",
+    ]
+    hdr = [
+        "effect",
+        "object",
+        "paper (mm)",
+        "triangulation: plane fit (mm)",
+        "change (mm)",
+        "GT MAE (mm)",
+        "change (mm)",
+    ]
+    hdr += ["reference: plane fit (mm)", "change (mm)"]
+    body = []
+    for e in effects:
+        for r in rows:
+            t, g, ref = (
+                r[f"{e}_paper_{m}_{k}"]
+                for m, k in (("calibrated", "plane_mae_mm"), ("calibrated", "gt_mae_mm"), ("reference", "plane_mae_mm"))
+            )
+            body.append(
+                [
+                    e,
+                    r["object"],
+                    f"{r['paper_mm']:.4f}",
+                    f"{t:.4f}",
+                    f"{t - r['paper_calibrated_plane_mae_mm']:+.4f}",
+                    f"{g:.4f}",
+                    f"{g - r['paper_calibrated_gt_mae_mm']:+.4f}",
+                    f"{ref:.4f}",
+                    f"{ref - r['paper_reference_plane_mae_mm']:+.4f}",
+                ]
+            )
+    return lines + markdown_table(hdr, body)
 
 
 def _exposures(n: int) -> str:
@@ -304,6 +382,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         for r in rows
     ]
     lines += markdown_table(hdr, body)
+    lines += _what_if_section(session, rows)
     lines += [
         "",
         "Stripe-order errors on the faces, per decoder and protocol: "

@@ -23,6 +23,7 @@ __all__ = ["sensor_for", "scene_for", "decoder_for", "run_config_for", "check_sw
 
 def sensor_for(params: dict) -> SensorModel:
     from simbench.device import (
+        Lens,
         get_sensor,
         sensor_from_dict,
         sensor_to_dict,
@@ -48,7 +49,9 @@ def sensor_for(params: dict) -> SensorModel:
             node = data
             for t in tables:
                 node = node[t]
-            if key not in node:
+            # a lens field left out of the dict at its default (lateral colour) is still a field
+            optional = {f.name for f in dataclasses.fields(Lens)} if tables[-1:] == ["lens"] else set()
+            if key not in node and key not in optional:
                 raise ValueError(
                     f"unknown sensor field {k!r}; fields of [{'.'.join(tables)}]: "
                     f"{sorted(x for x in node if not isinstance(node[x], dict))}"

@@ -205,6 +205,7 @@ BUILTIN_STUDIES = (
     "noise_ambient",
     "surface_colour",
     "paper_checks",
+    "lateral_colour",
     "calibration_effort",
 )
 
