@@ -93,7 +93,7 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
     """The CI check catches a deliberately worse decoder parameter (issue 4)."""
     from simbench.decode import DecoderParams
     from simbench.experiments.reproduce import reproduce
-    from simbench.experiments.table1 import BOARD_SETS, COLOURS, PROTOCOLS
+    from simbench.experiments.table1 import BOARD_SET_SENSORS, BOARD_SETS, COLOURS, PROTOCOLS
 
     # the calibrated-rig columns (a calibration per run) are make quick's to check, not this test's
     cfg = RunConfig.preset(quick=True, compare_rigs=False)
@@ -108,10 +108,10 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
         good["table1/paint/white/paper/calibrated/completeness"] > 0.99
         and good["table1/paint/white/paper/calibrated/stripe_order_errors"] == 0
     )
-    # issue 17: the colour-robust decoder decodes all seven boards of both sets under the paper
-    # sensor model near the white board's completeness, without stripe-order errors,
+    # issue 17: the colour-robust decoder decodes all seven boards of both physical sets under the
+    # paper sensor model near the white board's completeness, without stripe-order errors,
     # by both protocols; the paper's decoder loses the paint blue board
-    for b in BOARD_SETS:
+    for b in (b for b in BOARD_SETS if BOARD_SET_SENSORS[b] is None):
         for c in COLOURS:
             for mode in PROTOCOLS:
                 key = f"table1/{b}/{c}/robust/{mode}"
@@ -124,6 +124,20 @@ def test_worsened_decoder_fails_the_quick_benchmark(tmp_path, variant):
                 assert good[f"{key}/completeness"] >= 0.90 * white[b], key
                 assert good[f"{key}/stripe_order_error_rate"] <= 1e-4, key
     assert good["table1/paint/blue/paper/calibrated/completeness"] < 0.01
+    # issue 34: the paper's simulation as described (paper_sim): a pure red board leaves nothing in
+    # the green of its green-coded stripes and Eq. 13 reads none of them right, so only white and
+    # yellow decode with the paper's decoder; the colour-robust one also reads pink and cyan (one
+    # code channel each, decode.color.normalized_color_code); nothing decodes wrong
+    sim = "table1/paper_sim"
+    assert good[f"{sim}/red/code0_eq13"] == 0.0 and good[f"{sim}/red/code0_g"] == 0.0
+    for c in COLOURS:
+        decodable = {"paper": ("white", "yellow"), "robust": ("white", "yellow", "pink", "cyan")}
+        for d, ok in decodable.items():
+            key = f"{sim}/{c}/{d}/calibrated"
+            assert good[f"{key}/completeness"] > (0.99 if c in ok else -1) and (
+                c in ok or good[f"{key}/completeness"] == 0.0
+            ), key
+            assert good[f"{key}/stripe_order_errors"] == 0, key
     worse_cfg = dataclasses.replace(cfg, decoder=DecoderParams(sigma_periods=0.15))
     worse = reproduce(
         ["table1"],
