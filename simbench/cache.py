@@ -232,6 +232,8 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
             material.append(list(o.material.specular_rgb))
         if o.material.spectrum is not None:
             material.append({"spectrum": o.material.spectrum})
+        if o.material.subsurface is not None:
+            material.append({"subsurface": o.material.subsurface})
         objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
     return {
         "rig": rig_to_dict(scene.rig),

@@ -28,6 +28,8 @@ on a colour board (paper Table 1), turned into a reflectance by :func:`paint_ref
 ``material`` is ``diffuse`` (default) or ``plastic``: a smooth or rough dielectric coating
 (Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
 diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
+``subsurface = "marble"`` makes an object translucent: the light it reflects leaves displaced by
+the dipole profile of that medium (:mod:`simbench.subsurface`, whose ``MEDIA`` lists the names).
 
 A plane may also have a form error, as real boards do (:func:`board_form_m`): ``bow_m_per_m``
 (sag of a spherical bow over a 1 m chord, positive bulging towards the camera),
@@ -90,7 +92,7 @@ __all__ = [
 ]
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
-_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness")
+_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness", "subsurface")
 MATERIALS = ("diffuse", "plastic")
 
 # Reflectance range of matte paint, used by paint_reflectance.  Assumptions, argued from
@@ -213,10 +215,16 @@ class Material:
     # a measured reflectance spectrum "<dataset>/<patch>" (simbench.spectral.MEASURED_DATASETS);
     # rgb is then its linear sRGB, and the spectral path uses the spectrum itself
     spectrum: str | None = None
+    # a translucent medium of simbench.subsurface.MEDIA under the surface (None: opaque)
+    subsurface: str | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
             raise ValueError(f"unknown material {self.kind!r}; valid: {list(MATERIALS)}")
+        if self.subsurface is not None:
+            from simbench.subsurface import get_medium
+
+            get_medium(self.subsurface)
         object.__setattr__(self, "rgb", validate.numbers(self.rgb, "rgb reflectance", 3, lo=0.0, hi=1.0))
         object.__setattr__(self, "roughness", validate.number(self.roughness, "roughness", lo=0.001, hi=1.0))
         object.__setattr__(self, "specular_rgb", validate.numbers(self.specular_rgb, "specular_rgb", 3, lo=0.0, hi=1.0))
@@ -309,7 +317,9 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         mat_kind = str(d.get("material", "diffuse"))
         if "roughness" in d and mat_kind != "plastic":
             raise ValueError("roughness applies to material = 'plastic' only")
-        mat = Material(kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1), spectrum=spectrum)
+        mat = Material(
+            kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1), spectrum=spectrum, subsurface=d.get("subsurface")
+        )
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
     return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat)

@@ -23,6 +23,7 @@ from simbench.io import output_directory, save_exr, save_json, save_npy, save_pn
 from simbench.manifest import seal_manifest
 from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings, realised_rig
 from simbench.optics import distort_image, distorted_projector_drive, lateral_colour_image
+from simbench.subsurface import get_medium, subsurface_image
 from simbench.pattern import PatternSpec
 from simbench.photometry import (
     channel_weights,
@@ -405,6 +406,16 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
+def _opaque(scene: SceneSpec) -> SceneSpec:
+    """``scene`` with every material's subsurface medium removed (the same object otherwise)."""
+    if not any(o.material.subsurface for o in scene.objects):
+        return scene
+    objects = tuple(
+        dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=None)) for o in scene.objects
+    )
+    return dataclasses.replace(scene, objects=objects)
+
+
 def render_channels(
     scene: SceneSpec,
     drive: "np.ndarray | ProjectorDrive",
@@ -423,7 +434,8 @@ def render_channels(
     coloured by one bounce's crosstalk only (an approximation, as is the coating's
     specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
     per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
-    primary's materials: light of the projector's white.  Then the camera lens distortion and
+    primary's materials: light of the projector's white.  Then the translucent objects' subsurface
+    scattering (:mod:`simbench.subsurface`, on the ideal pixel grid), the camera lens distortion and
     lateral colour (per camera channel: an approximation where a channel sees several primaries'
     wavelengths, exact for narrow-band light).
 
@@ -434,6 +446,9 @@ def render_channels(
     -------
     ndarray, shape (H, W, 3), float32, in units of each channel's own primary
     """
+    media = {i: get_medium(o.material.subsurface) for i, o in enumerate(scene.objects) if o.material.subsurface}
+    # the renders do not depend on what happens under the surface (applied after them)
+    scene = _opaque(scene)
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
     kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
@@ -454,6 +469,11 @@ def render_channels(
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
+    if media:
+        gt = cached_ground_truth(scene, cache=render.cache)  # the geometry is the opaque one's
+        q = subsurface_image(
+            q, object_id=gt.object_id, depth_m=gt.depth_m, media=media, focal_px=scene.rig.camera.focal_px
+        )
     q = distort_image(q, scene.rig.camera)
     return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
         np.float32, copy=False

@@ -18,6 +18,7 @@ import numpy as np
 from simbench.device import EFFECTS, PAPER_LATERAL_COLOUR_PX, SensorModel, get_sensor, with_effects, with_lateral_colour
 from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.common import score
+from simbench.experiments.table3 import translucent
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
 from simbench.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M
@@ -27,6 +28,7 @@ __all__ = ["budget_rows", "converged_spp", "run_budget"]
 SCENE = "plane_white"
 RENDER_ROW = "render_converged"
 FORM_ROW = "board_form"
+SUBSURFACE_ROW = "subsurface"
 MODES = ("calibrated", "reference")  # triangulation (paper Eq. 15), reference plane (Sec. 5.4)
 PAPER_WHITE_MM = PAPER_TABLE1["white"][1]
 
@@ -118,11 +120,24 @@ def run_budget(session: Session) -> dict:
     specs.insert(
         [k for k, _, _ in specs].index("video_gamma"), (FORM_ROW, form_text, ideal)
     )  # with the effects, before the what-ifs
+    # what if the board were translucent (a scene change, not a sensor effect; before the what-ifs)
+    specs.insert(
+        [k for k, _, _ in specs].index("video_gamma"),
+        (
+            SUBSURFACE_ROW,
+            "what if: the board translucent as plaster (dipole diffusion, `simbench.subsurface`; the medium an "
+            "assumption between measured Spectralon and marble)",
+            ideal,
+        ),
+    )
     for i, (key, text, sensor) in enumerate(specs):
         with session.timed(f"[budget {i + 1}/{len(specs)}] {key}"):
             sub = session.fork(sensor, config=configs.get(key))
+            raw = sub.raw_scene(SCENE)
+            if key == SUBSURFACE_ROW:
+                raw = translucent(raw, ["board"], "plaster")
             # the same placement (and seeds) in every row
-            scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "budget/white", ["board"]))
+            scene = sub.prepare(sub.place(raw, "budget/white", ["board"]))
             caps = sub.capture(scene, "budget/white", repeats=repeats)
             row = {"effect": key, "description": text}
             for mode in MODES:

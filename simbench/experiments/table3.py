@@ -13,6 +13,7 @@ their own resolutions (the edge band scaled to the same angle).  Writes ``table3
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -114,17 +115,44 @@ def _competitor_faces(session: Session, raw, systems) -> dict:
 PLACED = ("cube", "cuboid")
 
 
-def what_if_sensors(paper: SensorModel) -> dict[str, tuple[str, SensorModel]]:
-    """Physical effects not (yet) in the run's sensor model, each measured on Table 3's scene with
-    the same placement and seeds: name -> (description, the run's model with it)."""
+def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[[SceneSpec], SceneSpec] | None"]]:
+    """Physical effects not (yet) in the run's sensor model or scenes, each measured on Table 3's
+    scene with the same placement and seeds: name -> (description, the sensor model to record
+    with, the change to the placed scene or None)."""
     cam, prj = PAPER_LATERAL_COLOUR_PX["camera"], PAPER_LATERAL_COLOUR_PX["projector"]
-    return {
+    out = {
         "lateral_colour": (
             f"lateral colour of both lenses, red and blue {cam[0] - cam[2]:g} camera px and {prj[0] - prj[2]:g} DMD px "
             "apart at the corner (`simbench.device.PAPER_LATERAL_COLOUR_PX`, an argued bound)",
             with_lateral_colour(paper, camera_px=cam, projector_px=prj),
+            None,
         ),
     }
+    for medium, why in SUBSURFACE_WHAT_IFS.items():
+        out[f"subsurface_{medium}"] = (
+            f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.subsurface`)",
+            paper,
+            lambda scene, medium=medium: translucent(scene, PLACED, medium),
+        )
+    return out
+
+
+# the plaster objects as translucent media: the assumed plaster, bracketed by the least and the
+# most translucent measured white media of simbench.subsurface.MEDIA
+SUBSURFACE_WHAT_IFS = {
+    "plaster": "an assumption between the two below",
+    "spectralon": "measured, the least translucent white diffuser",
+    "marble": "measured, a translucent stone",
+}
+
+
+def translucent(scene: SceneSpec, names, medium: str) -> SceneSpec:
+    """``scene`` with the objects ``names`` given the subsurface ``medium``."""
+    objects = tuple(
+        dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium)) if o.name in names else o
+        for o in scene.objects
+    )
+    return dataclasses.replace(scene, objects=objects)
 
 
 WHAT_IF_VARIANTS = (("paper", "calibrated"), ("paper", "reference"))
@@ -204,9 +232,13 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
                     metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
                 for k, v in competitors[d]["scores"][name].get("other_rig", {}).items():
                     metrics[f"table3/{name}/{d}/rig_{other}/{k}"] = v
-        for effect, (_, sensor) in what_if_sensors(session.sensor).items():
-            sub = session.fork(dataclasses.replace(sensor, name=f"{session.sensor.name}+{effect}"))
-            w_scene = sub.prepare(raw)
+        for effect, (_, sensor, change) in what_ifs(session.sensor).items():
+            sub = (
+                session
+                if sensor == session.sensor
+                else session.fork(dataclasses.replace(sensor, name=f"{session.sensor.name}+{effect}"))
+            )
+            w_scene = sub.prepare(raw if change is None else change(raw))
             w_cap = sub.capture(w_scene, label)[0]
             for d, m in WHAT_IF_VARIANTS:
                 w_result = sub.decode(w_cap, params[d], mode=m)
@@ -234,9 +266,7 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
         + [f"{d}_mm", f"{d}_gt_mae_mm", f"{d}_completeness"]
         + ([f"{d}_rig_{other}_{k}" for k in RIG_KEYS] if "other_rig" in competitors[d]["scores"][PLACED[0]] else [])
     ]
-    cols += [
-        f"{e}_{d}_{m}_{k}" for e in what_if_sensors(session.sensor) for d, m in WHAT_IF_VARIANTS for k in WHAT_IF_KEYS
-    ]
+    cols += [f"{e}_{d}_{m}_{k}" for e in what_ifs(session.sensor) for d, m in WHAT_IF_VARIANTS for k in WHAT_IF_KEYS]
     cols += ["render", "noise", "placement"]
     cols += [f"{n}_{k}" for n in PLACED for k in ("depth_m", "tilt_deg")]
     cols += [f"{d}_{k}_seed" for d in competitors for k in ("render", "noise")]
@@ -266,14 +296,14 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
 
 def _what_if_section(session: Session, rows: list[dict]) -> list[str]:
     """The effects not in the run's sensor model, measured (:func:`what_if_sensors`)."""
-    effects = what_if_sensors(session.sensor)
+    effects = what_ifs(session.sensor)
     lines = [
         "",
         "## What if: effects not in the sensor model, measured",
         "",
         "The same scene, placement and seeds, recorded through the run's sensor model with one more effect (the "
         "reference plane too), decoded by the paper's decoder; the change against the table above is what the effect "
-        "adds. " + " ".join(f"*{e}*: {text}." for e, (text, _) in effects.items()),
+        "adds. " + " ".join(f"*{e}*: {text}." for e, (text, _, _) in effects.items()),
         "",
     ]
     hdr = [
