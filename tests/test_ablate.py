@@ -77,6 +77,18 @@ def test_the_paper_decoders_added_checks_are_an_axis():
         check_sweep(_sweep(axis=[{"name": "decoder.without", "values": ["none", "colour"]}]))
 
 
+def test_subsurface_is_a_scene_axis():
+    from simbench.experiments.ablate import DEFAULTS
+    from simbench.experiments.ablate.mapping import scene_for
+
+    marble = scene_for({**DEFAULTS, "scene.name": "discontinuity", "scene.subsurface": "marble"})
+    assert {o.material.subsurface for o in marble.objects} == {"marble"}
+    opaque = scene_for({**DEFAULTS, "scene.name": "discontinuity", "scene.subsurface": "none"})
+    assert {o.material.subsurface for o in opaque.objects} == {None}
+    with pytest.raises(ValueError, match="unknown subsurface medium 'chalk'"):
+        check_sweep(_sweep(axis=[{"name": "scene.subsurface", "values": ["chalk"]}]))
+
+
 def test_builtin_studies_load():
     """Every built-in study expands and passes the check a sweep gets before it runs (a study
     naming a value the code no longer accepts fails here, not after a make ablations)."""

@@ -71,6 +71,9 @@ def scene_for(params: dict) -> SceneSpec:
     if "scene.srgb8" in params:
         rgb = paint_reflectance(params["scene.srgb8"])
         objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, rgb=rgb)) for o in objs]
+    if params.get("scene.subsurface", "none") != "none":
+        medium = params["scene.subsurface"]
+        objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium)) for o in objs]
     from simbench import validate
     from simbench.scene import MAX_ANGLE_DEG, SCENE_EXTENT_M
 
