@@ -27,6 +27,7 @@ marked folder, and in it only the files whose names and contents are a cache's o
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
@@ -233,7 +234,11 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
         if o.material.spectrum is not None:
             material.append({"spectrum": o.material.spectrum})
         if o.material.subsurface is not None:
-            material.append({"subsurface": o.material.subsurface})
+            from simbench.subsurface import get_medium
+
+            # by value, so that a medium whose coefficients change is a new render input
+            medium = dataclasses.asdict(get_medium(o.material.subsurface))
+            material.append({"subsurface": o.material.subsurface, **medium})
         objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
     return {
         "rig": rig_to_dict(scene.rig),

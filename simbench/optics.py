@@ -277,12 +277,12 @@ def lateral_colour_image(img: np.ndarray, intr: Intrinsics, *, shift_px: Sequenc
     """
     import cv2
 
-    src = np.asarray(img)
-    if src.ndim != 3 or src.shape[2] != 3 or src.shape[:2] != tuple(intr.size_hw):
-        raise ValueError(f"image of shape {src.shape} is not (H, W, 3) on the {intr.size_hw} grid")
     mags = lateral_colour_magnification(intr, shift_px)
     if not np.any(mags):
         return img
+    src = np.asarray(img)
+    if src.ndim != 3 or src.shape[2] != 3 or src.shape[:2] != tuple(intr.size_hw):
+        raise ValueError(f"image of shape {src.shape} is not (H, W, 3) on the {intr.size_hw} grid")
     out = np.empty_like(src)
     for c, m in enumerate(mags):
         if m == 0.0:

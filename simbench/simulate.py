@@ -435,7 +435,9 @@ def render_channels(
     specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
     per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
     primary's materials: light of the projector's white.  Then the translucent objects' subsurface
-    scattering (:mod:`simbench.subsurface`, on the ideal pixel grid), the camera lens distortion and
+    scattering (:mod:`simbench.subsurface`, on the ideal pixel grid, per camera channel with that
+    band's medium: an approximation where a channel sees several primaries, and it spreads all the
+    object's light, a glossy coating's highlight included), the camera lens distortion and
     lateral colour (per camera channel: an approximation where a channel sees several primaries'
     wavelengths, exact for narrow-band light).
 
@@ -604,6 +606,7 @@ def _recording_code_digest() -> str:
     import simbench.render
     import simbench.sensor
     import simbench.spectral
+    import simbench.subsurface
 
     modules = (
         simbench.sensor,
@@ -611,6 +614,7 @@ def _recording_code_digest() -> str:
         simbench.spectral,
         simbench.device,
         simbench.optics,
+        simbench.subsurface,
         simbench.render,
         simbench.mitsuba_dict,
     )

@@ -19,9 +19,11 @@ numerical transform and against a fringe blurred by :func:`subsurface_image`).
 The render keeps each material's diffuse reflectance (its ``rgb``, the total the profile
 integrates to) and redistributes the light it reflects with the normalised profile
 (:func:`subsurface_image`): on the camera's image, per object and per colour channel, with the
-profile scaled by the object's pixel footprint at its median depth (exact for a fronto-parallel
-face, an approximation on curved and oblique ones: the footprint grows by 1 / cos of the tilt
-across the profile) and never across objects.  Single scattering and the specular interface
+profile scaled by the object's pixel footprint at its median depth, never across objects: exact
+for a fronto-parallel face away from its outline; an approximation on curved and oblique faces
+(the footprint grows by 1 / cos of the tilt across the profile) and within a profile's reach of
+an outline, where each pixel averages the object's light it can reach (the light that would leave
+the object through its outline stays in it instead).  Single scattering and the specular interface
 are left out (a matte surface's reflection is diffuse).
 
 Media (:data:`MEDIA`): measured coefficients of Jensen et al. 2001 (their Table 1, in mm^-1 for
@@ -36,6 +38,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -125,6 +128,7 @@ SUBSAMPLES = 8
 MAX_KERNEL_PX = 401
 
 
+@lru_cache(maxsize=64)
 def _kernel(medium: Medium, channel: int, mm_per_px: float) -> np.ndarray:
     _, tr, zr, zv = medium.dipole(channel)
     # radius holding all but ~TAIL_ENERGY of the profile: its exponential decay, or for an
@@ -139,7 +143,9 @@ def _kernel(medium: Medium, channel: int, mm_per_px: float) -> np.ndarray:
         for dx in offs:
             r = np.hypot((grid[:, None] + dy) * mm_per_px, (grid[None, :] + dx) * mm_per_px)
             k += dipole_profile(r, medium, channel)
-    return (k / k.sum()).astype(np.float32)
+    out = (k / k.sum()).astype(np.float32)
+    out.setflags(write=False)
+    return out
 
 
 def subsurface_image(
@@ -177,7 +183,11 @@ def subsurface_image(
         mask = np.asarray(object_id) == idx
         if not mask.any():
             continue
-        mm_per_px = 1000.0 * float(np.nanmedian(np.asarray(depth_m)[mask])) / float(focal_px)
+        depths = np.asarray(depth_m, dtype=np.float64)[mask]
+        depths = depths[np.isfinite(depths) & (depths > 0)]
+        if not depths.size:
+            continue  # nothing of it has a depth: no footprint to scale the profile by
+        mm_per_px = round(1000.0 * float(np.median(depths)) / float(focal_px), 9)
         m = mask.astype(np.float32)
         for c in range(3):
             k = _kernel(medium, c, mm_per_px)

@@ -56,7 +56,8 @@ def normalized_color_code(rgb: np.ndarray, span: np.ndarray) -> np.ndarray:
     more wrong).  The pattern puts ``C * I`` in one code channel and ``(1 - C) * I`` in the other
     (Eq. 7-8), so the present channel is the fringe ``I`` on its own stripes and 0 on the
     others: it is compared with half the normalised fringe ``I``, the middle of the two, taken
-    from the fringe channel (or 0.5, half its mean, where that has no range either).  Where
+    from the fringe channel (or 0.25, half the normalised fringe's mean of 0.5, where that has no
+    range either).  Where
     neither code channel has a range the code is 1, like Eq. 13's tie.
 
     Parameters

@@ -388,7 +388,8 @@ PAPER_ADDED_CHECKS = {
         {"dark_level": 0.0},
         "a pixel whose row holds nothing above dark_level (full scale) within a period is unlit "
         "(projector shadow, black surface) and takes no part in any phase fit, so that windows "
-        "beside a shadow fit the lit samples alone; an absolute level",
+        "beside a shadow fit the lit samples alone; an absolute level (dark_level also floors the "
+        "colour-robust decoder's normalisation and noise weights, which switching it off changes too)",
     ),
     "max_residual": AddedCheck(
         {"max_residual": math.inf},

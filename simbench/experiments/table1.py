@@ -39,6 +39,7 @@ from simbench.experiments.common import (
 from simbench.io import atomic_write_text
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
 from simbench.metrics import code_stripes
+from simbench.optics import undistort_image
 from simbench.scene import linear_srgb8
 
 if TYPE_CHECKING:
@@ -126,7 +127,9 @@ def run_table1(session: Session) -> dict:
             cap = sub.capture(scene, label)[0]
             mat = scene.objects[0].material
             placement = session.seeds_used[f"{label}/placement"]
-            stripes = code_stripes(cap.raw, cap.gt.column_px, pattern=cfg.decoder.pattern, where=cap.gt.lit)
+            # on the ground truth's grid: the ideal pinhole's, which the decoder also undistorts to
+            image = undistort_image(cap.raw, cap.scene.rig.camera)
+            stripes = code_stripes(image, cap.gt.column_px, pattern=cfg.decoder.pattern, where=cap.gt.lit)
             content = {
                 "code1_eq13": stripes["code1_eq13"],
                 "code0_eq13": stripes["code0_eq13"],
