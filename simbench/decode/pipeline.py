@@ -18,6 +18,7 @@ from simbench.decode import _kernels
 from simbench.decode.color import (
     color_code,
     mixing_matrix,
+    albedo_gain,
     normalize_channels,
     normalized_color_code,
     overlay_weights,
@@ -175,6 +176,11 @@ class DecoderParams:
         Normalise each channel by its local range across neighbouring stripes before the
         overlay (Eq. 9) and the code (Eq. 13) (:func:`simbench.decode.color.normalize_channels`);
         off = the paper's decoder.
+    albedo_flatten : bool
+        Before the normalisation, divide out printed albedo steps found along the rows
+        (:func:`simbench.decode.color.albedo_gain`; ours, needs ``color_normalize``): each
+        segment between two steps brought to its brighter neighbour's level, so that a window
+        over the step sees one fringe.  Off = the paper's decoder.
     voting : bool
         Majority vote of codes per stripe (paper Sec. 5.2); off = the stripe's middle pixel.
     neighbour_reach : int
@@ -240,6 +246,7 @@ class DecoderParams:
     camera_period_px: float | None = None
     unmix: bool = False
     color_normalize: bool = False
+    albedo_flatten: bool = False
     voting: bool = True
     neighbour_reach: int = 3
     min_support: int = 3
@@ -272,6 +279,7 @@ class DecoderParams:
             ),
             "unmix": v.boolean(self.unmix, "unmix"),
             "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
+            "albedo_flatten": v.boolean(self.albedo_flatten, "albedo_flatten"),
             "voting": v.boolean(self.voting, "voting"),
             "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
@@ -304,6 +312,8 @@ class DecoderParams:
             raise ValueError(f"stripe_step_ratio must satisfy low < high, got {self.stripe_step_ratio}")
         if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
             raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
+        if fixed["albedo_flatten"] and not fixed["color_normalize"]:
+            raise ValueError("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
         for name, value in fixed.items():
             object.__setattr__(self, name, value)
 
@@ -360,6 +370,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         params,
         unmix=True,
         color_normalize=True,
+        albedo_flatten=True,
         intensity_mode="weighted",
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
         min_amplitude=ROBUST_MIN_AMPLITUDE,
@@ -677,6 +688,11 @@ def _columns(
         with stage("colour unmixing and normalisation"):
             if unmixing is not None:
                 rgb = unmix(rgb, unmixing)
+            if params.albedo_flatten:
+                _, span = normalize_channels(
+                    rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
+                )
+                rgb = rgb * albedo_gain(rgb, span, period_px=t_cam, order=params.order)[..., None]
             if params.color_normalize:
                 rgb, span = normalize_channels(
                     rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
