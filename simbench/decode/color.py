@@ -236,6 +236,10 @@ ALBEDO_MEAN_ROWS = 3
 # a segment between two steps shorter than this many periods holds no whole fringe cycle to take a
 # mean over: left as it is
 ALBEDO_MIN_SEGMENT_PERIODS = 1.5
+# a channel whose local range is under this share of the strongest channel's is left out of the
+# albedo proxy (assumption: 0.1; the rendered orange board's blue is 0.07 of its red, mostly
+# crosstalk residue that follows the code)
+ALBEDO_MIN_CHANNEL_SHARE = 0.1
 # the most a pixel's channels are amplified (a 0.04-albedo ink beside 0.8 paper needs 20x)
 ALBEDO_MAX_GAIN = 50.0
 
@@ -324,8 +328,10 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     1. An albedo proxy free of the code: each channel over its local range ``span`` (averaged
        over a window wider than the code's longest run, so that the code stripes weigh alike),
        the code pair ``R + G`` and the fringe ``B`` combined with weights ``span**2`` (the pair's
-       ``1 / (1/span_R**2 + 1/span_G**2)``) - a weak channel's crosstalk residue would otherwise
-       make the proxy follow the code;
+       ``1 / (1/span_R**2 + 1/span_G**2)``), leaving out a channel under
+       :data:`ALBEDO_MIN_CHANNEL_SHARE` of the strongest (its crosstalk residue would make the
+       proxy follow the code) and the pair where one code colour does not come back (a magenta
+       board: its green-coded stripes are dark); with neither, the gain is 1;
     2. the steps of the proxy along the rows (:func:`albedo_edges`);
     3. the proxy's mean over the normalisation window, kept inside each segment
        (:func:`segment_mean`), averaged over :data:`ALBEDO_MEAN_ROWS` rows: the segment's
@@ -356,15 +362,25 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     width = 2 * half + 1
     k = cv2.blur(np.ascontiguousarray(span, np.float32), (4 * half + 1, width), borderType=cv2.BORDER_REPLICATE)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        has = k > 0
+        # a channel the surface hardly reflects carries mostly noise and crosstalk residue
+        has = k >= ALBEDO_MIN_CHANNEL_SHARE * k.max(axis=2, keepdims=True)
+        has &= k > 0
         norm = np.where(has, np.maximum(rgb, 0.0) / np.where(has, k, 1.0), 0.0)
         inv2 = np.where(has, 1.0 / np.maximum(k, 1e-12) ** 2, 0.0)
-        pair = inv2[..., 0] + inv2[..., 1]
-        w_pair = np.where(pair > 0, 1.0 / np.where(pair > 0, pair, 1.0), 0.0)
+        # the pair is free of the code only where both code colours come back
+        both = has[..., 0] & has[..., 1]
+        w_pair = np.where(both, 1.0 / np.where(both, inv2[..., 0] + inv2[..., 1], 1.0), 0.0)
         w_fringe = np.where(has[..., 2], k[..., 2] ** 2, 0.0)
         total = w_pair + w_fringe
         proxy = np.where(total > 0, (w_pair * (norm[..., 0] + norm[..., 1]) + w_fringe * norm[..., 2]) / total, 0.0)
-    cuts = albedo_edges(proxy, period_px=period_px)
+    # only where the proxy is defined across a whole window (it is not, where it would follow the
+    # code, and a border between defined and not is no albedo step)
+    defined = cv2.erode(
+        (total > 0).astype(np.uint8),
+        np.ones((ALBEDO_EDGE_ROWS, 4 * half + 1), np.uint8),
+        borderType=cv2.BORDER_REPLICATE,
+    ).astype(bool)
+    cuts = albedo_edges(proxy, period_px=period_px) & defined
     mean = segment_mean(proxy, cuts, width_px=width).astype(np.float32)
     mean = cv2.blur(mean, (1, ALBEDO_MEAN_ROWS), borderType=cv2.BORDER_REPLICATE)
     level = cv2.blur(
@@ -376,7 +392,7 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         gain = np.where(mean > 1e-6, level / np.maximum(mean, 1e-6), 1.0)
     gain = np.minimum(gain, ALBEDO_MAX_GAIN)
     s0, s1 = _segment_bounds(cuts)
-    gain[(s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px] = 1.0
+    gain[((s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px) | ~defined] = 1.0
     near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, width), np.uint8)).astype(np.float32)
     fade = np.maximum(cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE), near)
     return (1.0 + (gain - 1.0) * fade).astype(np.float32)
