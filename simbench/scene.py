@@ -173,16 +173,17 @@ def linear_srgb8(srgb8: Sequence[int]) -> tuple[float, float, float]:
     (255, 0, 0) -> (1, 0, 0).  A renderer's material colour as the paper's 3ds Max simulation
     (Sec. 5.5) would take a colour-picker value; no real surface reflects so purely
     (:func:`paint_reflectance`)."""
+    return tuple(float(round(x, 6)) for x in _srgb_decode(srgb8))
+
+
+def _srgb_decode(srgb8: Sequence[int]) -> np.ndarray:
+    """The sRGB decoding curve of a checked 8-bit colour (unrounded)."""
     v = np.asarray(
         validate.numbers(list(srgb8) if isinstance(srgb8, np.ndarray) else srgb8, "srgb8", 3, lo=0.0, hi=255.0),
         dtype=np.float64,
     )
     if not np.array_equal(v, np.round(v)):
         raise ValueError(f"srgb8 holds 8-bit integers 0-255 (rgb takes reflectances in [0, 1]), got {list(srgb8)!r}")
-    return tuple(float(round(x, 6)) for x in _srgb_decode(v))
-
-
-def _srgb_decode(v: np.ndarray) -> np.ndarray:
     c = v / 255.0
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
@@ -194,8 +195,7 @@ def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
     decoding curve (IEC 61966-2-1, :func:`linear_srgb8`) and the paint range above: pure red
     (255, 0, 0) becomes (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
     """
-    linear_srgb8(srgb8)  # checks it
-    lin = _srgb_decode(np.asarray(srgb8, dtype=np.float64))
+    lin = _srgb_decode(srgb8)
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin
     return tuple(float(round(x, 6)) for x in rho)
 
@@ -375,6 +375,18 @@ def load_scene(path: str | Path) -> SceneSpec:
     data = read_toml(path, what="scene")
     data.setdefault("name", path.stem)
     return scene_from_dict(data, base_dir=path.parent, where=str(path))
+
+
+def with_subsurface(scene: SceneSpec, medium: str | None, *, names: Sequence[str] | None = None) -> SceneSpec:
+    """``scene`` with the objects ``names`` (all when None) given the subsurface ``medium`` (a
+    name of :data:`simbench.subsurface.MEDIA`; None: opaque), every other field as it was."""
+    objects = tuple(
+        dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium))
+        if names is None or o.name in names
+        else o
+        for o in scene.objects
+    )
+    return dataclasses.replace(scene, objects=objects)
 
 
 def reference_scene(scene: SceneSpec, *, albedo: float = 0.8, form: dict | None = None) -> SceneSpec:

@@ -34,7 +34,7 @@ from simbench.photometry import (
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import render_radiance
 from simbench.rig import rig_to_dict, save_rig
-from simbench.scene import OBJECT_KIND_TABLE, SceneSpec
+from simbench.scene import OBJECT_KIND_TABLE, SceneSpec, with_subsurface
 from simbench.seeds import RngLike, child_seed
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
 from simbench.spectral import crosstalk_matrix, material_crosstalk
@@ -410,10 +410,7 @@ def _opaque(scene: SceneSpec) -> SceneSpec:
     """``scene`` with every material's subsurface medium removed (the same object otherwise)."""
     if not any(o.material.subsurface for o in scene.objects):
         return scene
-    objects = tuple(
-        dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=None)) for o in scene.objects
-    )
-    return dataclasses.replace(scene, objects=objects)
+    return with_subsurface(scene, None)
 
 
 def render_channels(

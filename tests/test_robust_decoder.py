@@ -133,6 +133,13 @@ def test_paper_decoder_fails_the_blue_board_the_robust_one_decodes(calibration):
     assert paper.valid[lit].mean() < 0.5 or bad.mean() > 0.1
 
 
+def _printed(white: np.ndarray, rho: np.ndarray, *, noise: float, seed: int) -> np.ndarray:
+    """The capture of a print of reflectance ``rho`` (H, W, 3 or 1) from a noise-free capture
+    ``white`` of a unit-reflectance board: a capture is K (radiance * reflectance) + ambient."""
+    radiance = np.linalg.solve(K, (white - AMBIENT).reshape(-1, 3).T).T.reshape(white.shape) / 0.7
+    return _camera(radiance.astype(np.float32) * rho, noise=noise, seed=seed)
+
+
 def _chart(noise=0.002, seed=5):
     """A printed chart in the board's plane: tiles of different reflectance side by side, their
     edges along the stripes (the case that cuts rows of stripes into short chains)."""
@@ -150,9 +157,7 @@ def _chart(noise=0.002, seed=5):
     edges = np.linspace(0, w, len(tiles) + 1).round().astype(int)
     for (a, b), t in zip(zip(edges[:-1], edges[1:]), tiles):
         rho[:, a:b] = t
-    # the capture is K (radiance * reflectance) + ambient: redo it with the chart's reflectance
-    radiance = np.linalg.solve(K, (img - AMBIENT).reshape(-1, 3).T).T.reshape(img.shape) / 0.7
-    cap = _camera(radiance.astype(np.float32) * rho, noise=noise, seed=seed)
+    cap = _printed(img, rho, noise=noise, seed=seed)
     band = np.zeros((h, w), bool)
     for e in edges[1:-1]:
         band[:, e - 5 : e + 5] = True
@@ -194,8 +199,7 @@ def _checkerboard(ink: float, *, square_periods: float = 3.4, noise=0.002, seed=
     yy, xx = np.mgrid[0:h, 0:w]
     dark = ((xx // side).astype(int) + (yy // side).astype(int)) % 2 == 1
     rho = np.where(dark, np.float32(ink), np.float32(0.8))[..., None].astype(np.float32)
-    radiance = np.linalg.solve(K, (img - AMBIENT).reshape(-1, 3).T).T.reshape(img.shape) / 0.7
-    cap = _camera(radiance.astype(np.float32) * rho, noise=noise, seed=seed)
+    cap = _printed(img, rho, noise=noise, seed=seed)
     edge = np.zeros((h, w), bool)
     edge[:, 1:] |= dark[:, 1:] != dark[:, :-1]
     edge[1:, :] |= dark[1:, :] != dark[:-1, :]

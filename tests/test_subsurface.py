@@ -90,3 +90,17 @@ def test_media_by_name_and_in_scene_files():
     assert scene_fingerprint(plaster) != scene_fingerprint(opaque)
     with pytest.raises(ValueError, match="subsurface medium"):
         scene_from_dict({**base, "object": [{**base["object"][0], "subsurface": ["marble"]}]})
+
+
+def test_with_subsurface_sets_the_named_objects_medium_only():
+    from pathlib import Path
+
+    from simbench.scene import load_scene, with_subsurface
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "scenes" / "discontinuity.toml")
+    names = [o.name for o in scene.objects]
+    one = with_subsurface(scene, "plaster", names=names[:1])
+    assert [o.material.subsurface for o in one.objects] == ["plaster"] + [None] * (len(names) - 1)
+    every = with_subsurface(scene, "marble")
+    assert all(o.material.subsurface == "marble" for o in every.objects)
+    assert with_subsurface(every, None) == scene

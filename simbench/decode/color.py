@@ -271,8 +271,11 @@ def segment_mean(values: np.ndarray, cuts: np.ndarray, *, width_px: int) -> np.n
     ndarray, shape (H, W), float64; with no cut, the box mean with the window kept inside the
     image at its borders
     """
+    return _bounded_mean(values, *_segment_bounds(cuts), width_px=width_px)
+
+
+def _bounded_mean(values: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, width_px: int) -> np.ndarray:
     h, w = values.shape
-    s0, s1 = _segment_bounds(cuts)
     n = np.minimum(int(width_px), s1 - s0)
     w0 = np.clip(np.arange(w) - int(width_px) // 2, s0, s1 - n)
     cs = np.zeros((h, w + 1), np.float64)
@@ -381,7 +384,8 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
     cuts = albedo_edges(proxy, period_px=period_px) & defined
-    mean = segment_mean(proxy, cuts, width_px=width).astype(np.float32)
+    s0, s1 = _segment_bounds(cuts)
+    mean = _bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32)
     mean = cv2.blur(mean, (1, ALBEDO_MEAN_ROWS), borderType=cv2.BORDER_REPLICATE)
     level = cv2.blur(
         cv2.dilate(mean, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE),
@@ -391,7 +395,6 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.where(mean > 1e-6, level / np.maximum(mean, 1e-6), 1.0)
     gain = np.minimum(gain, ALBEDO_MAX_GAIN)
-    s0, s1 = _segment_bounds(cuts)
     gain[((s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px) | ~defined] = 1.0
     near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, width), np.uint8)).astype(np.float32)
     fade = np.maximum(cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE), near)

@@ -690,15 +690,15 @@ def _columns(
         with stage("colour unmixing and normalisation"):
             if unmixing is not None:
                 rgb = unmix(rgb, unmixing)
-            if params.albedo_flatten:
-                _, span = normalize_channels(
-                    rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
-                )
-                rgb = rgb * albedo_gain(rgb, span, period_px=t_cam, order=params.order)[..., None]
             if params.color_normalize:
-                rgb, span = normalize_channels(
-                    rgb, period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True
-                )
+                norm = dict(period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
+                normed, span = normalize_channels(rgb, **norm)
+                if params.albedo_flatten:
+                    gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
+                    # with no step anywhere the gain is exactly 1 and the normalisation stands
+                    if not (gain == 1.0).all():
+                        normed, span = normalize_channels(rgb * gain[..., None], **norm)
+                rgb = normed
                 if params.intensity_mode == "weighted":
                     weights = overlay_weights(
                         raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level

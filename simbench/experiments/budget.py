@@ -18,10 +18,9 @@ import numpy as np
 from simbench.device import EFFECTS, PAPER_LATERAL_COLOUR_PX, SensorModel, get_sensor, with_effects, with_lateral_colour
 from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.common import score
-from simbench.experiments.table3 import translucent
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
-from simbench.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M
+from simbench.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M, with_subsurface
 
 __all__ = ["budget_rows", "converged_spp", "run_budget"]
 
@@ -135,7 +134,7 @@ def run_budget(session: Session) -> dict:
             sub = session.fork(sensor, config=configs.get(key))
             raw = sub.raw_scene(SCENE)
             if key == SUBSURFACE_ROW:
-                raw = translucent(raw, ["board"], "plaster")
+                raw = with_subsurface(raw, "plaster", names=["board"])
             # the same placement (and seeds) in every row
             scene = sub.prepare(sub.place(raw, "budget/white", ["board"]))
             caps = sub.capture(scene, "budget/white", repeats=repeats)

@@ -38,6 +38,7 @@ from simbench.literature import (
 )
 from simbench.metrics import edge_band, points_from_depth
 from simbench.rig import rotation_xyz_deg
+from simbench.scene import with_subsurface
 
 if TYPE_CHECKING:
     from simbench.scene import SceneSpec
@@ -132,7 +133,7 @@ def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[
         out[f"subsurface_{medium}"] = (
             f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.subsurface`)",
             paper,
-            lambda scene, medium=medium: translucent(scene, PLACED, medium),
+            lambda scene, medium=medium: with_subsurface(scene, medium, names=PLACED),
         )
     return out
 
@@ -144,15 +145,6 @@ SUBSURFACE_WHAT_IFS = {
     "spectralon": "measured, the least translucent white diffuser",
     "marble": "measured, a translucent stone",
 }
-
-
-def translucent(scene: SceneSpec, names, medium: str) -> SceneSpec:
-    """``scene`` with the objects ``names`` given the subsurface ``medium``."""
-    objects = tuple(
-        dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium)) if o.name in names else o
-        for o in scene.objects
-    )
-    return dataclasses.replace(scene, objects=objects)
 
 
 WHAT_IF_VARIANTS = (("paper", "calibrated"), ("paper", "reference"))

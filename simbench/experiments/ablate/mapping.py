@@ -64,16 +64,13 @@ def sensor_for(params: dict) -> SensorModel:
 
 def scene_for(params: dict) -> SceneSpec:
     from simbench.experiments.common import library_scene_path
-    from simbench.scene import load_scene, paint_reflectance
+    from simbench.scene import load_scene, paint_reflectance, with_subsurface
 
     scene = load_scene(library_scene_path(params["scene.name"]))
     objs = list(scene.objects)
     if "scene.srgb8" in params:
         rgb = paint_reflectance(params["scene.srgb8"])
         objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, rgb=rgb)) for o in objs]
-    if params.get("scene.subsurface", "none") != "none":
-        medium = params["scene.subsurface"]
-        objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium)) for o in objs]
     from simbench import validate
     from simbench.scene import MAX_ANGLE_DEG, SCENE_EXTENT_M
 
@@ -96,7 +93,10 @@ def scene_for(params: dict) -> SceneSpec:
             rx, _, rz = q.get("rotation_deg", (0.0, 0.0, 0.0))
             q["rotation_deg"] = (rx, float(params["scene.tilt_deg"]), rz)
             objs[0] = dataclasses.replace(objs[0], params=tuple(sorted(q.items())))
-    return dataclasses.replace(scene, objects=tuple(objs))
+    scene = dataclasses.replace(scene, objects=tuple(objs))
+    if params.get("scene.subsurface", "none") != "none":
+        scene = with_subsurface(scene, params["scene.subsurface"])
+    return scene
 
 
 def decoder_for(params: dict) -> DecoderParams:
