@@ -447,7 +447,8 @@ def _cmd_decode(args) -> int:
         raise ValueError(f"--ply must name a .ply file, got {args.ply}")
     if args.debug_dir and Path(args.debug_dir).exists() and not Path(args.debug_dir).is_dir():
         raise ValueError(f"--debug-dir {args.debug_dir} exists and is not a folder")
-    _decoder_overrides(DecoderParams(), args.decoder or [])  # bad values fail before any file is read
+    # bad values fail before any file is read (on the decoder they will change)
+    _decoder_overrides(robust_params() if args.robust else DecoderParams(), args.decoder or [])
     overrides = []  # explicit options that replace what a recording holds, announced with the result
     if Path(args.capture).is_dir():
         from simbench.manifest import read_manifest

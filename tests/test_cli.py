@@ -352,6 +352,13 @@ def test_decode_robust_needs_the_reference_and_its_calibration_frames(tmp_path, 
     assert main([*base, "--reference", str(tmp_path / "ref.png")]) == 2
     err = capsys.readouterr().err
     assert "calibration_dark.png" in err and "--calibration-frames" in err
+    # --decoder overrides are checked against the decoder they change: the robust one's options
+    # pass the early check (which once tried them on the paper's decoder: "needs color_normalize")
+    assert main([*base, "--reference", str(tmp_path / "ref.png"), "--decoder", "albedo_flatten=true"]) == 2
+    err = capsys.readouterr().err
+    assert "calibration_dark.png" in err and "color_normalize" not in err
+    assert main([*base[:-1], "--reference", str(tmp_path / "ref.png"), "--decoder", "albedo_flatten=true"]) == 2
+    assert "albedo_flatten needs color_normalize" in capsys.readouterr().err
     assert not (tmp_path / "d.npy").exists()
 
 

@@ -475,10 +475,10 @@ def test_phase_stability_flags_the_pixels_an_albedo_step_biases(dark):
     once the stability term is folded in; away from the step the confidence is the fringe SNR.
     On the milder step the fringe SNR alone lets such a pixel through (measured: x = 120,
     0.19 rad off at SNR 3.4, the phase moving 0.14 rad when the window is halved).  The
-    colour-robust decoder's operating point is 2 (ROBUST_MIN_CONFIDENCE), which on such a raw
-    step keeps pixels up to 0.26 rad (0.05) and 0.41 rad (0.3) off: it flattens printed steps
-    before the fit (``albedo_flatten``, tests/test_robust_decoder.py), so that its windows do
-    not see them."""
+    colour-robust decoder's operating point is 3 (ROBUST_MIN_CONFIDENCE); it also flattens
+    printed steps before the fit (``albedo_flatten``, tests/test_robust_decoder.py), so that
+    its windows do not see them.  (At a threshold of 2, as it was for a while, such a raw step
+    keeps pixels up to 0.26 rad (0.05) and 0.41 rad (0.3) off.)"""
     from simbench.decode import ROBUST_MIN_CONFIDENCE, STABILITY_KAPPA_RAD, STABILITY_WINDOW_SCALE
     from simbench.decode.phase import fringe_snr, gabor_phase
     from simbench.decode.pipeline import phase_change
@@ -498,7 +498,8 @@ def test_phase_stability_flags_the_pixels_an_albedo_step_biases(dark):
     assert (conf[biased] < 3.0).all()
     if dark == 0.3:
         assert (snr[biased] >= 3.0).any()
-    assert ROBUST_MIN_CONFIDENCE == 2.0 and (conf[phase_change(wide.wrapped, true)[40] > 0.42] < 2.0).all()
+    assert ROBUST_MIN_CONFIDENCE == 3.0
+    assert (conf[phase_change(wide.wrapped, true)[40] > 0.42] < 2.0).all()
     far = slice(20, 100)
     assert np.array_equal(conf[far], snr[far]) and (conf[far] > 100).all()
 

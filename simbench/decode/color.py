@@ -242,6 +242,12 @@ ALBEDO_MIN_SEGMENT_PERIODS = 1.5
 ALBEDO_MIN_CHANNEL_SHARE = 0.1
 # the most a pixel's channels are amplified (a 0.04-albedo ink beside 0.8 paper needs 20x)
 ALBEDO_MAX_GAIN = 50.0
+# a segment whose fringe visibility (the proxy's standard deviation over its mean, rows averaged
+# over ALBEDO_EDGE_ROWS) is under this share of the most visible one within the window carries no
+# fringe - a projector shadow, not dark ink - and is not brightened (assumption: 0.5; measured
+# visibility ratios: a 20:1 ink beside its paper ~0.9, the cube's shadow on the wall beside
+# Table 3's cuboid face ~0.1-0.2, as dark as that ink, 8 DN at its peaks)
+ALBEDO_MIN_VISIBILITY = 0.5
 
 
 def _segment_bounds(cuts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -281,6 +287,24 @@ def _bounded_mean(values: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, width_p
     cs = np.zeros((h, w + 1), np.float64)
     np.cumsum(values, axis=1, dtype=np.float64, out=cs[:, 1:])
     return (np.take_along_axis(cs, w0 + n, 1) - np.take_along_axis(cs, w0, 1)) / n
+
+
+def _segment_visibility(
+    proxy: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, period_px: float, width_px: int
+) -> np.ndarray:
+    """The fringe's visibility in each pixel's segment: the standard deviation of the proxy
+    (rows averaged over :data:`ALBEDO_EDGE_ROWS`: the fringe runs along the columns, the noise
+    does not) over its mean, both over the window kept inside the segment and a quarter period
+    clear of its cuts (the optics blur the brighter side a few pixels across a step)."""
+    pv = cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
+    m = max(1, int(round(period_px / 2)))
+    room = (s1 - s0) > 2 * m + 2
+    a0 = np.where(room, s0 + m, s0)
+    a1 = np.where(room, s1 - m, s1)
+    mu = _bounded_mean(pv, a0, a1, width_px=width_px)
+    var = _bounded_mean(pv.astype(np.float64) ** 2, a0, a1, width_px=width_px) - mu * mu
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
 
 
 def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
@@ -387,6 +411,8 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     s0, s1 = _segment_bounds(cuts)
     mean = _bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32)
     mean = cv2.blur(mean, (1, ALBEDO_MEAN_ROWS), borderType=cv2.BORDER_REPLICATE)
+    vis = _segment_visibility(proxy, s0, s1, period_px=period_px, width_px=width)
+    shadow = vis < ALBEDO_MIN_VISIBILITY * cv2.dilate(vis, np.ones((1, width), np.uint8))
     level = cv2.blur(
         cv2.dilate(mean, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE),
         (width, 1),
@@ -395,7 +421,7 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.where(mean > 1e-6, level / np.maximum(mean, 1e-6), 1.0)
     gain = np.minimum(gain, ALBEDO_MAX_GAIN)
-    gain[((s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px) | ~defined] = 1.0
+    gain[((s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px) | ~defined | shadow] = 1.0
     near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, width), np.uint8)).astype(np.float32)
     fade = np.maximum(cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE), near)
     return (1.0 + (gain - 1.0) * fade).astype(np.float32)
