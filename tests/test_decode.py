@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from simbench.decode import DecoderParams, decode, decode_reference
-from simbench.decode.debruijn import neighbour_correct, window_positions_of_stripes
+from simbench.decode.color import Stripes
+from simbench.decode.debruijn import (
+    drop_broken_links,
+    keep_certain_sides,
+    neighbour_correct,
+    stripe_floor,
+    window_positions_of_stripes,
+)
 from simbench.pattern import PatternSpec, de_bruijn, fringe_pattern, quantize, window_positions
 from simbench.rig import paper_rig
 from simbench.projector import transfer_curve
@@ -132,6 +139,55 @@ def test_neighbour_correction_repairs_a_wrong_code():
     assert np.array_equal(fixed, truth)
     off, _ = neighbour_correct(raw, linked, cycle=8, reach=0)
     assert np.array_equal(off, raw)
+
+
+def test_stripe_floor_is_the_lowest_value_over_each_stripes_own_pixels():
+    values = np.arange(24, dtype=np.float32).reshape(2, 12)[:, ::-1].copy()
+    labels = np.full((2, 12), -1, np.int32)
+    labels[0, 0:4], labels[0, 4:12], labels[1, 2:9] = 0, 1, 2
+    labels[1, 5] = -1  # a bridged gap inside stripe 2: not its own pixel
+    values[0, 6] = np.nan
+    stripes = Stripes(
+        labels=labels,
+        row=np.array([0, 0, 1], np.int32),
+        start=np.array([0, 4, 2], np.int32),
+        stop=np.array([4, 12, 9], np.int32),
+        linked_prev=np.array([False, True, False]),
+    )
+    floor = stripe_floor(values, stripes)
+    assert floor.tolist() == [8.0, 0.0, 15.0]  # row 1 holds 11..0; stripe 2 leaves out column 5 (value 6)
+    assert stripe_floor(values, Stripes(labels, *(np.empty(0, np.int32),) * 3, np.empty(0, bool))).size == 0
+
+
+def test_a_broken_link_gives_back_only_the_stripe_with_no_pixel_under_the_operating_point():
+    """Exact: a chain whose W skips one (a depth edge the phase ran on across) between stripes 3
+    and 4.  Both are dropped; the one whose every pixel is at or above the operating point comes
+    back, when the other has a pixel below it and its own far link holds."""
+    p = np.array([0, 1, 2, 3, 5, 6, 7], np.int32)
+    linked = np.ones(7, bool)
+    linked[0] = False
+    dropped = drop_broken_links(p, linked, cycle=8)
+    assert dropped.tolist() == [0, 1, 2, -1, -1, 6, 7]
+    clean, edge = 20.0, 2.0
+    floor = np.full(7, clean, np.float32)
+    keep = dict(cycle=8, min_confidence=3.0)
+    floor[4] = edge
+    assert keep_certain_sides(p, dropped, linked, floor, **keep).tolist() == [0, 1, 2, 3, -1, 6, 7]
+    floor[3], floor[4] = edge, clean
+    assert keep_certain_sides(p, dropped, linked, floor, **keep).tolist() == [0, 1, 2, -1, 5, 6, 7]
+    # nothing marks the edge, or both stripes hold it: both stay dropped
+    for f3, f4 in ((clean, clean), (edge, edge), (np.nan, clean)):
+        floor[3], floor[4] = f3, f4
+        assert keep_certain_sides(p, dropped, linked, floor, **keep).tolist() == dropped.tolist()
+    # two clean stripes between two broken links, the edges in their outer neighbours: each one's
+    # link away from its edge goes to a stripe the other break dropped, so no surviving chain
+    # confirms their W - they stay dropped
+    p2 = np.array([0, 1, 3, 4, 6, 7], np.int32)
+    linked2 = np.ones(6, bool)
+    d2 = drop_broken_links(p2, linked2, cycle=8)
+    assert d2.tolist() == [0, -1, -1, -1, -1, 7]
+    floor2 = np.array([clean, edge, clean, clean, edge, clean], np.float32)
+    assert keep_certain_sides(p2, d2, linked2, floor2, **keep).tolist() == d2.tolist()
 
 
 @pytest.mark.parametrize("mode", ["reference", "calibrated"])

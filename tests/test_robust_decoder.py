@@ -306,3 +306,61 @@ def test_albedo_gain_brightens_faint_ink_but_not_a_projector_shadow():
     ink = cv2.erode(printed.astype(np.uint8), np.ones((1, int(t)), np.uint8)).astype(bool)
     assert np.median(gain[ink]) > 10.0, np.median(gain[ink])
     assert np.all(gain[inner] == 1.0), np.percentile(gain[inner], [50, 99, 100])
+
+
+def _one_period_step(far_brightness: float):
+    """Two boards side by side in the image, the right one farther by the depth at which the
+    projector column jumps by 0.98 of a period at the edge (as at scenes/hard_stairs_deep.toml's
+    1.0/1.1 m step, 20.6 px): the wrapped phase runs on across the edge, and the De Bruijn
+    windows over it break.  ``far_brightness``: the far board's brightness relative to the near
+    one's (distance and tilt make a real step's sides differ)."""
+    near, col_near, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, 1.0), supersample=2, albedo=1.0)
+    h, w = col_near.shape
+    r, xe = h // 2, w // 2
+    target = 0.98 * 21
+
+    def jump(z):
+        _, col, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, z), supersample=1, albedo=1.0)
+        return col[r, xe] - col_near[r, xe] - target
+
+    za, zb = 1.05, 1.15
+    ja, jb = jump(za), jump(zb)
+    for _ in range(4):  # secant steps
+        za, ja, zb = zb, jb, zb - jb * (zb - za) / (jb - ja)
+        jb = jump(zb)
+    assert abs(jb) < 0.05
+    far, col_far, _ = synthetic_plane_capture(DRIVE, RIG, point_m=(0, 0, zb), supersample=2, albedo=1.0)
+    left = np.arange(w)[None, :] < xe
+    radiance = np.where(left[..., None], near, far * np.float32(far_brightness))
+    white = _camera(radiance, noise=0.0)
+    cap = _printed(white, np.full((h, w, 1), 0.8, np.float32), noise=0.002, seed=3)
+    col = np.where(left, col_near, col_far)
+    x = np.arange(w)[None, :]
+    region = np.isfinite(col) & (np.abs(x - xe) >= 5)
+    return cap, col, region, region & (np.abs(x - xe) < 3 * PARAMS_PERIOD_PX)
+
+
+@pytest.mark.parametrize("far_brightness", [0.8, 1.0])
+def test_a_hidden_depth_edge_keeps_the_stripe_beside_it_when_the_confidence_shows_the_edge(calibration, far_brightness):
+    """A step whose phase runs on across the edge breaks a link; its two stripes were both
+    dropped (a period either side of the 5-px band lost).  ``link_keep_certain`` gives back the
+    one the edge is not in when the confidence shows where the edge is: with the far side
+    darker (0.8) the windows over the edge are biased, the edge's stripe holds pixels under the
+    operating point and the other none - measured 78.2 % -> 98.2 % within 3 periods of the edge.
+    With both sides alike (1.0) the phase crosses the edge unbiased, nothing marks it, and both
+    stay dropped.  Never a stripe-order error."""
+    ref, f = calibration
+    cap, col, region, near = _one_period_step(far_brightness)
+    out = {}
+    for keep in (True, False):
+        p = robust_params(DecoderParams(mode="calibrated"))
+        p = p if keep else dataclasses.replace(p, link_keep_certain=0.0)
+        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+        r = decode(cap, rig=RIG, params=p, reference=rmap)
+        ok = r.valid & region
+        assert np.all(np.abs(r.column_px[ok] - col[ok]) < 0.5 * 21), f"stripe-order error (keep {keep})"
+        out[keep] = (r.valid & near).sum() / near.sum()
+    if far_brightness < 1.0:
+        assert out[False] < 0.85 and out[True] >= 0.95, out
+    else:
+        assert out[True] == out[False], out

@@ -57,7 +57,8 @@ SHORTFALLS = {
     "robust_printed": "printed albedo edges and saturated tiles bias the phase: 95.5 % complete and 0.12 % > 5 mm "
     "wrong at the operating point (issue 35)",
     "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless "
-    "depth edge; ~89 % completeness (issue 17 note; 90.2 % and none > 5 mm wrong at the operating point 3, 2026-11-25)",
+    "depth edge; ~89 % completeness (issue 17 note; 91.7 % and none > 5 mm wrong at the operating point 3 with "
+    "link_keep_certain, 2026-11-25)",
 }
 
 

@@ -9,11 +9,23 @@ W; the plurality of the predictions wins, and a stripe that no neighbour confirm
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["chain_extent", "window_positions_of_stripes", "neighbour_correct", "drop_broken_links"]
+if TYPE_CHECKING:
+    from simbench.decode.color import Stripes
+
+__all__ = [
+    "chain_extent",
+    "window_positions_of_stripes",
+    "neighbour_correct",
+    "drop_broken_links",
+    "keep_certain_sides",
+    "stripe_floor",
+]
 
 
 def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,4 +136,100 @@ def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: 
     _kernels.drop_broken_links(
         np.ascontiguousarray(positions, dtype=np.int32), np.ascontiguousarray(linked_prev, dtype=bool), cycle, out
     )
+    return out
+
+
+def stripe_floor(values: np.ndarray, stripes: Stripes) -> np.ndarray:
+    """The lowest of ``values`` over each stripe's own pixels (its label's: not those of a gap
+    it was bridged across).
+
+    Parameters
+    ----------
+    values : ndarray, shape (H, W), float32; e.g. the confidence
+    stripes : :class:`simbench.decode.color.Stripes`
+
+    Returns
+    -------
+    ndarray, shape (S,), float32; NaN values are passed over (a stripe of NaN only: NaN)
+    """
+    n = stripes.count
+    if n == 0:
+        return np.empty(0, np.float32)
+    h, w = values.shape
+    flat = np.where(stripes.labels >= 0, values, np.float32(np.nan)).astype(np.float32).ravel()
+    # stripes lie in scan order without overlap: reduce over [start, stop) and skip the runs between
+    flat = np.append(flat, np.float32(np.nan))
+    base = stripes.row.astype(np.int64) * w
+    idx = np.empty(2 * n, np.int64)
+    idx[0::2] = base + stripes.start
+    idx[1::2] = base + stripes.stop
+    with np.errstate(invalid="ignore"):
+        return np.fmin.reduceat(flat, idx)[0::2].astype(np.float32)
+
+
+def keep_certain_sides(
+    positions: np.ndarray,
+    dropped: np.ndarray,
+    linked_prev: np.ndarray,
+    floor: np.ndarray,
+    *,
+    cycle: int,
+    min_confidence: float,
+) -> np.ndarray:
+    """Give back the stripe of a broken link that the edge is not in (ours).
+
+    :func:`drop_broken_links` drops both stripes of a link whose W do not follow each other: a
+    depth edge the wrapped phase ran on across, inside one of the two (the one that straddles
+    both surfaces) or at their border.  The phase windows over the edge are biased, and the
+    confidence's stability term marks them (``DecoderParams.phase_stability``), so where every
+    pixel of one stripe is at or above ``min_confidence`` and the other holds a pixel below it,
+    the edge is in the other; the first is kept with its W if its link on its far side holds
+    (that neighbour kept, W consecutive), so that its W is confirmed by a chain on its own side
+    of the edge.  Measured on ``scenes/hard_stairs_deep.toml``: a step whose projector column
+    jumps by 20.6 px (0.98 of a period), and the whole period on its near side had been dropped.
+    A step the phase crosses without any pixel below ``min_confidence`` keeps both dropped.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (S,), int32; W after :func:`neighbour_correct`
+    dropped : ndarray, shape (S,), int32; :func:`drop_broken_links` of ``positions``
+    linked_prev : ndarray, shape (S,), bool
+    floor : ndarray, shape (S,), float32; each stripe's lowest confidence (:func:`stripe_floor`)
+    cycle : int
+    min_confidence : float
+        The decoder's operating point.
+
+    Returns
+    -------
+    ndarray, shape (S,), int32; ``dropped`` with the kept stripes' W given back
+    """
+    p = np.asarray(positions, np.int64)
+    d = np.asarray(dropped, np.int32)
+    n = p.size
+    out = d.copy()
+    if n < 2:
+        return out
+    linked = np.asarray(linked_prev, bool)
+    both = (p[:-1] >= 0) & (p[1:] >= 0) & linked[1:]
+    step = np.mod(p[1:] - p[:-1], cycle)
+    broken = np.flatnonzero(both & (step != 1)) + 1  # link between stripes j - 1 and j
+    if broken.size == 0:
+        return out
+    # follows[j]: the link between stripes j - 1 and j holds (W consecutive)
+    follows = np.zeros(n, bool)
+    follows[1:] = both & (step == 1)
+    # a stripe's link on its left / right holds, to a neighbour that survived the drop
+    left_ok = np.zeros(n, bool)
+    left_ok[1:] = follows[1:] & (d[:-1] >= 0)
+    right_ok = np.zeros(n, bool)
+    right_ok[:-1] = follows[1:] & (d[1:] >= 0)
+    f = np.asarray(floor, np.float32)
+    thr = np.float32(min_confidence)
+    a, b = broken - 1, broken
+    # an unknown floor (NaN) is neither clean nor evidence of the edge
+    with np.errstate(invalid="ignore"):
+        keep_a = (f[a] >= thr) & (f[b] < thr) & left_ok[a]
+        keep_b = (f[b] >= thr) & (f[a] < thr) & right_ok[b]
+    out[a[keep_a]] = p[a[keep_a]]
+    out[b[keep_b]] = p[b[keep_b]]
     return out

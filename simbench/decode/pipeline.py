@@ -28,7 +28,9 @@ from simbench.decode.color import (
 )
 from simbench.decode.debruijn import (
     drop_broken_links,
+    keep_certain_sides,
     neighbour_correct,
+    stripe_floor,
     window_positions_of_stripes,
 )
 from simbench.decode.depth import (
@@ -104,13 +106,14 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # of the decoder: with the albedo flattening (DecoderParams.albedo_flatten) 14 scenes met both
 # goals at 2 and at 3, so 2; with the flattening's shadow guard (ALBEDO_MIN_VISIBILITY: a
 # projector shadow is no longer brightened like dark ink) 14 meet them at 3 and 13 at 2 (12 at 4
-# and 5, 11 with no threshold), so 3.  At 3: box before wall 98.1 % complete / 0.00 % wrong,
-# sphere before wall 97.4 % / 0.03 %, printed charts of 3:1 and
-# 1.6:1 97.1 % and 100 % / 0 %, glossy boards 98.0-99.6 % / 0 %.  Short of the goals there: the
-# 20:1 chart (80.4 %, 0 % wrong; 91.5 % at 2), the fine chart (squares under a period: nothing),
-# the box interior (77 %), the deep stairs (95.5 %) and the 60-degree corner (0.42 % wrong, -5 to
-# -12 mm beside the crease, stable across window widths: interreflection, none with direct light
-# only).  Not tuned on any table of the paper; a white board scores ~30.
+# and 5, 11 with no threshold), so 3; with link_keep_certain (at this same level) 15 at 3.  At 3:
+# box before wall 98.8 % complete / 0.00 % wrong, sphere before wall 97.4 % / 0.03 %, deep
+# stairs 97.4 % / 0.00 %, printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards
+# 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart (80.4 %, 0 % wrong; 91.5 % at 2),
+# the fine chart (squares under a period: nothing), the box interior (77 %) and the 60-degree
+# corner (0.42 % wrong, -5 to -12 mm beside the crease, stable across window widths:
+# interreflection, none with direct light only).  Not tuned on any table of the paper; a white
+# board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
 # again with a window half as wide along x, and a pixel whose phase moves by |dpsi| between the two
@@ -198,6 +201,14 @@ class DecoderParams:
     link_check : bool
         After the correction, drop both stripes of any link whose W do not follow each other
         (a depth edge hidden in a smooth phase; :func:`simbench.decode.debruijn.drop_broken_links`).
+    link_keep_certain : float
+        A confidence level: of a broken link's two stripes, keep the one the edge is not in
+        (ours, needs ``link_check``; :func:`simbench.decode.debruijn.keep_certain_sides`): where
+        every pixel of one stripe is at or above this level, a pixel of the other below it (the
+        phase windows over the edge), and the first's link on its other side holds.  A level of
+        its own, not ``min_confidence``, so that a decode with no operating point (to score a
+        range of thresholds) keeps the same stripes.  0 = both dropped (the paper's decoder: not
+        described); the colour-robust decoder's: :data:`ROBUST_MIN_CONFIDENCE`.
     stripe_step_ratio : tuple of float
         (low, high): a step of the wrapped phase between neighbouring pixels of a row, after a
         wrap is unwrapped, outside ``[low, high] * 2 pi / T_cam`` ends a run of stripes without a
@@ -255,6 +266,7 @@ class DecoderParams:
     min_support: int = 3
     bridge_gap_periods: float = 0.0
     link_check: bool = True
+    link_keep_certain: float = 0.0
     stripe_step_ratio: tuple[float, float] = (0.3, 3.0)
     dark_level: float = 0.04
     saturation_level: float = 1.0
@@ -288,6 +300,7 @@ class DecoderParams:
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
             "bridge_gap_periods": v.number(self.bridge_gap_periods, "bridge_gap_periods", lo=0.0, hi=1.0),
             "link_check": v.boolean(self.link_check, "link_check"),
+            "link_keep_certain": v.number(self.link_keep_certain, "link_keep_certain", lo=0.0, hi=MAX_FRINGE_SNR),
             "stripe_step_ratio": v.numbers(
                 list(self.stripe_step_ratio) if isinstance(self.stripe_step_ratio, tuple) else self.stripe_step_ratio,
                 "stripe_step_ratio",
@@ -374,6 +387,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         unmix=True,
         color_normalize=True,
         albedo_flatten=True,
+        link_keep_certain=ROBUST_MIN_CONFIDENCE,
         intensity_mode="weighted",
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
         min_amplitude=ROBUST_MIN_AMPLITUDE,
@@ -759,17 +773,6 @@ def _columns(
             max_gap_px=int(params.bridge_gap_periods * t_cam),
         )
         stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
-    with stage("De Bruijn windows and neighbour correction"):
-        table = _window_table(params.order, params.sequence)
-        raw_w = window_positions_of_stripes(
-            stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle
-        )
-        w_fixed, support = neighbour_correct(
-            raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
-        )
-        if params.link_check:
-            w_fixed = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
-            support = np.where(w_fixed >= 0, support, 0)
     lab = stripes.labels
     with stage("confidence"):
         confidence = fringe_snr(residual)
@@ -779,6 +782,27 @@ def _columns(
             with np.errstate(divide="ignore", invalid="ignore"):
                 # fmin: where the narrow fit has no phase the fringe SNR stands
                 np.fmin(confidence, np.float32(STABILITY_KAPPA_RAD) / shift, out=confidence)
+    with stage("De Bruijn windows and neighbour correction"):
+        table = _window_table(params.order, params.sequence)
+        raw_w = window_positions_of_stripes(
+            stripe_code, stripes.linked_prev, order=params.order, table=table, cycle=params.cycle
+        )
+        w_fixed, support = neighbour_correct(
+            raw_w, stripes.linked_prev, cycle=params.cycle, reach=params.neighbour_reach, min_support=params.min_support
+        )
+        if params.link_check:
+            dropped = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
+            if params.link_keep_certain > 0.0:
+                dropped = keep_certain_sides(
+                    w_fixed,
+                    dropped,
+                    stripes.linked_prev,
+                    stripe_floor(confidence, stripes),
+                    cycle=params.cycle,
+                    min_confidence=params.link_keep_certain,
+                )
+            w_fixed = dropped
+            support = np.where(w_fixed >= 0, support, 0)
     band = BandStripes(
         labels=lab,
         position=w_fixed.astype(np.int32, copy=False),
