@@ -1259,3 +1259,31 @@ void decode_tail(int64_t h, int64_t w, int64_t row0, const int32_t *restrict lab
     flush(&q, amplitude, rig, distorted, newton_steps, refine_steps, zmin, zmax, depth_out, valid_out, conf_out,
           col_out, index_out);
 }
+
+/* Mean of `width` values along each row of an (h, w) float32 image, the window centred on the
+ * pixel but kept within [s0, s1) (simbench.decode.color._bounded_mean): n = min(width, s1 - s0),
+ * start = min(max(x - width / 2, s0), s1 - n), prefix sums in double taken from the row's start
+ * in order, as numpy's cumsum(dtype=float64); `square` sums the squares (the value widened to
+ * double first).  cs: scratch of w + 1 doubles. */
+void bounded_mean(int64_t h, int64_t w, const float *restrict values, const int64_t *restrict s0,
+                  const int64_t *restrict s1, int64_t width, int64_t square, double *restrict cs,
+                  double *restrict out) {
+    for (int64_t y = 0; y < h; y++) {
+        const float *v = values + y * w;
+        const int64_t *a = s0 + y * w, *b = s1 + y * w;
+        double *o = out + y * w;
+        cs[0] = 0.0;
+        for (int64_t x = 0; x < w; x++) {
+            const double d = (double)v[x];
+            cs[x + 1] = cs[x] + (square ? d * d : d);
+        }
+        for (int64_t x = 0; x < w; x++) {
+            const int64_t span = b[x] - a[x];
+            const int64_t n = width < span ? width : span;
+            int64_t start = x - width / 2;
+            if (start < a[x]) start = a[x];
+            if (start > b[x] - n) start = b[x] - n;
+            o[x] = (cs[start + n] - cs[start]) / (double)n;
+        }
+    }
+}

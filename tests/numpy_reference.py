@@ -458,3 +458,15 @@ def depth_errors(depth_m, gt_depth_m, *, region, exclude=None, outlier_mm: float
         "bias_mm": float(err.mean()) if a.size else nan,
         "outlier_share": float(np.mean(a > outlier_mm)) if a.size else nan,
     }
+
+
+def bounded_mean(values, s0, s1, *, width_px, square=False):
+    """simbench.decode.color._bounded_mean as plain numpy (its path for any dtype)."""
+    if square:
+        values = values.astype(np.float64) ** 2
+    h, w = values.shape
+    n = np.minimum(int(width_px), s1 - s0)
+    w0 = np.clip(np.arange(w) - int(width_px) // 2, s0, s1 - n)
+    cs = np.zeros((h, w + 1), np.float64)
+    np.cumsum(values, axis=1, dtype=np.float64, out=cs[:, 1:])
+    return (np.take_along_axis(cs, w0 + n, 1) - np.take_along_axis(cs, w0, 1)) / n

@@ -574,3 +574,26 @@ def test_kernel_wrappers_refuse_what_the_c_code_cannot_read():
         _kernels.front_end(np.zeros((2, 3, 3), np.int32), [0, 1, 2], 0, 3, 0.04, 1.0, *([None] * 4))
     with pytest.raises(ValueError, match="rows"):
         _kernels.gabor_band(a, a, 2, 9, None, None, None, False, *([a] * 5))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("square", [False, True])
+def test_bounded_mean_matches_numpy(seed, square):
+    """The albedo flattening's segment-bounded window means (simbench.decode.color): the C
+    loop's bits are numpy's, for windows wider and narrower than the segments, cuts at the
+    row's ends and rows with none."""
+    rng = np.random.default_rng(seed)
+    h, w = 7, 97
+    values = rng.random((h, w), dtype=np.float32) * np.float32(3.0)
+    cuts = rng.random((h, w)) < np.array([0.02, 0.1, 0.0, 0.3, 0.05, 1.0, 0.01])[:, None]
+    s0, s1 = color._segment_bounds(cuts)
+    for width in (1, 4, 9, 41, 200):
+        got = color._bounded_mean(values, s0, s1, width_px=width, square=square)
+        want = ref.bounded_mean(values, s0, s1, width_px=width, square=square)
+        assert got.dtype == np.float64 and np.array_equal(got, want), width
+    # any other dtype takes numpy's path: the same values
+    v64 = values.astype(np.float64)
+    assert np.array_equal(
+        color._bounded_mean(v64, s0, s1, width_px=9, square=square),
+        ref.bounded_mean(v64, s0, s1, width_px=9, square=square),
+    )

@@ -33,6 +33,7 @@ __all__ = [
     "front_end",
     "validity",
     "decode_tail",
+    "bounded_mean",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -49,6 +50,7 @@ _SIGNATURES = {
     "match_reference": (None, [_I, _I, _I, _P, _P, _P]),
     "depth_from_disparity": (None, [_I, _I, _P, _F, _F, _P]),
     "chain_extent": (None, [_I, _P, _P, _P]),
+    "bounded_mean": (None, [_I, _I, _P, _P, _P, _I, _I, _P, _P]),
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
@@ -241,6 +243,28 @@ def chain_extent(linked_prev, left, right) -> None:
         _ptr(linked_prev, "linked_prev", np.bool_),
         _ptr(left, "left", np.int64, (n,), writable=True),
         _ptr(right, "right", np.int64, (n,), writable=True),
+    )
+
+
+def bounded_mean(values, s0, s1, width, square, out) -> None:
+    """Mean of ``width`` values (or of their squares) along each row, the window kept within
+    each pixel's ``[s0, s1)``; ``values`` float32 (H, W), ``s0``/``s1`` int64 (H, W), ``out``
+    float64 (H, W)."""
+    h, w = values.shape
+    width = int(width)
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    scratch = np.empty(w + 1, np.float64)  # held here: the loop writes through its address
+    _library().bounded_mean(
+        h,
+        w,
+        _ptr(values, "values", np.float32, (h, w)),
+        _ptr(s0, "s0", np.int64, (h, w)),
+        _ptr(s1, "s1", np.int64, (h, w)),
+        width,
+        int(bool(square)),
+        _ptr(scratch, "scratch", np.float64, (w + 1,), writable=True),
+        _ptr(out, "out", np.float64, (h, w), writable=True),
     )
 
 

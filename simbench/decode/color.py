@@ -280,7 +280,23 @@ def segment_mean(values: np.ndarray, cuts: np.ndarray, *, width_px: int) -> np.n
     return _bounded_mean(values, *_segment_bounds(cuts), width_px=width_px)
 
 
-def _bounded_mean(values: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, width_px: int) -> np.ndarray:
+def _bounded_mean(
+    values: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, width_px: int, square: bool = False
+) -> np.ndarray:
+    if values.dtype == np.float32:
+        # the same bits in one pass per row (simbench/_ckernels.c; tests/test_kernels.py)
+        out = np.empty(values.shape, np.float64)
+        _kernels.bounded_mean(
+            np.ascontiguousarray(values),
+            np.ascontiguousarray(s0, np.int64),
+            np.ascontiguousarray(s1, np.int64),
+            int(width_px),
+            square,
+            out,
+        )
+        return out
+    if square:
+        values = values.astype(np.float64) ** 2
     h, w = values.shape
     n = np.minimum(int(width_px), s1 - s0)
     w0 = np.clip(np.arange(w) - int(width_px) // 2, s0, s1 - n)
@@ -302,7 +318,7 @@ def _segment_visibility(
     a0 = np.where(room, s0 + m, s0)
     a1 = np.where(room, s1 - m, s1)
     mu = _bounded_mean(pv, a0, a1, width_px=width_px)
-    var = _bounded_mean(pv.astype(np.float64) ** 2, a0, a1, width_px=width_px) - mu * mu
+    var = _bounded_mean(pv, a0, a1, width_px=width_px, square=True) - mu * mu
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
 
@@ -326,9 +342,10 @@ def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
     h, w = g.shape
     cs = np.zeros((h, w + 2 * n + 1), np.float64)
     np.cumsum(np.pad(g, ((0, 0), (n, n)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
-    x = np.arange(w) + n
-    left = (cs[:, x + 1] - cs[:, x + 1 - n]) / n
-    right = (cs[:, x + 1 + n] - cs[:, x + 1]) / n
+    # cs[:, x + n + 1] - cs[:, x + 1] over the padded row is the n values right of x (slices, not
+    # a gather: views)
+    left = (cs[:, n + 1 : n + 1 + w] - cs[:, 1 : 1 + w]) / n
+    right = (cs[:, 2 * n + 1 : 2 * n + 1 + w] - cs[:, n + 1 : n + 1 + w]) / n
     # a floor under both means: noise on black stays no step
     eps = 1e-3 + 0.02 * np.maximum(left, right)
     score = np.abs(np.log(left + eps) - np.log(right + eps)).astype(np.float32)
@@ -390,7 +407,8 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     k = cv2.blur(np.ascontiguousarray(span, np.float32), (4 * half + 1, width), borderType=cv2.BORDER_REPLICATE)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         # a channel the surface hardly reflects carries mostly noise and crosstalk residue
-        has = k >= ALBEDO_MIN_CHANNEL_SHARE * k.max(axis=2, keepdims=True)
+        strongest = np.maximum(np.maximum(k[..., 0], k[..., 1]), k[..., 2])[..., None]
+        has = k >= ALBEDO_MIN_CHANNEL_SHARE * strongest
         has &= k > 0
         norm = np.where(has, np.maximum(rgb, 0.0) / np.where(has, k, 1.0), 0.0)
         inv2 = np.where(has, 1.0 / np.maximum(k, 1e-12) ** 2, 0.0)
