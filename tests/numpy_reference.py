@@ -461,7 +461,7 @@ def depth_errors(depth_m, gt_depth_m, *, region, exclude=None, outlier_mm: float
 
 
 def bounded_mean(values, s0, s1, *, width_px, square=False):
-    """simbench.decode.color._bounded_mean as plain numpy (its path for any dtype)."""
+    """simbench.decode.color._bounded_mean as plain numpy: double prefix sums, a gather of both ends."""
     if square:
         values = values.astype(np.float64) ** 2
     h, w = values.shape

@@ -268,7 +268,7 @@ def segment_mean(values: np.ndarray, cuts: np.ndarray, *, width_px: int) -> np.n
 
     Parameters
     ----------
-    values : ndarray, shape (H, W)
+    values : ndarray, shape (H, W); taken as float32
     cuts : ndarray, shape (H, W), bool; ``cuts[y, x]`` separates columns x and x + 1
     width_px : int
 
@@ -283,26 +283,19 @@ def segment_mean(values: np.ndarray, cuts: np.ndarray, *, width_px: int) -> np.n
 def _bounded_mean(
     values: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, width_px: int, square: bool = False
 ) -> np.ndarray:
-    if values.dtype == np.float32:
-        # the same bits in one pass per row (simbench/_ckernels.c; tests/test_kernels.py)
-        out = np.empty(values.shape, np.float64)
-        _kernels.bounded_mean(
-            np.ascontiguousarray(values),
-            np.ascontiguousarray(s0, np.int64),
-            np.ascontiguousarray(s1, np.int64),
-            int(width_px),
-            square,
-            out,
-        )
-        return out
-    if square:
-        values = values.astype(np.float64) ** 2
-    h, w = values.shape
-    n = np.minimum(int(width_px), s1 - s0)
-    w0 = np.clip(np.arange(w) - int(width_px) // 2, s0, s1 - n)
-    cs = np.zeros((h, w + 1), np.float64)
-    np.cumsum(values, axis=1, dtype=np.float64, out=cs[:, 1:])
-    return (np.take_along_axis(cs, w0 + n, 1) - np.take_along_axis(cs, w0, 1)) / n
+    """:func:`segment_mean` over given segment bounds, in one pass per row (simbench/_ckernels.c:
+    double prefix sums, the bits of numpy's cumsum path, tests/test_kernels.py); ``square`` means
+    the squares.  The values are taken as float32 (the decoder's images are)."""
+    out = np.empty(values.shape, np.float64)
+    _kernels.bounded_mean(
+        np.ascontiguousarray(values, np.float32),
+        np.ascontiguousarray(s0, np.int64),
+        np.ascontiguousarray(s1, np.int64),
+        int(width_px),
+        square,
+        out,
+    )
+    return out
 
 
 def _segment_visibility(
