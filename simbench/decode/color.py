@@ -303,8 +303,10 @@ def _segment_visibility(
 ) -> np.ndarray:
     """The fringe's visibility in each pixel's segment: the standard deviation of the proxy
     (rows averaged over :data:`ALBEDO_EDGE_ROWS`: the fringe runs along the columns, the noise
-    does not) over its mean, both over the window kept inside the segment and a quarter period
-    clear of its cuts (the optics blur the brighter side a few pixels across a step)."""
+    does not) over its mean, both over the window kept inside the segment and half a period clear
+    of its cuts: the optics blur the brighter side a few pixels across a step, and a cut sits up
+    to a few pixels off it (measured: a lit edge ~8 px into a shadow's segment on
+    ``scenes/hard_stairs_deep.toml``)."""
     pv = cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
     m = max(1, int(round(period_px / 2)))
     room = (s1 - s0) > 2 * m + 2
@@ -419,6 +421,9 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
     cuts = albedo_edges(proxy, period_px=period_px) & defined
+    if not cuts.any():
+        # no step: the fade below is 0 everywhere and the gain exactly 1; no segment to measure
+        return np.ones(proxy.shape, np.float32)
     s0, s1 = _segment_bounds(cuts)
     mean = _bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32)
     mean = cv2.blur(mean, (1, ALBEDO_MEAN_ROWS), borderType=cv2.BORDER_REPLICATE)

@@ -792,7 +792,8 @@ def _columns(
         )
         if params.link_check:
             dropped = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
-            if params.link_keep_certain > 0.0:
+            # the stripe floors only where a link broke (most bands of a smooth scene have none)
+            if params.link_keep_certain > 0.0 and not np.array_equal(dropped, w_fixed):
                 dropped = keep_certain_sides(
                     w_fixed,
                     dropped,
