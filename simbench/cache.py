@@ -233,6 +233,12 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
             material.append(list(o.material.specular_rgb))
         if o.material.spectrum is not None:
             material.append({"spectrum": o.material.spectrum})
+        if o.material.metal is not None:
+            from simbench.spectral import metal_ior_rgb
+
+            # by value, so that changed optical constants are a new render input
+            eta, k = metal_ior_rgb(o.material.metal, primary=o.material.metal_primary)
+            material.append({"metal": o.material.metal, "eta": list(eta), "k": list(k)})
         if o.material.subsurface is not None:
             from simbench.subsurface import get_medium
 

@@ -28,6 +28,9 @@ on a colour board (paper Table 1), turned into a reflectance by :func:`paint_ref
 ``material`` is ``diffuse`` (default) or ``plastic``: a smooth or rough dielectric coating
 (Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
 diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
+``material = "metal"`` is a bare metal (Mitsuba ``roughconductor``, GGX ``roughness`` alpha,
+default 0.1) named by ``metal = "aluminium"`` (:data:`simbench.spectral.METALS`: its measured
+complex refractive index gives its colour and its Fresnel reflectance); it takes no colour key.
 ``subsurface = "marble"`` makes an object translucent: the light it reflects leaves displaced by
 the dipole profile of that medium (:mod:`simbench.subsurface`, whose ``MEDIA`` lists the names).
 
@@ -87,13 +90,15 @@ __all__ = [
     "object_to_mitsuba",
     "paint_reflectance",
     "linear_srgb8",
+    "metal_rgb",
     "target_texture",
     "target_size_m",
 ]
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
-_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness", "subsurface")
-MATERIALS = ("diffuse", "plastic")
+_COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness", "metal", "subsurface")
+MATERIALS = ("diffuse", "plastic", "metal")
+_GLOSSY = ("plastic", "metal")  # the materials with a roughness
 
 # Reflectance range of matte paint, used by paint_reflectance.  Assumptions, argued from
 # physics: even a saturated paint reflects the ~4 % of a dielectric binder's surface (Fresnel
@@ -202,21 +207,28 @@ def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
 
 @dataclass(frozen=True)
 class Material:
-    """A material (see module docstring): ``diffuse`` (two-sided Lambertian) or ``plastic``
-    (rough dielectric coating over a diffuse base); ``rgb`` is the linear diffuse reflectance
-    in [0, 1], ``roughness`` the GGX alpha of the coating."""
+    """A material (see module docstring): ``diffuse`` (two-sided Lambertian), ``plastic``
+    (rough dielectric coating over a diffuse base) or ``metal`` (rough conductor); ``rgb`` is
+    the linear diffuse reflectance in [0, 1] (a metal's: its normal-incidence reflectance per
+    camera channel, for information and for the competitors' NIR albedo), ``roughness`` the GGX
+    alpha of the coating or of the metal's surface."""
 
     kind: str = "diffuse"
     rgb: tuple[float, float, float] = (0.8, 0.8, 0.8)
     roughness: float = 0.1
-    # the coating's specular tint; only the spectral-crosstalk renders set it (white light seen
-    # through the camera's channels), scene files cannot
+    # the coating's or the metal's specular tint; only the spectral-crosstalk renders set it
+    # (light of one primary seen through the camera's channels), scene files cannot
     specular_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
     # a measured reflectance spectrum "<dataset>/<patch>" (simbench.spectral.MEASURED_DATASETS);
     # rgb is then its linear sRGB, and the spectral path uses the spectrum itself
     spectrum: str | None = None
     # a translucent medium of simbench.subsurface.MEDIA under the surface (None: opaque)
     subsurface: str | None = None
+    # the metal of a ``metal`` material (simbench.spectral.METALS)
+    metal: str | None = None
+    # the projector primary whose band the metal's optical constants are averaged over (None:
+    # the projector's white); only the spectral-crosstalk renders set it, scene files cannot
+    metal_primary: int | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in MATERIALS:
@@ -225,6 +237,17 @@ class Material:
             from simbench.subsurface import get_medium
 
             get_medium(self.subsurface)
+        if (self.kind == "metal") != (self.metal is not None):
+            raise ValueError("a metal material needs its metal, and only a metal material takes one")
+        if self.metal is not None:
+            from simbench.spectral import METALS
+
+            if self.metal not in METALS:
+                raise ValueError(f"unknown metal {self.metal!r}; valid: {list(METALS)}")
+            if self.subsurface is not None:
+                raise ValueError("a metal is opaque: it takes no subsurface medium")
+        if self.metal_primary is not None and (self.metal is None or self.metal_primary not in (0, 1, 2)):
+            raise ValueError(f"metal_primary must be 0, 1 or 2 on a metal, got {self.metal_primary!r}")
         object.__setattr__(self, "rgb", validate.numbers(self.rgb, "rgb reflectance", 3, lo=0.0, hi=1.0))
         object.__setattr__(self, "roughness", validate.number(self.roughness, "roughness", lo=0.001, hi=1.0))
         object.__setattr__(self, "specular_rgb", validate.numbers(self.specular_rgb, "specular_rgb", 3, lo=0.0, hi=1.0))
@@ -315,10 +338,25 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
         else:
             rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else tuple(d.get("rgb", (0.8, 0.8, 0.8)))
         mat_kind = str(d.get("material", "diffuse"))
-        if "roughness" in d and mat_kind != "plastic":
-            raise ValueError("roughness applies to material = 'plastic' only")
+        if "roughness" in d and mat_kind not in _GLOSSY:
+            raise ValueError(f"roughness applies to material = {' or '.join(map(repr, _GLOSSY))} only")
+        metal = None
+        if mat_kind == "metal":
+            if given:
+                raise ValueError(f"a metal's colour is its metal's: remove {' and '.join(given)}")
+            metal = d.get("metal", "aluminium")
+            if not isinstance(metal, str):
+                raise ValueError(f"metal must be a name, got {metal!r}")
+            rgb = metal_rgb(metal)
+        elif "metal" in d:
+            raise ValueError("metal applies to material = 'metal' only")
         mat = Material(
-            kind=mat_kind, rgb=rgb, roughness=d.get("roughness", 0.1), spectrum=spectrum, subsurface=d.get("subsurface")
+            kind=mat_kind,
+            rgb=rgb,
+            roughness=d.get("roughness", 0.1),
+            spectrum=spectrum,
+            subsurface=d.get("subsurface"),
+            metal=metal,
         )
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
@@ -530,8 +568,31 @@ def _to_world(mi, *, translate, rotation_deg, scale) -> object:
     return mi.ScalarTransform4f(m.tolist())
 
 
+def metal_rgb(name: str) -> tuple[float, float, float]:
+    """A metal's normal-incidence reflectance per camera channel (the diagonal of
+    :func:`simbench.spectral.metal_crosstalk`), rounded to 6 digits: its ``Material.rgb``."""
+    from simbench.spectral import METALS, metal_crosstalk
+
+    if name not in METALS:
+        raise ValueError(f"unknown metal {name!r}; valid: {list(METALS)}")
+    return tuple(float(round(x, 6)) for x in np.clip(np.diag(metal_crosstalk(name)), 0.0, 1.0))
+
+
 def _bsdf(mat: Material) -> dict:
     rgb = {"type": "rgb", "value": list(mat.rgb)}
+    if mat.kind == "metal":
+        from simbench.spectral import metal_ior_rgb
+
+        eta, k = metal_ior_rgb(mat.metal, primary=mat.metal_primary)
+        inner = {
+            "type": "roughconductor",
+            "distribution": "ggx",
+            "alpha": mat.roughness,
+            "eta": {"type": "rgb", "value": list(eta)},
+            "k": {"type": "rgb", "value": list(k)},
+            "specular_reflectance": {"type": "rgb", "value": list(mat.specular_rgb)},
+        }
+        return {"type": "twosided", "bsdf": inner}
     if mat.kind == "plastic":
         # polypropylene-like coating (IOR 1.49); nonlinear=False: the base colour is the
         # reflectance the user asked for, not darkened by internal scattering

@@ -395,10 +395,14 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     white = np.clip(crosstalk_matrix((1.0, 1.0, 1.0))[:, p], 0.0, 1.0)
     objects = []
     for o in scene.objects:
-        k = np.clip(material_crosstalk(o.material.rgb, o.material.spectrum)[:, p], 0.0, 1.0)
-        mat = dataclasses.replace(
-            o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white)
-        )
+        if o.material.kind == "metal":
+            # its optical constants averaged over primary p's band (simbench.spectral.metal_ior_rgb)
+            mat = dataclasses.replace(o.material, metal_primary=p, specular_rgb=tuple(float(x) for x in white))
+        else:
+            k = np.clip(material_crosstalk(o.material.rgb, o.material.spectrum)[:, p], 0.0, 1.0)
+            mat = dataclasses.replace(
+                o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white)
+            )
         params = dict(o.params)
         for key in OBJECT_KIND_TABLE[o.kind].colour_keys:  # a target's ink, say
             params[key] = tuple(float(x) for x in np.clip(material_crosstalk(params[key], None)[:, p], 0.0, 1.0))

@@ -26,6 +26,12 @@ Data and assumptions (nothing here is fitted to the paper's results):
   (``RGB_to_sd_Mallett2019``): a bounded, smooth reflectance in [0, 1] that reproduces the RGB
   under sRGB/D65, linear in the RGB, so crosstalk of any material is a fixed blend of three
   basis matrices.
+* Metals (:data:`METALS`): the complex refractive index n + ik of the bulk metal, tabulated over
+  wavelength in the optical-constants files Mitsuba ships (``mitsuba/data/ior``: the luxpop.com
+  database and Palik's *Handbook of Optical Constants of Solids*, as their headers say).  A
+  metal reflects at the surface only; its reflectance at normal incidence is the Fresnel
+  ``R0 = ((n-1)^2 + k^2) / ((n+1)^2 + k^2)`` (Born & Wolf, *Principles of Optics*, Sec. 14.2),
+  and its crosstalk is that of the spectrum R0 (:func:`metal_crosstalk`).
 """
 
 from __future__ import annotations
@@ -59,6 +65,12 @@ __all__ = [
     "camera_sensitivities",
     "reflectance_spectrum",
     "crosstalk_matrix",
+    "METALS",
+    "metal_ior",
+    "metal_ior_rgb",
+    "conductor_fresnel",
+    "metal_reflectance",
+    "metal_crosstalk",
 ]
 
 PRIMARY_PEAKS_NM = (620.0, 522.0, 455.0)  # assumption, see module docstring
@@ -299,6 +311,100 @@ def material_crosstalk(rgb: Sequence[float], spectrum: str | None = None) -> np.
 @_persistent
 def _spectrum_crosstalk(name: str) -> np.ndarray:
     return _crosstalk_of(_measured_values(name))
+
+
+# metals a scene material can name -> (the stem of Mitsuba's optical-constants files, what it is)
+METALS = {
+    "aluminium": ("Al", "machined or brushed aluminium (luxpop)"),
+    "silver": ("Ag", "silver (luxpop)"),
+    "gold": ("Au", "gold (luxpop)"),
+    "copper": ("Cu", "copper (luxpop)"),
+    "chromium": ("Cr", "chromium, as chrome plating (luxpop)"),
+    "nickel": ("Ni_palik", "nickel, as nickel plating (Palik)"),
+}
+
+
+def _metal_file(name: str) -> str:
+    if name not in METALS:
+        raise ValueError(f"unknown metal {name!r}; valid: {list(METALS)}")
+    return METALS[name][0]
+
+
+def _read_spd(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    data = np.asarray(rows, dtype=np.float64)
+    return data[:, 0], data[:, 1]
+
+
+@lru_cache(maxsize=16)
+def _metal_ior(name: str) -> tuple[np.ndarray, np.ndarray]:
+    import mitsuba  # its data only: no variant is set
+
+    # once imported, the package's module is Mitsuba's alias library, still in its folder
+    folder = Path(mitsuba.__file__).parent / "data" / "ior"
+    stem = _metal_file(name)
+    out = []
+    for part in ("eta", "k"):
+        path = folder / f"{stem}.{part}.spd"
+        if not path.is_file():
+            raise FileNotFoundError(f"Mitsuba's optical constants of {name} are missing: {path}")
+        lam, v = _read_spd(path)
+        # the files tabulate the visible range; np.interp holds the end values beyond it
+        out.append(np.interp(wavelengths_nm(), lam, v))
+    for a in out:
+        a.setflags(write=False)
+    return out[0], out[1]
+
+
+def metal_ior(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Refractive index ``n`` and extinction coefficient ``k`` of a metal of :data:`METALS` on
+    :func:`wavelengths_nm` (module docstring), two arrays of shape (N,)."""
+    n, k = _metal_ior(name)
+    return n.copy(), k.copy()
+
+
+def conductor_fresnel(n: np.ndarray | float, k: np.ndarray | float, cos_theta: np.ndarray | float) -> np.ndarray:
+    """Unpolarised Fresnel reflectance of a conductor of complex index ``n + ik`` (from air)
+    at incidence angle ``arccos(cos_theta)``: the mean of the s and p reflectances of the exact
+    complex Fresnel equations (Born & Wolf, Sec. 14.2)."""
+    eta = np.asarray(n, dtype=np.complex128) + 1j * np.asarray(k, dtype=np.float64)
+    c = np.asarray(cos_theta, dtype=np.float64)
+    sin2 = 1.0 - c * c
+    ct = np.sqrt(eta * eta - sin2) / eta  # cosine of the (complex) refraction angle (Snell)
+    rs = (c - eta * ct) / (c + eta * ct)
+    rp = (eta * c - ct) / (eta * c + ct)
+    return 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+
+
+def metal_reflectance(name: str) -> np.ndarray:
+    """Normal-incidence reflectance ``R0`` of a metal on :func:`wavelengths_nm`, shape (N,)."""
+    n, k = _metal_ior(name)
+    return conductor_fresnel(n, k, 1.0)
+
+
+def metal_ior_rgb(
+    name: str, *, primary: int | None = None
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """A metal's ``n`` and ``k`` for an RGB renderer: per camera channel, their means weighted
+    by what the channel records of the projector's light (its sensitivity times the white's
+    primaries, or only primary ``primary``'s), rounded to 6 digits.  A render through them keeps
+    the Fresnel rise towards grazing angles; at normal incidence, per primary, it reflects the
+    spectral :func:`metal_crosstalk` over the white's to within 1 % (gold and copper, the most
+    coloured of :data:`METALS`; 0.3 % for the others - tests/test_spectral.py)."""
+    n, k = _metal_ior(name)
+    light = projector_primaries()
+    light = light.sum(axis=1) if primary is None else light[:, int(primary)]
+    w = camera_sensitivities() * light[:, None]
+    w = w / w.sum(axis=0)
+    return (
+        tuple(float(round(x, 6)) for x in n @ w),
+        tuple(float(round(x, 6)) for x in k @ w),
+    )
+
+
+def metal_crosstalk(name: str) -> np.ndarray:
+    """:func:`crosstalk_matrix` of a metal at normal incidence: ``K`` of its spectrum ``R0``."""
+    return _crosstalk_of(metal_reflectance(name))
 
 
 def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:

@@ -49,7 +49,12 @@ def test_srgb8_colours_reject_bad_values(bad, fn):
         ({"rgb": [0.5, 0.5, 0.5], "srgb8": [1, 2, 3]}, "not rgb and srgb8"),
         ({"roughness": 0.1}, "roughness applies"),
         ({"material": "plastic", "roughness": 0}, "roughness"),
-        ({"material": "metal"}, "unknown material"),
+        ({"material": "glass"}, "unknown material"),
+        ({"material": "metal", "metal": "unobtainium"}, "unknown metal"),
+        ({"material": "metal", "rgb": [0.5, 0.5, 0.5]}, "colour is its metal"),
+        ({"material": "metal", "subsurface": "marble"}, "opaque"),
+        ({"metal": "gold"}, "metal applies"),
+        ({"material": "metal", "metal": 3}, "metal must be a name"),
         ({"srgb8": [300, 0, 0]}, "srgb8"),
     ],
 )
@@ -74,6 +79,62 @@ def test_plastic_becomes_roughplastic(variant):
         and bsdf["alpha"] == 0.05
         and bsdf["diffuse_reflectance"]["value"] == [0.2, 0.3, 0.4]
     )
+
+
+def test_metal_reaches_the_material_with_its_reflectance():
+    s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "gold", "roughness": 0.2}]})
+    m = s.objects[0].material
+    assert m.kind == "metal" and m.metal == "gold" and m.roughness == 0.2
+    # gold's normal-incidence reflectance per camera channel: red high, blue low
+    assert m.rgb[0] > 0.85 and m.rgb[2] < 0.45
+    assert scene_from_dict({"object": [{**PLANE, "material": "metal"}]}).objects[0].material.metal == "aluminium"
+
+
+@pytest.mark.parametrize("roughness", [0.05, 0.3])
+@pytest.mark.parametrize("theta_deg", [(0.0, 0.0), (30.0, -10.0), (60.0, -50.0)])
+def test_metal_bsdf_is_the_ggx_microfacet_model(variant, roughness, theta_deg):
+    """Mitsuba's evaluation of a scene's metal equals the closed-form Cook-Torrance model
+    F(wi.h) D(h) G1(wi) G1(wo) / (4 cos_i cos_o) with GGX D and Smith G1 (Walter et al. 2007,
+    Eq. 33-34) and the exact conductor Fresnel of the metal's optical constants."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from simbench.scene import object_to_mitsuba
+    from simbench.spectral import conductor_fresnel, metal_ior_rgb
+
+    s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "copper", "roughness": roughness}]})
+    bsdf = mi.load_dict(object_to_mitsuba(s.objects[0])["bsdf"])
+    ti, to = np.radians(theta_deg)
+    wi = np.array([np.sin(ti), 0.0, np.cos(ti)])
+    wo = np.array([np.sin(to), 0.0, np.cos(to)])
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.n = mi.Normal3f(0.0, 0.0, 1.0)
+    si.sh_frame = mi.Frame3f(si.n)
+    si.wi = mi.Vector3f(*map(float, wi))
+    got = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*map(float, wo)))).ravel()
+    a = roughness
+    h = (wi + wo) / np.linalg.norm(wi + wo)
+    d = a * a / (np.pi * (h[2] ** 2 * (a * a - 1) + 1) ** 2)
+
+    def g1(c):
+        return 2.0 / (1.0 + np.sqrt(1.0 + a * a * (1 - c * c) / (c * c)))
+
+    eta, k = metal_ior_rgb("copper")
+    f = conductor_fresnel(np.asarray(eta), np.asarray(k), float(wi @ h)) * d * g1(wi[2]) * g1(wo[2])
+    # Mitsuba returns the BSDF times the cosine of the outgoing direction
+    np.testing.assert_allclose(got, f / (4 * wi[2] * wo[2]) * wo[2], rtol=1e-4)
+
+
+def test_per_primary_metal_keeps_its_band_and_its_cache_key():
+    from simbench.cache import scene_fingerprint
+    from simbench.simulate import _primary_scene
+
+    s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "gold"}]})
+    prim = [_primary_scene(s, p).objects[0].material for p in range(3)]
+    assert [m.metal_primary for m in prim] == [0, 1, 2]
+    keys = {str(scene_fingerprint(_primary_scene(s, p))) for p in range(3)}
+    other = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "silver"}]})
+    assert len(keys) == 3 and str(scene_fingerprint(other)) != str(scene_fingerprint(s))
 
 
 @pytest.mark.parametrize("name", ["discontinuity", "geometries", "bust", "clutter_pink_cyan", "clutter_pear_hat"])

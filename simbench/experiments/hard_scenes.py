@@ -32,6 +32,7 @@ Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_confidence.csv``,
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +41,10 @@ from simbench.decode.pipeline import apply_min_confidence
 from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
+
+if TYPE_CHECKING:
+    from simbench.decode.pipeline import DecodeResult
+    from simbench.systems import Recording, SystemDepth
 
 __all__ = [
     "HARD_SCENES",
@@ -51,6 +56,7 @@ __all__ = [
     "operating_point",
     "GOAL_COMPLETENESS",
     "GOAL_WRONG_SHARE",
+    "object_scores",
 ]
 
 # scene -> its class (the issue's list; scenes/make_hard_scenes.py writes them)
@@ -89,12 +95,30 @@ SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "stripe_order_errors")
 
 def _scores(rec, depth, period_px, region) -> dict:
     s = score(rec, depth, period_px, region=region)
-    err = np.abs(depth.depth_m - rec.gt.depth_m)[region & np.isfinite(depth.depth_m)]
     return {
         "completeness": s["completeness"],
         "gt_mae_mm": s["gt_mae_mm"],
-        "wrong_share": float(np.mean(err > WRONG_MM / 1000.0)) if err.size else float("nan"),
+        "wrong_share": _wrong_share(rec, depth, region),
         "stripe_order_errors": s.get("stripe_order_errors", float("nan")),
+    }
+
+
+def _wrong_share(rec, depth, region) -> float:
+    err = np.abs(depth.depth_m - rec.gt.depth_m)[region & np.isfinite(depth.depth_m)]
+    return float(np.mean(err > WRONG_MM / 1000.0)) if err.size else float("nan")
+
+
+def object_scores(rec: Recording, depth: "SystemDepth | DecodeResult", region: np.ndarray) -> dict:
+    """Completeness over ``region``, MAE against ground truth (mm) and the share of the decoded
+    pixels more than :data:`WRONG_MM` wrong: the scores of one system on one region.  NaN where
+    ``region`` is empty or nothing in it is decoded."""
+    if not region.any():
+        return {"completeness": float("nan"), "gt_mae_mm": float("nan"), "wrong_share": float("nan")}
+    s = score(rec, depth, region=region)
+    return {
+        "completeness": s["completeness"],
+        "gt_mae_mm": s["gt_mae_mm"],
+        "wrong_share": _wrong_share(rec, depth, region),
     }
 
 
