@@ -51,6 +51,8 @@ __all__ = [
     "ProjectorDrive",
     "DriveImage",
     "render_channels",
+    "with_translucency",
+    "opaque",
     "record",
     "acquire",
     "write_acquisition",
@@ -410,8 +412,24 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
-def _opaque(scene: SceneSpec) -> SceneSpec:
-    """``scene`` with every material's subsurface medium removed (the same object otherwise)."""
+def with_translucency(radiance: np.ndarray, scene: SceneSpec, *, cache: RenderCache | None = None) -> np.ndarray:
+    """``radiance`` (H, W, 3) rendered of ``scene`` with its surfaces opaque, on its camera's
+    ideal pixel grid, with the light its translucent objects reflect redistributed by their
+    media (:func:`simbench.subsurface.subsurface_image`, per channel with that band's medium);
+    ``radiance`` itself when every object is opaque.  Every system's renders pass through it, so
+    that a translucent object is translucent to all of them."""
+    media = {i: get_medium(o.material.subsurface) for i, o in enumerate(scene.objects) if o.material.subsurface}
+    if not media:
+        return radiance
+    gt = cached_ground_truth(opaque(scene), cache=cache)  # the geometry is the opaque one's
+    return subsurface_image(
+        radiance, object_id=gt.object_id, depth_m=gt.depth_m, media=media, focal_px=scene.rig.camera.focal_px
+    )
+
+
+def opaque(scene: SceneSpec) -> SceneSpec:
+    """``scene`` with every material's subsurface medium removed (the same object otherwise): what
+    a render of it sees (:func:`with_translucency` adds the media after)."""
     if not any(o.material.subsurface for o in scene.objects):
         return scene
     return with_subsurface(scene, None)
@@ -449,9 +467,9 @@ def render_channels(
     -------
     ndarray, shape (H, W, 3), float32, in units of each channel's own primary
     """
-    media = {i: get_medium(o.material.subsurface) for i, o in enumerate(scene.objects) if o.material.subsurface}
+    translucent_scene = scene
     # the renders do not depend on what happens under the surface (applied after them)
-    scene = _opaque(scene)
+    scene = opaque(scene)
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
     kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
@@ -472,11 +490,7 @@ def render_channels(
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
-    if media:
-        gt = cached_ground_truth(scene, cache=render.cache)  # the geometry is the opaque one's
-        q = subsurface_image(
-            q, object_id=gt.object_id, depth_m=gt.depth_m, media=media, focal_px=scene.rig.camera.focal_px
-        )
+    q = with_translucency(q, translucent_scene, cache=render.cache)
     q = distort_image(q, scene.rig.camera)
     return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
         np.float32, copy=False

@@ -11,7 +11,10 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
 - A monochrome IR camera, 640x480, f = 571 px (the competitor issue; Khoshelham & Oude Elberink
   2012 calibrate ~580 px), Aptina MT9M001 5.2 um pixels binned 2x2 (datasheet (recalled)).
 - The scene's NIR reflectance is taken as the mean of its RGB reflectance (assumption: no NIR
-  spectra are known for the scene materials); the 830 nm band-pass filter removes ambient light.
+  spectra are known for the scene materials), and a translucent object's NIR subsurface
+  scattering as the mean of its three bands' (:func:`simbench.simulate.with_translucency`; the
+  speckle statistics are kept those of a surface scatterer, an approximation: volume scattering
+  lowers speckle contrast); the 830 nm band-pass filter removes ambient light.
 - Laser speckle: coherent light gives each camera pixel a multiplicative speckle intensity,
   integrated over ``M = P (pixel pitch / speckle grain)^2`` grains of diameter ``2.44 lambda N``,
   with ``P = 2`` polarisation states for depolarising matte surfaces (Goodman, *Speckle
@@ -429,11 +432,12 @@ def _dot_drive_digest(model: KinectModel) -> str:
 def _render(
     scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache
 ) -> np.ndarray:
-    from simbench.simulate import DriveImage, cached_radiance
+    from simbench.simulate import DriveImage, cached_radiance, opaque, with_translucency
 
     # the drive by its digest, made only for a render the cache does not hold
     drive = DriveImage(_dot_drive_digest(model), lambda: _dot_drive(model))
-    return _ir(cached_radiance(scene, drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache))
+    rad = cached_radiance(opaque(scene), drive, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
+    return _ir(with_translucency(rad, scene, cache=cache))
 
 
 def calibrate(

@@ -19,6 +19,10 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
   surface lit by a point-like source); at depth edges foreground and background mix.
 - Shot noise (Poisson per sample) and read noise; samples clip at the full well and such pixels
   are flagged invalid, as the device does.
+- A translucent object (scene key ``subsurface``) spreads the light it returns
+  (:func:`simbench.simulate.with_translucency`) and delays it: each of its rays' phasors is
+  multiplied by the medium's :func:`simbench.subsurface.modulation_transfer` (dipole diffusion
+  in time; NIR as the mean of the three bands), so a translucent surface reads farther away.
 - Left out: multipath interference (the indirect light's path lengths are not tracked by the
   renderer; the amplitude is the direct render, max_depth 2), the systematic "wiggling" error
   of non-sinusoidal modulation, and temperature drift.  The scene's NIR reflectance is the mean
@@ -188,6 +192,9 @@ def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
     from simbench.truth import trace_rays
 
     hits = trace_rays(scene, _sub_rays(model))
+    # a translucent object delays the light its paths inside it take (simbench.subsurface.
+    # modulation_transfer; NIR as the mean of the three bands, as its reflectance); 1 if opaque
+    transfer = np.array([_medium_transfer(o, model) for o in scene.objects] + [1.0], dtype=np.complex128)
     p = hits["p"]
     emitter = np.asarray(scene.rig.position_m)
     to_e = emitter[None, :] - p
@@ -198,13 +205,22 @@ def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
         returns = hits["hit"] & ~hits["occluded"]
         w = np.where(returns, albedo[hits["object_id"]] * cos_i / r_e**2, 0.0)
     path = np.where(returns, np.linalg.norm(p, axis=1) + r_e, 0.0)  # misses carry no weight
-    ph = w * np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S)
+    ph = w * np.exp(1j * 2 * np.pi * model.modulation_hz * path / LIGHT_M_S) * transfer[hits["object_id"]]
     s = model.supersample
     shape = (model.height_px, s, model.width_px, s)
     total = ph.reshape(shape).sum(axis=(1, 3))
     weight = w.reshape(shape).sum(axis=(1, 3))
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(weight > 0, total / weight, 0.0)
+
+
+def _medium_transfer(obj, model: ToFModel) -> complex:
+    if not obj.material.subsurface:
+        return 1.0
+    from simbench.subsurface import get_medium, modulation_transfer
+
+    medium = get_medium(obj.material.subsurface)
+    return complex(np.mean([modulation_transfer(medium, c, frequency_hz=model.modulation_hz) for c in range(3)]))
 
 
 def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, rng: RngLike) -> np.ndarray:
@@ -291,12 +307,17 @@ def capture(
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
     from simbench.cache import scene_fingerprint
-    from simbench.simulate import cached_arrays, cached_radiance
+    from simbench.simulate import cached_arrays, cached_radiance, opaque, with_translucency
 
     rad = cached_radiance(
-        scene, _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache
-    ).mean(axis=2)
+        opaque(scene), _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache
+    )
+    rad = with_translucency(rad, scene, cache=cache).mean(axis=2)
     parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
+    if any(o.material.subsurface for o in scene.objects):
+        # translucent objects' delay (modulation_transfer), a model older phasors lack; opaque
+        # scenes keep their keys
+        parts["subsurface_delay"] = "dipole-v1"
 
     def make() -> dict:
         z = footprint_phasor(scene, model)

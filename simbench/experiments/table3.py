@@ -1,4 +1,5 @@
-"""Paper Table 3 and Fig. 10: a plaster cube next to a plaster cuboid (``scenes/discontinuity.toml``).
+"""Paper Table 3 and Fig. 10: a plaster cube next to a plaster cuboid (``scenes/discontinuity.toml``;
+translucent as :mod:`simbench.subsurface`'s assumed plaster, for every sensor).
 
 Per object, over its front face (ground-truth points within 1 mm of the face plane, minus a band
 at depth edges): the paper's protocol (mean absolute residual of the decoded points to their
@@ -131,17 +132,22 @@ def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[
     }
     for medium, why in SUBSURFACE_WHAT_IFS.items():
         out[f"subsurface_{medium}"] = (
-            f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.subsurface`)",
+            (
+                f"cube and cuboid opaque ({why})"
+                if medium == "opaque"
+                else f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.subsurface`)"
+            ),
             paper,
-            lambda scene, medium=medium: with_subsurface(scene, medium, names=PLACED),
+            lambda scene, medium=medium: with_subsurface(scene, None if medium == "opaque" else medium, names=PLACED),
         )
     return out
 
 
-# the plaster objects as translucent media: the assumed plaster, bracketed by the least and the
-# most translucent measured white media of simbench.subsurface.MEDIA
+# the plaster objects' translucency (scenes/discontinuity.toml: the assumed plaster of
+# simbench.subsurface) bracketed: opaque, and the least and the most translucent measured white
+# media of simbench.subsurface.MEDIA
 SUBSURFACE_WHAT_IFS = {
-    "plaster": "an assumption between the two below",
+    "opaque": "no subsurface scattering, as the project's tables had it before",
     "spectralon": "measured, the least translucent white diffuser",
     "marble": "measured, a translucent stone",
 }
@@ -291,10 +297,11 @@ def _what_if_section(session: Session, rows: list[dict]) -> list[str]:
     effects = what_ifs(session.sensor)
     lines = [
         "",
-        "## What if: effects not in the sensor model, measured",
+        "## What if: effects not in the sensor model, and the faces' translucency, measured",
         "",
         "The same scene, placement and seeds, recorded through the run's sensor model with one more effect (the "
-        "reference plane too), decoded by the paper's decoder; the change against the table above is what the effect "
+        "reference plane too) or with the faces' translucency changed (the table above has them translucent as the "
+        "assumed plaster), decoded by the paper's decoder; the change against the table above is what the change "
         "adds. " + " ".join(f"*{e}*: {text}." for e, (text, _, _) in effects.items()),
         "",
     ]

@@ -94,8 +94,9 @@ def scene_for(params: dict) -> SceneSpec:
             q["rotation_deg"] = (rx, float(params["scene.tilt_deg"]), rz)
             objs[0] = dataclasses.replace(objs[0], params=tuple(sorted(q.items())))
     scene = dataclasses.replace(scene, objects=tuple(objs))
-    if params.get("scene.subsurface", "none") != "none":
-        scene = with_subsurface(scene, params["scene.subsurface"])
+    if "scene.subsurface" in params:  # absent: as the scene file says
+        medium = params["scene.subsurface"]
+        scene = with_subsurface(scene, None if medium == "none" else medium)
     return scene
 
 

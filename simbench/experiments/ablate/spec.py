@@ -72,7 +72,8 @@ def _parameters() -> dict[str, str]:
         "sensor.source": "where sensor.effects take their values from (default paper)",
         "scene.name": "scene file of scenes/",
         "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
-        "scene.subsurface": "make every object translucent as this medium (simbench.subsurface.MEDIA) or 'none'",
+        "scene.subsurface": "make every object translucent as this medium (simbench.subsurface.MEDIA) or opaque "
+        "('none'); not given: as the scene file says",
         "scene.depth_m": "move the scene so its first object's centre is at this depth",
         "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",
         "decoder.without": "the paper decoder's added checks switched off (simbench.decode.PAPER_ADDED_CHECKS): "
