@@ -27,7 +27,6 @@ marked folder, and in it only the files whose names and contents are a cache's o
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import io
 import json
@@ -48,8 +47,6 @@ import numpy as np
 from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes
 from simbench import termination
 from simbench.manifest import file_sha256
-from simbench.rig import rig_to_dict
-from simbench.scene import SceneSpec
 
 __all__ = [
     "CACHE_FORMAT",
@@ -66,7 +63,7 @@ __all__ = [
     "check_cache_location",
     "claim_cache_folder",
     "prune_cache",
-    "scene_fingerprint",
+    "file_digest",
     "source_digest",
 ]
 
@@ -195,7 +192,7 @@ def claim_cache_folder(root: str | Path) -> Path:
 
 
 @lru_cache(maxsize=64)
-def _file_digest(path: str, mtime_ns: int, size: int) -> str:
+def file_digest(path: str, mtime_ns: int, size: int) -> str:
     """:func:`simbench.manifest.file_sha256`, memoised by the file's time and size."""
     return file_sha256(path)
 
@@ -217,43 +214,6 @@ def array_digest(a: np.ndarray) -> str:
     h = hashlib.sha256(f"{a.dtype.str}{a.shape}".encode())
     h.update(a.reshape(-1).view(np.uint8))  # the bytes tobytes() gives, without its copy (-40 %)
     return h.hexdigest()
-
-
-def scene_fingerprint(scene: SceneSpec) -> dict:
-    """Everything about a scene that affects a render, as plain JSON-able data."""
-    objects = []
-    for o in scene.objects:
-        params = dict(o.params)
-        if o.kind == "mesh":
-            p = Path(params["file"])
-            st = p.stat()
-            params["file"] = {"name": p.name, "sha256": _file_digest(str(p), st.st_mtime_ns, st.st_size)}
-        material = [o.material.kind, list(o.material.rgb), o.material.roughness]
-        if o.material.specular_rgb != (1.0, 1.0, 1.0):
-            material.append(list(o.material.specular_rgb))
-        if o.material.spectrum is not None:
-            material.append({"spectrum": o.material.spectrum})
-        if o.material.metal is not None:
-            from simbench.spectral import metal_ior_rgb
-
-            # by value, so that changed optical constants are a new render input
-            eta, k = metal_ior_rgb(o.material.metal, primary=o.material.metal_primary)
-            material.append({"metal": o.material.metal, "eta": list(eta), "k": list(k)})
-        if o.material.subsurface is not None:
-            from simbench.subsurface import get_medium
-
-            # by value, so that a medium whose coefficients change is a new render input
-            medium = dataclasses.asdict(get_medium(o.material.subsurface))
-            material.append({"subsurface": o.material.subsurface, **medium})
-        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
-    return {
-        "rig": rig_to_dict(scene.rig),
-        "objects": objects,
-        "projector_scale": scene.projector_scale,
-        "ambient_rgb": list(scene.ambient_rgb),
-        # only when set, so that pinhole scenes keep their cache keys
-        **({"camera_lens": list(scene.camera_lens)} if scene.camera_lens is not None else {}),
-    }
 
 
 def _digest(parts: dict) -> str:

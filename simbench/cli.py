@@ -270,9 +270,9 @@ def _cmd_render(args) -> int:
 
 def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
     """The proposed sensor's render folder: capture, reference (and calibration frames),
-    ground truth, rig, meta.json (:func:`simbench.simulate.acquire`)."""
+    ground truth, rig, meta.json (:func:`simbench.systems.proposed.acquire`)."""
     from simbench.device import get_sensor
-    from simbench.simulate import acquire, write_acquisition
+    from simbench.systems.proposed import acquire, write_acquisition
 
     sensor = get_sensor(args.camera)
     pattern = _pattern_spec(args, scene.rig.projector.size_hw)
@@ -452,7 +452,7 @@ def _cmd_decode(args) -> int:
     overrides = []  # explicit options that replace what a recording holds, announced with the result
     if Path(args.capture).is_dir():
         from simbench.manifest import read_manifest
-        from simbench.simulate import RENDER_MANIFEST
+        from simbench.systems.proposed import RENDER_MANIFEST
         from simbench.systems import system_of_recording
 
         if system_of_recording(args.capture) != "proposed":
@@ -1068,7 +1068,7 @@ def _decoder_overrides(params, items: list[str]):
 def _cmd_crosstalk(args) -> int:
     from simbench.experiments.table1 import PAPER_TABLE1
     from simbench.io import atomic_write_text
-    from simbench.spectral import crosstalk_report
+    from simbench.experiments.crosstalk import crosstalk_report
 
     text = crosstalk_report({name: srgb for name, (srgb, _) in PAPER_TABLE1.items()})
     print(text)

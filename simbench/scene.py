@@ -65,8 +65,9 @@ from pathlib import Path
 import numpy as np
 
 from simbench import validate
+from simbench.cache import file_digest
 from simbench.io import read_toml
-from simbench.rig import Rig, get_rig, rotation_xyz_deg
+from simbench.rig import Rig, get_rig, rig_to_dict, rotation_xyz_deg
 from simbench.seeds import RngLike
 
 log = logging.getLogger(__name__)
@@ -93,6 +94,7 @@ __all__ = [
     "metal_rgb",
     "target_texture",
     "target_size_m",
+    "scene_fingerprint",
 ]
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
@@ -909,3 +911,40 @@ def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str, *, texcoords: bool
     params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
     params.update()
     return mesh
+
+
+def scene_fingerprint(scene: SceneSpec) -> dict:
+    """Everything about a scene that affects a render, as plain JSON-able data."""
+    objects = []
+    for o in scene.objects:
+        params = dict(o.params)
+        if o.kind == "mesh":
+            p = Path(params["file"])
+            st = p.stat()
+            params["file"] = {"name": p.name, "sha256": file_digest(str(p), st.st_mtime_ns, st.st_size)}
+        material = [o.material.kind, list(o.material.rgb), o.material.roughness]
+        if o.material.specular_rgb != (1.0, 1.0, 1.0):
+            material.append(list(o.material.specular_rgb))
+        if o.material.spectrum is not None:
+            material.append({"spectrum": o.material.spectrum})
+        if o.material.metal is not None:
+            from simbench.spectral import metal_ior_rgb
+
+            # by value, so that changed optical constants are a new render input
+            eta, k = metal_ior_rgb(o.material.metal, primary=o.material.metal_primary)
+            material.append({"metal": o.material.metal, "eta": list(eta), "k": list(k)})
+        if o.material.subsurface is not None:
+            from simbench.subsurface import get_medium
+
+            # by value, so that a medium whose coefficients change is a new render input
+            medium = dataclasses.asdict(get_medium(o.material.subsurface))
+            material.append({"subsurface": o.material.subsurface, **medium})
+        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
+    return {
+        "rig": rig_to_dict(scene.rig),
+        "objects": objects,
+        "projector_scale": scene.projector_scale,
+        "ambient_rgb": list(scene.ambient_rgb),
+        # only when set, so that pinhole scenes keep their cache keys
+        **({"camera_lens": list(scene.camera_lens)} if scene.camera_lens is not None else {}),
+    }

@@ -1,4 +1,5 @@
-"""One simulated acquisition: pattern -> scene render -> camera, for a scene and its reference.
+"""The simulator's chain for one capture: pattern -> projector drive -> scene render -> camera.
+The systems (:mod:`simbench.systems`) build their acquisitions from it.
 
 Seeds: derived from one base seed and each capture's label (:mod:`simbench.seeds`); all are
 recorded.
@@ -7,24 +8,19 @@ recorded.
 from __future__ import annotations
 
 import dataclasses
-import logging
 import platform
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
-from simbench.cache import RenderCache, array_digest, scene_fingerprint, source_digest
+from simbench.cache import RenderCache, array_digest, source_digest
+from simbench.scene import scene_fingerprint
 from simbench.device import SensorModel, apply_to_rig, sensor_to_dict
-from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
-from simbench.manifest import seal_manifest
-from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings, realised_rig
+from simbench.mitsuba_dict import RenderSettings, film_settings, pass_settings
 from simbench.optics import distort_image, distorted_projector_drive, lateral_colour_image
 from simbench.subsurface import get_medium, subsurface_image
-from simbench.pattern import PatternSpec
 from simbench.photometry import (
     channel_weights,
     electrons_per_radiance_s,
@@ -33,7 +29,7 @@ from simbench.photometry import (
 )
 from simbench.projector import defocus_pattern, emitted_pattern, video_bitplane_weights
 from simbench.render import render_radiance
-from simbench.rig import rig_to_dict, save_rig
+from simbench.rig import rig_to_dict
 from simbench.scene import OBJECT_KIND_TABLE, SceneSpec, with_subsurface
 from simbench.seeds import RngLike, child_seed
 from simbench.sensor import SimpleCamera, emva_camera, simple_camera
@@ -41,7 +37,6 @@ from simbench.spectral import crosstalk_matrix, material_crosstalk
 from simbench.truth import GroundTruth, ground_truth, projector_distance
 
 __all__ = [
-    "Acquisition",
     "cached_radiance",
     "cached_ground_truth",
     "cached_arrays",
@@ -54,28 +49,13 @@ __all__ = [
     "with_translucency",
     "opaque",
     "record",
-    "acquire",
-    "write_acquisition",
+    "white_board",
+    "REFERENCE_ALBEDO",
     "versions",
 ]
 
-log = logging.getLogger(__name__)
 
 REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
-
-
-@dataclass(frozen=True)
-class Acquisition:
-    """A capture, its reference-plane capture, ground truth and everything to reproduce them."""
-
-    scene: SceneSpec
-    pattern: np.ndarray  # (Hp, Wp, 3) uint8, what the projector is sent
-    capture: np.ndarray  # (H, W, 3) recorded image
-    reference: np.ndarray  # (H, W, 3) recorded image of the reference plane
-    gt: GroundTruth
-    meta: dict = field(default_factory=dict)
-    # the reference plane under each of simbench.pattern.CALIBRATION_FRAMES (colour-robust decoder)
-    calibration: dict = field(default_factory=dict)
 
 
 # distribution names of what provenance records (read from the installed metadata: no import,
@@ -224,7 +204,7 @@ def _bitplane_weights(scene: SceneSpec, sensor: SensorModel, phase: float) -> np
     if not sensor.is_physical:
         raise ValueError("the projector's video-mode timing needs the physical (emva) camera's exposure time")
     return video_bitplane_weights(
-        exposure_s=exposure_s(sensor, scene.rig, **_white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase
+        exposure_s=exposure_s(sensor, scene.rig, **white_board(scene)), frame_rate_hz=prj.frame_rate_hz, phase=phase
     )
 
 
@@ -497,7 +477,7 @@ def render_channels(
     )
 
 
-def _white_board(scene: SceneSpec) -> dict:
+def white_board(scene: SceneSpec) -> dict:
     """The white reference board the camera's exposure and white balance are set on."""
     return {
         "reference_depth_m": scene.reference_depth_m,
@@ -519,7 +499,7 @@ def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike
 def _camera_settings(sensor: SensorModel, scene: SceneSpec) -> tuple[float, np.ndarray, np.ndarray]:
     """The physical camera's exposure, electrons per unit radiance over it and white-balance
     gains, all set on the white reference board."""
-    board = _white_board(scene)
+    board = white_board(scene)
     t = exposure_s(sensor, scene.rig, **board)
     return t, electrons_per_radiance_s(sensor, scene.rig) * t, white_balance_gains(sensor, scene.rig, **board)
 
@@ -650,117 +630,3 @@ def _recording_libraries() -> dict:
     except metadata.PackageNotFoundError:
         colour = "not installed"
     return {"numpy": np.__version__, "opencv": cv2.__version__, "colour-science": colour}
-
-
-def acquire(
-    scene: SceneSpec,
-    *,
-    pattern: PatternSpec,
-    sensor: SensorModel,
-    spp: int,
-    seed: int,
-    max_depth: int = 6,
-    sampler: str = "independent",
-    with_reference: bool = True,
-    with_calibration: bool = False,
-    cache: RenderCache | None = None,
-) -> Acquisition:
-    """Render and record a scene (and its reference plane) lit by the pattern: the proposed
-    sensor's recording (:class:`simbench.systems.proposed.ColourFringeSystem`) through the one
-    acquisition path (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the
-    labels ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
-
-    A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
-    Renders and ground truth come from ``cache`` when it holds them.
-    """
-    import mitsuba as mi
-
-    from simbench.decode import DecoderParams
-    from simbench.seeds import SeedLog
-    from simbench.systems import RenderSettings, SystemOptions
-    from simbench.systems import acquire as acquire_recording
-    from simbench.systems.proposed import ColourFringeSystem, pattern_record
-
-    rig = realised_rig(scene.rig)
-    if rig != scene.rig:
-        log.warning(
-            "projector principal point rendered at (%s, %s) instead of (%s, %s); rig.toml records the rendered one",
-            rig.projector.cx_px,
-            rig.projector.cy_px,
-            scene.rig.projector.cx_px,
-            scene.rig.projector.cy_px,
-        )
-    if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
-        raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
-    if with_calibration and not with_reference:
-        raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
-    system = ColourFringeSystem(SystemOptions(sensor=sensor, decoder=DecoderParams(pattern=pattern)))
-    seeds = SeedLog(seed)
-    render = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=cache)
-    scene = system.prepare(scene)
-    calibration = (
-        system.calibrate(scene, seeds=seeds, render=render, frames=with_calibration) if with_reference else None
-    )
-    rec = acquire_recording(system, scene, f"capture/{scene.name}", seeds=seeds, render=render, prepared=True)[0]
-    meta = {
-        "scene": scene.name,
-        "pattern": pattern_record(pattern),
-        "sensor": sensor_to_dict(sensor),
-        "exposure_s": exposure_s(sensor, scene.rig, **_white_board(scene)) if sensor.is_physical else None,
-        "white_balance_gains": white_balance_gains(sensor, scene.rig, **_white_board(scene)).tolist(),
-        "spp": int(spp),
-        "sampler": sampler,
-        "max_depth": int(max_depth),
-        "seed": int(seed),
-        "seeds": dict(seeds.used),
-        "reference_depth_m": scene.reference_depth_m,
-        "reference_albedo": REFERENCE_ALBEDO,
-        "variant": mi.variant(),
-        "versions": versions(),
-    }
-    reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
-    return Acquisition(
-        scene=scene,
-        pattern=system.pattern_u8,
-        capture=rec.raw,
-        reference=reference,
-        gt=rec.gt,
-        meta=meta,
-        calibration=calibration.frames if calibration is not None else {},
-    )
-
-
-RENDER_MANIFEST = "meta.json"
-
-
-def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool = False) -> dict[str, Path]:
-    """Write an acquisition as the files of ``simbench render``, the folder whole or not at all
-    (:func:`simbench.io.output_directory`: built beside ``out_dir`` and swapped in; an earlier
-    render there is replaced, any other non-empty folder refused).  ``meta.json`` lists every
-    file with its SHA-256, so a reader can tell a folder's files belong together."""
-
-    out = Path(out_dir)
-    with output_directory(out, manifest=RENDER_MANIFEST, overwrite=overwrite) as tmp:
-        names = {
-            "capture": "capture.png",
-            "reference": "reference.png",
-            "gt_depth": "gt_depth.npy",
-            "gt_depth_exr": "gt_depth.exr",
-            "gt_column": "gt_column.npy",
-            "gt_lit": "gt_lit.npy",
-            "gt_object_id": "gt_object_id.npy",
-            "rig": "rig.toml",
-            **{f"calibration_{k}": f"calibration_{k}.png" for k in acq.calibration},
-        }
-        for k, img in acq.calibration.items():
-            save_png(tmp / f"calibration_{k}.png", img)
-        save_png(tmp / names["capture"], acq.capture)
-        save_png(tmp / names["reference"], acq.reference)
-        save_npy(tmp / names["gt_depth"], acq.gt.depth_m)
-        save_exr(tmp / names["gt_depth_exr"], acq.gt.depth_m)
-        save_npy(tmp / names["gt_column"], acq.gt.column_px)
-        save_npy(tmp / names["gt_lit"], acq.gt.lit)
-        save_npy(tmp / names["gt_object_id"], acq.gt.object_id)
-        save_rig(acq.scene.rig, tmp / names["rig"])
-        save_json(tmp / RENDER_MANIFEST, seal_manifest(tmp, {"system": "proposed", **acq.meta}, names))
-    return {**{k: out / n for k, n in names.items()}, "meta": out / RENDER_MANIFEST}

@@ -23,7 +23,7 @@ def acquisitions(variant):
     from simbench.pattern import PatternSpec
     from simbench.scene import load_scene
     from simbench.device import get_sensor
-    from simbench.simulate import acquire
+    from simbench.systems.proposed import acquire
 
     cache: dict = {}
 

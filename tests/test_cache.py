@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from simbench.cache import RenderCache, array_digest, scene_fingerprint
+from simbench.cache import RenderCache, array_digest
+from simbench.scene import scene_fingerprint
 from simbench.scene import scene_from_dict
 
 from .conftest import SCENES

@@ -130,7 +130,7 @@ def test_a_reference_of_another_rig_is_refused(tmp_path, capsys):
 
 def test_every_systems_folder_is_sealed(tmp_path):
     """A ToF folder had no manifest: a shifted taps.npy or a doubled modulation_hz decoded."""
-    from simbench.baselines.recording import read_device_info, write_device_recording
+    from simbench.systems.recording import read_device_info, write_device_recording
     from simbench.baselines.tof import ToFModel
 
     model = ToFModel()
@@ -279,7 +279,7 @@ def test_a_bare_reference_of_another_rig_or_depth_is_refused(tmp_path, capsys):
 def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
     """Issue 33 audit: read noise makes dim taps negative (render scenes/sphere.toml --system tof);
     a check for non-negative taps refused every such folder."""
-    from simbench.baselines.recording import write_device_recording
+    from simbench.systems.recording import write_device_recording
     from simbench.baselines.tof import ToFModel
     from simbench.systems import get_system
 

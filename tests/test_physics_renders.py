@@ -148,7 +148,7 @@ def test_ideal_sensor_keeps_the_pipeline_accuracy(acquisitions, variant):
     resolution, 16 spp) still decodes to MAE <= 0.3 mm, >= 99 % complete, no order errors."""
     from simbench.decode import DecoderParams, decode
     from simbench.metrics import depth_errors
-    from simbench.simulate import acquire
+    from simbench.systems.proposed import acquire
 
     acq = acquire(
         load_scene(SCENES / "white_plane.toml"), pattern=PatternSpec(), sensor=get_sensor("ideal"), spp=16, seed=7

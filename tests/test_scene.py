@@ -152,7 +152,7 @@ def test_board_form_keys_are_validated(extra, match):
 def test_board_form_placement_keeps_the_poses_and_flat_boards_their_keys():
     """Formed boards sit in the same seeded poses as flat ones (the form is drawn after every
     placement); a flat board's parameters, and so its render-cache key, do not change."""
-    from simbench.cache import scene_fingerprint
+    from simbench.scene import scene_fingerprint
     from simbench.scene import Placement, place_objects
 
     scene = scene_from_dict(

@@ -126,7 +126,7 @@ def test_metal_bsdf_is_the_ggx_microfacet_model(variant, roughness, theta_deg):
 
 
 def test_per_primary_metal_keeps_its_band_and_its_cache_key():
-    from simbench.cache import scene_fingerprint
+    from simbench.scene import scene_fingerprint
     from simbench.simulate import _primary_scene
 
     s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "gold"}]})

@@ -76,7 +76,7 @@ def test_light_does_not_cross_objects_and_opaque_ones_are_untouched():
 
 
 def test_media_by_name_and_in_scene_files():
-    from simbench.cache import scene_fingerprint
+    from simbench.scene import scene_fingerprint
     from simbench.scene import scene_from_dict
 
     assert get_medium("plaster") is MEDIA["plaster"]

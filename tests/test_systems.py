@@ -86,7 +86,7 @@ class IdealDepthCamera:
         )
 
     def write_recording(self, out_dir, raw, calibration, *, scene, gt, meta, overwrite=False):
-        from simbench.baselines.recording import write_device_recording
+        from simbench.systems.recording import write_device_recording
         from simbench.io import save_npy
 
         writers = {"depth": lambda d: save_npy(d / "depth.npy", raw)}
@@ -95,7 +95,7 @@ class IdealDepthCamera:
         )
 
     def read_recording(self, in_dir):
-        from simbench.baselines.recording import read_device_info
+        from simbench.systems.recording import read_device_info
         from simbench.io import load_npy
 
         self.model, _ = read_device_info(in_dir, self.name, IdealModel)

@@ -10,7 +10,7 @@ pixel centres.  :func:`register_depth` resamples a competitor's map onto another
 
 Each is a registered depth system (:mod:`simbench.systems`): :class:`~simbench.baselines.kinect.KinectSystem`
 and :class:`~simbench.baselines.tof.ToFSystem`; their recordings are written by
-:mod:`simbench.baselines.recording`.
+:mod:`simbench.systems.recording`.
 """
 
 from __future__ import annotations

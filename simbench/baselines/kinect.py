@@ -617,7 +617,7 @@ class KinectSystem:
         overwrite: bool = False,
     ):
         """``ir.png`` + ``reference.png`` (16-bit grey), ground truth, ``device.json``."""
-        from simbench.baselines.recording import write_device_recording
+        from simbench.systems.recording import write_device_recording
         from simbench.io import save_png
 
         writers = {
@@ -635,7 +635,7 @@ class KinectSystem:
         from pathlib import Path
 
         from simbench import validate
-        from simbench.baselines.recording import read_device_info
+        from simbench.systems.recording import read_device_info
         from simbench.io import load_image
 
         d = Path(in_dir)

@@ -306,7 +306,7 @@ def capture(
 ) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
-    from simbench.cache import scene_fingerprint
+    from simbench.scene import scene_fingerprint
     from simbench.simulate import cached_arrays, cached_radiance, opaque, with_translucency
 
     rad = cached_radiance(
@@ -409,7 +409,7 @@ class ToFSystem:
         self, out_dir, raw: np.ndarray, calibration, *, scene: SceneSpec, gt, meta: dict, overwrite: bool = False
     ):
         """``taps.npy`` ((H, W, 4) float32 electrons), ground truth, ``device.json``."""
-        from simbench.baselines.recording import write_device_recording
+        from simbench.systems.recording import write_device_recording
         from simbench.io import save_npy
 
         writers = {"taps": lambda d: save_npy(d / "taps.npy", np.asarray(raw, np.float32))}
@@ -420,7 +420,7 @@ class ToFSystem:
     def read_recording(self, in_dir):
         from pathlib import Path
 
-        from simbench.baselines.recording import read_device_info
+        from simbench.systems.recording import read_device_info
         from simbench.io import load_npy
 
         d = Path(in_dir)

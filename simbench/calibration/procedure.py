@@ -302,7 +302,7 @@ def observe_pose(
     the observations are cached in ``render.cache`` by everything that affects them, the
     frames' renders are not (up to 3 x 25 images a pose).  ``wait=False``: None when another
     process sharing the cache is observing the pose (its observation is then read later)."""
-    from simbench.cache import scene_fingerprint
+    from simbench.scene import scene_fingerprint
     from simbench.device import sensor_to_dict
     from simbench.simulate import cached_arrays, physical_scene
 

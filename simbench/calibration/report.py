@@ -51,10 +51,9 @@ _PARAMETERS = (
 def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, truth: Rig) -> bytes:
     """PNG: (a) the corners of every view in the camera image, (b) the poses seen from above
     with the camera and projector, (c) the stereo residuals of camera and projector."""
-    from simbench.experiments.common import figure_png
-    from simbench.experiments.figures import _fig
+    from simbench.report import figure_png, panel_row
 
-    plt, fig, ax = _fig(3, width=4.4)
+    plt, fig, ax = panel_row(3, width=4.4)
     cam = truth.camera
     colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(result.views), 2)))
     for k, v in enumerate(result.views):
@@ -99,7 +98,7 @@ def calibration_markdown(
     result: CalibrationResult, *, target: CalibrationTarget, truth: Rig, settings: dict, command: str
 ) -> str:
     """The report: procedure, settings, reprojection RMS, per-parameter error, per-view table."""
-    from simbench.experiments.common import markdown_table
+    from simbench.report import markdown_table
 
     err = rig_errors(result.rig, truth)
     lo, hi = PUBLISHED_RMS_PX

@@ -10,10 +10,8 @@ run alone; every result row records them.
 from __future__ import annotations
 
 import copy
-import csv
 import dataclasses
 import hashlib
-import io
 import logging
 import re
 import subprocess
@@ -40,7 +38,8 @@ from simbench.calibration.procedure import (
 from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.device import SensorModel, get_sensor, sensor_to_dict
-from simbench.io import atomic_write_text, save_json
+from simbench.io import save_json
+from simbench.report import figure_png, markdown_table, write_table
 from simbench.metrics import depth_errors, edge_band
 from simbench.metrics import score as metrics_score
 from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
@@ -60,8 +59,6 @@ from simbench.systems import (
 )
 
 if TYPE_CHECKING:
-    import matplotlib.figure
-
     from simbench.rig import Intrinsics
 
 log = logging.getLogger(__name__)
@@ -619,31 +616,6 @@ def scene_errors(rec: Recording, result: DecodeResult, *, period_px: float, edge
         gt_column_px=rec.gt.column_px,
         period_px=period_px,
     )
-
-
-def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
-    """A matplotlib figure as PNG bytes (written atomically by the caller); closes it."""
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return out
-
-
-def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    return atomic_write_text(path_csv, buf.getvalue())
 
 
 def git_commit() -> str:

@@ -24,7 +24,7 @@ from simbench.experiments.common import RunConfig, figure_png, git_commit, libra
 from simbench.io import check_own_folder, json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.scene import load_scene
-from simbench.simulate import acquire
+from simbench.systems.proposed import acquire
 
 log = logging.getLogger(__name__)
 

@@ -19,9 +19,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, figure_png, made_by, markdown_table, scene_errors, write_table
+from simbench.experiments.common import Session, made_by, scene_errors
 from simbench.experiments.hard_scenes import WRONG_MM, object_scores
 from simbench.metrics import edge_band
+from simbench.report import figure_png, markdown_table, panel_row, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text, save_ply
 from simbench.metrics import points_from_depth
 
@@ -81,16 +82,6 @@ def shaded_view(depth_m: np.ndarray, camera: Intrinsics) -> np.ndarray:
     return np.abs(np.sum(n * view, axis=-1)).astype(np.float32)
 
 
-def _fig(n_panels: int, width: float = 4.6):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, n_panels, figsize=(width * n_panels, width * 0.82), constrained_layout=True)
-    return plt, fig, np.atleast_1d(axes)
-
-
 def _depth_range(depth_m: np.ndarray) -> tuple[float, float]:
     finite = depth_m[np.isfinite(depth_m)]
     return tuple(np.percentile(finite, [1, 99])) if finite.size else (0.0, 1.0)
@@ -100,7 +91,7 @@ def stages_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
     """Paper Fig. 6: capture, intensity, wrapped phase, De Bruijn stripes, unwrapped phase,
     depth, 3-D view."""
     st = result.stages
-    plt, fig, axes = _fig(7, width=3.4)
+    plt, fig, axes = panel_row(7, width=3.4)
     stripes = st["stripe_code"].astype(np.float32)
     stripes[stripes < 0] = np.nan
     panels = [
@@ -126,7 +117,7 @@ def stages_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
 
 
 def scene_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
-    plt, fig, axes = _fig(4)
+    plt, fig, axes = panel_row(4)
     lo, hi = _depth_range(result.depth_m)
     err = (result.depth_m - cap.gt.depth_m) * 1000.0
     axes[0].imshow(cap.image)

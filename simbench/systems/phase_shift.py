@@ -208,7 +208,7 @@ class PhaseShiftSystem:
         overwrite: bool = False,
     ) -> dict[str, Path]:
         """``frames.npy`` ((K, H, W) float32 grey), ``rig.toml``, ground truth, ``device.json``."""
-        from simbench.baselines.recording import write_device_recording
+        from simbench.systems.recording import write_device_recording
         from simbench.io import save_npy
         from simbench.rig import save_rig
 
@@ -221,7 +221,7 @@ class PhaseShiftSystem:
         )
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, None, SceneSpec]:
-        from simbench.baselines.recording import read_device_info
+        from simbench.systems.recording import read_device_info
         from simbench.io import load_npy
         from simbench.rig import load_rig
 

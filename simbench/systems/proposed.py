@@ -18,6 +18,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import logging
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -30,8 +31,13 @@ from simbench.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
 
 if TYPE_CHECKING:
+    from simbench.cache import RenderCache
     from simbench.decode.pipeline import DecoderParams, ReferenceMap
+    from simbench.device import SensorModel
     from simbench.pattern import PatternSpec
+    from simbench.truth import GroundTruth
+
+_log = logging.getLogger(__name__)
 
 __all__ = [
     "ColourFringeSystem",
@@ -42,6 +48,10 @@ __all__ = [
     "recorded_pattern",
     "recorded_z0",
     "describe_pattern",
+    "Acquisition",
+    "acquire",
+    "write_acquisition",
+    "RENDER_MANIFEST",
 ]
 
 BENCH_SCENES = ("plane", "shadow")
@@ -325,8 +335,6 @@ class ColourFringeSystem:
         meta: dict,
         overwrite: bool = False,
     ) -> dict[str, Path]:
-        from simbench.simulate import Acquisition, write_acquisition
-
         acq = Acquisition(
             scene=scene,
             pattern=self.pattern_u8,
@@ -346,7 +354,6 @@ class ColourFringeSystem:
         wrongly without a word)."""
         from simbench.io import load_image
         from simbench.rig import load_rig
-        from simbench.simulate import RENDER_MANIFEST
 
         d = Path(in_dir)
         meta = read_manifest(d / RENDER_MANIFEST)
@@ -429,3 +436,137 @@ def describe_pattern(p: PatternSpec) -> str:
         f"period {p.period_px} px, order {p.order}, codes {seq}, channels {p.channels}, dc {p.dc:g}, amplitude "
         f"{p.amplitude:g}, {p.size_hw[1]}x{p.size_hw[0]}"
     )
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """A capture, its reference-plane capture, ground truth and everything to reproduce them."""
+
+    scene: SceneSpec
+    pattern: np.ndarray  # (Hp, Wp, 3) uint8, what the projector is sent
+    capture: np.ndarray  # (H, W, 3) recorded image
+    reference: np.ndarray  # (H, W, 3) recorded image of the reference plane
+    gt: GroundTruth
+    meta: dict = field(default_factory=dict)
+    # the reference plane under each of simbench.pattern.CALIBRATION_FRAMES (colour-robust decoder)
+    calibration: dict = field(default_factory=dict)
+
+
+def acquire(
+    scene: SceneSpec,
+    *,
+    pattern: PatternSpec,
+    sensor: SensorModel,
+    spp: int,
+    seed: int,
+    max_depth: int = 6,
+    sampler: str = "independent",
+    with_reference: bool = True,
+    with_calibration: bool = False,
+    cache: RenderCache | None = None,
+) -> Acquisition:
+    """Render and record a scene (and its reference plane) lit by the pattern: the proposed
+    sensor's recording (:class:`ColourFringeSystem`) through the one
+    acquisition path (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the
+    labels ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
+
+    A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
+    Renders and ground truth come from ``cache`` when it holds them.
+    """
+    import mitsuba as mi
+
+    from simbench.decode import DecoderParams
+    from simbench.device import sensor_to_dict
+    from simbench.mitsuba_dict import realised_rig
+    from simbench.photometry import exposure_s, white_balance_gains
+    from simbench.seeds import SeedLog
+    from simbench.simulate import REFERENCE_ALBEDO, versions, white_board
+    from simbench.systems import acquire as acquire_recording
+
+    rig = realised_rig(scene.rig)
+    if rig != scene.rig:
+        _log.warning(
+            "projector principal point rendered at (%s, %s) instead of (%s, %s); rig.toml records the rendered one",
+            rig.projector.cx_px,
+            rig.projector.cy_px,
+            scene.rig.projector.cx_px,
+            scene.rig.projector.cy_px,
+        )
+    if tuple(pattern.size_hw) != scene.rig.projector.size_hw:
+        raise ValueError(f"pattern size {pattern.size_hw} differs from the projector's {scene.rig.projector.size_hw}")
+    if with_calibration and not with_reference:
+        raise ValueError("calibration frames are taken of the reference plane: they need with_reference")
+    system = ColourFringeSystem(SystemOptions(sensor=sensor, decoder=DecoderParams(pattern=pattern)))
+    seeds = SeedLog(seed)
+    render = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=cache)
+    scene = system.prepare(scene)
+    calibration = (
+        system.calibrate(scene, seeds=seeds, render=render, frames=with_calibration) if with_reference else None
+    )
+    rec = acquire_recording(system, scene, f"capture/{scene.name}", seeds=seeds, render=render, prepared=True)[0]
+    meta = {
+        "scene": scene.name,
+        "pattern": pattern_record(pattern),
+        "sensor": sensor_to_dict(sensor),
+        "exposure_s": exposure_s(sensor, scene.rig, **white_board(scene)) if sensor.is_physical else None,
+        "white_balance_gains": white_balance_gains(sensor, scene.rig, **white_board(scene)).tolist(),
+        "spp": int(spp),
+        "sampler": sampler,
+        "max_depth": int(max_depth),
+        "seed": int(seed),
+        "seeds": dict(seeds.used),
+        "reference_depth_m": scene.reference_depth_m,
+        "reference_albedo": REFERENCE_ALBEDO,
+        "variant": mi.variant(),
+        "versions": versions(),
+    }
+    reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
+    return Acquisition(
+        scene=scene,
+        pattern=system.pattern_u8,
+        capture=rec.raw,
+        reference=reference,
+        gt=rec.gt,
+        meta=meta,
+        calibration=calibration.frames if calibration is not None else {},
+    )
+
+
+RENDER_MANIFEST = "meta.json"
+
+
+def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool = False) -> dict[str, Path]:
+    """Write an acquisition as the files of ``simbench render``, the folder whole or not at all
+    (:func:`simbench.io.output_directory`: built beside ``out_dir`` and swapped in; an earlier
+    render there is replaced, any other non-empty folder refused).  ``meta.json`` lists every
+    file with its SHA-256, so a reader can tell a folder's files belong together."""
+
+    from simbench.io import output_directory, save_exr, save_json, save_npy, save_png
+    from simbench.manifest import seal_manifest
+    from simbench.rig import save_rig
+
+    out = Path(out_dir)
+    with output_directory(out, manifest=RENDER_MANIFEST, overwrite=overwrite) as tmp:
+        names = {
+            "capture": "capture.png",
+            "reference": "reference.png",
+            "gt_depth": "gt_depth.npy",
+            "gt_depth_exr": "gt_depth.exr",
+            "gt_column": "gt_column.npy",
+            "gt_lit": "gt_lit.npy",
+            "gt_object_id": "gt_object_id.npy",
+            "rig": "rig.toml",
+            **{f"calibration_{k}": f"calibration_{k}.png" for k in acq.calibration},
+        }
+        for k, img in acq.calibration.items():
+            save_png(tmp / f"calibration_{k}.png", img)
+        save_png(tmp / names["capture"], acq.capture)
+        save_png(tmp / names["reference"], acq.reference)
+        save_npy(tmp / names["gt_depth"], acq.gt.depth_m)
+        save_exr(tmp / names["gt_depth_exr"], acq.gt.depth_m)
+        save_npy(tmp / names["gt_column"], acq.gt.column_px)
+        save_npy(tmp / names["gt_lit"], acq.gt.lit)
+        save_npy(tmp / names["gt_object_id"], acq.gt.object_id)
+        save_rig(acq.scene.rig, tmp / names["rig"])
+        save_json(tmp / RENDER_MANIFEST, seal_manifest(tmp, {"system": "proposed", **acq.meta}, names))
+    return {**{k: out / n for k, n in names.items()}, "meta": out / RENDER_MANIFEST}

@@ -1,0 +1,58 @@
+"""Writing results: Markdown tables, CSV tables and matplotlib figures as PNG bytes - shared by
+every writer of results (the experiments, the calibration report, the ablations), so that none
+of them imports another's internals."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from simbench.io import atomic_write_text
+
+if TYPE_CHECKING:
+    import matplotlib.figure
+
+__all__ = ["figure_png", "markdown_table", "write_table", "panel_row"]
+
+
+def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
+    """A matplotlib figure as PNG bytes (written atomically by the caller); closes it."""
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """The lines of a Markdown table: ``header`` and one line per row of cells."""
+    out = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return out
+
+
+def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
+    """``rows`` as a CSV file of ``columns`` (floats to 6 significant digits), written atomically."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    return atomic_write_text(path_csv, buf.getvalue())
+
+
+def panel_row(n_panels: int, width: float = 4.6) -> tuple:
+    """(pyplot, figure, axes): one row of ``n_panels`` panels ``width`` inches wide, on the Agg
+    backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, n_panels, figsize=(width * n_panels, width * 0.82), constrained_layout=True)
+    return plt, fig, np.atleast_1d(axes)
