@@ -142,7 +142,9 @@ def test_every_fenced_block_runs_as_written(workdir):
     ran = 0
     for lang, body in blocks:
         if lang == "python":
-            script = workdir / f"block{ran}.py"
+            # not in workdir itself: its simbench/ folder (the studies' link) would shadow the package
+            (workdir / "blocks").mkdir(exist_ok=True)
+            script = workdir / "blocks" / f"block{ran}.py"
             script.write_text(body)
             res = _run([str(BIN / "python"), str(script)], workdir, home)
             assert res.returncode == 0, f"README Python block failed:\n{body}\n{res.stderr[-3000:]}"

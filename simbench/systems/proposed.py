@@ -50,6 +50,7 @@ __all__ = [
     "describe_pattern",
     "Acquisition",
     "acquire",
+    "acquire_with_calibration",
     "write_acquisition",
     "RENDER_MANIFEST",
 ]
@@ -466,13 +467,42 @@ def acquire(
     cache: RenderCache | None = None,
 ) -> Acquisition:
     """Render and record a scene (and its reference plane) lit by the pattern: the proposed
-    sensor's recording (:class:`ColourFringeSystem`) through the one
-    acquisition path (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the
-    labels ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
+    sensor's recording (:class:`ColourFringeSystem`) through the one acquisition path
+    (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the labels
+    ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
 
     A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
     Renders and ground truth come from ``cache`` when it holds them.
     """
+    return acquire_with_calibration(
+        scene,
+        pattern=pattern,
+        sensor=sensor,
+        spp=spp,
+        seed=seed,
+        max_depth=max_depth,
+        sampler=sampler,
+        with_reference=with_reference,
+        with_calibration=with_calibration,
+        cache=cache,
+    )[0]
+
+
+def acquire_with_calibration(
+    scene: SceneSpec,
+    *,
+    pattern: PatternSpec,
+    sensor: SensorModel,
+    spp: int,
+    seed: int,
+    max_depth: int = 6,
+    sampler: str = "independent",
+    with_reference: bool = True,
+    with_calibration: bool = False,
+    cache: RenderCache | None = None,
+) -> tuple[Acquisition, ReferenceCalibration | None]:
+    """:func:`acquire`, and the reference calibration it recorded (None without
+    ``with_reference``) for :meth:`ColourFringeSystem.decode`."""
     import mitsuba as mi
 
     from simbench.decode import DecoderParams
@@ -521,7 +551,7 @@ def acquire(
         "versions": versions(),
     }
     reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
-    return Acquisition(
+    acq = Acquisition(
         scene=scene,
         pattern=system.pattern_u8,
         capture=rec.raw,
@@ -530,6 +560,7 @@ def acquire(
         meta=meta,
         calibration=calibration.frames if calibration is not None else {},
     )
+    return acq, calibration
 
 
 RENDER_MANIFEST = "meta.json"

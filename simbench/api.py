@@ -1,0 +1,238 @@
+"""The common case in three calls - record a scene with a depth system (render it and pass it
+through the system's sensor), decode its depth, score it::
+
+    import simbench
+
+    rec = simbench.record("scenes/step.toml", system="proposed", sensor="paper")
+    depth = simbench.depth(rec)
+    simbench.score(depth, rec)  # {'mae_mm': ..., 'completeness': ..., ...}
+
+(``simbench.render`` and ``simbench.decode`` name the renderer's module and the decoder's
+package, hence ``record`` and ``depth``.)
+
+With the command line's defaults (``simbench render``: seed :data:`simbench.seeds.DEFAULT_SEED`,
+:data:`simbench.mitsuba_dict.DEFAULT_SPP` samples of the ``multijitter`` sampler, the render
+cache in ``.cache/simbench``), so ``record`` gives the images ``simbench render`` writes for the
+same scene, system, sensor and seed; ``depth`` decodes as ``simbench decode`` does (the proposed
+sensor: the paper's decoder against the reference plane, Sec. 5.4), and ``score`` gives
+``simbench score``'s numbers.  The Mitsuba variant is chosen at the first recording
+(:func:`simbench.variant.select_variant`) unless one is set already.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from simbench.decode import DecoderParams
+    from simbench.scene import SceneSpec
+    from simbench.systems import Recording, SystemDepth
+
+__all__ = ["Recorded", "record", "depth", "score", "DEFAULT_CACHE"]
+
+DEFAULT_CACHE = ".cache/simbench"  # the command line's render cache folder
+
+
+@dataclass(frozen=True)
+class Recorded:
+    """A scene recorded by one depth system, with what decoding it needs.
+
+    ``recording`` holds the raw frame(s) (:attr:`raw`), the scene as the system saw it and its
+    ground truth (:attr:`gt`: depth, projector column, lit pixels, object ids at the system's
+    pixels); ``calibration`` what the system decodes with (the proposed sensor's reference
+    plane); ``settings`` how it was made (system, sensor, seed, spp, sampler, variant)."""
+
+    system: str
+    recording: Recording
+    calibration: Any
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def raw(self) -> np.ndarray:
+        """What the system recorded (the proposed sensor: its 8-bit colour image)."""
+        return self.recording.raw
+
+    @property
+    def gt(self) -> Any:
+        """Ground truth at the system's pixels (:class:`simbench.truth.GroundTruth`)."""
+        return self.recording.gt
+
+    @property
+    def scene(self) -> SceneSpec:
+        return self.recording.scene
+
+
+def _ensure_variant(variant: str | None) -> str:
+    mi = sys.modules.get("mitsuba")
+    if mi is not None and mi.variant() is not None and variant in (None, mi.variant()):
+        return mi.variant()
+    from simbench.variant import select_variant
+
+    return select_variant(variant)
+
+
+def record(
+    scene: str | Path | SceneSpec,
+    *,
+    system: str = "proposed",
+    sensor: str = "paper",
+    seed: int | None = None,
+    spp: int | None = None,
+    sampler: str | None = None,
+    max_depth: int = 6,
+    calibration_frames: bool = False,
+    cache: str | Path | None = DEFAULT_CACHE,
+    variant: str | None = None,
+) -> Recorded:
+    """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
+    ``system`` (:func:`simbench.systems.system_names`), the proposed one through the sensor model
+    ``sensor`` (a preset of :func:`simbench.device.get_sensor` or a TOML file).
+
+    ``calibration_frames``: the proposed sensor also records the reference plane under black and
+    each primary, which the colour-robust decoder needs.  ``cache``: the render cache folder
+    (None: render everything, store nothing).
+
+    Examples
+    --------
+    >>> import simbench
+    >>> rec = simbench.record("scenes/white_plane.toml", spp=4, cache=None)  # doctest: +SKIP
+    >>> rec.raw.shape, rec.raw.dtype  # doctest: +SKIP
+    ((960, 1280, 3), dtype('uint8'))
+    """
+    from simbench.cache import RenderCache
+    from simbench.device import get_sensor
+    from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+    from simbench.scene import load_scene
+    from simbench.seeds import DEFAULT_SEED, SeedLog
+    from simbench.systems import RenderSettings, SystemOptions, acquire, get_system
+
+    seed = DEFAULT_SEED if seed is None else int(seed)
+    spp = DEFAULT_SPP if spp is None else int(spp)
+    sampler = DEFAULT_SAMPLER if sampler is None else sampler
+    check_sampler(sampler, spp)
+    sensor_model = get_sensor(sensor)
+    the_system = get_system(system, SystemOptions(sensor=sensor_model))
+    spec = scene if not isinstance(scene, (str, Path)) else load_scene(scene)
+    used_variant = _ensure_variant(variant)
+    store = RenderCache(None if cache is None else str(cache))
+    settings = {
+        "system": system,
+        "sensor": sensor,
+        "seed": seed,
+        "spp": spp,
+        "sampler": sampler,
+        "max_depth": max_depth,
+        "variant": used_variant,
+    }
+    if system == "proposed":
+        from simbench.systems.proposed import acquire_with_calibration
+
+        acq, calibration = acquire_with_calibration(
+            spec,
+            pattern=the_system.pattern,
+            sensor=sensor_model,
+            spp=spp,
+            sampler=sampler,
+            seed=seed,
+            max_depth=max_depth,
+            with_calibration=calibration_frames,
+            cache=store,
+        )
+        from simbench.systems import Recording
+
+        rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
+        return Recorded(system, rec, calibration, settings)
+    seeds = SeedLog(seed)
+    render_settings = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=store)
+    prepared = the_system.prepare(spec)
+    calibration = the_system.calibrate(prepared, seeds=seeds, render=render_settings)
+    rec = acquire(
+        the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
+    )[0]
+    return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)})
+
+
+def depth(
+    recorded: Recorded,
+    *,
+    decoder: str | DecoderParams = "paper",
+    mode: str | None = None,
+    min_confidence: float | None = None,
+) -> SystemDepth:
+    """``recorded`` decoded the way its system decodes, into depth (float32 metres, NaN where
+    invalid), a validity mask and a per-pixel confidence (:class:`simbench.systems.SystemDepth`).
+
+    For the proposed sensor, ``decoder`` is ``"paper"`` (the paper's decoder), ``"robust"`` (our
+    colour-robust decoder at its operating point; needs ``record(..., calibration_frames=True)``)
+    or a :class:`simbench.decode.DecoderParams`; ``mode`` ``"reference"`` (default: the reference
+    plane, paper Sec. 5.4) or ``"calibrated"`` (triangulation with the rig, Eq. 15).
+    ``min_confidence`` turns pixels below it into holes (every system; in the system's own unit,
+    :attr:`simbench.systems.SystemInfo.confidence`).
+    """
+    from simbench.decode import DecoderParams, robust_params
+    from simbench.decode.pipeline import apply_min_confidence
+    from simbench.device import get_sensor
+    from simbench.systems import SystemDepth, SystemOptions, get_system
+
+    rec = recorded.recording
+    options = SystemOptions(sensor=get_sensor(recorded.settings.get("sensor", "paper")))
+    if recorded.system == "proposed":
+        system = get_system("proposed", options)
+        if isinstance(decoder, str):
+            if decoder not in ("paper", "robust"):
+                raise ValueError(f"decoder must be 'paper', 'robust' or a DecoderParams, got {decoder!r}")
+            params = DecoderParams(pattern=system.pattern)
+            params = robust_params(params) if decoder == "robust" else params
+        else:
+            params = decoder
+        mode = mode or "reference"
+        if params.unmix and not recorded.calibration.frames:
+            raise ValueError(
+                "the colour-robust decoder unmixes with the reference plane's calibration frames: record with "
+                "calibration_frames=True"
+            )
+        result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
+    else:
+        if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
+            raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")
+        result = get_system(recorded.system, options).decode(rec.raw, recorded.calibration, scene=rec.scene)
+    if min_confidence is None:
+        return result
+    if result.confidence is None:
+        raise ValueError(f"the {recorded.system} system has no confidence to threshold")
+    keep = result.valid & (result.confidence >= float(min_confidence))
+    detail = (
+        apply_min_confidence(result.detail, float(min_confidence)) if recorded.system == "proposed" else result.detail
+    )
+    return SystemDepth(
+        depth_m=np.where(keep, result.depth_m, np.nan).astype(np.float32),
+        valid=keep,
+        confidence=result.confidence,
+        column_px=result.column_px,
+        detail=detail,
+    )
+
+
+def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: int = 0) -> dict:
+    """``simbench score``'s numbers for a decoded ``depth`` of ``recorded``
+    (:func:`simbench.metrics.depth_errors`): MAE, RMSE, median and p95 error (mm), completeness
+    over the lit pixels, the share of outliers more than 5 mm off and, where the system decodes
+    projector columns, stripe-order errors; pixels within ``edge_band_px`` of a depth edge are
+    left out of the errors (the completeness still counts them)."""
+    from simbench.metrics import depth_errors, edge_band
+    from simbench.systems import get_system
+
+    gt = recorded.gt
+    depth_m = np.asarray(getattr(depth, "depth_m", depth), dtype=np.float32)
+    if depth_m.shape != gt.depth_m.shape:
+        raise ValueError(f"depth of shape {depth_m.shape} does not match the recording's {gt.depth_m.shape}")
+    exclude = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px) if edge_band_px > 0 else None
+    column = getattr(depth, "column_px", None)
+    period = get_system(recorded.system).info().period_px if column is not None else None
+    kw = {"column_px": column, "gt_column_px": gt.column_px, "period_px": period} if period else {}
+    return depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)

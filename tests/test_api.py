@@ -1,0 +1,104 @@
+"""The three-call Python API (simbench.api): what the command line makes, from Python."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+
+def test_import_simbench_is_cheap_and_lists_the_api():
+    code = (
+        "import sys, simbench\n"
+        "assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules and 'simbench.api' not in sys.modules\n"
+        "assert callable(simbench.record) and callable(simbench.depth) and callable(simbench.score)\n"
+        "assert 'simbench.api' in sys.modules\n"
+        "try:\n    simbench.nothing\nexcept AttributeError as e:\n    print(e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert "no attribute 'nothing'" in out.stdout
+
+
+def _recorded(system: str = "proposed"):
+    """A Recorded of the decoder benchmark's numpy inputs (no renderer)."""
+    from simbench.api import Recorded
+    from simbench.systems import Recording, get_system
+
+    raw, cal, scene = get_system(system).bench_inputs()
+    gt = type("GT", (), {})()
+    gt.depth_m = np.full(raw.shape[:2], 1.1, np.float32)
+    gt.lit = np.ones(raw.shape[:2], bool)
+    gt.object_id = np.zeros(raw.shape[:2], np.int16)
+    gt.column_px = np.full(raw.shape[:2], np.nan, np.float32)
+    return Recorded(system, Recording(system, scene, raw, gt, {}), cal, {"sensor": "paper"})
+
+
+def test_depth_and_score_of_a_known_plane():
+    """The benchmark's synthetic plane at 1.1 m decodes to 1.1 m through the API."""
+    import simbench
+
+    rec = _recorded()
+    depth = simbench.depth(rec)
+    assert depth.depth_m.shape == rec.raw.shape[:2] and depth.depth_m.dtype == np.float32
+    scores = simbench.score(depth, rec)
+    assert scores["completeness"] > 0.95 and scores["mae_mm"] < 1.0
+    with pytest.raises(ValueError, match="does not match"):
+        simbench.score(depth.depth_m[:10], rec)
+    holes = simbench.depth(rec, min_confidence=1e9)
+    assert not holes.valid.any() and np.isnan(holes.depth_m).all()
+
+
+def test_depth_refuses_what_it_cannot_do():
+    import simbench
+
+    rec = _recorded()
+    with pytest.raises(ValueError, match="'paper', 'robust' or a DecoderParams"):
+        simbench.depth(rec, decoder="fast")
+    with pytest.raises(ValueError, match="calibration_frames=True"):
+        simbench.depth(rec, decoder="robust")
+
+
+@pytest.mark.slow
+def test_the_api_makes_what_the_command_line_makes(tmp_path, variant):
+    """``simbench render / decode / score`` and ``record / depth / score`` in a fresh process,
+    sharing one render cache: the same capture bytes, the same depth, the same scores."""
+    cache = tmp_path / "cache"
+    run = dict(cwd=tmp_path, capture_output=True, text=True)
+    scene = str(ROOT / "scenes" / "white_plane.toml")
+    cli = [str(BIN / "simbench")]
+    r = subprocess.run(
+        [*cli, "render", scene, "--out", "rec", "--spp", "4", "--seed", "3", "--cache", str(cache)], **run
+    )
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([*cli, "decode", "rec", "--out", "rec/depth.npy", "--debug-dir", "rec/stages"], **run)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(
+        [*cli, "score", "rec/depth.npy", "--gt", "rec/gt_depth.npy", "--column", "rec/stages/column.npy", "--json"],
+        **run,
+    )
+    assert r.returncode == 0, r.stderr
+    cli_scores = json.loads(r.stdout)
+    code = f"""
+import json, sys
+import numpy as np
+import simbench
+from simbench.io import load_image
+rec = simbench.record({scene!r}, spp=4, seed=3, cache={str(cache)!r})
+assert np.array_equal(rec.raw, load_image("rec/capture.png")), "capture differs"
+depth = simbench.depth(rec)
+assert np.array_equal(depth.depth_m, np.load("rec/depth.npy"), equal_nan=True), "depth differs"
+s = simbench.score(depth, rec)
+print(json.dumps({{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in s.items()}}))
+"""
+    r = subprocess.run([sys.executable, "-c", code], **run)
+    assert r.returncode == 0, r.stderr[-3000:]
+    api_scores = json.loads(r.stdout.strip().splitlines()[-1])
+    assert api_scores == cli_scores
