@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup reproduce ablations quick quick-thresholds lint test test-fast bench clean
+.PHONY: setup reproduce ablations quick quick-thresholds lint docs test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -55,7 +55,12 @@ TEST_WORKERS ?= 2
 PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=10
 
 # The whole test suite, slow renders included (after the lint).
-test: lint
+# The documentation site (mkdocs.yml, docs/): any warning - a broken link, a docstring the API
+# reference cannot read - fails the build.
+docs: setup
+	$(VENV)/bin/mkdocs build --strict --quiet
+
+test: lint docs
 	$(PYTEST)
 
 # Developers' loop: everything but the Mitsuba renders.
@@ -68,5 +73,5 @@ bench: setup
 	$(VENV)/bin/simbench bench --rig results/calibration/rig.toml --mode calibrated --repeats 10
 
 clean:
-	rm -rf $(VENV) .pytest_cache .benchmarks .cache
+	rm -rf $(VENV) .pytest_cache .benchmarks .cache site
 	rm -rf build simbench/*.so

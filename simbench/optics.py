@@ -25,8 +25,8 @@ so, in micrometres at full field.  Camera: the recorded channel ``c`` at pixel `
 distortion).  Projector: channel ``c`` of the DMD image is projected magnified by ``1 + m_c``,
 so before the distortion the drive is resampled the same way.  Longitudinal colour (a focus
 shift per wavelength) is not modelled: a symmetric blur biases no phase, and for the paper's
-lenses the blur it adds is too small to lower the fringe's contrast measurably (README, "The
-sensor model": a 5 um focus shift blurs the camera's image by sigma ~0.06 px and the projector's
+lenses the blur it adds is too small to lower the fringe's contrast measurably
+(docs/sensor-model.md: a 5 um focus shift blurs the camera's image by sigma ~0.06 px and the projector's
 by ~0.12 DMD px, a contrast loss below 1e-3 at the 21-px period).
 
 Defocus of a thin lens of aperture diameter ``A`` focused at distance ``s``: a point at

@@ -1,16 +1,18 @@
-"""The README works as written: every command and code block, run as a user runs them.
+"""The README and the documentation pages work as written: every command and code block, run as
+a user runs them.
 
-Each fenced block of README.md is executed in a fresh process, from a clean environment (only
-the virtual environment's ``bin`` on ``PATH``, an empty ``HOME``, no ``PYTHONPATH``), in an
-empty working folder that holds the repository's ``scenes/`` and ``simbench/studies/`` as the
-README's relative paths expect.  ``simbench`` lines run as they are, in order (later lines read
-what earlier ones wrote); Python blocks run as scripts; ``make`` lines are checked with
-``make -n`` (running them would start this suite again, or take minutes: CI runs them), and
-``simbench ablate`` lines (a built-in study is tens of full-resolution renders at the run's
-36 spp: most of an hour) are parsed by the real parser and their sweeps loaded, validated and
-expanded, not run (``tests/test_ablate.py`` runs sweeps end to end).
-Inline ``simbench ...`` commands in README.md and results/README.md are parsed by the real
-command-line parser (alternatives written ``a|b`` are each parsed).
+Each fenced block of README.md and of the pages of docs/ (in the site's navigation order) is
+executed in a fresh process, from a clean environment (only the virtual environment's ``bin`` on
+``PATH``, an empty ``HOME``, no ``PYTHONPATH``), in an empty working folder that holds the
+repository's ``scenes/`` and ``simbench/studies/`` as the pages' relative paths expect.
+``simbench`` lines run as they are, in order (later lines read what earlier ones wrote); Python
+blocks run as scripts; ``make`` lines are checked with ``make -n`` (running them would start
+this suite again, or take minutes: CI runs them), and ``simbench ablate`` lines (a built-in study
+is tens of full-resolution renders at the run's 36 spp: most of an hour) are parsed by the real
+parser and their sweeps loaded, validated and expanded, not run (``tests/test_ablate.py`` runs
+sweeps end to end); ``text`` blocks are listings, not run.  Inline ``simbench ...`` commands in
+README.md, the docs pages and results/README.md are parsed by the real command-line parser
+(alternatives written ``a|b`` are each parsed).
 """
 
 from __future__ import annotations
@@ -28,6 +30,18 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 BIN = Path(sys.executable).parent
+
+
+def doc_pages() -> list[Path]:
+    """README.md, then the documentation site's pages in its navigation order (mkdocs.yml)."""
+    import yaml
+
+    nav = yaml.safe_load((ROOT / "mkdocs.yml").read_text())["nav"]
+    return [README] + [ROOT / "docs" / next(iter(entry.values())) for entry in nav]
+
+
+def _all_text() -> str:
+    return "\n".join(p.read_text() for p in doc_pages())
 
 
 def fenced_blocks(text: str) -> list[tuple[str, str]]:
@@ -77,8 +91,15 @@ def _run(argv: list[str], cwd: Path, home: Path, timeout: float = 900) -> subpro
     return subprocess.run(argv, cwd=cwd, env=_clean_env(home), capture_output=True, text=True, timeout=timeout)
 
 
+def test_the_docs_pages_exist_and_the_readme_stays_short():
+    pages = doc_pages()
+    missing = [str(p) for p in pages if not p.is_file()]
+    assert not missing, missing
+    assert len(README.read_text().splitlines()) <= 200  # the details live in docs/
+
+
 def test_readme_has_the_blocks_this_test_expects():
-    blocks = fenced_blocks(README.read_text())
+    blocks = fenced_blocks(_all_text())
     langs = [lang for lang, _ in blocks]
     assert "python" in langs
     cmds = [c for lang, body in blocks if lang in ("", "sh", "bash", "console") for c in shell_commands(body)]
@@ -89,9 +110,9 @@ def test_readme_has_the_blocks_this_test_expects():
 
 
 def test_make_targets_in_the_readme_exist():
-    blocks = fenced_blocks(README.read_text())
+    blocks = fenced_blocks(_all_text())
     targets = {c.split()[1] for lang, body in blocks for c in shell_commands(body) if c.startswith("make ")}
-    targets |= set(re.findall(r"`make ([a-z-]+)`", README.read_text()))
+    targets |= set(re.findall(r"`make ([a-z-]+)`", _all_text()))
     for t in sorted(targets):
         res = subprocess.run(["make", "-n", t], cwd=ROOT, capture_output=True, text=True)
         assert res.returncode == 0, f"make -n {t}: {res.stderr}"
@@ -114,7 +135,7 @@ def test_inline_commands_parse():
     from simbench.cli import _parser
 
     parser = _parser()
-    cmds = _inline_commands(README.read_text()) + _inline_commands((ROOT / "results" / "README.md").read_text())
+    cmds = _inline_commands(_all_text()) + _inline_commands((ROOT / "results" / "README.md").read_text())
     assert len(cmds) > 5
     for cmd in cmds:
         argv = shlex.split(cmd)[1:]
@@ -136,8 +157,9 @@ def _check_ablate(argv: list[str], workdir: Path) -> None:
 
 @pytest.mark.slow
 def test_every_fenced_block_runs_as_written(workdir):
-    """The README's blocks, in order, in one working folder: each simbench line exits 0."""
-    blocks = fenced_blocks(README.read_text())
+    """The README's and the docs pages' blocks, in order, in one working folder: each simbench
+    line exits 0."""
+    blocks = fenced_blocks(_all_text())
     home = workdir / "home"
     ran = 0
     for lang, body in blocks:
