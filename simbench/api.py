@@ -28,8 +28,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simbench.cache import RenderCache
+
 if TYPE_CHECKING:
     from simbench.decode import DecoderParams
+    from simbench.pattern import PatternSpec
     from simbench.scene import SceneSpec
     from simbench.systems import Recording, SystemDepth
 
@@ -51,6 +54,9 @@ class Recorded:
     recording: Recording
     calibration: Any
     settings: dict = field(default_factory=dict)
+    # what the system's folder records about it (meta.json / device.json):
+    # :meth:`simbench.systems.DepthSystem.write_recording` writes it with the frames
+    meta: dict = field(default_factory=dict)
 
     @property
     def raw(self) -> np.ndarray:
@@ -86,7 +92,8 @@ def record(
     sampler: str | None = None,
     max_depth: int = 6,
     calibration_frames: bool = False,
-    cache: str | Path | None = DEFAULT_CACHE,
+    pattern: PatternSpec | None = None,
+    cache: str | Path | RenderCache | None = DEFAULT_CACHE,
     variant: str | None = None,
 ) -> Recorded:
     """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
@@ -94,8 +101,10 @@ def record(
     ``sensor`` (a preset of :func:`simbench.device.get_sensor` or a TOML file).
 
     ``calibration_frames``: the proposed sensor also records the reference plane under black and
-    each primary, which the colour-robust decoder needs.  ``cache``: the render cache folder
-    (None: render everything, store nothing).
+    each primary, which the colour-robust decoder needs.  ``pattern``: what the proposed sensor
+    projects (default: the paper's; the other systems project their own).  ``cache``: the render
+    cache folder or a :class:`simbench.cache.RenderCache` (None: render everything, store
+    nothing).
 
     Examples
     --------
@@ -104,7 +113,7 @@ def record(
     >>> rec.raw.shape, rec.raw.dtype  # doctest: +SKIP
     ((960, 1280, 3), dtype('uint8'))
     """
-    from simbench.cache import RenderCache
+    from simbench.decode import DecoderParams
     from simbench.device import get_sensor
     from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
     from simbench.scene import load_scene
@@ -116,10 +125,11 @@ def record(
     sampler = DEFAULT_SAMPLER if sampler is None else sampler
     check_sampler(sampler, spp)
     sensor_model = get_sensor(sensor)
-    the_system = get_system(system, SystemOptions(sensor=sensor_model))
     spec = scene if not isinstance(scene, (str, Path)) else load_scene(scene)
+    options = SystemOptions(sensor=sensor_model, decoder=None if pattern is None else DecoderParams(pattern=pattern))
+    the_system = get_system(system, options)
     used_variant = _ensure_variant(variant)
-    store = RenderCache(None if cache is None else str(cache))
+    store = cache if isinstance(cache, RenderCache) else RenderCache(None if cache is None else str(cache))
     settings = {
         "system": system,
         "sensor": sensor,
@@ -146,7 +156,7 @@ def record(
         from simbench.systems import Recording
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
-        return Recorded(system, rec, calibration, settings)
+        return Recorded(system, rec, calibration, settings, meta=acq.meta)
     seeds = SeedLog(seed)
     render_settings = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=store)
     prepared = the_system.prepare(spec)
@@ -154,7 +164,15 @@ def record(
     rec = acquire(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
-    return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)})
+    meta = {
+        "scene": str(scene) if isinstance(scene, (str, Path)) else spec.name,
+        "spp": spp,
+        "sampler": sampler,
+        "seed": seed,
+        "seeds": dict(seeds.used),
+        "variant": used_variant,
+    }
+    return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta)
 
 
 def depth(

@@ -229,19 +229,24 @@ def _recorded_pattern(args, recorded):
 
 
 def _cmd_render(args) -> int:
+    from simbench import api
+    from simbench.decode import DecoderParams
     from simbench.io import check_output_directory
-    from simbench.variant import select_variant
     from simbench.scene import load_scene
     from simbench.device import get_sensor
-    from simbench.systems import SystemOptions, get_system, system_names
+    from simbench.systems import SystemOptions, get_system, recording_manifest, system_names
 
     if args.system not in system_names():  # an unknown name fails before anything else
         get_system(args.system)
-    system = get_system(args.system, SystemOptions(sensor=get_sensor(args.camera)))
     scene = load_scene(args.scene)
+    pattern = _pattern_spec(args, scene.rig.projector.size_hw)
+    # the proposed sensor projects the pattern options' pattern; the other systems their own
+    system = get_system(
+        args.system, SystemOptions(sensor=get_sensor(args.camera), decoder=DecoderParams(pattern=pattern))
+    )
     spp, sampler = _render_settings(args)
-    manifest = "meta.json" if args.system == "proposed" else "device.json"
-    check_output_directory(args.out, manifest=manifest, overwrite=args.overwrite)  # before minutes of rendering
+    # before minutes of rendering
+    check_output_directory(args.out, manifest=recording_manifest(system), overwrite=args.overwrite)
     if not args.no_cache:
         from simbench.cache import check_cache_location
 
@@ -251,69 +256,33 @@ def _cmd_render(args) -> int:
                 f"--cache {args.cache} and --out {args.out} overlap: the render cache needs its own folder"
             )
         check_cache_location(args.cache, what="--cache")
-    variant = select_variant(args.variant)
     t0 = time.perf_counter()
     cache = _cache_of(args)
-    if args.system == "proposed":
-        files = _render_proposed(args, scene, spp=spp, sampler=sampler, cache=cache)
-    else:
-        files = _render_system(args, system, scene, spp=spp, sampler=sampler, cache=cache, variant=variant)
+    rec = api.record(
+        args.scene,
+        system=args.system,
+        sensor=args.camera,
+        seed=args.seed,
+        spp=spp,
+        sampler=sampler,
+        max_depth=args.max_depth,
+        calibration_frames=args.calibration_frames,
+        pattern=pattern,
+        cache=cache,
+        variant=args.variant,
+    )
+    _check_visible(rec.gt, scene)
+    files = system.write_recording(
+        Path(args.out), rec.raw, rec.calibration, scene=rec.scene, gt=rec.gt, meta=rec.meta, overwrite=args.overwrite
+    )
     cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
     print(
-        f"rendered {scene.name} with the {system.info().label} ({variant}, {spp} spp {sampler}, seed "
+        f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
     return 0
-
-
-def _render_proposed(args, scene, *, spp: int, sampler: str, cache) -> dict:
-    """The proposed sensor's render folder: capture, reference (and calibration frames),
-    ground truth, rig, meta.json (:func:`simbench.systems.proposed.acquire`)."""
-    from simbench.device import get_sensor
-    from simbench.systems.proposed import acquire, write_acquisition
-
-    sensor = get_sensor(args.camera)
-    pattern = _pattern_spec(args, scene.rig.projector.size_hw)
-    acq = acquire(
-        scene,
-        pattern=pattern,
-        sensor=sensor,
-        spp=spp,
-        sampler=sampler,
-        seed=args.seed,
-        max_depth=args.max_depth,
-        with_calibration=args.calibration_frames,
-        cache=cache,
-    )
-    _check_visible(acq.gt, scene)
-    return write_acquisition(acq, args.out, overwrite=args.overwrite)
-
-
-def _render_system(args, system, scene, *, spp: int, sampler: str, cache, variant: str) -> dict:
-    """Another registered system's recording folder: its raw frames, calibration, ground
-    truth and manifest (:meth:`simbench.systems.DepthSystem.write_recording`)."""
-    from simbench.seeds import SeedLog
-    from simbench.systems import RenderSettings, acquire
-
-    seeds = SeedLog(args.seed)
-    render = RenderSettings(spp=spp, sampler=sampler, max_depth=args.max_depth, cache=cache)
-    prepared = system.prepare(scene)
-    cal = system.calibrate(prepared, seeds=seeds, render=render)
-    rec = acquire(system, prepared, scene.name, seeds=seeds, render=render, calibration=cal, prepared=True)[0]
-    _check_visible(rec.gt, scene)
-    meta = {
-        "scene": str(args.scene),
-        "spp": spp,
-        "sampler": sampler,
-        "seed": args.seed,
-        "seeds": dict(seeds.used),
-        "variant": variant,
-    }
-    return system.write_recording(
-        Path(args.out), rec.raw, cal, scene=rec.scene, gt=rec.gt, meta=meta, overwrite=args.overwrite
-    )
 
 
 def _check_visible(gt, scene) -> None:

@@ -44,6 +44,7 @@ __all__ = [
     "DepthSystem",
     "acquire",
     "register_system",
+    "recording_manifest",
     "unregister_system",
     "get_system",
     "system_names",
@@ -244,6 +245,14 @@ def acquire(
 
 # recording folders name their system in one of these files
 RECORDING_MANIFESTS = ("device.json", "meta.json")
+
+
+def recording_manifest(system: DepthSystem) -> str:
+    """The manifest file of ``system``'s recording folders (a system may name its own with a
+    ``manifest_name`` attribute; the competitors' is ``device.json``)."""
+    from simbench.systems.recording import DEVICE_MANIFEST
+
+    return getattr(system, "manifest_name", DEVICE_MANIFEST)
 
 
 def system_of_recording(in_dir: str | Path) -> str:

@@ -140,6 +140,7 @@ class ColourFringeSystem:
     name = "proposed"
     # the proposed sensor's captures keep the labels experiments give them
     seed_prefix = ""
+    manifest_name = "meta.json"  # RENDER_MANIFEST: its folders' manifest
 
     def __init__(self, options: SystemOptions | None = None) -> None:
         from simbench.decode import DecoderParams
