@@ -1006,13 +1006,13 @@ def _cmd_reproduce(args) -> int:
 
 
 def _decoder_overrides(params, items: list[str]):
-    """``name=value`` pairs applied to DecoderParams (values parsed as TOML scalars);
-    ``without=NAME`` (or a list) switches the paper decoder's added checks off
-    (:func:`simbench.decode.without_checks`)."""
+    """``name=value`` pairs (values parsed as TOML scalars; a bare word is a string) applied to
+    DecoderParams by :func:`simbench.decode.with_changes`; ``without=NAME`` (or a list) switches
+    the paper decoder's added checks off."""
     import dataclasses
     import tomllib
 
-    from simbench.decode import without_checks
+    from simbench.decode import with_changes
 
     names = {f.name for f in dataclasses.fields(params)} | {"without"}
     changes = {}
@@ -1021,15 +1021,11 @@ def _decoder_overrides(params, items: list[str]):
         if not sep or key not in names:
             raise ValueError(f"--decoder takes name=value with name one of {sorted(names)}; got {item!r}")
         try:
-            value = tomllib.loads(f"v = {text}")["v"]
+            changes[key] = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            value = text  # a bare word: phase_method=ftp
-        if isinstance(value, list) and key in ("depth_range_m", "sequence", "stripe_step_ratio"):
-            value = tuple(value)
-        changes[key] = value
+            changes[key] = text  # a bare word: phase_method=ftp
     try:
-        without = changes.pop("without", "none")
-        return without_checks(replace(params, **changes), without)
+        return with_changes(params, changes)
     except ValueError as exc:
         raise ValueError(f"--decoder: {exc}") from None
 

@@ -1,5 +1,6 @@
 """The decoder alone, on analytic captures computed in numpy (no Mitsuba)."""
 
+import dataclasses
 import os
 
 import numpy as np
@@ -583,3 +584,18 @@ def test_the_robust_decoders_confidence_is_the_lower_of_its_two_terms(reference)
             want = snr
         assert np.array_equal(r.confidence[r.valid], want[r.valid])
         assert np.array_equal(r.stages["confidence"], want)
+
+
+def test_with_changes_is_the_one_way_from_names_to_decoder_settings():
+    """The command line's --decoder name=value and an ablation's decoder.* axes both go through
+    simbench.decode.with_changes: lists become tuples for tuple fields, ``without`` switches the
+    added checks off, an unknown name lists the valid ones."""
+    from simbench.decode import DecoderParams, with_changes, without_checks
+
+    base = DecoderParams()
+    got = with_changes(base, {"depth_range_m": [0.5, 2.0], "phase_method": "ftp", "without": ["link_check"]})
+    assert got.depth_range_m == (0.5, 2.0) and got.phase_method == "ftp"
+    assert got == without_checks(dataclasses.replace(base, depth_range_m=(0.5, 2.0), phase_method="ftp"), "link_check")
+    assert with_changes(base, {}) == base
+    with pytest.raises(ValueError, match=r"unknown decoder setting\(s\) \['sigma'\]; valid: .*sigma_periods"):
+        with_changes(base, {"sigma": 1.0})

@@ -63,6 +63,7 @@ __all__ = [
     "AddedCheck",
     "PAPER_ADDED_CHECKS",
     "without_checks",
+    "with_changes",
     "robust_params",
     "ROBUST_MIN_CONFIDENCE",
     "ROBUST_MIN_AMPLITUDE",
@@ -463,6 +464,24 @@ def without_checks(params: DecoderParams, names: str | Sequence[str]) -> Decoder
     for n in names:
         changes.update(PAPER_ADDED_CHECKS[n].off)
     return dataclasses.replace(params, **changes)
+
+
+def with_changes(params: DecoderParams, changes: Mapping[str, object]) -> DecoderParams:
+    """``params`` with the fields ``changes`` names replaced (a list for a tuple field becomes a
+    tuple, as TOML and JSON give them) and, under the key ``without``, the paper decoder's added
+    checks switched off (:func:`without_checks`): the one place where the command line's
+    ``--decoder name=value`` and an ablation's ``decoder.*`` axes become decoder settings.  An
+    unknown name is a ``ValueError`` listing the valid ones."""
+    names = {f.name for f in dataclasses.fields(params)}
+    unknown = sorted(set(changes) - names - {"without"})
+    if unknown:
+        raise ValueError(f"unknown decoder setting(s) {unknown}; valid: {sorted(names | {'without'})}")
+    fields = {
+        k: tuple(v) if isinstance(v, list) and isinstance(getattr(params, k), tuple) else v
+        for k, v in changes.items()
+        if k != "without"
+    }
+    return without_checks(dataclasses.replace(params, **fields), changes.get("without", "none"))
 
 
 @dataclass(frozen=True)

@@ -101,19 +101,15 @@ def scene_for(params: dict) -> SceneSpec:
 
 
 def decoder_for(params: dict) -> DecoderParams:
-    from simbench.decode import DecoderParams, without_checks
+    from simbench.decode import DecoderParams, with_changes
     from simbench.pattern import PatternSpec, parse_sequence
 
     fields = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("decoder.")}
-    without = fields.pop("without", "none")
-    for k in ("depth_range_m", "stripe_step_ratio"):
-        if k in fields and isinstance(fields[k], list):
-            fields[k] = tuple(fields[k])
     kinds = {"pattern.period_px": int, "pattern.order": int, "pattern.channels": str}
     pattern = {k.split(".", 1)[1]: kinds[k](v) for k, v in params.items() if k in kinds}
     if "pattern.sequence" in params:
         pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
-    return without_checks(DecoderParams(pattern=PatternSpec(**pattern), **fields), without)
+    return with_changes(DecoderParams(pattern=PatternSpec(**pattern)), fields)
 
 
 def run_config_for(params: dict, *, seed: int, sensor: SensorModel, decoder: DecoderParams) -> RunConfig:
