@@ -257,7 +257,7 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
         raise ValueError("budget broke")
 
     # budget (the longer) is this process's; flatness runs on the spawned worker
-    monkeypatch.setitem(module.TARGETS, "budget", broken)
+    monkeypatch.setitem(module.TARGETS, "budget", dataclasses.replace(module.TARGETS["budget"], run=broken))
     with pytest.raises(ValueError, match="budget broke"):
         run(["budget", "flatness"], "broken", workers=2)
 

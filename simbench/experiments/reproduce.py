@@ -15,6 +15,7 @@ import logging
 import json
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from simbench import validate
@@ -33,6 +34,7 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "TARGETS",
+    "Target",
     "ALL_TARGETS",
     "check_targets",
     "reproduce",
@@ -42,23 +44,36 @@ __all__ = [
     "write_thresholds",
 ]
 
-TARGETS: dict[str, Callable[[Session], dict]] = {
-    "table1": run_table1,
-    "table3": run_table3,
-    "fig9": run_fig9,
-    "figures": run_figures,
-    "budget": run_budget,
-    "render_noise": run_render_noise,
-    "flatness": run_flatness,
-    "hard_scenes": run_hard_scenes,
+
+@dataclass(frozen=True)
+class Target:
+    """One target of ``simbench reproduce``: the function that makes its files, whether ``all``
+    runs it, and its place in the order the workers take targets in (``rank``: the longest
+    first - warm quick run on 2 cores: fig9 7.0 s, table1 3.2 s, table3 2.1 s, figures 1.7 s,
+    budget 1.0 s, the others 0.5 s; hard_scenes by its renders - so that no long target starts
+    last)."""
+
+    run: Callable[[Session], dict]
+    in_all: bool
+    rank: int
+
+
+# hard_scenes is not in ``all``: at full resolution its 19 scenes, each with the 12-exposure
+# phase-shifting reference, take ~2 h of rendering on 2 cores (measured: ~7 min a scene), more
+# than the rest together; its quick form runs in CI (`make quick`: `reproduce all hard_scenes --quick`).
+TARGETS: dict[str, Target] = {
+    "table1": Target(run_table1, True, 1),
+    "table3": Target(run_table3, True, 3),
+    "fig9": Target(run_fig9, True, 0),
+    "figures": Target(run_figures, True, 4),
+    "budget": Target(run_budget, True, 5),
+    "render_noise": Target(run_render_noise, True, 6),
+    "flatness": Target(run_flatness, True, 7),
+    "hard_scenes": Target(run_hard_scenes, False, 2),
 }
 
-
-# what ``all`` runs: the paper's tables and figures and the studies beside them.  hard_scenes is
-# named on its own: at full resolution its 19 scenes, each with the 12-exposure phase-shifting
-# reference, take ~2 h of rendering on 2 cores (measured: ~7 min a scene), more than the rest
-# together; its quick form runs in CI (`make quick`: `reproduce all hard_scenes --quick`).
-ALL_TARGETS = ("table1", "table3", "fig9", "figures", "budget", "render_noise", "flatness")
+# what ``all`` runs: the paper's tables and figures and the studies beside them
+ALL_TARGETS = tuple(name for name, target in TARGETS.items() if target.in_all)
 
 
 def _resolve(targets: list[str]) -> list[str]:
@@ -123,13 +138,8 @@ def reproduce(
 
 def _run_target(session: Session, name: str) -> dict:
     with session.timed(f"{name} done"):
-        return TARGETS[name](session.for_target())
+        return TARGETS[name].run(session.for_target())
 
-
-# The order targets are taken in by the workers: the longest first (warm quick run on 2 cores:
-# fig9 7.0 s, table1 3.2 s, table3 2.1 s, figures 1.7 s, budget 1.0 s, the others 0.5 s), so that
-# no long target starts last.
-_LONGEST_FIRST = ("fig9", "table1", "hard_scenes", "table3", "figures", "budget", "render_noise", "flatness")
 
 _worker_session: Session | None = None
 
@@ -175,7 +185,7 @@ def _run_in_workers(names: list[str], *, session: Session, workers: int, progres
 
     relay_thread = threading.Thread(target=relay, daemon=True)
     relay_thread.start()
-    todo = deque(sorted(names, key=lambda n: _LONGEST_FIRST.index(n) if n in _LONGEST_FIRST else len(_LONGEST_FIRST)))
+    todo = deque(sorted(names, key=lambda n: TARGETS[n].rank))
     done: dict[str, dict] = {}
     failed: list[BaseException] = []
     counts: list[tuple[int, int, dict]] = []  # the spawned workers' cache hits, misses and entries made, per target
