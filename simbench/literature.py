@@ -26,6 +26,7 @@ import numpy as np
 __all__ = [
     "PAPER_TABLE1",
     "PAPER_TABLE3",
+    "PAPER_COMPETITORS",
     "PAPER_PERIOD_PX",
     "PAPER_DEBRUIJN_ORDER",
     "PAPER_CAMERA",
@@ -52,6 +53,9 @@ PAPER_TABLE1 = {
 }
 # [Li2017] Table 3 (the real rig), mm: object -> (proposed method, Kinect, ToF camera)
 PAPER_TABLE3 = {"cube": (0.8366, 1.4665, 1.8699), "cuboid": (1.3345, 1.4599, 1.9811)}
+# the systems the paper compares its method with (Table 3's columns after its own, Fig. 9's
+# curves): registered system name -> (the paper's name for it, its column in PAPER_TABLE3)
+PAPER_COMPETITORS = {"kinect": ("Kinect", 1), "tof": ("ToF", 2)}
 # [Li2017] Sec. 3-4, Eq. 7-8: fringe period T (projector px) and the De Bruijn window length
 PAPER_PERIOD_PX = 21
 PAPER_DEBRUIJN_ORDER = 3

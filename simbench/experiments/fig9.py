@@ -30,14 +30,12 @@ from simbench.experiments.common import (
     write_table,
 )
 from simbench.io import atomic_write_bytes, atomic_write_text
-from simbench.literature import CHIABRANDO_TOF, nguyen_kinect_sigma_mm
+from simbench.literature import CHIABRANDO_TOF, PAPER_COMPETITORS, nguyen_kinect_sigma_mm
 
 __all__ = ["DEPTHS_M", "run_fig9", "fig9_plot"]
 
 DEPTHS_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.4)
 SENSORS = ("proposed", "kinect", "tof", "phase_shift")
-# the systems the paper compares with ("the proposed method's RMSE ... below"); the others are references
-PAPER_COMPETITORS = ("kinect", "tof")
 
 
 def sensor_label(name: str) -> str:

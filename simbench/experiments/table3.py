@@ -35,6 +35,7 @@ from simbench.experiments.common import (
 )
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import (
+    PAPER_COMPETITORS,  # system -> (the paper's name for it, its column in PAPER_TABLE3)
     PAPER_TABLE3,  # paper Table 3 (mm): object -> (proposed, Kinect, ToF)
 )
 from simbench.metrics import edge_band, points_from_depth
@@ -65,11 +66,9 @@ def front_face_mask(scene: SceneSpec, gt: GroundTruth, name: str, *, tol_m: floa
     return on_face & (gt.object_id == idx) & gt.lit
 
 
-COMPETITORS = ("kinect", "tof")
+COMPETITORS = tuple(PAPER_COMPETITORS)
 # beside the paper's columns: the multi-shot accuracy reference on the proposed projector and camera
 REFERENCE_SYSTEMS = ("phase_shift",)
-# the paper's competitor columns: system -> (short name, index into PAPER_TABLE3's tuples)
-PAPER_COMPETITORS = {"kinect": ("Kinect", 1), "tof": ("ToF", 2)}
 
 
 def _competitor_faces(session: Session, raw, systems) -> dict:
