@@ -69,6 +69,13 @@ def de_bruijn(order: int, *, alphabet: int = 2) -> np.ndarray:
     ----------
     .. [1] H. Fredricksen, "A survey of full length nonlinear shift register cycle algorithms",
        SIAM Review 24(2), 195-221, 1982.
+
+    Examples
+    --------
+    >>> de_bruijn(3)
+    array([0, 0, 0, 1, 0, 1, 1, 1], dtype=uint8)
+    >>> len(de_bruijn(4, alphabet=3))
+    81
     """
     if int(order) != order or order < 2:
         raise ValueError(f"De Bruijn order must be an integer >= 2, got {order!r}")
@@ -244,7 +251,18 @@ def code_sequence(sequence: Sequence[int] | None, *, order: int) -> np.ndarray:
 
 
 def phase_from_column(u: np.ndarray, *, period_px: float) -> np.ndarray:
-    """Unwrapped phase Phi(u) of the fringe at projector column ``u`` (OpenCV coordinates)."""
+    """Unwrapped phase Phi(u) of the fringe at projector column ``u`` (OpenCV coordinates).
+
+    Examples
+    --------
+    The phase runs from -pi at a stripe's left border to +pi at its right border (the border of
+    the first stripe is column -0.5, pixel centres at integers):
+
+    >>> phase_from_column(np.array([-0.5, 10.0, 20.5]), period_px=21)
+    array([-3.14159265,  0.        ,  3.14159265])
+    >>> column_from_phase(phase_from_column(np.array([7.25]), period_px=21), period_px=21)
+    array([7.25])
+    """
     return 2.0 * np.pi * (np.asarray(u, dtype=np.float64) + 0.5) / period_px - np.pi
 
 

@@ -201,6 +201,13 @@ def paint_reflectance(srgb8: Sequence[int]) -> tuple[float, float, float]:
     ``rho = rho_min + (rho_max - rho_min) * linear(srgb8 / 255)`` per channel, with the sRGB
     decoding curve (IEC 61966-2-1, :func:`linear_srgb8`) and the paint range above: pure red
     (255, 0, 0) becomes (0.80, 0.04, 0.04), not (1, 0, 0): no real paint is spectrally pure.
+
+    Examples
+    --------
+    >>> paint_reflectance((255, 0, 0))
+    (0.8, 0.04, 0.04)
+    >>> paint_reflectance((128, 128, 128))
+    (0.204054, 0.204054, 0.204054)
     """
     lin = _srgb_decode(srgb8)
     rho = PAINT_MIN_REFLECTANCE + (PAINT_MAX_REFLECTANCE - PAINT_MIN_REFLECTANCE) * lin

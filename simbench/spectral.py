@@ -365,7 +365,18 @@ def metal_ior(name: str) -> tuple[np.ndarray, np.ndarray]:
 def conductor_fresnel(n: np.ndarray | float, k: np.ndarray | float, cos_theta: np.ndarray | float) -> np.ndarray:
     """Unpolarised Fresnel reflectance of a conductor of complex index ``n + ik`` (from air)
     at incidence angle ``arccos(cos_theta)``: the mean of the s and p reflectances of the exact
-    complex Fresnel equations (Born & Wolf, Sec. 14.2)."""
+    complex Fresnel equations (Born & Wolf, Sec. 14.2).
+
+    Examples
+    --------
+    Glass (n = 1.5, k = 0) reflects 4 % at normal incidence; aluminium at 550 nm (n = 0.96,
+    k = 6.69) about 92 %:
+
+    >>> round(float(conductor_fresnel(1.5, 0.0, 1.0)), 4)
+    0.04
+    >>> round(float(conductor_fresnel(0.96, 6.69, 1.0)), 3)
+    0.921
+    """
     eta = np.asarray(n, dtype=np.complex128) + 1j * np.asarray(k, dtype=np.float64)
     c = np.asarray(cos_theta, dtype=np.float64)
     sin2 = 1.0 - c * c

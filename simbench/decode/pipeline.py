@@ -471,7 +471,14 @@ def with_changes(params: DecoderParams, changes: Mapping[str, object]) -> Decode
     tuple, as TOML and JSON give them) and, under the key ``without``, the paper decoder's added
     checks switched off (:func:`without_checks`): the one place where the command line's
     ``--decoder name=value`` and an ablation's ``decoder.*`` axes become decoder settings.  An
-    unknown name is a ``ValueError`` listing the valid ones."""
+    unknown name is a ``ValueError`` listing the valid ones.
+
+    Examples
+    --------
+    >>> p = with_changes(DecoderParams(), {"depth_range_m": [0.5, 2.0], "phase_method": "ftp"})
+    >>> p.depth_range_m, p.phase_method
+    ((0.5, 2.0), 'ftp')
+    """
     names = {f.name for f in dataclasses.fields(params)}
     unknown = sorted(set(changes) - names - {"without"})
     if unknown:
