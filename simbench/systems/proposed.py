@@ -454,39 +454,9 @@ class Acquisition:
     calibration: dict = field(default_factory=dict)
 
 
-def acquire(
-    scene: SceneSpec,
-    *,
-    pattern: PatternSpec,
-    sensor: SensorModel,
-    spp: int,
-    seed: int,
-    max_depth: int = 6,
-    sampler: str = "independent",
-    with_reference: bool = True,
-    with_calibration: bool = False,
-    cache: RenderCache | None = None,
-) -> Acquisition:
-    """Render and record a scene (and its reference plane) lit by the pattern: the proposed
-    sensor's recording (:class:`ColourFringeSystem`) through the one acquisition path
-    (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the labels
-    ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).
-
-    A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
-    Renders and ground truth come from ``cache`` when it holds them.
-    """
-    return acquire_with_calibration(
-        scene,
-        pattern=pattern,
-        sensor=sensor,
-        spp=spp,
-        seed=seed,
-        max_depth=max_depth,
-        sampler=sampler,
-        with_reference=with_reference,
-        with_calibration=with_calibration,
-        cache=cache,
-    )[0]
+def acquire(scene: SceneSpec, **options: object) -> Acquisition:
+    """:func:`acquire_with_calibration`'s acquisition alone (the same keyword options)."""
+    return acquire_with_calibration(scene, **options)[0]
 
 
 def acquire_with_calibration(
@@ -502,8 +472,16 @@ def acquire_with_calibration(
     with_calibration: bool = False,
     cache: RenderCache | None = None,
 ) -> tuple[Acquisition, ReferenceCalibration | None]:
-    """:func:`acquire`, and the reference calibration it recorded (None without
-    ``with_reference``) for :meth:`ColourFringeSystem.decode`."""
+    """Render and record a scene (and its reference plane) lit by the pattern: the proposed
+    sensor's recording (:class:`ColourFringeSystem`) through the one acquisition path
+    (:func:`simbench.systems.acquire`), seeds derived from ``seed`` and the labels
+    ``capture/<scene name>`` and the reference's (:mod:`simbench.seeds`).  Returns the
+    acquisition and the reference calibration it recorded (None without ``with_reference``), which
+    :meth:`ColourFringeSystem.decode` decodes with.
+
+    A Mitsuba variant must already be selected (:func:`simbench.variant.select_variant`).
+    Renders and ground truth come from ``cache`` when it holds them.
+    """
     import mitsuba as mi
 
     from simbench.decode import DecoderParams
