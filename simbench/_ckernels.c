@@ -3,7 +3,7 @@
  * loops (wrappers in simbench/decode/_kernels.py), the projector-column triangulation
  * (simbench/rig.py) and the plane fit's centred points (simbench/metrics.py).  The lens model's
  * remap grids are in simbench/_lens.c, built into the same library: recordings depend on them
- * alone (simbench.simulate hashes that file), so an edit here re-records nothing.
+ * alone (simbench.sim.keys hashes that file), so an edit here re-records nothing.
  *
  * Every loop evaluates the same IEEE operations, in the same order and precision, as the numpy
  * expression it replaces (tests/numpy_reference.py; tests/test_kernels.py compares the bits).

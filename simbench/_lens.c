@@ -5,7 +5,7 @@
  * (every loop gives the bits of the numpy expression it replaces; tests/test_optics.py compares
  * them).
  *
- * A file of its own because recordings and projector drives depend on it: simbench.simulate puts
+ * A file of its own because recordings and projector drives depend on it: simbench.sim.keys puts
  * this file's digest, and not the decoder's loops, in every recording's and drive's cache key.
  */
 #include <float.h>

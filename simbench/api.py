@@ -7,11 +7,11 @@ through the system's sensor), decode its depth, score it::
     depth = simbench.depth(rec)
     simbench.score(depth, rec)  # {'mae_mm': ..., 'completeness': ..., ...}
 
-(``simbench.render`` and ``simbench.decode`` name the renderer's module and the decoder's
+(``simbench.sim.render`` and ``simbench.decode`` name the renderer's module and the decoder's
 package, hence ``record`` and ``depth``.)
 
 With the command line's defaults (``simbench render``: seed :data:`simbench.seeds.DEFAULT_SEED`,
-:data:`simbench.mitsuba_dict.DEFAULT_SPP` samples of the ``multijitter`` sampler, the render
+:data:`simbench.sim.mitsuba_dict.DEFAULT_SPP` samples of the ``multijitter`` sampler, the render
 cache in ``.cache/simbench``), so ``record`` gives the images ``simbench render`` writes for the
 same scene, system, sensor and seed; ``depth`` decodes as ``simbench decode`` does (the proposed
 sensor: the paper's decoder against the reference plane, Sec. 5.4), and ``score`` gives
@@ -33,7 +33,7 @@ from simbench.cache import RenderCache
 if TYPE_CHECKING:
     from simbench.decode import DecoderParams
     from simbench.pattern import PatternSpec
-    from simbench.scene import SceneSpec
+    from simbench.sim.scene import SceneSpec
     from simbench.systems import Recording, SystemDepth
 
 __all__ = ["Recorded", "record", "depth", "score", "DEFAULT_CACHE"]
@@ -65,7 +65,7 @@ class Recorded:
 
     @property
     def gt(self) -> Any:
-        """Ground truth at the system's pixels (:class:`simbench.truth.GroundTruth`)."""
+        """Ground truth at the system's pixels (:class:`simbench.sim.truth.GroundTruth`)."""
         return self.recording.gt
 
     @property
@@ -98,7 +98,7 @@ def record(
 ) -> Recorded:
     """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
     ``system`` (:func:`simbench.systems.system_names`), the proposed one through the sensor model
-    ``sensor`` (a preset of :func:`simbench.device.get_sensor` or a TOML file).
+    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor` or a TOML file).
 
     ``calibration_frames``: the proposed sensor also records the reference plane under black and
     each primary, which the colour-robust decoder needs.  ``pattern``: what the proposed sensor
@@ -114,9 +114,9 @@ def record(
     ((960, 1280, 3), dtype('uint8'))
     """
     from simbench.decode import DecoderParams
-    from simbench.device import get_sensor
-    from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
-    from simbench.scene import load_scene
+    from simbench.sim.sensor import get_sensor
+    from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+    from simbench.sim.scene import load_scene
     from simbench.seeds import DEFAULT_SEED, SeedLog
     from simbench.systems import RenderSettings, SystemOptions, acquire, get_system
 
@@ -194,7 +194,7 @@ def depth(
     """
     from simbench.decode import DecoderParams, robust_params
     from simbench.decode.pipeline import apply_min_confidence
-    from simbench.device import get_sensor
+    from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemDepth, SystemOptions, get_system
 
     rec = recorded.recording

@@ -107,7 +107,7 @@ def _human_bytes(n: float) -> str:
 
 def _add_render_options(s, *, quick_spp: int | None = None) -> None:
     """--spp and --sampler, one definition for every subcommand that renders."""
-    from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
+    from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, SAMPLERS
 
     quick = f", {quick_spp} with --quick" if quick_spp else ""
     s.add_argument(
@@ -138,7 +138,7 @@ def _cache_of(args):
 
 def _render_settings(args) -> tuple[int, str]:
     """(spp, sampler) of the parsed options, checked together before anything renders."""
-    from simbench.mitsuba_dict import DEFAULT_SPP, check_sampler
+    from simbench.sim.mitsuba_dict import DEFAULT_SPP, check_sampler
 
     spp = args.spp if args.spp is not None else DEFAULT_SPP
     check_sampler(args.sampler, spp)
@@ -170,7 +170,7 @@ def _distortion_models() -> list[str]:
 
 
 def _samplers() -> tuple[str, ...]:
-    from simbench.mitsuba_dict import SAMPLERS
+    from simbench.sim.mitsuba_dict import SAMPLERS
 
     return SAMPLERS
 
@@ -232,8 +232,8 @@ def _cmd_render(args) -> int:
     from simbench import api
     from simbench.decode import DecoderParams
     from simbench.io import check_output_directory
-    from simbench.scene import load_scene
-    from simbench.device import get_sensor
+    from simbench.sim.scene import load_scene
+    from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemOptions, get_system, recording_manifest, system_names
 
     if args.system not in system_names():  # an unknown name fails before anything else
@@ -336,9 +336,9 @@ def _z0_for(reference: Path, z0: float | None) -> float:
 def _cmd_calibrate(args) -> int:
     from simbench.calibration import calibrate_rig, get_target, true_rig
     from simbench.calibration.report import write_calibration
-    from simbench.device import get_sensor
+    from simbench.sim.sensor import get_sensor
     from simbench.io import check_output_directory
-    from simbench.mitsuba_dict import RenderSettings, check_sampler
+    from simbench.sim.mitsuba_dict import RenderSettings, check_sampler
     from simbench.rig import get_rig
     from simbench.variant import select_variant
 
@@ -940,7 +940,7 @@ def _cmd_bench(args) -> int:
 
 def _cmd_reproduce(args) -> int:
     from simbench.experiments.common import RunConfig
-    from simbench.device import get_sensor
+    from simbench.sim.sensor import get_sensor
     from simbench.experiments.reproduce import (
         check_targets,
         check_threshold_names,

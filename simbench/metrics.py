@@ -22,7 +22,7 @@ from simbench.pattern import PatternSpec, check_channels
 from simbench.rig import Intrinsics, pixel_rays
 
 if TYPE_CHECKING:
-    from simbench.truth import GroundTruth
+    from simbench.sim.truth import GroundTruth
 
 __all__ = [
     "edge_band",
@@ -331,7 +331,7 @@ def score(
     Parameters
     ----------
     depth_m : ndarray, shape (H, W), float32 metres, NaN = invalid
-    gt : :class:`simbench.truth.GroundTruth` at the same pixels (``depth_m``, ``lit``,
+    gt : :class:`simbench.sim.truth.GroundTruth` at the same pixels (``depth_m``, ``lit``,
         ``object_id``, ``column_px``)
     camera : the camera of the depth map (for the plane fit)
     region : ndarray, shape (H, W), bool, optional

@@ -517,3 +517,24 @@ def projector_column_at_depth(
     pts = rays * np.asarray(depth_m, dtype=np.float64)[..., None]
     u, _, _ = project_to_projector(pts, rig)
     return u
+
+
+def register_depth(depth_m: np.ndarray, *, source: Intrinsics, target: Intrinsics) -> np.ndarray:
+    """Resample a depth map from camera ``source`` onto camera ``target``'s pixel grid, for two
+    cameras sharing their centre and axes (nearest neighbour: depth is not interpolated across
+    edges).  Pixels of ``target`` outside ``source``'s view are NaN.
+
+    Returns
+    -------
+    ndarray, shape target.size_hw, float32
+    """
+    d = np.asarray(depth_m, dtype=np.float32)
+    if d.shape != source.size_hw:
+        raise ValueError(f"depth map shape {d.shape} does not match the source camera {source.size_hw}")
+    yy, xx = np.indices(target.size_hw, dtype=np.float64)
+    xs = np.rint((xx - target.cx_px) * source.focal_px / target.focal_px + source.cx_px).astype(np.int64)
+    ys = np.rint((yy - target.cy_px) * source.focal_px / target.focal_px + source.cy_px).astype(np.int64)
+    inside = (xs >= 0) & (xs < source.width_px) & (ys >= 0) & (ys < source.height_px)
+    out = np.full(target.size_hw, np.nan, np.float32)
+    out[inside] = d[ys[inside], xs[inside]]
+    return out

@@ -35,11 +35,11 @@ DEFAULT_SEED = 2017
 
 # numbered streams below one render seed (numbers are part of the results: never renumber)
 CHILD_STREAMS = {
-    # the Kinect's factory reference: its speckle and its camera noise (simbench.baselines.kinect)
+    # the Kinect's factory reference: its speckle and its camera noise (simbench.systems.kinect)
     "kinect_calibration_frames": 1,
-    "kinect_speckle": 2,  # the speckle frozen to a captured scene (simbench.baselines.kinect)
-    "ambient_render": 3,  # the ambient-only render beside the projector render (simbench.simulate)
-    "dlp_exposure_phase": 5,  # where the exposure starts in a video-mode DLP frame (simbench.simulate)
+    "kinect_speckle": 2,  # the speckle frozen to a captured scene (simbench.systems.kinect)
+    "ambient_render": 3,  # the ambient-only render beside the projector render (simbench.sim.capture)
+    "dlp_exposure_phase": 5,  # where the exposure starts in a video-mode DLP frame (simbench.sim.drive)
 }
 
 # the numbered frames of a multi-shot recording (a 3-word entropy: never equal to a child stream)

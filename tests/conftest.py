@@ -21,8 +21,8 @@ def variant() -> str:
 def acquisitions(variant):
     """Full-resolution, 16 spp, noisy acquisitions of the pipeline scenes (rendered once)."""
     from simbench.pattern import PatternSpec
-    from simbench.scene import load_scene
-    from simbench.device import get_sensor
+    from simbench.sim.scene import load_scene
+    from simbench.sim.sensor import get_sensor
     from simbench.systems.proposed import acquire
 
     cache: dict = {}

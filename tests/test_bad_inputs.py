@@ -59,7 +59,7 @@ def _rig_text(**changes) -> str:
 def _tiny_images() -> tuple[np.ndarray, np.ndarray]:
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
     from simbench.rig import rig_from_dict
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.sim.synthetic import synthetic_plane_capture
     import tomllib
 
     rig = rig_from_dict(tomllib.loads(TINY_RIG))
@@ -251,7 +251,7 @@ for cid, body, msg in [
         "scale",
     ),
     ("duplicate-names", PLANE + PLANE, "unique"),
-    # issue 33: values that validated and rendered nothing (exit 0); bounds in simbench.scene
+    # issue 33: values that validated and rendered nothing (exit 0); bounds in simbench.sim.scene
     ("center-1e308", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 1e308]"), "center_m"),
     ("center-beyond-100m", PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 150.0]"), "center_m"),
     ("sphere-radius-1e30", '[[object]]\ntype = "sphere"\nradius_m = 1e30\n', "radius_m"),
@@ -380,7 +380,7 @@ for cid, text, msg in [
     ("dark-noise-negative", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = -1.0"), "dark_noise_e"),
     ("dark-noise-inf", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = inf"), "dark_noise_e"),
     ("bits-9", _sensor(PAPER, "bits = 8", "bits = 9"), "bits"),
-    # issue 33: validated and made every capture 255 (exit 0); bounds argued in simbench.device
+    # issue 33: validated and made every capture 255 (exit 0); bounds argued in simbench.sim.sensor
     ("offset-1e30", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 1e30"), "offset_dn"),
     ("offset-above-half-range", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 200.0"), "offset_dn"),
     ("dark-current-1e30", _sensor(PAPER, "dark_current_e_s = 0.0", "dark_current_e_s = 1e30"), "dark_current_e_s"),

@@ -1,5 +1,5 @@
-"""The simulated competitors (simbench.baselines): Kinect-v1-like speckle structured light and
-SR4000-like time of flight.  Fast tests run the decoders on numpy-made frames; the slow ones
+"""The simulated competitors (simbench.systems.kinect, simbench.systems.tof): Kinect-v1-like speckle
+structured light and SR4000-like time of flight.  Fast tests run the decoders on numpy-made frames; the slow ones
 render with Mitsuba and hold the issue's validation checks against published measurements."""
 
 from __future__ import annotations
@@ -9,12 +9,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from simbench import baselines
-from simbench.baselines import kinect, tof
+from simbench.systems import kinect, tof
 from simbench.experiments.bench import competitor_inputs
 from simbench.literature import nguyen_kinect_sigma_mm
-from simbench.rig import Intrinsics
-from simbench.photometry import LIGHT_M_S
+from simbench.rig import Intrinsics, register_depth
+from simbench.sim.photometry import LIGHT_M_S
 
 from .conftest import SCENES
 
@@ -187,12 +186,10 @@ def test_tof_field_of_view_and_range():
 # ------------------------------------------------------------------------------------ both
 
 
-def test_get_device_lists_valid_names_and_parameters():
-    with pytest.raises(ValueError, match="valid: \\['kinect', 'tof'\\]"):
-        baselines.get_device("kinect2")
-    with pytest.raises(ValueError, match="unknown tof parameter"):
-        baselines.get_device("tof", modulation_mhz=20)
-    assert baselines.get_device("tof", modulation_hz=20e6).unambiguous_range_m == pytest.approx(7.49, abs=0.01)
+def test_tof_unambiguous_range_is_half_the_modulation_wavelength():
+    # c / 2f: 7.49 m at 20 MHz, 5.0 m at the SR4000's 30 MHz (its datasheet's calibrated range)
+    assert tof.ToFModel(modulation_hz=30e6).unambiguous_range_m == pytest.approx(5.0, abs=0.01)
+    assert tof.ToFModel(modulation_hz=20e6).unambiguous_range_m == pytest.approx(7.49, abs=0.01)
 
 
 def test_register_depth_resamples_between_cameras_sharing_a_centre():
@@ -200,15 +197,15 @@ def test_register_depth_resamples_between_cameras_sharing_a_centre():
     dst = Intrinsics.centred(640, 480, 571.0)
     yy, xx = np.indices(src.size_hw)
     depth = (1.0 + 0.001 * xx).astype(np.float32)  # depth grows along x
-    out = baselines.register_depth(depth, source=src, target=dst)
+    out = register_depth(depth, source=src, target=dst)
     assert out.shape == dst.size_hw
     # the centre maps to the centre; the target is wider than the source: NaN outside
     assert out[240, 320] == pytest.approx(depth[72, 88], abs=0.0011)
     assert np.isnan(out).any() or dst.fov_x_deg <= src.fov_x_deg
-    same = baselines.register_depth(depth, source=src, target=src)
+    same = register_depth(depth, source=src, target=src)
     assert np.array_equal(same, depth)
     with pytest.raises(ValueError, match="does not match"):
-        baselines.register_depth(depth[:10], source=src, target=dst)
+        register_depth(depth[:10], source=src, target=dst)
 
 
 @pytest.mark.parametrize("device", ["kinect", "tof"])
@@ -239,8 +236,8 @@ def test_kinect_plane_error_within_2x_of_nguyen_2012(variant):
     """The competitor issue's check: simulated plane RMSE at 0.9-1.4 m within 2x of the real
     Kinect's axial noise sigma_z = 1.2 + 1.9 (z - 0.4)^2 mm (Nguyen, Izadi & Lovell 2012)."""
     from simbench.metrics import depth_errors
-    from simbench.scene import load_scene
-    from simbench.simulate import cached_ground_truth
+    from simbench.sim.scene import load_scene
+    from simbench.sim.capture import cached_ground_truth
 
     model = kinect.KinectModel()
     cal = kinect.calibrate(model, spp=16, seed=11)
@@ -260,7 +257,7 @@ def test_kinect_plane_error_within_2x_of_nguyen_2012(variant):
 def test_tof_wall_sigma_within_1_5x_of_chiabrando_2009(variant):
     """The competitor issue's check: per-pixel temporal sigma on a white wall at 1.3 m within
     1.5x of the SR4000's 4.0 mm (Chiabrando et al. 2009, 8.5 ms integration)."""
-    from simbench.scene import load_scene
+    from simbench.sim.scene import load_scene
 
     model = tof.ToFModel()
     scene = tof.device_scene(load_scene(SCENES / "plane_depth_130cm.toml"), model)
@@ -275,10 +272,10 @@ def test_tof_wall_sigma_within_1_5x_of_chiabrando_2009(variant):
 @pytest.mark.slow
 def test_tof_flying_pixels_at_the_depth_step(variant):
     """At the cube/cuboid/wall edges, footprint mixing puts pixels between the surfaces."""
-    from simbench.scene import load_scene
-    from simbench.simulate import cached_ground_truth
+    from simbench.sim.scene import load_scene
+    from simbench.sim.capture import cached_ground_truth
 
-    from simbench.scene import with_subsurface
+    from simbench.sim.scene import with_subsurface
 
     model = tof.ToFModel(noise=False)
     # opaque: a translucent face reads farther by its medium's delay (tested on its own)
@@ -339,7 +336,7 @@ def test_cli_system_render_decode_score(tmp_path, variant, device):
 def test_kinect_dot_drive_is_keyed_by_a_digest_kept_per_model(monkeypatch):
     """The dot projector's drive enters the render cache's key by its digest, made once per
     model and process: the digest of the drive itself, and a later lookup builds no drive."""
-    from simbench.baselines import kinect
+    from simbench.systems import kinect
     from simbench.cache import array_digest
 
     model = kinect.KinectModel()
@@ -358,8 +355,8 @@ def test_tof_reads_a_translucent_plane_farther_by_its_medium_delay(variant):
     mean over the bands, NIR as their mean): the decoded distance grows by its phase, c arg / 4 pi f."""
     import math
 
-    from simbench.scene import load_scene, with_subsurface
-    from simbench.subsurface import MEDIA, modulation_transfer
+    from simbench.sim.scene import load_scene, with_subsurface
+    from simbench.sim.subsurface import MEDIA, modulation_transfer
 
     model = tof.ToFModel(noise=False)
     scene = tof.device_scene(load_scene(SCENES / "white_plane.toml"), model)
@@ -379,7 +376,7 @@ def test_tof_reads_a_translucent_plane_farther_by_its_medium_delay(variant):
 def test_kinect_sees_a_translucent_plane_blurred(variant):
     """The Kinect's IR render passes through the scene's translucency: on a marble plane the
     dots spread, so the image's contrast drops while its mean (the reflected light) stays."""
-    from simbench.scene import load_scene, with_subsurface
+    from simbench.sim.scene import load_scene, with_subsurface
 
     model = kinect.KinectModel()
     scene = kinect.device_scene(load_scene(SCENES / "white_plane.toml"), model)

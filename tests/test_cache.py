@@ -1,13 +1,14 @@
 """The content-hash render cache."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from simbench.cache import RenderCache, array_digest
-from simbench.scene import scene_fingerprint
-from simbench.scene import scene_from_dict
+from simbench.sim.scene import scene_fingerprint
+from simbench.sim.scene import scene_from_dict
 
 from .conftest import SCENES
 
@@ -139,8 +140,8 @@ def test_decoder_change_does_not_rerender(tmp_path, variant, monkeypatch):
     """A second run with other decoder settings takes every render from the cache without even
     building a projector drive (the render keys' drive digests are cached by the drive's
     inputs), and the cached run's tables equal an uncached run's byte for byte."""
-    from simbench import simulate
     from simbench.decode import DecoderParams
+    from simbench.sim import drive
     from simbench.experiments.common import RunConfig
     from simbench.experiments.reproduce import reproduce
 
@@ -155,7 +156,7 @@ def test_decoder_change_does_not_rerender(tmp_path, variant, monkeypatch):
         raise AssertionError("a warm run built a projector drive")
 
     with monkeypatch.context() as m:
-        m.setattr(simulate, "_build_drive", no_drive)
+        m.setattr(drive, "_build_drive", no_drive)
         reproduce(
             ["table3"], config=other, out_dir=tmp_path / "b", cache_dir=tmp_path / "cache", progress=quiet, command="t"
         )
@@ -170,9 +171,10 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     single-primary drives (empty for a primary the drive leaves off); a second ProjectorDrive
     of the same inputs reads them from the cache without building the drive, and other inputs
     (another pattern, another exposure phase in video mode) are another entry."""
-    from simbench.device import get_sensor
+    from simbench.sim.sensor import get_sensor
     from simbench.pattern import calibration_frames
-    from simbench.simulate import ProjectorDrive, _mono, physical_scene, projector_drive_for
+    from simbench.sim.drive import ProjectorDrive, mono_drive, projector_drive_for
+    from simbench.sim.capture import physical_scene
     from simbench.experiments.common import Session, RunConfig
 
     sensor = get_sensor("paper")
@@ -184,7 +186,7 @@ def test_projector_drive_digests_match_the_drive_and_are_cached(tmp_path, varian
     array = projector_drive_for(scene, pattern, sensor)
     assert first.digests() == {
         "rgb": array_digest(array),
-        **{f"mono{p}": array_digest(_mono(array, p)) for p in range(3)},
+        **{f"mono{p}": array_digest(mono_drive(array, p)) for p in range(3)},
     }
     second = ProjectorDrive(scene, pattern, sensor, cache=cache)
     assert second.digests() == first.digests() and second._array is None
@@ -205,9 +207,10 @@ def test_drives_of_kept_patterns_are_keyed_by_their_kept_digests(tmp_path, monke
     and so has a drive of a DriveImage, which makes its pattern only when the drive is built.
     The phase-shift frames' digests are also kept in the render cache: a process that finds
     them there never makes the frames."""
-    from simbench.device import get_sensor
-    from simbench.scene import load_scene
-    from simbench.simulate import DriveImage, ProjectorDrive, physical_scene
+    from simbench.sim.sensor import get_sensor
+    from simbench.sim.scene import load_scene
+    from simbench.sim.drive import DriveImage, ProjectorDrive
+    from simbench.sim.capture import physical_scene
     from simbench.systems import phase_shift, proposed
     from simbench.systems.phase_shift import PhaseShiftSystem
 
@@ -243,12 +246,13 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     camera noise (renders deleted, the camera model and the digests broken); another noise seed,
     sensor setting, reference depth, pattern or render seed is another recording; a Generator is
     recorded afresh, never cached."""
-    from simbench import simulate
-    from simbench.device import get_sensor
-    from simbench.mitsuba_dict import RenderSettings
+    from simbench.sim import capture
+    from simbench.sim.sensor import get_sensor
+    from simbench.sim.mitsuba_dict import RenderSettings
     from simbench.rig import scale_camera
-    from simbench.scene import load_scene
-    from simbench.simulate import ProjectorDrive, physical_scene, record, record_channels, render_channels
+    from simbench.sim.scene import load_scene
+    from simbench.sim.drive import ProjectorDrive
+    from simbench.sim.capture import physical_scene, record, record_channels, render_channels
     from simbench.systems.proposed import pattern_u8
     from simbench.pattern import PatternSpec
 
@@ -284,7 +288,7 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
         raise AssertionError("a cached recording was recorded again")
 
     with monkeypatch.context() as m:
-        m.setattr(simulate, "emva_camera", broken)
+        m.setattr(capture, "emva_camera", broken)
         m.setattr(ProjectorDrive, "digests", broken)  # keyed by the drive's inputs: no digest read
         again = recordings()
     for a, b in zip(again, first):
@@ -305,15 +309,16 @@ def test_recordings_are_cached_with_the_bits_of_a_fresh_recording(tmp_path, vari
     assert len(list((tmp_path / "cache").glob("recording-*.npz"))) == 8
 
 
-@pytest.mark.parametrize("key", ["_recording_code_digest", "_drive_code_digest"])
-def test_recording_and_drive_keys_hold_the_lens_loops_and_not_the_decoders(key, tmp_path, monkeypatch):
-    """A recording's and a projector drive's code digests change with the lens model's C source
-    (simbench/_lens.c) and not with the decoder's (simbench/_ckernels.c), so an edit of a decoder
-    loop re-records nothing; the loops they call (the lens maps, the defocus blur's levels) are
-    defined in the hashed file, and only there (the projector model's too: drives depend on them)."""
+def test_simulator_code_digest_holds_the_lens_loops_and_not_the_decoders(tmp_path, monkeypatch):
+    """The simulator's code digest (part of every recording's and projector drive's key) changes
+    with the lens model's C source (simbench/_lens.c) and with any simulator module, and not
+    with the decoder's C source (simbench/_ckernels.c), so an edit of a decoder loop re-records
+    nothing; the loops they call (the lens maps, the defocus blur's levels) are defined in the
+    hashed file, and only there (the projector model's too: drives depend on them)."""
     import re
 
-    from simbench import native, optics, projector, simulate
+    from simbench import native, optics
+    from simbench.sim import keys, projector
 
     lens, kernels = native.LENS_SOURCE.read_text(), native.SOURCE.read_text()
     for name in [*optics._BROWN, *optics._BLUR, *projector._LUT, *projector._DMD]:
@@ -321,8 +326,8 @@ def test_recording_and_drive_keys_hold_the_lens_loops_and_not_the_decoders(key, 
         assert defined.search(lens) and not defined.search(kernels), name
 
     def digest():
-        getattr(simulate, key).cache_clear()
-        return getattr(simulate, key)()
+        keys.sim_code_digest.cache_clear()
+        return keys.sim_code_digest()
 
     base = digest()
     for attr in ("SOURCE", "LENS_SOURCE"):
@@ -332,6 +337,15 @@ def test_recording_and_drive_keys_hold_the_lens_loops_and_not_the_decoders(key, 
             m.setattr(native, attr, edited)
             changed = digest() != base
         assert changed == (attr == "LENS_SOURCE"), attr
+    # a simulator module: every file of simbench/sim is hashed (no hand-kept list)
+    sim_dir = Path(keys.__file__).parent
+    copy = tmp_path / "sim"
+    copy.mkdir()
+    for f in sim_dir.glob("*.py"):
+        (copy / f.name).write_bytes(f.read_bytes() + (b"\n# edited\n" if f.name == "camera.py" else b""))
+    with monkeypatch.context() as m:
+        m.setattr(keys, "__file__", str(copy / "keys.py"))
+        assert digest() != base
     assert digest() == base
 
 
@@ -474,7 +488,7 @@ def test_samples_per_pass_keep_every_pixel_in_one_dr_jit_work_unit(variant):
     SIMD packet, the unit's granularity on a small one), and the passes make up the count;
     a power of two on a full-resolution render stays one pass (its images, and cache keys,
     unchanged)."""
-    from simbench.mitsuba_dict import pass_settings, samples_per_pass
+    from simbench.sim.mitsuba_dict import pass_settings, samples_per_pass
 
     full, small = 1280 * 960, 160 * 120
     for spp in (1, 2, 3, 4, 9, 16, 25, 36, 49, 64, 100, 256):
@@ -497,7 +511,7 @@ def test_film_settings_mark_the_films_dr_jit_added_into_by_expansion(variant):
     import drjit as dr
     import mitsuba as mi
 
-    from simbench.mitsuba_dict import FILM_CHANNELS, atomic_film_adds, film_settings
+    from simbench.sim.mitsuba_dict import FILM_CHANNELS, atomic_film_adds, film_settings
 
     film = {"type": "hdrfilm", "width": 8, "height": 4, "rfilter": {"type": "box"}, "pixel_format": "rgb"}
     scene = mi.load_dict({"type": "scene", "sensor": {"type": "perspective", "film": film}})

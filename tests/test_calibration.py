@@ -89,7 +89,7 @@ def test_target_round_trips_and_unknown_names_fail(tmp_path):
 
 
 def test_target_texture_and_scene_object():
-    from simbench.scene import scene_from_dict, target_texture
+    from simbench.sim.scene import scene_from_dict, target_texture
 
     tex = target_texture((3, 2), 1, paper_rgb=(0.8,) * 3, ink_rgb=(0.04,) * 3)
     assert tex.shape == (4, 5, 3)
@@ -104,8 +104,8 @@ def test_target_texture_and_scene_object():
 
 def test_crosstalk_maps_the_ink_like_a_material():
     """The paper sensor's crosstalk path sees the ink through the camera's channels too."""
-    from simbench.scene import scene_from_dict
-    from simbench.simulate import _primary_scene
+    from simbench.sim.scene import scene_from_dict
+    from simbench.sim.capture import _primary_scene
 
     scene = scene_from_dict({"object": [TARGET.scene_object(center_m=(0, 0, 1), rotation_deg=(0, 0, 0))]})
     for p in range(3):
@@ -241,7 +241,7 @@ def test_processes_sharing_a_cache_share_the_poses(monkeypatch):
     then waits for the others; the views reach the solve in pose order whatever the order they
     were observed in, so the rig is the one a lone process finds."""
     import simbench.calibration.procedure as procedure
-    from simbench.mitsuba_dict import RenderSettings
+    from simbench.sim.mitsuba_dict import RenderSettings
 
     truth = paper_rig()
     exact = _exact_views(truth, 5)
@@ -296,8 +296,8 @@ def test_noise_free_calibration_recovers_the_true_rig(tmp_path, variant):
     12 poses): focal lengths within 0.1 %, principal points within 0.5 px, baseline within
     0.5 mm - with every view's corners found and decoded."""
     from simbench.calibration import calibrate_rig, true_rig
-    from simbench.device import get_sensor
-    from simbench.mitsuba_dict import RenderSettings
+    from simbench.sim.sensor import get_sensor
+    from simbench.sim.mitsuba_dict import RenderSettings
 
     sensor = get_sensor("ideal")
     render = RenderSettings(spp=1, sampler="multijitter", max_depth=2, cache=None)

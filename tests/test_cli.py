@@ -5,7 +5,7 @@ import pytest
 
 from simbench.cli import main
 from simbench.io import load_image
-from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
 from .conftest import SCENES
 
@@ -127,9 +127,9 @@ def _synthetic_recording(tmp_path):
 
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
-    from simbench.projector import transfer_curve
+    from simbench.sim.projector import transfer_curve
     from simbench.rig import paper_rig, save_rig
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.sim.synthetic import synthetic_plane_capture
 
     rig = paper_rig()
     drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")

@@ -17,8 +17,8 @@ from simbench.decode.debruijn import (
 )
 from simbench.pattern import PatternSpec, de_bruijn, fringe_pattern, quantize, window_positions
 from simbench.rig import paper_rig
-from simbench.projector import transfer_curve
-from simbench.synthetic import synthetic_plane_capture
+from simbench.sim.projector import transfer_curve
+from simbench.sim.synthetic import synthetic_plane_capture
 
 RIG = paper_rig()
 DRIVE = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")

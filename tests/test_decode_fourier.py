@@ -7,9 +7,9 @@ from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.decode.fourier import ftp_phase, ridge_frequencies, wfr_phase
 from simbench.decode.phase import gabor_phase, gaussian_kernel
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.projector import transfer_curve
+from simbench.sim.projector import transfer_curve
 from simbench.rig import paper_rig
-from simbench.synthetic import synthetic_plane_capture
+from simbench.sim.synthetic import synthetic_plane_capture
 
 RIG = paper_rig()
 DRIVE = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")

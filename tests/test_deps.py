@@ -36,7 +36,7 @@ def test_versions_import_nothing_and_survive_a_mocked_scipy():
         import json, sys
         from unittest import mock
         sys.modules["scipy"] = mock.MagicMock()   # what colour-science leaves behind
-        from simbench.simulate import versions
+        from simbench.sim.keys import versions
         v = versions()
         print(json.dumps({"v": v}))
         """
@@ -56,7 +56,7 @@ def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():
     code = _HIDE_SCIPY + textwrap.dedent(
         """
         import sys, types
-        from simbench import spectral
+        from simbench.sim import spectral
         try:
             spectral.camera_sensitivities()
         except ImportError as exc:
@@ -79,7 +79,7 @@ def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():
 def test_colour_then_the_decoder_in_a_fresh_process():
     """The order `simbench render` takes: colour's crosstalk first, then the decoder's kernels."""
     res = _run(
-        "from simbench import spectral; spectral.camera_sensitivities(); from simbench.decode import "
+        "from simbench.sim import spectral; spectral.camera_sensitivities(); from simbench.decode import "
         "_kernels; _kernels._library(); import scipy.ndimage; print('ok')"
     )
     assert res.returncode == 0, res.stderr

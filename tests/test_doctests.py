@@ -19,7 +19,13 @@ NUMPY_PRINT_DEFAULTS = {
     "floatmode": "maxprec",
     "legacy": False,
 }
-MODULES = ("simbench.pattern", "simbench.scene", "simbench.spectral", "simbench.decode.pipeline", "simbench.api")
+MODULES = (
+    "simbench.pattern",
+    "simbench.sim.scene",
+    "simbench.sim.spectral",
+    "simbench.decode.pipeline",
+    "simbench.api",
+)
 
 
 @pytest.mark.parametrize("name", MODULES)

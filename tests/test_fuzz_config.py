@@ -18,10 +18,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from simbench.decode import DecoderParams
-from simbench.device import get_sensor, sensor_from_dict, sensor_to_dict
+from simbench.sim.sensor import get_sensor, sensor_from_dict, sensor_to_dict
 from simbench.experiments.ablate import sweep_from_dict
 from simbench.rig import paper_rig, rig_from_dict, rig_to_dict
-from simbench.scene import scene_from_dict
+from simbench.sim.scene import scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG_ERRORS = (ValueError, FileNotFoundError)

@@ -40,8 +40,8 @@ def _truth(name: str):
     import dataclasses
 
     from simbench.rig import scale_camera
-    from simbench.scene import load_scene
-    from simbench.truth import ground_truth
+    from simbench.sim.scene import load_scene
+    from simbench.sim.truth import ground_truth
 
     scene = load_scene(SCENES / f"{name}.toml")
     return ground_truth(dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25)))

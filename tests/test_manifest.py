@@ -34,7 +34,7 @@ def _folder_with_pattern(d: Path, **pattern) -> Path:
     from simbench.io import save_json, save_npy, save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
     from simbench.rig import rig_from_dict
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.sim.synthetic import synthetic_plane_capture
     from simbench.systems.proposed import pattern_record
 
     rig = rig_from_dict(tomllib.loads(TINY_RIG))
@@ -131,7 +131,7 @@ def test_a_reference_of_another_rig_is_refused(tmp_path, capsys):
 def test_every_systems_folder_is_sealed(tmp_path):
     """A ToF folder had no manifest: a shifted taps.npy or a doubled modulation_hz decoded."""
     from simbench.systems.recording import read_device_info, write_device_recording
-    from simbench.baselines.tof import ToFModel
+    from simbench.systems.tof import ToFModel
 
     model = ToFModel()
     taps = np.arange(48, dtype=np.float32).reshape(4, 3, 4)
@@ -233,7 +233,7 @@ def _tiny_plane_png(path: Path, rig_text: str, z_m: float) -> None:
     from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
     from simbench.rig import rig_from_dict
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.sim.synthetic import synthetic_plane_capture
 
     rig = rig_from_dict(tomllib.loads(rig_text))
     drive = quantize(fringe_pattern(PatternSpec(size_hw=rig.projector.size_hw))).astype(np.float32) / 255
@@ -280,7 +280,7 @@ def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
     """Issue 33 audit: read noise makes dim taps negative (render scenes/sphere.toml --system tof);
     a check for non-negative taps refused every such folder."""
     from simbench.systems.recording import write_device_recording
-    from simbench.baselines.tof import ToFModel
+    from simbench.systems.tof import ToFModel
     from simbench.systems import get_system
 
     model = ToFModel()

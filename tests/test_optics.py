@@ -1,4 +1,4 @@
-"""Lens physics (simbench.optics, simbench.projector) and the decoder's undistortion."""
+"""Lens physics (simbench.optics, simbench.sim.projector) and the decoder's undistortion."""
 
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ from simbench.optics import (
     undistort_projector_columns,
 )
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.projector import defocus_pattern, dmd_layout, transfer_curve
+from simbench.sim.projector import defocus_pattern, dmd_layout, transfer_curve
 from simbench.rig import Intrinsics, paper_rig
-from simbench.synthetic import synthetic_plane_capture
+from simbench.sim.synthetic import synthetic_plane_capture
 
 DIST = (-0.08, 0.10, 0.001, -0.0005, 0.0)
 
@@ -191,7 +191,7 @@ def test_video_mode_bitplane_timing_against_its_model():
     """A free-running camera collects each bit-plane whole when its exposure is a whole number of
     frames (any phase), on average over the phase whatever its length, and by hand-computed
     shares in a simple case; a triggered camera (no weights) sees the linear transfer."""
-    from simbench.projector import video_bitplane_weights
+    from simbench.sim.projector import video_bitplane_weights
 
     for phase in (0.0, 0.37, 0.999):
         np.testing.assert_allclose(
@@ -290,7 +290,7 @@ def test_the_projector_model_gives_the_bits_of_its_numpy_form(settings):
     (in C) give the bits numpy gave on the whole image - for a real pattern size (the paper
     projector's, every code in every channel, odd and even heights) - so projector drives, and
     the render cache keys made from them, did not change when they moved to C."""
-    from simbench.projector import video_bitplane_weights
+    from simbench.sim.projector import video_bitplane_weights
 
     if settings.get("bitplane_weights") == "video":
         settings = {

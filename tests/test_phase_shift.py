@@ -38,9 +38,9 @@ def test_a_plane_decodes_to_its_true_column():
     """The synthetic plane at 1.1 m (6 x 6 rays per camera pixel, noise-free): 0.06 px RMS (the
     residual is the synthetic's sampling of the projector's pixels, not the method: 0.14 px
     with 2 x 2 rays), no order errors, every lit pixel decoded."""
-    from simbench.projector import transfer_curve
+    from simbench.sim.projector import transfer_curve
     from simbench.rig import paper_rig
-    from simbench.synthetic import synthetic_plane_capture
+    from simbench.sim.synthetic import synthetic_plane_capture
     from simbench.systems.phase_shift import PhaseShiftSystem
 
     drives = np.stack([transfer_curve(f, transfer="linear") for f in PhaseShiftSystem().frames_u8()])

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from simbench.device import get_sensor, with_effects
+from simbench.sim.sensor import get_sensor, with_effects
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.projector import transfer_curve
+from simbench.sim.projector import transfer_curve
 from simbench.rig import scale_camera
-from simbench.scene import load_scene
+from simbench.sim.scene import load_scene
 
 pytestmark = pytest.mark.slow
 
@@ -41,9 +41,9 @@ def _centre(img: np.ndarray, half: int = 20) -> np.ndarray:
 
 
 def _render(scene, drive, sensor, *, spp: int, seed: int, max_depth: int) -> np.ndarray:
-    """:func:`simbench.simulate.render_channels` with independent sampling and no cache."""
-    from simbench.mitsuba_dict import RenderSettings
-    from simbench.simulate import render_channels
+    """:func:`simbench.sim.capture.render_channels` with independent sampling and no cache."""
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.capture import render_channels
 
     return render_channels(
         scene, drive, sensor, seed=seed, render=RenderSettings(spp=spp, sampler="independent", max_depth=max_depth)
@@ -65,7 +65,7 @@ def test_inverse_square_falloff(variant):
 def test_ambient_light_at_the_stated_ratio(variant):
     """Ambient ratio r: on a surface at Z0 the ambient irradiance is r times the projector's
     white irradiance there (constant environment: E = pi L)."""
-    from simbench.simulate import physical_scene
+    from simbench.sim.capture import physical_scene
 
     sensor = dataclasses.replace(get_sensor("ideal"), ambient_ratio=0.1)
     scene = physical_scene(_plane(1.0), sensor)
@@ -85,8 +85,8 @@ def test_crosstalk_renders_match_the_spectral_integral(variant, rgb):
     each primary alone is int(S_c rho P_p) / int(S_c P_c) times the channel's own primary on
     a perfect white, within 1 % (box-filtered direct light on a plane has no render noise
     to speak of)."""
-    from simbench.photometry import electrons_per_radiance_s
-    from simbench.spectral import camera_sensitivities, projector_primaries, reflectance_spectrum
+    from simbench.sim.photometry import electrons_per_radiance_s
+    from simbench.sim.spectral import camera_sensitivities, projector_primaries, reflectance_spectrum
 
     sensor = with_effects(get_sensor("ideal"), get_sensor("paper"), ["crosstalk"])
     s, p, rho = camera_sensitivities(), projector_primaries(), reflectance_spectrum(rgb)
@@ -121,7 +121,7 @@ def test_camera_defocus_follows_the_thin_lens(variant):
     """A fringe on a plane at 1.4 m seen by a camera focused at 1.0 m through a wide aperture
     loses contrast by the blur disc's transfer function 2 J1(x) / x, x = pi c / T (c the blur
     circle, T the fringe period in camera pixels), within 5 %."""
-    from simbench.simulate import physical_scene
+    from simbench.sim.capture import physical_scene
 
     z = 1.4
     scene = _plane(z, scale=1.0)

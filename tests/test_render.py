@@ -7,12 +7,12 @@ import pytest
 
 from simbench.decode import DecoderParams, decode
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.truth import ground_truth
-from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, mitsuba_scene
-from simbench.render import render_radiance
+from simbench.sim.truth import ground_truth
+from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, mitsuba_scene
+from simbench.sim.render import render_radiance
 from simbench.rig import Intrinsics, Rig, scale_camera
-from simbench.scene import scene_from_dict
-from simbench.projector import transfer_curve
+from simbench.sim.scene import scene_from_dict
+from simbench.sim.projector import transfer_curve
 from tests.scoring import acquisition_scores
 
 pytestmark = pytest.mark.slow
@@ -176,14 +176,14 @@ def test_alternative_phase_methods_meet_the_pipeline_limits(acquisitions, method
 
 
 def test_formed_board_ground_truth_follows_its_form(variant):
-    """A bowed, rippled board renders (as a displaced grid mesh) where simbench.scene.board_form_m
+    """A bowed, rippled board renders (as a displaced grid mesh) where simbench.sim.scene.board_form_m
     puts it: the ground-truth depth at every pixel within 2 % of the ripple amplitude plus 1 um
     (the piecewise-flat grid: 1 - cos(pi / RIPPLE_CELLS) = 1.9 %), object ids intact."""
     import dataclasses
 
-    from simbench.truth import ground_truth
+    from simbench.sim.truth import ground_truth
     from simbench.rig import pixel_rays, scale_camera
-    from simbench.scene import board_form_m, scene_from_dict
+    from simbench.sim.scene import board_form_m, scene_from_dict
 
     form = {"bow_m_per_m": 0.002, "waviness_m": 3e-4, "waviness_phase_rad": 0.3}
     scene = scene_from_dict(

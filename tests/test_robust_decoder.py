@@ -10,14 +10,14 @@ import pytest
 from simbench.decode import DecoderParams, decode, decode_reference, robust_params
 from simbench.decode.color import albedo_edges, albedo_gain, mixing_matrix, normalize_channels, segment_mean, unmix
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.projector import transfer_curve
+from simbench.sim.projector import transfer_curve
 from simbench.rig import paper_rig, scale_camera
-from simbench.synthetic import synthetic_plane_capture
+from simbench.sim.synthetic import synthetic_plane_capture
 
 RIG = scale_camera(paper_rig(), 0.5)
 PATTERN = quantize(fringe_pattern(PatternSpec()))
 DRIVE = transfer_curve(PATTERN, transfer="linear")
-# a strong, asymmetric coupling of the order of the paper sensor model's (simbench/spectral.py:
+# a strong, asymmetric coupling of the order of the paper sensor model's (simbench/sim/spectral.py:
 # the blue primary reaches the green channel at 0.25 of its own)
 K = np.array([[1.0, 0.10, 0.05], [0.12, 1.0, 0.25], [0.01, 0.34, 1.0]])
 AMBIENT = np.float32(0.01)
@@ -87,7 +87,7 @@ def test_unmix_needs_the_calibration(calibration):
         DecoderParams(intensity_mode="weighted")
 
 
-# paint-like boards (simbench.scene.paint_reflectance of the paper's Table 1 colours) and a dark
+# paint-like boards (simbench.sim.scene.paint_reflectance of the paper's Table 1 colours) and a dark
 # grey board: each primary reflected at the board's reflectance for it
 BOARDS = {
     "red": (0.8, 0.04, 0.04),

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from simbench.scene import load_scene, scene_from_dict
+from simbench.sim.scene import load_scene, scene_from_dict
 
 from .conftest import SCENES
 
@@ -49,7 +49,7 @@ def test_scene_file_errors(tmp_path):
 
 
 def test_placement_is_seeded_bounded_and_leaves_other_objects():
-    from simbench.scene import Placement, place_objects, scene_from_dict
+    from simbench.sim.scene import Placement, place_objects, scene_from_dict
 
     scene = scene_from_dict(
         {
@@ -82,8 +82,8 @@ def test_placement_is_seeded_bounded_and_leaves_other_objects():
 
 
 def test_measured_spectrum_material():
-    from simbench.scene import scene_from_dict
-    from simbench.spectral import material_crosstalk, measured_linear_srgb
+    from simbench.sim.scene import scene_from_dict
+    from simbench.sim.spectral import material_crosstalk, measured_linear_srgb
 
     s = scene_from_dict({"object": [{"type": "plane", "size_m": [1, 1], "spectrum": "ColorChecker N Ohta/blue"}]})
     m = s.objects[0].material
@@ -111,7 +111,7 @@ def test_board_form_against_its_definition():
     """The bow sags by bow_m_per_m over a 1 m chord through the centre whatever the board's
     size, the board's mean height stays 0 (its center_m is its mean plane), and the ripple has
     its amplitude and period across x only."""
-    from simbench.scene import board_form_m
+    from simbench.sim.scene import board_form_m
 
     for size in ((2.0, 1.6), (0.4, 0.3)):
         cells = [(np.arange(n) + 0.5) / n * s - s / 2 for n, s in ((800, size[0]), (600, size[1]))]  # cell centres
@@ -152,8 +152,8 @@ def test_board_form_keys_are_validated(extra, match):
 def test_board_form_placement_keeps_the_poses_and_flat_boards_their_keys():
     """Formed boards sit in the same seeded poses as flat ones (the form is drawn after every
     placement); a flat board's parameters, and so its render-cache key, do not change."""
-    from simbench.scene import scene_fingerprint
-    from simbench.scene import Placement, place_objects
+    from simbench.sim.scene import scene_fingerprint
+    from simbench.sim.scene import Placement, place_objects
 
     scene = scene_from_dict(
         {
@@ -203,7 +203,7 @@ def test_placement_moves_spheres_and_meshes_too(tmp_path):
     """Every object kind can be placed (the ablations place every object of a scene): a mesh
     moves by its translation and tilts, a sphere moves in depth only; the draws of the objects
     after them do not depend on their kind."""
-    from simbench.scene import Placement, place_objects
+    from simbench.sim.scene import Placement, place_objects
 
     (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     scene = scene_from_dict(
@@ -301,7 +301,7 @@ def test_mesh_files_that_are_no_mesh(tmp_path):
 
 
 def test_mesh_size_bounds(tmp_path, monkeypatch):
-    import simbench.scene as scene_module
+    import simbench.sim.scene as scene_module
 
     monkeypatch.setattr(scene_module, "MESH_MAX_FACES", 1)
     scene_module.check_mesh_file.cache_clear()
@@ -350,7 +350,7 @@ def test_fuzzed_meshes_are_refused_cleanly_or_load(tmp_path_factory):
         corruption=corrupt,
     )
     def run(nv, data, corruption):
-        import simbench.scene as scene_module
+        import simbench.sim.scene as scene_module
 
         folder = tmp_path_factory.mktemp("mesh")
         vertices = [tuple(data.draw(coords) for _ in range(3)) for _ in range(nv)]

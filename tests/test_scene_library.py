@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from simbench.scene import (
+from simbench.sim.scene import (
     PAINT_MAX_REFLECTANCE,
     PAINT_MIN_REFLECTANCE,
     linear_srgb8,
@@ -70,7 +70,7 @@ def test_srgb8_and_plastic_reach_the_material():
 
 
 def test_plastic_becomes_roughplastic(variant):
-    from simbench.scene import object_to_mitsuba
+    from simbench.sim.scene import object_to_mitsuba
 
     s = scene_from_dict({"object": [{**PLANE, "rgb": [0.2, 0.3, 0.4], "material": "plastic", "roughness": 0.05}]})
     bsdf = object_to_mitsuba(s.objects[0])["bsdf"]["bsdf"]
@@ -99,8 +99,8 @@ def test_metal_bsdf_is_the_ggx_microfacet_model(variant, roughness, theta_deg):
     import drjit as dr
     import mitsuba as mi
 
-    from simbench.scene import object_to_mitsuba
-    from simbench.spectral import conductor_fresnel, metal_ior_rgb
+    from simbench.sim.scene import object_to_mitsuba
+    from simbench.sim.spectral import conductor_fresnel, metal_ior_rgb
 
     s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "copper", "roughness": roughness}]})
     bsdf = mi.load_dict(object_to_mitsuba(s.objects[0])["bsdf"])
@@ -126,8 +126,8 @@ def test_metal_bsdf_is_the_ggx_microfacet_model(variant, roughness, theta_deg):
 
 
 def test_per_primary_metal_keeps_its_band_and_its_cache_key():
-    from simbench.scene import scene_fingerprint
-    from simbench.simulate import _primary_scene
+    from simbench.sim.scene import scene_fingerprint
+    from simbench.sim.capture import _primary_scene
 
     s = scene_from_dict({"object": [{**PLANE, "material": "metal", "metal": "gold"}]})
     prim = [_primary_scene(s, p).objects[0].material for p in range(3)]
@@ -179,7 +179,7 @@ def test_meshes_are_regenerated_identically(tmp_path):
 
 
 def test_malformed_mesh_gives_one_clear_error(tmp_path):
-    """Caught when the scene is read (simbench.scene.check_mesh_file), before Mitsuba loads it."""
+    """Caught when the scene is read (simbench.sim.scene.check_mesh_file), before Mitsuba loads it."""
     (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n")
     with pytest.raises(ValueError, match=r"object\[0\] 'statue'.*broken.ply"):
         scene_from_dict(

@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 import pytest
 
-from simbench.scene import paint_reflectance
-from simbench.spectral import (
+from simbench.sim.scene import paint_reflectance
+from simbench.sim.spectral import (
     METALS,
     conductor_fresnel,
     metal_crosstalk,
@@ -75,7 +75,7 @@ def test_bad_reflectance_is_rejected():
 _MEMO_PROBE = """
 import json, sys
 import numpy as np
-from simbench import spectral
+from simbench.sim import spectral
 values = [
     spectral.watts_per_lux(),
     spectral.crosstalk_matrix((0.8, 0.3, 0.1)),
@@ -154,7 +154,7 @@ def test_metal_reflectances_are_the_handbook_values():
 
 @pytest.mark.parametrize("metal", sorted(METALS))
 def test_per_primary_optical_constants_reflect_the_spectral_crosstalk(metal):
-    """The per-primary render of a metal (simbench.simulate._primary_scene): the white's
+    """The per-primary render of a metal (simbench.sim.capture._primary_scene): the white's
     crosstalk as tint and the optical constants averaged over the primary's band.  At normal
     incidence it must reflect the spectral K of the metal's R0: within 1 % for gold and copper, the most
     coloured metals, 0.3 % for the others (metal_ior_rgb's docstring)."""

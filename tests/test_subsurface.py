@@ -1,4 +1,4 @@
-"""Subsurface scattering (simbench.subsurface): the dipole model against its closed forms."""
+"""Subsurface scattering (simbench.sim.subsurface): the dipole model against its closed forms."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from simbench.subsurface import MEDIA, dipole_mtf, dipole_profile, get_medium, subsurface_image
+from simbench.sim.subsurface import MEDIA, dipole_mtf, dipole_profile, get_medium, subsurface_image
 
 
 @pytest.mark.parametrize("name", ["marble", "skin1", "plaster"])
@@ -76,8 +76,8 @@ def test_light_does_not_cross_objects_and_opaque_ones_are_untouched():
 
 
 def test_media_by_name_and_in_scene_files():
-    from simbench.scene import scene_fingerprint
-    from simbench.scene import scene_from_dict
+    from simbench.sim.scene import scene_fingerprint
+    from simbench.sim.scene import scene_from_dict
 
     assert get_medium("plaster") is MEDIA["plaster"]
     with pytest.raises(ValueError, match="unknown subsurface medium 'chalk'.*marble"):
@@ -95,7 +95,7 @@ def test_media_by_name_and_in_scene_files():
 def test_with_subsurface_sets_the_named_objects_medium_only():
     from pathlib import Path
 
-    from simbench.scene import load_scene, with_subsurface
+    from simbench.sim.scene import load_scene, with_subsurface
 
     scene = load_scene(Path(__file__).resolve().parents[1] / "scenes" / "discontinuity.toml")
     # Table 3's plaster objects are translucent as the file says, the wall opaque
@@ -115,8 +115,8 @@ def test_modulation_transfer_is_the_transform_of_the_time_resolved_dipole(name):
     transformed at the SR4000's 30 MHz; to 1e-4 (the quadrature's own accuracy)."""
     import math
 
-    from simbench.photometry import LIGHT_M_S
-    from simbench.subsurface import modulation_transfer
+    from simbench.sim.photometry import LIGHT_M_S
+    from simbench.sim.subsurface import modulation_transfer
 
     medium = MEDIA[name]
     f = 30e6

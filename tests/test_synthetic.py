@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from simbench.rig import paper_rig
-from simbench.synthetic import synthetic_plane_capture
+from simbench.sim.synthetic import synthetic_plane_capture
 
 
 def test_a_sequence_gives_each_frame_the_bits_of_its_own_capture():

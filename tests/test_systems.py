@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from simbench.rig import Intrinsics, Rig
-from simbench.scene import SceneSpec
+from simbench.sim.scene import SceneSpec
 from simbench.systems import (
     DepthSystem,
     SystemDepth,
@@ -67,7 +67,7 @@ class IdealDepthCamera:
         return None
 
     def acquire(self, scene, calibration, *, render_seed, noise_seeds, render):
-        from simbench.simulate import cached_ground_truth
+        from simbench.sim.capture import cached_ground_truth
 
         depth = cached_ground_truth(scene, cache=render.cache).depth_m
         return [depth.astype(np.float32) for _ in noise_seeds]

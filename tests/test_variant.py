@@ -81,10 +81,10 @@ def test_scalar_fallback_renders_the_same_scene(variant, tmp_path):
     code = """
 import json, sys, numpy as np
 from simbench.variant import select_variant
-from simbench.truth import ground_truth
-from simbench.render import render_radiance
+from simbench.sim.truth import ground_truth
+from simbench.sim.render import render_radiance
 v = select_variant(sys.argv[1])
-from simbench.scene import scene_from_dict
+from simbench.sim.scene import scene_from_dict
 from simbench.rig import Rig, Intrinsics
 import dataclasses
 s = scene_from_dict({"object": [{"type": "sphere", "center_m": [0.02, 0, 1.0], "radius_m": 0.05},

@@ -4,7 +4,7 @@ At every target pose (:func:`simbench.calibration.poses.calibration_poses`) the 
 a white frame, then vertical and horizontal phase-shifting + Gray-code sequences
 (:mod:`simbench.decode.temporal`, the multi-shot reference's own patterns); the camera records
 each through the sensor model (noise, colour filter array, lenses: the same path as every
-capture, :func:`simbench.simulate.record`).  Then:
+capture, :func:`simbench.sim.capture.record`).  Then:
 
 1. the checkerboard's inner corners are found in the white frame
    (``cv2.findChessboardCornersSB``) and the camera is calibrated from them
@@ -47,7 +47,7 @@ import numpy as np
 from simbench.calibration.poses import DEPTH_RANGE_M, Pose, calibration_poses
 from simbench.calibration.target import CalibrationTarget
 from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
-from simbench.mitsuba_dict import RenderSettings
+from simbench.sim.mitsuba_dict import RenderSettings
 from simbench.rig import Intrinsics, Rig, angles_xyz_deg
 from simbench.seeds import DEFAULT_SEED, derive_seed, frame_seed
 
@@ -261,7 +261,7 @@ def _fit_homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
 
 
 def _pose_scene(target: CalibrationTarget, pose: Pose, rig: Rig, index: int) -> object:
-    from simbench.scene import scene_from_dict
+    from simbench.sim.scene import scene_from_dict
 
     data = {
         "name": f"calibration_pose{index:02d}",
@@ -298,13 +298,14 @@ def observe_pose(
     samples, 0.1-0.2 px at 4-16 independent ones), while the sequences' sampling noise
     averages out over the ~1000 pixels of a local homography.  ``frames_u8``: drives in place of
     :func:`calibration_frames` (None: those, made once per process when a pose is not cached).  ``rig`` is the
-    ideal rig (the sensor model adds its lenses, :func:`simbench.simulate.physical_scene`);
+    ideal rig (the sensor model adds its lenses, :func:`simbench.sim.capture.physical_scene`);
     the observations are cached in ``render.cache`` by everything that affects them, the
     frames' renders are not (up to 3 x 25 images a pose).  ``wait=False``: None when another
     process sharing the cache is observing the pose (its observation is then read later)."""
-    from simbench.scene import scene_fingerprint
-    from simbench.device import sensor_to_dict
-    from simbench.simulate import cached_arrays, physical_scene
+    from simbench.sim.scene import scene_fingerprint
+    from simbench.sim.sensor import sensor_to_dict
+    from simbench.sim.keys import cached_arrays
+    from simbench.sim.capture import physical_scene
 
     scene = physical_scene(_pose_scene(target, pose, rig, index), sensor)
     render_seed = derive_seed(seed, f"calibration/pose{index}/render")
@@ -357,7 +358,8 @@ def calibration_frames(projector_hw: tuple[int, int]) -> tuple[np.ndarray, ...]:
 
 
 def _observe(scene, target, sensor, cols, rows, render, render_seed, noise_seed, corner_spp, frames):
-    from simbench.simulate import ProjectorDrive, exposure_phase, record, render_channels
+    from simbench.sim.drive import ProjectorDrive, exposure_phase
+    from simbench.sim.capture import record, render_channels
 
     uncached = dataclasses.replace(render, cache=None)  # 75 renders a pose: too many to keep
     phase = exposure_phase(render_seed)
@@ -554,8 +556,8 @@ def _stereo_residuals(obj, cam, proj, k_c, d_c, k_p, d_p, r, t) -> dict[str, np.
 def true_rig(rig: Rig, sensor: object) -> Rig:
     """The rig the renders realise: ``rig`` with the sensor's lens distortion, the projector's
     principal point on Mitsuba's padding grid - what a perfect calibration would return."""
-    from simbench.device import apply_to_rig
-    from simbench.mitsuba_dict import realised_rig
+    from simbench.sim.sensor import apply_to_rig
+    from simbench.sim.mitsuba_dict import realised_rig
 
     return realised_rig(apply_to_rig(rig, sensor))
 
@@ -598,7 +600,7 @@ def calibrate_rig(
     ----------
     rig : the ideal rig (a preset or file: the sensor model adds its lenses)
     target : the printed board
-    sensor : :class:`simbench.device.SensorModel`
+    sensor : :class:`simbench.sim.sensor.SensorModel`
     poses : number of target poses (OpenCV's documentation asks for >= 10 views)
     seed : base seed: the poses (``calibration/poses``) and each pose's render and noise
     render : the sequences' spp, the sampler, path depth and the cache of the observations

@@ -11,7 +11,7 @@ A target file::
     paper_rgb = [0.8, 0.8, 0.8]    # linear diffuse reflectance of the paper
     ink_rgb = [0.04, 0.04, 0.04]   # ... and of the dark squares
 
-    [flatness]                     # form error of the board (simbench.scene.board_form_m)
+    [flatness]                     # form error of the board (simbench.sim.scene.board_form_m)
     bow_m_per_m = 0.0
     waviness_m = 0.0
 
@@ -29,7 +29,7 @@ import numpy as np
 
 from simbench import validate
 from simbench.io import read_toml
-from simbench.scene import MAX_FORM_M, target_size_m
+from simbench.sim.scene import MAX_FORM_M, target_size_m
 
 __all__ = ["CalibrationTarget", "TARGET_KINDS", "TARGET_PRESETS", "get_target", "load_target", "target_from_dict"]
 

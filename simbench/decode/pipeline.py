@@ -1056,7 +1056,7 @@ def decode_reference(
 
 
 # How far a decoded reference plane may lie from Z0, relative (assumption: a lab places its
-# reference board within 1 % of Z0 - simbench.scene.Placement's +-10 mm at 1 m - and a
+# reference board within 1 % of Z0 - simbench.sim.scene.Placement's +-10 mm at 1 m - and a
 # calibrated rig adds well under 0.5 %; a reference of another rig lies far outside: a 0.120 m
 # baseline read as 0.093 m puts the plane ~29 % off).
 REFERENCE_Z0_TOLERANCE = 0.03

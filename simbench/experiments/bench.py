@@ -2,7 +2,7 @@
 
 Decodes one 1280x960 capture of a plane at 1.1 m against a decoded reference at 1.0 m
 (reference decoding happens once per calibration, so it is outside the timed call).  The
-captures are analytic (numpy, :mod:`simbench.synthetic`) with the minimal camera's noise, so
+captures are analytic (numpy, :mod:`simbench.sim.synthetic`) with the minimal camera's noise, so
 the benchmark needs no renderer and measures only the decoder.
 
 Two scenes (``--scene``): ``plane``, fully lit, where the Gabor stage takes every certainty

@@ -15,12 +15,19 @@ import math
 
 import numpy as np
 
-from simbench.device import EFFECTS, PAPER_LATERAL_COLOUR_PX, SensorModel, get_sensor, with_effects, with_lateral_colour
+from simbench.sim.sensor import (
+    EFFECTS,
+    PAPER_LATERAL_COLOUR_PX,
+    SensorModel,
+    get_sensor,
+    with_effects,
+    with_lateral_colour,
+)
 from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
-from simbench.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M, with_subsurface
+from simbench.sim.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M, with_subsurface
 
 __all__ = ["budget_rows", "converged_spp", "run_budget"]
 
@@ -42,7 +49,7 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
     """(key, description, sensor) of each row: the baseline, each effect the ``paper`` model
     switches on, the projector's video-mode gamma and its free-running bit-plane timing
     (what-ifs: the paper triggered the camera from pattern mode), the lenses' lateral colour
-    (what-if: not in the ``paper`` model yet, :data:`simbench.device.PAPER_LATERAL_COLOUR_PX`),
+    (what-if: not in the ``paper`` model yet, :data:`simbench.sim.sensor.PAPER_LATERAL_COLOUR_PX`),
     and the full ``paper`` model.
     The render-noise row (:data:`RENDER_ROW`, the ideal sensor rendered with
     :func:`converged_spp` samples) comes second in :func:`run_budget`."""
@@ -81,7 +88,8 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
         (
             "lateral_colour",
             f"what if: lateral chromatic aberration of both lenses, red and blue {cam[0] - cam[2]:g} camera px and "
-            f"{prj[0] - prj[2]:g} DMD px apart at the corner (assumption, `simbench.device.PAPER_LATERAL_COLOUR_PX`; "
+            f"{prj[0] - prj[2]:g} DMD px apart at the corner (assumption, "
+            "`simbench.sim.sensor.PAPER_LATERAL_COLOUR_PX`; "
             "not in the paper model yet), not corrected by the decoder",
             colour,
         )
@@ -124,7 +132,7 @@ def run_budget(session: Session) -> dict:
         [k for k, _, _ in specs].index("video_gamma"),
         (
             SUBSURFACE_ROW,
-            "what if: the board translucent as plaster (dipole diffusion, `simbench.subsurface`; the medium an "
+            "what if: the board translucent as plaster (dipole diffusion, `simbench.sim.subsurface`; the medium an "
             "assumption between measured Spectralon and marble)",
             ideal,
         ),

@@ -37,17 +37,17 @@ from simbench.calibration.procedure import (
 )
 from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
-from simbench.device import SensorModel, get_sensor, sensor_to_dict
+from simbench.sim.sensor import SensorModel, get_sensor, sensor_to_dict
 from simbench.io import save_json
 from simbench.report import figure_png, markdown_table, write_table
 from simbench.metrics import depth_errors, edge_band
 from simbench.metrics import score as metrics_score
-from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
 from simbench.rig import Rig
 from simbench.pattern import PatternSpec
-from simbench.scene import Placement, SceneSpec, board_form, load_scene, place_objects
+from simbench.sim.scene import Placement, SceneSpec, board_form, load_scene, place_objects
 from simbench.seeds import DEFAULT_SEED, SeedLog, derive_seed
-from simbench.simulate import versions
+from simbench.sim.keys import versions
 from simbench.systems import (
     DepthSystem,
     Recording,
@@ -122,11 +122,11 @@ POSE_PROGRESS_S = 1.0
 class RunConfig:
     """Settings of a reproduction run (``quick`` = the reduced CI run).
 
-    sensor : sensor model, a preset of :func:`simbench.device.get_sensor` (``paper``: the
+    sensor : sensor model, a preset of :func:`simbench.sim.sensor.get_sensor` (``paper``: the
         Flea3 + LightCrafter physics; ``minimal``: noise only; ``ideal``: nothing) or a TOML file
     camera_scale : camera resolution factor (0.5 = 640x480 for quick runs)
     spp, sampler, max_depth : path tracing samples per pixel, Mitsuba sample generator
-        (:data:`simbench.mitsuba_dict.DEFAULT_SAMPLER` and ``DEFAULT_SPP``: measured to keep render
+        (:data:`simbench.sim.mitsuba_dict.DEFAULT_SAMPLER` and ``DEFAULT_SPP``: measured to keep render
         noise below a third of camera noise on the white board) and path length
     seed : base seed of every capture
     fig9_repeats : noise realisations per depth in Fig. 9 (the paper: "more than 10 times")
@@ -134,10 +134,10 @@ class RunConfig:
     decoder : the paper's decoder settings (the colour-robust decoder is
         :func:`simbench.decode.robust_params` of them)
     placement_depth_mm, placement_tilt_deg : how precisely test objects are placed
-        (:class:`simbench.scene.Placement`: each object gets its own seeded error within these
+        (:class:`simbench.sim.scene.Placement`: each object gets its own seeded error within these
         bounds, independent of the reference plane; 0 = exactly on the nominal pose)
     board_bow_mm_per_m, board_waviness_mm : form error of every placed board and of the reference
-        board (:func:`simbench.scene.board_form_m`: the bow's sag over a 1 m chord, the
+        board (:func:`simbench.sim.scene.board_form_m`: the bow's sag over a 1 m chord, the
         ripple's amplitude; seeded bow sign and ripple phase per board); 0 = flat
     rig : the rig the proposed sensor and the multi-shot reference decode with: ``"true"`` (the
         rig the scene is rendered with) or ``"calibrated"`` (the one ``simbench calibrate``
@@ -196,7 +196,7 @@ class RunConfig:
         )
 
     def reference_form(self) -> dict:
-        """Form keys of the reference board (:func:`simbench.scene.board_form`, seeded from the
+        """Form keys of the reference board (:func:`simbench.sim.scene.board_form`, seeded from the
         run's seed: one board for the whole run); empty when boards are flat."""
         p = self.placement
         if not (p.bow_m_per_m or p.waviness_m):

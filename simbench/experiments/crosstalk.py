@@ -1,17 +1,17 @@
 """The projector-to-camera crosstalk matrices of the paper's board colours, as Markdown
-(``simbench crosstalk``; ``results/crosstalk.md``): a report on :mod:`simbench.spectral`'s model."""
+(``simbench crosstalk``; ``results/crosstalk.md``): a report on :mod:`simbench.sim.spectral`'s model."""
 
 from __future__ import annotations
 
-from simbench.scene import paint_reflectance
-from simbench.spectral import CAMERA_DATASET, PRIMARY_FWHM_NM, PRIMARY_PEAKS_NM, crosstalk_matrix
+from simbench.sim.scene import paint_reflectance
+from simbench.sim.spectral import CAMERA_DATASET, PRIMARY_FWHM_NM, PRIMARY_PEAKS_NM, crosstalk_matrix
 
 __all__ = ["crosstalk_report"]
 
 
 def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
     """Markdown: the crosstalk matrix of a perfect white and of each named sRGB paint colour
-    (reflectance by :func:`simbench.scene.paint_reflectance`)."""
+    (reflectance by :func:`simbench.sim.scene.paint_reflectance`)."""
     lines = [
         "# Projector-to-camera crosstalk matrices",
         "",
@@ -22,7 +22,7 @@ def crosstalk_report(colours: dict[str, tuple[int, int, int]]) -> str:
         + " / ".join(f"{x:g}" for x in PRIMARY_FWHM_NM)
         + f" nm, assumption); camera: `{CAMERA_DATASET}` sensitivities "
         "(stand-in for the Flea3); surface spectra: Mallett & Yuksel 2019 from the paint reflectance. See "
-        "`simbench/spectral.py`.",
+        "`simbench/sim/spectral.py`.",
         "",
     ]
     entries = [("perfect white (reflectance 1)", (1.0, 1.0, 1.0))] + [

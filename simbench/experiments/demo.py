@@ -19,11 +19,11 @@ import numpy as np
 
 from simbench.cache import RenderCache
 from simbench.decode import decode, decode_reference
-from simbench.device import get_sensor
+from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import RunConfig, figure_png, git_commit, library_scene_path
 from simbench.io import check_own_folder, json_bytes, write_files
 from simbench.metrics import edge_band, score
-from simbench.scene import load_scene
+from simbench.sim.scene import load_scene
 from simbench.systems.proposed import acquire
 
 log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ def run_demo(
     """
     import mitsuba as mi
 
-    from simbench.simulate import versions
+    from simbench.sim.keys import versions
 
     config = config if config is not None else demo_config()
     out = Path(out_dir)

@@ -254,7 +254,8 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "",
         "The paper gives Fig. 9 as a chart only, without numbers: what its text says is below the table. Fig. 9 is "
         "measured on the paper's rig (Sec. 6). Each board is placed with a seeded error within "
-        f"+-{cfg.placement_depth_mm:g} mm and +-{cfg.placement_tilt_deg:g} deg (`simbench.scene.Placement`), the same "
+        f"+-{cfg.placement_depth_mm:g} mm and +-{cfg.placement_tilt_deg:g} deg "
+        "(`simbench.sim.scene.Placement`), the same "
         "placement for every sensor. The proposed method is decoded by triangulation with the rig (Eq. 15; RMSE "
         "against "
         "ground truth, and RMS residual to the fitted plane); the reference-plane protocol (Sec. 5.4, reference at 1.0 "

@@ -16,7 +16,7 @@ What each score sees:
   camera sees it - what a perfect sensor would report.
 
 Every level uses the same placement, render and noise seeds (common random numbers); the bow's
-sign and the ripple's phase are drawn per board (:func:`simbench.scene.board_form`), the test
+sign and the ripple's phase are drawn per board (:func:`simbench.sim.scene.board_form`), the test
 board's and the reference board's independently.
 """
 
@@ -188,7 +188,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         f"`flatness.png`.",
         "",
         "The white board, placed as in Table 1, and the reference board get a form error "
-        "(`simbench.scene.board_form_m`): a bow "
+        "(`simbench.sim.scene.board_form_m`): a bow "
         f"(paraboloid, the level its sag over a 1 m chord: mm per metre; the board is {sx:g} x {sy:g} m, the camera "
         f"sees its middle), then a "
         "ripple across the stripes (50 mm period, the level its amplitude). The bow's sign and the ripple's phase are "

@@ -13,7 +13,7 @@ decode covers:
   noise seeds (what a real camera adds frame to frame).
 
 The target (issue 17) is render <= 1/3 of camera on the white board.  The run's own setting
-(:data:`simbench.mitsuba_dict.DEFAULT_SAMPLER`, ``DEFAULT_SPP``) is chosen from this table; the
+(:data:`simbench.sim.mitsuba_dict.DEFAULT_SAMPLER`, ``DEFAULT_SPP``) is chosen from this table; the
 cube/cuboid scene (interreflections, which stratification helps less) is measured at the run's
 setting to show what a mesh scene keeps.
 """
@@ -28,12 +28,12 @@ from simbench.experiments.common import Session, markdown_table, write_table
 from simbench.experiments.table3 import PLACED
 from simbench.io import atomic_write_text
 from simbench.metrics import edge_band
-from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
 __all__ = ["CANDIDATES", "QUICK_CANDIDATES", "TARGET_RATIO", "run_render_noise", "depth_spread_mm"]
 
 # (sampler, spp): independent sampling, and each stratified generator at a count it accepts
-# (simbench.mitsuba_dict.check_sampler); costs are about proportional to spp
+# (simbench.sim.mitsuba_dict.check_sampler); costs are about proportional to spp
 CANDIDATES = (
     ("independent", 16),
     ("independent", 64),
@@ -159,7 +159,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "with different noise seeds). Target: render noise at most 1/3 of camera noise on the white board. The run "
         f"renders with `{cfg.sampler}` at {cfg.spp} spp (marked), which {'meets' if own_meets else 'does not meet'} "
         f"the target here; "
-        f"the default of full runs (`simbench.mitsuba_dict.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = "
+        f"the default of full runs (`simbench.sim.mitsuba_dict.DEFAULT_SAMPLER` = `{DEFAULT_SAMPLER}`, `DEFAULT_SPP` = "
         f"{DEFAULT_SPP}) was chosen "
         f"from the full run's table as the cheapest setting that meets it with a margin of 10 % (render / camera <= "
         f"{0.9 * TARGET_RATIO:.2f}; "

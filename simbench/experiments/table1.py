@@ -5,8 +5,8 @@ SLI system"), not a measurement on its rig.  Three conditions (board sets), so t
 sees the decoder's fidelity and the sensor's realism apart: ``paper_sim``, the paper's
 simulation as a renderer of its kind makes it (the ``paper_sim`` sensor preset: a linear,
 noise-free RGB camera with no crosstalk or mosaic; the boards' RGB values as linear material
-colour, :func:`simbench.scene.linear_srgb8`); ``paint``, the paper's sRGB values as matte paint
-(:func:`simbench.scene.paint_reflectance`) through the run's physical sensor model; and
+colour, :func:`simbench.sim.scene.linear_srgb8`); ``paint``, the paper's sRGB values as matte paint
+(:func:`simbench.sim.scene.paint_reflectance`) through the run's physical sensor model; and
 ``measured``, the nearest real printed patches, measured spectra of a ColorChecker
 (:data:`MEASURED_PATCHES`), through the same sensor.  For every board the code stripes'
 content and how often Eq. 13 reads them right are measured from the true projector column
@@ -25,7 +25,7 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from simbench.decode import robust_params
-from simbench.device import get_sensor
+from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import (
     Session,
     calibration_sentence,
@@ -40,10 +40,10 @@ from simbench.io import atomic_write_text
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
 from simbench.metrics import code_stripes
 from simbench.optics import undistort_image
-from simbench.scene import linear_srgb8
+from simbench.sim.scene import linear_srgb8
 
 if TYPE_CHECKING:
-    from simbench.scene import SceneSpec
+    from simbench.sim.scene import SceneSpec
 
 __all__ = [
     "PAPER_TABLE1",
@@ -289,7 +289,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "The paper's Table 1 comes from its own 3ds Max simulation (Sec. 5.5), not from its rig; ours is a physically "
         "based simulation with the `paper` sensor model. Each board is placed independently of the reference plane: "
         f"a seeded error within +-{cfg.placement_depth_mm:g} mm in depth and +-{cfg.placement_tilt_deg:g} deg of tilt "
-        "(`simbench.scene.Placement`, an argued assumption). *Triangulation* decodes with the rig (paper Eq. 15); "
+        "(`simbench.sim.scene.Placement`, an argued assumption). *Triangulation* decodes with the rig (paper Eq. 15); "
         "*reference plane* matches against a separate capture of the white reference plane at Z0 (Sec. 5.4), which "
         "cancels the errors a board shares with the reference. *Plane fit* is the paper's protocol: mean absolute "
         "residual (mm) of the decoded points to their least-squares plane (it cannot see an error that is planar). "
@@ -301,8 +301,9 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         "`paper_sim` sensor preset (`simbench/presets/paper_sim.toml`: a linear, noise-free, white-balanced 8-bit RGB "
         "camera with no spectral crosstalk and no colour mosaic, an ideal projector, 2 % ambient light; every choice "
         "an assumption stated there) and the boards' RGB values as linear material colour (255 -> 1, 0 -> 0, "
-        "`simbench.scene.linear_srgb8`), decoded with the true rig. *paint*, the paper's sRGB values as matte paint "
-        "(`simbench.scene.paint_reflectance`: 0.04-0.80, an assumption) through the run's physical sensor model; "
+        "`simbench.sim.scene.linear_srgb8`), decoded with the true rig. *paint*, the paper's sRGB values as "
+        "matte paint "
+        "(`simbench.sim.scene.paint_reflectance`: 0.04-0.80, an assumption) through the run's physical sensor model; "
         "*measured*, the ColorChecker patch of the same name (N. Ohta's measured spectra in colour-science; pink = "
         "magenta; chosen by name, see `simbench/experiments/table1.py`), rendered through the spectral path.",
     ]

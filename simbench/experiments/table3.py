@@ -1,11 +1,11 @@
 """Paper Table 3 and Fig. 10: a plaster cube next to a plaster cuboid (``scenes/discontinuity.toml``;
-translucent as :mod:`simbench.subsurface`'s assumed plaster, for every sensor).
+translucent as :mod:`simbench.sim.subsurface`'s assumed plaster, for every sensor).
 
 Per object, over its front face (ground-truth points within 1 mm of the face plane, minus a band
 at depth edges): the paper's protocol (mean absolute residual of the decoded points to their
 least-squares plane - the paper's "actual depth obtained by the Least Squares Fitting method")
 and the mean absolute error against ground truth.  The Kinect and ToF columns come from the
-simulated competitors (:mod:`simbench.baselines`) on the same scene, scored the same way at
+simulated competitors (:mod:`simbench.systems.kinect`, :mod:`simbench.systems.tof`) on the same scene, scored the same way at
 their own resolutions (the edge band scaled to the same angle).  Writes ``table3.md``,
 ``table3.csv``, ``fig10.png`` (cross-sections of the three sensors, as the paper's Fig. 10) and
 ``table3.provenance.json``.
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.device import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
+from simbench.sim.sensor import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
 from simbench.experiments.common import (
     Session,
     calibration_sentence,
@@ -40,11 +40,11 @@ from simbench.literature import (
 )
 from simbench.metrics import edge_band, points_from_depth
 from simbench.rig import rotation_xyz_deg
-from simbench.scene import with_subsurface
+from simbench.sim.scene import with_subsurface
 
 if TYPE_CHECKING:
-    from simbench.scene import SceneSpec
-    from simbench.truth import GroundTruth
+    from simbench.sim.scene import SceneSpec
+    from simbench.sim.truth import GroundTruth
 
 __all__ = ["PAPER_TABLE3", "SCENE", "front_face_mask", "run_table3"]
 
@@ -124,7 +124,7 @@ def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[
     out = {
         "lateral_colour": (
             f"lateral colour of both lenses, red and blue {cam[0] - cam[2]:g} camera px and {prj[0] - prj[2]:g} DMD px "
-            "apart at the corner (`simbench.device.PAPER_LATERAL_COLOUR_PX`, an argued bound)",
+            "apart at the corner (`simbench.sim.sensor.PAPER_LATERAL_COLOUR_PX`, an argued bound)",
             with_lateral_colour(paper, camera_px=cam, projector_px=prj),
             None,
         ),
@@ -134,7 +134,7 @@ def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[
             (
                 f"cube and cuboid opaque ({why})"
                 if medium == "opaque"
-                else f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.subsurface`)"
+                else f"cube and cuboid translucent as {medium} ({why}; dipole diffusion, `simbench.sim.subsurface`)"
             ),
             paper,
             lambda scene, medium=medium: with_subsurface(scene, None if medium == "opaque" else medium, names=PLACED),
@@ -143,8 +143,8 @@ def what_ifs(paper: SensorModel) -> dict[str, tuple[str, SensorModel, "Callable[
 
 
 # the plaster objects' translucency (scenes/discontinuity.toml: the assumed plaster of
-# simbench.subsurface) bracketed: opaque, and the least and the most translucent measured white
-# media of simbench.subsurface.MEDIA
+# simbench.sim.subsurface) bracketed: opaque, and the least and the most translucent measured white
+# media of simbench.sim.subsurface.MEDIA
 SUBSURFACE_WHAT_IFS = {
     "opaque": "no subsurface scattering, as the project's tables had it before",
     "spectralon": "measured, the least translucent white diffuser",
@@ -354,7 +354,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         "The paper's Table 3 is measured on its rig (Sec. 6). The cube and the cuboid are each placed with a seeded "
         "error "
         f"within +-{cfg.placement_depth_mm:g} mm in depth and +-{cfg.placement_tilt_deg:g} deg of tilt "
-        f"(`simbench.scene.Placement`), "
+        f"(`simbench.sim.scene.Placement`), "
         "independently of the reference plane; offsets in `table3.csv`. Scored over each object's front face (ground "
         f"truth within 1 mm of the face plane) minus a {cfg.edge_band_px}-px band at depth edges. *Plane fit* = the "
         "paper's protocol, mean absolute residual (mm) to the least-squares plane of the decoded face; *GT MAE* = "
@@ -427,7 +427,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         (
             (
                 "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera "
-                "(176x144) of `simbench/baselines/`, on the same scene from the same camera centre, scored with the "
+                "(176x144) of `simbench.systems.kinect` and `.tof`, on the same scene from the same camera centre, scored with the "
                 "same protocol at their own resolutions (edge band scaled to the same angle). "
                 if all(d in competitors for d in COMPETITORS)
                 else ""

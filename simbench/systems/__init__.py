@@ -12,8 +12,8 @@ numbers).  Experiments, the benchmark and the CLI loop over systems by name.
 
 Systems are registered by name (:func:`register_system`, the way Mitsuba registers plugins):
 the built-in ones are ``proposed`` (:mod:`simbench.systems.proposed`, the paper's colour
-sequence coded fringe sensor), ``kinect`` (:mod:`simbench.baselines.kinect`), ``tof``
-(:mod:`simbench.baselines.tof`) and ``phase_shift`` (:mod:`simbench.systems.phase_shift`, the
+sequence coded fringe sensor), ``kinect`` (:mod:`simbench.systems.kinect`), ``tof``
+(:mod:`simbench.systems.tof`) and ``phase_shift`` (:mod:`simbench.systems.phase_shift`, the
 multi-shot reference on the proposed sensor's projector and camera).  A new system is one module with a class following
 :class:`DepthSystem` plus one :func:`register_system` call; :func:`get_system` builds a system by
 name from the run's :class:`SystemOptions` and lists the registered names when one is unknown.
@@ -29,8 +29,8 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from simbench.mitsuba_dict import RenderSettings
-from simbench.scene import SceneSpec
+from simbench.sim.mitsuba_dict import RenderSettings
+from simbench.sim.scene import SceneSpec
 
 if TYPE_CHECKING:
     from simbench.seeds import SeedLog
@@ -56,12 +56,12 @@ __all__ = [
 class SystemOptions:
     """What a run sets for every system; each system uses what applies to it.
 
-    sensor : the proposed sensor's camera/projector model (:class:`simbench.device.SensorModel`;
+    sensor : the proposed sensor's camera/projector model (:class:`simbench.sim.sensor.SensorModel`;
         None = the ``paper`` preset).  The competitors carry their own sensors.
     decoder : the proposed sensor's decoder settings, with the pattern it projects
         (:class:`simbench.decode.DecoderParams`; None = the paper's)
     camera_scale : resolution factor of the proposed sensor's camera (0.5 for quick runs)
-    reference_form : form keys of the reference board (:func:`simbench.scene.board_form`)
+    reference_form : form keys of the reference board (:func:`simbench.sim.scene.board_form`)
     """
 
     sensor: Any = None
@@ -117,7 +117,7 @@ class Recording:
     system: str
     scene: SceneSpec
     raw: np.ndarray
-    gt: Any  # simbench.truth.GroundTruth
+    gt: Any  # simbench.sim.truth.GroundTruth
     seeds: dict
 
     @property
@@ -230,7 +230,7 @@ def acquire(
     recorded there); ``calibration`` is what :meth:`DepthSystem.calibrate` returned.  Renders
     and ground truth come from ``render.cache`` when it holds them.
     """
-    from simbench.simulate import cached_ground_truth
+    from simbench.sim.capture import cached_ground_truth
 
     if not prepared:
         scene = system.prepare(scene)
@@ -274,6 +274,6 @@ def system_of_recording(in_dir: str | Path) -> str:
 
 
 register_system("proposed", "simbench.systems.proposed:ColourFringeSystem")
-register_system("kinect", "simbench.baselines.kinect:KinectSystem")
-register_system("tof", "simbench.baselines.tof:ToFSystem")
+register_system("kinect", "simbench.systems.kinect:KinectSystem")
+register_system("tof", "simbench.systems.tof:ToFSystem")
 register_system("phase_shift", "simbench.systems.phase_shift:PhaseShiftSystem")

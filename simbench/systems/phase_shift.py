@@ -21,8 +21,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
-from simbench.mitsuba_dict import RenderSettings
-from simbench.scene import SceneSpec
+from simbench.sim.mitsuba_dict import RenderSettings
+from simbench.sim.scene import SceneSpec
 from simbench.systems import SystemDepth, SystemInfo, SystemOptions
 
 if TYPE_CHECKING:
@@ -136,7 +136,8 @@ class PhaseShiftSystem:
         once per noise seed with its own camera noise (:func:`simbench.seeds.frame_seed`);
         each recording has shape (K, H, W), float32 grey in [0, 1]."""
         from simbench.seeds import frame_seed
-        from simbench.simulate import DriveImage, ProjectorDrive, exposure_phase, record_channels
+        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
+        from simbench.sim.capture import record_channels
 
         if tuple(self.spec.size_hw) != scene.rig.projector.size_hw:
             raise ValueError(
@@ -179,12 +180,12 @@ class PhaseShiftSystem:
 
     def bench_inputs(self, *, scene: str = "plane", seed: int = 0) -> tuple[np.ndarray, None, SceneSpec]:
         """(frames, None, scene) of a plane at 1.1 m in the paper's rig made in numpy
-        (:mod:`simbench.synthetic`), with the minimal camera's noise; deterministic for a seed."""
-        from simbench.device import get_sensor
-        from simbench.projector import transfer_curve
+        (:mod:`simbench.sim.synthetic`), with the minimal camera's noise; deterministic for a seed."""
+        from simbench.sim.sensor import get_sensor
+        from simbench.sim.projector import transfer_curve
         from simbench.rig import paper_rig
-        from simbench.sensor import simple_camera
-        from simbench.synthetic import synthetic_plane_capture
+        from simbench.sim.camera import simple_camera
+        from simbench.sim.synthetic import synthetic_plane_capture
 
         if scene != "plane":
             raise ValueError(f"the {self.name} benchmark has only the plane, not {scene!r}")

@@ -2,7 +2,7 @@
 projected by a DLP projector, recorded by a colour camera, decoded by the paper's pipeline.
 
 Calibration is the paper's Sec. 5.4: one capture of a white reference plane at the scene's Z0
-(albedo :data:`simbench.simulate.REFERENCE_ALBEDO`) per rig and lighting, decoded once per
+(albedo :data:`simbench.sim.photometry.REFERENCE_ALBEDO`) per rig and lighting, decoded once per
 decoder setting; a decoder that unmixes the primaries also needs the plane under a black frame
 and under each primary at full drive (Caspi et al. 1998's calibration of the coupling matrix;
 four frames once per calibration, the measurement stays single-shot).
@@ -27,15 +27,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.manifest import read_manifest
-from simbench.scene import SceneSpec, reference_scene
+from simbench.sim.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
 
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
     from simbench.decode.pipeline import DecoderParams, ReferenceMap
-    from simbench.device import SensorModel
+    from simbench.sim.sensor import SensorModel
     from simbench.pattern import PatternSpec
-    from simbench.truth import GroundTruth
+    from simbench.sim.truth import GroundTruth
 
 _log = logging.getLogger(__name__)
 
@@ -144,7 +144,7 @@ class ColourFringeSystem:
 
     def __init__(self, options: SystemOptions | None = None) -> None:
         from simbench.decode import DecoderParams
-        from simbench.device import get_sensor
+        from simbench.sim.sensor import get_sensor
 
         options = options or SystemOptions()
         self.sensor = options.sensor if options.sensor is not None else get_sensor("paper")
@@ -184,10 +184,10 @@ class ColourFringeSystem:
 
     def prepare(self, scene: SceneSpec) -> SceneSpec:
         """The scene with the run's camera resolution, the rendered rig and the sensor model's
-        lenses and ambient light (:func:`simbench.simulate.physical_scene`)."""
-        from simbench.mitsuba_dict import realised_rig
+        lenses and ambient light (:func:`simbench.sim.capture.physical_scene`)."""
+        from simbench.sim.mitsuba_dict import realised_rig
         from simbench.rig import scale_camera
-        from simbench.simulate import physical_scene
+        from simbench.sim.capture import physical_scene
 
         rig = scene.rig if self.camera_scale == 1 else scale_camera(scene.rig, self.camera_scale)
         return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
@@ -213,7 +213,7 @@ class ColourFringeSystem:
         """Record the reference plane behind ``scene`` (prepared) and, with ``frames`` (default:
         when the decoder unmixes), the calibration frames; seeds from :meth:`reference_label`."""
         from simbench.pattern import calibration_frames
-        from simbench.simulate import REFERENCE_ALBEDO
+        from simbench.sim.photometry import REFERENCE_ALBEDO
 
         ref_scene = reference_scene(scene, albedo=REFERENCE_ALBEDO, form=self.reference_form)
         label = self.reference_label(scene)
@@ -242,8 +242,9 @@ class ColourFringeSystem:
     ) -> list[np.ndarray]:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
         once per noise seed (a static scene measured again differs by camera noise only;
-        recordings cached, :func:`simbench.simulate.record_channels`)."""
-        from simbench.simulate import DriveImage, ProjectorDrive, exposure_phase, record_channels
+        recordings cached, :func:`simbench.sim.capture.record_channels`)."""
+        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
+        from simbench.sim.capture import record_channels
 
         pattern = pattern_u8
         if pattern is None:  # the run's pattern, by its kept digest: made only for a render not cached
@@ -283,7 +284,7 @@ class ColourFringeSystem:
         self, *, scene: str = "plane", seed: int = 0, frames: bool = False
     ) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of the decoder benchmark (``simbench bench``), made in
-        numpy without the renderer (:mod:`simbench.synthetic`), deterministic for a seed: the
+        numpy without the renderer (:mod:`simbench.sim.synthetic`), deterministic for a seed: the
         paper's rig, a plane at 1.1 m, the reference at 1.0 m, the minimal camera's noise.
 
         ``scene``: ``plane`` (fully lit) or ``shadow`` (:data:`BENCH_SHADOW` gets no projector
@@ -291,11 +292,11 @@ class ColourFringeSystem:
         ``frames``: the calibration also holds the reference plane under black and each primary
         (:data:`simbench.pattern.CALIBRATION_FRAMES`), which the colour-robust decoder needs.
         """
-        from simbench.device import get_sensor
-        from simbench.projector import transfer_curve
+        from simbench.sim.sensor import get_sensor
+        from simbench.sim.projector import transfer_curve
         from simbench.rig import paper_rig
-        from simbench.sensor import simple_camera
-        from simbench.synthetic import synthetic_plane_capture
+        from simbench.sim.camera import simple_camera
+        from simbench.sim.synthetic import synthetic_plane_capture
 
         if scene not in BENCH_SCENES:
             raise ValueError(f"unknown benchmark scene {scene!r}; valid: {list(BENCH_SCENES)}")
@@ -427,7 +428,7 @@ def recorded_z0(meta: dict, *, where: str) -> float:
 
     if "reference_depth_m" not in meta:
         raise ValueError(f"{where}: records no reference_depth_m (Z0)")
-    # the bounds of a scene file's reference_depth_m (simbench.scene)
+    # the bounds of a scene file's reference_depth_m (simbench.sim.scene)
     return validate.number(meta["reference_depth_m"], f"{where}: reference_depth_m", lo=0.0, lo_open=True, hi=100.0)
 
 
@@ -485,11 +486,12 @@ def acquire_with_calibration(
     import mitsuba as mi
 
     from simbench.decode import DecoderParams
-    from simbench.device import sensor_to_dict
-    from simbench.mitsuba_dict import realised_rig
-    from simbench.photometry import exposure_s, white_balance_gains
+    from simbench.sim.sensor import sensor_to_dict
+    from simbench.sim.mitsuba_dict import realised_rig
+    from simbench.sim.photometry import exposure_s, white_balance_gains
     from simbench.seeds import SeedLog
-    from simbench.simulate import REFERENCE_ALBEDO, versions, white_board
+    from simbench.sim.photometry import REFERENCE_ALBEDO, white_board
+    from simbench.sim.keys import versions
     from simbench.systems import acquire as acquire_recording
 
     rig = realised_rig(scene.rig)

@@ -32,7 +32,7 @@ Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
 - ``decoder.<field>``: any :class:`simbench.decode.DecoderParams` field (phase method, overlay vs
   ``blue`` intensity, voting, neighbour correction, colour normalisation, ...);
 - ``sensor.preset``: a sensor preset or TOML file; ``sensor.effects``: a list of
-  :data:`simbench.device.EFFECTS` switched on over the ``ideal`` model, taken from
+  :data:`simbench.sim.sensor.EFFECTS` switched on over the ``ideal`` model, taken from
   ``sensor.source`` (default ``paper``); ``sensor.<table>.<key>``: one number of the sensor model
   (e.g. ``sensor.camera.dark_noise_e``, ``sensor.ambient.ratio``, ``sensor.projector.lumens``);
 - ``scene.name`` (a file of ``scenes/``), ``scene.srgb8`` (repaint every object), ``scene.depth_m``

@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from simbench.decode import DecoderParams
-    from simbench.device import SensorModel
+    from simbench.sim.sensor import SensorModel
     from simbench.experiments.ablate.spec import Sweep
     from simbench.experiments.common import RunConfig
-    from simbench.scene import SceneSpec
+    from simbench.sim.scene import SceneSpec
 
 from simbench.experiments.ablate.spec import PARAMETERS
 
@@ -22,7 +22,7 @@ __all__ = ["sensor_for", "scene_for", "decoder_for", "run_config_for", "check_sw
 
 
 def sensor_for(params: dict) -> SensorModel:
-    from simbench.device import (
+    from simbench.sim.sensor import (
         Lens,
         get_sensor,
         sensor_from_dict,
@@ -64,7 +64,7 @@ def sensor_for(params: dict) -> SensorModel:
 
 def scene_for(params: dict) -> SceneSpec:
     from simbench.experiments.common import library_scene_path
-    from simbench.scene import load_scene, paint_reflectance, with_subsurface
+    from simbench.sim.scene import load_scene, paint_reflectance, with_subsurface
 
     scene = load_scene(library_scene_path(params["scene.name"]))
     objs = list(scene.objects)
@@ -72,7 +72,7 @@ def scene_for(params: dict) -> SceneSpec:
         rgb = paint_reflectance(params["scene.srgb8"])
         objs = [dataclasses.replace(o, material=dataclasses.replace(o.material, rgb=rgb)) for o in objs]
     from simbench import validate
-    from simbench.scene import MAX_ANGLE_DEG, SCENE_EXTENT_M
+    from simbench.sim.scene import MAX_ANGLE_DEG, SCENE_EXTENT_M
 
     if "scene.depth_m" in params:
         validate.number(params["scene.depth_m"], "scene.depth_m", lo=0.0, lo_open=True, hi=SCENE_EXTENT_M)
@@ -144,7 +144,7 @@ def run_config_for(params: dict, *, seed: int, sensor: SensorModel, decoder: Dec
 
 
 def _samplers() -> tuple[str, ...]:
-    from simbench.mitsuba_dict import SAMPLERS
+    from simbench.sim.mitsuba_dict import SAMPLERS
 
     return SAMPLERS
 

@@ -53,7 +53,7 @@ def _fmt(v) -> str:
 
 def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
     from simbench.experiments.common import git_commit, write_table
-    from simbench.simulate import versions
+    from simbench.sim.keys import versions
 
     axis_names = [k for k, _ in sweep.axes]
     cols = [

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from simbench import validate
 from simbench.io import read_toml
-from simbench.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 from simbench.seeds import DEFAULT_SEED, repetition_seed
 
 log = logging.getLogger(__name__)
@@ -72,7 +72,7 @@ def _parameters() -> dict[str, str]:
         "sensor.source": "where sensor.effects take their values from (default paper)",
         "scene.name": "scene file of scenes/",
         "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
-        "scene.subsurface": "make every object translucent as this medium (simbench.subsurface.MEDIA) or opaque "
+        "scene.subsurface": "make every object translucent as this medium (simbench.sim.subsurface.MEDIA) or opaque "
         "('none'); not given: as the scene file says",
         "scene.depth_m": "move the scene so its first object's centre is at this depth",
         "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",

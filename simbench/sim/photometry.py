@@ -1,6 +1,6 @@
 """Photometry: from the projector's lumens to electrons in each camera pixel.
 
-The chain of the ``emva`` camera (:mod:`simbench.device` holds the sensor model): the
+The chain of the ``emva`` camera (:mod:`simbench.sim.sensor` holds the sensor model): the
 projector's white gives ``lumens / A`` lux at 1 m (:func:`white_lux_at_1m`, ``A`` = its
 frustum's cross-section at 1 m), split into primaries balanced to D65
 (:func:`primary_irradiance_w_m2`); a rendered radiance of 1 for primary ``p`` is the radiance
@@ -19,10 +19,28 @@ References
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from simbench.device import PhysicalCamera, SensorModel
+from simbench.sim.sensor import PhysicalCamera, SensorModel
 from simbench.rig import Rig
+
+if TYPE_CHECKING:
+    from simbench.sim.scene import SceneSpec
+
+REFERENCE_ALBEDO = 0.8  # assumption: a matte white board as the reference plane
+
+
+def white_board(scene: SceneSpec) -> dict:
+    """The white reference board the camera's exposure and white balance are set on: the
+    keyword arguments of :func:`exposure_s` and :func:`white_balance_gains` for ``scene``."""
+    return {
+        "reference_depth_m": scene.reference_depth_m,
+        "reference_albedo": REFERENCE_ALBEDO,
+        "projector_scale": scene.projector_scale,
+    }
+
 
 __all__ = [
     "PLANCK_J_S",
@@ -53,7 +71,7 @@ def photons_per_unit_radiance(
     """Mean photons reaching one pixel during the exposure per unit of *rendered* radiance.
 
     A rendered radiance of 1 is what a white Lambertian surface facing the projector at 1 m
-    sends back under full drive (see :func:`simbench.render.render_radiance`): physical radiance
+    sends back under full drive (see :func:`simbench.sim.render.render_radiance`): physical radiance
     ``L = E_1m / pi`` for a projector irradiance ``E_1m`` at 1 m.  A lens of f-number N and
     transmission tau focused far away puts ``E_s = pi * tau * L / (4 N^2)`` on the sensor
     (camera equation, on axis, magnification and cos^4 fall-off neglected); a pixel of area
@@ -87,13 +105,13 @@ def primary_irradiance_w_m2(white_lux: float) -> np.ndarray:
     projectors' video modes; TI does not publish the LightCrafter 4500's): the three primaries'
     luminances are the mix whose CIE 1931 XYZ has D65's chromaticity, and each primary's lux
     are turned into watts by its LED spectrum's luminous efficacy (683 lm/W x V-weighted,
-    :func:`simbench.spectral.watts_per_lux`).
+    :func:`simbench.sim.spectral.watts_per_lux`).
 
     Returns
     -------
     ndarray, shape (3,), float64 (R, G, B primaries)
     """
-    from simbench.spectral import watts_per_lux
+    from simbench.sim.spectral import watts_per_lux
 
     if not white_lux > 0:
         raise ValueError(f"white_lux must be > 0, got {white_lux}")
@@ -111,7 +129,7 @@ def white_lux_at_1m(sensor: SensorModel, rig: Rig) -> float:
 def electrons_per_radiance_s(sensor: SensorModel, rig: Rig) -> np.ndarray:
     """Electrons per second in camera channel ``p`` per unit rendered radiance of primary ``p``
     (module docstring), shape (3,).  Needs the physical camera."""
-    from simbench.spectral import PRIMARY_PEAKS_NM
+    from simbench.sim.spectral import PRIMARY_PEAKS_NM
 
     cam = sensor.camera
     if not isinstance(cam, PhysicalCamera):
@@ -136,7 +154,7 @@ def electrons_per_radiance_s(sensor: SensorModel, rig: Rig) -> np.ndarray:
 
 def _reference_matrix(sensor: SensorModel, albedo: float) -> np.ndarray:
     if sensor.crosstalk:
-        from simbench.spectral import crosstalk_matrix
+        from simbench.sim.spectral import crosstalk_matrix
 
         return crosstalk_matrix((albedo,) * 3)
     return albedo * np.eye(3)

@@ -143,7 +143,7 @@ def modulation_transfer(medium: Medium, channel: int, *, frequency_hz: float) ->
     the sign of a path's phase ``2 pi f L / c``; a pixel's distance reads ``arg c / (4 pi f)``
     long.  Tested against the quadrature of ``R(t)``.
     """
-    from simbench.photometry import LIGHT_M_S
+    from simbench.sim.photometry import LIGHT_M_S
 
     _, tr, zr, zv = medium.dipole(channel)
     ss, sa = medium.sigma_s_prime_per_mm[channel], medium.sigma_a_per_mm[channel]

@@ -24,15 +24,15 @@ ambient light          ``[ambient] ratio`` (to the projector's white irradiance 
 
 The photometric chain of the ``emva`` camera: the projector's white gives ``lumens / A``
 lux at 1 m (``A`` = its frustum's cross-section at 1 m, from the rig), split into primaries
-(:func:`simbench.photometry.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
+(:func:`simbench.sim.photometry.primary_irradiance_w_m2`); a rendered radiance of 1 for primary
 ``p`` is the radiance ``E_p / pi`` of a white Lambertian surface 1 m in front of it, which the
-camera equation turns into photons per pixel (:func:`simbench.photometry.photons_per_unit_radiance`)
-and the channel's quantum efficiency into electrons (the whole chain: :mod:`simbench.photometry`).
+camera equation turns into photons per pixel (:func:`simbench.sim.photometry.photons_per_unit_radiance`)
+and the channel's quantum efficiency into electrons (the whole chain: :mod:`simbench.sim.photometry`).
 The exposure time is ``auto`` by default: what brings the brightest channel of the white reference board at Z0 to
 ``auto_exposure_fraction`` of the full well, as an operator would set it once for the rig.
 White balance ``one_push`` sets the red and blue channel gains once, on the same white board
 under the projector's full white, so that its three channels read alike
-(:func:`simbench.photometry.white_balance_gains`); the auto exposure then holds for the balanced channels.
+(:func:`simbench.sim.photometry.white_balance_gains`); the auto exposure then holds for the balanced channels.
 """
 
 from __future__ import annotations
@@ -45,9 +45,9 @@ from pathlib import Path
 
 from simbench import validate
 from simbench.io import read_toml
-from simbench.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
+from simbench.sim.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
-from simbench.sensor import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
+from simbench.sim.camera import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
 
 __all__ = [
     "Lens",
@@ -70,7 +70,7 @@ __all__ = [
     "with_lateral_colour",
 ]
 
-PRESETS_DIR = Path(__file__).resolve().parent / "presets"
+PRESETS_DIR = Path(__file__).resolve().parents[1] / "presets"
 SENSOR_PRESETS = ("ideal", "minimal", "paper", "paper_sim")
 _NO_DISTORTION = (0.0, 0.0, 0.0, 0.0, 0.0)
 # Point Grey Flea3 USB 3.0 Technical Reference (rev. 9/27/2012), Sec. 7.8 "White Balance": off
@@ -142,7 +142,7 @@ def _bits(bits: object) -> int:
 
 @dataclass(frozen=True)
 class PhysicalCamera:
-    """A colour camera after EMVA 1288 with a colour filter array (see :mod:`simbench.sensor`).
+    """A colour camera after EMVA 1288 with a colour filter array (see :mod:`simbench.sim.camera`).
 
     ``qe`` is each channel's quantum efficiency for the projector primary of its own colour;
     ``gain_dn_per_e`` None = full well maps to the top of the ADC range; ``exposure_s`` None =
@@ -217,7 +217,7 @@ class PhysicalCamera:
 
 @dataclass(frozen=True)
 class ProjectorModel:
-    """The projector's physics (see :mod:`simbench.projector`)."""
+    """The projector's physics (see :mod:`simbench.sim.projector`)."""
 
     lumens: float = 150.0
     transfer: str = "linear"

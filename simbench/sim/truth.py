@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simbench.mitsuba_dict import load_scene_dict, mitsuba_scene
+from simbench.sim.mitsuba_dict import load_scene_dict, mitsuba_scene
 from simbench.rig import pixel_rays, project_to_projector
-from simbench.scene import SceneSpec
+from simbench.sim.scene import SceneSpec
 from simbench.variant import is_jit
 
 __all__ = ["GroundTruth", "ground_truth", "trace_rays", "projector_distance"]

@@ -229,7 +229,7 @@ def emitted_pattern(
 ) -> np.ndarray:
     """Transfer curve (with the bit-plane timing), black level and DMD layout of an 8-bit
     pattern (defocus and distortion need the scene and the lens, see
-    :func:`simbench.simulate.projector_drive_for`).
+    :func:`simbench.sim.drive.projector_drive_for`).
 
     Returns
     -------

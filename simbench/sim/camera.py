@@ -4,7 +4,7 @@ Two camera steps: the *minimal* one (exposure, shot and read noise, full-well cl
 quantisation), :func:`simple_camera`, and the physical one, :func:`emva_camera` (EMVA 1288 with
 a Bayer colour filter array and OpenCV demosaicing).  Their parameters and the rest of the
 physics (crosstalk, projector, lenses, ambient light) are configured by
-:class:`simbench.device.SensorModel` and chained by :func:`simbench.simulate.record`.
+:class:`simbench.sim.sensor.SensorModel` and chained by :func:`simbench.sim.capture.record`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from simbench import validate
 from simbench.seeds import RngLike
 
 if TYPE_CHECKING:
-    from simbench.device import PhysicalCamera
+    from simbench.sim.sensor import PhysicalCamera
 
 __all__ = [
     "SimpleCamera",
@@ -83,7 +83,7 @@ def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng: RngLike = 
     Parameters
     ----------
     radiance : ndarray, shape (H, W, 3), float32
-        Linear radiance from :func:`simbench.render.render_radiance`.
+        Linear radiance from :func:`simbench.sim.render.render_radiance`.
     camera : SimpleCamera
     rng : numpy.random.Generator | int | None
         Noise seed; the same seed gives the same image.
@@ -194,7 +194,7 @@ def emva_camera(
     rng: RngLike = None,
 ) -> np.ndarray:
     """Rendered radiance -> recorded image through the EMVA 1288 model and the colour filter
-    array of ``camera`` (a :class:`simbench.device.PhysicalCamera`).
+    array of ``camera`` (a :class:`simbench.sim.sensor.PhysicalCamera`).
 
     Mean electrons ``e_c = radiance_c * electrons_per_radiance[c]`` (+ dark current x
     exposure); Poisson shot noise, temporal dark noise ``sigma_d`` (Gaussian), full-well
@@ -213,7 +213,7 @@ def emva_camera(
     exposure_s : float
         Exposure time (dark current).
     white_balance : sequence of 3 float
-        Analogue gain of each colour channel (:func:`simbench.photometry.white_balance_gains`).
+        Analogue gain of each colour channel (:func:`simbench.sim.photometry.white_balance_gains`).
     rng : numpy.random.Generator | int | None
         Temporal-noise seed.
 

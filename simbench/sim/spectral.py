@@ -421,7 +421,7 @@ def metal_crosstalk(name: str) -> np.ndarray:
 @_persistent
 def watts_per_lux() -> np.ndarray:
     """W/m^2 of each primary per lux of the D65-balanced white (see
-    :func:`simbench.photometry.primary_irradiance_w_m2`), shape (3,)."""
+    :func:`simbench.sim.photometry.primary_irradiance_w_m2`), shape (3,)."""
     colour = _colour()
     cmfs = np.asarray(
         colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(_shape()).values, dtype=np.float64

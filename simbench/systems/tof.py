@@ -20,8 +20,8 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
 - Shot noise (Poisson per sample) and read noise; samples clip at the full well and such pixels
   are flagged invalid, as the device does.
 - A translucent object (scene key ``subsurface``) spreads the light it returns
-  (:func:`simbench.simulate.with_translucency`) and delays it: each of its rays' phasors is
-  multiplied by the medium's :func:`simbench.subsurface.modulation_transfer` (dipole diffusion
+  (:func:`simbench.sim.capture.with_translucency`) and delays it: each of its rays' phasors is
+  multiplied by the medium's :func:`simbench.sim.subsurface.modulation_transfer` (dipole diffusion
   in time; NIR as the mean of the three bands), so a translucent surface reads farther away.
 - Left out: multipath interference (the indirect light's path lengths are not tracked by the
   renderer; the amplitude is the direct render, max_depth 2), the systematic "wiggling" error
@@ -44,9 +44,9 @@ import numpy as np
 from simbench import validate
 
 from simbench.literature import SR4000_FOV_X_DEG, SR4000_MODULATION_HZ, SR4000_SIZE_WH
-from simbench.photometry import LIGHT_M_S, photons_per_unit_radiance
+from simbench.sim.photometry import LIGHT_M_S, photons_per_unit_radiance
 from simbench.rig import Intrinsics, Rig
-from simbench.scene import SceneSpec
+from simbench.sim.scene import SceneSpec
 from simbench.seeds import RngLike
 
 if TYPE_CHECKING:
@@ -160,7 +160,7 @@ def device_scene(scene: SceneSpec, model: ToFModel) -> SceneSpec:
 def electrons_per_radiance(model: ToFModel) -> float:
     """Electrons (all four samples together) per unit rendered radiance: the emitter's
     irradiance at 1 m (optical power over the frustum's cross-section) through the camera
-    equation (:func:`simbench.photometry.photons_per_unit_radiance`), QE and fill factor."""
+    equation (:func:`simbench.sim.photometry.photons_per_unit_radiance`), QE and fill factor."""
     prj = tof_rig(model).projector
     area_1m = ((prj.width_px - 2) / prj.focal_px) * ((prj.height_px - 2) / prj.focal_px)
     photons = photons_per_unit_radiance(
@@ -189,10 +189,10 @@ def _sub_rays(model: ToFModel) -> np.ndarray:
 def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
     """Normalised phasor ``Z`` of each pixel's direct return, shape (H, W), complex128
     (0 where nothing in the footprint returns light)."""
-    from simbench.truth import trace_rays
+    from simbench.sim.truth import trace_rays
 
     hits = trace_rays(scene, _sub_rays(model))
-    # a translucent object delays the light its paths inside it take (simbench.subsurface.
+    # a translucent object delays the light its paths inside it take (simbench.sim.subsurface.
     # modulation_transfer; NIR as the mean of the three bands, as its reflectance); 1 if opaque
     transfer = np.array([_medium_transfer(o, model) for o in scene.objects] + [1.0], dtype=np.complex128)
     p = hits["p"]
@@ -217,7 +217,7 @@ def footprint_phasor(scene: SceneSpec, model: ToFModel) -> np.ndarray:
 def _medium_transfer(obj, model: ToFModel) -> complex:
     if not obj.material.subsurface:
         return 1.0
-    from simbench.subsurface import get_medium, modulation_transfer
+    from simbench.sim.subsurface import get_medium, modulation_transfer
 
     medium = get_medium(obj.material.subsurface)
     return complex(np.mean([modulation_transfer(medium, c, frequency_hz=model.modulation_hz) for c in range(3)]))
@@ -306,8 +306,9 @@ def capture(
 ) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
-    from simbench.scene import scene_fingerprint
-    from simbench.simulate import cached_arrays, cached_radiance, opaque, with_translucency
+    from simbench.sim.scene import scene_fingerprint
+    from simbench.sim.keys import cached_arrays
+    from simbench.sim.capture import cached_radiance, opaque, with_translucency
 
     rad = cached_radiance(
         opaque(scene), _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache

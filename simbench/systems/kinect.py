@@ -12,7 +12,7 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
   2012 calibrate ~580 px), Aptina MT9M001 5.2 um pixels binned 2x2 (datasheet (recalled)).
 - The scene's NIR reflectance is taken as the mean of its RGB reflectance (assumption: no NIR
   spectra are known for the scene materials), and a translucent object's NIR subsurface
-  scattering as the mean of its three bands' (:func:`simbench.simulate.with_translucency`; the
+  scattering as the mean of its three bands' (:func:`simbench.sim.capture.with_translucency`; the
   speckle statistics are kept those of a surface scatterer, an approximation: volume scattering
   lowers speckle contrast); the 830 nm band-pass filter removes ambient light.
 - Laser speckle: coherent light gives each camera pixel a multiplicative speckle intensity,
@@ -49,7 +49,7 @@ import numpy as np
 from simbench import validate
 from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX
 from simbench.rig import Intrinsics, Rig
-from simbench.scene import SceneSpec, reference_scene
+from simbench.sim.scene import SceneSpec, reference_scene
 from simbench.seeds import RngLike, child_seed
 
 if TYPE_CHECKING:
@@ -129,7 +129,7 @@ class KinectModel:
             "pixel_pitch_um",
             "full_well_e",
         ):
-            # finite and positive; depths within the scenes' 100 m (simbench.scene.SCENE_EXTENT_M)
+            # finite and positive; depths within the scenes' 100 m (simbench.sim.scene.SCENE_EXTENT_M)
             hi = 100.0 if name.endswith("depth_m") else None
             validate.number(getattr(self, name), f"kinect {name}", lo=0.0, lo_open=True, hi=hi)
         if not self.min_depth_m < self.max_depth_m:
@@ -432,7 +432,8 @@ def _dot_drive_digest(model: KinectModel) -> str:
 def _render(
     scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, sampler: str, cache
 ) -> np.ndarray:
-    from simbench.simulate import DriveImage, cached_radiance, opaque, with_translucency
+    from simbench.sim.drive import DriveImage
+    from simbench.sim.capture import cached_radiance, opaque, with_translucency
 
     # the drive by its digest, made only for a render the cache does not hold
     drive = DriveImage(_dot_drive_digest(model), lambda: _dot_drive(model))
@@ -453,7 +454,7 @@ def calibrate(
     """Record the factory reference: a white plane (``albedo``) at ``reference_depth_m``; the
     exposure is set so that its brightest dots (99.9th percentile) reach ``exposure_fraction``
     of the full well.  Seeds: render ``seed``; speckle and noise derived from it."""
-    from simbench.scene import SceneObject
+    from simbench.sim.scene import SceneObject
 
     placeholder = SceneSpec(
         name="kinect_reference",

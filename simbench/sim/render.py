@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from simbench.mitsuba_dict import atomic_film_adds, load_scene_dict, mitsuba_scene
-from simbench.scene import SceneSpec
+from simbench.sim.mitsuba_dict import atomic_film_adds, load_scene_dict, mitsuba_scene
+from simbench.sim.scene import SceneSpec
 
 __all__ = ["render_radiance"]
 
@@ -23,7 +23,7 @@ def render_radiance(
     Light adds linearly, and a path tracer choosing between two emitters per sample spends
     half its samples on each: render the projector and the ambient light separately (a scene
     with no ambient light, and ``drive=None``) and add the images, as
-    :func:`simbench.simulate.render_channels` does.
+    :func:`simbench.sim.capture.render_channels` does.
 
     Parameters
     ----------
@@ -33,8 +33,8 @@ def render_radiance(
     spp, seed : int
         Samples per pixel and the sampler seed (same seed, same image: bit-identical in llvm,
         where a count other than a power of two is rendered in passes,
-        :func:`simbench.mitsuba_dict.samples_per_pass`, and the film takes atomic adds,
-        :func:`simbench.mitsuba_dict.atomic_film_adds`).
+        :func:`simbench.sim.mitsuba_dict.samples_per_pass`, and the film takes atomic adds,
+        :func:`simbench.sim.mitsuba_dict.atomic_film_adds`).
     max_depth : int
         Path length limit (>= 3 gives one interreflection bounce).
     sampler : str

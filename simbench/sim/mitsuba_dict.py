@@ -16,7 +16,7 @@ import numpy as np
 
 from simbench.cache import RenderCache
 from simbench.rig import Intrinsics, Rig
-from simbench.scene import SceneSpec, object_to_mitsuba
+from simbench.sim.scene import SceneSpec, object_to_mitsuba
 
 __all__ = [
     "projector_texture",

@@ -24,15 +24,15 @@ A scene file::
 Instead of ``rgb`` an object may give ``srgb8 = [255, 0, 0]``, an 8-bit sRGB colour as printed
 on a colour board (paper Table 1), turned into a reflectance by :func:`paint_reflectance`, or
 ``spectrum = "ColorChecker N Ohta/red"``, a measured reflectance spectrum
-(:data:`simbench.spectral.MEASURED_DATASETS`) used as it is by the spectral (crosstalk) path.
+(:data:`simbench.sim.spectral.MEASURED_DATASETS`) used as it is by the spectral (crosstalk) path.
 ``material`` is ``diffuse`` (default) or ``plastic``: a smooth or rough dielectric coating
 (Mitsuba ``roughplastic``, interior IOR 1.49, GGX ``roughness`` alpha, default 0.1) over a
 diffuse base of colour ``rgb``; it gives the specular highlights of glazed pots and book covers.
 ``material = "metal"`` is a bare metal (Mitsuba ``roughconductor``, GGX ``roughness`` alpha,
-default 0.1) named by ``metal = "aluminium"`` (:data:`simbench.spectral.METALS`: its measured
+default 0.1) named by ``metal = "aluminium"`` (:data:`simbench.sim.spectral.METALS`: its measured
 complex refractive index gives its colour and its Fresnel reflectance); it takes no colour key.
 ``subsurface = "marble"`` makes an object translucent: the light it reflects leaves displaced by
-the dipole profile of that medium (:mod:`simbench.subsurface`, whose ``MEDIA`` lists the names).
+the dipole profile of that medium (:mod:`simbench.sim.subsurface`, whose ``MEDIA`` lists the names).
 
 A plane may also have a form error, as real boards do (:func:`board_form_m`): ``bow_m_per_m``
 (sag of a spherical bow over a 1 m chord, positive bulging towards the camera),
@@ -228,12 +228,12 @@ class Material:
     # the coating's or the metal's specular tint; only the spectral-crosstalk renders set it
     # (light of one primary seen through the camera's channels), scene files cannot
     specular_rgb: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    # a measured reflectance spectrum "<dataset>/<patch>" (simbench.spectral.MEASURED_DATASETS);
+    # a measured reflectance spectrum "<dataset>/<patch>" (simbench.sim.spectral.MEASURED_DATASETS);
     # rgb is then its linear sRGB, and the spectral path uses the spectrum itself
     spectrum: str | None = None
-    # a translucent medium of simbench.subsurface.MEDIA under the surface (None: opaque)
+    # a translucent medium of simbench.sim.subsurface.MEDIA under the surface (None: opaque)
     subsurface: str | None = None
-    # the metal of a ``metal`` material (simbench.spectral.METALS)
+    # the metal of a ``metal`` material (simbench.sim.spectral.METALS)
     metal: str | None = None
     # the projector primary whose band the metal's optical constants are averaged over (None:
     # the projector's white); only the spectral-crosstalk renders set it, scene files cannot
@@ -243,13 +243,13 @@ class Material:
         if self.kind not in MATERIALS:
             raise ValueError(f"unknown material {self.kind!r}; valid: {list(MATERIALS)}")
         if self.subsurface is not None:
-            from simbench.subsurface import get_medium
+            from simbench.sim.subsurface import get_medium
 
             get_medium(self.subsurface)
         if (self.kind == "metal") != (self.metal is not None):
             raise ValueError("a metal material needs its metal, and only a metal material takes one")
         if self.metal is not None:
-            from simbench.spectral import METALS
+            from simbench.sim.spectral import METALS
 
             if self.metal not in METALS:
                 raise ValueError(f"unknown metal {self.metal!r}; valid: {list(METALS)}")
@@ -284,7 +284,7 @@ class SceneSpec:
     projector_scale: float = 1.0
     ambient_rgb: tuple[float, float, float] = (0.0, 0.0, 0.0)
     # camera thin lens (aperture radius m, focus distance m); None = pinhole.  Set by the
-    # sensor model (simbench.device), not by scene files.
+    # sensor model (simbench.sim.sensor), not by scene files.
     camera_lens: tuple[float, float] | None = None
     description: str = ""
     base_dir: Path = field(default=Path("."), compare=False)
@@ -338,7 +338,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
             )
         spectrum = None
         if "spectrum" in d:
-            from simbench.spectral import measured_linear_srgb
+            from simbench.sim.spectral import measured_linear_srgb
 
             if not isinstance(d["spectrum"], str):
                 raise ValueError(f"spectrum must be a string '<dataset>/<patch>', got {d['spectrum']!r}")
@@ -426,7 +426,7 @@ def load_scene(path: str | Path) -> SceneSpec:
 
 def with_subsurface(scene: SceneSpec, medium: str | None, *, names: Sequence[str] | None = None) -> SceneSpec:
     """``scene`` with the objects ``names`` (all when None) given the subsurface ``medium`` (a
-    name of :data:`simbench.subsurface.MEDIA`; None: opaque), every other field as it was."""
+    name of :data:`simbench.sim.subsurface.MEDIA`; None: opaque), every other field as it was."""
     objects = tuple(
         dataclasses.replace(o, material=dataclasses.replace(o.material, subsurface=medium))
         if names is None or o.name in names
@@ -579,8 +579,8 @@ def _to_world(mi, *, translate, rotation_deg, scale) -> object:
 
 def metal_rgb(name: str) -> tuple[float, float, float]:
     """A metal's normal-incidence reflectance per camera channel (the diagonal of
-    :func:`simbench.spectral.metal_crosstalk`), rounded to 6 digits: its ``Material.rgb``."""
-    from simbench.spectral import METALS, metal_crosstalk
+    :func:`simbench.sim.spectral.metal_crosstalk`), rounded to 6 digits: its ``Material.rgb``."""
+    from simbench.sim.spectral import METALS, metal_crosstalk
 
     if name not in METALS:
         raise ValueError(f"unknown metal {name!r}; valid: {list(METALS)}")
@@ -590,7 +590,7 @@ def metal_rgb(name: str) -> tuple[float, float, float]:
 def _bsdf(mat: Material) -> dict:
     rgb = {"type": "rgb", "value": list(mat.rgb)}
     if mat.kind == "metal":
-        from simbench.spectral import metal_ior_rgb
+        from simbench.sim.spectral import metal_ior_rgb
 
         eta, k = metal_ior_rgb(mat.metal, primary=mat.metal_primary)
         inner = {
@@ -859,7 +859,7 @@ class ObjectKind:
     position_key: str = "center_m"
     tilts: bool = True
     # parameters holding reflectances besides the material's (seen through the camera's
-    # channels like it: simbench.simulate's crosstalk path maps them too)
+    # channels like it: simbench.sim.capture's crosstalk path maps them too)
     colour_keys: tuple[str, ...] = ()
 
 
@@ -935,13 +935,13 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
         if o.material.spectrum is not None:
             material.append({"spectrum": o.material.spectrum})
         if o.material.metal is not None:
-            from simbench.spectral import metal_ior_rgb
+            from simbench.sim.spectral import metal_ior_rgb
 
             # by value, so that changed optical constants are a new render input
             eta, k = metal_ior_rgb(o.material.metal, primary=o.material.metal_primary)
             material.append({"metal": o.material.metal, "eta": list(eta), "k": list(k)})
         if o.material.subsurface is not None:
-            from simbench.subsurface import get_medium
+            from simbench.sim.subsurface import get_medium
 
             # by value, so that a medium whose coefficients change is a new render input
             medium = dataclasses.asdict(get_medium(o.material.subsurface))

@@ -1,0 +1,313 @@
+"""The simulator's chain for one capture: pattern -> projector drive -> scene render -> camera.
+The systems (:mod:`simbench.systems`) build their acquisitions from it;
+the drive is :mod:`simbench.sim.drive`'s, the cache keys :mod:`simbench.sim.keys`'.
+
+Seeds: derived from one base seed and each capture's label (:mod:`simbench.seeds`); all are
+recorded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from simbench.cache import RenderCache, array_digest
+from simbench.sim.scene import scene_fingerprint
+from simbench.sim.sensor import SensorModel, apply_to_rig, sensor_to_dict
+from simbench.sim.drive import DriveImage, ProjectorDrive, mono_drive
+from simbench.sim.keys import recording_libraries, renderer_id, seed_key, sim_code_digest
+from simbench.sim.mitsuba_dict import RenderSettings, film_settings, pass_settings
+from simbench.optics import distort_image, lateral_colour_image
+from simbench.sim.subsurface import get_medium, subsurface_image
+from simbench.sim.photometry import (
+    channel_weights,
+    electrons_per_radiance_s,
+    exposure_s,
+    white_balance_gains,
+    white_board,
+)
+from simbench.sim.render import render_radiance
+from simbench.sim.scene import OBJECT_KIND_TABLE, SceneSpec, with_subsurface
+from simbench.seeds import RngLike, child_seed
+from simbench.sim.camera import SimpleCamera, emva_camera, simple_camera
+from simbench.sim.spectral import crosstalk_matrix, material_crosstalk
+from simbench.sim.truth import GroundTruth, ground_truth
+
+__all__ = [
+    "cached_radiance",
+    "cached_ground_truth",
+    "physical_scene",
+    "render_channels",
+    "with_translucency",
+    "opaque",
+    "record",
+    "record_channels",
+]
+
+
+def cached_radiance(
+    scene: SceneSpec,
+    drive: "np.ndarray | DriveImage | None",
+    *,
+    spp: int,
+    seed: int,
+    max_depth: int,
+    sampler: str = "independent",
+    cache: RenderCache | None = None,
+) -> np.ndarray:
+    """:func:`simbench.sim.render.render_radiance`, looked up in / stored to ``cache``; ``drive``
+    may be a :class:`DriveImage`, built only on a miss."""
+    kw = {"spp": spp, "seed": seed, "max_depth": max_depth, "sampler": sampler}
+    lazy = isinstance(drive, DriveImage)
+
+    def render() -> np.ndarray:
+        return render_radiance(scene, drive.make() if lazy else drive, **kw)
+
+    if cache is None:
+        return render()
+    digest = "off" if drive is None else (drive.digest if lazy else array_digest(drive))
+    parts = {
+        "scene": scene_fingerprint(scene),
+        "drive": digest,
+        "spp": int(spp),
+        "seed": int(seed),
+        "max_depth": int(max_depth),
+        "sampler": sampler,
+        **pass_settings(spp, pixels=scene.rig.camera.width_px * scene.rig.camera.height_px),
+        **film_settings(pixels=scene.rig.camera.width_px * scene.rig.camera.height_px),
+        **renderer_id(),
+    }
+    return cache.get_or_make("radiance", parts, lambda: {"radiance": render()})["radiance"]
+
+
+def cached_ground_truth(scene: SceneSpec, *, cache: RenderCache | None = None) -> GroundTruth:
+    """:func:`simbench.sim.truth.ground_truth`, looked up in / stored to ``cache``."""
+    scene = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
+    if cache is None:
+        return ground_truth(scene)
+
+    def make() -> dict:
+        gt = ground_truth(scene)
+        return {"depth_m": gt.depth_m, "column_px": gt.column_px, "object_id": gt.object_id, "lit": gt.lit}
+
+    arrays = cache.get_or_make("truth", {"scene": scene_fingerprint(scene), **renderer_id()}, make)
+    return GroundTruth(**arrays)
+
+
+def physical_scene(scene: SceneSpec, sensor: SensorModel) -> SceneSpec:
+    """The scene as the sensor model sees it: lens distortion in the rig (as calibration
+    records it), the camera's thin lens when its defocus is on, and the ambient light at
+    ``sensor.ambient_ratio`` of the projector's white irradiance at Z0 (a constant
+    environment of radiance ``L`` gives an unoccluded surface ``pi L``; the projector's
+    white gives ``pi * scale / Z0^2`` at Z0 in render units).  Apply once per scene."""
+    rig = apply_to_rig(scene.rig, sensor)
+    lens = scene.camera_lens
+    if sensor.camera_lens.defocus:
+        if not sensor.is_physical:
+            raise ValueError(
+                "camera defocus needs the physical (emva) camera model (its pixel pitch sets the aperture)"
+            )
+        aperture = sensor.camera_lens.aperture_m(rig.camera.focal_px, sensor.camera.pixel_pitch_um)
+        lens = (aperture / 2.0, sensor.camera_lens.focus_m)
+    ambient = scene.ambient_rgb
+    if sensor.ambient_ratio > 0:
+        level = sensor.ambient_ratio * scene.projector_scale / scene.reference_depth_m**2
+        ambient = tuple(a + level for a in ambient)
+    return dataclasses.replace(scene, rig=rig, camera_lens=lens, ambient_rgb=ambient)
+
+
+def _ambient_seed(seed: int) -> int:
+    """The ambient render's seed, independent of the projector render's."""
+    return int(child_seed(seed, "ambient_render").generate_state(1)[0])
+
+
+def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
+    """The scene lit by primary ``p`` alone, with each material's reflectance replaced by the
+    camera's view of it (column ``p`` of its crosstalk matrix)."""
+    white = np.clip(crosstalk_matrix((1.0, 1.0, 1.0))[:, p], 0.0, 1.0)
+    objects = []
+    for o in scene.objects:
+        if o.material.kind == "metal":
+            # its optical constants averaged over primary p's band (simbench.sim.spectral.metal_ior_rgb)
+            mat = dataclasses.replace(o.material, metal_primary=p, specular_rgb=tuple(float(x) for x in white))
+        else:
+            k = np.clip(material_crosstalk(o.material.rgb, o.material.spectrum)[:, p], 0.0, 1.0)
+            mat = dataclasses.replace(
+                o.material, rgb=tuple(float(x) for x in k), specular_rgb=tuple(float(x) for x in white)
+            )
+        params = dict(o.params)
+        for key in OBJECT_KIND_TABLE[o.kind].colour_keys:  # a target's ink, say
+            params[key] = tuple(float(x) for x in np.clip(material_crosstalk(params[key], None)[:, p], 0.0, 1.0))
+        objects.append(dataclasses.replace(o, material=mat, params=tuple(sorted(params.items()))))
+    return dataclasses.replace(scene, objects=tuple(objects))
+
+
+def with_translucency(radiance: np.ndarray, scene: SceneSpec, *, cache: RenderCache | None = None) -> np.ndarray:
+    """``radiance`` (H, W, 3) rendered of ``scene`` with its surfaces opaque, on its camera's
+    ideal pixel grid, with the light its translucent objects reflect redistributed by their
+    media (:func:`simbench.sim.subsurface.subsurface_image`, per channel with that band's medium);
+    ``radiance`` itself when every object is opaque.  Every system's renders pass through it, so
+    that a translucent object is translucent to all of them."""
+    media = {i: get_medium(o.material.subsurface) for i, o in enumerate(scene.objects) if o.material.subsurface}
+    if not media:
+        return radiance
+    gt = cached_ground_truth(opaque(scene), cache=cache)  # the geometry is the opaque one's
+    return subsurface_image(
+        radiance, object_id=gt.object_id, depth_m=gt.depth_m, media=media, focal_px=scene.rig.camera.focal_px
+    )
+
+
+def opaque(scene: SceneSpec) -> SceneSpec:
+    """``scene`` with every material's subsurface medium removed (the same object otherwise): what
+    a render of it sees (:func:`with_translucency` adds the media after)."""
+    if not any(o.material.subsurface for o in scene.objects):
+        return scene
+    return with_subsurface(scene, None)
+
+
+def render_channels(
+    scene: SceneSpec,
+    drive: "np.ndarray | ProjectorDrive",
+    sensor: SensorModel,
+    *,
+    seed: int,
+    render: RenderSettings,
+) -> np.ndarray:
+    """Radiance per camera channel on the camera's recorded pixel grid, rendered with ``seed``
+    and ``render``'s settings (through its cache).
+
+    Without crosstalk: one render, channel c lit by primary c.  With crosstalk: one render per
+    projector primary p (the drive's channel p in all three channels, materials replaced by
+    column p of their crosstalk matrix) summed with the weights of
+    :func:`simbench.sim.photometry.channel_weights` - exact for direct light; interreflected light is
+    coloured by one bounce's crosstalk only (an approximation, as is the coating's
+    specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
+    per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
+    primary's materials: light of the projector's white.  Then the translucent objects' subsurface
+    scattering (:mod:`simbench.sim.subsurface`, on the ideal pixel grid, per camera channel with that
+    band's medium: an approximation where a channel sees several primaries, and it spreads all the
+    object's light, a glossy coating's highlight included), the camera lens distortion and
+    lateral colour (per camera channel: an approximation where a channel sees several primaries'
+    wavelengths, exact for narrow-band light).
+
+    ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for` (or a
+    :class:`ProjectorDrive`, built only for renders the cache does not hold).
+
+    Returns
+    -------
+    ndarray, shape (H, W, 3), float32, in units of each channel's own primary
+    """
+    translucent_scene = scene
+    # the renders do not depend on what happens under the surface (applied after them)
+    scene = opaque(scene)
+    ambient = max(scene.ambient_rgb) > 0
+    dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
+    kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
+    lazy = isinstance(drive, ProjectorDrive)
+    if not sensor.crosstalk:
+        q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
+        if ambient:
+            q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
+    else:
+        weights = channel_weights(sensor, scene.rig)
+        q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
+        for p in range(3):
+            mono = drive.primary(p) if lazy else mono_drive(drive, p)
+            # the same seed for each primary: the sum has one render's sampling pattern; a
+            # primary the drive leaves off (calibration frames) lights nothing
+            lit = mono is not None if lazy else mono.any()
+            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if lit else np.zeros_like(q)
+            if ambient:
+                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
+            q += r * weights[:, p].astype(np.float32)
+    q = with_translucency(q, translucent_scene, cache=render.cache)
+    q = distort_image(q, scene.rig.camera)
+    return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
+        np.float32, copy=False
+    )
+
+
+def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
+    """The camera's recorded image from :func:`render_channels`' output: the simple camera,
+    or the EMVA 1288 camera with its colour filter array at the sensor's (auto) exposure."""
+    cam = sensor.camera
+    if isinstance(cam, SimpleCamera):
+        return simple_camera(q, camera=cam, rng=rng)
+    t, per_radiance, gains = _camera_settings(sensor, scene)
+    return emva_camera(q, camera=cam, electrons_per_radiance=per_radiance, exposure_s=t, white_balance=gains, rng=rng)
+
+
+def _camera_settings(sensor: SensorModel, scene: SceneSpec) -> tuple[float, np.ndarray, np.ndarray]:
+    """The physical camera's exposure, electrons per unit radiance over it and white-balance
+    gains, all set on the white reference board."""
+    board = white_board(scene)
+    t = exposure_s(sensor, scene.rig, **board)
+    return t, electrons_per_radiance_s(sensor, scene.rig) * t, white_balance_gains(sensor, scene.rig, **board)
+
+
+def record_channels(
+    scene: SceneSpec,
+    drive: "np.ndarray | ProjectorDrive",
+    sensor: SensorModel,
+    *,
+    seed: int,
+    render: RenderSettings,
+    rngs: list,
+) -> list[np.ndarray]:
+    """``[record(render_channels(...), rng=n) for n in rngs]``: one render of the scene
+    recorded once per noise seed, each recording looked up in / stored to ``render.cache``.
+
+    A recording is a pure function of what its renders are made from and of the camera; it is
+    cached under those inputs - the scene's render fingerprint, the drive's inputs
+    (:meth:`ProjectorDrive.inputs`, or an array's digest), the render seed and settings, the
+    renderer, the sensor model, the exposure numbers by value, the noise seed, the versions of
+    numpy, OpenCV and colour-science (noise draws, demosaicing, crosstalk data) and the bytes of
+    the code between a scene and a recording - so a run whose recordings are cached builds no
+    drive, reads no render and draws no noise.  A seed that is not an integer or a SeedSequence
+    (a Generator) is recorded afresh.
+    """
+    q: np.ndarray | None = None
+
+    def recorded(n) -> np.ndarray:
+        nonlocal q
+        if q is None:
+            q = render_channels(scene, drive, sensor, seed=seed, render=render)
+        return record(q, sensor=sensor, scene=scene, rng=n)
+
+    cache = render.cache
+    if cache is None or cache.root is None:
+        return [recorded(n) for n in rngs]
+    base = {
+        "scene": scene_fingerprint(scene),
+        "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
+        "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
+        "sensor": sensor_to_dict(sensor),
+        "exposure": _recording_settings(sensor, scene),
+        "code": sim_code_digest(),
+        **recording_libraries(),
+        **renderer_id(),
+    }
+    out = []
+    for n in rngs:
+        key = seed_key(n)
+        if key is None:
+            out.append(recorded(n))
+        else:
+            out.append(
+                cache.get_or_make("recording", {**base, "rng": key}, lambda n=n: {"image": recorded(n)})["image"]
+            )
+    return out
+
+
+def _recording_settings(sensor: SensorModel, scene: SceneSpec) -> dict:
+    """The numbers :func:`record` sets the camera with (by value: they come from colour data
+    and photometry, whatever their source)."""
+    if isinstance(sensor.camera, SimpleCamera):
+        return {}
+    t, per_radiance, gains = _camera_settings(sensor, scene)
+    return {
+        "exposure_s": float(t),
+        "electrons_per_radiance": np.asarray(per_radiance).tolist(),
+        "white_balance": np.asarray(gains).tolist(),
+    }

@@ -1,0 +1,120 @@
+"""Cache keys of the simulator's results: the renderer's identity, the code a recording or
+projector drive is made by, the library versions its bits depend on, and provenance versions.
+
+Everything the simulator caches is keyed by a SHA-256 of the values it is made from
+(:class:`simbench.cache.RenderCache`) plus what is here, so a changed model, renderer or library
+never reuses an older entry.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Callable
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from simbench.cache import RenderCache, source_digest
+
+__all__ = ["versions", "renderer_id", "cached_arrays", "sim_code_digest", "recording_libraries", "seed_key"]
+
+
+# distribution names of what provenance records (read from the installed metadata: no import,
+# so nothing another package put into sys.modules, such as colour-science's stand-in for a
+# missing SciPy, can break or fool the lookup)
+VERSIONED_DISTRIBUTIONS = {
+    "simbench": "simbench",
+    "mitsuba": "mitsuba",
+    "drjit": "drjit",
+    "numpy": "numpy",
+    # OpenCV (remaps, filters); simbench's own C loops (simbench/_lens.c, compiled at
+    # install: the C compiler is recorded too)
+    "opencv": "opencv-python-headless",
+    "colour": "colour-science",
+    "scipy": "scipy",
+}
+
+
+def versions() -> dict:
+    """Versions of the installed packages that affect results, and of Python."""
+    from importlib import metadata
+
+    out = {}
+    for key, dist in VERSIONED_DISTRIBUTIONS.items():
+        try:
+            out[key] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[key] = "not installed"
+    out["python"] = platform.python_version()
+    from simbench.native import compiler
+
+    out["c_compiler"] = compiler()
+    return out
+
+
+def renderer_id() -> dict:
+    """The variant and Mitsuba version that render here (part of every render key)."""
+    import mitsuba as mi
+
+    return {"variant": mi.variant(), "mitsuba": mi.__version__}
+
+
+def cached_arrays(
+    kind: str,
+    parts: dict,
+    make: Callable[[], dict[str, np.ndarray]],
+    *,
+    cache: RenderCache | None = None,
+    wait: bool = True,
+) -> dict[str, np.ndarray] | None:
+    """``make()``'s arrays, looked up in / stored to ``cache`` under ``kind`` and ``parts``
+    plus the renderer's identity (variant, Mitsuba version); ``wait=False``: None when another
+    process is making them (:meth:`simbench.cache.RenderCache.get_or_make`)."""
+    return make() if cache is None else cache.get_or_make(kind, {**parts, **renderer_id()}, make, wait=wait)
+
+
+@lru_cache(maxsize=1)
+def sim_code_digest() -> str:
+    """SHA-256 of the simulator's code: every module of :mod:`simbench.sim`, the lens model
+    (:mod:`simbench.optics`) and its compiled loops (``simbench/_lens.c``).  Part of the keys
+    of what is derived from renders by code - recordings and projector drives - so that an edit
+    anywhere in the simulator never reuses an older result (renders themselves are keyed by
+    their inputs and ``RENDER_VERSION``)."""
+    import simbench.native
+    import simbench.optics
+
+    here = Path(__file__).parent
+    return source_digest([*sorted(here.glob("*.py")), simbench.optics.__file__, simbench.native.LENS_SOURCE])
+
+
+def seed_key(rng: object) -> "int | dict | None":
+    """A noise seed as cache-key data: an integer, or a SeedSequence by what its streams are
+    drawn from (entropy, spawn key, pool size); None for anything else (a Generator's state
+    moves on as it draws)."""
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        return int(rng)
+    if isinstance(rng, np.random.SeedSequence):
+        entropy = rng.entropy
+        return {
+            "entropy": [int(e) for e in entropy] if isinstance(entropy, (list, tuple, np.ndarray)) else int(entropy),
+            "spawn_key": [int(k) for k in rng.spawn_key],
+            "pool_size": int(rng.pool_size),
+        }
+    return None
+
+
+@lru_cache(maxsize=1)
+def recording_libraries() -> dict:
+    """The libraries whose algorithms or data a recording's bits depend on: numpy (the noise
+    draws), OpenCV (demosaicing, remapping), colour-science (the crosstalk of the primaries'
+    renders; its version read without importing it)."""
+    from importlib import metadata
+
+    import cv2
+
+    try:
+        colour = metadata.version("colour-science")
+    except metadata.PackageNotFoundError:
+        colour = "not installed"
+    return {"numpy": np.__version__, "opencv": cv2.__version__, "colour-science": colour}
