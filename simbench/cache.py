@@ -188,6 +188,11 @@ def claim_cache_folder(root: str | Path) -> Path:
             atomic_write_bytes(root / MARKER_NAME, _MARKER_TEXT.encode())
         except OSError as exc:
             log.debug("render cache %s: no marker written (%s)", root, exc)
+        except ValueError:
+            # another process sharing the folder marked it between our look and our write (the
+            # writer refuses to replace a cache's marker): the folder is marked, as wanted
+            if _marker_format(root) is None:
+                raise
     return root
 
 
