@@ -30,6 +30,7 @@ from simbench import validate
 from simbench.literature import PAPER_DEBRUIJN_ORDER, PAPER_PERIOD_PX
 
 __all__ = [
+    "pattern_from_options",
     "PatternSpec",
     "CALIBRATION_FRAMES",
     "calibration_frames",
@@ -338,3 +339,21 @@ def calibration_frames(pattern_u8: np.ndarray) -> dict[str, np.ndarray]:
         f[..., p] = full
         out[name] = f
     return out
+
+
+def pattern_from_options(
+    size_hw: tuple[int, int],
+    *,
+    period_px: int | None = None,
+    order: int | None = None,
+    sequence: str | None = None,
+    channels: str | None = None,
+) -> PatternSpec:
+    """The :class:`PatternSpec` at ``size_hw`` that the command line's pattern options give
+    (``sequence`` as text, e.g. ``"00010111"``); an option left None keeps the default."""
+    try:
+        codes = None if sequence is None else parse_sequence(sequence)
+    except ValueError as exc:
+        raise ValueError(f"--sequence: {exc}") from None
+    given = {"period_px": period_px, "order": order, "channels": channels}
+    return PatternSpec(size_hw=size_hw, sequence=codes, **{k: v for k, v in given.items() if v is not None})

@@ -529,7 +529,7 @@ def test_cache_info_and_prune(tmp_path, capsys):
     ("text", "n"), [("0", 0), ("12345", 12345), ("500M", 500 << 20), ("10g", 10 << 30), ("1.5GiB", 3 << 29)]
 )
 def test_cache_sizes_are_read_the_way_du_writes_them(text, n):
-    from simbench.cli import _size_bytes
+    from simbench.cli.options import size_bytes as _size_bytes
 
     assert _size_bytes(text) == n
 

@@ -182,9 +182,9 @@ toml_texts = st.one_of(
 @FUZZ
 @given(name=st.one_of(st.sampled_from(DECODER_FIELDS), st.text(max_size=8)), text=toml_texts)
 def test_decoder_overrides(name, text):
-    from simbench.cli import _decoder_overrides
+    from simbench.decode import with_assignments
 
-    params = _check(_decoder_overrides, DecoderParams(), [f"{name}={text}"])
+    params = _check(with_assignments, DecoderParams(), [f"{name}={text}"])
     if params is not None:
         for f in dataclasses.fields(params):
             v = getattr(params, f.name)

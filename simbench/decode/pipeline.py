@@ -491,6 +491,35 @@ def with_changes(params: DecoderParams, changes: Mapping[str, object]) -> Decode
     return without_checks(dataclasses.replace(params, **fields), changes.get("without", "none"))
 
 
+def with_assignments(params: DecoderParams, items: Sequence[str]) -> DecoderParams:
+    """``params`` with ``name=value`` items applied (:func:`with_changes`): each value parsed as
+    a TOML scalar or array (``voting=false``, ``depth_range_m=[0.5, 2.0]``), a bare word as a
+    string (``phase_method=ftp``); ``without=NAME`` switches an added check off.  The command
+    line's ``--decoder`` items.
+
+    Examples
+    --------
+    >>> with_assignments(DecoderParams(), ["phase_method=ftp", "voting=false"]).voting
+    False
+    """
+    import tomllib
+
+    names = {f.name for f in dataclasses.fields(params)} | {"without"}
+    changes = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or key not in names:
+            raise ValueError(f"--decoder takes name=value with name one of {sorted(names)}; got {item!r}")
+        try:
+            changes[key] = tomllib.loads(f"v = {text}")["v"]
+        except tomllib.TOMLDecodeError:
+            changes[key] = text  # a bare word: phase_method=ftp
+    try:
+        return with_changes(params, changes)
+    except ValueError as exc:
+        raise ValueError(f"--decoder: {exc}") from None
+
+
 @dataclass(frozen=True)
 class ReferenceMap:
     """A decoded reference-plane capture.

@@ -5,8 +5,8 @@ Per object, over its front face (ground-truth points within 1 mm of the face pla
 at depth edges): the paper's protocol (mean absolute residual of the decoded points to their
 least-squares plane - the paper's "actual depth obtained by the Least Squares Fitting method")
 and the mean absolute error against ground truth.  The Kinect and ToF columns come from the
-simulated competitors (:mod:`simbench.systems.kinect`, :mod:`simbench.systems.tof`) on the same scene, scored the same way at
-their own resolutions (the edge band scaled to the same angle).  Writes ``table3.md``,
+simulated competitors (:mod:`simbench.systems.kinect`, :mod:`simbench.systems.tof`) on the same
+scene, scored the same way at their own resolutions (the edge band scaled to the same angle).  Writes ``table3.md``,
 ``table3.csv``, ``fig10.png`` (cross-sections of the three sensors, as the paper's Fig. 10) and
 ``table3.provenance.json``.
 """
@@ -427,8 +427,8 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         (
             (
                 "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera "
-                "(176x144) of `simbench.systems.kinect` and `.tof`, on the same scene from the same camera centre, scored with the "
-                "same protocol at their own resolutions (edge band scaled to the same angle). "
+                "(176x144) of `simbench.systems.kinect` and `.tof`, on the same scene from the same camera centre, "
+                "scored with the same protocol at their own resolutions (edge band scaled to the same angle). "
                 if all(d in competitors for d in COMPETITORS)
                 else ""
             )

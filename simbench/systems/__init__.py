@@ -49,6 +49,7 @@ __all__ = [
     "get_system",
     "system_names",
     "system_of_recording",
+    "DEFAULT_SYSTEM",
 ]
 
 
@@ -243,6 +244,10 @@ def acquire(
     ]
 
 
+# the system a bare capture image belongs to (`simbench decode IMAGE --rig RIG`), and the command
+# line's --system default: the paper's sensor
+DEFAULT_SYSTEM = "proposed"
+
 # recording folders name their system in one of these files
 RECORDING_MANIFESTS = ("device.json", "meta.json")
 
@@ -264,7 +269,7 @@ def system_of_recording(in_dir: str | Path) -> str:
         path = d / manifest
         if path.is_file():
             info = json_object(path)  # its seal is checked by the system's reader
-            name = info.get("system", info.get("device", "proposed"))
+            name = info.get("system", info.get("device", DEFAULT_SYSTEM))
             if not isinstance(name, str) or name not in _SYSTEMS:
                 raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
             return name

@@ -29,6 +29,13 @@ import numpy as np
 from simbench.manifest import read_manifest
 from simbench.sim.scene import SceneSpec, reference_scene
 from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
+from simbench.systems.proposed_folder import (
+    RENDER_MANIFEST,
+    describe_pattern,
+    pattern_record,
+    recorded_pattern,
+    recorded_z0,
+)
 
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
@@ -36,6 +43,7 @@ if TYPE_CHECKING:
     from simbench.sim.sensor import SensorModel
     from simbench.pattern import PatternSpec
     from simbench.sim.truth import GroundTruth
+    from simbench.systems.files import DecodeRequest, FileDecode
 
 _log = logging.getLogger(__name__)
 
@@ -349,6 +357,13 @@ class ColourFringeSystem:
         )
         return write_acquisition(acq, out_dir, overwrite=overwrite)
 
+    def decode_files(self, request: DecodeRequest) -> FileDecode:
+        """A capture image (with a rig) or a recording folder decoded from its files, with the
+        request's options (:func:`simbench.systems.proposed_folder.decode_capture_files`)."""
+        from simbench.systems.proposed_folder import decode_capture_files
+
+        return decode_capture_files(request)
+
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, ReferenceCalibration, SceneSpec]:
         """(capture, calibration, scene) of a folder written by :meth:`write_recording`
         (``simbench render``); the scene carries the recorded rig and Z0, no objects.  The
@@ -376,69 +391,6 @@ class ColourFringeSystem:
             rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames
         )
         return capture, cal, SceneSpec(name=str(meta.get("scene", d.name)), rig=rig, objects=(), reference_depth_m=z0)
-
-
-def pattern_record(pattern: PatternSpec) -> dict:
-    """The pattern as a render folder's manifest records it (:func:`recorded_pattern` reads it)."""
-    return {
-        "size_hw": list(pattern.size_hw),
-        "period_px": pattern.period_px,
-        "order": pattern.order,
-        "sequence": pattern.codes().tolist(),
-        "dc": pattern.dc,
-        "amplitude": pattern.amplitude,
-        "channels": pattern.channels,
-    }
-
-
-def recorded_pattern(meta: dict, *, where: str) -> PatternSpec:
-    """The pattern a render folder's manifest (``meta.json``) records it was captured with.
-
-    Raises
-    ------
-    ValueError
-        No pattern recorded, or one that is not a valid pattern.
-    """
-    from simbench.pattern import PatternSpec, de_bruijn
-
-    p = meta.get("pattern")
-    if not isinstance(p, dict):
-        raise ValueError(f"{where}: records no pattern, so it cannot be decoded as recorded")
-    try:
-        order = p["order"]
-        codes = p.get("sequence")
-        default = de_bruijn(order).tolist() if isinstance(order, int) and 2 <= order <= 16 else None
-        sequence = None if codes is None or (default is not None and list(codes) == list(default)) else tuple(codes)
-        return PatternSpec(
-            size_hw=tuple(p["size_hw"]),
-            period_px=p["period_px"],
-            order=order,
-            sequence=sequence,
-            dc=p.get("dc", 0.5),
-            amplitude=p.get("amplitude", 0.5),
-            channels=p.get("channels", "rgb"),
-        )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ValueError(f"{where}: its pattern is not valid ({exc})") from None
-
-
-def recorded_z0(meta: dict, *, where: str) -> float:
-    """The reference plane's depth a render folder's manifest records (Z0, m)."""
-    from simbench import validate
-
-    if "reference_depth_m" not in meta:
-        raise ValueError(f"{where}: records no reference_depth_m (Z0)")
-    # the bounds of a scene file's reference_depth_m (simbench.sim.scene)
-    return validate.number(meta["reference_depth_m"], f"{where}: reference_depth_m", lo=0.0, lo_open=True, hi=100.0)
-
-
-def describe_pattern(p: PatternSpec) -> str:
-    """One line naming what tells two patterns apart."""
-    seq = "".join(map(str, p.codes()))
-    return (
-        f"period {p.period_px} px, order {p.order}, codes {seq}, channels {p.channels}, dc {p.dc:g}, amplitude "
-        f"{p.amplitude:g}, {p.size_hw[1]}x{p.size_hw[0]}"
-    )
 
 
 @dataclass(frozen=True)
@@ -542,9 +494,6 @@ def acquire_with_calibration(
         calibration=calibration.frames if calibration is not None else {},
     )
     return acq, calibration
-
-
-RENDER_MANIFEST = "meta.json"
 
 
 def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool = False) -> dict[str, Path]:

@@ -1,0 +1,224 @@
+"""Command line: each subcommand parses its arguments and calls one library function.
+
+Errors are one line on stderr and exit status 2 (``--debug`` shows the traceback).
+
+One module per command group (:mod:`~simbench.cli.render`, :mod:`~simbench.cli.calibrate`,
+:mod:`~simbench.cli.decode`, :mod:`~simbench.cli.experiments`, :mod:`~simbench.cli.cache`), each
+adding its commands to the parser; the options they share are in :mod:`~simbench.cli.options`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from pathlib import Path
+
+from simbench.cli import cache, calibrate, decode, experiments, render
+from simbench.cli.options import DEFAULT_CACHE, Formatter, Parser, human_bytes
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+
+    kw = {"formatter_class": Formatter}
+    p = Parser(
+        prog="simbench",
+        description="Simulation testbed for single-shot structured-light depth sensing (Li et al., Sensors 2017).",
+        **kw,
+    )
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
+
+    render.add_parsers(sub, kw)
+    calibrate.add_parsers(sub, kw)
+    decode.add_parsers(sub, kw)
+    experiments.add_parsers(sub, kw)
+    cache.add_parsers(sub, kw)
+    return p
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Library messages (``logging``, logger ``simbench``) as ``simbench: ...`` lines on the
+    current ``sys.stderr`` (looked up per record, so redirected streams see them)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setFormatter(logging.Formatter("simbench: %(message)s"))
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
+def _report_library_messages() -> None:
+    logger = logging.getLogger("simbench")
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        logger.addHandler(_StderrHandler())
+    logger.setLevel(logging.WARNING)
+
+
+# options that name files or folders (an empty value is refused for every one)
+_PATH_OPTIONS = (
+    "out",
+    "confidence",
+    "ply",
+    "debug_dir",
+    "write_thresholds",
+    "check",
+    "cache",
+    "calibration",
+    "reference",
+    "rig",
+    "gt",
+    "lit",
+    "column",
+    "gt_column",
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
+    from simbench.threads import single_thread_blas
+
+    single_thread_blas()
+    _report_library_messages()
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:  # --help, or a usage error already printed as one line
+        return exc.code if isinstance(exc.code, int) else 2
+    empty = [name for name in _PATH_OPTIONS if getattr(args, name, None) == ""]
+    if empty:  # "" would mean the working folder to some writers (demo, reproduce wrote into it)
+        print(f"simbench: error: --{empty[0].replace('_', '-')}: an empty path; give a file or folder", file=sys.stderr)
+        return 2
+    previous = _on_sigterm_raise()
+    try:
+        return args.fn(args)
+    except KeyboardInterrupt:
+        print("simbench: interrupted", file=sys.stderr)
+        return 130
+    except _Terminated:
+        print(_TERMINATED_LINE, file=sys.stderr)
+        _quiet_finalizers(args)
+        return 143
+    except BrokenPipeError:  # `simbench ... | head`: the reader has gone; stop quietly, as `yes | head` does
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's flush is not a 2nd error
+        except (OSError, ValueError, AttributeError):  # a stdout without a descriptor (a test's buffer)
+            pass
+        return 141
+    except MemoryError:
+        if args.debug:
+            raise
+        print("simbench: error: out of memory (the inputs ask for more than this machine has)", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - SIGTERM re-wrapped by a render (simbench.termination)
+        from simbench import termination
+
+        if not termination.requested():
+            return _report_error(exc, args)
+        print(_TERMINATED_LINE, file=sys.stderr)
+        _quiet_finalizers(args)
+        return 143
+    finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _report_error(exc: Exception, args) -> int:
+    """One line for a failed command: exit 2 for bad input (missing or unreadable files,
+    invalid values), 1 for anything else, a bug (``--debug``: the traceback instead)."""
+    if args.debug:
+        raise exc
+    if isinstance(exc, (ValueError, OSError)):
+        print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
+        return 2
+    print(
+        f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback "
+        f"and please report it",
+        file=sys.stderr,
+    )
+    return 1
+
+
+_TERMINATED_LINE = "simbench: terminated (SIGTERM); partial outputs and cache locks removed"
+
+
+def _quiet_finalizers(args) -> None:
+    """After SIGTERM, objects the signal interrupted half-built may fail in their finalizers at
+    exit (a ``ZipFile`` whose ``__init__`` it cut short: "Exception ignored in ZipFile.__del__",
+    seen in CI), which printed tracebacks after the one-line message: those are dropped (kept
+    with ``--debug``).  Their files are the temporaries the unwinding already removed."""
+    if not getattr(args, "debug", False):
+        sys.unraisablehook = lambda unraisable: None
+
+
+class _Terminated(BaseException):
+    """SIGTERM (``kill``, a job scheduler's stop) raised in the main thread, as Ctrl-C raises
+    KeyboardInterrupt: the ``with`` blocks unwind, so temporary folders go and cache locks are
+    released and removed, and the exit says so."""
+
+
+def _on_sigterm_raise():
+    """Turn SIGTERM into :class:`_Terminated` while a command runs; returns the handler to
+    restore (None off the main thread, where signals cannot be handled)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        f = frame
+        while f is not None:
+            # an exception raised inside an import breaks a C extension's initialisation (Mitsuba's
+            # aborts the interpreter at exit): ask again once the import is done
+            if f.f_code.co_filename.startswith("<frozen importlib"):
+                threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGTERM)).start()
+                return
+            f = f.f_back
+        from simbench import termination
+
+        termination.request()
+        termination.run_or_hold(_raise_terminated)  # not inside a cache lock's taking or letting go
+
+    return signal.signal(signal.SIGTERM, handler)
+
+
+def _raise_terminated() -> None:
+    raise _Terminated()
+
+
+def _disk_full_hint(exc: BaseException, args) -> str:
+    """For a full disk: how much is free where the write failed, and how to free the cache."""
+    import shutil
+
+    from simbench.io import DISK_FULL_ERRNOS
+
+    if not isinstance(exc, OSError) or exc.errno not in DISK_FULL_ERRNOS:
+        return ""
+    where = Path(exc.filename) if exc.filename else Path(".")
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    try:
+        free = f"{human_bytes(shutil.disk_usage(where).free)} free there now; "
+    except OSError:
+        free = ""
+    cache = getattr(args, "cache", None) or DEFAULT_CACHE
+    return (
+        f" ({free}`simbench cache info --cache {cache}` shows what the render cache holds, "
+        f"`simbench cache prune --cache {cache} --max-size SIZE` frees it)"
+    )
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__

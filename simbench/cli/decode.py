@@ -1,0 +1,206 @@
+"""``simbench decode`` and ``simbench score``: a capture or recording to depth, and depth scored against
+ground truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from simbench.cli.options import (
+    add_pattern_options,
+    float_in,
+    int_in,
+    DEFAULT_CACHE,
+)
+
+
+def _cmd_decode(args) -> int:
+    from simbench.systems.files import DecodeRequest, decode_files
+
+    request = DecodeRequest(
+        capture=args.capture,
+        out=args.out,
+        confidence=args.confidence,
+        ply=args.ply,
+        debug_dir=args.debug_dir,
+        rig=args.rig,
+        min_confidence=args.min_confidence,
+        cache_dir=None if args.no_cache else args.cache,
+        reference=args.reference,
+        calibration=args.calibration,
+        mode=args.mode,
+        z0_m=args.z0,
+        near_m=args.near,
+        far_m=args.far,
+        period_px=args.period,
+        order=args.order,
+        sequence=args.sequence,
+        channels=args.channels,
+        robust=args.robust,
+        decoder=tuple(args.decoder or ()),
+    )
+    print(decode_files(request))
+    return 0
+
+
+def _cmd_score(args) -> int:
+    from simbench.io import load_npy
+    from simbench.systems.files import recording_manifest_of
+    from simbench.metrics import depth_errors, edge_band
+
+    if args.period <= 2:
+        raise ValueError(f"--period must be > 2 projector px, got {args.period}")
+    gt = _depth_map(load_npy(args.gt), args.gt, what="ground truth")
+    if not np.isfinite(gt).any():
+        raise ValueError(f"{args.gt}: the ground truth has no finite depth: nothing to score against")
+    depth = _depth_map(load_npy(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
+    gt_dir = Path(args.gt).parent
+    lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
+    col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
+    for p in (Path(args.gt), lit_path, col_gt_path):  # inside a recording folder: as recorded
+        if p.is_file():
+            recording_manifest_of(p)
+    region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
+    exclude = None
+    if args.edge_band < 0:
+        raise ValueError(f"--edge-band must be >= 0, got {args.edge_band}")
+    if args.edge_band > 0:
+        obj_path = gt_dir / "gt_object_id.npy"
+        obj = load_npy(obj_path, expected_shape=gt.shape) if obj_path.is_file() else None
+        exclude = edge_band(gt, object_id=obj, band_px=args.edge_band)
+    kw = {}
+    if args.column:
+        kw = {
+            "column_px": load_npy(args.column, expected_shape=gt.shape),
+            "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape),
+            "period_px": args.period,
+        }
+    m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
+    if not m["n_region"]:
+        raise ValueError(
+            f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
+            "holds no pixel with a finite ground truth off the edge band"
+        )
+    if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
+        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
+        print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
+    else:
+        print(
+            f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 "
+            f"{m['p95_mm']:.4f} mm"
+        )
+        print(
+            f"completeness {100 * m['completeness']:.2f} % of {m['n_region']} pixels, outliers (> 5 mm) "
+            f"{100 * m['outlier_share']:.3f} %"
+        )
+        if "stripe_order_errors" in m:
+            print(
+                f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid "
+                f"pixels)"
+            )
+    return 0
+
+
+def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:
+    """``a`` if it is a 2-D map of real numbers (metres), else a one-line error naming the file."""
+    if a.ndim != 2:
+        raise ValueError(f"{path}: {what} must be a 2-D depth map, got shape {a.shape}")
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{path}: {what} must hold real numbers (metres), got dtype {a.dtype}")
+    return a
+
+
+def add_parsers(sub, kw: dict) -> None:
+    """Add this module's commands to the command line's subparsers."""
+    s = sub.add_parser("decode", help="decode a capture into a depth map (.npy, metres, NaN = invalid)", **kw)
+    s.add_argument(
+        "capture",
+        help="the capture (PNG/TIFF, or .npy for float images), or a folder written by `simbench render` (any "
+        "--system; its reference, rig and calibration frames are used)",
+    )
+    s.add_argument("--reference", help="reference-plane capture (reference mode)")
+    s.add_argument(
+        "--rig",
+        help="rig TOML file (required unless CAPTURE is a render folder; given with a folder, it replaces the folder's "
+        "rig: e.g. the rig.toml of `simbench calibrate`)",
+    )
+    s.add_argument("--out", required=True, help="depth map to write (.npy, float32 metres, NaN = invalid)")
+    s.add_argument(
+        "--confidence",
+        help="confidence map to write (.npy, float32, the system's own unit: the colour-fringe sensor's is the fringe "
+        "SNR; default: NAME_confidence.npy beside --out)",
+    )
+    s.add_argument(
+        "--min-confidence",
+        type=float_in(lo=0.0, hi=1e6),
+        default=None,
+        help="the operating point: decoded pixels whose confidence is below it become holes (default: the decoder's "
+        "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
+        "competitor's validity threshold)",
+    )
+    s.add_argument("--ply", help="also write the point cloud as PLY")
+    s.add_argument("--debug-dir", help="write every decoder stage here")
+    s.add_argument(
+        "--mode",
+        choices=("reference", "calibrated"),
+        default=None,
+        help="reference (the default): match against the reference plane (paper Sec. 5.4); calibrated: triangulate "
+        "with the rig",
+    )
+    s.add_argument(
+        "--z0",
+        type=float_in(lo=0.0, hi=100.0, lo_open=True),
+        default=None,
+        help="reference depth, m (default: meta.json beside the reference, else 1.0)",
+    )
+    s.add_argument(
+        "--near", type=float_in(lo=0.0, hi=100.0, lo_open=True), default=0.75, help="working range near end, m"
+    )
+    s.add_argument(
+        "--far", type=float_in(lo=0.0, hi=100.0, lo_open=True), default=1.75, help="working range far end, m"
+    )
+    add_pattern_options(s)
+    s.add_argument(
+        "--robust",
+        action="store_true",
+        help="our colour-robust decoder (unmixing, colour normalisation, weighted intensity) instead of the paper's; "
+        "needs the calibration frames",
+    )
+    s.add_argument(
+        "--calibration",
+        default=None,
+        help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: "
+        "the --reference folder)",
+    )
+    s.add_argument(
+        "--decoder",
+        nargs="*",
+        metavar="NAME=VALUE",
+        help="other decoder parameters, e.g. phase_method=ftp voting=false",
+    )
+    s.add_argument(
+        "--cache",
+        default=DEFAULT_CACHE,
+        help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and "
+        "decoder code)",
+    )
+    s.add_argument("--no-cache", action="store_true", help="decode the reference plane every time, store nothing")
+    s.set_defaults(fn=_cmd_decode)
+
+    s = sub.add_parser("score", help="score a depth map against ground truth", **kw)
+    s.add_argument("depth", help="depth map .npy (metres, NaN = invalid)")
+    s.add_argument("--gt", required=True, help="ground-truth depth .npy (gt_lit.npy beside it defines the region)")
+    s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
+    s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")
+    s.add_argument("--gt-column", help="true columns .npy (default: gt_column.npy beside --gt)")
+    s.add_argument(
+        "--period",
+        type=float_in(lo=2.0, hi=16384.0, lo_open=True),
+        default=21.0,
+        help="fringe period, projector px (a column off by more than half of it is a stripe-order error)",
+    )
+    s.add_argument("--edge-band", type=int_in(0, 1000), default=0, help="exclude pixels this close to depth edges (px)")
+    s.add_argument("--json", action="store_true", help="print the scores as JSON")
+    s.set_defaults(fn=_cmd_score)

@@ -1,0 +1,163 @@
+"""``simbench pattern`` and ``simbench render``: the pattern image, and a scene recorded by a depth system."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from simbench.seeds import DEFAULT_SEED
+from simbench.cli.options import (
+    MAX_DEPTH,
+    SEED,
+    add_cache_options,
+    add_pattern_options,
+    add_render_options,
+    cache_of,
+    int_in,
+    pattern_spec,
+    registered_systems,
+    render_settings,
+)
+
+
+def _cmd_pattern(args) -> int:
+    from simbench.io import save_png
+    from simbench.pattern import fringe_pattern, quantize
+
+    spec = pattern_spec(args, (args.height, args.width))
+    path = save_png(args.out, quantize(fringe_pattern(spec)))
+    codes = "".join(map(str, spec.codes()))
+    print(f"pattern {args.width}x{args.height}, period {args.period} px, codes {codes} (window {args.order}) -> {path}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from simbench import api
+    from simbench.decode import DecoderParams
+    from simbench.io import check_output_directory
+    from simbench.sim.scene import load_scene
+    from simbench.sim.sensor import get_sensor
+    from simbench.systems import SystemOptions, get_system, recording_manifest, system_names
+
+    if args.system not in system_names():  # an unknown name fails before anything else
+        get_system(args.system)
+    scene = load_scene(args.scene)
+    pattern = pattern_spec(args, scene.rig.projector.size_hw)
+    # a system that projects a coded pattern projects the pattern options'; the others their own
+    system = get_system(
+        args.system, SystemOptions(sensor=get_sensor(args.camera), decoder=DecoderParams(pattern=pattern))
+    )
+    spp, sampler = render_settings(args)
+    # before minutes of rendering
+    check_output_directory(args.out, manifest=recording_manifest(system), overwrite=args.overwrite)
+    if not args.no_cache:
+        from simbench.cache import check_cache_location
+
+        cache_dir, out_dir = Path(args.cache).resolve(), Path(args.out).resolve()
+        if cache_dir == out_dir or out_dir in cache_dir.parents or cache_dir in out_dir.parents:
+            raise ValueError(
+                f"--cache {args.cache} and --out {args.out} overlap: the render cache needs its own folder"
+            )
+        check_cache_location(args.cache, what="--cache")
+    t0 = time.perf_counter()
+    cache = cache_of(args)
+    rec = api.record(
+        args.scene,
+        system=args.system,
+        sensor=args.camera,
+        seed=args.seed,
+        spp=spp,
+        sampler=sampler,
+        max_depth=args.max_depth,
+        calibration_frames=args.calibration_frames,
+        pattern=pattern,
+        cache=cache,
+        variant=args.variant,
+    )
+    _check_visible(rec.gt, scene)
+    files = system.write_recording(
+        Path(args.out), rec.raw, rec.calibration, scene=rec.scene, gt=rec.gt, meta=rec.meta, overwrite=args.overwrite
+    )
+    cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
+    print(
+        f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
+        f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
+    )
+    for key, path in files.items():
+        print(f"  {key:17s} {path.name}")
+    return 0
+
+
+def _check_visible(gt, scene) -> None:
+    """A render in which no object of the scene reaches the camera is an error, not a folder of
+    black images (objects behind the camera, far outside its view, or too small to see)."""
+    if not np.isfinite(gt.depth_m).any():
+        raise ValueError(
+            f"scene {scene.name!r}: no object is visible to the camera (every one is behind it, outside its field of "
+            "view or smaller than a pixel); nothing was written"
+        )
+
+
+def add_parsers(sub, kw: dict) -> None:
+    """Add this module's commands to the command line's subparsers."""
+    from simbench.systems import DEFAULT_SYSTEM
+    from simbench.validate import MAX_SIDE_PX
+
+    s = sub.add_parser("pattern", help="write the colour sequence coded fringe pattern (PNG)", **kw)
+    s.add_argument("--out", required=True, help="PNG file to write")
+    s.add_argument(
+        "--width",
+        type=int_in(1, MAX_SIDE_PX),
+        default=1824,
+        help="pattern width, projector px (the LightCrafter 4500's)",
+    )
+    s.add_argument("--height", type=int_in(1, MAX_SIDE_PX), default=1140, help="pattern height, projector px")
+    add_pattern_options(s)
+    s.set_defaults(fn=_cmd_pattern)
+
+    s = sub.add_parser(
+        "render", help="render a scene with a depth system: its raw frames, calibration, ground truth, metadata", **kw
+    )
+    s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
+    s.add_argument(
+        "--system",
+        default=DEFAULT_SYSTEM,
+        help=f"depth system (registered: {', '.join(registered_systems())}); the others replace the scene's rig with "
+        "their own",
+    )
+    s.add_argument(
+        "--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)"
+    )
+    s.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output folder even if it holds files render did not write (e.g. decoded depth)",
+    )
+    add_render_options(s)
+    add_cache_options(s)
+    s.add_argument(
+        "--calibration-frames",
+        action="store_true",
+        help="also record the reference plane under black and each primary (calibration_*.png), which `simbench "
+        "decode --robust` needs",
+    )
+    s.add_argument(
+        "--seed",
+        type=SEED,
+        default=DEFAULT_SEED,
+        help="base seed (every render and noise seed derives from it and a label; all recorded in the manifest)",
+    )
+    s.add_argument("--max-depth", type=MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
+    s.add_argument(
+        "--sensor",
+        "--camera",
+        dest="camera",
+        default="paper",
+        help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; paper_sim: the paper's 3ds Max "
+        "simulation, a linear noise-free RGB camera; minimal: noise only; ideal: nothing) or a sensor TOML file",
+    )
+    add_pattern_options(s)
+    s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
+    s.set_defaults(fn=_cmd_render)

@@ -1,0 +1,310 @@
+"""Decoding from files to files: a capture image or a recording folder in, a depth map, its
+confidence map (and optionally a point cloud and the decoder's stage images) out - what
+``simbench decode`` does, for every system.
+
+A recording folder (``simbench render --out``) names the system that wrote it
+(:func:`simbench.systems.system_of_recording`) and decodes that system's way, with what it
+recorded; an image file is a capture of :data:`simbench.systems.DEFAULT_SYSTEM` (the paper's
+sensor), decoded with a rig file.  A system that decodes its files itself (options of its own, a
+reference plane, images) has a ``decode_files(request)`` method returning a :class:`FileDecode`;
+any other system's folder is read with its ``read_recording`` and decoded with its ``decode``,
+and the options it cannot use are refused, never ignored.
+
+Every output is checked writable before anything is read, an output that would overwrite one of
+the inputs (or a recording's own file) is refused, and the outputs are written together or not at
+all (:func:`simbench.io.write_files`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DecodeRequest", "FileDecode", "decode_files", "recording_manifest_of", "confidence_path"]
+
+
+@dataclass(frozen=True)
+class DecodeRequest:
+    """What to decode, how, and where the results go (paths as given by the user).
+
+    capture : an image file (PNG/TIFF/NPY) or a recording folder
+    out : the depth map to write (.npy, float32 metres, NaN invalid)
+    confidence : the confidence map to write (default: NAME_confidence.npy beside ``out``)
+    ply, debug_dir : the point cloud (.ply) and the folder of decoder stages, optional
+    rig : a rig TOML (required for an image; for a folder, it replaces the recorded rig)
+    min_confidence : the operating point; None = the decoder's own
+
+    The other fields are options of the colour-fringe (proposed) sensor's decoder: a reference
+    plane capture, its calibration frames' folder, the decoding ``mode``, Z0, the working range,
+    the pattern (None = as recorded, or the default), the colour-robust decoder and other
+    decoder settings as ``name=value`` items.  None or empty = not given.
+    """
+
+    capture: str
+    out: str
+    confidence: str | None = None
+    ply: str | None = None
+    debug_dir: str | None = None
+    rig: str | None = None
+    min_confidence: float | None = None
+    cache_dir: str | None = None
+    reference: str | None = None
+    calibration: str | None = None
+    mode: str | None = None
+    z0_m: float | None = None
+    near_m: float = 0.75
+    far_m: float = 1.75
+    period_px: int | None = None
+    order: int | None = None
+    sequence: str | None = None
+    channels: str | None = None
+    robust: bool = False
+    decoder: tuple[str, ...] = ()
+
+
+# how the command line names each option of a request, for messages that tell a user what to change
+FLAGS = {
+    "reference": "--reference",
+    "calibration": "--calibration",
+    "mode": "--mode",
+    "z0_m": "--z0",
+    "period_px": "--period",
+    "order": "--order",
+    "sequence": "--sequence",
+    "channels": "--channels",
+    "robust": "--robust",
+    "decoder": "--decoder",
+    "near_m": "--near",
+    "far_m": "--far",
+}
+# the options every system takes (the rest are the colour-fringe decoder's)
+COMMON_FIELDS = frozenset({"capture", "out", "confidence", "ply", "debug_dir", "rig", "min_confidence", "cache_dir"})
+
+
+@dataclass
+class FileDecode:
+    """A system's decode of a request, before anything is written.
+
+    depth_m, valid, confidence : (H, W) float32 metres (NaN invalid), bool, float32
+    camera : the :class:`simbench.rig.Intrinsics` the depth map is on (for the point cloud)
+    colours : (H, W, 3) uint8 per pixel for the point cloud, or None
+    summary : what was done, for the one-line report (mode, Z0, reference, overrides)
+    confidence_meaning : what the confidence is and the operating point applied
+    stages : name -> array of the decoder's stages (``--debug-dir``), or None when it has none
+    elapsed_s : the decode's own time
+    capture_file : the image decoded (a folder's capture), as the stage folder records it
+    commit : called after the decode succeeded, before the outputs are written (a cache entry)
+    """
+
+    depth_m: np.ndarray
+    valid: np.ndarray
+    confidence: np.ndarray
+    camera: Any
+    summary: str
+    confidence_meaning: str
+    elapsed_s: float
+    colours: np.ndarray | None = None
+    stages: dict[str, np.ndarray] | None = None
+    capture_file: str = ""
+    commit: Callable[[], None] = field(default=lambda: None)
+
+
+def confidence_path(request: DecodeRequest) -> Path:
+    """Where the confidence map goes: ``request.confidence``, else NAME_confidence.npy beside
+    ``request.out``."""
+    if request.confidence:
+        return Path(request.confidence)
+    out = Path(request.out)
+    return out.with_name(f"{out.stem}_confidence.npy")
+
+
+def recording_manifest_of(path: str | Path) -> dict | None:
+    """The sealed manifest (``meta.json``, or a competitor's ``device.json``) of the recording
+    folder holding ``path`` (checked: the manifest's own seal, and ``path``'s recorded SHA-256
+    when it lists it), or None when there is none.  A folder mixing the files of two renders,
+    or whose manifest was edited, is refused."""
+    from simbench.manifest import ManifestError, file_sha256, read_manifest
+    from simbench.systems import RECORDING_MANIFESTS
+
+    path = Path(path)
+    for name in reversed(RECORDING_MANIFESTS):  # meta.json first
+        meta = path.parent / name
+        if not meta.exists():
+            continue
+        data = read_manifest(meta, verify_files=False)
+        for key, listed in data["files"].items():
+            if listed == path.name and file_sha256(path) != data["sha256"][key]:
+                raise ManifestError(
+                    f"{path} does not match {meta} (SHA-256 differs): the folder mixes files of two renders"
+                )
+        return data
+    return None
+
+
+def check_request_paths(request: DecodeRequest) -> None:
+    """The output paths' kinds, before anything else: a depth map is .npy, a point cloud .ply,
+    the stage folder a folder."""
+    if Path(request.out).suffix != ".npy":
+        raise ValueError(f"--out must name a .npy file, got {request.out}")
+    if request.ply and Path(request.ply).suffix.lower() != ".ply":
+        raise ValueError(f"--ply must name a .ply file, got {request.ply}")
+    if request.debug_dir and Path(request.debug_dir).exists() and not Path(request.debug_dir).is_dir():
+        raise ValueError(f"--debug-dir {request.debug_dir} exists and is not a folder")
+
+
+def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
+    """Every output writable before the decode starts (a folder in the way, a file above one, no
+    permission; the reference cache too), and none of them one of the ``inputs`` or a file of a
+    recording among them (``--out FOLDER/gt_depth.npy`` replaced the ground truth)."""
+    from simbench.cache import check_cache_location
+    from simbench.io import check_output_file, check_own_folder
+    from simbench.manifest import listed_files
+    from simbench.systems import RECORDING_MANIFESTS
+
+    protected: set[Path] = set()
+    folders: set[Path] = set()  # recording folders among the inputs'
+    for p in inputs:
+        if p:
+            protected.add(Path(p).resolve())
+            folder = Path(p) if Path(p).is_dir() else Path(p).parent
+            listed = set().union(*(listed_files(folder / m) for m in RECORDING_MANIFESTS))
+            protected |= listed
+            folders |= {f.parent for f in listed}
+    outputs = [Path(request.out), confidence_path(request)] + ([Path(request.ply)] if request.ply else [])
+    if request.debug_dir and Path(request.debug_dir).resolve() in folders:
+        raise ValueError(f"--debug-dir {request.debug_dir} is a recording's folder: its stage images would mix with it")
+    for out in outputs:
+        if out.resolve() in protected:
+            raise ValueError(
+                f"{out} is a file of the recording being decoded (or an input): choose another output path"
+            )
+    check_output_file(request.out, what="--out")
+    check_output_file(confidence_path(request), what="--confidence")
+    if Path(request.out).resolve() == confidence_path(request).resolve():
+        raise ValueError(f"--confidence {confidence_path(request)} is --out: give another path")
+    if request.ply:
+        check_output_file(request.ply, what="--ply")
+    if request.debug_dir:
+        check_own_folder(request.debug_dir, marker="stages.json", written_by="simbench decode", what="--debug-dir")
+        debug, out = Path(request.debug_dir).resolve(), Path(request.out).resolve()
+        if debug == out or out in debug.parents:
+            raise ValueError(f"--debug-dir {request.debug_dir} is --out {request.out} or under it: give another folder")
+    if request.cache_dir is not None:
+        check_cache_location(request.cache_dir, what="--cache")
+
+
+def decode_files(request: DecodeRequest) -> str:
+    """Decode ``request.capture`` with the system it belongs to and write the outputs; the
+    one-line report of what was decoded and where it went."""
+    from simbench.io import json_bytes, npy_bytes, ply_bytes, png_bytes, write_files
+    from simbench.metrics import points_from_depth
+    from simbench.systems import DEFAULT_SYSTEM, get_system, system_of_recording
+
+    check_request_paths(request)
+    name = system_of_recording(request.capture) if Path(request.capture).is_dir() else DEFAULT_SYSTEM
+    system = get_system(name)
+    hook = getattr(system, "decode_files", None)
+    res = hook(request) if hook is not None else _decode_folder(system, request)
+    files = {Path(request.out): npy_bytes(res.depth_m), confidence_path(request): npy_bytes(res.confidence)}
+    msg = (
+        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {res.elapsed_s * 1000:.0f} ms ({res.summary}) -> "
+        f"{request.out}, confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
+    )
+    if request.ply:
+        pts = points_from_depth(res.depth_m, res.camera)
+        files[Path(request.ply)] = ply_bytes(pts[res.valid], None if res.colours is None else res.colours[res.valid])
+        msg += f", {request.ply}"
+    if request.debug_dir:
+        if res.stages is None:
+            raise ValueError(f"--debug-dir: the {name} system's decoder has no stage images to write")
+        d = Path(request.debug_dir)
+        for key, arr in res.stages.items():
+            files[d / f"{key}.npy"] = npy_bytes(arr)
+        if "wrapped_phase" in res.stages:
+            files[d / "wrapped_phase.png"] = png_bytes(_to_u8(res.stages["wrapped_phase"], -np.pi, np.pi))
+        if "intensity" in res.stages:
+            files[d / "intensity.png"] = png_bytes(_to_u8(res.stages["intensity"], 0.0, 1.0))
+        files[d / "depth.png"] = png_bytes(_to_u8(res.depth_m, *_finite_range(res.depth_m)))
+        stages = sorted(p.name for p in files if p.parent == d)
+        files[d / "stages.json"] = json_bytes(
+            {"command": "simbench decode", "capture": res.capture_file or request.capture, "files": stages}
+        )
+        msg += f", stages in {d}/"
+    if len({p.resolve() for p in files}) != len(files):
+        raise ValueError("--out, --confidence, --ply and the --debug-dir files must be different paths")
+    # only now, the decode done: a failed decode leaves nothing behind, not even a cache entry; and
+    # before the outputs, so that a cache that cannot take the entry fails with no output written
+    res.commit()
+    write_files(files)
+    return msg
+
+
+def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
+    """A recording folder of a system without a ``decode_files`` of its own: read with its
+    ``read_recording``, decoded with its ``decode`` and what it recorded; a ``rig`` replaces the
+    recorded one (e.g. the rig ``simbench calibrate`` estimated)."""
+    from simbench.decode.pipeline import apply_min_confidence
+
+    name = system.name
+    defaults = DecodeRequest(capture=request.capture, out=request.out)
+    stray = [
+        FLAGS[f.name]
+        for f in dataclasses.fields(request)
+        if f.name not in COMMON_FIELDS and getattr(request, f.name) != getattr(defaults, f.name)
+    ]
+    if stray:
+        raise ValueError(
+            f"{request.capture} is a {name} recording: {', '.join(stray)} apply to the proposed sensor's folders only "
+            f"(a {name} folder decodes the {name} way, with what it recorded)"
+        )
+    if request.debug_dir:
+        raise ValueError(f"--debug-dir: the {name} system's decoder has no stage images to write")
+    check_outputs(request, inputs=[request.capture, request.rig])
+    raw, cal, scene = system.read_recording(Path(request.capture))
+    if request.rig is not None:
+        from simbench.rig import load_rig
+
+        rig = load_rig(request.rig)
+        if rig.camera.size_hw != scene.rig.camera.size_hw:
+            raise ValueError(
+                f"--rig {request.rig}: camera {rig.camera.width_px}x{rig.camera.height_px}, but the recording's is "
+                f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
+            )
+        scene = dataclasses.replace(scene, rig=rig)
+    t0 = time.perf_counter()
+    res = system.decode(raw, cal, scene=scene)
+    dt = time.perf_counter() - t0
+    info = system.info()
+    if request.min_confidence is not None:
+        if res.confidence is None:
+            raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
+        res = apply_min_confidence(res, request.min_confidence)
+    over = f"; overriding the recording: rig {request.rig} instead of the recorded one" if request.rig else ""
+    meaning = info.confidence + (
+        f"; and, by --min-confidence, below {request.min_confidence:g}" if request.min_confidence is not None else ""
+    )
+    return FileDecode(
+        depth_m=res.depth_m,
+        valid=res.valid,
+        confidence=res.confidence if res.confidence is not None else np.zeros(res.depth_m.shape, np.float32),
+        camera=scene.rig.camera,
+        summary=info.label + over,
+        confidence_meaning=meaning,
+        elapsed_s=dt,
+    )
+
+
+def _finite_range(a: np.ndarray) -> tuple[float, float]:
+    f = a[np.isfinite(a)]
+    return (float(f.min()), float(f.max())) if f.size else (0.0, 1.0)
+
+
+def _to_u8(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    x = (np.nan_to_num(np.asarray(a, dtype=np.float64), nan=lo) - lo) / max(hi - lo, 1e-12)
+    return np.rint(np.clip(x, 0, 1) * 255).astype(np.uint8)

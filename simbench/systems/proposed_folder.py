@@ -1,0 +1,324 @@
+"""The colour-fringe (proposed) sensor's recording folder - its manifest (``meta.json``), the
+pattern and Z0 it records - and its captures decoded from files: a recording folder of
+``simbench render`` or a capture image with a rig file, against a reference-plane capture
+(reference mode) or by triangulation with the rig (calibrated mode), with the paper's decoder or
+the colour-robust one (which calibrates on the reference plane and its calibration frames).
+
+What a recording records is what it decodes with: its pattern, rig, reference and Z0; an option
+that contradicts the recording is an error, one that replaces a recorded file is announced with
+the result.  The decoded reference plane is cached (:mod:`simbench.decode.persist`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from simbench.pattern import PatternSpec
+
+from simbench.systems.files import DecodeRequest, FileDecode, check_outputs, recording_manifest_of
+
+__all__ = [
+    "RENDER_MANIFEST",
+    "decode_capture_files",
+    "describe_pattern",
+    "pattern_record",
+    "recorded_pattern",
+    "recorded_z0",
+]
+
+# the manifest of a proposed-sensor recording folder (simbench.manifest)
+RENDER_MANIFEST = "meta.json"
+
+
+def _recorded_pattern(request: DecodeRequest, recorded):
+    """The pattern a recording folder records, with any pattern option of the request checked
+    against it: a contradiction is an error, never a silent re-decode with other values."""
+    from simbench.pattern import parse_sequence
+
+    given = {
+        "--period": (request.period_px, recorded.period_px),
+        "--order": (request.order, recorded.order),
+        "--channels": (request.channels, recorded.channels),
+        "--sequence": (
+            None if request.sequence is None else parse_sequence(request.sequence),
+            tuple(int(c) for c in recorded.codes()),
+        ),
+    }
+    for option, (value, rec) in given.items():
+        if value is not None and value != rec:
+            raise ValueError(
+                f"{option} {request.sequence if option == '--sequence' else value} contradicts the recording, made "
+                f"with the pattern {describe_pattern(recorded)} (meta.json); leave {option} out to decode it as "
+                "recorded"
+            )
+    return recorded
+
+
+def _z0_for(reference: Path, z0: float | None) -> float:
+    """Z0: the reference's folder records it (a ``z0_m`` that contradicts it is an error);
+    without a recording, ``z0_m`` or 1 m."""
+    meta = recording_manifest_of(reference)
+    if meta is None:
+        return z0 if z0 is not None else 1.0
+    recorded = recorded_z0(meta, where=str(reference.parent / "meta.json"))
+    if z0 is not None and z0 != recorded:
+        raise ValueError(
+            f"--z0 {z0!r} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at Z0 = "
+            f"{recorded!r} m; leave --z0 out to decode it as recorded"
+        )
+    return recorded
+
+
+def _decoder_params(request: DecodeRequest, base=None):
+    """The decoder's parameters: the paper's or the colour-robust ones, with the request's
+    ``name=value`` settings (:func:`simbench.decode.with_assignments`)."""
+    from simbench.decode import DecoderParams, robust_params, with_assignments
+
+    base = base if base is not None else DecoderParams()
+    return with_assignments(robust_params(base) if request.robust else base, request.decoder)
+
+
+def decode_capture_files(request: DecodeRequest) -> FileDecode:
+    """Decode the request's capture (an image with ``request.rig``, or a recording folder) with
+    the colour-fringe sensor's decoder."""
+    from simbench.cache import RenderCache
+    from simbench.decode import DecoderParams, decode
+    from simbench.decode.persist import lookup_decoded_reference
+    from simbench.io import load_image
+    from simbench.manifest import read_manifest
+    from simbench.pattern import pattern_from_options
+    from simbench.rig import load_rig
+
+    _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
+    overrides = []  # explicit options that replace what a recording holds, announced with the result
+    capture_path, rig_path, reference_path = request.capture, request.rig, request.reference
+    if Path(request.capture).is_dir():
+        folder = Path(request.capture)
+        read_manifest(folder / RENDER_MANIFEST)  # the whole folder as recorded: every file's SHA-256
+        capture_path = str(folder / "capture.png")
+        if rig_path is not None:
+            overrides.append(f"rig {rig_path} instead of the recorded rig.toml")
+        if reference_path is not None:
+            overrides.append(f"reference {reference_path} instead of the recorded reference.png")
+        rig_path = rig_path or str(folder / "rig.toml")
+        reference_path = reference_path or str(folder / "reference.png")
+    if rig_path is None:
+        if not Path(capture_path).exists():
+            raise FileNotFoundError(f"{capture_path} not found")
+        raise ValueError("--rig is required when CAPTURE is an image (or give a folder written by `simbench render`)")
+    check_outputs(request, inputs=[capture_path, reference_path, rig_path, request.calibration])
+    rig = load_rig(rig_path)
+    manifests = {
+        p: recording_manifest_of(p) for p in (capture_path, reference_path, rig_path) if p and Path(p).is_file()
+    }
+    _check_same_recording_rig(capture_path, reference_path, manifests)
+    capture = load_image(capture_path, expected_size_hw=rig.camera.size_hw)
+    mode = request.mode or "reference"
+    reference = None
+    z0 = request.z0_m if request.z0_m is not None else 1.0
+    if mode == "reference":
+        if reference_path is None:
+            raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
+        reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
+        z0 = _z0_for(Path(reference_path), request.z0_m)
+    recorded = manifests.get(capture_path)
+    if recorded is not None and recorded["files"].get("capture") != Path(capture_path).name:
+        recorded = None  # an image beside a recording, not its capture: decoded as any image
+    if recorded is not None:
+        pattern = _recorded_pattern(
+            request, recorded_pattern(recorded, where=str(Path(capture_path).parent / "meta.json"))
+        )
+        if pattern.size_hw != rig.projector.size_hw:
+            raise ValueError(
+                f"the recording's pattern is {pattern.size_hw[1]}x{pattern.size_hw[0]}, the rig's projector "
+                f"{rig.projector.width_px}x{rig.projector.height_px}: --rig {rig_path} is not this recording's rig"
+            )
+    else:
+        pattern = pattern_from_options(
+            rig.projector.size_hw,
+            period_px=request.period_px,
+            order=request.order,
+            sequence=request.sequence,
+            channels=request.channels,
+        )
+    base = DecoderParams(pattern=pattern, mode=mode, z0_m=z0, depth_range_m=(request.near_m, request.far_m))
+    params = _decoder_params(request, base)
+    if request.min_confidence is not None:
+        params = dataclasses.replace(params, min_confidence=request.min_confidence)
+    cache = RenderCache(request.cache_dir)
+    store_reference = lambda: None  # noqa: E731
+    if params.unmix:
+        reference, store_reference = _calibrated_reference(
+            request, rig, params, reference, reference_path=reference_path, cache=cache
+        )
+    elif reference is not None:
+        reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
+    if reference is not None:
+        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path)
+    t0 = time.perf_counter()
+    result = decode(capture, rig=rig, params=params, reference=reference)
+    dt = time.perf_counter() - t0
+    ref_note = (
+        ""
+        if reference is None
+        else (
+            ", reference map from the cache"
+            if cache.hits
+            else ", reference decoded" + ("" if cache.root is None else " and cached")
+        )
+    )
+    over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
+    threshold = (
+        f"holes below {params.min_confidence:g}" if params.min_confidence > 0 else "no threshold: every decoded pixel"
+    )
+    meaning = f"fringe SNR{', capped by the phase stability' if params.phase_stability else ''}; {threshold}"
+    stages = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence, **result.stages}
+    return FileDecode(
+        depth_m=result.depth_m,
+        valid=result.valid,
+        confidence=result.confidence,
+        camera=rig.camera,
+        summary=f"{mode} mode, Z0 = {z0} m{ref_note}{over}",
+        confidence_meaning=meaning,
+        elapsed_s=dt,
+        colours=capture if capture.dtype == np.uint8 else None,
+        stages=stages,
+        capture_file=capture_path,
+        commit=store_reference,
+    )
+
+
+def _check_reference_plane(reference, rig, *, reference_path, rig_path) -> None:
+    """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
+    of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before."""
+    from simbench.decode import REFERENCE_Z0_TOLERANCE, reference_plane_offset
+
+    offset = reference_plane_offset(reference, rig)
+    if np.isfinite(offset) and abs(offset) > REFERENCE_Z0_TOLERANCE:
+        z = reference.z0_m * (1 + offset)
+        raise ValueError(
+            f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z:.3f} m, not its Z0 = "
+            f"{reference.z0_m:g} m ({100 * offset:+.1f} %, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it "
+            "captured with this rig, and at this Z0?"
+        )
+
+
+def _check_same_recording_rig(capture_path, reference_path, manifests: dict) -> None:
+    """A reference from another recording folder must have been recorded with the capture's rig
+    (their manifests' rig.toml digests): a reference of another baseline decodes to wrong
+    depths everywhere without a word."""
+    cap, ref = manifests.get(capture_path), manifests.get(reference_path)
+    if cap is None or ref is None or cap is ref:
+        return
+    a, b = cap["sha256"].get("rig"), ref["sha256"].get("rig")
+    if a is not None and b is not None and a != b:
+        raise ValueError(
+            f"--reference {reference_path} was recorded with another rig than {capture_path} (their folders' rig.toml "
+            "differ): a reference plane belongs to the rig it was captured with"
+        )
+
+
+def _calibrated_reference(request, rig, params, reference, *, reference_path, cache=None):
+    """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
+    the reference capture (``reference``, or read from ``reference_path`` in calibrated mode) and
+    the calibration frames beside it (or in ``request.calibration``); with the function that
+    caches it (:func:`simbench.decode.persist.lookup_decoded_reference`)."""
+    from simbench.decode.persist import lookup_decoded_reference
+    from simbench.io import load_image
+    from simbench.pattern import CALIBRATION_FRAMES
+
+    if reference_path is None:
+        raise ValueError(
+            "the colour-robust decoder (unmix) calibrates on the reference plane: give --reference (and its "
+            "calibration frames)"
+        )
+    folder = Path(request.calibration) if request.calibration is not None else Path(reference_path).parent
+    paths = {k: folder / f"calibration_{k}.png" for k in CALIBRATION_FRAMES}
+    missing = [p.name for p in paths.values() if not p.is_file()]
+    if missing:
+        raise ValueError(
+            f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench "
+            f"render --calibration-frames`, or give --calibration FOLDER)"
+        )
+    for p in paths.values():
+        recording_manifest_of(p)
+    frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
+    if reference is None:
+        reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
+    z0 = _z0_for(Path(reference_path), request.z0_m)
+    ref_params = dataclasses.replace(params, mode="reference", z0_m=z0)
+    return lookup_decoded_reference(
+        reference,
+        rig=rig,
+        params=ref_params,
+        primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]],
+        dark=frames["dark"],
+        cache=cache,
+    )
+
+
+def pattern_record(pattern: PatternSpec) -> dict:
+    """The pattern as a render folder's manifest records it (:func:`recorded_pattern` reads it)."""
+    return {
+        "size_hw": list(pattern.size_hw),
+        "period_px": pattern.period_px,
+        "order": pattern.order,
+        "sequence": pattern.codes().tolist(),
+        "dc": pattern.dc,
+        "amplitude": pattern.amplitude,
+        "channels": pattern.channels,
+    }
+
+
+def recorded_pattern(meta: dict, *, where: str) -> PatternSpec:
+    """The pattern a render folder's manifest (``meta.json``) records it was captured with.
+
+    Raises
+    ------
+    ValueError
+        No pattern recorded, or one that is not a valid pattern.
+    """
+    from simbench.pattern import PatternSpec, de_bruijn
+
+    p = meta.get("pattern")
+    if not isinstance(p, dict):
+        raise ValueError(f"{where}: records no pattern, so it cannot be decoded as recorded")
+    try:
+        order = p["order"]
+        codes = p.get("sequence")
+        default = de_bruijn(order).tolist() if isinstance(order, int) and 2 <= order <= 16 else None
+        sequence = None if codes is None or (default is not None and list(codes) == list(default)) else tuple(codes)
+        return PatternSpec(
+            size_hw=tuple(p["size_hw"]),
+            period_px=p["period_px"],
+            order=order,
+            sequence=sequence,
+            dc=p.get("dc", 0.5),
+            amplitude=p.get("amplitude", 0.5),
+            channels=p.get("channels", "rgb"),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: its pattern is not valid ({exc})") from None
+
+
+def recorded_z0(meta: dict, *, where: str) -> float:
+    """The reference plane's depth a render folder's manifest records (Z0, m)."""
+    from simbench import validate
+
+    if "reference_depth_m" not in meta:
+        raise ValueError(f"{where}: records no reference_depth_m (Z0)")
+    # the bounds of a scene file's reference_depth_m (simbench.sim.scene)
+    return validate.number(meta["reference_depth_m"], f"{where}: reference_depth_m", lo=0.0, lo_open=True, hi=100.0)
+
+
+def describe_pattern(p: PatternSpec) -> str:
+    """One line naming what tells two patterns apart."""
+    seq = "".join(map(str, p.codes()))
+    return (
+        f"period {p.period_px} px, order {p.order}, codes {seq}, channels {p.channels}, dc {p.dc:g}, amplitude "
+        f"{p.amplitude:g}, {p.size_hw[1]}x{p.size_hw[0]}"
+    )
