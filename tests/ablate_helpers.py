@@ -47,6 +47,8 @@ def always_dies(params: dict, *, seed: int, cache_dir) -> dict:
 
 
 def slow_run(params: dict, *, seed: int, cache_dir) -> dict:
+    """Says it has started (touches its marker path), then takes ten minutes."""
+    Path(params["scene.name"]).touch()
     time.sleep(600)
     return _row(seed)
 

@@ -141,103 +141,59 @@ def _run_target(session: Session, name: str) -> dict:
         return TARGETS[name].run(session.for_target())
 
 
-_worker_session: Session | None = None
-
-
-def _worker_start(config: RunConfig, out_dir: str, cache_dir: str | None, command: str, variant: str, messages) -> None:
+def _worker_start(emit: Callable[[str], None], config: RunConfig, out_dir: str, cache_dir: str | None, command: str):
     """A worker process's session, made once (systems and calibrations are then shared by the
-    targets it runs, as in one process); its progress goes to the parent through ``messages``."""
-    global _worker_session
-    from simbench.threads import single_thread_blas
-    from simbench.variant import select_variant
-
-    single_thread_blas()
-    select_variant(variant)
-    _worker_session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=messages.put, command=command)
+    targets it runs, as in one process); its progress goes to the parent through ``emit``."""
+    return Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=emit, command=command)
 
 
 def _worker_run(name: str) -> tuple[dict, int, int, dict]:
     """One target on a worker: its metrics, and the cache hits, misses and entries made
     (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per target)."""
-    cache = _worker_session.cache
+    from simbench.experiments.workers import worker_state
+
+    session = worker_state()
+    cache = session.cache
     cache.hits, cache.misses, cache.made = 0, 0, {}
-    metrics = _run_target(_worker_session, name)
+    metrics = _run_target(session, name)
     return metrics, cache.hits, cache.misses, cache.made
 
 
+def _died(task) -> None:
+    raise RuntimeError(f"a reproduce worker process died twice on target {task.key} (killed, or out of memory)")
+
+
 def _run_in_workers(names: list[str], *, session: Session, workers: int, progress: Callable[[str], None]) -> dict:
-    """The targets on ``workers`` workers: this process (it has its imports and its session
-    already) and ``workers - 1`` spawned processes, each taking the next target, longest first,
-    when it is free.  The cache's counts of the spawned ones are added to ``session``'s."""
-    import multiprocessing as mp
-    import threading
-    from collections import deque
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
+    """The targets on ``workers`` workers of :mod:`simbench.experiments.workers`: this process
+    (it has its imports and its session already) and ``workers - 1`` spawned processes, each
+    taking the next target, longest first, when it is free.  The cache's counts of the spawned
+    ones are added to ``session``'s."""
+    from simbench.experiments.workers import Task, run_tasks
 
-    workers = min(workers, len(names))
-    ctx = mp.get_context("spawn")  # a forked Mitsuba/Dr.Jit process is not safe to use
-    messages = ctx.Queue()
-
-    def relay() -> None:
-        while (message := messages.get()) is not None:
-            progress(message)
-
-    relay_thread = threading.Thread(target=relay, daemon=True)
-    relay_thread.start()
-    todo = deque(sorted(names, key=lambda n: TARGETS[n].rank))
     done: dict[str, dict] = {}
-    failed: list[BaseException] = []
-    counts: list[tuple[int, int, dict]] = []  # the spawned workers' cache hits, misses and entries made, per target
+    counts: list[tuple] = []  # the spawned workers' cache hits, misses and entries made, per target
+
+    def on_result(task, result) -> None:
+        done[task.key], *count = result
+        counts.append(tuple(count))
+
     cache_root = None if session.cache.root is None else str(session.cache.root)
-    args = (session.config, str(session.out), cache_root, session.command, session.variant, messages)
-
-    def feed(pool: ProcessPoolExecutor) -> None:
-        while todo and not failed:
-            try:
-                name = todo.popleft()
-            except IndexError:
-                return
-            try:
-                done[name], *count = pool.submit(_worker_run, name).result()
-            except BaseException as exc:  # noqa: BLE001 - re-raised in the parent's thread
-                failed.append(exc)
-                return
-            counts.append(tuple(count))
-
-    try:
-        with ProcessPoolExecutor(
-            max_workers=workers - 1, mp_context=ctx, initializer=_worker_start, initargs=args
-        ) as pool:
-            first = todo.popleft()  # this process starts at once; the spawned ones import first
-            feeders = [threading.Thread(target=feed, args=(pool,), daemon=True) for _ in range(workers - 1)]
-            for t in feeders:
-                t.start()
-            try:
-                done[first] = _run_target(session, first)
-                while todo and not failed:
-                    try:
-                        name = todo.popleft()
-                    except IndexError:
-                        break
-                    done[name] = _run_target(session, name)
-            except BaseException:
-                todo.clear()  # the spawned workers finish the target they hold, then stop
-                raise
-            finally:
-                for t in feeders:
-                    t.join()
-        if failed:
-            raise failed[0]
-        session.cache.hits += sum(c[0] for c in counts)  # after the feeders: no other thread counts
-        session.cache.misses += sum(c[1] for c in counts)
-        for c in counts:
-            session.cache.add_made(c[2])
-    except BrokenProcessPool as exc:
-        raise RuntimeError("a reproduce worker process died (killed, or out of memory)") from exc
-    finally:
-        messages.put(None)
-        relay_thread.join()
+    run_tasks(
+        [Task(name, (name,)) for name in sorted(names, key=lambda n: TARGETS[n].rank)],
+        _worker_run,
+        workers=min(workers, len(names)),
+        variant=session.variant,
+        setup=_worker_start,
+        setup_args=(session.config, str(session.out), cache_root, session.command),
+        in_parent=lambda task: (_run_target(session, task.key), 0, 0, {}),
+        on_result=on_result,
+        on_died=_died,
+        progress=progress,
+    )
+    session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own targets'
+    session.cache.misses += sum(c[1] for c in counts)
+    for c in counts:
+        session.cache.add_made(c[2])
     return {k: v for name in names for k, v in done[name].items()}
 
 

@@ -1,6 +1,6 @@
-"""Running a sweep: one run (render through the cache, record, decode, score), local worker
-processes that die with the parent and are retried once, a Dask cluster, and the run log that
-lets a restarted sweep skip finished runs."""
+"""Running a sweep: one run (render through the cache, record, decode, score) on the experiments'
+worker pool (:mod:`simbench.experiments.workers`: local processes or a Dask cluster), and the run
+log that lets a restarted sweep skip finished runs."""
 
 from __future__ import annotations
 
@@ -79,104 +79,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         }
 
 
-def _worker_init(variant: str | None, parent_pid: int) -> None:
-    from simbench.threads import single_thread_blas
-    from simbench.variant import select_variant
-
-    _die_with_parent(parent_pid)
-    single_thread_blas()
-    select_variant(variant)
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Make this worker process die when the sweep's process does (Linux ``PR_SET_PDEATHSIG``),
-    so that a killed sweep leaves no workers (each holds ~0.5 GB) behind."""
-    import ctypes
-    import signal
-
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: workers end when their task queue closes
-    if os.getppid() != parent_pid:  # the parent died before the signal was armed
-        os._exit(1)
-
-
-def _tracked(run_fn, marker_dir: str, key: str, params: dict, seed: int, cache_dir: str | None) -> dict:
-    """``run_fn(params, seed=..., cache_dir=...)`` with a marker file present while it runs:
-    if the worker dies, the markers left say which runs were on it."""
-    marker = Path(marker_dir) / key
-    marker.touch()
-    try:
-        return run_fn(params, seed=seed, cache_dir=cache_dir)
-    finally:
-        marker.unlink(missing_ok=True)
-
-
 WORKER_DIED = "worker process died twice on this run (killed, or out of memory)"
-
-
-def _run_pool(
-    todo: list[dict],
-    *,
-    workers: int,
-    variant: str | None,
-    cache: str | None,
-    finished,
-    run_fn,
-    marker_dir: Path,
-    progress,
-) -> None:
-    """Run ``todo`` on a process pool.  A worker that dies (kill -9, the OOM killer) breaks the
-    pool: the runs it held (their marker files are left) are retried once, each alone in a
-    fresh pool; a run that kills its worker again is recorded as failed.  Runs that were only
-    queued are resubmitted unpenalised."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
-    marker_dir.mkdir(parents=True, exist_ok=True)
-    for m in marker_dir.iterdir():
-        m.unlink()
-    deaths: dict[str, int] = {}
-    rounds: list[tuple[list[dict], int]] = [(list(todo), workers)]
-    ctx = mp.get_context("spawn")
-    while rounds:
-        batch, n_workers = rounds.pop(0)
-        broken: list[dict] = []
-        with ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=ctx, initializer=_worker_init, initargs=(variant, os.getpid())
-        ) as pool:
-            futs = {
-                pool.submit(_tracked, run_fn, str(marker_dir), r["key"], r["params"], r["seed"], cache): r
-                for r in batch
-            }
-            for f in as_completed(futs):
-                try:
-                    res = f.result()
-                except BrokenProcessPool:
-                    broken.append(futs[f])
-                    continue
-                finished(futs[f], res)
-        if not broken:
-            continue
-        on_dead = {m.name for m in marker_dir.iterdir()}
-        for m in marker_dir.iterdir():
-            m.unlink()
-        suspects = [r for r in broken if r["key"] in on_dead]
-        queued = [r for r in broken if r["key"] not in on_dead]
-        retry = []
-        for r in suspects:
-            deaths[r["key"]] = deaths.get(r["key"], 0) + 1
-            if deaths[r["key"]] >= 2:
-                finished(r, {"error": WORKER_DIED, "timing": {}})
-            else:
-                retry.append(r)
-        progress(
-            f"a worker process died (runs {sorted(r['run'] for r in suspects)} were on it): retrying them one at a time"
-        )
-        rounds = [(rs, 1) for rs in ([r] for r in retry)] + ([(queued, workers)] if queued else []) + rounds
-    marker_dir.rmdir()
 
 
 # ------------------------------------------------------------------------------ the sweep
@@ -220,7 +123,7 @@ def run_sweep(
     process pool of ``workers`` processes (1 = in this process).  ``run_fn`` runs one
     parameter set (:func:`run_one`; another module-level function with its signature can
     stand in, e.g. to test the runner).  A pool worker that dies costs its runs one retry;
-    a run that kills its worker twice is recorded as failed (:func:`_run_pool`).  For
+    a run that kills its worker twice is recorded as failed (:func:`simbench.experiments.workers.run_tasks`).  For
     :func:`run_one`, every run's values are checked first
     (:func:`~simbench.experiments.ablate.mapping.check_sweep`, which builds what it builds): a
     value that cannot run raises ``ValueError`` before anything is run or written.  A stand-in
@@ -251,42 +154,24 @@ def run_sweep(
         )
         progress(f"[ablate {sweep.name} {n}/{len(todo)}] run {run['run']}: {status}")
 
-    if todo:
-        if scheduler is not None:
-            _run_dask(todo, scheduler, cache, finished, run_fn)
-        elif workers > 1:
-            _run_pool(
-                todo,
-                workers=workers,
-                variant=variant,
-                cache=cache,
-                finished=finished,
-                run_fn=run_fn,
-                marker_dir=out / f".{sweep.name}.running",
-                progress=progress,
-            )
-        else:
-            for r in todo:
-                finished(r, run_fn(r["params"], seed=r["seed"], cache_dir=cache))
+    from simbench.experiments.workers import Task, run_tasks
+
+    tasks = [Task(r["key"], (r["params"],), {"seed": r["seed"], "cache_dir": cache}) for r in todo]
+    by_key = {r["key"]: r for r in todo}
+    run_tasks(
+        tasks,
+        run_fn,
+        workers=workers,
+        scheduler=scheduler,
+        variant=variant,
+        on_result=lambda task, res: finished(by_key[task.key], res),
+        on_died=lambda task: finished(by_key[task.key], {"error": WORKER_DIED, "timing": {}}),
+        # e.g. Dask's KilledWorker: the cluster retried the run and gave up
+        on_error=lambda task, exc: finished(
+            by_key[task.key], {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "timing": {}}
+        ),
+        progress=progress,
+    )
     rows = sweep_rows(sweep, runs, done)
     write_sweep(sweep, rows, runs, done, out, command)
     return rows
-
-
-def _run_dask(todo: list[dict], scheduler, cache, finished, run_fn) -> None:
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise ValueError("--scheduler needs Dask distributed: pip install 'dask[distributed]'") from None
-    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
-    try:
-        futs = {client.submit(run_fn, r["params"], seed=r["seed"], cache_dir=cache, pure=False): r for r in todo}
-        for f in as_completed(list(futs)):
-            try:
-                res = f.result()
-            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: Dask retried and gave up
-                res = {"error": f"{type(exc).__name__}: {exc}".splitlines()[0], "timing": {}}
-            finished(futs[f], res)
-    finally:
-        if client is not scheduler:
-            client.close()
