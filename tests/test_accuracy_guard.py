@@ -14,7 +14,7 @@ completeness and order errors (bust 122) the same to the digits shown.
 import numpy as np
 import pytest
 
-from simbench.decode import DecoderParams, decode, pipeline
+from simbench.decode import DecoderParams, decode, params
 from simbench.decode.phase import PhaseResult
 from tests import numpy_reference as ref
 from tests.scoring import acquisition_scores
@@ -42,7 +42,7 @@ def test_fast_gabor_keeps_the_accuracy_of_the_opencv_form(acquisitions, name, mo
         acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference), band_px=5
     )
     with monkeypatch.context() as m:
-        m.setitem(pipeline.PHASE_METHODS, "gabor", _opencv_gabor)
+        m.setitem(params.PHASE_METHODS, "gabor", _opencv_gabor)
         plain = acquisition_scores(
             acq, decode(acq.capture, rig=rig, params=DecoderParams(), reference=acq.reference), band_px=5
         )

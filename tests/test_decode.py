@@ -212,17 +212,17 @@ def test_result_does_not_depend_on_threads(mode, reference):
 def test_band_plan_is_one_band_per_thread_and_splitting_changes_no_bit(reference):
     """Bands cover the rows in order, one per thread (none thinner than 4 halos or 32 rows),
     whatever the image size; decoding in more bands changes no bit."""
-    from simbench.decode import pipeline
+    from simbench.decode.bands import row_bands
 
     for threads in (1, 2, 3, None):
         for h, w in ((960, 1280), (1080, 1920), (3000, 4000), (60, 1280), (5, 7)):
-            bands, halo, workers = pipeline._bands(h, w, DecoderParams(threads=threads), RIG)
+            bands, halo, workers = row_bands(h, w, DecoderParams(threads=threads), RIG)
             assert bands[0][0] == 0 and bands[-1][1] == h and all(a[1] == b[0] for a, b in zip(bands, bands[1:]))
             want = threads or os.cpu_count()
             assert workers == len(bands) == (min(want, h // max(4 * halo, 32)) or 1)
     img, _, _ = _tilted(15, depth=1.05)
     whole = decode(img, rig=RIG, params=DecoderParams(threads=2), reference=reference)
-    assert len(pipeline._bands(960, 1280, DecoderParams(threads=6), RIG)[0]) == 6
+    assert len(row_bands(960, 1280, DecoderParams(threads=6), RIG)[0]) == 6
     split = decode(img, rig=RIG, params=DecoderParams(threads=6), reference=reference)
     assert np.array_equal(split.depth_m, whole.depth_m, equal_nan=True)
     assert np.array_equal(split.stages["stripe_label"], whole.stages["stripe_label"])

@@ -23,7 +23,7 @@ MODULES = (
     "simbench.pattern",
     "simbench.sim.scene",
     "simbench.sim.spectral",
-    "simbench.decode.pipeline",
+    "simbench.decode.params",
     "simbench.api",
 )
 

@@ -169,7 +169,7 @@ def test_gabor_fit_rows_do_not_depend_on_the_output_range():
 def test_phase_without_the_offset_gives_the_same_bits_otherwise(method):
     """offset=False (the decoder's call: no stage reads the offset, and the Gabor kernel then
     does not write it) leaves every other output bit for bit as it was."""
-    from simbench.decode.pipeline import PHASE_METHODS
+    from simbench.decode.params import PHASE_METHODS
 
     img, cert = fringe(60, 300, holes=True)
     kw = dict(certainty=cert, period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)

@@ -1,6 +1,18 @@
-"""The paper's decoder (Sec. 5): one module per stage, chained by :func:`decode`."""
+"""The paper's decoder (Sec. 5) and our colour-robust one: one module per stage, chained by
+:func:`decode`.
 
-from simbench.decode.pipeline import (
+- :mod:`~simbench.decode.color`: channel overlay weights, colour code, voting, unmixing (Sec. 5.1-5.2)
+- :mod:`~simbench.decode.phase`: the Gabor phase and the fringe SNR (Sec. 5.3);
+  :mod:`~simbench.decode.fourier`: FTP and windowed Fourier ridges, interchangeable with it
+- :mod:`~simbench.decode.debruijn`: De Bruijn unwrapping with neighbour correction (Sec. 5.2)
+- :mod:`~simbench.decode.depth`: reference-plane matching and depth (Sec. 5.4)
+- :mod:`~simbench.decode.params`: the parameters (:class:`DecoderParams`, :func:`robust_params`)
+- :mod:`~simbench.decode.pipeline`: the chain; :mod:`~simbench.decode.bands`: its row bands in
+  threads; :mod:`~simbench.decode.persist`: decoded reference planes cached
+- :mod:`~simbench.decode.temporal`: the multi-shot reference's phase shifting and Gray code
+"""
+
+from simbench.decode.params import (
     MODES,
     PAPER_ADDED_CHECKS,
     AddedCheck,
@@ -8,19 +20,21 @@ from simbench.decode.pipeline import (
     with_changes,
     without_checks,
     PHASE_METHODS,
-    DecodeResult,
     DecoderParams,
-    ReferenceMap,
-    as_float_image,
-    decode,
-    REFERENCE_Z0_TOLERANCE,
     ROBUST_MIN_AMPLITUDE,
     ROBUST_MIN_CONFIDENCE,
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
+    robust_params,
+)
+from simbench.decode.pipeline import (
+    DecodeResult,
+    ReferenceMap,
+    as_float_image,
+    decode,
+    REFERENCE_Z0_TOLERANCE,
     decode_reference,
     reference_plane_offset,
-    robust_params,
 )
 
 __all__ = [

@@ -20,7 +20,8 @@ import numpy as np
 
 from simbench import native
 from simbench.cache import RenderCache, array_digest, source_digest
-from simbench.decode.pipeline import DecoderParams, ReferenceMap, decode_reference
+from simbench.decode.params import DecoderParams
+from simbench.decode.pipeline import ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
 
 __all__ = ["lookup_decoded_reference", "decoder_fingerprint"]

@@ -254,7 +254,7 @@ def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float) -> np
 
 
 def check_phase_inputs(intensity: np.ndarray, certainty: np.ndarray, period_px: float) -> None:
-    """The checks every phase stage of :data:`simbench.decode.pipeline.PHASE_METHODS` makes."""
+    """The checks every phase stage of :data:`simbench.decode.params.PHASE_METHODS` makes."""
     if intensity.ndim != 2 or certainty.shape != intensity.shape:
         raise ValueError(f"intensity {intensity.shape} and certainty {certainty.shape} must be equal 2-D shapes")
     if not period_px > 2:

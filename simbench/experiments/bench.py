@@ -21,7 +21,7 @@ import time
 import cv2
 
 from simbench.decode import DecoderParams
-from simbench.decode.pipeline import MODES
+from simbench.decode.params import MODES
 from simbench.decode.profile import stage_times
 from simbench.rig import Rig
 from simbench.systems import get_system, system_names

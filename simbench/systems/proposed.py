@@ -39,7 +39,8 @@ from simbench.systems.proposed_folder import (
 
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
-    from simbench.decode.pipeline import DecoderParams, ReferenceMap
+    from simbench.decode.params import DecoderParams
+    from simbench.decode.pipeline import ReferenceMap
     from simbench.sim.sensor import SensorModel
     from simbench.pattern import PatternSpec
     from simbench.sim.truth import GroundTruth
