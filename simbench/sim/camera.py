@@ -114,7 +114,7 @@ def simple_camera(radiance: np.ndarray, *, camera: SimpleCamera, rng: RngLike = 
 CFA_PATTERNS = {
     # colour of the 2x2 cell's pixels (0,0), (0,1), (1,0), (1,1) -> OpenCV's name for it
     # (OpenCV names a Bayer layout by the second row's second and third pixels; the mapping
-    # is checked by tests/test_sensor.py)
+    # is checked by tests/test_camera.py)
     "none": None,
     "RGGB": "BayerBG",
     "BGGR": "BayerRG",
