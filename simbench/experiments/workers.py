@@ -259,13 +259,17 @@ def _pool_round(todo: deque, fn, *, ctx, init, workers: int, in_parent, deliver,
                     return
                 deliver(task, result)
 
+        # this process takes the first task before the workers start: it has its imports and
+        # state, while a spawned worker first imports (so the longest task starts at once here)
+        first = take() if in_parent is not None else None
         feeders = [threading.Thread(target=feed, daemon=True) for _ in range(spawned)]
         for t in feeders:
             t.start()
         try:
-            if in_parent is not None:
-                while (task := take()) is not None:
-                    deliver(task, in_parent(task))
+            task = first
+            while task is not None:
+                deliver(task, in_parent(task))
+                task = take()
         except BaseException:
             with lock:
                 todo.clear()  # the workers finish the task they hold, then stop
