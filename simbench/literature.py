@@ -65,6 +65,12 @@ PAPER_DEBRUIJN_ORDER = 3
 PAPER_CAMERA = (1280, 960, 2312.5320)
 PAPER_PROJECTOR = (1824, 1140, 2227.9948)
 PAPER_BASELINE_M = 0.093
+# frame rates of the paper's devices, for multi-shot sequences: the Flea3 FL3-U3-13E4C-C reads
+# out at most 60 frames/s at full resolution (Point Grey Flea3 USB 3.0 data sheet: 1.3 MP, 60 FPS);
+# the LightCrafter 4500 shows 8-bit patterns at up to 120 Hz (TI DLPU011, Ch. 4 "Pattern
+# Sequences": a 120 Hz input frame, a 2.78 ms slot per colour).  A sequence runs at the slower.
+FLEA3_MAX_FPS = 60.0
+LIGHTCRAFTER_8BIT_PATTERN_HZ = 120.0
 
 # the Kinect v1: IR camera focal length (the competitor issue's 571 px; [Khoshelham2012]
 # calibrate ~580 px) and the projector-camera baseline [Khoshelham2012]

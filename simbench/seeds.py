@@ -26,6 +26,7 @@ __all__ = [
     "derive_seed",
     "child_seed",
     "frame_seed",
+    "slice_seed",
     "repetition_seed",
     "SeedLog",
 ]
@@ -41,6 +42,9 @@ CHILD_STREAMS = {
     "ambient_render": 3,  # the ambient-only render beside the projector render (simbench.sim.capture)
     "dlp_exposure_phase": 5,  # where the exposure starts in a video-mode DLP frame (simbench.sim.drive)
 }
+
+# the time slices of a moving scene's exposure (simbench.sim.capture; a 3-word entropy)
+SLICE_STREAM = 17
 
 # the numbered frames of a multi-shot recording (a 3-word entropy: never equal to a child stream)
 FRAME_STREAM = 16
@@ -71,6 +75,12 @@ def frame_seed(seed: int, frame: int) -> np.random.SeedSequence:
     """The camera-noise stream of frame ``frame`` of a multi-shot recording whose noise seed is
     ``seed`` (each exposure of a sequence has its own noise)."""
     return np.random.SeedSequence([check_seed(seed), FRAME_STREAM, int(frame)])
+
+
+def slice_seed(seed: int, index: int) -> int:
+    """The render seed of time slice ``index`` of a moving scene's exposure rendered with
+    ``seed`` (each slice samples its own paths)."""
+    return int(np.random.SeedSequence([check_seed(seed), SLICE_STREAM, int(index)]).generate_state(1)[0])
 
 
 def repetition_seed(base: int, repeat: int) -> int:

@@ -174,3 +174,23 @@ def test_grey_frame_gives_the_bits_of_numpys_channel_mean():
         got, want = grey_frame(f), ref.grey_frame(f)
         assert got.dtype == want.dtype == np.float32 and got.shape == want.shape
         assert np.array_equal(got, want, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(want))
+
+
+@pytest.mark.parametrize("steps", [4, 5, 8])
+@pytest.mark.parametrize("drift_rad", [0.01, 0.1, 0.5, -0.3])
+def test_a_linear_phase_drift_gives_the_predicted_phase_error(steps, drift_rad):
+    """N-step phase shifting of a fringe whose phase moves by eps per image (a surface moving
+    during the sequence): the decoder's phase error is the closed form of
+    simbench.decode.temporal.drift_phase_error (the mid-sequence phase (N - 1) eps / 2 plus a
+    ripple at twice the fringe frequency), to rounding."""
+    from simbench.decode.temporal import drift_phase_error, wrapped_phase
+
+    phi = np.linspace(-np.pi, np.pi, 2001)[None, :]
+    frames = np.stack([0.5 + 0.4 * np.cos(phi + n * drift_rad - 2 * np.pi * n / steps) for n in range(steps)])
+    est, _, _ = wrapped_phase(frames, steps=steps)
+    error = np.angle(np.exp(1j * (est - phi)))
+    assert np.abs(error - drift_phase_error(phi, drift_rad=drift_rad, steps=steps)).max() < 1e-12
+    # its mean over a period is the mid-sequence phase; the ripple's size is r = sin(eps/2)/sin(2 pi/N - eps/2)
+    assert error.mean() == pytest.approx((steps - 1) * drift_rad / 2, abs=1e-3)
+    r = np.sin(drift_rad / 2) / np.sin(2 * np.pi / steps - drift_rad / 2)
+    assert np.ptp(error) == pytest.approx(2 * np.arcsin(abs(r)), rel=1e-3)

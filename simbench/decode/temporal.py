@@ -36,6 +36,7 @@ __all__ = [
     "PhaseShiftSpec",
     "phase_shift_frames",
     "wrapped_phase",
+    "drift_phase_error",
     "gray_order",
     "decode_phase_shift",
     "TemporalResult",
@@ -137,6 +138,33 @@ def wrapped_phase(frames: np.ndarray, *, steps: int) -> tuple[np.ndarray, np.nda
     phi = np.arctan2(s, c)
     phi = np.where(phi >= np.pi, phi - 2.0 * np.pi, phi)
     return phi, i.mean(axis=0), 2.0 / steps * np.hypot(s, c)
+
+
+def drift_phase_error(phi: np.ndarray, *, drift_rad: float, steps: int) -> np.ndarray:
+    """The error of :func:`wrapped_phase` when the fringe phase moves by ``drift_rad`` from one
+    image to the next (``I_n = A + B cos(phi + n eps - 2 pi n / N)``: a surface moving during an
+    N-step sequence, or a miscalibrated phase shifter), wrapped to [-pi, pi).
+
+    With ``psi = phi + (N - 1) eps / 2`` (the phase at the sequence's middle) the sums of the
+    estimator give, exactly, ``phi_hat = psi + arg(1 - r exp(-i (2 psi + 2 pi / N)))`` with
+    ``r = sin(eps / 2) / sin(2 pi / N - eps / 2)``: the mid-sequence phase plus a ripple at twice
+    the fringe frequency of relative size ``r`` (~ eps N / 4 pi for small drifts) - the standard
+    analysis of a linear phase-shift error (J. Schwider et al., "Digital wave-front measuring
+    interferometry: some systematic error sources", Appl. Opt. 22(21), 3421-3432, 1983;
+    K. Creath, "Phase-measurement interferometry techniques", Prog. Opt. 26, 349-393, 1988).
+
+    Parameters
+    ----------
+    phi : ndarray, the true phase at the first image (rad)
+    drift_rad : the phase change per image (rad)
+    steps : N
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    eps = float(drift_rad)
+    psi = phi + 0.5 * (steps - 1) * eps
+    r = np.sin(0.5 * eps) / np.sin(2.0 * np.pi / steps - 0.5 * eps)
+    est = psi + np.angle(1.0 - r * np.exp(-1j * (2.0 * psi + 2.0 * np.pi / steps)))
+    return np.angle(np.exp(1j * (est - phi)))
 
 
 def gray_order(bit_images: np.ndarray, threshold: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ recorded.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -29,7 +30,9 @@ from simbench.sim.photometry import (
 )
 from simbench.sim.render import render_radiance
 from simbench.sim.scene import OBJECT_KIND_TABLE, SceneSpec, with_subsurface
-from simbench.seeds import RngLike, child_seed
+from simbench.seeds import RngLike, child_seed, slice_seed
+from simbench.sim.motion import slice_times
+from simbench.sim.timeline import is_moving, scene_at, slice_count, slice_spp
 from simbench.sim.camera import SimpleCamera, emva_camera, simple_camera
 from simbench.sim.spectral import crosstalk_matrix, material_crosstalk
 from simbench.sim.truth import GroundTruth, ground_truth
@@ -173,6 +176,7 @@ def render_channels(
     *,
     seed: int,
     render: RenderSettings,
+    window_s: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """Radiance per camera channel on the camera's recorded pixel grid, rendered with ``seed``
     and ``render``'s settings (through its cache).
@@ -194,10 +198,19 @@ def render_channels(
     ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for` (or a
     :class:`ProjectorDrive`, built only for renders the cache does not hold).
 
+    A moving scene (:mod:`simbench.sim.motion`) is integrated over the exposure ``window_s``
+    (start, end) in seconds: the mean of :func:`simbench.sim.timeline.slice_count` renders at the
+    slices' centre instants, each with its own seed (:func:`simbench.seeds.slice_seed`) and
+    :func:`simbench.sim.timeline.slice_spp` of the samples (one slice: the scene at the window's
+    middle, with ``seed`` and every sample).  A static scene ignores ``window_s``.
+
     Returns
     -------
     ndarray, shape (H, W, 3), float32, in units of each channel's own primary
     """
+    if is_moving(scene):
+        return _exposure_integral(scene, drive, sensor, seed=seed, render=render, window_s=window_s)
+    scene = scene_at(scene, 0.0)  # zero velocities: static
     translucent_scene = scene
     # the renders do not depend on what happens under the surface (applied after them)
     scene = opaque(scene)
@@ -228,6 +241,28 @@ def render_channels(
     )
 
 
+def _exposure_integral(scene, drive, sensor, *, seed: int, render: RenderSettings, window_s) -> np.ndarray:
+    """:func:`render_channels` of a moving scene: the mean over the exposure's time slices."""
+    if window_s is None:
+        raise ValueError(
+            f"scene {scene.name!r} moves: its capture needs the exposure window it integrates (a system with a "
+            "time model)"
+        )
+    t0, t1 = (float(x) for x in window_s)
+    if not (math.isfinite(t0) and math.isfinite(t1) and t1 >= t0):
+        raise ValueError(f"exposure window must be (start, end) with end >= start, got {window_s!r}")
+    n = slice_count(scene, scene.rig.camera, (t0, t1))
+    if n == 1:
+        return render_channels(scene_at(scene, 0.5 * (t0 + t1)), drive, sensor, seed=seed, render=render)
+    spp = slice_spp(render.spp, n, render.sampler)
+    settings = dataclasses.replace(render, spp=spp)
+    total = None
+    for i, t in enumerate(slice_times((t0, t1), n)):
+        q = render_channels(scene_at(scene, float(t)), drive, sensor, seed=slice_seed(seed, i), render=settings)
+        total = q.astype(np.float64) if total is None else total + q
+    return (total / n).astype(np.float32)
+
+
 def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
     """The camera's recorded image from :func:`render_channels`' output: the simple camera,
     or the EMVA 1288 camera with its colour filter array at the sensor's (auto) exposure."""
@@ -254,9 +289,11 @@ def record_channels(
     seed: int,
     render: RenderSettings,
     rngs: list,
+    window_s: tuple[float, float] | None = None,
 ) -> list[np.ndarray]:
     """``[record(render_channels(...), rng=n) for n in rngs]``: one render of the scene
-    recorded once per noise seed, each recording looked up in / stored to ``render.cache``.
+    recorded once per noise seed, each recording looked up in / stored to ``render.cache``; a
+    moving scene integrated over ``window_s`` (:func:`render_channels`).
 
     A recording is a pure function of what its renders are made from and of the camera; it is
     cached under those inputs - the scene's render fingerprint, the drive's inputs
@@ -272,7 +309,7 @@ def record_channels(
     def recorded(n) -> np.ndarray:
         nonlocal q
         if q is None:
-            q = render_channels(scene, drive, sensor, seed=seed, render=render)
+            q = render_channels(scene, drive, sensor, seed=seed, render=render, window_s=window_s)
         return record(q, sensor=sensor, scene=scene, rng=n)
 
     cache = render.cache
@@ -282,6 +319,8 @@ def record_channels(
         "scene": scene_fingerprint(scene),
         "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
         "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
+        # only for a moving scene, so that static recordings keep their keys
+        **({"window_s": [float(x) for x in window_s]} if is_moving(scene) and window_s is not None else {}),
         "sensor": sensor_to_dict(sensor),
         "exposure": _recording_settings(sensor, scene),
         "code": sim_code_digest(),

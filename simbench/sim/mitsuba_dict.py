@@ -254,6 +254,12 @@ def mitsuba_scene(
 
     if spp < 1 or int(spp) != spp:
         raise ValueError(f"spp must be a positive integer, got {spp}")
+    moving = [o.name for o in scene.objects if o.motion is not None]
+    if moving:  # a render is one instant: the caller poses the scene (simbench.sim.timeline.scene_at)
+        raise ValueError(
+            f"scene {scene.name!r}: objects {moving} move; render it posed at an instant or through an exposure "
+            "window (simbench.sim.capture.render_channels)"
+        )
     check_sampler(sampler, spp)
     rig = scene.rig
     cam = rig.camera

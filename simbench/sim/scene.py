@@ -69,6 +69,7 @@ from simbench.cache import file_digest
 from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rig_to_dict, rotation_xyz_deg
 from simbench.seeds import RngLike
+from simbench.sim.motion import Motion
 
 log = logging.getLogger(__name__)
 
@@ -99,6 +100,8 @@ __all__ = [
 
 BOARD_FORM_KEYS = ("bow_m_per_m", "waviness_m", "waviness_period_m", "waviness_phase_rad")
 _COMMON_KEYS = ("type", "name", "rgb", "srgb8", "spectrum", "material", "roughness", "metal", "subsurface")
+# an object's rigid motion (simbench.sim.motion)
+MOTION_KEYS = ("velocity_m_s", "angular_velocity_deg_s", "rotation_axis", "rotation_centre_m")
 MATERIALS = ("diffuse", "plastic", "metal")
 _GLOSSY = ("plastic", "metal")  # the materials with a roughness
 
@@ -270,6 +273,8 @@ class SceneObject:
     name: str
     params: tuple[tuple[str, object], ...]
     material: Material = Material()
+    # rigid motion at constant velocity (simbench.sim.motion.Motion); None = static
+    motion: Motion | None = None
 
     def get(self, key: str, default=None) -> object:
         return dict(self.params).get(key, default)
@@ -321,7 +326,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
     kind = d.get("type")
     if kind not in OBJECT_KINDS:
         raise ValueError(f"{where}: unknown type {kind!r}; valid types: {sorted(OBJECT_KINDS)}")
-    allowed = _COMMON_KEYS + OBJECT_KINDS[kind]
+    allowed = _COMMON_KEYS + MOTION_KEYS + OBJECT_KINDS[kind]
     unknown = sorted(set(d) - set(allowed))
     if unknown:
         raise ValueError(f"{where} ({kind}): unknown key(s) {unknown}; valid keys: {list(allowed)}")
@@ -367,9 +372,26 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
             subsurface=d.get("subsurface"),
             metal=metal,
         )
+        motion = _motion(d)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
-    return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat)
+    return SceneObject(kind=kind, name=name, params=tuple(sorted(p.items())), material=mat, motion=motion)
+
+
+def _motion(d: dict) -> Motion | None:
+    """An object table's motion keys (:data:`MOTION_KEYS`) as a :class:`Motion`; None when it
+    does not move (no keys, or zero velocities: a static object keeps its cache keys)."""
+    if not any(k in d for k in MOTION_KEYS):
+        return None
+    if ("rotation_axis" in d or "rotation_centre_m" in d) and not d.get("angular_velocity_deg_s"):
+        raise ValueError("rotation_axis and rotation_centre_m need a non-zero angular_velocity_deg_s")
+    motion = Motion(
+        velocity_m_s=d.get("velocity_m_s", (0.0, 0.0, 0.0)),
+        angular_velocity_deg_s=d.get("angular_velocity_deg_s", 0.0),
+        axis=d.get("rotation_axis", (0.0, 1.0, 0.0)),
+        centre_m=d.get("rotation_centre_m"),
+    )
+    return None if motion.is_static else motion
 
 
 _SCENE_KEYS = ("name", "description", "rig", "reference_depth_m", "projector", "ambient", "object")
@@ -946,7 +968,10 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
             # by value, so that a medium whose coefficients change is a new render input
             medium = dataclasses.asdict(get_medium(o.material.subsurface))
             material.append({"subsurface": o.material.subsurface, **medium})
-        objects.append({"kind": o.kind, "name": o.name, "params": params, "material": material})
+        entry = {"kind": o.kind, "name": o.name, "params": params, "material": material}
+        if o.motion is not None:  # only when it moves, so that static scenes keep their cache keys
+            entry["motion"] = o.motion.to_dict()
+        objects.append(entry)
     return {
         "rig": rig_to_dict(scene.rig),
         "objects": objects,

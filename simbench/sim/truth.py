@@ -34,12 +34,17 @@ class GroundTruth:
     lit : ndarray, shape (H, W), bool
         Seen by the camera and directly lit by the projector (inside its frustum, not in its
         shadow, the same side of the surface facing both).
+    motion_px : ndarray, shape (H, W, 2), float32, or None
+        A moving scene's: how far (du, dv camera pixels) the surface point seen at each pixel
+        moves across the image during the capture (:func:`simbench.sim.timeline.motion_field_px`);
+        None for a static scene.
     """
 
     depth_m: np.ndarray
     column_px: np.ndarray
     object_id: np.ndarray
     lit: np.ndarray
+    motion_px: np.ndarray | None = None
 
     @property
     def seen(self) -> np.ndarray:

@@ -21,6 +21,7 @@ name from the run's :class:`SystemOptions` and lists the registered names when o
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ import numpy as np
 
 from simbench.sim.mitsuba_dict import RenderSettings
 from simbench.sim.scene import SceneSpec
+from simbench.sim.timeline import is_moving, motion_field_px, scene_at
 
 if TYPE_CHECKING:
     from simbench.seeds import SeedLog
@@ -43,6 +45,7 @@ __all__ = [
     "Recording",
     "DepthSystem",
     "acquire",
+    "capture_window",
     "register_system",
     "recording_manifest",
     "unregister_system",
@@ -235,13 +238,32 @@ def acquire(
 
     if not prepared:
         scene = system.prepare(scene)
+    truth_scene = scene
+    if is_moving(scene):
+        window = capture_window(system, scene)
+        truth_scene = scene_at(scene, 0.5 * (window[0] + window[1]))  # the truth at mid-capture
     render_seed, noise_seeds = seeds.capture(system.seed_prefix + label, repeats=repeats)
     raws = system.acquire(scene, calibration, render_seed=render_seed, noise_seeds=noise_seeds, render=render)
-    gt = cached_ground_truth(scene, cache=render.cache)
+    gt = cached_ground_truth(truth_scene, cache=render.cache)
+    if truth_scene is not scene:
+        motion = motion_field_px(gt.depth_m, gt.object_id, scene, scene.rig.camera, window)
+        gt = dataclasses.replace(gt, motion_px=motion)
     return [
         Recording(system=system.name, scene=scene, raw=raw, gt=gt, seeds={"render": render_seed, "noise": n})
         for raw, n in zip(raws, noise_seeds)
     ]
+
+
+def capture_window(system: DepthSystem, scene: SceneSpec) -> tuple[float, float]:
+    """When ``system`` records ``scene`` (prepared): (start, end) in seconds of its whole capture,
+    from its optional ``capture_window_s(scene)`` - the time model a moving scene needs.  A
+    system without one refuses moving scenes rather than recording an instant as an exposure."""
+    window = getattr(system, "capture_window_s", None)
+    if window is None:
+        raise ValueError(
+            f"the {system.name} system has no time model yet: it cannot record the moving scene {scene.name!r}"
+        )
+    return window(scene)
 
 
 # the system a bare capture image belongs to (`simbench decode IMAGE --rig RIG`), and the command

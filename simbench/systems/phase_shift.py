@@ -136,22 +136,53 @@ class PhaseShiftSystem:
         once per noise seed with its own camera noise (:func:`simbench.seeds.frame_seed`);
         each recording has shape (K, H, W), float32 grey in [0, 1]."""
         from simbench.seeds import frame_seed
-        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
         from simbench.sim.capture import record_channels
+        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
+        from simbench.sim.timeline import is_moving, scene_at
 
         if tuple(self.spec.size_hw) != scene.rig.projector.size_hw:
             raise ValueError(
                 f"pattern size {self.spec.size_hw} differs from the projector's {scene.rig.projector.size_hw}"
             )
         phase = exposure_phase(render_seed)
+        windows = self.frame_windows_s(scene) if is_moving(scene) else None
         frames = []  # per projector frame, its recording per noise seed (grey)
         for k, digest in enumerate(_frame_digests(self.spec, render.cache)):
             frame = DriveImage(digest, lambda k=k: self.frames_u8()[k])  # made only for a render not cached
-            drive = ProjectorDrive(scene, frame, self.sensor, cache=render.cache, phase=phase)
+            window = None if windows is None else windows[k]
+            # the projector's defocus follows the geometry at the frame's mid-exposure
+            posed = scene if window is None else scene_at(scene, 0.5 * (window[0] + window[1]))
+            drive = ProjectorDrive(posed, frame, self.sensor, cache=render.cache, phase=phase)
             seeds = [frame_seed(n, k) for n in noise_seeds]
-            recordings = record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds)
+            recordings = record_channels(
+                scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds, window_s=window
+            )
             frames.append([grey_frame(r) for r in recordings])
         return [np.stack([f[i] for f in frames]) for i in range(len(noise_seeds))]
+
+    def frame_period_s(self, scene: SceneSpec) -> float:
+        """Time from one frame's start to the next: the camera's exposure, or the frame period of
+        the slower device when that is longer (the Flea3's 60 frames/s at full resolution; the
+        LightCrafter 4500's 8-bit patterns at up to 120 Hz: :data:`simbench.literature.FLEA3_MAX_FPS`).
+        Assumption: the projector triggers the camera and the next pattern follows the readout
+        at once (no dark time; the camera's readout overlaps the next exposure)."""
+        from simbench.literature import FLEA3_MAX_FPS, LIGHTCRAFTER_8BIT_PATTERN_HZ
+
+        exposure = self._optics.capture_window_s(scene)[1]
+        return max(exposure, 1.0 / min(FLEA3_MAX_FPS, LIGHTCRAFTER_8BIT_PATTERN_HZ))
+
+    def frame_windows_s(self, scene: SceneSpec) -> list[tuple[float, float]]:
+        """The time model: frame k exposes from k P to k P + T (P :meth:`frame_period_s`, T the
+        camera's exposure, the proposed sensor's camera: global shutter)."""
+        exposure = self._optics.capture_window_s(scene)[1]
+        period = self.frame_period_s(scene)
+        return [(k * period, k * period + exposure) for k in range(self.spec.captures)]
+
+    def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
+        """From the first frame's start to the last one's end (12 frames: ~0.33 s at the paper
+        sensor's ~27 ms auto exposure)."""
+        windows = self.frame_windows_s(scene)
+        return (windows[0][0], windows[-1][1])
 
     def decode(self, raw: np.ndarray, calibration: None = None, *, scene: SceneSpec) -> SystemDepth:
         """Undistort each frame with the camera's lens (as the rig file records it), decode

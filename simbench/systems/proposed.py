@@ -252,14 +252,34 @@ class ColourFringeSystem:
         """One render of ``scene`` (prepared) lit by the pattern (or ``pattern_u8``), recorded
         once per noise seed (a static scene measured again differs by camera noise only;
         recordings cached, :func:`simbench.sim.capture.record_channels`)."""
-        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
         from simbench.sim.capture import record_channels
+        from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
+        from simbench.sim.timeline import is_moving, scene_at
 
         pattern = pattern_u8
         if pattern is None:  # the run's pattern, by its kept digest: made only for a render not cached
             pattern = DriveImage(pattern_digest(self.pattern), lambda: self.pattern_u8)
-        drive = ProjectorDrive(scene, pattern, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
-        return record_channels(scene, drive, self.sensor, seed=render_seed, render=render, rngs=noise_seeds)
+        window = self.capture_window_s(scene) if is_moving(scene) else None
+        # the projector's defocus follows the geometry at mid-exposure (the drive is one image)
+        posed = scene if window is None else scene_at(scene, 0.5 * (window[0] + window[1]))
+        drive = ProjectorDrive(posed, pattern, self.sensor, cache=render.cache, phase=exposure_phase(render_seed))
+        return record_channels(
+            scene, drive, self.sensor, seed=render_seed, render=render, rngs=noise_seeds, window_s=window
+        )
+
+    def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
+        """The time model: the capture is one exposure of the camera, from 0 to its exposure
+        time (:func:`simbench.sim.photometry.exposure_s`: the auto exposure on the white board,
+        ~10 ms for the paper's set-up).  The Flea3 FL3-U3-13E4C has a global shutter (Sony ICX445
+        CCD: every pixel integrates over the same window; Point Grey Flea3 USB 3.0 Technical
+        Reference), so there is no rolling-shutter skew."""
+        from simbench.sim.photometry import exposure_s, white_board
+
+        if not self.sensor.is_physical:
+            raise ValueError(
+                "a moving scene needs the physical (emva) camera's exposure time; the simple camera has none"
+            )
+        return (0.0, float(exposure_s(self.sensor, scene.rig, **white_board(scene))))
 
     def decode(
         self,
@@ -519,6 +539,7 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
             "gt_object_id": "gt_object_id.npy",
             "rig": "rig.toml",
             **{f"calibration_{k}": f"calibration_{k}.png" for k in acq.calibration},
+            **({"gt_motion": "gt_motion.npy"} if acq.gt.motion_px is not None else {}),
         }
         for k, img in acq.calibration.items():
             save_png(tmp / f"calibration_{k}.png", img)
@@ -529,6 +550,8 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
         save_npy(tmp / names["gt_column"], acq.gt.column_px)
         save_npy(tmp / names["gt_lit"], acq.gt.lit)
         save_npy(tmp / names["gt_object_id"], acq.gt.object_id)
+        if acq.gt.motion_px is not None:  # a moving scene: each pixel's image motion over the capture
+            save_npy(tmp / names["gt_motion"], acq.gt.motion_px)
         save_rig(acq.scene.rig, tmp / names["rig"])
         save_json(tmp / RENDER_MANIFEST, seal_manifest(tmp, {"system": "proposed", **acq.meta}, names))
     return {**{k: out / n for k, n in names.items()}, "meta": out / RENDER_MANIFEST}

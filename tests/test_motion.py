@@ -1,0 +1,222 @@
+"""Moving scenes (simbench.sim.motion, simbench.sim.timeline): the scene keys, poses against the
+rigid-motion formula, image motion against the pinhole's closed form, the time slices, and motion
+blur as physics - a moving edge renders as the box-filtered step, converged in its slice count."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from simbench.rig import scale_camera
+from simbench.sim.motion import MAX_SLICE_MOTION_PX, slice_times
+from simbench.sim.scene import load_scene, scene_fingerprint, scene_from_dict
+from simbench.sim.timeline import image_motion_px, is_moving, object_at, scene_at, slice_count, slice_spp
+
+from .conftest import SCENES
+
+
+def _plane_scene(**motion) -> object:
+    obj = {"type": "plane", "name": "board", "center_m": [-0.05, 0.0, 1.0], "size_m": [0.1, 0.3], **motion}
+    return scene_from_dict({"name": "moving", "object": [obj]})
+
+
+def test_motion_keys_are_validated_and_a_static_object_keeps_its_cache_key():
+    still = _plane_scene()
+    assert not is_moving(still) and still.objects[0].motion is None
+    zero = _plane_scene(velocity_m_s=[0.0, 0.0, 0.0], angular_velocity_deg_s=0.0)
+    assert zero.objects[0].motion is None and scene_fingerprint(zero) == scene_fingerprint(still)
+    moving = _plane_scene(velocity_m_s=[0.5, 0.0, 0.0])
+    assert is_moving(moving) and scene_fingerprint(moving) != scene_fingerprint(still)
+    assert scene_fingerprint(moving)["objects"][0]["motion"]["velocity_m_s"] == [0.5, 0.0, 0.0]
+    for bad, match in (
+        ({"velocity_m_s": [60.0, 0, 0]}, r"velocity_m_s\[0\] must be a finite number in \[-50, 50\]"),
+        ({"velocity_m_s": [1.0, 0]}, "velocity_m_s must be a list of 3 numbers"),
+        ({"angular_velocity_deg_s": 10.0, "rotation_axis": [0, 0, 0]}, "rotation_axis must not be zero"),
+        ({"rotation_axis": [0, 0, 1]}, "need a non-zero angular_velocity_deg_s"),
+        ({"angular_velocity_deg_s": "fast"}, "angular_velocity_deg_s must be a finite number"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            _plane_scene(**bad)
+
+
+def test_a_file_scene_without_motion_keeps_every_cache_key():
+    for name in ("white_plane.toml", "discontinuity.toml", "specular.toml"):
+        scene = load_scene(SCENES / name)
+        assert scene_at(scene, 0.3) is scene
+        assert all("motion" not in o for o in scene_fingerprint(scene)["objects"])
+
+
+def test_a_pose_is_the_rigid_motion_of_the_object():
+    """Every corner of a box at time t is where c + R(w t)(x - c) + v t puts it."""
+    from simbench.sim.timeline import _extent_points
+
+    box = scene_from_dict(
+        {
+            "object": [
+                {
+                    "type": "box",
+                    "name": "b",
+                    "center_m": [0.1, -0.05, 1.1],
+                    "size_m": [0.1, 0.2, 0.05],
+                    "rotation_deg": [10.0, -20.0, 5.0],
+                    "velocity_m_s": [0.2, -0.1, 0.3],
+                    "angular_velocity_deg_s": 90.0,
+                    "rotation_axis": [1.0, 1.0, 0.0],
+                    "rotation_centre_m": [0.0, 0.0, 1.0],
+                }
+            ]
+        }
+    ).objects[0]
+    for t in (0.0, 0.1, 0.37):
+        moved = object_at(box, t)
+        assert moved.motion is None
+        want = box.motion.apply(_extent_points(box), t, centre_m=np.asarray(box.get("center_m")))
+        assert np.allclose(np.sort(_extent_points(moved), axis=0), np.sort(want, axis=0), atol=1e-9)
+    m = box.motion
+    for t in (0.5, 1.0, 2.0):  # a rotation by w t about the axis: orthonormal, the axis fixed, trace 1 + 2 cos(w t)
+        r = m.rotation(t)
+        assert np.allclose(r @ r.T, np.eye(3)) and np.allclose(r @ np.asarray(m.axis), m.axis)
+        assert np.trace(r) == pytest.approx(1 + 2 * math.cos(math.radians(90.0 * t)))
+
+
+def test_image_motion_is_the_pinholes_closed_form():
+    """A plane moving sideways at v for T seconds at depth Z moves f v T / Z pixels."""
+    scene = _plane_scene(velocity_m_s=[0.4, 0.0, 0.0])
+    cam = scene.rig.camera
+    t = 0.01
+    assert image_motion_px(scene, cam, 0.0, t) == pytest.approx(cam.focal_px * 0.4 * t / 1.0, rel=1e-9)
+    n = slice_count(scene, cam, (0.0, t))
+    assert n == math.ceil(cam.focal_px * 0.4 * t / MAX_SLICE_MOTION_PX)
+    assert slice_count(_plane_scene(), cam, (0.0, t)) == 1 and slice_count(scene, cam, (0.0, 0.0)) == 1
+    assert np.allclose(slice_times((0.0, 1.0), 4), [0.125, 0.375, 0.625, 0.875])
+
+
+def test_the_sample_budget_is_split_the_way_each_sampler_allows():
+    assert slice_spp(64, 4, "multijitter") == 16
+    assert slice_spp(64, 3, "multijitter") == 16  # 21 is no square: the square below
+    assert slice_spp(64, 3, "independent") == 21
+    assert slice_spp(16, 40, "multijitter") == 1
+    assert slice_spp(16, 40, "orthogonal") == 4  # its smallest (a prime squared)
+
+
+def test_a_moving_scene_is_never_rendered_as_an_instant_without_saying_so(variant):
+    from simbench.sim.capture import cached_ground_truth, render_channels
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.sensor import get_sensor
+
+    scene = _plane_scene(velocity_m_s=[0.4, 0.0, 0.0])
+    with pytest.raises(ValueError, match="objects \\['board'\\] move"):
+        cached_ground_truth(scene)
+    with pytest.raises(ValueError, match="needs the exposure window"):
+        render_channels(scene, None, get_sensor("ideal"), seed=1, render=RenderSettings(spp=1, sampler="independent"))
+
+
+def _edge_scene(speed_m_s: float):
+    """A white board whose right edge crosses the middle of a small camera's view, lit by a
+    uniform projector white, before nothing (black)."""
+    scene = _plane_scene(velocity_m_s=[speed_m_s, 0.0, 0.0])
+    return dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25))  # 320 x 240 px
+
+
+def _row_profile(q: np.ndarray) -> np.ndarray:
+    band = q[100:140, :, 1].astype(np.float64)  # rows around the middle, green
+    return band.mean(axis=0)
+
+
+@pytest.mark.slow
+def test_a_moving_edge_is_the_box_filtered_step_and_its_slices_are_converged(variant, monkeypatch):
+    """Motion blur by time slices against the closed form: over an exposure T the edge at
+    e(t) = e0 + s t (s = f v / Z px/s) covers pixel i for clip(e(t) - i + 1/2, 0, 1) of its
+    area, so the recorded profile is that coverage's mean over t (a ramp f v T / Z pixels
+    wide), within render noise (64 samples a pixel, 40 rows averaged: measured 0.006 of the plateau); and twice the
+    slices change it by no more than that noise."""
+    from simbench.sim.capture import physical_scene, render_channels
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.sensor import get_sensor
+
+    sensor = get_sensor("ideal")
+    speed, window = 0.5, (0.0, 0.02)  # 0.5 m/s over 20 ms: 10 mm, ~5.8 px of the small camera
+    scene = physical_scene(_edge_scene(speed), sensor)
+    cam = scene.rig.camera
+    drive = np.ones((*scene.rig.projector.size_hw, 3), np.float32)
+    render = RenderSettings(spp=64, sampler="independent", max_depth=2)
+    q = render_channels(scene, drive, sensor, seed=11, render=render, window_s=window)
+    profile = _row_profile(q)
+    c = int(cam.cx_px)
+    plateau = profile[c - 40 : c - 10].mean()  # well inside the board (58 px wide), left of the edge
+    measured = profile / plateau
+    # the edge's image column at time t: the board's right side, x = -0.05 + 0.05 + v t, at z = 1
+    cols = np.arange(cam.width_px)
+    t = np.linspace(*window, 4001)
+    edge = cam.focal_px * (0.0 + speed * t)[:, None] / 1.0 + cam.cx_px
+    expected = np.clip(edge - cols[None, :] + 0.5, 0.0, 1.0).mean(axis=0)
+    blur = slice(int(edge.min()) - 4, int(edge.max()) + 5)
+    assert np.abs(measured[blur] - expected[blur]).max() < 0.015, (measured[blur], expected[blur])
+    assert expected[blur].min() < 0.05 and expected[blur].max() > 0.95  # the window spans the whole ramp
+    # a static render of the mid-exposure pose has a sharp edge: the blur is real
+    still = _row_profile(render_channels(scene_at(scene, 0.01), drive, sensor, seed=11, render=render)) / plateau
+    assert np.abs(still[blur] - expected[blur]).max() > 0.2
+    # converged: twice the slices (each with half the samples) agree within the noise
+    import simbench.sim.timeline as timeline
+
+    n = slice_count(scene, cam, window)
+    monkeypatch.setattr(timeline, "MAX_SLICE_MOTION_PX", MAX_SLICE_MOTION_PX / 2)
+    assert slice_count(scene, cam, window) in (2 * n - 1, 2 * n)
+    finer = _row_profile(render_channels(scene, drive, sensor, seed=12, render=render, window_s=window)) / plateau
+    assert np.abs(finer[blur] - measured[blur]).max() < 0.02
+
+
+def _board_before_wall(**motion):
+    return scene_from_dict(
+        {
+            "name": "board_before_wall",
+            "object": [
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+                {"type": "plane", "name": "board", "center_m": [-0.05, 0.0, 1.0], "size_m": [0.2, 0.3], **motion},
+            ],
+        }
+    )
+
+
+@pytest.mark.slow
+def test_the_paper_sensor_records_a_moving_board_over_its_exposure(variant, tmp_path):
+    """The proposed sensor's time model is one exposure of its global-shutter camera: the ground
+    truth is the board at mid-exposure, each pixel's motion is f v T / Z (the closed form) on the
+    board and 0 on the wall, and the recording folder keeps it (gt_motion.npy); a zero velocity
+    records bit for bit what the static scene records; a system without a time model refuses."""
+    from simbench.seeds import SeedLog
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.systems import SystemOptions, acquire, get_system
+
+    system = get_system("proposed", SystemOptions(camera_scale=0.25))
+    render = RenderSettings(spp=4, sampler="multijitter", max_depth=2)
+    moving = _board_before_wall(velocity_m_s=[0.5, 0.0, 0.0])
+    t0, t1 = system.capture_window_s(system.prepare(moving))
+    assert t0 == 0.0 and 0.001 < t1 < 0.1  # the auto exposure on the white board
+    rec = acquire(system, moving, "m", seeds=SeedLog(), render=render)[0]
+    cam = rec.scene.rig.camera
+    board, wall = rec.gt.object_id == 1, rec.gt.object_id == 0
+    assert np.allclose(rec.gt.motion_px[board], [cam.focal_px * 0.5 * t1 / 1.0, 0.0], atol=1e-3)
+    assert not rec.gt.motion_px[wall].any()
+    # the truth is the board at mid-exposure: its right edge at x = 0.05 m + v T / 2 (~4 px from t = 0's)
+    edge_col = cam.focal_px * (0.05 + 0.5 * 0.5 * t1) / 1.0 + cam.cx_px
+    row = board[cam.height_px // 2]
+    assert abs(np.flatnonzero(row).max() + 0.5 - edge_col) <= 0.5
+    files = system.write_recording(
+        tmp_path / "rec",
+        rec.raw,
+        system.calibrate(rec.scene, seeds=SeedLog(), render=render),
+        scene=rec.scene,
+        gt=rec.gt,
+        meta={"scene": "board_before_wall"},
+    )
+    assert np.array_equal(np.load(files["gt_motion"]), rec.gt.motion_px)
+    # zero velocity: the static scene's recording, bit for bit
+    still = acquire(system, _board_before_wall(), "s", seeds=SeedLog(), render=render)[0]
+    zero = acquire(system, _board_before_wall(velocity_m_s=[0.0, 0.0, 0.0]), "s", seeds=SeedLog(), render=render)[0]
+    assert np.array_equal(still.raw, zero.raw) and zero.gt.motion_px is None
+    with pytest.raises(ValueError, match="the kinect system has no time model yet"):
+        acquire(get_system("kinect"), moving, "k", seeds=SeedLog(), render=render)
