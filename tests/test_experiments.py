@@ -38,7 +38,7 @@ def test_scale_camera_keeps_the_view():
 
 
 def test_unknown_target_is_rejected():
-    assert _resolve(["all"]) == ["table1", "table3", "fig9", "figures", "budget", "render_noise", "flatness"]
+    assert _resolve(["all"]) == ["table1", "table3", "fig9", "figures", "budget", "render_noise", "flatness", "motion"]
     assert _resolve(["fig9", "table1"]) == ["table1", "fig9"]
     with pytest.raises(ValueError, match="valid"):
         _resolve(["table2"])

@@ -94,12 +94,12 @@ def test_image_motion_is_the_pinholes_closed_form():
     assert np.allclose(slice_times((0.0, 1.0), 4), [0.125, 0.375, 0.625, 0.875])
 
 
-def test_the_sample_budget_is_split_the_way_each_sampler_allows():
-    assert slice_spp(64, 4, "multijitter") == 16
-    assert slice_spp(64, 3, "multijitter") == 16  # 21 is no square: the square below
-    assert slice_spp(64, 3, "independent") == 21
-    assert slice_spp(16, 40, "multijitter") == 1
-    assert slice_spp(16, 40, "orthogonal") == 4  # its smallest (a prime squared)
+def test_the_sample_budget_is_split_across_the_slices():
+    assert slice_spp(64, 4) == 16 and slice_spp(64, 3) == 21 and slice_spp(64, 63) == 1
+    assert slice_spp(16, 40) == 1  # more slices than samples: one each (40 in all)
+    for spp in (4, 16, 36, 64):
+        for n in range(1, spp + 1):
+            assert spp - n < n * slice_spp(spp, n) <= spp  # within n samples of a static capture's
 
 
 def test_a_moving_scene_is_never_rendered_as_an_instant_without_saying_so(variant):

@@ -25,6 +25,7 @@ from simbench.experiments.fig9 import run_fig9
 from simbench.experiments.figures import run_figures
 from simbench.experiments.flatness import run_flatness
 from simbench.experiments.hard_scenes import run_hard_scenes
+from simbench.experiments.motion import run_motion
 from simbench.experiments.render_noise import run_render_noise
 from simbench.experiments.table1 import run_table1
 from simbench.experiments.table3 import run_table3
@@ -70,6 +71,7 @@ TARGETS: dict[str, Target] = {
     "render_noise": Target(run_render_noise, True, 6),
     "flatness": Target(run_flatness, True, 7),
     "hard_scenes": Target(run_hard_scenes, False, 2),
+    "motion": Target(run_motion, True, 1),
 }
 
 # what ``all`` runs: the paper's tables and figures and the studies beside them

@@ -200,9 +200,10 @@ def render_channels(
 
     A moving scene (:mod:`simbench.sim.motion`) is integrated over the exposure ``window_s``
     (start, end) in seconds: the mean of :func:`simbench.sim.timeline.slice_count` renders at the
-    slices' centre instants, each with its own seed (:func:`simbench.seeds.slice_seed`) and
-    :func:`simbench.sim.timeline.slice_spp` of the samples (one slice: the scene at the window's
-    middle, with ``seed`` and every sample).  A static scene ignores ``window_s``.
+    slices' centre instants, each with its own seed (:func:`simbench.seeds.slice_seed`),
+    :func:`simbench.sim.timeline.slice_spp` of the samples and the ``independent`` sampler (one
+    slice: the scene at the window's middle, with ``seed``, every sample and ``render``'s sampler).
+    A static scene ignores ``window_s``.
 
     Returns
     -------
@@ -254,8 +255,9 @@ def _exposure_integral(scene, drive, sensor, *, seed: int, render: RenderSetting
     n = slice_count(scene, scene.rig.camera, (t0, t1))
     if n == 1:
         return render_channels(scene_at(scene, 0.5 * (t0 + t1)), drive, sensor, seed=seed, render=render)
-    spp = slice_spp(render.spp, n, render.sampler)
-    settings = dataclasses.replace(render, spp=spp)
+    # independent sampling: any per-slice count, and each slice's samples at random positions
+    # (stratification within a 1-sample slice means nothing)
+    settings = dataclasses.replace(render, spp=slice_spp(render.spp, n), sampler="independent")
     total = None
     for i, t in enumerate(slice_times((t0, t1), n)):
         q = render_channels(scene_at(scene, float(t)), drive, sensor, seed=slice_seed(seed, i), render=settings)

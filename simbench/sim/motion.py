@@ -17,7 +17,8 @@ Motion blur is physics: the camera integrates radiance over its exposure window.
 (the pinned release; the newest on PyPI) has no animated transforms in its Python module, so the
 exposure is integrated by rendering ``n`` time slices at the centres of ``n`` equal sub-windows
 (the midpoint rule: a box filter in time) and averaging them, the sample budget split across the
-slices (:func:`simbench.sim.timeline.slice_spp`), so a moving capture costs about what a static one costs.  ``n`` is
+slices (:func:`simbench.sim.timeline.slice_spp`, independent sampling), so a moving capture costs about
+what a static one costs.  ``n`` is
 chosen so that no point of a moving object travels more than :data:`MAX_SLICE_MOTION_PX` camera
 pixels within one slice (:func:`simbench.sim.timeline.slice_count`); tests/test_motion.py checks that the blur is then
 converged (twice the slices change the image by no more than render noise) and that a moving

@@ -10,7 +10,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.rig import angles_xyz_deg, rotation_xyz_deg
-from simbench.sim.mitsuba_dict import check_sampler
 from simbench.sim.motion import MAX_SLICE_MOTION_PX, MAX_SLICES
 from simbench.sim.scene import OBJECT_KIND_TABLE, SceneObject, SceneSpec, target_size_m
 
@@ -107,25 +106,12 @@ def slice_count(scene: SceneSpec, camera: Intrinsics, window_s: tuple[float, flo
     return int(min(MAX_SLICES, max(1, math.ceil(travel / MAX_SLICE_MOTION_PX))))
 
 
-def slice_spp(spp: int, n: int, sampler: str) -> int:
-    """Samples per pixel of each of ``n`` slices of a ``spp`` render: the largest count the
-    sampler takes (a square for stratified and multijitter, a prime squared for orthogonal, a
-    square power of two for ldsampler) not above ``spp / n``; at least the sampler's smallest."""
-    target = max(1, spp // n)
-    for k in range(target, 0, -1):
-        try:
-            check_sampler(sampler, k)
-        except ValueError:
-            continue
-        return k
-    k = target + 1
-    while True:  # none below: the smallest above (orthogonal and ldsampler start at 4)
-        try:
-            check_sampler(sampler, k)
-        except ValueError:
-            k += 1
-            continue
-        return k
+def slice_spp(spp: int, n: int) -> int:
+    """Samples per pixel of each of ``n`` time slices of a ``spp`` render: ``spp // n``, at least
+    one (the slices are rendered with the ``independent`` sampler, which takes any count, so the
+    capture keeps within ``n`` samples of ``spp`` - about a static capture's cost - until ``n``
+    exceeds ``spp``: then every slice takes one sample, ``n`` in all)."""
+    return max(1, int(spp) // int(n))
 
 
 def motion_field_px(
