@@ -351,3 +351,28 @@ def test_a_termination_inside_a_run_stops_the_sweep_instead_of_recording_a_failu
     finally:
         termination._REQUESTED.clear()
     assert "error" in run_one({**params, "run.spp": 0}, seed=1, cache_dir=None)  # without it: a recorded failure
+
+
+def test_speed_is_an_axis():
+    """Issue 37's ablation axis: scene.speed_m_s moves the first object (scene.motion: lateral or
+    axial), validated; speed 0 is the static scene, its cache keys unchanged."""
+    from simbench.experiments.ablate.mapping import scene_for
+    from simbench.sim.scene import scene_fingerprint
+
+    still = scene_for({"scene.name": "motion_board"})
+    assert scene_fingerprint(scene_for({"scene.name": "motion_board", "scene.speed_m_s": 0.0})) == scene_fingerprint(
+        still
+    )
+    axial = scene_for({"scene.name": "motion_board", "scene.speed_m_s": 0.5, "scene.motion": "axial"})
+    assert axial.objects[0].motion.velocity_m_s == (0.0, 0.0, -0.5) and axial.objects[1].motion is None
+    lateral = scene_for({"scene.name": "motion_board", "scene.speed_m_s": 0.2})
+    assert lateral.objects[0].motion.velocity_m_s == (0.2, 0.0, 0.0)
+    for bad, match in (
+        ({"scene.speed_m_s": -1.0}, "scene.speed_m_s must be a finite number in"),
+        ({"scene.speed_m_s": 0.1, "scene.motion": "up"}, "scene.motion must be one of"),
+        ({"scene.motion": "sideways"}, "scene.motion must be one of"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            scene_for({"scene.name": "motion_board", **bad})
+    sweep = sweep_from_dict({"name": "speed", "axis": [{"name": "scene.speed_m_s", "values": [0.0, 0.3]}]})
+    assert [r["params"]["scene.speed_m_s"] for r in expand(sweep)] == [0.0, 0.3]

@@ -37,7 +37,9 @@ Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
   (e.g. ``sensor.camera.dark_noise_e``, ``sensor.ambient.ratio``, ``sensor.projector.lumens``);
 - ``scene.name`` (a file of ``scenes/``), ``scene.srgb8`` (repaint every object), ``scene.depth_m``
   (move the scene so its first object's centre is at this depth), ``scene.tilt_deg`` (the first
-  object's rotation about the vertical axis);
+  object's rotation about the vertical axis), ``scene.speed_m_s`` and ``scene.motion`` (the first
+  object moving ``lateral``-ly or ``axial``-ly at that speed during the exposure:
+  :mod:`simbench.sim.motion`);
 - ``run.spp``, ``run.sampler``, ``run.camera_scale``, ``run.max_depth``.
 
 Execution: a local process pool (``workers``) or a Dask distributed cluster (``scheduler``); each

@@ -93,6 +93,16 @@ def scene_for(params: dict) -> SceneSpec:
             rx, _, rz = q.get("rotation_deg", (0.0, 0.0, 0.0))
             q["rotation_deg"] = (rx, float(params["scene.tilt_deg"]), rz)
             objs[0] = dataclasses.replace(objs[0], params=tuple(sorted(q.items())))
+    if params.get("scene.speed_m_s"):
+        from simbench.experiments.motion import DIRECTIONS
+        from simbench.sim.motion import MAX_SPEED_M_S, Motion
+
+        speed = validate.number(params["scene.speed_m_s"], "scene.speed_m_s", lo=0.0, hi=MAX_SPEED_M_S)
+        direction = validate.choice(params.get("scene.motion", "lateral"), "scene.motion", DIRECTIONS)
+        velocity = tuple(speed * u for u in DIRECTIONS[direction])
+        objs[0] = dataclasses.replace(objs[0], motion=Motion(velocity_m_s=velocity))
+    elif "scene.motion" in params:
+        validate.choice(params["scene.motion"], "scene.motion", ("lateral", "axial"))
     scene = dataclasses.replace(scene, objects=tuple(objs))
     if "scene.subsurface" in params:  # absent: as the scene file says
         medium = params["scene.subsurface"]

@@ -76,6 +76,9 @@ def _parameters() -> dict[str, str]:
         "('none'); not given: as the scene file says",
         "scene.depth_m": "move the scene so its first object's centre is at this depth",
         "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",
+        "scene.speed_m_s": "speed of the first object (m/s; simbench.sim.motion), in the scene.motion direction",
+        "scene.motion": "direction of that motion: lateral (+x, sideways) or axial (-z, towards the camera); "
+        "default lateral",
         "decoder.without": "the paper decoder's added checks switched off (simbench.decode.PAPER_ADDED_CHECKS): "
         "none, all, a name or a list of names",
         "run.spp": "samples per pixel",
