@@ -187,11 +187,23 @@ def _or_error(on_result: Callable, on_error: Callable) -> Callable:
 def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_args, in_parent, progress) -> None:
     import multiprocessing as mp
 
+    import queue
+
     ctx = mp.get_context("spawn")
     messages = ctx.Queue()
+    stop = threading.Event()
 
     def relay() -> None:
-        while (message := messages.get()) is not None:
+        # this process only reads the queue: it never takes the queue's shared write lock, which a
+        # worker that exits (or dies) while sending can leave held (a run finished its targets and
+        # then hung here, waiting to put its own end-of-messages marker behind that lock)
+        while True:
+            try:
+                message = messages.get(timeout=0.1)
+            except queue.Empty:
+                if stop.is_set():
+                    return
+                continue
             progress(message)
 
     relay_thread = threading.Thread(target=relay, daemon=True)
@@ -226,7 +238,7 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
                     with lock:
                         on_died(task)
     finally:
-        messages.put(None)
+        stop.set()  # the relay drains what the workers sent, then ends
         relay_thread.join()
 
 
