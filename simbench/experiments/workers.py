@@ -244,8 +244,14 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
 
 def _pool_round(todo: deque, fn, *, ctx, init, workers: int, in_parent, deliver, lock) -> list[Task]:
     """Tasks from ``todo`` on one pool until it is empty, a task raises (re-raised here) or a
-    worker dies; returns the tasks that were running on the pool when it broke."""
-    from concurrent.futures import ProcessPoolExecutor
+    worker dies; returns the tasks that were running on the pool when it broke.
+
+    Only this (the calling) thread submits, so only it starts worker processes: a worker dies
+    with the thread that started it (``PR_SET_PDEATHSIG`` follows the creating thread, not the
+    process), and workers started by short-lived threads were killed when those ended - holding
+    a queue's lock, which hung the run.  This process's own tasks (``in_parent``) run in a thread
+    beside it."""
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     broken: list[Task] = []
@@ -255,40 +261,56 @@ def _pool_round(todo: deque, fn, *, ctx, init, workers: int, in_parent, deliver,
         with lock:
             return todo.popleft() if todo and not failed and not broken else None
 
-    spawned = workers - 1 if in_parent is not None else workers
-    with ProcessPoolExecutor(max_workers=spawned, mp_context=ctx, initializer=_start, initargs=init) as pool:
-
-        def feed() -> None:
-            while (task := take()) is not None:
-                try:
-                    result = pool.submit(_call, fn, task).result()
-                except BrokenProcessPool:
-                    with lock:
-                        broken.append(task)
-                    return
-                except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
-                    failed.append(exc)
-                    return
-                deliver(task, result)
-
-        # this process takes the first task before the workers start: it has its imports and
-        # state, while a spawned worker first imports (so the longest task starts at once here)
-        first = take() if in_parent is not None else None
-        feeders = [threading.Thread(target=feed, daemon=True) for _ in range(spawned)]
-        for t in feeders:
-            t.start()
+    def run_here(first: Task | None) -> None:
+        task = first
         try:
-            task = first
             while task is not None:
                 deliver(task, in_parent(task))
                 task = take()
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+            with lock:
+                failed.append(exc)
+                todo.clear()  # the workers finish the task they hold, then stop
+
+    spawned = workers - 1 if in_parent is not None else workers
+    with ProcessPoolExecutor(max_workers=spawned, mp_context=ctx, initializer=_start, initargs=init) as pool:
+        # this process takes the first task before the workers start: it has its imports and
+        # state, while a spawned worker first imports (so the longest task starts at once here)
+        here = None
+        if in_parent is not None:
+            here = threading.Thread(target=run_here, args=(take(),), daemon=True)
+            here.start()
+        running: dict = {}
+
+        def fill() -> None:
+            while len(running) < spawned and (task := take()) is not None:
+                running[pool.submit(_call, fn, task)] = task
+
+        try:
+            fill()
+            while running:
+                done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                for future in done:
+                    task = running.pop(future)
+                    try:
+                        result = future.result()
+                    except BrokenProcessPool:
+                        with lock:
+                            broken.append(task)
+                        continue
+                    except BaseException as exc:  # noqa: BLE001 - raised below, once the others are in
+                        with lock:
+                            failed.append(exc)
+                        continue
+                    deliver(task, result)
+                fill()
         except BaseException:
             with lock:
-                todo.clear()  # the workers finish the task they hold, then stop
+                todo.clear()
             raise
         finally:
-            for t in feeders:
-                t.join()
+            if here is not None:
+                here.join()
     if failed:
         raise failed[0]
     return broken
