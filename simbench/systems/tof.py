@@ -58,6 +58,8 @@ __all__ = [
     "tof_rig",
     "device_scene",
     "footprint_phasor",
+    "tap_windows_s",
+    "moving_tap_means",
     "record_taps",
     "decode_taps",
     "capture",
@@ -244,6 +246,11 @@ def record_taps(amplitude: np.ndarray, phasor: np.ndarray, *, model: ToFModel, r
     phi = np.angle(phasor)
     k = np.arange(4)
     mean = (n / 4.0)[..., None] * (1.0 + m[..., None] * np.cos(phi[..., None] - k * np.pi / 2))
+    return _noisy_taps(mean, model=model, rng=rng)
+
+
+def _noisy_taps(mean: np.ndarray, *, model: ToFModel, rng: RngLike) -> np.ndarray:
+    """Shot and read noise on the four samples' means (electrons), clipped at the full well."""
     if model.noise:
         gen = np.random.default_rng(rng)
         taps = gen.poisson(mean).astype(np.float64) + gen.normal(0.0, model.read_noise_e, mean.shape)
@@ -294,6 +301,70 @@ def decode_taps(taps: np.ndarray, *, model: ToFModel) -> ToFDepth:
     )
 
 
+def tap_windows_s(model: ToFModel) -> list[tuple[float, float]]:
+    """The time model: the four correlation samples are taken one after another, sample k over
+    ``[k tau, (k + 1) tau)`` with ``tau = integration_s / 4`` (the frame's integration shared by its
+    samples, as :func:`electrons_per_radiance` shares its electrons).  Sequential sampling is how
+    lock-in ToF cameras with fewer storage sites than samples work (PMD cameras take their
+    samples in four sequential stages: Jimenez, Pizarro & Mazo 2014, Image Vis. Comput. 32,
+    1127-1143); that the SR4000 does likewise is our assumption."""
+    tau = model.integration_s / 4.0
+    return [(k * tau, (k + 1) * tau) for k in range(4)]
+
+
+def _phasor(scene: SceneSpec, model: ToFModel, *, cache: RenderCache | None) -> np.ndarray:
+    from simbench.sim.keys import cached_arrays
+    from simbench.sim.scene import scene_fingerprint
+
+    parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
+    if any(o.material.subsurface for o in scene.objects):
+        # translucent objects' delay (modulation_transfer), a model older phasors lack; opaque
+        # scenes keep their keys
+        parts["subsurface_delay"] = "dipole-v1"
+
+    def make() -> dict:
+        z = footprint_phasor(scene, model)
+        return {"re": z.real, "im": z.imag}
+
+    arrays = cached_arrays("tof_phasor", parts, make, cache=cache)
+    return arrays["re"] + 1j * arrays["im"]
+
+
+def moving_tap_means(
+    scene: SceneSpec, model: ToFModel, *, spp: int, seed: int, sampler: str, cache: RenderCache | None = None
+) -> np.ndarray:
+    """The four samples' mean electrons (H, W, 4) of a moving scene: sample k integrates the
+    return over its own window (:func:`tap_windows_s`), by time slices as every system's blur
+    (:mod:`simbench.sim.motion`): ``A_k = (1/4) mean_t [n(t) + m Re(n(t) Z(t) exp(-i k pi/2))]``,
+    ``n`` the return's electrons and ``Z`` the footprint phasor at each slice's instant - so a
+    sample sees the depth and the brightness of its own moment (the amplitude changes between
+    samples too: a moving object's return brightens as it approaches)."""
+    from simbench.seeds import slice_seed
+    from simbench.sim.capture import cached_radiance, opaque, with_translucency
+    from simbench.sim.motion import MAX_SLICES, slice_times
+    from simbench.sim.timeline import scene_at, slice_count, slice_spp
+
+    k_e = electrons_per_radiance(model)
+    means = []
+    for k, window in enumerate(tap_windows_s(model)):
+        n_sl = slice_count(scene, model.camera, window)
+        per = spp if n_sl == 1 else slice_spp(spp, n_sl)
+        how = sampler if n_sl == 1 else "independent"
+        acc_n = acc_nz = 0.0
+        for i, t in enumerate(slice_times(window, n_sl)):
+            posed = scene_at(scene, float(t))
+            s = seed if n_sl == 1 else slice_seed(seed, k * MAX_SLICES + i)
+            rad = cached_radiance(
+                opaque(posed), _emitter_texture(model), spp=per, seed=s, max_depth=2, sampler=how, cache=cache
+            )
+            n = np.clip(with_translucency(rad, posed, cache=cache).mean(axis=2).astype(np.float64), 0, None) * k_e
+            acc_n = acc_n + n
+            acc_nz = acc_nz + n * _phasor(posed, model, cache=cache)
+        n_mean, nz_mean = acc_n / n_sl, acc_nz / n_sl
+        means.append(0.25 * (n_mean + model.demodulation_contrast * np.real(nz_mean * np.exp(-0.5j * np.pi * k))))
+    return np.stack(means, axis=-1)
+
+
 def capture(
     scene: SceneSpec,
     model: ToFModel,
@@ -306,26 +377,17 @@ def capture(
 ) -> list[np.ndarray]:
     """Tap frames (H, W, 4) of ``scene`` (already :func:`device_scene`): one direct-light render
     (``seed``) and one footprint trace, recorded once per noise seed."""
-    from simbench.sim.scene import scene_fingerprint
-    from simbench.sim.keys import cached_arrays
     from simbench.sim.capture import cached_radiance, opaque, with_translucency
+    from simbench.sim.timeline import is_moving
 
+    if is_moving(scene):
+        means = moving_tap_means(scene, model, spp=spp, seed=seed, sampler=sampler, cache=cache)
+        return [_noisy_taps(means, model=model, rng=s) for s in noise_seeds]
     rad = cached_radiance(
         opaque(scene), _emitter_texture(model), spp=spp, seed=seed, max_depth=2, sampler=sampler, cache=cache
     )
     rad = with_translucency(rad, scene, cache=cache).mean(axis=2)
-    parts = {"scene": scene_fingerprint(scene), "supersample": model.supersample, "modulation_hz": model.modulation_hz}
-    if any(o.material.subsurface for o in scene.objects):
-        # translucent objects' delay (modulation_transfer), a model older phasors lack; opaque
-        # scenes keep their keys
-        parts["subsurface_delay"] = "dipole-v1"
-
-    def make() -> dict:
-        z = footprint_phasor(scene, model)
-        return {"re": z.real, "im": z.imag}
-
-    arrays = cached_arrays("tof_phasor", parts, make, cache=cache)
-    z = arrays["re"] + 1j * arrays["im"]
+    z = _phasor(scene, model, cache=cache)
     return [record_taps(rad, z, model=model, rng=s) for s in noise_seeds]
 
 
@@ -380,6 +442,12 @@ class ToFSystem:
             sampler=render.sampler,
             cache=render.cache,
         )
+
+    def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
+        """The time model (:func:`tap_windows_s`): four samples one after another over the
+        integration time (8.5 ms)."""
+        windows = tap_windows_s(self.model)
+        return (windows[0][0], windows[-1][1])
 
     def decode(self, raw: np.ndarray, calibration=None, *, scene: SceneSpec | None = None):
         from simbench.systems import SystemDepth
