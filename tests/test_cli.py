@@ -690,3 +690,18 @@ def test_after_sigterm_a_half_built_objects_finalizer_prints_nothing(capsys, mon
     Broken()
     gc.collect()
     assert capsys.readouterr().err == ""
+
+
+def test_reproduce_help_names_every_target():
+    """The reproduce command's help lists its targets by name (not imported, for start-up time):
+    every registered target, and no other."""
+    import argparse
+    import re
+
+    from simbench.cli import _parser
+    from simbench.experiments.reproduce import TARGETS
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    help_text = next(a.help for a in sub.choices["reproduce"]._actions if a.dest == "targets")  # noqa: SLF001
+    listed = set(re.findall(r"\b[a-z][a-z0-9_]+\b", help_text.split(" or all")[0]))
+    assert listed == set(TARGETS)

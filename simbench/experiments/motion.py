@@ -17,7 +17,7 @@ Budget (stated, not hidden): the experiment renders at a quarter of the camera's
 capture takes one render per time slice (63 slices at 1 m/s on this camera); quick runs move the
 board only, at 0, 0.03 and 0.3 m/s.  Phase shifting, twelve such captures, runs
 only up to :data:`MULTI_SHOT_MAX_SPEED_M_S`: its sequence lasts ~0.33 s, so at that speed the
-object has moved 33 mm during it; faster rows are "not run", not zero.  The Kinect
+object has moved 32 mm during it; faster rows are "not run", not zero.  The Kinect
 has no time model yet (it refuses a moving scene) and is listed as such.
 """
 
