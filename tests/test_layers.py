@@ -39,21 +39,7 @@ def test_no_import_cycles_between_modules():
             a, b = _unit(m), _unit(t)
             if a != b and "simbench" not in (a, b):
                 edges[a].add(b)
-    state: dict[str, int] = {}
-    cycles = []
-
-    def visit(u: str, path: list[str]) -> None:
-        state[u] = 1
-        for v in sorted(edges[u]):
-            if state.get(v) == 1:
-                cycles.append(path[path.index(v) :] + [v])
-            elif v not in state:
-                visit(v, path + [v])
-        state[u] = 2
-
-    for u in sorted(edges):
-        if u not in state:
-            visit(u, [u])
+    cycles = _cycles(edges)
     assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
 
 
