@@ -17,6 +17,8 @@ References
 .. [Chiabrando2009] F. Chiabrando, R. Chiabrando, D. Piatti, F. Rinaudo, "Sensors for 3D
    Imaging: Metric Evaluation and Calibration of a CCD/CMOS Time-of-Flight Camera", Sensors
    9(12), 10080-10096, 2009.
+.. [Sarbolandi2015] H. Sarbolandi, D. Lefloch, A. Kolb, "Kinect Range Sensing: Structured-Light
+   versus Time-of-Flight Kinect", Computer Vision and Image Understanding 139, 1-20, 2015.
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ __all__ = [
     "PAPER_BASELINE_M",
     "KINECT_FOCAL_PX",
     "KINECT_BASELINE_M",
+    "KINECT_FPS",
+    "MT9M001_ROW_TIME_S",
     "SR4000_SIZE_WH",
     "SR4000_FOV_X_DEG",
     "SR4000_MODULATION_HZ",
@@ -76,6 +80,12 @@ LIGHTCRAFTER_8BIT_PATTERN_HZ = 120.0
 # calibrate ~580 px) and the projector-camera baseline [Khoshelham2012]
 KINECT_FOCAL_PX = 571.0
 KINECT_BASELINE_M = 0.075
+# the Kinect v1 delivers depth at 30 Hz [Sarbolandi2015]; its IR camera is an Aptina MT9M001
+# (1/2-inch 1280 x 1024 CMOS, 5.2 um pixels, 10-bit ADC, electronic rolling shutter, 30 fps
+# progressive scan; one row every 1,524 pixel clocks = 31.75 us at the recommended 48 MHz
+# master clock: Aptina MT9M001 data sheet, Rev. K 5/11, Table 3 "Frame Timing")
+KINECT_FPS = 30.0
+MT9M001_ROW_TIME_S = 31.75e-6
 # the MESA SR4000: 176 x 144 lock-in pixels, 43.6 deg horizontal field, 30 MHz default
 # modulation (data sheet as quoted by [Chiabrando2009])
 SR4000_SIZE_WH = (176, 144)

@@ -9,7 +9,17 @@ Device (numbers from the literature where they exist, otherwise stated assumptio
   (each dot one texel of a 3x3 cell, so a dot is smaller than a camera pixel), 75 mm to the
   camera's +x (baseline: Khoshelham & Oude Elberink 2012).
 - A monochrome IR camera, 640x480, f = 571 px (the competitor issue; Khoshelham & Oude Elberink
-  2012 calibrate ~580 px), Aptina MT9M001 5.2 um pixels binned 2x2 (datasheet (recalled)).
+  2012 calibrate ~580 px), Aptina MT9M001 5.2 um pixels binned 2x2 (5.2 um and the 10-bit ADC:
+  the MT9M001 data sheet; the 2x2 binning to 640x480 is our assumption).
+- Time (moving scenes): 30 frames/s (Sarbolandi et al. 2015) on the MT9M001's electronic rolling
+  shutter (data sheet: ERS, one sensor row every 31.75 us at the recommended 48 MHz clock).
+  Output row r (two sensor rows, top first) integrates over [r t_row, r t_row + T_exp), t_row =
+  63.5 us, so the 480 rows start 30.5 ms apart from top to bottom.  T_exp is not published:
+  assumption: the whole frame time, 1/30 s (the laser shines continuously and the sensor may
+  integrate for as long as a frame lasts; a shorter exposure is a ``KinectModel`` field away).
+  A moving scene is rendered in time slices over the whole readout and each row takes the slices
+  of its own window (:func:`rolling_weights`); the speckle stays the static one, an approximation
+  (a moving surface carries its speckle along and averages it over the exposure).
 - The scene's NIR reflectance is taken as the mean of its RGB reflectance (assumption: no NIR
   spectra are known for the scene materials), and a translucent object's NIR subsurface
   scattering as the mean of its three bands' (:func:`simbench.sim.capture.with_translucency`; the
@@ -47,7 +57,7 @@ import cv2
 import numpy as np
 
 from simbench import validate
-from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX
+from simbench.literature import KINECT_BASELINE_M, KINECT_FOCAL_PX, KINECT_FPS, MT9M001_ROW_TIME_S
 from simbench.rig import Intrinsics, Rig
 from simbench.sim.scene import SceneSpec, reference_scene
 from simbench.seeds import RngLike, child_seed
@@ -67,6 +77,8 @@ __all__ = [
     "match",
     "calibrate",
     "capture",
+    "row_windows_s",
+    "rolling_weights",
 ]
 
 
@@ -102,14 +114,18 @@ class KinectModel:
     pattern_seed: int = 2010
     wavelength_nm: float = 830.0
     f_number: float = 2.0  # assumption: a fast small-format IR lens
-    pixel_pitch_um: float = 10.4  # MT9M001 5.2 um, 2x2 binned (datasheet (recalled))
+    pixel_pitch_um: float = 10.4  # MT9M001 5.2 um (data sheet), 2x2 binned (assumption)
     # matte paint and plaster depolarise: two independent speckle patterns add (Goodman)
     polarisation_states: int = 2
     psf_sigma_px: float = 0.5  # assumption: lens blur + pixel crosstalk, Gaussian sigma
     full_well_e: float = 20000.0  # assumption: binned MT9M001 pixel
     read_noise_e: float = 10.0  # assumption
-    bits: int = 10  # MT9M001 ADC (datasheet (recalled))
+    bits: int = 10  # MT9M001 ADC (data sheet)
     exposure_fraction: float = 0.7
+    # the time model (module docstring): assumption, the exposure fills the 30 Hz frame; the
+    # rolling shutter's row delay, two MT9M001 rows per binned output row (0: a global shutter)
+    exposure_s: float = 1.0 / KINECT_FPS
+    row_time_s: float = 2 * MT9M001_ROW_TIME_S
     speckle: bool = True
     noise: bool = True
     min_ncc: float = 0.5  # assumption: below it the match is not trusted
@@ -132,6 +148,8 @@ class KinectModel:
             # finite and positive; depths within the scenes' 100 m (simbench.sim.scene.SCENE_EXTENT_M)
             hi = 100.0 if name.endswith("depth_m") else None
             validate.number(getattr(self, name), f"kinect {name}", lo=0.0, lo_open=True, hi=hi)
+        validate.number(self.exposure_s, "kinect exposure_s", lo=0.0, lo_open=True, hi=1.0)
+        validate.number(self.row_time_s, "kinect row_time_s", lo=0.0, hi=1e-3)
         if not self.min_depth_m < self.max_depth_m:
             raise ValueError("kinect min_depth_m must be below max_depth_m")
         if self.window_px < 3 or self.window_px % 2 == 0:
@@ -441,6 +459,59 @@ def _render(
     return _ir(with_translucency(rad, scene, cache=cache))
 
 
+def row_windows_s(model: KinectModel) -> np.ndarray:
+    """Each image row's exposure (start, end) in seconds, shape (H, 2): the rolling shutter's
+    rows start ``row_time_s`` apart, top first, and integrate ``exposure_s`` each."""
+    start = np.arange(model.height_px, dtype=np.float64) * model.row_time_s
+    return np.stack([start, start + model.exposure_s], axis=1)
+
+
+def rolling_weights(windows_s: np.ndarray, edges_s: np.ndarray) -> np.ndarray:
+    """The share of each row's exposure that falls in each time slice, shape (H, n): the overlap
+    of row window ``windows_s[r]`` with slice ``[edges_s[i], edges_s[i + 1])`` over the window's
+    length - a row's image is the weighted sum of the slice renders (each slice's render standing
+    for its whole sub-window: the midpoint rule), and a row's weights add up to one when the
+    slices cover its window."""
+    w = np.asarray(windows_s, dtype=np.float64)
+    e = np.asarray(edges_s, dtype=np.float64)
+    lo = np.maximum(w[:, :1], e[None, :-1])
+    hi = np.minimum(w[:, 1:], e[None, 1:])
+    return np.clip(hi - lo, 0.0, None) / (w[:, 1:] - w[:, :1])
+
+
+def capture_window_s(model: KinectModel) -> tuple[float, float]:
+    """The whole frame's capture, first row's start to last row's end (seconds)."""
+    rows = row_windows_s(model)
+    return (float(rows[0, 0]), float(rows[-1, 1]))
+
+
+def _moving_render(scene: SceneSpec, model: KinectModel, *, spp: int, seed: int, max_depth: int, cache) -> np.ndarray:
+    """The IR radiance (H, W) of a moving scene through the rolling shutter: time slices over the
+    whole readout (:func:`simbench.sim.timeline.slice_count`: <= 0.25 px of motion each), each
+    row the :func:`rolling_weights` sum of the slices in its own window.  A row's window spans
+    ``exposure_s`` of the readout, so the samples are split over the slices one exposure holds
+    (every row sees about ``spp``; the frame costs readout / exposure, ~1.9x, a static render's)."""
+    from simbench.seeds import slice_seed
+    from simbench.sim.timeline import scene_at, slice_count, slice_spp
+
+    span = capture_window_s(model)
+    n = slice_count(scene, model.camera, span)
+    edges = np.linspace(span[0], span[1], n + 1)
+    weights = rolling_weights(row_windows_s(model), edges)
+    per_exposure = max(1, math.ceil(n * model.exposure_s / (span[1] - span[0])))
+    per = slice_spp(spp, per_exposure)
+    out = np.zeros((model.height_px, model.width_px), dtype=np.float64)
+    for i in range(n):
+        if not weights[:, i].any():
+            continue
+        posed = scene_at(scene, 0.5 * float(edges[i] + edges[i + 1]))
+        ir = _render(
+            posed, model, spp=per, seed=slice_seed(seed, i), max_depth=max_depth, sampler="independent", cache=cache
+        )
+        out += weights[:, i, None] * ir
+    return out.astype(np.float32)
+
+
 def calibrate(
     model: KinectModel,
     *,
@@ -487,8 +558,14 @@ def capture(
     cache: RenderCache | None = None,
 ) -> list[np.ndarray]:
     """IR frames of ``scene`` (already :func:`device_scene`): one render (``seed``; the speckle,
-    frozen to the static scene, derives from it) recorded once per noise seed."""
-    rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
+    frozen to the static scene, derives from it) recorded once per noise seed; a moving scene
+    through the rolling shutter (:func:`_moving_render`)."""
+    from simbench.sim.timeline import is_moving
+
+    if is_moving(scene):
+        rad = _moving_render(scene, model, spp=spp, seed=seed, max_depth=max_depth, cache=cache)
+    else:
+        rad = _render(scene, model, spp=spp, seed=seed, max_depth=max_depth, sampler=sampler, cache=cache)
     speckle_seed = int(child_seed(seed, "kinect_speckle").generate_state(1)[0])
     return [
         record_ir(
@@ -564,6 +641,11 @@ class KinectSystem:
             sampler=render.sampler,
             cache=render.cache,
         )
+
+    def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
+        """The time model (module docstring): one exposure per row of the rolling shutter, the
+        first row's start to the last row's end (63.8 ms)."""
+        return capture_window_s(self.model)
 
     def decode(self, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec | None = None):
         from simbench.systems import SystemDepth
