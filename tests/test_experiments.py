@@ -4,6 +4,7 @@ import dataclasses
 import json
 import math
 import re
+import time
 
 import pytest
 
@@ -216,15 +217,16 @@ def test_the_rig_calibration_reports_the_poses_it_makes(variant, tmp_path, monke
 @pytest.mark.slow
 def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path, variant, monkeypatch):
     """A target's outputs, provenance included, are the same bytes whether it runs alone, after
-    another target in the same process, or on two workers (this process and a spawned one); a
-    target that fails on this process's side fails the run."""
+    another target in the same process, on two workers (this process and a spawned one) or on a
+    Dask cluster (its files sent back to this process, its progress lines too); a target that
+    fails on this process's side fails the run."""
     from simbench.experiments import reproduce as module
     from simbench.experiments.reproduce import reproduce
 
     cfg = RunConfig.preset(quick=True, compare_rigs=False)
     messages = []
 
-    def run(targets, out, workers=1):
+    def run(targets, out, workers=1, scheduler=None):
         messages.clear()
         reproduce(
             targets,
@@ -234,6 +236,7 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
             progress=messages.append,
             command="t",
             workers=workers,
+            scheduler=scheduler,
         )
         return {
             p.relative_to(tmp_path / out): p.read_bytes() for p in sorted((tmp_path / out).rglob("*")) if p.is_file()
@@ -252,6 +255,17 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     assert workers == together
     flatness = {p: b for p, b in together.items() if p.name.startswith("flatness")}
     assert len(flatness) >= 3 and flatness == {p: b for p, b in alone.items() if p.name != "metrics.json"}
+    distributed = pytest.importorskip("distributed")
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        on_dask = run(["budget", "flatness"], "dask", scheduler=client)
+        deadline = time.monotonic() + 10  # the workers' lines come as Dask events, asynchronously
+        while not any(m.startswith("flatness done") for m in messages) and time.monotonic() < deadline:
+            time.sleep(0.1)
+    assert on_dask == workers
+    assert any(m.startswith("flatness done") for m in messages) and any(m.startswith("budget done") for m in messages)
 
     def broken(session):
         raise ValueError("budget broke")

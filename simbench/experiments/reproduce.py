@@ -102,6 +102,7 @@ def reproduce(
     progress: Callable[[str], None] = log.info,
     command: str = "",
     workers: int = 1,
+    scheduler: str | object | None = None,
 ) -> dict:
     """Run the targets; returns ``{metric path: value}`` of all of them (also written to
     ``<out_dir>/metrics.json`` merged with earlier runs' metrics of other targets).
@@ -112,12 +113,21 @@ def reproduce(
     first), with the same outputs as one process.  It pays on a warm cache, where every target
     is decoding and scoring, and on a cold one too, where the targets' single-threaded work
     overlaps the other worker's renders (an entry two workers need is made once:
-    :meth:`simbench.cache.RenderCache.get_or_make`)."""
+    :meth:`simbench.cache.RenderCache.get_or_make`).
+
+    ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the targets on
+    instead (:func:`simbench.experiments.workers.run_tasks`; ``workers`` is then the cluster's
+    business): each worker runs this run's Mitsuba variant, reads and fills the render cache at
+    ``cache_dir`` (give a path every worker sees: a shared filesystem), writes a target's files
+    to a folder of its own and sends them back, and this process writes them into ``out_dir``
+    (atomically) - so the outputs are those of a local run."""
     names = _resolve(targets)
     workers = validate.integer(workers, "workers", lo=1)
     session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=progress, command=command)
     metrics: dict = {}
-    if workers == 1 or len(names) == 1:
+    if scheduler is not None:
+        metrics = _run_in_workers(names, session=session, workers=workers, progress=progress, scheduler=scheduler)
+    elif workers == 1 or len(names) == 1:
         for name in names:
             metrics.update(_run_target(session, name))
     else:
@@ -143,51 +153,81 @@ def _run_target(session: Session, name: str) -> dict:
         return TARGETS[name].run(session.for_target())
 
 
-def _worker_start(emit: Callable[[str], None], config: RunConfig, out_dir: str, cache_dir: str | None, command: str):
-    """A worker process's session, made once (systems and calibrations are then shared by the
-    targets it runs, as in one process); its progress goes to the parent through ``emit``."""
+def _worker_start(
+    emit: Callable[[str], None], config: RunConfig, out_dir: str | None, cache_dir: str | None, command: str
+):
+    """A worker's session, made once (systems and calibrations are then shared by the targets it
+    runs, as in one process); its progress goes to the parent through ``emit``.  ``out_dir``
+    None (a cluster worker): a temporary folder of its own, whose files :func:`_worker_run`
+    sends back."""
+    if out_dir is None:
+        import tempfile
+
+        out_dir = tempfile.mkdtemp(prefix="simbench-reproduce-")
     return Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=emit, command=command)
 
 
-def _worker_run(name: str) -> tuple[dict, int, int, dict]:
-    """One target on a worker: its metrics, and the cache hits, misses and entries made
-    (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per target)."""
+def _worker_run(name: str, ship: bool = False) -> tuple[dict, int, int, dict, dict]:
+    """One target on a worker: its metrics, the cache hits, misses and entries made
+    (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per target)
+    and, when ``ship`` (a cluster worker), the files it wrote ({path under the output folder:
+    bytes}; removed here)."""
     from simbench.experiments.workers import worker_state
 
     session = worker_state()
     cache = session.cache
     cache.hits, cache.misses, cache.made = 0, 0, {}
     metrics = _run_target(session, name)
-    return metrics, cache.hits, cache.misses, cache.made
+    files: dict[str, bytes] = {}
+    if ship:
+        for path in sorted(p for p in session.out.rglob("*") if p.is_file()):
+            files[path.relative_to(session.out).as_posix()] = path.read_bytes()
+            path.unlink()
+    return metrics, cache.hits, cache.misses, cache.made, files
 
 
 def _died(task) -> None:
     raise RuntimeError(f"a reproduce worker process died twice on target {task.key} (killed, or out of memory)")
 
 
-def _run_in_workers(names: list[str], *, session: Session, workers: int, progress: Callable[[str], None]) -> dict:
+def _run_in_workers(
+    names: list[str],
+    *,
+    session: Session,
+    workers: int,
+    progress: Callable[[str], None],
+    scheduler: str | object | None = None,
+) -> dict:
     """The targets on ``workers`` workers of :mod:`simbench.experiments.workers`: this process
     (it has its imports and its session already) and ``workers - 1`` spawned processes, each
-    taking the next target, longest first, when it is free.  The cache's counts of the spawned
-    ones are added to ``session``'s."""
+    taking the next target, longest first, when it is free; or on the Dask cluster
+    ``scheduler`` (every target there, its files sent back and written here).  The cache's
+    counts of the other workers are added to ``session``'s."""
     from simbench.experiments.workers import Task, run_tasks
+    from simbench.io import atomic_write_bytes
 
     done: dict[str, dict] = {}
-    counts: list[tuple] = []  # the spawned workers' cache hits, misses and entries made, per target
+    counts: list[tuple] = []  # the other workers' cache hits, misses and entries made, per target
+    ship = scheduler is not None
 
     def on_result(task, result) -> None:
-        done[task.key], *count = result
+        done[task.key], *count, files = result
         counts.append(tuple(count))
+        for rel, data in files.items():
+            target = session.out / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(target, data)
 
     cache_root = None if session.cache.root is None else str(session.cache.root)
     run_tasks(
-        [Task(name, (name,)) for name in sorted(names, key=lambda n: TARGETS[n].rank)],
+        [Task(name, (name, ship)) for name in sorted(names, key=lambda n: TARGETS[n].rank)],
         _worker_run,
         workers=min(workers, len(names)),
+        scheduler=scheduler,
         variant=session.variant,
         setup=_worker_start,
-        setup_args=(session.config, str(session.out), cache_root, session.command),
-        in_parent=lambda task: (_run_target(session, task.key), 0, 0, {}),
+        setup_args=(session.config, None if ship else str(session.out), cache_root, session.command),
+        in_parent=None if ship else (lambda task: (_run_target(session, task.key), 0, 0, {}, {})),
         on_result=on_result,
         on_died=_died,
         progress=progress,

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import os
 import threading
+import uuid
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -39,11 +40,17 @@ class Task:
 
 # the worker process's own state: what the caller's setup made (e.g. an experiment session)
 _worker_state: Any = None
+# on a Dask worker, whose threads may run tasks side by side: each thread's own state
+_thread = threading.local()
+_dask_lock = threading.Lock()
+# the Dask event topic workers' progress lines travel on to the client
+PROGRESS_TOPIC = "simbench-progress"
 
 
 def worker_state() -> Any:
-    """In a worker process: what the pool's ``setup`` returned (None without one)."""
-    return _worker_state
+    """In a worker process: what the pool's ``setup`` returned (None without one); on a Dask
+    worker, the state this thread's ``setup`` made."""
+    return getattr(_thread, "state", _worker_state)
 
 
 def _start(variant: str | None, parent_pid: int, messages, setup, setup_args: tuple) -> None:
@@ -99,9 +106,13 @@ def run_tasks(
         finish, no other starts, and the exception is raised here.
     workers : local processes; 1 = every task in this process, in order.
     scheduler : a Dask scheduler address or ``distributed.Client`` instead of local workers
-        (``fn`` then runs on the cluster's workers, which pick their own variant).
+        (``fn`` then runs on the cluster's workers, with ``variant``, or each picking its own
+        when None; the tasks are submitted in the order given, Dask's priority falling with it,
+        so the longest given first start first).
     setup : run once in each local worker as ``setup(emit, *setup_args)`` (``emit(str)`` sends a
-        line to ``progress``); what it returns is :func:`worker_state` there.
+        line to ``progress``); what it returns is :func:`worker_state` there.  On Dask, once per
+        worker thread (a worker's threads may run tasks side by side), its lines sent as Dask
+        events (:data:`PROGRESS_TOPIC`) that this process passes to ``progress``.
     in_parent : this process takes tasks too, as one of the ``workers``, running
         ``in_parent(task)`` (it has its imports and state already); None = it only waits.
     on_died : a task whose worker died twice (raise from it to stop the run).
@@ -115,7 +126,9 @@ def run_tasks(
         run_here = _caught(run_here)
         fn = _Caught(fn)
     if scheduler is not None:
-        _run_dask(tasks, fn, scheduler, on_result)
+        _run_dask(
+            tasks, fn, scheduler, on_result, variant=variant, setup=setup, setup_args=setup_args, progress=progress
+        )
     elif workers <= 1:
         for task in tasks:
             on_result(task, run_here(task))
@@ -284,7 +297,14 @@ def _pool_round(todo: deque, fn, *, ctx, init, workers: int, in_parent, deliver,
 
         def fill() -> None:
             while len(running) < spawned and (task := take()) is not None:
-                running[pool.submit(_call, fn, task)] = task
+                try:
+                    running[pool.submit(_call, fn, task)] = task
+                except BrokenProcessPool:
+                    # a worker died since the last result came in: this task never ran; it goes
+                    # back first in line for the next pool, and the running ones report the break
+                    with lock:
+                        todo.appendleft(task)
+                    return
 
         try:
             fill()
@@ -330,7 +350,49 @@ def _alone(task: Task, fn, *, ctx, init, deliver) -> bool:
     return True
 
 
-def _run_dask(tasks: list[Task], fn, scheduler, on_result) -> None:
+def _dask_emit(line: str) -> None:
+    """A progress line from a Dask worker to the client (:data:`PROGRESS_TOPIC`)."""
+    from distributed import get_worker
+
+    get_worker().log_event(PROGRESS_TOPIC, str(line))
+
+
+def _dask_call(fn, task: Task, variant: str | None, setup, setup_args: tuple) -> Any:
+    """``fn(task)`` on a Dask worker: the variant chosen (a worker arrives without an entry
+    point; Dr.Jit's libLLVM must be steered before Mitsuba is imported) and this thread's
+    ``setup`` state made, once."""
+    if setup is not None and getattr(_thread, "state", None) is None:
+        with _dask_lock:  # one variant choice and setup at a time in a worker process
+            _dask_variant(variant)
+            from simbench.threads import single_thread_blas
+
+            single_thread_blas()
+            _thread.state = setup(_dask_emit, *setup_args)
+    elif setup is None:
+        with _dask_lock:
+            _dask_variant(variant)
+    return _call(fn, task)
+
+
+def _dask_variant(variant: str | None) -> None:
+    import sys
+
+    from simbench.variant import select_variant
+
+    mi = sys.modules.get("mitsuba")
+    current = None if mi is None else mi.variant()
+    if current is None:
+        select_variant(variant)
+    elif variant is not None and current != variant:
+        raise RuntimeError(
+            f"this Dask worker runs Mitsuba variant {current!r} already; the run asks for {variant!r} "
+            "(one variant per worker process: give the run its own workers)"
+        )
+
+
+def _run_dask(
+    tasks: list[Task], fn, scheduler, on_result, *, variant=None, setup=None, setup_args=(), progress=log.info
+) -> None:
     """The tasks on a Dask cluster (Dask retries a task whose worker dies, then raises
     ``KilledWorker``, handed on as the task's exception)."""
     try:
@@ -338,8 +400,24 @@ def _run_dask(tasks: list[Task], fn, scheduler, on_result) -> None:
     except ImportError:
         raise ValueError("--scheduler needs Dask distributed: pip install 'dask[distributed]'") from None
     client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+    client.subscribe_topic(PROGRESS_TOPIC, lambda event: progress(event[1]))
     try:
-        futures = {client.submit(_call, fn, task, pure=False): task for task in tasks}
+        # priority falls with the order given: the longest tasks (given first) start first
+        run_id = uuid.uuid4().hex[:12]  # task keys unique on a cluster that runs several runs
+        futures = {
+            client.submit(
+                _dask_call,
+                fn,
+                task,
+                variant,
+                setup,
+                setup_args,
+                pure=False,
+                key=f"simbench-{run_id}-{i}-{task.key}",
+                priority=len(tasks) - i,
+            ): task
+            for i, task in enumerate(tasks)
+        }
         for future in as_completed(list(futures)):
             try:
                 result = future.result()
@@ -349,5 +427,6 @@ def _run_dask(tasks: list[Task], fn, scheduler, on_result) -> None:
                 raise result.exc
             on_result(futures[future], result)
     finally:
+        client.unsubscribe_topic(PROGRESS_TOPIC)
         if client is not scheduler:
             client.close()
