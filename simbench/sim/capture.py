@@ -39,6 +39,7 @@ from simbench.sim.truth import GroundTruth, ground_truth
 
 __all__ = [
     "cached_radiance",
+    "one_pass_response",
     "cached_ground_truth",
     "physical_scene",
     "render_channels",
@@ -146,6 +147,45 @@ def _primary_scene(scene: SceneSpec, p: int) -> SceneSpec:
     return dataclasses.replace(scene, objects=tuple(objects))
 
 
+# object kinds that are convex when flat: no point of one sees another point of it, so all the
+# projector's light reaches the camera in one bounce (a plane counts while it has no bow or waviness)
+_CONVEX_KINDS = ("plane", "box", "sphere")
+
+
+def one_pass_response(scene: SceneSpec) -> np.ndarray | None:
+    """The 3x3 camera response ``k[c, p]`` (camera channel c seen from projector primary p) of
+    the scene's one material when a crosstalk capture's projector light factors per pixel, else
+    None - the condition under which :func:`render_channels` renders the three primaries in one
+    pass.
+
+    With crosstalk, primary p's render has the drive's channel p in every channel and each
+    material's reflectance replaced by column p of its crosstalk matrix, so its channel c is
+    ``k[c, p] S_p``, ``S_p`` the light of primary p on a white surface - exactly so when every
+    path the camera sees bounces once, off one material with no specular lobe: a single diffuse
+    object that cannot light itself (a flat plane, a box, a sphere), nothing else in the scene.
+    Then one render with the drive's three channels as they are and a white material gives the
+    three ``S_p`` at once (the same seed draws the same paths: the diffuse lobe is sampled the same
+    whatever its albedo, and the projector is a delta light), and the capture is ``k * weights``
+    applied per pixel - the per-primary renders' sum to float rounding.  Interreflection between
+    materials, a glossy or metallic lobe, a printed chart's inks or a mesh (perhaps concave) keep
+    the per-primary renders."""
+    if len(scene.objects) != 1:
+        return None
+    o = scene.objects[0]
+    if o.kind not in _CONVEX_KINDS or o.material.kind != "diffuse" or OBJECT_KIND_TABLE[o.kind].colour_keys:
+        return None
+    if o.kind == "plane" and any(float(o.get(k, 0.0) or 0.0) != 0.0 for k in ("bow_m_per_m", "waviness_m")):
+        return None  # a bowed or wavy board is concave somewhere: it may light itself
+    return np.clip(material_crosstalk(o.material.rgb, o.material.spectrum), 0.0, 1.0)
+
+
+def _white_scene(scene: SceneSpec) -> SceneSpec:
+    """``scene`` (one diffuse object: :func:`one_pass_response`) with a white material."""
+    (o,) = scene.objects
+    mat = dataclasses.replace(o.material, rgb=(1.0, 1.0, 1.0), spectrum=None)
+    return dataclasses.replace(scene, objects=(dataclasses.replace(o, material=mat),))
+
+
 def with_translucency(radiance: np.ndarray, scene: SceneSpec, *, cache: RenderCache | None = None) -> np.ndarray:
     """``radiance`` (H, W, 3) rendered of ``scene`` with its surfaces opaque, on its camera's
     ideal pixel grid, with the light its translucent objects reflect redistributed by their
@@ -186,9 +226,13 @@ def render_channels(
     column p of their crosstalk matrix) summed with the weights of
     :func:`simbench.sim.photometry.channel_weights` - exact for direct light; interreflected light is
     coloured by one bounce's crosstalk only (an approximation, as is the coating's
-    specular tint).  The ambient light is rendered apart (light adds linearly; one emitter
-    per render keeps the path tracer's noise that of a single light) and, with crosstalk, once per
-    primary's materials: light of the projector's white.  Then the translucent objects' subsurface
+    specular tint).  Where that sum factors per pixel (one diffuse convex object:
+    :func:`one_pass_response`), the three primaries are one render of the drive as it is on a
+    white material, each pixel's channels then mixed by the material's response and the weights
+    - the same capture to float rounding, a third of the renders.  The ambient light is rendered
+    apart (light adds linearly; one emitter per render keeps the path tracer's noise that of a
+    single light) and, with crosstalk, once per primary's materials: light of the projector's
+    white.  Then the translucent objects' subsurface
     scattering (:mod:`simbench.sim.subsurface`, on the ideal pixel grid, per camera channel with that
     band's medium: an approximation where a channel sees several primaries, and it spreads all the
     object's light, a glossy coating's highlight included), the camera lens distortion and
@@ -226,12 +270,21 @@ def render_channels(
     else:
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
+        response = one_pass_response(dark)
+        if response is not None:
+            lit = any(drive.primary(p) is not None for p in range(3)) if lazy else drive.any()
+            if lit:
+                s_p = cached_radiance(_white_scene(dark), drive.image() if lazy else drive, seed=seed, **kw)
+                q += s_p @ (weights * response).T.astype(np.float32)
         for p in range(3):
-            mono = drive.primary(p) if lazy else mono_drive(drive, p)
-            # the same seed for each primary: the sum has one render's sampling pattern; a
-            # primary the drive leaves off (calibration frames) lights nothing
-            lit = mono is not None if lazy else mono.any()
-            r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw) if lit else np.zeros_like(q)
+            r = np.zeros_like(q)
+            if response is None:
+                mono = drive.primary(p) if lazy else mono_drive(drive, p)
+                # the same seed for each primary: the sum has one render's sampling pattern; a
+                # primary the drive leaves off (calibration frames) lights nothing
+                lit = mono is not None if lazy else mono.any()
+                if lit:
+                    r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
             if ambient:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
