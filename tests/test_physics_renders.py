@@ -161,7 +161,15 @@ def test_ideal_sensor_keeps_the_pipeline_accuracy(acquisitions, variant):
 
 
 _ONE_PASS_OBJECTS = {
-    "plane": {"type": "plane", "name": "o", "center_m": [0.0, 0.0, 1.0], "size_m": [0.6, 0.5], "rgb": [0.7, 0.2, 0.1]},
+    "plane": {"type": "plane", "name": "o", "center_m": [0.0, 0.0, 1.0], "size_m": [0.3, 0.25], "rgb": [0.7, 0.2, 0.1]},
+    "tilted plane filling the view": {
+        "type": "plane",
+        "name": "o",
+        "center_m": [0.05, 0.0, 1.1],
+        "size_m": [2.0, 1.6],
+        "rotation_deg": [10.0, -25.0, 0.0],
+        "rgb": [0.2, 0.3, 0.7],
+    },
     "sphere": {"type": "sphere", "name": "o", "center_m": [0.0, 0.0, 1.0], "radius_m": 0.15, "rgb": [0.1, 0.6, 0.3]},
     "box, measured patch": {
         "type": "box",
@@ -177,7 +185,8 @@ _ONE_PASS_OBJECTS = {
 @pytest.mark.parametrize("name", sorted(_ONE_PASS_OBJECTS))
 def test_one_pass_crosstalk_capture_is_the_per_primary_sum(variant, monkeypatch, name):
     """One diffuse convex object: the three primaries rendered in one pass on a white material and
-    mixed per pixel by the material's response (simbench.sim.capture.one_pass_response) give the
+    mixed per pixel by the material's response (simbench.sim.capture.one_pass_response; the
+    ambient light too where the plane fills the view: simbench.sim.capture.fills_view) give the
     per-primary renders' sum to float rounding - the same seed draws the same paths - where the
     render noise itself is ~1/sqrt(spp) of the signal: the bound is 1e-5 of the brightest pixel,
     far below a 4-spp render's noise (measured ~0.3 of a pixel's value)."""
@@ -190,6 +199,8 @@ def test_one_pass_crosstalk_capture_is_the_per_primary_sum(variant, monkeypatch,
     sensor = get_sensor("paper")
     scene = capture.physical_scene(scene, sensor)
     assert sensor.crosstalk and capture.one_pass_response(scene) is not None
+    # the paper model's ambient light is rendered in one pass too where the plane fills the view
+    assert max(scene.ambient_rgb) > 0 and capture.fills_view(scene) == ("filling" in name)
     h, w = scene.rig.projector.size_hw
     drive = np.random.default_rng(5).random((h, w, 3), dtype=np.float32)
     render = RenderSettings(spp=4, sampler="independent")
@@ -219,3 +230,25 @@ def test_only_a_capture_that_factors_is_rendered_in_one_pass():
         assert one_pass_response(load_scene(SCENES / f"{name}.toml")) is None, name
     for name in ("white_plane", "plane_measured_blue", "plane_depth_120cm"):
         assert one_pass_response(load_scene(SCENES / f"{name}.toml")) is not None, name
+
+
+def test_a_plane_fills_the_view_only_when_every_pixel_sees_it():
+    """The ambient one-pass condition: the plane's projected quadrilateral holds the image's corners
+    with a 4-pixel margin (simbench.sim.capture.fills_view)."""
+    from simbench.sim.capture import fills_view
+    from simbench.sim.scene import scene_from_dict
+
+    def plane(**kw):
+        obj = {"type": "plane", "name": "p", "center_m": [0.0, 0.0, 1.0], "size_m": [1.5, 1.2], **kw}
+        return scene_from_dict({"object": [obj]})
+
+    assert fills_view(plane()) and fills_view(load_scene(SCENES / "white_plane.toml"))
+    assert not fills_view(plane(size_m=[0.5, 0.5]))
+    assert not fills_view(plane(center_m=[0.5, 0.0, 1.0]))  # off to the side: the left of the view sees past it
+    assert not fills_view(plane(center_m=[0.0, 0.0, -1.0]))  # behind the camera
+    sphere = {"type": "sphere", "name": "s", "center_m": [0.0, 0.0, 1.0], "radius_m": 5.0}
+    assert not fills_view(scene_from_dict({"object": [sphere]}))  # planes only
+    cam = plane().rig.camera
+    # the plane's edge just inside the view's edge (by 2 px at 1 m): not filled
+    half_w = (cam.width_px - 1 - cam.cx_px + 2.5) / cam.focal_px
+    assert not fills_view(plane(center_m=[half_w - 0.75 - 2 / cam.focal_px, 0.0, 1.0]))

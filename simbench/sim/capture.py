@@ -40,6 +40,7 @@ from simbench.sim.truth import GroundTruth, ground_truth
 __all__ = [
     "cached_radiance",
     "one_pass_response",
+    "fills_view",
     "cached_ground_truth",
     "physical_scene",
     "render_channels",
@@ -179,6 +180,40 @@ def one_pass_response(scene: SceneSpec) -> np.ndarray | None:
     return np.clip(material_crosstalk(o.material.rgb, o.material.spectrum), 0.0, 1.0)
 
 
+# how far beyond the image's edge (camera pixels) a plane must reach to count as filling the
+# view: a border pixel's footprint (half a pixel) and a thin lens's spread, with room to spare
+_FILL_MARGIN_PX = 4.0
+
+
+def fills_view(scene: SceneSpec) -> bool:
+    """Whether the scene's one object is a plane that covers the camera's whole view (every
+    pixel's footprint, :data:`_FILL_MARGIN_PX` beyond the image), so that no camera ray sees the
+    ambient environment itself - the condition, beside :func:`one_pass_response`, for rendering
+    the ambient light in one pass too: a pixel that sees the environment directly gets each
+    channel's own ambient, mixed by the weights alone, not by the material's response."""
+    from simbench.sim.timeline import _extent_points
+
+    if len(scene.objects) != 1 or scene.objects[0].kind != "plane":
+        return False
+    corners = np.unique(_extent_points(scene.objects[0]), axis=0)  # the flat box's 4 corners, each twice
+    if corners.shape[0] != 4 or not (corners[:, 2] > 0).all():
+        return False
+    cam = scene.rig.camera
+    uv = corners[:, :2] / corners[:, 2:] * cam.focal_px + (cam.cx_px, cam.cy_px)
+    centre = uv.mean(axis=0)
+    quad = uv[np.argsort(np.arctan2(uv[:, 1] - centre[1], uv[:, 0] - centre[0]))]  # convex: ordered by angle
+    m = _FILL_MARGIN_PX + 0.5
+    image = np.array([[-m, -m], [cam.width_px - 1 + m, -m], [cam.width_px - 1 + m, cam.height_px - 1 + m]])
+    image = np.vstack([image, [-m, cam.height_px - 1 + m]])
+    edges = np.roll(quad, -1, axis=0) - quad
+    for point in image:
+        rel = point - quad
+        cross = edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0]
+        if not ((cross > 0).all() or (cross < 0).all()):
+            return False
+    return True
+
+
 def _white_scene(scene: SceneSpec) -> SceneSpec:
     """``scene`` (one diffuse object: :func:`one_pass_response`) with a white material."""
     (o,) = scene.objects
@@ -276,6 +311,13 @@ def render_channels(
             if lit:
                 s_p = cached_radiance(_white_scene(dark), drive.image() if lazy else drive, seed=seed, **kw)
                 q += s_p @ (weights * response).T.astype(np.float32)
+        # the ambient light in one pass too where no pixel sees the environment itself: with the
+        # same white material and seed, channel c of its render is the environment's channel c
+        # on a white surface, which each primary's material render scales by k[c, p]
+        ambient_once = ambient and response is not None and fills_view(dark)
+        if ambient_once:
+            a_c = cached_radiance(_white_scene(scene), None, seed=_ambient_seed(seed), **kw)
+            q += a_c * (weights * response).sum(axis=1).astype(np.float32)
         for p in range(3):
             r = np.zeros_like(q)
             if response is None:
@@ -285,7 +327,7 @@ def render_channels(
                 lit = mono is not None if lazy else mono.any()
                 if lit:
                     r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
-            if ambient:
+            if ambient and not ambient_once:
                 r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
             q += r * weights[:, p].astype(np.float32)
     q = with_translucency(q, translucent_scene, cache=render.cache)
