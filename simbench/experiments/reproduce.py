@@ -183,6 +183,8 @@ def _worker_run(name: str, ship: bool = False) -> tuple[dict, int, int, dict, di
         for path in sorted(p for p in session.out.rglob("*") if p.is_file()):
             files[path.relative_to(session.out).as_posix()] = path.read_bytes()
             path.unlink()
+        for folder in sorted((p for p in session.out.rglob("*") if p.is_dir()), reverse=True):
+            folder.rmdir()  # emptied above, deepest first: the worker's folder holds nothing between targets
     return metrics, cache.hits, cache.misses, cache.made, files
 
 
