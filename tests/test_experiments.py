@@ -264,7 +264,20 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
         deadline = time.monotonic() + 10  # the workers' lines come as Dask events, asynchronously
         while not any(m.startswith("flatness done") for m in messages) and time.monotonic() < deadline:
             time.sleep(0.1)
+        # the workers' threads outlive a run: the next run on them has its own settings
+        reproduce(
+            ["flatness"],
+            config=cfg,
+            out_dir=tmp_path / "again",
+            cache_dir=tmp_path / "cache",
+            progress=lambda s: None,
+            command="second run",
+            scheduler=client,
+        )
+    assert "Made by `second run`" in (tmp_path / "again" / "flatness.md").read_text()
     assert on_dask == workers
+    with pytest.raises(ValueError, match="--workers and --scheduler: choose one"):
+        run(["flatness"], "both", workers=2, scheduler="tcp://127.0.0.1:1")
     assert any(m.startswith("flatness done") for m in messages) and any(m.startswith("budget done") for m in messages)
 
     def broken(session):

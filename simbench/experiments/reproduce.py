@@ -123,6 +123,8 @@ def reproduce(
     (atomically) - so the outputs are those of a local run."""
     names = _resolve(targets)
     workers = validate.integer(workers, "workers", lo=1)
+    if scheduler is not None and workers > 1:
+        raise ValueError("--workers and --scheduler: choose one (the cluster's workers run the targets)")
     session = Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=progress, command=command)
     metrics: dict = {}
     if scheduler is not None:

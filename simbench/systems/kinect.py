@@ -644,7 +644,7 @@ class KinectSystem:
 
     def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
         """The time model (module docstring): one exposure per row of the rolling shutter, the
-        first row's start to the last row's end (63.8 ms)."""
+        first row's start to the last row's end (63.7 ms)."""
         return capture_window_s(self.model)
 
     def decode(self, raw: np.ndarray, calibration: KinectCalibration, *, scene: SceneSpec | None = None):
