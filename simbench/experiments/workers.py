@@ -364,17 +364,14 @@ def _dask_call(fn, task: Task, variant: str | None, setup, setup_args: tuple) ->
     with the setup and arguments that made it and made anew for a run that brings others
     (another config, cache or command on the same cluster)."""
     made_by = (setup, setup_args)
-    if setup is not None and getattr(_thread, "made_by", None) != made_by:
-        with _dask_lock:  # one variant choice and setup at a time in a worker process
-            _dask_variant(variant)
+    with _dask_lock:  # one variant choice and setup at a time in a worker process
+        _dask_variant(variant)
+        if setup is not None and getattr(_thread, "made_by", None) != made_by:
             from simbench.threads import single_thread_blas
 
             single_thread_blas()
             _thread.state = setup(_dask_emit, *setup_args)
             _thread.made_by = made_by
-    elif setup is None:
-        with _dask_lock:
-            _dask_variant(variant)
     return _call(fn, task)
 
 

@@ -203,15 +203,13 @@ def fills_view(scene: SceneSpec) -> bool:
     centre = uv.mean(axis=0)
     quad = uv[np.argsort(np.arctan2(uv[:, 1] - centre[1], uv[:, 0] - centre[0]))]  # convex: ordered by angle
     m = _FILL_MARGIN_PX + 0.5
-    image = np.array([[-m, -m], [cam.width_px - 1 + m, -m], [cam.width_px - 1 + m, cam.height_px - 1 + m]])
-    image = np.vstack([image, [-m, cam.height_px - 1 + m]])
+    u1, v1 = cam.width_px - 1 + m, cam.height_px - 1 + m
+    image = np.array([[-m, -m], [u1, -m], [u1, v1], [-m, v1]])
+    # each image corner on the same side of every edge of the convex quad: inside it
     edges = np.roll(quad, -1, axis=0) - quad
-    for point in image:
-        rel = point - quad
-        cross = edges[:, 0] * rel[:, 1] - edges[:, 1] * rel[:, 0]
-        if not ((cross > 0).all() or (cross < 0).all()):
-            return False
-    return True
+    rel = image[:, None, :] - quad[None, :, :]
+    cross = edges[None, :, 0] * rel[..., 1] - edges[None, :, 1] * rel[..., 0]
+    return bool(((cross > 0).all(axis=1) | (cross < 0).all(axis=1)).all())
 
 
 def _white_scene(scene: SceneSpec) -> SceneSpec:
@@ -306,30 +304,30 @@ def render_channels(
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
         response = one_pass_response(dark)
-        if response is not None:
-            lit = any(drive.primary(p) is not None for p in range(3)) if lazy else drive.any()
-            if lit:
-                s_p = cached_radiance(_white_scene(dark), drive.image() if lazy else drive, seed=seed, **kw)
-                q += s_p @ (weights * response).T.astype(np.float32)
         # the ambient light in one pass too where no pixel sees the environment itself: with the
         # same white material and seed, channel c of its render is the environment's channel c
         # on a white surface, which each primary's material render scales by k[c, p]
         ambient_once = ambient and response is not None and fills_view(dark)
-        if ambient_once:
-            a_c = cached_radiance(_white_scene(scene), None, seed=_ambient_seed(seed), **kw)
-            q += a_c * (weights * response).sum(axis=1).astype(np.float32)
-        for p in range(3):
-            r = np.zeros_like(q)
-            if response is None:
-                mono = drive.primary(p) if lazy else mono_drive(drive, p)
-                # the same seed for each primary: the sum has one render's sampling pattern; a
-                # primary the drive leaves off (calibration frames) lights nothing
-                lit = mono is not None if lazy else mono.any()
-                if lit:
-                    r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
-            if ambient and not ambient_once:
-                r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
-            q += r * weights[:, p].astype(np.float32)
+        if response is not None:
+            mix = weights * response  # [c, p]
+            if any(drive.primary(p) is not None for p in range(3)) if lazy else drive.any():
+                s_p = cached_radiance(_white_scene(dark), drive.image() if lazy else drive, seed=seed, **kw)
+                q += s_p @ mix.T.astype(np.float32)
+            if ambient_once:
+                a_c = cached_radiance(_white_scene(scene), None, seed=_ambient_seed(seed), **kw)
+                q += a_c * mix.sum(axis=1).astype(np.float32)
+        if response is None or (ambient and not ambient_once):
+            for p in range(3):
+                r = np.zeros_like(q)
+                if response is None:
+                    mono = drive.primary(p) if lazy else mono_drive(drive, p)
+                    # the same seed for each primary: the sum has one render's sampling pattern; a
+                    # primary the drive leaves off (calibration frames) lights nothing
+                    if mono is not None if lazy else mono.any():
+                        r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
+                if ambient and not ambient_once:
+                    r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
+                q += r * weights[:, p].astype(np.float32)
     q = with_translucency(q, translucent_scene, cache=render.cache)
     q = distort_image(q, scene.rig.camera)
     return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
