@@ -1287,3 +1287,285 @@ void bounded_mean(int64_t h, int64_t w, const float *restrict values, const int6
         }
     }
 }
+
+/* The channel normalisation's per-row work holds, per pixel, eight floats: the three channels'
+ * running minima, their maxima, two unused (so that a pixel's six chains load as two vectors). */
+#define EXT 8
+typedef float v4f_n __attribute__((vector_size(16)));
+typedef double v4d_n __attribute__((vector_size(32)));
+static inline v4d_n ld4d(const float *p) {
+    v4f_n f;
+    memcpy(&f, p, sizeof f);
+    return __builtin_convertvector(f, v4d_n);
+}
+
+/* Running extrema of k = 2 r + 1 values along a row of w pixels of three interleaved channels,
+ * the row's ends replicated (cv2.erode / cv2.dilate with a 1 x k kernel and BORDER_REPLICATE: the
+ * window clipped to the row holds the same values), by van Herk / Gil-Werman: over the padded
+ * row of n = w + 2 r pixels, per block of k pixels the running extremum from the block's start
+ * (g) and from its end (e), then the window [i, i + k) is e[i] against g[i + k - 1].  Exact for
+ * finite values (a minimum is a minimum in any order).  The six chains (three channels, minimum
+ * and maximum) run side by side.  pad: n x 3 floats; g, e: n x EXT; ext: w x EXT (the three
+ * minima, then the three maxima). */
+ROW_FN void running_extrema(int64_t w, int64_t r, const float *restrict v, float *restrict pad, float *restrict g,
+                            float *restrict e, float *restrict ext) {
+    const int64_t k = 2 * r + 1, n = w + 2 * r;
+    for (int64_t i = 0; i < r; i++)
+        for (int c = 0; c < 3; c++) {
+            pad[3 * i + c] = v[c];
+            pad[3 * (r + w + i) + c] = v[3 * (w - 1) + c];
+        }
+    memcpy(pad + 3 * r, v, (size_t)(3 * w) * sizeof(float));
+    for (int64_t b = 0; b < n; b += k) {
+        const int64_t end = b + k < n ? b + k : n;
+        float a0 = pad[3 * b], a1 = pad[3 * b + 1], a2 = pad[3 * b + 2], m0 = a0, m1 = a1, m2 = a2;
+        for (int64_t i = b; i < end; i++) {
+            const float p0 = pad[3 * i], p1 = pad[3 * i + 1], p2 = pad[3 * i + 2];
+            a0 = p0 < a0 ? p0 : a0;
+            a1 = p1 < a1 ? p1 : a1;
+            a2 = p2 < a2 ? p2 : a2;
+            m0 = p0 > m0 ? p0 : m0;
+            m1 = p1 > m1 ? p1 : m1;
+            m2 = p2 > m2 ? p2 : m2;
+            float *q = g + EXT * i;
+            q[0] = a0, q[1] = a1, q[2] = a2, q[3] = m0, q[4] = m1, q[5] = m2;
+        }
+        a0 = pad[3 * (end - 1)], a1 = pad[3 * (end - 1) + 1], a2 = pad[3 * (end - 1) + 2], m0 = a0, m1 = a1, m2 = a2;
+        for (int64_t i = end - 1; i >= b; i--) {
+            const float p0 = pad[3 * i], p1 = pad[3 * i + 1], p2 = pad[3 * i + 2];
+            a0 = p0 < a0 ? p0 : a0;
+            a1 = p1 < a1 ? p1 : a1;
+            a2 = p2 < a2 ? p2 : a2;
+            m0 = p0 > m0 ? p0 : m0;
+            m1 = p1 > m1 ? p1 : m1;
+            m2 = p2 > m2 ? p2 : m2;
+            float *q = e + EXT * i;
+            q[0] = a0, q[1] = a1, q[2] = a2, q[3] = m0, q[4] = m1, q[5] = m2;
+        }
+    }
+    for (int64_t x = 0; x < w; x++) {
+        const float *a = e + EXT * x, *b = g + EXT * (x + k - 1);
+        float *o = ext + EXT * x;
+        for (int j = 0; j < 3; j++) o[j] = b[j] < a[j] ? b[j] : a[j];
+        for (int j = 3; j < 6; j++) o[j] = b[j] > a[j] ? b[j] : a[j];
+        o[6] = o[7] = 0.0f;
+    }
+}
+
+/* The box means of a row's running extrema (w x EXT) over k = 2 r + 1 pixels, the ends
+ * replicated, as cv2.blur does for float32: a double sum started over the first k padded values
+ * in order, then s += (double)p[i + k] - (double)p[i], each mean (float)(s * (1.0 / k)), into lo
+ * and hi (w x 3 each).  A pixel's chains are the lanes of two vectors: lane-wise IEEE double
+ * arithmetic, the same bits. */
+ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *restrict lo, float *restrict hi) {
+    const int64_t k = 2 * r + 1;
+    const double sc = 1.0 / (double)k;
+    const v4d_n scale = {sc, sc, sc, sc};
+    v4d_n a = {0, 0, 0, 0}, b = {0, 0, 0, 0};
+    for (int64_t i = 0; i < k; i++) {
+        /* the padded row p[i] = ext[clamp(i - r, 0, w - 1)] */
+        int64_t x = i - r;
+        x = x < 0 ? 0 : (x > w - 1 ? w - 1 : x);
+        a += ld4d(ext + EXT * x);
+        b += ld4d(ext + EXT * x + 4);
+    }
+    for (int64_t x = 0; x < w; x++) {
+        const v4f_n fa = __builtin_convertvector(a * scale, v4f_n), fb = __builtin_convertvector(b * scale, v4f_n);
+        lo[3 * x] = fa[0], lo[3 * x + 1] = fa[1], lo[3 * x + 2] = fa[2];
+        hi[3 * x] = fa[3], hi[3 * x + 1] = fb[0], hi[3 * x + 2] = fb[1];
+        if (x + 1 < w) {
+            const int64_t in = x + 1 + r < w - 1 ? x + 1 + r : w - 1, out = x - r > 0 ? x - r : 0;
+            a += ld4d(ext + EXT * in) - ld4d(ext + EXT * out);
+            b += ld4d(ext + EXT * in + 4) - ld4d(ext + EXT * out + 4);
+        }
+    }
+}
+
+/* The colour-robust decoder's channel normalisation (simbench.decode.color.normalize_channels)
+ * of an (h, w, 3) float32 image: per row and channel the running minimum and maximum over
+ * k = 2 r + 1 pixels (running_extrema), each box-averaged over k pixels (box_means); then
+ * span = mean_max - mean_min, out = (v - mean_min) / span where span >= min_span, else 0, and
+ * span_out (NULL: not written) the span there, else 0.  scratch: normalize_scratch_floats(w, r)
+ * floats. */
+int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + (EXT + 6) * w; }
+
+void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, int64_t r, float min_span,
+                        float *restrict out, float *restrict span_out, float *restrict scratch) {
+    const int64_t n = w + 2 * r, m = 3 * w;
+    float *pad = scratch, *g = pad + 3 * n, *e = g + EXT * n, *ext = e + EXT * n;
+    float *restrict lo = ext + EXT * w, *restrict hi = lo + m;
+    for (int64_t y = 0; y < h; y++) {
+        const float *restrict v = rgb + y * m;
+        running_extrema(w, r, v, pad, g, e, ext);
+        box_means(w, r, ext, lo, hi);
+        float *restrict o = out + y * m;
+        for (int64_t i = 0; i < m; i++) {
+            const float span = hi[i] - lo[i];
+            o[i] = span >= min_span ? (v[i] - lo[i]) / span : 0.0f;
+        }
+        if (span_out) {
+            float *restrict so = span_out + y * m;
+            for (int64_t i = 0; i < m; i++) {
+                const float span = hi[i] - lo[i];
+                so[i] = span >= min_span ? span : 0.0f;
+            }
+        }
+    }
+}
+
+/* The albedo proxy of simbench.decode.color.albedo_gain, per pixel from the unmixed capture and
+ * its local ranges k (both (n, 3) float32), in the float32 operations of the numpy form: a
+ * channel counts where k >= 0.1 k_max and k > 0; norm = max(v, 0) / k there; the code pair's
+ * weight 1 / (1 / k_R^2 + 1 / k_G^2) where both count, the fringe's k_B^2 where it counts;
+ * proxy = (w_pair (norm_R + norm_G) + w_fringe norm_B) / (w_pair + w_fringe) where that sum is
+ * > 0 (defined = 1), else 0. */
+void albedo_proxy(int64_t n, const float *restrict rgb, const float *restrict k, float share,
+                  float *restrict proxy, uint8_t *restrict defined) {
+    const float tiny = (float)1e-12;
+    for (int64_t i = 0; i < n; i++) {
+        const float *v = rgb + 3 * i, *s = k + 3 * i;
+        float m = s[0] > s[1] ? s[0] : s[1];
+        m = m > s[2] ? m : s[2];
+        const float thr = share * m;
+        float norm[3], inv2[3];
+        int has[3];
+        for (int c = 0; c < 3; c++) {
+            has[c] = (s[c] >= thr) & (s[c] > 0.0f);
+            const float pos = v[c] > 0.0f ? v[c] : 0.0f, kk = s[c] > tiny ? s[c] : tiny;
+            norm[c] = has[c] ? pos / s[c] : 0.0f;
+            inv2[c] = has[c] ? 1.0f / (kk * kk) : 0.0f;
+        }
+        const int both = has[0] & has[1];
+        const float w_pair = both ? 1.0f / (inv2[0] + inv2[1]) : 0.0f;
+        const float w_fringe = has[2] ? s[2] * s[2] : 0.0f;
+        const float total = w_pair + w_fringe;
+        proxy[i] = total > 0.0f ? (w_pair * (norm[0] + norm[1]) + w_fringe * norm[2]) / total : 0.0f;
+        defined[i] = total > 0.0f;
+    }
+}
+
+/* Albedo steps along the rows of an (h, w) proxy (simbench.decode.color.albedo_edges after its
+ * row average): per row, prefix sums in double over the row padded by m = 2 t values each side
+ * (its ends replicated; numpy's cumsum order), the means of the m values left and right of each
+ * pixel, a = left + eps, b = right + eps with eps = 1e-3 + 0.02 max(left, right), the step's
+ * ratio q = max(a, b) / min(a, b); a cut where q > ratio_min and q is the largest within t
+ * pixels either side (ends replicated), never within m - 1 columns of the left end or m of the
+ * right.  The ratio in double is compared directly (a logarithm would be monotone in it and
+ * add only its last-bit differences between machines' libraries).  cs: w + 2 m + 1 doubles, q:
+ * w + 2 t doubles of scratch. */
+void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, double ratio_min,
+                  double *restrict cs, double *restrict q, uint8_t *restrict cuts) {
+    const int64_t m = 2 * t, np_ = w + 2 * m;
+    for (int64_t y = 0; y < h; y++) {
+        const float *row = g + y * w;
+        uint8_t *cut = cuts + y * w;
+        cs[0] = 0.0;
+        for (int64_t i = 0; i < np_; i++) {
+            int64_t x = i - m;
+            x = x < 0 ? 0 : (x > w - 1 ? w - 1 : x);
+            cs[i + 1] = cs[i] + (double)row[x];
+        }
+        double *qq = q + t; /* q[-t .. w + t) with the ends replicated */
+        for (int64_t x = 0; x < w; x++) {
+            const double left = (cs[x + m + 1] - cs[x + 1]) / (double)m;
+            const double right = (cs[x + 2 * m + 1] - cs[x + m + 1]) / (double)m;
+            const double eps = 1e-3 + 0.02 * (left > right ? left : right);
+            const double a = left + eps, b = right + eps;
+            qq[x] = a > b ? a / b : b / a;
+        }
+        for (int64_t i = 0; i < t; i++) {
+            q[i] = qq[0];
+            qq[w + i] = qq[w - 1];
+        }
+        for (int64_t x = 0; x < w; x++) cut[x] = 0;
+        const int64_t x1 = w - m;
+        for (int64_t x = m - 1; x < x1; x++) {
+            const double v = qq[x];
+            if (!(v > ratio_min)) continue;
+            int top = 1;
+            for (int64_t j = x - t; j <= x + t; j++)
+                if (qq[j] > v) {
+                    top = 0;
+                    break;
+                }
+            cut[x] = (uint8_t)top;
+        }
+    }
+}
+
+static inline v4d_n ld3d(const float *p) {
+    const v4f_n f = {p[0], p[1], p[2], 0.0f};
+    return __builtin_convertvector(f, v4d_n);
+}
+
+/* The noise level of simbench.decode.color.overlay_weights: each channel of an (h, w, 3) float32
+ * image averaged over k = 2 r + 1 pixels along its row (cv2.blur's float32 box filter: the ends
+ * replicated, double running sums, (float)(s * (1.0 / k))), then max(mean, 0) + floor.  A
+ * pixel's three sums are the lanes of one vector (lane-wise IEEE double, the same bits). */
+void box_level(int64_t h, int64_t w, const float *restrict raw, int64_t r, float floor_,
+               float *restrict level) {
+    const int64_t k = 2 * r + 1;
+    const double sc = 1.0 / (double)k;
+    const v4d_n scale = {sc, sc, sc, sc};
+    for (int64_t y = 0; y < h; y++) {
+        const float *row = raw + y * w * 3;
+        float *restrict out = level + y * w * 3;
+        v4d_n s = {0, 0, 0, 0};
+        for (int64_t i = 0; i < k; i++) {
+            int64_t x = i - r;
+            x = x < 0 ? 0 : (x > w - 1 ? w - 1 : x);
+            s += ld3d(row + 3 * x);
+        }
+        for (int64_t x = 0; x < w; x++) {
+            const v4f_n m = __builtin_convertvector(s * scale, v4f_n);
+            for (int c = 0; c < 3; c++) out[3 * x + c] = (m[c] > 0.0f ? m[c] : 0.0f) + floor_;
+            if (x + 1 < w) {
+                const int64_t in = x + 1 + r < w - 1 ? x + 1 + r : w - 1, gone = x - r > 0 ? x - r : 0;
+                s += ld3d(row + 3 * in) - ld3d(row + 3 * gone);
+            }
+        }
+    }
+}
+
+/* The inverse noise variances of simbench.decode.color.overlay_weights from the unmixed
+ * channels' variances var and their local ranges span ((n, 3) float32 each): rel = var /
+ * max(span, 1e-12)^2 where span > 0, else inf; w_code = 1 / (rel_R + rel_G), w_fringe =
+ * 1 / rel_B, in float32. */
+void noise_weights(int64_t n, const float *restrict var, const float *restrict span, float *restrict w_code,
+                   float *restrict w_fringe) {
+    const float tiny = (float)1e-12;
+    for (int64_t i = 0; i < n; i++) {
+        const float s0 = span[3 * i], s1 = span[3 * i + 1], s2 = span[3 * i + 2];
+        const float m0 = s0 > tiny ? s0 : tiny, m1 = s1 > tiny ? s1 : tiny, m2 = s2 > tiny ? s2 : tiny;
+        const float r0 = var[3 * i] / (m0 * m0), r1 = var[3 * i + 1] / (m1 * m1), r2 = var[3 * i + 2] / (m2 * m2);
+        const float rel0 = s0 > 0.0f ? r0 : INFINITY, rel1 = s1 > 0.0f ? r1 : INFINITY;
+        const float rel2 = s2 > 0.0f ? r2 : INFINITY;
+        w_code[i] = 1.0f / (rel0 + rel1);
+        w_fringe[i] = 1.0f / rel2;
+    }
+}
+
+/* The colour-robust decoder's fringe and code from normalised channels rgb and their ranges span
+ * ((n, 3) float32 each, R = code 1, G = code 0, B = fringe): intensity = (w_code (R + G) +
+ * w_fringe B) / (w_code + w_fringe) where that sum is > 0, else 0 (simbench.decode.phase's
+ * "weighted" mode; NULL weights: not written), and code = simbench.decode.color.
+ * normalized_color_code (a code channel without range compared with half the fringe, 0.25
+ * where the fringe has none either). */
+void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restrict span,
+                        const float *restrict w_code, const float *restrict w_fringe, float *restrict intensity,
+                        uint8_t *restrict code) {
+    if (w_code)
+        for (int64_t i = 0; i < n; i++) {
+            const float *v = rgb + 3 * i;
+            const float num = w_code[i] * (v[0] + v[1]) + w_fringe[i] * v[2], den = w_code[i] + w_fringe[i];
+            intensity[i] = den > 0.0f ? num / den : 0.0f;
+        }
+    if (code)
+        for (int64_t i = 0; i < n; i++) {
+            const float *v = rgb + 3 * i, *s = span + 3 * i;
+            const int has_r = s[0] > 0.0f, has_g = s[1] > 0.0f;
+            const float half = s[2] > 0.0f ? 0.5f * v[2] : 0.25f;
+            const float r = (has_r | !has_g) ? v[0] : half, g = (has_g | !has_r) ? v[1] : half;
+            code[i] = r >= g;
+        }
+}

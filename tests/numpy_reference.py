@@ -470,3 +470,105 @@ def bounded_mean(values, s0, s1, *, width_px, square=False):
     cs = np.zeros((h, w + 1), np.float64)
     np.cumsum(values, axis=1, dtype=np.float64, out=cs[:, 1:])
     return (np.take_along_axis(cs, w0 + n, 1) - np.take_along_axis(cs, w0, 1)) / n
+
+
+def normalize_channels(rgb, *, half, min_span):
+    """simbench.decode.color.normalize_channels as it was in OpenCV and numpy: per channel
+    cv2.erode / cv2.dilate over 1 x (2 half + 1), each cv2.blur'ed over as many, the range's
+    division where it reaches min_span."""
+    kernel = np.ones((1, 2 * half + 1), np.uint8)
+    box = (2 * half + 1, 1)
+    out = np.empty(rgb.shape, np.float32)
+    spans = np.empty(rgb.shape, np.float32)
+    for c in range(3):
+        v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
+        lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
+        span = (
+            cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
+        )
+        ok = span >= np.float32(min_span)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            np.divide(v - lo, span, out=out[..., c], where=ok)
+        out[..., c][~ok] = 0.0
+        spans[..., c] = np.where(ok, span, 0.0)
+    return out, spans
+
+
+def albedo_proxy(rgb, k, *, share):
+    """The albedo proxy of simbench.decode.color.albedo_gain as it was in numpy."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        strongest = np.maximum(np.maximum(k[..., 0], k[..., 1]), k[..., 2])[..., None]
+        has = k >= np.float32(share) * strongest
+        has &= k > 0
+        norm = np.where(has, np.maximum(rgb, 0.0) / np.where(has, k, 1.0), 0.0)
+        inv2 = np.where(has, 1.0 / np.maximum(k, 1e-12) ** 2, 0.0)
+        both = has[..., 0] & has[..., 1]
+        w_pair = np.where(both, 1.0 / np.where(both, inv2[..., 0] + inv2[..., 1], 1.0), 0.0)
+        w_fringe = np.where(has[..., 2], k[..., 2] ** 2, 0.0)
+        total = w_pair + w_fringe
+        proxy = np.where(total > 0, (w_pair * (norm[..., 0] + norm[..., 1]) + w_fringe * norm[..., 2]) / total, 0.0)
+    return proxy, total > 0
+
+
+def albedo_step_ratio(g, *, t):
+    """The step ratio max(a, b) / min(a, b) of simbench.decode.color.albedo_edges (a, b: the means
+    of the 2 t values left and right of each column, plus their floor), and the old score, its
+    logarithm |log a - log b| as float32."""
+    n = 2 * t
+    h, w = g.shape
+    cs = np.zeros((h, w + 2 * n + 1), np.float64)
+    np.cumsum(np.pad(g, ((0, 0), (n, n)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
+    left = (cs[:, n + 1 : n + 1 + w] - cs[:, 1 : 1 + w]) / n
+    right = (cs[:, 2 * n + 1 : 2 * n + 1 + w] - cs[:, n + 1 : n + 1 + w]) / n
+    eps = 1e-3 + 0.02 * np.maximum(left, right)
+    a, b = left + eps, right + eps
+    return np.maximum(a, b) / np.minimum(a, b), np.abs(np.log(a) - np.log(b)).astype(np.float32)
+
+
+def albedo_edges(g, *, t, ratio_min, log_score=False):
+    """Cuts where the step ratio exceeds ratio_min and is the largest within t columns (ends
+    replicated), never within 2 t - 1 columns of the left end or 2 t of the right; with
+    ``log_score`` as it was decided before (the float32 logarithm against its window maximum
+    from cv2.dilate, the threshold log(ratio_min) in float32)."""
+    ratio, score = albedo_step_ratio(g, t=t)
+    if log_score:
+        peak = cv2.dilate(score, np.ones((1, 2 * t + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        cuts = (score >= peak) & (score > np.float32(np.log(ratio_min)))
+    else:
+        padded = np.pad(ratio, ((0, 0), (t, t)), mode="edge")
+        peak = np.lib.stride_tricks.sliding_window_view(padded, 2 * t + 1, axis=1).max(axis=2)
+        cuts = (ratio >= peak) & (ratio > ratio_min)
+    n = 2 * t
+    cuts[:, : n - 1] = False
+    cuts[:, max(0, g.shape[1] - n) :] = False
+    return cuts
+
+
+def overlay_weights(raw, span, *, unmixing, half, floor):
+    """simbench.decode.color.overlay_weights as it was in OpenCV and numpy."""
+    mean = cv2.blur(np.ascontiguousarray(raw, dtype=np.float32), (2 * half + 1, 1), borderType=cv2.BORDER_REPLICATE)
+    level = np.maximum(mean, 0.0) + np.float32(floor)
+    u = np.eye(3) if unmixing is None else np.asarray(unmixing, np.float64)
+    var_u = cv2.transform(level, (u * u).astype(np.float32)).reshape(raw.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(span > 0, var_u / np.maximum(span, 1e-12) ** 2, np.inf).astype(np.float32)
+        w_code = (1.0 / (rel[..., 0] + rel[..., 1])).astype(np.float32)
+        w_fringe = (1.0 / rel[..., 2]).astype(np.float32)
+    return w_code, w_fringe
+
+
+def weighted_intensity(rgb, w_code, w_fringe):
+    """simbench.decode.phase's ``weighted`` intensity as it was in numpy."""
+    num = w_code * (rgb[..., 0] + rgb[..., 1]) + w_fringe * rgb[..., 2]
+    den = w_code + w_fringe
+    return np.divide(num, den, out=np.zeros(num.shape, np.float32), where=den > 0).astype(np.float32, copy=False)
+
+
+def normalized_color_code(rgb, span):
+    """simbench.decode.color.normalized_color_code as it was in numpy."""
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    has_r, has_g = span[..., 0] > 0, span[..., 1] > 0
+    half = np.where(span[..., 2] > 0, np.float32(0.5) * b, np.float32(0.25))
+    r = np.where(has_r | ~has_g, r, half)
+    g = np.where(has_g | ~has_r, g, half)
+    return r >= g

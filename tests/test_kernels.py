@@ -591,3 +591,105 @@ def test_bounded_mean_matches_numpy(seed, square):
         got = color._bounded_mean(values, s0, s1, width_px=width, square=square)
         want = ref.bounded_mean(values, s0, s1, width_px=width, square=square)
         assert got.dtype == np.float64 and np.array_equal(got, want), width
+
+
+def robust_inputs(seed=0, h=40, w=300):
+    """A fringe with code stripes on printed tiles of three albedos, a shadow, a saturated
+    patch, a channel that has no range over part of the image, noise and negative values (an
+    unmixed capture has them)."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(w)
+    fringe = 0.5 + 0.5 * np.cos(2 * np.pi * x / T_CAM)
+    code = (np.floor(x / T_CAM) % 3 == 0).astype(float)
+    albedo = np.where((x // 70) % 3 == 0, 0.9, np.where((x // 70) % 3 == 1, 0.3, 0.05))
+    img = np.empty((h, w, 3))
+    img[..., 0] = code * fringe * albedo
+    img[..., 1] = (1 - code) * fringe * albedo
+    img[..., 2] = fringe * albedo
+    img += rng.normal(0, 0.01, img.shape)
+    img[:, 200:230] = rng.normal(0, 0.002, (h, 30, 3))  # shadow
+    img[5:9, 100:130] = 1.0  # clipped
+    img[20:, :, 1] = 0.3  # no range in one channel
+    return img.astype(np.float32)
+
+
+@pytest.mark.parametrize("w", [300, 60, 7, 1])
+@pytest.mark.parametrize("half", [45, 3, 0])
+def test_channel_normalisation_matches_opencv(w, half):
+    """The colour-robust decoder's normalisation (running extrema by van Herk / Gil-Werman, box
+    means in double running sums): the bits of cv2.erode / cv2.dilate + cv2.blur and numpy, also
+    where the row is shorter than the window."""
+    from simbench.decode import _kernels
+
+    rgb = np.ascontiguousarray(robust_inputs(w=max(w, 300))[:, :w])
+    for min_span in (0.01, 0.0):
+        out = np.empty_like(rgb)
+        span = np.empty_like(rgb)
+        _kernels.normalize_channels(rgb, half, min_span, out, span)
+        want_out, want_span = ref.normalize_channels(rgb, half=half, min_span=min_span)
+        same(out, want_out)
+        same(span, want_span)
+    got = color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, return_span=True)
+    want = ref.normalize_channels(rgb, half=color._code_window_px(T_CAM, 3), min_span=0.01)
+    same(got[0], want[0])
+    same(got[1], want[1])
+
+
+def test_albedo_proxy_and_noise_weights_match_numpy():
+    """The albedo flattening's proxy, the overlay's noise weights, the weighted fringe and the
+    normalised code: the bits of the numpy forms they replaced, with channels below the share,
+    zero, tiny and absent ranges."""
+    from simbench.decode import _kernels
+
+    rgb = robust_inputs(seed=1)
+    normed, span = color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, return_span=True)
+    k = np.ascontiguousarray(span * np.float32(0.7))
+    k[3:6, :, 0] = 1e-30  # tiny: 1 / k**2 overflows
+    k[6:8, :, 2] = 0.0
+    k[10:12] = 0.0  # no channel: undefined
+    h, w = k.shape[:2]
+    proxy, defined = np.empty((h, w), np.float32), np.empty((h, w), bool)
+    _kernels.albedo_proxy(rgb, k, 0.1, proxy, defined)
+    want_proxy, want_defined = ref.albedo_proxy(rgb, k, share=0.1)
+    same(proxy, want_proxy)
+    same(defined, want_defined)
+    assert defined.any() and not defined.all()
+    unmixing = np.linalg.inv(np.array([[1.0, 0.2, 0.05], [0.15, 1.0, 0.1], [0.02, 0.1, 1.0]]))
+    for u in (None, unmixing):
+        w_code, w_fringe = color.overlay_weights(rgb, span, unmixing=u, period_px=T_CAM, order=3, floor=0.04)
+        want = ref.overlay_weights(rgb, span, unmixing=u, half=color._code_window_px(T_CAM, 3), floor=0.04)
+        same(w_code, want[0])
+        same(w_fringe, want[1])
+        assert (w_code == 0).any() and (w_code > 0).any()
+        same(
+            phase.overlay_intensity(normed, mode="weighted", weights=(w_code, w_fringe)),
+            ref.weighted_intensity(normed, w_code, w_fringe),
+        )
+    same(color.normalized_color_code(normed, span), ref.normalized_color_code(normed, span))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_albedo_edges_match_numpy_and_rank_as_the_logarithm_did(seed):
+    """Albedo steps: the C loop's cuts are the numpy form's (the step ratio in double, its
+    window maximum), and on these rows the same as the float32 logarithm of the ratio decided
+    before (a logarithm ranks alike; only last-bit ties could differ)."""
+    rng = np.random.default_rng(seed)
+    h, w = 12, 400
+    x = np.arange(w)
+    albedo = np.where((x // rng.integers(30, 90)) % 2 == 0, 0.8, rng.uniform(0.05, 0.6))
+    g = (albedo * (0.5 + 0.5 * np.cos(2 * np.pi * x / T_CAM)) + rng.normal(0, 0.01, (h, w))).astype(np.float32)
+    g[4, 150:] *= 1.5  # one step of exactly the threshold region's size
+    t = int(round(T_CAM))
+    got = color.albedo_edges(g, period_px=T_CAM)
+    # albedo_edges averages five rows first
+    import cv2
+
+    rows = cv2.blur(g, (1, color.ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
+    same(got, ref.albedo_edges(rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO))
+    same(got, ref.albedo_edges(rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO, log_score=True))
+    assert got.any()
+    # black with noise: the floor keeps it free of steps
+    assert not color.albedo_edges(
+        np.abs(g - g) + rng.normal(0, 1e-4, g.shape).astype(np.float32), period_px=T_CAM
+    ).any()
+    assert not got[:, : 2 * t - 1].any() and not got[:, w - 2 * t :].any()

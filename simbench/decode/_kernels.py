@@ -34,6 +34,12 @@ __all__ = [
     "validity",
     "decode_tail",
     "bounded_mean",
+    "normalize_channels",
+    "albedo_proxy",
+    "albedo_edges",
+    "box_level",
+    "noise_weights",
+    "robust_fringe_code",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -51,6 +57,13 @@ _SIGNATURES = {
     "depth_from_disparity": (None, [_I, _I, _P, _F, _F, _P]),
     "chain_extent": (None, [_I, _P, _P, _P]),
     "bounded_mean": (None, [_I, _I, _P, _P, _P, _I, _I, _P, _P]),
+    "normalize_scratch_floats": (_I, [_I, _I]),
+    "normalize_channels": (None, [_I, _I, _P, _I, _F, _P, _P, _P]),
+    "albedo_proxy": (None, [_I, _P, _P, _F, _P, _P]),
+    "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P]),
+    "box_level": (None, [_I, _I, _P, _I, _F, _P]),
+    "noise_weights": (None, [_I, _P, _P, _P, _P]),
+    "robust_fringe_code": (None, [_I, _P, _P, _P, _P, _P, _P]),
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
@@ -527,4 +540,123 @@ def decode_tail(
         _ptr(conf_out, "conf_out", np.float32, shape, writable=True),
         _ptr(col_out, "col_out", np.float32, shape, writable=True),
         _ptr(index_out, "index_out", np.int32, shape, writable=True),
+    )
+
+
+def normalize_channels(rgb, half, min_span, out, span) -> None:
+    """:func:`simbench.decode.color.normalize_channels` of an (H, W, 3) float32 image in one
+    pass: per row and channel the running minimum and maximum over ``2 half + 1`` pixels, each
+    box-averaged over as many (cv2.erode / cv2.dilate then cv2.blur, ends replicated, with the
+    double running sums of OpenCV's float32 box filter), ``span = max - min``, ``out = (v - min) /
+    span`` where ``span >= min_span`` (float32), else 0; ``span`` (or None) gets the span there,
+    else 0.  The same bits as the OpenCV/numpy form (tests/numpy_reference.py)."""
+    h, w, c = rgb.shape
+    if c != 3:
+        raise ValueError(f"rgb: expected (H, W, 3), got {rgb.shape}")
+    half = int(half)
+    if half < 0:
+        raise ValueError(f"half must be >= 0, got {half}")
+    lib = _library()
+    scratch = _scratch(lib.normalize_scratch_floats(w, half))
+    lib.normalize_channels(
+        h,
+        w,
+        _ptr(rgb, "rgb", np.float32, (h, w, 3)),
+        half,
+        _f32(min_span),
+        _ptr(out, "out", np.float32, (h, w, 3), writable=True),
+        None if span is None else _ptr(span, "span", np.float32, (h, w, 3), writable=True),
+        scratch.ctypes.data,
+    )
+
+
+def albedo_proxy(rgb, k, share, proxy, defined) -> None:
+    """The albedo proxy of :func:`simbench.decode.color.albedo_gain` from the unmixed capture
+    ``rgb`` and its local ranges ``k`` (both (H, W, 3) float32), a channel counted where its range
+    is >= ``share`` times the largest: ``proxy`` (H, W) float32 and ``defined`` (H, W) bool (the
+    weights' sum > 0).  The same bits as the numpy form (tests/numpy_reference.py)."""
+    h, w, _ = rgb.shape
+    _library().albedo_proxy(
+        h * w,
+        _ptr(rgb, "rgb", np.float32, (h, w, 3)),
+        _ptr(k, "k", np.float32, (h, w, 3)),
+        _f32(share),
+        _ptr(proxy, "proxy", np.float32, (h, w), writable=True),
+        _ptr(defined, "defined", np.bool_, (h, w), writable=True),
+    )
+
+
+def albedo_edges(g, t, ratio_min, cuts) -> None:
+    """Albedo steps along the rows of ``g`` ((H, W) float32, the proxy averaged over rows):
+    ``cuts[y, x]`` (bool) where the means of the ``2 t`` values either side of the step between
+    columns x and x + 1 (ends replicated) differ by more than ``ratio_min`` (with a floor, see
+    :func:`simbench.decode.color.albedo_edges`) and the ratio is the largest within ``t``
+    pixels."""
+    h, w = g.shape
+    t = int(t)
+    if t < 1:
+        raise ValueError(f"t must be >= 1, got {t}")
+    cs = np.empty(w + 4 * t + 1, np.float64)
+    q = np.empty(w + 2 * t, np.float64)
+    _library().albedo_edges(
+        h,
+        w,
+        _ptr(g, "g", np.float32, (h, w)),
+        t,
+        float(ratio_min),
+        cs.ctypes.data,
+        q.ctypes.data,
+        _ptr(cuts, "cuts", np.bool_, (h, w), writable=True),
+    )
+
+
+def box_level(raw, half, floor, level) -> None:
+    """Each channel of ``raw`` ((H, W, 3) float32) averaged over ``2 half + 1`` pixels along its
+    row (the bits of cv2.blur, ends replicated), then ``max(mean, 0) + floor`` into ``level``."""
+    h, w, _ = raw.shape
+    _library().box_level(
+        h,
+        w,
+        _ptr(raw, "raw", np.float32, (h, w, 3)),
+        int(half),
+        _f32(floor),
+        _ptr(level, "level", np.float32, (h, w, 3), writable=True),
+    )
+
+
+def noise_weights(var, span, w_code, w_fringe) -> None:
+    """``rel = var / max(span, 1e-12)**2`` where ``span > 0``, else inf (float32, (H, W, 3)
+    each); ``w_code = 1 / (rel_R + rel_G)``, ``w_fringe = 1 / rel_B`` ((H, W) float32)."""
+    h, w, _ = var.shape
+    _library().noise_weights(
+        h * w,
+        _ptr(var, "var", np.float32, (h, w, 3)),
+        _ptr(span, "span", np.float32, (h, w, 3)),
+        _ptr(w_code, "w_code", np.float32, (h, w), writable=True),
+        _ptr(w_fringe, "w_fringe", np.float32, (h, w), writable=True),
+    )
+
+
+def robust_fringe_code(rgb, span, weights, intensity, code) -> None:
+    """From normalised channels and their ranges ((H, W, 3) float32 each): the weighted fringe
+    (:func:`simbench.decode.phase.overlay_intensity`, mode ``weighted``, with ``weights`` =
+    (w_code, w_fringe); None: ``intensity`` not written) and the code
+    (:func:`simbench.decode.color.normalized_color_code`; ``code`` None: not written)."""
+    h, w, _ = rgb.shape
+    if code is not None and span is None:
+        raise ValueError("the code needs the channels' ranges (span)")
+    if weights is not None:
+        wc = _ptr(weights[0], "w_code", np.float32, (h, w))
+        wf = _ptr(weights[1], "w_fringe", np.float32, (h, w))
+        out = _ptr(intensity, "intensity", np.float32, (h, w), writable=True)
+    else:
+        wc = wf = out = None
+    _library().robust_fringe_code(
+        h * w,
+        _ptr(rgb, "rgb", np.float32, (h, w, 3)),
+        None if span is None else _ptr(span, "span", np.float32, (h, w, 3)),
+        wc,
+        wf,
+        out,
+        None if code is None else _ptr(code, "code", np.bool_, (h, w), writable=True),
     )

@@ -72,12 +72,10 @@ def normalized_color_code(rgb: np.ndarray, span: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (H, W), bool
     """
-    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    has_r, has_g = span[..., 0] > 0, span[..., 1] > 0
-    half = np.where(span[..., 2] > 0, np.float32(0.5) * b, np.float32(0.25))
-    r = np.where(has_r | ~has_g, r, half)
-    g = np.where(has_g | ~has_r, g, half)
-    return r >= g
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    code = np.empty(rgb.shape[:2], bool)
+    _kernels.robust_fringe_code(rgb, np.ascontiguousarray(span, dtype=np.float32), None, None, code)
+    return code
 
 
 def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: np.ndarray | None = None) -> np.ndarray:
@@ -177,7 +175,8 @@ def normalize_channels(
     the projector's black level.  Not in the paper (its Eq. 9 and 13 use the raw channels):
     our option for coloured surfaces, at the price of amplifying the noise of a weak channel.
 
-    The running minimum and maximum are then averaged over the same window.  Raw, they step
+    The running minimum and maximum (the window clipped to the row) are then averaged over the
+    same window (the row's ends replicated).  Raw, they step
     where an albedo edge enters the window, half a window away from the edge, and the step in
     the normalised fringe fails the phase fit there (measured on ``scenes/robust_printed.toml``:
     a second invalid line beside every printed edge, cutting off a 2-period strip of stripes
@@ -204,21 +203,13 @@ def normalize_channels(
         ``min_span``)
     """
     half = _code_window_px(period_px, order)
-    kernel = np.ones((1, 2 * half + 1), np.uint8)
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     out = np.empty(rgb.shape, np.float32)
     spans = np.empty(rgb.shape, np.float32) if return_span else None
-    for c in range(3):
-        v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
-        box = (2 * half + 1, 1)
-        lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
-        span = (
-            cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
-        )
-        ok = span >= min_span
-        np.divide(v - lo, span, out=out[..., c], where=ok)
-        out[..., c][~ok] = 0.0
-        if spans is not None:
-            spans[..., c] = np.where(ok, span, 0.0)
+    # one pass per row (simbench/_ckernels.c): the running extrema by van Herk / Gil-Werman and
+    # their box means in the double running sums of OpenCV's float32 box filter, the bits of
+    # cv2.erode / cv2.dilate + cv2.blur (tests/test_kernels.py)
+    _kernels.normalize_channels(rgb, half, min_span, out, spans)
     return (out, spans) if return_span else out
 
 
@@ -323,8 +314,11 @@ def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
 
     The mean over two whole periods on each side of a column has no fringe left in it; where
     the two differ by more than :data:`ALBEDO_EDGE_RATIO` (rows averaged over
-    :data:`ALBEDO_EDGE_ROWS` first) and the ratio is the largest within a period, the row has a
-    step there.
+    :data:`ALBEDO_EDGE_ROWS` first, the row's ends replicated, a floor of ``1e-3 + 0.02`` times
+    the larger mean added to both so that noise on black stays no step) and the ratio is the
+    largest within a period, the row has a step there (one pass per row in
+    ``simbench/_ckernels.c``; the ratio is compared as it is, in double: its logarithm, used
+    before, ranks the same but left the last bit to each machine's vector library).
 
     Returns
     -------
@@ -332,23 +326,9 @@ def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
     the image's left or right border, where one side's window would reach past it)
     """
     t = max(2, int(round(period_px)))
-    n = 2 * t
     g = cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
-    h, w = g.shape
-    cs = np.zeros((h, w + 2 * n + 1), np.float64)
-    np.cumsum(np.pad(g, ((0, 0), (n, n)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
-    # cs[:, x + n + 1] - cs[:, x + 1] over the padded row is the n values right of x (slices, not
-    # a gather: views)
-    left = (cs[:, n + 1 : n + 1 + w] - cs[:, 1 : 1 + w]) / n
-    right = (cs[:, 2 * n + 1 : 2 * n + 1 + w] - cs[:, n + 1 : n + 1 + w]) / n
-    # a floor under both means: noise on black stays no step
-    eps = 1e-3 + 0.02 * np.maximum(left, right)
-    score = np.abs(np.log(left + eps) - np.log(right + eps)).astype(np.float32)
-    peak = cv2.dilate(score, np.ones((1, 2 * t + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
-    cuts = (score >= peak) & (score > np.float32(np.log(ALBEDO_EDGE_RATIO)))
-    # where a side's window reaches past the image the comparison is with padding
-    cuts[:, : n - 1] = False
-    cuts[:, max(0, w - n) :] = False
+    cuts = np.empty(g.shape, bool)
+    _kernels.albedo_edges(g, t, ALBEDO_EDGE_RATIO, cuts)
     return cuts
 
 
@@ -400,23 +380,16 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     half = _code_window_px(period_px, order)
     width = 2 * half + 1
     k = cv2.blur(np.ascontiguousarray(span, np.float32), (4 * half + 1, width), borderType=cv2.BORDER_REPLICATE)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        # a channel the surface hardly reflects carries mostly noise and crosstalk residue
-        strongest = np.maximum(np.maximum(k[..., 0], k[..., 1]), k[..., 2])[..., None]
-        has = k >= ALBEDO_MIN_CHANNEL_SHARE * strongest
-        has &= k > 0
-        norm = np.where(has, np.maximum(rgb, 0.0) / np.where(has, k, 1.0), 0.0)
-        inv2 = np.where(has, 1.0 / np.maximum(k, 1e-12) ** 2, 0.0)
-        # the pair is free of the code only where both code colours come back
-        both = has[..., 0] & has[..., 1]
-        w_pair = np.where(both, 1.0 / np.where(both, inv2[..., 0] + inv2[..., 1], 1.0), 0.0)
-        w_fringe = np.where(has[..., 2], k[..., 2] ** 2, 0.0)
-        total = w_pair + w_fringe
-        proxy = np.where(total > 0, (w_pair * (norm[..., 0] + norm[..., 1]) + w_fringe * norm[..., 2]) / total, 0.0)
+    # a channel the surface hardly reflects carries mostly noise and crosstalk residue; the pair is
+    # free of the code only where both code colours come back (one pass, simbench/_ckernels.c,
+    # the bits of the numpy form in tests/numpy_reference.py)
+    proxy = np.empty(k.shape[:2], np.float32)
+    total_pos = np.empty(k.shape[:2], bool)
+    _kernels.albedo_proxy(np.ascontiguousarray(rgb, np.float32), k, ALBEDO_MIN_CHANNEL_SHARE, proxy, total_pos)
     # only where the proxy is defined across a whole window (it is not, where it would follow the
     # code, and a border between defined and not is no albedo step)
     defined = cv2.erode(
-        (total > 0).astype(np.uint8),
+        total_pos.view(np.uint8),
         np.ones((ALBEDO_EDGE_ROWS, 4 * half + 1), np.uint8),
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
@@ -468,14 +441,14 @@ def overlay_weights(
     w_code, w_fringe : ndarray, shape (H, W), float32; 0 where a channel has no fringe
     """
     half = _code_window_px(period_px, order)
-    mean = cv2.blur(np.ascontiguousarray(raw, dtype=np.float32), (2 * half + 1, 1), borderType=cv2.BORDER_REPLICATE)
-    level = np.maximum(mean, 0.0) + np.float32(floor)
+    raw = np.ascontiguousarray(raw, dtype=np.float32)
+    level = np.empty(raw.shape, np.float32)
+    _kernels.box_level(raw, half, floor, level)
     u = np.eye(3) if unmixing is None else np.asarray(unmixing, np.float64)
     var_u = cv2.transform(level, (u * u).astype(np.float32)).reshape(raw.shape)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(span > 0, var_u / np.maximum(span, 1e-12) ** 2, np.inf).astype(np.float32)
-        w_code = (1.0 / (rel[..., 0] + rel[..., 1])).astype(np.float32)
-        w_fringe = (1.0 / rel[..., 2]).astype(np.float32)
+    w_code = np.empty(raw.shape[:2], np.float32)
+    w_fringe = np.empty(raw.shape[:2], np.float32)
+    _kernels.noise_weights(var_u, np.ascontiguousarray(span, dtype=np.float32), w_code, w_fringe)
     return w_code, w_fringe
 
 

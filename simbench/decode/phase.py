@@ -56,10 +56,13 @@ def _weighted(rgb: np.ndarray, weights: tuple[np.ndarray, np.ndarray] | None = N
         raise ValueError(
             "intensity_mode 'weighted' needs normalised channels (color_normalize=True) and their noise weights"
         )
-    w_code, w_fringe = weights
-    num = w_code * (rgb[..., 0] + rgb[..., 1]) + w_fringe * rgb[..., 2]
-    den = w_code + w_fringe
-    return np.divide(num, den, out=np.zeros(num.shape, np.float32), where=den > 0).astype(np.float32, copy=False)
+    # (w_code (R + G) + w_fringe B) / (w_code + w_fringe) in float32, 0 where both weights are 0
+    # (one pass, simbench/_ckernels.c)
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    out = np.empty(rgb.shape[:2], np.float32)
+    w = tuple(np.ascontiguousarray(a, dtype=np.float32) for a in weights)
+    _kernels.robust_fringe_code(rgb, None, w, out, None)
+    return out
 
 
 INTENSITY_MODES = {"overlay": _overlay, "blue": _blue, "weighted": _weighted}

@@ -209,12 +209,13 @@ def _fused_front_end(params: DecoderParams, unmixing: np.ndarray | None, image: 
         unmixing is None
         and not params.color_normalize
         and params.intensity_mode in _FUSED_INTENSITY
-        and image.dtype in (np.uint8, np.uint16, np.float32)
+        and image.dtype in _FUSED_DTYPES
         and image.flags.c_contiguous
     )
 
 
 _FUSED_INTENSITY = {"overlay": 0, "blue": 1}
+_FUSED_DTYPES = (np.uint8, np.uint16, np.float32)
 
 
 @dataclass(frozen=True)
@@ -298,13 +299,32 @@ def _columns(
         with stage("to float"):
             rgb = _to_float(image if order == [0, 1, 2] else image[..., order])
         with stage("lit and clipped pixels"):
-            certainty, lit = certainty_map(
-                rgb,
-                period_px=t_cam,
-                dark_level=params.dark_level,
-                saturation_level=params.saturation_level,
-                window_periods=window,
-            )
+            if image.dtype in _FUSED_DTYPES and image.flags.c_contiguous:
+                # the fused front end's lit and clipped pixels (the same bits as certainty_map);
+                # its fringe and code are not these channels' and are dropped
+                hb, wb = image.shape[:2]
+                certainty = np.empty((hb, wb), np.float32)
+                lit = np.empty((hb, wb), bool)
+                _kernels.front_end(
+                    image,
+                    order,
+                    _FUSED_INTENSITY["blue"],
+                    certainty_window_px(t_cam, window),
+                    params.dark_level,
+                    params.saturation_level,
+                    np.empty((hb, wb), np.float32),
+                    certainty,
+                    lit,
+                    np.empty((hb, wb), bool),
+                )
+            else:
+                certainty, lit = certainty_map(
+                    rgb,
+                    period_px=t_cam,
+                    dark_level=params.dark_level,
+                    saturation_level=params.saturation_level,
+                    window_periods=window,
+                )
         raw = rgb
         weights = span = None
         with stage("colour unmixing and normalisation"):
