@@ -1569,3 +1569,53 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
             code[i] = r >= g;
         }
 }
+
+/* The albedo flattening's per-segment measures (simbench.decode.color.albedo_gain), one row at a
+ * time from the steps `cuts` (cuts[x]: between columns x and x + 1): each pixel's segment
+ * [s0, s1); mean (float32) = the mean of `width` values of `proxy` centred on the pixel, kept
+ * inside the segment (bounded_mean); vis (float32) = the standard deviation over the mean of `pv`
+ * (the proxy averaged over rows) over the same window kept inside the segment narrowed by
+ * `margin` at each end where it is longer than 2 margin + 2 (the sum of squares' mean less the
+ * squared mean, in double; 0 where the mean is not > 0); short_ = the segment is shorter than
+ * min_len.  The bits of the numpy form (_segment_bounds, _bounded_mean, _segment_visibility).
+ * scratch: 3 (w + 1) doubles. */
+void albedo_segments(int64_t h, int64_t w, const float *restrict proxy, const float *restrict pv,
+                     const uint8_t *restrict cuts, int64_t width, int64_t margin, double min_len,
+                     double *restrict scratch, float *restrict mean, float *restrict vis, uint8_t *restrict short_) {
+    double *cp = scratch, *cv = cp + (w + 1), *cq = cv + (w + 1);
+    for (int64_t y = 0; y < h; y++) {
+        const float *p = proxy + y * w, *q = pv + y * w;
+        const uint8_t *cut = cuts + y * w;
+        cp[0] = cv[0] = cq[0] = 0.0;
+        for (int64_t x = 0; x < w; x++) {
+            const double a = (double)p[x], b = (double)q[x];
+            cp[x + 1] = cp[x] + a;
+            cv[x + 1] = cv[x] + b;
+            cq[x + 1] = cq[x] + b * b;
+        }
+        int64_t s0 = 0;
+        while (s0 < w) {
+            int64_t s1 = s0;
+            while (s1 < w - 1 && !cut[s1]) s1++;
+            s1++; /* one past the segment's last column */
+            const int64_t len = s1 - s0;
+            const int room = len > 2 * margin + 2;
+            const int64_t a0 = room ? s0 + margin : s0, a1 = room ? s1 - margin : s1;
+            for (int64_t x = s0; x < s1; x++) {
+                int64_t n = width < len ? width : len, start = x - width / 2;
+                if (start < s0) start = s0;
+                if (start > s1 - n) start = s1 - n;
+                mean[y * w + x] = (float)((cp[start + n] - cp[start]) / (double)n);
+                n = width < a1 - a0 ? width : a1 - a0;
+                start = x - width / 2;
+                if (start < a0) start = a0;
+                if (start > a1 - n) start = a1 - n;
+                const double mu = (cv[start + n] - cv[start]) / (double)n;
+                const double var = (cq[start + n] - cq[start]) / (double)n - mu * mu;
+                vis[y * w + x] = mu > 0.0 ? (float)(sqrt(var > 0.0 ? var : 0.0) / mu) : 0.0f;
+                short_[y * w + x] = (double)len < min_len;
+            }
+            s0 = s1;
+        }
+    }
+}

@@ -693,3 +693,27 @@ def test_albedo_edges_match_numpy_and_rank_as_the_logarithm_did(seed):
         np.abs(g - g) + rng.normal(0, 1e-4, g.shape).astype(np.float32), period_px=T_CAM
     ).any()
     assert not got[:, : 2 * t - 1].any() and not got[:, w - 2 * t :].any()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_albedo_segments_match_numpy(seed):
+    """The flattening's per-segment measures in one pass: the bits of segment_mean (as float32),
+    _segment_visibility and the segments' lengths, for segments shorter and longer than the
+    window and its margins, and rows with no step."""
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(seed)
+    h, w = 9, 301
+    proxy = (rng.random((h, w)) * 2).astype(np.float32)
+    proxy[:5] = 0.0  # rows 0-2 average to 0 over five rows: no visibility
+    rows = color._rows_mean(proxy)
+    cuts = rng.random((h, w)) < np.array([0.02, 0.1, 0.05, 0.0, 0.3, 0.01, 1.0, 0.03, 0.005])[:, None]
+    width, period = 91, T_CAM
+    mean, vis, short = np.empty((h, w), np.float32), np.empty((h, w), np.float32), np.empty((h, w), bool)
+    margin = color._visibility_margin_px(period)
+    _kernels.albedo_segments(proxy, rows, cuts, width, margin, 1.5 * period, mean, vis, short)
+    s0, s1 = color._segment_bounds(cuts)
+    same(mean, color._bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32))
+    same(vis, color._segment_visibility(proxy, s0, s1, period_px=period, width_px=width))
+    same(short, (s1 - s0) < 1.5 * period)
+    assert short.any() and not short.all() and (vis > 0).any() and (vis[:3] == 0).all()

@@ -40,6 +40,7 @@ __all__ = [
     "box_level",
     "noise_weights",
     "robust_fringe_code",
+    "albedo_segments",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -64,6 +65,7 @@ _SIGNATURES = {
     "box_level": (None, [_I, _I, _P, _I, _F, _P]),
     "noise_weights": (None, [_I, _P, _P, _P, _P]),
     "robust_fringe_code": (None, [_I, _P, _P, _P, _P, _P, _P]),
+    "albedo_segments": (None, [_I, _I, _P, _P, _P, _I, _I, _D, _P, _P, _P, _P]),
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
@@ -659,4 +661,31 @@ def robust_fringe_code(rgb, span, weights, intensity, code) -> None:
         wf,
         out,
         None if code is None else _ptr(code, "code", np.bool_, (h, w), writable=True),
+    )
+
+
+def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -> None:
+    """The albedo flattening's per-segment measures between the steps ``cuts`` ((H, W) bool):
+    ``mean`` = :func:`simbench.decode.color.segment_mean` of ``proxy`` as float32, ``vis`` = the
+    visibility of ``pv`` (:func:`simbench.decode.color._segment_visibility`, the segments narrowed
+    by ``margin``), ``short`` = the segment is shorter than ``min_len`` pixels.  The same bits as
+    the numpy forms."""
+    h, w = proxy.shape
+    width, margin = int(width), int(margin)
+    if width < 1 or margin < 0:
+        raise ValueError(f"width must be >= 1 and margin >= 0, got {width}, {margin}")
+    scratch = np.empty(3 * (w + 1), np.float64)
+    _library().albedo_segments(
+        h,
+        w,
+        _ptr(proxy, "proxy", np.float32, (h, w)),
+        _ptr(pv, "pv", np.float32, (h, w)),
+        _ptr(cuts, "cuts", np.bool_, (h, w)),
+        width,
+        margin,
+        float(min_len),
+        scratch.ctypes.data,
+        _ptr(mean, "mean", np.float32, (h, w), writable=True),
+        _ptr(vis, "vis", np.float32, (h, w), writable=True),
+        _ptr(short, "short", np.bool_, (h, w), writable=True),
     )

@@ -289,6 +289,10 @@ def _bounded_mean(
     return out
 
 
+def _visibility_margin_px(period_px: float) -> int:
+    return max(1, int(round(period_px / 2)))
+
+
 def _segment_visibility(
     proxy: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, period_px: float, width_px: int
 ) -> np.ndarray:
@@ -298,8 +302,8 @@ def _segment_visibility(
     of its cuts: the optics blur the brighter side a few pixels across a step, and a cut sits up
     to a few pixels off it (measured: a lit edge ~8 px into a shadow's segment on
     ``scenes/hard_stairs_deep.toml``)."""
-    pv = cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
-    m = max(1, int(round(period_px / 2)))
+    pv = _rows_mean(proxy)
+    m = _visibility_margin_px(period_px)
     room = (s1 - s0) > 2 * m + 2
     a0 = np.where(room, s0 + m, s0)
     a1 = np.where(room, s1 - m, s1)
@@ -325,10 +329,17 @@ def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
     ndarray, shape (H, W), bool; True between columns x and x + 1 (never within two periods of
     the image's left or right border, where one side's window would reach past it)
     """
-    t = max(2, int(round(period_px)))
-    g = cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
+    return _edges_of_rows(_rows_mean(proxy), period_px=period_px)
+
+
+def _rows_mean(proxy: np.ndarray) -> np.ndarray:
+    """The proxy averaged over :data:`ALBEDO_EDGE_ROWS` rows (ends replicated)."""
+    return cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
+
+
+def _edges_of_rows(g: np.ndarray, *, period_px: float) -> np.ndarray:
     cuts = np.empty(g.shape, bool)
-    _kernels.albedo_edges(g, t, ALBEDO_EDGE_RATIO, cuts)
+    _kernels.albedo_edges(g, max(2, int(round(period_px))), ALBEDO_EDGE_RATIO, cuts)
     return cuts
 
 
@@ -393,14 +404,29 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         np.ones((ALBEDO_EDGE_ROWS, 4 * half + 1), np.uint8),
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
-    cuts = albedo_edges(proxy, period_px=period_px) & defined
+    rows = _rows_mean(proxy)
+    cuts = _edges_of_rows(rows, period_px=period_px) & defined
     if not cuts.any():
         # no step: the fade below is 0 everywhere and the gain exactly 1; no segment to measure
         return np.ones(proxy.shape, np.float32)
-    s0, s1 = _segment_bounds(cuts)
-    mean = _bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32)
+    # per pixel, over its segment: the proxy's window mean, the fringe's visibility, the segment's
+    # length (one pass per row, simbench/_ckernels.c: the bits of segment_mean and
+    # _segment_visibility, tests/test_kernels.py)
+    mean = np.empty(proxy.shape, np.float32)
+    vis = np.empty(proxy.shape, np.float32)
+    short = np.empty(proxy.shape, bool)
+    _kernels.albedo_segments(
+        proxy,
+        rows,
+        cuts,
+        width,
+        _visibility_margin_px(period_px),
+        ALBEDO_MIN_SEGMENT_PERIODS * period_px,
+        mean,
+        vis,
+        short,
+    )
     mean = cv2.blur(mean, (1, ALBEDO_MEAN_ROWS), borderType=cv2.BORDER_REPLICATE)
-    vis = _segment_visibility(proxy, s0, s1, period_px=period_px, width_px=width)
     shadow = vis < ALBEDO_MIN_VISIBILITY * cv2.dilate(vis, np.ones((1, width), np.uint8))
     level = cv2.blur(
         cv2.dilate(mean, np.ones((1, width), np.uint8), borderType=cv2.BORDER_REPLICATE),
@@ -410,7 +436,7 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.where(mean > 1e-6, level / np.maximum(mean, 1e-6), 1.0)
     gain = np.minimum(gain, ALBEDO_MAX_GAIN)
-    gain[((s1 - s0) < ALBEDO_MIN_SEGMENT_PERIODS * period_px) | ~defined | shadow] = 1.0
+    gain[short | ~defined | shadow] = 1.0
     near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, width), np.uint8)).astype(np.float32)
     fade = np.maximum(cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE), near)
     return (1.0 + (gain - 1.0) * fade).astype(np.float32)
