@@ -11,6 +11,7 @@ from simbench.decode.color import Stripes
 from simbench.decode.debruijn import (
     drop_broken_links,
     keep_certain_sides,
+    keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
     window_positions_of_stripes,
@@ -189,6 +190,56 @@ def test_a_broken_link_gives_back_only_the_stripe_with_no_pixel_under_the_operat
     assert d2.tolist() == [0, -1, -1, -1, -1, 7]
     floor2 = np.array([clean, edge, clean, clean, edge, clean], np.float32)
     assert keep_certain_sides(p2, d2, linked2, floor2, **keep).tolist() == d2.tolist()
+
+
+def test_a_broken_links_straddling_stripe_keeps_its_own_side_of_the_edge():
+    """Exact: one row of seven stripes of 10 px, W skipping one between stripes 3 and 4 (an edge
+    inside stripe 4, its lowest confidence at its third pixel).  Stripe 4's far link holds, so its
+    pixels right of that minimum keep its W and the rest are unlabelled; stripe 3, with no pixel
+    under the operating point, stays dropped.  Nothing is split where nothing marks the edge, or
+    where the stripe's far link is broken too, or at a level of 0."""
+    p = np.array([0, 1, 2, 3, 5, 6, 7], np.int32)
+    linked = np.ones(7, bool)
+    linked[0] = False
+    dropped = drop_broken_links(p, linked, cycle=8)
+    labels = np.repeat(np.arange(7, dtype=np.int32), 10)[None, :]
+    stripes = Stripes(
+        labels,
+        np.zeros(7, np.int32),
+        np.arange(0, 70, 10, dtype=np.int32),
+        np.arange(10, 80, 10, dtype=np.int32),
+        linked,
+    )
+    conf = np.full((1, 70), 20.0, np.float32)
+    conf[0, 40:45] = [4.0, 2.5, 1.0, 2.0, 5.0]
+    split = dict(cycle=8, min_confidence=3.0)
+
+    def parts(p, dropped, conf, **kw):
+        return keep_straddler_parts(p, dropped, linked, stripes, conf, stripe_floor(conf, stripes), **kw)
+
+    out, lab = parts(p, dropped, conf, **split)
+    assert out.tolist() == [0, 1, 2, -1, 5, 6, 7]
+    assert lab[0, 40:43].tolist() == [-1, -1, -1] and lab[0, 43:50].tolist() == [4] * 7
+    assert np.array_equal(lab[0, :40], labels[0, :40]) and np.array_equal(lab[0, 50:], labels[0, 50:])
+    assert np.array_equal(stripes.labels, labels)  # the input is left alone
+    # the mirror image: the edge in stripe 3, whose left link holds - its left part kept
+    conf[0, 40:45] = 20.0
+    conf[0, 35:38] = [1.0, 2.0, 2.5]
+    out, lab = parts(p, dropped, conf, **split)
+    assert out.tolist() == [0, 1, 2, 3, -1, 6, 7]
+    assert lab[0, 30:35].tolist() == [3] * 5 and lab[0, 35:40].tolist() == [-1] * 5
+    # nothing under the operating point, a level of 0, a far link broken as well, or a far
+    # neighbour under the operating point itself: nothing split
+    conf[0, 35:38] = 20.0
+    assert parts(p, dropped, conf, **split)[0].tolist() == dropped.tolist()
+    conf[0, 42] = 1.0
+    assert parts(p, dropped, conf, cycle=8, min_confidence=0.0)[0].tolist() == dropped.tolist()
+    p3 = np.array([0, 1, 2, 3, 5, 7, 0], np.int32)  # stripe 4 between two broken links
+    d3 = drop_broken_links(p3, linked, cycle=8)
+    assert parts(p3, d3, conf, **split)[0].tolist() == d3.tolist()
+    assert parts(p, dropped, conf, **split)[0].tolist() == [0, 1, 2, -1, 5, 6, 7]
+    conf[0, 55] = 2.0  # stripe 5, beyond the holding link, is not clean
+    assert parts(p, dropped, conf, **split)[0].tolist() == dropped.tolist()
 
 
 @pytest.mark.parametrize("mode", ["reference", "calibrated"])

@@ -352,15 +352,18 @@ def test_a_hidden_depth_edge_keeps_the_stripe_beside_it_when_the_confidence_show
     ref, f = calibration
     cap, col, region, near = _one_period_step(far_brightness)
     out = {}
-    for keep in (True, False):
+    for keep, split in ((True, False), (False, False), (True, True), (False, True)):
         p = robust_params(DecoderParams(mode="calibrated"))
-        p = p if keep else dataclasses.replace(p, link_keep_certain=0.0)
+        p = dataclasses.replace(p, link_keep_certain=p.link_keep_certain if keep else 0.0, link_split=split)
         rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
         r = decode(cap, rig=RIG, params=p, reference=rmap)
         ok = r.valid & region
-        assert np.all(np.abs(r.column_px[ok] - col[ok]) < 0.5 * 21), f"stripe-order error (keep {keep})"
-        out[keep] = (r.valid & near).sum() / near.sum()
+        assert np.all(np.abs(r.column_px[ok] - col[ok]) < 0.5 * 21), f"stripe-order error (keep {keep}, split {split})"
+        out[keep, split] = (r.valid & near).sum() / near.sum()
     if far_brightness < 1.0:
-        assert out[False] < 0.85 and out[True] >= 0.95, out
+        assert out[False, False] < 0.85 and out[True, False] >= 0.95, out
+        # the split (at the keep's level: none at 0) never takes anything away, and gives no
+        # stripe-order error (checked above)
+        assert out[True, True] >= out[True, False] and out[False, True] == out[False, False], out
     else:
-        assert out[True] == out[False], out
+        assert out[True, False] == out[False, False] == out[True, True] == out[False, True], out

@@ -24,6 +24,7 @@ __all__ = [
     "neighbour_correct",
     "drop_broken_links",
     "keep_certain_sides",
+    "keep_straddler_parts",
     "stripe_floor",
 ]
 
@@ -233,3 +234,95 @@ def keep_certain_sides(
     out[a[keep_a]] = p[a[keep_a]]
     out[b[keep_b]] = p[b[keep_b]]
     return out
+
+
+def keep_straddler_parts(
+    positions: np.ndarray,
+    kept: np.ndarray,
+    linked_prev: np.ndarray,
+    stripes: Stripes,
+    confidence: np.ndarray,
+    floor: np.ndarray,
+    *,
+    cycle: int,
+    min_confidence: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Keep the part of a broken link's dropped stripe that lies on its own chain's side of the
+    edge (ours).
+
+    After :func:`drop_broken_links` (and :func:`keep_certain_sides`) a stripe of a broken link
+    may still be dropped although its link on its other side holds, to a kept neighbour whose
+    every pixel is at or above ``min_confidence``: its W agrees with a trustworthy chain beyond
+    it, and only its part on the far side of the hidden depth edge - a few pixels of it - belongs
+    to the other surface.  (A neighbour under the operating point is no such evidence: measured
+    on ``scenes/hard_sphere_before_wall.toml``, a chain along the sphere's limb, all of it below
+    the operating point and two periods off, would have given a stripe beside it its W.)
+
+    The windows over the edge are biased, so where the stripe holds a pixel below
+    ``min_confidence`` its lowest confidence marks where the edge is: the stripe's pixels on its
+    own chain's side of that minimum keep its W (a stripe right of the link: its pixels right of
+    the minimum; left of the link: left of it), the rest become unlabelled.  The pixels near the
+    edge keep their low confidence, so the operating point still removes them.  A stripe with no
+    pixel below ``min_confidence`` stays dropped: nothing shows where in it (or whether in it) the
+    edge is, and a split at a noise minimum would give the pixels between it and the edge the
+    other surface's W, a whole period off.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (S,), int32; W after :func:`neighbour_correct`
+    kept : ndarray, shape (S,), int32; ``positions`` after the link check (dropped: -1)
+    linked_prev : ndarray, shape (S,), bool
+    stripes : :class:`simbench.decode.color.Stripes`
+    confidence : ndarray, shape (H, W), float32; the stripes' image's
+    floor : ndarray, shape (S,), float32; each stripe's lowest confidence (:func:`stripe_floor`)
+    cycle : int
+    min_confidence : float
+        The decoder's operating point; 0 splits nothing.
+
+    Returns
+    -------
+    positions : ndarray, shape (S,), int32; ``kept`` with the split stripes' W given back
+    labels : ndarray, shape (H, W), int32; ``stripes.labels`` with the dropped parts -1 (the same
+        array when nothing was split)
+    """
+    p = np.asarray(positions, np.int64)
+    out = np.asarray(kept, np.int32).copy()
+    labels = stripes.labels
+    n = p.size
+    if n < 2:
+        return out, labels
+    linked = np.asarray(linked_prev, bool)
+    both = (p[:-1] >= 0) & (p[1:] >= 0) & linked[1:]
+    step = np.mod(p[1:] - p[:-1], cycle)
+    broken = np.flatnonzero(both & (step != 1)) + 1
+    if broken.size == 0:
+        return out, labels
+    follows = np.zeros(n, bool)
+    follows[1:] = both & (step == 1)
+    with np.errstate(invalid="ignore"):
+        clean = (out >= 0) & (np.asarray(floor, np.float32) >= np.float32(min_confidence))
+    left_ok = np.zeros(n, bool)
+    left_ok[1:] = follows[1:] & clean[:-1]
+    right_ok = np.zeros(n, bool)
+    right_ok[:-1] = follows[1:] & clean[1:]
+    # (stripe, keep its right part): right of a broken link with its right link holding, or left
+    # of one with its left link holding; a stripe between two broken links has neither
+    todo = [(int(s), True) for s in broken if out[s] < 0 and right_ok[s]]
+    todo += [(int(s), False) for s in broken - 1 if out[s] < 0 and left_ok[s]]
+    if not todo or min_confidence <= 0.0:
+        return out, labels
+    labels = labels.copy()
+    for s, keep_right in todo:
+        y, x0, x1 = int(stripes.row[s]), int(stripes.start[s]), int(stripes.stop[s])
+        own = labels[y, x0:x1] == s
+        c = np.where(own, confidence[y, x0:x1], np.float32(np.inf))
+        k = int(np.argmin(c))  # the first lowest: a stripe has its edge once
+        if not c[k] < np.float32(min_confidence):
+            continue  # nothing marks the edge
+        part = labels[y, x0:x1]
+        if keep_right:
+            part[: k + 1][own[: k + 1]] = -1
+        else:
+            part[k:][own[k:]] = -1
+        out[s] = p[s]
+    return out, labels

@@ -160,6 +160,12 @@ class DecoderParams:
         its own, not ``min_confidence``, so that a decode with no operating point (to score a
         range of thresholds) keeps the same stripes.  0 = both dropped (the paper's decoder: not
         described); the colour-robust decoder's: :data:`ROBUST_MIN_CONFIDENCE`.
+    link_split : bool
+        Of a broken link's stripe still dropped whose link on its other side holds and which holds
+        a pixel below ``link_keep_certain`` (the edge's mark), keep the pixels on that side of its
+        lowest confidence (ours, needs ``link_check`` and ``link_keep_certain``;
+        :func:`simbench.decode.debruijn.keep_straddler_parts`): the part of a period beside a
+        hidden depth edge that lies on the stripe's own surface.  False: the whole stripe dropped.
     stripe_step_ratio : tuple of float
         (low, high): a step of the wrapped phase between neighbouring pixels of a row, after a
         wrap is unwrapped, outside ``[low, high] * 2 pi / T_cam`` ends a run of stripes without a
@@ -218,6 +224,7 @@ class DecoderParams:
     bridge_gap_periods: float = 0.0
     link_check: bool = True
     link_keep_certain: float = 0.0
+    link_split: bool = False
     stripe_step_ratio: tuple[float, float] = (0.3, 3.0)
     dark_level: float = 0.04
     saturation_level: float = 1.0
@@ -252,6 +259,7 @@ class DecoderParams:
             "bridge_gap_periods": v.number(self.bridge_gap_periods, "bridge_gap_periods", lo=0.0, hi=1.0),
             "link_check": v.boolean(self.link_check, "link_check"),
             "link_keep_certain": v.number(self.link_keep_certain, "link_keep_certain", lo=0.0, hi=MAX_FRINGE_SNR),
+            "link_split": v.boolean(self.link_split, "link_split"),
             "stripe_step_ratio": v.numbers(
                 list(self.stripe_step_ratio) if isinstance(self.stripe_step_ratio, tuple) else self.stripe_step_ratio,
                 "stripe_step_ratio",

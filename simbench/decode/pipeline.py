@@ -25,6 +25,7 @@ from simbench.decode.color import (
 from simbench.decode.debruijn import (
     drop_broken_links,
     keep_certain_sides,
+    keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
     window_positions_of_stripes,
@@ -419,14 +420,26 @@ def _columns(
             dropped = drop_broken_links(w_fixed, stripes.linked_prev, cycle=params.cycle)
             # the stripe floors only where a link broke (most bands of a smooth scene have none)
             if params.link_keep_certain > 0.0 and not np.array_equal(dropped, w_fixed):
+                floor = stripe_floor(confidence, stripes)
                 dropped = keep_certain_sides(
                     w_fixed,
                     dropped,
                     stripes.linked_prev,
-                    stripe_floor(confidence, stripes),
+                    floor,
                     cycle=params.cycle,
                     min_confidence=params.link_keep_certain,
                 )
+                if params.link_split:
+                    dropped, lab = keep_straddler_parts(
+                        w_fixed,
+                        dropped,
+                        stripes.linked_prev,
+                        stripes,
+                        confidence,
+                        floor,
+                        cycle=params.cycle,
+                        min_confidence=params.link_keep_certain,
+                    )
             w_fixed = dropped
             support = np.where(w_fixed >= 0, support, 0)
     band = BandStripes(
