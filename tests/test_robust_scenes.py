@@ -58,7 +58,8 @@ SHORTFALLS = {
     "wrong at the operating point (issue 35)",
     "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless "
     "depth edge; ~89 % completeness (issue 17 note; 91.7 % and none > 5 mm wrong at the operating point 3 with "
-    "link_keep_certain, 2026-11-25)",
+    "link_keep_certain, 2026-11-25; 92.6 % with link_split, 2026-11-26: the rest is the sliver's 4-stripe rows, "
+    "4.5 %, and pixels under the operating point beside the edges)",
 }
 
 

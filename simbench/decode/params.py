@@ -57,10 +57,10 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # of the decoder: with the albedo flattening (DecoderParams.albedo_flatten) 14 scenes met both
 # goals at 2 and at 3, so 2; with the flattening's shadow guard (ALBEDO_MIN_VISIBILITY: a
 # projector shadow is no longer brightened like dark ink) 14 meet them at 3 and 13 at 2 (12 at 4
-# and 5, 11 with no threshold), so 3; with link_keep_certain (at this same level) 15 at 3.  At 3:
-# box before wall 98.8 % complete / 0.00 % wrong, sphere before wall 97.4 % / 0.03 %, deep
-# stairs 97.4 % / 0.00 %, printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards
-# 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart (80.4 %, 0 % wrong; 91.5 % at 2),
+# and 5, 11 with no threshold), so 3; with link_keep_certain (at this same level) 15 at 3; with
+# link_split 15 at 3 (13 at 4).  At 3: box before wall 99.2 % complete / 0.00 % wrong, sphere
+# before wall 97.6 % / 0.03 %, deep stairs 97.8 % / 0.00 %, printed charts of 3:1 and 1.6:1
+# 97.1 % and 100 % / 0 %, glossy boards 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart (80.4 %, 0 % wrong; 91.5 % at 2),
 # the fine chart (squares under a period: nothing), the box interior (77 %) and the 60-degree
 # corner (0.42 % wrong, -5 to -12 mm beside the crease, stable across window widths:
 # interreflection, none with direct light only).  Not tuned on any table of the paper; a white
@@ -165,7 +165,8 @@ class DecoderParams:
         a pixel below ``link_keep_certain`` (the edge's mark), keep the pixels on that side of its
         lowest confidence (ours, needs ``link_check`` and ``link_keep_certain``;
         :func:`simbench.decode.debruijn.keep_straddler_parts`): the part of a period beside a
-        hidden depth edge that lies on the stripe's own surface.  False: the whole stripe dropped.
+        hidden depth edge that lies on the stripe's own surface.  False: the whole stripe dropped
+        (the paper's decoder: not described); the colour-robust decoder's: True.
     stripe_step_ratio : tuple of float
         (low, high): a step of the wrapped phase between neighbouring pixels of a row, after a
         wrap is unwrapped, outside ``[low, high] * 2 pi / T_cam`` ends a run of stripes without a
@@ -340,13 +341,16 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it;
     the lit test looks across a whole code window).  Its confidence folds in the phase's
     stability against the window's width (``phase_stability``) and its operating point makes the pixels below
-    :data:`ROBUST_MIN_CONFIDENCE` holes.  Everything else as ``params``."""
+    :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
+    and the part of a stripe that the confidence shows to lie on their own side of the edge
+    (``link_keep_certain``, ``link_split``).  Everything else as ``params``."""
     return dataclasses.replace(
         params,
         unmix=True,
         color_normalize=True,
         albedo_flatten=True,
         link_keep_certain=ROBUST_MIN_CONFIDENCE,
+        link_split=True,
         intensity_mode="weighted",
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
         min_amplitude=ROBUST_MIN_AMPLITUDE,
