@@ -59,12 +59,12 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # projector shadow is no longer brightened like dark ink) 14 meet them at 3 and 13 at 2 (12 at 4
 # and 5, 11 with no threshold), so 3; with link_keep_certain (at this same level) 15 at 3; with
 # link_split 15 at 3 (13 at 4).  At 3: box before wall 99.2 % complete / 0.00 % wrong, sphere
-# before wall 97.6 % / 0.03 %, deep stairs 97.8 % / 0.00 %, printed charts of 3:1 and 1.6:1
-# 97.1 % and 100 % / 0 %, glossy boards 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart (80.4 %, 0 % wrong; 91.5 % at 2),
-# the fine chart (squares under a period: nothing), the box interior (77 %) and the 60-degree
-# corner (0.42 % wrong, -5 to -12 mm beside the crease, stable across window widths:
-# interreflection, none with direct light only).  Not tuned on any table of the paper; a white
-# board scores ~30.
+# before wall 97.6 % / 0.03 %, deep stairs 97.8 % / 0.00 %, printed charts of 3:1 and 1.6:1 97.1 %
+# and 100 % / 0 %, glossy boards 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart
+# (80.4 %, 0 % wrong; 91.5 % at 2), the fine chart (squares under a period: nothing), the box
+# interior (77 %) and the 60-degree corner (0.42 % wrong, -5 to -12 mm beside the crease, stable
+# across window widths: interreflection, none with direct light only).  Not tuned on any table of
+# the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
 # again with a window half as wide along x, and a pixel whose phase moves by |dpsi| between the two
