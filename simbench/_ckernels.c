@@ -1385,17 +1385,24 @@ ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *re
  * of an (h, w, 3) float32 image: per row and channel the running minimum and maximum over
  * k = 2 r + 1 pixels (running_extrema), each box-averaged over k pixels (box_means); then
  * span = mean_max - mean_min, out = (v - mean_min) / span where span >= min_span, else 0, and
- * span_out (NULL: not written) the span there, else 0.  scratch: normalize_scratch_floats(w, r)
- * floats. */
-int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + (EXT + 6) * w; }
+ * span_out (NULL: not written) the span there, else 0; with a per-pixel gain ((h, w); NULL: none)
+ * v is each channel times it.  scratch: normalize_scratch_floats(w, r) floats. */
+int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + (EXT + 9) * w; }
 
-void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, int64_t r, float min_span,
-                        float *restrict out, float *restrict span_out, float *restrict scratch) {
+void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, const float *restrict gain, int64_t r,
+                        float min_span, float *restrict out, float *restrict span_out, float *restrict scratch) {
     const int64_t n = w + 2 * r, m = 3 * w;
     float *pad = scratch, *g = pad + 3 * n, *e = g + EXT * n, *ext = e + EXT * n;
-    float *restrict lo = ext + EXT * w, *restrict hi = lo + m;
+    float *restrict lo = ext + EXT * w, *restrict hi = lo + m, *restrict scaled = hi + m;
     for (int64_t y = 0; y < h; y++) {
         const float *restrict v = rgb + y * m;
+        if (gain) {
+            /* each channel times the pixel's gain first, in float32 (numpy's rgb * gain[..., None]) */
+            const float *restrict gy = gain + y * w;
+            for (int64_t x = 0; x < w; x++)
+                for (int c = 0; c < 3; c++) scaled[3 * x + c] = v[3 * x + c] * gy[x];
+            v = scaled;
+        }
         running_extrema(w, r, v, pad, g, e, ext);
         box_means(w, r, ext, lo, hi);
         float *restrict o = out + y * m;

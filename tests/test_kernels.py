@@ -633,6 +633,14 @@ def test_channel_normalisation_matches_opencv(w, half):
     want = ref.normalize_channels(rgb, half=color._code_window_px(T_CAM, 3), min_span=0.01)
     same(got[0], want[0])
     same(got[1], want[1])
+    # with the albedo flattening's gain: the bits of normalising rgb * gain
+    gain = (1.0 + 3.0 * np.random.default_rng(w).random(rgb.shape[:2])).astype(np.float32)
+    got = color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, return_span=True, gain=gain)
+    want = ref.normalize_channels(rgb * gain[..., None], half=color._code_window_px(T_CAM, 3), min_span=0.01)
+    same(got[0], want[0])
+    same(got[1], want[1])
+    with pytest.raises(ValueError, match="gain"):
+        color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, gain=gain[:, :-1])
 
 
 def test_albedo_proxy_and_noise_weights_match_numpy():

@@ -59,7 +59,7 @@ _SIGNATURES = {
     "chain_extent": (None, [_I, _P, _P, _P]),
     "bounded_mean": (None, [_I, _I, _P, _P, _P, _I, _I, _P, _P]),
     "normalize_scratch_floats": (_I, [_I, _I]),
-    "normalize_channels": (None, [_I, _I, _P, _I, _F, _P, _P, _P]),
+    "normalize_channels": (None, [_I, _I, _P, _P, _I, _F, _P, _P, _P]),
     "albedo_proxy": (None, [_I, _P, _P, _F, _P, _P]),
     "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P]),
     "box_level": (None, [_I, _I, _P, _I, _F, _P]),
@@ -545,13 +545,14 @@ def decode_tail(
     )
 
 
-def normalize_channels(rgb, half, min_span, out, span) -> None:
+def normalize_channels(rgb, half, min_span, out, span, gain=None) -> None:
     """:func:`simbench.decode.color.normalize_channels` of an (H, W, 3) float32 image in one
     pass: per row and channel the running minimum and maximum over ``2 half + 1`` pixels, each
     box-averaged over as many (cv2.erode / cv2.dilate then cv2.blur, ends replicated, with the
     double running sums of OpenCV's float32 box filter), ``span = max - min``, ``out = (v - min) /
     span`` where ``span >= min_span`` (float32), else 0; ``span`` (or None) gets the span there,
-    else 0.  The same bits as the OpenCV/numpy form (tests/numpy_reference.py)."""
+    else 0; ``gain`` ((H, W) float32, or None) multiplies each pixel's channels first.  The same bits
+    as the OpenCV/numpy form (tests/numpy_reference.py)."""
     h, w, c = rgb.shape
     if c != 3:
         raise ValueError(f"rgb: expected (H, W, 3), got {rgb.shape}")
@@ -564,6 +565,7 @@ def normalize_channels(rgb, half, min_span, out, span) -> None:
         h,
         w,
         _ptr(rgb, "rgb", np.float32, (h, w, 3)),
+        None if gain is None else _ptr(gain, "gain", np.float32, (h, w)),
         half,
         _f32(min_span),
         _ptr(out, "out", np.float32, (h, w, 3), writable=True),

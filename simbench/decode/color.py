@@ -162,7 +162,13 @@ def _code_window_px(period_px: float, order: int) -> int:
 
 
 def normalize_channels(
-    rgb: np.ndarray, *, period_px: float, order: int, min_span: float, return_span: bool = False
+    rgb: np.ndarray,
+    *,
+    period_px: float,
+    order: int,
+    min_span: float,
+    return_span: bool = False,
+    gain: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each channel rescaled to its local range across neighbouring stripes.
 
@@ -195,6 +201,9 @@ def normalize_channels(
         it is set to 0 (for the colour code see :func:`normalized_color_code`).
     return_span : bool
         Also return the local ranges.
+    gain : ndarray, shape (H, W), float32, optional
+        A per-pixel gain every channel is multiplied by first (:func:`albedo_gain`'s): the result
+        of ``rgb * gain[..., None]`` without that image.
 
     Returns
     -------
@@ -209,7 +218,11 @@ def normalize_channels(
     # one pass per row (simbench/_ckernels.c): the running extrema by van Herk / Gil-Werman and
     # their box means in the double running sums of OpenCV's float32 box filter, the bits of
     # cv2.erode / cv2.dilate + cv2.blur (tests/test_kernels.py)
-    _kernels.normalize_channels(rgb, half, min_span, out, spans)
+    if gain is not None:
+        gain = np.ascontiguousarray(gain, dtype=np.float32)
+        if gain.shape != rgb.shape[:2]:
+            raise ValueError(f"gain: expected shape {rgb.shape[:2]}, got {gain.shape}")
+    _kernels.normalize_channels(rgb, half, min_span, out, spans, gain)
     return (out, spans) if return_span else out
 
 

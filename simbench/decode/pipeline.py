@@ -338,7 +338,7 @@ def _columns(
                     gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
                     if not (gain == 1.0).all():
-                        normed, span = normalize_channels(rgb * gain[..., None], **norm)
+                        normed, span = normalize_channels(rgb, gain=gain, **norm)
                 rgb = normed
                 if params.intensity_mode == "weighted":
                     weights = overlay_weights(
