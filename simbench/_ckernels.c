@@ -1354,7 +1354,9 @@ ROW_FN void running_extrema(int64_t w, int64_t r, const float *restrict v, float
 
 /* The box means of a row's running extrema (w x EXT) over k = 2 r + 1 pixels, the ends
  * replicated, as cv2.blur does for float32: a double sum started over the first k padded values
- * in order, then s += (double)p[i + k] - (double)p[i], each mean (float)(s * (1.0 / k)), into lo
+ * in order, then s += (double)p[i + k] - (double)p[i], each mean (float)(s * (1.0 / k)) (for a
+ * window of 3 or 5, OpenCV's RowSum adds the window afresh at every pixel, and a window of 1 is a
+ * copy: so here), into lo
  * and hi (w x 3 each).  A pixel's chains are the lanes of two vectors: lane-wise IEEE double
  * arithmetic, the same bits. */
 ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *restrict lo, float *restrict hi) {
@@ -1369,11 +1371,24 @@ ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *re
         a += ld4d(ext + EXT * x);
         b += ld4d(ext + EXT * x + 4);
     }
+    const int direct = k <= 5; /* k = 1, 3, 5 */
     for (int64_t x = 0; x < w; x++) {
+        if (direct) {
+            /* OpenCV adds a window of 3 or 5 afresh at every pixel, from its first value (its RowSum),
+             * and copies for a window of 1 */
+            const int64_t x0 = x - r < 0 ? 0 : x - r;
+            a = ld4d(ext + EXT * x0);
+            b = ld4d(ext + EXT * x0 + 4);
+            for (int64_t i = 1; i < k; i++) {
+                const int64_t xi = x - r + i < 0 ? 0 : (x - r + i > w - 1 ? w - 1 : x - r + i);
+                a += ld4d(ext + EXT * xi);
+                b += ld4d(ext + EXT * xi + 4);
+            }
+        }
         const v4f_n fa = __builtin_convertvector(a * scale, v4f_n), fb = __builtin_convertvector(b * scale, v4f_n);
         lo[3 * x] = fa[0], lo[3 * x + 1] = fa[1], lo[3 * x + 2] = fa[2];
         hi[3 * x] = fa[3], hi[3 * x + 1] = fb[0], hi[3 * x + 2] = fb[1];
-        if (x + 1 < w) {
+        if (!direct && x + 1 < w) {
             const int64_t in = x + 1 + r < w - 1 ? x + 1 + r : w - 1, out = x - r > 0 ? x - r : 0;
             a += ld4d(ext + EXT * in) - ld4d(ext + EXT * out);
             b += ld4d(ext + EXT * in + 4) - ld4d(ext + EXT * out + 4);
@@ -1395,7 +1410,7 @@ void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, const f
     float *pad = scratch, *g = pad + 3 * n, *e = g + EXT * n, *ext = e + EXT * n;
     float *restrict lo = ext + EXT * w, *restrict hi = lo + m, *restrict scaled = hi + m;
     for (int64_t y = 0; y < h; y++) {
-        const float *restrict v = rgb + y * m;
+        const float *v = rgb + y * m; /* not restrict: it may point at scaled, written just before */
         if (gain) {
             /* each channel times the pixel's gain first, in float32 (numpy's rgb * gain[..., None]) */
             const float *restrict gy = gain + y * w;
@@ -1514,6 +1529,7 @@ void box_level(int64_t h, int64_t w, const float *restrict raw, int64_t r, float
     const int64_t k = 2 * r + 1;
     const double sc = 1.0 / (double)k;
     const v4d_n scale = {sc, sc, sc, sc};
+    const int direct = k <= 5; /* as box_means */
     for (int64_t y = 0; y < h; y++) {
         const float *row = raw + y * w * 3;
         float *restrict out = level + y * w * 3;
@@ -1524,9 +1540,16 @@ void box_level(int64_t h, int64_t w, const float *restrict raw, int64_t r, float
             s += ld3d(row + 3 * x);
         }
         for (int64_t x = 0; x < w; x++) {
+            if (direct) {
+                s = ld3d(row + 3 * (x - r < 0 ? 0 : x - r));
+                for (int64_t i = 1; i < k; i++) {
+                    const int64_t xi = x - r + i < 0 ? 0 : (x - r + i > w - 1 ? w - 1 : x - r + i);
+                    s += ld3d(row + 3 * xi);
+                }
+            }
             const v4f_n m = __builtin_convertvector(s * scale, v4f_n);
             for (int c = 0; c < 3; c++) out[3 * x + c] = (m[c] > 0.0f ? m[c] : 0.0f) + floor_;
-            if (x + 1 < w) {
+            if (!direct && x + 1 < w) {
                 const int64_t in = x + 1 + r < w - 1 ? x + 1 + r : w - 1, gone = x - r > 0 ? x - r : 0;
                 s += ld3d(row + 3 * in) - ld3d(row + 3 * gone);
             }

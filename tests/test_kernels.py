@@ -614,7 +614,7 @@ def robust_inputs(seed=0, h=40, w=300):
 
 
 @pytest.mark.parametrize("w", [300, 60, 7, 1])
-@pytest.mark.parametrize("half", [45, 3, 0])
+@pytest.mark.parametrize("half", [45, 3, 2, 1, 0])
 def test_channel_normalisation_matches_opencv(w, half):
     """The colour-robust decoder's normalisation (running extrema by van Herk / Gil-Werman, box
     means in double running sums): the bits of cv2.erode / cv2.dilate + cv2.blur and numpy, also
@@ -641,6 +641,49 @@ def test_channel_normalisation_matches_opencv(w, half):
     same(got[1], want[1])
     with pytest.raises(ValueError, match="gain"):
         color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, gain=gain[:, :-1])
+
+
+@pytest.mark.parametrize("half", [0, 1, 2, 3, 4])
+def test_box_means_follow_opencvs_row_sums_where_rounding_shows(half):
+    """A huge value beside small ones: a running sum loses the small ones after the huge value
+    leaves the window, and OpenCV's float32 box filter adds windows of 3 and 5 afresh at every
+    pixel instead (and copies for a window of 1) - the C box means (of the normalisation's
+    extrema and of the noise level) do the same, so they keep its bits even there (found by a
+    review: before, windows of 1, 3 and 5 differed here; the decoder's are >= 7)."""
+    import cv2
+
+    from simbench.decode import _kernels
+
+    rgb = np.ones((2, 12, 3), np.float32)
+    rgb[:, 0] = 1e20
+    rgb[1, 5] = -3e19
+    k = 2 * half + 1
+    level = np.empty_like(rgb)
+    _kernels.box_level(rgb, half, 0.0, level)
+    same(level, np.maximum(cv2.blur(rgb, (k, 1), borderType=cv2.BORDER_REPLICATE), 0.0) + np.float32(0.0))
+    for min_span in (0.0, 0.5):
+        out, span = np.empty_like(rgb), np.empty_like(rgb)
+        _kernels.normalize_channels(rgb, half, min_span, out, span)
+        want = ref.normalize_channels(rgb, half=half, min_span=min_span)
+        same(out, want[0])
+        same(span, want[1])
+
+
+def test_kernel_wrappers_refuse_empty_images_and_negative_windows():
+    from simbench.decode import _kernels
+
+    empty = np.empty((4, 0, 3), np.float32)
+    with pytest.raises(ValueError, match="W >= 1"):
+        _kernels.normalize_channels(empty, 3, 0.01, empty.copy(), None)
+    with pytest.raises(ValueError, match="W >= 1"):
+        _kernels.box_level(empty, 3, 0.04, empty.copy())
+    with pytest.raises(ValueError, match="half"):
+        _kernels.box_level(np.ones((2, 5, 3), np.float32), -2, 0.04, np.empty((2, 5, 3), np.float32))
+    with pytest.raises(ValueError, match="W >= 1"):
+        _kernels.albedo_edges(np.empty((3, 0), np.float32), 21, 1.35, np.empty((3, 0), bool))
+    e = np.empty((3, 0), np.float32)
+    with pytest.raises(ValueError, match="W >= 1"):
+        _kernels.albedo_segments(e, e, np.empty((3, 0), bool), 91, 10, 30.0, e, e, np.empty((3, 0), bool))
 
 
 def test_albedo_proxy_and_noise_weights_match_numpy():

@@ -554,8 +554,8 @@ def normalize_channels(rgb, half, min_span, out, span, gain=None) -> None:
     else 0; ``gain`` ((H, W) float32, or None) multiplies each pixel's channels first.  The same bits
     as the OpenCV/numpy form (tests/numpy_reference.py)."""
     h, w, c = rgb.shape
-    if c != 3:
-        raise ValueError(f"rgb: expected (H, W, 3), got {rgb.shape}")
+    if c != 3 or h < 1 or w < 1:
+        raise ValueError(f"rgb: expected (H, W, 3) with H, W >= 1, got {rgb.shape}")
     half = int(half)
     if half < 0:
         raise ValueError(f"half must be >= 0, got {half}")
@@ -598,6 +598,8 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
     pixels."""
     h, w = g.shape
     t = int(t)
+    if h < 1 or w < 1:
+        raise ValueError(f"g: expected (H, W) with H, W >= 1, got {g.shape}")
     if t < 1:
         raise ValueError(f"t must be >= 1, got {t}")
     cs = np.empty(w + 4 * t + 1, np.float64)
@@ -617,7 +619,11 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
 def box_level(raw, half, floor, level) -> None:
     """Each channel of ``raw`` ((H, W, 3) float32) averaged over ``2 half + 1`` pixels along its
     row (the bits of cv2.blur, ends replicated), then ``max(mean, 0) + floor`` into ``level``."""
-    h, w, _ = raw.shape
+    h, w, c = raw.shape
+    if c != 3 or h < 1 or w < 1:
+        raise ValueError(f"raw: expected (H, W, 3) with H, W >= 1, got {raw.shape}")
+    if int(half) < 0:
+        raise ValueError(f"half must be >= 0, got {half}")
     _library().box_level(
         h,
         w,
@@ -673,6 +679,8 @@ def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -
     by ``margin``), ``short`` = the segment is shorter than ``min_len`` pixels.  The same bits as
     the numpy forms."""
     h, w = proxy.shape
+    if h < 1 or w < 1:
+        raise ValueError(f"proxy: expected (H, W) with H, W >= 1, got {proxy.shape}")
     width, margin = int(width), int(margin)
     if width < 1 or margin < 0:
         raise ValueError(f"width must be >= 1 and margin >= 0, got {width}, {margin}")

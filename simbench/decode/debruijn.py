@@ -282,8 +282,8 @@ def keep_straddler_parts(
     Returns
     -------
     positions : ndarray, shape (S,), int32; ``kept`` with the split stripes' W given back
-    labels : ndarray, shape (H, W), int32; ``stripes.labels`` with the dropped parts -1 (the same
-        array when nothing was split)
+    labels : ndarray, shape (H, W), int32; ``stripes.labels`` with the dropped parts -1 (a copy
+        whenever a stripe was a candidate; ``stripes.labels`` itself is never written)
     """
     p = np.asarray(positions, np.int64)
     out = np.asarray(kept, np.int32).copy()

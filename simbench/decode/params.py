@@ -161,8 +161,9 @@ class DecoderParams:
         range of thresholds) keeps the same stripes.  0 = both dropped (the paper's decoder: not
         described); the colour-robust decoder's: :data:`ROBUST_MIN_CONFIDENCE`.
     link_split : bool
-        Of a broken link's stripe still dropped whose link on its other side holds and which holds
-        a pixel below ``link_keep_certain`` (the edge's mark), keep the pixels on that side of its
+        Of a broken link's stripe still dropped whose link on its other side holds, to a kept
+        stripe with every pixel at or above ``link_keep_certain``, and which holds a pixel below
+        that level (the edge's mark), keep the pixels on that side of its
         lowest confidence (ours, needs ``link_check`` and ``link_keep_certain``;
         :func:`simbench.decode.debruijn.keep_straddler_parts`): the part of a period beside a
         hidden depth edge that lies on the stripe's own surface.  False: the whole stripe dropped
