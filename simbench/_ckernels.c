@@ -1299,6 +1299,19 @@ static inline v4d_n ld4d(const float *p) {
     return __builtin_convertvector(f, v4d_n);
 }
 
+/* The six running extrema of running_extrema (three minima, then three maxima) started at one
+ * pixel's values, and one pixel folded into them, the result stored at q (EXT floats). */
+static inline void extrema_start(const float *restrict p, float acc[6]) {
+    for (int c = 0; c < 3; c++) acc[c] = acc[3 + c] = p[c];
+}
+static inline void extrema_step(const float *restrict p, float acc[6], float *restrict q) {
+    for (int c = 0; c < 3; c++) {
+        acc[c] = p[c] < acc[c] ? p[c] : acc[c];
+        acc[3 + c] = p[c] > acc[3 + c] ? p[c] : acc[3 + c];
+    }
+    for (int j = 0; j < 6; j++) q[j] = acc[j];
+}
+
 /* Running extrema of k = 2 r + 1 values along a row of w pixels of three interleaved channels,
  * the row's ends replicated (cv2.erode / cv2.dilate with a 1 x k kernel and BORDER_REPLICATE: the
  * window clipped to the row holds the same values), by van Herk / Gil-Werman: over the padded
@@ -1318,30 +1331,11 @@ ROW_FN void running_extrema(int64_t w, int64_t r, const float *restrict v, float
     memcpy(pad + 3 * r, v, (size_t)(3 * w) * sizeof(float));
     for (int64_t b = 0; b < n; b += k) {
         const int64_t end = b + k < n ? b + k : n;
-        float a0 = pad[3 * b], a1 = pad[3 * b + 1], a2 = pad[3 * b + 2], m0 = a0, m1 = a1, m2 = a2;
-        for (int64_t i = b; i < end; i++) {
-            const float p0 = pad[3 * i], p1 = pad[3 * i + 1], p2 = pad[3 * i + 2];
-            a0 = p0 < a0 ? p0 : a0;
-            a1 = p1 < a1 ? p1 : a1;
-            a2 = p2 < a2 ? p2 : a2;
-            m0 = p0 > m0 ? p0 : m0;
-            m1 = p1 > m1 ? p1 : m1;
-            m2 = p2 > m2 ? p2 : m2;
-            float *q = g + EXT * i;
-            q[0] = a0, q[1] = a1, q[2] = a2, q[3] = m0, q[4] = m1, q[5] = m2;
-        }
-        a0 = pad[3 * (end - 1)], a1 = pad[3 * (end - 1) + 1], a2 = pad[3 * (end - 1) + 2], m0 = a0, m1 = a1, m2 = a2;
-        for (int64_t i = end - 1; i >= b; i--) {
-            const float p0 = pad[3 * i], p1 = pad[3 * i + 1], p2 = pad[3 * i + 2];
-            a0 = p0 < a0 ? p0 : a0;
-            a1 = p1 < a1 ? p1 : a1;
-            a2 = p2 < a2 ? p2 : a2;
-            m0 = p0 > m0 ? p0 : m0;
-            m1 = p1 > m1 ? p1 : m1;
-            m2 = p2 > m2 ? p2 : m2;
-            float *q = e + EXT * i;
-            q[0] = a0, q[1] = a1, q[2] = a2, q[3] = m0, q[4] = m1, q[5] = m2;
-        }
+        float acc[6];
+        extrema_start(pad + 3 * b, acc);
+        for (int64_t i = b; i < end; i++) extrema_step(pad + 3 * i, acc, g + EXT * i);
+        extrema_start(pad + 3 * (end - 1), acc);
+        for (int64_t i = end - 1; i >= b; i--) extrema_step(pad + 3 * i, acc, e + EXT * i);
     }
     for (int64_t x = 0; x < w; x++) {
         const float *a = e + EXT * x, *b = g + EXT * (x + k - 1);
@@ -1607,7 +1601,8 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
  * (the proxy averaged over rows) over the same window kept inside the segment narrowed by
  * `margin` at each end where it is longer than 2 margin + 2 (the sum of squares' mean less the
  * squared mean, in double; 0 where the mean is not > 0); short_ = the segment is shorter than
- * min_len.  The bits of the numpy form (_segment_bounds, _bounded_mean, _segment_visibility).
+ * min_len.  The bits of the numpy form (_segment_bounds, _bounded_mean; segment_visibility in
+ * tests/numpy_reference.py).
  * scratch: 3 (w + 1) doubles. */
 void albedo_segments(int64_t h, int64_t w, const float *restrict proxy, const float *restrict pv,
                      const uint8_t *restrict cuts, int64_t width, int64_t margin, double min_len,

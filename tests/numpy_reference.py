@@ -572,3 +572,21 @@ def normalized_color_code(rgb, span):
     r = np.where(has_r | ~has_g, r, half)
     g = np.where(has_g | ~has_r, g, half)
     return r >= g
+
+
+def segment_visibility(proxy, s0, s1, *, period_px, width_px):
+    """The albedo flattening's fringe visibility per pixel as it was in numpy (before
+    simbench/_ckernels.c's albedo_segments): the standard deviation over the mean of the proxy
+    averaged over rows, over the window kept inside the segment narrowed by half a period at
+    each end where it has room."""
+    from simbench.decode import color
+
+    pv = color._rows_mean(proxy)
+    m = color._visibility_margin_px(period_px)
+    room = (s1 - s0) > 2 * m + 2
+    a0 = np.where(room, s0 + m, s0)
+    a1 = np.where(room, s1 - m, s1)
+    mu = color._bounded_mean(pv, a0, a1, width_px=width_px)
+    var = color._bounded_mean(pv, a0, a1, width_px=width_px, square=True) - mu * mu
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)

@@ -749,7 +749,7 @@ def test_albedo_edges_match_numpy_and_rank_as_the_logarithm_did(seed):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_albedo_segments_match_numpy(seed):
     """The flattening's per-segment measures in one pass: the bits of segment_mean (as float32),
-    _segment_visibility and the segments' lengths, for segments shorter and longer than the
+    the visibility (tests/numpy_reference.py) and the segments' lengths, for segments shorter and longer than the
     window and its margins, and rows with no step."""
     from simbench.decode import _kernels
 
@@ -765,6 +765,6 @@ def test_albedo_segments_match_numpy(seed):
     _kernels.albedo_segments(proxy, rows, cuts, width, margin, 1.5 * period, mean, vis, short)
     s0, s1 = color._segment_bounds(cuts)
     same(mean, color._bounded_mean(proxy, s0, s1, width_px=width).astype(np.float32))
-    same(vis, color._segment_visibility(proxy, s0, s1, period_px=period, width_px=width))
+    same(vis, ref.segment_visibility(proxy, s0, s1, period_px=period, width_px=width))
     same(short, (s1 - s0) < 1.5 * period)
     assert short.any() and not short.all() and (vis > 0).any() and (vis[:3] == 0).all()

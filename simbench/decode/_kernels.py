@@ -675,9 +675,9 @@ def robust_fringe_code(rgb, span, weights, intensity, code) -> None:
 def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -> None:
     """The albedo flattening's per-segment measures between the steps ``cuts`` ((H, W) bool):
     ``mean`` = :func:`simbench.decode.color.segment_mean` of ``proxy`` as float32, ``vis`` = the
-    visibility of ``pv`` (:func:`simbench.decode.color._segment_visibility`, the segments narrowed
-    by ``margin``), ``short`` = the segment is shorter than ``min_len`` pixels.  The same bits as
-    the numpy forms."""
+    visibility of ``pv`` (its standard deviation over its mean, the segments narrowed by
+    ``margin``; ``segment_visibility`` in tests/numpy_reference.py), ``short`` = the segment is
+    shorter than ``min_len`` pixels.  The same bits as the numpy forms."""
     h, w = proxy.shape
     if h < 1 or w < 1:
         raise ValueError(f"proxy: expected (H, W) with H, W >= 1, got {proxy.shape}")

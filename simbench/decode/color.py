@@ -303,27 +303,10 @@ def _bounded_mean(
 
 
 def _visibility_margin_px(period_px: float) -> int:
+    """How far inside its cuts a segment's fringe visibility is measured (half a period): the
+    optics blur the brighter side a few pixels across a step, and a cut sits up to a few pixels off
+    it (measured: a lit edge ~8 px into a shadow's segment on ``scenes/hard_stairs_deep.toml``)."""
     return max(1, int(round(period_px / 2)))
-
-
-def _segment_visibility(
-    proxy: np.ndarray, s0: np.ndarray, s1: np.ndarray, *, period_px: float, width_px: int
-) -> np.ndarray:
-    """The fringe's visibility in each pixel's segment: the standard deviation of the proxy
-    (rows averaged over :data:`ALBEDO_EDGE_ROWS`: the fringe runs along the columns, the noise
-    does not) over its mean, both over the window kept inside the segment and half a period clear
-    of its cuts: the optics blur the brighter side a few pixels across a step, and a cut sits up
-    to a few pixels off it (measured: a lit edge ~8 px into a shadow's segment on
-    ``scenes/hard_stairs_deep.toml``)."""
-    pv = _rows_mean(proxy)
-    m = _visibility_margin_px(period_px)
-    room = (s1 - s0) > 2 * m + 2
-    a0 = np.where(room, s0 + m, s0)
-    a1 = np.where(room, s1 - m, s1)
-    mu = _bounded_mean(pv, a0, a1, width_px=width_px)
-    var = _bounded_mean(pv, a0, a1, width_px=width_px, square=True) - mu * mu
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
 
 
 def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:

@@ -168,6 +168,25 @@ def stripe_floor(values: np.ndarray, stripes: Stripes) -> np.ndarray:
         return np.fmin.reduceat(flat, idx)[0::2].astype(np.float32)
 
 
+def _links(p: np.ndarray, linked_prev: np.ndarray, *, cycle: int) -> tuple[np.ndarray, np.ndarray]:
+    """Of the links between known positions ``p`` (int64, -1 unknown): the broken ones, as the index
+    j of the link between stripes j - 1 and j, and ``follows[j]``: that link holds (W consecutive)."""
+    linked = np.asarray(linked_prev, bool)
+    both = (p[:-1] >= 0) & (p[1:] >= 0) & linked[1:]
+    step = np.mod(p[1:] - p[:-1], cycle)
+    follows = np.zeros(p.size, bool)
+    follows[1:] = both & (step == 1)
+    return np.flatnonzero(both & (step != 1)) + 1, follows
+
+
+def _far_links_hold(follows: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per stripe, whether its link on its left / right holds to a neighbour where ``ok``."""
+    left, right = np.zeros(follows.size, bool), np.zeros(follows.size, bool)
+    left[1:] = follows[1:] & ok[:-1]
+    right[:-1] = follows[1:] & ok[1:]
+    return left, right
+
+
 def keep_certain_sides(
     positions: np.ndarray,
     dropped: np.ndarray,
@@ -206,24 +225,14 @@ def keep_certain_sides(
     """
     p = np.asarray(positions, np.int64)
     d = np.asarray(dropped, np.int32)
-    n = p.size
     out = d.copy()
-    if n < 2:
+    if p.size < 2:
         return out
-    linked = np.asarray(linked_prev, bool)
-    both = (p[:-1] >= 0) & (p[1:] >= 0) & linked[1:]
-    step = np.mod(p[1:] - p[:-1], cycle)
-    broken = np.flatnonzero(both & (step != 1)) + 1  # link between stripes j - 1 and j
+    broken, follows = _links(p, linked_prev, cycle=cycle)
     if broken.size == 0:
         return out
-    # follows[j]: the link between stripes j - 1 and j holds (W consecutive)
-    follows = np.zeros(n, bool)
-    follows[1:] = both & (step == 1)
     # a stripe's link on its left / right holds, to a neighbour that survived the drop
-    left_ok = np.zeros(n, bool)
-    left_ok[1:] = follows[1:] & (d[:-1] >= 0)
-    right_ok = np.zeros(n, bool)
-    right_ok[:-1] = follows[1:] & (d[1:] >= 0)
+    left_ok, right_ok = _far_links_hold(follows, d >= 0)
     f = np.asarray(floor, np.float32)
     thr = np.float32(min_confidence)
     a, b = broken - 1, broken
@@ -288,28 +297,19 @@ def keep_straddler_parts(
     p = np.asarray(positions, np.int64)
     out = np.asarray(kept, np.int32).copy()
     labels = stripes.labels
-    n = p.size
-    if n < 2:
+    if p.size < 2 or min_confidence <= 0.0:
         return out, labels
-    linked = np.asarray(linked_prev, bool)
-    both = (p[:-1] >= 0) & (p[1:] >= 0) & linked[1:]
-    step = np.mod(p[1:] - p[:-1], cycle)
-    broken = np.flatnonzero(both & (step != 1)) + 1
+    broken, follows = _links(p, linked_prev, cycle=cycle)
     if broken.size == 0:
         return out, labels
-    follows = np.zeros(n, bool)
-    follows[1:] = both & (step == 1)
     with np.errstate(invalid="ignore"):
         clean = (out >= 0) & (np.asarray(floor, np.float32) >= np.float32(min_confidence))
-    left_ok = np.zeros(n, bool)
-    left_ok[1:] = follows[1:] & clean[:-1]
-    right_ok = np.zeros(n, bool)
-    right_ok[:-1] = follows[1:] & clean[1:]
+    left_ok, right_ok = _far_links_hold(follows, clean)
     # (stripe, keep its right part): right of a broken link with its right link holding, or left
     # of one with its left link holding; a stripe between two broken links has neither
     todo = [(int(s), True) for s in broken if out[s] < 0 and right_ok[s]]
     todo += [(int(s), False) for s in broken - 1 if out[s] < 0 and left_ok[s]]
-    if not todo or min_confidence <= 0.0:
+    if not todo:
         return out, labels
     labels = labels.copy()
     for s, keep_right in todo:
