@@ -233,6 +233,25 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     assert out[False][0] < 0.97 <= out[True][0], out
 
 
+def test_colour_robust_result_does_not_depend_on_threads(calibration):
+    """The albedo flattening reads ~48 rows above and below a pixel (its spans' box mean, the edge
+    rows): each row band carries them beyond the phase fit's halo, so that the checkerboard
+    decodes to the same bits in 1, 2, 3 or 7 bands (with the fit's halo alone, 2 bands moved
+    the depth of ~14 k pixels within ~46 rows of the bands' border on scenes/step.toml)."""
+    from simbench.decode.bands import row_bands
+
+    ref, f = calibration
+    cap, _, _ = _checkerboard(0.1)
+    p = robust_params(DecoderParams(mode="calibrated"))
+    rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+    one = decode(cap, rig=RIG, params=dataclasses.replace(p, threads=1), reference=rmap)
+    for threads in (2, 3, 7):
+        assert len(row_bands(*cap.shape[:2], dataclasses.replace(p, threads=threads), RIG)[0]) == threads
+        r = decode(cap, rig=RIG, params=dataclasses.replace(p, threads=threads), reference=rmap)
+        assert np.array_equal(r.depth_m, one.depth_m, equal_nan=True), threads
+        assert np.array_equal(r.confidence, one.confidence, equal_nan=True), threads
+
+
 def test_albedo_gain_leaves_a_uniform_board_alone(calibration):
     """No step on a uniform (even saturated) board: the gain is exactly 1, so the flattening
     cannot move any result there."""

@@ -12,6 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from simbench.decode.color import albedo_gain_reach_rows
 from simbench.decode.params import DecoderParams
 from simbench.decode.profile import run_in_context
 from simbench.pattern import check_channels
@@ -19,16 +20,27 @@ from simbench.rig import Rig
 
 
 def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int, int]], int, int]:
-    """Row bands, the halo (rows) each needs for the phase fit, and the worker threads: one
-    band per thread, never thinner than 4 halos (or 32 rows).
+    """Row bands, the halo (rows) each needs, and the worker threads: one band per thread, never
+    thinner than 4 phase-fit halos (or 32 rows).
+
+    The halo is what a band's rows read beyond themselves: the phase fit's window (3 sigma_y)
+    and, with the albedo flattening, the rows its gain reads
+    (:func:`simbench.decode.color.albedo_gain_reach_rows`: the gain of the fit's rows must be the
+    whole image's).  With less, a band's rows near its ends would see a gain made of a truncated
+    image, and the result would follow the thread count (it did, until 2026-11-26: the
+    colour-robust decoder's depth at up to ~46 rows from a band's end, on every capture with an
+    albedo step or a shadow).
 
     (Bands were once also kept under 4 MiB of float32 image each, because first-touching fresh
     huge pages made single-thread decodes slow; the fresh pages came from a reference cycle that
     kept each decode's images alive, and since that is gone one band per thread is the faster
     plan: single-thread 1280x960 decode 15.8 -> 15.2 ms median, 2 threads unchanged.)"""
     sy = params.sigma_periods * params.camera_period(rig) * params.sigma_y_ratio
-    halo = int(np.ceil(3.0 * sy))
-    most = max(1, height // max(4 * halo, 32))
+    fit_halo = int(np.ceil(3.0 * sy))
+    halo = fit_halo
+    if params.color_normalize and params.albedo_flatten:
+        halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
+    most = max(1, height // max(4 * fit_halo, 32))
     threads = max(1, params.threads or os.cpu_count() or 1)
     n = min(threads, most)
     edges = np.linspace(0, height, n + 1).round().astype(int)

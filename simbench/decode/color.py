@@ -24,6 +24,7 @@ __all__ = [
     "albedo_edges",
     "segment_mean",
     "albedo_gain",
+    "albedo_gain_reach_rows",
     "overlay_weights",
     "normalized_color_code",
     "Stripes",
@@ -337,6 +338,15 @@ def _edges_of_rows(g: np.ndarray, *, period_px: float) -> np.ndarray:
     cuts = np.empty(g.shape, bool)
     _kernels.albedo_edges(g, max(2, int(round(period_px))), ALBEDO_EDGE_RATIO, cuts)
     return cuts
+
+
+def albedo_gain_reach_rows(period_px: float, order: int) -> int:
+    """How many rows above and below a pixel :func:`albedo_gain` reads to make that pixel's gain:
+    the spans' box mean (half a window), the edge rows' mean and erosion
+    (:data:`ALBEDO_EDGE_ROWS`), the segment means' row average (:data:`ALBEDO_MEAN_ROWS`).  The
+    decoder's row bands carry this many rows more than the phase fit needs
+    (:func:`simbench.decode.bands.row_bands`), so that a band's gain is the whole image's."""
+    return _code_window_px(period_px, order) + ALBEDO_EDGE_ROWS // 2 + ALBEDO_MEAN_ROWS // 2
 
 
 def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: int) -> np.ndarray:
