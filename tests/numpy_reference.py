@@ -472,10 +472,11 @@ def bounded_mean(values, s0, s1, *, width_px, square=False):
     return (np.take_along_axis(cs, w0 + n, 1) - np.take_along_axis(cs, w0, 1)) / n
 
 
-def normalize_channels(rgb, *, half, min_span):
+def normalize_channels(rgb, *, half, min_span, clamp_ends=False):
     """simbench.decode.color.normalize_channels as it was in OpenCV and numpy: per channel
     cv2.erode / cv2.dilate over 1 x (2 half + 1), each cv2.blur'ed over as many, the range's
-    division where it reaches min_span."""
+    division where it reaches min_span; ``clamp_ends`` (rows wider than 2 half + 1): the smoothed
+    extrema of columns half and W - 1 - half replicated over the half columns beyond them."""
     kernel = np.ones((1, 2 * half + 1), np.uint8)
     box = (2 * half + 1, 1)
     out = np.empty(rgb.shape, np.float32)
@@ -483,9 +484,13 @@ def normalize_channels(rgb, *, half, min_span):
     for c in range(3):
         v = np.ascontiguousarray(rgb[..., c], dtype=np.float32)
         lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
-        span = (
-            cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE) - lo
-        )
+        hi = cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
+        w = v.shape[1]
+        if clamp_ends and w > 2 * half:
+            for a in (lo, hi):
+                a[:, :half] = a[:, half : half + 1]
+                a[:, w - half :] = a[:, w - 1 - half : w - half]
+        span = hi - lo
         ok = span >= np.float32(min_span)
         with np.errstate(divide="ignore", invalid="ignore"):
             np.divide(v - lo, span, out=out[..., c], where=ok)

@@ -623,12 +623,18 @@ def test_channel_normalisation_matches_opencv(w, half):
 
     rgb = np.ascontiguousarray(robust_inputs(w=max(w, 300))[:, :w])
     for min_span in (0.01, 0.0):
-        out = np.empty_like(rgb)
-        span = np.empty_like(rgb)
-        _kernels.normalize_channels(rgb, half, min_span, out, span)
-        want_out, want_span = ref.normalize_channels(rgb, half=half, min_span=min_span)
-        same(out, want_out)
-        same(span, want_span)
+        plain = None
+        for clamp in (False, True):
+            out = np.empty_like(rgb)
+            span = np.empty_like(rgb)
+            _kernels.normalize_channels(rgb, half, min_span, out, span, None, clamp)
+            want_out, want_span = ref.normalize_channels(rgb, half=half, min_span=min_span, clamp_ends=clamp)
+            same(out, want_out)
+            same(span, want_span)
+            if clamp:
+                moved = not np.array_equal(out, plain, equal_nan=True)
+                assert moved == (w > 2 * half > 0), (w, half)  # the ends moved where a window fits
+            plain = out
     got = color.normalize_channels(rgb, period_px=T_CAM, order=3, min_span=0.01, return_span=True)
     want = ref.normalize_channels(rgb, half=color._code_window_px(T_CAM, 3), min_span=0.01)
     same(got[0], want[0])

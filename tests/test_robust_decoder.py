@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from simbench.decode import DecoderParams, decode, decode_reference, robust_params
+from simbench.decode import color
 from simbench.decode.color import albedo_edges, albedo_gain, mixing_matrix, normalize_channels, segment_mean, unmix
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
 from simbench.sim.projector import transfer_curve
@@ -231,6 +232,39 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
         assert np.all(err < 0.5 * 21), f"stripe-order error (flatten {flatten})"
         out[flatten] = (ok.sum() / region.sum(), float(err.mean()))
     assert out[False][0] < 0.97 <= out[True][0], out
+
+
+def test_the_code_at_a_rows_end_is_read_against_a_whole_window():
+    """A red stripe whose last 1.5 px open the row (fringe 0.045 of full there, as the 1-px stripe at
+    scenes/robust_staircase.toml's left border): against the window cut by the row's end its code
+    reads green in over a third of 2000 noisy rows (37 % here; the staircase lost 435 of 960 rows
+    of its border sliver so), against the whole window moved inward (code_at_row_ends) in under
+    1 %; at the right end (the row mirrored) the same; every other pixel's code as it was."""
+    t = 22.0
+    half = color._code_window_px(t, 3)
+    h, w = 2000, 300
+    xp = np.arange(w) + 20.5
+    code = np.array([1, 1, 1, 0, 1, 0, 0, 0] * 3)[(xp // t).astype(int)].astype(bool)
+    fringe = 0.5 - 0.5 * np.cos(2 * np.pi * xp / t)
+    rgb = np.stack([code * fringe, ~code * fringe, fringe], axis=-1)[None].repeat(h, 0).astype(np.float32)
+    rgb += np.random.default_rng(3).normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    ends = np.zeros(w, bool)
+    ends[:half] = ends[w - half :] = True
+    for mirrored in (False, True):
+        img = np.ascontiguousarray(rgb[:, ::-1]) if mirrored else rgb
+        truth = code[::-1] if mirrored else code
+        end = w - 1 if mirrored else 0
+        normed, span = color.normalize_channels(img, period_px=t, order=3, min_span=0.01, return_span=True)
+        cut = color.normalized_color_code(normed, span)
+        whole = cut.copy()
+        color.code_at_row_ends(img, whole, period_px=t, order=3, min_span=0.01)
+        assert np.mean(cut[:, end] != truth[end]) > 0.2
+        assert np.mean(whole[:, end] != truth[end]) < 0.01
+        assert np.array_equal(whole[:, ~ends], cut[:, ~ends])
+        assert np.mean(whole[:, ends] != truth[ends]) <= np.mean(cut[:, ends] != truth[ends])
+    narrow = np.zeros((h, 2 * half), bool)  # no whole window in a row: left as it is
+    color.code_at_row_ends(rgb[:, : 2 * half], narrow, period_px=t, order=3, min_span=0.01)
+    assert not narrow.any()
 
 
 def test_colour_robust_result_does_not_depend_on_threads(calibration):

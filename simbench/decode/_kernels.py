@@ -59,7 +59,7 @@ _SIGNATURES = {
     "chain_extent": (None, [_I, _P, _P, _P]),
     "bounded_mean": (None, [_I, _I, _P, _P, _P, _I, _I, _P, _P]),
     "normalize_scratch_floats": (_I, [_I, _I]),
-    "normalize_channels": (None, [_I, _I, _P, _P, _I, _F, _P, _P, _P]),
+    "normalize_channels": (None, [_I, _I, _P, _P, _I, _F, _I, _P, _P, _P]),
     "albedo_proxy": (None, [_I, _P, _P, _F, _P, _P]),
     "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P]),
     "box_level": (None, [_I, _I, _P, _I, _F, _P]),
@@ -545,14 +545,16 @@ def decode_tail(
     )
 
 
-def normalize_channels(rgb, half, min_span, out, span, gain=None) -> None:
+def normalize_channels(rgb, half, min_span, out, span, gain=None, clamp_ends=False) -> None:
     """:func:`simbench.decode.color.normalize_channels` of an (H, W, 3) float32 image in one
     pass: per row and channel the running minimum and maximum over ``2 half + 1`` pixels, each
     box-averaged over as many (cv2.erode / cv2.dilate then cv2.blur, ends replicated, with the
     double running sums of OpenCV's float32 box filter), ``span = max - min``, ``out = (v - min) /
     span`` where ``span >= min_span`` (float32), else 0; ``span`` (or None) gets the span there,
     else 0; ``gain`` ((H, W) float32, or None) multiplies each pixel's channels first.  The same bits
-    as the OpenCV/numpy form (tests/numpy_reference.py)."""
+    as the OpenCV/numpy form (tests/numpy_reference.py).  ``clamp_ends`` (where ``W > 2 half``):
+    the ``half`` pixels at each end of a row take the minimum and maximum of the first (last) pixel
+    whose window lies inside the row."""
     h, w, c = rgb.shape
     if c != 3 or h < 1 or w < 1:
         raise ValueError(f"rgb: expected (H, W, 3) with H, W >= 1, got {rgb.shape}")
@@ -568,6 +570,7 @@ def normalize_channels(rgb, half, min_span, out, span, gain=None) -> None:
         None if gain is None else _ptr(gain, "gain", np.float32, (h, w)),
         half,
         _f32(min_span),
+        int(bool(clamp_ends)),
         _ptr(out, "out", np.float32, (h, w, 3), writable=True),
         None if span is None else _ptr(span, "span", np.float32, (h, w, 3), writable=True),
         scratch.ctypes.data,

@@ -16,6 +16,7 @@ from simbench.decode.color import (
     mixing_matrix,
     albedo_gain,
     normalize_channels,
+    code_at_row_ends,
     normalized_color_code,
     overlay_weights,
     segment_stripes,
@@ -327,17 +328,20 @@ def _columns(
                     window_periods=window,
                 )
         raw = rgb
-        weights = span = None
+        weights = span = gain = None
         with stage("colour unmixing and normalisation"):
             if unmixing is not None:
                 rgb = unmix(rgb, unmixing)
+            unmixed = rgb
             if params.color_normalize:
                 norm = dict(period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
                 normed, span = normalize_channels(rgb, **norm)
                 if params.albedo_flatten:
                     gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
-                    if not (gain == 1.0).all():
+                    if (gain == 1.0).all():
+                        gain = None
+                    else:
                         normed, span = normalize_channels(rgb, gain=gain, **norm)
                 rgb = normed
                 if params.intensity_mode == "weighted":
@@ -347,7 +351,18 @@ def _columns(
         with stage("intensity overlay (Eq. 9)"):
             intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
         with stage("colour code (Eq. 13)"):
-            code = color_code(rgb[crop]) if span is None else normalized_color_code(rgb[crop], span[crop])
+            if span is None:
+                code = color_code(rgb[crop])
+            else:
+                code = normalized_color_code(rgb[crop], span[crop])
+                code_at_row_ends(
+                    unmixed[crop],
+                    code,
+                    period_px=t_cam,
+                    order=params.order,
+                    min_span=norm["min_span"],
+                    gain=None if gain is None else gain[crop],
+                )
     sx = params.sigma_periods * t_cam
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
