@@ -19,6 +19,13 @@ from simbench.pattern import check_channels
 from simbench.rig import Rig
 
 
+def fit_halo_rows(params: DecoderParams, rig: Rig) -> int:
+    """The rows above and below a pixel the phase fit reads: its Gaussian window's radius,
+    ``ceil(3 sigma_y)`` (:func:`simbench.decode.phase.gaussian_kernel`)."""
+    sy = params.sigma_periods * params.camera_period(rig) * params.sigma_y_ratio
+    return int(np.ceil(3.0 * sy))
+
+
 def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int, int]], int, int]:
     """Row bands, the halo (rows) each needs, and the worker threads: one band per thread, never
     thinner than 4 phase-fit halos (or 32 rows).
@@ -35,8 +42,7 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     huge pages made single-thread decodes slow; the fresh pages came from a reference cycle that
     kept each decode's images alive, and since that is gone one band per thread is the faster
     plan: single-thread 1280x960 decode 15.8 -> 15.2 ms median, 2 threads unchanged.)"""
-    sy = params.sigma_periods * params.camera_period(rig) * params.sigma_y_ratio
-    fit_halo = int(np.ceil(3.0 * sy))
+    fit_halo = fit_halo_rows(params, rig)
     halo = fit_halo
     if params.color_normalize and params.albedo_flatten:
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)

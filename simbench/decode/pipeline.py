@@ -49,7 +49,7 @@ from simbench.decode.params import (
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
 )
-from simbench.decode.bands import run_bands
+from simbench.decode.bands import fit_halo_rows, run_bands
 from simbench.optics import undistort_image
 from simbench.pattern import (
     check_channels,
@@ -300,6 +300,31 @@ def _columns(
     else:
         with stage("to float"):
             rgb = _to_float(image if order == [0, 1, 2] else image[..., order])
+        raw = rgb
+        weights = span = gain = None
+        with stage("colour unmixing and normalisation"):
+            if unmixing is not None:
+                rgb = unmix(rgb, unmixing)
+            if params.color_normalize:
+                norm = dict(period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
+                normed, span = normalize_channels(rgb, **norm)
+                if params.albedo_flatten:
+                    gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
+                    # the band holds the rows the gain reads beyond the fit's (bands.row_bands); the
+                    # rest of the work needs the fit's rows only: copies of them, so that the band's
+                    # images are freed (the memory a band thread holds at once decides whether the
+                    # allocator hands it fresh pages every decode: ~8 ms more a decode when it did)
+                    halo = fit_halo_rows(params, rig)
+                    fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
+                    crop = slice(crop.start - fit.start, crop.stop - fit.start)
+                    image, gain = image[fit], gain[fit]
+                    raw, rgb = (a[fit].copy() for a in (raw, rgb)) if rgb is not raw else (raw[fit].copy(),) * 2
+                    # with no step anywhere the gain is exactly 1 and the normalisation stands
+                    if (gain == 1.0).all():
+                        gain = None
+                        normed, span = normed[fit].copy(), span[fit].copy()
+                    else:
+                        normed, span = normalize_channels(rgb, gain=gain, **norm)
         with stage("lit and clipped pixels"):
             if image.dtype in _FUSED_DTYPES and image.flags.c_contiguous:
                 # the fused front end's lit and clipped pixels (the same bits as certainty_map);
@@ -321,30 +346,17 @@ def _columns(
                 )
             else:
                 certainty, lit = certainty_map(
-                    rgb,
+                    raw,
                     period_px=t_cam,
                     dark_level=params.dark_level,
                     saturation_level=params.saturation_level,
                     window_periods=window,
                 )
-        raw = rgb
-        weights = span = gain = None
-        with stage("colour unmixing and normalisation"):
-            if unmixing is not None:
-                rgb = unmix(rgb, unmixing)
-            unmixed = rgb
-            if params.color_normalize:
-                norm = dict(period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
-                normed, span = normalize_channels(rgb, **norm)
-                if params.albedo_flatten:
-                    gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
-                    # with no step anywhere the gain is exactly 1 and the normalisation stands
-                    if (gain == 1.0).all():
-                        gain = None
-                    else:
-                        normed, span = normalize_channels(rgb, gain=gain, **norm)
-                rgb = normed
-                if params.intensity_mode == "weighted":
+        unmixed = rgb
+        if span is not None:
+            rgb = normed
+            if params.intensity_mode == "weighted":
+                with stage("colour unmixing and normalisation"):
                     weights = overlay_weights(
                         raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level
                     )
