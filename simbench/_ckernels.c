@@ -1395,9 +1395,9 @@ ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *re
  * k = 2 r + 1 pixels (running_extrema), each box-averaged over k pixels (box_means); then
  * span = mean_max - mean_min, out = (v - mean_min) / span where span >= min_span, else 0, and
  * span_out (NULL: not written) the span there, else 0; with a per-pixel gain ((h, w); NULL: none)
- * v is each channel times it.  clamp_ends (with w > 2 r): within r pixels of the row's ends the
- * means are those of the first (last) pixel whose window lies inside the row, r (w - 1 - r) - the
- * window kept whole and moved inward instead of cut by the row's end.
+ * v is each channel times it.  clamp_ends (with w > 4 r): within 2 r pixels of the row's ends the
+ * means are those of pixel 2 r (w - 1 - 2 r), the first (last) whose mean reads only extrema of
+ * whole windows - the window moved inward instead of cut by the row's end.
  * scratch: normalize_scratch_floats(w, r) floats. */
 int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + (EXT + 9) * w; }
 
@@ -1418,12 +1418,13 @@ void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, const f
         }
         running_extrema(w, r, v, pad, g, e, ext);
         box_means(w, r, ext, lo, hi);
-        if (clamp_ends && w > 2 * r) {
-            for (int64_t x = 0; x < r; x++)
+        if (clamp_ends && w > 4 * r) {
+            const int64_t q = 2 * r;
+            for (int64_t x = 0; x < q; x++)
                 for (int c = 0; c < 3; c++) {
-                    lo[3 * x + c] = lo[3 * r + c], hi[3 * x + c] = hi[3 * r + c];
-                    lo[3 * (w - 1 - x) + c] = lo[3 * (w - 1 - r) + c];
-                    hi[3 * (w - 1 - x) + c] = hi[3 * (w - 1 - r) + c];
+                    lo[3 * x + c] = lo[3 * q + c], hi[3 * x + c] = hi[3 * q + c];
+                    lo[3 * (w - 1 - x) + c] = lo[3 * (w - 1 - q) + c];
+                    hi[3 * (w - 1 - x) + c] = hi[3 * (w - 1 - q) + c];
                 }
         }
         float *restrict o = out + y * m;

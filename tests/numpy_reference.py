@@ -475,8 +475,8 @@ def bounded_mean(values, s0, s1, *, width_px, square=False):
 def normalize_channels(rgb, *, half, min_span, clamp_ends=False):
     """simbench.decode.color.normalize_channels as it was in OpenCV and numpy: per channel
     cv2.erode / cv2.dilate over 1 x (2 half + 1), each cv2.blur'ed over as many, the range's
-    division where it reaches min_span; ``clamp_ends`` (rows wider than 2 half + 1): the smoothed
-    extrema of columns half and W - 1 - half replicated over the half columns beyond them."""
+    division where it reaches min_span; ``clamp_ends`` (rows wider than 4 half): the smoothed
+    extrema of columns 2 half and W - 1 - 2 half replicated over the 2 half columns beyond them."""
     kernel = np.ones((1, 2 * half + 1), np.uint8)
     box = (2 * half + 1, 1)
     out = np.empty(rgb.shape, np.float32)
@@ -486,10 +486,11 @@ def normalize_channels(rgb, *, half, min_span, clamp_ends=False):
         lo = cv2.blur(cv2.erode(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
         hi = cv2.blur(cv2.dilate(v, kernel, borderType=cv2.BORDER_REPLICATE), box, borderType=cv2.BORDER_REPLICATE)
         w = v.shape[1]
-        if clamp_ends and w > 2 * half:
+        if clamp_ends and w > 4 * half:
+            q = 2 * half
             for a in (lo, hi):
-                a[:, :half] = a[:, half : half + 1]
-                a[:, w - half :] = a[:, w - 1 - half : w - half]
+                a[:, :q] = a[:, q : q + 1]
+                a[:, w - q :] = a[:, w - 1 - q : w - q]
         span = hi - lo
         ok = span >= np.float32(min_span)
         with np.errstate(divide="ignore", invalid="ignore"):

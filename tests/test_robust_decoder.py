@@ -234,37 +234,86 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     assert out[False][0] < 0.97 <= out[True][0], out
 
 
-def test_the_code_at_a_rows_end_is_read_against_a_whole_window():
-    """A red stripe whose last 1.5 px open the row (fringe 0.045 of full there, as the 1-px stripe at
-    scenes/robust_staircase.toml's left border): against the window cut by the row's end its code
-    reads green in over a third of 2000 noisy rows (37 % here; the staircase lost 435 of 960 rows
-    of its border sliver so), against the whole window moved inward (code_at_row_ends) in under
-    1 %; at the right end (the row mirrored) the same; every other pixel's code as it was."""
+def _fringe_rows(h: int, w: int, *, shift_px: float = 20.5, seed: int = 3):
+    """Noisy rows of the normalised-channel pattern (R = C I, G = (1 - C) I, B = I), the first
+    stripe's last ``22 - shift_px`` px opening the row; and the true code."""
     t = 22.0
-    half = color._code_window_px(t, 3)
-    h, w = 2000, 300
-    xp = np.arange(w) + 20.5
-    code = np.array([1, 1, 1, 0, 1, 0, 0, 0] * 3)[(xp // t).astype(int)].astype(bool)
+    xp = np.arange(w) + shift_px
+    code = np.array([1, 1, 1, 0, 1, 0, 0, 0] * (w // 150 + 2))[(xp // t).astype(int)].astype(bool)
     fringe = 0.5 - 0.5 * np.cos(2 * np.pi * xp / t)
     rgb = np.stack([code * fringe, ~code * fringe, fringe], axis=-1)[None].repeat(h, 0).astype(np.float32)
-    rgb += np.random.default_rng(3).normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    rgb += np.random.default_rng(seed).normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    return rgb, code
+
+
+def test_the_code_at_a_rows_end_is_read_against_whole_windows():
+    """A red stripe whose last 1.5 px open the row (fringe 0.045 of full there, as the 1-px stripe at
+    scenes/robust_staircase.toml's left border): against the window cut by the row's end its code
+    reads green in over a third of 2000 noisy rows (the staircase lost 435 of 960 rows of its border
+    sliver so), with code_at_row_ends in under 1 %; at the right end (the row mirrored) the same;
+    every other pixel's code as it was; a row of 4 half or fewer pixels is left alone."""
+    t = 22.0
+    half = color._code_window_px(t, 3)
+    rgb, code = _fringe_rows(2000, 300)
+    w = rgb.shape[1]
     ends = np.zeros(w, bool)
-    ends[:half] = ends[w - half :] = True
+    ends[: 2 * half] = ends[w - 2 * half :] = True
     for mirrored in (False, True):
         img = np.ascontiguousarray(rgb[:, ::-1]) if mirrored else rgb
         truth = code[::-1] if mirrored else code
         end = w - 1 if mirrored else 0
         normed, span = color.normalize_channels(img, period_px=t, order=3, min_span=0.01, return_span=True)
         cut = color.normalized_color_code(normed, span)
-        whole = cut.copy()
-        color.code_at_row_ends(img, whole, period_px=t, order=3, min_span=0.01)
+        before = cut.copy()
+        whole = color.code_at_row_ends(img, cut, period_px=t, order=3, min_span=0.01)
+        assert np.array_equal(cut, before)  # a new array; the input stays
         assert np.mean(cut[:, end] != truth[end]) > 0.2
         assert np.mean(whole[:, end] != truth[end]) < 0.01
         assert np.array_equal(whole[:, ~ends], cut[:, ~ends])
         assert np.mean(whole[:, ends] != truth[ends]) <= np.mean(cut[:, ends] != truth[ends])
-    narrow = np.zeros((h, 2 * half), bool)  # no whole window in a row: left as it is
-    color.code_at_row_ends(rgb[:, : 2 * half], narrow, period_px=t, order=3, min_span=0.01)
-    assert not narrow.any()
+    narrow = np.zeros((4, 4 * half), bool)
+    assert color.code_at_row_ends(rgb[:4, : 4 * half], narrow, period_px=t, order=3, min_span=0.01) is narrow
+
+
+@pytest.mark.parametrize("w", [4 * 45 + 1, 4 * 45 + 2, 5 * 45, 300, 1280])
+@pytest.mark.parametrize("with_gain", [False, True])
+def test_the_code_at_a_rows_end_is_the_whole_rows_clamped_normalisation(w, with_gain):
+    """code_at_row_ends reads strips of 4 half + 1 columns: at both ends the code of normalising the
+    whole row with ``clamp_ends`` (the strips' bounds are what this pins), with and without a gain."""
+    t = 22.0
+    half = color._code_window_px(t, 3)
+    assert half == 45
+    rgb, _ = _fringe_rows(6, w, shift_px=7.0, seed=w)
+    gain = (1.0 + np.random.default_rng(w).random((6, w))).astype(np.float32) if with_gain else None
+    kw = dict(period_px=t, order=3, min_span=0.01)
+    cut = color.normalized_color_code(*color.normalize_channels(rgb, return_span=True, gain=gain, **kw))
+    whole = color.normalized_color_code(
+        *color.normalize_channels(rgb, return_span=True, gain=gain, clamp_ends=True, **kw)
+    )
+    got = color.code_at_row_ends(rgb, cut, gain=gain, **kw)
+    q = 2 * half
+    assert np.array_equal(got[:, :q], whole[:, :q])
+    assert np.array_equal(got[:, w - q :], whole[:, w - q :])
+    assert np.array_equal(got[:, q : w - q], cut[:, q : w - q])
+
+
+def test_the_albedo_gain_reads_no_row_beyond_its_reach(calibration):
+    """albedo_gain_reach_rows is the gain's reach: the gain of a band of rows with that many more
+    above and below is the whole image's there (the row bands carry them: bands.row_bands)."""
+    from simbench.decode.color import albedo_gain_reach_rows
+
+    cap, _, _ = _checkerboard(0.1)
+    rgb = cap.astype(np.float32) / np.float32(np.iinfo(cap.dtype).max if cap.dtype.kind == "u" else 1.0)
+    t = PARAMS_PERIOD_PX
+    kw = dict(period_px=t, order=3)
+    _, span = normalize_channels(rgb, min_span=0.01, return_span=True, **kw)
+    whole = albedo_gain(rgb, span, **kw)
+    assert (whole != 1.0).mean() > 0.05  # the steps are flattened
+    m = albedo_gain_reach_rows(t, 3)
+    for r0, r1 in ((150, 230), (300, 301), (0, 40)):
+        a = max(0, r0 - m)
+        band = albedo_gain(rgb[a : r1 + m], span[a : r1 + m], **kw)
+        assert np.array_equal(band[r0 - a : r1 - a], whole[r0:r1]), (r0, r1)
 
 
 def test_colour_robust_result_does_not_depend_on_threads(calibration):

@@ -552,9 +552,9 @@ def normalize_channels(rgb, half, min_span, out, span, gain=None, clamp_ends=Fal
     double running sums of OpenCV's float32 box filter), ``span = max - min``, ``out = (v - min) /
     span`` where ``span >= min_span`` (float32), else 0; ``span`` (or None) gets the span there,
     else 0; ``gain`` ((H, W) float32, or None) multiplies each pixel's channels first.  The same bits
-    as the OpenCV/numpy form (tests/numpy_reference.py).  ``clamp_ends`` (where ``W > 2 half``):
-    the ``half`` pixels at each end of a row take the minimum and maximum of the first (last) pixel
-    whose window lies inside the row."""
+    as the OpenCV/numpy form (tests/numpy_reference.py).  ``clamp_ends`` (where ``W > 4 half``):
+    the ``2 half`` pixels at each end of a row take the mean minimum and maximum of pixel
+    ``2 half`` (``W - 1 - 2 half``), the first (last) whose mean reads only whole windows."""
     h, w, c = rgb.shape
     if c != 3 or h < 1 or w < 1:
         raise ValueError(f"rgb: expected (H, W, 3) with H, W >= 1, got {rgb.shape}")

@@ -208,10 +208,10 @@ def normalize_channels(
         A per-pixel gain every channel is multiplied by first (:func:`albedo_gain`'s): the result
         of ``rgb * gain[..., None]`` without that image.
     clamp_ends : bool
-        Within half a window of a row's ends, the ranges of the first (last) pixel whose window
-        lies inside the row: the window moved inward whole instead of cut by the row's end (for
-        the colour code there: :func:`code_at_row_ends`).  Rows no wider than a window are as
-        without it.
+        Within a window of a row's ends (``2 half`` pixels), the ranges of the first (last) pixel
+        whose mean reads only extrema of whole windows, pixel ``2 half`` (``W - 1 - 2 half``): the
+        window moved inward instead of cut by the row's end (for the colour code there:
+        :func:`code_at_row_ends`).  Rows of ``4 half`` pixels or fewer are as without it.
 
     Returns
     -------
@@ -242,41 +242,50 @@ def code_at_row_ends(
     order: int,
     min_span: float,
     gain: np.ndarray | None = None,
-) -> None:
-    """Read the colour code again, in place, in the half window at each end of every row, against
-    the local ranges of a whole window (ours, with :func:`normalize_channels`).
+) -> np.ndarray:
+    """``code`` with the colour code read again within a window of each end of every row, against
+    local ranges made of whole windows only (ours, with :func:`normalize_channels`).
 
     At a row's end :func:`normalize_channels` cuts its window to the pixels inside the row: half
     a window at the very end, (n + 1) / 2 periods, which may hold stripes of one code only (the
-    longest run is n), so that the other code channel's range there is noise and a stripe's code
-    reads by chance.  Measured on ``scenes/robust_staircase.toml``: the one-pixel stripe at the
-    left border read the wrong code in 435 of its 960 rows, and each such row lost the 4-stripe
-    sliver of wall beside it (3.0 % of the scene).  The whole window moved inward
-    (``clamp_ends``) holds both colours.  Only the code is read so: the fringe's normalisation
-    keeps the cut window, which follows a nearby albedo step more closely (measured: moving the
-    fringe's window too cost the printed charts 0.3-0.6 % completeness).
+    longest run is n), and the box mean of the extrema spreads that over another half window - so
+    that the other code channel's range comes out too small there and a weak pixel's code reads by
+    chance.  Measured on ``scenes/robust_staircase.toml``: the one-pixel stripe at the left border
+    read the wrong code in 435 of its 960 rows, and each such row lost the 4-stripe sliver of wall
+    beside it (3.4 % of the scene).  Here the ``2 half`` pixels at each end take the ranges of the
+    first (last) pixel whose mean reads only whole windows (``clamp_ends``): 1 row of 960 still
+    misreads (with the ranges of the first whole window itself, half as far in, 55 did).  Only the
+    code is read so: the fringe's normalisation keeps the cut window, which follows a nearby albedo
+    step more closely (measured: moving the fringe's window too cost the printed charts 0.3-0.6 %
+    completeness).
 
     Parameters
     ----------
     rgb : ndarray, shape (H, W, 3), float32; the capture the code channels were normalised from
         (unmixed, before :func:`normalize_channels`)
-    code : ndarray, shape (H, W), bool; :func:`normalized_color_code` of it, overwritten at the
-        rows' ends
+    code : ndarray, shape (H, W), bool; :func:`normalized_color_code` of it (not changed)
     period_px, order, min_span :
         As for :func:`normalize_channels`.
     gain : ndarray, shape (H, W), float32, optional
         The gain the code's normalisation took (:func:`albedo_gain`).
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool; ``code`` itself where a row holds no such pixel (``W <= 4 half``)
     """
     half = _code_window_px(period_px, order)
     h, w = code.shape
-    if w <= 2 * half:
-        return  # no whole window in a row
-    # the first whole window's ranges read the extrema of the columns up to 3 half: a strip of them
-    # gives the row's own values there
-    strip = min(w, 3 * half + 1)
-    for cols, ends, out in (
-        (slice(0, strip), slice(0, half), slice(0, half)),
-        (slice(w - strip, w), slice(strip - half, strip), slice(w - half, w)),
+    if w <= 4 * half:
+        return code
+    q = 2 * half
+    # pixel 2 half's ranges read the extrema of the columns up to 4 half: a strip of them gives the
+    # row's own values (at the right end to the rounding of the box means' running sums, which
+    # start at the strip's first column instead of the row's)
+    strip = 4 * half + 1
+    out = code.copy()
+    for cols, ends, dest in (
+        (slice(0, strip), slice(0, q), slice(0, q)),
+        (slice(w - strip, w), slice(strip - q, strip), slice(w - q, w)),
     ):
         normed, span = normalize_channels(
             rgb[:, cols],
@@ -287,7 +296,8 @@ def code_at_row_ends(
             gain=None if gain is None else gain[:, cols],
             clamp_ends=True,
         )
-        code[:, out] = normalized_color_code(normed[:, ends], span[:, ends])
+        out[:, dest] = normalized_color_code(normed[:, ends], span[:, ends])
+    return out
 
 
 # Albedo flattening (ours, the colour-robust decoder's ``albedo_flatten``).  An albedo step is

@@ -266,7 +266,8 @@ def _columns(
 
     ``image`` is the band of the checked capture (any dtype :func:`as_float_image` takes,
     channels in the capture's order; ``order`` lists the indices of code 1, code 0 and the
-    fringe) plus a halo of rows above and below for the phase fit; ``crop`` selects the band's
+    fringe) plus a halo of rows above and below for the phase fit and, with the albedo flattening,
+    the rows its gain reads (:func:`simbench.decode.bands.row_bands`); ``crop`` selects the band's
     own rows, to which everything after the fit is restricted.
     Returns (:class:`BandStripes`, stages) for the cropped rows; the stage images of the
     absolute column (``position``, ``column``, ``unwrapped_phase``) are made on access.
@@ -317,7 +318,7 @@ def _columns(
                     halo = fit_halo_rows(params, rig)
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
-                    image, gain = image[fit], gain[fit]
+                    image, gain = image[fit], gain[fit].copy()
                     raw, rgb = (a[fit].copy() for a in (raw, rgb)) if rgb is not raw else (raw[fit].copy(),) * 2
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
                     if (gain == 1.0).all():
@@ -366,10 +367,9 @@ def _columns(
             if span is None:
                 code = color_code(rgb[crop])
             else:
-                code = normalized_color_code(rgb[crop], span[crop])
-                code_at_row_ends(
+                code = code_at_row_ends(
                     unmixed[crop],
-                    code,
+                    normalized_color_code(rgb[crop], span[crop]),
                     period_px=t_cam,
                     order=params.order,
                     min_span=norm["min_span"],
@@ -687,8 +687,9 @@ def decode(
 ) -> DecodeResult:
     """Decode one capture into depth (paper Sec. 5).
 
-    Rows are processed in bands on ``params.threads`` threads (each with a halo of rows for
-    the phase fit); the result does not depend on the number of threads.
+    Rows are processed in bands on ``params.threads`` threads (each with a halo of the rows its
+    2-D windows read: :func:`simbench.decode.bands.row_bands`); the result does not depend on the
+    number of threads.
 
     Parameters
     ----------
