@@ -47,6 +47,13 @@ def _pad_factor(c_px: float, size: int, scale: int) -> tuple[int, int, float]:
     return left, total, realised
 
 
+# the last texture made from a read-only drive: (drive, projector, result).  A moving capture
+# renders the same drive in every time slice (the Kinect's dot pattern); the upsampling and padding
+# were ~25 ms a slice.  Only a read-only drive is reused, by identity (held here, so that its id
+# cannot pass to another array), since a writable one could change under the same object.
+_LAST_TEXTURE: tuple = ()
+
+
 def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndarray, float, Intrinsics]:
     """Texture and field of view for Mitsuba's ``projector`` emitter.
 
@@ -70,6 +77,19 @@ def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndar
     h, w = projector.size_hw
     if drive.shape != (h, w, 3):
         raise ValueError(f"pattern shape {drive.shape} does not match the projector {(h, w, 3)}")
+    global _LAST_TEXTURE
+    if drive.flags.writeable:
+        return _texture(drive, projector)
+    last = _LAST_TEXTURE  # one read: another thread may replace it
+    if last and last[0] is drive and last[1] == projector:
+        return last[2]
+    result = _texture(drive, projector)
+    _LAST_TEXTURE = (drive, projector, result)
+    return result
+
+
+def _texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndarray, float, Intrinsics]:
+    h, w = projector.size_hw
     scale, (lx, tx), (ly, ty), realised = _padding(projector)
     tex = drive
     if scale > 1:
@@ -79,7 +99,9 @@ def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndar
         out[ly : ly + h * scale, lx : lx + w * scale] = tex
         tex = out
     fov = float(np.degrees(2 * np.arctan(tx / (2.0 * scale * projector.focal_px))))
-    return np.ascontiguousarray(tex, dtype=np.float32), fov, realised
+    tex = np.ascontiguousarray(tex, dtype=np.float32)
+    # mi.Bitmap takes writable arrays only (a read-only drive passes through unpadded)
+    return (tex if tex.flags.writeable else tex.copy()), fov, realised
 
 
 def _padding(projector: Intrinsics) -> tuple[int, tuple[int, int], tuple[int, int], Intrinsics]:
