@@ -59,3 +59,34 @@ def test_the_cli_runs_blas_on_one_thread_also_in_libraries_loaded_later():
     assert cli["env"] == "1"
     assert len(cli["threads"]) >= 2, cli  # numpy's BLAS and SciPy's
     assert all(n == 1 for _, n in cli["threads"]), cli
+
+
+def test_the_cli_keeps_malloc_to_few_arenas_and_respects_the_users_setting():
+    """After ``simbench`` starts, glibc's MALLOC_ARENA_MAX is set for spawned children (and mallopt
+    called for this process); a value the user set stays; importing simbench alone sets nothing."""
+    code = """
+        import contextlib, io
+        from simbench.cli import main
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(["--help"]) == 0
+        print(json.dumps({"arenas": os.environ.get("MALLOC_ARENA_MAX")}))
+        """
+    env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+
+    def run(code: str, extra: dict) -> dict:
+        out = subprocess.run(
+            [sys.executable, "-c", "import json, os\n" + textwrap.dedent(code)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env={**env, **extra},
+        )
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    from simbench.threads import MALLOC_ARENAS
+
+    assert run(code, {})["arenas"] == str(MALLOC_ARENAS)
+    assert run(code, {"MALLOC_ARENA_MAX": "7"})["arenas"] == "7"
+    imported = 'import simbench.cli\nprint(json.dumps({"arenas": os.environ.get("MALLOC_ARENA_MAX")}))'
+    assert run(imported, {})["arenas"] is None

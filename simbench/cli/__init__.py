@@ -85,9 +85,10 @@ _PATH_OPTIONS = (
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
-    from simbench.threads import single_thread_blas
+    from simbench.threads import limit_malloc_arenas, single_thread_blas
 
     single_thread_blas()
+    limit_malloc_arenas()
     _report_library_messages()
     try:
         args = _parser().parse_args(argv)

@@ -55,11 +55,12 @@ def worker_state() -> Any:
 
 def _start(variant: str | None, parent_pid: int, messages, setup, setup_args: tuple) -> None:
     global _worker_state
-    from simbench.threads import single_thread_blas
+    from simbench.threads import limit_malloc_arenas, single_thread_blas
     from simbench.variant import select_variant
 
     _die_with_parent(parent_pid)
     single_thread_blas()
+    limit_malloc_arenas()
     select_variant(variant)
     if setup is not None:
         _worker_state = setup(messages.put, *setup_args)
@@ -367,9 +368,10 @@ def _dask_call(fn, task: Task, variant: str | None, setup, setup_args: tuple) ->
     with _dask_lock:  # one variant choice and setup at a time in a worker process
         _dask_variant(variant)
         if setup is not None and getattr(_thread, "made_by", None) != made_by:
-            from simbench.threads import single_thread_blas
+            from simbench.threads import limit_malloc_arenas, single_thread_blas
 
             single_thread_blas()
+            limit_malloc_arenas()
             _thread.state = setup(_dask_emit, *setup_args)
             _thread.made_by = made_by
     return _call(fn, task)
