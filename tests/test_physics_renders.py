@@ -252,3 +252,30 @@ def test_a_plane_fills_the_view_only_when_every_pixel_sees_it():
     # the plane's edge just inside the view's edge (by 2 px at 1 m): not filled
     half_w = (cam.width_px - 1 - cam.cx_px + 2.5) / cam.focal_px
     assert not fills_view(plane(center_m=[half_w - 0.75 - 2 / cam.focal_px, 0.0, 1.0]))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="the render covers the ideal pinhole field only, and a barrel-distorted camera's end columns look "
+    "beyond it: distort_image leaves them black (issue 35 note, 2026-11-26: a 3-5 px rim at full resolution that "
+    "biases the phase ~10 px in from each end)",
+)
+def test_a_distorted_camera_records_the_scene_to_its_image_ends(variant):
+    """A plane filling the view under ambient light, recorded through the paper sensor's lens (k1 =
+    -0.08, k2 = 0.1): its left and right end columns are as bright as the columns just inside (a
+    real lens shows the scene there; the simulated one must render the field the distortion
+    reaches)."""
+    from simbench.sim.capture import physical_scene
+
+    paper = get_sensor("paper")
+    scene = physical_scene(dataclasses.replace(_plane(1.0), ambient_rgb=(0.3, 0.3, 0.3)), paper)
+    assert scene.rig.camera.has_distortion
+    drive = np.zeros(scene.rig.projector.size_hw + (3,), np.float32)
+    q = _render(scene, drive, paper, spp=4, seed=3, max_depth=2)
+    h, w = q.shape[:2]
+    rows = slice(h // 2 - 40, h // 2 + 40)
+    inside = q[rows, 30:40].mean()
+    assert inside > 0
+    for end in (slice(0, 2), slice(w - 2, w)):
+        assert q[rows, end].mean() >= 0.8 * inside, (end, q[rows, end].mean(), inside)
