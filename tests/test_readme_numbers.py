@@ -40,7 +40,7 @@ def _readme_table(first_header_cell: str) -> tuple[list[str], list[list[str]]]:
                     break
                 block.append(row)
             rows = _rows(block)
-            return rows[0], [r for r in rows[2:]]
+            return rows[0], rows[2:]
     raise AssertionError(f"README has no table starting with {first_header_cell!r}")
 
 

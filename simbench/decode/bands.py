@@ -44,7 +44,7 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     plan: single-thread 1280x960 decode 15.8 -> 15.2 ms median, 2 threads unchanged.)"""
     fit_halo = fit_halo_rows(params, rig)
     halo = fit_halo
-    if params.color_normalize and params.albedo_flatten:
+    if params.albedo_flatten:  # (it needs color_normalize: DecoderParams checks)
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
     most = max(1, height // max(4 * fit_halo, 32))
     threads = max(1, params.threads or os.cpu_count() or 1)

@@ -319,7 +319,8 @@ def _columns(
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
                     image, gain = image[fit], gain[fit].copy()
-                    raw, rgb = (a[fit].copy() for a in (raw, rgb)) if rgb is not raw else (raw[fit].copy(),) * 2
+                    raw = raw[fit].copy()
+                    rgb = raw if unmixing is None else rgb[fit].copy()
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
                     if (gain == 1.0).all():
                         gain = None
