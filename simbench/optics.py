@@ -9,7 +9,9 @@ Distortion (OpenCV's model, coefficients ``(k1, k2, p1, p2, k3)`` on normalised 
 
 * Camera: a ray with normalised direction ``(x, y)`` is recorded at pixel ``K (x_d, y_d)``.
   Mitsuba renders the ideal pinhole image, so the recorded image at pixel ``p`` is the ideal
-  image at ``K D^-1(K^-1 p)`` (:func:`distort_image`); a decoder undoes it by sampling the
+  image at ``K D^-1(K^-1 p)`` (:func:`distort_image`) - for a barrel lens beyond the ideal
+  image's ends, so a capture renders the field the lens reaches (:func:`lens_field`,
+  :func:`camera_lens_image`); a decoder undoes it by sampling the
   recorded image at ``K D(x)`` for every ideal pixel (:func:`undistort_image`).
 * Projector (an inverse camera): the DMD pixel that lights the ray ``(x, y)`` is ``K D(x, y)``.
   Mitsuba's projector is an ideal pinhole, so its texture at ideal pixel ``q`` is the DMD
@@ -57,6 +59,8 @@ __all__ = [
     "distorted_projector_drive",
     "lateral_colour_magnification",
     "lateral_colour_image",
+    "lens_field",
+    "camera_lens_image",
     "undistort_projector_columns",
     "blur_circle_px",
     "blur_sigma_px",
@@ -192,7 +196,8 @@ def distort_image(img: np.ndarray, intr: Intrinsics) -> np.ndarray:
 
     Returns
     -------
-    ndarray, same shape and dtype; zero where the recorded pixel sees outside the ideal image.
+    ndarray, same shape and dtype; zero where the recorded pixel sees outside the ideal image
+    (a simulated capture renders the wider field instead: :func:`camera_lens_image`).
     """
     import cv2
 
@@ -275,24 +280,131 @@ def lateral_colour_image(img: np.ndarray, intr: Intrinsics, *, shift_px: Sequenc
     -------
     ndarray, same shape and dtype (``img`` itself where every shift is 0)
     """
-    import cv2
-
     mags = lateral_colour_magnification(intr, shift_px)
     if not np.any(mags):
         return img
     src = np.asarray(img)
     if src.ndim != 3 or src.shape[2] != 3 or src.shape[:2] != tuple(intr.size_hw):
         raise ValueError(f"image of shape {src.shape} is not (H, W, 3) on the {intr.size_hw} grid")
+    return _magnify(src, float(intr.cx_px), float(intr.cy_px), mags)
+
+
+def _magnify(src: np.ndarray, cx: float, cy: float, mags: np.ndarray) -> np.ndarray:
+    """:func:`lateral_colour_image` on ``src``'s grid with principal point ``(cx, cy)`` and the
+    channels' magnifications ``mags``."""
+    import cv2
+
     out = np.empty_like(src)
     for c, m in enumerate(mags):
         if m == 0.0:
             out[..., c] = src[..., c]
             continue
-        mx, my = _magnify_maps(tuple(intr.size_hw), float(intr.cx_px), float(intr.cy_px), float(m))
+        mx, my = _magnify_maps(tuple(src.shape[:2]), cx, cy, float(m))
         plane = np.ascontiguousarray(src[..., c], dtype=np.float32)
         moved = cv2.remap(plane, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         out[..., c] = moved.astype(src.dtype, copy=False)
     return out
+
+
+def _padded(intr: Intrinsics, mx: int, my: int) -> Intrinsics:
+    """``intr``'s ideal pinhole grown by ``mx`` columns at each side and ``my`` rows at the top and
+    bottom (same rays for the same pixels: the principal point moves with the grid)."""
+    import dataclasses
+
+    if mx == 0 and my == 0:
+        return intr
+    return dataclasses.replace(
+        intr,
+        width_px=intr.width_px + 2 * mx,
+        height_px=intr.height_px + 2 * my,
+        cx_px=intr.cx_px + mx,
+        cy_px=intr.cy_px + my,
+    )
+
+
+def _lateral_margin_px(shift_px: Sequence[float]) -> int:
+    """Pixels beyond the recorded image that lateral colour reads from: a channel shifted inward
+    by ``s`` px at the corner samples up to ``s`` px outside (one more for bilinear weights)."""
+    s = max(abs(float(x)) for x in shift_px)
+    return 0 if s == 0.0 else int(np.ceil(s)) + 1
+
+
+@lru_cache(maxsize=8)
+def _lens_geometry(intr: Intrinsics, lateral_px: int) -> tuple[Intrinsics, tuple[np.ndarray, np.ndarray] | None]:
+    """The ideal field of :func:`lens_field` and the remap grids that distort it onto the recorded
+    grid grown by ``lateral_px`` at every side (None without distortion: the field is that grid)."""
+    ext = _padded(intr, lateral_px, lateral_px)
+    if not intr.has_distortion:
+        return ext.undistorted, None
+    mx, my = _distort_maps(ext)
+    h, w = intr.size_hw
+    # the field's margin m: the ideal image's coordinate of a map value v is v + m - lateral_px;
+    # m covers the lowest and highest v with a pixel to spare (bilinear reads the next one too);
+    # the same margin at both sides, so a centred principal point (a thin lens) stays centred
+    margins = []
+    for grid, n in ((mx, w), (my, h)):
+        lo, hi = float(grid.min()), float(grid.max())
+        margins.append(max(0, int(np.ceil(max(lateral_px - lo, hi - lateral_px - (n - 1)))) + 1))
+    field = _padded(intr.undistorted, *margins)
+    dx, dy = np.float32(margins[0] - lateral_px), np.float32(margins[1] - lateral_px)
+    maps = (mx + dx, my + dy)
+    for m in maps:
+        m.setflags(write=False)
+    return field, maps
+
+
+def lens_field(intr: Intrinsics, *, lateral_colour_px: Sequence[float] = (0.0, 0.0, 0.0)) -> Intrinsics:
+    """The ideal pinhole field that a camera with ``intr`` (its distortion) and this lateral colour
+    records: ``intr``'s grid grown, by the same margin at opposite sides, until every recorded
+    pixel's light comes from inside it - a barrel lens's image ends look beyond the pinhole
+    image of the same size, and a real lens shows the scene there, not black.  Render this
+    field, then :func:`camera_lens_image`.  ``intr`` itself for an ideal lens.
+
+    Returns
+    -------
+    simbench.rig.Intrinsics, no distortion, the same focal length
+    """
+    if not intr.has_distortion and _lateral_margin_px(lateral_colour_px) == 0:
+        return intr
+    return _lens_geometry(intr, _lateral_margin_px(lateral_colour_px))[0]
+
+
+def camera_lens_image(
+    ideal: np.ndarray, intr: Intrinsics, *, lateral_colour_px: Sequence[float] = (0.0, 0.0, 0.0)
+) -> np.ndarray:
+    """What the camera records through its lens: :func:`distort_image` then
+    :func:`lateral_colour_image`, from an image of the whole field they read
+    (:func:`lens_field`), so that every recorded pixel sees the scene.
+
+    Parameters
+    ----------
+    ideal : ndarray, shape (H', W', C), float32, on ``lens_field(intr, lateral_colour_px=...)``'s grid
+    intr : simbench.rig.Intrinsics, the camera (its distortion)
+    lateral_colour_px : 3 floats, as for :func:`lateral_colour_image` (relative to ``intr``'s grid)
+
+    Returns
+    -------
+    ndarray, shape (H, W, C) on ``intr``'s grid; ``ideal`` itself for an ideal lens
+    """
+    import cv2
+
+    lateral_px = _lateral_margin_px(lateral_colour_px)
+    field = lens_field(intr, lateral_colour_px=lateral_colour_px)
+    src = np.asarray(ideal)
+    if src.ndim != 3 or src.shape[:2] != tuple(field.size_hw):
+        raise ValueError(
+            f"image of shape {src.shape} is not (H, W, C) on the lens's field {field.size_hw} "
+            f"(simbench.optics.lens_field of the {intr.size_hw} camera)"
+        )
+    if field is intr:
+        return ideal
+    maps = _lens_geometry(intr, lateral_px)[1]
+    out = src if maps is None else _remap(src, *maps, cv2.INTER_LINEAR)
+    mags = lateral_colour_magnification(intr, lateral_colour_px)
+    if np.any(mags):
+        out = _magnify(out, float(intr.cx_px) + lateral_px, float(intr.cy_px) + lateral_px, mags)
+    h, w = intr.size_hw
+    return out[lateral_px : lateral_px + h, lateral_px : lateral_px + w]
 
 
 def undistort_projector_columns(

@@ -51,6 +51,87 @@ def test_distort_then_undistort_image_recovers_a_smooth_image():
     assert not np.allclose(distort_image(img, intr)[inner], img[inner], atol=0.01)  # it did distort
 
 
+def _field_image(field, fn):
+    """``fn(x, y)`` of normalised coordinates at the pixel centres of ``field``, (H, W, 3) float32."""
+    x, y = pixel_grid(field)
+    v = fn(x, y)
+    return np.ascontiguousarray(np.stack([v, 0.5 * v, 0.25 + v], -1), dtype=np.float32)
+
+
+@pytest.mark.parametrize("dist", [DIST, (0.12, 0.0, 0.0, 0.0, 0.0)], ids=["barrel", "pincushion"])
+@pytest.mark.parametrize("cxy", [(159.5, 119.5), (150.25, 127.0)], ids=["centred", "off-centre"])
+def test_the_lens_field_gives_every_recorded_pixel_the_scene_it_sees(dist, cxy):
+    """A capture renders ``lens_field`` and records it through ``camera_lens_image``: every recorded
+    pixel p gets the ideal image at K D^-1(K^-1 p) - up to the image's ends, where ``distort_image``
+    of a same-size pinhole image is black for a barrel lens.  Exact for an image linear in the
+    normalised coordinates (bilinear interpolation reproduces it: tolerance float32 rounding of the
+    maps, 1e-4 of the values' range).  The field has the same focal length, the same margin at
+    opposite sides (a centred principal point stays centred, as Mitsuba's thin lens needs) and no
+    distortion."""
+    from simbench.optics import camera_lens_image, lens_field
+
+    intr = Intrinsics(320, 240, 578.0, *cxy, dist)
+    field = lens_field(intr)
+    mx, my = (field.width_px - intr.width_px) // 2, (field.height_px - intr.height_px) // 2
+    assert (field.width_px - intr.width_px, field.height_px - intr.height_px) == (2 * mx, 2 * my)
+    assert (field.cx_px, field.cy_px, field.focal_px) == (intr.cx_px + mx, intr.cy_px + my, intr.focal_px)
+    assert not field.has_distortion
+
+    def linear(x, y):  # 0.5 to 1.5 over the field
+        return 1.0 + x - y
+
+    out = camera_lens_image(_field_image(field, linear), intr)
+    assert out.shape == (240, 320, 3)
+    xd, yd = pixel_grid(intr)
+    expected = _field_image(intr, lambda x, y: linear(*undistort_normalized(xd, yd, dist)))
+    assert np.max(np.abs(out - expected)) < 1e-4
+    if dist[0] < 0:  # barrel: the old path's ends are black, the lens field's are not
+        same_size = distort_image(_field_image(intr, linear), intr)[..., 0]
+        for end in (0, -1):
+            assert (same_size[:, end] < 0.5 * out[:, end, 0]).mean() > 0.5
+        assert mx >= 2 and np.all(out[:, [0, -1]] > 0.1)
+
+
+def test_lateral_colour_through_the_lens_field_has_no_black_rim():
+    """Lateral colour pulling a channel inward (blue -0.6 px at the corner) reads beyond the recorded
+    image: through the lens field that channel is the scene up to the image's ends (a uniform
+    scene stays uniform to float rounding), while ``lateral_colour_image`` on the recorded grid
+    darkens its end columns.  Inside the image both agree (tolerance: one more bilinear step of a
+    smooth image)."""
+    from simbench.optics import camera_lens_image, lateral_colour_image, lens_field
+
+    shift = (0.6, 0.0, -0.6)
+    for dist in (DIST, (0.0,) * 5):
+        intr = Intrinsics(320, 240, 578.0, 159.5, 119.5, dist)
+        field = lens_field(intr, lateral_colour_px=shift)
+        assert field.width_px > intr.width_px
+        flat = camera_lens_image(np.ones(field.size_hw + (3,), np.float32), intr, lateral_colour_px=shift)
+        assert np.max(np.abs(flat - 1.0)) < 1e-5
+        smooth = _field_image(field, lambda x, y: 0.5 + 0.3 * np.sin(9 * x) * np.cos(7 * y))
+        out = camera_lens_image(smooth, intr, lateral_colour_px=shift)
+        mx, my = (field.width_px - 320) // 2, (field.height_px - 240) // 2
+        old = lateral_colour_image(
+            distort_image(np.ascontiguousarray(smooth[my : my + 240, mx : mx + 320]), intr), intr, shift_px=shift
+        )
+        inner = (slice(20, -20), slice(20, -20))
+        assert np.max(np.abs(out[inner] - old[inner])) < 2e-3
+        assert old[:, -1, 2].mean() < 0.9 * out[:, -1, 2].mean()
+
+
+def test_an_ideal_lens_renders_its_own_image():
+    """No distortion, no lateral colour: the field is the camera itself and the image passes
+    through untouched (static captures of ideal sensors keep their render keys); a wrong-size
+    image is refused with the field's size in the message."""
+    from simbench.optics import camera_lens_image, lens_field
+
+    intr = Intrinsics(320, 240, 578.0, 159.5, 119.5)
+    assert lens_field(intr) is intr
+    img = np.zeros((240, 320, 3), np.float32)
+    assert camera_lens_image(img, intr) is img
+    with pytest.raises(ValueError, match="lens's field"):
+        camera_lens_image(img, Intrinsics(320, 240, 578.0, 159.5, 119.5, DIST))
+
+
 def pixel_grid(intr):
     """Normalised coordinates of the camera's pixel centres, float64, (H, W) each."""
     h, w = intr.size_hw

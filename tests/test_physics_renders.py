@@ -254,13 +254,6 @@ def test_a_plane_fills_the_view_only_when_every_pixel_sees_it():
     assert not fills_view(plane(center_m=[half_w - 0.75 - 2 / cam.focal_px, 0.0, 1.0]))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="the render covers the ideal pinhole field only, and a barrel-distorted camera's end columns look "
-    "beyond it: distort_image leaves them black (issue 35 note, 2026-11-26: a 3-5 px rim at full resolution that "
-    "biases the phase ~10 px in from each end)",
-)
 def test_a_distorted_camera_records_the_scene_to_its_image_ends(variant):
     """A plane filling the view under ambient light, recorded through the paper sensor's lens (k1 =
     -0.08, k2 = 0.1): its left and right end columns are as bright as the columns just inside (a

@@ -19,7 +19,7 @@ from simbench.sim.sensor import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.sim.drive import DriveImage, ProjectorDrive, mono_drive
 from simbench.sim.keys import recording_libraries, renderer_id, seed_key, sim_code_digest
 from simbench.sim.mitsuba_dict import RenderSettings, film_settings, pass_settings
-from simbench.optics import distort_image, lateral_colour_image
+from simbench.optics import camera_lens_image, lens_field
 from simbench.sim.subsurface import get_medium, subsurface_image
 from simbench.sim.photometry import (
     channel_weights,
@@ -270,7 +270,9 @@ def render_channels(
     band's medium: an approximation where a channel sees several primaries, and it spreads all the
     object's light, a glossy coating's highlight included), the camera lens distortion and
     lateral colour (per camera channel: an approximation where a channel sees several primaries'
-    wavelengths, exact for narrow-band light).
+    wavelengths, exact for narrow-band light).  The renders cover the field the lens records
+    (:func:`simbench.optics.lens_field`: a few pixels wider than the camera's image for a barrel
+    lens), so the recorded image has the scene up to its ends.
 
     ``scene`` is a :func:`physical_scene`; ``drive`` from :func:`projector_drive_for` (or a
     :class:`ProjectorDrive`, built only for renders the cache does not hold).
@@ -289,6 +291,12 @@ def render_channels(
     if is_moving(scene):
         return _exposure_integral(scene, drive, sensor, seed=seed, render=render, window_s=window_s)
     scene = scene_at(scene, 0.0)  # zero velocities: static
+    camera, lateral_px = scene.rig.camera, sensor.camera_lens.lateral_colour_px
+    # the renders cover the field the camera's lens records (wider than its pinhole image
+    # where the lens is barrel-distorted): every recorded pixel sees the scene
+    field = lens_field(camera, lateral_colour_px=lateral_px)
+    if field is not camera:
+        scene = dataclasses.replace(scene, rig=dataclasses.replace(scene.rig, camera=field))
     translucent_scene = scene
     # the renders do not depend on what happens under the surface (applied after them)
     scene = opaque(scene)
@@ -329,10 +337,7 @@ def render_channels(
                     r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
                 q += r * weights[:, p].astype(np.float32)
     q = with_translucency(q, translucent_scene, cache=render.cache)
-    q = distort_image(q, scene.rig.camera)
-    return lateral_colour_image(q, scene.rig.camera, shift_px=sensor.camera_lens.lateral_colour_px).astype(
-        np.float32, copy=False
-    )
+    return camera_lens_image(q, camera, lateral_colour_px=lateral_px).astype(np.float32, copy=False)
 
 
 def _exposure_integral(scene, drive, sensor, *, seed: int, render: RenderSettings, window_s) -> np.ndarray:
