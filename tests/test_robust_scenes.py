@@ -41,28 +41,23 @@ PASSING = [
     "robust_dark",
     "robust_tilt_x45",
     "step",
+    # 2026-11-26: 97.43 % complete, none > 5 mm wrong, both modes (96.39 % once the captures lost
+    # their black end columns, 97.43 % with the narrow window's SNR beside the depth edges)
+    "robust_staircase",
 ]
 # Known shortfalls, kept as strict xfails so that a fix shows up (and must then move the scene
-# to PASSING).  Measured at commit time, calibrated mode: ~89.4 % completeness, MAE 0.20 mm,
-# no stripe-order error.  Two losses, both of too few trustworthy neighbours rather than of the
-# phase: a 4-stripe sliver of wall between the image border and a projector shadow (~5.5 % of
-# the pixels) has two De Bruijn windows, one vote short of the neighbour correction's
-# min_support; and beside the step-to-wall edge that casts no shadow the phase runs on across
-# the edge, the link check finds the broken link and drops both stripes of it, about one
-# period each side beyond the 5-px band.
+# to PASSING).  (robust_staircase was one from issue 17 to 2026-11-26: slivers between the image
+# border and projector shadows, stripes dropped beside a shadowless depth edge, then pixels under
+# the operating point beside the edges - 89.4 % at first.)
 SHORTFALLS = {
     # measured 2026-11-25 (16 spp) at the operating point 3 with the albedo flattening and its shadow
     # guard: 95.5 % complete, 0.12 % (calibrated) / 0.13 % (reference) of the decoded pixels > 5 mm
     # wrong, MAE 0.42 / 0.39 mm (before the flattening 95.2 % and 0.50 %; with no threshold 97.9 % but
     # 1.2 % wrong).  The wrong pixels and the holes lie beside the tile edges, where the window
-    # straddles an albedo step, and on the saturated tiles.
+    # straddles an albedo step, and on the saturated tiles.  2026-11-26, captures without the black
+    # end columns and the narrow window's SNR: 95.6 % complete, 0.098 % / 0.100 % wrong, MAE 0.40 mm.
     "robust_printed": "printed albedo edges and saturated tiles bias the phase: 95.5 % complete and 0.12 % > 5 mm "
     "wrong at the operating point (issue 35)",
-    "robust_staircase": "slivers between the image border and shadows, one period dropped each side of a shadowless "
-    "depth edge; ~89 % completeness (issue 17 note; 91.7 % and none > 5 mm wrong at the operating point 3 with "
-    "link_keep_certain, 2026-11-25; 92.6 % with link_split, 2026-11-26; 96.0 % with the code at the rows' ends "
-    "read against whole windows, 2026-11-26: the rest is pixels under the operating point within ~15 px of the "
-    "edges and at the image's right end, 2.4 %, and phase-invalid ones beside the edges, 1.5 %)",
 }
 
 

@@ -189,6 +189,15 @@ class DecoderParams:
         :data:`STABILITY_WINDOW_SCALE` as wide along x, and the confidence is the lower of the
         fringe SNR and :data:`STABILITY_KAPPA_RAD` over the phase's change (the colour-robust
         decoder; off = the fringe SNR alone, and no second fit).
+    narrow_snr : bool
+        With ``phase_stability``: the fringe SNR is the higher of the wide window's and the
+        narrow window's (its residual comes with the second fit).  Beside a depth edge the wide
+        window's far-side samples raise its residual as the square root of their weight ``w`` but
+        bias its phase only in proportion to ``w``: the wide SNR there understates a phase the
+        narrow window, seeing less of the far side, finds clean and the stability term finds
+        unmoved.  Not on the discontinuity itself, where the narrow window is as mixed as the wide
+        one (:func:`simbench.decode.phase.off_discontinuity`).  The colour-robust decoder; off =
+        the wide window's SNR alone.
     min_confidence : float
         The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
         is below it become holes (NaN depth, not valid);
@@ -234,6 +243,7 @@ class DecoderParams:
     max_residual: float = 0.6
     min_window_support: float = 0.5
     phase_stability: bool = False
+    narrow_snr: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
     mode: str = "reference"
@@ -275,6 +285,7 @@ class DecoderParams:
             "max_residual": v.number(self.max_residual, "max_residual", lo=0.0, lo_open=True, allow_inf=True),
             "min_window_support": v.number(self.min_window_support, "min_window_support", lo=0.0, hi=1.0),
             "phase_stability": v.boolean(self.phase_stability, "phase_stability"),
+            "narrow_snr": v.boolean(self.narrow_snr, "narrow_snr"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
             "mode": v.choice(self.mode, "mode", MODES),
@@ -291,6 +302,8 @@ class DecoderParams:
             raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
         if fixed["albedo_flatten"] and not fixed["color_normalize"]:
             raise ValueError("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
+        if fixed["narrow_snr"] and not fixed["phase_stability"]:
+            raise ValueError("narrow_snr needs phase_stability = true (the narrow window is the stability term's fit)")
         for name, value in fixed.items():
             object.__setattr__(self, name, value)
 
@@ -341,7 +354,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     validity tests then act on signal relative to the local range (``min_amplitude``,
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it;
     the lit test looks across a whole code window).  Its confidence folds in the phase's
-    stability against the window's width (``phase_stability``) and its operating point makes the pixels below
+    stability against the window's width (``phase_stability``), takes the better of the two
+    windows' fringe SNRs (``narrow_snr``), and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
     and the part of a stripe that the confidence shows to lie on their own side of the edge
     (``link_keep_certain``, ``link_split``).  Everything else as ``params``."""
@@ -356,6 +370,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
         min_amplitude=ROBUST_MIN_AMPLITUDE,
         phase_stability=True,
+        narrow_snr=True,
         min_confidence=ROBUST_MIN_CONFIDENCE,
     )
 

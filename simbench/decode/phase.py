@@ -182,6 +182,40 @@ def fringe_snr(residual: np.ndarray) -> np.ndarray:
     return snr
 
 
+# The narrow window's fringe SNR counts (DecoderParams.narrow_snr) only where the wide fit's
+# residual is at most this share of the highest within the wide window's reach: off the
+# discontinuity that raises it.  For a window whose far-side share is c, the residual grows as
+# sqrt(c (1 - c)), highest (c = 1/2) on the discontinuity itself, where the narrow window is as
+# mixed as the wide one and its fit of a nominal-period cosine to two half-fringes can still
+# look clean (measured on synthetic phase jumps: pixels 0.5-1 rad off with narrow SNR > 3); half
+# of the peak is c <= 7 %, where the narrow window (half the width) holds < 0.1 % of the far side.
+NARROW_SNR_RESIDUAL_SHARE = 0.5
+
+
+def off_discontinuity(residual: np.ndarray, *, sigma_x_px: float) -> np.ndarray:
+    """Where the narrow window's fringe SNR may stand for a pixel's (:data:`NARROW_SNR_RESIDUAL_SHARE`):
+    its wide-window fit residual is at most that share of the highest residual within
+    ``3 sigma_x_px`` along its row (the wide window's reach).
+
+    Parameters
+    ----------
+    residual : ndarray, shape (H, W), float32
+        The wide fit's :attr:`PhaseResult.residual` (NaN or inf where unfit: never off).
+    sigma_x_px : float
+        The wide window's standard deviation along x.
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    r = np.asarray(residual, np.float32)
+    finite = np.isfinite(r)
+    rr = np.where(finite, r, np.float32(0.0))
+    reach = max(1, int(np.ceil(3.0 * sigma_x_px)))
+    peak = cv2.dilate(rr, np.ones((1, 2 * reach + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return finite & (rr <= np.float32(NARROW_SNR_RESIDUAL_SHARE) * peak)
+
+
 def gaussian_kernel(sigma: float) -> np.ndarray:
     """Unit-sum sampled Gaussian, radius ``ceil(3 sigma)`` (the decoder's row halo assumes it)."""
     r = max(1, int(np.ceil(3.0 * sigma)))

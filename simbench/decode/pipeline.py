@@ -40,6 +40,7 @@ from simbench.decode.phase import (
     certainty_map,
     certainty_window_px,
     fringe_snr,
+    off_discontinuity,
     overlay_intensity,
 )
 from simbench.decode.profile import stage
@@ -397,7 +398,9 @@ def _columns(
                 sigma_x_px=sx * STABILITY_WINDOW_SCALE,
                 sigma_y_px=sx * params.sigma_y_ratio,
                 offset=False,
-            ).wrapped[crop]
+            )
+            narrow_residual = narrow.residual[crop]
+            narrow = narrow.wrapped[crop]
     with stage("validity"):
         intensity, certainty, lit = intensity[crop], certainty[crop], lit[crop]
         wrapped, amplitude, residual, support_w = (
@@ -430,6 +433,9 @@ def _columns(
     lab = stripes.labels
     with stage("confidence"):
         confidence = fringe_snr(residual)
+        if narrow is not None and params.narrow_snr:
+            off = off_discontinuity(residual, sigma_x_px=sx)
+            np.fmax(confidence, fringe_snr(narrow_residual), out=confidence, where=off)
         shift = None
         if narrow is not None:
             shift = phase_change(wrapped, narrow)
@@ -490,6 +496,7 @@ def _columns(
     st.put("confidence", confidence)
     if shift is not None:
         st.put("phase_change", shift)
+        st.put("narrow_fit_residual", narrow_residual)
     st.put("phase_valid", valid)
     st.put("code", code)
     st.put("stripe_label", lab)

@@ -175,7 +175,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     threshold = (
         f"holes below {params.min_confidence:g}" if params.min_confidence > 0 else "no threshold: every decoded pixel"
     )
-    meaning = f"fringe SNR{', capped by the phase stability' if params.phase_stability else ''}; {threshold}"
+    snr = "fringe SNR (the better of the wide and the narrow window's)" if params.narrow_snr else "fringe SNR"
+    meaning = f"{snr}{', capped by the phase stability' if params.phase_stability else ''}; {threshold}"
     stages = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence, **result.stages}
     return FileDecode(
         depth_m=result.depth_m,
