@@ -404,7 +404,7 @@ def camera_lens_image(
     if np.any(mags):
         out = _magnify(out, float(intr.cx_px) + lateral_px, float(intr.cy_px) + lateral_px, mags)
     h, w = intr.size_hw
-    return out[lateral_px : lateral_px + h, lateral_px : lateral_px + w]
+    return np.ascontiguousarray(out[lateral_px : lateral_px + h, lateral_px : lateral_px + w])
 
 
 def undistort_projector_columns(
