@@ -114,6 +114,48 @@ def test_a_moving_scene_is_never_rendered_as_an_instant_without_saying_so(varian
         render_channels(scene, None, get_sensor("ideal"), seed=1, render=RenderSettings(spp=1, sampler="independent"))
 
 
+def test_an_exposure_integral_is_one_cache_entry_and_its_slices_none(variant, tmp_path, monkeypatch):
+    """The moving scene's integral over the exposure is stored as one ``exposure`` entry (its slices
+    are not stored: no other capture renders them, and each slice's file cost a third of its render
+    at the motion study's size); read back it is the uncached integral bit for bit and renders
+    nothing; a different window or sensor is another entry.  (A small camera, 1 spp a slice.)"""
+    import simbench.sim.capture as capture
+    from simbench.cache import RenderCache
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.sensor import get_sensor
+
+    sensor = get_sensor("ideal")
+    scene = capture.physical_scene(
+        dataclasses.replace(_plane_scene(velocity_m_s=[0.5, 0.0, 0.0]), rig=scale_camera(_plane_scene().rig, 0.125)),
+        sensor,
+    )
+    drive = np.ones((*scene.rig.projector.size_hw, 3), np.float32)
+    window = (0.0, 0.004)
+    assert slice_count(scene, scene.rig.camera, window) > 1
+    cache = RenderCache(tmp_path / "cache")
+    settings = RenderSettings(spp=4, sampler="independent", max_depth=2)
+    cold = capture.render_channels(
+        scene, drive, sensor, seed=5, render=dataclasses.replace(settings, cache=cache), window_s=window
+    )
+    files = sorted(p.name.split("-")[0] for p in (tmp_path / "cache").glob("*.npz"))
+    assert files.count("exposure") == 1 and "radiance" not in files, files
+    uncached = capture.render_channels(scene, drive, sensor, seed=5, render=settings, window_s=window)
+    assert np.array_equal(cold, uncached)
+
+    def no_render(*a, **k):
+        raise AssertionError("rendered although the integral is cached")
+
+    monkeypatch.setattr(capture, "render_radiance", no_render)
+    warm = capture.render_channels(
+        scene, drive, sensor, seed=5, render=dataclasses.replace(settings, cache=cache), window_s=window
+    )
+    assert np.array_equal(warm, cold)
+    with pytest.raises(AssertionError, match="rendered although"):
+        capture.render_channels(
+            scene, drive, sensor, seed=5, render=dataclasses.replace(settings, cache=cache), window_s=(0.0, 0.005)
+        )
+
+
 def _edge_scene(speed_m_s: float):
     """A white board whose right edge crosses the middle of a small camera's view, lit by a
     uniform projector white, before nothing (black)."""

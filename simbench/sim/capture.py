@@ -354,13 +354,35 @@ def _exposure_integral(scene, drive, sensor, *, seed: int, render: RenderSetting
     if n == 1:
         return render_channels(scene_at(scene, 0.5 * (t0 + t1)), drive, sensor, seed=seed, render=render)
     # independent sampling: any per-slice count, and each slice's samples at random positions
-    # (stratification within a 1-sample slice means nothing)
-    settings = dataclasses.replace(render, spp=slice_spp(render.spp, n), sampler="independent")
-    total = None
-    for i, t in enumerate(slice_times((t0, t1), n)):
-        q = render_channels(scene_at(scene, float(t)), drive, sensor, seed=slice_seed(seed, i), render=settings)
-        total = q.astype(np.float64) if total is None else total + q
-    return (total / n).astype(np.float32)
+    # (stratification within a 1-sample slice means nothing).  The slices are not cached one by
+    # one: no other capture renders the same instant with the same drive and seed, and at the
+    # motion study's sizes storing each (an fsync'd file per slice and primary) cost as much as a
+    # third of rendering it; the integral is one entry instead (issue 38)
+    settings = dataclasses.replace(render, spp=slice_spp(render.spp, n), sampler="independent", cache=None)
+
+    def integral() -> np.ndarray:
+        total = None
+        for i, t in enumerate(slice_times((t0, t1), n)):
+            q = render_channels(scene_at(scene, float(t)), drive, sensor, seed=slice_seed(seed, i), render=settings)
+            total = q.astype(np.float64) if total is None else total + q
+        return (total / n).astype(np.float32)
+
+    cache = render.cache
+    if cache is None or cache.root is None:
+        return integral()
+    parts = {
+        "scene": scene_fingerprint(scene),
+        "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
+        "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
+        "window_s": [t0, t1],
+        # what render_channels reads of the sensor (channel weights, crosstalk, lens), and the code
+        # between a scene and the integral: as a recording's key has them
+        "sensor": sensor_to_dict(sensor),
+        "code": sim_code_digest(),
+        **recording_libraries(),
+        **renderer_id(),
+    }
+    return cache.get_or_make("exposure", parts, lambda: {"radiance": integral()})["radiance"]
 
 
 def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
