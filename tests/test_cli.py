@@ -359,6 +359,9 @@ def test_decode_robust_needs_the_reference_and_its_calibration_frames(tmp_path, 
     assert "calibration_dark.png" in err and "color_normalize" not in err
     assert main([*base[:-1], "--reference", str(tmp_path / "ref.png"), "--decoder", "albedo_flatten=true"]) == 2
     assert "albedo_flatten needs color_normalize" in capsys.readouterr().err
+    # the narrow window's SNR is the stability term's fit: refused on a decoder without it
+    assert main([*base[:-1], "--reference", str(tmp_path / "ref.png"), "--decoder", "narrow_snr=true"]) == 2
+    assert "narrow_snr needs phase_stability" in capsys.readouterr().err
     assert not (tmp_path / "d.npy").exists()
 
 
