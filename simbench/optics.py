@@ -40,6 +40,7 @@ Gaussian of that standard deviation (:func:`blur_sigma_px`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from functools import lru_cache
 from typing import TYPE_CHECKING
@@ -309,8 +310,6 @@ def _magnify(src: np.ndarray, cx: float, cy: float, mags: np.ndarray) -> np.ndar
 def _padded(intr: Intrinsics, mx: int, my: int) -> Intrinsics:
     """``intr``'s ideal pinhole grown by ``mx`` columns at each side and ``my`` rows at the top and
     bottom (same rays for the same pixels: the principal point moves with the grid)."""
-    import dataclasses
-
     if mx == 0 and my == 0:
         return intr
     return dataclasses.replace(

@@ -370,19 +370,26 @@ def _exposure_integral(scene, drive, sensor, *, seed: int, render: RenderSetting
     cache = render.cache
     if cache is None or cache.root is None:
         return integral()
-    parts = {
+    parts = _capture_key(scene, drive, sensor, seed=seed, render=render, window_s=(t0, t1))
+    return cache.get_or_make("exposure", parts, lambda: {"radiance": integral()})["radiance"]
+
+
+def _capture_key(scene, drive, sensor, *, seed: int, render: RenderSettings, window_s) -> dict:
+    """The cache key's parts shared by a recording and an exposure integral: what
+    :func:`render_channels` reads (the scene's render fingerprint, the drive's inputs or an array's
+    digest, the render seed and settings, a moving scene's window, the sensor model), the versions
+    of the libraries a recording uses, the renderer and the bytes of the code between a scene and
+    a recording.  ``window_s`` None: no window (a static scene's recording keeps its key)."""
+    return {
         "scene": scene_fingerprint(scene),
         "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
         "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
-        "window_s": [t0, t1],
-        # what render_channels reads of the sensor (channel weights, crosstalk, lens), and the code
-        # between a scene and the integral: as a recording's key has them
+        **({} if window_s is None else {"window_s": [float(x) for x in window_s]}),
         "sensor": sensor_to_dict(sensor),
         "code": sim_code_digest(),
         **recording_libraries(),
         **renderer_id(),
     }
-    return cache.get_or_make("exposure", parts, lambda: {"radiance": integral()})["radiance"]
 
 
 def record(q: np.ndarray, *, sensor: SensorModel, scene: SceneSpec, rng: RngLike = None) -> np.ndarray:
@@ -437,17 +444,11 @@ def record_channels(
     cache = render.cache
     if cache is None or cache.root is None:
         return [recorded(n) for n in rngs]
+    # the window only for a moving scene, so that static recordings keep their keys
+    window = window_s if is_moving(scene) else None
     base = {
-        "scene": scene_fingerprint(scene),
-        "drive": drive.inputs() if isinstance(drive, ProjectorDrive) else array_digest(drive),
-        "render": {"seed": int(seed), "spp": int(render.spp), "sampler": render.sampler, "max_depth": render.max_depth},
-        # only for a moving scene, so that static recordings keep their keys
-        **({"window_s": [float(x) for x in window_s]} if is_moving(scene) and window_s is not None else {}),
-        "sensor": sensor_to_dict(sensor),
+        **_capture_key(scene, drive, sensor, seed=seed, render=render, window_s=window),
         "exposure": _recording_settings(sensor, scene),
-        "code": sim_code_digest(),
-        **recording_libraries(),
-        **renderer_id(),
     }
     out = []
     for n in rngs:
