@@ -304,3 +304,62 @@ def test_library_scene_names_stay_inside_the_library(tmp_path):
             library_scene_path(name)
     with pytest.raises(ValueError, match="no scene 'no_such'.*white_plane"):
         library_scene_path("no_such")
+
+
+def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_writes(tmp_path, variant, monkeypatch):
+    """A target measured in parts (:class:`simbench.experiments.common.Split`): on two workers
+    both processes measure parts, the costliest first, and this process writes the same files,
+    provenance and its seeds included, as one process measuring them in order."""
+    import os
+
+    from simbench.experiments import reproduce as module
+    from simbench.experiments.common import Split
+    from tests import worker_helpers as helpers
+
+    split = Split("split", helpers.split_parts, helpers.split_measure, helpers.split_write, cost=helpers.split_cost)
+    monkeypatch.setitem(module.TARGETS, "split", module.Target(split.run, False, 0, split=split))
+    cfg = RunConfig.preset(quick=True)
+    assert [p for _, p in split.ranked(cfg)] == ["p5", "p4", "p3", "p2", "p1", "p0"]
+
+    def run(out, workers):
+        lines = []
+        metrics = module.reproduce(
+            ["split"],
+            config=cfg,
+            out_dir=tmp_path / out,
+            cache_dir=None,
+            progress=lines.append,
+            command="t",
+            workers=workers,
+        )
+        files = {p.name: p.read_bytes() for p in sorted((tmp_path / out).iterdir())}
+        return metrics, files, lines, set(helpers.WRITTEN_BY)
+
+    one = run("one", 1)
+    two = run("two", 2)
+    assert one[0] == two[0] and one[1] == two[1]
+    assert set(one[1]) == {"split.txt", "split.provenance.json", "metrics.json"}
+    seeds = json.loads(one[1]["split.provenance.json"])["seeds"]
+    assert sorted(seeds) == [f"split/p{k}" for k in range(6)]
+    assert one[3] == {os.getpid()} and len(two[3]) == 2  # one process; then this one and a spawned worker
+    assert [m.split(" (")[0] for m in one[2][:6]] == [f"[split {k + 1}/6] p{k}" for k in range(6)]
+    assert sorted(m.split(" (")[0] for m in two[2] if m.startswith("[split")) == [
+        f"[split {k + 1}/6] p{k}" for k in range(6)
+    ]
+    assert any(m.startswith("split done") for m in two[2])
+    distributed = pytest.importorskip("distributed")
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        metrics = module.reproduce(
+            ["split"],
+            config=cfg,
+            out_dir=tmp_path / "dask",
+            cache_dir=None,
+            progress=lambda s: None,
+            command="t",
+            scheduler=client,
+        )
+    assert metrics == one[0] and {p.name: p.read_bytes() for p in (tmp_path / "dask").iterdir()} == one[1]
+    assert os.getpid() not in helpers.WRITTEN_BY  # measured on the cluster's workers, written here

@@ -33,3 +33,37 @@ def dies_on(marker: str, *, times: int) -> str:
         path.write_text(str(died + 1))
         os.kill(os.getpid(), signal.SIGKILL)
     return path.name
+
+
+# A target measured in parts (simbench.experiments.common.Split) for tests/test_experiments.py:
+# each part records a seed and waits a little (so that both of two workers take parts); the
+# parent's write keeps the processes that measured them in WRITTEN_BY (not in its files).
+WRITTEN_BY: set[int] = set()
+
+
+def split_parts(config) -> list[str]:
+    return [f"p{k}" for k in range(6)]
+
+
+def split_measure(session, part: str) -> dict:
+    import time
+
+    seed = session.seeds.seed(f"split/{part}")
+    session.seeds.record(f"split/{part}", {"render": seed})
+    time.sleep(0.3)
+    return {"part": part, "seed": seed, "pid": os.getpid()}
+
+
+def split_write(session, results: list[dict]) -> dict:
+    from simbench.io import atomic_write_text
+
+    WRITTEN_BY.clear()
+    WRITTEN_BY.update(r["pid"] for r in results)
+    text = "".join(f"{r['part']} {r['seed']}\n" for r in results)
+    path = atomic_write_text(session.out / "split.txt", text)
+    session.provenance("split", [path])
+    return {f"split/{r['part']}": r["seed"] for r in results}
+
+
+def split_cost(part: str) -> float:
+    return int(part[1:])  # the last part first

@@ -17,10 +17,10 @@ import re
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -69,6 +69,7 @@ __all__ = [
     "RunConfig",
     "Capture",
     "Session",
+    "Split",
     "score",
     "scene_errors",
     "made_by",
@@ -238,9 +239,11 @@ class RunConfig:
 Capture = Recording
 
 
-def _same_calibration(a: RunConfig, b: RunConfig) -> bool:
+def _calibration_settings(sensor: SensorModel, config: RunConfig) -> tuple:
+    """What a rig calibration of the run depends on besides the rig: the sensor model and the
+    run's calibration settings."""
     keys = ("seed", "camera_scale", "calibration_poses", "calibration_bow_mm_per_m", "calibration_waviness_mm")
-    return all(getattr(a, k) == getattr(b, k) for k in keys)
+    return (sensor, *(getattr(config, k) for k in keys))
 
 
 class Session:
@@ -269,7 +272,10 @@ class Session:
         self.seeds = SeedLog(config.seed)
         self._systems: dict[str, DepthSystem] = {}
         self._calibrations: dict = {}
-        self._rigs: dict = {}
+        # the rigs calibrated in this run, per sensor model and calibration settings (a fork at
+        # other settings, e.g. the motion study's camera scale, has its own; forks share them)
+        self._rig_sets: dict = {}
+        self._rigs: dict = self._rig_sets.setdefault(_calibration_settings(self.sensor, config), {})
         self.proposed = self.system("proposed")
 
     @property
@@ -297,8 +303,8 @@ class Session:
         other.cache = self.cache
         other.seeds = self.seeds
         other._calibrations = self._calibrations
-        if other.sensor == self.sensor and (config is None or _same_calibration(config, self.config)):
-            other._rigs = self._rigs
+        other._rig_sets = self._rig_sets
+        other._rigs = self._rig_sets.setdefault(_calibration_settings(other.sensor, other.config), {})
         return other
 
     def for_target(self) -> "Session":
@@ -513,6 +519,59 @@ class _Timer:
     def __exit__(self, *exc) -> None:
         if exc[0] is None:
             self.progress(f"{self.what} ({time.perf_counter() - self.t0:.1f} s)")
+
+
+@dataclass(frozen=True)
+class Split:
+    """A target measured in parts that depend on nothing but the run's settings: the scenes of
+    the hard-scene table, the depths of Fig. 9, the speeds of the motion study.
+
+    ``parts(config)`` names them in the order their results are written; ``measure(session,
+    part)`` measures one (renders through the session's cache, seeds from labels, its result
+    picklable plain data); ``write(session, results)`` makes the target's files from the results
+    in ``parts``' order and returns its metrics.  ``cost(part)``, when given, ranks the parts for
+    a pool (the costliest first; equal costs keep ``parts``' order).
+
+    One process measures the parts in order (:meth:`run`); ``simbench reproduce --workers N`` or
+    ``--scheduler`` measures them side by side on its workers, each part in a session whose seed
+    log is its own (:meth:`measure_part`), and writes here: the same files either way, since a
+    part's result and the seeds it records do not depend on where or after what it ran.
+    """
+
+    name: str
+    parts: Callable[[RunConfig], Sequence[str]]
+    measure: Callable[[Session, str], Any]
+    write: Callable[[Session, list], dict]
+    cost: Callable[[str], float] | None = None
+
+    def measure_part(self, session: Session, part: str, *, index: int, total: int) -> tuple[Any, dict]:
+        """(``measure``'s result, the seeds it recorded) for ``part``, the ``index``-th of
+        ``total``, measured in a session with a seed log of its own."""
+        own = session.for_target()
+        with own.timed(f"[{self.name} {index + 1}/{total}] {part}"):
+            result = self.measure(own, part)
+        return result, own.seeds.used
+
+    def ranked(self, config: RunConfig) -> list[tuple[int, str]]:
+        """(index, part) in the order a pool should take them: the costliest first."""
+        parts = list(enumerate(self.parts(config)))
+        if self.cost is None:
+            return parts
+        return sorted(parts, key=lambda ip: -self.cost(ip[1]))
+
+    def collect(self, session: Session, measured: Sequence[tuple[Any, dict]]) -> dict:
+        """``write`` of the parts' results (in ``parts``' order, with their seeds recorded in
+        ``session``'s log)."""
+        for _, seeds in measured:
+            session.seeds.used.update(seeds)
+        return self.write(session, [result for result, _ in measured])
+
+    def run(self, session: Session) -> dict:
+        """Every part measured here, in order, then written."""
+        parts = list(self.parts(session.config))
+        return self.collect(
+            session, [self.measure_part(session, p, index=i, total=len(parts)) for i, p in enumerate(parts)]
+        )
 
 
 def score(

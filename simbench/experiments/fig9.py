@@ -19,6 +19,7 @@ import numpy as np
 
 from simbench.experiments.common import (
     Session,
+    Split,
     calibration_sentence,
     calibration_summary,
     figure_png,
@@ -32,7 +33,7 @@ from simbench.experiments.common import (
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import CHIABRANDO_TOF, PAPER_COMPETITORS, nguyen_kinect_sigma_mm
 
-__all__ = ["DEPTHS_M", "run_fig9", "fig9_plot"]
+__all__ = ["DEPTHS_M", "SPLIT", "run_fig9", "measure_depth", "write_fig9", "fig9_parts", "fig9_plot"]
 
 DEPTHS_M = (0.9, 1.0, 1.1, 1.2, 1.3, 1.4)
 SENSORS = ("proposed", "kinect", "tof", "phase_shift")
@@ -45,99 +46,110 @@ def sensor_label(name: str) -> str:
     return get_system(name).info().label
 
 
-def run_fig9(session: Session) -> dict:
+def _scene_name(z: float) -> str:
+    return f"plane_depth_{int(round(z * 100)):03d}cm"
+
+
+def fig9_parts(config) -> list[str]:
+    """The depths, as the boards' scene names (``plane_depth_090cm`` ...)."""
+    return [_scene_name(z) for z in DEPTHS_M]
+
+
+def measure_depth(session: Session, name: str) -> dict:
+    """One depth: the board placed once, recorded ``fig9_repeats`` times by every sensor and
+    scored; its rows and metrics (plain data)."""
     cfg = session.config
+    z = DEPTHS_M[fig9_parts(cfg).index(name)]
     rows, metrics = [], {}
     other = other_rig(session)
-    for i, z in enumerate(DEPTHS_M):
-        name = f"plane_depth_{int(round(z * 100)):03d}cm"
-        with session.timed(f"[fig9 {i + 1}/{len(DEPTHS_M)}] {z:.1f} m x {cfg.fig9_repeats}"):
-            # one placement of the board per depth, seen by every sensor
-            raw = session.place(session.raw_scene(name), f"fig9/{name}", ["board"])
-            placement = session.seeds_used[f"fig9/{name}/placement"]
-            scene = session.prepare(raw)
-            for k, cap in enumerate(session.capture(scene, f"fig9/{name}", repeats=cfg.fig9_repeats)):
-                tri = score(cap, session.decode(cap, cfg.decoder, mode="calibrated"), cfg.decoder.period_px)
-                ref = score(cap, session.decode(cap, cfg.decoder, mode="reference"), cfg.decoder.period_px)
-                extra = {}
-                if other:
-                    tri_o = score(
-                        cap, session.decode(cap, cfg.decoder, mode="calibrated", rig=other), cfg.decoder.period_px
-                    )
-                    ref_o = score(
-                        cap, session.decode(cap, cfg.decoder, mode="reference", rig=other), cfg.decoder.period_px
-                    )
-                    extra = {
-                        "other_rig_rmse_mm": tri_o["gt_rmse_mm"],
-                        "other_rig_plane_rms_mm": tri_o["plane_rms_mm"],
-                        "other_rig_ref_rmse_mm": ref_o["gt_rmse_mm"],
-                    }
-                rows.append(
-                    {
-                        "sensor": "proposed",
-                        "depth_m": z,
-                        "repeat": k,
-                        "rmse_mm": tri["gt_rmse_mm"],
-                        "plane_rms_mm": tri["plane_rms_mm"],
-                        "mae_mm": tri["gt_mae_mm"],
-                        "bias_mm": tri["bias_mm"],
-                        "completeness": tri["completeness"],
-                        "stripe_order_errors": tri["stripe_order_errors"],
-                        "ref_rmse_mm": ref["gt_rmse_mm"],
-                        "ref_plane_rms_mm": ref["plane_rms_mm"],
-                        "ref_stripe_order_errors": ref["stripe_order_errors"],
-                        **extra,
-                        **cap.seeds,
-                        **placement,
-                    }
-                )
-            for device in SENSORS[1:]:
-                recs = session.acquire(device, raw, f"fig9/{name}", repeats=cfg.fig9_repeats)
-                # per-pixel temporal sigma over the recordings (how Chiabrando et al. measure a ToF camera)
-                with np.errstate(invalid="ignore"), warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)
-                    stack = np.stack([depth.depth_m for _, depth in recs])
-                    sigma = np.nanstd(stack, axis=0, ddof=1) if len(recs) > 1 else np.full(stack.shape[1:], np.nan)
-                lit = recs[0][0].gt.lit
-                temporal_mm = float(np.nanmean(sigma[lit])) * 1000 if np.isfinite(sigma[lit]).any() else float("nan")
-                info = session.system(device).info()
-                for k, (rec, depth) in enumerate(recs):
-                    sc = score(rec, depth, info.period_px)
-                    extra = {}
-                    if info.uses_scene_rig and other:
-                        so = score(rec, session.decode_recording(device, rec, rig=other), info.period_px)
-                        extra = {"other_rig_rmse_mm": so["gt_rmse_mm"], "other_rig_plane_rms_mm": so["plane_rms_mm"]}
-                    rows.append(
-                        {
-                            "sensor": device,
-                            "depth_m": z,
-                            "repeat": k,
-                            "rmse_mm": sc["gt_rmse_mm"],
-                            "plane_rms_mm": sc["plane_rms_mm"],
-                            "mae_mm": sc["gt_mae_mm"],
-                            "bias_mm": sc["bias_mm"],
-                            "completeness": sc["completeness"],
-                            "stripe_order_errors": sc.get("stripe_order_errors", ""),
-                            "temporal_sigma_mm": temporal_mm,
-                            **extra,
-                            **rec.seeds,
-                        }
-                    )
-        for sensor in SENSORS:
-            sel = [r for r in rows if r["depth_m"] == z and r["sensor"] == sensor]
-            prefix = f"fig9/{z:.1f}m" if sensor == "proposed" else f"fig9/{sensor}/{z:.1f}m"
-            keys = ("rmse_mm", "plane_rms_mm", "completeness") + (
-                ("stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm")
-                if sensor == "proposed"
-                else ("temporal_sigma_mm",)
+    # one placement of the board per depth, seen by every sensor
+    raw = session.place(session.raw_scene(name), f"fig9/{name}", ["board"])
+    placement = session.seeds_used[f"fig9/{name}/placement"]
+    scene = session.prepare(raw)
+    for k, cap in enumerate(session.capture(scene, f"fig9/{name}", repeats=cfg.fig9_repeats)):
+        tri = score(cap, session.decode(cap, cfg.decoder, mode="calibrated"), cfg.decoder.period_px)
+        ref = score(cap, session.decode(cap, cfg.decoder, mode="reference"), cfg.decoder.period_px)
+        extra = {}
+        if other:
+            tri_o = score(cap, session.decode(cap, cfg.decoder, mode="calibrated", rig=other), cfg.decoder.period_px)
+            ref_o = score(cap, session.decode(cap, cfg.decoder, mode="reference", rig=other), cfg.decoder.period_px)
+            extra = {
+                "other_rig_rmse_mm": tri_o["gt_rmse_mm"],
+                "other_rig_plane_rms_mm": tri_o["plane_rms_mm"],
+                "other_rig_ref_rmse_mm": ref_o["gt_rmse_mm"],
+            }
+        rows.append(
+            {
+                "sensor": "proposed",
+                "depth_m": z,
+                "repeat": k,
+                "rmse_mm": tri["gt_rmse_mm"],
+                "plane_rms_mm": tri["plane_rms_mm"],
+                "mae_mm": tri["gt_mae_mm"],
+                "bias_mm": tri["bias_mm"],
+                "completeness": tri["completeness"],
+                "stripe_order_errors": tri["stripe_order_errors"],
+                "ref_rmse_mm": ref["gt_rmse_mm"],
+                "ref_plane_rms_mm": ref["plane_rms_mm"],
+                "ref_stripe_order_errors": ref["stripe_order_errors"],
+                **extra,
+                **cap.seeds,
+                **placement,
+            }
+        )
+    for device in SENSORS[1:]:
+        recs = session.acquire(device, raw, f"fig9/{name}", repeats=cfg.fig9_repeats)
+        # per-pixel temporal sigma over the recordings (how Chiabrando et al. measure a ToF camera)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            stack = np.stack([depth.depth_m for _, depth in recs])
+            sigma = np.nanstd(stack, axis=0, ddof=1) if len(recs) > 1 else np.full(stack.shape[1:], np.nan)
+        lit = recs[0][0].gt.lit
+        temporal_mm = float(np.nanmean(sigma[lit])) * 1000 if np.isfinite(sigma[lit]).any() else float("nan")
+        info = session.system(device).info()
+        for k, (rec, depth) in enumerate(recs):
+            sc = score(rec, depth, info.period_px)
+            extra = {}
+            if info.uses_scene_rig and other:
+                so = score(rec, session.decode_recording(device, rec, rig=other), info.period_px)
+                extra = {"other_rig_rmse_mm": so["gt_rmse_mm"], "other_rig_plane_rms_mm": so["plane_rms_mm"]}
+            rows.append(
+                {
+                    "sensor": device,
+                    "depth_m": z,
+                    "repeat": k,
+                    "rmse_mm": sc["gt_rmse_mm"],
+                    "plane_rms_mm": sc["plane_rms_mm"],
+                    "mae_mm": sc["gt_mae_mm"],
+                    "bias_mm": sc["bias_mm"],
+                    "completeness": sc["completeness"],
+                    "stripe_order_errors": sc.get("stripe_order_errors", ""),
+                    "temporal_sigma_mm": temporal_mm,
+                    **extra,
+                    **rec.seeds,
+                }
             )
-            keys += tuple(k for k in ("other_rig_rmse_mm", "other_rig_ref_rmse_mm") if k in sel[0])
-            for key in keys:
-                metrics[f"{prefix}/{key}"] = (
-                    float(np.mean([r[key] for r in sel]))
-                    if key != "stripe_order_errors"
-                    else int(max(r[key] for r in sel))
-                )
+    for sensor in SENSORS:
+        sel = [r for r in rows if r["depth_m"] == z and r["sensor"] == sensor]
+        prefix = f"fig9/{z:.1f}m" if sensor == "proposed" else f"fig9/{sensor}/{z:.1f}m"
+        keys = ("rmse_mm", "plane_rms_mm", "completeness") + (
+            ("stripe_order_errors", "ref_rmse_mm", "ref_plane_rms_mm")
+            if sensor == "proposed"
+            else ("temporal_sigma_mm",)
+        )
+        keys += tuple(k for k in ("other_rig_rmse_mm", "other_rig_ref_rmse_mm") if k in sel[0])
+        for key in keys:
+            metrics[f"{prefix}/{key}"] = (
+                float(np.mean([r[key] for r in sel])) if key != "stripe_order_errors" else int(max(r[key] for r in sel))
+            )
+    return {"rows": rows, "metrics": metrics}
+
+
+def write_fig9(session: Session, measured: list[dict]) -> dict:
+    """The figure's files from :func:`measure_depth`'s results (in :func:`fig9_parts`' order)."""
+    cfg = session.config
+    rows = [r for m in measured for r in m["rows"]]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     out = session.out
     cols = [
         "sensor",
@@ -174,8 +186,19 @@ def run_fig9(session: Session) -> dict:
         )
     )
     files.append(atomic_write_text(out / "fig9.md", _markdown(session, rows)))
+    other = other_rig(session)
+    scene = session.scene(fig9_parts(cfg)[-1])  # the rig every depth shares
     session.provenance("fig9", files, extra={"calibration": calibration_summary(session, scene)} if other else None)
     return metrics
+
+
+# each depth a part (the run's workers take them side by side)
+SPLIT = Split("fig9", fig9_parts, measure_depth, write_fig9)
+
+
+def run_fig9(session: Session) -> dict:
+    """Every depth of :func:`fig9_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _summary(

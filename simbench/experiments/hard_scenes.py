@@ -38,7 +38,7 @@ import numpy as np
 
 from simbench.decode import robust_params
 from simbench.decode.pipeline import apply_min_confidence
-from simbench.experiments.common import Session, figure_png, markdown_table, score, write_table
+from simbench.experiments.common import Session, Split, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
 
@@ -52,6 +52,10 @@ __all__ = [
     "CONFIDENCE_THRESHOLDS",
     "WRONG_MM",
     "run_hard_scenes",
+    "measure_scene",
+    "write_hard_scenes",
+    "scene_names",
+    "SPLIT",
     "confidence_curve",
     "operating_point",
     "GOAL_COMPLETENESS",
@@ -171,38 +175,55 @@ def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
     return max(thresholds, key=lambda t: (meeting(t), -t))
 
 
-def run_hard_scenes(session: Session) -> dict:
+def _decoders(config) -> tuple[dict, dict]:
+    """The decoders' parameters (decoded once with no threshold: the curves need every decoded
+    pixel's confidence) and their operating points."""
+    robust = robust_params(config.decoder)
+    params = {"paper": config.decoder, "robust": dataclasses.replace(robust, min_confidence=0.0)}
+    return params, {"paper": config.decoder.min_confidence, "robust": robust.min_confidence}
+
+
+def scene_names(config) -> tuple[str, ...]:
+    """The scenes a run measures: every hard scene, or one of each class when quick."""
+    return QUICK_SCENES if config.quick else tuple(HARD_SCENES)
+
+
+def measure_scene(session: Session, name: str) -> dict:
+    """One hard scene: its table row, its confidence curves and its metrics (plain data)."""
     cfg = session.config
-    names = QUICK_SCENES if cfg.quick else tuple(HARD_SCENES)
-    robust = robust_params(cfg.decoder)
-    # decoded once with no threshold: the curves need every decoded pixel's confidence
-    params = {"paper": cfg.decoder, "robust": dataclasses.replace(robust, min_confidence=0.0)}
-    operating = {"paper": cfg.decoder.min_confidence, "robust": robust.min_confidence}
-    rows, curves, metrics = [], [], {}
-    for i, name in enumerate(names):
-        label = f"hard_scenes/{name}"
-        with session.timed(f"[hard_scenes {i + 1}/{len(names)}] {name}"):
-            raw = session.raw_scene(name)
-            cap = session.capture(session.prepare(raw), label)[0]
-            band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
-            region = cap.gt.lit & ~band
-            row = {"scene": name, "class": HARD_SCENES[name], "scored_pixels": int(region.sum()), **cap.seeds}
-            for d in DECODERS:
-                full = session.decode(cap, params[d], mode="calibrated")
-                result = apply_min_confidence(full, operating[d])
-                for k, v in _scores(cap, result, cfg.decoder.period_px, region).items():
-                    row[f"{d}_{k}"] = v
-                    metrics[f"hard_scenes/{name}/{d}/{k}"] = v
-                for c in confidence_curve(full.depth_m, full.confidence, cap.gt.depth_m, region):
-                    curves.append({"scene": name, "decoder": d, **c})
-            rec, depth = session.acquire(REFERENCE_SYSTEM, raw, label)[0]
-            ref_band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=cfg.edge_band_px)
-            info = session.system(REFERENCE_SYSTEM).info()
-            for k, v in _scores(rec, depth, info.period_px, rec.gt.lit & ~ref_band).items():
-                row[f"{REFERENCE_SYSTEM}_{k}"] = v
-                metrics[f"hard_scenes/{name}/{REFERENCE_SYSTEM}/{k}"] = v
-            row.update({f"{REFERENCE_SYSTEM}_{k}_seed": v for k, v in rec.seeds.items()})
-            rows.append(row)
+    params, operating = _decoders(cfg)
+    curves, metrics = [], {}
+    label = f"hard_scenes/{name}"
+    raw = session.raw_scene(name)
+    cap = session.capture(session.prepare(raw), label)[0]
+    band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
+    region = cap.gt.lit & ~band
+    row = {"scene": name, "class": HARD_SCENES[name], "scored_pixels": int(region.sum()), **cap.seeds}
+    for d in DECODERS:
+        full = session.decode(cap, params[d], mode="calibrated")
+        result = apply_min_confidence(full, operating[d])
+        for k, v in _scores(cap, result, cfg.decoder.period_px, region).items():
+            row[f"{d}_{k}"] = v
+            metrics[f"hard_scenes/{name}/{d}/{k}"] = v
+        for c in confidence_curve(full.depth_m, full.confidence, cap.gt.depth_m, region):
+            curves.append({"scene": name, "decoder": d, **c})
+    rec, depth = session.acquire(REFERENCE_SYSTEM, raw, label)[0]
+    ref_band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=cfg.edge_band_px)
+    info = session.system(REFERENCE_SYSTEM).info()
+    for k, v in _scores(rec, depth, info.period_px, rec.gt.lit & ~ref_band).items():
+        row[f"{REFERENCE_SYSTEM}_{k}"] = v
+        metrics[f"hard_scenes/{name}/{REFERENCE_SYSTEM}/{k}"] = v
+    row.update({f"{REFERENCE_SYSTEM}_{k}_seed": v for k, v in rec.seeds.items()})
+    return {"row": row, "curves": curves, "metrics": metrics}
+
+
+def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
+    """The target's files from :func:`measure_scene`'s results (in :func:`scene_names`' order)."""
+    names = [m["row"]["scene"] for m in measured]
+    _, operating = _decoders(session.config)
+    rows = [m["row"] for m in measured]
+    curves = [c for m in measured for c in m["curves"]]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     out = session.out
     cols = ["scene", "class", "scored_pixels"]
     cols += [f"{d}_{k}" for d in (*DECODERS, REFERENCE_SYSTEM) for k in SCORE_KEYS]
@@ -219,13 +240,22 @@ def run_hard_scenes(session: Session) -> dict:
         "hard_scenes",
         files,
         extra={
-            "scenes": list(names),
+            "scenes": names,
             "wrong_mm": WRONG_MM,
             "confidence_thresholds": list(CONFIDENCE_THRESHOLDS),
             "operating_points": operating,
         },
     )
     return metrics
+
+
+# the scenes are measured one by one (the run's workers take them side by side)
+SPLIT = Split("hard_scenes", scene_names, measure_scene, write_hard_scenes)
+
+
+def run_hard_scenes(session: Session) -> dict:
+    """Every scene of :func:`scene_names` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _curve_plot(curves: list[dict], operating: dict) -> bytes:

@@ -31,13 +31,25 @@ import math
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, markdown_table, score, write_table
+from simbench.experiments.common import Session, Split, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
 from simbench.report import figure_png
 from simbench.sim.motion import Motion
 
-__all__ = ["SPEEDS_M_S", "QUICK_SPEEDS_M_S", "DIRECTIONS", "SCENES", "QUICK_SCENES", "run_motion", "holds_up_to"]
+__all__ = [
+    "SPEEDS_M_S",
+    "QUICK_SPEEDS_M_S",
+    "DIRECTIONS",
+    "SCENES",
+    "QUICK_SCENES",
+    "SPLIT",
+    "run_motion",
+    "measure_motion",
+    "write_motion",
+    "motion_parts",
+    "holds_up_to",
+]
 
 SPEEDS_M_S = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
 QUICK_SPEEDS_M_S = (0.0, 0.03, 0.3)
@@ -91,26 +103,57 @@ def _moving(raw, name: str, velocity: tuple[float, float, float]):
     return dataclasses.replace(raw, objects=objects)
 
 
-def run_motion(session: Session) -> dict:
+def _motion_session(session: Session) -> Session:
+    """``session`` at the study's camera scale and sample budget (same cache, seeds, sensor)."""
     cfg = session.config
-    scale = CAMERA_SCALE
-    speeds = QUICK_SPEEDS_M_S if cfg.quick else SPEEDS_M_S
-    scenes = {k: SCENES[k] for k in QUICK_SCENES} if cfg.quick else SCENES
-    sub = session.fork(session.sensor, config=dataclasses.replace(cfg, camera_scale=scale, spp=SPP, sampler=SAMPLER))
+    sub = session.fork(
+        session.sensor, config=dataclasses.replace(cfg, camera_scale=CAMERA_SCALE, spp=SPP, sampler=SAMPLER)
+    )
     if not sub.sensor.is_physical:
         raise ValueError("the motion experiment needs the physical (emva) camera model (its exposure time)")
-    rows, metrics, timing = [], {}, {}
-    for scene_name, moving in scenes.items():
-        raw = sub.raw_scene(scene_name)
-        for direction, unit in DIRECTIONS.items():
-            label = f"motion/{scene_name}"  # the same seeds at every speed and direction
-            for speed in speeds:
-                scene = _moving(raw, moving, tuple(speed * u for u in unit))
-                key = f"motion/{scene_name}/{direction}/{speed:g}"
-                with sub.timed(f"[motion] {scene_name} {direction} {speed:g} m/s"):
-                    rows += _row_set(sub, scene, moving, label, key, speed, metrics, timing, scale=scale)
-                for r in rows[-len(ROWS) :]:
-                    r.update(scene=scene_name, direction=direction)
+    return sub
+
+
+def _grid(config) -> tuple[tuple[float, ...], dict]:
+    return (QUICK_SPEEDS_M_S, {k: SCENES[k] for k in QUICK_SCENES}) if config.quick else (SPEEDS_M_S, SCENES)
+
+
+def motion_parts(config) -> list[str]:
+    """The study's captures, ``scene/direction/speed``: every scene, direction and speed."""
+    speeds, scenes = _grid(config)
+    return [f"{s}/{d}/{v:g}" for s in scenes for d in DIRECTIONS for v in speeds]
+
+
+def motion_cost(part: str) -> float:
+    """A part's rank for a pool: its speed (a faster object takes more time slices to render)."""
+    return float(part.rsplit("/", 1)[1])
+
+
+def measure_motion(session: Session, part: str) -> dict:
+    """One scene moving in one direction at one speed, recorded and scored by every system: its
+    rows, metrics and the systems' capture times (plain data)."""
+    scene_name, direction, speed_text = part.split("/")
+    speed = float(speed_text)
+    sub = _motion_session(session)
+    moving = SCENES[scene_name]
+    scene = _moving(sub.raw_scene(scene_name), moving, tuple(speed * u for u in DIRECTIONS[direction]))
+    metrics, timing = {}, {}
+    # the same seeds at every speed and direction (common random numbers)
+    rows = _row_set(
+        sub, scene, moving, f"motion/{scene_name}", f"motion/{part}", speed, metrics, timing, scale=CAMERA_SCALE
+    )
+    for r in rows:
+        r.update(scene=scene_name, direction=direction)
+    return {"rows": rows, "metrics": metrics, "timing": timing}
+
+
+def write_motion(session: Session, measured: list[dict]) -> dict:
+    """The study's files from :func:`measure_motion`'s results (in :func:`motion_parts`' order)."""
+    speeds, scenes = _grid(session.config)
+    sub = _motion_session(session)
+    rows = [r for m in measured for r in m["rows"]]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
+    timing = {k: v for m in measured for k, v in m["timing"].items()}
     summary = _summary(rows)
     for (scene_name, direction, row), held in summary.items():
         metrics[f"motion/{scene_name}/{direction}/{row}/holds_up_to_m_s"] = held
@@ -138,9 +181,22 @@ def run_motion(session: Session) -> dict:
     session.provenance(
         "motion",
         files,
-        extra={"camera_scale": scale, "speeds_m_s": list(speeds), "multi_shot_max_speed_m_s": MULTI_SHOT_MAX_SPEED_M_S},
+        extra={
+            "camera_scale": CAMERA_SCALE,
+            "speeds_m_s": list(speeds),
+            "multi_shot_max_speed_m_s": MULTI_SHOT_MAX_SPEED_M_S,
+        },
     )
     return metrics
+
+
+# each capture a part (the run's workers take them side by side, the fastest object first)
+SPLIT = Split("motion", motion_parts, measure_motion, write_motion, cost=motion_cost)
+
+
+def run_motion(session: Session) -> dict:
+    """Every part of :func:`motion_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _region(rec, moving_id: int, band_px: int) -> np.ndarray:

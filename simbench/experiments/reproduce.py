@@ -11,6 +11,7 @@ depth) is the CI benchmark, whose key errors are compared with the thresholds in
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import json
 import math
@@ -20,12 +21,12 @@ from pathlib import Path
 
 from simbench import validate
 from simbench.experiments.budget import run_budget
-from simbench.experiments.common import RunConfig, Session
-from simbench.experiments.fig9 import run_fig9
+from simbench.experiments.common import RunConfig, Session, Split
+from simbench.experiments import fig9
 from simbench.experiments.figures import run_figures
 from simbench.experiments.flatness import run_flatness
-from simbench.experiments.hard_scenes import run_hard_scenes
-from simbench.experiments.motion import run_motion
+from simbench.experiments import hard_scenes
+from simbench.experiments import motion
 from simbench.experiments.render_noise import run_render_noise
 from simbench.experiments.table1 import run_table1
 from simbench.experiments.table3 import run_table3
@@ -57,21 +58,29 @@ class Target:
     run: Callable[[Session], dict]
     in_all: bool
     rank: int
+    # measured in parts that a pool runs side by side (``run`` is then ``split.run``)
+    split: Split | None = None
+
+
+def _split(split: Split, in_all: bool, rank: int) -> Target:
+    return Target(split.run, in_all, rank, split=split)
 
 
 # hard_scenes is not in ``all``: at full resolution its 19 scenes, each with the 12-exposure
-# phase-shifting reference, take ~2 h of rendering on 2 cores (measured: ~7 min a scene), more
-# than the rest together; its quick form runs in CI (`make quick`: `reproduce all hard_scenes --quick`).
+# phase-shifting reference, take ~2-3 h of rendering on 2 cores from an empty cache (measured:
+# 7-16 min a scene), more than the rest together; its quick form runs in CI (`make quick`:
+# `reproduce all hard_scenes --quick`).  Its scenes, fig9's depths and the motion study's captures
+# are measured one by one (Split), so that workers take them side by side.
 TARGETS: dict[str, Target] = {
     "table1": Target(run_table1, True, 1),
     "table3": Target(run_table3, True, 3),
-    "fig9": Target(run_fig9, True, 0),
+    "fig9": _split(fig9.SPLIT, True, 0),
     "figures": Target(run_figures, True, 4),
     "budget": Target(run_budget, True, 5),
     "render_noise": Target(run_render_noise, True, 6),
     "flatness": Target(run_flatness, True, 7),
-    "hard_scenes": Target(run_hard_scenes, False, 2),
-    "motion": Target(run_motion, True, 1),
+    "hard_scenes": _split(hard_scenes.SPLIT, False, 2),
+    "motion": _split(motion.SPLIT, True, 1),
 }
 
 # what ``all`` runs: the paper's tables and figures and the studies beside them
@@ -110,9 +119,10 @@ def reproduce(
     Each target runs with a seed log of its own (:meth:`Session.for_target`), so its outputs,
     provenance included, do not depend on which targets ran before it; ``workers`` > 1 runs the
     targets on that many workers (this process and spawned ones; each target whole, longest
-    first), with the same outputs as one process.  It pays on a warm cache, where every target
-    is decoding and scoring, and on a cold one too, where the targets' single-threaded work
-    overlaps the other worker's renders (an entry two workers need is made once:
+    first, but fig9's depths, the motion study's captures and the hard scenes one by one:
+    :class:`simbench.experiments.common.Split`), with the same outputs as one process.  It pays
+    on a warm cache, where every target is decoding and scoring, and on a cold one too, where
+    the targets' single-threaded work overlaps the other worker's renders (an entry two workers need is made once:
     :meth:`simbench.cache.RenderCache.get_or_make`).
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the targets on
@@ -129,7 +139,7 @@ def reproduce(
     metrics: dict = {}
     if scheduler is not None:
         metrics = _run_in_workers(names, session=session, workers=workers, progress=progress, scheduler=scheduler)
-    elif workers == 1 or len(names) == 1:
+    elif workers == 1 or len(_tasks(names, config)) == 1:
         for name in names:
             metrics.update(_run_target(session, name))
     else:
@@ -169,16 +179,22 @@ def _worker_start(
     return Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=emit, command=command)
 
 
-def _worker_run(name: str, ship: bool = False) -> tuple[dict, int, int, dict, dict]:
-    """One target on a worker: its metrics, the cache hits, misses and entries made
-    (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per target)
+def _worker_run(name: str, ship: bool = False, part: tuple | None = None) -> tuple:
+    """One task on a worker: the target ``name`` whole, or one ``part`` of it, ``(split, index,
+    total, part name)`` (:class:`Split`).  Returns its metrics (a part: its result and seeds, see
+    :meth:`Split.measure_part`), the cache hits, misses and entries made
+    (:attr:`simbench.cache.RenderCache.made`) it counted (the counts start at zero per task)
     and, when ``ship`` (a cluster worker), the files it wrote ({path under the output folder:
-    bytes}; removed here)."""
+    bytes}; removed here; a part writes none)."""
     from simbench.experiments.workers import worker_state
 
     session = worker_state()
     cache = session.cache
     cache.hits, cache.misses, cache.made = 0, 0, {}
+    if part is not None:
+        split, index, total, part_name = part
+        measured = split.measure_part(session, part_name, index=index, total=total)
+        return measured, cache.hits, cache.misses, cache.made, {}
     metrics = _run_target(session, name)
     files: dict[str, bytes] = {}
     if ship:
@@ -188,6 +204,23 @@ def _worker_run(name: str, ship: bool = False) -> tuple[dict, int, int, dict, di
         for folder in sorted((p for p in session.out.rglob("*") if p.is_dir()), reverse=True):
             folder.rmdir()  # emptied above, deepest first: the worker's folder holds nothing between targets
     return metrics, cache.hits, cache.misses, cache.made, files
+
+
+def _tasks(names: list[str], config: RunConfig) -> list:
+    """The pool's tasks, longest first: each target whole, a split target's parts one by one
+    (:class:`Split`: its costliest first; those of a long target before a shorter target)."""
+    from simbench.experiments.workers import Task
+
+    tasks = []
+    for name in sorted(names, key=lambda n: TARGETS[n].rank):
+        split = TARGETS[name].split
+        if split is None:
+            tasks.append(Task(name, (name,)))
+            continue
+        total = len(split.parts(config))
+        for index, part in split.ranked(config):
+            tasks.append(Task(f"{name}/{part}", (name,), {"part": (split, index, total, part)}))
+    return tasks
 
 
 def _died(task) -> None:
@@ -204,42 +237,63 @@ def _run_in_workers(
 ) -> dict:
     """The targets on ``workers`` workers of :mod:`simbench.experiments.workers`: this process
     (it has its imports and its session already) and ``workers - 1`` spawned processes, each
-    taking the next target, longest first, when it is free; or on the Dask cluster
-    ``scheduler`` (every target there, its files sent back and written here).  The cache's
-    counts of the other workers are added to ``session``'s."""
-    from simbench.experiments.workers import Task, run_tasks
+    taking the next task (:func:`_tasks`), longest first, when it is free; or on the Dask
+    cluster ``scheduler`` (every task there, a whole target's files sent back and written here).
+    A split target's parts are measured on the workers and its files written here once all are
+    in.  The cache's counts of the other workers are added to ``session``'s."""
+    from simbench.experiments.workers import run_tasks
     from simbench.io import atomic_write_bytes
 
     done: dict[str, dict] = {}
-    counts: list[tuple] = []  # the other workers' cache hits, misses and entries made, per target
+    parts: dict[str, dict[int, tuple]] = {}  # split target -> part index -> (result, seeds)
+    counts: list[tuple] = []  # the other workers' cache hits, misses and entries made, per task
     ship = scheduler is not None
 
     def on_result(task, result) -> None:
-        done[task.key], *count, files = result
+        value, *count, files = result
+        part = task.kwargs.get("part")
+        if part is None:
+            done[task.key] = value
+        else:
+            parts.setdefault(task.args[0], {})[part[1]] = value
         counts.append(tuple(count))
         for rel, data in files.items():
             target = session.out / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(target, data)
 
+    def here(task):
+        part = task.kwargs.get("part")
+        if part is None:
+            return _run_target(session, task.key), 0, 0, {}, {}
+        split, index, total, name = part
+        return split.measure_part(session, name, index=index, total=total), 0, 0, {}, {}
+
+    tasks = _tasks(names, session.config)
     cache_root = None if session.cache.root is None else str(session.cache.root)
     run_tasks(
-        [Task(name, (name, ship)) for name in sorted(names, key=lambda n: TARGETS[n].rank)],
+        [dataclasses.replace(t, kwargs={**t.kwargs, "ship": ship}) for t in tasks],
         _worker_run,
-        workers=min(workers, len(names)),
+        workers=min(workers, len(tasks)),
         scheduler=scheduler,
         variant=session.variant,
         setup=_worker_start,
         setup_args=(session.config, None if ship else str(session.out), cache_root, session.command),
-        in_parent=None if ship else (lambda task: (_run_target(session, task.key), 0, 0, {}, {})),
+        in_parent=None if ship else here,
         on_result=on_result,
         on_died=_died,
         progress=progress,
     )
-    session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own targets'
+    session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own tasks'
     session.cache.misses += sum(c[1] for c in counts)
     for c in counts:
         session.cache.add_made(c[2])
+    for name in names:
+        split = TARGETS[name].split
+        if split is not None:
+            with session.timed(f"{name} done"):
+                measured = parts[name]
+                done[name] = split.collect(session.for_target(), [measured[i] for i in range(len(measured))])
     return {k: v for name in names for k, v in done[name].items()}
 
 
