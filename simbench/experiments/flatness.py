@@ -29,6 +29,7 @@ import numpy as np
 
 from simbench.experiments.common import (
     Session,
+    Split,
     figure_png,
     markdown_table,
     score,
@@ -41,6 +42,10 @@ if TYPE_CHECKING:
     from simbench.experiments.common import Capture
 
 __all__ = [
+    "SPLIT",
+    "flatness_parts",
+    "measure_board",
+    "write_flatness",
     "BOW_LEVELS_MM",
     "WAVINESS_LEVELS_MM",
     "QUICK_BOW_LEVELS_MM",
@@ -81,32 +86,45 @@ def _levels(quick: bool) -> list[tuple[str, float, float]]:
     return [("bow", b, 0.0) for b in bows] + [("waviness", 0.0, w) for w in waves]
 
 
-def run_flatness(session: Session) -> dict:
+def flatness_parts(config) -> list[str]:
+    """The boards, ``bow 0.5`` ...: every bow level, then every waviness level."""
+    return [f"{kind} {bow_mm if kind == 'bow' else wave_mm:g}" for kind, bow_mm, wave_mm in _levels(config.quick)]
+
+
+def measure_board(session: Session, part: str) -> dict:
+    """One board form (``bow 0.5``: its kind and level in mm), placed, recorded and decoded both
+    ways: its row and metrics (plain data)."""
     cfg = session.config
-    rows, metrics = [], {}
-    levels = _levels(cfg.quick)
-    for i, (kind, bow_mm, wave_mm) in enumerate(levels):
-        level = bow_mm if kind == "bow" else wave_mm
-        with session.timed(f"[flatness {i + 1}/{len(levels)}] {kind} {level:g} mm"):
-            sub = session.fork(
-                session.sensor, config=dataclasses.replace(cfg, board_bow_mm_per_m=bow_mm, board_waviness_mm=wave_mm)
-            )
-            scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "flatness/white", ["board"]))
-            cap = sub.capture(scene, "flatness/white")[0]
-            row = {"form": kind, "level_mm": level, **surface_form(cap)}
-            for mode in MODES:
-                s = score(cap, sub.decode(cap, cfg.decoder, mode=mode), cfg.decoder.period_px)
-                prefix = "" if mode == "calibrated" else "ref_"
-                for k in SCORE_KEYS:
-                    row[prefix + k] = s[k]
-                    metrics[f"flatness/{kind}_{level:g}/{mode}/{k}"] = s[k]
-            placed = sub.seeds_used["flatness/white/placement"]
-            row["board_bow_mm_per_m"] = 1000.0 * placed.get("board_bow_m_per_m", 0.0)
-            row["board_waviness_phase_rad"] = placed.get("board_waviness_phase_rad", "")
-            ref_form = sub.config.reference_form()
-            row["reference_bow_mm_per_m"] = 1000.0 * ref_form.get("bow_m_per_m", 0.0)
-            row["reference_waviness_phase_rad"] = ref_form.get("waviness_phase_rad", "")
-            rows.append(row)
+    kind, level, bow_mm, wave_mm = next(
+        (k, b if k == "bow" else w, b, w) for k, b, w in _levels(cfg.quick) if f"{k} {b if k == 'bow' else w:g}" == part
+    )
+    metrics = {}
+    sub = session.fork(
+        session.sensor, config=dataclasses.replace(cfg, board_bow_mm_per_m=bow_mm, board_waviness_mm=wave_mm)
+    )
+    scene = sub.prepare(sub.place(sub.raw_scene(SCENE), "flatness/white", ["board"]))
+    cap = sub.capture(scene, "flatness/white")[0]
+    row = {"form": kind, "level_mm": level, **surface_form(cap)}
+    for mode in MODES:
+        s = score(cap, sub.decode(cap, cfg.decoder, mode=mode), cfg.decoder.period_px)
+        prefix = "" if mode == "calibrated" else "ref_"
+        for k in SCORE_KEYS:
+            row[prefix + k] = s[k]
+            metrics[f"flatness/{kind}_{level:g}/{mode}/{k}"] = s[k]
+    placed = sub.seeds_used["flatness/white/placement"]
+    row["board_bow_mm_per_m"] = 1000.0 * placed.get("board_bow_m_per_m", 0.0)
+    row["board_waviness_phase_rad"] = placed.get("board_waviness_phase_rad", "")
+    ref_form = sub.config.reference_form()
+    row["reference_bow_mm_per_m"] = 1000.0 * ref_form.get("bow_m_per_m", 0.0)
+    row["reference_waviness_phase_rad"] = ref_form.get("waviness_phase_rad", "")
+    return {"row": row, "metrics": metrics}
+
+
+def write_flatness(session: Session, measured: list[dict]) -> dict:
+    """The study's files from :func:`measure_board`'s results (in :func:`flatness_parts`' order)."""
+    cfg = session.config
+    rows = [m["row"] for m in measured]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = [
         "form",
         "level_mm",
@@ -138,6 +156,15 @@ def run_flatness(session: Session) -> dict:
         },
     )
     return metrics
+
+
+# each board form a part (the run's workers take them side by side)
+SPLIT = Split("flatness", flatness_parts, measure_board, write_flatness)
+
+
+def run_flatness(session: Session) -> dict:
+    """Every board of :func:`flatness_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def flatness_plot(rows: list[dict], *, title: str) -> bytes:

@@ -28,6 +28,7 @@ from simbench.decode import robust_params
 from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import (
     Session,
+    Split,
     calibration_sentence,
     calibration_summary,
     made_by,
@@ -46,6 +47,10 @@ if TYPE_CHECKING:
     from simbench.sim.scene import SceneSpec
 
 __all__ = [
+    "SPLIT",
+    "table1_parts",
+    "measure_board",
+    "write_table1",
     "PAPER_TABLE1",
     "COLOURS",
     "BOARD_SETS",
@@ -112,62 +117,73 @@ def board_scene(session: Session, board_set: str, colour: str) -> SceneSpec:
     return session.prepare(session.place(raw, label, [BOARD])), label
 
 
-def run_table1(session: Session) -> dict:
-    """Render, decode and score the boards of both sets; returns ``{metric path: value}``."""
+def table1_parts(config) -> list[str]:
+    """The boards, ``set/colour``: every colour of each board set."""
+    return [f"{b}/{c}" for b in BOARD_SETS for c in COLOURS]
+
+
+def measure_board(session: Session, part: str) -> dict:
+    """One board (``set/colour``) recorded, decoded by both decoders with both protocols and
+    scored: its rows and metrics (plain data)."""
     cfg = session.config
     params = {"paper": cfg.decoder, "robust": robust_params(cfg.decoder)}
+    board_set, colour = part.split("/")
     rows, metrics = [], {}
-    jobs = [(b, c) for b in BOARD_SETS for c in COLOURS]
-    sessions = {b: board_session(session, b) for b in BOARD_SETS}
-    for i, (board_set, colour) in enumerate(jobs):
-        with session.timed(f"[table1 {i + 1}/{len(jobs)}] {board_set} {colour}"):
-            sub = sessions[board_set]
-            other = other_rig(session) if BOARD_SET_SENSORS[board_set] is None else None
-            scene, label = board_scene(sub, board_set, colour)
-            cap = sub.capture(scene, label)[0]
-            mat = scene.objects[0].material
-            placement = session.seeds_used[f"{label}/placement"]
-            # on the ground truth's grid: the ideal pinhole's, which the decoder also undistorts to
-            image = undistort_image(cap.raw, cap.scene.rig.camera)
-            stripes = code_stripes(image, cap.gt.column_px, pattern=cfg.decoder.pattern, where=cap.gt.lit)
-            content = {
-                "code1_eq13": stripes["code1_eq13"],
-                "code0_eq13": stripes["code0_eq13"],
-                **{f"code{k}_{c}": stripes[f"code{k}_mean"][j] for k in (1, 0) for j, c in enumerate("rgb")},
+    sub = board_session(session, board_set)
+    other = other_rig(session) if BOARD_SET_SENSORS[board_set] is None else None
+    scene, label = board_scene(sub, board_set, colour)
+    cap = sub.capture(scene, label)[0]
+    mat = scene.objects[0].material
+    placement = session.seeds_used[f"{label}/placement"]
+    # on the ground truth's grid: the ideal pinhole's, which the decoder also undistorts to
+    image = undistort_image(cap.raw, cap.scene.rig.camera)
+    stripes = code_stripes(image, cap.gt.column_px, pattern=cfg.decoder.pattern, where=cap.gt.lit)
+    content = {
+        "code1_eq13": stripes["code1_eq13"],
+        "code0_eq13": stripes["code0_eq13"],
+        **{f"code{k}_{c}": stripes[f"code{k}_mean"][j] for k in (1, 0) for j, c in enumerate("rgb")},
+    }
+    for k, v in content.items():
+        metrics[f"table1/{board_set}/{colour}/{k}"] = v
+    for decoder in DECODERS:
+        for mode in PROTOCOLS:
+            s = score(cap, sub.decode(cap, params[decoder], mode=mode), cfg.decoder.period_px)
+            so = (
+                score(cap, sub.decode(cap, params[decoder], mode=mode, rig=other), cfg.decoder.period_px)
+                if other
+                else {}
+            )
+            row = {
+                "board_set": board_set,
+                "colour": colour,
+                "material": MEASURED_PATCHES[colour]
+                if board_set == "measured"
+                else " ".join(map(str, PAPER_TABLE1[colour][0])),
+                "reflectance": " ".join(f"{c:.3f}" for c in mat.rgb),
+                "decoder": decoder,
+                "protocol": mode,
+                "paper_mae_mm": PAPER_TABLE1[colour][1],
+                **s,
+                "ratio": s["plane_mae_mm"] / PAPER_TABLE1[colour][1],
+                **{f"other_rig_{k}": so.get(k, float("nan")) for k in OTHER_RIG_KEYS},
+                **content,
+                "sensor": sub.sensor.name,
+                **cap.seeds,
+                **placement,
             }
-            for k, v in content.items():
-                metrics[f"table1/{board_set}/{colour}/{k}"] = v
-            for decoder in DECODERS:
-                for mode in PROTOCOLS:
-                    s = score(cap, sub.decode(cap, params[decoder], mode=mode), cfg.decoder.period_px)
-                    so = (
-                        score(cap, sub.decode(cap, params[decoder], mode=mode, rig=other), cfg.decoder.period_px)
-                        if other
-                        else {}
-                    )
-                    row = {
-                        "board_set": board_set,
-                        "colour": colour,
-                        "material": MEASURED_PATCHES[colour]
-                        if board_set == "measured"
-                        else " ".join(map(str, PAPER_TABLE1[colour][0])),
-                        "reflectance": " ".join(f"{c:.3f}" for c in mat.rgb),
-                        "decoder": decoder,
-                        "protocol": mode,
-                        "paper_mae_mm": PAPER_TABLE1[colour][1],
-                        **s,
-                        "ratio": s["plane_mae_mm"] / PAPER_TABLE1[colour][1],
-                        **{f"other_rig_{k}": so.get(k, float("nan")) for k in OTHER_RIG_KEYS},
-                        **content,
-                        "sensor": sub.sensor.name,
-                        **cap.seeds,
-                        **placement,
-                    }
-                    rows.append(row)
-                    for k, v in s.items():
-                        metrics[f"table1/{board_set}/{colour}/{decoder}/{mode}/{k}"] = v
-                    for k in OTHER_RIG_KEYS if other else ():
-                        metrics[f"table1/{board_set}/{colour}/{decoder}/{mode}/rig_{other}/{k}"] = so[k]
+            rows.append(row)
+            for k, v in s.items():
+                metrics[f"table1/{board_set}/{colour}/{decoder}/{mode}/{k}"] = v
+            for k in OTHER_RIG_KEYS if other else ():
+                metrics[f"table1/{board_set}/{colour}/{decoder}/{mode}/rig_{other}/{k}"] = so[k]
+    return {"rows": rows, "metrics": metrics}
+
+
+def write_table1(session: Session, measured: list[dict]) -> dict:
+    """The table's files from :func:`measure_board`'s results (in :func:`table1_parts`' order)."""
+    cfg = session.config
+    rows = [r for m in measured for r in m["rows"]]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     other = other_rig(session)
     cols = [
         "board_set",
@@ -211,6 +227,15 @@ def run_table1(session: Session) -> dict:
         },
     )
     return metrics
+
+
+# each board a part (the run's workers take them side by side)
+SPLIT = Split("table1", table1_parts, measure_board, write_table1)
+
+
+def run_table1(session: Session) -> dict:
+    """Render, decode and score the boards of both sets; returns ``{metric path: value}``."""
+    return SPLIT.run(session)
 
 
 def _fmt(v: float, spec: str = ".3f") -> str:
