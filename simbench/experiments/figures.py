@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, made_by, scene_errors
+from simbench.experiments.common import Session, Split, made_by, scene_errors
 from simbench.experiments.hard_scenes import WRONG_MM, object_scores
 from simbench.metrics import edge_band
 from simbench.report import figure_png, markdown_table, panel_row, write_table
-from simbench.io import atomic_write_bytes, atomic_write_text, save_ply
+from simbench.io import atomic_write_bytes, atomic_write_text, ply_bytes
 from simbench.metrics import points_from_depth
 
 if TYPE_CHECKING:
@@ -36,8 +36,13 @@ __all__ = [
     "FIG6_SCENE",
     "SPECULAR_SCENE",
     "SPECULAR_SYSTEMS",
+    "SPLIT",
     "run_figures",
-    "run_specular",
+    "figures_parts",
+    "measure_figure",
+    "write_figures",
+    "measure_specular",
+    "write_specular",
     "shown_raw",
     "shaded_view",
     "stages_figure",
@@ -137,35 +142,53 @@ def scene_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
     return figure_png(fig, dpi=80)
 
 
-def run_figures(session: Session) -> dict:
+def figures_parts(config) -> list[str]:
+    """The scenes: the paper's figures' (:data:`FIGURE_SCENES`), then the specular one."""
+    return [*FIGURE_SCENES, SPECULAR_SCENE]
+
+
+def figures_cost(part: str) -> float:
+    """A part's rank for a pool: the specular scene is recorded by every system."""
+    return len(SPECULAR_SYSTEMS) if part == SPECULAR_SCENE else 1.0
+
+
+def measure_figure(session: Session, name: str) -> dict:
+    """One scene: the specular one by :func:`measure_specular`; a figure's scene recorded,
+    decoded and scored - its row, metrics and figure files ({name under ``figures/``: bytes})."""
+    if name == SPECULAR_SCENE:
+        return measure_specular(session)
+    cfg = session.config
+    fig_id = FIGURE_SCENES[name]
+    scene = session.scene(name)
+    cap = session.capture(scene, f"figures/{name}")[0]
+    result = session.decode(cap, cfg.decoder)
+    m = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
+    row = {"scene": name, "figure": fig_id, **{k: m[k] for k in SUMMARY_KEYS}, **cap.seeds}
+    metrics = {f"figures/{name}/{k}": m[k] for k in ("mae_mm", "completeness", "stripe_order_error_rate")}
+    title = (
+        f"paper {fig_id.replace('fig', 'Fig. ')}: {name} - "
+        f"MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"
+    )
+    s = cfg.ply_stride
+    pts = points_from_depth(result.depth_m, scene.rig.camera)[::s, ::s]
+    ok = np.isfinite(pts[..., 2])
+    files = {
+        f"{fig_id}_{name}.png": scene_figure(cap, result, title=title),
+        f"{fig_id}_{name}.ply": ply_bytes(pts[ok], cap.image[::s, ::s][ok]),
+    }
+    if name == FIG6_SCENE:
+        files["fig6_stages.png"] = stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}")
+    return {"row": row, "metrics": metrics, "files": files}
+
+
+def write_figures(session: Session, measured: list[dict]) -> dict:
+    """The figures' files from :func:`measure_figure`'s results (in :func:`figures_parts`' order)."""
     cfg = session.config
     out = session.out / "figures"
-    files, rows, metrics = [], [], {}
-    for i, (name, fig_id) in enumerate(FIGURE_SCENES.items()):
-        with session.timed(f"[figures {i + 1}/{len(FIGURE_SCENES)}] {name}"):
-            scene = session.scene(name)
-            cap = session.capture(scene, f"figures/{name}")[0]
-            result = session.decode(cap, cfg.decoder)
-            m = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
-            rows.append({"scene": name, "figure": fig_id, **{k: m[k] for k in SUMMARY_KEYS}, **cap.seeds})
-            for k in ("mae_mm", "completeness", "stripe_order_error_rate"):
-                metrics[f"figures/{name}/{k}"] = m[k]
-            title = (
-                f"paper {fig_id.replace('fig', 'Fig. ')}: {name} - "
-                f"MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"
-            )
-            files.append(atomic_write_bytes(out / f"{fig_id}_{name}.png", scene_figure(cap, result, title=title)))
-            s = cfg.ply_stride
-            pts = points_from_depth(result.depth_m, scene.rig.camera)[::s, ::s]
-            ok = np.isfinite(pts[..., 2])
-            files.append(save_ply(out / f"{fig_id}_{name}.ply", pts[ok], cap.image[::s, ::s][ok]))
-            if name == FIG6_SCENE:
-                files.append(
-                    atomic_write_bytes(
-                        out / "fig6_stages.png",
-                        stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}"),
-                    )
-                )
+    *scenes, specular = measured
+    files = [atomic_write_bytes(out / rel, data) for m in scenes for rel, data in m["files"].items()]
+    rows = [m["row"] for m in scenes]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = ["scene", "figure", *SUMMARY_KEYS, "render", "noise"]
     files.append(write_table(out / "summary.csv", rows, cols))
     cam = session.scene(FIG6_SCENE).rig.camera
@@ -204,11 +227,18 @@ def run_figures(session: Session) -> dict:
         ],
     )
     files.append(atomic_write_text(out / "summary.md", "\n".join(md) + "\n"))
-    spec_files, spec_metrics = run_specular(session)
-    files += spec_files
-    metrics.update(spec_metrics)
+    files += write_specular(session, specular)
     session.provenance("figures/figures", files)
     return metrics
+
+
+# each scene a part (the run's workers take them side by side, the specular scene first)
+SPLIT = Split("figures", figures_parts, measure_figure, write_figures, cost=figures_cost)
+
+
+def run_figures(session: Session) -> dict:
+    """Every scene of :func:`figures_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _specular_recordings(session: Session) -> dict:
@@ -248,15 +278,14 @@ def shown_raw(raw: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
     return np.clip(np.nan_to_num(img), 0.0, 1.0)
 
 
-def run_specular(session: Session) -> tuple[list, dict]:
+def measure_specular(session: Session) -> dict:
     """Specular highlights seen by every system of :data:`SPECULAR_SYSTEMS`: per system and
     object of ``scenes/specular.toml`` the completeness over the pixels the system lights, the
     MAE against ground truth and the share of decoded pixels more than 5 mm wrong, off an edge
-    band (the run's, scaled to each system's focal length).  Returns (files, metrics)."""
+    band (the run's, scaled to each system's focal length).  Returns its rows, metrics and
+    figure (:func:`write_specular` writes them)."""
     cfg = session.config
-    out = session.out / "figures"
-    with session.timed(f"[figures] {SPECULAR_SCENE}: every system"):
-        recs = _specular_recordings(session)
+    recs = _specular_recordings(session)
     scene = session.raw_scene(SPECULAR_SCENE)
     main_focal = session.scene(SPECULAR_SCENE).rig.camera.focal_px
     rows, metrics = [], {}
@@ -269,9 +298,17 @@ def run_specular(session: Session) -> tuple[list, dict]:
             rows.append({"system": name, "object": obj.name, "pixels": int(region.sum()), **sc, **rec.seeds})
             for k in SPECULAR_KEYS:
                 metrics[f"figures/{SPECULAR_SCENE}/{name}/{obj.name}/{k}"] = sc[k]
+    return {"rows": rows, "metrics": metrics, "files": {"specular_systems.png": specular_figure(recs)}}
+
+
+def write_specular(session: Session, measured: dict) -> list:
+    """The specular scene's table, figure and text from :func:`measure_specular`'s result."""
+    cfg = session.config
+    out = session.out / "figures"
+    rows = measured["rows"]
     files = [
         write_table(out / "specular.csv", rows, ["system", "object", "pixels", *SPECULAR_KEYS, "render", "noise"]),
-        atomic_write_bytes(out / "specular_systems.png", specular_figure(recs)),
+        atomic_write_bytes(out / "specular_systems.png", measured["files"]["specular_systems.png"]),
     ]
     cam = session.scene(SPECULAR_SCENE).rig.camera
     md = [
@@ -301,7 +338,7 @@ def run_specular(session: Session) -> tuple[list, dict]:
         ],
     )
     files.append(atomic_write_text(out / "specular.md", "\n".join(md) + "\n"))
-    return files, metrics
+    return files
 
 
 def _pct(x: float) -> str:

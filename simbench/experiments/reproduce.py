@@ -23,7 +23,7 @@ from simbench import validate
 from simbench.experiments.budget import run_budget
 from simbench.experiments.common import RunConfig, Session, Split
 from simbench.experiments import fig9
-from simbench.experiments.figures import run_figures
+from simbench.experiments import figures
 from simbench.experiments import flatness
 from simbench.experiments import hard_scenes
 from simbench.experiments import motion
@@ -75,7 +75,7 @@ TARGETS: dict[str, Target] = {
     "table1": _split(table1.SPLIT, True, 1),
     "table3": Target(run_table3, True, 3),
     "fig9": _split(fig9.SPLIT, True, 0),
-    "figures": Target(run_figures, True, 4),
+    "figures": _split(figures.SPLIT, True, 4),
     "budget": Target(run_budget, True, 5),
     "render_noise": Target(run_render_noise, True, 6),
     "flatness": _split(flatness.SPLIT, True, 7),
