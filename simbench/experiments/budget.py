@@ -23,13 +23,13 @@ from simbench.sim.sensor import (
     with_effects,
     with_lateral_colour,
 )
-from simbench.experiments.common import Session, markdown_table, write_table
+from simbench.experiments.common import Session, Split, markdown_table, write_table
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
 from simbench.sim.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M, with_subsurface
 
-__all__ = ["budget_rows", "converged_spp", "run_budget"]
+__all__ = ["budget_rows", "converged_spp", "run_budget", "SPLIT", "budget_parts", "measure_row", "write_budget"]
 
 SCENE = "plane_white"
 RENDER_ROW = "render_converged"
@@ -98,11 +98,13 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
     return rows
 
 
-def run_budget(session: Session) -> dict:
-    cfg = session.config
-    repeats = 1 if cfg.quick else 3
+def _repeats(cfg) -> int:
+    return 1 if cfg.quick else 3
+
+
+def _row_specs(cfg) -> tuple[list[tuple], dict]:
+    """The rows (key, description, sensor model) and the run settings of the rows that change them."""
     ideal, paper = get_sensor("ideal"), get_sensor("paper")
-    rows, metrics = [], {}
     specs = budget_rows(ideal, paper)
     configs = {
         RENDER_ROW: dataclasses.replace(cfg, sampler="multijitter", spp=converged_spp(cfg.spp)),
@@ -137,26 +139,49 @@ def run_budget(session: Session) -> dict:
             ideal,
         ),
     )
-    for i, (key, text, sensor) in enumerate(specs):
-        with session.timed(f"[budget {i + 1}/{len(specs)}] {key}"):
-            sub = session.fork(sensor, config=configs.get(key))
-            raw = sub.raw_scene(SCENE)
-            if key == SUBSURFACE_ROW:
-                raw = with_subsurface(raw, "plaster", names=["board"])
-            # the same placement (and seeds) in every row
-            scene = sub.prepare(sub.place(raw, "budget/white", ["board"]))
-            caps = sub.capture(scene, "budget/white", repeats=repeats)
-            row = {"effect": key, "description": text}
-            for mode in MODES:
-                scores = [score(c, sub.decode(c, cfg.decoder, mode=mode), cfg.decoder.period_px) for c in caps]
-                prefix = "" if mode == "calibrated" else "ref_"
-                for k in scores[0]:
-                    v = float(np.mean([s[k] for s in scores]))
-                    row[prefix + k] = v
-                    metrics[f"budget/{key}/{mode}/{k}"] = v
-            row["paper_mae_mm"] = PAPER_WHITE_MM
-            row["ratio"] = row["plane_mae_mm"] / PAPER_WHITE_MM
-            rows.append(row)
+    return specs, configs
+
+
+def budget_parts(config) -> list[str]:
+    """The rows' keys, in the table's order."""
+    return [key for key, _, _ in _row_specs(config)[0]]
+
+
+def measure_row(session: Session, key: str) -> dict:
+    """One row: the white board recorded with one effect on (the same placement and seeds in
+    every row), decoded both ways and scored; its row and metrics (plain data)."""
+    cfg = session.config
+    repeats = _repeats(cfg)
+    specs, configs = _row_specs(cfg)
+    text, sensor = next((t, m) for k, t, m in specs if k == key)
+    metrics = {}
+    sub = session.fork(sensor, config=configs.get(key))
+    raw = sub.raw_scene(SCENE)
+    if key == SUBSURFACE_ROW:
+        raw = with_subsurface(raw, "plaster", names=["board"])
+    # the same placement (and seeds) in every row
+    scene = sub.prepare(sub.place(raw, "budget/white", ["board"]))
+    caps = sub.capture(scene, "budget/white", repeats=repeats)
+    row = {"effect": key, "description": text}
+    for mode in MODES:
+        scores = [score(c, sub.decode(c, cfg.decoder, mode=mode), cfg.decoder.period_px) for c in caps]
+        prefix = "" if mode == "calibrated" else "ref_"
+        for k in scores[0]:
+            v = float(np.mean([s[k] for s in scores]))
+            row[prefix + k] = v
+            metrics[f"budget/{key}/{mode}/{k}"] = v
+    row["paper_mae_mm"] = PAPER_WHITE_MM
+    row["ratio"] = row["plane_mae_mm"] / PAPER_WHITE_MM
+    return {"row": row, "metrics": metrics}
+
+
+def write_budget(session: Session, measured: list[dict]) -> dict:
+    """The table's files from :func:`measure_row`'s results (in :func:`budget_parts`' order)."""
+    cfg = session.config
+    repeats = _repeats(cfg)
+    specs, _ = _row_specs(cfg)
+    rows = [m["row"] for m in measured]
+    metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = [
         "effect",
         "description",
@@ -180,6 +205,15 @@ def run_budget(session: Session) -> dict:
     ]
     session.provenance("budget", files, extra={"sensors": {key: sensor.name for key, _, sensor in specs}})
     return metrics
+
+
+# each row a part (the run's workers take them side by side)
+SPLIT = Split("budget", budget_parts, measure_row, write_budget)
+
+
+def run_budget(session: Session) -> dict:
+    """Every row of :func:`budget_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _markdown(session: Session, rows: list[dict], repeats: int) -> str:

@@ -24,13 +24,23 @@ import dataclasses
 
 import numpy as np
 
-from simbench.experiments.common import Session, markdown_table, write_table
+from simbench.experiments.common import Session, Split, markdown_table, write_table
 from simbench.experiments.table3 import PLACED
 from simbench.io import atomic_write_text
 from simbench.metrics import edge_band
 from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
-__all__ = ["CANDIDATES", "QUICK_CANDIDATES", "TARGET_RATIO", "run_render_noise", "depth_spread_mm"]
+__all__ = [
+    "CANDIDATES",
+    "QUICK_CANDIDATES",
+    "TARGET_RATIO",
+    "SPLIT",
+    "run_render_noise",
+    "render_noise_parts",
+    "measure_noise",
+    "write_render_noise",
+    "depth_spread_mm",
+]
 
 # (sampler, spp): independent sampling, and each stratified generator at a count it accepts
 # (simbench.sim.mitsuba_dict.check_sampler); costs are about proportional to spp
@@ -78,49 +88,85 @@ def _depth(session: Session, cap) -> np.ndarray:
     return session.decode(cap, session.config.decoder, mode="calibrated").depth_m
 
 
-def run_render_noise(session: Session) -> dict:
-    cfg = session.config
+def _candidates(cfg) -> tuple[tuple[str, int], list[tuple[str, int]]]:
+    """The run's own setting and the settings the white board is rendered with."""
     own = (cfg.sampler, cfg.spp)
     candidates = list(QUICK_CANDIDATES if cfg.quick else CANDIDATES)
     if own not in candidates:
         candidates.append(own)
+    return own, candidates
+
+
+def render_noise_parts(config) -> list[str]:
+    """``scene/camera`` (the camera's noise) and ``scene/sampler_spp`` (the renders' at a
+    setting): every setting on the white board, the run's own on the other scenes."""
+    own, candidates = _candidates(config)
+    parts = []
+    for name in SCENES:
+        settings = candidates if name == "plane_white" else [own]
+        parts += [f"{name}/camera", *(f"{name}/{sampler}_{spp}" for sampler, spp in settings)]
+    return parts
+
+
+def _scene(session: Session, name: str):
+    label = f"render_noise/{name}"
+    return session.prepare(session.place(session.raw_scene(name), label, SCENES[name][1])), label
+
+
+def measure_noise(session: Session, part: str) -> dict:
+    """One part of :func:`render_noise_parts`: the depth spread (mm) over :data:`REPEATS`
+    recordings of one render (``camera``) or over :data:`REPEATS` renders with the camera's
+    noise off (a setting), and the pixels it is taken over, on the scene's lit, edge-free
+    pixels."""
+    cfg = session.config
     sensor = session.sensor
     if not sensor.is_physical:
         raise ValueError("the render-noise study needs the physical (emva) camera model")
+    name, what = part.split("/")
+    scene, label = _scene(session, name)
+    caps = session.capture(scene, f"{label}/camera", repeats=REPEATS)
+    region = _region(session, caps[0])
+    if what == "camera":
+        sd, n = depth_spread_mm([_depth(session, c) for c in caps], region)
+        return {"sd_mm": sd, "pixels": n}
+    sampler, spp = what.rsplit("_", 1)
     quiet = session.fork(dataclasses.replace(sensor, camera=dataclasses.replace(sensor.camera, noise=False)))
+    sub = quiet.fork(quiet.sensor, config=dataclasses.replace(cfg, sampler=sampler, spp=int(spp)))
+    sd, n = depth_spread_mm([_depth(sub, sub.capture(scene, f"{label}/render/{k}")[0]) for k in range(REPEATS)], region)
+    return {"sd_mm": sd, "pixels": n}
+
+
+def write_render_noise(session: Session, measured: list[dict]) -> dict:
+    """The study's files from :func:`measure_noise`'s results (in :func:`render_noise_parts`' order)."""
+    cfg = session.config
+    own, _ = _candidates(cfg)
     rows, metrics = [], {}
-    for name, (kind, placed) in SCENES.items():
-        label = f"render_noise/{name}"
-        scene = session.prepare(session.place(session.raw_scene(name), label, placed))
-        with session.timed(f"[render noise] {name}: camera noise, {REPEATS} recordings"):
-            caps = session.capture(scene, f"{label}/camera", repeats=REPEATS)
-            region = _region(session, caps[0])
-            camera_sd, _ = depth_spread_mm([_depth(session, c) for c in caps], region)
-        metrics[f"render_noise/{name}/camera_sd_mm"] = camera_sd
-        settings = candidates if name == "plane_white" else [own]
-        for sampler, spp in settings:
-            sub = quiet.fork(quiet.sensor, config=dataclasses.replace(cfg, sampler=sampler, spp=spp))
-            with session.timed(f"[render noise] {name}: {sampler} {spp} spp, {REPEATS} renders"):
-                depths = [_depth(sub, sub.capture(scene, f"{label}/render/{k}")[0]) for k in range(REPEATS)]
-            render_sd, n = depth_spread_mm(depths, region)
-            ratio = render_sd / camera_sd
-            key = f"render_noise/{name}/{sampler}_{spp}"
-            metrics[f"{key}/render_sd_mm"] = render_sd
-            metrics[f"{key}/ratio"] = ratio
-            rows.append(
-                {
-                    "scene": name,
-                    "scene_type": kind,
-                    "sampler": sampler,
-                    "spp": spp,
-                    "run_setting": (sampler, spp) == own,
-                    "render_sd_mm": render_sd,
-                    "camera_sd_mm": camera_sd,
-                    "ratio": ratio,
-                    "meets_target": bool(ratio <= TARGET_RATIO),
-                    "pixels": n,
-                }
-            )
+    camera_sd = {}
+    for part, m in zip(render_noise_parts(cfg), measured):
+        name, what = part.split("/")
+        if what == "camera":
+            camera_sd[name] = m["sd_mm"]
+            metrics[f"render_noise/{name}/camera_sd_mm"] = m["sd_mm"]
+            continue
+        sampler, spp = what.rsplit("_", 1)
+        ratio = m["sd_mm"] / camera_sd[name]
+        key = f"render_noise/{name}/{what}"
+        metrics[f"{key}/render_sd_mm"] = m["sd_mm"]
+        metrics[f"{key}/ratio"] = ratio
+        rows.append(
+            {
+                "scene": name,
+                "scene_type": SCENES[name][0],
+                "sampler": sampler,
+                "spp": int(spp),
+                "run_setting": (sampler, int(spp)) == own,
+                "render_sd_mm": m["sd_mm"],
+                "camera_sd_mm": camera_sd[name],
+                "ratio": ratio,
+                "meets_target": bool(ratio <= TARGET_RATIO),
+                "pixels": m["pixels"],
+            }
+        )
     cols = [
         "scene",
         "scene_type",
@@ -140,6 +186,15 @@ def run_render_noise(session: Session) -> dict:
     ]
     session.provenance("render_noise", files, extra={"repeats": REPEATS, "target_ratio": TARGET_RATIO})
     return metrics
+
+
+# each recording set a part (the run's workers take them side by side)
+SPLIT = Split("render_noise", render_noise_parts, measure_noise, write_render_noise)
+
+
+def run_render_noise(session: Session) -> dict:
+    """Every part of :func:`render_noise_parts` measured, then the files written (:class:`Split`)."""
+    return SPLIT.run(session)
 
 
 def _markdown(session: Session, rows: list[dict]) -> str:

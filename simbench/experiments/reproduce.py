@@ -20,14 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simbench import validate
-from simbench.experiments.budget import run_budget
+from simbench.experiments import budget
 from simbench.experiments.common import RunConfig, Session, Split
 from simbench.experiments import fig9
 from simbench.experiments import figures
 from simbench.experiments import flatness
 from simbench.experiments import hard_scenes
 from simbench.experiments import motion
-from simbench.experiments.render_noise import run_render_noise
+from simbench.experiments import render_noise
 from simbench.experiments import table1
 from simbench.experiments.table3 import run_table3
 from simbench.io import atomic_write_text, read_toml, save_json
@@ -76,8 +76,8 @@ TARGETS: dict[str, Target] = {
     "table3": Target(run_table3, True, 3),
     "fig9": _split(fig9.SPLIT, True, 0),
     "figures": _split(figures.SPLIT, True, 4),
-    "budget": Target(run_budget, True, 5),
-    "render_noise": Target(run_render_noise, True, 6),
+    "budget": _split(budget.SPLIT, True, 5),
+    "render_noise": _split(render_noise.SPLIT, True, 6),
     "flatness": _split(flatness.SPLIT, True, 7),
     "hard_scenes": _split(hard_scenes.SPLIT, False, 2),
     "motion": _split(motion.SPLIT, True, 1),
