@@ -14,6 +14,7 @@ scene, scored the same way at their own resolutions (the edge band scaled to the
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -23,6 +24,7 @@ from simbench.decode import robust_params
 from simbench.sim.sensor import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
 from simbench.experiments.common import (
     Session,
+    Split,
     calibration_sentence,
     calibration_summary,
     other_rig,
@@ -46,7 +48,16 @@ if TYPE_CHECKING:
     from simbench.sim.scene import SceneSpec
     from simbench.sim.truth import GroundTruth
 
-__all__ = ["PAPER_TABLE3", "SCENE", "front_face_mask", "run_table3"]
+__all__ = [
+    "PAPER_TABLE3",
+    "SCENE",
+    "SPLIT",
+    "front_face_mask",
+    "run_table3",
+    "table3_parts",
+    "measure_table3",
+    "write_table3",
+]
 
 SCENE = "discontinuity"
 
@@ -71,46 +82,49 @@ COMPETITORS = tuple(PAPER_COMPETITORS)
 REFERENCE_SYSTEMS = ("phase_shift",)
 
 
-def _competitor_faces(session: Session, raw, systems) -> dict:
-    """Per competitor system: its recording, depth, faces and per-face scores.  The edge band,
-    defined on the main camera, is scaled to each system's resolution (the same angle, at
-    least 1 px)."""
+def _placed(session: Session):
+    """The scene with its objects placed once (the same placement and seeds for every sensor)
+    and its capture label."""
+    label = f"table3/{SCENE}"
+    return session.place(session.raw_scene(SCENE), label, PLACED), label
+
+
+def _measure_competitor(session: Session, name: str) -> dict:
+    """System ``name``'s recording scored per face: its label, per-face scores and its Fig. 10
+    panel.  The edge band, defined on the main camera, is scaled to the system's resolution
+    (the same angle, at least 1 px)."""
+    raw, label = _placed(session)
     main_focal_px = session.scene(SCENE).rig.camera.focal_px
-    out = {}
-    for name in systems:
-        with session.timed(f"[table3] {name}"):
-            rec, depth = session.acquire(name, raw, f"table3/{SCENE}")[0]
-            band = edge_band(
-                rec.gt.depth_m,
-                object_id=rec.gt.object_id,
-                band_px=max(1, int(round(session.config.edge_band_px * rec.scene.rig.camera.focal_px / main_focal_px))),
-            )
-            info = session.system(name).info()
-            rig = other_rig(session)
-            other = session.decode_recording(name, rec, rig=rig) if info.uses_scene_rig and rig else None
-            faces, scores = {}, {}
-            for obj in PAPER_TABLE3:
-                face = front_face_mask(rec.scene, rec.gt, obj) & ~band
-                faces[obj] = face
-                sc = score(rec, depth, info.period_px, region=face)
-                scores[obj] = {
-                    "plane_mae_mm": sc["plane_mae_mm"],
-                    "gt_mae_mm": sc["gt_mae_mm"],
-                    "completeness": sc["completeness"],
-                    "face_pixels": int(face.sum()),
-                    "seeds": rec.seeds,
-                }
-                if other is not None:
-                    so = score(rec, other, info.period_px, region=face)
-                    scores[obj]["other_rig"] = {k: so[k] for k in ("plane_mae_mm", "gt_mae_mm", "completeness")}
-            out[name] = {
-                "recording": rec,
-                "depth": depth,
-                "label": session.system(name).info().label,
-                "faces": faces,
-                "scores": scores,
-            }
-    return out
+    rec, depth = session.acquire(name, raw, label)[0]
+    band = edge_band(
+        rec.gt.depth_m,
+        object_id=rec.gt.object_id,
+        band_px=max(1, int(round(session.config.edge_band_px * rec.scene.rig.camera.focal_px / main_focal_px))),
+    )
+    info = session.system(name).info()
+    rig = other_rig(session)
+    other = session.decode_recording(name, rec, rig=rig) if info.uses_scene_rig and rig else None
+    faces, scores = {}, {}
+    for obj in PAPER_TABLE3:
+        face = front_face_mask(rec.scene, rec.gt, obj) & ~band
+        faces[obj] = face
+        sc = score(rec, depth, info.period_px, region=face)
+        scores[obj] = {
+            "plane_mae_mm": sc["plane_mae_mm"],
+            "gt_mae_mm": sc["gt_mae_mm"],
+            "completeness": sc["completeness"],
+            "face_pixels": int(face.sum()),
+            "seeds": rec.seeds,
+        }
+        if other is not None:
+            so = score(rec, other, info.period_px, region=face)
+            scores[obj]["other_rig"] = {k: so[k] for k in ("plane_mae_mm", "gt_mae_mm", "completeness")}
+    label_text = info.label
+    return {
+        "label": label_text,
+        "scores": scores,
+        "panel": (label_text, rec.scene.rig.camera, rec.gt.depth_m, depth.depth_m, faces),
+    }
 
 
 PLACED = ("cube", "cuboid")
@@ -159,95 +173,143 @@ VARIANTS = (("paper", "calibrated"), ("paper", "reference"), ("robust", "calibra
 RIG_KEYS = ("plane_mae_mm", "gt_mae_mm", "completeness")
 
 
-def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REFERENCE_SYSTEMS) -> dict:
-    """Table 3 with the proposed sensor and the other ``systems`` (registered names,
-    :mod:`simbench.systems`): the paper's competitors, the Kinect and the ToF camera, and the
-    multi-shot reference."""
+SYSTEMS = COMPETITORS + REFERENCE_SYSTEMS
+# what_ifs' effects (its keys, whatever the sensor model)
+WHAT_IFS = ("lateral_colour", *(f"subsurface_{medium}" for medium in SUBSURFACE_WHAT_IFS))
+PROPOSED = "proposed"
+
+
+def table3_parts(config, *, systems: tuple[str, ...] = SYSTEMS) -> list[str]:
+    """The proposed sensor's capture, each other system's recording, each what-if's capture."""
+    return [PROPOSED, *systems, *WHAT_IFS]
+
+
+def table3_cost(part: str) -> float:
+    """A part's rank for a pool: the proposed sensor's (four decoders, the other rig's too) and
+    the multi-shot reference's (12 exposures) first."""
+    return 2.0 if part in (PROPOSED, *REFERENCE_SYSTEMS) else 1.0
+
+
+def _proposed_capture(session: Session):
+    raw, label = _placed(session)
+    scene = session.prepare(raw)
+    cap = session.capture(scene, label)[0]
+    band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=session.config.edge_band_px)
+    faces = {name: front_face_mask(scene, cap.gt, name) & ~band for name in PAPER_TABLE3}
+    return raw, label, scene, cap, faces
+
+
+def _measure_proposed(session: Session) -> dict:
+    """The proposed sensor's capture decoded by both decoders in both modes (and with the other
+    rig), scored per face: per object its columns, the metrics, the whole scene's errors and its
+    Fig. 10 panel."""
     cfg = session.config
-    label = f"table3/{SCENE}"
-    # one placement of the objects, seen by every sensor
-    raw = session.place(session.raw_scene(SCENE), label, PLACED)
-    competitors = _competitor_faces(session, raw, systems)
     params = {"paper": cfg.decoder, "robust": robust_params(cfg.decoder)}
-    with session.timed("[table3] cube and cuboid"):
-        scene = session.prepare(raw)
-        cap = session.capture(scene, label)[0]
-        results = {(d, m): session.decode(cap, params[d], mode=m) for d, m in VARIANTS}
-        other = other_rig(session)
-        others = {(d, m): session.decode(cap, params[d], mode=m, rig=other) for d, m in VARIANTS} if other else {}
-        band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
-        rows, metrics, faces = [], {}, {}
-        for name, paper in PAPER_TABLE3.items():
-            face = front_face_mask(scene, cap.gt, name) & ~band
-            faces[name] = face
-            row = {"object": name, "paper_mm": paper[0], "face_pixels": int(face.sum())}
-            for (d, m), result in results.items():
-                sc = score(cap, result, cfg.decoder.period_px, region=face)
-                key = f"{d}_{m}"
-                row.update(
-                    {
-                        f"{key}_plane_mae_mm": sc["plane_mae_mm"],
-                        f"{key}_ratio": sc["plane_mae_mm"] / paper[0],
-                        f"{key}_gt_mae_mm": sc["gt_mae_mm"],
-                        f"{key}_completeness": sc["completeness"],
-                        f"{key}_stripe_order_errors": sc["stripe_order_errors"],
-                    }
-                )
-                for k in ("plane_mae_mm", "gt_mae_mm", "completeness", "stripe_order_errors"):
-                    metrics[f"table3/{name}/{d}/{m}/{k}"] = sc[k]
-                if others:
-                    so = score(cap, others[(d, m)], cfg.decoder.period_px, region=face)
-                    row.update({f"{key}_rig_{other}_{k}": so[k] for k in RIG_KEYS})
-                    for k in RIG_KEYS:
-                        metrics[f"table3/{name}/{d}/{m}/rig_{other}/{k}"] = so[k]
-            for d, c in competitors.items():
-                if d in PAPER_COMPETITORS:
-                    row[f"paper_{d}_mm"] = paper[PAPER_COMPETITORS[d][1]]
-                row.update(
-                    {
-                        f"{d}_mm": c["scores"][name]["plane_mae_mm"],
-                        f"{d}_gt_mae_mm": c["scores"][name]["gt_mae_mm"],
-                        f"{d}_completeness": c["scores"][name]["completeness"],
-                    }
-                )
-                if "other_rig" in c["scores"][name]:
-                    row.update({f"{d}_rig_{other}_{k}": v for k, v in c["scores"][name]["other_rig"].items()})
+    _, label, scene, cap, faces = _proposed_capture(session)
+    results = {(d, m): session.decode(cap, params[d], mode=m) for d, m in VARIANTS}
+    other = other_rig(session)
+    others = {(d, m): session.decode(cap, params[d], mode=m, rig=other) for d, m in VARIANTS} if other else {}
+    columns, metrics = {}, {}
+    for name, paper in PAPER_TABLE3.items():
+        face = faces[name]
+        row = {"face_pixels": int(face.sum())}
+        for (d, m), result in results.items():
+            sc = score(cap, result, cfg.decoder.period_px, region=face)
+            key = f"{d}_{m}"
             row.update(
                 {
-                    **cap.seeds,
-                    **session.seeds_used[f"{label}/placement"],
-                    **{
-                        f"{d}_{k}_seed": v
-                        for d in competitors
-                        for k, v in competitors[d]["scores"][name]["seeds"].items()
-                    },
+                    f"{key}_plane_mae_mm": sc["plane_mae_mm"],
+                    f"{key}_ratio": sc["plane_mae_mm"] / paper[0],
+                    f"{key}_gt_mae_mm": sc["gt_mae_mm"],
+                    f"{key}_completeness": sc["completeness"],
+                    f"{key}_stripe_order_errors": sc["stripe_order_errors"],
                 }
             )
-            rows.append(row)
-            for d in competitors:
-                for k in ("plane_mae_mm", "gt_mae_mm", "completeness"):
-                    metrics[f"table3/{name}/{d}_{k}"] = competitors[d]["scores"][name][k]
-                for k, v in competitors[d]["scores"][name].get("other_rig", {}).items():
-                    metrics[f"table3/{name}/{d}/rig_{other}/{k}"] = v
-        for effect, (_, sensor, change) in what_ifs(session.sensor).items():
-            sub = (
-                session
-                if sensor == session.sensor
-                else session.fork(dataclasses.replace(sensor, name=f"{session.sensor.name}+{effect}"))
+            for k in ("plane_mae_mm", "gt_mae_mm", "completeness", "stripe_order_errors"):
+                metrics[f"table3/{name}/{d}/{m}/{k}"] = sc[k]
+            if others:
+                so = score(cap, others[(d, m)], cfg.decoder.period_px, region=face)
+                row.update({f"{key}_rig_{other}_{k}": so[k] for k in RIG_KEYS})
+                for k in RIG_KEYS:
+                    metrics[f"table3/{name}/{d}/{m}/rig_{other}/{k}"] = so[k]
+        row.update({**cap.seeds, **session.seeds_used[f"{label}/placement"]})
+        columns[name] = row
+    result = results[("paper", "calibrated")]
+    whole = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
+    metrics["table3/scene/completeness"] = whole["completeness"]
+    metrics["table3/scene/stripe_order_errors"] = whole["stripe_order_errors"]
+    panel = ("proposed", cap.scene.rig.camera, cap.gt.depth_m, result.depth_m, faces)
+    return {"columns": columns, "metrics": metrics, "whole": whole, "panel": panel}
+
+
+def _measure_what_if(session: Session, effect: str) -> dict:
+    """One effect of :func:`what_ifs` recorded (the same placement and seeds) and decoded by the
+    paper's decoder, scored on the proposed capture's faces: per object its columns, the metrics."""
+    cfg = session.config
+    raw, label, _, _, faces = _proposed_capture(session)
+    _, sensor, change = what_ifs(session.sensor)[effect]
+    sub = (
+        session
+        if sensor == session.sensor
+        else session.fork(dataclasses.replace(sensor, name=f"{session.sensor.name}+{effect}"))
+    )
+    w_scene = sub.prepare(raw if change is None else change(raw))
+    w_cap = sub.capture(w_scene, label)[0]
+    columns = {name: {} for name in PAPER_TABLE3}
+    metrics = {}
+    for d, m in WHAT_IF_VARIANTS:
+        w_result = sub.decode(w_cap, cfg.decoder if d == "paper" else robust_params(cfg.decoder), mode=m)
+        for name in PAPER_TABLE3:
+            sc = score(w_cap, w_result, cfg.decoder.period_px, region=faces[name])
+            for k in WHAT_IF_KEYS:
+                columns[name][f"{effect}_{d}_{m}_{k}"] = sc[k]
+                metrics[f"table3/{name}/what_if/{effect}/{d}/{m}/{k}"] = sc[k]
+    return {"columns": columns, "metrics": metrics}
+
+
+def measure_table3(session: Session, part: str) -> dict:
+    """One part of :func:`table3_parts` (plain data and its Fig. 10 panel)."""
+    if part == PROPOSED:
+        return _measure_proposed(session)
+    if part in WHAT_IFS:
+        return _measure_what_if(session, part)
+    return _measure_competitor(session, part)
+
+
+def write_table3(session: Session, measured: list[dict], *, systems: tuple[str, ...] = SYSTEMS) -> dict:
+    """The table's files from :func:`measure_table3`'s results (in :func:`table3_parts`' order)."""
+    cfg = session.config
+    proposed, *rest = measured
+    competitors = dict(zip(systems, rest[: len(systems)]))
+    what_if = rest[len(systems) :]
+    other = other_rig(session)
+    metrics = dict(proposed["metrics"])
+    rows = []
+    for name, paper in PAPER_TABLE3.items():
+        row = {"object": name, "paper_mm": paper[0], **proposed["columns"][name]}
+        for d, c in competitors.items():
+            if d in PAPER_COMPETITORS:
+                row[f"paper_{d}_mm"] = paper[PAPER_COMPETITORS[d][1]]
+            row.update(
+                {
+                    f"{d}_mm": c["scores"][name]["plane_mae_mm"],
+                    f"{d}_gt_mae_mm": c["scores"][name]["gt_mae_mm"],
+                    f"{d}_completeness": c["scores"][name]["completeness"],
+                }
             )
-            w_scene = sub.prepare(raw if change is None else change(raw))
-            w_cap = sub.capture(w_scene, label)[0]
-            for d, m in WHAT_IF_VARIANTS:
-                w_result = sub.decode(w_cap, params[d], mode=m)
-                for row in rows:
-                    sc = score(w_cap, w_result, cfg.decoder.period_px, region=faces[row["object"]])
-                    for k in WHAT_IF_KEYS:
-                        row[f"{effect}_{d}_{m}_{k}"] = sc[k]
-                        metrics[f"table3/{row['object']}/what_if/{effect}/{d}/{m}/{k}"] = sc[k]
-        result = results[("paper", "calibrated")]
-        whole = scene_errors(cap, result, period_px=cfg.decoder.period_px, edge_band_px=cfg.edge_band_px)
-        metrics["table3/scene/completeness"] = whole["completeness"]
-        metrics["table3/scene/stripe_order_errors"] = whole["stripe_order_errors"]
+            if "other_rig" in c["scores"][name]:
+                row.update({f"{d}_rig_{other}_{k}": v for k, v in c["scores"][name]["other_rig"].items()})
+            row.update({f"{d}_{k}_seed": v for k, v in c["scores"][name]["seeds"].items()})
+            for k in ("plane_mae_mm", "gt_mae_mm", "completeness"):
+                metrics[f"table3/{name}/{d}_{k}"] = c["scores"][name][k]
+            for k, v in c["scores"][name].get("other_rig", {}).items():
+                metrics[f"table3/{name}/{d}/rig_{other}/{k}"] = v
+        for w in what_if:
+            row.update(w["columns"][name])
+        rows.append(row)
+    for w in what_if:
+        metrics.update(w["metrics"])
+    whole = proposed["whole"]
     out = session.out
     cols = ["object", "paper_mm", "face_pixels"]
     cols += [
@@ -269,11 +331,7 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
     cols += [f"{d}_{k}_seed" for d in competitors for k in ("render", "noise")]
     files = [write_table(out / "table3.csv", rows, cols)]
     files.append(atomic_write_text(out / "table3.md", _markdown(session, rows, whole, competitors)))
-    panels = [("proposed", cap.scene.rig.camera, cap.gt.depth_m, result.depth_m, faces)]
-    panels += [
-        (c["label"], c["recording"].scene.rig.camera, c["recording"].gt.depth_m, c["depth"].depth_m, c["faces"])
-        for c in competitors.values()
-    ]
+    panels = [proposed["panel"], *(c["panel"] for c in competitors.values())]
     files.append(
         atomic_write_bytes(
             out / "fig10.png",
@@ -285,10 +343,28 @@ def run_table3(session: Session, *, systems: tuple[str, ...] = COMPETITORS + REF
         files,
         extra={
             "placement": {"depth_mm": cfg.placement_depth_mm, "tilt_deg": cfg.placement_tilt_deg},
-            **({"calibration": calibration_summary(session, scene)} if other else {}),
+            **({"calibration": calibration_summary(session, session.scene(SCENE))} if other else {}),
         },
     )
     return metrics
+
+
+# each sensor's recording and each what-if a part (the run's workers take them side by side)
+SPLIT = Split("table3", table3_parts, measure_table3, write_table3, cost=table3_cost)
+
+
+def run_table3(session: Session, *, systems: tuple[str, ...] = SYSTEMS) -> dict:
+    """Table 3 with the proposed sensor and the other ``systems`` (registered names,
+    :mod:`simbench.systems`): the paper's competitors, the Kinect and the ToF camera, and the
+    multi-shot reference."""
+    if systems == SYSTEMS:
+        return SPLIT.run(session)
+    split = dataclasses.replace(
+        SPLIT,
+        parts=functools.partial(table3_parts, systems=systems),
+        write=functools.partial(write_table3, systems=systems),
+    )
+    return split.run(session)
 
 
 def _what_if_section(session: Session, rows: list[dict]) -> list[str]:
