@@ -284,7 +284,7 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
         raise ValueError("budget broke")
 
     # budget (the longer) is this process's; flatness runs on the spawned worker
-    monkeypatch.setitem(module.TARGETS, "budget", dataclasses.replace(module.TARGETS["budget"], run=broken))
+    monkeypatch.setitem(module.TARGETS, "budget", dataclasses.replace(module.TARGETS["budget"], run=broken, split=None))
     with pytest.raises(ValueError, match="budget broke"):
         run(["budget", "flatness"], "broken", workers=2)
 
@@ -363,3 +363,10 @@ def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_write
         )
     assert metrics == one[0] and {p.name: p.read_bytes() for p in (tmp_path / "dask").iterdir()} == one[1]
     assert os.getpid() not in helpers.WRITTEN_BY  # measured on the cluster's workers, written here
+    # a part that fails stops the run with its error, and nothing of the target is written
+    failing = dataclasses.replace(split, measure=helpers.split_measure_fails)
+    monkeypatch.setitem(module.TARGETS, "split", module.Target(failing.run, False, 0, split=failing))
+    for workers in (1, 2):
+        with pytest.raises(ValueError, match="part p3 failed on purpose"):
+            run(f"failing{workers}", workers)
+        assert not (tmp_path / f"failing{workers}" / "split.txt").exists()

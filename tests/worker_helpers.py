@@ -67,3 +67,9 @@ def split_write(session, results: list[dict]) -> dict:
 
 def split_cost(part: str) -> float:
     return int(part[1:])  # the last part first
+
+
+def split_measure_fails(session, part: str) -> dict:
+    if part == "p3":
+        raise ValueError("part p3 failed on purpose")
+    return split_measure(session, part)
