@@ -347,6 +347,7 @@ def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_write
         f"[split {k + 1}/6] p{k}" for k in range(6)
     ]
     assert any(m.startswith("split done") for m in two[2])
+    assert any(m.startswith("tasks: 6, ") and "the longest" in m for m in two[2])
     distributed = pytest.importorskip("distributed")
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
@@ -370,3 +371,16 @@ def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_write
         with pytest.raises(ValueError, match="part p3 failed on purpose"):
             run(f"failing{workers}", workers)
         assert not (tmp_path / f"failing{workers}" / "split.txt").exists()
+
+
+def test_the_task_summary_bounds_a_run_by_its_longest_task_and_its_work_over_the_workers():
+    from simbench.experiments.reproduce import task_summary
+
+    line = task_summary({"fig9/a": 30.0, "fig9/b": 10.0, "table1": 80.0}, workers=2)
+    assert line == (
+        "tasks: 3, 120 worker-s in all, the longest 80 s (table1); a run takes at least 80 s on 2, 80 s on 16 workers"
+    )
+    many = {f"t{k}": 10.0 for k in range(64)}
+    assert task_summary(many, workers=2).endswith("at least 320 s on 2, 40 s on 16 workers")
+    assert task_summary(many, workers=None).endswith("at least 40 s on 16 workers")
+    assert task_summary({}, workers=2) == "tasks: none"

@@ -15,6 +15,7 @@ import dataclasses
 import logging
 import json
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,7 @@ __all__ = [
     "load_thresholds",
     "check_thresholds",
     "thresholds_from",
+    "task_summary",
     "write_thresholds",
 ]
 
@@ -180,6 +182,13 @@ def _worker_start(
 
 
 def _worker_run(name: str, ship: bool = False, part: tuple | None = None) -> tuple:
+    """:func:`_worker_task` and the seconds it took (the run's task-time summary)."""
+    t0 = time.perf_counter()
+    result = _worker_task(name, ship, part)
+    return (*result, time.perf_counter() - t0)
+
+
+def _worker_task(name: str, ship: bool = False, part: tuple | None = None) -> tuple:
     """One task on a worker: the target ``name`` whole, or one ``part`` of it, ``(split, index,
     total, part name)`` (:class:`Split`).  Returns its metrics (a part: its result and seeds, see
     :meth:`Split.measure_part`), the cache hits, misses and entries made
@@ -223,6 +232,23 @@ def _tasks(names: list[str], config: RunConfig) -> list:
     return tasks
 
 
+def task_summary(durations: dict[str, float], *, workers: int | None) -> str:
+    """One line on where a pooled run's time went: its tasks' seconds summed over the workers,
+    the longest task, and what they bound a run on W workers to, ``max(longest, sum / W)`` -
+    a lower bound (renders a task waits for on another worker, the writing after the pool and
+    starting the workers come on top), for this run's workers and for 16."""
+    if not durations:
+        return "tasks: none"
+    total = sum(durations.values())
+    key, longest = max(durations.items(), key=lambda kv: kv[1])
+    bounds = [w for w in (workers, 16) if w]
+    bound = ", ".join(f"{max(longest, total / w):.0f} s on {w}" for w in dict.fromkeys(bounds))
+    return (
+        f"tasks: {len(durations)}, {total:.0f} worker-s in all, the longest {longest:.0f} s ({key}); "
+        f"a run takes at least {bound} workers"
+    )
+
+
 def _died(task) -> None:
     raise RuntimeError(f"a reproduce worker process died twice on target {task.key} (killed, or out of memory)")
 
@@ -245,12 +271,14 @@ def _run_in_workers(
     from simbench.io import atomic_write_bytes
 
     done: dict[str, dict] = {}
+    durations: dict[str, float] = {}  # task -> seconds on its worker
     parts: dict[str, dict[int, tuple]] = {}  # split target -> part index -> (result, seeds)
     counts: list[tuple] = []  # the other workers' cache hits, misses and entries made, per task
     ship = scheduler is not None
 
     def on_result(task, result) -> None:
-        value, *count, files = result
+        value, *count, files, seconds = result
+        durations[task.key] = seconds
         part = task.kwargs.get("part")
         if part is None:
             done[task.key] = value
@@ -263,11 +291,12 @@ def _run_in_workers(
             atomic_write_bytes(target, data)
 
     def here(task):
+        t0 = time.perf_counter()
         part = task.kwargs.get("part")
         if part is None:
-            return _run_target(session, task.key), 0, 0, {}, {}
+            return _run_target(session, task.key), 0, 0, {}, {}, time.perf_counter() - t0
         split, index, total, name = part
-        return split.measure_part(session, name, index=index, total=total), 0, 0, {}, {}
+        return split.measure_part(session, name, index=index, total=total), 0, 0, {}, {}, time.perf_counter() - t0
 
     tasks = _tasks(names, session.config)
     cache_root = None if session.cache.root is None else str(session.cache.root)
@@ -284,6 +313,7 @@ def _run_in_workers(
         on_died=_died,
         progress=progress,
     )
+    progress(task_summary(durations, workers=min(workers, len(tasks)) if scheduler is None else None))
     session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own tasks'
     session.cache.misses += sum(c[1] for c in counts)
     for c in counts:
