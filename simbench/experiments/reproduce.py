@@ -71,8 +71,8 @@ def _split(split: Split, in_all: bool, rank: int) -> Target:
 # hard_scenes is not in ``all``: at full resolution its 19 scenes, each with the 12-exposure
 # phase-shifting reference, take ~2-3 h of rendering on 2 cores from an empty cache (measured:
 # 7-16 min a scene), more than the rest together; its quick form runs in CI (`make quick`:
-# `reproduce all hard_scenes --quick`).  Its scenes, fig9's depths and the motion study's captures
-# are measured one by one (Split), so that workers take them side by side.
+# `reproduce all hard_scenes --quick`).  Every target is measured in parts (Split: its scenes, depths,
+# boards, captures), so that workers take them side by side.
 TARGETS: dict[str, Target] = {
     "table1": _split(table1.SPLIT, True, 1),
     "table3": _split(table3.SPLIT, True, 3),
@@ -120,9 +120,9 @@ def reproduce(
 
     Each target runs with a seed log of its own (:meth:`Session.for_target`), so its outputs,
     provenance included, do not depend on which targets ran before it; ``workers`` > 1 runs the
-    targets on that many workers (this process and spawned ones; each target whole, longest
-    first, but fig9's depths, the motion study's captures and the hard scenes one by one:
-    :class:`simbench.experiments.common.Split`), with the same outputs as one process.  It pays
+    targets on that many workers (this process and spawned ones), each target's parts side by
+    side, the costliest first (:class:`simbench.experiments.common.Split`: Table 1's boards,
+    Fig. 9's depths, the hard scenes, ...), with the same outputs as one process.  It pays
     on a warm cache, where every target is decoding and scoring, and on a cold one too, where
     the targets' single-threaded work overlaps the other worker's renders (an entry two workers need is made once:
     :meth:`simbench.cache.RenderCache.get_or_make`).
