@@ -371,6 +371,12 @@ def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_write
         with pytest.raises(ValueError, match="part p3 failed on purpose"):
             run(f"failing{workers}", workers)
         assert not (tmp_path / f"failing{workers}" / "split.txt").exists()
+    # beside a failing target, a pool still writes the targets whose parts all came in (the good
+    # one's parts first: a failure starts no other task)
+    monkeypatch.setitem(module.TARGETS, "good", module.Target(split.run, False, -1, split=split))
+    with pytest.raises(ValueError, match="part p3 failed on purpose"):
+        module.reproduce(["split", "good"], config=cfg, out_dir=tmp_path / "mixed", cache_dir=None, workers=2)
+    assert (tmp_path / "mixed" / "split.txt").read_bytes() == one[1]["split.txt"]
 
 
 def test_the_task_summary_bounds_a_run_by_its_longest_task_and_its_work_over_the_workers():
@@ -384,3 +390,38 @@ def test_the_task_summary_bounds_a_run_by_its_longest_task_and_its_work_over_the
     assert task_summary(many, workers=2).endswith("at least 320 s on 2, 40 s on 16 workers")
     assert task_summary(many, workers=None).endswith("at least 40 s on 16 workers")
     assert task_summary({}, workers=2) == "tasks: none"
+
+
+@pytest.mark.parametrize("quick", [False, True])
+def test_every_target_is_split_into_distinct_parts_that_name_themselves(quick):
+    """Every reproduce target is measured in parts (quick and full): the parts are distinct (a
+    pool tells them by name), each ranked once, and the tasks of all targets hold every part once."""
+    from simbench.experiments.reproduce import TARGETS, _tasks
+
+    cfg = RunConfig.preset(quick=quick)
+    for name, target in TARGETS.items():
+        assert target.split is not None and target.split.name == name, name
+        parts = list(target.split.parts(cfg))
+        assert parts and len(set(parts)) == len(parts), name
+        assert sorted(i for i, _ in target.split.ranked(cfg)) == list(range(len(parts)))
+    tasks = _tasks(list(TARGETS), cfg)
+    assert len({t.key for t in tasks}) == len(tasks) == sum(len(t.split.parts(cfg)) for t in TARGETS.values())
+
+
+def test_forks_share_the_rigs_calibrated_at_their_settings(variant, tmp_path):
+    """A rig is calibrated once per run for each sensor model and calibration setting: forks at the
+    run's settings share the run's rigs, forks at other settings (the motion study's camera scale,
+    one fork per part) share theirs, and no two settings share one."""
+    from simbench.experiments.common import Session
+    from simbench.sim.sensor import get_sensor
+
+    cfg = RunConfig.preset(quick=True)
+    session = Session(cfg, out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
+    board = session.fork(session.sensor, config=dataclasses.replace(cfg, board_bow_mm_per_m=1.0))
+    scaled = [
+        session.for_target().fork(session.sensor, config=dataclasses.replace(cfg, camera_scale=0.25)) for _ in "ab"
+    ]
+    other_sensor = session.fork(get_sensor("ideal"))
+    assert board._rigs is session._rigs  # the board's form is not a calibration setting
+    assert scaled[0]._rigs is scaled[1]._rigs and scaled[0]._rigs is not session._rigs
+    assert other_sensor._rigs is not session._rigs and other_sensor._rigs is not scaled[0]._rigs

@@ -257,8 +257,7 @@ def add_parsers(sub, kw: dict) -> None:
         default=1,
         help=(
             "worker processes, one task each at a time - a part of a target: a board of table1, a depth of fig9, a "
-            "scene of hard_scenes, ... - (same outputs as 1; the warm quick run on 2 cores: 9.5 s instead of 13.9 s; "
-            "not with --scheduler)"
+            "scene of hard_scenes, ... - (same outputs as 1; not with --scheduler)"
         ),
     )
     s.add_argument(

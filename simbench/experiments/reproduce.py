@@ -250,7 +250,7 @@ def task_summary(durations: dict[str, float], *, workers: int | None) -> str:
 
 
 def _died(task) -> None:
-    raise RuntimeError(f"a reproduce worker process died twice on target {task.key} (killed, or out of memory)")
+    raise RuntimeError(f"a reproduce worker process died twice on task {task.key} (killed, or out of memory)")
 
 
 def _run_in_workers(
@@ -300,30 +300,44 @@ def _run_in_workers(
 
     tasks = _tasks(names, session.config)
     cache_root = None if session.cache.root is None else str(session.cache.root)
-    run_tasks(
-        [dataclasses.replace(t, kwargs={**t.kwargs, "ship": ship}) for t in tasks],
-        _worker_run,
-        workers=min(workers, len(tasks)),
-        scheduler=scheduler,
-        variant=session.variant,
-        setup=_worker_start,
-        setup_args=(session.config, None if ship else str(session.out), cache_root, session.command),
-        in_parent=None if ship else here,
-        on_result=on_result,
-        on_died=_died,
-        progress=progress,
-    )
+
+    def collect(name: str) -> None:
+        split = TARGETS[name].split
+        measured = parts.get(name, {})
+        total = len(split.parts(session.config))
+        if name in done or len(measured) < total:
+            return
+        with session.timed(f"{name} done"):
+            done[name] = split.collect(session.for_target(), [measured[i] for i in range(total)])
+
+    split_names = [name for name in names if TARGETS[name].split is not None]
+    try:
+        run_tasks(
+            [dataclasses.replace(t, kwargs={**t.kwargs, "ship": ship}) for t in tasks],
+            _worker_run,
+            workers=min(workers, len(tasks)),
+            scheduler=scheduler,
+            variant=session.variant,
+            setup=_worker_start,
+            setup_args=(session.config, None if ship else str(session.out), cache_root, session.command),
+            in_parent=None if ship else here,
+            on_result=on_result,
+            on_died=_died,
+            progress=progress,
+        )
+    except BaseException:
+        # a part failed (or the run was stopped): the targets whose parts are all in are still
+        # written, so that a long run keeps what it finished; then the error goes on
+        for name in split_names:
+            collect(name)
+        raise
     progress(task_summary(durations, workers=min(workers, len(tasks)) if scheduler is None else None))
     session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own tasks'
     session.cache.misses += sum(c[1] for c in counts)
     for c in counts:
         session.cache.add_made(c[2])
-    for name in names:
-        split = TARGETS[name].split
-        if split is not None:
-            with session.timed(f"{name} done"):
-                measured = parts[name]
-                done[name] = split.collect(session.for_target(), [measured[i] for i in range(len(measured))])
+    for name in split_names:
+        collect(name)
     return {k: v for name in names for k, v in done[name].items()}
 
 
