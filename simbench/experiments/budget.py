@@ -23,7 +23,7 @@ from simbench.sim.sensor import (
     with_effects,
     with_lateral_colour,
 )
-from simbench.experiments.common import Session, Split, markdown_table, write_table
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, write_table
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
 from simbench.io import atomic_write_text
@@ -98,11 +98,11 @@ def budget_rows(ideal: SensorModel, paper: SensorModel) -> list[tuple[str, str, 
     return rows
 
 
-def _repeats(cfg) -> int:
+def _repeats(cfg: RunConfig) -> int:
     return 1 if cfg.quick else 3
 
 
-def _row_specs(cfg) -> tuple[list[tuple], dict]:
+def _row_specs(cfg: RunConfig) -> tuple[list[tuple], dict]:
     """The rows (key, description, sensor model) and the run settings of the rows that change them."""
     ideal, paper = get_sensor("ideal"), get_sensor("paper")
     specs = budget_rows(ideal, paper)
@@ -142,7 +142,7 @@ def _row_specs(cfg) -> tuple[list[tuple], dict]:
     return specs, configs
 
 
-def budget_parts(config) -> list[str]:
+def budget_parts(config: RunConfig) -> list[str]:
     """The rows' keys, in the table's order."""
     return [key for key, _, _ in _row_specs(config)[0]]
 

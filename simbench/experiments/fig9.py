@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 
 from simbench.experiments.common import (
+    RunConfig,
     Session,
     Split,
     calibration_sentence,
@@ -50,7 +51,7 @@ def _scene_name(z: float) -> str:
     return f"plane_depth_{int(round(z * 100)):03d}cm"
 
 
-def fig9_parts(config) -> list[str]:
+def fig9_parts(config: RunConfig) -> list[str]:
     """The depths, as the boards' scene names (``plane_depth_090cm`` ...)."""
     return [_scene_name(z) for z in DEPTHS_M]
 

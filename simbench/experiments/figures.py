@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, Split, made_by, scene_errors
+from simbench.experiments.common import RunConfig, Session, Split, made_by, scene_errors
 from simbench.experiments.hard_scenes import WRONG_MM, object_scores
 from simbench.metrics import edge_band
 from simbench.report import figure_png, markdown_table, panel_row, write_table
@@ -142,7 +142,7 @@ def scene_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
     return figure_png(fig, dpi=80)
 
 
-def figures_parts(config) -> list[str]:
+def figures_parts(config: RunConfig) -> list[str]:
     """The scenes: the paper's figures' (:data:`FIGURE_SCENES`), then the specular one."""
     return [*FIGURE_SCENES, SPECULAR_SCENE]
 

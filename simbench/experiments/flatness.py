@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.experiments.common import (
+    RunConfig,
     Session,
     Split,
     figure_png,
@@ -86,7 +87,7 @@ def _levels(quick: bool) -> list[tuple[str, float, float]]:
     return [("bow", b, 0.0) for b in bows] + [("waviness", 0.0, w) for w in waves]
 
 
-def flatness_parts(config) -> list[str]:
+def flatness_parts(config: RunConfig) -> list[str]:
     """The boards, ``bow 0.5`` ...: every bow level, then every waviness level."""
     return [f"{kind} {bow_mm if kind == 'bow' else wave_mm:g}" for kind, bow_mm, wave_mm in _levels(config.quick)]
 

@@ -38,7 +38,7 @@ import numpy as np
 
 from simbench.decode import robust_params
 from simbench.decode.pipeline import apply_min_confidence
-from simbench.experiments.common import Session, Split, figure_png, markdown_table, score, write_table
+from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
 
@@ -175,7 +175,7 @@ def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
     return max(thresholds, key=lambda t: (meeting(t), -t))
 
 
-def _decoders(config) -> tuple[dict, dict]:
+def _decoders(config: RunConfig) -> tuple[dict, dict]:
     """The decoders' parameters (decoded once with no threshold: the curves need every decoded
     pixel's confidence) and their operating points."""
     robust = robust_params(config.decoder)
@@ -183,7 +183,7 @@ def _decoders(config) -> tuple[dict, dict]:
     return params, {"paper": config.decoder.min_confidence, "robust": robust.min_confidence}
 
 
-def scene_names(config) -> tuple[str, ...]:
+def scene_names(config: RunConfig) -> tuple[str, ...]:
     """The scenes a run measures: every hard scene, or one of each class when quick."""
     return QUICK_SCENES if config.quick else tuple(HARD_SCENES)
 

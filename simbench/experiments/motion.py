@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import Session, Split, markdown_table, score, write_table
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, write_table
 from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import edge_band
 from simbench.report import figure_png
@@ -114,11 +114,11 @@ def _motion_session(session: Session) -> Session:
     return sub
 
 
-def _grid(config) -> tuple[tuple[float, ...], dict]:
+def _grid(config: RunConfig) -> tuple[tuple[float, ...], dict]:
     return (QUICK_SPEEDS_M_S, {k: SCENES[k] for k in QUICK_SCENES}) if config.quick else (SPEEDS_M_S, SCENES)
 
 
-def motion_parts(config) -> list[str]:
+def motion_parts(config: RunConfig) -> list[str]:
     """The study's captures, ``scene/direction/speed``: every scene, direction and speed."""
     speeds, scenes = _grid(config)
     return [f"{s}/{d}/{v:g}" for s in scenes for d in DIRECTIONS for v in speeds]

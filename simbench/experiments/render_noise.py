@@ -24,7 +24,7 @@ import dataclasses
 
 import numpy as np
 
-from simbench.experiments.common import Session, Split, markdown_table, write_table
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, write_table
 from simbench.experiments.table3 import PLACED
 from simbench.io import atomic_write_text
 from simbench.metrics import edge_band
@@ -88,7 +88,7 @@ def _depth(session: Session, cap) -> np.ndarray:
     return session.decode(cap, session.config.decoder, mode="calibrated").depth_m
 
 
-def _candidates(cfg) -> tuple[tuple[str, int], list[tuple[str, int]]]:
+def _candidates(cfg: RunConfig) -> tuple[tuple[str, int], list[tuple[str, int]]]:
     """The run's own setting and the settings the white board is rendered with."""
     own = (cfg.sampler, cfg.spp)
     candidates = list(QUICK_CANDIDATES if cfg.quick else CANDIDATES)
@@ -97,7 +97,7 @@ def _candidates(cfg) -> tuple[tuple[str, int], list[tuple[str, int]]]:
     return own, candidates
 
 
-def render_noise_parts(config) -> list[str]:
+def render_noise_parts(config: RunConfig) -> list[str]:
     """``scene/camera`` (the camera's noise) and ``scene/sampler_spp`` (the renders' at a
     setting): every setting on the white board, the run's own on the other scenes."""
     own, candidates = _candidates(config)

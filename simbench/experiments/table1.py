@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 from simbench.decode import robust_params
 from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import (
+    RunConfig,
     Session,
     Split,
     calibration_sentence,
@@ -117,7 +118,7 @@ def board_scene(session: Session, board_set: str, colour: str) -> SceneSpec:
     return session.prepare(session.place(raw, label, [BOARD])), label
 
 
-def table1_parts(config) -> list[str]:
+def table1_parts(config: RunConfig) -> list[str]:
     """The boards, ``set/colour``: every colour of each board set."""
     return [f"{b}/{c}" for b in BOARD_SETS for c in COLOURS]
 

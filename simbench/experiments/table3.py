@@ -23,13 +23,14 @@ import numpy as np
 from simbench.decode import robust_params
 from simbench.sim.sensor import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
 from simbench.experiments.common import (
+    RunConfig,
     Session,
     Split,
     calibration_sentence,
     calibration_summary,
-    other_rig,
     figure_png,
     markdown_table,
+    other_rig,
     scene_errors,
     score,
     sensor_caveat,
@@ -179,7 +180,7 @@ WHAT_IFS = ("lateral_colour", *(f"subsurface_{medium}" for medium in SUBSURFACE_
 PROPOSED = "proposed"
 
 
-def table3_parts(config, *, systems: tuple[str, ...] = SYSTEMS) -> list[str]:
+def table3_parts(config: RunConfig, *, systems: tuple[str, ...] = SYSTEMS) -> list[str]:
     """The proposed sensor's capture, each other system's recording, each what-if's capture."""
     return [PROPOSED, *systems, *WHAT_IFS]
 
