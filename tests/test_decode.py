@@ -701,3 +701,18 @@ def test_with_changes_is_the_one_way_from_names_to_decoder_settings():
     assert with_changes(base, {}) == base
     with pytest.raises(ValueError, match=r"unknown decoder setting\(s\) \['sigma'\]; valid: .*sigma_periods"):
         with_changes(base, {"sigma": 1.0})
+
+
+def test_the_narrow_snr_stands_only_where_the_wide_window_is_clean_enough_itself():
+    """off_discontinuity: beside a residual peak, a pixel whose wide residual is low relative to
+    the peak but whose wide SNR is under NARROW_SNR_MIN_WIDE_SNR (its far side large in absolute
+    terms) is not off the discontinuity; one above it is; the peak itself never is."""
+    from simbench.decode.phase import NARROW_SNR_MIN_WIDE_SNR, off_discontinuity
+
+    floor = 1.0 / NARROW_SNR_MIN_WIDE_SNR
+    r = np.full((1, 41), 0.05, np.float32)
+    r[0, 20] = 2.0  # the discontinuity
+    r[0, 23] = 1.2 * floor  # a third of the peak, but wide SNR under the floor
+    r[0, 17] = 0.8 * floor  # wide SNR over the floor
+    off = off_discontinuity(r, sigma_x_px=5.0)[0]
+    assert not off[20] and not off[23] and off[17]
