@@ -58,12 +58,14 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # goals at 2 and at 3, so 2; with the flattening's shadow guard (ALBEDO_MIN_VISIBILITY: a
 # projector shadow is no longer brightened like dark ink) 14 meet them at 3 and 13 at 2 (12 at 4
 # and 5, 11 with no threshold), so 3; with link_keep_certain (at this same level) 15 at 3; with
-# link_split 15 at 3 (13 at 4).  At 3: box before wall 99.2 % complete / 0.00 % wrong, sphere
-# before wall 97.6 % / 0.03 %, deep stairs 97.8 % / 0.00 %, printed charts of 3:1 and 1.6:1 97.1 %
-# and 100 % / 0 %, glossy boards 98.0-99.6 % / 0 %.  Short of the goals there: the 20:1 chart
-# (80.4 %, 0 % wrong; 91.5 % at 2), the fine chart (squares under a period: nothing), the box
-# interior (77 %) and the 60-degree corner (0.42 % wrong, -5 to -12 mm beside the crease, stable
-# across window widths: interreflection, none with direct light only).  Not tuned on any table of
+# link_split 15 at 3 (13 at 4); with the captures over the lens's whole field, the narrow window's
+# SNR and its wide-SNR floor (2026-11-26) 15 at 3, 14 at 4, 13 at 0, 2 and 5.  At 3: box before wall
+# 99.55 % complete / 0.001 % wrong, sphere before wall 98.2 % / 0.048 %, deep stairs 98.3 % / 0.054 %,
+# printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards 98.4-100 % / 0 %.  Short of
+# the goals there: the 20:1 chart (81.2 %, 0.008 % wrong), the fine chart (squares under a period:
+# nothing), the box interior (76.8 %) and the 60-degree corner (0.39 % wrong, -5 to -8 mm 6-11 px
+# beside the crease, stable across window widths and decoders: the interreflected light shifts the
+# fringe itself, none with direct light only).  Not tuned on any table of
 # the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
