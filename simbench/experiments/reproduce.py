@@ -21,16 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simbench import validate
-from simbench.experiments import budget
+from simbench.experiments import budget, fig9, figures, flatness, hard_scenes, motion, render_noise, table1, table3
 from simbench.experiments.common import RunConfig, Session, Split
-from simbench.experiments import fig9
-from simbench.experiments import figures
-from simbench.experiments import flatness
-from simbench.experiments import hard_scenes
-from simbench.experiments import motion
-from simbench.experiments import render_noise
-from simbench.experiments import table1
-from simbench.experiments import table3
 from simbench.io import atomic_write_text, read_toml, save_json
 
 log = logging.getLogger(__name__)
@@ -124,8 +116,8 @@ def reproduce(
     side, the costliest first (:class:`simbench.experiments.common.Split`: Table 1's boards,
     Fig. 9's depths, the hard scenes, ...), with the same outputs as one process.  It pays
     on a warm cache, where every target is decoding and scoring, and on a cold one too, where
-    the targets' single-threaded work overlaps the other worker's renders (an entry two workers need is made once:
-    :meth:`simbench.cache.RenderCache.get_or_make`).
+    the targets' single-threaded work overlaps the other worker's renders (an entry two workers
+    need is made once: :meth:`simbench.cache.RenderCache.get_or_make`).
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the targets on
     instead (:func:`simbench.experiments.workers.run_tasks`; ``workers`` is then the cluster's
