@@ -596,3 +596,25 @@ def segment_visibility(proxy, s0, s1, *, period_px, width_px):
     var = color._bounded_mean(pv, a0, a1, width_px=width_px, square=True) - mu * mu
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
+
+
+def crease_bias(column, *, reach, factor, max_step):
+    """simbench.decode.depth.crease_bias as whole-row numpy passes: the concave second difference
+    over ``reach`` either side times ``factor`` where positive and no step within reach is over
+    ``max_step`` or NaN (a prefix count of broken steps), else 0."""
+    c = np.asarray(column, np.float32)
+    h, w = c.shape
+    out = np.zeros((h, w), np.float32)
+    span = 2 * reach
+    if reach < 1 or w <= span:
+        return out
+    d2 = c[:, span:] - np.float32(2.0) * c[:, reach : w - reach] + c[:, : w - span]
+    with np.errstate(invalid="ignore"):
+        broken = ~(np.abs(np.diff(c, axis=1)) <= np.float32(max_step))
+        v = np.float32(factor) * d2
+    breaks = np.zeros((h, w), np.int32)
+    np.cumsum(broken, axis=1, out=breaks[:, 1:])
+    whole = breaks[:, span:] == breaks[:, : w - span]
+    with np.errstate(invalid="ignore"):
+        np.copyto(out[:, reach : w - reach], v, where=whole & (v > 0))
+    return out

@@ -716,3 +716,76 @@ def test_the_narrow_snr_stands_only_where_the_wide_window_is_clean_enough_itself
     r[0, 17] = 0.8 * floor  # wide SNR over the floor
     off = off_discontinuity(r, sigma_x_px=5.0)[0]
     assert not off[20] and not off[23] and off[17]
+
+
+def test_crease_bias_is_the_concave_second_difference_and_nothing_else():
+    """Closed form: a column map whose slope drops by k at x0 (concave for a rig whose column
+    grows with depth) predicts ratio * k * (L - |x - x0|) within L of x0 and 0 beyond; the mirror
+    (convex) break, a plane, and a break with a depth step or a hole within reach predict 0."""
+    from simbench.decode.depth import crease_bias
+
+    x = np.arange(200, dtype=np.float64)
+    k, x0, reach, ratio = 0.25, 100, 22, 0.3  # slopes and values exact in float32
+    concave = np.where(x < x0, x, x0 + (1.0 - k) * (x - x0))
+    maps = np.stack([concave, 2 * x0 - concave[::-1], 0.5 * x + 3.0, concave, concave]).astype(np.float32)
+    maps[3, 110:] += 5.0  # a depth edge 10 px from the crease
+    maps[4, 85] = np.nan  # a hole 15 px from it
+    got = crease_bias(maps, scale_px=reach, depth_sign=1.0, bias_ratio=ratio, max_step_px=3.0)
+    want = ratio * k * np.clip(reach - np.abs(x - x0), 0.0, None)
+    np.testing.assert_allclose(got[0], want, atol=2e-5)
+    assert np.array_equal(got[1:3], np.zeros((2, 200), np.float32))
+    assert np.all(got[3, 110 - reach : 110 + reach] == 0.0) and got[3, 80] > 0.0
+    assert np.all(got[4, 85 - reach : 85 + reach + 1] == 0.0) and got[4, 115] > 0.0
+    mirrored = crease_bias(maps[1:2], scale_px=reach, depth_sign=-1.0, bias_ratio=ratio, max_step_px=3.0)
+    np.testing.assert_allclose(mirrored[0], want[::-1], atol=2e-5)  # the other rig: the other sign
+
+
+def _corner_capture(opening_deg: float, crease_m: float = 1.2):
+    """A vertical crease at x = 0, z = crease_m, opening towards the camera (concave, < 180 deg)
+    or away from it (a ridge, > 180 deg), noise-free: each pixel the nearer face (concave) or the
+    farther (ridge)."""
+    tilt = np.radians(90.0 - opening_deg / 2.0)
+    faces = [
+        synthetic_plane_capture(DRIVE, RIG, normal=(s * np.sin(tilt), 0.0, -np.cos(tilt)), point_m=(0, 0, crease_m))
+        for s in (-1.0, 1.0)
+    ]
+    pick = np.nanargmin if opening_deg < 180 else np.nanargmax
+    which = pick(np.stack([np.where(np.isfinite(f[2]), f[2], np.nan) for f in faces]), axis=0)
+    img = np.where(which[..., None] == 0, faces[0][0], faces[1][0])
+    col = np.where(which == 0, faces[0][1], faces[1][1])
+    return img, col
+
+
+def test_the_crease_term_doubts_pixels_beside_a_concave_crease_only():
+    """End to end on noise-free corners of the paper rig: with ``crease_doubt`` the confidence is
+    the lower of the other terms' and kappa T / (2 pi bias) of the stage ``crease_bias``; a 60-deg
+    concave corner gets a bias over the operating point's 0.45 px beside its crease (so those
+    pixels become holes at 3) and only the fit's ripple a period away; a ridge only that ripple;
+    without the flag there is no crease stage and the confidence is the other terms'."""
+    from simbench.decode import CREASE_BIAS_RATIO, STABILITY_KAPPA_RAD
+
+    base = DecoderParams(mode="calibrated", phase_stability=True, narrow_snr=True)
+    img, col = _corner_capture(60.0)
+    plain = decode(img, rig=RIG, params=base)
+    assert "crease_bias" not in plain.stages
+    r = decode(img, rig=RIG, params=dataclasses.replace(base, crease_doubt=True))
+    bias = r.stages["crease_bias"]
+    with np.errstate(divide="ignore"):
+        cap = np.float32(STABILITY_KAPPA_RAD * 21 / (2 * np.pi)) / bias
+    assert np.array_equal(r.confidence[r.valid], np.fmin(plain.confidence, cap)[r.valid])
+    row = 480
+    crease = int(np.nanargmin(np.diff(col[row], 2))) + 1  # the true map's sharpest concave break
+    k = (col[row, crease - 1] - col[row, crease - 31]) / 30 - (col[row, crease + 31] - col[row, crease + 1]) / 30
+    assert k > 0.15  # the slope's drop
+    # the decoded map is the true one seen through the Gabor window (sigma_x = T_cam / 4): a
+    # break blurred by a Gaussian of sigma has D2 = k (L - 2 sigma / sqrt(2 pi)) at its centre
+    sigma = 0.25 * base.camera_period(RIG)
+    assert bias[row, crease] == pytest.approx(CREASE_BIAS_RATIO * k * (22 - 2 * sigma / np.sqrt(2 * np.pi)), rel=0.1)
+    assert np.all(bias[row, crease - 5 : crease + 6] > 0.45)
+    # a period away only the fit's ripple: a third of the operating point's level
+    assert np.all(bias[row, crease + 25 : crease + 60] < 0.15) and np.all(bias[row, crease - 60 : crease - 25] < 0.15)
+    assert (r.valid & (r.confidence < 3.0)).sum() > (plain.valid & (plain.confidence < 3.0)).sum()
+    ridge, _ = _corner_capture(240.0)
+    assert (
+        decode(ridge, rig=RIG, params=dataclasses.replace(base, crease_doubt=True)).stages["crease_bias"].max() < 0.15
+    )

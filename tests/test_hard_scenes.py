@@ -54,7 +54,7 @@ def test_every_hard_scene_fills_the_view(name, variant):
     assert 0.8 < np.nanmin(gt.depth_m) and np.nanmax(gt.depth_m) < 1.4  # the decoder's range: 0.75-1.75 m
 
 
-@pytest.mark.parametrize("name", ["hard_corner_060", "hard_corner_090", "hard_corner_120"])
+@pytest.mark.parametrize("name", sorted(n for n in HARD_SCENES if n.startswith("hard_corner_")))
 def test_corners_are_concave_with_the_crease_farthest(name, variant):
     gt = _truth(name)
     row = gt.depth_m[gt.depth_m.shape[0] // 2]

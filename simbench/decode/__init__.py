@@ -5,7 +5,8 @@
 - :mod:`~simbench.decode.phase`: the Gabor phase and the fringe SNR (Sec. 5.3);
   :mod:`~simbench.decode.fourier`: FTP and windowed Fourier ridges, interchangeable with it
 - :mod:`~simbench.decode.debruijn`: De Bruijn unwrapping with neighbour correction (Sec. 5.2)
-- :mod:`~simbench.decode.depth`: reference-plane matching and depth (Sec. 5.4)
+- :mod:`~simbench.decode.depth`: reference-plane matching and depth (Sec. 5.4); the crease term of
+  the colour-robust decoder's confidence
 - :mod:`~simbench.decode.params`: the parameters (:class:`DecoderParams`, :func:`robust_params`)
 - :mod:`~simbench.decode.pipeline`: the chain; :mod:`~simbench.decode.bands`: its row bands in
   threads; :mod:`~simbench.decode.persist`: decoded reference planes cached
@@ -16,6 +17,9 @@ from simbench.decode.params import (
     MODES,
     PAPER_ADDED_CHECKS,
     AddedCheck,
+    CREASE_BIAS_RATIO,
+    CREASE_MAX_STEP_PX,
+    CREASE_SCALE_PERIODS,
     with_assignments,
     with_changes,
     without_checks,
@@ -41,6 +45,9 @@ __all__ = [
     "MODES",
     "PAPER_ADDED_CHECKS",
     "AddedCheck",
+    "CREASE_BIAS_RATIO",
+    "CREASE_MAX_STEP_PX",
+    "CREASE_SCALE_PERIODS",
     "with_assignments",
     "with_changes",
     "without_checks",

@@ -41,6 +41,7 @@ __all__ = [
     "noise_weights",
     "robust_fringe_code",
     "albedo_segments",
+    "crease_bias",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -73,6 +74,7 @@ _SIGNATURES = {
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
+    "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _P, _F, _P, _P, _P]),
     "decode_tail": (
         None,
         [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
@@ -701,4 +703,27 @@ def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -
         _ptr(mean, "mean", np.float32, (h, w), writable=True),
         _ptr(vis, "vis", np.float32, (h, w), writable=True),
         _ptr(short, "short", np.bool_, (h, w), writable=True),
+    )
+
+
+def crease_bias(column, reach: int, factor: float, max_step: float, out, *, cap=None) -> None:
+    """Per row of ``column`` ((H, W) float32): ``out = v`` where ``v = factor * (c[x + L] -
+    2 c[x] + c[x - L]) > 0`` and no step between neighbours within ``L = reach`` of ``x`` is over
+    ``max_step`` or NaN, else 0 (0 within ``L`` of the row's ends).  ``cap = (kappa, valid,
+    conf)``: also ``conf = fmin(conf, kappa / out)`` where ``valid`` and ``out > 0``, in place."""
+    h, w = column.shape
+    kappa, valid, conf = cap if cap is not None else (0.0, None, None)
+    broken = np.empty(max(w, 1), np.uint8)  # scratch: a row's steps
+    _library().crease_bias(
+        h,
+        w,
+        _ptr(column, "column", np.float32, (h, w)),
+        int(reach),
+        float(factor),
+        float(max_step),
+        _ptr(out, "out", np.float32, (h, w), writable=True),
+        float(kappa),
+        None if cap is None else _ptr(valid, "valid", np.bool_, (h, w)),
+        None if cap is None else _ptr(conf, "conf", np.float32, (h, w), writable=True),
+        broken.ctypes.data,
     )

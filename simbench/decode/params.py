@@ -80,6 +80,22 @@ ROBUST_MIN_CONFIDENCE = 3.0
 # sigma_y, ~72 and ~36 samples), so noise trips it at ~3 sigma.
 STABILITY_WINDOW_SCALE = 0.5
 STABILITY_KAPPA_RAD = 0.4
+# The crease term of the confidence (DecoderParams.crease_doubt,
+# simbench.decode.depth.crease_bias): a pixel scores STABILITY_KAPPA_RAD over the phase bias
+# predicted from the concave break of the decoded column map's slope - the same scale as the
+# stability term, so that a threshold of 3 doubts a predicted 0.45 projector px (~4 mm at 1.35 m).
+# The break is read over one camera period either side (CREASE_SCALE_PERIODS; the error's measured
+# blur, ~14 px, lies within it, and a wider reach costs more pixels beside creases).  A step over
+# CREASE_MAX_STEP_PX between neighbours (three times a fronto-parallel surface's slope of ~1) is a
+# depth edge, not a crease.  CREASE_BIAS_RATIO (2026-11-26, designed on the 60, 90 and 120-degree
+# corners, then checked on 45 and 75 degrees, rendered afterwards): the corners' peak error over
+# D2 at the crease is 0.47-0.55 and the least-squares fit of the error to D2 within a period of
+# the crease 0.09-0.16 (the triangle D2 outlasts the error's tail); of 0.25, 0.3 and 0.35, 0.3 is
+# the lowest with none of the 60-degree corner's pixels > 5 mm wrong at the operating point (97.7 %
+# complete; 0.25: 0.008 % wrong) while the 90-degree corner keeps 99.9 %.
+CREASE_SCALE_PERIODS = 1.0
+CREASE_BIAS_RATIO = 0.3
+CREASE_MAX_STEP_PX = 3.0
 
 
 @dataclass(frozen=True)
@@ -200,6 +216,12 @@ class DecoderParams:
         unmoved.  Not on the discontinuity itself, where the narrow window is as mixed as the wide
         one (:func:`simbench.decode.phase.off_discontinuity`).  The colour-robust decoder; off =
         the wide window's SNR alone.
+    crease_doubt : bool
+        Fold the predicted bias at concave creases into the confidence: the lower of the
+        confidence so far and :data:`STABILITY_KAPPA_RAD` over the bias (in phase) that
+        :func:`simbench.decode.depth.crease_bias` predicts from the decoded column map's concave
+        second difference (interreflection shifts the fringe itself near a crease, where no
+        window's fit can see it).  The colour-robust decoder; off = no crease term.
     min_confidence : float
         The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
         is below it become holes (NaN depth, not valid);
@@ -246,6 +268,7 @@ class DecoderParams:
     min_window_support: float = 0.5
     phase_stability: bool = False
     narrow_snr: bool = False
+    crease_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
     mode: str = "reference"
@@ -288,6 +311,7 @@ class DecoderParams:
             "min_window_support": v.number(self.min_window_support, "min_window_support", lo=0.0, hi=1.0),
             "phase_stability": v.boolean(self.phase_stability, "phase_stability"),
             "narrow_snr": v.boolean(self.narrow_snr, "narrow_snr"),
+            "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
             "mode": v.choice(self.mode, "mode", MODES),
@@ -357,7 +381,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it;
     the lit test looks across a whole code window).  Its confidence folds in the phase's
     stability against the window's width (``phase_stability``), takes the better of the two
-    windows' fringe SNRs (``narrow_snr``), and its operating point makes the pixels below
+    windows' fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases
+    (``crease_doubt``), and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
     and the part of a stripe that the confidence shows to lie on their own side of the edge
     (``link_keep_certain``, ``link_split``).  Everything else as ``params``."""
@@ -373,6 +398,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         min_amplitude=ROBUST_MIN_AMPLITUDE,
         phase_stability=True,
         narrow_snr=True,
+        crease_doubt=True,
         min_confidence=ROBUST_MIN_CONFIDENCE,
     )
 

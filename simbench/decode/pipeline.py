@@ -45,6 +45,9 @@ from simbench.decode.phase import (
 )
 from simbench.decode.profile import stage
 from simbench.decode.params import (
+    CREASE_BIAS_RATIO,
+    CREASE_MAX_STEP_PX,
+    CREASE_SCALE_PERIODS,
     DecoderParams,
     PHASE_METHODS,
     STABILITY_KAPPA_RAD,
@@ -745,6 +748,12 @@ def decode(
     col_out = np.empty((h, w), np.float32)
     index_out = np.empty((h, w), np.int32)
     inv_fb = 1.0 / (rig.camera.focal_px * rig.baseline_m)
+    if params.crease_doubt:
+        crease_px = int(round(CREASE_SCALE_PERIODS * params.camera_period(rig)))
+        # kappa over a bias in projector px: kappa T / (2 pi bias), the stability term's scale
+        crease_kappa_px = np.float32(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi))
+        at = dict(rows=np.array([h // 2]), cols=np.array([w // 2]))
+        depth_sign = float(np.sign(np.diff([projector_column_at_depth(z, rig, **at)[0] for z in (zmin, zmax)])[0]))
 
     def band(img, order, rows, crop):
         stripes, stages = _columns(img, order, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
@@ -776,6 +785,19 @@ def decode(
                 col_out=col_out[rows],
                 index_out=index_out[rows],
             )
+        if params.crease_doubt:
+            with stage("crease doubt"):
+                bias = np.empty(col_out[rows].shape, np.float32)
+                # conf = fmin(conf, kappa / bias) where valid, in the kernel's pass
+                _kernels.crease_bias(
+                    col_out[rows],
+                    crease_px,
+                    np.float32(-depth_sign * CREASE_BIAS_RATIO),
+                    CREASE_MAX_STEP_PX,
+                    bias,
+                    cap=(crease_kappa_px, valid_out[rows], conf_out[rows]),
+                )
+            stages.put("crease_bias", bias)
         if ref is not None:
             stages.put("reference_x", lambda: match_reference(stripes.columns[0], ref.inverse[rows]))
             stages.put(

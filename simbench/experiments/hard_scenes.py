@@ -65,7 +65,9 @@ __all__ = [
 
 # scene -> its class (the issue's list; scenes/make_hard_scenes.py writes them)
 HARD_SCENES = {
+    "hard_corner_045": "interreflection",
     "hard_corner_060": "interreflection",
+    "hard_corner_075": "interreflection",
     "hard_corner_090": "interreflection",
     "hard_corner_120": "interreflection",
     "hard_vgroove_090": "interreflection",
@@ -348,11 +350,14 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "the local cosine fit leaves in its window (`simbench.decode.phase.fringe_snr`). Noise, a depth edge or an "
         "albedo step inside the window, and a second fringe added by a highlight all lower it. The colour-robust "
         "decoder caps it by the phase's stability, 0.4 rad over the phase's change when the window is halved "
-        "(`DecoderParams.phase_stability`): a window straddling an edge or a crease is biased, less so when narrower. "
+        "(`DecoderParams.phase_stability`): a window straddling an edge or a crease is biased, less so when narrower; "
+        "and by 0.4 rad over the phase bias predicted at concave creases from the decoded column map's concave second "
+        "difference over a period (`DecoderParams.crease_doubt`: the faces' light on each other shifts the fringe "
+        "itself there, which no window sees). "
         "Keeping only the pixels at or above a threshold, over the scenes above (the rule that chose the "
         "colour-robust decoder's operating point, `simbench.experiments.hard_scenes.operating_point`: the threshold "
         "under which the most scenes meet both goals, of equals the lowest; it was applied to the full-resolution "
-        f"run of all 19 scenes; on this run's scenes it picks {operating_point(curves):g}):",
+        f"run of all {len(HARD_SCENES)} scenes; on this run's scenes it picks {operating_point(curves):g}):",
         "",
         *markdown_table(
             [

@@ -176,7 +176,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         f"holes below {params.min_confidence:g}" if params.min_confidence > 0 else "no threshold: every decoded pixel"
     )
     snr = "fringe SNR (the better of the wide and the narrow window's)" if params.narrow_snr else "fringe SNR"
-    meaning = f"{snr}{', capped by the phase stability' if params.phase_stability else ''}; {threshold}"
+    caps = [
+        c for c, on in (("the phase stability", params.phase_stability), ("the crease bias", params.crease_doubt)) if on
+    ]
+    meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}; {threshold}"
     stages = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence, **result.stages}
     return FileDecode(
         depth_m=result.depth_m,
