@@ -789,3 +789,62 @@ def test_the_crease_term_doubts_pixels_beside_a_concave_crease_only():
     assert (
         decode(ridge, rig=RIG, params=dataclasses.replace(base, crease_doubt=True)).stages["crease_bias"].max() < 0.15
     )
+
+
+@pytest.mark.parametrize(
+    "name, normal, point, carrier",
+    [
+        # the box interior's faces, whole: a side wall (the fringe 1.41x the nominal frequency)
+        # and a floor (fringes tilted 32 deg)
+        ("side wall", (1.0, 0.0, 0.0), (-0.2, 0.0, 1.1), 1),
+        ("floor", (0.0, -1.0, 0.0), (0.0, 0.15, 1.1), 2),
+    ],
+)
+def test_the_carrier_bank_decodes_faces_seen_at_a_steep_angle(name, normal, point, carrier):
+    """Exact tier, with noise: a face whose fringe the nominal window cannot fit (nothing valid
+    without the bank) decodes wholly with it, every column within 0.15 px (noise 0.01 of full
+    scale), each pixel with the bank's fit made for it (stage ``carrier``)."""
+    img, col, z = synthetic_plane_capture(DRIVE, RIG, normal=normal, point_m=point)
+    inside = np.isfinite(col) & (z > 0.8) & (z < 1.7)
+    noisy = np.clip(img + np.random.default_rng(0).normal(0, 0.01, img.shape), 0, 1).astype(np.float32)
+    base = DecoderParams(mode="calibrated", phase_stability=True)
+    assert not decode(noisy, rig=RIG, params=base).valid[inside].any()
+    r = decode(noisy, rig=RIG, params=dataclasses.replace(base, carrier_bank=True))
+    assert r.valid[inside].mean() > 0.99
+    assert np.abs(r.column_px - col)[r.valid & inside].max() < 0.15
+    assert np.mean(r.stages["carrier"][r.valid & inside] == carrier) > 0.99
+
+
+def test_bank_fit_keeps_the_nominal_fit_wherever_it_passes_and_reuses_a_choice():
+    """A clean fringe of the nominal period: the nominal fit's very bits and no other choice.
+    Beside it a fringe 1.4x as fast: there the bank's first entry, its phase that of a full-width
+    fit of that carrier (the slice of columns it is fitted on does not change it beyond float
+    rounding); given that choice, a narrower call fits each pixel with its own carrier."""
+    from simbench.decode.phase import CARRIER_BANK, bank_fit, gabor_phase
+
+    t, h, w = 21.8, 40, 400
+    x = np.arange(w, dtype=np.float64)
+    psi = np.where(x < 200, 2 * np.pi * x / t, 2 * np.pi * 200 / t + 1.4 * 2 * np.pi * (x - 200) / t)
+    img = np.tile(0.5 + 0.4 * np.cos(psi), (h, 1)).astype(np.float32)
+    cert = np.ones((h, w), np.float32)
+    kw = dict(certainty=cert, period_px=t, sigma_y_px=0.15 * t)
+    clean = np.tile(0.5 + 0.4 * np.cos(2 * np.pi * x / t), (h, 1)).astype(np.float32)
+    got, choice = bank_fit(gabor_phase, clean, sigma_x_px=0.25 * t, max_residual=0.6, **kw)
+    want = gabor_phase(clean, sigma_x_px=0.25 * t, offset=False, **kw)
+    assert not choice.any() and np.array_equal(got.wrapped, want.wrapped)
+    nominal = gabor_phase(img, sigma_x_px=0.25 * t, offset=False, **kw)
+    got, choice = bank_fit(gabor_phase, img, sigma_x_px=0.25 * t, max_residual=0.6, **kw)
+    fast = choice == 1
+    # off the image's ends: the fast part takes the bank wherever the nominal fit fails (its
+    # residual swings about the limit there), the slow part never
+    assert np.array_equal(fast[:, 260:380], nominal.residual[:, 260:380] > 0.6) and fast[:, 260:380].mean() > 0.4
+    assert not choice[:, 20:150].any() and np.array_equal(got.wrapped[~fast], nominal.wrapped[~fast])
+    scale = CARRIER_BANK[0][0]
+    full = gabor_phase(img, certainty=cert, period_px=t * scale, sigma_x_px=0.25 * t * scale, sigma_y_px=0.15 * t)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (got.wrapped - full.wrapped)))[fast], 0.0, atol=1e-4)
+    error = np.abs(np.angle(np.exp(1j * (got.wrapped - psi))))  # the fit's phase: I = A + B cos(psi)
+    assert error[fast & (x > 260) & (x < 380)].max() < 0.02
+    narrow, again = bank_fit(gabor_phase, img, sigma_x_px=0.125 * t, max_residual=0.6, choice=choice, **kw)
+    assert again is choice
+    alone = gabor_phase(img, certainty=cert, period_px=t * scale, sigma_x_px=0.125 * t * scale, sigma_y_px=0.15 * t)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (narrow.wrapped - alone.wrapped)))[fast], 0.0, atol=1e-4)

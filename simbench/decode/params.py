@@ -216,6 +216,13 @@ class DecoderParams:
         unmoved.  Not on the discontinuity itself, where the narrow window is as mixed as the wide
         one (:func:`simbench.decode.phase.off_discontinuity`).  The colour-robust decoder; off =
         the wide window's SNR alone.
+    carrier_bank : bool
+        Where the nominal phase fit fails its residual test, fit again with the carriers and
+        windows of :data:`simbench.decode.phase.CARRIER_BANK` (other periods, a shorter window)
+        and keep the one with the lowest residual, and its own narrower fit for the stability
+        term (:func:`simbench.decode.phase.bank_fit`): a surface seen at a steep angle shows the
+        fringe at another period or tilted.  The colour-robust decoder; off = the nominal fit
+        only (every pixel whose nominal fit passes is the same either way).
     crease_doubt : bool
         Fold the predicted bias at concave creases into the confidence: the lower of the
         confidence so far and :data:`STABILITY_KAPPA_RAD` over the bias (in phase) that
@@ -268,6 +275,7 @@ class DecoderParams:
     min_window_support: float = 0.5
     phase_stability: bool = False
     narrow_snr: bool = False
+    carrier_bank: bool = False
     crease_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
@@ -311,6 +319,7 @@ class DecoderParams:
             "min_window_support": v.number(self.min_window_support, "min_window_support", lo=0.0, hi=1.0),
             "phase_stability": v.boolean(self.phase_stability, "phase_stability"),
             "narrow_snr": v.boolean(self.narrow_snr, "narrow_snr"),
+            "carrier_bank": v.boolean(self.carrier_bank, "carrier_bank"),
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
@@ -382,7 +391,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     the lit test looks across a whole code window).  Its confidence folds in the phase's
     stability against the window's width (``phase_stability``), takes the better of the two
     windows' fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases
-    (``crease_doubt``), and its operating point makes the pixels below
+    (``crease_doubt``); where the nominal phase fit fails it tries other carriers
+    (``carrier_bank``), and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
     and the part of a stripe that the confidence shows to lie on their own side of the edge
     (``link_keep_certain``, ``link_split``).  Everything else as ``params``."""
@@ -399,6 +409,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         phase_stability=True,
         narrow_snr=True,
         crease_doubt=True,
+        carrier_bank=True,
         min_confidence=ROBUST_MIN_CONFIDENCE,
     )
 

@@ -18,6 +18,7 @@ tests/test_accuracy_guard.py).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -33,6 +34,8 @@ __all__ = [
     "certainty_map",
     "PhaseResult",
     "gabor_phase",
+    "bank_fit",
+    "CARRIER_BANK",
     "fringe_snr",
     "MAX_FRINGE_SNR",
 ]
@@ -364,3 +367,128 @@ def gabor_phase(
         residual=residual,
         support=s1,
     )
+
+
+# The colour-robust decoder's carrier bank (DecoderParams.carrier_bank): (period scale, sigma_y
+# scale) of the fits tried where the nominal one fails its residual test.  A surface seen at a
+# steep angle shows the fringe at another period in the camera (the box interior's side faces:
+# the projector column grows 1.40x and 0.52x as fast along the row as on a board facing the rig)
+# or tilted (its top and bottom faces: 0.60 projector px per row against 0.96 per column, 32 deg),
+# which a window of the nominal period and height does not fit: the misfit is no noise, and the
+# residual test rejects it.  A period 1/1.4 of the nominal, the window scaled with it, fits
+# fringes up to ~1.7 times the nominal frequency (within ~20 % of a carrier: the Gabor window's
+# misfit at 20 % is under a third of the residual test's limit); a window 0.3 as tall (sigma_y
+# ~1 px) fits fringes tilted up to ~45 deg (its phase spread across its height stays under
+# ~1 rad).  Measured on the box interior (2026-11-26, full resolution): its left, top and bottom
+# faces then pass the residual test (completeness 76.3 -> 88.9 %).  Tried and left out: periods
+# 1.4-2.2 x the nominal, for fringes seen stretched - chosen nowhere but on the box's right face,
+# lit by the projector at grazing incidence (a +-6 DN fringe on ~25 DN of the other faces' light),
+# which no fit decodes; each entry costs two more fits where the nominal one fails.
+CARRIER_BANK = ((1.0 / 1.4, 1.0), (1.0, 0.3))
+# The bank is tried only where the nominal fit fails the residual test.  A fringe 1.4x as fast
+# leaves the nominal window a residual that swings between 0.57 and 0.68 along the row (measured,
+# noise-free), so part of such a face keeps the nominal fit; trying the bank from half the limit
+# instead (2026-11-26, the hard scenes at full resolution) took the box interior 88.9 -> 89.2 %
+# but the sphere before its wall to 0.114 % of its pixels > 5 mm wrong and the 20:1 chart to an
+# MAE of 0.51 mm: more pixels at depth edges and print edges took a fit that looked clean.
+
+
+def bank_fit(
+    method: Callable[..., PhaseResult],
+    intensity: np.ndarray,
+    *,
+    certainty: np.ndarray,
+    period_px: float,
+    sigma_x_px: float,
+    sigma_y_px: float,
+    max_residual: float,
+    candidates: np.ndarray | None = None,
+    min_support: float = 0.0,
+    choice: np.ndarray | None = None,
+    bank: tuple[tuple[float, float], ...] = CARRIER_BANK,
+) -> tuple[PhaseResult, np.ndarray]:
+    """The phase fit of ``method`` (a :data:`simbench.decode.PHASE_METHODS` entry) at the nominal
+    period, and where its residual is over ``max_residual`` (or NaN) the fit with the lowest
+    residual of it and the bank's entries (:data:`CARRIER_BANK`: each scales the period and the
+    window's width by its first number, the window's height by its second).
+
+    Parameters
+    ----------
+    method : callable
+        ``method(intensity, certainty=, period_px=, sigma_x_px=, sigma_y_px=, offset=False)``.
+    intensity, certainty : ndarray, shape (H, W), float32
+    period_px, sigma_x_px, sigma_y_px : float
+        The nominal fit's.
+    max_residual : float
+        A pixel whose nominal residual is at most this (the residual test's limit) keeps the
+        nominal fit.
+    candidates : ndarray, shape (H, W), bool, optional
+        The pixels that may take another fit (the lit ones); default all.
+    min_support : float
+        ... and whose nominal window has at least this share of its weight on certain samples
+        (another carrier does not mend a window that reaches into a shadow).
+    choice : ndarray, shape (H, W), int8, optional
+        Instead of choosing: the choice of an earlier call (0 nominal, ``j`` the bank's ``j``-th
+        entry), e.g. the wide fit's for the stability term's narrow one.
+    bank : tuple of (float, float)
+
+    Returns
+    -------
+    (PhaseResult, choice): the fit per pixel (no offset) and which fit it is (int8)
+    """
+
+    def fit(scale_x: float, scale_y: float, cols: slice = slice(None)) -> PhaseResult:
+        return method(
+            np.ascontiguousarray(intensity[:, cols]),
+            certainty=np.ascontiguousarray(certainty[:, cols]),
+            period_px=period_px * scale_x,
+            sigma_x_px=sigma_x_px * scale_x,
+            sigma_y_px=sigma_y_px * scale_y,
+            offset=False,
+        )
+
+    nominal = fit(1.0, 1.0)
+    choose = choice is None
+    if choose:
+        with np.errstate(invalid="ignore"):
+            todo = ~(nominal.residual <= np.float32(max_residual))
+            todo &= nominal.support >= np.float32(min_support)
+        if candidates is not None:
+            todo &= candidates
+        choice = np.zeros(todo.shape, np.int8)
+        if not todo.any():
+            return nominal, choice
+    elif not choice.any():
+        return nominal, choice
+    parts = [a.copy() for a in (nominal.wrapped, nominal.amplitude, nominal.residual, nominal.support)]
+    for j, (scale_x, scale_y) in enumerate(bank, 1):
+        need = todo if choose else choice == j
+        # only the columns within the window's reach of a pixel that needs this fit: a pixel's
+        # fit reads its window alone, and the phase is the fringe's own at the pixel, whatever
+        # column the slice starts at (the Gabor fit: the same up to float rounding)
+        reach = int(np.ceil(3.0 * sigma_x_px * scale_x)) + 1
+        for c0, c1 in _column_runs(need.any(axis=0), reach):
+            q = fit(scale_x, scale_y, slice(c0, c1))
+            view = [a[:, c0:c1] for a in parts]
+            if choose:
+                with np.errstate(invalid="ignore"):
+                    take = todo[:, c0:c1] & (q.residual < view[2])
+                choice[:, c0:c1][take] = j
+            else:
+                take = need[:, c0:c1]
+            for dst, src in zip(view, (q.wrapped, q.amplitude, q.residual, q.support)):
+                np.copyto(dst, src, where=take)
+    return PhaseResult(wrapped=parts[0], amplitude=parts[1], offset=None, residual=parts[2], support=parts[3]), choice
+
+
+def _column_runs(needed: np.ndarray, reach: int) -> list[tuple[int, int]]:
+    """Column ranges ``[c0, c1)`` covering every needed column and ``reach`` columns either
+    side, merged where they touch."""
+    idx = np.flatnonzero(needed)
+    if idx.size == 0:
+        return []
+    w = needed.size
+    gaps = np.flatnonzero(np.diff(idx) > 2 * reach)
+    starts = np.concatenate([[idx[0]], idx[gaps + 1]])
+    ends = np.concatenate([idx[gaps], [idx[-1]]])
+    return [(max(0, int(a) - reach), min(w, int(b) + reach + 1)) for a, b in zip(starts, ends)]

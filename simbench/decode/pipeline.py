@@ -37,6 +37,7 @@ from simbench.decode.depth import (
     match_reference,
 )
 from simbench.decode.phase import (
+    bank_fit,
     certainty_map,
     certainty_window_px,
     fringe_snr,
@@ -381,27 +382,31 @@ def _columns(
                     gain=None if gain is None else gain[crop],
                 )
     sx = params.sigma_periods * t_cam
+    method = PHASE_METHODS[params.phase_method]
+    carrier = None
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
-        phase = PHASE_METHODS[params.phase_method](
-            intensity,
-            certainty=certainty,
-            period_px=t_cam,
-            sigma_x_px=sx,
-            sigma_y_px=sx * params.sigma_y_ratio,
-            offset=False,
-        )
+        fit = dict(certainty=certainty, period_px=t_cam, sigma_y_px=sx * params.sigma_y_ratio)
+        if params.carrier_bank:
+            phase, carrier = bank_fit(
+                method,
+                intensity,
+                sigma_x_px=sx,
+                max_residual=params.max_residual,
+                candidates=lit,
+                min_support=params.min_window_support,
+                **fit,
+            )
+        else:
+            phase = method(intensity, sigma_x_px=sx, offset=False, **fit)
     narrow = None
     if params.phase_stability:
         with stage(f"phase stability ({params.phase_method} at {STABILITY_WINDOW_SCALE:g} x the window)"):
-            narrow = PHASE_METHODS[params.phase_method](
-                intensity,
-                certainty=certainty,
-                period_px=t_cam,
-                sigma_x_px=sx * STABILITY_WINDOW_SCALE,
-                sigma_y_px=sx * params.sigma_y_ratio,
-                offset=False,
-            )
+            nx = sx * STABILITY_WINDOW_SCALE
+            if carrier is not None:  # each pixel's own fit of the bank, narrower
+                narrow, _ = bank_fit(method, intensity, sigma_x_px=nx, max_residual=0.0, choice=carrier, **fit)
+            else:
+                narrow = method(intensity, sigma_x_px=nx, offset=False, **fit)
             narrow_residual = narrow.residual[crop]
             narrow = narrow.wrapped[crop]
     with stage("validity"):
@@ -497,6 +502,8 @@ def _columns(
     st.put("amplitude", amplitude)
     st.put("fit_residual", residual)
     st.put("confidence", confidence)
+    if carrier is not None:
+        st.put("carrier", carrier[crop])
     if shift is not None:
         st.put("phase_change", shift)
         st.put("narrow_fit_residual", narrow_residual)
