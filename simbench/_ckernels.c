@@ -1659,43 +1659,81 @@ void albedo_segments(int64_t h, int64_t w, const float *restrict proxy, const fl
 }
 
 /* The predicted bias at concave creases (simbench.decode.depth.crease_bias) of an (h, w) float32
- * column map: per row, d2 = (c[x + L] - 2 c[x]) + c[x - L] and v = factor d2 (factor = -sign(d
- * column / d depth) * bias ratio) where v > 0 and none of the 2 L steps between neighbours from
- * x - L to x + L is over max_step or a NaN (a running count of such steps), else 0; 0 within L of
- * a row's ends.  With conf (NULL: not written): conf = fminf(conf, kappa / v) where valid and
- * v > 0 (the pipeline's confidence cap, in the same pass).  Passes over a row's steps first (they
- * vectorise), then the running count; broken: scratch of w bytes. */
+ * column map.  Per row, into signed (scratch, h x w): v = factor d2 with d2 = (c[x + L] - 2 c[x]) +
+ * c[x - L] (factor = -sign(d column / d depth) * bias ratio), NaN where one of the 2 L steps between
+ * neighbours from x - L to x + L is over max_step or NaN (a running count of such steps) and within
+ * L of the row's ends.  Then down each column, out = the mean of the finite v within rows_reach
+ * rows either side (double running sums, rows entering and leaving the window in order) where the
+ * pixel's own v is finite and that mean is > 0, else 0.  With conf (NULL: not written): conf =
+ * fminf(conf, kappa / out) where valid (the pipeline's confidence cap, in the same call).
+ * Scratch: broken, w bytes; sums, w doubles; counts, w int64. */
 void crease_bias(int64_t h, int64_t w, const float *restrict col, int64_t reach, float factor, float max_step,
-                 float *restrict out, float kappa, const uint8_t *restrict valid, float *restrict conf,
-                 uint8_t *restrict broken) {
+                 int64_t rows_reach, float *restrict signed_d2, float *restrict out, float kappa,
+                 const uint8_t *restrict valid, float *restrict conf, uint8_t *restrict broken,
+                 double *restrict sums, int64_t *restrict counts) {
     for (int64_t r = 0; r < h; r++) {
         const float *c = col + r * w;
-        float *o = out + r * w;
+        float *v = signed_d2 + r * w;
         for (int64_t x = 0; x < w; x++)
-            o[x] = 0.0f;
+            v[x] = NAN;
         if (reach < 1 || w <= 2 * reach)
             continue;
         for (int64_t j = 0; j < w - 1; j++)
             broken[j] = !(fabsf(c[j + 1] - c[j]) <= max_step);
-        for (int64_t x = reach; x < w - reach; x++) {
-            const float v = factor * ((c[x + reach] - 2.0f * c[x]) + c[x - reach]);
-            o[x] = v > 0.0f ? v : 0.0f;
-        }
         int64_t count = 0;
         for (int64_t j = 0; j < 2 * reach; j++)
             count += broken[j];
         for (int64_t x = reach; x < w - reach; x++) {
             if (x > reach)
                 count += (int64_t)broken[x + reach - 1] - (int64_t)broken[x - reach - 1];
-            if (count)
-                o[x] = 0.0f;
+            if (!count)
+                v[x] = factor * ((c[x + reach] - 2.0f * c[x]) + c[x - reach]);
+        }
+    }
+    for (int64_t x = 0; x < w; x++) {
+        sums[x] = 0.0;
+        counts[x] = 0;
+    }
+    for (int64_t r = 0; r < h && r <= rows_reach; r++)
+        for (int64_t x = 0; x < w; x++) {
+            const float a = signed_d2[r * w + x];
+            if (a == a) {
+                sums[x] += (double)a;
+                counts[x]++;
+            }
+        }
+    for (int64_t r = 0; r < h; r++) {
+        if (r > 0) {
+            const int64_t enter = r + rows_reach, leave = r - rows_reach - 1;
+            if (enter < h)
+                for (int64_t x = 0; x < w; x++) {
+                    const float a = signed_d2[enter * w + x];
+                    if (a == a) {
+                        sums[x] += (double)a;
+                        counts[x]++;
+                    }
+                }
+            if (leave >= 0)
+                for (int64_t x = 0; x < w; x++) {
+                    const float a = signed_d2[leave * w + x];
+                    if (a == a) {
+                        sums[x] -= (double)a;
+                        counts[x]--;
+                    }
+                }
+        }
+        const float *v = signed_d2 + r * w;
+        float *o = out + r * w;
+        for (int64_t x = 0; x < w; x++) {
+            const float m = counts[x] > 0 ? (float)(sums[x] / (double)counts[x]) : 0.0f;
+            o[x] = (v[x] == v[x] && m > 0.0f) ? m : 0.0f;
         }
         if (conf) {
-            const uint8_t *ok = valid + r * w;
-            float *k = conf + r * w;
             /* fminf(k, q) without its call (q = kappa / o is never NaN; kappa / 0 = inf leaves k),
              * branch-free so that it vectorises */
-            for (int64_t x = reach; x < w - reach; x++) {
+            const uint8_t *ok = valid + r * w;
+            float *k = conf + r * w;
+            for (int64_t x = 0; x < w; x++) {
                 const float q = kappa / o[x], kx = k[x];
                 k[x] = (ok[x] && (q < kx || kx != kx)) ? q : kx;
             }

@@ -598,23 +598,41 @@ def segment_visibility(proxy, s0, s1, *, period_px, width_px):
         return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
 
 
-def crease_bias(column, *, reach, factor, max_step):
-    """simbench.decode.depth.crease_bias as whole-row numpy passes: the concave second difference
-    over ``reach`` either side times ``factor`` where positive and no step within reach is over
-    ``max_step`` or NaN (a prefix count of broken steps), else 0."""
+def crease_bias(column, *, reach, factor, max_step, rows_reach=0):
+    """simbench.decode.depth.crease_bias as whole-row numpy passes: ``factor`` times the second
+    difference over ``reach`` either side where no step within reach is over ``max_step`` or NaN
+    (a prefix count of broken steps), else NaN; then down the columns the mean of the finite ones
+    within ``rows_reach`` rows (float64 running sums, rows entering and leaving in order) where the
+    pixel's own is finite and the mean > 0, else 0."""
     c = np.asarray(column, np.float32)
     h, w = c.shape
-    out = np.zeros((h, w), np.float32)
+    v = np.full((h, w), np.nan, np.float32)
     span = 2 * reach
-    if reach < 1 or w <= span:
-        return out
-    d2 = c[:, span:] - np.float32(2.0) * c[:, reach : w - reach] + c[:, : w - span]
-    with np.errstate(invalid="ignore"):
-        broken = ~(np.abs(np.diff(c, axis=1)) <= np.float32(max_step))
-        v = np.float32(factor) * d2
-    breaks = np.zeros((h, w), np.int32)
-    np.cumsum(broken, axis=1, out=breaks[:, 1:])
-    whole = breaks[:, span:] == breaks[:, : w - span]
-    with np.errstate(invalid="ignore"):
-        np.copyto(out[:, reach : w - reach], v, where=whole & (v > 0))
+    if reach >= 1 and w > span:
+        d2 = c[:, span:] - np.float32(2.0) * c[:, reach : w - reach] + c[:, : w - span]
+        with np.errstate(invalid="ignore"):
+            broken = ~(np.abs(np.diff(c, axis=1)) <= np.float32(max_step))
+        breaks = np.zeros((h, w), np.int32)
+        np.cumsum(broken, axis=1, out=breaks[:, 1:])
+        whole = breaks[:, span:] == breaks[:, : w - span]
+        v[:, reach : w - reach] = np.where(whole, np.float32(factor) * d2, np.float32(np.nan))
+    fin = np.isfinite(v)
+    z = np.where(fin, v, 0.0).astype(np.float64)
+    sums = np.zeros(w, np.float64)
+    counts = np.zeros(w, np.int64)
+    for r in range(min(h, rows_reach + 1)):
+        sums += z[r]
+        counts += fin[r]
+    out = np.zeros((h, w), np.float32)
+    for r in range(h):
+        if r > 0:
+            if r + rows_reach < h:
+                sums += z[r + rows_reach]
+                counts += fin[r + rows_reach]
+            if r - rows_reach - 1 >= 0:
+                sums -= z[r - rows_reach - 1]
+                counts -= fin[r - rows_reach - 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m = np.where(counts > 0, (sums / np.maximum(counts, 1)).astype(np.float32), np.float32(0.0))
+        out[r] = np.where(fin[r] & (m > 0), m, np.float32(0.0))
     return out

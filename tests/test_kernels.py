@@ -782,28 +782,30 @@ def test_albedo_segments_match_numpy(seed):
 
 
 def test_crease_bias_matches_numpy():
-    """The crease term's C loop: the bits of its numpy form on a noisy map with concave and convex
-    breaks, depth steps, holes and rows too short for the reach, for both signs."""
+    """The crease term's C loops: the bits of its numpy form on a noisy map with concave and convex
+    breaks, depth steps, holes and rows too short for the reach, for both signs and row reaches
+    from none to more than the map's height."""
     rng = np.random.default_rng(3)
     x = np.arange(300, dtype=np.float32)
-    col = np.tile(np.where(x < 150, x, 150 + 0.8 * (x - 150)), (8, 1)).astype(np.float32)
+    col = np.tile(np.where(x < 150, x, 150 + 0.8 * (x - 150)), (12, 1)).astype(np.float32)
     col += rng.normal(0.0, 0.05, col.shape).astype(np.float32)
     col[2, 200:] += 10.0  # a depth edge
     col[3, 120:125] = np.nan  # a hole
     col[4] = np.where(x < 150, x, 150 + 1.2 * (x - 150))  # convex for factor > 0
     for factor in (0.3, -0.3):
         for reach in (1, 22, 149, 150):
-            got = np.empty_like(col)
-            depth._kernels.crease_bias(col, reach, factor, 3.0, got)
-            same(got, ref.crease_bias(col, reach=reach, factor=factor, max_step=3.0))
+            for rows in (0, 1, 4, 20):
+                got = np.empty_like(col)
+                depth._kernels.crease_bias(col, reach, factor, 3.0, rows, got)
+                same(got, ref.crease_bias(col, reach=reach, factor=factor, max_step=3.0, rows_reach=rows))
     got = np.empty_like(col)
-    depth._kernels.crease_bias(col, 22, 0.3, 3.0, got)
+    depth._kernels.crease_bias(col, 22, 0.3, 3.0, 2, got)
     assert (got > 0).any() and (got == 0).any()
-    # the confidence cap in the same pass: fmin(conf, kappa / bias) where valid
+    # the confidence cap in the same call: fmin(conf, kappa / bias) where valid
     conf = rng.uniform(0.0, 40.0, col.shape).astype(np.float32)
     valid = rng.random(col.shape) < 0.8
     want = conf.copy()
     with np.errstate(divide="ignore"):
         np.fmin(want, np.float32(1.34) / got, out=want, where=valid)
-    depth._kernels.crease_bias(col, 22, 0.3, 3.0, np.empty_like(col), cap=(np.float32(1.34), valid, conf))
+    depth._kernels.crease_bias(col, 22, 0.3, 3.0, 2, np.empty_like(col), cap=(np.float32(1.34), valid, conf))
     same(conf, want)

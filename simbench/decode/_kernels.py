@@ -74,7 +74,7 @@ _SIGNATURES = {
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
-    "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _P, _F, _P, _P, _P]),
+    "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _F, _P, _P, _P, _P, _P]),
     "decode_tail": (
         None,
         [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
@@ -706,14 +706,20 @@ def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -
     )
 
 
-def crease_bias(column, reach: int, factor: float, max_step: float, out, *, cap=None) -> None:
-    """Per row of ``column`` ((H, W) float32): ``out = v`` where ``v = factor * (c[x + L] -
-    2 c[x] + c[x - L]) > 0`` and no step between neighbours within ``L = reach`` of ``x`` is over
-    ``max_step`` or NaN, else 0 (0 within ``L`` of the row's ends).  ``cap = (kappa, valid,
-    conf)``: also ``conf = fmin(conf, kappa / out)`` where ``valid`` and ``out > 0``, in place."""
+def crease_bias(column, reach: int, factor: float, max_step: float, rows_reach: int, out, *, cap=None) -> None:
+    """Over ``column`` ((H, W) float32): per row ``v = factor * (c[x + L] - 2 c[x] + c[x - L])``
+    where no step between neighbours within ``L = reach`` of ``x`` is over ``max_step`` or NaN
+    (else, and within ``L`` of the row's ends, none); ``out`` = the mean of the ``v`` there are
+    within ``rows_reach`` rows either side, where the pixel has a ``v`` and the mean is > 0, else
+    0 (running sums in float64 down each column).  ``cap = (kappa, valid, conf)``: also ``conf =
+    fmin(conf, kappa / out)`` where ``valid``, in place."""
     h, w = column.shape
     kappa, valid, conf = cap if cap is not None else (0.0, None, None)
-    broken = np.empty(max(w, 1), np.uint8)  # scratch: a row's steps
+    # scratch: the rows' v, a row's steps, the columns' running sums and counts
+    signed = np.empty((h, w), np.float32)
+    broken = np.empty(max(w, 1), np.uint8)
+    sums = np.empty(max(w, 1), np.float64)
+    counts = np.empty(max(w, 1), np.int64)
     _library().crease_bias(
         h,
         w,
@@ -721,9 +727,13 @@ def crease_bias(column, reach: int, factor: float, max_step: float, out, *, cap=
         int(reach),
         float(factor),
         float(max_step),
+        int(rows_reach),
+        signed.ctypes.data,
         _ptr(out, "out", np.float32, (h, w), writable=True),
         float(kappa),
         None if cap is None else _ptr(valid, "valid", np.bool_, (h, w)),
         None if cap is None else _ptr(conf, "conf", np.float32, (h, w), writable=True),
         broken.ctypes.data,
+        sums.ctypes.data,
+        counts.ctypes.data,
     )

@@ -36,6 +36,7 @@ __all__ = [
     "gabor_phase",
     "bank_fit",
     "CARRIER_BANK",
+    "BANK_STRETCH_SHARE",
     "fringe_snr",
     "MAX_FRINGE_SNR",
 ]
@@ -260,8 +261,9 @@ def magnitude(
 
 
 @lru_cache(maxsize=8)
-def _basis(width: int, omega: float):
-    x = np.arange(width, dtype=np.float64) * omega
+def _basis(width: int, omega: float, column0: int = 0):
+    """cos/sin of the carrier and of its double at columns ``column0 .. column0 + width - 1``."""
+    x = np.arange(column0, column0 + width, dtype=np.float64) * omega
     out = tuple(np.ascontiguousarray(r, dtype=np.float32) for r in (np.cos(x), np.sin(x), np.cos(2 * x), np.sin(2 * x)))
     for a in out:
         a.setflags(write=False)
@@ -285,18 +287,27 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
 
 
 def _fit(
-    intensity: np.ndarray, certainty: np.ndarray, omega: float, sx: float, sy: float, table=None, offset: bool = True
+    intensity: np.ndarray,
+    certainty: np.ndarray,
+    omega: float,
+    sx: float,
+    sy: float,
+    table=None,
+    offset: bool = True,
+    column0: int = 0,
 ) -> tuple:
     """The band fit of :func:`simbench.decode._kernels.gabor_band`: (wrapped, amp, a0, residual,
-    support), a0 None unless ``offset``; ``table`` as it takes it (read)."""
+    support), a0 None unless ``offset``; ``table`` as it takes it (read); ``column0``: the image
+    column of the band's first (the carrier's origin)."""
     h, w = intensity.shape
     out = tuple(None if q == 2 and not offset else np.empty((h, w), np.float32) for q in range(5))
-    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), _basis(w, omega), table, False, *out)
+    basis = _basis(w, omega, column0)
+    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), basis, table, False, *out)
     return out
 
 
 @lru_cache(maxsize=16)
-def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float) -> np.ndarray:
+def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float, column0: int = 0) -> np.ndarray:
     """The certainty's window sums of an all-ones band and the fit's solver from them, which
     every pixel whose window is wholly certain shares: ``n`` rows
     (:func:`simbench.decode._kernels.gabor_table_rows`), made from an all-ones band of ``n`` rows
@@ -305,7 +316,7 @@ def _all_certain_table(n: int, w: int, omega: float, sx: float, sy: float) -> np
     ones = np.ones((n, w), np.float32)
     table = np.empty((_kernels.gabor_table_planes(), n, w), np.float32)
     out = tuple(np.empty((n, w), np.float32) for _ in range(5))
-    _kernels.gabor_band(ones, ones, 0, n, kernels, _basis(w, omega), table, True, *out)
+    _kernels.gabor_band(ones, ones, 0, n, kernels, _basis(w, omega, column0), table, True, *out)
     table.setflags(write=False)
     return table
 
@@ -326,6 +337,7 @@ def gabor_phase(
     sigma_x_px: float,
     sigma_y_px: float,
     offset: bool = True,
+    column0: int = 0,
 ) -> PhaseResult:
     """Wrapped phase of a vertical-stripe fringe by a Gaussian-windowed (Gabor) fit.
 
@@ -339,6 +351,9 @@ def gabor_phase(
         Standard deviations of the Gaussian envelope.
     offset : bool
         Whether to return the fit's offset (``PhaseResult.offset``; None otherwise).
+    column0 : int
+        The image column of ``intensity``'s first (a slice of an image's columns gives the bits
+        the whole image's fit gives there, where the window lies within the slice).
 
     Returns
     -------
@@ -358,7 +373,7 @@ def gabor_phase(
     h, w = intensity.shape
     n = _kernels.gabor_table_rows(h, _half_kernels(omega, sx, sy))
     wrapped, amp, a0, residual, s1 = _fit(
-        intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy), offset=offset
+        intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy, column0), offset=offset, column0=column0
     )
     return PhaseResult(
         wrapped=wrapped,
@@ -380,17 +395,32 @@ def gabor_phase(
 # misfit at 20 % is under a third of the residual test's limit); a window 0.3 as tall (sigma_y
 # ~1 px) fits fringes tilted up to ~45 deg (its phase spread across its height stays under
 # ~1 rad).  Measured on the box interior (2026-11-26, full resolution): its left, top and bottom
-# faces then pass the residual test (completeness 76.3 -> 88.9 %).  Tried and left out: periods
+# faces then pass the residual test (completeness 76.3 -> 89.7 % with the rules below).  Tried and
+# left out: periods
 # 1.4-2.2 x the nominal, for fringes seen stretched - chosen nowhere but on the box's right face,
 # lit by the projector at grazing incidence (a +-6 DN fringe on ~25 DN of the other faces' light),
-# which no fit decodes; each entry costs two more fits where the nominal one fails.
+# which no fit decodes; each entry costs two more fits where the nominal one fails.  A bank fit's
+# pixel keeps its own fit's SNR: the narrow window's SNR (DecoderParams.narrow_snr) is for pixels
+# beside an edge, and on the aluminium sphere of scenes/specular.toml it had lifted 48 bank-fit
+# pixels > 5 mm wrong over the operating point (its wrong share 0.17 -> 0.27 %; without it 0.18 %).
 CARRIER_BANK = ((1.0 / 1.4, 1.0), (1.0, 0.3))
-# The bank is tried only where the nominal fit fails the residual test.  A fringe 1.4x as fast
-# leaves the nominal window a residual that swings between 0.57 and 0.68 along the row (measured,
-# noise-free), so part of such a face keeps the nominal fit; trying the bank from half the limit
-# instead (2026-11-26, the hard scenes at full resolution) took the box interior 88.9 -> 89.2 %
-# but the sphere before its wall to 0.114 % of its pixels > 5 mm wrong and the 20:1 chart to an
-# MAE of 0.51 mm: more pixels at depth edges and print edges took a fit that looked clean.
+# The bank is tried only along a stretch the nominal fit misfits as a whole: where the nominal
+# residual stays over this share of the residual test's limit across the nominal window's reach
+# (3 sigma_x either side along the row).  A fringe 1.4x as fast leaves the nominal window a residual
+# of 0.57-0.68 all along (measured, noise-free), a tilted one 0.69; beside a depth or albedo edge
+# the residual is high only within the window's reach of it, and on a face's clean stretch beyond
+# it ~0.05.  Without it (the lowest residual wherever the nominal fit failed) Table 3's cuboid had
+# the faster carrier win on 692 pixels 8-9 px inside its edge, 2.3 mm off on average (a window
+# narrower in x straddles less of the edge and fits it with a clean-looking residual of 0.31-0.49),
+# and the face's MAE rose from 0.149 to 0.160 mm; with it 17 pixels, 0.149 mm.  Also tried: a cap of
+# 0.3 on the bank fit's own residual (the cuboid 0.152 mm, and 78 stripe-order errors on the box
+# interior), and a check that the fitted phase runs at the carrier's rate (beside the edge the
+# fitted phase runs fast too).  The bank is tried only where the nominal fit fails the residual
+# test itself: as the residual of a fringe 1.4x as fast swings about the limit, part of such a face
+# keeps the nominal fit (0.045 rad off, measured noise-free); trying the bank from half the limit
+# instead (before the stretch rule) took the box interior 88.9 -> 89.2 % but the sphere before its
+# wall to 0.114 % of its pixels > 5 mm wrong and the 20:1 chart to an MAE of 0.51 mm.
+BANK_STRETCH_SHARE = 0.5
 
 
 def bank_fit(
@@ -408,14 +438,16 @@ def bank_fit(
     bank: tuple[tuple[float, float], ...] = CARRIER_BANK,
 ) -> tuple[PhaseResult, np.ndarray]:
     """The phase fit of ``method`` (a :data:`simbench.decode.PHASE_METHODS` entry) at the nominal
-    period, and where its residual is over ``max_residual`` (or NaN) the fit with the lowest
-    residual of it and the bank's entries (:data:`CARRIER_BANK`: each scales the period and the
+    period, and where its residual is over ``max_residual`` all along a stretch of the row (over
+    :data:`BANK_STRETCH_SHARE` ``* max_residual`` within the window's reach) the fit with the
+    lowest residual of it and the bank's entries (:data:`CARRIER_BANK`: each scales the period and the
     window's width by its first number, the window's height by its second).
 
     Parameters
     ----------
     method : callable
-        ``method(intensity, certainty=, period_px=, sigma_x_px=, sigma_y_px=, offset=False)``.
+        ``method(intensity, certainty=, period_px=, sigma_x_px=, sigma_y_px=, offset=False,
+        column0=)`` (:func:`gabor_phase`; ``column0`` with a slice of columns).
     intensity, certainty : ndarray, shape (H, W), float32
     period_px, sigma_x_px, sigma_y_px : float
         The nominal fit's.
@@ -437,14 +469,20 @@ def bank_fit(
     (PhaseResult, choice): the fit per pixel (no offset) and which fit it is (int8)
     """
 
-    def fit(scale_x: float, scale_y: float, cols: slice = slice(None)) -> PhaseResult:
-        return method(
-            np.ascontiguousarray(intensity[:, cols]),
-            certainty=np.ascontiguousarray(certainty[:, cols]),
+    def fit(scale_x: float, scale_y: float, cols: slice | None = None) -> PhaseResult:
+        kw = dict(
             period_px=period_px * scale_x,
             sigma_x_px=sigma_x_px * scale_x,
             sigma_y_px=sigma_y_px * scale_y,
             offset=False,
+        )
+        if cols is None:
+            return method(intensity, certainty=certainty, **kw)
+        return method(
+            np.ascontiguousarray(intensity[:, cols]),
+            certainty=np.ascontiguousarray(certainty[:, cols]),
+            column0=cols.start,
+            **kw,
         )
 
     nominal = fit(1.0, 1.0)
@@ -455,6 +493,12 @@ def bank_fit(
             todo &= nominal.support >= np.float32(min_support)
         if candidates is not None:
             todo &= candidates
+        # a whole stretch misfit, not a discontinuity: the nominal residual stays high across
+        # the window's reach (NaN, unfit, counts as high)
+        reach = max(1, int(np.ceil(3.0 * sigma_x_px)))
+        high = np.where(np.isnan(nominal.residual), np.float32(np.inf), nominal.residual)
+        low = cv2.erode(high, np.ones((1, 2 * reach + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        todo &= low > np.float32(BANK_STRETCH_SHARE * max_residual)
         choice = np.zeros(todo.shape, np.int8)
         if not todo.any():
             return nominal, choice
@@ -464,8 +508,9 @@ def bank_fit(
     for j, (scale_x, scale_y) in enumerate(bank, 1):
         need = todo if choose else choice == j
         # only the columns within the window's reach of a pixel that needs this fit: a pixel's
-        # fit reads its window alone, and the phase is the fringe's own at the pixel, whatever
-        # column the slice starts at (the Gabor fit: the same up to float rounding)
+        # fit reads its window alone, and with the carrier referred to the image's columns
+        # (column0) it has the bits of the whole row's fit, whatever the slice (so the result
+        # does not depend on the decoder's row bands)
         reach = int(np.ceil(3.0 * sigma_x_px * scale_x)) + 1
         for c0, c1 in _column_runs(need.any(axis=0), reach):
             q = fit(scale_x, scale_y, slice(c0, c1))

@@ -443,6 +443,10 @@ def _columns(
         confidence = fringe_snr(residual)
         if narrow is not None and params.narrow_snr:
             off = off_discontinuity(residual, sigma_x_px=sx)
+            if carrier is not None:
+                # a bank fit stands on a stretch the nominal window misfits, beside no edge: the
+                # narrow window's reason to count (less of an edge's far side) does not apply
+                off &= carrier[crop] == 0
             np.fmax(confidence, fringe_snr(narrow_residual), out=confidence, where=off)
         shift = None
         if narrow is not None:
@@ -792,19 +796,6 @@ def decode(
                 col_out=col_out[rows],
                 index_out=index_out[rows],
             )
-        if params.crease_doubt:
-            with stage("crease doubt"):
-                bias = np.empty(col_out[rows].shape, np.float32)
-                # conf = fmin(conf, kappa / bias) where valid, in the kernel's pass
-                _kernels.crease_bias(
-                    col_out[rows],
-                    crease_px,
-                    np.float32(-depth_sign * CREASE_BIAS_RATIO),
-                    CREASE_MAX_STEP_PX,
-                    bias,
-                    cap=(crease_kappa_px, valid_out[rows], conf_out[rows]),
-                )
-            stages.put("crease_bias", bias)
         if ref is not None:
             stages.put("reference_x", lambda: match_reference(stripes.columns[0], ref.inverse[rows]))
             stages.put(
@@ -815,6 +806,23 @@ def decode(
         return stages
 
     parts = run_bands(band, image, params, rig)
+    stages = _merge_stages(parts)
+    if params.crease_doubt:
+        # after the bands: the break of the column map's slope is averaged down the crease, over
+        # rows of neighbouring bands
+        with stage("crease doubt"):
+            bias = np.empty((h, w), np.float32)
+            # conf = fmin(conf, kappa / bias) where valid, in the kernel's pass
+            _kernels.crease_bias(
+                col_out,
+                crease_px,
+                np.float32(-depth_sign * CREASE_BIAS_RATIO),
+                CREASE_MAX_STEP_PX,
+                crease_px,
+                bias,
+                cap=(crease_kappa_px, valid_out, conf_out),
+            )
+        stages.put("crease_bias", bias)
     if params.min_confidence > 0.0:
         with stage("operating point (min_confidence)"):
             doubtful = valid_out & (conf_out < np.float32(params.min_confidence))
@@ -828,5 +836,5 @@ def decode(
         confidence=conf_out,
         column_px=col_out,
         stripe_index=index_out,
-        stages=_merge_stages(parts),
+        stages=stages,
     )
