@@ -1661,15 +1661,15 @@ void albedo_segments(int64_t h, int64_t w, const float *restrict proxy, const fl
 /* The predicted bias at concave creases (simbench.decode.depth.crease_bias) of an (h, w) float32
  * column map.  Per row, into signed (scratch, h x w): v = factor d2 with d2 = (c[x + L] - 2 c[x]) +
  * c[x - L] (factor = -sign(d column / d depth) * bias ratio), NaN where one of the 2 L steps between
- * neighbours from x - L to x + L is over max_step or NaN (a running count of such steps) and within
- * L of the row's ends.  Then down each column, out = the mean of the finite v within rows_reach
+ * neighbours from x - L to x + L is over max_step or NaN or has an end not trusted (trusted: NULL =
+ * every pixel; a running count of such steps) and within L of the row's ends.  Then down each column, out = the mean of the finite v within rows_reach
  * rows either side (double running sums, rows entering and leaving the window in order) where the
  * pixel's own v is finite and that mean is > 0, else 0.  With conf (NULL: not written): conf =
  * fminf(conf, kappa / out) where valid (the pipeline's confidence cap, in the same call).
  * Scratch: broken, w bytes; sums, w doubles; counts, w int64. */
 void crease_bias(int64_t h, int64_t w, const float *restrict col, int64_t reach, float factor, float max_step,
-                 int64_t rows_reach, float *restrict signed_d2, float *restrict out, float kappa,
-                 const uint8_t *restrict valid, float *restrict conf, uint8_t *restrict broken,
+                 int64_t rows_reach, const uint8_t *restrict trusted, float *restrict signed_d2, float *restrict out,
+                 float kappa, const uint8_t *restrict valid, float *restrict conf, uint8_t *restrict broken,
                  double *restrict sums, int64_t *restrict counts) {
     for (int64_t r = 0; r < h; r++) {
         const float *c = col + r * w;
@@ -1680,6 +1680,11 @@ void crease_bias(int64_t h, int64_t w, const float *restrict col, int64_t reach,
             continue;
         for (int64_t j = 0; j < w - 1; j++)
             broken[j] = !(fabsf(c[j + 1] - c[j]) <= max_step);
+        if (trusted) {
+            const uint8_t *t = trusted + r * w;
+            for (int64_t j = 0; j < w - 1; j++)
+                broken[j] |= !(t[j] && t[j + 1]);
+        }
         int64_t count = 0;
         for (int64_t j = 0; j < 2 * reach; j++)
             count += broken[j];

@@ -598,7 +598,7 @@ def segment_visibility(proxy, s0, s1, *, period_px, width_px):
         return np.where(mu > 0, np.sqrt(np.maximum(var, 0.0)) / np.where(mu > 0, mu, 1.0), 0.0).astype(np.float32)
 
 
-def crease_bias(column, *, reach, factor, max_step, rows_reach=0):
+def crease_bias(column, *, reach, factor, max_step, rows_reach=0, trusted=None):
     """simbench.decode.depth.crease_bias as whole-row numpy passes: ``factor`` times the second
     difference over ``reach`` either side where no step within reach is over ``max_step`` or NaN
     (a prefix count of broken steps), else NaN; then down the columns the mean of the finite ones
@@ -612,6 +612,8 @@ def crease_bias(column, *, reach, factor, max_step, rows_reach=0):
         d2 = c[:, span:] - np.float32(2.0) * c[:, reach : w - reach] + c[:, : w - span]
         with np.errstate(invalid="ignore"):
             broken = ~(np.abs(np.diff(c, axis=1)) <= np.float32(max_step))
+        if trusted is not None:
+            broken |= ~(trusted[:, 1:] & trusted[:, :-1])
         breaks = np.zeros((h, w), np.int32)
         np.cumsum(broken, axis=1, out=breaks[:, 1:])
         whole = breaks[:, span:] == breaks[:, : w - span]

@@ -792,12 +792,15 @@ def test_crease_bias_matches_numpy():
     col[2, 200:] += 10.0  # a depth edge
     col[3, 120:125] = np.nan  # a hole
     col[4] = np.where(x < 150, x, 150 + 1.2 * (x - 150))  # convex for factor > 0
+    trusted = rng.random(col.shape) < 0.995  # a few distrusted pixels break their windows
     for factor in (0.3, -0.3):
         for reach in (1, 22, 149, 150):
             for rows in (0, 1, 4, 20):
-                got = np.empty_like(col)
-                depth._kernels.crease_bias(col, reach, factor, 3.0, rows, got)
-                same(got, ref.crease_bias(col, reach=reach, factor=factor, max_step=3.0, rows_reach=rows))
+                for t in (None, trusted):
+                    got = np.empty_like(col)
+                    depth._kernels.crease_bias(col, reach, factor, 3.0, rows, got, trusted=t)
+                    want = ref.crease_bias(col, reach=reach, factor=factor, max_step=3.0, rows_reach=rows, trusted=t)
+                    same(got, want)
     got = np.empty_like(col)
     depth._kernels.crease_bias(col, 22, 0.3, 3.0, 2, got)
     assert (got > 0).any() and (got == 0).any()

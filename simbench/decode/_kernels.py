@@ -74,7 +74,7 @@ _SIGNATURES = {
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
-    "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _F, _P, _P, _P, _P, _P]),
+    "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _P, _F, _P, _P, _P, _P, _P]),
     "decode_tail": (
         None,
         [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
@@ -706,10 +706,13 @@ def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -
     )
 
 
-def crease_bias(column, reach: int, factor: float, max_step: float, rows_reach: int, out, *, cap=None) -> None:
+def crease_bias(
+    column, reach: int, factor: float, max_step: float, rows_reach: int, out, *, trusted=None, cap=None
+) -> None:
     """Over ``column`` ((H, W) float32): per row ``v = factor * (c[x + L] - 2 c[x] + c[x - L])``
     where no step between neighbours within ``L = reach`` of ``x`` is over ``max_step`` or NaN
-    (else, and within ``L`` of the row's ends, none); ``out`` = the mean of the ``v`` there are
+    or has an end outside ``trusted`` ((H, W) bool; None: every pixel) (else, and within ``L``
+    of the row's ends, none); ``out`` = the mean of the ``v`` there are
     within ``rows_reach`` rows either side, where the pixel has a ``v`` and the mean is > 0, else
     0 (running sums in float64 down each column).  ``cap = (kappa, valid, conf)``: also ``conf =
     fmin(conf, kappa / out)`` where ``valid``, in place."""
@@ -728,6 +731,7 @@ def crease_bias(column, reach: int, factor: float, max_step: float, rows_reach: 
         float(factor),
         float(max_step),
         int(rows_reach),
+        None if trusted is None else _ptr(trusted, "trusted", np.bool_, (h, w)),
         signed.ctypes.data,
         _ptr(out, "out", np.float32, (h, w), writable=True),
         float(kappa),

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from typing import TypeVar
 
+import cv2
 import numpy as np
 
 from simbench.decode import _kernels
@@ -812,7 +813,11 @@ def decode(
         # rows of neighbouring bands
         with stage("crease doubt"):
             bias = np.empty((h, w), np.float32)
-            # conf = fmin(conf, kappa / bias) where valid, in the kernel's pass
+            # columns within half a period of a hole (a depth edge's, a shadow's) are bent by the
+            # fit's windows that straddle it: no evidence of a crease; conf = fmin(conf, kappa /
+            # bias) where valid, in the kernel's pass
+            margin = np.ones((1, 2 * (crease_px // 2) + 1), np.uint8)
+            trusted = cv2.erode(valid_out.view(np.uint8), margin, borderType=cv2.BORDER_REPLICATE).view(bool)
             _kernels.crease_bias(
                 col_out,
                 crease_px,
@@ -820,6 +825,7 @@ def decode(
                 CREASE_MAX_STEP_PX,
                 crease_px,
                 bias,
+                trusted=trusted,
                 cap=(crease_kappa_px, valid_out, conf_out),
             )
         stages.put("crease_bias", bias)
