@@ -383,3 +383,20 @@ def test_the_kinect_rolling_shutter_shears_an_axially_moving_wall_by_the_closed_
     assert offset == pytest.approx(-v * (model.exposure_s / 2 - t_mid), abs=1e-3)
     (slope_gs, _), _, _ = fits[0.0]
     assert abs(slope_gs) < 0.05 * v * model.row_time_s
+
+
+def test_the_motion_study_measures_a_capture_in_three_parts_the_slowest_ranked_first():
+    """Each capture (scene/direction/speed) is three parts, in the order its rows are written
+    (proposed sensor, phase shifting, competitors); phase shifting's twelve moving frames rank
+    it first where it runs and last where it does not (faster than MULTI_SHOT_MAX_SPEED_M_S)."""
+    from simbench.experiments.common import RunConfig
+    from simbench.experiments.motion import GROUPS, MULTI_SHOT_MAX_SPEED_M_S, motion_cost, motion_parts
+
+    parts = motion_parts(RunConfig())
+    captures = sorted({p.rsplit("/", 1)[0] for p in parts})
+    assert len(parts) == 3 * len(captures) and GROUPS == ("proposed", "phase_shift", "competitors")
+    assert all(parts[i].endswith("/" + GROUPS[i % 3]) for i in range(len(parts)))
+    fast = max(float(c.rsplit("/", 1)[1]) for c in captures)
+    slowest = max(parts, key=motion_cost)
+    assert slowest.endswith(f"/{MULTI_SHOT_MAX_SPEED_M_S:g}/phase_shift")
+    assert motion_cost(f"bust/lateral/{fast:g}/phase_shift") == 0.0 < motion_cost(f"bust/lateral/{fast:g}/proposed")

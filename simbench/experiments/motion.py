@@ -118,21 +118,32 @@ def _grid(config: RunConfig) -> tuple[tuple[float, ...], dict]:
     return (QUICK_SPEEDS_M_S, {k: SCENES[k] for k in QUICK_SCENES}) if config.quick else (SPEEDS_M_S, SCENES)
 
 
+# a capture's systems in three parts: phase shifting's moving sequence is most of a capture's time
+# (up to ~5 min of one worker for the bust at 0.1 m/s), so it runs beside the others on a pool
+GROUPS = ("proposed", "phase_shift", "competitors")
+
+
 def motion_parts(config: RunConfig) -> list[str]:
-    """The study's captures, ``scene/direction/speed``: every scene, direction and speed."""
+    """The study's parts, ``scene/direction/speed/group``: every scene, direction and speed, its
+    systems in :data:`GROUPS` (the proposed sensor, phase shifting, the competitors)."""
     speeds, scenes = _grid(config)
-    return [f"{s}/{d}/{v:g}" for s in scenes for d in DIRECTIONS for v in speeds]
+    return [f"{s}/{d}/{v:g}/{g}" for s in scenes for d in DIRECTIONS for v in speeds for g in GROUPS]
 
 
 def motion_cost(part: str) -> float:
-    """A part's rank for a pool: its speed (a faster object takes more time slices to render)."""
-    return float(part.rsplit("/", 1)[1])
+    """A part's rank for a pool: its speed (a faster object takes more time slices to render),
+    phase shifting's twelve frames counted twelve times where it runs."""
+    _, _, speed_text, group = part.split("/")
+    speed = float(speed_text)
+    if group == "phase_shift":
+        return 12.0 * speed if speed <= MULTI_SHOT_MAX_SPEED_M_S else 0.0
+    return speed
 
 
 def measure_motion(session: Session, part: str) -> dict:
-    """One scene moving in one direction at one speed, recorded and scored by every system: its
-    rows, metrics and the systems' capture times (plain data)."""
-    scene_name, direction, speed_text = part.split("/")
+    """One scene moving in one direction at one speed, recorded and scored by one group of
+    systems: its rows, metrics and the systems' capture times (plain data)."""
+    scene_name, direction, speed_text, group = part.split("/")
     speed = float(speed_text)
     sub = _motion_session(session)
     moving = SCENES[scene_name]
@@ -140,7 +151,16 @@ def measure_motion(session: Session, part: str) -> dict:
     metrics, timing = {}, {}
     # the same seeds at every speed and direction (common random numbers)
     rows = _row_set(
-        sub, scene, moving, f"motion/{scene_name}", f"motion/{part}", speed, metrics, timing, scale=CAMERA_SCALE
+        sub,
+        scene,
+        moving,
+        f"motion/{scene_name}",
+        f"motion/{scene_name}/{direction}/{speed_text}",
+        speed,
+        metrics,
+        timing,
+        scale=CAMERA_SCALE,
+        group=group,
     )
     for r in rows:
         r.update(scene=scene_name, direction=direction)
@@ -217,25 +237,49 @@ def _wrong_share(depth_m: np.ndarray, rec, region: np.ndarray) -> float:
 
 
 def _row_set(
-    sub: Session, scene, moving: str, label: str, key: str, speed: float, metrics: dict, timing: dict, *, scale: float
+    sub: Session,
+    scene,
+    moving: str,
+    label: str,
+    key: str,
+    speed: float,
+    metrics: dict,
+    timing: dict,
+    *,
+    scale: float,
+    group: str | None = None,
 ):
+    """The rows of ``group`` of :data:`GROUPS` (None: every system) for one moving scene."""
     cfg = sub.config
     moving_id = [o.name for o in scene.objects].index(moving)
     rows = []
     prepared = sub.prepare(scene)
-    window = sub.proposed.capture_window_s(prepared)
-    timing["proposed"] = window[1] - window[0]
-    cap = sub.capture(prepared, label)[0]
     # the run's edge band is for its own camera scale: the same angle at this one
     band = max(1, int(round(cfg.edge_band_px * scale / cfg.camera_scale)))
-    region = _region(cap, moving_id, band)
-    motion_px = float(np.abs(cap.gt.motion_px).max()) if cap.gt.motion_px is not None else 0.0
-    for decoder in ("paper", "robust"):
-        params = cfg.decoder if decoder == "paper" else robust_params(cfg.decoder)
-        result = sub.decode(cap, params, mode="calibrated")
-        sc = score(cap, result, params.period_px, region=region)
-        sc["wrong_share"] = _wrong_share(result.depth_m, cap, region)
-        rows.append(_row("proposed", decoder, speed, sc, window, motion_px, int(region.sum()), ""))
+    if group in (None, "proposed"):
+        window = sub.proposed.capture_window_s(prepared)
+        timing["proposed"] = window[1] - window[0]
+        cap = sub.capture(prepared, label)[0]
+        region = _region(cap, moving_id, band)
+        motion_px = float(np.abs(cap.gt.motion_px).max()) if cap.gt.motion_px is not None else 0.0
+        for decoder in ("paper", "robust"):
+            params = cfg.decoder if decoder == "paper" else robust_params(cfg.decoder)
+            result = sub.decode(cap, params, mode="calibrated")
+            sc = score(cap, result, params.period_px, region=region)
+            sc["wrong_share"] = _wrong_share(result.depth_m, cap, region)
+            rows.append(_row("proposed", decoder, speed, sc, window, motion_px, int(region.sum()), ""))
+    if group in (None, "phase_shift"):
+        rows += _phase_shift_rows(sub, scene, moving_id, label, speed, band, timing)
+    if group in (None, "competitors"):
+        rows += _competitor_rows(sub, scene, moving_id, label, speed, band, prepared.rig.camera.focal_px, timing)
+    for r in rows:
+        for m in ("gt_mae_mm", "completeness", "wrong_share"):
+            metrics[f"{key}/{r['row']}/{m}"] = r[m]
+    return rows
+
+
+def _phase_shift_rows(sub: Session, scene, moving_id: int, label: str, speed: float, band: int, timing: dict) -> list:
+    rows = []
     ps = sub.system("phase_shift")
     ps_prepared = ps.prepare(scene)
     ps_window = ps.capture_window_s(ps_prepared)
@@ -262,7 +306,13 @@ def _row_set(
                 f"not run: the object moves {travel_mm:.0f} mm during the {ps_window[1] - ps_window[0]:.2f} s sequence",
             )
         )
-    main_focal = prepared.rig.camera.focal_px
+    return rows
+
+
+def _competitor_rows(
+    sub: Session, scene, moving_id: int, label: str, speed: float, band: int, main_focal: float, timing: dict
+) -> list:
+    rows = []
     for name in COMPETITORS:  # each at its own camera's resolution
         rec, depth = sub.acquire(name, scene, label)[0]
         band_own = max(1, int(round(band * rec.scene.rig.camera.focal_px / main_focal)))  # the same angle
@@ -273,9 +323,6 @@ def _row_set(
         own_window = sub.system(name).capture_window_s(rec.scene)
         timing[name] = own_window[1] - own_window[0]
         rows.append(_row(name, "", speed, sc, own_window, mpx, int(region_own.sum()), ""))
-    for r in rows:
-        for m in ("gt_mae_mm", "completeness", "wrong_share"):
-            metrics[f"{key}/{r['row']}/{m}"] = r[m]
     return rows
 
 
