@@ -65,7 +65,7 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # before wall 98.2 % / 0.058 %, deep stairs 98.3 % / 0.054 %, corners of 60-120 deg 97.7-99.99 % / 0 %,
 # printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards 98.4-100 % / 0 %.  Short of
 # the goals there: the 45-degree corner (96.4 %, 2 pixels wrong: the crease term's band), the box
-# interior (89.7 %: its right face, lit at grazing incidence, decodes nowhere), the 20:1 chart
+# interior (90.1 %: its right face, lit at grazing incidence, decodes nowhere), the 20:1 chart
 # (81.4 %, 0.008 % wrong) and the fine chart (squares under a period: nothing).  Not tuned on any
 # table of the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0

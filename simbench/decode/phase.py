@@ -395,7 +395,8 @@ def gabor_phase(
 # misfit at 20 % is under a third of the residual test's limit); a window 0.3 as tall (sigma_y
 # ~1 px) fits fringes tilted up to ~45 deg (its phase spread across its height stays under
 # ~1 rad).  Measured on the box interior (2026-11-26, full resolution): its left, top and bottom
-# faces then pass the residual test (completeness 76.3 -> 89.7 % with the rules below).  Tried and
+# faces then pass the residual test (completeness 76.3 -> 89.7 % with the rules below, 90.1 % with
+# the crease term's hole margin).  Tried and
 # left out: periods
 # 1.4-2.2 x the nominal, for fringes seen stretched - chosen nowhere but on the box's right face,
 # lit by the projector at grazing incidence (a +-6 DN fringe on ~25 DN of the other faces' light),
