@@ -146,6 +146,7 @@ def crease_bias(
     bias_ratio: float,
     max_step_px: float,
     rows_reach: int = 0,
+    trusted: np.ndarray | None = None,
 ) -> np.ndarray:
     """Predicted phase bias at concave creases, in projector pixels (ours; the colour-robust
     decoder's ``crease_doubt``).
@@ -178,6 +179,9 @@ def crease_bias(
         A larger step between neighbouring pixels is a depth edge.
     rows_reach : int
         Rows either side whose ``D2`` the mean takes (0: the row's own).
+    trusted : ndarray, shape (H, W), bool, optional
+        Columns that may enter a ``D2`` (a step with an end outside it breaks the windows over it,
+        like a depth edge); the decoder's: the valid columns at least half a period from a hole.
 
     Returns
     -------
@@ -186,5 +190,7 @@ def crease_bias(
     c = np.ascontiguousarray(column_px, dtype=np.float32)
     out = np.empty(c.shape, np.float32)
     factor = np.float32(-np.sign(depth_sign) * bias_ratio)
-    _kernels.crease_bias(c, int(scale_px), factor, max_step_px, int(rows_reach), out)
+    if trusted is not None:
+        trusted = np.ascontiguousarray(trusted, dtype=bool)
+    _kernels.crease_bias(c, int(scale_px), factor, max_step_px, int(rows_reach), out, trusted=trusted)
     return out
