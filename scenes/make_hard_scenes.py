@@ -3,10 +3,10 @@
 Issue 35: scenes of the classes a real user points a structured-light sensor at, where a decoder
 tuned on flat boards breaks - each class at several settings, of our own design:
 
-* concave corners opening at 45, 60, 75, 90 and 120 deg, and a horizontal V-groove: two faces that
-  light each other (interreflection adds a low-frequency glow to the fringe); 45 and 75 deg were
-  added after the decoder's crease doubt was designed on the other three, to check it on angles it
-  was not made on;
+* concave corners opening at 45, 50, 60, 75, 90, 105 and 120 deg, and a horizontal V-groove: two
+  faces that light each other (interreflection adds a low-frequency glow to the fringe); the
+  decoder's crease doubt was designed on 60, 90 and 120 deg, 45 and 75 were added after it, and 50
+  and 105 after its hole margin, each to check it on angles it was not made on;
 * the inside of an open box: five faces lighting each other;
 * objects before walls: a box, a sphere, and three 0.1 m steps - depth edges and projector
   shadows at several depths;
@@ -201,7 +201,7 @@ def glossy(roughness: float) -> tuple[str, list[dict]]:
 
 
 def scenes() -> dict[str, tuple[str, list[dict]]]:
-    out = {f"hard_corner_{a:03d}": corner(a) for a in (45, 60, 75, 90, 120)}
+    out = {f"hard_corner_{a:03d}": corner(a) for a in (45, 50, 60, 75, 90, 105, 120)}
     out["hard_vgroove_090"] = vgroove()
     out["hard_box_interior"] = box_interior()
     out["hard_box_before_wall"] = box_before_wall()

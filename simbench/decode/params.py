@@ -61,8 +61,9 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # link_split 15 at 3 (13 at 4); with the captures over the lens's whole field, the narrow window's
 # SNR and its wide-SNR floor (2026-11-26) 15 of 19 at 3, 14 at 4, 13 at 0, 2 and 5; with the crease
 # term and the carrier bank, and corners at 45 and 75 deg added (21 scenes, 2026-11-26): 17 at 3,
-# 15 at 2 and 4, 14 at 0 and 5.  At 3: box before wall 99.56 % complete / 0.001 % wrong, sphere
-# before wall 98.2 % / 0.058 %, deep stairs 98.3 % / 0.054 %, corners of 60-120 deg 97.7-99.99 % / 0 %,
+# 15 at 2 and 4, 14 at 0 and 5; with corners at 50 and 105 deg too (23 scenes): 19 at 3, 17 at 2,
+# 16 at 4, 15 at 0 and 5.  At 3: box before wall 99.56 % complete / 0.001 % wrong, sphere
+# before wall 98.2 % / 0.058 %, deep stairs 98.3 % / 0.054 %, corners of 50-120 deg 97.4-99.99 % / 0 %,
 # printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards 98.4-100 % / 0 %.  Short of
 # the goals there: the 45-degree corner (96.4 %, 2 pixels wrong: the crease term's band), the box
 # interior (90.1 %: its right face, lit at grazing incidence, decodes nowhere), the 20:1 chart

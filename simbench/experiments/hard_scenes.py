@@ -66,9 +66,11 @@ __all__ = [
 # scene -> its class (the list; scenes/make_hard_scenes.py writes them)
 HARD_SCENES = {
     "hard_corner_045": "interreflection",
+    "hard_corner_050": "interreflection",
     "hard_corner_060": "interreflection",
     "hard_corner_075": "interreflection",
     "hard_corner_090": "interreflection",
+    "hard_corner_105": "interreflection",
     "hard_corner_120": "interreflection",
     "hard_vgroove_090": "interreflection",
     "hard_box_interior": "interreflection",
