@@ -15,11 +15,19 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from simbench.decode import _kernels
 
-__all__ = ["absolute_column", "inverse_column_table", "match_reference", "depth_from_disparity", "crease_bias"]
+__all__ = [
+    "absolute_column",
+    "inverse_column_table",
+    "match_reference",
+    "depth_from_disparity",
+    "crease_bias",
+    "crease_trusted",
+]
 
 
 def absolute_column(
@@ -181,7 +189,7 @@ def crease_bias(
         Rows either side whose ``D2`` the mean takes (0: the row's own).
     trusted : ndarray, shape (H, W), bool, optional
         Columns that may enter a ``D2`` (a step with an end outside it breaks the windows over it,
-        like a depth edge); the decoder's: the valid columns at least half a period from a hole.
+        like a depth edge); the decoder's: :func:`crease_trusted`.
 
     Returns
     -------
@@ -194,3 +202,17 @@ def crease_bias(
         trusted = np.ascontiguousarray(trusted, dtype=bool)
     _kernels.crease_bias(c, int(scale_px), factor, max_step_px, int(rows_reach), out, trusted=trusted)
     return out
+
+
+def crease_trusted(valid: np.ndarray, *, scale_px: int) -> np.ndarray:
+    """The columns :func:`crease_bias` may read in the decoder: the valid ones at least half of
+    ``scale_px`` from an invalid one along the row (beside a hole - a depth edge's, a shadow's -
+    the fit's windows straddle it and bend the decoded map, which is no crease).
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    margin = np.ones((1, 2 * (int(scale_px) // 2) + 1), np.uint8)
+    v = np.ascontiguousarray(valid, dtype=bool)
+    return cv2.erode(v.view(np.uint8), margin, borderType=cv2.BORDER_REPLICATE).view(bool)

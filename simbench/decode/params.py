@@ -227,9 +227,8 @@ class DecoderParams:
         the wide window's SNR alone.
     carrier_bank : bool
         Where the nominal phase fit fails its residual test along a stretch of a row, fit again
-        with the carriers and
-        windows of :data:`simbench.decode.phase.CARRIER_BANK` (other periods, a shorter window)
-        and keep the one with the lowest residual, and its own narrower fit for the stability
+        with the carriers and windows of :data:`simbench.decode.phase.CARRIER_BANK` (other
+        periods, a shorter window) and keep the one with the lowest residual, and its own narrower fit for the stability
         term (:func:`simbench.decode.phase.bank_fit`): a surface seen at a steep angle shows the
         fringe at another period or tilted.  Only with ``phase_method = 'gabor'``.  The
         colour-robust decoder; off = the nominal fit only (a pixel whose nominal fit passes keeps
@@ -352,8 +351,8 @@ class DecoderParams:
             raise ValueError("narrow_snr needs phase_stability = true (the narrow window is the stability term's fit)")
         if fixed["carrier_bank"] and fixed["phase_method"] != "gabor":
             raise ValueError(
-                "carrier_bank needs phase_method = 'gabor' (it refits slices of a row's columns, which a "
-                "whole-row FFT does not allow)"
+                "carrier_bank needs phase_method = 'gabor' (it refits slices of a row's columns, which the "
+                "Fourier methods' whole-row transforms do not allow)"
             )
         for name, value in fixed.items():
             object.__setattr__(self, name, value)

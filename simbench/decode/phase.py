@@ -396,9 +396,8 @@ def gabor_phase(
 # ~1 px) fits fringes tilted up to ~45 deg (its phase spread across its height stays under
 # ~1 rad).  Measured on the box interior (2026-11-26, full resolution): its left, top and bottom
 # faces then pass the residual test (completeness 76.3 -> 89.7 % with the rules below, 90.1 % with
-# the crease term's hole margin).  Tried and
-# left out: periods
-# 1.4-2.2 x the nominal, for fringes seen stretched - chosen nowhere but on the box's right face,
+# the crease term's hole margin).  Tried and left out: periods 1.4-2.2 x the nominal, for fringes
+# seen stretched - chosen nowhere but on the box's right face,
 # lit by the projector at grazing incidence (a +-6 DN fringe on ~25 DN of the other faces' light),
 # which no fit decodes; each entry costs two more fits where the nominal one fails.  A bank fit's
 # pixel keeps its own fit's SNR: the narrow window's SNR (DecoderParams.narrow_snr) is for pixels

@@ -8,7 +8,6 @@ from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from typing import TypeVar
 
-import cv2
 import numpy as np
 
 from simbench.decode import _kernels
@@ -34,6 +33,7 @@ from simbench.decode.debruijn import (
 )
 from simbench.decode.depth import (
     absolute_column,
+    crease_trusted,
     inverse_column_table,
     match_reference,
 )
@@ -813,11 +813,8 @@ def decode(
         # rows of neighbouring bands
         with stage("crease doubt"):
             bias = np.empty((h, w), np.float32)
-            # columns within half a period of a hole (a depth edge's, a shadow's) are bent by the
-            # fit's windows that straddle it: no evidence of a crease; conf = fmin(conf, kappa /
-            # bias) where valid, in the kernel's pass
-            margin = np.ones((1, 2 * (crease_px // 2) + 1), np.uint8)
-            trusted = cv2.erode(valid_out.view(np.uint8), margin, borderType=cv2.BORDER_REPLICATE).view(bool)
+            # conf = fmin(conf, kappa / bias) where valid, in the kernel's pass
+            trusted = crease_trusted(valid_out, scale_px=crease_px)
             _kernels.crease_bias(
                 col_out,
                 crease_px,

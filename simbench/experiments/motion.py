@@ -247,16 +247,16 @@ def _row_set(
     timing: dict,
     *,
     scale: float,
-    group: str | None = None,
+    group: str,
 ):
-    """The rows of ``group`` of :data:`GROUPS` (None: every system) for one moving scene."""
+    """The rows of ``group`` of :data:`GROUPS` for one moving scene."""
     cfg = sub.config
     moving_id = [o.name for o in scene.objects].index(moving)
     rows = []
     prepared = sub.prepare(scene)
     # the run's edge band is for its own camera scale: the same angle at this one
     band = max(1, int(round(cfg.edge_band_px * scale / cfg.camera_scale)))
-    if group in (None, "proposed"):
+    if group == "proposed":
         window = sub.proposed.capture_window_s(prepared)
         timing["proposed"] = window[1] - window[0]
         cap = sub.capture(prepared, label)[0]
@@ -268,9 +268,9 @@ def _row_set(
             sc = score(cap, result, params.period_px, region=region)
             sc["wrong_share"] = _wrong_share(result.depth_m, cap, region)
             rows.append(_row("proposed", decoder, speed, sc, window, motion_px, int(region.sum()), ""))
-    if group in (None, "phase_shift"):
+    if group == "phase_shift":
         rows += _phase_shift_rows(sub, scene, moving_id, label, speed, band, timing)
-    if group in (None, "competitors"):
+    if group == "competitors":
         rows += _competitor_rows(sub, scene, moving_id, label, speed, band, prepared.rig.camera.focal_px, timing)
     for r in rows:
         for m in ("gt_mae_mm", "completeness", "wrong_share"):
