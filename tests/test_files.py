@@ -75,6 +75,23 @@ def test_calibrated_mode_needs_no_reference(tmp_path):
     assert np.nanmedian(np.load(tmp_path / "d.npy")) == pytest.approx(1.1, abs=2e-3)
 
 
+def test_the_summary_names_the_mode_the_decoder_ran_in(tmp_path):
+    """``--decoder mode=calibrated`` is the decoder's mode as much as ``--mode calibrated``: the
+    summary line says the mode and Z0 the decoder ran with (it once printed ``--mode``'s
+    default), no reference is asked for, and a ``--mode`` that says otherwise is refused."""
+    inputs = _plane_images(tmp_path)
+    out = str(tmp_path / "d.npy")
+    msg = decode_files(
+        DecodeRequest(capture=inputs["capture"], rig=inputs["rig"], decoder=("mode=calibrated",), out=out)
+    )
+    assert "calibrated mode" in msg and "reference mode" not in msg
+    assert np.nanmedian(np.load(out)) == pytest.approx(1.1, abs=2e-3)
+    msg = decode_files(DecodeRequest(decoder=("z0_m=1.0",), out=out, **inputs))
+    assert "reference mode, Z0 = 1.0 m" in msg
+    with pytest.raises(ValueError, match="--mode reference and --decoder mode=calibrated disagree"):
+        decode_files(DecodeRequest(mode="reference", decoder=("mode=calibrated",), out=out, **inputs))
+
+
 @pytest.fixture
 def ideal_folder(tmp_path):
     """A recording folder of a system with no decode_files of its own (a test's toy system)."""

@@ -93,7 +93,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     from simbench.pattern import pattern_from_options
     from simbench.rig import load_rig
 
-    _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
+    asked = _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
+    decoder_mode = asked.mode if any(item.partition("=")[0] == "mode" for item in request.decoder) else None
+    if request.mode and decoder_mode and request.mode != decoder_mode:
+        raise ValueError(f"--mode {request.mode} and --decoder mode={decoder_mode} disagree: give one")
     overrides = []  # explicit options that replace what a recording holds, announced with the result
     capture_path, rig_path, reference_path = request.capture, request.rig, request.reference
     if Path(request.capture).is_dir():
@@ -117,7 +120,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     }
     _check_same_recording_rig(capture_path, reference_path, manifests)
     capture = load_image(capture_path, expected_size_hw=rig.camera.size_hw)
-    mode = request.mode or "reference"
+    mode = request.mode or decoder_mode or "reference"
     reference = None
     z0 = request.z0_m if request.z0_m is not None else 1.0
     if mode == "reference":
@@ -186,7 +189,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         valid=result.valid,
         confidence=result.confidence,
         camera=rig.camera,
-        summary=f"{mode} mode, Z0 = {z0} m{ref_note}{over}",
+        summary=f"{params.mode} mode, Z0 = {params.z0_m} m{ref_note}{over}",
         confidence_meaning=meaning,
         elapsed_s=dt,
         colours=capture if capture.dtype == np.uint8 else None,
