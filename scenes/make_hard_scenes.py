@@ -6,7 +6,8 @@ tuned on flat boards breaks - each class at several settings, of our own design:
 * concave corners opening at 45, 50, 60, 75, 90, 105 and 120 deg, and a horizontal V-groove: two
   faces that light each other (interreflection adds a low-frequency glow to the fringe); the
   decoder's crease doubt was designed on 60, 90 and 120 deg, 45 and 75 were added after it, and 50
-  and 105 after its hole margin, each to check it on angles it was not made on;
+  and 105 after its hole margin, each to check it on angles it was not made on; then a corner
+  turned 10 deg off the camera's axis (65 deg) and a grey one (55 deg), checks of its second design round;
 * the inside of an open box: five faces lighting each other;
 * objects before walls: a box, a sphere, and three 0.1 m steps - depth edges and projector
   shadows at several depths;
@@ -29,6 +30,7 @@ from pathlib import Path
 OUT = Path(__file__).resolve().parent
 
 WHITE = (0.8, 0.8, 0.8)  # the albedo of the library's white boards (white_plane.toml)
+GREY = (0.35, 0.35, 0.35)  # assumption: a mid-grey board (Munsell N6 reflects ~30 %)
 
 
 def _num(x: float) -> str:
@@ -64,25 +66,28 @@ def _toml(description: str, objects: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def corner(opening_deg: float) -> tuple[str, list[dict]]:
-    """A concave vertical corner: two white boards meeting in a crease at x = 0, z = 1.35 m,
-    opening ``opening_deg`` towards the camera."""
+def corner(
+    opening_deg: float, *, turn_deg: float = 0.0, rgb: tuple = WHITE, finish: str = "white"
+) -> tuple[str, list[dict]]:
+    """A concave vertical corner: two boards of albedo ``rgb`` meeting in a crease at x = 0,
+    z = 1.35 m, opening ``opening_deg`` towards the camera, turned ``turn_deg`` about the crease
+    (positive: the left face more edge-on, the right one more frontal)."""
     tilt = 90.0 - opening_deg / 2.0  # each face's turn from facing the camera
     # the crease 1.35 m away, so that at 60 deg the near edges stay inside the decoder's working
     # range (0.75-1.75 m) at 0.84 m; each board wide enough that its outer edge lies beyond the
     # view (half-width 0.28 m per metre of depth) with 15 % to spare: w (cos t + 0.28 sin t) =
     # 1.15 * 0.28 * zc
     h, zc = 0.8, 1.35
-    t = math.radians(tilt)
-    w = round(1.15 * 0.28 * zc / (math.cos(t) + 0.28 * math.sin(t)), 3)
-    dx, dz = w / 2 * math.cos(math.radians(tilt)), w / 2 * math.sin(math.radians(tilt))
-    objs = [
-        _plane("left", (-dx, 0.0, zc - dz), (w, h), (0.0, -tilt, 0.0), rgb=WHITE),
-        _plane("right", (dx, 0.0, zc - dz), (w, h), (0.0, tilt, 0.0), rgb=WHITE),
-    ]
+    objs = []
+    for name, side, face_tilt in (("left", -1.0, tilt + turn_deg), ("right", 1.0, tilt - turn_deg)):
+        t = math.radians(face_tilt)
+        w = round(1.15 * 0.28 * zc / (math.cos(t) + 0.28 * math.sin(t)), 3)
+        dx, dz = w / 2 * math.cos(t), w / 2 * math.sin(t)
+        objs.append(_plane(name, (side * dx, 0.0, zc - dz), (w, h), (0.0, side * face_tilt, 0.0), rgb=rgb))
+    turned = f", turned {turn_deg:g} deg about its crease" if turn_deg else ""
     desc = (
-        f"Hard scenes (issue 35): a concave corner opening at {opening_deg:g} deg - two white boards meeting in a "
-        f"vertical crease {zc:g} m away, each lighting the other (interreflection)"
+        f"Hard scenes (issue 35): a concave corner opening at {opening_deg:g} deg{turned} - two {finish} boards "
+        f"meeting in a vertical crease {zc:g} m away, each lighting the other (interreflection)"
     )
     return desc, objs
 
@@ -202,6 +207,11 @@ def glossy(roughness: float) -> tuple[str, list[dict]]:
 
 def scenes() -> dict[str, tuple[str, list[dict]]]:
     out = {f"hard_corner_{a:03d}": corner(a) for a in (45, 50, 60, 75, 90, 105, 120)}
+    # rendered after the crease term's second design round, to check it where none of its
+    # constants looked: a corner turned off the camera's axis (faces unequally foreshortened and
+    # lit) and a grey one (interreflection a smaller share of the light, the fringe dimmer)
+    out["hard_corner_065_turned"] = corner(65, turn_deg=10.0)
+    out["hard_corner_055_grey"] = corner(55, rgb=GREY, finish="grey")
     out["hard_vgroove_090"] = vgroove()
     out["hard_box_interior"] = box_interior()
     out["hard_box_before_wall"] = box_before_wall()

@@ -72,6 +72,8 @@ HARD_SCENES = {
     "hard_corner_090": "interreflection",
     "hard_corner_105": "interreflection",
     "hard_corner_120": "interreflection",
+    "hard_corner_065_turned": "interreflection",
+    "hard_corner_055_grey": "interreflection",
     "hard_vgroove_090": "interreflection",
     "hard_box_interior": "interreflection",
     "hard_box_before_wall": "depth edges, shadows",
