@@ -52,6 +52,9 @@ def _pad_factor(c_px: float, size: int, scale: int) -> tuple[int, int, float]:
 # were ~25 ms a slice.  Only a read-only drive is reused, by identity (held here, so that its id
 # cannot pass to another array), since a writable one could change under the same object.
 _LAST_TEXTURE: tuple = ()
+# ... and the mi.Bitmap made of that texture: (texture, bitmap).  mi.Bitmap copies its array (the
+# Kinect's 1980x2532 dot texture: 35-45 ms a time slice); Mitsuba's loader only reads it.
+_LAST_BITMAP: tuple = ()
 
 
 def projector_texture(drive: np.ndarray, projector: Intrinsics) -> tuple[np.ndarray, float, Intrinsics]:
@@ -334,7 +337,7 @@ def mitsuba_scene(
             "to_world": _pose(mi, rig),
             "irradiance": {
                 "type": "bitmap",
-                "bitmap": mi.Bitmap(tex),
+                "bitmap": _bitmap(mi, tex),
                 "raw": True,
                 "filter_type": "nearest",
                 "wrap_mode": "clamp",
@@ -345,6 +348,21 @@ def mitsuba_scene(
     for i, obj in enumerate(scene.objects):
         d[f"obj{i:03d}"] = object_to_mitsuba(obj, key=f"obj{i:03d}")
     return d, realised_rig(rig)
+
+
+def _bitmap(mi: ModuleType, tex: np.ndarray) -> object:
+    """``mi.Bitmap(tex)``, the last one reused when ``tex`` is :func:`projector_texture`'s kept
+    texture (made of a read-only drive, handed out as the same array for the same drive and read
+    by nothing but this)."""
+    global _LAST_BITMAP
+    last = _LAST_BITMAP  # one read each: another thread may replace them
+    if last and last[0] is tex:
+        return last[1]
+    bitmap = mi.Bitmap(tex)
+    kept = _LAST_TEXTURE
+    if kept and kept[2][0] is tex:
+        _LAST_BITMAP = (tex, bitmap)
+    return bitmap
 
 
 def load_scene_dict(mi: ModuleType, d: dict, scene: SceneSpec) -> object:
