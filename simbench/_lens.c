@@ -1,6 +1,7 @@
 /*
- * The lens model's remap grids and its layered defocus blur (simbench/optics.py), and the
- * projector's DMD layout and 8-bit transfer (simbench/projector.py), in C: compiled into the same
+ * The lens model's remap grids and its layered defocus blur (simbench/optics.py), the
+ * projector's DMD layout and 8-bit transfer (simbench/projector.py) and the camera's EMVA model's
+ * deterministic steps (simbench/sim/camera.py), in C: compiled into the same
  * library as simbench/_ckernels.c (pyproject.toml), with the same flags and the same contract
  * (every loop gives the bits of the numpy expression it replaces; tests/test_optics.py compares
  * them).
@@ -9,6 +10,7 @@
  * this file's digest, and not the decoder's loops, in every recording's and drive's cache key.
  */
 #include <float.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdint.h>
 
@@ -169,4 +171,70 @@ void dmd_diamond(int64_t h, int64_t w, int64_t c, const float *restrict in, floa
 void lut_u8(int64_t n, int64_t c, const uint8_t *restrict code, const float *restrict table, float *restrict out) {
     for (int64_t p = 0; p < n; p++)
         for (int64_t ch = 0; ch < c; ch++) out[p * c + ch] = table[code[p * c + ch] * c + ch];
+}
+
+/* The EMVA 1288 camera's deterministic steps (simbench.sim.camera.emva_camera), in float64 and in
+ * numpy's operation order, so the recorded frames are the bits of the numpy form
+ * (tests/numpy_reference.py).  chan (4 values, or NULL): the colour filter's channel at
+ * (y % 2, x % 2) in raster order, one value per pixel out; NULL: every channel, three per pixel.
+ *
+ * emva_mean: out = max((double)radiance, 0) * scale[c] (* gain_fp, when given) + dark_e, the
+ * mean electrons of each recorded value, from float32 radiance (f64 == 0) or float64; returns how
+ * many radiance values are not finite (nothing is written then: the caller refuses the image). */
+int64_t emva_mean(int64_t h, int64_t w, const void *restrict radiance, int64_t f64, const double *restrict scale,
+                  const int64_t *restrict chan, const double *restrict gain_fp, double dark_e,
+                  double *restrict out) {
+    const float *r32 = (const float *)radiance;
+    const double *r64 = (const double *)radiance;
+    int64_t bad = 0;
+    for (int64_t p = 0; p < h * w * 3; p++) bad += f64 ? !isfinite(r64[p]) : !isfinite(r32[p]);
+    if (bad) return bad;
+    for (int64_t y = 0; y < h; y++) {
+        const int64_t row = y * w * 3;
+        if (chan) {
+            double *o = out + y * w;
+            const double *g = gain_fp ? gain_fp + y * w : NULL;
+            for (int64_t x = 0; x < w; x++) {
+                const int64_t c = chan[(y & 1) * 2 + (x & 1)];
+                const double v = f64 ? r64[row + x * 3 + c] : (double)r32[row + x * 3 + c];
+                double e = (v >= 0.0 ? v : 0.0) * scale[c];
+                if (g) e = e * g[x];
+                o[x] = e + dark_e;
+            }
+        } else {
+            double *o = out + row;
+            const double *g = gain_fp ? gain_fp + row : NULL;
+            for (int64_t x = 0; x < w * 3; x++) {
+                const double v = f64 ? r64[row + x] : (double)r32[row + x];
+                double e = (v >= 0.0 ? v : 0.0) * scale[x % 3];
+                if (g) e = e * g[x];
+                o[x] = e + dark_e;
+            }
+        }
+    }
+    return 0;
+}
+
+/* emva_dn: the digital number of each value, clip(rint(gain[c] * min(e + dark_fp, full_well) +
+ * offset), 0, max_dn) (rint: to nearest, ties to even, as numpy's), dark_fp per value or NULL
+ * (0.0), into uint8 (bits8 != 0) or uint16. */
+void emva_dn(int64_t h, int64_t w, const double *restrict e, const double *restrict dark_fp,
+             const int64_t *restrict chan, const double *restrict gain, double full_well, double offset,
+             double max_dn, int64_t bits8, void *restrict out) {
+    const int64_t per = chan ? 1 : 3;
+    for (int64_t y = 0; y < h; y++) {
+        for (int64_t k = 0; k < w * per; k++) {
+            const int64_t p = y * w * per + k;
+            const int64_t c = chan ? chan[(y & 1) * 2 + (k & 1)] : k % 3;
+            double v = e[p] + (dark_fp ? dark_fp[p] : 0.0);
+            v = v < full_well ? v : full_well;
+            double dn = nearbyint(gain[c] * v + offset);
+            dn = dn > 0.0 ? dn : 0.0;
+            dn = dn < max_dn ? dn : max_dn;
+            if (bits8)
+                ((uint8_t *)out)[p] = (uint8_t)dn;
+            else
+                ((uint16_t *)out)[p] = (uint16_t)dn;
+        }
+    }
 }

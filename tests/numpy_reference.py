@@ -1,6 +1,6 @@
 """The decoder's stages as whole-image numpy expressions (their form before the fused C
 loops of :mod:`simbench.decode._kernels`); ``tests/test_kernels.py`` checks that each kernel
-gives the same bits."""
+gives the same bits.  Also the camera model's (:func:`emva_camera`, ``tests/test_camera.py``)."""
 
 from __future__ import annotations
 
@@ -637,4 +637,55 @@ def crease_bias(column, *, reach, factor, max_step, rows_reach=0, trusted=None):
         with np.errstate(invalid="ignore", divide="ignore"):
             m = np.where(counts > 0, (sums / np.maximum(counts, 1)).astype(np.float32), np.float32(0.0))
         out[r] = np.where(fin[r] & (m > 0), m, np.float32(0.0))
+    return out
+
+
+def emva_camera(
+    radiance: np.ndarray,
+    *,
+    camera,
+    electrons_per_radiance: float | np.ndarray,
+    exposure_s: float,
+    white_balance: np.ndarray | None = (1.0, 1.0, 1.0),
+    rng=None,
+) -> np.ndarray:
+    """:func:`simbench.sim.camera.emva_camera` as whole-image numpy float64 passes (its form before
+    the C loops of ``simbench/_lens.c``)."""
+    from simbench.sim.camera import bayer_mosaic, demosaic, fixed_pattern
+
+    rad = np.asarray(radiance, dtype=np.float64)
+    if rad.ndim != 3 or rad.shape[2] != 3:
+        raise ValueError(f"radiance must have shape (H, W, 3), got {rad.shape}")
+    if not np.all(np.isfinite(rad)):
+        raise ValueError("radiance contains NaN or inf")
+    scale = np.asarray(electrons_per_radiance, dtype=np.float64)
+    if scale.shape != (3,) or not np.all(scale > 0):
+        raise ValueError(f"electrons_per_radiance must be three numbers > 0, got {electrons_per_radiance!r}")
+    wb = np.asarray(white_balance, dtype=np.float64)
+    if wb.shape != (3,) or not np.all(np.isfinite(wb) & (wb > 0)):
+        raise ValueError(f"white_balance must be three finite numbers > 0, got {white_balance!r}")
+    mean_e = np.clip(rad, 0.0, None) * scale
+    gain = camera.gain * wb
+    if camera.cfa != "none":
+        mean_e = bayer_mosaic(mean_e, pattern=camera.cfa)
+        gain = bayer_mosaic(np.broadcast_to(gain, rad.shape), pattern=camera.cfa)
+    shape = mean_e.shape
+    if camera.prnu > 0 or camera.dsnu_e > 0:
+        gain_fp, dark_fp = fixed_pattern(shape, seed=camera.fixed_pattern_seed, prnu=camera.prnu, dsnu_e=camera.dsnu_e)
+        mean_e = mean_e * gain_fp
+    else:
+        dark_fp = 0.0
+    mean_e = mean_e + camera.dark_current_e_s * exposure_s
+    if camera.noise:
+        gen = np.random.default_rng(rng)
+        electrons = gen.poisson(np.minimum(mean_e, 1e12)).astype(np.float64)
+        if camera.dark_noise_e > 0:
+            electrons += gen.normal(0.0, camera.dark_noise_e, size=shape)
+    else:
+        electrons = mean_e
+    electrons = np.minimum(electrons + dark_fp, camera.full_well_e)
+    dn = np.clip(np.rint(gain * electrons + camera.offset_dn), 0, camera.max_dn)
+    out = dn.astype(np.uint8 if camera.bits == 8 else np.uint16)
+    if camera.cfa != "none":
+        out = demosaic(out, pattern=camera.cfa, method=camera.demosaic)
     return out

@@ -187,3 +187,52 @@ def test_fixed_pattern_is_drawn_once_with_the_bits_of_a_fresh_draw():
     assert fixed_pattern((6, 8), seed=123, prnu=0.01, dsnu_e=5.0)[0] is gain
     with pytest.raises(ValueError):
         gain[0, 0] = 2.0
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {},  # the paper sensor: Bayer RGGB, noise, PRNU and DSNU, 8 bits
+        {"noise": False},
+        {"cfa": "none", "prnu": 0.0, "dsnu_e": 0.0},
+        {"cfa": "GBRG", "bits": 12, "offset_dn": 3.5, "dark_current_e_s": 40.0},
+        {"cfa": "none", "bits": 16, "noise": False, "dark_noise_e": 0.0},
+        {"cfa": "BGGR", "dark_noise_e": 0.0, "prnu": 0.05, "dsnu_e": 0.0},
+    ],
+)
+def test_emva_camera_gives_the_bits_of_its_numpy_form(changes, dtype):
+    """The C loops (simbench/_lens.c: emva_mean, emva_dn) against the whole-image numpy form they
+    replaced (tests/numpy_reference.py), bit for bit, with a seed: on an odd-sized frame (the Bayer
+    cell cut at the edges) whose radiance spans dark (negative render noise included), mid-range,
+    saturating and half-DN rounding ties."""
+    import dataclasses
+
+    from simbench.sim.camera import emva_camera
+
+    from .numpy_reference import emva_camera as emva_numpy
+
+    cam = dataclasses.replace(get_sensor("paper").camera, **changes)
+    rng = np.random.default_rng(3)
+    rad = (rng.random((37, 51, 3)) * 2.4 - 0.2).astype(dtype)
+    rad[0, :6] = [[0.0] * 3, [-0.0] * 3, [1e-30] * 3, [0.5] * 3, [1.0] * 3, [100.0] * 3]
+    kw = dict(
+        camera=cam, electrons_per_radiance=(4100.0, 5200.0, 3900.0), exposure_s=0.012, white_balance=(1.3, 1.0, 1.7)
+    )
+    for seed in (0, 1):
+        a = emva_camera(rad, rng=seed, **kw)
+        b = emva_numpy(rad, rng=seed, **kw)
+        assert a.dtype == b.dtype and a.shape == b.shape == (37, 51, 3)
+        assert np.array_equal(a, b)
+    assert np.unique(a).size > 20  # not all clipped or dark
+    # ties round to even, as numpy's rint: 1 DN per electron, 1 electron per unit radiance
+    tie = dataclasses.replace(cam, gain_dn_per_e=1.0, noise=False, prnu=0.0, dsnu_e=0.0, offset_dn=0.0, bits=12)
+    flat = np.full((2, 2, 3), 10.5, dtype)
+    flat[1] = 11.5
+    got = emva_camera(flat, camera=tie, electrons_per_radiance=(1.0, 1.0, 1.0), exposure_s=0.0)
+    assert np.array_equal(got, emva_numpy(flat, camera=tie, electrons_per_radiance=(1.0, 1.0, 1.0), exposure_s=0.0))
+    assert cam.cfa != "none" or (got[0] == 10).all() and (got[1] == 12).all()
+    bad = rad.copy()
+    bad[5, 7, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN or inf"):
+        emva_camera(bad, rng=0, **kw)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench import validate
+from simbench import native, validate
 from simbench.seeds import RngLike
 
 if TYPE_CHECKING:
@@ -226,29 +226,45 @@ def emva_camera(
     .. [1] EMVA Standard 1288, Release 4.0, "Standard for Characterization of Image Sensors and
        Cameras", 2021.
     """
-    rad = np.asarray(radiance, dtype=np.float64)
+    rad = np.asarray(radiance)
     if rad.ndim != 3 or rad.shape[2] != 3:
         raise ValueError(f"radiance must have shape (H, W, 3), got {rad.shape}")
-    if not np.all(np.isfinite(rad)):
-        raise ValueError("radiance contains NaN or inf")
+    # float32 (what renders give) read as it is, anything else as float64: the same values
+    rad = np.ascontiguousarray(rad, dtype=np.float32 if rad.dtype == np.float32 else np.float64)
     scale = np.asarray(electrons_per_radiance, dtype=np.float64)
     if scale.shape != (3,) or not np.all(scale > 0):
         raise ValueError(f"electrons_per_radiance must be three numbers > 0, got {electrons_per_radiance!r}")
     wb = np.asarray(white_balance, dtype=np.float64)
     if wb.shape != (3,) or not np.all(np.isfinite(wb) & (wb > 0)):
         raise ValueError(f"white_balance must be three finite numbers > 0, got {white_balance!r}")
-    mean_e = np.clip(rad, 0.0, None) * scale
-    gain = camera.gain * wb
+    gain = np.ascontiguousarray(camera.gain * wb, dtype=np.float64)
+    h, w = rad.shape[:2]
+    chan = None
     if camera.cfa != "none":
-        mean_e = bayer_mosaic(mean_e, pattern=camera.cfa)
-        gain = bayer_mosaic(np.broadcast_to(gain, rad.shape), pattern=camera.cfa)
-    shape = mean_e.shape
+        _opencv_bayer(camera.cfa)
+        chan = np.array([_CHANNEL[c] for c in camera.cfa], dtype=np.int64)  # (0, 0), (0, 1), (1, 0), (1, 1)
+    shape = (h, w) if chan is not None else (h, w, 3)
+    gain_fp = dark_fp = None
     if camera.prnu > 0 or camera.dsnu_e > 0:
         gain_fp, dark_fp = fixed_pattern(shape, seed=camera.fixed_pattern_seed, prnu=camera.prnu, dsnu_e=camera.dsnu_e)
-        mean_e = mean_e * gain_fp
-    else:
-        dark_fp = 0.0
-    mean_e = mean_e + camera.dark_current_e_s * exposure_s
+    # mean electrons e_c = radiance_c * electrons_per_radiance[c], the pixel's filter's channel
+    # kept, times the pixel's PRNU gain, plus dark current x exposure (one C loop over the pixels,
+    # simbench/_lens.c: the bits of the numpy form, tests/numpy_reference.py)
+    mean_e = np.empty(shape, np.float64)
+    lib = native.bind(_EMVA)
+    bad = lib.emva_mean(
+        h,
+        w,
+        native.ptr(rad, "radiance", rad.dtype, rad.shape),
+        int(rad.dtype == np.float64),
+        native.ptr(scale, "scale", np.float64, (3,)),
+        None if chan is None else native.ptr(chan, "chan", np.int64, (4,)),
+        None if gain_fp is None else native.ptr(gain_fp, "gain_fp", np.float64, shape),
+        float(camera.dark_current_e_s * exposure_s),
+        native.ptr(mean_e, "mean_e", np.float64, shape, writable=True),
+    )
+    if bad:
+        raise ValueError("radiance contains NaN or inf")
     if camera.noise:
         gen = np.random.default_rng(rng)
         electrons = gen.poisson(np.minimum(mean_e, 1e12)).astype(np.float64)
@@ -256,12 +272,31 @@ def emva_camera(
             electrons += gen.normal(0.0, camera.dark_noise_e, size=shape)
     else:
         electrons = mean_e
-    electrons = np.minimum(electrons + dark_fp, camera.full_well_e)
-    dn = np.clip(np.rint(gain * electrons + camera.offset_dn), 0, camera.max_dn)
-    out = dn.astype(np.uint8 if camera.bits == 8 else np.uint16)
+    # full-well clipping, the gain and offset, rounded to the ADC's range
+    out = np.empty(shape, np.uint8 if camera.bits == 8 else np.uint16)
+    lib.emva_dn(
+        h,
+        w,
+        native.ptr(electrons, "electrons", np.float64, shape),
+        None if dark_fp is None else native.ptr(dark_fp, "dark_fp", np.float64, shape),
+        None if chan is None else native.ptr(chan, "chan", np.int64, (4,)),
+        native.ptr(gain, "gain", np.float64, (3,)),
+        float(camera.full_well_e),
+        float(camera.offset_dn),
+        float(camera.max_dn),
+        int(camera.bits == 8),
+        native.ptr(out, "out", out.dtype, shape, writable=True),
+    )
     if camera.cfa != "none":
         out = demosaic(out, pattern=camera.cfa, method=camera.demosaic)
     return out
+
+
+_P, _I, _D = native.P, native.I64, native.F64
+_EMVA = {
+    "emva_mean": (_I, [_I, _I, _P, _I, _P, _P, _P, _D, _P]),
+    "emva_dn": (None, [_I, _I, _P, _P, _P, _P, _D, _D, _D, _I, _P]),
+}
 
 
 def photon_transfer(
