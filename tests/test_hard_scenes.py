@@ -146,3 +146,28 @@ def test_the_committed_operating_point_is_the_rules_pick_on_the_committed_full_r
         ]
     assert {r["scene"] for r in rows} == set(HARD_SCENES)
     assert operating_point(rows) == ROBUST_MIN_CONFIDENCE
+
+
+def test_a_scene_is_short_of_the_goals_it_misses():
+    """Issue 35's three goals per scene (>= 97 % complete, MAE <= 0.5 mm, <= 0.1 % of decoded
+    pixels > 5 mm wrong), for each method of a results row; nothing decoded misses all three."""
+    from simbench.experiments.hard_scenes import short_of_goals
+
+    row = {
+        "robust_completeness": 0.975,
+        "robust_gt_mae_mm": 0.45,
+        "robust_wrong_share": 0.0,
+        "phase_shift_completeness": 1.0,
+        "phase_shift_gt_mae_mm": 0.48,
+        "phase_shift_wrong_share": 0.004,
+        "paper_completeness": 0.0,
+        "paper_gt_mae_mm": float("nan"),
+        "paper_wrong_share": float("nan"),
+    }
+    assert short_of_goals(row, "robust") == []
+    assert short_of_goals(row, "phase_shift") == ["wrong"]
+    assert short_of_goals(row, "paper") == ["complete", "MAE", "wrong"]
+    assert short_of_goals(dict(row, robust_completeness=0.9699, robust_gt_mae_mm=0.5001), "robust") == [
+        "complete",
+        "MAE",
+    ]
