@@ -180,7 +180,9 @@ void lut_u8(int64_t n, int64_t c, const uint8_t *restrict code, const float *res
  *
  * emva_mean: out = max((double)radiance, 0) * scale[c] (* gain_fp, when given) + dark_e, the
  * mean electrons of each recorded value, from float32 radiance (f64 == 0) or float64; returns how
- * many radiance values are not finite (nothing is written then: the caller refuses the image). */
+ * many radiance values are not finite (nothing is written then: the caller refuses the image), or
+ * minus how many means are not (finite radiance times an infinite scale, or 0 x inf: numpy's form
+ * went on with NaN into the ADC and recorded 0 there). */
 int64_t emva_mean(int64_t h, int64_t w, const void *restrict radiance, int64_t f64, const double *restrict scale,
                   const int64_t *restrict chan, const double *restrict gain_fp, double dark_e,
                   double *restrict out) {
@@ -200,6 +202,7 @@ int64_t emva_mean(int64_t h, int64_t w, const void *restrict radiance, int64_t f
                 double e = (v >= 0.0 ? v : 0.0) * scale[c];
                 if (g) e = e * g[x];
                 o[x] = e + dark_e;
+                bad += !isfinite(o[x]);
             }
         } else {
             double *o = out + row;
@@ -209,10 +212,11 @@ int64_t emva_mean(int64_t h, int64_t w, const void *restrict radiance, int64_t f
                 double e = (v >= 0.0 ? v : 0.0) * scale[x % 3];
                 if (g) e = e * g[x];
                 o[x] = e + dark_e;
+                bad += !isfinite(o[x]);
             }
         }
     }
-    return 0;
+    return -bad;
 }
 
 /* emva_dn: the digital number of each value, clip(rint(gain[c] * min(e + dark_fp, full_well) +

@@ -236,3 +236,10 @@ def test_emva_camera_gives_the_bits_of_its_numpy_form(changes, dtype):
     bad[5, 7, 1] = np.nan
     with pytest.raises(ValueError, match="NaN or inf"):
         emva_camera(bad, rng=0, **kw)
+    # where the numpy form went on with NaN (0 x inf: huge float64 radiance on a PRNU gain of 0;
+    # an infinite scale) and recorded 0, a clear error
+    with pytest.raises(ValueError, match="three finite numbers"):
+        emva_camera(rad, rng=0, **dict(kw, electrons_per_radiance=(np.inf, 1.0, 1.0)))
+    dead = dataclasses.replace(cam, prnu=1.0, dsnu_e=0.0, noise=False)
+    with pytest.raises(ValueError, match="mean electrons are not finite"):
+        emva_camera(np.full((37, 51, 3), 1e306), **dict(kw, camera=dead))

@@ -90,6 +90,11 @@ def test_the_summary_names_the_mode_the_decoder_ran_in(tmp_path):
     assert "reference mode, Z0 = 1.0 m" in msg
     with pytest.raises(ValueError, match="--mode reference and --decoder mode=calibrated disagree"):
         decode_files(DecodeRequest(mode="reference", decoder=("mode=calibrated",), out=out, **inputs))
+    # likewise Z0: --decoder z0_m= is --z0 (it decoded at 1.02 m and put the plane at 1.124 m)
+    with pytest.raises(ValueError, match="--z0 1.0 and --decoder z0_m=1.02 disagree"):
+        decode_files(DecodeRequest(z0_m=1.0, decoder=("z0_m=1.02",), out=out, **inputs))
+    msg = decode_files(DecodeRequest(decoder=("z0_m=1.02",), out=out, **inputs))
+    assert "reference mode, Z0 = 1.02 m" in msg  # an image's reference has no recorded Z0: taken as given
 
 
 @pytest.fixture

@@ -93,6 +93,8 @@ def test_a_contradicting_z0_is_an_error_and_an_explicit_rig_is_announced(tmp_pat
     r = render_folder(tmp_path)
     rc, _, err = _run(["decode", r, "--out", tmp_path / "d.npy", "--z0", "1.2"], capsys)
     assert rc == 2 and "--z0 1.2 contradicts" in err and "Z0 = 1.0 m" in err
+    rc, _, err = _run(["decode", r, "--out", tmp_path / "d.npy", "--decoder", "z0_m=1.2"], capsys)
+    assert rc == 2 and "--decoder z0_m=1.2 contradicts" in err and "Z0 = 1.0 m" in err, err
     (tmp_path / "calibrated.toml").write_text(TINY_RIG)
     rc, out, err = _run(["decode", r, "--out", tmp_path / "d.npy", "--rig", tmp_path / "calibrated.toml"], capsys)
     assert rc == 0 and "overriding the recording: rig" in out and "calibrated.toml" in out, (out, err)

@@ -200,3 +200,31 @@ def test_formed_board_ground_truth_follows_its_form(variant):
     expect = 1.0 - board_form_m(x, y, size_m=(1.2, 0.9), **form)
     assert np.max(np.abs(gt.depth_m[ok] - expect)) < 0.02 * 3e-4 + 1e-6
     assert np.ptp(gt.depth_m[ok]) > 1e-3  # the form is there: 2 mm/m of bow over the view, and the ripple
+
+
+def test_the_projector_bitmap_is_made_once_for_a_kept_drive(variant):
+    """A read-only drive (a moving capture's, rendered in every time slice) gets the same
+    mi.Bitmap in every scene dict - mi.Bitmap copies the texture, 35-45 ms for the Kinect's dots -
+    and another drive, or a writable one (which may change under the same object), a Bitmap of
+    its own holding its own values."""
+    from simbench.sim.mitsuba_dict import mitsuba_scene, projector_texture
+
+    scene = scene_from_dict({"object": [{"type": "plane", "center_m": [0, 0, 1.0], "size_m": [2, 2]}]})
+    h, w = scene.rig.projector.size_hw
+
+    def bitmap(drive):
+        d, _ = mitsuba_scene(scene, drive, spp=1, max_depth=2)
+        return d["projector"]["irradiance"]["bitmap"]
+
+    kept = np.full((h, w, 3), 0.25, np.float32)
+    kept.setflags(write=False)
+    first = bitmap(kept)
+    assert bitmap(kept) is first
+    assert np.array_equal(np.array(first), projector_texture(kept, scene.rig.projector)[0])
+    other = np.full((h, w, 3), 0.5, np.float32)
+    other.setflags(write=False)
+    second = bitmap(other)
+    assert second is not first and np.array(second).max() == 0.5
+    writable = np.full((h, w, 3), 0.75, np.float32)
+    a, b = bitmap(writable), bitmap(writable)
+    assert a is not b and np.array(a).max() == 0.75

@@ -232,8 +232,8 @@ def emva_camera(
     # float32 (what renders give) read as it is, anything else as float64: the same values
     rad = np.ascontiguousarray(rad, dtype=np.float32 if rad.dtype == np.float32 else np.float64)
     scale = np.asarray(electrons_per_radiance, dtype=np.float64)
-    if scale.shape != (3,) or not np.all(scale > 0):
-        raise ValueError(f"electrons_per_radiance must be three numbers > 0, got {electrons_per_radiance!r}")
+    if scale.shape != (3,) or not np.all(np.isfinite(scale) & (scale > 0)):
+        raise ValueError(f"electrons_per_radiance must be three finite numbers > 0, got {electrons_per_radiance!r}")
     wb = np.asarray(white_balance, dtype=np.float64)
     if wb.shape != (3,) or not np.all(np.isfinite(wb) & (wb > 0)):
         raise ValueError(f"white_balance must be three finite numbers > 0, got {white_balance!r}")
@@ -263,8 +263,13 @@ def emva_camera(
         float(camera.dark_current_e_s * exposure_s),
         native.ptr(mean_e, "mean_e", np.float64, shape, writable=True),
     )
-    if bad:
+    if bad > 0:
         raise ValueError("radiance contains NaN or inf")
+    if bad < 0:
+        raise ValueError(
+            f"{-bad} pixels' mean electrons are not finite (radiance x electrons_per_radiance "
+            f"{electrons_per_radiance!r} x PRNU gain + dark current x exposure_s {exposure_s!r})"
+        )
     if camera.noise:
         gen = np.random.default_rng(rng)
         electrons = gen.poisson(np.minimum(mean_e, 1e12)).astype(np.float64)

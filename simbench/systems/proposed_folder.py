@@ -58,19 +58,30 @@ def _recorded_pattern(request: DecodeRequest, recorded):
     return recorded
 
 
-def _z0_for(reference: Path, z0: float | None) -> float:
-    """Z0: the reference's folder records it (a ``z0_m`` that contradicts it is an error);
-    without a recording, ``z0_m`` or 1 m."""
+def _z0_for(reference: Path, z0: float | None, *, option: str = "--z0") -> float:
+    """Z0: the reference's folder records it (a ``z0_m`` that contradicts it is an error, named
+    as ``option`` gave it); without a recording, ``z0_m`` or 1 m."""
     meta = recording_manifest_of(reference)
     if meta is None:
         return z0 if z0 is not None else 1.0
     recorded = recorded_z0(meta, where=str(reference.parent / "meta.json"))
     if z0 is not None and z0 != recorded:
+        given = f"{option}{z0!r}" if option.endswith("=") else f"{option} {z0!r}"
         raise ValueError(
-            f"--z0 {z0!r} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at Z0 = "
-            f"{recorded!r} m; leave --z0 out to decode it as recorded"
+            f"{given} contradicts {reference.parent / 'meta.json'}, whose reference plane was recorded at "
+            f"Z0 = {recorded!r} m; leave {option.split('=')[0]} out to decode it as recorded"
         )
     return recorded
+
+
+def _asked_z0(request: DecodeRequest, params) -> tuple[float | None, str]:
+    """The Z0 the request gives (``--z0``, else ``--decoder z0_m=``, read from ``params``, the
+    request's decoder parameters) and the option that gave it; None where neither does."""
+    if request.z0_m is not None:
+        return request.z0_m, "--z0"
+    if any(item.partition("=")[0] == "z0_m" for item in request.decoder):
+        return params.z0_m, "--decoder z0_m="
+    return None, "--z0"
 
 
 def _decoder_params(request: DecodeRequest, base=None):
@@ -94,9 +105,14 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     from simbench.rig import load_rig
 
     asked = _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
-    decoder_mode = asked.mode if any(item.partition("=")[0] == "mode" for item in request.decoder) else None
+    # --decoder mode= and z0_m= say what --mode and --z0 say: the same checks, and a pair that disagrees is refused
+    named = {item.partition("=")[0] for item in request.decoder}
+    decoder_mode = asked.mode if "mode" in named else None
     if request.mode and decoder_mode and request.mode != decoder_mode:
         raise ValueError(f"--mode {request.mode} and --decoder mode={decoder_mode} disagree: give one")
+    if request.z0_m is not None and "z0_m" in named and request.z0_m != asked.z0_m:
+        raise ValueError(f"--z0 {request.z0_m} and --decoder z0_m={asked.z0_m} disagree: give one")
+    z0_asked, z0_option = _asked_z0(request, asked)
     overrides = []  # explicit options that replace what a recording holds, announced with the result
     capture_path, rig_path, reference_path = request.capture, request.rig, request.reference
     if Path(request.capture).is_dir():
@@ -122,12 +138,12 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     capture = load_image(capture_path, expected_size_hw=rig.camera.size_hw)
     mode = request.mode or decoder_mode or "reference"
     reference = None
-    z0 = request.z0_m if request.z0_m is not None else 1.0
+    z0 = z0_asked if z0_asked is not None else 1.0
     if mode == "reference":
         if reference_path is None:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
         reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
-        z0 = _z0_for(Path(reference_path), request.z0_m)
+        z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     recorded = manifests.get(capture_path)
     if recorded is not None and recorded["files"].get("capture") != Path(capture_path).name:
         recorded = None  # an image beside a recording, not its capture: decoded as any image
@@ -256,7 +272,8 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
     frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
     if reference is None:
         reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
-    z0 = _z0_for(Path(reference_path), request.z0_m)
+    z0_asked, z0_option = _asked_z0(request, params)
+    z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     ref_params = dataclasses.replace(params, mode="reference", z0_m=z0)
     return lookup_decoded_reference(
         reference,
