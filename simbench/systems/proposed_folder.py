@@ -74,12 +74,17 @@ def _z0_for(reference: Path, z0: float | None, *, option: str = "--z0") -> float
     return recorded
 
 
+def _decoder_names(request: DecodeRequest) -> set[str]:
+    """The parameters the request's ``--decoder name=value`` items set."""
+    return {item.partition("=")[0] for item in request.decoder}
+
+
 def _asked_z0(request: DecodeRequest, params) -> tuple[float | None, str]:
     """The Z0 the request gives (``--z0``, else ``--decoder z0_m=``, read from ``params``, the
     request's decoder parameters) and the option that gave it; None where neither does."""
     if request.z0_m is not None:
         return request.z0_m, "--z0"
-    if any(item.partition("=")[0] == "z0_m" for item in request.decoder):
+    if "z0_m" in _decoder_names(request):
         return params.z0_m, "--decoder z0_m="
     return None, "--z0"
 
@@ -106,7 +111,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
 
     asked = _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
     # --decoder mode= and z0_m= say what --mode and --z0 say: the same checks, and a pair that disagrees is refused
-    named = {item.partition("=")[0] for item in request.decoder}
+    named = _decoder_names(request)
     decoder_mode = asked.mode if "mode" in named else None
     if request.mode and decoder_mode and request.mode != decoder_mode:
         raise ValueError(f"--mode {request.mode} and --decoder mode={decoder_mode} disagree: give one")
