@@ -204,11 +204,87 @@ def test_one_pass_crosstalk_capture_is_the_per_primary_sum(variant, monkeypatch,
     h, w = scene.rig.projector.size_hw
     drive = np.random.default_rng(5).random((h, w, 3), dtype=np.float32)
     render = RenderSettings(spp=4, sampler="independent")
+    # the ambient light rendered here too (the constant that replaces it where the plane fills the
+    # view is tested against the render below)
+    rendered = capture.cached_radiance
+    monkeypatch.setattr(
+        capture,
+        "uniform_ambient",
+        lambda s: rendered(s, None, seed=capture._ambient_seed(11), spp=4, max_depth=6, sampler="independent"),
+    )
     one = capture.render_channels(scene, drive, sensor, seed=11, render=render)
     monkeypatch.setattr(capture, "one_pass_response", lambda s: None)
     per = capture.render_channels(scene, drive, sensor, seed=11, render=render)
     assert per.max() > 0 and (per > 0).mean() > 0.05
     assert np.abs(one - per).max() <= 1e-5 * per.max()
+
+
+@pytest.mark.parametrize("crosstalk", [True, False])
+def test_the_ambient_light_on_a_plane_filling_the_view_is_its_constant(variant, monkeypatch, crosstalk):
+    """A diffuse plane that alone fills the view under the constant environment reflects rho x L
+    in every pixel (simbench.sim.capture.uniform_ambient): the path tracer's ambient render is that
+    constant plus sampling noise - per channel its mean within 4 standard errors of the constant,
+    its pixels spread about it (the render's noise) - and a capture made with the constant differs
+    from one made with the render by that noise alone: mean difference within 4 standard errors of
+    0, none over 8 of the render's standard deviations."""
+    import simbench.sim.capture as capture
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.scene import scene_from_dict
+
+    # the paper sensor (its ambient light), with and without crosstalk (the white material's one
+    # render mixed per pixel, or the material's own)
+    sensor = get_sensor("paper") if crosstalk else with_effects(get_sensor("paper"), get_sensor("ideal"), ["crosstalk"])
+    obj = _ONE_PASS_OBJECTS["tilted plane filling the view"]
+    scene = scene_from_dict({"name": "one", "object": [obj]})
+    scene = capture.physical_scene(dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25)), sensor)
+    lit = scene if not sensor.crosstalk else capture._white_scene(scene)
+    flat = capture.uniform_ambient(lit)
+    assert flat is not None and max(scene.ambient_rgb) > 0
+    rho = np.ones(3) if sensor.crosstalk else np.asarray(obj["rgb"])
+    assert np.allclose(flat, rho * np.asarray(scene.ambient_rgb), rtol=1e-6)
+    amb = capture.cached_radiance(lit, None, seed=3, spp=16, max_depth=6, sampler="independent")
+    n = amb.shape[0] * amb.shape[1]
+    for c in range(3):
+        sd = amb[..., c].std()
+        assert 0 < sd < 0.2 * flat[c]
+        assert abs(amb[..., c].mean() - flat[c]) < 4 * sd / math.sqrt(n)
+    h, w = scene.rig.projector.size_hw
+    drive = np.random.default_rng(5).random((h, w, 3), dtype=np.float32)
+    render = RenderSettings(spp=16, sampler="independent")
+    exact = capture.render_channels(scene, drive, sensor, seed=3, render=render)
+    monkeypatch.setattr(
+        capture,
+        "uniform_ambient",
+        lambda s: capture.cached_radiance(
+            s, None, seed=capture._ambient_seed(3), spp=16, max_depth=6, sampler="independent"
+        ),
+    )
+    sampled = capture.render_channels(scene, drive, sensor, seed=3, render=render)
+    diff = (sampled - exact).reshape(-1, 3)
+    for c in range(3):
+        sd = diff[:, c].std()
+        assert sd > 0 and abs(diff[:, c].mean()) < 4 * sd / math.sqrt(n)
+        assert np.abs(diff[:, c]).max() < 8 * sd
+
+
+def test_the_ambient_constant_is_only_for_one_diffuse_plane_filling_the_view():
+    from simbench.sim.capture import uniform_ambient
+    from simbench.sim.scene import scene_from_dict
+
+    def scene(*objects, ambient=(0.02, 0.02, 0.02)):
+        return dataclasses.replace(scene_from_dict({"object": list(objects)}), ambient_rgb=ambient)
+
+    big = {"type": "plane", "name": "p", "center_m": [0.0, 0.0, 1.0], "size_m": [2.0, 2.0], "rgb": [0.5, 0.4, 0.3]}
+    assert np.allclose(uniform_ambient(scene(big)), [0.01, 0.008, 0.006])
+    for s in (
+        scene(big, ambient=(0.0, 0.0, 0.0)),  # no ambient light
+        scene({**big, "size_m": [0.3, 0.3]}),  # the environment seen beside it
+        scene(big, {**big, "name": "q", "center_m": [0.0, 0.0, 0.8], "size_m": [0.2, 0.2]}),  # it shadows the wall
+        scene({**big, "material": "plastic"}),  # a specular lobe
+        scene({**big, "bow_m_per_m": 0.001}),  # concave: it sees itself
+        scene({"type": "sphere", "name": "s", "center_m": [0.0, 0.0, 1.0], "radius_m": 5.0}),
+    ):
+        assert uniform_ambient(s) is None
 
 
 def test_only_a_capture_that_factors_is_rendered_in_one_pass():

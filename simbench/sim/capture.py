@@ -40,6 +40,7 @@ from simbench.sim.truth import GroundTruth, ground_truth
 __all__ = [
     "cached_radiance",
     "one_pass_response",
+    "uniform_ambient",
     "fills_view",
     "cached_ground_truth",
     "physical_scene",
@@ -212,6 +213,27 @@ def fills_view(scene: SceneSpec) -> bool:
     return bool(((cross > 0).all(axis=1) | (cross < 0).all(axis=1)).all())
 
 
+def uniform_ambient(scene: SceneSpec) -> np.ndarray | None:
+    """The ambient light the camera sees where the scene is one diffuse plane that fills the view
+    (:func:`one_pass_response`, :func:`fills_view`): ``rho_c L_c`` in every pixel, shape (3,)
+    float32 (the material's reflectance times the constant environment's radiance per channel),
+    else None.
+
+    A Lambertian surface that sees nothing but a constant environment over its hemisphere
+    reflects ``rho / pi * integral(L cos theta d omega) = rho L`` at every point, whatever its
+    distance or tilt, and where the plane fills the view every camera ray meets it: the path
+    tracer's ambient render of such a scene is that constant plus its sampling noise (white plane,
+    36 spp multijitter: mean 0.0200000 for L = 0.02, 1.0 % noise per pixel), so the constant
+    replaces the render (one render fewer per capture; the captures change by that noise alone,
+    ``tests/test_physics_renders.py``)."""
+    if max(scene.ambient_rgb) <= 0 or one_pass_response(scene) is None or not fills_view(scene):
+        return None
+    (o,) = scene.objects
+    if o.material.spectrum is not None:
+        return None  # the render's reflectance comes from the spectrum: keep the render
+    return (np.asarray(o.material.rgb, np.float64) * np.asarray(scene.ambient_rgb, np.float64)).astype(np.float32)
+
+
 def _white_scene(scene: SceneSpec) -> SceneSpec:
     """``scene`` (one diffuse object: :func:`one_pass_response`) with a white material."""
     (o,) = scene.objects
@@ -307,7 +329,8 @@ def render_channels(
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
         if ambient:
-            q = q + cached_radiance(scene, None, seed=_ambient_seed(seed), **kw)
+            flat = uniform_ambient(scene)
+            q = q + (flat if flat is not None else cached_radiance(scene, None, seed=_ambient_seed(seed), **kw))
     else:
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
@@ -322,7 +345,9 @@ def render_channels(
                 s_p = cached_radiance(_white_scene(dark), drive.image() if lazy else drive, seed=seed, **kw)
                 q += s_p @ mix.T.astype(np.float32)
             if ambient_once:
-                a_c = cached_radiance(_white_scene(scene), None, seed=_ambient_seed(seed), **kw)
+                # the environment on the white plane that fills the view: L_c everywhere, exactly
+                # (uniform_ambient), not a render's estimate of it
+                a_c = uniform_ambient(_white_scene(scene))
                 q += a_c * mix.sum(axis=1).astype(np.float32)
         if response is None or (ambient and not ambient_once):
             for p in range(3):
