@@ -342,6 +342,13 @@ def _run_in_workers(
 # The margin (default 0.25) covers run-to-run differences between machines (the llvm and
 # scalar variants sample differently); a change to the decoder that makes a key error 25 %
 # worse fails CI.
+#   A row that decodes under MIN_SCORED_COMPLETENESS of its region gets no error threshold: its
+# errors are the mean of a few hundred stray pixels (mostly in the wrong stripe order), which
+# render noise alone moves by tens of mm - measured: the paper decoder on the quick run's paint
+# blue board (0.46 % decoded, 73 % of those in the wrong order) went from 55.8 to 78.5 mm when
+# the ambient render's 1 % noise was taken out (675e7f2).  Such a row is still held by its
+# completeness and its stripe-order errors.
+MIN_SCORED_COMPLETENESS = 0.01
 
 
 def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
@@ -361,9 +368,18 @@ def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
     return None
 
 
+def _too_sparse(name: str, metrics: dict) -> bool:
+    """An error metric of a row whose own completeness is under MIN_SCORED_COMPLETENESS."""
+    prefix, leaf = name.rsplit("/", 1) if "/" in name else ("", name)
+    done = metrics.get(f"{prefix}/completeness")
+    return leaf.endswith("_mm") and done is not None and not done >= MIN_SCORED_COMPLETENESS
+
+
 def thresholds_from(metrics: dict, *, margin: float) -> dict:
     out = {}
     for name, value in sorted(metrics.items()):
+        if _too_sparse(name, metrics):
+            continue
         r = _rule(name, value, margin)
         if r is not None:
             out[name] = {"measured": value, r[0]: r[1]}
@@ -377,7 +393,8 @@ def write_thresholds(path: str | Path, metrics: dict, *, margin: float, command:
         f"# Written by: {command}",
         f"# Margin {margin:g}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
         "# stripe-order errors max = measured*(1+margin)+20; their rate and the share of pixels > 5 mm wrong",
-        "# (wrong_share) max = measured*(1+margin)+0.0005.",
+        "# (wrong_share) max = measured*(1+margin)+0.0005. No error threshold for a row that decodes under",
+        f"# {MIN_SCORED_COMPLETENESS:.0%} of its region (its errors are those of a few stray pixels).",
         "# Regenerate only for an intended change, and say why in the commit.",
         "",
     ]
