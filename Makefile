@@ -49,10 +49,11 @@ lint: setup
 	$(VENV)/bin/ruff format --check simbench tests scenes
 
 # Test processes (pytest-xdist), each test file kept in one of them (--dist loadfile: a file's
-# module fixtures, e.g. its renders, are made once).  2 = the cores CI has; TEST_WORKERS=0 runs
+# module fixtures, e.g. its renders, are made once), heaviest first (--no-loadscope-reorder:
+# tests/conftest.py FILE_SECONDS).  2 = the cores CI has; TEST_WORKERS=0 runs
 # everything in this process.
 TEST_WORKERS ?= 2
-PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=10
+PYTEST := $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=10
 
 # The whole test suite, slow renders included (after the lint).
 # The documentation site (mkdocs.yml, docs/): any warning - a broken link, a docstring the API

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -42,9 +43,57 @@ def acquisitions(variant):
     return get
 
 
+@pytest.fixture(scope="session")
+def shared_cache(tmp_path_factory) -> Path:
+    """One render cache for this test session, shared by its pytest-xdist workers (the folder
+    above each worker's temporary root), empty when the session starts.  Only for commands whose
+    claims hold whether their renders are made or read: the README's ``simbench calibrate --poses
+    3`` (tests/test_readme.py) and the calibration CLI test (tests/test_calibration.py) observe the
+    same three poses, ~100 s of work each on 2 cores, and two processes share a pose's observation
+    through the cache (one makes it, the other waits for it or takes the next pose)."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent
+    path = root / "shared-render-cache"
+    path.mkdir(exist_ok=True)
+    return path
+
+
 @pytest.fixture(autouse=True)
 def _in_a_fresh_folder(tmp_path, monkeypatch):
     """Every test runs in its own empty working folder: the CLI's relative defaults (the render
     cache ``.cache/simbench``, ``results/...``) land there, not in the checkout, so a test never
     reads a developer's warm cache (and passes for it) or leaves files behind."""
     monkeypatch.chdir(tmp_path)
+
+
+# Each test file's work (s), measured at 48850dc with `make test` (`--durations=0`, summed per file,
+# 2 workers on this 2-core machine): files run whole in one worker (`--dist loadfile`), in this order
+# (`--no-loadscope-reorder`), heaviest first, so that the last file to start is a short one.  By
+# pytest-xdist's default order (most tests first) the README file (1 test of 281 s, 6 tests) started
+# last and the run took 826 s of wall time for 1410 s of work on 2 workers.  A file not listed
+# comes after these, in collection order; the figures need not be exact, only roughly ranked.
+FILE_SECONDS = {
+    "test_readme.py": 283,
+    "test_calibration.py": 193,
+    "test_decode.py": 105,
+    "test_robust_scenes.py": 98,
+    "test_cli.py": 94,
+    "test_experiments.py": 86,
+    "test_motion.py": 59,
+    "test_render.py": 58,
+    "test_bench.py": 53,
+    "test_phase_shift.py": 50,
+    "test_files.py": 34,
+    "test_ablate.py": 31,
+    "test_optics.py": 29,
+    "test_physics_renders.py": 26,
+    "test_cache.py": 26,
+    "test_systems.py": 25,
+    "test_decode_fourier.py": 24,
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(sorted(FILE_SECONDS, key=FILE_SECONDS.get, reverse=True))}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: collection order within
