@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -43,22 +42,6 @@ def acquisitions(variant):
     return get
 
 
-@pytest.fixture(scope="session")
-def shared_cache(tmp_path_factory) -> Path:
-    """One render cache for this test session, shared by its pytest-xdist workers (the folder
-    above each worker's temporary root), empty when the session starts.  Only for commands whose
-    claims hold whether their renders are made or read: the README's ``simbench calibrate --poses
-    3`` (tests/test_readme.py) and the calibration CLI test (tests/test_calibration.py) observe the
-    same three poses, ~100 s of work each on 2 cores, and two processes share a pose's observation
-    through the cache (one makes it, the other waits for it or takes the next pose)."""
-    root = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        root = root.parent
-    path = root / "shared-render-cache"
-    path.mkdir(exist_ok=True)
-    return path
-
-
 @pytest.fixture(autouse=True)
 def _in_a_fresh_folder(tmp_path, monkeypatch):
     """Every test runs in its own empty working folder: the CLI's relative defaults (the render
@@ -72,7 +55,8 @@ def _in_a_fresh_folder(tmp_path, monkeypatch):
 # (`--no-loadscope-reorder`), heaviest first, so that the last file to start is a short one.  By
 # pytest-xdist's default order (most tests first) the README file (1 test of 281 s, 6 tests) started
 # last and the run took 826 s of wall time for 1410 s of work on 2 workers.  A file not listed
-# comes after these, in collection order; the figures need not be exact, only roughly ranked.
+# comes after these, in collection order (so a new file of more than ~20 s belongs here: the
+# `--durations=10` list `make test` prints shows it); the figures need only rank the files.
 FILE_SECONDS = {
     "test_readme.py": 283,
     "test_calibration.py": 193,

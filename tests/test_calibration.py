@@ -312,17 +312,16 @@ def test_noise_free_calibration_recovers_the_true_rig(tmp_path, variant):
 
 
 @pytest.mark.slow
-def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys, shared_cache):
+def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
     """`simbench calibrate` through the paper sensor (noise, Bayer mosaic, crosstalk, lens
     distortion; 3 poses, the minimum): reprojection RMS in the published range, the camera's
     distortion found, the report written, a rerun from the cache with the same rig.  (The
     README runs `simbench decode FOLDER --rig` on such a rig; `make quick` checks the tables'
-    calibrated-rig columns against thresholds.)  The cache is the session's shared one: the
-    README's own `simbench calibrate --poses 3` observes the same poses (conftest.shared_cache)."""
+    calibrated-rig columns against thresholds.)"""
     from simbench.calibration.report import PUBLISHED_RMS_PX
     from simbench.cli import main
 
-    out, cache = tmp_path / "cal", shared_cache
+    out, cache = tmp_path / "cal", tmp_path / "cache"
     argv = ["calibrate", "--poses", "3", "--out", str(out), "--cache", str(cache)]
     assert main(argv) == 0
     assert "reprojection RMS" in capsys.readouterr().out

@@ -204,13 +204,17 @@ def test_one_pass_crosstalk_capture_is_the_per_primary_sum(variant, monkeypatch,
     h, w = scene.rig.projector.size_hw
     drive = np.random.default_rng(5).random((h, w, 3), dtype=np.float32)
     render = RenderSettings(spp=4, sampler="independent")
-    # the ambient light rendered here too (the constant that replaces it where the plane fills the
-    # view is tested against the render below)
-    rendered = capture.cached_radiance
+    # the ambient light rendered here too where the constant would replace it (the constant is
+    # tested against the render below)
+    rendered, constant = capture.cached_radiance, capture.uniform_ambient
     monkeypatch.setattr(
         capture,
         "uniform_ambient",
-        lambda s: rendered(s, None, seed=capture._ambient_seed(11), spp=4, max_depth=6, sampler="independent"),
+        lambda s, *, max_depth: (
+            None
+            if constant(s, max_depth=max_depth) is None
+            else rendered(s, None, seed=capture._ambient_seed(11), spp=4, max_depth=max_depth, sampler="independent")
+        ),
     )
     one = capture.render_channels(scene, drive, sensor, seed=11, render=render)
     monkeypatch.setattr(capture, "one_pass_response", lambda s: None)
@@ -238,7 +242,7 @@ def test_the_ambient_light_on_a_plane_filling_the_view_is_its_constant(variant, 
     scene = scene_from_dict({"name": "one", "object": [obj]})
     scene = capture.physical_scene(dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25)), sensor)
     lit = scene if not sensor.crosstalk else capture._white_scene(scene)
-    flat = capture.uniform_ambient(lit)
+    flat = capture.uniform_ambient(lit, max_depth=6)
     assert flat is not None and max(scene.ambient_rgb) > 0
     rho = np.ones(3) if sensor.crosstalk else np.asarray(obj["rgb"])
     assert np.allclose(flat, rho * np.asarray(scene.ambient_rgb), rtol=1e-6)
@@ -251,12 +255,21 @@ def test_the_ambient_light_on_a_plane_filling_the_view_is_its_constant(variant, 
     h, w = scene.rig.projector.size_hw
     drive = np.random.default_rng(5).random((h, w, 3), dtype=np.float32)
     render = RenderSettings(spp=16, sampler="independent")
+    # compared before the camera lens, which resamples the image (its distortion and lateral
+    # colour) and so correlates neighbouring pixels' noise: sd / sqrt(n) would understate the
+    # standard error of the mean there
+    monkeypatch.setattr(capture, "camera_lens_image", lambda q, camera, lateral_colour_px: q)
     exact = capture.render_channels(scene, drive, sensor, seed=3, render=render)
+    constant = capture.uniform_ambient
     monkeypatch.setattr(
         capture,
         "uniform_ambient",
-        lambda s: capture.cached_radiance(
-            s, None, seed=capture._ambient_seed(3), spp=16, max_depth=6, sampler="independent"
+        lambda s, *, max_depth: (
+            None
+            if constant(s, max_depth=max_depth) is None
+            else capture.cached_radiance(
+                s, None, seed=capture._ambient_seed(3), spp=16, max_depth=max_depth, sampler="independent"
+            )
         ),
     )
     sampled = capture.render_channels(scene, drive, sensor, seed=3, render=render)
@@ -275,7 +288,14 @@ def test_the_ambient_constant_is_only_for_one_diffuse_plane_filling_the_view():
         return dataclasses.replace(scene_from_dict({"object": list(objects)}), ambient_rgb=ambient)
 
     big = {"type": "plane", "name": "p", "center_m": [0.0, 0.0, 1.0], "size_m": [2.0, 2.0], "rgb": [0.5, 0.4, 0.3]}
-    assert np.allclose(uniform_ambient(scene(big)), [0.01, 0.008, 0.006])
+    assert np.allclose(uniform_ambient(scene(big), max_depth=2), [0.01, 0.008, 0.006])
+    assert np.allclose(uniform_ambient(scene(big), max_depth=-1), [0.01, 0.008, 0.006])  # unbounded paths
+    assert uniform_ambient(scene(big), max_depth=1) is None  # no bounce: the render sees no ambient light
+    # a measured spectrum renders as its linear sRGB (simbench.sim.scene._bsdf), and so is the constant
+    spectral = scene({k: v for k, v in big.items() if k != "rgb"} | {"spectrum": "ColorChecker N Ohta/red"})
+    (o,) = spectral.objects
+    assert o.material.spectrum is not None
+    assert np.allclose(uniform_ambient(spectral, max_depth=2), 0.02 * np.asarray(o.material.rgb))
     for s in (
         scene(big, ambient=(0.0, 0.0, 0.0)),  # no ambient light
         scene({**big, "size_m": [0.3, 0.3]}),  # the environment seen beside it
@@ -284,7 +304,7 @@ def test_the_ambient_constant_is_only_for_one_diffuse_plane_filling_the_view():
         scene({**big, "bow_m_per_m": 0.001}),  # concave: it sees itself
         scene({"type": "sphere", "name": "s", "center_m": [0.0, 0.0, 1.0], "radius_m": 5.0}),
     ):
-        assert uniform_ambient(s) is None
+        assert uniform_ambient(s, max_depth=6) is None
 
 
 def test_only_a_capture_that_factors_is_rendered_in_one_pass():

@@ -75,21 +75,15 @@ def _clean_env(home: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory, shared_cache):
+def workdir(tmp_path_factory):
     d = tmp_path_factory.mktemp("readme")
     (d / "home").mkdir()
-    # the commands' default render cache (.cache/simbench) is the session's shared one, so that
-    # tests/test_calibration.py's CLI test and the calibration page's `simbench calibrate --poses 3`
-    # observe those poses once between them (conftest.shared_cache)
-    (d / ".cache").mkdir()
-    (d / ".cache" / "simbench").symlink_to(shared_cache, target_is_directory=True)
     (d / "scenes").symlink_to(ROOT / "scenes")
     (d / "simbench").mkdir()
     (d / "simbench" / "studies").symlink_to(ROOT / "simbench" / "studies")
     yield d
-    # the README's commands write their outputs here (freed when the module ends, not with the
-    # session, so CI's disk holds one such module's files at a time) and their renders in the
-    # shared cache (freed with the session's temporary folders)
+    # the README's commands write ~0.7 GB here (their render cache and outputs): freed when the
+    # module ends, not with the session, so CI's disk holds one such module's files at a time
     shutil.rmtree(d, ignore_errors=True)
 
 

@@ -171,14 +171,21 @@ def one_pass_response(scene: SceneSpec) -> np.ndarray | None:
     applied per pixel - the per-primary renders' sum to float rounding.  Interreflection between
     materials, a glossy or metallic lobe, a printed chart's inks or a mesh (perhaps concave) keep
     the per-primary renders."""
-    if len(scene.objects) != 1:
+    if not _lit_once(scene):
         return None
+    (o,) = scene.objects
+    return np.clip(material_crosstalk(o.material.rgb, o.material.spectrum), 0.0, 1.0)
+
+
+def _lit_once(scene: SceneSpec) -> bool:
+    """One diffuse object that cannot light itself and nothing else (:func:`one_pass_response`)."""
+    if len(scene.objects) != 1:
+        return False
     o = scene.objects[0]
     if o.kind not in _CONVEX_KINDS or o.material.kind != "diffuse" or OBJECT_KIND_TABLE[o.kind].colour_keys:
-        return None
-    if o.kind == "plane" and any(float(o.get(k, 0.0) or 0.0) != 0.0 for k in ("bow_m_per_m", "waviness_m")):
-        return None  # a bowed or wavy board is concave somewhere: it may light itself
-    return np.clip(material_crosstalk(o.material.rgb, o.material.spectrum), 0.0, 1.0)
+        return False
+    # a bowed or wavy board is concave somewhere: it may light itself
+    return not (o.kind == "plane" and any(float(o.get(k, 0.0) or 0.0) != 0.0 for k in ("bow_m_per_m", "waviness_m")))
 
 
 # how far beyond the image's edge (camera pixels) a plane must reach to count as filling the
@@ -213,11 +220,12 @@ def fills_view(scene: SceneSpec) -> bool:
     return bool(((cross > 0).all(axis=1) | (cross < 0).all(axis=1)).all())
 
 
-def uniform_ambient(scene: SceneSpec) -> np.ndarray | None:
+def uniform_ambient(scene: SceneSpec, *, max_depth: int) -> np.ndarray | None:
     """The ambient light the camera sees where the scene is one diffuse plane that fills the view
-    (:func:`one_pass_response`, :func:`fills_view`): ``rho_c L_c`` in every pixel, shape (3,)
-    float32 (the material's reflectance times the constant environment's radiance per channel),
-    else None.
+    (:func:`one_pass_response`, :func:`fills_view`) and the render's paths reach a light after a
+    bounce (``max_depth`` -1 or >= 2, Mitsuba's convention): ``rho_c L_c`` in every pixel, shape
+    (3,) float32 (the material's reflectance as rendered, its ``rgb`` - a measured spectrum's
+    linear sRGB too -, times the constant environment's radiance per channel), else None.
 
     A Lambertian surface that sees nothing but a constant environment over its hemisphere
     reflects ``rho / pi * integral(L cos theta d omega) = rho L`` at every point, whatever its
@@ -226,11 +234,9 @@ def uniform_ambient(scene: SceneSpec) -> np.ndarray | None:
     36 spp multijitter: mean 0.0200000 for L = 0.02, 1.0 % noise per pixel), so the constant
     replaces the render (one render fewer per capture; the captures change by that noise alone,
     ``tests/test_physics_renders.py``)."""
-    if max(scene.ambient_rgb) <= 0 or one_pass_response(scene) is None or not fills_view(scene):
+    if max(scene.ambient_rgb) <= 0 or 0 <= max_depth < 2 or not fills_view(scene) or not _lit_once(scene):
         return None
     (o,) = scene.objects
-    if o.material.spectrum is not None:
-        return None  # the render's reflectance comes from the spectrum: keep the render
     return (np.asarray(o.material.rgb, np.float64) * np.asarray(scene.ambient_rgb, np.float64)).astype(np.float32)
 
 
@@ -329,7 +335,7 @@ def render_channels(
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
         if ambient:
-            flat = uniform_ambient(scene)
+            flat = uniform_ambient(scene, max_depth=render.max_depth)
             q = q + (flat if flat is not None else cached_radiance(scene, None, seed=_ambient_seed(seed), **kw))
     else:
         weights = channel_weights(sensor, scene.rig)
@@ -338,7 +344,8 @@ def render_channels(
         # the ambient light in one pass too where no pixel sees the environment itself: with the
         # same white material and seed, channel c of its render is the environment's channel c
         # on a white surface, which each primary's material render scales by k[c, p]
-        ambient_once = ambient and response is not None and fills_view(dark)
+        a_c = uniform_ambient(_white_scene(scene), max_depth=render.max_depth) if response is not None else None
+        ambient_once = ambient and a_c is not None
         if response is not None:
             mix = weights * response  # [c, p]
             if any(drive.primary(p) is not None for p in range(3)) if lazy else drive.any():
@@ -347,7 +354,6 @@ def render_channels(
             if ambient_once:
                 # the environment on the white plane that fills the view: L_c everywhere, exactly
                 # (uniform_ambient), not a render's estimate of it
-                a_c = uniform_ambient(_white_scene(scene))
                 q += a_c * mix.sum(axis=1).astype(np.float32)
         if response is None or (ambient and not ambient_once):
             for p in range(3):
