@@ -79,7 +79,7 @@ def test_threshold_rules():
     assert t["a/stripe_order_error_rate"]["max"] == pytest.approx(0.0005)
     assert "a/nan_mm" not in t
     assert "a/bias_mm" not in thresholds_from({"a/bias_mm": -0.4}, margin=0.5)  # signed: no max
-    # a row that decodes under 1 % of its region: held by its completeness and order errors only
+    # a row that decodes under 1 % of its region: no error threshold (its stripe-order errors hold it)
     sparse = {"b/mae_mm": 60.0, "b/completeness": 0.005, "b/stripe_order_errors": 900, "b/c/mae_mm": 1.0}
     t = thresholds_from({**sparse, "b/c/completeness": 0.01}, margin=0.5)
     assert set(t) == {"b/completeness", "b/stripe_order_errors", "b/c/mae_mm", "b/c/completeness"}
