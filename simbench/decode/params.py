@@ -234,6 +234,13 @@ class DecoderParams:
         fringe at another period or tilted.  Only with ``phase_method = 'gabor'``.  The
         colour-robust decoder; off = the nominal fit only (a pixel whose nominal fit passes keeps
         its fitted phase either way; its confidence may still move, where a neighbour's did).
+    centroid_correction : bool
+        Take out of each fitted phase (the wide window's and the narrow one's) the first-order bias
+        of a window the certainty cuts on one side (the image's border, a shadow): the fringe's
+        rate measured where windows are whole, less the carrier's, times the offset of the
+        window's certainty-weighted centre (:func:`simbench.decode.phase.centroid_corrected`).
+        Pixels of the carrier bank's fits keep their phase.  Only with ``phase_method = 'gabor'``.
+        The colour-robust decoder; off = the fitted phase as it is.
     crease_doubt : bool
         Fold the predicted bias at concave creases into the confidence: the lower of the
         confidence so far and :data:`STABILITY_KAPPA_RAD` over the bias (in phase) that
@@ -287,6 +294,7 @@ class DecoderParams:
     phase_stability: bool = False
     narrow_snr: bool = False
     carrier_bank: bool = False
+    centroid_correction: bool = False
     crease_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
@@ -331,6 +339,7 @@ class DecoderParams:
             "phase_stability": v.boolean(self.phase_stability, "phase_stability"),
             "narrow_snr": v.boolean(self.narrow_snr, "narrow_snr"),
             "carrier_bank": v.boolean(self.carrier_bank, "carrier_bank"),
+            "centroid_correction": v.boolean(self.centroid_correction, "centroid_correction"),
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
@@ -355,6 +364,8 @@ class DecoderParams:
                 "carrier_bank needs phase_method = 'gabor' (it refits slices of a row's columns, which the "
                 "Fourier methods' whole-row transforms do not allow)"
             )
+        if fixed["centroid_correction"] and fixed["phase_method"] != "gabor":
+            raise ValueError("centroid_correction needs phase_method = 'gabor' (it corrects the Gabor window's fit)")
         for name, value in fixed.items():
             object.__setattr__(self, name, value)
 
@@ -426,6 +437,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         narrow_snr=True,
         crease_doubt=True,
         carrier_bank=params.phase_method == "gabor",
+        centroid_correction=params.phase_method == "gabor",
         min_confidence=ROBUST_MIN_CONFIDENCE,
     )
 

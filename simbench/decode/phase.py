@@ -18,7 +18,7 @@ tests/test_accuracy_guard.py).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -39,6 +39,7 @@ __all__ = [
     "BANK_STRETCH_SHARE",
     "fringe_snr",
     "MAX_FRINGE_SNR",
+    "centroid_corrected",
 ]
 
 
@@ -537,3 +538,142 @@ def _column_runs(needed: np.ndarray, reach: int) -> list[tuple[int, int]]:
     starts = np.concatenate([[idx[0]], idx[gaps + 1]])
     ends = np.concatenate([idx[gaps], [idx[-1]]])
     return [(max(0, int(a) - reach), min(w, int(b) + reach + 1)) for a, b in zip(starts, ends)]
+
+
+# The window-centroid correction (ours; the colour-robust decoder's DecoderParams.centroid_correction).
+# A window cut by the certainty (the image's border, a shadow, an unlit or clipped patch) weighs
+# one side of its pixel only; where the fringe runs at another rate than the fit's carrier (a
+# surface tilted against the rig: the library's 45-degree corner shows it 15 % faster on one face
+# and 15 % slower on the other) the fitted phase is that of the window's weighted centre, not the
+# pixel's: off by the rate difference times the centre's offset, to first order.  Measured on
+# scenes/hard_corner_045.toml (full resolution): 0.19-0.33 rad at the image's outermost columns,
+# where the narrow and wide fits then disagree and the phase-stability term doubted ~0.7 % of the
+# image (0.01-0.15 rad left after the correction).  The rate is the mean step of the wrapped phase
+# between neighbours whose windows are centred (within CENTRED_PX), within RATE_REACH_PERIODS
+# periods beyond the window's reach on the side the window's centre lies (its weight lies there;
+# across a shadow or an edge the other side may be another surface at another rate) - assumption:
+# two periods, ~45 steps, whose mean has the noise of a 45-px baseline.  A centre closer than
+# CENTRED_PX to its pixel is left alone (assumption: 0.05 px, where a 15 % rate difference biases
+# the phase by ~0.002 rad, a twentieth of the phase noise at an SNR of 3).
+RATE_REACH_PERIODS = 2.0
+CENTRED_PX = 0.05
+STEP_SCALE = float(2**20)
+
+
+def _not_whole(c: np.ndarray, rx: int, ry: int) -> np.ndarray:
+    """Pixels whose window (2 rx + 1 by 2 ry + 1) may have its certainty-weighted centre off the
+    pixel in x: the certainty ``c`` (values in {0, 1}) is not one value throughout the window, the
+    outside beyond the left and right ends counting as 0.  Rows beyond the top and bottom repeat
+    the end rows: a window cut there alone is as centred in x as its rows are."""
+    u8 = cv2.copyMakeBorder((c > 0.5).view(np.uint8), 0, 0, rx, rx, cv2.BORDER_CONSTANT, value=0)
+    k = np.ones((2 * ry + 1, 2 * rx + 1), np.uint8)
+    lo = cv2.erode(u8, k, borderType=cv2.BORDER_REPLICATE)
+    hi = cv2.dilate(u8, k, borderType=cv2.BORDER_REPLICATE)
+    return (lo != hi)[:, rx : rx + c.shape[1]]
+
+
+def _centroid(c: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
+    """The x offset (px, + to the right) of each pixel's window centre weighted by the certainty
+    ``c``: ``sum g c u / sum g c`` (:func:`gaussian_kernel` in x and y, the image's outside
+    uncertain); NaN where the window holds no certainty."""
+    gx, gy = gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px)
+    u = np.arange(len(gx), dtype=np.float32) - np.float32(len(gx) // 2)
+    # sepFilter2D correlates, out(x) = sum_u k(u) c(x + u): the window as the fit weighs it
+    total = cv2.sepFilter2D(c, cv2.CV_32F, gx, gy, borderType=cv2.BORDER_CONSTANT)
+    moment = cv2.sepFilter2D(c, cv2.CV_32F, gx * u, gy, borderType=cv2.BORDER_CONSTANT)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(total > np.float32(1e-6), moment / total, np.float32(np.nan)).astype(np.float32)
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    two_pi = np.float32(2 * np.pi)
+    return (a - two_pi * np.rint(a / two_pi)).astype(np.float32, copy=False)
+
+
+def rate_reach_px(sigma_x_px: float, period_px: float) -> int:
+    """Columns :func:`centroid_corrected` reads the fringe's rate over from a pixel: the
+    window's reach and :data:`RATE_REACH_PERIODS` periods."""
+    return len(gaussian_kernel(sigma_x_px)) // 2 + max(1, int(round(RATE_REACH_PERIODS * period_px)))
+
+
+def centroid_corrected(
+    fits: Sequence[tuple[np.ndarray, float]],
+    certainty: np.ndarray,
+    *,
+    sigma_y_px: float,
+    period_px: float,
+    keep: np.ndarray | None = None,
+) -> list[np.ndarray]:
+    """Gabor fits of one image - ``(wrapped, sigma_x_px)``, the widest window first, each with
+    windows ``sigma_x_px`` by ``sigma_y_px`` and carrier ``2 pi / period_px`` on samples of
+    ``certainty`` (in {0, 1}) - each less the first-order bias of every window whose
+    certainty-weighted centre lies ``dx`` off its pixel: ``wrap(psi - (rate - omega) dx)``.
+    ``rate`` is the mean step of the first fit's phase between neighbours whose (first-fit)
+    windows are centred within :data:`CENTRED_PX`, over the :func:`rate_reach_px` + 1 columns
+    from the pixel towards its window's centre.  A pixel stays as it is where its window's centre
+    is within :data:`CENTRED_PX` of it, where no such step is in reach, and where ``keep`` (e.g.
+    another carrier's fit).
+
+    Each corrected pixel reads its own window and columns alone, so the result does not depend
+    on how the image is cut into row bands.
+
+    Returns
+    -------
+    list of ndarray, shape (H, W), float32: the fits in their order
+    """
+    psis = [np.asarray(wrapped, np.float32) for wrapped, _ in fits]
+    sigmas = [float(sx) for _, sx in fits]
+    c = np.ascontiguousarray(certainty, np.float32)
+    rx, ry = len(gaussian_kernel(sigmas[0])) // 2, len(gaussian_kernel(sigma_y_px)) // 2
+    # the widest window's cut pixels hold every narrower one's
+    cut = _not_whole(c, rx, ry)
+    cand = cut if keep is None else cut & ~keep
+    cols = np.flatnonzero(cand.any(axis=0))
+    outs = [psi.copy() for psi in psis]
+    if cols.size == 0:
+        return outs
+    reach = rate_reach_px(sigmas[0], period_px)
+    margin = rx + reach + 1
+    omega = np.float32(2.0 * np.pi / period_px)
+    h, w = c.shape
+    for run in np.split(cols, np.flatnonzero(np.diff(cols) > 2 * margin) + 1):
+        # a block wide and tall enough that every pixel read holds its whole window within it
+        a, b = max(0, int(run[0]) - margin), min(w, int(run[-1]) + margin + 1)
+        in_rows = np.flatnonzero(cand[:, a:b].any(axis=1))
+        y0, y1 = max(0, int(in_rows[0]) - ry), min(h, int(in_rows[-1]) + ry + 1)
+        cs = np.ascontiguousarray(c[y0:y1, a:b])
+        block_cut, block_cand = cut[y0:y1, a:b], cand[y0:y1, a:b]
+        dxs = [_centroid(cs, sx, sigma_y_px) for sx in sigmas]
+        with np.errstate(invalid="ignore"):
+            centred = ~block_cut | (np.abs(dxs[0]) <= np.float32(CENTRED_PX))
+        rate_src = psis[0][y0:y1, a:b]
+        for psi, out, dx in zip(psis, outs, dxs):
+            with np.errstate(invalid="ignore"):
+                need = block_cand & (np.abs(dx) > np.float32(CENTRED_PX)) & np.isfinite(psi[y0:y1, a:b])
+            ys, xs = np.nonzero(need)
+            if ys.size == 0:
+                continue
+            rows, row_of = np.unique(ys, return_inverse=True)
+            ps, cr = rate_src[rows], centred[rows]
+            step = np.zeros(ps.shape, np.float32)
+            step[:, 1:-1] = _wrap(ps[:, 2:] - ps[:, :-2]) * np.float32(0.5)
+            good = np.zeros(ps.shape, bool)
+            good[:, 1:-1] = cr[:, 1:-1] & cr[:, 2:] & cr[:, :-2]
+            good &= np.isfinite(step)
+            # the steps in fixed point (2^-20 rad), summed as integers: a window's sum is then exact
+            # wherever its block starts, so the result does not follow the block's extent
+            q = np.where(good, np.rint(step * np.float32(STEP_SCALE)), np.float32(0.0)).astype(np.int64)
+            zero = np.zeros((rows.size, 1), np.int64)
+            sq = np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
+            sn = np.concatenate([zero, np.cumsum(good, axis=1, dtype=np.int64)], axis=1)
+            d = dx[ys, xs]
+            # [x, x + reach] where the centre lies right of the pixel, [x - reach, x] left; within the block
+            lo = np.where(d > 0, xs, np.maximum(xs - reach, 0))
+            hi = np.where(d > 0, np.minimum(xs + reach + 1, b - a), xs + 1)
+            sv = (sq[row_of, hi] - sq[row_of, lo]).astype(np.float64) / STEP_SCALE
+            sc = sn[row_of, hi] - sn[row_of, lo]
+            rate = (sv / np.maximum(sc, 1.0)).astype(np.float32)
+            bias = np.where(sc > 0, (rate - omega) * d, np.float32(0.0))
+            yy, xx = ys + y0, xs + a
+            out[yy, xx] = _wrap(psi[yy, xx] - bias)
+    return outs

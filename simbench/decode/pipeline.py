@@ -39,6 +39,7 @@ from simbench.decode.depth import (
 )
 from simbench.decode.phase import (
     bank_fit,
+    centroid_corrected,
     certainty_map,
     certainty_window_px,
     fringe_snr,
@@ -410,6 +411,9 @@ def _columns(
                 narrow = method(intensity, sigma_x_px=nx, offset=False, **fit)
             narrow_residual = narrow.residual[crop]
             narrow = narrow.wrapped[crop]
+    if params.centroid_correction:
+        with stage("window centroid correction"):
+            phase, narrow = _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam)
     with stage("validity"):
         intensity, certainty, lit = intensity[crop], certainty[crop], lit[crop]
         wrapped, amplitude, residual, support_w = (
@@ -528,6 +532,20 @@ def _columns(
 
     st.put("unwrapped_phase", unwrapped)
     return band, st
+
+
+def _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam) -> tuple:
+    """The wide fit (whole band) and the narrow one (``crop``'s rows) with the window-centroid
+    bias taken out (:attr:`DecoderParams.centroid_correction`), the fringe's rate read on the
+    wide fit's phase; a carrier bank's pixels keep their phase (their carrier is another)."""
+    fits = [(phase.wrapped, sx)]
+    if narrow is not None:
+        band = np.full(phase.wrapped.shape, np.nan, np.float32)
+        band[crop] = narrow
+        fits.append((band, sx * STABILITY_WINDOW_SCALE))
+    bank = None if carrier is None else carrier != 0
+    out = centroid_corrected(fits, certainty, sigma_y_px=fit["sigma_y_px"], period_px=t_cam, keep=bank)
+    return dataclasses.replace(phase, wrapped=out[0]), (out[1][crop] if narrow is not None else None)
 
 
 _R = TypeVar("_R")
