@@ -63,13 +63,14 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # bank, and corners at 45 and 75 deg added (21 scenes, 2026-11-26): 17 at 3, 15 at 2 and 4, 14 at 0
 # and 5; with corners at 50 and 105 deg too (23 scenes): 19 at 3, 17 at 2, 16 at 4, 15 at 0 and 5;
 # with a turned 65-degree and a grey 55-degree corner (25 scenes): 21 at 3, 19 at 2, 16 at 4, 17 at
-# 0, 15 at 5.  At 3: box before wall 99.56 % complete / 0.001 % wrong, sphere before wall 98.2 % /
-# 0.058 %, deep stairs 98.3 % / 0.054 %, corners of 50-120 deg 97.4-99.99 % / 0 % (the turned and
-# grey ones 98.1 and 97.5 %), printed charts of 3:1 and 1.6:1 97.1 % and 100 % / 0 %, glossy boards
-# 98.4-100 % / 0 %.  Short of the goals there: the 45-degree corner (96.4 %, 2 pixels wrong: the
-# crease term's band), the box interior (90.1 %: its right face, lit at grazing incidence, decodes
-# nowhere), the 20:1 chart (81.4 %, 0.008 % wrong) and the fine chart (squares under a period:
-# nothing).  Not tuned on any table of the paper; a white board scores ~30.
+# 0, 15 at 5; with the window-centroid correction (DecoderParams.centroid_correction, 2026-11-27):
+# 22 at 3, 19 at 2, 17 at 0, 16 at 4, 15 at 5.  At 3: box before wall 99.56 % complete / 0.001 %
+# wrong, sphere before wall 98.2 % / 0.058 %, deep stairs 98.3 % / 0.054 %, corners of 45-120 deg
+# 97.1-100 % / 0 % (the turned and grey ones 98.4 and 98.0 %), printed charts of 3:1 and 1.6:1
+# 97.1 % and 100 % / 0 %, glossy boards 98.4-100 % / 0 %.  Short of the goals there: the box
+# interior (90.1 %: its right face, lit at grazing incidence, decodes nowhere), the 20:1 chart
+# (81.4 %, 0.008 % wrong) and the fine chart (squares under a period: nothing).  Not tuned on any
+# table of the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
 # again with a window half as wide along x, and a pixel whose phase moves by |dpsi| between the two
