@@ -478,10 +478,11 @@ CC_SX = 0.25 * CC_PERIOD
 CC_SY = 0.6 * CC_SX
 
 
-def _centroid_case(rate_left: float, rate_right: float, shadow: tuple[int, int] | None = None, h: int = 120):
+def _centroid_case(rate_left: float, rate_right: float, shadow: tuple[int, int] | None = None, h: int = 120, lit=None):
     """A noise-free fringe whose rate (in units of the carrier's) is ``rate_left`` left of the
     middle column and ``rate_right`` right of it, optionally an uncertain (shadowed) band of
-    columns; its wide and narrow Gabor fits, those corrected, and the true phase."""
+    columns, or lit only on the columns ``lit`` (a slice); its wide and narrow Gabor fits, those
+    corrected, and the true phase."""
     from simbench.decode.phase import _wrap, centroid_corrected, gabor_phase
 
     w = 400
@@ -493,6 +494,11 @@ def _centroid_case(rate_left: float, rate_right: float, shadow: tuple[int, int] 
     if shadow is not None:
         cert[:, shadow[0] : shadow[1]] = 0.0
         intensity[:, shadow[0] : shadow[1]] = 0.02
+    if lit is not None:
+        dark = np.ones(w, bool)
+        dark[lit] = False
+        cert[:, dark] = 0.0
+        intensity[:, dark] = 0.02
     kw = dict(certainty=cert, period_px=CC_PERIOD, sigma_y_px=CC_SY, offset=False)
     wide = gabor_phase(intensity, sigma_x_px=CC_SX, **kw).wrapped
     narrow = gabor_phase(intensity, sigma_x_px=CC_SX / 2, **kw).wrapped
@@ -534,6 +540,19 @@ def test_the_centroid_correction_reads_each_side_of_a_shadow_at_its_own_rate():
         assert after[row, side].max() < 0.5 * before[row, side].max(), side
 
 
+@pytest.mark.parametrize("width", [40, 50, 60])
+def test_the_centroid_correction_reads_no_rate_inside_a_wide_shadow(width):
+    """A lit strip narrower than the rate's reach between wide shadows: the steps inside the
+    shadows, whose windows are wholly uncertain, are no phase (their fit returns 0) and must not
+    count - read as steps of 0 they had pulled the rate to ~0 and the strip's ends to 0.75 rad off
+    (review of the first version); read right, the ends' bias halves."""
+    before, after, _, _, _ = _centroid_case(1.15, 1.15, lit=slice(100, 100 + width))
+    row = 60
+    ends = np.r_[100:110, 90 + width : 100 + width]
+    assert before[row, ends].max() > 0.1
+    assert after[row, ends].max() < 0.5 * before[row, ends].max()
+
+
 def test_the_centroid_correction_leaves_a_fringe_at_the_carriers_rate_alone():
     """No rate difference, no bias: a cut window's phase stays within float rounding."""
     before, after, n_before, n_after, _ = _centroid_case(1.0, 1.0)
@@ -563,6 +582,7 @@ def test_the_centroid_correction_does_not_follow_the_row_bands():
     keep[:, :20] = True
     kept = centroid_corrected([(wide, CC_SX)], slant, keep=keep, **kw)[0]
     assert np.array_equal(kept[:, :20], wide[:, :20]) and not np.array_equal(whole[0][:, :20], wide[:, :20])
+    assert np.array_equal(kept[:, 20:], whole[0][:, 20:], equal_nan=True)  # the rest corrected as before
 
 
 def test_the_centroid_correction_is_the_colour_robust_decoders_and_needs_the_gabor_fit():

@@ -586,8 +586,10 @@ def _centroid(c: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
+    """``a`` wrapped to [-pi, pi) (the fit's convention: pi itself folds to -pi), float32."""
     two_pi = np.float32(2 * np.pi)
-    return (a - two_pi * np.rint(a / two_pi)).astype(np.float32, copy=False)
+    r = (a - two_pi * np.rint(a / two_pi)).astype(np.float32, copy=False)
+    return np.where(r >= np.float32(np.pi), r - two_pi, r).astype(np.float32, copy=False)
 
 
 def rate_reach_px(sigma_x_px: float, period_px: float) -> int:
@@ -609,7 +611,8 @@ def centroid_corrected(
     ``certainty`` (in {0, 1}) - each less the first-order bias of every window whose
     certainty-weighted centre lies ``dx`` off its pixel: ``wrap(psi - (rate - omega) dx)``.
     ``rate`` is the mean step of the first fit's phase between neighbours whose (first-fit)
-    windows are centred within :data:`CENTRED_PX`, over the :func:`rate_reach_px` + 1 columns
+    windows are centred within :data:`CENTRED_PX` and hold certain samples (a wholly uncertain
+    window's fit is no phase), over the :func:`rate_reach_px` + 1 columns
     from the pixel towards its window's centre.  A pixel stays as it is where its window's centre
     is within :data:`CENTRED_PX` of it, where no such step is in reach, and where ``keep`` (e.g.
     another carrier's fit).
@@ -645,7 +648,9 @@ def centroid_corrected(
         block_cut, block_cand = cut[y0:y1, a:b], cand[y0:y1, a:b]
         dxs = [_centroid(cs, sx, sigma_y_px) for sx in sigmas]
         with np.errstate(invalid="ignore"):
-            centred = ~block_cut | (np.abs(dxs[0]) <= np.float32(CENTRED_PX))
+            # a wholly uncertain window (a shadow wider than it) has no phase to step: its fit
+            # returns 0, which would pull the rate towards 0
+            centred = (~block_cut & (cs > np.float32(0.5))) | (np.abs(dxs[0]) <= np.float32(CENTRED_PX))
         rate_src = psis[0][y0:y1, a:b]
         for psi, out, dx in zip(psis, outs, dxs):
             with np.errstate(invalid="ignore"):

@@ -537,7 +537,9 @@ def _columns(
 def _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam) -> tuple:
     """The wide fit (whole band) and the narrow one (``crop``'s rows) with the window-centroid
     bias taken out (:attr:`DecoderParams.centroid_correction`), the fringe's rate read on the
-    wide fit's phase; a carrier bank's pixels keep their phase (their carrier is another)."""
+    wide fit's phase; a carrier bank's pixels keep their phase (their carrier is another) but
+    lend their steps to the rate (a phase's steps are the fringe's whatever carrier fitted it;
+    whether their windows are whole is judged with the nominal window)."""
     fits = [(phase.wrapped, sx)]
     if narrow is not None:
         band = np.full(phase.wrapped.shape, np.nan, np.float32)
