@@ -651,26 +651,31 @@ def centroid_corrected(
             # a wholly uncertain window (a shadow wider than it) has no phase to step: its fit
             # returns 0, which would pull the rate towards 0
             centred = (~block_cut & (cs > np.float32(0.5))) | (np.abs(dxs[0]) <= np.float32(CENTRED_PX))
-        rate_src = psis[0][y0:y1, a:b]
-        for psi, out, dx in zip(psis, outs, dxs):
+        needs = []
+        for psi, dx in zip(psis, dxs):
             with np.errstate(invalid="ignore"):
-                need = block_cand & (np.abs(dx) > np.float32(CENTRED_PX)) & np.isfinite(psi[y0:y1, a:b])
+                needs.append(block_cand & (np.abs(dx) > np.float32(CENTRED_PX)) & np.isfinite(psi[y0:y1, a:b]))
+        rows = np.flatnonzero(np.logical_or.reduce([n.any(axis=1) for n in needs]))
+        if rows.size == 0:
+            continue
+        # the rate's steps on the rows some fit needs, once for all fits (each row's sums its own)
+        ps, cr = psis[0][y0:y1, a:b][rows], centred[rows]
+        step = np.zeros(ps.shape, np.float32)
+        step[:, 1:-1] = _wrap(ps[:, 2:] - ps[:, :-2]) * np.float32(0.5)
+        good = np.zeros(ps.shape, bool)
+        good[:, 1:-1] = cr[:, 1:-1] & cr[:, 2:] & cr[:, :-2]
+        good &= np.isfinite(step)
+        # the steps in fixed point (2^-20 rad), summed as integers: a window's sum is then exact
+        # wherever its block starts, so the result does not follow the block's extent
+        q = np.where(good, np.rint(step * np.float32(STEP_SCALE)), np.float32(0.0)).astype(np.int64)
+        zero = np.zeros((rows.size, 1), np.int64)
+        sq = np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
+        sn = np.concatenate([zero, np.cumsum(good, axis=1, dtype=np.int64)], axis=1)
+        for psi, out, dx, need in zip(psis, outs, dxs, needs):
             ys, xs = np.nonzero(need)
             if ys.size == 0:
                 continue
-            rows, row_of = np.unique(ys, return_inverse=True)
-            ps, cr = rate_src[rows], centred[rows]
-            step = np.zeros(ps.shape, np.float32)
-            step[:, 1:-1] = _wrap(ps[:, 2:] - ps[:, :-2]) * np.float32(0.5)
-            good = np.zeros(ps.shape, bool)
-            good[:, 1:-1] = cr[:, 1:-1] & cr[:, 2:] & cr[:, :-2]
-            good &= np.isfinite(step)
-            # the steps in fixed point (2^-20 rad), summed as integers: a window's sum is then exact
-            # wherever its block starts, so the result does not follow the block's extent
-            q = np.where(good, np.rint(step * np.float32(STEP_SCALE)), np.float32(0.0)).astype(np.int64)
-            zero = np.zeros((rows.size, 1), np.int64)
-            sq = np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
-            sn = np.concatenate([zero, np.cumsum(good, axis=1, dtype=np.int64)], axis=1)
+            row_of = np.searchsorted(rows, ys)
             d = dx[ys, xs]
             # [x, x + reach] where the centre lies right of the pixel, [x - reach, x] left; within the block
             lo = np.where(d > 0, xs, np.maximum(xs - reach, 0))
