@@ -170,8 +170,16 @@ def _cmd_bench(args) -> int:
         from simbench.rig import load_rig
 
         rig = load_rig(args.rig)
+    if args.max_ratio is not None and not args.robust:
+        raise ValueError("--max-ratio applies to --robust (the colour-robust decoder against the paper's)")
     res = run_decode_benchmark(
-        repeats=args.repeats, device=args.device, scene=args.scene, rig=rig, mode=args.mode, robust=args.robust
+        repeats=args.repeats,
+        device=args.device,
+        scene=args.scene,
+        rig=rig,
+        mode=args.mode,
+        robust=args.robust,
+        baseline=args.max_ratio is not None,
     )
     setup = ", ".join(
         [res["scene"]]
@@ -185,12 +193,22 @@ def _cmd_bench(args) -> int:
         else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({setup}): median "
         f"{res['median_ms']:.1f} ms, "
         f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)"
+        + (
+            f"; {res['ratio']:.2f}x the paper decoder's median {res['baseline_median_ms']:.1f} ms, timed alongside"
+            if "ratio" in res
+            else ""
+        )
     )
     if res["stages_ms"] and not args.json:
         print("per stage, mean per decode (row bands run in parallel threads, so the sum exceeds the wall time):")
         print(stage_table(res["stages_ms"]))
     if args.max_ms is not None and res["median_ms"] > args.max_ms:
         raise ValueError(f"decode median {res['median_ms']:.1f} ms exceeds --max-ms {args.max_ms}")
+    if args.max_ratio is not None and res["ratio"] > args.max_ratio:
+        raise ValueError(
+            f"the colour-robust decoder's median is {res['ratio']:.2f}x the paper decoder's, over --max-ratio "
+            f"{args.max_ratio}"
+        )
     return 0
 
 
@@ -332,6 +350,13 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument("--repeats", type=int_in(1, 100000), default=20, help="timed decodes (after one warm-up)")
     s.add_argument(
         "--max-ms", type=float_in(lo=0.0, lo_open=True), default=None, help="fail when the median exceeds this"
+    )
+    s.add_argument(
+        "--max-ratio",
+        type=float_in(lo=0.0, lo_open=True),
+        default=None,
+        help="with --robust: time the paper decoder alongside and fail when the colour-robust decoder's median "
+        "exceeds this multiple of its median (a guard the machine's speed does not move)",
     )
     s.add_argument("--json", action="store_true", help="print the timings as JSON")
     s.set_defaults(fn=_cmd_bench)

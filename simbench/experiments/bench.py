@@ -59,6 +59,7 @@ def run_decode_benchmark(
     rig: Rig | None = None,
     mode: str | None = None,
     robust: bool = False,
+    baseline: bool = False,
 ) -> dict:
     """Time one decode by the depth system ``device`` (any registered name,
     :mod:`simbench.systems`) of its benchmark inputs (``bench_inputs``) at its native
@@ -73,7 +74,12 @@ def run_decode_benchmark(
     through the projector's lens); ``mode`` (``reference`` or ``calibrated``) overrides the
     decoder's mode; ``robust`` times our colour-robust decoder
     (:func:`simbench.decode.robust_params`: its calibration frames come with the inputs) instead
-    of the paper's.  The reference map is decoded once, before the timed runs."""
+    of the paper's.  The reference map is decoded once, before the timed runs.
+
+    ``baseline`` (with ``robust``): the paper's decoder timed too, each of its runs right after one
+    of the colour-robust decoder's on the same capture, so that both see the machine in the same
+    state; ``baseline_median_ms`` and ``ratio`` (the two medians' ratio: the issue-35 measure, and a
+    regression guard that a slower or busier machine does not move, as it moves both)."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if device not in system_names():
@@ -82,6 +88,8 @@ def run_decode_benchmark(
         raise ValueError(f"a rig, a decoder mode and --robust apply to the proposed decoder, not to {device!r}")
     if mode is not None and mode not in MODES:
         raise ValueError(f"unknown decoder mode {mode!r}; valid: {list(MODES)}")
+    if baseline and not robust:
+        raise ValueError("a baseline (the paper decoder timed alongside) applies to the colour-robust decoder")
     system = get_system(device)
     raw, cal, spec = system.bench_inputs(scene=scene, **({"frames": True} if robust else {}))
     # an image (H, W), (H, W, channels or taps), or a multi-shot stack of frames (K, H, W)
@@ -103,14 +111,35 @@ def run_decode_benchmark(
     def run():
         system.decode(raw, cal, scene=spec, **extra)
 
+    if baseline:
+        # the same capture (the inputs are deterministic), its calibration without the frames the
+        # paper's decoder does not take
+        p_raw, p_cal, p_spec = system.bench_inputs(scene=scene)
+        p_spec = dataclasses.replace(p_spec, rig=spec.rig)
+
+    def run_paper():
+        system.decode(p_raw, p_cal, scene=p_spec, **{k: v for k, v in extra.items() if k != "params"})
+
     for _ in range(warmup):
         run()
-    times = []
+        if baseline:
+            run_paper()
+    times, paper_times = [], []
     with stage_times() as stages:
         for _ in range(repeats):
             t0 = time.perf_counter()
             run()
             times.append((time.perf_counter() - t0) * 1000.0)
+            if baseline:
+                # outside the stage collector's view: its table is the colour-robust decoder's
+                with stage_times():
+                    t0 = time.perf_counter()
+                    run_paper()
+                    paper_times.append((time.perf_counter() - t0) * 1000.0)
+    extra_out = {}
+    if baseline:
+        paper_median = statistics.median(paper_times)
+        extra_out = {"baseline_median_ms": paper_median, "ratio": statistics.median(times) / paper_median}
     return {
         "device": device,
         "scene": scene,
@@ -125,6 +154,7 @@ def run_decode_benchmark(
         "threads": cv2.getNumThreads(),
         "cpus": os.cpu_count(),
         "stages_ms": {k: v / repeats for k, v in stages.ms.items()},
+        **extra_out,
     }
 
 
