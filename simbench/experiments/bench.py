@@ -111,14 +111,11 @@ def run_decode_benchmark(
     def run():
         system.decode(raw, cal, scene=spec, **extra)
 
-    if baseline:
-        # the same capture (the inputs are deterministic), its calibration without the frames the
-        # paper's decoder does not take
-        p_raw, p_cal, p_spec = system.bench_inputs(scene=scene)
-        p_spec = dataclasses.replace(p_spec, rig=spec.rig)
+    # the paper's decoder on the same capture: its calibration without the frames it does not take
+    paper_cal = dataclasses.replace(cal, frames={}, _maps={}) if baseline else None
 
     def run_paper():
-        system.decode(p_raw, p_cal, scene=p_spec, **{k: v for k, v in extra.items() if k != "params"})
+        system.decode(raw, paper_cal, scene=spec, **{k: v for k, v in extra.items() if k != "params"})
 
     for _ in range(warmup):
         run()
