@@ -27,12 +27,14 @@ marked folder, and in it only the files whose names and contents are a cache's o
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import io
 import json
 import logging
 import os
 import re
+import sys
 import threading
 import zipfile
 import time
@@ -44,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes
+from simbench.io import DISK_FULL_ERRNOS, atomic_write_bytes, read_json_dict
 from simbench import termination
 from simbench.manifest import file_sha256
 
@@ -65,6 +67,8 @@ __all__ = [
     "prune_cache",
     "file_digest",
     "source_digest",
+    "code_text",
+    "user_cache_dir",
 ]
 
 log = logging.getLogger(__name__)
@@ -203,14 +207,81 @@ def file_digest(path: str, mtime_ns: int, size: int) -> str:
 
 
 def source_digest(paths: Iterable[str | Path]) -> str:
-    """SHA-256 over source files (name and bytes, in the order given): part of a cache key
-    for results of code that may change between runs."""
-    h = hashlib.sha256()
+    """SHA-256 over source files (name and code, in the order given): part of a cache key for
+    results of code that may change between runs.
+
+    A Python file counts by its syntax tree without docstrings (:func:`code_text`): an edit of
+    its comments, docstrings or layout keeps the digest, as it keeps every result the code makes,
+    while any change to what the code does changes it; other files (C) count by their bytes."""
+    files = []
     for path in paths:
-        path = Path(path)
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
+        st = Path(path).stat()
+        files.append((str(path), st.st_mtime_ns, st.st_size))
+    h = hashlib.sha256(f"python{sys.version_info[0]}.{sys.version_info[1]}".encode())
+    for (path, _, _), code in zip(files, _code_bytes(tuple(files))):
+        h.update(Path(path).name.encode())
+        h.update(code)
     return h.hexdigest()
+
+
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+
+
+def user_cache_dir() -> Path | None:
+    """The folder of simbench's small per-user memos (what the renders need from colour-science,
+    the code digests of :func:`source_digest`): ``SIMBENCH_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/simbench`` or ``~/.cache/simbench``; None when ``SIMBENCH_CACHE_DIR`` is set
+    to an empty string (the memos off: their values computed every time)."""
+    root = os.environ.get("SIMBENCH_CACHE_DIR")
+    if root == "":
+        return None
+    if root is None:
+        return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "simbench"
+    return Path(root)
+
+
+@lru_cache(maxsize=64)
+def _code_bytes(files: tuple[tuple[str, int, int], ...]) -> tuple[bytes, ...]:
+    """Each source file's bytes, or for a Python file the SHA-256 of its :func:`code_text`.
+    Parsing the simulator's and the decoder's modules takes ~0.5 s, so those digests are kept in
+    a memo in :func:`user_cache_dir`, keyed by the SHA-256 of the file's bytes (an entry that is
+    not a digest is recomputed), written once for the files it lacked."""
+    data = [Path(path).read_bytes() for path, _, _ in files]
+    raw = [hashlib.sha256(d).hexdigest() for d in data]
+    root = user_cache_dir()
+    memo = None if root is None else root / f"code-digests-python{sys.version_info[0]}.{sys.version_info[1]}.json"
+    known = {} if memo is None else read_json_dict(memo)
+    new = {}
+    out = []
+    for (path, _, _), d, r in zip(files, data, raw):
+        if not path.endswith(".py"):
+            out.append(d)
+            continue
+        hit = known.get(r)
+        if not (isinstance(hit, str) and _HEX64.fullmatch(hit)):
+            hit = new[r] = hashlib.sha256(code_text(d).encode()).hexdigest()
+        out.append(bytes.fromhex(hit))
+    if new and memo is not None:
+        try:  # merged with what other processes wrote meanwhile; replaced atomically
+            memo.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(memo, json.dumps({**read_json_dict(memo), **new}).encode())
+        except OSError:
+            pass  # an unwritable folder costs time, not results
+    return tuple(out)
+
+
+def code_text(source: str | bytes) -> str:
+    """What a Python module does, as text: its syntax tree (:func:`ast.dump`, without line
+    numbers) with every module, class and function docstring removed - the same for two sources
+    that differ only in comments, docstrings or layout."""
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                if isinstance(body[0].value.value, str):
+                    node.body = body[1:]
+    return ast.dump(tree, annotate_fields=False, include_attributes=False)
 
 
 def array_digest(a: np.ndarray) -> str:

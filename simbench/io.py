@@ -40,6 +40,7 @@ __all__ = [
     "save_exr",
     "save_ply",
     "read_toml",
+    "read_json_dict",
 ]
 
 
@@ -625,3 +626,13 @@ def ply_bytes(points_m: np.ndarray, colors: np.ndarray | None = None) -> bytes:
         props += "property uchar red\nproperty uchar green\nproperty uchar blue\n"
     header = f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n{props}end_header\n"
     return header.encode("ascii") + rec.tobytes()
+
+
+def read_json_dict(path: str | Path) -> dict:
+    """A JSON object kept as a memo: its dict, or an empty one where the file is missing,
+    unreadable, damaged or not an object (the caller recomputes, and rewrites, what it needs)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}

@@ -1,6 +1,9 @@
 """The content-hash render cache."""
 
 import dataclasses
+import itertools
+import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -348,16 +351,66 @@ def test_simulator_code_digest_holds_the_lens_loops_and_not_the_decoders(tmp_pat
             m.setattr(native, attr, edited)
             changed = digest() != base
         assert changed == (attr == "LENS_SOURCE"), attr
-    # a simulator module: every file of simbench/sim is hashed (no hand-kept list)
+    # a simulator module: every file of simbench/sim is hashed (no hand-kept list) - by what its
+    # code does: a comment, a docstring or the layout changed keeps the digest
     sim_dir = Path(keys.__file__).parent
-    copy = tmp_path / "sim"
-    copy.mkdir()
-    for f in sim_dir.glob("*.py"):
-        (copy / f.name).write_bytes(f.read_bytes() + (b"\n# edited\n" if f.name == "camera.py" else b""))
-    with monkeypatch.context() as m:
-        m.setattr(keys, "__file__", str(copy / "keys.py"))
-        assert digest() != base
+    for edit, changes in (
+        (lambda text: text + b"\n_EDITED = 1\n", True),
+        (lambda text: text + b"\n# edited\n", False),
+        (lambda text: text.replace(b'"""', b'"""An edited docstring. ', 1).replace(b"    ", b"        "), False),
+    ):
+        copy = tmp_path / f"sim{len(list(tmp_path.glob('sim*')))}"
+        copy.mkdir()
+        for f in sim_dir.glob("*.py"):
+            (copy / f.name).write_bytes(edit(f.read_bytes()) if f.name == "camera.py" else f.read_bytes())
+        with monkeypatch.context() as m:
+            m.setattr(keys, "__file__", str(copy / "keys.py"))
+            assert (digest() != base) == changes, changes
     assert digest() == base
+
+
+def test_source_digest_follows_the_code_not_its_comments_docstrings_or_layout(tmp_path, monkeypatch):
+    """simbench.cache.source_digest: a Python file by its syntax tree less docstrings (module,
+    class and function ones; a string elsewhere is code), kept in a memo by the file's bytes -
+    a damaged memo recomputed, the memo off when SIMBENCH_CACHE_DIR is empty - and a C file by
+    its bytes."""
+    from simbench import cache as cache_mod
+
+    monkeypatch.setenv("SIMBENCH_CACHE_DIR", str(tmp_path / "memo"))
+    src = tmp_path / "m.py"
+    stamps = itertools.count(1)
+
+    def digest(text: str) -> str:
+        src.write_text(text)
+        os.utime(src, ns=(1, next(stamps)))  # a new modification time: not the in-process memo's entry
+        return cache_mod.source_digest([src])
+
+    base = digest(
+        '"""Module."""\n\ndef f(x):\n    """Doc."""\n    return x + 1  # one\n\nclass A:\n    """A."""\n    y = "s"\n'
+    )
+    same = (
+        '# a comment\n"""Other module text."""\ndef f(x):\n    return (x +\n            1)\n'
+        'class A:\n    """B."""\n    y = "s"\n'
+    )
+    assert digest(same) == base
+    for changed in (
+        '"""Module."""\ndef f(x):\n    return x + 2\nclass A:\n    y = "s"\n',  # a constant
+        '"""Module."""\ndef f(x):\n    return x + 1\nclass A:\n    y = "t"\n',  # a string that is code
+        '"""Module."""\ndef f(y):\n    return y + 1\nclass A:\n    y = "s"\n',  # a name
+    ):
+        assert digest(changed) != base, changed
+    memo = next((tmp_path / "memo").glob("code-digests-python*.json"))
+    assert len(json.loads(memo.read_text())) >= 4
+    memo.write_text("{not json")
+    assert digest(same) == base and isinstance(json.loads(memo.read_text()), dict)
+    monkeypatch.setenv("SIMBENCH_CACHE_DIR", "")
+    assert digest(same) == base
+    c = tmp_path / "k.c"
+    c.write_bytes(b"int f(void) { return 1; }\n")
+    one = cache_mod.source_digest([c])
+    c.write_bytes(b"int f(void) { return 1; } /* a comment */\n")
+    os.utime(c, ns=(1, 2))
+    assert cache_mod.source_digest([c]) != one
 
 
 def _make_once(root: str, log: str, start) -> tuple[int, int, list]:

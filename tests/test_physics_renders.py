@@ -223,6 +223,113 @@ def test_one_pass_crosstalk_capture_is_the_per_primary_sum(variant, monkeypatch,
     assert np.abs(one - per).max() <= 1e-5 * per.max()
 
 
+_TARGET = {
+    "type": "target",
+    "name": "board",
+    "center_m": [0.02, -0.01, 0.9],
+    "rotation_deg": [15.0, -20.0, 0.0],
+    "squares": [9, 7],
+    "square_m": 0.03,
+    "rgb": [0.85, 0.8, 0.75],
+    "ink_rgb": [0.05, 0.04, 0.06],
+}
+# (objects, max_depth): scenes whose light bounces once, with materials that differ per channel
+_GREY_SCENES = {
+    "printed target, unbounded paths": ([_TARGET], 6),
+    "target, coloured sphere and measured patch, direct light": (
+        [
+            _TARGET,
+            {**_ONE_PASS_OBJECTS["sphere"], "name": "ball", "center_m": [0.15, 0.05, 0.8], "radius_m": 0.05},
+            {
+                **_ONE_PASS_OBJECTS["box, measured patch"],
+                "name": "patch",
+                "center_m": [-0.15, 0.0, 0.8],
+                "size_m": [0.1, 0.1, 0.1],
+            },
+            {
+                "type": "plane",
+                "name": "wall",
+                "center_m": [0.0, 0.0, 1.2],
+                "size_m": [2.0, 1.6],
+                "rgb": [0.6, 0.3, 0.2],
+            },
+        ],
+        2,
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_GREY_SCENES))
+def test_a_grey_drive_on_once_bounced_light_is_one_render(variant, monkeypatch, name):
+    """A drive with the same image in the projector's three primaries (a phase-shift or calibration
+    frame) lighting Lambertian surfaces that the light leaves after one bounce (a printed target
+    alone, or any diffuse scene rendered with direct light only): one render of each reflectance as
+    the camera's channels record it under equal primaries (simbench.sim.capture.grey_scene) gives the
+    per-primary renders' weighted sum to float rounding - the same seed draws the same paths -
+    where the render noise itself is ~1/sqrt(spp) of the signal: the bound is 1e-5 of the
+    brightest pixel, far below a 4-spp render's noise."""
+    import simbench.sim.capture as capture
+    from simbench.sim.mitsuba_dict import RenderSettings
+    from simbench.sim.scene import scene_from_dict
+
+    objects, max_depth = _GREY_SCENES[name]
+    scene = scene_from_dict({"name": "grey", "object": objects})
+    scene = dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.25))
+    sensor = get_sensor("paper")
+    scene = capture.physical_scene(scene, sensor)
+    dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
+    assert capture.one_pass_response(dark) is None and capture.single_bounce(dark, max_depth=max_depth)
+    _, scale = capture.grey_scene(dark, capture.channel_weights(sensor, scene.rig))
+    assert scale > 1  # the paper camera's channels see more than their own primary: scaled back after
+    h, w = scene.rig.projector.size_hw
+    drive = np.repeat(np.random.default_rng(5).random((h, w, 1), dtype=np.float32), 3, axis=2)
+    render = RenderSettings(spp=4, sampler="independent", max_depth=max_depth)
+    one = capture.render_channels(scene, drive, sensor, seed=11, render=render)
+    monkeypatch.setattr(capture, "single_bounce", lambda s, *, max_depth: False)
+    per = capture.render_channels(scene, drive, sensor, seed=11, render=render)
+    assert per.max() > 0 and (per > 0).mean() > 0.05
+    assert np.abs(one - per).max() <= 1e-5 * per.max()
+    # a drive whose primaries differ keeps the per-primary renders
+    monkeypatch.undo()
+    assert capture._grey_drive(drive * np.float32([1.0, 1.0, 0.5])) is None
+
+
+def test_only_once_bounced_diffuse_light_takes_the_grey_render():
+    """Glossy or metallic lobes, two objects that may light each other, a bowed board or a mesh
+    under unbounded paths keep the per-primary renders; direct light (max_depth <= 2) bounces
+    once whatever the geometry; a colour or black drive is not grey."""
+    from simbench.sim.capture import _grey_drive, grey_scene, single_bounce
+    from simbench.sim.photometry import channel_weights
+    from simbench.sim.scene import scene_from_dict
+    from simbench.sim.spectral import material_crosstalk
+
+    plane = {"type": "plane", "name": "p", "center_m": [0.0, 0.0, 1.0], "size_m": [0.5, 0.5]}
+    two = [plane, {**plane, "name": "q", "center_m": [0.0, 0.0, 1.2]}]
+    for objects in ([plane], [_TARGET], [_ONE_PASS_OBJECTS["sphere"]]):
+        assert single_bounce(scene_from_dict({"object": objects}), max_depth=6), objects
+    assert single_bounce(scene_from_dict({"object": two}), max_depth=2)
+    assert single_bounce(load_scene(SCENES / "bust.toml"), max_depth=2)
+    for objects in (two, [{**plane, "bow_m_per_m": 0.001}], [{**_TARGET, "waviness_m": 0.001}]):
+        assert not single_bounce(scene_from_dict({"object": objects}), max_depth=6), objects
+        assert not single_bounce(scene_from_dict({"object": objects}), max_depth=-1), objects
+    assert not single_bounce(load_scene(SCENES / "bust.toml"), max_depth=6)
+    for material in ({"material": "plastic"}, {"material": "metal", "metal": "aluminium"}):
+        assert not single_bounce(scene_from_dict({"object": [{**plane, **material}]}), max_depth=2), material
+    grey = np.full((4, 5, 3), 0.5, np.float32)
+    assert _grey_drive(grey) is grey
+    assert _grey_drive(np.zeros_like(grey)) is None and _grey_drive(grey * np.float32([1, 1, 0.9])) is None
+    # the reflectances: sum_p w[c, p] k[c, p], scaled to <= 1 together (materials and inks)
+    scene = scene_from_dict({"object": [_TARGET, {**plane, "rgb": [0.9, 0.2, 0.1]}]})
+    w = channel_weights(get_sensor("paper"), scene.rig)
+    mixed, scale = grey_scene(scene, w)
+    for o, m in zip(scene.objects, mixed.objects):
+        want = (w * np.clip(material_crosstalk(o.material.rgb, None), 0, 1)).sum(axis=1)
+        assert np.allclose(np.asarray(m.material.rgb) * scale, want, rtol=1e-12)
+    ink = (w * np.clip(material_crosstalk(_TARGET["ink_rgb"], None), 0, 1)).sum(axis=1)
+    assert np.allclose(np.asarray(mixed.objects[0].get("ink_rgb")) * scale, ink, rtol=1e-12)
+    assert scale >= 1 and max(max(m.material.rgb) for m in mixed.objects) == pytest.approx(1.0)
+
+
 @pytest.mark.parametrize("crosstalk", [True, False])
 def test_the_ambient_light_on_a_plane_filling_the_view_is_its_constant(variant, monkeypatch, crosstalk):
     """A diffuse plane that alone fills the view under the constant environment reflects rho x L

@@ -40,6 +40,8 @@ from simbench.sim.truth import GroundTruth, ground_truth
 __all__ = [
     "cached_radiance",
     "one_pass_response",
+    "single_bounce",
+    "grey_scene",
     "uniform_ambient",
     "fills_view",
     "cached_ground_truth",
@@ -240,6 +242,67 @@ def uniform_ambient(scene: SceneSpec, *, max_depth: int) -> np.ndarray | None:
     return (np.asarray(o.material.rgb, np.float64) * np.asarray(scene.ambient_rgb, np.float64)).astype(np.float32)
 
 
+def single_bounce(scene: SceneSpec, *, max_depth: int) -> bool:
+    """Whether every path of a render of ``scene`` that reaches the projector bounces once, off
+    a Lambertian surface: every material diffuse (printed inks included) and either the
+    renderer stops there (``max_depth`` 0-2, Mitsuba's convention: 2 is direct light) or the
+    scene is one convex object (:func:`one_pass_response`'s geometry, a printed target
+    included) that cannot light itself.  The condition, beside a grey drive, for
+    :func:`grey_scene`'s one render."""
+    if any(o.material.kind != "diffuse" for o in scene.objects):
+        return False
+    if 0 <= max_depth <= 2:
+        return True
+    if len(scene.objects) != 1:
+        return False
+    o = scene.objects[0]
+    flat = o.kind in ("plane", "target") and not any(
+        float(o.get(k, 0.0) or 0.0) != 0.0 for k in ("bow_m_per_m", "waviness_m")
+    )
+    return o.kind in ("box", "sphere") or flat
+
+
+def grey_scene(scene: SceneSpec, weights: np.ndarray) -> tuple[SceneSpec, float]:
+    """``scene`` with each reflectance (materials' and inks') replaced by what camera channel c
+    records of it under light of equal drive in the projector's three primaries,
+    ``sum_p weights[c, p] k[c, p]`` (``k`` its crosstalk matrix, clipped as
+    :func:`_primary_scene` clips it), divided by ``scale`` (returned; >= 1) so that no
+    reflectance exceeds 1.
+
+    Where every path bounces once off a Lambertian surface (:func:`single_bounce`), a path's
+    contribution to channel c of primary p's render is ``drive * k[c, p] * G`` with G the same
+    for every primary (the same seed draws the same paths: the diffuse lobe is sampled the same
+    whatever its albedo, and the projector is a delta light), so the weighted sum of the three
+    per-primary renders of a grey drive is ``scale`` times one render of this scene - to float
+    rounding (a calibration pose's frame: max 3.2e-7 relative, ``tests/test_render.py``)."""
+    weights = np.asarray(weights, np.float64)
+
+    def mixed(rgb, spectrum) -> np.ndarray:
+        return (weights * np.clip(material_crosstalk(rgb, spectrum), 0.0, 1.0)).sum(axis=1)
+
+    mats = [mixed(o.material.rgb, o.material.spectrum) for o in scene.objects]
+    inks = [{key: mixed(o.get(key), None) for key in OBJECT_KIND_TABLE[o.kind].colour_keys} for o in scene.objects]
+    scale = max(1.0, *(float(m.max()) for m in mats), *(float(v.max()) for d in inks for v in d.values()))
+    objects = []
+    for o, m, ink in zip(scene.objects, mats, inks):
+        mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in m / scale), spectrum=None)
+        params = dict(o.params)
+        params.update({key: tuple(float(x) for x in v / scale) for key, v in ink.items()})
+        objects.append(dataclasses.replace(o, material=mat, params=tuple(sorted(params.items()))))
+    return dataclasses.replace(scene, objects=tuple(objects)), scale
+
+
+def _grey_drive(drive: "np.ndarray | ProjectorDrive") -> "np.ndarray | DriveImage | None":
+    """The drive of primary 0 alone in all three channels when the drive shows the same image in
+    its three primaries (a phase-shift or calibration frame, the same after the projector
+    model), else None (also when it shows nothing)."""
+    if isinstance(drive, ProjectorDrive):
+        digests = {drive.digests()[f"mono{p}"] for p in range(3)}
+        return drive.primary(0) if len(digests) == 1 and "" not in digests else None
+    grey = np.array_equal(drive[..., 0], drive[..., 1]) and np.array_equal(drive[..., 1], drive[..., 2])
+    return drive if grey and drive.any() else None
+
+
 def _white_scene(scene: SceneSpec) -> SceneSpec:
     """``scene`` (one diffuse object: :func:`one_pass_response`) with a white material."""
     (o,) = scene.objects
@@ -290,7 +353,10 @@ def render_channels(
     specular tint).  Where that sum factors per pixel (one diffuse convex object:
     :func:`one_pass_response`), the three primaries are one render of the drive as it is on a
     white material, each pixel's channels then mixed by the material's response and the weights
-    - the same capture to float rounding, a third of the renders.  The ambient light is rendered
+    - the same capture to float rounding, a third of the renders; so too where the drive shows
+    the same image in the three primaries (phase-shift and calibration frames) and every path
+    bounces once off Lambertian surfaces (:func:`single_bounce`: direct light, or a printed target
+    alone), one render of the reflectances each channel records (:func:`grey_scene`).  The ambient light is rendered
     apart (light adds linearly; one emitter per render keeps the path tracer's noise that of a
     single light) and, with crosstalk, once per primary's materials: light of the projector's
     white.  Then the translucent objects' subsurface
@@ -355,10 +421,16 @@ def render_channels(
                 # the environment on the white plane that fills the view: L_c everywhere, exactly
                 # (uniform_ambient), not a render's estimate of it
                 q += a_c * mix.sum(axis=1).astype(np.float32)
+        # a grey drive lighting surfaces that the light leaves after one bounce: the three
+        # primaries' renders are one render of the reflectances each channel records of them
+        grey = _grey_drive(drive) if response is None and single_bounce(dark, max_depth=render.max_depth) else None
+        if grey is not None:
+            mixed, scale = grey_scene(dark, weights)
+            q += cached_radiance(mixed, grey, seed=seed, **kw) * np.float32(scale)
         if response is None or (ambient and not ambient_once):
             for p in range(3):
                 r = np.zeros_like(q)
-                if response is None:
+                if response is None and grey is None:
                     mono = drive.primary(p) if lazy else mono_drive(drive, p)
                     # the same seed for each primary: the sum has one render's sampling pattern; a
                     # primary the drive leaves off (calibration frames) lights nothing

@@ -39,7 +39,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
 import warnings
 from collections.abc import Callable, Sequence
 from functools import lru_cache
@@ -47,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench.io import atomic_write_text
+from simbench.cache import user_cache_dir
+from simbench.io import atomic_write_text, read_json_dict
 
 __all__ = [
     "memo_path",
@@ -88,11 +88,9 @@ _MEMO: dict | None = None
 
 def memo_path() -> Path | None:
     """The file of the spectral memo (see above), or None when it is off."""
-    root = os.environ.get("SIMBENCH_CACHE_DIR")
-    if root == "":
-        return None
+    root = user_cache_dir()
     if root is None:
-        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "simbench"
+        return None
     from importlib import metadata
 
     try:
@@ -107,14 +105,6 @@ def _source_digest() -> str:
     return hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16]
 
 
-def _read_memo(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}  # missing or damaged: recompute (and rewrite) what is asked for
-    return data if isinstance(data, dict) else {}
-
-
 def _persistent(fn: Callable) -> Callable:
     """``fn`` (hashable arguments; an array or a tuple of floats out) remembered in the memo
     file: computed at most once per colour-science version and version of this module."""
@@ -126,7 +116,7 @@ def _persistent(fn: Callable) -> Callable:
         key = f"{fn.__name__}{args!r}"
         if path is not None:
             if _MEMO is None:
-                _MEMO = _read_memo(path)
+                _MEMO = read_json_dict(path)
             hit = _MEMO.get(key)
             if isinstance(hit, dict) and hit.get("kind") in ("array", "tuple"):
                 if hit["kind"] == "tuple":
@@ -139,7 +129,7 @@ def _persistent(fn: Callable) -> Callable:
             entry = {"kind": "tuple" if isinstance(value, tuple) else "array", "value": np.asarray(value).tolist()}
             _MEMO[key] = entry
             try:  # merge with what other processes wrote meanwhile; replace atomically
-                atomic_write_text(path, json.dumps({**_read_memo(path), key: entry}))
+                atomic_write_text(path, json.dumps({**read_json_dict(path), key: entry}))
             except OSError:
                 pass  # an unwritable cache folder costs time, not results
         return value
