@@ -279,6 +279,9 @@ def test_a_grey_drive_on_once_bounced_light_is_one_render(variant, monkeypatch, 
     scene = capture.physical_scene(scene, sensor)
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
     assert capture.one_pass_response(dark) is None and capture.single_bounce(dark, max_depth=max_depth)
+    # the paper model's ambient light: its three per-primary renders become one too, the
+    # environment seen beside the target included (grey_ambient_scene)
+    assert max(scene.ambient_rgb) > 0
     _, scale = capture.grey_scene(dark, capture.channel_weights(sensor, scene.rig))
     assert scale > 1  # the paper camera's channels see more than their own primary: scaled back after
     h, w = scene.rig.projector.size_hw
@@ -298,7 +301,7 @@ def test_only_once_bounced_diffuse_light_takes_the_grey_render():
     """Glossy or metallic lobes, two objects that may light each other, a bowed board or a mesh
     under unbounded paths keep the per-primary renders; direct light (max_depth <= 2) bounces
     once whatever the geometry; a colour or black drive is not grey."""
-    from simbench.sim.capture import _grey_drive, grey_scene, single_bounce
+    from simbench.sim.capture import _grey_drive, grey_ambient_scene, grey_scene, single_bounce
     from simbench.sim.photometry import channel_weights
     from simbench.sim.scene import scene_from_dict
     from simbench.sim.spectral import material_crosstalk
@@ -328,6 +331,14 @@ def test_only_once_bounced_diffuse_light_takes_the_grey_render():
     ink = (w * np.clip(material_crosstalk(_TARGET["ink_rgb"], None), 0, 1)).sum(axis=1)
     assert np.allclose(np.asarray(mixed.objects[0].get("ink_rgb")) * scale, ink, rtol=1e-12)
     assert scale >= 1 and max(max(m.material.rgb) for m in mixed.objects) == pytest.approx(1.0)
+    # the ambient render's: the environment times each channel's weight sum, the reflectances
+    # divided by it - their product the same sum_p w[c, p] k[c, p]
+    lit = dataclasses.replace(scene, ambient_rgb=(0.02, 0.03, 0.04))
+    amb = grey_ambient_scene(lit, w)
+    assert np.allclose(amb.ambient_rgb, np.asarray(lit.ambient_rgb) * w.sum(axis=1), rtol=1e-12)
+    for o, m in zip(scene.objects, amb.objects):
+        want = (w * np.clip(material_crosstalk(o.material.rgb, None), 0, 1)).sum(axis=1)
+        assert np.allclose(np.asarray(m.material.rgb) * w.sum(axis=1), want, rtol=1e-12) and max(m.material.rgb) <= 1
 
 
 @pytest.mark.parametrize("crosstalk", [True, False])

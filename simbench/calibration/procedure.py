@@ -90,10 +90,10 @@ DEFAULT_POSES = 10
 # the local homography needs this many decoded pixels around a corner (assumption: a 4-point
 # homography fitted to >= 50 points averages the phase noise down by > 3x)
 MIN_WINDOW_POINTS = 50
-# bump when what observe_pose computes from the same renders changes (its cache key); 3: a
-# frame's three per-primary renders became one (simbench.sim.capture.grey_scene), the same
-# frames to float rounding
-OBSERVATION_VERSION = 3
+# bump when what observe_pose computes from the same renders changes (its cache key); 4: a
+# frame's three per-primary renders became one (simbench.sim.capture.grey_scene), and so did
+# the ambient light's (grey_ambient_scene), the same frames to float rounding
+OBSERVATION_VERSION = 4
 # The lens models a solve may fit (OpenCV flags; every model has one focal length: square
 # pixels).  "radial" (the default) fits k1, k2; "radial_tangential" also p1, p2, the Bouguet
 # toolbox's default (k3 stays 0 in both, as there).  The tangential terms model a decentred

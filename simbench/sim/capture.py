@@ -42,6 +42,7 @@ __all__ = [
     "one_pass_response",
     "single_bounce",
     "grey_scene",
+    "grey_ambient_scene",
     "uniform_ambient",
     "fills_view",
     "cached_ground_truth",
@@ -262,6 +263,30 @@ def single_bounce(scene: SceneSpec, *, max_depth: int) -> bool:
     return o.kind in ("box", "sphere") or flat
 
 
+def _recorded_reflectances(scene: SceneSpec, weights: np.ndarray) -> tuple[list[np.ndarray], list[dict]]:
+    """Each object's material reflectance and inks as camera channel c records them under equal
+    light of the projector's three primaries, ``sum_p weights[c, p] k[c, p]`` (``k`` the
+    crosstalk matrix, clipped as :func:`_primary_scene` clips it)."""
+    weights = np.asarray(weights, np.float64)
+
+    def mixed(rgb, spectrum) -> np.ndarray:
+        return (weights * np.clip(material_crosstalk(rgb, spectrum), 0.0, 1.0)).sum(axis=1)
+
+    mats = [mixed(o.material.rgb, o.material.spectrum) for o in scene.objects]
+    inks = [{key: mixed(o.get(key), None) for key in OBJECT_KIND_TABLE[o.kind].colour_keys} for o in scene.objects]
+    return mats, inks
+
+
+def _with_reflectances(scene: SceneSpec, mats: list[np.ndarray], inks: list[dict], divisor) -> SceneSpec:
+    objects = []
+    for o, m, ink in zip(scene.objects, mats, inks):
+        mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in m / divisor), spectrum=None)
+        params = dict(o.params)
+        params.update({key: tuple(float(x) for x in v / divisor) for key, v in ink.items()})
+        objects.append(dataclasses.replace(o, material=mat, params=tuple(sorted(params.items()))))
+    return dataclasses.replace(scene, objects=tuple(objects))
+
+
 def grey_scene(scene: SceneSpec, weights: np.ndarray) -> tuple[SceneSpec, float]:
     """``scene`` with each reflectance (materials' and inks') replaced by what camera channel c
     records of it under light of equal drive in the projector's three primaries,
@@ -274,22 +299,24 @@ def grey_scene(scene: SceneSpec, weights: np.ndarray) -> tuple[SceneSpec, float]
     for every primary (the same seed draws the same paths: the diffuse lobe is sampled the same
     whatever its albedo, and the projector is a delta light), so the weighted sum of the three
     per-primary renders of a grey drive is ``scale`` times one render of this scene - to float
-    rounding (a calibration pose's frame: max 3.2e-7 relative, ``tests/test_render.py``)."""
-    weights = np.asarray(weights, np.float64)
-
-    def mixed(rgb, spectrum) -> np.ndarray:
-        return (weights * np.clip(material_crosstalk(rgb, spectrum), 0.0, 1.0)).sum(axis=1)
-
-    mats = [mixed(o.material.rgb, o.material.spectrum) for o in scene.objects]
-    inks = [{key: mixed(o.get(key), None) for key in OBJECT_KIND_TABLE[o.kind].colour_keys} for o in scene.objects]
+    rounding (2e-7 of the brightest pixel, ``tests/test_physics_renders.py``)."""
+    mats, inks = _recorded_reflectances(scene, weights)
     scale = max(1.0, *(float(m.max()) for m in mats), *(float(v.max()) for d in inks for v in d.values()))
-    objects = []
-    for o, m, ink in zip(scene.objects, mats, inks):
-        mat = dataclasses.replace(o.material, rgb=tuple(float(x) for x in m / scale), spectrum=None)
-        params = dict(o.params)
-        params.update({key: tuple(float(x) for x in v / scale) for key, v in ink.items()})
-        objects.append(dataclasses.replace(o, material=mat, params=tuple(sorted(params.items()))))
-    return dataclasses.replace(scene, objects=tuple(objects)), scale
+    return _with_reflectances(scene, mats, inks, scale), scale
+
+
+def grey_ambient_scene(scene: SceneSpec, weights: np.ndarray) -> SceneSpec:
+    """``scene`` whose ambient render is the three per-primary ambient renders' weighted sum,
+    where every path bounces once off a Lambertian surface (:func:`single_bounce`): the
+    environment's channel c times ``sum_p weights[c, p]`` (what a pixel that sees the
+    environment itself records of the primaries' ambient renders), each reflectance
+    :func:`grey_scene`'s divided by that sum (<= 1: a weighted mean of reflectances), so that a
+    path off a surface carries ``L_c sum_p weights[c, p] k[c, p]``, as the sum does (the constant
+    environment is sampled the same whatever its radiance)."""
+    total = np.asarray(weights, np.float64).sum(axis=1)  # [c]
+    mats, inks = _recorded_reflectances(scene, weights)
+    out = _with_reflectances(scene, mats, inks, total)
+    return dataclasses.replace(out, ambient_rgb=tuple(float(a * t) for a, t in zip(scene.ambient_rgb, total)))
 
 
 def _grey_drive(drive: "np.ndarray | ProjectorDrive") -> "np.ndarray | DriveImage | None":
@@ -421,13 +448,18 @@ def render_channels(
                 # the environment on the white plane that fills the view: L_c everywhere, exactly
                 # (uniform_ambient), not a render's estimate of it
                 q += a_c * mix.sum(axis=1).astype(np.float32)
+        once = response is None and single_bounce(dark, max_depth=render.max_depth)
         # a grey drive lighting surfaces that the light leaves after one bounce: the three
         # primaries' renders are one render of the reflectances each channel records of them
-        grey = _grey_drive(drive) if response is None and single_bounce(dark, max_depth=render.max_depth) else None
+        grey = _grey_drive(drive) if once else None
         if grey is not None:
             mixed, scale = grey_scene(dark, weights)
             q += cached_radiance(mixed, grey, seed=seed, **kw) * np.float32(scale)
-        if response is None or (ambient and not ambient_once):
+        # the ambient light, which no drive colours, likewise where it bounces once
+        ambient_per_primary = ambient and not ambient_once and not once
+        if ambient and not ambient_once and once:
+            q += cached_radiance(grey_ambient_scene(scene, weights), None, seed=_ambient_seed(seed), **kw)
+        if (response is None and grey is None) or ambient_per_primary:
             for p in range(3):
                 r = np.zeros_like(q)
                 if response is None and grey is None:
@@ -436,7 +468,7 @@ def render_channels(
                     # primary the drive leaves off (calibration frames) lights nothing
                     if mono is not None if lazy else mono.any():
                         r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
-                if ambient and not ambient_once:
+                if ambient_per_primary:
                     r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
                 q += r * weights[:, p].astype(np.float32)
     q = with_translucency(q, translucent_scene, cache=render.cache)
