@@ -79,7 +79,10 @@ def _cmd_calibrate(args) -> int:
         overwrite=args.overwrite,
     )
     rms = result.rms_px
-    cached = f", {cache.hits} of {cache.hits + cache.misses} poses from the cache" if cache.root is not None else ""
+    # the poses observed here (each observation one cache entry); the rest were read (the cache
+    # also serves the poses' projector depth maps, which its hit count would add)
+    observed = cache.made.get("calibration_view", (0, 0.0))[0]
+    cached = f", {args.poses - observed} of {args.poses} poses from the cache" if cache.root is not None else ""
     print(
         f"calibrated {rig.name} through sensor model {args.camera} from {len(result.used_views)} of {args.poses} poses "
         f"({variant}{cached}) in {time.perf_counter() - t0:.1f} s: reprojection RMS camera {rms['camera']:.3f} px, "
