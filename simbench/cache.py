@@ -217,7 +217,7 @@ def source_digest(paths: Iterable[str | Path]) -> str:
     for path in paths:
         st = Path(path).stat()
         files.append((str(path), st.st_mtime_ns, st.st_size))
-    h = hashlib.sha256(f"python{sys.version_info[0]}.{sys.version_info[1]}".encode())
+    h = hashlib.sha256(f"python{sys.version_info[0]}.{sys.version_info[1]}/code{CODE_TEXT_VERSION}".encode())
     for (path, _, _), code in zip(files, _code_bytes(tuple(files))):
         h.update(Path(path).name.encode())
         h.update(code)
@@ -225,6 +225,9 @@ def source_digest(paths: Iterable[str | Path]) -> str:
 
 
 _HEX64 = re.compile(r"[0-9a-f]{64}")
+# bump when what code_text keeps of a module changes: it names the memo of file digests, whose
+# entries are keyed by the files' bytes alone
+CODE_TEXT_VERSION = 1
 
 
 def user_cache_dir() -> Path | None:
@@ -249,7 +252,11 @@ def _code_bytes(files: tuple[tuple[str, int, int], ...]) -> tuple[bytes, ...]:
     data = [Path(path).read_bytes() for path, _, _ in files]
     raw = [hashlib.sha256(d).hexdigest() for d in data]
     root = user_cache_dir()
-    memo = None if root is None else root / f"code-digests-python{sys.version_info[0]}.{sys.version_info[1]}.json"
+    memo = (
+        None
+        if root is None
+        else root / f"code-digests-v{CODE_TEXT_VERSION}-python{sys.version_info[0]}.{sys.version_info[1]}.json"
+    )
     known = {} if memo is None else read_json_dict(memo)
     new = {}
     out = []
@@ -259,7 +266,11 @@ def _code_bytes(files: tuple[tuple[str, int, int], ...]) -> tuple[bytes, ...]:
             continue
         hit = known.get(r)
         if not (isinstance(hit, str) and _HEX64.fullmatch(hit)):
-            hit = new[r] = hashlib.sha256(code_text(d).encode()).hexdigest()
+            try:
+                text = code_text(d).encode()
+            except (SyntaxError, ValueError):  # not parsable here (a file being written, newer syntax)
+                text = b"bytes:" + d
+            hit = new[r] = hashlib.sha256(text).hexdigest()
         out.append(bytes.fromhex(hit))
     if new and memo is not None:
         try:  # merged with what other processes wrote meanwhile; replaced atomically

@@ -357,7 +357,10 @@ def test_simulator_code_digest_holds_the_lens_loops_and_not_the_decoders(tmp_pat
     for edit, changes in (
         (lambda text: text + b"\n_EDITED = 1\n", True),
         (lambda text: text + b"\n# edited\n", False),
-        (lambda text: text.replace(b'"""', b'"""An edited docstring. ', 1).replace(b"    ", b"        "), False),
+        (
+            lambda text: text.replace(b'"""', b'"""An edited docstring. ', 1).replace(b"\n\ndef ", b"\n\n\n\ndef "),
+            False,
+        ),
     ):
         copy = tmp_path / f"sim{len(list(tmp_path.glob('sim*')))}"
         copy.mkdir()
@@ -399,12 +402,15 @@ def test_source_digest_follows_the_code_not_its_comments_docstrings_or_layout(tm
         '"""Module."""\ndef f(y):\n    return y + 1\nclass A:\n    y = "s"\n',  # a name
     ):
         assert digest(changed) != base, changed
-    memo = next((tmp_path / "memo").glob("code-digests-python*.json"))
+    memo = next((tmp_path / "memo").glob(f"code-digests-v{cache_mod.CODE_TEXT_VERSION}-python*.json"))
     assert len(json.loads(memo.read_text())) >= 4
     memo.write_text("{not json")
     assert digest(same) == base and isinstance(json.loads(memo.read_text()), dict)
     monkeypatch.setenv("SIMBENCH_CACHE_DIR", "")
     assert digest(same) == base
+    # a file that does not parse (one being written, say) counts by its bytes
+    broken = digest("def f(:\n")
+    assert broken != base and digest("def f(:\n ") != broken
     c = tmp_path / "k.c"
     c.write_bytes(b"int f(void) { return 1; }\n")
     one = cache_mod.source_digest([c])

@@ -287,9 +287,15 @@ def test_a_grey_drive_on_once_bounced_light_is_one_render(variant, monkeypatch, 
     h, w = scene.rig.projector.size_hw
     drive = np.repeat(np.random.default_rng(5).random((h, w, 1), dtype=np.float32), 3, axis=2)
     render = RenderSettings(spp=4, sampler="independent", max_depth=max_depth)
+    renders = []
+    rendered = capture.cached_radiance
+    monkeypatch.setattr(capture, "cached_radiance", lambda *a, **k: renders.append(a[1] is None) or rendered(*a, **k))
     one = capture.render_channels(scene, drive, sensor, seed=11, render=render)
+    # one projector render and one ambient render, not three of each
+    assert sorted(renders) == [False, True], renders
     monkeypatch.setattr(capture, "single_bounce", lambda s, *, max_depth: False)
     per = capture.render_channels(scene, drive, sensor, seed=11, render=render)
+    assert len(renders) == 2 + 6
     assert per.max() > 0 and (per > 0).mean() > 0.05
     assert np.abs(one - per).max() <= 1e-5 * per.max()
     # a drive whose primaries differ keeps the per-primary renders
@@ -318,9 +324,24 @@ def test_only_once_bounced_diffuse_light_takes_the_grey_render():
     assert not single_bounce(load_scene(SCENES / "bust.toml"), max_depth=6)
     for material in ({"material": "plastic"}, {"material": "metal", "metal": "aluminium"}):
         assert not single_bounce(scene_from_dict({"object": [{**plane, **material}]}), max_depth=2), material
+    assert not single_bounce(dataclasses.replace(scene_from_dict({"object": [plane]}), objects=()), max_depth=2)
     grey = np.full((4, 5, 3), 0.5, np.float32)
     assert _grey_drive(grey) is grey
     assert _grey_drive(np.zeros_like(grey)) is None and _grey_drive(grey * np.float32([1, 1, 0.9])) is None
+    # a lazy drive (phase-shift captures) through the paper projector model, known by its
+    # per-primary digests: primary 0's image where the three are the same
+    from simbench.sim.capture import physical_scene
+    from simbench.sim.drive import ProjectorDrive
+
+    sensor = get_sensor("paper")
+    board = physical_scene(scene_from_dict({"object": [_TARGET]}), sensor)
+    h, w = board.rig.projector.size_hw
+    ramp = np.broadcast_to(np.linspace(0, 255, w).astype(np.uint8)[None, :, None], (h, w, 3)).copy()
+    lazy = _grey_drive(ProjectorDrive(board, ramp, sensor))
+    assert lazy is not None and lazy.digest == ProjectorDrive(board, ramp, sensor).digests()["mono0"]
+    assert np.array_equal(lazy.make()[..., 0], lazy.make()[..., 2])
+    ramp[..., 2] //= 2
+    assert _grey_drive(ProjectorDrive(board, ramp, sensor)) is None
     # the reflectances: sum_p w[c, p] k[c, p], scaled to <= 1 together (materials and inks)
     scene = scene_from_dict({"object": [_TARGET, {**plane, "rgb": [0.9, 0.2, 0.1]}]})
     w = channel_weights(get_sensor("paper"), scene.rig)

@@ -250,7 +250,7 @@ def single_bounce(scene: SceneSpec, *, max_depth: int) -> bool:
     scene is one convex object (:func:`one_pass_response`'s geometry, a printed target
     included) that cannot light itself.  The condition, beside a grey drive, for
     :func:`grey_scene`'s one render."""
-    if any(o.material.kind != "diffuse" for o in scene.objects):
+    if not scene.objects or any(o.material.kind != "diffuse" for o in scene.objects):
         return False
     if 0 <= max_depth <= 2:
         return True
