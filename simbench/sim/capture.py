@@ -383,7 +383,8 @@ def render_channels(
     - the same capture to float rounding, a third of the renders; so too where the drive shows
     the same image in the three primaries (phase-shift and calibration frames) and every path
     bounces once off Lambertian surfaces (:func:`single_bounce`: direct light, or a printed target
-    alone), one render of the reflectances each channel records (:func:`grey_scene`).  The ambient light is rendered
+    alone), one render of the reflectances each channel records (:func:`grey_scene`; their ambient
+    light likewise, :func:`grey_ambient_scene`).  The ambient light is rendered
     apart (light adds linearly; one emitter per render keeps the path tracer's noise that of a
     single light) and, with crosstalk, once per primary's materials: light of the projector's
     white.  Then the translucent objects' subsurface
