@@ -1289,7 +1289,7 @@ void bounded_mean(int64_t h, int64_t w, const float *restrict values, const int6
 }
 
 /* The channel normalisation's per-row work holds, per pixel, eight floats: the three channels'
- * running minima, their maxima, two unused (so that a pixel's six chains load as two vectors). */
+ * running minima and a fourth lane, then their maxima and a fourth lane (two vectors). */
 #define EXT 8
 typedef float v4f_n __attribute__((vector_size(16)));
 typedef double v4d_n __attribute__((vector_size(32)));
@@ -1299,17 +1299,23 @@ static inline v4d_n ld4d(const float *p) {
     return __builtin_convertvector(f, v4d_n);
 }
 
-/* The six running extrema of running_extrema (three minima, then three maxima) started at one
- * pixel's values, and one pixel folded into them, the result stored at q (EXT floats). */
-static inline void extrema_start(const float *restrict p, float acc[6]) {
-    for (int c = 0; c < 3; c++) acc[c] = acc[3 + c] = p[c];
+/* A pixel's three channels and the next value (any) as one vector, and the lane-wise minimum and
+ * maximum of two such vectors with the scalar forms' selection, a < b ? a : b and a > b ? a : b
+ * (the same value for any finite input, the same operand kept on a tie). */
+typedef int32_t v4i_n __attribute__((vector_size(16)));
+static inline v4f_n ld4f(const float *p) {
+    v4f_n f;
+    memcpy(&f, p, sizeof f);
+    return f;
 }
-static inline void extrema_step(const float *restrict p, float acc[6], float *restrict q) {
-    for (int c = 0; c < 3; c++) {
-        acc[c] = p[c] < acc[c] ? p[c] : acc[c];
-        acc[3 + c] = p[c] > acc[3 + c] ? p[c] : acc[3 + c];
-    }
-    for (int j = 0; j < 6; j++) q[j] = acc[j];
+static inline void st4f(float *p, v4f_n v) { memcpy(p, &v, sizeof v); }
+static inline v4f_n vmin4(v4f_n a, v4f_n b) {
+    const v4i_n m = a < b;
+    return (v4f_n)(((v4i_n)a & m) | ((v4i_n)b & ~m));
+}
+static inline v4f_n vmax4(v4f_n a, v4f_n b) {
+    const v4i_n m = a > b;
+    return (v4f_n)(((v4i_n)a & m) | ((v4i_n)b & ~m));
 }
 
 /* Running extrema of k = 2 r + 1 values along a row of w pixels of three interleaved channels,
@@ -1317,9 +1323,9 @@ static inline void extrema_step(const float *restrict p, float acc[6], float *re
  * window clipped to the row holds the same values), by van Herk / Gil-Werman: over the padded
  * row of n = w + 2 r pixels, per block of k pixels the running extremum from the block's start
  * (g) and from its end (e), then the window [i, i + k) is e[i] against g[i + k - 1].  Exact for
- * finite values (a minimum is a minimum in any order).  The six chains (three channels, minimum
- * and maximum) run side by side.  pad: n x 3 floats; g, e: n x EXT; ext: w x EXT (the three
- * minima, then the three maxima). */
+ * finite values (a minimum is a minimum in any order).  A pixel's three channels are the first
+ * three lanes of a vector (the fourth, the next value, is carried along and dropped).  pad: n x 3
+ * + 1 floats; g, e: n x EXT; ext: w x EXT (the three minima and 0, then the three maxima and 0). */
 ROW_FN void running_extrema(int64_t w, int64_t r, const float *restrict v, float *restrict pad, float *restrict g,
                             float *restrict e, float *restrict ext) {
     const int64_t k = 2 * r + 1, n = w + 2 * r;
@@ -1329,20 +1335,27 @@ ROW_FN void running_extrema(int64_t w, int64_t r, const float *restrict v, float
             pad[3 * (r + w + i) + c] = v[3 * (w - 1) + c];
         }
     memcpy(pad + 3 * r, v, (size_t)(3 * w) * sizeof(float));
+    pad[3 * n] = 0.0f; /* the last pixel's fourth lane */
     for (int64_t b = 0; b < n; b += k) {
         const int64_t end = b + k < n ? b + k : n;
-        float acc[6];
-        extrema_start(pad + 3 * b, acc);
-        for (int64_t i = b; i < end; i++) extrema_step(pad + 3 * i, acc, g + EXT * i);
-        extrema_start(pad + 3 * (end - 1), acc);
-        for (int64_t i = end - 1; i >= b; i--) extrema_step(pad + 3 * i, acc, e + EXT * i);
+        v4f_n lo = ld4f(pad + 3 * b), hi = lo;
+        for (int64_t i = b; i < end; i++) {
+            const v4f_n p = ld4f(pad + 3 * i);
+            lo = vmin4(p, lo), hi = vmax4(p, hi);
+            st4f(g + EXT * i, lo), st4f(g + EXT * i + 4, hi);
+        }
+        lo = hi = ld4f(pad + 3 * (end - 1));
+        for (int64_t i = end - 1; i >= b; i--) {
+            const v4f_n p = ld4f(pad + 3 * i);
+            lo = vmin4(p, lo), hi = vmax4(p, hi);
+            st4f(e + EXT * i, lo), st4f(e + EXT * i + 4, hi);
+        }
     }
+    const v4i_n m = {-1, -1, -1, 0}; /* the fourth lane to 0 */
     for (int64_t x = 0; x < w; x++) {
         const float *a = e + EXT * x, *b = g + EXT * (x + k - 1);
-        float *o = ext + EXT * x;
-        for (int j = 0; j < 3; j++) o[j] = b[j] < a[j] ? b[j] : a[j];
-        for (int j = 3; j < 6; j++) o[j] = b[j] > a[j] ? b[j] : a[j];
-        o[6] = o[7] = 0.0f;
+        st4f(ext + EXT * x, (v4f_n)((v4i_n)vmin4(ld4f(b), ld4f(a)) & m));
+        st4f(ext + EXT * x + 4, (v4f_n)((v4i_n)vmax4(ld4f(b + 4), ld4f(a + 4)) & m));
     }
 }
 
@@ -1381,7 +1394,7 @@ ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *re
         }
         const v4f_n fa = __builtin_convertvector(a * scale, v4f_n), fb = __builtin_convertvector(b * scale, v4f_n);
         lo[3 * x] = fa[0], lo[3 * x + 1] = fa[1], lo[3 * x + 2] = fa[2];
-        hi[3 * x] = fa[3], hi[3 * x + 1] = fb[0], hi[3 * x + 2] = fb[1];
+        hi[3 * x] = fb[0], hi[3 * x + 1] = fb[1], hi[3 * x + 2] = fb[2];
         if (!direct && x + 1 < w) {
             const int64_t in = x + 1 + r < w - 1 ? x + 1 + r : w - 1, out = x - r > 0 ? x - r : 0;
             a += ld4d(ext + EXT * in) - ld4d(ext + EXT * out);
@@ -1399,13 +1412,13 @@ ROW_FN void box_means(int64_t w, int64_t r, const float *restrict ext, float *re
  * means are those of pixel 2 r (w - 1 - 2 r), the first (last) whose mean reads only extrema of
  * whole windows - the window moved inward instead of cut by the row's end.
  * scratch: normalize_scratch_floats(w, r) floats. */
-int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + (EXT + 9) * w; }
+int64_t normalize_scratch_floats(int64_t w, int64_t r) { return (3 + 2 * EXT) * (w + 2 * r) + 1 + (EXT + 9) * w; }
 
 void normalize_channels(int64_t h, int64_t w, const float *restrict rgb, const float *restrict gain, int64_t r,
                         float min_span, int64_t clamp_ends, float *restrict out, float *restrict span_out,
                         float *restrict scratch) {
     const int64_t n = w + 2 * r, m = 3 * w;
-    float *pad = scratch, *g = pad + 3 * n, *e = g + EXT * n, *ext = e + EXT * n;
+    float *pad = scratch, *g = pad + 3 * n + 1, *e = g + EXT * n, *ext = e + EXT * n;
     float *restrict lo = ext + EXT * w, *restrict hi = lo + m, *restrict scaled = hi + m;
     for (int64_t y = 0; y < h; y++) {
         const float *v = rgb + y * m; /* not restrict: it may point at scaled, written just before */

@@ -12,7 +12,7 @@ import json
 import os
 import re
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -145,26 +145,30 @@ def _exchange(a: Path, b: Path) -> bool:
     return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
 
 
-def _check_replaceable(folder: Path, manifest: str, overwrite: bool) -> None:
+def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: bool) -> None:
     """May ``folder`` be replaced by a new output?  Yes if empty; if it is an output of the
-    same kind (its ``manifest`` lists every file in it); or, with ``overwrite``, if it is an
-    output of the same kind holding other files too.  A folder simbench did not write is
-    never replaced."""
+    same kind (a ``manifest`` - or one of several names - lists every file in it); or, with
+    ``overwrite``, if it is such an output holding other files too.  A folder simbench did not
+    write is never replaced, ``overwrite`` or not."""
+    names = (manifest,) if isinstance(manifest, str) else tuple(manifest)
     entries = sorted(e.name for e in folder.iterdir())
     if not entries:
         return
     listed: set[str] | None = None
-    m = folder / manifest
-    if m.is_file():
+    for name in names:
+        m = folder / name
+        if not m.is_file():
+            continue
         try:
             files = json.loads(m.read_text(encoding="utf-8")).get("files", {})
-            listed = {str(v) for v in (files.values() if isinstance(files, dict) else files)} | {manifest}
+            listed = {str(v) for v in (files.values() if isinstance(files, dict) else files)} | {name}
+            break
         except (ValueError, AttributeError, UnicodeDecodeError):
-            listed = None
+            continue
     if listed is None:
         raise ValueError(
-            f"{folder} exists, is not empty and was not written by this command (no {manifest}); choose another output "
-            f"folder"
+            f"{folder} exists, is not empty and was not written by this command (no {' or '.join(names)}); simbench "
+            f"never replaces such a folder, --overwrite or not: choose another output folder"
         )
     extra = [e for e in entries if e not in listed]
     if extra and not overwrite:
@@ -175,7 +179,7 @@ def _check_replaceable(folder: Path, manifest: str, overwrite: bool) -> None:
         )
 
 
-def check_output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> None:
+def check_output_directory(path: str | Path, *, manifest: str | Sequence[str], overwrite: bool = False) -> None:
     """ValueError unless :func:`output_directory` could write ``path`` (call it before long
     work, so that a wrong ``--out`` fails at once)."""
     path = Path(path)
@@ -189,7 +193,7 @@ def check_output_directory(path: str | Path, *, manifest: str, overwrite: bool =
 
 
 @contextmanager
-def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False) -> Iterator[Path]:
+def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwrite: bool = False) -> Iterator[Path]:
     """A result folder written whole or not at all.
 
     Yields a temporary sibling folder to fill; when the block succeeds it takes ``path``'s
@@ -201,7 +205,8 @@ def output_directory(path: str | Path, *, manifest: str, overwrite: bool = False
     ----------
     path : the output folder
     manifest : name of the JSON file in the folder that lists its files under ``"files"``
-        (what makes an existing folder recognisable as a replaceable output)
+        (what makes an existing folder recognisable as a replaceable output), or several such
+        names (any of them: a recording folder of any depth system may take another's place)
     overwrite : replace an existing output even when it holds files it did not write
 
     Raises
@@ -466,7 +471,16 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
 
 
 def save_png(path: str | Path, image: np.ndarray) -> Path:
-    """Save an RGB (H, W, 3) or grey (H, W) uint8/uint16 image as PNG (RGB order in memory)."""
+    """Save an RGB (H, W, 3) or grey (H, W) uint8/uint16 image as PNG (RGB order in memory).
+
+    Raises
+    ------
+    ValueError
+        When ``path`` does not end in ``.png``: PNG bytes under another name (a ``.jpg``, say)
+        would be read as that format by other tools, or not at all."""
+    check_not_protected(path)  # that error first: it names what the path is
+    if Path(path).suffix.lower() != ".png":
+        raise ValueError(f"{path}: a PNG file's name must end in .png")
     return atomic_write_bytes(path, png_bytes(image, name=str(path)))
 
 

@@ -293,18 +293,19 @@ def _intrinsics_from(table: object, where: str) -> Intrinsics:
 
 def rig_from_dict(data: dict, *, where: str = "rig") -> Rig:
     """Build a :class:`Rig` from the TOML table layout documented in :func:`save_rig`."""
-    _check_keys(data, ("name", "camera", "projector", "pose"), where, required=("camera", "projector"))
-    pose = data.get("pose", {})
+    # no default pose: a rig file without its baseline would triangulate with some other rig's
+    _check_keys(data, ("name", "camera", "projector", "pose"), where, required=("camera", "projector", "pose"))
+    pose = data["pose"]
     if not isinstance(pose, dict):
         raise ValueError(f"{where}.pose: expected a table")
-    _check_keys(pose, _POSE_KEYS, f"{where}.pose")
+    _check_keys(pose, _POSE_KEYS, f"{where}.pose", required=("position_m",))
     camera = _intrinsics_from(data["camera"], f"{where}.camera")
     projector = _intrinsics_from(data["projector"], f"{where}.projector")
     try:
         return Rig(
             camera=camera,
             projector=projector,
-            position_m=tuple(pose.get("position_m", (0.093, 0.0, 0.0))),
+            position_m=tuple(pose["position_m"]),
             rotation_deg=tuple(pose.get("rotation_deg", (0.0, 0.0, 0.0))),
             name=str(data.get("name", "custom")),
         )
@@ -334,8 +335,9 @@ _RIG_HEADER = """\
 # [camera] / [projector]: width_px, height_px, focal_px, cx_px, cy_px (principal point in OpenCV
 #   pixel coordinates, where the image centre is ((W-1)/2, (H-1)/2); omitted = centred);
 #   optional distortion = [k1, k2, p1, p2, k3] (Brown-Conrady, OpenCV order; omitted = none).
-# [pose]: the projector in the camera frame: position_m = optical centre; rotation_deg = angles
-#   about x, y, z in degrees, R = Rz @ Ry @ Rx maps projector axes to camera axes.
+# [pose] (required): the projector in the camera frame: position_m = optical centre (required);
+#   rotation_deg = angles about x, y, z in degrees, R = Rz @ Ry @ Rx maps projector axes to camera
+#   axes (omitted = none).
 """
 
 

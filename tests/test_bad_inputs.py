@@ -329,6 +329,18 @@ case(
     files=_scene('rig = "rig.toml"\n' + PLANE, "[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"),
 )
 case(
+    "render-rig-missing-pose",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+    "missing key(s) ['pose']",
+    files=_scene('rig = "rig.toml"\n' + PLANE, TINY_RIG.split("[pose]")[0]),
+)
+case(
+    "render-rig-missing-position",
+    lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
+    "missing key(s) ['position_m']",
+    files=_scene('rig = "rig.toml"\n' + PLANE, TINY_RIG.replace("position_m = [0.093, 0.0, 0.0]", "")),
+)
+case(
     "render-rig-pose-not-table",
     lambda d: ["render", str(d / "s.toml"), "--out", str(d / "out")],
     "pose",

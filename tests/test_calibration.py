@@ -324,9 +324,12 @@ def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
     out, cache = tmp_path / "cal", tmp_path / "cache"
     argv = ["calibrate", "--poses", "3", "--out", str(out), "--cache", str(cache)]
     assert main(argv) == 0
-    first = capsys.readouterr().out
+    captured = capsys.readouterr()
+    first = captured.out
     # the poses counted, not the cache's look-ups (each pose also reads its projector depth map)
     assert "reprojection RMS" in first and "0 of 3 poses from the cache" in first, first
+    # fewer poses than OpenCV asks for: the user is told what such a rig is good for
+    assert "warning: a rig from 3 poses (OpenCV asks for >= 10)" in captured.err, captured.err
     info = json.loads((out / "calibration.json").read_text())
     lo, hi = PUBLISHED_RMS_PX
     assert lo <= info["rms_px"]["camera"] <= hi and lo <= info["rms_px"]["projector"] <= hi, info["rms_px"]

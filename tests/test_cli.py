@@ -14,7 +14,11 @@ def test_pattern_command(tmp_path, capsys):
     assert main(["pattern", "--out", str(tmp_path / "p.png")]) == 0
     img = load_image(tmp_path / "p.png")
     assert img.shape == (1140, 1824, 3)
-    assert "p.png" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    # the pattern made, not the options given (None where left to their defaults: the audit's find)
+    assert "p.png" in out and "period 21 px" in out and "(window 3)" in out, out
+    assert main(["pattern", "--out", str(tmp_path / "q.png"), "--order", "4", "--period", "24"]) == 0
+    assert "period 24 px, codes 0000100110101111 (window 4)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
@@ -27,6 +31,7 @@ def test_pattern_command(tmp_path, capsys):
         (["pattern", "--out", "p.png", "--sequence", "0101"], "repeats"),
         (["pattern", "--out", "p.png", "--sequence", "01x"], "0 and 1"),
         (["pattern", "--out", "p.png", "--channels", "rgg"], "permutation of 'rgb'"),
+        (["pattern", "--out", "p.jpg"], "must end in .png"),
         (["bench", "--device", "tof", "--scene", "shadow", "--repeats", "1"], "only the plane"),
         (["bench", "--rig", "missing.toml", "--repeats", "1"], "rig file not found"),
         (["bench", "--device", "tof", "--mode", "calibrated", "--repeats", "1"], "proposed decoder"),
@@ -51,6 +56,7 @@ def test_pattern_channels(tmp_path):
 def test_invalid_rig_field(tmp_path, capsys):
     (tmp_path / "r.toml").write_text(
         "[camera]\nwidth_px=1280\nheight_px=960\nfocal_px=0\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"
+        "[pose]\nposition_m=[0.093, 0.0, 0.0]\n"
     )
     assert (
         main(["decode", str(tmp_path / "c.png"), "--rig", str(tmp_path / "r.toml"), "--out", str(tmp_path / "d.npy")])
@@ -708,3 +714,76 @@ def test_reproduce_help_names_every_target():
     help_text = next(a.help for a in sub.choices["reproduce"]._actions if a.dest == "targets")  # noqa: SLF001
     listed = set(re.findall(r"\b[a-z][a-z0-9_]+\b", help_text.split(" or all")[0]))
     assert listed == set(TARGETS)
+
+
+def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_foreign_folder(tmp_path, capsys):
+    """A recording folder of another system (its device.json) is replaced like one of the same
+    system, with a line naming what was there (the audit found it refused as "not written by this
+    command", --overwrite or not); a folder simbench did not write is refused, and the message says
+    that --overwrite does not change that."""
+    from tests.test_bad_inputs import TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    out, cache = tmp_path / "out", tmp_path / "cache"
+
+    def render(*extra):
+        argv = ["render", str(tmp_path / "s.toml"), "--out", str(out), "--cache", str(cache), "--spp", "4", *extra]
+        return main(argv)
+
+    assert render("--system", "tof") == 0
+    assert "replaced" not in capsys.readouterr().out
+    assert render("--sensor", "ideal") == 0
+    assert "(replaced a tof recording of scene" in capsys.readouterr().out
+    assert (out / "meta.json").is_file() and not (out / "device.json").exists()
+    assert render("--system", "tof") == 0
+    assert "(replaced a proposed recording of scene tiny there)" in capsys.readouterr().out
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep me")
+    for extra in ((), ("--overwrite",)):
+        argv = ["render", str(tmp_path / "s.toml"), "--out", str(foreign), "--system", "tof", "--no-cache", *extra]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "never replaces such a folder, --overwrite or not" in err, err
+        assert (foreign / "notes.txt").read_text() == "keep me"
+
+
+@pytest.mark.parametrize(
+    "level, why",
+    [(0, "the capture is dark (its brightest value 0 of 255)"), (255, "100 % of the capture's pixels are saturated")],
+)
+def test_a_capture_that_decodes_to_nothing_is_decoded_and_named_on_stderr(tmp_path, capsys, level, why):
+    """A black or white frame is a legal image: decoded (all NaN, exit 0), but the user hears why
+    nothing came out instead of a quiet "decoded 0.00 %" (the audit's find)."""
+    import numpy as np
+
+    from simbench.io import save_png
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    save_png(tmp_path / "flat.png", np.full((120, 160, 3), level, np.uint8))
+    argv = ["decode", str(tmp_path / "flat.png"), "--reference", str(r / "reference.png")]
+    assert main(argv + ["--rig", str(r / "rig.toml"), "--out", str(tmp_path / "d.npy")]) == 0
+    captured = capsys.readouterr()
+    assert "decoded 0.00 % of pixels" in captured.out
+    assert f"flat.png: no pixel decoded: {why}" in captured.err, captured.err
+    assert np.isnan(np.load(tmp_path / "d.npy")).all()
+    # a capture that decodes says nothing of the kind
+    assert main(["decode", str(r), "--out", str(tmp_path / "e.npy")]) == 0
+    assert "decoded" not in capsys.readouterr().err
+
+
+def test_python_m_simbench_runs_the_command_line(tmp_path):
+    import subprocess
+    import sys
+
+    res = subprocess.run(
+        [sys.executable, "-m", "simbench", "pattern", "--out", str(tmp_path / "p.png")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0 and "period 21 px" in res.stdout, res.stderr
+    bad = subprocess.run([sys.executable, "-m", "simbench", "pattern"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "--out" in bad.stderr

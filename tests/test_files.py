@@ -125,11 +125,11 @@ def test_a_folder_decodes_its_system_way_and_refuses_the_colour_fringe_options(i
     assert np.isnan(depth[:10]).all() and (depth[10:] == np.float32(1.2)).all()
     assert (np.load(tmp_path / "d_confidence.npy") == 0).all()  # no confidence map: zeros
     for given, flags in (
-        ({"z0_m": 1.0, "robust": True}, "--z0, --robust"),
-        ({"period_px": 30}, "--period"),
-        ({"mode": "calibrated", "decoder": ("voting=false",)}, "--mode, --decoder"),
+        ({"z0_m": 1.0, "robust": True}, "--z0, --robust apply"),
+        ({"period_px": 30}, "--period applies"),
+        ({"mode": "calibrated", "decoder": ("voting=false",)}, "--mode, --decoder apply"),
     ):
-        with pytest.raises(ValueError, match=f"is a ideal_depth recording: {flags} apply to the proposed"):
+        with pytest.raises(ValueError, match=f"is a ideal_depth recording: {flags} to the proposed"):
             decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "x.npy"), **given))
     # what the system cannot give is refused, not skipped
     with pytest.raises(ValueError, match="gives no confidence map"):

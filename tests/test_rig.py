@@ -29,17 +29,20 @@ def test_toml_round_trip(tmp_path):
     "text, match",
     [
         (
-            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=-1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=-1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"
+            "[pose]\nposition_m=[0.093, 0.0, 0.0]\n",
             "focal_px",
         ),
         (
-            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\nfoo=1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\nfoo=1\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"
+            "[pose]\nposition_m=[0.093, 0.0, 0.0]\n",
             "unknown key",
         ),
         ("[camera]\nwidth_px=10\nheight_px=10\nfocal_px=5\n", "missing key"),
         ("[camera\n", "not valid TOML"),
         (
-            "[camera]\nwidth_px=10.5\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n",
+            "[camera]\nwidth_px=10.5\nheight_px=10\nfocal_px=5\n[projector]\nwidth_px=10\nheight_px=10\nfocal_px=5\n"
+            "[pose]\nposition_m=[0.093, 0.0, 0.0]\n",
             "width_px",
         ),
         (

@@ -35,6 +35,11 @@ def test_ranges_and_open_bounds_are_stated_in_the_message():
     with pytest.raises(ValueError, match=r"z must be a finite number <= 5, got 6"):
         validate.number(6, "z", hi=5)
     assert validate.number(math.inf, "z", lo=0, allow_inf=True) == math.inf
+    # an integer bound exactly as it is (a seed's range read "[0, 9.22337e+18]"), a float one in %g
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 9223372036854775807\], got -1"):
+        validate.integer(-1, "seed", lo=0, hi=2**63 - 1)
+    with pytest.raises(ValueError, match=r"z must be a finite number <= 1e\+06, got "):
+        validate.number(2e6, "z", hi=1e6)
 
 
 def test_an_integer_may_be_an_integral_float_and_a_long_value_is_shown_cut():

@@ -85,6 +85,7 @@ CALIBRATION_SPP = 1
 CALIBRATION_CORNER_SPP = 16
 CALIBRATION_SAMPLER = "multijitter"
 CALIBRATION_MAX_DEPTH = 2
+# OpenCV's documentation asks for at least 10 views of the target (calibrateCamera tutorial)
 DEFAULT_POSES = 10
 
 # the local homography needs this many decoded pixels around a corner (assumption: a 4-point

@@ -23,6 +23,7 @@ from simbench.cli.options import (
 
 def _cmd_calibrate(args) -> int:
     from simbench.calibration import calibrate_rig, get_target, true_rig
+    from simbench.calibration.procedure import DEFAULT_POSES
     from simbench.calibration.report import write_calibration
     from simbench.sim.sensor import get_sensor
     from simbench.io import check_output_directory
@@ -90,6 +91,13 @@ def _cmd_calibrate(args) -> int:
     )
     for key, path in files.items():
         print(f"  {key:9s} {path.name}")
+    if len(result.used_views) < DEFAULT_POSES:
+        print(
+            f"simbench: warning: a rig from {len(result.used_views)} poses (OpenCV asks for >= {DEFAULT_POSES}): its "
+            "lens distortion and principal points are poorly determined (report.md: its errors against the true rig) - "
+            "fine for trying the commands, not for results",
+            file=sys.stderr,
+        )
     return 0
 
 

@@ -29,7 +29,9 @@ def _cmd_pattern(args) -> int:
     spec = pattern_spec(args, (args.height, args.width))
     path = save_png(args.out, quantize(fringe_pattern(spec)))
     codes = "".join(map(str, spec.codes()))
-    print(f"pattern {args.width}x{args.height}, period {args.period} px, codes {codes} (window {args.order}) -> {path}")
+    print(
+        f"pattern {args.width}x{args.height}, period {spec.period_px} px, codes {codes} (window {spec.order}) -> {path}"
+    )
     return 0
 
 
@@ -39,7 +41,7 @@ def _cmd_render(args) -> int:
     from simbench.io import check_output_directory
     from simbench.sim.scene import load_scene
     from simbench.sim.sensor import get_sensor
-    from simbench.systems import SystemOptions, get_system, recording_manifest, system_names
+    from simbench.systems import RECORDING_MANIFESTS, SystemOptions, get_system, system_names
 
     if args.system not in system_names():  # an unknown name fails before anything else
         get_system(args.system)
@@ -51,7 +53,8 @@ def _cmd_render(args) -> int:
     )
     spp, sampler = render_settings(args)
     # before minutes of rendering
-    check_output_directory(args.out, manifest=recording_manifest(system), overwrite=args.overwrite)
+    check_output_directory(args.out, manifest=RECORDING_MANIFESTS, overwrite=args.overwrite)
+    replaced = _earlier_recording(Path(args.out))
     if not args.no_cache:
         from simbench.cache import check_cache_location
 
@@ -85,9 +88,31 @@ def _cmd_render(args) -> int:
         f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
+    if replaced:
+        print(f"  (replaced {replaced} there)")
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
     return 0
+
+
+def _earlier_recording(out: Path) -> str:
+    """What the recording folder ``out`` holds before a render replaces it (its scene and
+    system, as its manifest names them), or "" when it is absent or empty."""
+    from simbench.manifest import json_object
+    from simbench.systems import RECORDING_MANIFESTS
+
+    if not out.is_dir() or not any(out.iterdir()):
+        return ""
+    for name in RECORDING_MANIFESTS:
+        try:
+            meta = json_object(out / name)
+        except (OSError, ValueError):
+            continue
+        scene = meta.get("scene")
+        scene = scene.get("name") if isinstance(scene, dict) else scene
+        system = meta.get("system") or meta.get("device") or "?"
+        return f"a {system} recording" + (f" of scene {scene}" if scene else "")
+    return "files render did not write (--overwrite)"
 
 
 def _check_visible(gt, scene) -> None:

@@ -18,8 +18,9 @@ all (:func:`simbench.io.write_files`).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -110,7 +111,7 @@ class FileDecode:
     confidence_meaning: str
     elapsed_s: float
     colours: np.ndarray | None = None
-    stages: dict[str, np.ndarray] | None = None
+    stages: Mapping[str, np.ndarray] | None = None
     capture_file: str = ""
     commit: Callable[[], None] = field(default=lambda: None)
 
@@ -242,7 +243,34 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
+    hint = nothing_decoded_hint(res.valid, res.colours)
+    if hint:
+        logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
+
+
+# under this share of decoded pixels a decode is reported as (nearly) empty
+NOTHING_DECODED_SHARE = 0.01
+
+
+def nothing_decoded_hint(valid: np.ndarray, capture_u8: np.ndarray | None = None) -> str:
+    """A warning for a decode that found (almost) nothing - under :data:`NOTHING_DECODED_SHARE`
+    of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated);
+    "" otherwise.  The decode itself stands (NaN where nothing decoded): a dark frame is a legal
+    image, but a user who passed the wrong file should hear of it."""
+    share = float(np.mean(valid)) if np.size(valid) else 0.0
+    if share >= NOTHING_DECODED_SHARE:
+        return ""
+    why = "is the capture lit by this pattern, in focus, and taken with this rig and reference?"
+    if capture_u8 is not None and capture_u8.size:
+        top = int(capture_u8.max())
+        clipped = float((capture_u8 >= 255).all(axis=-1).mean()) if capture_u8.ndim == 3 else 0.0
+        if top <= 16:
+            why = f"the capture is dark (its brightest value {top} of 255)"
+        elif clipped >= 0.5:
+            why = f"{100 * clipped:.0f} % of the capture's pixels are saturated in every channel"
+    what = "no pixel" if share == 0 else f"only {100 * share:.2f} % of the pixels"
+    return f"{what} decoded: {why}"
 
 
 def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
@@ -259,8 +287,9 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
         if f.name not in COMMON_FIELDS and getattr(request, f.name) != getattr(defaults, f.name)
     ]
     if stray:
+        verb = "applies" if len(stray) == 1 else "apply"
         raise ValueError(
-            f"{request.capture} is a {name} recording: {', '.join(stray)} apply to the proposed sensor's folders only "
+            f"{request.capture} is a {name} recording: {', '.join(stray)} {verb} to the proposed sensor's folders only "
             f"(a {name} folder decodes the {name} way, with what it recorded)"
         )
     if request.debug_dir:

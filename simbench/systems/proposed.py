@@ -28,7 +28,7 @@ import numpy as np
 
 from simbench.manifest import read_manifest
 from simbench.sim.scene import SceneSpec, reference_scene
-from simbench.systems import RenderSettings, SystemDepth, SystemInfo, SystemOptions
+from simbench.systems import RECORDING_MANIFESTS, RenderSettings, SystemDepth, SystemInfo, SystemOptions
 from simbench.systems.proposed_folder import (
     RENDER_MANIFEST,
     describe_pattern,
@@ -528,7 +528,7 @@ def write_acquisition(acq: Acquisition, out_dir: str | Path, *, overwrite: bool 
     from simbench.rig import save_rig
 
     out = Path(out_dir)
-    with output_directory(out, manifest=RENDER_MANIFEST, overwrite=overwrite) as tmp:
+    with output_directory(out, manifest=RECORDING_MANIFESTS, overwrite=overwrite) as tmp:
         names = {
             "capture": "capture.png",
             "reference": "reference.png",

@@ -32,10 +32,11 @@ def write_device_recording(
     (``{"device": name, **model's parameters, **info}``, sealed with every file's SHA-256:
     :func:`simbench.manifest.seal_manifest`)."""
     from simbench.io import output_directory, save_exr, save_json, save_npy
+    from simbench.systems import RECORDING_MANIFESTS
 
     out = Path(out_dir)
     names = {}
-    with output_directory(out, manifest=DEVICE_MANIFEST, overwrite=overwrite) as tmp:
+    with output_directory(out, manifest=RECORDING_MANIFESTS, overwrite=overwrite) as tmp:
         for key, write in writers.items():
             names[key] = write(tmp).name
         names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
