@@ -39,6 +39,15 @@ if TYPE_CHECKING:
 __all__ = ["Recorded", "record", "depth", "score", "DEFAULT_CACHE"]
 
 DEFAULT_CACHE = ".cache/simbench"  # the command line's render cache folder
+# the ranges the command line's options take too (simbench.cli.options): seeds exact in JSON and
+# NumPy (63 bits), samples per pixel, path length (2 = direct light; Mitsuba's -1, unbounded, is
+# not offered: Russian roulette ends paths anyway)
+SEED_RANGE = (0, 2**63 - 1)
+SPP_RANGE = (1, 1 << 16)
+MAX_DEPTH_RANGE = (2, 1024)
+# confidence thresholds, in the systems' own units (the fringe SNR is < ~1e3)
+MIN_CONFIDENCE_RANGE = (0.0, 1e6)
+EDGE_BAND_RANGE_PX = (0, 1000)
 
 
 @dataclass(frozen=True)
@@ -120,12 +129,21 @@ def record(
     from simbench.seeds import DEFAULT_SEED, SeedLog
     from simbench.systems import RenderSettings, SystemOptions, acquire, get_system
 
-    seed = DEFAULT_SEED if seed is None else int(seed)
-    spp = DEFAULT_SPP if spp is None else int(spp)
+    from simbench import validate as v
+    from simbench.sim.scene import SceneSpec
+
+    # the command line's checks (its options' ranges), so that a bad argument names itself
+    if not isinstance(scene, (str, Path, SceneSpec)):
+        raise ValueError(f"scene must be a scene file (str or Path) or a SceneSpec, got {type(scene).__name__}")
+    if not (cache is None or isinstance(cache, (str, Path, RenderCache))):
+        raise ValueError(f"cache must be a folder (str or Path), a RenderCache or None, got {type(cache).__name__}")
+    seed = DEFAULT_SEED if seed is None else v.integer(seed, "seed", lo=SEED_RANGE[0], hi=SEED_RANGE[1])
+    spp = DEFAULT_SPP if spp is None else v.integer(spp, "spp", lo=SPP_RANGE[0], hi=SPP_RANGE[1])
+    max_depth = v.integer(max_depth, "max_depth", lo=MAX_DEPTH_RANGE[0], hi=MAX_DEPTH_RANGE[1])
     sampler = DEFAULT_SAMPLER if sampler is None else sampler
     check_sampler(sampler, spp)
     sensor_model = get_sensor(sensor)
-    spec = scene if not isinstance(scene, (str, Path)) else load_scene(scene)
+    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
     options = SystemOptions(sensor=sensor_model, decoder=None if pattern is None else DecoderParams(pattern=pattern))
     the_system = get_system(system, options)
     used_variant = _ensure_variant(variant)
@@ -197,6 +215,16 @@ def depth(
     from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemDepth, SystemOptions, get_system
 
+    from simbench import validate as v
+
+    if not isinstance(recorded, Recorded):
+        raise ValueError(f"depth() decodes what record() returned, got {type(recorded).__name__}")
+    if mode is not None:
+        v.choice(mode, "mode", ("reference", "calibrated"))
+    if min_confidence is not None:
+        min_confidence = v.number(
+            min_confidence, "min_confidence", lo=MIN_CONFIDENCE_RANGE[0], hi=MIN_CONFIDENCE_RANGE[1]
+        )
     rec = recorded.recording
     options = SystemOptions(sensor=get_sensor(recorded.settings.get("sensor", "paper")))
     if recorded.system == "proposed":
@@ -245,6 +273,14 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     from simbench.metrics import depth_errors, edge_band
     from simbench.systems import get_system
 
+    from simbench import validate as v
+
+    if isinstance(depth, Recorded) or not isinstance(recorded, Recorded):
+        raise ValueError(
+            f"score(depth, recorded): a depth map (or depth()'s result) and what record() returned, got "
+            f"{type(depth).__name__} and {type(recorded).__name__}"
+        )
+    edge_band_px = v.integer(edge_band_px, "edge_band_px", lo=EDGE_BAND_RANGE_PX[0], hi=EDGE_BAND_RANGE_PX[1])
     gt = recorded.gt
     depth_m = np.asarray(getattr(depth, "depth_m", depth), dtype=np.float32)
     if depth_m.shape != gt.depth_m.shape:

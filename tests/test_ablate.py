@@ -376,3 +376,22 @@ def test_speed_is_an_axis():
             scene_for({"scene.name": "motion_board", **bad})
     sweep = sweep_from_dict({"name": "speed", "axis": [{"name": "scene.speed_m_s", "values": [0.0, 0.3]}]})
     assert [r["params"]["scene.speed_m_s"] for r in expand(sweep)] == [0.0, 0.3]
+
+
+def test_the_documented_sweep_file_loads_as_written(tmp_path):
+    """The module's example sweep (docs/ablations.md points to it) parses as written; a sweep key
+    written after an [[axis]] table - TOML makes it the axis's - is named in the error (the audit
+    copied an example that did so and got 'needs exactly name and values')."""
+    import textwrap
+
+    import simbench.experiments.ablate as ablate
+
+    doc = ablate.__doc__
+    example = textwrap.dedent(doc.split("A sweep file (TOML)::", 1)[1].split("\nParameters", 1)[0])
+    (tmp_path / "doc.toml").write_text(example)
+    sweep = load_sweep(tmp_path / "doc.toml")
+    assert sweep.combine == "grid" and len(expand(sweep)) == 5 * 2 * sweep.repeats  # runs: the grid, each repeated
+    late = example.replace('combine = "grid"', "") + '\ncombine = "zip"\n'
+    (tmp_path / "late.toml").write_text(late)
+    with pytest.raises(ValueError, match=r"axis 2 holds \['combine'\] beside 'name' and 'values'"):
+        load_sweep(tmp_path / "late.toml")

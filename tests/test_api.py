@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from .conftest import SCENES
+
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 
@@ -52,7 +54,7 @@ def test_depth_and_score_of_a_known_plane():
     assert scores["completeness"] > 0.95 and scores["mae_mm"] < 1.0
     with pytest.raises(ValueError, match="does not match"):
         simbench.score(depth.depth_m[:10], rec)
-    holes = simbench.depth(rec, min_confidence=1e9)
+    holes = simbench.depth(rec, min_confidence=1e6)  # the top of the range: no fringe SNR is that high
     assert not holes.valid.any() and np.isnan(holes.depth_m).all()
 
 
@@ -64,6 +66,53 @@ def test_depth_refuses_what_it_cannot_do():
         simbench.depth(rec, decoder="fast")
     with pytest.raises(ValueError, match="calibration_frames=True"):
         simbench.depth(rec, decoder="robust")
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"spp": -4}, r"spp must be an integer in \[1, 65536\], got -4"),
+        ({"spp": 2.9}, "spp must be an integer"),
+        ({"seed": "abc"}, "seed must be an integer"),
+        ({"seed": 1.7}, "seed must be an integer"),
+        ({"seed": 2**70}, r"seed must be an integer in \[0, 9223372036854775807\]"),
+        ({"max_depth": 0}, r"max_depth must be an integer in \[2, 1024\], got 0"),
+        ({"max_depth": -3}, "max_depth must be an integer"),
+        ({"cache": 5}, "cache must be a folder"),
+    ],
+)
+def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypatch, kwargs, match):
+    """The audit's finds: a bad argument named itself only on the command line (the API said
+    'isqrt() argument must be nonnegative', truncated 2.9 spp to 2, rendered a black capture at
+    max_depth 0, made a cache folder named '5').  Refused before anything is rendered or made."""
+    import simbench
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=match):
+        simbench.record(SCENES / "white_plane.toml", **kwargs)
+    with pytest.raises(ValueError, match="scene must be a scene file"):
+        simbench.record(None)
+    assert not any(tmp_path.iterdir())
+
+
+def test_depth_and_score_check_their_arguments():
+    import simbench
+
+    rec = _recorded()
+    for bad in (float("nan"), -1.0, "3"):
+        with pytest.raises(ValueError, match="min_confidence must be a finite number in"):
+            simbench.depth(rec, min_confidence=bad)
+    with pytest.raises(ValueError, match=r"mode must be one of \['reference', 'calibrated'\]"):
+        simbench.depth(rec, mode="triangulate")
+    with pytest.raises(ValueError, match="depth\\(\\) decodes what record\\(\\) returned"):
+        simbench.depth(rec.raw)
+    depth = simbench.depth(rec)
+    with pytest.raises(ValueError, match="edge_band_px must be an integer"):
+        simbench.score(depth, rec, edge_band_px=2.5)
+    with pytest.raises(ValueError, match=r"edge_band_px must be an integer in \[0, 1000\], got -5"):
+        simbench.score(depth, rec, edge_band_px=-5)
+    with pytest.raises(ValueError, match="score\\(depth, recorded\\)"):
+        simbench.score(rec, depth)
 
 
 @pytest.mark.slow

@@ -156,6 +156,11 @@ def test_the_colour_robust_benchmark_times_the_paper_decoder_alongside(capsys):
         run_decode_benchmark(repeats=1, baseline=True)
     assert main(["bench", "--repeats", "1", "--max-ratio", "10"]) == 2  # refused before any decode
     assert "--max-ratio applies to --robust" in capsys.readouterr().err
-    assert main(["bench", "--robust", "--repeats", "1", "--max-ratio", "0.01"]) == 2
+    # a failed guard is a failed check (exit 1, as reproduce --check's), not bad input (2)
+    assert main(["bench", "--robust", "--repeats", "1", "--max-ratio", "0.01"]) == 1
     out = capsys.readouterr()
-    assert "x the paper decoder's median" in out.out and "over --max-ratio 0.01" in out.err
+    assert (
+        "x the paper decoder's median" in out.out and "regression: " in out.err and "over --max-ratio 0.01" in out.err
+    )
+    assert main(["bench", "--repeats", "1", "--max-ms", "0.001"]) == 1
+    assert "regression: decode median" in capsys.readouterr().err

@@ -766,7 +766,7 @@ def test_a_capture_that_decodes_to_nothing_is_decoded_and_named_on_stderr(tmp_pa
     argv = ["decode", str(tmp_path / "flat.png"), "--reference", str(r / "reference.png")]
     assert main(argv + ["--rig", str(r / "rig.toml"), "--out", str(tmp_path / "d.npy")]) == 0
     captured = capsys.readouterr()
-    assert "decoded 0.00 % of pixels" in captured.out
+    assert "decoded 0.00 % of the image's pixels" in captured.out
     assert f"flat.png: no pixel decoded: {why}" in captured.err, captured.err
     assert np.isnan(np.load(tmp_path / "d.npy")).all()
     # a capture that decodes says nothing of the kind
@@ -787,3 +787,34 @@ def test_python_m_simbench_runs_the_command_line(tmp_path):
     assert res.returncode == 0 and "period 21 px" in res.stdout, res.stderr
     bad = subprocess.run([sys.executable, "-m", "simbench", "pattern"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "--out" in bad.stderr
+
+
+def test_the_working_range_options_and_the_decoder_setting_cannot_disagree(tmp_path, capsys):
+    """--near/--far and --decoder depth_range_m= say one thing: a pair that disagrees is refused,
+    as --mode against --decoder mode= is (the audit: depth_range_m silently won); --near >= --far
+    is named as such; a working range that leaves nothing decoded is named in the warning."""
+    from simbench.decode import DecoderParams
+    from simbench.systems.files import WORKING_RANGE_M
+    from tests.test_bad_inputs import render_folder
+
+    assert DecoderParams().depth_range_m == WORKING_RANGE_M  # the command line's defaults, the decoder's
+    r = render_folder(tmp_path)
+    out = str(tmp_path / "d.npy")
+    argv = ["decode", str(r), "--out", out, "--decoder", "depth_range_m=[0.8, 1.5]", "--near", "1.2", "--far", "1.3"]
+    assert main(argv) == 2
+    assert "--near 1.2 --far 1.3 and --decoder depth_range_m=[0.8, 1.5] disagree: give one" in capsys.readouterr().err
+    assert main(["decode", str(r), "--out", out, "--near", "2", "--far", "1"]) == 2
+    assert "--near 2 must be less than --far 1" in capsys.readouterr().err
+    assert main(["decode", str(r), "--out", out, "--near", "1.5", "--far", "1.7"]) == 0  # the plane is at 1.1 m
+    assert "within the working range asked for, 1.5-1.7 m (--near, --far)" in capsys.readouterr().err
+    assert main(["decode", str(r), "--out", out, "--decoder", "depth_range_m=[0.8, 1.5]"]) == 0
+
+
+def test_calibration_frames_without_the_robust_decoder_are_refused(tmp_path, capsys):
+    """--calibration names the colour-robust decoder's frames; without --robust they were ignored."""
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    assert main(["decode", str(r), "--out", str(tmp_path / "d.npy"), "--calibration", str(r)]) == 2
+    assert "add --robust (or --decoder unmix=true)" in capsys.readouterr().err
+    assert not (tmp_path / "d.npy").exists()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from simbench import api
 from simbench.cli.options import (
     add_pattern_options,
     float_in,
@@ -134,7 +135,7 @@ def add_parsers(sub, kw: dict) -> None:
     )
     s.add_argument(
         "--min-confidence",
-        type=float_in(lo=0.0, hi=1e6),
+        type=float_in(lo=api.MIN_CONFIDENCE_RANGE[0], hi=api.MIN_CONFIDENCE_RANGE[1]),
         default=None,
         help="the operating point: decoded pixels whose confidence is below it become holes (default: the decoder's "
         "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
@@ -201,6 +202,11 @@ def add_parsers(sub, kw: dict) -> None:
         default=21.0,
         help="fringe period, projector px (a column off by more than half of it is a stripe-order error)",
     )
-    s.add_argument("--edge-band", type=int_in(0, 1000), default=0, help="exclude pixels this close to depth edges (px)")
+    s.add_argument(
+        "--edge-band",
+        type=int_in(*api.EDGE_BAND_RANGE_PX),
+        default=0,
+        help="exclude pixels this close to depth edges (px)",
+    )
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.set_defaults(fn=_cmd_score)

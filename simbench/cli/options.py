@@ -70,10 +70,10 @@ def float_in(**limits: object) -> Callable[[str], object]:
 
 
 # seeds: SeedSequence takes any non-negative integer; 63 bits keep them exact in JSON and NumPy
-SEED = int_in(0, 2**63 - 1)
+SEED = int_in(*api.SEED_RANGE)
 
 
-SPP = int_in(1, 1 << 16)
+SPP = int_in(*api.SPP_RANGE)
 
 
 # the render cache's folder, relative to the working folder (every command that renders or reads it)
@@ -144,7 +144,7 @@ def render_settings(args) -> tuple[int, str]:
 
 
 # Mitsuba's path length: 1 sees only the emitters, so the projector's light needs >= 2
-MAX_DEPTH = int_in(2, 1024)
+MAX_DEPTH = int_in(*api.MAX_DEPTH_RANGE)
 
 
 def calibration_defaults() -> dict:

@@ -30,6 +30,10 @@ import numpy as np
 __all__ = ["DecodeRequest", "FileDecode", "decode_files", "recording_manifest_of", "confidence_path"]
 
 
+# the command line's working range (--near, --far), metres: the paper's rig's ~0.9-1.4 m with margin
+WORKING_RANGE_M = (0.75, 1.75)
+
+
 @dataclass(frozen=True)
 class DecodeRequest:
     """What to decode, how, and where the results go (paths as given by the user).
@@ -59,8 +63,8 @@ class DecodeRequest:
     calibration: str | None = None
     mode: str | None = None
     z0_m: float | None = None
-    near_m: float = 0.75
-    far_m: float = 1.75
+    near_m: float = WORKING_RANGE_M[0]
+    far_m: float = WORKING_RANGE_M[1]
     period_px: int | None = None
     order: int | None = None
     sequence: str | None = None
@@ -214,8 +218,8 @@ def decode_files(request: DecodeRequest) -> str:
     res = hook(request) if hook is not None else _decode_folder(system, request)
     files = {Path(request.out): npy_bytes(res.depth_m), confidence_path(request): npy_bytes(res.confidence)}
     msg = (
-        f"decoded {res.valid.mean() * 100:.2f} % of pixels in {res.elapsed_s * 1000:.0f} ms ({res.summary}) -> "
-        f"{request.out}, confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
+        f"decoded {res.valid.mean() * 100:.2f} % of the image's pixels in {res.elapsed_s * 1000:.0f} ms "
+        f"({res.summary}) -> {request.out}, confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
     )
     if request.ply:
         pts = points_from_depth(res.depth_m, res.camera)
@@ -243,7 +247,7 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
-    hint = nothing_decoded_hint(res.valid, res.colours)
+    hint = nothing_decoded_hint(res.valid, res.colours, working_range_m=(request.near_m, request.far_m))
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
@@ -253,15 +257,21 @@ def decode_files(request: DecodeRequest) -> str:
 NOTHING_DECODED_SHARE = 0.01
 
 
-def nothing_decoded_hint(valid: np.ndarray, capture_u8: np.ndarray | None = None) -> str:
+def nothing_decoded_hint(
+    valid: np.ndarray, capture_u8: np.ndarray | None = None, *, working_range_m: tuple[float, float] | None = None
+) -> str:
     """A warning for a decode that found (almost) nothing - under :data:`NOTHING_DECODED_SHARE`
-    of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated);
-    "" otherwise.  The decode itself stands (NaN where nothing decoded): a dark frame is a legal
-    image, but a user who passed the wrong file should hear of it."""
+    of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated)
+    or a working range other than the default was asked for; "" otherwise.  The decode itself
+    stands (NaN where nothing decoded): a dark frame is a legal image, but a user who passed the
+    wrong file should hear of it."""
     share = float(np.mean(valid)) if np.size(valid) else 0.0
     if share >= NOTHING_DECODED_SHARE:
         return ""
     why = "is the capture lit by this pattern, in focus, and taken with this rig and reference?"
+    if working_range_m is not None and tuple(working_range_m) != WORKING_RANGE_M:
+        near, far = working_range_m
+        why = f"is the scene within the working range asked for, {near:g}-{far:g} m (--near, --far)?"
     if capture_u8 is not None and capture_u8.size:
         top = int(capture_u8.max())
         clipped = float((capture_u8 >= 255).all(axis=-1).mean()) if capture_u8.ndim == 3 else 0.0

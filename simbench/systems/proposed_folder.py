@@ -20,7 +20,13 @@ import numpy as np
 
 from simbench.pattern import PatternSpec
 
-from simbench.systems.files import DecodeRequest, FileDecode, check_outputs, recording_manifest_of
+from simbench.systems.files import (
+    WORKING_RANGE_M,
+    DecodeRequest,
+    FileDecode,
+    check_outputs,
+    recording_manifest_of,
+)
 
 __all__ = [
     "RENDER_MANIFEST",
@@ -118,6 +124,14 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         raise ValueError(f"--mode {request.mode} and --decoder mode={decoder_mode} disagree: give one")
     if request.z0_m is not None and "z0_m" in named and request.z0_m != asked.z0_m:
         raise ValueError(f"--z0 {request.z0_m} and --decoder z0_m={asked.z0_m} disagree: give one")
+    if not request.near_m < request.far_m:
+        raise ValueError(f"--near {request.near_m:g} must be less than --far {request.far_m:g} (metres)")
+    if "depth_range_m" in named and (request.near_m, request.far_m) != WORKING_RANGE_M:
+        if tuple(asked.depth_range_m) != (request.near_m, request.far_m):
+            raise ValueError(
+                f"--near {request.near_m:g} --far {request.far_m:g} and --decoder depth_range_m="
+                f"{list(asked.depth_range_m)} disagree: give one"
+            )
     z0_asked, z0_option = _asked_z0(request, asked)
     overrides = []  # explicit options that replace what a recording holds, announced with the result
     capture_path, rig_path, reference_path = request.capture, request.rig, request.reference
@@ -174,6 +188,11 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     params = _decoder_params(request, base)
     if request.min_confidence is not None:
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
+    if request.calibration is not None and not params.unmix:
+        raise ValueError(
+            f"--calibration {request.calibration}: those frames are for the colour-robust decoder's unmixing; add "
+            "--robust (or --decoder unmix=true), or leave --calibration out"
+        )
     cache = RenderCache(request.cache_dir)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:

@@ -9,6 +9,8 @@ A sweep file (TOML)::
                                          # repetition r uses the same seeds in every
                                          # parameter set (common random numbers)
     plot_metric = "gt_mae_mm"            # y of the plot (default gt_mae_mm)
+    combine = "grid"                     # "grid" (every combination) or "zip" (axes in step);
+                                         # the sweep's keys come before its tables (TOML)
 
     [base]                               # any parameter (below) fixed for every run
     "scene.name" = "plane_white"
@@ -21,8 +23,6 @@ A sweep file (TOML)::
     [[axis]]
     name = "decoder.voting"
     values = [true, false]
-
-    combine = "grid"                     # "grid" (every combination) or "zip" (axes in step)
 
 Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
 

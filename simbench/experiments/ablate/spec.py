@@ -181,6 +181,12 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
     if not isinstance(data.get("axis", []), list):
         raise ValueError(f"{where}: axis must be an array of tables ([[axis]])")
     for i, ax in enumerate(data.get("axis", [])):
+        if isinstance(ax, dict) and set(ax) > {"name", "values"}:
+            extra = sorted(set(ax) - {"name", "values"})
+            raise ValueError(
+                f"{where}: axis {i + 1} holds {extra} beside 'name' and 'values' (in TOML a key written after an "
+                "[[axis]] table belongs to that axis: write the sweep's own keys before the first [[axis]])"
+            )
         if not isinstance(ax, dict) or set(ax) != {"name", "values"} or not isinstance(ax["values"], list):
             raise ValueError(f"{where}: axis {i + 1} needs exactly 'name' and a list 'values'")
         axes.append((ax["name"], tuple(tuple(v) if isinstance(v, list) else v for v in ax["values"])))
