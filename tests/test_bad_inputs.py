@@ -615,7 +615,12 @@ for opt, bad in [
     ("--far", "1e9"),
 ]:
     case(f"decode{opt}={bad}", lambda d, o=opt, b=bad: _decode(d, o, b), opt, setup=render_folder)
-case("decode-near-beyond-far", lambda d: _decode(d, "--near", "2.0", "--far", "1.0"), "near < far", setup=render_folder)
+case(
+    "decode-near-beyond-far",
+    lambda d: _decode(d, "--near", "2.0", "--far", "1.0"),
+    "--near 2 must be less than --far 1",
+    setup=render_folder,
+)
 case("decode-mode-unknown", lambda d: _decode(d, "--mode", "stereo"), "--mode", setup=render_folder)
 for item, msg in [
     ("voting=maybe", "voting"),

@@ -818,3 +818,27 @@ def test_calibration_frames_without_the_robust_decoder_are_refused(tmp_path, cap
     assert main(["decode", str(r), "--out", str(tmp_path / "d.npy"), "--calibration", str(r)]) == 2
     assert "add --robust (or --decoder unmix=true)" in capsys.readouterr().err
     assert not (tmp_path / "d.npy").exists()
+
+
+def test_score_warns_of_a_depth_map_that_cannot_be_this_scene_in_metres(tmp_path, capsys):
+    """All NaN, millimetres, negative: scored (the numbers say how far off), with a warning each
+    (the audit: an MAE of 1,071,028 mm came without a word)."""
+    import numpy as np
+
+    gt = np.full((40, 50), 1.1, np.float32)
+    np.save(tmp_path / "gt.npy", gt)
+    cases = {
+        "nan": (np.full_like(gt, np.nan), "holds no finite depth where the scene is scored"),
+        "mm": (gt * 1000, "its median depth is 1e+03x the ground truth's (1.1 m): is it in metres"),
+        "neg": (
+            np.where(np.arange(50) < 5, -1.0, 1.1).astype(np.float32)[None].repeat(40, 0),
+            "200 of its depths are <= 0 m",
+        ),
+    }
+    for name, (depth, warning) in cases.items():
+        np.save(tmp_path / f"{name}.npy", depth)
+        assert main(["score", str(tmp_path / f"{name}.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
+        assert warning in capsys.readouterr().err, name
+    np.save(tmp_path / "good.npy", gt + np.float32(0.0004))
+    assert main(["score", str(tmp_path / "good.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -4,6 +4,7 @@ ground truth."""
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -84,6 +85,8 @@ def _cmd_score(args) -> int:
             f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
             "holds no pixel with a finite ground truth off the edge band"
         )
+    for warning in _implausible_depth(depth, gt, region):
+        print(f"simbench: warning: {args.depth}: {warning}", file=sys.stderr)
     if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
         print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
@@ -102,6 +105,28 @@ def _cmd_score(args) -> int:
                 f"pixels)"
             )
     return 0
+
+
+def _implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> list[str]:
+    """What makes a depth map look like something other than a decode of this scene in metres:
+    no finite depth where it is scored, depths <= 0, or a median far (> 5x) from the ground
+    truth's - another unit, another scene.  Scored all the same (the numbers say how far off)."""
+    ok = region & np.isfinite(gt)
+    d = depth[ok]
+    finite = np.isfinite(d)
+    if not finite.any():
+        return ["it holds no finite depth where the scene is scored: the errors are undefined (a decode of nothing?)"]
+    out = []
+    if (d[finite] <= 0).any():
+        out.append(f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m")
+    gt_median = float(np.median(gt[ok][finite]))
+    ratio = float(np.median(d[finite])) / gt_median
+    if not 0.2 <= ratio <= 5.0:
+        out.append(
+            f"its median depth is {ratio:.3g}x the ground truth's ({gt_median:.3g} m): is it in metres, "
+            "and of this scene? (simbench's depth maps are float32 metres)"
+        )
+    return out
 
 
 def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:
