@@ -179,6 +179,8 @@ def test_interrupted_sweep_resumes_without_redoing_runs(tmp_path, variant):
     assert sum("] run " in m for m in messages) == 2
     assert (part / "t.csv").read_bytes() == (full / "t.csv").read_bytes()
     assert len([json.loads(x) for x in (part / "t.runs.jsonl").read_text().splitlines()[:2]]) == 2
+    # the variant the runs were made with is in the provenance (the second audit: it was not)
+    assert json.loads((part / "t.provenance.json").read_text())["variant"] == [variant]
 
 
 @pytest.mark.slow

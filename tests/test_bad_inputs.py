@@ -1138,6 +1138,8 @@ for cid, argv, msg in [
     ("demo-scene-absolute", ["demo", "--out", "demo", "--scenes", "/etc/passwd"], "not a name of scenes/"),
     ("demo-scene-dotdot", ["demo", "--out", "demo", "--scenes", ".."], "not a name of scenes/"),
     ("demo-scene-empty", ["demo", "--out", "demo", "--scenes", ""], "not a name of scenes/"),
+    # the second audit: --scenes with no names ran the four default scenes
+    ("demo-scenes-none", ["demo", "--out", "demo", "--scenes"], "--scenes: expected at least one argument"),
     ("no-command", [], "required"),
     ("unknown-command", ["calibrate2"], "calibrate2"),
 ]:

@@ -76,6 +76,7 @@ def test_stage_times_cover_the_decode_without_changing_it():
     assert "outside" not in times.seconds
     res = run_decode_benchmark(repeats=1, warmup=0)
     assert set(res["stages_ms"]) == set(times.seconds)
+    assert res["mode"] == "reference"  # the mode it ran in, the decoder's default (was null)
     table = stage_table(res["stages_ms"])
     assert "phase (gabor" in table and table.splitlines()[-1].startswith("sum over threads")
     assert run_decode_benchmark(repeats=1, warmup=0, device="kinect")["stages_ms"] == {}

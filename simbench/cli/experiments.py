@@ -235,7 +235,7 @@ def add_parsers(sub, kw: dict) -> None:
         default="minimal",
         help="sensor model: preset (ideal, minimal, paper) or TOML file",
     )
-    s.add_argument("--scenes", nargs="*", help="scene names in scenes/ (default: the four pipeline scenes)")
+    s.add_argument("--scenes", nargs="+", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_demo)
 

@@ -141,7 +141,8 @@ def run_decode_benchmark(
         "device": device,
         "scene": scene,
         "rig": spec.rig.name if spec is not None else None,
-        "mode": mode,
+        # the mode the decoder ran in (its own default where none was asked for; None: the system has no modes)
+        "mode": mode if mode is not None else getattr(getattr(system, "decoder", None), "mode", None),
         "decoder": "robust" if robust else ("paper" if device == "proposed" else None),
         "size_wh": [w, h],
         "repeats": repeats,

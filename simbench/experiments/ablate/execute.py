@@ -63,6 +63,8 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
             noise_seed=cap.seeds["noise"],
             placement_seed=placement["placement"],
             error="",
+            # results depend on the variant (docs/usage.md): the sweep's provenance lists each run's
+            variant=sys.modules["mitsuba"].variant(),
         )
         row["timing"] = {"setup_s": t1 - t0, "render_record_s": t2 - t1, "decode_s": t3 - t2}
         return row

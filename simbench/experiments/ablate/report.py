@@ -89,6 +89,10 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
                 "repeats": sweep.repeats,
                 "seed": sweep.seed,
             },
+            # the Mitsuba variant(s) the runs were made with ("unknown": a run logged before it was kept)
+            "variant": sorted(
+                {str(done.get(r["key"], {}).get("variant", "unknown")) for r in runs if r["key"] in done}
+            ),
             "versions": versions(),
             "git_commit": git_commit(),
             "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
