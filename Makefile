@@ -28,7 +28,7 @@ reproduce: setup
 	$(VENV)/bin/simbench demo --out results/demo
 	$(VENV)/bin/simbench crosstalk --out results/crosstalk.md
 
-# The built-in ablation studies into results/ablations (every run redone; ~15 min on 2 cores).
+# The built-in ablation studies into results/ablations (every run redone; 32 min 30 s on 2 cores on 2026-11-27).
 ablations: setup
 	$(VENV)/bin/simbench ablate builtin --fresh --workers 2
 
