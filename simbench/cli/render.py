@@ -112,7 +112,7 @@ def _earlier_recording(out: Path) -> str:
         scene = scene.get("name") if isinstance(scene, dict) else scene
         system = meta.get("system") or meta.get("device") or "?"
         return f"a {system} recording" + (f" of scene {scene}" if scene else "")
-    return "files render did not write (--overwrite)"
+    return ""  # no manifest: check_output_directory refused the folder already
 
 
 def _check_visible(gt, scene) -> None:

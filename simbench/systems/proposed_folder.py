@@ -224,9 +224,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         c for c, on in (("the phase stability", params.phase_stability), ("the crease bias", params.crease_doubt)) if on
     ]
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}; {threshold}"
-    # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms)
+    # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
+    # a stage of the same name wins, as when they were unpacked over these
     stages = ChainMap(
-        {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}, result.stages
+        result.stages, {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
     )
     return FileDecode(
         depth_m=result.depth_m,

@@ -181,8 +181,8 @@ def sweep_from_dict(data: dict, *, where: str = "sweep") -> Sweep:
     if not isinstance(data.get("axis", []), list):
         raise ValueError(f"{where}: axis must be an array of tables ([[axis]])")
     for i, ax in enumerate(data.get("axis", [])):
-        if isinstance(ax, dict) and set(ax) > {"name", "values"}:
-            extra = sorted(set(ax) - {"name", "values"})
+        extra = sorted(set(ax) - {"name", "values"}) if isinstance(ax, dict) else []
+        if extra:
             raise ValueError(
                 f"{where}: axis {i + 1} holds {extra} beside 'name' and 'values' (in TOML a key written after an "
                 "[[axis]] table belongs to that axis: write the sweep's own keys before the first [[axis]])"
