@@ -52,10 +52,15 @@ def _file_mode() -> int:
 
 
 def _raise_with_filename(exc: BaseException, path: Path) -> None:
-    """A failed write or fsync does not say which file ("[Errno 28] No space left on device"):
-    raise it again naming ``path``, so the message and the free-space hint point at the right
-    disk.  Other exceptions are left to the caller's ``raise``."""
-    if isinstance(exc, OSError) and exc.filename is None and exc.errno is not None:
+    """A failed write or fsync does not say which file ("[Errno 28] No space left on device"),
+    and a failed temporary file names itself (".depth.k2j4.ply: Permission denied"): raise it
+    again naming ``path``, so the message and the free-space hint point at the file asked for.
+    Other exceptions are left to the caller's ``raise``."""
+    if not isinstance(exc, OSError) or exc.errno is None:
+        return
+    named = exc.filename
+    temporary = named is not None and Path(os.fsdecode(named)).name.startswith(f".{path.stem}.")
+    if named is None or temporary:
         raise OSError(exc.errno, exc.strerror, str(path)) from exc
 
 
@@ -95,7 +100,11 @@ def _atomic_target(path: Path, suffix: str) -> Iterator[str]:
     """A temporary file beside ``path`` that replaces it when the block succeeds."""
     check_not_protected(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
+    except OSError as exc:  # a folder this process may not write to
+        _raise_with_filename(exc, path)
+        raise
     os.close(fd)
     try:
         os.chmod(tmp, _file_mode())

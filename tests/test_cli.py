@@ -530,8 +530,29 @@ def test_cache_info_and_prune(tmp_path, capsys):
     assert "give --max-size, --unused-days or both" in capsys.readouterr().err
     assert main(["cache", "prune", "--cache", str(d), "--max-size", "lots"]) == 2
     assert "expected a size such as 500M" in capsys.readouterr().err
+    # a value beginning with "-" is the option's value, checked as such (argparse alone said
+    # "expected one argument" of "-1G", taking it for an option)
+    assert main(["cache", "prune", "--cache", str(d), "--max-size", "-1G"]) == 2
+    assert "expected a size such as 500M, 10G or 1.5GiB, got '-1G'" in capsys.readouterr().err
     assert main(["cache", "info", "--cache", str(tmp_path / "none")]) == 2
     assert "no such cache folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, expect",
+    [
+        (["x", "--max-size", "-1G"], ["x", "--max-size=-1G"]),
+        (["--near", "-inf", "--far", "-1e3"], ["--near=-inf", "--far=-1e3"]),
+        (["--seed", "-1"], ["--seed=-1"]),
+        (["--max-size=-1G", "-1"], ["--max-size=-1G", "-1"]),  # attached already; a bare "-1" stays
+        (["-h", "-1"], ["-h", "-1"]),  # a short option is left to argparse
+        (["--out", "-dir"], ["--out", "-dir"]),  # not a number: argparse's own error
+    ],
+)
+def test_option_values_that_begin_with_a_minus_are_attached(argv, expect):
+    from simbench.cli import _negative_values_attached
+
+    assert _negative_values_attached(argv) == expect
 
 
 @pytest.mark.parametrize(

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -78,6 +80,30 @@ def test_a_failed_write_names_its_file_keeps_the_old_one_and_leaves_no_temporary
         atomic_write_text(target, "new")
     assert info.value.errno == errno.ENOSPC and info.value.filename == str(target)
     assert [p.name for p in tmp_path.iterdir()] == ["x.txt"] and target.read_text() == "old"
+
+
+def test_a_folder_that_refuses_the_temporary_file_names_the_file_asked_for(tmp_path, monkeypatch):
+    """The second audit's `--ply` into a folder it could not write: the error named the
+    temporary sibling (".cloud.k2j4.ply: Permission denied"), a file the user never asked for.
+    (Simulated: root, which runs these tests, may write anywhere.)"""
+    import errno
+    import tempfile
+
+    from simbench.io import save_ply
+
+    def refused(prefix="", suffix="", dir=None, **kw):
+        raise PermissionError(errno.EACCES, "Permission denied", str(Path(dir) / f"{prefix}x8k2{suffix}"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refused)
+    target = tmp_path / "cloud.ply"
+    with pytest.raises(PermissionError, match=r"Permission denied: '.*/cloud\.ply'$") as info:
+        save_ply(target, np.zeros((4, 3), np.float32))
+    assert info.value.filename == str(target)
+    # another file's name in an error stays: it is not ours to rename
+    from simbench.io import _raise_with_filename
+
+    other = OSError(errno.EACCES, "Permission denied", "/elsewhere/model.ply")
+    _raise_with_filename(other, target)  # returns: the caller raises the original
 
 
 def test_an_output_folder_given_as_a_symbolic_link_is_refused_before_any_work(tmp_path):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -91,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     limit_malloc_arenas()
     _report_library_messages()
     try:
-        args = _parser().parse_args(argv)
+        args = _parser().parse_args(_negative_values_attached(sys.argv[1:] if argv is None else list(argv)))
     except SystemExit as exc:  # --help, or a usage error already printed as one line
         return exc.code if isinstance(exc.code, int) else 2
     empty = [name for name in _PATH_OPTIONS if getattr(args, name, None) == ""]
@@ -132,6 +133,24 @@ def main(argv: list[str] | None = None) -> int:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
+
+
+# a value that argparse would take for an option, since it begins with "-": "-1G", "-1e3", "-inf"
+# (argparse reads only "-1" and "-0.5" as numbers); no simbench option name begins so
+_NEGATIVE_VALUE = re.compile(r"-(\d|\.\d|inf\b|nan\b)", re.IGNORECASE)
+
+
+def _negative_values_attached(argv: list[str]) -> list[str]:
+    """``--max-size -1G`` as ``--max-size=-1G``: argparse said "expected one argument" of a value
+    that it took for an option; attached, the option's own check names the value."""
+    out: list[str] = []
+    for token in argv:
+        previous = out[-1] if out else ""
+        if _NEGATIVE_VALUE.match(token) and previous.startswith("--") and "=" not in previous and previous != "--":
+            out[-1] = f"{previous}={token}"
+        else:
+            out.append(token)
+    return out
 
 
 def _report_error(exc: Exception, args) -> int:
