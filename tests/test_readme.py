@@ -98,11 +98,38 @@ def test_the_docs_pages_exist_and_the_readme_stays_short():
     assert len(README.read_text().splitlines()) <= 200  # the details live in docs/
 
 
+def _without_environment(cmd: str) -> str:
+    """A command without its leading ``NAME=value`` words; each must be a variable simbench reads,
+    with a value it accepts (the cluster recipe's ``SIMBENCH_THREADS=1 dask worker ...``)."""
+
+    from simbench.threads import THREADS_VARIABLE, process_threads
+
+    words = cmd.split()
+    while words and re.match(r"[A-Z_][A-Z0-9_]*=", words[0]):
+        name, value = words.pop(0).split("=", 1)
+        assert name == THREADS_VARIABLE, f"{cmd}: {name} is no variable simbench reads"
+        saved = os.environ.get(name)
+        os.environ[name] = value
+        try:
+            process_threads()  # raises for a value simbench refuses
+        finally:
+            if saved is None:
+                del os.environ[name]
+            else:
+                os.environ[name] = saved
+    return " ".join(words)
+
+
 def test_readme_has_the_blocks_this_test_expects():
     blocks = fenced_blocks(_all_text())
     langs = [lang for lang, _ in blocks]
     assert "python" in langs
-    cmds = [c for lang, body in blocks if lang in ("", "sh", "bash", "console") for c in shell_commands(body)]
+    cmds = [
+        _without_environment(c)
+        for lang, body in blocks
+        if lang in ("", "sh", "bash", "console")
+        for c in shell_commands(body)
+    ]
     assert any(c.startswith("make reproduce") for c in cmds) and any(c.startswith("make test") for c in cmds)
     # beside make and simbench, only the cluster recipe's (docs/usage.md): installing the project
     # on a worker host and starting Dask's scheduler and workers, which need a cluster to run -
@@ -186,7 +213,7 @@ def test_every_fenced_block_runs_as_written(workdir):
         for cmd in shell_commands(body):
             if cmd.startswith("make "):
                 continue  # test_make_targets_in_the_readme_exist
-            argv = shlex.split(cmd)
+            argv = shlex.split(_without_environment(cmd))
             if argv[0] in ("pip", "dask"):
                 continue  # the cluster recipe's hosts: test_readme_has_the_blocks_this_test_expects
             if "--scheduler" in argv:  # its cluster's address: parsed here, the path run on a LocalCluster

@@ -90,3 +90,44 @@ def test_the_cli_keeps_malloc_to_few_arenas_and_respects_the_users_setting():
     assert run(code, {"MALLOC_ARENA_MAX": "7"})["arenas"] == "7"
     imported = 'import simbench.cli\nprint(json.dumps({"arenas": os.environ.get("MALLOC_ARENA_MAX")}))'
     assert run(imported, {})["arenas"] is None
+
+
+def test_a_process_share_of_the_cores_is_read_from_simbench_threads(monkeypatch):
+    """SIMBENCH_THREADS: a whole number >= 1, else every usable CPU; anything else named."""
+    import pytest
+
+    from simbench.threads import THREADS_VARIABLE, process_threads, usable_cpus
+
+    monkeypatch.delenv(THREADS_VARIABLE, raising=False)
+    assert process_threads() == usable_cpus() >= 1
+    monkeypatch.setenv(THREADS_VARIABLE, " 5 ")
+    assert process_threads() == 5
+    for bad in ("0", "-2", "1.5", "many"):
+        monkeypatch.setenv(THREADS_VARIABLE, bad)
+        with pytest.raises(ValueError, match=f"SIMBENCH_THREADS must be a whole number of threads >= 1, got '{bad}'"):
+            process_threads()
+
+
+def test_cores_shared_divides_the_cores_and_restores_the_pools(monkeypatch):
+    import cv2
+
+    import simbench.threads as threads
+    from simbench.decode.bands import row_bands
+    from simbench.decode.params import DecoderParams
+    from simbench.rig import paper_rig
+
+    monkeypatch.delenv(threads.THREADS_VARIABLE, raising=False)
+    monkeypatch.setattr(threads, "usable_cpus", lambda: 16)
+    before = cv2.getNumThreads()
+    with threads.cores_shared(5) as n:
+        assert n == 3 and os.environ[threads.THREADS_VARIABLE] == "3" and cv2.getNumThreads() == 3
+        # the decoder's default row bands follow the share (an explicit count does not)
+        assert row_bands(960, 1280, DecoderParams(), paper_rig())[2] == 3
+        assert row_bands(960, 1280, DecoderParams(threads=6), paper_rig())[2] == 6
+    assert threads.THREADS_VARIABLE not in os.environ and cv2.getNumThreads() == before
+    with threads.cores_shared(64) as n:
+        assert n == 1
+    monkeypatch.setenv(threads.THREADS_VARIABLE, "2")  # the user's choice is kept
+    with threads.cores_shared(5) as n:
+        assert n == 2 and cv2.getNumThreads() == 2
+    assert os.environ[threads.THREADS_VARIABLE] == "2" and cv2.getNumThreads() == before

@@ -33,6 +33,34 @@ def test_every_task_runs_once_in_this_process_and_the_workers():
     assert {v[1] for v in results.values()} <= {"parent", "w"} and results["0"][1] == "parent"  # the first task here
 
 
+def test_each_worker_process_takes_its_share_of_the_cores(monkeypatch):
+    """With N processes on C cores each sizes its thread pools (Dr.Jit's render threads, OpenCV's,
+    the decoder's row bands by default) to C // N, this process too while the run lasts; then
+    they are restored.  A share the user set (SIMBENCH_THREADS) is every process's."""
+    import cv2
+    import drjit as dr
+
+    from simbench.threads import THREADS_VARIABLE, usable_cpus
+
+    monkeypatch.delenv(THREADS_VARIABLE, raising=False)
+    share = max(1, usable_cpus() // 2)
+    before = (cv2.getNumThreads(), dr.thread_count())
+    here = []
+
+    def in_parent(task):
+        here.append(worker_helpers.threads_seen(0))
+        return here[-1]
+
+    tasks = [Task(str(i), (i,)) for i in range(4)]
+    results, _, _ = _collect(tasks, worker_helpers.threads_seen, workers=2, variant="scalar_rgb", in_parent=in_parent)
+    assert set(results.values()) == {(str(share), share, share)}, results
+    assert here and THREADS_VARIABLE not in __import__("os").environ
+    assert (cv2.getNumThreads(), dr.thread_count()) == before
+    monkeypatch.setenv(THREADS_VARIABLE, "3")
+    results, _, _ = _collect(tasks, worker_helpers.threads_seen, workers=2, variant="scalar_rgb")
+    assert set(results.values()) == {("3", 3, 3)}, results
+
+
 def test_one_worker_runs_everything_here_in_order():
     order = []
     tasks = [Task(str(i), (i,)) for i in range(4)]

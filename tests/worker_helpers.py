@@ -73,3 +73,13 @@ def split_measure_fails(session, part: str) -> dict:
     if part == "p3":
         raise ValueError("part p3 failed on purpose")
     return split_measure(session, part)
+
+
+def threads_seen(x: int) -> tuple:
+    """What a task sees of its process's thread share (tests/test_workers.py)."""
+    import sys
+
+    import cv2
+
+    dr = sys.modules.get("drjit")
+    return os.environ.get("SIMBENCH_THREADS"), cv2.getNumThreads(), None if dr is None else dr.thread_count()

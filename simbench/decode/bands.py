@@ -17,6 +17,7 @@ from simbench.decode.params import DecoderParams
 from simbench.decode.profile import run_in_context
 from simbench.pattern import check_channels
 from simbench.rig import Rig
+from simbench.threads import process_threads
 
 
 def fit_halo_rows(params: DecoderParams, rig: Rig) -> int:
@@ -47,7 +48,7 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     if params.albedo_flatten:  # (it needs color_normalize: DecoderParams checks)
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
     most = max(1, height // max(4 * fit_halo, 32))
-    threads = max(1, params.threads or os.cpu_count() or 1)
+    threads = max(1, params.threads or process_threads())
     n = min(threads, most)
     edges = np.linspace(0, height, n + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])], halo, n

@@ -267,7 +267,9 @@ class DecoderParams:
         Working range; depths outside are invalid.  In calibrated mode the cycle number is
         chosen for the middle of this range (in inverse depth).
     threads : int or None
-        Worker threads (row bands); None = one per CPU.  Results do not depend on it.
+        Worker threads (row bands); None = the process's share of the machine
+        (:func:`simbench.threads.process_threads`: ``SIMBENCH_THREADS``, else one per CPU).
+        Results do not depend on it.
     """
 
     pattern: PatternSpec = PatternSpec()

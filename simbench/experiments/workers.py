@@ -62,8 +62,19 @@ def _start(variant: str | None, parent_pid: int, messages, setup, setup_args: tu
     single_thread_blas()
     limit_malloc_arenas()
     select_variant(variant)
+    _take_share()
     if setup is not None:
         _worker_state = setup(messages.put, *setup_args)
+
+
+def _take_share() -> None:
+    """This process's threads sized to its share of the machine, where ``SIMBENCH_THREADS``
+    says it (:func:`simbench.threads.cores_shared` in the pool's parent; by hand on a Dask
+    worker host); after the variant is chosen, so that Dr.Jit's pool is sized too."""
+    from simbench.threads import THREADS_VARIABLE, apply_threads, process_threads
+
+    if os.environ.get(THREADS_VARIABLE, "").strip():
+        apply_threads(process_threads())
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -203,6 +214,8 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
 
     import queue
 
+    from simbench.threads import cores_shared
+
     ctx = mp.get_context("spawn")
     messages = ctx.Queue()
     stop = threading.Event()
@@ -231,29 +244,32 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
     todo = deque(tasks)
     deaths: dict[str, int] = {}
     init = (variant, os.getpid(), messages, setup, setup_args)
-    try:
-        while todo:
-            broken = _pool_round(
-                todo, fn, ctx=ctx, init=init, workers=workers, in_parent=in_parent, deliver=deliver, lock=lock
-            )
-            if not broken:
-                continue
-            progress(
-                f"a worker process died (tasks {sorted(t.key for t in broken)} were running): retrying them one at a "
-                "time"
-            )
-            for task in broken:
-                deaths[task.key] = deaths.get(task.key, 0) + 1
-                while deaths[task.key] < 2:
-                    if _alone(task, fn, ctx=ctx, init=init, deliver=deliver):
-                        break
-                    deaths[task.key] += 1
-                if deaths[task.key] >= 2:
-                    with lock:
-                        on_died(task)
-    finally:
-        stop.set()  # the relay drains what the workers sent, then ends
-        relay_thread.join()
+    # each process (this one among them when it takes tasks) takes its share of the cores; the
+    # workers read it from the environment they are spawned with (_take_share)
+    with cores_shared(workers):
+        try:
+            while todo:
+                broken = _pool_round(
+                    todo, fn, ctx=ctx, init=init, workers=workers, in_parent=in_parent, deliver=deliver, lock=lock
+                )
+                if not broken:
+                    continue
+                progress(
+                    f"a worker process died (tasks {sorted(t.key for t in broken)} were running): retrying them one "
+                    "at a time"
+                )
+                for task in broken:
+                    deaths[task.key] = deaths.get(task.key, 0) + 1
+                    while deaths[task.key] < 2:
+                        if _alone(task, fn, ctx=ctx, init=init, deliver=deliver):
+                            break
+                        deaths[task.key] += 1
+                    if deaths[task.key] >= 2:
+                        with lock:
+                            on_died(task)
+        finally:
+            stop.set()  # the relay drains what the workers sent, then ends
+            relay_thread.join()
 
 
 def _pool_round(todo: deque, fn, *, ctx, init, workers: int, in_parent, deliver, lock) -> list[Task]:
@@ -372,6 +388,7 @@ def _dask_call(fn, task: Task, variant: str | None, setup, setup_args: tuple) ->
 
             single_thread_blas()
             limit_malloc_arenas()
+            _take_share()
             _thread.state = setup(_dask_emit, *setup_args)
             _thread.made_by = made_by
     return _call(fn, task)
