@@ -13,6 +13,8 @@ import re
 import sys
 from pathlib import Path
 
+from simbench.threads import THREADS_VARIABLE, apply_threads, process_threads
+
 __all__ = ["MIN_LLVM_MAJOR", "find_libllvm", "choose_variant", "select_variant", "is_jit"]
 
 log = logging.getLogger(__name__)
@@ -121,6 +123,10 @@ def select_variant(requested: str | None = None) -> str:
     except (ImportError, RuntimeError, AttributeError) as exc:
         msg = (str(exc).splitlines() or [type(exc).__name__])[0]
         raise ValueError(f"Mitsuba variant {variant} cannot be used here ({msg}); use --variant scalar_rgb") from None
+    if os.environ.get(
+        THREADS_VARIABLE, ""
+    ).strip():  # a process's share of the machine (a pool's worker, or the user's)
+        apply_threads(process_threads())
     return variant
 
 

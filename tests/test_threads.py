@@ -131,3 +131,32 @@ def test_cores_shared_divides_the_cores_and_restores_the_pools(monkeypatch):
     with threads.cores_shared(5) as n:
         assert n == 2 and cv2.getNumThreads() == 2
     assert os.environ[threads.THREADS_VARIABLE] == "2" and cv2.getNumThreads() == before
+
+
+def test_a_share_set_by_hand_holds_in_any_entry_point_and_a_bad_one_is_one_line(tmp_path):
+    """SIMBENCH_THREADS set by the user (a Dask worker host, a shared machine): choosing the
+    Mitsuba variant (every entry point that renders: CLI, API, pool workers) sizes Dr.Jit's and
+    OpenCV's threads to it; a value simbench refuses is one line and exit 2 before any work."""
+    code = """
+        import json, cv2
+        from simbench.variant import select_variant
+        select_variant(None)
+        import drjit as dr
+        print(json.dumps([dr.thread_count(), cv2.getNumThreads()]))
+        """
+    env = {**os.environ, "SIMBENCH_THREADS": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=300, env=env
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [1, 1]
+    env["SIMBENCH_THREADS"] = "-2"
+    out = subprocess.run(
+        [sys.executable, "-m", "simbench", "pattern", "--out", str(tmp_path / "p.png")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=env,
+    )
+    assert out.returncode == 2 and not (tmp_path / "p.png").exists()
+    assert out.stderr.strip() == "simbench: error: SIMBENCH_THREADS must be a whole number of threads >= 1, got '-2'"

@@ -86,11 +86,23 @@ _PATH_OPTIONS = (
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit status (0 ok, 1 a bug or a failed check, 2 bad input)."""
-    from simbench.threads import limit_malloc_arenas, single_thread_blas
+    from simbench.threads import (
+        THREADS_VARIABLE,
+        apply_threads,
+        limit_malloc_arenas,
+        process_threads,
+        single_thread_blas,
+    )
 
     single_thread_blas()
     limit_malloc_arenas()
     _report_library_messages()
+    if os.environ.get(THREADS_VARIABLE, "").strip():  # the user's share of the machine for every pool
+        try:
+            apply_threads(process_threads())
+        except ValueError as exc:
+            print(f"simbench: error: {exc}", file=sys.stderr)
+            return 2
     try:
         args = _parser().parse_args(_negative_values_attached(sys.argv[1:] if argv is None else list(argv)))
     except SystemExit as exc:  # --help, or a usage error already printed as one line

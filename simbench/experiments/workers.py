@@ -61,20 +61,9 @@ def _start(variant: str | None, parent_pid: int, messages, setup, setup_args: tu
     _die_with_parent(parent_pid)
     single_thread_blas()
     limit_malloc_arenas()
-    select_variant(variant)
-    _take_share()
+    select_variant(variant)  # with the share of the cores cores_shared set (SIMBENCH_THREADS)
     if setup is not None:
         _worker_state = setup(messages.put, *setup_args)
-
-
-def _take_share() -> None:
-    """This process's threads sized to its share of the machine, where ``SIMBENCH_THREADS``
-    says it (:func:`simbench.threads.cores_shared` in the pool's parent; by hand on a Dask
-    worker host); after the variant is chosen, so that Dr.Jit's pool is sized too."""
-    from simbench.threads import THREADS_VARIABLE, apply_threads, process_threads
-
-    if os.environ.get(THREADS_VARIABLE, "").strip():
-        apply_threads(process_threads())
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -245,7 +234,7 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
     deaths: dict[str, int] = {}
     init = (variant, os.getpid(), messages, setup, setup_args)
     # each process (this one among them when it takes tasks) takes its share of the cores; the
-    # workers read it from the environment they are spawned with (_take_share)
+    # workers read it from the environment they are spawned with (simbench.variant.select_variant)
     with cores_shared(workers):
         try:
             while todo:
@@ -388,7 +377,6 @@ def _dask_call(fn, task: Task, variant: str | None, setup, setup_args: tuple) ->
 
             single_thread_blas()
             limit_malloc_arenas()
-            _take_share()
             _thread.state = setup(_dask_emit, *setup_args)
             _thread.made_by = made_by
     return _call(fn, task)
