@@ -91,11 +91,19 @@ def _ensure_variant(variant: str | None) -> str:
     return select_variant(variant)
 
 
+# record's options that a system may not take, with the command line's names for them
+_RECORDING_FLAGS = {
+    "sensor": "--sensor",
+    "pattern": "--period, --order, --sequence, --channels",
+    "calibration_frames": "--calibration-frames",
+}
+
+
 def record(
     scene: str | Path | SceneSpec,
     *,
     system: str = "proposed",
-    sensor: str = "paper",
+    sensor: str | None = None,
     seed: int | None = None,
     spp: int | None = None,
     sampler: str | None = None,
@@ -107,7 +115,10 @@ def record(
 ) -> Recorded:
     """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
     ``system`` (:func:`simbench.systems.system_names`), the proposed one through the sensor model
-    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor` or a TOML file).
+    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor` or a TOML file; None = ``paper``).
+    A ``sensor``, ``pattern`` or ``calibration_frames`` that the system does not record with
+    (:attr:`simbench.systems.SystemInfo.recording_options`: the competitors carry their own
+    devices) is a ``ValueError``.
 
     ``calibration_frames``: the proposed sensor also records the reference plane under black and
     each primary, which the colour-robust decoder needs.  ``pattern``: what the proposed sensor
@@ -123,7 +134,7 @@ def record(
     ((960, 1280, 3), dtype('uint8'))
     """
     from simbench.decode import DecoderParams
-    from simbench.sim.sensor import get_sensor
+    from simbench.sim.sensor import check_rig_lens, get_sensor
     from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
     from simbench.sim.scene import load_scene
     from simbench.seeds import DEFAULT_SEED, SeedLog
@@ -142,10 +153,29 @@ def record(
     max_depth = v.integer(max_depth, "max_depth", lo=MAX_DEPTH_RANGE[0], hi=MAX_DEPTH_RANGE[1])
     sampler = DEFAULT_SAMPLER if sampler is None else sampler
     check_sampler(sampler, spp)
+    given = {
+        "sensor": sensor is not None,
+        "pattern": pattern is not None,
+        "calibration_frames": bool(calibration_frames),
+    }
+    sensor = "paper" if sensor is None else sensor
     sensor_model = get_sensor(sensor)
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
     options = SystemOptions(sensor=sensor_model, decoder=None if pattern is None else DecoderParams(pattern=pattern))
     the_system = get_system(system, options)
+    info = the_system.info()
+    stray = [name for name, yes in given.items() if yes and name not in info.recording_options]
+    if stray:  # (they were ignored without a word)
+        uses = (
+            f"it records with {', '.join(info.recording_options)} only" if info.recording_options else "its own device"
+        )
+        verb = "does" if len(stray) == 1 else "do"
+        named = " and ".join(f"{k} ({_RECORDING_FLAGS[k]})" for k in stray)
+        raise ValueError(
+            f"{named} {verb} not apply to the {system} system ({uses}): leave {'it' if len(stray) == 1 else 'them'} out"
+        )
+    if info.uses_scene_rig:  # (the competitors replace the scene's rig with their own)
+        check_rig_lens(spec.rig, sensor_model, where=f"scene {scene if isinstance(scene, (str, Path)) else spec.name}")
     used_variant = _ensure_variant(variant)
     store = cache if isinstance(cache, RenderCache) else RenderCache(None if cache is None else str(cache))
     settings = {

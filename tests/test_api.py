@@ -79,6 +79,17 @@ def test_depth_refuses_what_it_cannot_do():
         ({"max_depth": 0}, r"max_depth must be an integer in \[2, 1024\], got 0"),
         ({"max_depth": -3}, "max_depth must be an integer"),
         ({"cache": 5}, "cache must be a folder"),
+        # the fresh-clone audit: the competitors recorded without these, and without a word
+        (
+            {"system": "kinect", "sensor": "ideal"},
+            r"^sensor \(--sensor\) does not apply to the kinect system \(its own device\): leave it out$",
+        ),
+        ({"system": "tof", "calibration_frames": True}, "calibration_frames .* does not apply to the tof system"),
+        (
+            {"system": "phase_shift", "pattern": "P25"},
+            r"pattern \(--period, --order, --sequence, --channels\) does not apply to the phase_shift system \(it "
+            r"records with sensor only\)",
+        ),
     ],
 )
 def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypatch, kwargs, match):
@@ -88,6 +99,10 @@ def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypa
     import simbench
 
     monkeypatch.chdir(tmp_path)
+    if kwargs.get("pattern") == "P25":
+        from simbench.pattern import PatternSpec
+
+        kwargs = {**kwargs, "pattern": PatternSpec(period_px=25)}
     with pytest.raises(ValueError, match=match):
         simbench.record(SCENES / "white_plane.toml", **kwargs)
     with pytest.raises(ValueError, match="scene must be a scene file"):

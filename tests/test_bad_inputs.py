@@ -393,8 +393,8 @@ for cid, text, msg in [
     ("dark-noise-inf", _sensor(PAPER, "dark_noise_e = 20.0", "dark_noise_e = inf"), "dark_noise_e"),
     ("bits-9", _sensor(PAPER, "bits = 8", "bits = 9"), "bits"),
     # issue 33: validated and made every capture 255 (exit 0); bounds argued in simbench.sim.sensor
-    ("offset-1e30", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 1e30"), "offset_dn"),
-    ("offset-above-half-range", _sensor(PAPER, "bits = 8", "bits = 8\noffset_dn = 200.0"), "offset_dn"),
+    ("offset-1e30", _sensor(PAPER, "offset_dn = 0.0", "offset_dn = 1e30"), "offset_dn"),
+    ("offset-above-half-range", _sensor(PAPER, "offset_dn = 0.0", "offset_dn = 200.0"), "offset_dn"),
     ("dark-current-1e30", _sensor(PAPER, "dark_current_e_s = 0.0", "dark_current_e_s = 1e30"), "dark_current_e_s"),
     ("dsnu-1e30", _sensor(PAPER, "dsnu_e = 5.0", "dsnu_e = 1e30"), "dsnu_e"),
     ("focus-1e20", _sensor(PAPER, "focus_m = 1.0", "focus_m = 1e20"), "focus_m"),
@@ -843,6 +843,61 @@ case(
     "render-variant-cuda-without-gpu",
     lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), "--variant", "cuda_ad_rgb"],
     "cuda_ad_rgb",
+)
+
+
+def _scene_with_rig(d: Path, rig_text: str) -> None:
+    (d / "rig.toml").write_text(rig_text)
+    (d / "s.toml").write_text('rig = "rig.toml"\n[[object]]\ntype = "plane"\ncenter_m = [0, 0, 1]\nsize_m = [2, 2]\n')
+
+
+# the fresh-clone audit: a rig's lens distortion was dropped for the sensor model's without a word
+case(
+    "calibrate-rig-distortion-not-the-sensors",
+    lambda d: ["calibrate", "--poses", "3", "--rig", str(d / "rig.toml"), "--out", str(d / "cal")],
+    "the rig's camera distortion [-0.2, 0.0, 0.0, 0.0, 0.0] is not the lens of sensor model 'paper'",
+    setup=lambda d: (d / "rig.toml").write_text(_rig_text(**{"camera.distortion": "[-0.2, 0, 0, 0, 0]"})),
+)
+case(
+    "render-scene-rig-distortion-not-the-sensors",
+    lambda d: ["render", str(d / "s.toml"), "--sensor", "ideal", "--out", str(d / "o")],
+    "the rig's projector distortion [0.1, 0.0, 0.0, 0.0, 0.0] is not the lens of sensor model 'ideal'",
+    setup=lambda d: _scene_with_rig(d, _rig_text(**{"projector.distortion": "[0.1, 0, 0, 0, 0]"})),
+)
+
+for cid, extra, msg in [
+    ("kinect-sensor", ["--system", "kinect", "--sensor", "ideal"], "sensor (--sensor) does not apply to the kinect"),
+    ("tof-period", ["--system", "tof", "--period", "25"], "pattern (--period, --order, --sequence, --channels) does"),
+    ("phase-shift-order", ["--system", "phase_shift", "--order", "4"], "does not apply to the phase_shift system"),
+    ("kinect-calibration-frames", ["--system", "kinect", "--calibration-frames"], "calibration_frames (--calib"),
+]:
+    case(
+        f"render-{cid}",
+        lambda d, extra=extra: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "o"), *extra],
+        msg,
+    )
+
+case(
+    "calibrate-target-symmetric",  # the audit: 10 x 8 squares were accepted (9 x 7 corners: symmetric)
+    lambda d: ["calibrate", "--poses", "3", "--target", str(d / "t.toml"), "--out", str(d / "cal")],
+    "squares [10, 8] - give one count even and the other odd",
+    setup=lambda d: (d / "t.toml").write_text("squares = [10, 8]\nsquare_m = 0.03\n"),
+)
+# the fresh-clone audit: a rig of another baseline decoded 95 % at 77 mm MAE in calibrated mode
+case(
+    "decode-calibrated-rig-of-another-baseline",
+    lambda d: [
+        "decode",
+        str(d / "r"),
+        "--mode",
+        "calibrated",
+        "--rig",
+        str(d / "other.toml"),
+        "--out",
+        str(d / "x.npy"),
+    ],
+    "triangulates with the rig",
+    setup=lambda d: (render_folder(d), (d / "other.toml").write_text(_rig_text(**{"pose.position_m": "[0.12, 0, 0]"}))),
 )
 
 # ----------------------------------------------------------------------------------- score

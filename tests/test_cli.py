@@ -863,3 +863,18 @@ def test_score_warns_of_a_depth_map_that_cannot_be_this_scene_in_metres(tmp_path
     np.save(tmp_path / "good.npy", gt + np.float32(0.0004))
     assert main(["score", str(tmp_path / "good.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_a_competitors_min_confidence_that_removes_nothing_says_so(tmp_path, capsys):
+    """The fresh-clone audit: a ToF folder decoded with --min-confidence 0.9 said nothing of the
+    threshold doing nothing (its decoded pixels all hold thousands of electrons)."""
+    folder = tmp_path / "tof"
+    assert main(["render", str(SCENES / "step.toml"), "--system", "tof", "--out", str(folder), "--no-cache"]) == 0
+    capsys.readouterr()
+    assert main(["decode", str(folder), "--out", str(tmp_path / "d.npy"), "--min-confidence", "0.9"]) == 0
+    out = capsys.readouterr().out
+    assert "below 0.9, which removed no pixel (the least confident decoded one has " in out
+    assert main(["decode", str(folder), "--out", str(tmp_path / "e.npy"), "--min-confidence", "1e6"]) == 0
+    out, err = capsys.readouterr()
+    assert "below 1e+06)" in out and "removed no pixel" not in out and "decoded 0.00 %" in out
+    assert "no pixel decoded: --min-confidence 1e+06 made holes of " in err  # not "lit by this pattern?"

@@ -107,7 +107,7 @@ def _without_environment(cmd: str) -> str:
     words = cmd.split()
     while words and re.match(r"[A-Z_][A-Z0-9_]*=", words[0]):
         name, value = words.pop(0).split("=", 1)
-        assert name == THREADS_VARIABLE, f"{cmd}: {name} is no variable simbench reads"
+        assert name in (THREADS_VARIABLE, "SIMBENCH_CACHE_DIR"), f"{cmd}: {name} is no variable simbench reads"
         saved = os.environ.get(name)
         os.environ[name] = value
         try:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import tomllib
 
 import numpy as np
 import pytest
@@ -287,3 +288,53 @@ def test_the_projector_drive_carries_the_projector_lens_lateral_colour():
     dispersed = projector_drive_for(scene, pattern, with_lateral_colour(ideal, camera_px=(0, 0, 0), projector_px=shift))
     assert np.array_equal(dispersed, lateral_colour_image(plain, scene.rig.projector, shift_px=shift))
     assert not np.array_equal(dispersed[..., 0], plain[..., 0]) and np.array_equal(dispersed[..., 1], plain[..., 1])
+
+
+def test_a_sensor_file_that_leaves_keys_out_is_told_the_values_that_stand_in(tmp_path, caplog):
+    """The fresh-clone audit: a copy of paper.toml without `cfa` or `prnu` recorded without a
+    mosaic or PRNU and said nothing.  Now the file's load names each key left out and the value
+    used; the presets themselves (documented in their comments) load quietly, and a complete copy
+    of paper.toml says nothing either."""
+    import logging
+
+    from simbench.sim.sensor import PRESETS_DIR, left_out_keys, load_sensor
+
+    text = (PRESETS_DIR / "paper.toml").read_text()
+    full = tmp_path / "mine.toml"
+    full.write_text(text)
+    with caplog.at_level(logging.WARNING, logger="simbench"):
+        assert load_sensor(full) == get_sensor("paper")
+        for name in SENSOR_PRESETS:
+            get_sensor(name)
+    assert not caplog.records, [r.getMessage() for r in caplog.records]
+
+    cut = tmp_path / "cut.toml"
+    cut.write_text("\n".join(line for line in text.splitlines() if not line.startswith(("prnu", "cfa", "ratio"))))
+    with caplog.at_level(logging.WARNING, logger="simbench"):
+        sensor = load_sensor(cut)
+    assert sensor.camera.prnu == 0.0 and sensor.camera.cfa == "none" and sensor.ambient_ratio == 0.0
+    (message,) = [r.getMessage() for r in caplog.records]
+    assert f"sensor {cut} leaves out 3 key(s)" in message
+    assert message.endswith("camera.prnu = 0.0, camera.cfa = 'none', ambient.ratio = 0.0")
+    # a simple camera's file is listed against its own fields; every value the model used
+    minimal = tomllib.loads((PRESETS_DIR / "minimal.toml").read_text())
+    listed = left_out_keys(minimal, get_sensor("minimal"))
+    assert "camera.read_noise_e = 10.0" not in listed and "projector.dmd = 'square'" in listed
+    assert "projector.contrast_ratio = 'inf'" in listed and "spectral.crosstalk = False" in listed
+
+
+def test_a_rig_whose_lens_is_not_the_sensor_models_is_refused():
+    """A render takes its lenses from the sensor model (apply_to_rig): a rig stating another
+    distortion would have been replaced without a word; the same distortion, or none, is fine."""
+    from simbench.rig import paper_rig
+    from simbench.sim.sensor import apply_to_rig, check_rig_lens
+
+    paper = get_sensor("paper")
+    check_rig_lens(paper_rig(), paper, where="r")
+    check_rig_lens(apply_to_rig(paper_rig(), paper), paper, where="r")  # what calibration records
+    rig = paper_rig()
+    odd = dataclasses.replace(rig, camera=dataclasses.replace(rig.camera, distortion=(-0.2, 0.0, 0.0, 0.0, 0.0)))
+    with pytest.raises(
+        ValueError, match=r"^r: the rig's camera distortion \[-0.2, 0.0, 0.0, 0.0, 0.0\] is not the lens"
+    ):
+        check_rig_lens(odd, paper, where="r")

@@ -60,8 +60,14 @@ def _cmd_cache_prune(args) -> int:
         for path in result.paths:
             print(f"would remove {path}")
     extra = f" and {len(result.leftovers)} leftovers of killed writers" if result.leftovers else ""
+    rules = []
+    if args.unused_days is not None:
+        rules.append(f"those unused for {args.unused_days:g} days")
+    if args.max_size is not None:
+        rules.append(f"the least recently used beyond {human_bytes(args.max_size)}")
+    rule = " and ".join(rules)
     print(
-        f"cache {args.cache}: {verb} {len(removed)} entries ({human_bytes(gone)}), the least recently used{extra}; "
+        f"cache {args.cache}: {verb} {len(removed)} entries ({human_bytes(gone)}), {rule}{extra}; "
         f"{len(before) - len(removed)} kept ({human_bytes(left)})"
     )
     return 0
@@ -85,13 +91,14 @@ def add_parsers(sub, kw: dict) -> None:
         "--max-size",
         type=size_bytes,
         default=None,
-        help="keep at most this much, the most recently used (e.g. 10G; K, M, G, T are powers of 1024)",
+        help="keep at most this much, the most recently used (e.g. 10G; K, M, G, T are powers of 1024; a bare "
+        "number is bytes: 500 keeps nothing but a tiny entry)",
     )
     c.add_argument(
         "--unused-days",
         type=float_in(lo=0.0),
         default=None,
-        help="remove every entry not used for this many days",
+        help="remove every entry not used for this many days (0: every entry)",
     )
     c.add_argument("--dry-run", action="store_true", help="only say what would be removed")
     c.set_defaults(fn=_cmd_cache_prune)

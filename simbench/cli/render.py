@@ -49,8 +49,9 @@ def _cmd_render(args) -> int:
     pattern = pattern_spec(args, scene.rig.projector.size_hw)
     # a system that projects a coded pattern projects the pattern options'; the others their own
     system = get_system(
-        args.system, SystemOptions(sensor=get_sensor(args.camera), decoder=DecoderParams(pattern=pattern))
+        args.system, SystemOptions(sensor=get_sensor(args.camera or "paper"), decoder=DecoderParams(pattern=pattern))
     )
+    pattern_given = any(getattr(args, k) is not None for k in ("period", "order", "sequence", "channels"))
     spp, sampler = render_settings(args)
     # before minutes of rendering
     check_output_directory(args.out, manifest=RECORDING_MANIFESTS, overwrite=args.overwrite)
@@ -75,7 +76,8 @@ def _cmd_render(args) -> int:
         sampler=sampler,
         max_depth=args.max_depth,
         calibration_frames=args.calibration_frames,
-        pattern=pattern,
+        # (a system that projects no coded pattern is refused one only when the options gave it)
+        pattern=pattern if pattern_given or "pattern" in system.info().recording_options else None,
         cache=cache,
         variant=args.variant,
     )
@@ -179,9 +181,10 @@ def add_parsers(sub, kw: dict) -> None:
         "--sensor",
         "--camera",
         dest="camera",
-        default="paper",
+        default=None,
         help="sensor model: a preset (paper: the Flea3 + LightCrafter physics; paper_sim: the paper's 3ds Max "
-        "simulation, a linear noise-free RGB camera; minimal: noise only; ideal: nothing) or a sensor TOML file",
+        "simulation, a linear noise-free RGB camera; minimal: noise only; ideal: nothing) or a sensor TOML file "
+        "(default: paper; for the systems that record through one: the others carry their own devices)",
     )
     add_pattern_options(s)
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")

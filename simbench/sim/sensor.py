@@ -38,6 +38,7 @@ under the projector's full white, so that its three channels read alike
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -49,11 +50,15 @@ from simbench.sim.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
 from simbench.sim.camera import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
 
+log = logging.getLogger(__name__)
+
 __all__ = [
     "Lens",
     "PhysicalCamera",
     "ProjectorModel",
     "SensorModel",
+    "check_rig_lens",
+    "left_out_keys",
     "Effect",
     "EFFECT_TABLE",
     "PRESETS_DIR",
@@ -421,11 +426,62 @@ def sensor_to_dict(sensor: SensorModel) -> dict:
 
 
 def load_sensor(path: str | Path) -> SensorModel:
-    """Read a sensor TOML file; errors name the file and the field."""
+    """Read a sensor TOML file; errors name the file and the field.  A file outside the
+    presets that leaves keys out is told which values stand in for them (a warning): a
+    copy of ``paper.toml`` with ``cfa`` deleted records without a mosaic."""
     path = Path(path)
     data = read_toml(path, what="sensor")
     data.setdefault("name", path.stem)
-    return sensor_from_dict(data, where=str(path))
+    sensor = sensor_from_dict(data, where=str(path))
+    if path.resolve().parent != PRESETS_DIR.resolve():
+        left = left_out_keys(data, sensor)
+        said = (str(path.resolve()), tuple(left))
+        if left and said not in _LEFT_OUT_SAID:  # once a process (a command loads its sensor more than once)
+            _LEFT_OUT_SAID.add(said)
+            log.warning(
+                "sensor %s leaves out %d key(s), which take these values (an effect left out is off; "
+                "docs/sensor-model.md): %s",
+                path,
+                len(left),
+                ", ".join(left),
+            )
+    return sensor
+
+
+_LEFT_OUT_SAID: set[tuple] = set()
+
+
+def left_out_keys(data: dict, sensor: SensorModel) -> list[str]:
+    """``table.key = value`` for each key of ``sensor``'s camera model, lenses, projector,
+    spectral and ambient tables that ``data`` (a sensor TOML table) does not give: the values
+    the model took for them."""
+    tables = {
+        "camera": ([f.name for f in dataclasses.fields(type(sensor.camera))], sensor.camera),
+        "camera.lens": ([f.name for f in dataclasses.fields(Lens)], sensor.camera_lens),
+        "projector": ([f.name for f in dataclasses.fields(ProjectorModel) if f.name != "lens"], sensor.projector),
+        # (a projector's lumens are its output: its lens's transmission is in them already)
+        "projector.lens": (
+            [f.name for f in dataclasses.fields(Lens) if f.name != "transmission"],
+            sensor.projector.lens,
+        ),
+    }
+    out = []
+    for table, (names, obj) in tables.items():
+        given = data
+        for part in table.split("."):
+            given = given.get(part, {}) if isinstance(given, dict) else {}
+        for name in names:
+            if name not in given:
+                value = getattr(obj, name)
+                if isinstance(value, tuple):
+                    value = list(value)
+                if isinstance(value, float) and math.isinf(value):
+                    value = "inf"
+                out.append(f"{table}.{name} = {'auto' if value is None else repr(value)}")
+    for table, key, value in (("spectral", "crosstalk", sensor.crosstalk), ("ambient", "ratio", sensor.ambient_ratio)):
+        if key not in data.get(table, {}):
+            out.append(f"{table}.{key} = {value!r}")
+    return out
 
 
 def get_sensor(name_or_path: str | Path) -> SensorModel:
@@ -441,6 +497,22 @@ def get_sensor(name_or_path: str | Path) -> SensorModel:
 
 # ---------------------------------------------------------------------------------------
 # geometry and photometry
+
+
+def check_rig_lens(rig: Rig, sensor: SensorModel, *, where: str) -> None:
+    """ValueError when ``rig`` states a lens distortion other than ``sensor``'s: a render takes
+    its lenses from the sensor model (:func:`apply_to_rig`), so the rig's would be dropped
+    without a word (a calibrated rig.toml given to ``calibrate --rig`` or as a scene's rig)."""
+    for name, intr, lens in (
+        ("camera", rig.camera, sensor.camera_lens),
+        ("projector", rig.projector, sensor.projector.lens),
+    ):
+        if intr.has_distortion and tuple(intr.distortion) != tuple(lens.distortion):
+            raise ValueError(
+                f"{where}: the rig's {name} distortion {list(intr.distortion)} is not the lens of sensor model "
+                f"{sensor.name!r} ({list(lens.distortion)}); a render takes its lenses from the sensor model: give "
+                f"the distortion as the sensor file's [{name}.lens] distortion, and the rig without it"
+            )
 
 
 def apply_to_rig(rig: Rig, sensor: SensorModel) -> Rig:

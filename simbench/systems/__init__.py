@@ -95,6 +95,11 @@ class SystemInfo:
     # simbench.calibration: experiments can hand it the calibrated rig instead of the true one
     # (the competitors carry their own factory-calibrated devices)
     uses_scene_rig: bool = False
+    # what it records with among simbench.api.record's options beyond the scene and the render
+    # settings: "sensor" (the sensor model its camera and projector are), "pattern" (the coded
+    # pattern it projects), "calibration_frames" (the reference plane under black and each
+    # primary); any other given is an error there, not ignored
+    recording_options: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -247,7 +247,13 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
-    hint = nothing_decoded_hint(res.valid, res.colours, working_range_m=(request.near_m, request.far_m))
+    hint = nothing_decoded_hint(
+        res.valid,
+        res.colours,
+        working_range_m=(request.near_m, request.far_m),
+        confidence=res.confidence,
+        min_confidence=request.min_confidence,
+    )
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
@@ -258,7 +264,12 @@ NOTHING_DECODED_SHARE = 0.01
 
 
 def nothing_decoded_hint(
-    valid: np.ndarray, capture_u8: np.ndarray | None = None, *, working_range_m: tuple[float, float] | None = None
+    valid: np.ndarray,
+    capture_u8: np.ndarray | None = None,
+    *,
+    working_range_m: tuple[float, float] | None = None,
+    confidence: np.ndarray | None = None,
+    min_confidence: float | None = None,
 ) -> str:
     """A warning for a decode that found (almost) nothing - under :data:`NOTHING_DECODED_SHARE`
     of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated)
@@ -279,6 +290,14 @@ def nothing_decoded_hint(
             why = f"the capture is dark (its brightest value {top} of 255)"
         elif clipped >= 0.5:
             why = f"{100 * clipped:.0f} % of the capture's pixels are saturated in every channel"
+    if min_confidence is not None and confidence is not None:
+        conf = np.asarray(confidence, np.float32)
+        under = np.isfinite(conf) & (conf > 0) & (conf < np.float32(min_confidence))
+        if under.any():  # (a hole's confidence is kept: the threshold, not the decode, made it)
+            why = (
+                f"--min-confidence {min_confidence:g} made holes of {100 * float(np.mean(under)):.1f} % of the pixels "
+                f"(the most confident has {float(np.max(conf[under])):.4g})"
+            )
     what = "no pixel" if share == 0 else f"only {100 * share:.2f} % of the pixels"
     return f"{what} decoded: {why}"
 
@@ -323,10 +342,19 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
     if request.min_confidence is not None:
         if res.confidence is None:
             raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
+        before = res.valid
         res = apply_min_confidence(res, request.min_confidence)
+        if before.any() and not (before & ~res.valid).any():
+            # (the audit's ToF decode at 0.9: 100 % decoded, nothing said of its 200 e- floor)
+            lowest = float(np.min(np.asarray(res.confidence)[before]))
+            over_floor = f", which removed no pixel (the least confident decoded one has {lowest:.4g})"
+        else:
+            over_floor = ""
     over = f"; overriding the recording: rig {request.rig} instead of the recorded one" if request.rig else ""
     meaning = info.confidence + (
-        f"; and, by --min-confidence, below {request.min_confidence:g}" if request.min_confidence is not None else ""
+        f"; and, by --min-confidence, below {request.min_confidence:g}{over_floor}"
+        if request.min_confidence is not None
+        else ""
     )
     return FileDecode(
         depth_m=res.depth_m,

@@ -99,6 +99,7 @@ class PhaseShiftSystem:
             captures=s.captures,
             period_px=s.period_px,
             uses_scene_rig=True,
+            recording_options=("sensor",),  # its own sequence, not the coded pattern
             confidence=(
                 f"fringe modulation B of the {s.steps}-step fit (full-scale units, 0-1); pixels below "
                 f"{s.min_modulation:g} are holes"
