@@ -164,11 +164,10 @@ def record(
     options = SystemOptions(sensor=sensor_model, decoder=None if pattern is None else DecoderParams(pattern=pattern))
     the_system = get_system(system, options)
     info = the_system.info()
-    stray = [name for name, yes in given.items() if yes and name not in info.recording_options]
+    takes = info.recording_options  # None: a system that does not say takes what applies to it
+    stray = [] if takes is None else [name for name, yes in given.items() if yes and name not in takes]
     if stray:  # (they were ignored without a word)
-        uses = (
-            f"it records with {', '.join(info.recording_options)} only" if info.recording_options else "its own device"
-        )
+        uses = f"it records with {', '.join(takes)} only" if takes else "its own device"
         verb = "does" if len(stray) == 1 else "do"
         named = " and ".join(f"{k} ({_RECORDING_FLAGS[k]})" for k in stray)
         raise ValueError(

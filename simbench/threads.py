@@ -132,7 +132,8 @@ def cores_shared(workers: int) -> Iterator[int]:
     import cv2
 
     before_env = os.environ.get(THREADS_VARIABLE)
-    n = process_threads() if before_env else max(1, usable_cpus() // max(1, int(workers)))
+    user_set = bool(before_env and before_env.strip())
+    n = process_threads() if user_set else max(1, usable_cpus() // max(1, int(workers)))
     before_cv = cv2.getNumThreads()
     dr = sys.modules.get("drjit")
     before_dr = dr.thread_count() if dr is not None else None

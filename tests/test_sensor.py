@@ -320,7 +320,9 @@ def test_a_sensor_file_that_leaves_keys_out_is_told_the_values_that_stand_in(tmp
     minimal = tomllib.loads((PRESETS_DIR / "minimal.toml").read_text())
     listed = left_out_keys(minimal, get_sensor("minimal"))
     assert "camera.read_noise_e = 10.0" not in listed and "projector.dmd = 'square'" in listed
-    assert "projector.contrast_ratio = 'inf'" in listed and "spectral.crosstalk = False" in listed
+    assert "projector.contrast_ratio = 'inf'" in listed and "ambient.ratio = 0.0" in listed
+    # (its exposure is a fraction of full scale: no lens photometry, and no crosstalk allowed)
+    assert not [k for k in listed if k.startswith(("camera.lens.", "spectral."))], listed
 
 
 def test_a_rig_whose_lens_is_not_the_sensor_models_is_refused():

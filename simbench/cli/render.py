@@ -52,6 +52,8 @@ def _cmd_render(args) -> int:
         args.system, SystemOptions(sensor=get_sensor(args.camera or "paper"), decoder=DecoderParams(pattern=pattern))
     )
     pattern_given = any(getattr(args, k) is not None for k in ("period", "order", "sequence", "channels"))
+    options = system.info().recording_options  # None: a system that does not say takes what applies
+    takes_pattern = options is None or "pattern" in options
     spp, sampler = render_settings(args)
     # before minutes of rendering
     check_output_directory(args.out, manifest=RECORDING_MANIFESTS, overwrite=args.overwrite)
@@ -77,7 +79,7 @@ def _cmd_render(args) -> int:
         max_depth=args.max_depth,
         calibration_frames=args.calibration_frames,
         # (a system that projects no coded pattern is refused one only when the options gave it)
-        pattern=pattern if pattern_given or "pattern" in system.info().recording_options else None,
+        pattern=pattern if pattern_given or takes_pattern else None,
         cache=cache,
         variant=args.variant,
     )

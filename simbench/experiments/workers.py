@@ -203,8 +203,9 @@ def _run_local(tasks, fn, *, workers, variant, on_result, on_died, setup, setup_
 
     import queue
 
-    from simbench.threads import cores_shared
+    from simbench.threads import cores_shared, process_threads
 
+    process_threads()  # a SIMBENCH_THREADS simbench refuses fails here, before any thread starts
     ctx = mp.get_context("spawn")
     messages = ctx.Queue()
     stop = threading.Event()

@@ -38,8 +38,10 @@ under the projector's full white, so that its three channels read alike
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import math
+import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -435,9 +437,12 @@ def load_sensor(path: str | Path) -> SensorModel:
     sensor = sensor_from_dict(data, where=str(path))
     if path.resolve().parent != PRESETS_DIR.resolve():
         left = left_out_keys(data, sensor)
-        said = (str(path.resolve()), tuple(left))
-        if left and said not in _LEFT_OUT_SAID:  # once a process (a command loads its sensor more than once)
-            _LEFT_OUT_SAID.add(said)
+        said = hashlib.sha256(repr((str(path.resolve()), left)).encode()).hexdigest()[:16]
+        # once a run: a command loads its sensor more than once, and a pool's workers inherit
+        # what their parent said through the environment
+        told = os.environ.get(_LEFT_OUT_VARIABLE, "").split()
+        if left and said not in told:
+            os.environ[_LEFT_OUT_VARIABLE] = " ".join([*told, said])
             log.warning(
                 "sensor %s leaves out %d key(s), which take these values (an effect left out is off; "
                 "docs/sensor-model.md): %s",
@@ -448,13 +453,14 @@ def load_sensor(path: str | Path) -> SensorModel:
     return sensor
 
 
-_LEFT_OUT_SAID: set[tuple] = set()
+_LEFT_OUT_VARIABLE = "SIMBENCH_SENSOR_FILES_TOLD"  # (internal: the files load_sensor has warned of)
 
 
 def left_out_keys(data: dict, sensor: SensorModel) -> list[str]:
     """``table.key = value`` for each key of ``sensor``'s camera model, lenses, projector,
     spectral and ambient tables that ``data`` (a sensor TOML table) does not give: the values
     the model took for them."""
+    simple = not sensor.is_physical  # its exposure is a fraction of full scale: no lens photometry or crosstalk
     tables = {
         "camera": ([f.name for f in dataclasses.fields(type(sensor.camera))], sensor.camera),
         "camera.lens": ([f.name for f in dataclasses.fields(Lens)], sensor.camera_lens),
@@ -465,6 +471,8 @@ def left_out_keys(data: dict, sensor: SensorModel) -> list[str]:
             sensor.projector.lens,
         ),
     }
+    if simple:
+        del tables["camera.lens"]
     out = []
     for table, (names, obj) in tables.items():
         given = data
@@ -479,7 +487,7 @@ def left_out_keys(data: dict, sensor: SensorModel) -> list[str]:
                     value = "inf"
                 out.append(f"{table}.{name} = {'auto' if value is None else repr(value)}")
     for table, key, value in (("spectral", "crosstalk", sensor.crosstalk), ("ambient", "ratio", sensor.ambient_ratio)):
-        if key not in data.get(table, {}):
+        if key not in data.get(table, {}) and not (simple and table == "spectral"):
             out.append(f"{table}.{key} = {value!r}")
     return out
 

@@ -601,6 +601,7 @@ class KinectSystem:
         return SystemInfo(
             name=self.name,
             label="Kinect v1 (simulated)",
+            recording_options=(),  # its own device: no sensor model, pattern or calibration frames
             size_hw=(m.height_px, m.width_px),
             captures=1,
             confidence=(

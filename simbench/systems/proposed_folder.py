@@ -207,7 +207,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
         # its Z0 by that rig too (a rig of another baseline decoded 95 % at 77 mm MAE without a
         # word; the check costs a decode of the reference, cached, where a rig is given)
-        ref_params = dataclasses.replace(params, mode="reference", z0_m=_z0_for(Path(reference_path), None))
+        ref_z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)  # (an image's: as --z0 says, or 1 m)
+        ref_params = dataclasses.replace(params, mode="reference", z0_m=ref_z0)
         plane, store_plane = lookup_decoded_reference(
             load_image(reference_path, expected_size_hw=rig.camera.size_hw), rig=rig, params=ref_params, cache=cache
         )
@@ -239,12 +240,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     stages = ChainMap(
         result.stages, {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
     )
+    z0_note = f", Z0 = {float(reference.z0_m)} m" if reference is not None else ""  # (none used: no Z0)
     return FileDecode(
         depth_m=result.depth_m,
         valid=result.valid,
         confidence=result.confidence,
         camera=rig.camera,
-        summary=f"{params.mode} mode{f', Z0 = {params.z0_m} m' if reference is not None else ''}{ref_note}{over}",
+        summary=f"{params.mode} mode{z0_note}{ref_note}{over}",
         confidence_meaning=meaning,
         elapsed_s=dt,
         colours=capture if capture.dtype == np.uint8 else None,

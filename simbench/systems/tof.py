@@ -408,6 +408,7 @@ class ToFSystem:
         return SystemInfo(
             name=self.name,
             label="SR4000 ToF (simulated)",
+            recording_options=(),  # its own device: no sensor model, pattern or calibration frames
             size_hw=(m.height_px, m.width_px),
             captures=1,
             confidence=(
