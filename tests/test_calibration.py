@@ -150,6 +150,55 @@ def test_angles_invert_the_rotation():
         angles_xyz_deg(np.diag([1.0, 1.0, -1.0]))
 
 
+# --- the corners ----------------------------------------------------------------------------
+
+
+def _board_image(seed: int, size_wh: tuple[int, int] = (640, 480)) -> np.ndarray:
+    """A seeded synthetic view of the target: squares warped by a perspective, area-averaged,
+    with noise, 8 bits (a stand-in for a rendered white frame)."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    cols, rows = TARGET.squares
+    s = 40
+    board = ((np.indices((rows * s, cols * s)) // s).sum(0) % 2 * 200 + 30).astype(np.float32)
+    board = cv2.copyMakeBorder(board, s, s, s, s, cv2.BORDER_CONSTANT, value=230)
+    h, w = board.shape
+    width, height = size_wh
+    quad = np.float32([[0.18, 0.2], [0.83, 0.25], [0.8, 0.84], [0.15, 0.77]]) * np.float32([width, height])
+    quad += rng.uniform(-10, 10, (4, 2)).astype(np.float32)
+    homography = cv2.getPerspectiveTransform(np.float32([[0, 0], [w, 0], [w, h], [0, h]]), quad)
+    img = cv2.warpPerspective(board, homography, size_wh, flags=cv2.INTER_AREA) + rng.normal(0, 3.0, (height, width))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_corners_do_not_depend_on_intel_ipp(seed):
+    """The corner search runs without Intel IPP, whose code is chosen by the CPU.  On board 4
+    cv2.cornerSubPix moved corners by 1.5e-5 px with IPP on against off, and this test failed
+    without the switch (2026-11-27, an AMD EPYC, OpenCV 5.0 with IPP 2026.0 k0; an Intel Xeon
+    had given the calibrated rig ~1e-5 of its values apart).  Where this OpenCV has no IPP the
+    test still checks that the caller's settings come back."""
+    import cv2
+
+    from simbench.calibration.procedure import find_corners
+
+    img = _board_image(seed)
+    ipp, threads = cv2.ipp.useIPP(), cv2.getNumThreads()
+    try:
+        found = {}
+        for use in (True, False):
+            cv2.ipp.setUseIPP(use)
+            before = cv2.ipp.useIPP()  # False whatever was asked where this OpenCV has no IPP
+            found[use] = find_corners(img, target=TARGET)
+            assert cv2.ipp.useIPP() == before and cv2.getNumThreads() == threads
+        assert found[True] is not None and found[True].shape == (70, 2)
+        assert found[True].tobytes() == found[False].tobytes()
+    finally:
+        cv2.ipp.setUseIPP(ipp)
+        cv2.setNumThreads(threads)
+
+
 # --- the projector's coordinates: local homographies -------------------------------------------
 
 

@@ -50,6 +50,7 @@ def test_versions_import_nothing_and_survive_a_mocked_scipy():
     assert out["v"]["c_compiler"].startswith(("GCC:", "clang"))
     assert out["v"]["opencv"] == metadata.version("opencv-python-headless")
     assert out["v"]["python"].count(".") == 2
+    assert out["v"]["cpu"] and out["v"]["cpu"] != "unknown"
 
 
 def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():

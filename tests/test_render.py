@@ -1,6 +1,7 @@
 """Render tier: full-resolution Mitsuba captures of the pipeline scenes, decoded and scored."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -115,6 +116,64 @@ def test_render_is_the_same_bits_on_any_number_of_render_threads(variant, camera
     finally:
         dr.set_thread_count(before)
     assert all(np.array_equal(images[0], other) for other in images[1:])
+
+
+_GLOSSY_RENDER = """
+import ctypes, hashlib, os, sys
+from simbench.variant import select_variant
+if not select_variant().startswith("llvm_"):
+    print("skip: not an LLVM variant"); sys.exit(0)
+import dataclasses
+import drjit as dr
+if sys.argv[1] == "avx2":
+    core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    try:
+        set_target = core._Z19jit_llvm_set_targetPKcS0_j  # jit_llvm_set_target(cpu, features, width)
+    except AttributeError:
+        print("skip: this Dr.Jit has no jit_llvm_set_target"); sys.exit(0)
+    set_target(b"haswell", b"+avx,+avx2,+fma,+f16c,+sse4.2,+popcnt,+bmi,+bmi2,+lzcnt,+movbe", 16)
+from simbench.pattern import PatternSpec, fringe_pattern, quantize
+from simbench.rig import scale_camera
+from simbench.sim.projector import transfer_curve
+from simbench.sim.render import render_radiance
+from simbench.sim.scene import scene_from_dict
+scene = scene_from_dict({"object": [
+    {"type": "sphere", "center_m": [0, 0, 1.0], "radius_m": 0.15, "material": "plastic", "roughness": 0.08},
+    {"type": "box", "center_m": [0.2, 0.1, 1.1], "size_m": [0.15, 0.15, 0.15], "material": "metal", "roughness": 0.2},
+    {"type": "plane", "center_m": [0, 0, 1.3], "size_m": [3, 3]}]})
+scene = dataclasses.replace(scene, rig=scale_camera(scene.rig, 0.125))
+drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
+img = render_radiance(scene, drive, seed=5, spp=16, max_depth=4)
+print(dr.flag(dr.JitFlag.FastMath), hashlib.sha256(img.tobytes()).hexdigest())
+"""
+
+
+def test_render_is_the_same_bits_with_avx2_as_with_avx512():
+    """Renders must not depend on which x86 CPU makes them (simbench.variant.exact_cpu_arithmetic):
+    a glossy scene (plastic and metal: normalised half vectors) rendered with Dr.Jit's kernels
+    compiled for AVX2 alone gives the bits of the host's own instruction set at the same vector
+    width.  With Dr.Jit's fast math the kernels call AVX-512's reciprocal-square-root estimate
+    (vendor bits; an Intel and an AMD CPU rendered these scenes differently), which an AVX2
+    target cannot even compile.  Each render in a fresh process: the target is process-wide."""
+    import subprocess
+    import sys
+
+    cpuinfo = Path("/proc/cpuinfo")
+    flags = cpuinfo.read_text() if cpuinfo.exists() else ""
+    if " avx2" not in flags:
+        pytest.skip("needs an x86 CPU with AVX2")
+    out = {}
+    for target in ("host", "avx2"):
+        res = subprocess.run(
+            [sys.executable, "-c", _GLOSSY_RENDER, target], capture_output=True, text=True, timeout=600
+        )
+        assert res.returncode == 0, f"{target}: exit {res.returncode}: {res.stderr[-2000:]}"
+        line = res.stdout.strip().splitlines()[-1]
+        if line.startswith("skip:"):
+            pytest.skip(line[6:])
+        out[target] = line
+    assert out["host"].startswith("False ")  # fast math off
+    assert out["host"] == out["avx2"]
 
 
 def test_inverse_square_falloff(variant):

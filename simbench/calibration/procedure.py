@@ -93,8 +93,9 @@ DEFAULT_POSES = 10
 MIN_WINDOW_POINTS = 50
 # bump when what observe_pose computes from the same renders changes (its cache key); 4: a
 # frame's three per-primary renders became one (simbench.sim.capture.grey_scene), and so did
-# the ambient light's (grey_ambient_scene), the same frames to float rounding
-OBSERVATION_VERSION = 4
+# the ambient light's (grey_ambient_scene), the same frames to float rounding; 5: the corner
+# search without Intel IPP (_opencv_without_ipp: corners ~1e-5 px apart)
+OBSERVATION_VERSION = 5
 # The lens models a solve may fit (OpenCV flags; every model has one focal length: square
 # pixels).  "radial" (the default) fits k1, k2; "radial_tangential" also p1, p2, the Bouguet
 # toolbox's default (k3 stays 0 in both, as there).  The tangential terms model a decentred
@@ -159,20 +160,45 @@ def find_corners(image_u8: np.ndarray, *, target: CalibrationTarget) -> np.ndarr
     # contrast stretched to the full range (a board at the far end of the volume fills a third
     # of it); OpenCV's own CALIB_CB_NORMALIZE_IMAGE equalises the dark background's histogram
     # too and then misses boards it finds without it
-    stretched = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX)
-    flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    found, corners = cv2.findChessboardCornersSB(stretched, target.pattern_size, flags=flags)
-    if not found:
-        return None
-    # the sector-based detector's corners are good to ~0.2 px on our renders; the saddle-point
-    # refinement over a window of a fifth of a square brings them to ~0.06 px (measured on the
-    # default rig against the projected truth)
-    c = corners.reshape(-1, 2)
-    spacing = corner_spacing_px(c, target=target)
-    win = int(np.clip(0.2 * spacing, 2, 12))
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
-    refined = cv2.cornerSubPix(img, c.astype(np.float32).reshape(-1, 1, 2).copy(), (win, win), (-1, -1), criteria)
+    with _opencv_without_ipp():
+        stretched = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX)
+        flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+        found, corners = cv2.findChessboardCornersSB(stretched, target.pattern_size, flags=flags)
+        if not found:
+            return None
+        # the sector-based detector's corners are good to ~0.2 px on our renders; the saddle-point
+        # refinement over a window of a fifth of a square brings them to ~0.06 px (measured on the
+        # default rig against the projected truth)
+        c = corners.reshape(-1, 2)
+        spacing = corner_spacing_px(c, target=target)
+        win = int(np.clip(0.2 * spacing, 2, 12))
+        criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+        refined = cv2.cornerSubPix(img, c.astype(np.float32).reshape(-1, 1, 2).copy(), (win, win), (-1, -1), criteria)
     return refined.reshape(-1, 2).astype(np.float64)
+
+
+@contextmanager
+def _opencv_without_ipp() -> Iterator[None]:
+    """OpenCV's own code instead of Intel IPP's, on this thread alone, for the corner search.
+
+    IPP picks its code by the CPU it runs on, and its results are not OpenCV's to the last bit
+    (opencv/opencv#29279, #24082).  Measured 2026-11-27: the same quick run gave the calibrated
+    rig's errors ~1e-5 of their values apart on an Intel Xeon and on an AMD EPYC, every other
+    column the same bytes; on the AMD, ``cv2.cornerSubPix`` moved the corners of 2 of the run's
+    10 views by a float32 step (1.5-3e-5 px) with IPP switched off (``OPENCV_IPP=disabled``),
+    and nothing else of the quick run changed with it.  IPP's switch is per thread (OpenCV
+    keeps it in thread-local data), so OpenCV's own worker threads are held to this one
+    meanwhile; the search takes well under a second a view either way."""
+    import cv2
+
+    use_ipp, threads = cv2.ipp.useIPP(), cv2.getNumThreads()
+    cv2.ipp.setUseIPP(False)
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(threads)
+        cv2.ipp.setUseIPP(use_ipp)
 
 
 def corner_spacing_px(corners_px: np.ndarray, *, target: CalibrationTarget) -> float:

@@ -17,7 +17,15 @@ import numpy as np
 
 from simbench.cache import RenderCache, source_digest
 
-__all__ = ["versions", "renderer_id", "cached_arrays", "sim_code_digest", "recording_libraries", "seed_key"]
+__all__ = [
+    "versions",
+    "renderer_id",
+    "cached_arrays",
+    "cpu_model",
+    "sim_code_digest",
+    "recording_libraries",
+    "seed_key",
+]
 
 
 # distribution names of what provenance records (read from the installed metadata: no import,
@@ -50,14 +58,33 @@ def versions() -> dict:
     from simbench.native import compiler
 
     out["c_compiler"] = compiler()
+    out["cpu"] = cpu_model()
     return out
 
 
+def cpu_model() -> str:
+    """The processor's model name (Linux: /proc/cpuinfo; elsewhere the platform's word).  Part
+    of provenance because a few results depend on it in their last digits: OpenCV's SIMD code
+    follows the instruction sets the CPU has (docs/rendering.md, "Across CPUs")."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and value.strip():
+                    return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
 def renderer_id() -> dict:
-    """The variant and Mitsuba version that render here (part of every render key)."""
+    """The variant, the Mitsuba version and whether Dr.Jit may use approximate arithmetic
+    (:func:`simbench.variant.exact_cpu_arithmetic`) where renders are made (part of every
+    render key)."""
+    import drjit as dr
     import mitsuba as mi
 
-    return {"variant": mi.variant(), "mitsuba": mi.__version__}
+    return {"variant": mi.variant(), "mitsuba": mi.__version__, "fast_math": bool(dr.flag(dr.JitFlag.FastMath))}
 
 
 def cached_arrays(
