@@ -10,7 +10,7 @@ import pytest
 
 from simbench.experiments.common import RunConfig
 from simbench.seeds import derive_seed as label_seed
-from simbench.experiments.reproduce import _resolve, check_thresholds, thresholds_from, write_thresholds
+from simbench.experiments.reproduce import _resolve, check_thresholds, same_values, thresholds_from, write_thresholds
 from simbench.rig import paper_rig, scale_camera
 
 
@@ -68,6 +68,23 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     assert any(
         "not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path)
     )
+
+
+def test_same_values_counts_bit_equal_metrics_and_names_the_farthest(tmp_path):
+    """The line `make quick` prints after its check: how many metrics are the committed run's
+    bits (NaN equal to NaN), on which CPUs, and the one farthest apart."""
+    import json
+
+    committed = {"a/mae_mm": 0.5, "b/completeness": 0.99, "c/wrong_share": math.nan, "d/mae_mm": 2.0, "e/x": 1.0}
+    (tmp_path / "metrics.json").write_text(json.dumps(committed))
+    (tmp_path / "table1.provenance.json").write_text(json.dumps({"versions": {"cpu": "Test CPU 9000"}}))
+    run = {**committed, "a/mae_mm": 0.5 * (1 + 1e-6), "d/mae_mm": 2.0 * (1 + 3e-4), "f/new": 1.0}
+    line = same_values(run, tmp_path / "metrics.json")
+    assert line.startswith("3 of 5 metrics the same bits as")
+    assert "made on Test CPU 9000" in line
+    assert line.endswith("the farthest apart: d/mae_mm, 0.0003 of its value")
+    assert same_values(committed, tmp_path / "metrics.json").startswith("5 of 5 ")
+    assert "no comparison" in same_values(run, tmp_path / "missing.json")
 
 
 def test_threshold_rules():

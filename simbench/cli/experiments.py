@@ -45,6 +45,7 @@ def _cmd_reproduce(args) -> int:
         check_thresholds,
         load_thresholds,
         reproduce,
+        same_values,
         write_thresholds,
     )
     from simbench.variant import select_variant
@@ -103,6 +104,9 @@ def _cmd_reproduce(args) -> int:
             print(f"simbench: {len(failures)} metric(s) worse than {args.check}", file=sys.stderr)
             return 1
         print(f"all metrics within {args.check}")
+        committed = Path(args.check).with_name("metrics.json")
+        if committed.exists():
+            print(same_values(metrics, committed))
     return 0
 
 

@@ -35,6 +35,7 @@ __all__ = [
     "reproduce",
     "load_thresholds",
     "check_thresholds",
+    "same_values",
     "thresholds_from",
     "task_summary",
     "write_thresholds",
@@ -455,3 +456,49 @@ def check_thresholds(metrics: dict, thresholds_path: str | Path) -> list[str]:
         if "min" in t and v < t["min"]:
             failures.append(f"{name} = {v:.6g} < min {t['min']} (measured when set: {t.get('measured')})")
     return failures
+
+
+def same_values(metrics: dict, reference_path: str | Path) -> str:
+    """One line on how many of ``metrics`` equal, bit for bit, those of an earlier run's
+    ``metrics.json`` (the committed one beside a thresholds file), with the CPU each run was made
+    on and the metric farthest apart - what a check on another machine tells about
+    reproducibility across CPUs (docs/rendering.md), which thresholds cannot."""
+    import json
+
+    from simbench.sim.keys import cpu_model
+
+    path = Path(reference_path)
+    try:
+        reference = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        return f"no comparison with {path} ({type(exc).__name__})"
+    made_on = "a CPU not recorded"
+    for prov in sorted(path.parent.glob("*.provenance.json")):
+        try:
+            made_on = json.loads(prov.read_text()).get("versions", {}).get("cpu", made_on)
+        except (OSError, ValueError):
+            continue
+        break
+
+    def equal(a: object, b: object) -> bool:
+        both_nan = isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+        return both_nan or a == b
+
+    shared = sorted(set(metrics) & set(reference))
+    differ = [k for k in shared if not equal(metrics[k], reference[k])]
+    line = (
+        f"{len(shared) - len(differ)} of {len(shared)} metrics the same bits as {path} "
+        f"(made on {made_on}; this run on {cpu_model()})"
+    )
+    numeric = [
+        (abs(metrics[k] - reference[k]) / max(abs(reference[k]), 1e-12), k)
+        for k in differ
+        if isinstance(metrics[k], float | int)
+        and isinstance(reference[k], float | int)
+        and math.isfinite(metrics[k])
+        and math.isfinite(reference[k])
+    ]
+    if numeric:
+        rel, key = max(numeric)
+        line += f"; the farthest apart: {key}, {rel:.2g} of its value"
+    return line
