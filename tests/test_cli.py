@@ -878,3 +878,24 @@ def test_a_competitors_min_confidence_that_removes_nothing_says_so(tmp_path, cap
     out, err = capsys.readouterr()
     assert "below 1e+06)" in out and "removed no pixel" not in out and "decoded 0.00 %" in out
     assert "no pixel decoded: --min-confidence 1e+06 made holes of " in err  # not "lit by this pattern?"
+
+
+def test_the_nothing_decoded_hint_blames_the_threshold_only_for_holes_it_made():
+    """Phase shifting's confidence (the fringe modulation) is positive at pixels it never
+    decoded: a dark capture decoded with a threshold above that modulation must be called dark
+    (or unlit), not the threshold's doing, when the system says which holes the threshold made."""
+    import numpy as np
+
+    from simbench.systems.files import nothing_decoded_hint
+
+    valid = np.zeros((20, 30), bool)
+    conf = np.full((20, 30), 0.05, np.float32)
+    dim = np.full((20, 30, 3), 40, np.uint8)
+    blamed = nothing_decoded_hint(valid, dim, confidence=conf, min_confidence=0.1)
+    assert "--min-confidence 0.1 made holes of 100.0 % of the pixels" in blamed  # no mask: by the confidence alone
+    none_made = nothing_decoded_hint(valid, dim, confidence=conf, min_confidence=0.1, thresholded=np.zeros_like(valid))
+    assert "--min-confidence" not in none_made and "lit by this pattern" in none_made
+    some = np.zeros_like(valid)
+    some[:5] = True
+    made = nothing_decoded_hint(valid, dim, confidence=conf, min_confidence=0.1, thresholded=some)
+    assert "made holes of 25.0 % of the pixels" in made

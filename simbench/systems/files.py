@@ -105,6 +105,9 @@ class FileDecode:
     elapsed_s : the decode's own time
     capture_file : the image decoded (a folder's capture), as the stage folder records it
     commit : called after the decode succeeded, before the outputs are written (a cache entry)
+    thresholded : (H, W) bool, the decoded pixels ``--min-confidence`` made holes, where the
+        system knows them apart from pixels it never decoded (None: told by a positive
+        confidence under the threshold)
     """
 
     depth_m: np.ndarray
@@ -118,6 +121,7 @@ class FileDecode:
     stages: Mapping[str, np.ndarray] | None = None
     capture_file: str = ""
     commit: Callable[[], None] = field(default=lambda: None)
+    thresholded: np.ndarray | None = None
 
 
 def confidence_path(request: DecodeRequest) -> Path:
@@ -253,6 +257,7 @@ def decode_files(request: DecodeRequest) -> str:
         working_range_m=(request.near_m, request.far_m),
         confidence=res.confidence,
         min_confidence=request.min_confidence,
+        thresholded=res.thresholded,
     )
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
@@ -270,6 +275,7 @@ def nothing_decoded_hint(
     working_range_m: tuple[float, float] | None = None,
     confidence: np.ndarray | None = None,
     min_confidence: float | None = None,
+    thresholded: np.ndarray | None = None,
 ) -> str:
     """A warning for a decode that found (almost) nothing - under :data:`NOTHING_DECODED_SHARE`
     of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated)
@@ -293,6 +299,10 @@ def nothing_decoded_hint(
     if min_confidence is not None and confidence is not None:
         conf = np.asarray(confidence, np.float32)
         under = np.isfinite(conf) & (conf > 0) & (conf < np.float32(min_confidence))
+        if thresholded is not None:
+            # (phase shifting's modulation is positive at pixels it never decoded: a dark
+            # capture's holes are not the threshold's)
+            under &= np.asarray(thresholded, bool)
         if under.any():  # (a hole's confidence is kept: the threshold, not the decode, made it)
             why = (
                 f"--min-confidence {min_confidence:g} made holes of {100 * float(np.mean(under)):.1f} % of the pixels "
@@ -344,12 +354,15 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
             raise ValueError(f"--min-confidence: the {name} system gives no confidence map")
         before = res.valid
         res = apply_min_confidence(res, request.min_confidence)
+        thresholded = before & ~res.valid
         if before.any() and not (before & ~res.valid).any():
             # (the audit's ToF decode at 0.9: 100 % decoded, nothing said of its 200 e- floor)
             lowest = float(np.min(np.asarray(res.confidence)[before]))
             over_floor = f", which removed no pixel (the least confident decoded one has {lowest:.4g})"
         else:
             over_floor = ""
+    else:
+        thresholded = None
     over = f"; overriding the recording: rig {request.rig} instead of the recorded one" if request.rig else ""
     meaning = info.confidence + (
         f"; and, by --min-confidence, below {request.min_confidence:g}{over_floor}"
@@ -364,6 +377,7 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
         summary=info.label + over,
         confidence_meaning=meaning,
         elapsed_s=dt,
+        thresholded=thresholded,
     )
 
 
