@@ -15,7 +15,7 @@ from pathlib import Path
 
 from simbench.threads import THREADS_VARIABLE, apply_threads, process_threads
 
-__all__ = ["MIN_LLVM_MAJOR", "find_libllvm", "choose_variant", "select_variant", "exact_cpu_arithmetic", "is_jit"]
+__all__ = ["MIN_LLVM_MAJOR", "find_libllvm", "choose_variant", "select_variant", "is_jit"]
 
 log = logging.getLogger(__name__)
 
@@ -123,33 +123,11 @@ def select_variant(requested: str | None = None) -> str:
     except (ImportError, RuntimeError, AttributeError) as exc:
         msg = (str(exc).splitlines() or [type(exc).__name__])[0]
         raise ValueError(f"Mitsuba variant {variant} cannot be used here ({msg}); use --variant scalar_rgb") from None
-    if variant.startswith("llvm_"):
-        exact_cpu_arithmetic()
     if os.environ.get(
         THREADS_VARIABLE, ""
     ).strip():  # a process's share of the machine (a pool's worker, or the user's)
         apply_threads(process_threads())
     return variant
-
-
-def exact_cpu_arithmetic() -> None:
-    """Dr.Jit's LLVM back end without its fast-math mode, so that a render's bits do not depend
-    on which x86 CPU runs it.
-
-    With ``JitFlag.FastMath`` (Dr.Jit's default) a reciprocal square root - every vector
-    normalisation: the glossy BSDFs' half vectors, shading frames - is the CPU's estimate
-    instruction (``vrcp14``/``vrsqrt14`` on AVX-512) refined by one Newton step, and those
-    estimates are the vendor's own bits: the same quick run gave the glossy scenes (specular,
-    clutter, hard_glossy_005) up to 6e-4 of their MAE apart on an Intel Xeon and an AMD EPYC,
-    every diffuse scene the same bytes (2026-11-27).  Without it the kernels hold IEEE
-    operations only (``1 / sqrt``) and render the same bits with the AVX2 instruction set as
-    with AVX-512 at the same vector width (``tests/test_render.py``); a 640x480 16-spp glossy
-    scene took 0.216-0.218 s either way here.  The packet width (16 lanes on AVX-512, 8 on AVX2)
-    still orders the film's per-packet sums (``JitFlag.ScatterReduceLocal``), so an AVX2-only
-    CPU renders other bits in the last place (switching that off costs ~14 % a render)."""
-    import drjit as dr
-
-    dr.set_flag(dr.JitFlag.FastMath, False)
 
 
 def _has_cuda(dr) -> bool:

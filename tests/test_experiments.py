@@ -447,3 +447,42 @@ def test_forks_share_the_rigs_calibrated_at_their_settings(variant, tmp_path):
     assert board._rigs is session._rigs  # the board's form is not a calibration setting
     assert scaled[0]._rigs is scaled[1]._rigs and scaled[0]._rigs is not session._rigs
     assert other_sensor._rigs is not session._rigs and other_sensor._rigs is not scaled[0]._rigs
+
+
+def test_known_task_seconds_order_the_pool_longest_first_across_targets(tmp_path):
+    """With measured seconds the pool takes the longest task of any target first (a 16-worker
+    run started a 384-s motion part at 67 s behind Table 1's parts, ordered by target rank);
+    tasks the record does not know go first, in rank order; the record keeps each task's longest
+    run and lives in the cache folder."""
+    from simbench.experiments.reproduce import (
+        TARGETS,
+        _tasks,
+        record_task_seconds,
+        task_profile,
+        task_seconds,
+    )
+
+    cfg = RunConfig.preset(quick=True)
+    names = ["table1", "motion", "fig9"]
+    ranked = _tasks(names, cfg)
+    assert [t.key.split("/")[0] for t in ranked][:1] == ["fig9"]  # rank 0 first without seconds
+    keys = [t.key for t in ranked]
+    motion = [k for k in keys if k.startswith("motion/")]
+    seconds = {k: 1.0 + i for i, k in enumerate(keys)}
+    seconds[motion[-1]] = 1000.0  # the rank order's last motion part is the longest
+    unknown = keys[3]
+    del seconds[unknown]
+    order = [t.key for t in _tasks(names, cfg, seconds)]
+    assert sorted(order) == sorted(keys)
+    assert order[0] == unknown and order[1] == motion[-1]
+    assert [seconds[k] for k in order[1:]] == sorted((seconds[k] for k in order[1:]), reverse=True)
+
+    profile = task_profile(cfg, "llvm_ad_rgb")
+    assert profile == "quick llvm_ad_rgb"
+    record_task_seconds(tmp_path, profile, {"a": 5.0, "b": 2.0})
+    record_task_seconds(tmp_path, profile, {"a": 1.0, "c": 3.0})  # a warm rerun of a: its cold 5 s stays
+    assert task_seconds(tmp_path, profile) == {"a": 5.0, "b": 2.0, "c": 3.0}
+    (tmp_path / "task_seconds.json").write_text("not json")
+    shipped = task_seconds(tmp_path, profile)  # unreadable: the shipped record
+    assert shipped and set(shipped) <= {t.key for t in _tasks(list(TARGETS), cfg)}
+    assert task_seconds(None, "full llvm_ad_rgb") and not task_seconds(None, "other profile")

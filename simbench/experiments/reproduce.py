@@ -38,6 +38,9 @@ __all__ = [
     "same_values",
     "thresholds_from",
     "task_summary",
+    "task_profile",
+    "task_seconds",
+    "record_task_seconds",
     "write_thresholds",
 ]
 
@@ -208,9 +211,14 @@ def _worker_task(name: str, ship: bool = False, part: tuple | None = None) -> tu
     return metrics, cache.hits, cache.misses, cache.made, files
 
 
-def _tasks(names: list[str], config: RunConfig) -> list:
-    """The pool's tasks, longest first: each target whole, a split target's parts one by one
-    (:class:`Split`: its costliest first; those of a long target before a shorter target)."""
+def _tasks(names: list[str], config: RunConfig, seconds: dict[str, float] | None = None) -> list:
+    """The pool's tasks, longest first: each target whole, a split target's parts one by one.
+
+    With ``seconds`` (task -> seconds a run took, :func:`task_seconds`): the tasks it knows by
+    their seconds, the longest first across every target, after those it does not know (which
+    might be long).  Without, or among the unknown: by target rank, then within a target its
+    costliest first (:class:`Split`).  The order decides only when a task starts: every file is
+    written from the parts in their own order, the same whatever ran where."""
     from simbench.experiments.workers import Task
 
     tasks = []
@@ -222,7 +230,65 @@ def _tasks(names: list[str], config: RunConfig) -> list:
         total = len(split.parts(config))
         for index, part in split.ranked(config):
             tasks.append(Task(f"{name}/{part}", (name,), {"part": (split, index, total, part)}))
+    if seconds:
+        known = sorted((t for t in tasks if t.key in seconds), key=lambda t: -seconds[t.key])  # stable
+        tasks = [t for t in tasks if t.key not in seconds] + known
     return tasks
+
+
+# The seconds each task of a pooled run took, kept in the render cache's folder (one file; a run
+# merges its own in, keeping each task's longest): a cold run's renders make a task long, a warm
+# run's reuse short, and the order wants the long case.  Absent there, the seconds shipped in
+# simbench/experiments/task_seconds.toml (a measured cold run).  Keyed by the run's profile.
+TASK_SECONDS_NAME = "task_seconds.json"
+_SHIPPED_TASK_SECONDS = Path(__file__).resolve().parent / "task_seconds.toml"
+
+
+def task_profile(config: RunConfig, variant: str) -> str:
+    """What a task's seconds are measured under: quick or full, and the Mitsuba variant."""
+    return f"{'quick' if config.quick else 'full'} {variant}"
+
+
+def task_seconds(cache_root: str | Path | None, profile: str) -> dict[str, float]:
+    """Task -> seconds for ``profile``: the cache folder's record, else the shipped one's (the
+    same quick/full profile of any variant), else {}.  An unreadable record counts as none."""
+    if cache_root is not None:
+        try:
+            recorded = json.loads((Path(cache_root) / TASK_SECONDS_NAME).read_text()).get(profile)
+        except (OSError, ValueError, AttributeError):
+            recorded = None
+        if isinstance(recorded, dict) and recorded:
+            return {str(k): float(v) for k, v in recorded.items()}
+    try:
+        shipped = read_toml(_SHIPPED_TASK_SECONDS, what="task seconds")
+    except (OSError, ValueError):
+        return {}
+    table = shipped.get(profile.split(" ")[0], {})
+    return {str(k): float(v) for k, v in table.items()} if isinstance(table, dict) else {}
+
+
+def record_task_seconds(cache_root: str | Path | None, profile: str, durations: dict[str, float]) -> None:
+    """Merge a pooled run's task seconds into the cache folder's record (each task's longest;
+    written atomically; two runs finishing together may lose one's update - the order is a
+    schedule, not a result)."""
+
+    if cache_root is None or not durations or not Path(cache_root).is_dir():
+        return
+    path = Path(cache_root) / TASK_SECONDS_NAME
+    try:
+        record = json.loads(path.read_text())
+        if not isinstance(record, dict):
+            record = {}
+    except (OSError, ValueError):
+        record = {}
+    mine = dict(record.get(profile, {})) if isinstance(record.get(profile), dict) else {}
+    for key, value in durations.items():
+        mine[key] = round(max(float(value), float(mine.get(key, 0.0))), 1)
+    record[profile] = dict(sorted(mine.items()))
+    try:
+        atomic_write_text(path, json.dumps(record, indent=1, sort_keys=True) + "\n")
+    except OSError as exc:  # a read-only shared cache: the run's results stand
+        log.warning("task seconds not recorded in %s (%s)", path, exc)
 
 
 def task_summary(durations: dict[str, float], *, workers: int | None) -> str:
@@ -291,8 +357,9 @@ def _run_in_workers(
         split, index, total, name = part
         return split.measure_part(session, name, index=index, total=total), 0, 0, {}, {}, time.perf_counter() - t0
 
-    tasks = _tasks(names, session.config)
     cache_root = None if session.cache.root is None else str(session.cache.root)
+    profile = task_profile(session.config, session.variant)
+    tasks = _tasks(names, session.config, task_seconds(cache_root, profile))
 
     def collect(name: str) -> None:
         split = TARGETS[name].split
@@ -325,6 +392,7 @@ def _run_in_workers(
             collect(name)
         raise
     progress(task_summary(durations, workers=min(workers, len(tasks)) if scheduler is None else None))
+    record_task_seconds(cache_root, profile, durations)
     session.cache.hits += sum(c[0] for c in counts)  # in the parent's counts already: its own tasks'
     session.cache.misses += sum(c[1] for c in counts)
     for c in counts:

@@ -78,13 +78,14 @@ def cpu_model() -> str:
 
 
 def renderer_id() -> dict:
-    """The variant, the Mitsuba version and whether Dr.Jit may use approximate arithmetic
-    (:func:`simbench.variant.exact_cpu_arithmetic`) where renders are made (part of every
-    render key)."""
-    import drjit as dr
+    """The variant, the Mitsuba version and whether Dr.Jit's fast math is used for it
+    (:func:`simbench.sim.mitsuba_dict.jit_arithmetic`: every render, scene load and ray cast of
+    simbench runs inside it, on whatever thread) - part of every render key."""
     import mitsuba as mi
 
-    return {"variant": mi.variant(), "mitsuba": mi.__version__, "fast_math": bool(dr.flag(dr.JitFlag.FastMath))}
+    from simbench.sim.mitsuba_dict import fast_math
+
+    return {"variant": mi.variant(), "mitsuba": mi.__version__, "fast_math": fast_math(mi.variant())}
 
 
 def cached_arrays(

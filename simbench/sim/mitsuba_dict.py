@@ -256,6 +256,42 @@ def atomic_film_adds() -> Iterator[None]:
         dr.set_expand_threshold(before)
 
 
+def fast_math(variant: str) -> bool:
+    """Whether simbench lets Dr.Jit use fast math for ``variant``: on the GPU (``cuda_*``), not on
+    the CPU (:func:`jit_arithmetic`)."""
+    return variant.startswith("cuda_")
+
+
+@contextmanager
+def jit_arithmetic() -> Iterator[None]:
+    """Dr.Jit's arithmetic for the Mitsuba work inside (scene loading, rendering, ray casting),
+    on this thread, restored after: on the CPU without fast math (:func:`fast_math`), so that a
+    render's bits do not depend on which x86 CPU runs it.
+
+    With ``JitFlag.FastMath`` (Dr.Jit's default) a reciprocal square root - every vector
+    normalisation: the glossy BSDFs' half vectors, shading frames - is the CPU's estimate
+    instruction (``vrsqrt14`` on AVX-512) refined by one Newton step, and the estimate's bits are
+    the vendor's: the same quick run gave the glossy scenes (specular, clutter,
+    hard_glossy_005) up to 6e-4 of their MAE apart on an Intel Xeon and an AMD EPYC, the diffuse
+    scenes the same bytes (2026-11-27).  Without it the kernels hold IEEE operations only and a
+    render compiled for AVX2 alone gives the host's AVX-512 bits at the same vector width
+    (``tests/test_render.py``); a 640x480 16-spp glossy scene took 0.216-0.218 s either way.  The
+    packet width (16 lanes on AVX-512, 8 on AVX2) still orders the film's per-packet sums
+    (``JitFlag.ScatterReduceLocal``; off, it costs ~14 % a render), so a CPU without AVX-512
+    renders other last bits.  Dr.Jit keeps its flags per thread (a pool's parent runs tasks on
+    a thread of its own), hence a context around the work, not a setting at start-up; the
+    render keys hold the policy (:func:`simbench.sim.keys.renderer_id`)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    before = dr.flag(dr.JitFlag.FastMath)
+    dr.set_flag(dr.JitFlag.FastMath, fast_math(mi.variant()))
+    try:
+        yield
+    finally:
+        dr.set_flag(dr.JitFlag.FastMath, before)
+
+
 def film_settings(*, pixels: int) -> dict:
     """``{"film_adds": "atomic"}`` for a JIT render whose film Dr.Jit's default would have
     added into by expansion (:func:`atomic_film_adds` changed its last bits), else nothing:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simbench.sim.mitsuba_dict import atomic_film_adds, load_scene_dict, mitsuba_scene
+from simbench.sim.mitsuba_dict import atomic_film_adds, jit_arithmetic, load_scene_dict, mitsuba_scene
 from simbench.sim.scene import SceneSpec
 
 __all__ = ["render_radiance"]
@@ -54,7 +54,7 @@ def render_radiance(
         # makes the image repeatable) and that a multi-pass render is evaluated at once
         mi.set_log_level(mi.LogLevel.Error)
     try:
-        with atomic_film_adds():
+        with atomic_film_adds(), jit_arithmetic():
             img = mi.render(load_scene_dict(mi, d, scene), seed=int(seed), spp=int(spp))
         return np.array(img, dtype=np.float32)
     finally:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simbench.sim.mitsuba_dict import load_scene_dict, mitsuba_scene
+from simbench.sim.mitsuba_dict import jit_arithmetic, load_scene_dict, mitsuba_scene
 from simbench.rig import pixel_rays, project_to_projector
 from simbench.sim.scene import SceneSpec
 from simbench.variant import is_jit
@@ -51,6 +51,7 @@ class GroundTruth:
         return self.object_id >= 0
 
 
+@jit_arithmetic()
 def ground_truth(scene: SceneSpec) -> GroundTruth:
     """Cast one ray through every camera pixel centre with Mitsuba and project the hits."""
     import mitsuba as mi
@@ -80,6 +81,7 @@ def ground_truth(scene: SceneSpec) -> GroundTruth:
     )
 
 
+@jit_arithmetic()
 def trace_rays(scene: SceneSpec, dirs: np.ndarray) -> dict[str, np.ndarray]:
     """First hits of rays from the camera centre along ``dirs`` (camera frame), for sensors
     that need more than one ray per pixel (the ToF camera's supersampled footprints).
@@ -144,6 +146,7 @@ def _trace_scalar(mi, mscene, dirs, proj_pos, key_to_index):
     return p, n, hit, occluded, obj
 
 
+@jit_arithmetic()
 def projector_distance(scene: SceneSpec, *, stride: int = 4) -> np.ndarray:
     """Depth along the projector's optical axis of the first surface each projector pixel's
     ray meets (ideal pinhole rays), for the projector's defocus.
