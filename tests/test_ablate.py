@@ -198,7 +198,7 @@ def test_process_pool_and_dask_local_cluster_give_identical_tables(tmp_path, var
     cache = tmp_path / "cache"
     run_sweep(sweep, out_dir=tmp_path / "pool", cache_dir=cache, workers=2, progress=lambda s: None)
     with (
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         distributed.Client(cluster) as client,
     ):
         run_sweep(sweep, out_dir=tmp_path / "dask", cache_dir=cache, scheduler=client, progress=lambda s: None)

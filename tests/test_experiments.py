@@ -279,7 +279,7 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     assert len(flatness) >= 3 and flatness == {p: b for p, b in alone.items() if p.name != "metrics.json"}
     distributed = pytest.importorskip("distributed")
     with (
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         distributed.Client(cluster) as client,
     ):
         on_dask = run(["budget", "flatness"], "dask", scheduler=client)
@@ -372,7 +372,7 @@ def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_write
     assert any(m.startswith("tasks: 6, ") and "the longest" in m for m in two[2])
     distributed = pytest.importorskip("distributed")
     with (
-        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         distributed.Client(cluster) as client,
     ):
         metrics = module.reproduce(
