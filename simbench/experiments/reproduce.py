@@ -257,21 +257,32 @@ def task_seconds(cache_root: str | Path | None, profile: str) -> dict[str, float
             recorded = json.loads((Path(cache_root) / TASK_SECONDS_NAME).read_text()).get(profile)
         except (OSError, ValueError, AttributeError):
             recorded = None
-        if isinstance(recorded, dict) and recorded:
-            return {str(k): float(v) for k, v in recorded.items()}
+        recorded = _seconds_table(recorded)
+        if recorded:
+            return recorded
     try:
         shipped = read_toml(_SHIPPED_TASK_SECONDS, what="task seconds")
     except (OSError, ValueError):
         return {}
-    table = shipped.get(profile.split(" ")[0], {})
-    return {str(k): float(v) for k, v in table.items()} if isinstance(table, dict) else {}
+    return _seconds_table(shipped.get(profile.split(" ")[0]))
+
+
+def _seconds_table(table: object) -> dict[str, float]:
+    """The finite, non-negative numbers of a task-seconds table (a record edited by hand keeps
+    what it still holds of them: the order is a schedule, never worth failing a run for)."""
+    if not isinstance(table, dict):
+        return {}
+    out = {}
+    for key, value in table.items():
+        if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) and value >= 0:
+            out[str(key)] = float(value)
+    return out
 
 
 def record_task_seconds(cache_root: str | Path | None, profile: str, durations: dict[str, float]) -> None:
     """Merge a pooled run's task seconds into the cache folder's record (each task's longest;
     written atomically; two runs finishing together may lose one's update - the order is a
     schedule, not a result)."""
-
     if cache_root is None or not durations or not Path(cache_root).is_dir():
         return
     path = Path(cache_root) / TASK_SECONDS_NAME
@@ -281,9 +292,9 @@ def record_task_seconds(cache_root: str | Path | None, profile: str, durations: 
             record = {}
     except (OSError, ValueError):
         record = {}
-    mine = dict(record.get(profile, {})) if isinstance(record.get(profile), dict) else {}
+    mine = _seconds_table(record.get(profile))
     for key, value in durations.items():
-        mine[key] = round(max(float(value), float(mine.get(key, 0.0))), 1)
+        mine[key] = round(max(float(value), mine.get(key, 0.0)), 1)
     record[profile] = dict(sorted(mine.items()))
     try:
         atomic_write_text(path, json.dumps(record, indent=1, sort_keys=True) + "\n")
@@ -531,8 +542,6 @@ def same_values(metrics: dict, reference_path: str | Path) -> str:
     ``metrics.json`` (the committed one beside a thresholds file), with the CPU each run was made
     on and the metric farthest apart - what a check on another machine tells about
     reproducibility across CPUs (docs/rendering.md), which thresholds cannot."""
-    import json
-
     from simbench.sim.keys import cpu_model
 
     path = Path(reference_path)
