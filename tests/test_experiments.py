@@ -430,6 +430,35 @@ def test_every_target_is_split_into_distinct_parts_that_name_themselves(quick):
     assert len({t.key for t in tasks}) == len(tasks) == sum(len(t.split.parts(cfg)) for t in TARGETS.values())
 
 
+def test_the_specular_scene_is_a_part_per_system_phase_shifting_ranked_first(variant, tmp_path):
+    """The specular figure's systems record the scene in parts of their own (a 16-worker run was
+    bound by the one part that held all five): every label of SPECULAR_SYSTEMS belongs to exactly
+    one part, the proposed sensor's two decoders to one (they decode one recording), phase
+    shifting's 12 exposures rank first, and a part naming no system is refused by name."""
+    from simbench.experiments.common import Session
+    from simbench.experiments.figures import (
+        FIGURE_SCENES,
+        SPECULAR_SCENE,
+        SPECULAR_SYSTEMS,
+        figures_parts,
+        measure_figure,
+        specular_parts,
+    )
+    from simbench.experiments.reproduce import TARGETS
+
+    cfg = RunConfig.preset(quick=True)
+    parts = figures_parts(cfg)
+    assert parts == [*FIGURE_SCENES, *specular_parts()]
+    systems = [p.partition("/")[2] for p in specular_parts()]
+    assert systems == ["proposed", "phase_shift", "kinect", "tof"]
+    assert sorted(n for s in systems for n in SPECULAR_SYSTEMS if n.partition("/")[0] == s) == sorted(SPECULAR_SYSTEMS)
+    ranked = [p for _, p in TARGETS["figures"].split.ranked(cfg)]
+    assert ranked[0] == f"{SPECULAR_SCENE}/phase_shift" and sorted(ranked) == sorted(parts)
+    session = Session(cfg, out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
+    with pytest.raises(ValueError, match="no specular system 'sonar'; valid: kinect, phase_shift, proposed, tof"):
+        measure_figure(session, f"{SPECULAR_SCENE}/sonar")
+
+
 def test_forks_share_the_rigs_calibrated_at_their_settings(variant, tmp_path):
     """A rig is calibrated once per run for each sensor model and calibration setting: forks at the
     run's settings share the run's rigs, forks at other settings (the motion study's camera scale,

@@ -42,6 +42,7 @@ __all__ = [
     "measure_figure",
     "write_figures",
     "measure_specular",
+    "specular_parts",
     "write_specular",
     "shown_raw",
     "shaded_view",
@@ -143,20 +144,29 @@ def scene_figure(cap: Capture, result: DecodeResult, *, title: str) -> bytes:
 
 
 def figures_parts(config: RunConfig) -> list[str]:
-    """The scenes: the paper's figures' (:data:`FIGURE_SCENES`), then the specular one."""
-    return [*FIGURE_SCENES, SPECULAR_SCENE]
+    """The scenes: the paper's figures' (:data:`FIGURE_SCENES`), then the specular one, a part
+    per system that records it (:func:`specular_parts`)."""
+    return [*FIGURE_SCENES, *specular_parts()]
+
+
+def specular_parts() -> list[str]:
+    """``specular/<system>`` for each system of :data:`SPECULAR_SYSTEMS` (the proposed sensor's
+    two decoders in one part: they decode the same recording)."""
+    return [f"{SPECULAR_SCENE}/{s}" for s in dict.fromkeys(name.partition("/")[0] for name in SPECULAR_SYSTEMS)]
 
 
 def figures_cost(part: str) -> float:
-    """A part's rank for a pool: the specular scene is recorded by every system."""
-    return len(SPECULAR_SYSTEMS) if part == SPECULAR_SCENE else 1.0
+    """A part's rank for a pool: phase shifting records 12 exposures, a scene one."""
+    return 12.0 if part == f"{SPECULAR_SCENE}/phase_shift" else 1.0
 
 
 def measure_figure(session: Session, name: str) -> dict:
-    """One scene: the specular one by :func:`measure_specular`; a figure's scene recorded,
-    decoded and scored - its row, metrics and figure files ({name under ``figures/``: bytes})."""
-    if name == SPECULAR_SCENE:
-        return measure_specular(session)
+    """One part: a system on the specular scene by :func:`measure_specular`; a figure's scene
+    recorded, decoded and scored - its row, metrics and figure files ({name under ``figures/``:
+    bytes})."""
+    scene, _, system = name.partition("/")
+    if scene == SPECULAR_SCENE:
+        return measure_specular(session, system)
     cfg = session.config
     fig_id = FIGURE_SCENES[name]
     scene = session.scene(name)
@@ -185,7 +195,7 @@ def write_figures(session: Session, measured: list[dict]) -> dict:
     """The figures' files from :func:`measure_figure`'s results (in :func:`figures_parts`' order)."""
     cfg = session.config
     out = session.out / "figures"
-    *scenes, specular = measured
+    scenes, specular = measured[: len(FIGURE_SCENES)], measured[len(FIGURE_SCENES) :]
     files = [atomic_write_bytes(out / rel, data) for m in scenes for rel, data in m["files"].items()]
     rows = [m["row"] for m in scenes]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
@@ -232,7 +242,8 @@ def write_figures(session: Session, measured: list[dict]) -> dict:
     return metrics
 
 
-# each scene a part (the run's workers take them side by side, the specular scene first)
+# each scene a part, the specular scene's a part per system (the run's workers take them side
+# by side: each system records the scene on its own, phase shifting's 12 exposures the longest)
 SPLIT = Split("figures", figures_parts, measure_figure, write_figures, cost=figures_cost)
 
 
@@ -241,21 +252,25 @@ def run_figures(session: Session) -> dict:
     return SPLIT.run(session)
 
 
-def _specular_recordings(session: Session) -> dict:
-    """system label -> (recording, depth map, what it recorded as an image) on the specular scene."""
+def _specular_recordings(session: Session, system: str) -> dict:
+    """Label of :data:`SPECULAR_SYSTEMS` -> (recording, depth map, what it recorded as an image)
+    on the specular scene, for the labels of ``system`` (``proposed``: both decoders)."""
+    names = [n for n in SPECULAR_SYSTEMS if n.partition("/")[0] == system]
+    if not names:
+        known = sorted(dict.fromkeys(n.partition("/")[0] for n in SPECULAR_SYSTEMS))
+        raise ValueError(f"no specular system {system!r}; valid: {', '.join(known)}")
     cfg = session.config
     label = f"figures/{SPECULAR_SCENE}"
     raw = session.raw_scene(SPECULAR_SCENE)
-    cap = session.capture(session.prepare(raw), label)[0]
     out = {}
-    for name in SPECULAR_SYSTEMS:
-        system, _, decoder = name.partition("/")
-        if system == "proposed":
-            params = cfg.decoder if decoder == "paper" else robust_params(cfg.decoder)
+    if system == "proposed":
+        cap = session.capture(session.prepare(raw), label)[0]
+        for name in names:
+            params = cfg.decoder if name == "proposed/paper" else robust_params(cfg.decoder)
             out[name] = (cap, session.decode(cap, params, mode="calibrated"), shown_raw(cap.image, cap.image.shape[:2]))
-        else:
-            rec, depth = session.acquire(system, raw, label)[0]
-            out[name] = (rec, depth, shown_raw(rec.raw, rec.scene.rig.camera.size_hw))
+    else:
+        rec, depth = session.acquire(system, raw, label)[0]
+        out[system] = (rec, depth, shown_raw(rec.raw, rec.scene.rig.camera.size_hw))
     return out
 
 
@@ -278,18 +293,19 @@ def shown_raw(raw: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
     return np.clip(np.nan_to_num(img), 0.0, 1.0)
 
 
-def measure_specular(session: Session) -> dict:
-    """Specular highlights seen by every system of :data:`SPECULAR_SYSTEMS`: per system and
-    object of ``scenes/specular.toml`` the completeness over the pixels the system lights, the
-    MAE against ground truth and the share of decoded pixels more than 5 mm wrong, off an edge
-    band (the run's, scaled to each system's focal length).  Returns its rows, metrics and
-    figure (:func:`write_specular` writes them)."""
+def measure_specular(session: Session, system: str) -> dict:
+    """Specular highlights seen by one system of :data:`SPECULAR_SYSTEMS` (``proposed``: its two
+    decoders): per object of ``scenes/specular.toml`` the completeness over the pixels the system
+    lights, the MAE against ground truth and the share of decoded pixels more than 5 mm wrong,
+    off an edge band (the run's, scaled to the system's focal length).  Returns its rows, metrics
+    and the figure's panels - per label what it recorded, its depth and the truth, float32 arrays
+    (:func:`write_specular` draws the figure from every system's)."""
     cfg = session.config
-    recs = _specular_recordings(session)
+    recs = _specular_recordings(session, system)
     scene = session.raw_scene(SPECULAR_SCENE)
     main_focal = session.scene(SPECULAR_SCENE).rig.camera.focal_px
-    rows, metrics = [], {}
-    for name, (rec, depth, _) in recs.items():
+    rows, metrics, panels = [], {}, {}
+    for name, (rec, depth, img) in recs.items():
         band_px = max(1, int(round(cfg.edge_band_px * rec.scene.rig.camera.focal_px / main_focal)))
         band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=band_px)
         for i, obj in enumerate(scene.objects):
@@ -298,17 +314,20 @@ def measure_specular(session: Session) -> dict:
             rows.append({"system": name, "object": obj.name, "pixels": int(region.sum()), **sc, **rec.seeds})
             for k in SPECULAR_KEYS:
                 metrics[f"figures/{SPECULAR_SCENE}/{name}/{obj.name}/{k}"] = sc[k]
-    return {"rows": rows, "metrics": metrics, "files": {"specular_systems.png": specular_figure(recs)}}
+        panels[name] = (img, depth.depth_m, rec.gt.depth_m)
+    return {"rows": rows, "metrics": metrics, "panels": panels}
 
 
-def write_specular(session: Session, measured: dict) -> list:
-    """The specular scene's table, figure and text from :func:`measure_specular`'s result."""
+def write_specular(session: Session, measured: list[dict]) -> list:
+    """The specular scene's table, figure and text from :func:`measure_specular`'s results (in
+    :func:`specular_parts`' order)."""
     cfg = session.config
     out = session.out / "figures"
-    rows = measured["rows"]
+    rows = [r for m in measured for r in m["rows"]]
+    panels = {name: p for m in measured for name, p in m["panels"].items()}
     files = [
         write_table(out / "specular.csv", rows, ["system", "object", "pixels", *SPECULAR_KEYS, "render", "noise"]),
-        atomic_write_bytes(out / "specular_systems.png", measured["files"]["specular_systems.png"]),
+        atomic_write_bytes(out / "specular_systems.png", specular_figure(panels)),
     ]
     cam = session.scene(SPECULAR_SCENE).rig.camera
     md = [
@@ -345,22 +364,23 @@ def _pct(x: float) -> str:
     return "-" if not np.isfinite(x) else f"{100 * x:.2f} %"
 
 
-def specular_figure(recs: dict) -> bytes:
-    """One column per system: what it recorded, its depth, its error against ground truth."""
+def specular_figure(panels: dict) -> bytes:
+    """One column per system: what it recorded, its depth, its error against ground truth
+    (``panels``: label -> (recorded image, depth, true depth), as :func:`measure_specular` gives)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    n = len(recs)
+    n = len(panels)
     fig, axes = plt.subplots(3, n, figsize=(3.4 * n, 8.2), constrained_layout=True, squeeze=False)
-    lo, hi = _depth_range(next(iter(recs.values()))[0].gt.depth_m)
-    for j, (name, (rec, depth, img)) in enumerate(recs.items()):
+    lo, hi = _depth_range(next(iter(panels.values()))[2])
+    for j, (name, (img, depth_m, truth_m)) in enumerate(panels.items()):
         axes[0, j].imshow(img, cmap=None if img.ndim == 3 else "gray", vmin=0, vmax=1)
         axes[0, j].set_title(f"{name}: recorded", fontsize=9)
-        axes[1, j].imshow(depth.depth_m, cmap="viridis", vmin=lo, vmax=hi)
+        axes[1, j].imshow(depth_m, cmap="viridis", vmin=lo, vmax=hi)
         axes[1, j].set_title("depth; white = no depth", fontsize=9)
-        err = (depth.depth_m - rec.gt.depth_m) * 1000.0
+        err = (depth_m - truth_m) * 1000.0
         im = axes[2, j].imshow(err, cmap="coolwarm", vmin=-WRONG_MM, vmax=WRONG_MM)
         axes[2, j].set_title(f"depth - truth (mm, clipped at +-{WRONG_MM:g})", fontsize=9)
         for ax in axes[:, j]:
