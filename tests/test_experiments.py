@@ -406,12 +406,33 @@ def test_the_task_summary_bounds_a_run_by_its_longest_task_and_its_work_over_the
 
     line = task_summary({"fig9/a": 30.0, "fig9/b": 10.0, "table1": 80.0}, workers=2)
     assert line == (
-        "tasks: 3, 120 worker-s in all, the longest 80 s (table1); a run takes at least 80 s on 2, 80 s on 16 workers"
+        "tasks: 3, 120 worker-s in all, the longest 80 s (table1); a run takes at least 80 s on 2, 80 s on 16 "
+        "workers; longest first, 80 s on 2, 80 s on 16"
     )
     many = {f"t{k}": 10.0 for k in range(64)}
-    assert task_summary(many, workers=2).endswith("at least 320 s on 2, 40 s on 16 workers")
-    assert task_summary(many, workers=None).endswith("at least 40 s on 16 workers")
+    assert task_summary(many, workers=2).endswith(
+        "at least 320 s on 2, 40 s on 16 workers; longest first, 320 s on 2, 40 s on 16"
+    )
+    assert task_summary(many, workers=None).endswith("at least 40 s on 16 workers; longest first, 40 s on 16")
+    # five tasks on two workers: the bound (max(5, 18 / 2) = 9 s) is not reached - longest first,
+    # 5 | 4, then the three 3-s tasks on 4+3, 5+3, 7+3: the last ends at 10 s
+    odd = {"a": 5.0, "b": 4.0, "c": 3.0, "d": 3.0, "e": 3.0}
+    assert task_summary(odd, workers=2).endswith(
+        "at least 9 s on 2, 5 s on 16 workers; longest first, 10 s on 2, 5 s on 16"
+    )
     assert task_summary({}, workers=2) == "tasks: none"
+
+
+def test_list_scheduling_starts_each_task_on_the_first_free_worker_in_the_order_given():
+    """The pool's makespan model: each task, in order, on the worker free first."""
+    from simbench.experiments.reproduce import list_schedule_s
+
+    assert list_schedule_s([5, 4, 3, 3, 3], 2) == 10.0
+    assert list_schedule_s([3, 3, 3, 4, 5], 2) == 11.0  # the same work, the long tasks last
+    assert list_schedule_s([3, 3, 3, 4, 5], 16) == 5.0 == list_schedule_s([5], 1)
+    assert list_schedule_s([], 4) == 0.0
+    with pytest.raises(ValueError, match="workers must be at least 1, got 0"):
+        list_schedule_s([1.0], 0)
 
 
 @pytest.mark.parametrize("quick", [False, True])

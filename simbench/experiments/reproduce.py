@@ -12,11 +12,12 @@ depth) is the CI benchmark, whose key errors are compared with the thresholds in
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import logging
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +39,7 @@ __all__ = [
     "same_values",
     "thresholds_from",
     "task_summary",
+    "list_schedule_s",
     "task_profile",
     "task_seconds",
     "record_task_seconds",
@@ -302,20 +304,36 @@ def record_task_seconds(cache_root: str | Path | None, profile: str, durations: 
         log.warning("task seconds not recorded in %s (%s)", path, exc)
 
 
+def list_schedule_s(seconds: Sequence[float], workers: int) -> float:
+    """When the last of tasks lasting ``seconds`` ends if each, in the order given, starts on the
+    first of ``workers`` workers to be free (list scheduling: a pool's behaviour with no task
+    waiting for another's renders, and no start-up or writing time)."""
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    free = [0.0] * min(workers, max(len(seconds), 1))
+    for s in seconds:
+        heapq.heappush(free, heapq.heappop(free) + float(s))
+    return max(free)
+
+
 def task_summary(durations: dict[str, float], *, workers: int | None) -> str:
     """One line on where a pooled run's time went: its tasks' seconds summed over the workers,
     the longest task, and what they bound a run on W workers to, ``max(longest, sum / W)`` -
     a lower bound (renders a task waits for on another worker, the writing after the pool and
-    starting the workers come on top), for this run's workers and for 16."""
+    starting the workers come on top), for this run's workers and for 16; then what the pool's
+    order makes of these seconds (:func:`list_schedule_s` with the tasks longest first, as a
+    run that finds them recorded takes them, :func:`_tasks`)."""
     if not durations:
         return "tasks: none"
     total = sum(durations.values())
     key, longest = max(durations.items(), key=lambda kv: kv[1])
-    bounds = [w for w in (workers, 16) if w]
-    bound = ", ".join(f"{max(longest, total / w):.0f} s on {w}" for w in dict.fromkeys(bounds))
+    bounds = list(dict.fromkeys(w for w in (workers, 16) if w))
+    bound = ", ".join(f"{max(longest, total / w):.0f} s on {w}" for w in bounds)
+    ordered = sorted(durations.values(), reverse=True)
+    scheduled = ", ".join(f"{list_schedule_s(ordered, w):.0f} s on {w}" for w in bounds)
     return (
         f"tasks: {len(durations)}, {total:.0f} worker-s in all, the longest {longest:.0f} s ({key}); "
-        f"a run takes at least {bound} workers"
+        f"a run takes at least {bound} workers; longest first, {scheduled}"
     )
 
 
