@@ -164,8 +164,8 @@ def measure_figure(session: Session, name: str) -> dict:
     """One part: a system on the specular scene by :func:`measure_specular`; a figure's scene
     recorded, decoded and scored - its row, metrics and figure files ({name under ``figures/``:
     bytes})."""
-    scene, _, system = name.partition("/")
-    if scene == SPECULAR_SCENE:
+    head, _, system = name.partition("/")
+    if head == SPECULAR_SCENE:
         return measure_specular(session, system)
     cfg = session.config
     fig_id = FIGURE_SCENES[name]
