@@ -94,15 +94,27 @@ def pear() -> trimesh.Trimesh:
 
 
 def hat() -> trimesh.Trimesh:
-    crown_z = np.linspace(0.012, 0.10, 40)
+    # a coiled straw braid: ridges 10 mm apart along the surface (brim top, crown side, crown top;
+    # rad + z grows along the profile), crossed by a 60-fold twist away from the crown's centre,
+    # 1 mm relief from trough to crest; each ridge sampled 5 times (~2 mm profile steps, 400
+    # sections round: a twist of as many ridges as sections would sit on its zeros at the vertices)
+    brim_r = np.linspace(0.18, 0.087, 47)
+    crown_z = np.linspace(0.012, 0.10, 44)
     crown_r = 0.085 - 0.01 * ((crown_z - 0.012) / 0.088) ** 2
-    profile = [(0.0, 0.0), (0.18, 0.0), (0.18, 0.012)] + list(zip(crown_r, crown_z)) + [(0.0, 0.10)]
-    m = revolve(profile, sections=160)
-    # straw weave: a 1 mm relief of crossing ridges
+    top_r = np.linspace(0.073, 0.002, 36)
+    profile = (
+        [(0.0, 0.0), (0.18, 0.0)]
+        + [(r, 0.012) for r in brim_r]
+        + list(zip(crown_r, crown_z))
+        + [(r, 0.10) for r in top_r]
+        + [(0.0, 0.10)]
+    )
+    m = revolve(profile, sections=400)
     x, y, z = m.vertices.T
     ang = np.arctan2(y, x)
     rad = np.hypot(x, y)
-    weave = 0.001 * np.sin(160 * ang) * np.sin(400 * (rad + z))
+    twist = 0.3 * np.clip((rad - 0.03) / 0.03, 0, 1) * np.sin(60 * ang)
+    weave = 0.0005 * np.sin(2 * np.pi * (rad + z) / 0.010) * (1 + twist) / 1.3
     n = np.zeros_like(m.vertices)
     for k in range(3):  # area-weighted vertex normals (numpy only)
         np.add.at(n, m.faces[:, k], m.face_normals * m.area_faces[:, None])

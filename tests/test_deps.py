@@ -13,6 +13,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 # a meta-path finder that makes SciPy look uninstalled in the child interpreter
 _HIDE_SCIPY = textwrap.dedent(
     """
@@ -51,6 +53,23 @@ def test_versions_import_nothing_and_survive_a_mocked_scipy():
     assert out["v"]["opencv"] == metadata.version("opencv-python-headless")
     assert out["v"]["python"].count(".") == 2
     assert out["v"]["cpu"] and out["v"]["cpu"] != "unknown"
+
+
+def test_the_cpu_in_provenance_names_its_widest_vector_instructions():
+    """Two CPUs of one model name, one with AVX-512 and one without, render and decode other last
+    bits (docs/rendering.md): provenance tells them apart."""
+    from pathlib import Path
+
+    from simbench.sim.keys import cpu_model
+
+    info = Path("/proc/cpuinfo")
+    flags = next(
+        (line.split(":", 1)[1].split() for line in info.read_text().splitlines() if line.startswith("flags")), []
+    )
+    if not flags:
+        pytest.skip("no x86 flags in /proc/cpuinfo")
+    want = "(AVX-512)" if "avx512f" in flags else "(AVX2)" if "avx2" in flags else "(no AVX2)"
+    assert cpu_model().endswith(want)
 
 
 def test_colour_without_scipy_is_a_clear_error_and_leaves_no_mock():

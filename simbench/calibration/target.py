@@ -57,9 +57,9 @@ class CalibrationTarget:
 
     def __post_init__(self) -> None:
         v = validate
-        squares = v.numbers(self.squares, "squares [columns, rows]", 2, lo=3, hi=64)
+        squares = v.numbers(self.squares, "squares", 2, lo=3, hi=64)
         if any(int(n) != n for n in squares):
-            raise ValueError(f"squares must be whole numbers, got {self.squares!r}")
+            raise ValueError(f"squares must be 2 whole numbers [columns, rows], got {self.squares!r}")
         values = {
             "kind": v.choice(self.kind, "target kind", TARGET_KINDS),
             "squares": tuple(int(n) for n in squares),

@@ -434,7 +434,7 @@ def load_sensor(path: str | Path) -> SensorModel:
     path = Path(path)
     data = read_toml(path, what="sensor")
     data.setdefault("name", path.stem)
-    sensor = sensor_from_dict(data, where=str(path))
+    sensor = sensor_from_dict(data, where=f"{path}: sensor")
     if path.resolve().parent != PRESETS_DIR.resolve():
         left = left_out_keys(data, sensor)
         said = hashlib.sha256(repr((str(path.resolve()), left)).encode()).hexdigest()[:16]
