@@ -10,7 +10,15 @@ import pytest
 
 from simbench.experiments.common import RunConfig
 from simbench.seeds import derive_seed as label_seed
-from simbench.experiments.reproduce import _resolve, check_thresholds, same_values, thresholds_from, write_thresholds
+from simbench.experiments.reproduce import (
+    _resolve,
+    check_thresholds,
+    kept_thresholds,
+    load_thresholds,
+    same_values,
+    thresholds_from,
+    write_thresholds,
+)
 from simbench.rig import paper_rig, scale_camera
 
 
@@ -43,6 +51,35 @@ def test_unknown_target_is_rejected():
     assert _resolve(["fig9", "table1"]) == ["table1", "fig9"]
     with pytest.raises(ValueError, match="valid"):
         _resolve(["table2"])
+
+
+def test_writing_one_targets_thresholds_keeps_the_others(tmp_path):
+    """An intended change to one target re-derives its thresholds only (as metrics.json keeps the
+    other targets' metrics), every kept entry the bytes it had; a run of every target the file
+    holds writes it anew, and the margin of a file that keeps entries cannot change."""
+    first = {"table1/white/paper/gt_mae_mm": 0.3, "fig9/1.0m/gt_mae_mm": 0.5, "fig9/1.0m/completeness": 0.99}
+    path = write_thresholds(tmp_path / "t.toml", first, margin=0.25, command="cmd all", targets=["table1", "fig9"])
+    whole = path.read_text()
+    assert "# Written by: cmd all" in whole and "Then for" not in whole
+
+    def body(text: str) -> str:
+        return text[text.index("\n[") :]
+
+    write_thresholds(path, first, margin=0.25, command="cmd fig9", targets=["fig9"])
+    assert body(path.read_text()) == body(whole)  # the same metrics: the same entries, byte for byte
+    for _ in range(2):  # a second update of the same target leaves one line for it
+        write_thresholds(path, {"fig9/1.0m/gt_mae_mm": 0.6}, margin=0.25, command="cmd fig9", targets=["fig9"])
+    text = path.read_text()
+    assert text.count("# Then for fig9: cmd fig9") == 1 and "# Written by: cmd all" in text
+    table = load_thresholds(path)
+    assert table["table1/white/paper/gt_mae_mm"] == {"measured": 0.3, "max": 0.3 * 1.25 + 0.02}
+    assert table["fig9/1.0m/gt_mae_mm"]["measured"] == 0.6 and "fig9/1.0m/completeness" not in table
+    with pytest.raises(ValueError, match="margin is not 0.5"):
+        write_thresholds(path, {"fig9/1.0m/gt_mae_mm": 0.6}, margin=0.5, command="x", targets=["fig9"])
+    with pytest.raises(ValueError, match="margin is not 0.5"):
+        kept_thresholds(path, ["fig9"], margin=0.5)
+    write_thresholds(path, first, margin=0.5, command="cmd all", targets=["all"])  # every target: anew
+    assert "Then for" not in path.read_text() and "# Margin 0.5:" in path.read_text()
 
 
 def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):

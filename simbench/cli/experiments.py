@@ -42,6 +42,7 @@ def _cmd_reproduce(args) -> int:
     from simbench.experiments.reproduce import (
         check_targets,
         check_threshold_names,
+        kept_thresholds,
         check_thresholds,
         load_thresholds,
         reproduce,
@@ -58,6 +59,7 @@ def _cmd_reproduce(args) -> int:
         from simbench.io import check_output_file
 
         check_output_file(args.write_thresholds, what="--write-thresholds")
+        kept_thresholds(args.write_thresholds, args.targets, margin=args.margin)
     if args.camera is not None:
         get_sensor(args.camera)
     overrides = {
@@ -94,7 +96,9 @@ def _cmd_reproduce(args) -> int:
         scheduler=args.scheduler,
     )
     if args.write_thresholds:
-        path = write_thresholds(args.write_thresholds, metrics, margin=args.margin, command=command)
+        path = write_thresholds(
+            args.write_thresholds, metrics, margin=args.margin, command=command, targets=args.targets
+        )
         print(f"wrote thresholds {path}")
     if args.check:
         failures = check_thresholds(metrics, args.check)
@@ -276,7 +280,10 @@ def add_parsers(sub, kw: dict) -> None:
         "--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4"
     )
     s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
-    s.add_argument("--write-thresholds", help="write a thresholds TOML from this run's metrics")
+    s.add_argument(
+        "--write-thresholds",
+        help="write a thresholds TOML from this run's metrics (an existing file keeps its other targets' entries)",
+    )
     s.add_argument(
         "--margin", type=float_in(lo=0.0, hi=10.0), default=0.25, help="relative margin for --write-thresholds"
     )

@@ -16,6 +16,7 @@ import heapq
 import logging
 import json
 import math
+import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ __all__ = [
     "task_seconds",
     "record_task_seconds",
     "write_thresholds",
+    "kept_thresholds",
 ]
 
 
@@ -486,11 +488,30 @@ def thresholds_from(metrics: dict, *, margin: float) -> dict:
     return out
 
 
-def write_thresholds(path: str | Path, metrics: dict, *, margin: float, command: str) -> Path:
-    """A thresholds TOML from measured metrics (the header states the rules and the margin)."""
+def write_thresholds(
+    path: str | Path, metrics: dict, *, margin: float, command: str, targets: list[str] | None = None
+) -> Path:
+    """A thresholds TOML from measured metrics (the header states the rules and the margin).
+
+    ``targets``: the targets the metrics come from, where ``path`` holds thresholds of others
+    too - its entries of other targets are kept (as ``metrics.json`` keeps their metrics), so that
+    an intended change to one target re-derives that target's thresholds only; the header keeps
+    the command that wrote the file and adds this one.  The file's margin must be ``margin``.  A
+    run of every target the file holds writes it anew."""
+    from simbench import validate
+
+    path = Path(path)
+    kept = kept_thresholds(path, targets, margin=margin) if targets is not None else {}
+    written_by = f"# Written by: {command}"
+    if kept:  # else the run covers every target of the file: written anew
+        text = path.read_text().splitlines()
+        header = [line for line in text if line.startswith("# Written by: ")][:1]
+        this = f"# Then for {' '.join(_resolve(targets))}: "
+        updates = [line for line in text if line.startswith("# Then for ") and not line.startswith(this)]
+        written_by = "\n".join([*header, *updates, this + command])
     lines = [
         "# Regression thresholds for `make quick` (`simbench reproduce all hard_scenes --quick`, run by .ci/run).",
-        f"# Written by: {command}",
+        written_by,
         f"# Margin {margin:g}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
         "# stripe-order errors max = measured*(1+margin)+20; their rate and the share of pixels > 5 mm wrong",
         "# (wrong_share) max = measured*(1+margin)+0.0005. No error threshold for a row that decodes under",
@@ -499,12 +520,31 @@ def write_thresholds(path: str | Path, metrics: dict, *, margin: float, command:
         "# Regenerate only for an intended change, and say why in the commit.",
         "",
     ]
-    for name, t in thresholds_from(metrics, margin=margin).items():
+    table = {**kept, **thresholds_from(metrics, margin=validate.number(margin, "margin", lo=0.0))}
+    for name, t in sorted(table.items()):
         lines.append(f'["{name}"]')
         for k, v in t.items():
             lines.append(f"{k} = {v!r}" if not isinstance(v, float) else f"{k} = {v:.6g}")
         lines.append("")
     return atomic_write_text(path, "\n".join(lines))
+
+
+def kept_thresholds(path: str | Path, targets: list[str], *, margin: float) -> dict:
+    """The entries of thresholds file ``path`` (if it exists) that a run of ``targets`` leaves as
+    they are (:func:`write_thresholds`); a ValueError if there are any and the file's margin is
+    not ``margin`` (its header states one margin)."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    names = set(_resolve(targets))
+    kept = {k: v for k, v in load_thresholds(path).items() if k.split("/")[0] not in names}
+    found = re.search(r"^# Margin ([0-9.eE+-]+):", path.read_text(), flags=re.M)
+    if kept and (found is None or float(found.group(1)) != margin):
+        raise ValueError(
+            f"{path}: its margin is not {margin:g}; to change the margin write the whole file anew "
+            "(run every target it holds)"
+        )
+    return kept
 
 
 def load_thresholds(path: str | Path) -> dict:
