@@ -94,10 +94,11 @@ def pear() -> trimesh.Trimesh:
 
 
 def hat() -> trimesh.Trimesh:
-    # a coiled straw braid: ridges 10 mm apart along the surface (brim top, crown side, crown top;
-    # rad + z grows along the profile), crossed by a 60-fold twist away from the crown's centre,
-    # 1 mm relief from trough to crest; each ridge sampled 5 times (~2 mm profile steps, 400
-    # sections round: a twist of as many ridges as sections would sit on its zeros at the vertices)
+    # a straw braid's ridges: concentric rings 10 mm apart in rad + z (on the brim top and the
+    # crown top in the radius, on the crown side in the height; 10-13 mm along the surface), their
+    # height modulated 60-fold round the crown away from its centre - up to 1 mm from trough to
+    # crest, 0.77 mm near the centre; each ridge sampled 5 times (~2 mm profile steps, 400 sections
+    # round: an angular term of as many periods as sections would sit on its zeros at the vertices)
     brim_r = np.linspace(0.18, 0.087, 47)
     crown_z = np.linspace(0.012, 0.10, 44)
     crown_r = 0.085 - 0.01 * ((crown_z - 0.012) / 0.088) ** 2

@@ -74,12 +74,43 @@ def test_writing_one_targets_thresholds_keeps_the_others(tmp_path):
     table = load_thresholds(path)
     assert table["table1/white/paper/gt_mae_mm"] == {"measured": 0.3, "max": 0.3 * 1.25 + 0.02}
     assert table["fig9/1.0m/gt_mae_mm"]["measured"] == 0.6 and "fig9/1.0m/completeness" not in table
-    with pytest.raises(ValueError, match="margin is not 0.5"):
+    with pytest.raises(ValueError, match=r"margin is 0.25, not 0.5; .* also makes table1"):
         write_thresholds(path, {"fig9/1.0m/gt_mae_mm": 0.6}, margin=0.5, command="x", targets=["fig9"])
-    with pytest.raises(ValueError, match="margin is not 0.5"):
+    with pytest.raises(ValueError, match="margin is 0.25, not 0.5"):
         kept_thresholds(path, ["fig9"], margin=0.5)
     write_thresholds(path, first, margin=0.5, command="cmd all", targets=["all"])  # every target: anew
     assert "Then for" not in path.read_text() and "# Margin 0.5:" in path.read_text()
+
+
+def test_a_thresholds_file_is_mended_by_a_run_of_every_target_and_keeps_only_what_it_may(tmp_path):
+    """A broken file is written anew, unread, by a run of every target; a target simbench no
+    longer has is dropped; a quick file keeps nothing for a full run; a file without its
+    'Written by' line says so."""
+    from simbench.experiments.reproduce import TARGETS
+
+    path = tmp_path / "t.toml"
+    path.write_text("<<<<<<< HEAD\nnot toml\n")
+    write_thresholds(path, {"fig9/1.0m/gt_mae_mm": 0.5}, margin=0.25, command="c", targets=list(TARGETS))
+    assert load_thresholds(path)["fig9/1.0m/gt_mae_mm"]["measured"] == 0.5
+    text = path.read_text().replace("# Written by: c", "# Written by: simbench reproduce all --quick")
+    path.write_text(text + '\n["gone_target/x/gt_mae_mm"]\nmeasured = 1.0\nmax = 2.0\n')
+    assert set(kept_thresholds(path, ["table1"], margin=0.25, quick=True)) == {"fig9/1.0m/gt_mae_mm"}
+    with pytest.raises(ValueError, match="thresholds of a quick run"):
+        kept_thresholds(path, ["table1"], margin=0.25, quick=False)
+    path.write_text(text.replace("# Written by: simbench reproduce all --quick\n", ""))
+    write_thresholds(path, {"table1/a/gt_mae_mm": 0.3}, margin=0.25, command="c2", targets=["table1"])
+    assert "# Written by: (not recorded)\n# Then for table1: c2" in path.read_text()
+
+
+def test_a_thresholds_margin_that_cannot_merge_is_refused_before_the_run(tmp_path, capsys):
+    from simbench.cli import main
+
+    path = write_thresholds(tmp_path / "t.toml", {"fig9/1.0m/gt_mae_mm": 0.5}, margin=0.25, command="c")
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    argv = ["reproduce", "table1", "--quick", "--out", str(out), "--cache", str(cache)]
+    code = main([*argv, "--write-thresholds", str(path), "--margin", "0.5"])
+    assert code != 0 and "margin is 0.25, not 0.5" in capsys.readouterr().err
+    assert not out.exists() and not cache.exists()  # refused before anything ran
 
 
 def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):

@@ -57,7 +57,10 @@ class CalibrationTarget:
 
     def __post_init__(self) -> None:
         v = validate
-        squares = v.numbers(self.squares, "squares", 2, lo=3, hi=64)
+        try:
+            squares = v.numbers(self.squares, "squares", 2, lo=3, hi=64)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (squares = [columns, rows])") from None
         if any(int(n) != n for n in squares):
             raise ValueError(f"squares must be 2 whole numbers [columns, rows], got {self.squares!r}")
         values = {

@@ -59,7 +59,7 @@ def _cmd_reproduce(args) -> int:
         from simbench.io import check_output_file
 
         check_output_file(args.write_thresholds, what="--write-thresholds")
-        kept_thresholds(args.write_thresholds, args.targets, margin=args.margin)
+        kept_thresholds(args.write_thresholds, args.targets, margin=args.margin, quick=args.quick)
     if args.camera is not None:
         get_sensor(args.camera)
     overrides = {
@@ -97,7 +97,7 @@ def _cmd_reproduce(args) -> int:
     )
     if args.write_thresholds:
         path = write_thresholds(
-            args.write_thresholds, metrics, margin=args.margin, command=command, targets=args.targets
+            args.write_thresholds, metrics, margin=args.margin, command=command, targets=args.targets, quick=args.quick
         )
         print(f"wrote thresholds {path}")
     if args.check:

@@ -489,7 +489,13 @@ def thresholds_from(metrics: dict, *, margin: float) -> dict:
 
 
 def write_thresholds(
-    path: str | Path, metrics: dict, *, margin: float, command: str, targets: list[str] | None = None
+    path: str | Path,
+    metrics: dict,
+    *,
+    margin: float,
+    command: str,
+    targets: list[str] | None = None,
+    quick: bool | None = None,
 ) -> Path:
     """A thresholds TOML from measured metrics (the header states the rules and the margin).
 
@@ -497,22 +503,23 @@ def write_thresholds(
     too - its entries of other targets are kept (as ``metrics.json`` keeps their metrics), so that
     an intended change to one target re-derives that target's thresholds only; the header keeps
     the command that wrote the file and adds this one.  The file's margin must be ``margin``.  A
-    run of every target the file holds writes it anew."""
+    run of every target writes it anew.  ``quick``: whether the run was ``--quick`` (a file of the
+    other resolution keeps no entries of this one: :func:`kept_thresholds`)."""
     from simbench import validate
 
     path = Path(path)
-    kept = kept_thresholds(path, targets, margin=margin) if targets is not None else {}
+    kept = kept_thresholds(path, targets, margin=margin, quick=quick) if targets is not None else {}
     written_by = f"# Written by: {command}"
     if kept:  # else the run covers every target of the file: written anew
-        text = path.read_text().splitlines()
-        header = [line for line in text if line.startswith("# Written by: ")][:1]
+        text = path.read_text(encoding="utf-8").splitlines()
+        header = [line for line in text if line.startswith("# Written by: ")][:1] or ["# Written by: (not recorded)"]
         this = f"# Then for {' '.join(_resolve(targets))}: "
         updates = [line for line in text if line.startswith("# Then for ") and not line.startswith(this)]
         written_by = "\n".join([*header, *updates, this + command])
     lines = [
         "# Regression thresholds for `make quick` (`simbench reproduce all hard_scenes --quick`, run by .ci/run).",
         written_by,
-        f"# Margin {margin:g}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
+        f"# Margin {margin!r}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
         "# stripe-order errors max = measured*(1+margin)+20; their rate and the share of pixels > 5 mm wrong",
         "# (wrong_share) max = measured*(1+margin)+0.0005. No error threshold for a row that decodes under",
         f"# {MIN_SCORED_COMPLETENESS:.0%} of its region (the errors of a few stray pixels): its stripe-order"
@@ -529,20 +536,39 @@ def write_thresholds(
     return atomic_write_text(path, "\n".join(lines))
 
 
-def kept_thresholds(path: str | Path, targets: list[str], *, margin: float) -> dict:
-    """The entries of thresholds file ``path`` (if it exists) that a run of ``targets`` leaves as
-    they are (:func:`write_thresholds`); a ValueError if there are any and the file's margin is
-    not ``margin`` (its header states one margin)."""
+def kept_thresholds(path: str | Path, targets: list[str], *, margin: float, quick: bool | None = None) -> dict:
+    """The entries of thresholds file ``path`` that a run of ``targets`` leaves as they are
+    (:func:`write_thresholds`): none if the file does not exist or the run makes every target
+    (the file is then written anew, unread - a broken file is mended so); entries of a target
+    simbench no longer has are dropped (a check would refuse them).  A ValueError if entries
+    are kept and the file's margin is not ``margin`` or (``quick`` given) it was written by a run
+    of the other resolution (its header states one margin and one command)."""
     path = Path(path)
-    if not path.is_file():
-        return {}
     names = set(_resolve(targets))
-    kept = {k: v for k, v in load_thresholds(path).items() if k.split("/")[0] not in names}
-    found = re.search(r"^# Margin ([0-9.eE+-]+):", path.read_text(), flags=re.M)
-    if kept and (found is None or float(found.group(1)) != margin):
+    if not path.is_file() or names == set(TARGETS):
+        return {}
+    table = load_thresholds(path)
+    gone = sorted({k.split("/")[0] for k in table} - set(TARGETS))
+    if gone:
+        log.warning("%s: dropping the thresholds of %s, no longer a target", path, ", ".join(gone))
+    kept = {k: v for k, v in table.items() if k.split("/")[0] in set(TARGETS) - names}
+    if not kept:
+        return {}
+    held = ", ".join(sorted({k.split("/")[0] for k in kept}))
+    text = path.read_text(encoding="utf-8")
+    found = re.search(r"^# Margin (\S+):", text, flags=re.M)
+    if found is None:
+        raise ValueError(f"{path}: states no margin; write it anew with a run of every target it holds ({held})")
+    if float(found.group(1)) != margin:
         raise ValueError(
-            f"{path}: its margin is not {margin:g}; to change the margin write the whole file anew "
-            "(run every target it holds)"
+            f"{path}: its margin is {found.group(1)}, not {margin!r}; to change the margin write the whole file "
+            f"anew (a run that also makes {held})"
+        )
+    written = re.search(r"^# Written by: (.*)$", text, flags=re.M)
+    if quick is not None and written is not None and ("--quick" in written.group(1).split()) != quick:
+        raise ValueError(
+            f"{path} holds thresholds of a {'full' if quick else 'quick'} run ({written.group(1)}); "
+            f"this run is {'quick' if quick else 'full'}"
         )
     return kept
 

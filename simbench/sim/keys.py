@@ -62,26 +62,28 @@ def versions() -> dict:
     return out
 
 
-def cpu_model() -> str:
-    """The processor's model name and, on x86, its widest vector instructions (Linux:
-    /proc/cpuinfo; elsewhere the platform's word), e.g. ``"AMD EPYC (AVX2)"``.  Part of
-    provenance because results depend on it in their last digits: OpenCV's and numpy's SIMD code
-    and Dr.Jit's packet width follow the instruction sets the CPU has, and two "AMD EPYC" models,
-    one with AVX-512 and one without, gave 765 of the quick run's 1830 metrics the same bits
-    (docs/rendering.md, "Across CPUs")."""
+def cpu_model(cpuinfo: str | None = None) -> str:
+    """The processor's model name and, on Linux x86, its widest vector instructions (from
+    ``cpuinfo``, the text of /proc/cpuinfo, read when None; elsewhere the platform's word), e.g.
+    ``"AMD EPYC (AVX2)"``.  Part of provenance because results depend on it in their last digits:
+    OpenCV's and numpy's SIMD code and Dr.Jit's packet width follow the instruction sets the CPU
+    has, and two "AMD EPYC" models, one with AVX-512 and one without, gave 765 of the quick run's
+    1830 metrics the same bits (docs/rendering.md, "Across CPUs")."""
+    if cpuinfo is None:
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+                cpuinfo = f.read()
+        except OSError:
+            cpuinfo = ""
     name, flags = "", set()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
-            for line in f:
-                key, _, value = line.partition(":")
-                if key.strip() == "model name" and not name:
-                    name = value.strip()
-                elif key.strip() == "flags" and not flags:
-                    flags = set(value.split())
-                if name and flags:
-                    break
-    except OSError:
-        pass
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        if key.strip() == "model name" and not name:
+            name = value.strip()
+        elif key.strip() == "flags" and not flags:
+            flags = set(value.split())
+        if name and flags:
+            break
     name = name or platform.processor() or platform.machine() or "unknown"
     isa = next((label for flag, label in (("avx512f", "AVX-512"), ("avx2", "AVX2")) if flag in flags), None)
     if isa is None and flags:
