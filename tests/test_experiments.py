@@ -155,6 +155,24 @@ def test_same_values_counts_bit_equal_metrics_and_names_the_farthest(tmp_path):
     assert "no comparison" in same_values(run, tmp_path / "missing.json")
 
 
+def test_same_values_says_which_cpu_made_which_target_when_they_differ(tmp_path, monkeypatch):
+    """A committed run remade in part on another CPU (one target's files): the line names each
+    CPU's targets and counts the metrics of this run's CPU apart - those should be the same."""
+    import json
+
+    import simbench.sim.keys
+
+    committed = {"a/x_mm": 0.5, "a/y_mm": 1.0, "b/x_mm": 2.0}
+    (tmp_path / "metrics.json").write_text(json.dumps(committed))
+    (tmp_path / "a.provenance.json").write_text(json.dumps({"versions": {"cpu": "CPU (AVX-512)"}}))
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "b.provenance.json").write_text(json.dumps({"versions": {"cpu": "CPU (AVX2)"}}))
+    monkeypatch.setattr(simbench.sim.keys, "cpu_model", lambda: "CPU (AVX2)")
+    line = same_values({**committed, "a/x_mm": 0.6}, tmp_path / "metrics.json")
+    assert line.startswith("2 of 3 metrics") and "made on CPU (AVX-512): a; CPU (AVX2): b;" in line
+    assert "of the 1 made on this run's CPU, 1 the same bits" in line
+
+
 def test_threshold_rules():
     t = thresholds_from(
         {"a/mae_mm": 1.0, "a/completeness": 0.5, "a/stripe_order_error_rate": 0.0, "a/nan_mm": math.nan}, margin=0.5

@@ -633,24 +633,36 @@ def same_values(metrics: dict, reference_path: str | Path) -> str:
         reference = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         return f"no comparison with {path} ({type(exc).__name__})"
-    made_on = "a CPU not recorded"
-    for prov in sorted(path.parent.glob("*.provenance.json")):
+    cpu_of: dict[str, str] = {}  # target -> the CPU its provenance records
+    for prov in sorted(path.parent.rglob("*.provenance.json")):
         try:
-            made_on = json.loads(prov.read_text()).get("versions", {}).get("cpu", made_on)
+            cpu = json.loads(prov.read_text()).get("versions", {}).get("cpu")
         except (OSError, ValueError):
             continue
-        break
+        if cpu:
+            cpu_of[prov.name.split(".")[0]] = cpu
+    cpus = sorted(set(cpu_of.values()))
+    if len(cpus) <= 1:
+        made_on = cpus[0] if cpus else "a CPU not recorded"
+    else:  # a file remade in part elsewhere: which targets each CPU made
+        made_on = "; ".join(f"{c}: {', '.join(sorted(t for t, v in cpu_of.items() if v == c))}" for c in cpus)
 
     def equal(a: object, b: object) -> bool:
         both_nan = isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
         return both_nan or a == b
 
+    here = cpu_model()
     shared = sorted(set(metrics) & set(reference))
     differ = [k for k in shared if not equal(metrics[k], reference[k])]
     line = (
         f"{len(shared) - len(differ)} of {len(shared)} metrics the same bits as {path} "
-        f"(made on {made_on}; this run on {cpu_model()})"
+        f"(made on {made_on}; this run on {here})"
     )
+    if len(cpus) > 1 and here in cpus:
+        mine = [k for k in shared if cpu_of.get(k.split("/")[0]) == here]
+        apart = set(differ)
+        same = sum(1 for k in mine if k not in apart)
+        line += f"; of the {len(mine)} made on this run's CPU, {same} the same bits"
     numeric = [
         (abs(metrics[k] - reference[k]) / max(abs(reference[k]), 1e-12), k)
         for k in differ
