@@ -42,8 +42,8 @@ def _cmd_reproduce(args) -> int:
     from simbench.experiments.reproduce import (
         check_targets,
         check_threshold_names,
-        kept_thresholds,
         check_thresholds,
+        kept_thresholds,
         load_thresholds,
         reproduce,
         same_values,
