@@ -551,7 +551,8 @@ def kept_thresholds(path: str | Path, targets: list[str], *, margin: float, quic
     gone = sorted({k.split("/")[0] for k in table} - set(TARGETS))
     if gone:
         log.warning("%s: dropping the thresholds of %s, no longer a target", path, ", ".join(gone))
-    kept = {k: v for k, v in table.items() if k.split("/")[0] in set(TARGETS) - names}
+    others = set(TARGETS) - names
+    kept = {k: v for k, v in table.items() if k.split("/")[0] in others}
     if not kept:
         return {}
     held = ", ".join(sorted({k.split("/")[0] for k in kept}))
