@@ -37,6 +37,8 @@ __all__ = [
     "ply_bytes",
     "save_png",
     "load_image",
+    "adc_full_scale",
+    "narrow_uint16_hint",
     "save_exr",
     "save_ply",
     "read_toml",
@@ -565,6 +567,61 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
         h, w = expected_size_hw
         raise ValueError(f"{path}: image is {img.shape[1]}x{img.shape[0]} (WxH) but the camera is {w}x{h}")
     return np.ascontiguousarray(img)
+
+
+# the ADC depths a camera may have (simbench.sim.camera, simbench.sim.sensor)
+ADC_BITS = (8, 10, 12, 16)
+
+
+def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarray:
+    """A capture as the decoder reads it, given the bits of the camera's ADC that recorded it.
+
+    The decoder takes uint8 / 255 and uint16 / 65535 as full scale.  A 10- or 12-bit camera's
+    image is stored in uint16 as its digital numbers, 0 to ``2**bits - 1`` (as the simulated
+    camera records them, and as most machine-vision software saves such frames unscaled), so it
+    is returned as float32 ``DN / (2**bits - 1)``; an 8- or 16-bit camera's image (or ``bits``
+    None: the container's range) and float images are returned as they are.
+
+    Raises
+    ------
+    ValueError
+        An image whose values or dtype cannot come from a ``bits``-bit camera.
+    """
+    if bits is None or img.dtype.kind == "f":
+        return img
+    bits = validate.choice(validate.integer(bits, "bits"), "bits", ADC_BITS)
+    if img.dtype == np.uint8:
+        if bits != 8:
+            raise ValueError(f"{where}: an 8-bit image, not the {bits}-bit camera's digital numbers (uint16)")
+        return img
+    if img.dtype != np.uint16 or bits == 16:
+        return img
+    if bits == 8:
+        raise ValueError(f"{where}: a 16-bit image, not an 8-bit camera's digital numbers (uint8)")
+    full = (1 << bits) - 1
+    top = int(img.max(initial=0))
+    if top > full:
+        raise ValueError(
+            f"{where}: values up to {top}, above a {bits}-bit camera's largest digital number {full}: "
+            f"not that camera's image as recorded (scaled to 16 bits? then it is read as it is, without the bits)"
+        )
+    return np.multiply(img, np.float32(1.0 / full), dtype=np.float32)
+
+
+def narrow_uint16_hint(img: np.ndarray) -> str:
+    """A hint for a uint16 image read at the full 16-bit range whose values all fit in 12 or
+    10 bits (a 10- or 12-bit camera's digital numbers, which would then read 16 or 64 times too
+    dark); "" otherwise."""
+    if img.dtype != np.uint16:
+        return ""
+    top = int(img.max(initial=0))
+    for bits in (10, 12):
+        if 0 < top <= (1 << bits) - 1:
+            return (
+                f"a 16-bit image whose largest value is {top}, within {bits} bits: if it holds a {bits}-bit camera's "
+                f"digital numbers, give --bits {bits} (read now as 16-bit, {1 << (16 - bits)} times darker)"
+            )
+    return ""
 
 
 @contextmanager

@@ -42,6 +42,7 @@ def _cmd_decode(args) -> int:
         channels=args.channels,
         robust=args.robust,
         decoder=tuple(args.decoder or ()),
+        bits=args.bits,
     )
     print(decode_files(request))
     return 0
@@ -174,6 +175,15 @@ def add_parsers(sub, kw: dict) -> None:
         default=None,
         help="reference (the default): match against the reference plane (paper Sec. 5.4); calibrated: triangulate "
         "with the rig",
+    )
+    s.add_argument(
+        "--bits",
+        type=int,
+        choices=(8, 10, 12, 16),
+        default=None,
+        help="the bits of the camera's ADC, for images that do not record them: a 10- or 12-bit camera's 16-bit "
+        "image holds its digital numbers, 0 to 2^bits - 1 (default: a recording's camera, else the image's "
+        "dtype: 8-bit / 255, 16-bit / 65535)",
     )
     s.add_argument(
         "--z0",

@@ -48,7 +48,9 @@ class DecodeRequest:
     The other fields are options of the colour-fringe (proposed) sensor's decoder: a reference
     plane capture, its calibration frames' folder, the decoding ``mode``, Z0, the working range,
     the pattern (None = as recorded, or the default), the colour-robust decoder and other
-    decoder settings as ``name=value`` items.  None or empty = not given.
+    decoder settings as ``name=value`` items, and the bits of the camera's ADC for images that
+    do not record them (a 10- or 12-bit camera's uint16 digital numbers).  None or empty = not
+    given.
     """
 
     capture: str
@@ -71,6 +73,7 @@ class DecodeRequest:
     channels: str | None = None
     robust: bool = False
     decoder: tuple[str, ...] = ()
+    bits: int | None = None
 
 
 # how the command line names each option of a request, for messages that tell a user what to change
@@ -87,6 +90,7 @@ FLAGS = {
     "decoder": "--decoder",
     "near_m": "--near",
     "far_m": "--far",
+    "bits": "--bits",
 }
 # the options every system takes (the rest are the colour-fringe decoder's)
 COMMON_FIELDS = frozenset({"capture", "out", "confidence", "ply", "debug_dir", "rig", "min_confidence", "cache_dir"})

@@ -33,6 +33,7 @@ from simbench.systems.proposed_folder import (
     RENDER_MANIFEST,
     describe_pattern,
     pattern_record,
+    recorded_adc_bits,
     recorded_pattern,
     recorded_z0,
 )
@@ -56,6 +57,7 @@ __all__ = [
     "pattern_record",
     "recorded_pattern",
     "recorded_z0",
+    "recorded_adc_bits",
     "describe_pattern",
     "Acquisition",
     "acquire",
@@ -107,6 +109,9 @@ class ReferenceCalibration:
     image: np.ndarray
     frames: dict = field(default_factory=dict)
     cache: object = None
+    # the bits of the camera's ADC (None: the images' dtype's range): a 10- or 12-bit camera's
+    # uint16 images hold its digital numbers (simbench.io.adc_full_scale)
+    adc_bits: int | None = None
     _maps: dict = field(default_factory=dict, repr=False)
 
     def reference_map(self, params, *, rig=None) -> ReferenceMap:
@@ -121,6 +126,11 @@ class ReferenceCalibration:
             )
         key = (params, rig)
         if key not in self._maps:
+            from simbench.io import adc_full_scale
+
+            def scaled(img, name):
+                return None if img is None else adc_full_scale(img, bits=self.adc_bits, where=name)
+
             primaries = None
             if params.unmix:
                 if not self.frames:
@@ -128,18 +138,24 @@ class ReferenceCalibration:
                         "this decoder unmixes the primaries: the calibration needs its frames (calibrate with "
                         "frames=True)"
                     )
-                primaries = [self.frames[k] for k in ("red", "green", "blue")]
+                primaries = [scaled(self.frames[k], f"calibration frame {k}") for k in ("red", "green", "blue")]
             ref, store = lookup_decoded_reference(
-                self.image,
+                scaled(self.image, "reference"),
                 rig=rig,
                 params=params,
                 primaries=primaries,
-                dark=self.frames.get("dark"),
+                dark=scaled(self.frames.get("dark"), "calibration frame dark"),
                 cache=self.cache,
             )
             store()
             self._maps[key] = ref
         return self._maps[key]
+
+
+def _narrow_adc_bits(bits: int) -> int | None:
+    """``bits`` where a camera's uint16 images hold digital numbers of fewer bits (10, 12), else
+    None: an 8- or 16-bit camera's images are read by their dtype's range."""
+    return bits if bits in (10, 12) else None
 
 
 class ColourFringeSystem:
@@ -232,7 +248,13 @@ class ColourFringeSystem:
         if self.decoder.unmix if frames is None else frames:
             for name, drive in calibration_frames(self.pattern_u8).items():
                 cal[name] = self._record(ref_scene, f"{label}/{name}", seeds=seeds, render=render, pattern_u8=drive)
-        return ReferenceCalibration(rig=scene.rig, image=image, frames=cal, cache=render.cache)
+        return ReferenceCalibration(
+            rig=scene.rig,
+            image=image,
+            frames=cal,
+            cache=render.cache,
+            adc_bits=_narrow_adc_bits(self.sensor.camera.bits),
+        )
 
     def _record(self, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, pattern_u8=None) -> np.ndarray:
         render_seed, noise = seeds.capture(label)
@@ -296,9 +318,13 @@ class ColourFringeSystem:
         ``scene.rig`` (which may be a calibrated rig rather than the one the scene was rendered
         with; the reference map is then decoded with it too)."""
         from simbench.decode import decode
+        from simbench.io import adc_full_scale
 
         params = params if params is not None else self.decoder
         params = _with(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
+        # a 10- or 12-bit camera's digital numbers, read against its own full scale (any other
+        # camera's images by their dtype's range, as the decoder reads arrays)
+        raw = adc_full_scale(raw, bits=_narrow_adc_bits(self.sensor.camera.bits), where="capture")
         ref = None
         if params.mode == "reference" or params.unmix:
             if calibration is None:
@@ -391,8 +417,9 @@ class ColourFringeSystem:
         (``simbench render``); the scene carries the recorded rig and Z0, no objects.  The
         manifest and every file are checked (:func:`simbench.manifest.read_manifest`), and a
         folder recorded with another pattern than this system's is refused (it would decode
-        wrongly without a word)."""
-        from simbench.io import load_image
+        wrongly without a word).  A 10- or 12-bit camera's capture comes as float32 of its full
+        scale (:func:`simbench.io.adc_full_scale`), the calibration with its ``adc_bits``."""
+        from simbench.io import adc_full_scale, load_image
         from simbench.rig import load_rig
 
         d = Path(in_dir)
@@ -405,12 +432,18 @@ class ColourFringeSystem:
             )
         rig = load_rig(d / "rig.toml")
         z0 = recorded_z0(meta, where=str(d / RENDER_MANIFEST))
-        capture = load_image(d / "capture.png", expected_size_hw=rig.camera.size_hw)
+        bits = recorded_adc_bits(meta, where=str(d / RENDER_MANIFEST))
+        capture = adc_full_scale(
+            load_image(d / "capture.png", expected_size_hw=rig.camera.size_hw), bits=bits, where=str(d / "capture.png")
+        )
         frames = {}
         for name in (n for n in ("dark", "red", "green", "blue") if (d / f"calibration_{n}.png").is_file()):
             frames[name] = load_image(d / f"calibration_{name}.png", expected_size_hw=rig.camera.size_hw)
         cal = ReferenceCalibration(
-            rig=rig, image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw), frames=frames
+            rig=rig,
+            image=load_image(d / "reference.png", expected_size_hw=rig.camera.size_hw),
+            frames=frames,
+            adc_bits=bits,
         )
         return capture, cal, SceneSpec(name=str(meta.get("scene", d.name)), rig=rig, objects=(), reference_depth_m=z0)
 

@@ -12,6 +12,7 @@ the result.  The decoded reference plane is cached (:mod:`simbench.decode.persis
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time
 from collections import ChainMap
 from pathlib import Path
@@ -33,6 +34,7 @@ __all__ = [
     "decode_capture_files",
     "describe_pattern",
     "pattern_record",
+    "recorded_adc_bits",
     "recorded_pattern",
     "recorded_z0",
 ]
@@ -105,13 +107,39 @@ def _decoder_params(request: DecodeRequest, base=None):
     return with_assignments(robust_params(base) if request.robust else base, request.decoder)
 
 
+def _camera_image(path: str | Path, rig, request: DecodeRequest) -> np.ndarray:
+    """An image of the decode (the capture, the reference, a calibration frame) at its camera's
+    full scale (:func:`simbench.io.adc_full_scale`): the ADC bits its recording's manifest
+    records, else ``--bits``, else the dtype's range - with a warning where a 16-bit image's
+    values all fit in 10 or 12 bits (a 12-bit camera's frame read as 16-bit decodes at a
+    sixteenth of its brightness: half the pixels lost, and no other word of it)."""
+    from simbench.io import adc_full_scale, load_image, narrow_uint16_hint
+
+    path = Path(path)
+    img = load_image(path, expected_size_hw=rig.camera.size_hw)
+    meta = recording_manifest_of(path)
+    recorded = None
+    if meta is not None and path.name in meta.get("files", {}).values():
+        recorded = recorded_adc_bits(meta, where=str(path.parent / RENDER_MANIFEST))
+    if recorded is not None and request.bits is not None and request.bits != recorded:
+        raise ValueError(
+            f"--bits {request.bits} contradicts {path.parent / RENDER_MANIFEST}, whose camera recorded "
+            f"{recorded}-bit digital numbers; leave --bits out to decode it as recorded"
+        )
+    bits = recorded if recorded is not None else request.bits
+    if bits is None:
+        hint = narrow_uint16_hint(img)
+        if hint:
+            logging.getLogger("simbench").warning("%s: %s", path, hint)
+    return adc_full_scale(img, bits=bits, where=str(path))
+
+
 def decode_capture_files(request: DecodeRequest) -> FileDecode:
     """Decode the request's capture (an image with ``request.rig``, or a recording folder) with
     the colour-fringe sensor's decoder."""
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode
     from simbench.decode.persist import lookup_decoded_reference
-    from simbench.io import load_image
     from simbench.manifest import read_manifest
     from simbench.pattern import pattern_from_options
     from simbench.rig import load_rig
@@ -155,14 +183,14 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         p: recording_manifest_of(p) for p in (capture_path, reference_path, rig_path) if p and Path(p).is_file()
     }
     _check_same_recording_rig(capture_path, reference_path, manifests)
-    capture = load_image(capture_path, expected_size_hw=rig.camera.size_hw)
+    capture = _camera_image(capture_path, rig, request)
     mode = request.mode or decoder_mode or "reference"
     reference = None
     z0 = z0_asked if z0_asked is not None else 1.0
     if mode == "reference":
         if reference_path is None:
             raise ValueError("--reference is required in reference mode (or use --mode calibrated)")
-        reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
+        reference = _camera_image(reference_path, rig, request)
         z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     recorded = manifests.get(capture_path)
     if recorded is not None and recorded["files"].get("capture") != Path(capture_path).name:
@@ -210,7 +238,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         ref_z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)  # (an image's: as --z0 says, or 1 m)
         ref_params = dataclasses.replace(params, mode="reference", z0_m=ref_z0)
         plane, store_plane = lookup_decoded_reference(
-            load_image(reference_path, expected_size_hw=rig.camera.size_hw), rig=rig, params=ref_params, cache=cache
+            _camera_image(reference_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
         _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path)
         store_plane()
@@ -292,7 +320,6 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
     the calibration frames beside it (or in ``request.calibration``); with the function that
     caches it (:func:`simbench.decode.persist.lookup_decoded_reference`)."""
     from simbench.decode.persist import lookup_decoded_reference
-    from simbench.io import load_image
     from simbench.pattern import CALIBRATION_FRAMES
 
     if reference_path is None:
@@ -310,9 +337,9 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
         )
     for p in paths.values():
         recording_manifest_of(p)
-    frames = {k: load_image(p, expected_size_hw=rig.camera.size_hw) for k, p in paths.items()}
+    frames = {k: _camera_image(p, rig, request) for k, p in paths.items()}
     if reference is None:
-        reference = load_image(reference_path, expected_size_hw=rig.camera.size_hw)
+        reference = _camera_image(reference_path, rig, request)
     z0_asked, z0_option = _asked_z0(request, params)
     z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     ref_params = dataclasses.replace(params, mode="reference", z0_m=z0)
@@ -378,6 +405,18 @@ def recorded_z0(meta: dict, *, where: str) -> float:
         raise ValueError(f"{where}: records no reference_depth_m (Z0)")
     # the bounds of a scene file's reference_depth_m (simbench.sim.scene)
     return validate.number(meta["reference_depth_m"], f"{where}: reference_depth_m", lo=0.0, lo_open=True, hi=100.0)
+
+
+def recorded_adc_bits(meta: dict, *, where: str) -> int | None:
+    """The bits of the camera's ADC a render folder's manifest records (its sensor's camera), or
+    None where it records no sensor (the images' dtype's range then)."""
+    from simbench import validate
+    from simbench.io import ADC_BITS
+
+    camera = meta.get("sensor", {}).get("camera") if isinstance(meta.get("sensor"), dict) else None
+    if not isinstance(camera, dict) or "bits" not in camera:
+        return None
+    return validate.choice(validate.integer(camera["bits"], f"{where}: sensor.camera.bits"), "bits", ADC_BITS)
 
 
 def describe_pattern(p: PatternSpec) -> str:
