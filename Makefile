@@ -20,8 +20,9 @@ $(STAMP): pyproject.toml scripts/setup_system.sh simbench/_ckernels.c simbench/_
 # The main job: the paper's Table 1, Table 3, Fig. 9 and figures into results/ (renders are
 # cached in .cache/simbench), the rig calibration's report (its observations were made, and
 # cached, by the tables' calibrated-rig columns), then the pipeline demo into results/demo.
-# On 2 worker processes: the same files as one (from an empty cache 45 min 12 s, measured at
-# 9a7c491 with the 36-spp renders in passes).
+# On 2 worker processes: the same files as one (`reproduce all` from an empty cache: 41 min 44 s on
+# an Intel Xeon, 51 min 30 s on an AMD EPYC with AVX-512; renders take ~2.3x as long on a CPU
+# without AVX-512; docs/results.md).
 reproduce: setup
 	$(VENV)/bin/simbench reproduce all --workers 2
 	$(VENV)/bin/simbench calibrate --out results/calibration --overwrite

@@ -21,6 +21,8 @@ sensor: the paper's decoder against the reference plane, Sec. 5.4), and ``score`
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -240,7 +242,7 @@ def depth(
     :attr:`simbench.systems.SystemInfo.confidence`).
     """
     from simbench.decode import DecoderParams, robust_params
-    from simbench.decode.pipeline import apply_min_confidence
+    from simbench.decode.pipeline import apply_min_confidence, code_order_doubt, without_depth
     from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemDepth, SystemOptions, get_system
 
@@ -272,6 +274,12 @@ def depth(
                 "calibration_frames=True"
             )
         result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
+        # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
+        # red and green swapped) gives no depth rather than half of it wrong
+        doubt = code_order_doubt(result.detail.window_succession)
+        if doubt:
+            logging.getLogger("simbench").warning("no pixel decoded: %s", doubt)
+            result = dataclasses.replace(without_depth(result), detail=without_depth(result.detail))
     else:
         if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
             raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")
@@ -299,7 +307,7 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     over the lit pixels, the share of outliers more than 5 mm off and, where the system decodes
     projector columns, stripe-order errors; pixels within ``edge_band_px`` of a depth edge are
     left out of the errors (the completeness still counts them)."""
-    from simbench.metrics import depth_errors, edge_band
+    from simbench.metrics import depth_errors, edge_band, implausible_columns, implausible_depth
     from simbench.systems import get_system
 
     from simbench import validate as v
@@ -318,4 +326,11 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     column = getattr(depth, "column_px", None)
     period = get_system(recorded.system).info().period_px if column is not None else None
     kw = {"column_px": column, "gt_column_px": gt.column_px, "period_px": period} if period else {}
+    # as `simbench score`: a map in other units, or of another scene, is scored with a warning
+    log = logging.getLogger("simbench")
+    for warning in implausible_depth(depth_m, gt.depth_m, np.asarray(gt.lit, bool)):
+        log.warning("score: the depth map: %s", warning)
+    if kw:
+        for warning in implausible_columns(column, gt.column_px):
+            log.warning("score: the depth's column_px: %s", warning)
     return depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)

@@ -333,6 +333,8 @@ class RenderCache:
         self.damaged = 0
         self.unstored = 0
         self.made: dict[str, tuple[int, float]] = {}
+        # called as on_made(kind, seconds) after each entry this process made (a command's progress)
+        self.on_made: Callable[[str, float], None] | None = None
         self._lock = threading.Lock()
         # per thread, innermost last: the nested makes' seconds, and the keys each has used
         self._local = threading.local()
@@ -360,6 +362,8 @@ class RenderCache:
                 stack[-1] += elapsed
             if ok:
                 self.add_made({kind: (1, own)})
+                if self.on_made is not None:
+                    self.on_made(kind, own)
 
     def _used(self, path: Path, sources: Iterable[str]) -> None:
         """An entry was read: mark it and its sources used, and note them as sources of the

@@ -553,11 +553,22 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
             img = img[..., ::-1]
     if img.dtype.kind == "f":  # .npy or a float TIFF/EXR
         finite = img[np.isfinite(img)]
+        if finite.size != img.size:
+            raise ValueError(f"{path}: {img.size - finite.size} pixel values are NaN or inf; a capture is finite")
         if finite.size and (finite.min() < 0.0 or finite.max() > 1.0):
+            lo, hi = float(finite.min()), float(finite.max())
+            if lo < 0.0:
+                hint = "no camera records negative light: an image after background subtraction or other processing?"
+            elif hi <= 255.0:
+                hint = "8-bit values? divide by 255, or save it as uint8"
+            else:
+                hint = "16-bit values? divide by 65535, or save it as uint16"
             raise ValueError(
                 f"{path}: a float capture holds values in [0, 1] of full scale, this one spans "
-                f"[{finite.min():g}, {finite.max():g}] (8-bit values? divide by 255, or save it as uint8)"
+                f"[{lo:g}, {hi:g}] ({hint})"
             )
+    elif img.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"{path}: {img.dtype} pixels; a capture is uint8, uint16 or float in [0, 1]")
     if channels == 1:
         if img.ndim != 2:
             raise ValueError(f"{path}: expected a single-channel image, got shape {img.shape}")

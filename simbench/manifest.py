@@ -104,10 +104,15 @@ def read_manifest(path: str | Path, *, verify_files: bool = True) -> dict:
         raise FileNotFoundError(f"{path} not found: not a recording folder (`simbench render --out`)")
     data = json_object(path)
     fmt = data.get("manifest_format")
-    if fmt != MANIFEST_FORMAT or not isinstance(data.get(_SELF_KEY), str):
+    if fmt != MANIFEST_FORMAT:
         raise ManifestError(
-            f"{path}: no sealed manifest of format {MANIFEST_FORMAT} (found {fmt!r}): written by hand or by an older "
-            "simbench, so what it was recorded with cannot be trusted; render it again"
+            f"{path}: a manifest of format {fmt!r}, not {MANIFEST_FORMAT}: written by hand or by an older simbench, so "
+            "what it was recorded with cannot be trusted; render it again"
+        )
+    if not isinstance(data.get(_SELF_KEY), str):
+        raise ManifestError(
+            f"{path}: its seal ({_SELF_KEY}) is missing: written by hand or edited, so what it was recorded with "
+            "cannot be trusted; render it again"
         )
     if _content_sha256(data) != data[_SELF_KEY]:
         raise ManifestError(

@@ -32,6 +32,8 @@ __all__ = [
     "points_from_depth",
     "score",
     "code_stripes",
+    "implausible_depth",
+    "implausible_columns",
 ]
 
 
@@ -455,3 +457,43 @@ def code_stripes(
         out[f"code{k}_eq13"] = float((reads_one[sel] == bool(k)).mean()) if n else float("nan")
         out[f"code{k}_pixels"] = n
     return out
+
+
+def implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> list[str]:
+    """What makes a depth map look like something other than a decode of this scene in metres:
+    no finite depth where it is scored, depths <= 0, or a median far (> 5x) from the ground
+    truth's - another unit, another scene.  Scored all the same (the numbers say how far off):
+    ``simbench score`` prints these as warnings, :func:`simbench.score` logs them."""
+    ok = region & np.isfinite(gt)
+    d = depth[ok]
+    finite = np.isfinite(d)
+    if not finite.any():
+        return ["it holds no finite depth where the scene is scored: the errors are undefined (a decode of nothing?)"]
+    out = []
+    if (d[finite] <= 0).any():
+        out.append(f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m")
+    gt_median = float(np.median(gt[ok][finite]))
+    ratio = float(np.median(d[finite])) / gt_median
+    if not 0.2 <= ratio <= 5.0:
+        out.append(
+            f"its median depth is {ratio:.3g}x the ground truth's ({gt_median:.3g} m): is it in metres, "
+            "and of this scene? (simbench's depth maps are float32 metres)"
+        )
+    return out
+
+
+def implausible_columns(column_px: np.ndarray, gt_column_px: np.ndarray) -> list[str]:
+    """What makes a decoded column map look like something else (a depth map in metres): its
+    median under a hundredth of the ground-truth columns' (projector columns run to ~1800 px)."""
+    col = np.asarray(column_px, np.float64)
+    gcol = np.asarray(gt_column_px, np.float64)
+    c, g = col[np.isfinite(col)], gcol[np.isfinite(gcol)]
+    if not c.size or not g.size or np.median(g) <= 0:
+        return []
+    if abs(float(np.median(c))) < 0.01 * float(np.median(g)):
+        return [
+            f"its median {float(np.median(c)):.3g} is far below the ground truth's projector columns (median "
+            f"{float(np.median(g)):.4g} px): a depth map in metres? (a column map is the decoder's column.npy, "
+            "simbench decode --debug-dir)"
+        ]
+    return []

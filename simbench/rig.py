@@ -355,7 +355,8 @@ def save_rig(rig: Rig, path: str | Path) -> Path:
 
 def load_rig(path: str | Path) -> Rig:
     """Read a rig TOML file; errors name the file and the offending field."""
-    return rig_from_dict(read_toml(path, what="rig"), where=str(path))
+    # "FILE: rig.camera: ..." as a sensor file's errors read (not "FILE.camera", a file's name)
+    return rig_from_dict(read_toml(path, what="rig"), where=f"{path}: rig")
 
 
 def pixel_rays(intr: Intrinsics) -> np.ndarray:

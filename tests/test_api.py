@@ -110,6 +110,24 @@ def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypa
     assert not any(tmp_path.iterdir())
 
 
+def test_score_warns_as_the_command_line_does(caplog):
+    """A depth map in millimetres scored from Python: the numbers, and the command line's warning
+    (the audit: simbench.score had none of them)."""
+    import logging
+
+    import simbench
+
+    rec = _recorded()
+    depth = simbench.depth(rec)
+    with caplog.at_level(logging.WARNING, logger="simbench"):
+        m = simbench.score(depth.depth_m * 1000, rec)
+    assert m["mae_mm"] > 1e5 and "its median depth is 1e+03x the ground truth's" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="simbench"):
+        simbench.score(depth, rec)
+    assert caplog.text == ""
+
+
 def test_depth_and_score_check_their_arguments():
     import simbench
 

@@ -519,15 +519,16 @@ for cid, name, content, msg in [
     ("capture-crc-error", "c.png", "flip", "CRC error"),
     ("capture-grey", "c.png", np.zeros((120, 160), np.uint8), "RGB"),
     ("capture-wrong-size", "c.png", np.zeros((240, 320, 3), np.uint8), "320x240"),
-    ("capture-npy-nan", "c.npy", np.full((120, 160, 3), np.nan, np.float32), "NaN"),
+    ("capture-npy-nan", "c.npy", np.full((120, 160, 3), np.nan, np.float32), ("c.npy: 57600 pixel values", "NaN")),
     ("capture-npy-2d", "c.npy", np.zeros((120, 160), np.float32), "RGB"),
-    ("capture-npy-int64", "c.npy", np.zeros((120, 160, 3), np.int64), "dtype"),
+    ("capture-npy-int64", "c.npy", np.zeros((120, 160, 3), np.int64), ("c.npy: int64 pixels", "uint8, uint16")),
     ("capture-npy-empty", "c.npy", b"", "empty"),
     ("capture-npy-not-npy", "c.npy", b"PK\x03\x04 not numpy", "not a NumPy"),
     # issue 33: read as RGB and decoded to 0 % with exit 0; floats on the 8-bit scale accepted
     ("capture-grey-alpha-png", "c.png", b"GA", "grey+alpha PNG"),
     ("capture-npy-0-255", "c.npy", np.full((120, 160, 3), 200.0, np.float32), "8-bit values"),
-    ("capture-npy-negative", "c.npy", np.full((120, 160, 3), -0.5, np.float32), "spans [-0.5"),
+    ("capture-npy-negative", "c.npy", np.full((120, 160, 3), -0.5, np.float32), ("spans [-0.5", "negative light")),
+    ("capture-npy-0-65535", "c.npy", np.full((120, 160, 3), 4000.0, np.float32), "16-bit values? divide by 65535"),
 ]:
 
     def _setup(d, name=name, content=content):
@@ -826,6 +827,23 @@ case(
     lambda d: _decode(d),
     "meta.json",
     setup=lambda d: (render_folder(d) / "meta.json").write_text("{not json"),
+)
+
+
+def _unsealed(d: Path) -> None:
+    import json
+
+    r = render_folder(d)
+    data = json.loads((r / "meta.json").read_text())
+    del data["manifest_sha256"]
+    (r / "meta.json").write_text(json.dumps(data))
+
+
+case(  # a new user's audit: "no sealed manifest of format 2 (found 2)"
+    "decode-meta-seal-removed",
+    lambda d: _decode(d),
+    ("meta.json: its seal (manifest_sha256) is missing", "render it again"),
+    setup=_unsealed,
 )
 case(
     "decode-meta-z0-negative",

@@ -1,4 +1,5 @@
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -92,6 +93,8 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_m
     (distortion in rig.toml, undistorted by decode) the error grows but stays sub-millimetre."""
     out = tmp_path / "wp"
     assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(out), "--seed", "3", "--sensor", sensor]) == 0
+    # progress on the way (a cold render is silent for a minute otherwise): each costly entry made
+    assert re.search(r"simbench: radiance made in \d+\.\d s \(\d+ s so far\)", capsys.readouterr().err)
     for f in (
         "capture.png",
         "reference.png",
@@ -684,17 +687,26 @@ def test_a_cache_that_cannot_take_the_reference_leaves_no_output(tmp_path, capsy
 
 
 def test_a_debug_dir_is_reused_by_later_decodes(tmp_path, capsys):
-    """--debug-dir writes stages.json (the folder is recognised as a decode's), so decoding again
-    into it replaces its stage images; a folder of someone else's files is refused (test_bad_inputs)."""
+    """--debug-dir writes stages.json (the folder is recognised as a decode's, with the decode's
+    settings), so decoding again into it replaces its stage images and removes those it listed that
+    the new decode has not; a folder of someone else's files is refused (test_bad_inputs)."""
     import json
 
     from tests.test_bad_inputs import render_folder
 
     r = render_folder(tmp_path)
-    for _ in range(2):
-        assert main(["decode", str(r), "--out", str(tmp_path / "d.npy"), "--debug-dir", str(tmp_path / "dbg")]) == 0
-    listed = json.loads((tmp_path / "dbg" / "stages.json").read_text())["files"]
-    assert sorted(listed) == sorted(p.name for p in (tmp_path / "dbg").iterdir() if p.name != "stages.json")
+    dbg = tmp_path / "dbg"
+    base = ["decode", str(r), "--out", str(tmp_path / "d.npy"), "--debug-dir", str(dbg)]
+    # first with a stage the second decode does not make: it must not stay behind (a new user's
+    # audit found the colour-robust decoder's stages beside a later paper decode's)
+    assert main([*base, "--decoder", "crease_doubt=true"]) == 0
+    assert (dbg / "crease_bias.npy").is_file()
+    (dbg / "notes.txt").write_text("mine")  # not the command's: kept
+    assert main(base) == 0
+    info = json.loads((dbg / "stages.json").read_text())
+    assert not (dbg / "crease_bias.npy").exists() and (dbg / "notes.txt").read_text() == "mine"
+    assert sorted(info["files"]) == sorted(p.name for p in dbg.iterdir() if p.name not in ("stages.json", "notes.txt"))
+    assert info["decoded"].startswith("reference mode") and "fringe SNR" in info["confidence"]
 
 
 def test_after_sigterm_a_half_built_objects_finalizer_prints_nothing(capsys, monkeypatch):
@@ -862,6 +874,42 @@ def test_score_warns_of_a_depth_map_that_cannot_be_this_scene_in_metres(tmp_path
         assert warning in capsys.readouterr().err, name
     np.save(tmp_path / "good.npy", gt + np.float32(0.0004))
     assert main(["score", str(tmp_path / "good.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_score_refuses_a_lit_mask_that_is_not_one_and_warns_of_inputs_that_are_not_what_it_asked(tmp_path, capsys):
+    """A new user's audit: a float or id map as --lit was cast to bool (NaN and every non-zero
+    value lit); a depth map in a recording scored against another recording's truth, and a depth
+    map given as --column, went without a word."""
+    import numpy as np
+
+    from tests.test_bad_inputs import render_folder
+
+    gt = np.full((40, 50), 1.1, np.float32)
+    np.save(tmp_path / "gt.npy", gt)
+    np.save(tmp_path / "d.npy", gt + np.float32(0.0004))
+    base = ["score", str(tmp_path / "d.npy"), "--gt", str(tmp_path / "gt.npy")]
+    for name, lit in (("float", gt), ("ids", np.arange(2000).reshape(40, 50) % 3)):
+        np.save(tmp_path / f"lit_{name}.npy", lit)
+        assert main([*base, "--lit", str(tmp_path / f"lit_{name}.npy")]) == 2
+        assert "--lit must be a boolean mask (as gt_lit.npy)" in capsys.readouterr().err, name
+    np.save(tmp_path / "lit01.npy", (np.arange(2000).reshape(40, 50) % 2).astype(np.uint8))
+    assert main([*base, "--lit", str(tmp_path / "lit01.npy"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["n_region"] == 1000
+    # --column given a depth map
+    np.save(tmp_path / "gt_column.npy", np.full((40, 50), 900.0, np.float32))
+    assert main([*base, "--column", str(tmp_path / "d.npy"), "--gt-column", str(tmp_path / "gt_column.npy")]) == 0
+    assert "far below the ground truth's projector columns" in capsys.readouterr().err
+    # a depth map in a recording's folder, scored against another recording's ground truth
+    r = render_folder(tmp_path)
+    np.save(r / "decoded.npy", gt[:1].repeat(120, 0)[:, :1].repeat(160, 1))
+    other = tmp_path / "other"
+    other.mkdir()
+    np.save(other / "gt_depth.npy", np.full((120, 160), 1.3, np.float32))
+    assert main(["score", str(r / "decoded.npy"), "--gt", str(other / "gt_depth.npy")]) == 0
+    err = capsys.readouterr().err
+    assert f"lies in the recording {r}, whose ground truth is not {other / 'gt_depth.npy'}" in err, err
+    assert main(["score", str(r / "decoded.npy"), "--gt", str(r / "gt_depth.npy")]) == 0
     assert "warning" not in capsys.readouterr().err
 
 

@@ -51,7 +51,7 @@ def _cmd_decode(args) -> int:
 def _cmd_score(args) -> int:
     from simbench.io import load_npy
     from simbench.systems.files import recording_manifest_of
-    from simbench.metrics import depth_errors, edge_band
+    from simbench.metrics import depth_errors, edge_band, implausible_depth, implausible_columns
 
     if args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
@@ -65,7 +65,10 @@ def _cmd_score(args) -> int:
     for p in (Path(args.gt), lit_path, col_gt_path):  # inside a recording folder: as recorded
         if p.is_file():
             recording_manifest_of(p)
-    region = load_npy(lit_path, expected_shape=gt.shape).astype(bool) if lit_path.is_file() else np.isfinite(gt)
+    region = _mask(load_npy(lit_path, expected_shape=gt.shape), lit_path) if lit_path.is_file() else np.isfinite(gt)
+    other = _not_the_recordings_truth(Path(args.depth), Path(args.gt))
+    if other:
+        print(f"simbench: warning: {args.depth}: {other}", file=sys.stderr)
     exclude = None
     if args.edge_band < 0:
         raise ValueError(f"--edge-band must be >= 0, got {args.edge_band}")
@@ -80,13 +83,16 @@ def _cmd_score(args) -> int:
             "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape),
             "period_px": args.period,
         }
+    if kw:
+        for warning in implausible_columns(kw["column_px"], kw["gt_column_px"]):
+            print(f"simbench: warning: {args.column}: {warning}", file=sys.stderr)
     m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
     if not m["n_region"]:
         raise ValueError(
             f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
             "holds no pixel with a finite ground truth off the edge band"
         )
-    for warning in _implausible_depth(depth, gt, region):
+    for warning in implausible_depth(depth, gt, region):
         print(f"simbench: warning: {args.depth}: {warning}", file=sys.stderr)
     if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
@@ -108,26 +114,39 @@ def _cmd_score(args) -> int:
     return 0
 
 
-def _implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> list[str]:
-    """What makes a depth map look like something other than a decode of this scene in metres:
-    no finite depth where it is scored, depths <= 0, or a median far (> 5x) from the ground
-    truth's - another unit, another scene.  Scored all the same (the numbers say how far off)."""
-    ok = region & np.isfinite(gt)
-    d = depth[ok]
-    finite = np.isfinite(d)
-    if not finite.any():
-        return ["it holds no finite depth where the scene is scored: the errors are undefined (a decode of nothing?)"]
-    out = []
-    if (d[finite] <= 0).any():
-        out.append(f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m")
-    gt_median = float(np.median(gt[ok][finite]))
-    ratio = float(np.median(d[finite])) / gt_median
-    if not 0.2 <= ratio <= 5.0:
-        out.append(
-            f"its median depth is {ratio:.3g}x the ground truth's ({gt_median:.3g} m): is it in metres, "
-            "and of this scene? (simbench's depth maps are float32 metres)"
-        )
-    return out
+def _mask(a: np.ndarray, path) -> np.ndarray:
+    """A boolean mask (``gt_lit.npy``), or integers that are all 0 or 1; anything else is refused
+    (a float map cast to bool counts NaN and every non-zero value as lit)."""
+    if a.dtype == bool:
+        return a
+    if a.dtype.kind in "iu" and a.size and np.isin(a, (0, 1)).all():
+        return a.astype(bool)
+    finite = a[np.isfinite(a)] if a.dtype.kind == "f" else a
+    span = f" in [{finite.min():g}, {finite.max():g}]" if finite.size else ""
+    raise ValueError(
+        f"{path}: --lit must be a boolean mask (as gt_lit.npy), got {a.dtype} values{span}: a depth or id map?"
+    )
+
+
+def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
+    """A warning when the depth map lies in a recording folder whose ground truth ``gt_path`` is
+    not (another scene's ground truth scored without a word gave 174 mm MAE); "" otherwise, or
+    where the depth map lies outside any recording (nothing to compare with)."""
+    from simbench.manifest import file_sha256
+    from simbench.systems.files import recording_manifest_of
+
+    if not depth_path.is_file() or not gt_path.is_file():
+        return ""
+    meta = recording_manifest_of(depth_path)
+    if meta is None or "gt_depth" not in meta.get("sha256", {}):
+        return ""
+    if file_sha256(gt_path) == meta["sha256"]["gt_depth"]:
+        return ""
+    own = depth_path.parent / meta["files"]["gt_depth"]
+    return (
+        f"it lies in the recording {depth_path.parent}, whose ground truth is not {gt_path} (another SHA-256): "
+        f"scored against another recording's truth? (that recording's is {own})"
+    )
 
 
 def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:

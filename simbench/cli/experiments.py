@@ -241,7 +241,7 @@ def add_parsers(sub, kw: dict) -> None:
         "--camera",
         dest="camera",
         default="minimal",
-        help="sensor model: preset (ideal, minimal, paper) or TOML file",
+        help="sensor model: preset (ideal, minimal, paper, paper_sim) or TOML file",
     )
     s.add_argument("--scenes", nargs="+", help="scene names in scenes/ (default: the four pipeline scenes)")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
@@ -255,7 +255,7 @@ def add_parsers(sub, kw: dict) -> None:
         # listed here, not imported (every command would pay the experiments' imports, ~45 ms);
         # tests/test_cli.py checks the list against simbench.experiments.reproduce.TARGETS
         help="table1, table3, fig9, figures, budget, render_noise, flatness, motion, hard_scenes or all (default: "
-        "every target but hard_scenes: ~40-45 min from an empty cache on 2 cores, docs/results.md)",
+        "every target but hard_scenes: ~42-52 min from an empty cache on 2 cores with AVX-512, docs/results.md)",
     )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
@@ -274,7 +274,7 @@ def add_parsers(sub, kw: dict) -> None:
         "--camera",
         dest="camera",
         default=None,
-        help="sensor model: preset (ideal, minimal, paper) or TOML file (default: paper)",
+        help="sensor model: preset (ideal, minimal, paper, paper_sim) or TOML file (default: paper)",
     )
     s.add_argument(
         "--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4"

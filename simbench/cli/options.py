@@ -109,7 +109,11 @@ def add_render_options(s, *, quick_spp: int | None = None) -> None:
 
     quick = f", {quick_spp} with --quick" if quick_spp else ""
     s.add_argument(
-        "--spp", type=SPP, default=None, help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick})"
+        "--spp",
+        type=SPP,
+        default=None,
+        help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick}); the stratified, multijitter and "
+        "ldsampler samplers take a square count (4, 9, 16, 25, 36 ...; ldsampler a power of two's square)",
     )
     s.add_argument(
         "--sampler",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -69,6 +70,17 @@ def _cmd_render(args) -> int:
         check_cache_location(args.cache, what="--cache")
     t0 = time.perf_counter()
     cache = cache_of(args)
+
+    def made(kind: str, seconds: float) -> None:
+        # progress on a cold render (a minute or more): each path-traced render, and anything else slow
+        if kind == "radiance" or seconds >= 1.0:
+            print(
+                f"simbench: {kind} made in {seconds:.1f} s ({time.perf_counter() - t0:.0f} s so far)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    cache.on_made = made
     rec = api.record(
         args.scene,
         system=args.system,

@@ -37,6 +37,7 @@ from simbench.decode.pipeline import (
     as_float_image,
     decode,
     REFERENCE_Z0_TOLERANCE,
+    REFERENCE_Z0_WARNING,
     decode_reference,
     reference_plane_offset,
 )
@@ -60,6 +61,7 @@ __all__ = [
     "decode_reference",
     "reference_plane_offset",
     "REFERENCE_Z0_TOLERANCE",
+    "REFERENCE_Z0_WARNING",
     "robust_params",
     "ROBUST_MIN_AMPLITUDE",
     "ROBUST_MIN_CONFIDENCE",

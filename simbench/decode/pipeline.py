@@ -63,7 +63,13 @@ from simbench.pattern import (
     code_sequence,
     window_positions,
 )
-from simbench.rig import Rig, projector_column_at_depth, triangulation_steps, triangulation_values
+from simbench.rig import (
+    Rig,
+    projector_column_at_depth,
+    triangulate_columns,
+    triangulation_steps,
+    triangulation_values,
+)
 
 __all__ = [
     "phase_change",
@@ -75,6 +81,10 @@ __all__ = [
     "decode_reference",
     "reference_plane_offset",
     "REFERENCE_Z0_TOLERANCE",
+    "REFERENCE_Z0_WARNING",
+    "code_order_doubt",
+    "without_depth",
+    "MIN_WINDOW_SUCCESSION",
     "decode",
 ]
 
@@ -114,6 +124,9 @@ class DecodeResult:
     column_px : ndarray, shape (H, W), float32; decoded projector column, NaN if invalid
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
     stages : Mapping of str -> ndarray; intermediate images (paper Fig. 6), made on first access
+    window_succession : (pairs, successive); the linked neighbouring stripes whose De Bruijn
+        windows both read, and how many of them read successive windows, before the neighbour
+        correction (:func:`code_order_doubt` reads it)
     """
 
     depth_m: np.ndarray
@@ -122,6 +135,7 @@ class DecodeResult:
     column_px: np.ndarray
     stripe_index: np.ndarray
     stages: Mapping = field(default_factory=dict)
+    window_succession: tuple[int, int] = (0, 0)
 
 
 class LazyStages(Mapping):
@@ -245,6 +259,10 @@ class BandStripes:
     confidence: np.ndarray
     period_px: int
     cycle: int
+    # linked neighbour pairs whose De Bruijn windows both read, and of them those whose windows
+    # succeed each other (:func:`window_succession`)
+    window_pairs: int = 0
+    window_successive: int = 0
 
     def position_map(self) -> np.ndarray:
         """W per pixel, -1 unknown."""
@@ -493,6 +511,7 @@ def _columns(
                     )
             w_fixed = dropped
             support = np.where(w_fixed >= 0, support, 0)
+    pairs, successive = _window_succession_counts(raw_w, stripes.linked_prev, cycle=params.cycle)
     band = BandStripes(
         labels=lab,
         position=w_fixed.astype(np.int32, copy=False),
@@ -501,6 +520,8 @@ def _columns(
         confidence=confidence,
         period_px=params.period_px,
         cycle=params.cycle,
+        window_pairs=pairs,
+        window_successive=successive,
     )
     st = LazyStages()
     st.put("intensity", intensity)
@@ -579,6 +600,71 @@ def phase_change(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """|a - b| of two wrapped phases, wrapped to [0, pi] (float32, rad; NaN where either is)."""
     d = np.abs(np.asarray(a, np.float32) - np.asarray(b, np.float32))
     return np.minimum(d, np.float32(2 * np.pi) - d)
+
+
+# Under this share of successive windows among linked neighbouring stripes a capture is not read
+# in its pattern's order.  Measured (2026-11-28, the paper's decoder in calibrated mode on the 509
+# recordings of a render cache of every target): every capture of the pattern read >= 0.925 (a
+# 34 %-decoded hard scene; planes ~1.0), while a mirrored, 180-degree-rotated or red/green-swapped
+# capture reads 0.50 - B(2,3)'s reversed sequence is its complement, so every window still exists
+# and half of the neighbour pairs still succeed each other (4 of the cycle's 8) - and a capture
+# of another pattern (period, order, sequence) or a grey one 0.0-0.48.
+MIN_WINDOW_SUCCESSION = 0.75
+# fewer pairs than this say nothing either way (a nearly dark capture)
+MIN_WINDOW_PAIRS = 200
+
+
+def _window_succession_counts(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: int) -> tuple[int, int]:
+    """(pairs, successive): stripes linked to the previous one where both windows read, and how
+    many of them read the next window of the cycle."""
+    w = np.asarray(positions)
+    if w.size < 2:
+        return 0, 0
+    prev, cur, linked = w[:-1], w[1:], np.asarray(linked_prev, bool)[1:]
+    pair = linked & (cur >= 0) & (prev >= 0)
+    successive = pair & (cur == (prev + 1) % cycle)
+    return int(pair.sum()), int(successive.sum())
+
+
+def code_order_doubt(window_succession: tuple[int, int], *, what: str = "capture") -> str:
+    """Why a decode cannot be this pattern's, from its :attr:`DecodeResult.window_succession`,
+    or "" when it reads in the pattern's order (or too few stripes to tell).
+
+    A capture of the pattern reads successive De Bruijn windows across almost every pair of
+    linked neighbouring stripes; a mirrored one, or one with its red and green channels swapped,
+    reads B(2,3)'s complement, every window of which is a valid window elsewhere in the cycle:
+    about half of the stripes then decode - to wrong columns, up to hundreds of mm off, each
+    confirmed by a neighbour.  The paper's decoder has no such check (its results are not
+    changed); the command line and :func:`simbench.depth` apply it."""
+    pairs, successive = window_succession
+    if pairs < MIN_WINDOW_PAIRS:
+        return ""
+    share = successive / pairs
+    if share >= MIN_WINDOW_SUCCESSION:
+        return ""
+    return (
+        f"the {what}'s stripe code does not read in this pattern's order: {100 * share:.0f} % of {pairs} "
+        f"neighbouring stripes read successive De Bruijn windows (a capture of this pattern reads over 90 %; "
+        f"under {100 * MIN_WINDOW_SUCCESSION:.0f} % is refused) - is the image mirrored or rotated 180 degrees, "
+        f"or its red and green channels swapped, or was it taken with another pattern (--period, --order, "
+        f"--sequence, --channels)?"
+    )
+
+
+def without_depth(result: _R) -> _R:
+    """``result`` (a :class:`DecodeResult`, or any result with ``depth_m``, ``valid``,
+    ``confidence`` and optionally ``column_px`` and ``stripe_index``) with nothing decoded: NaN
+    depth, no valid pixel, confidence 0 - for a capture :func:`code_order_doubt` refuses."""
+    out = {
+        "depth_m": np.full(result.depth_m.shape, np.nan, np.float32),
+        "valid": np.zeros(result.valid.shape, bool),
+        "confidence": np.zeros(result.confidence.shape, np.float32),
+    }
+    if getattr(result, "column_px", None) is not None:
+        out["column_px"] = np.full(result.column_px.shape, np.nan, np.float32)
+    if getattr(result, "stripe_index", None) is not None:
+        out["stripe_index"] = np.full(result.stripe_index.shape, -1, np.int32)
+    return dataclasses.replace(result, **out)
 
 
 @lru_cache(maxsize=16)
@@ -661,8 +747,10 @@ def decode_reference(
     ------
     ValueError
         When less than ``params.min_reference_coverage`` of the pixels decode (a black,
-        saturated or unrelated image is not a reference), or calibration captures are
-        missing, mis-sized or unusable.
+        saturated or unrelated image is not a reference), when its stripes do not read in the
+        pattern's order (:func:`code_order_doubt`: a mirrored or red/green-swapped reference
+        passes the coverage and Z0 checks and makes every depth wrong), or calibration captures
+        are missing, mis-sized or unusable.
     """
     image = _ideal_image(_check_capture(reference, rig.camera.size_hw), rig)
     mixing = None
@@ -673,15 +761,16 @@ def decode_reference(
         mixing = mixing_matrix(cal[:3], cal[3], region=_calibration_region(cal[:3], cal[3]))
     unmixing = _unmixing(mixing, params)
     predicted = _plane_columns(rig, float(params.z0_m))
-    parts = run_bands(
-        lambda img, order, rows, crop: _columns(
-            img, order, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing
-        )[0].columns[0],
-        image,
-        params,
-        rig,
-    )
-    column = np.concatenate(parts, axis=0)
+
+    def band(img, order, rows, crop):
+        stripes = _columns(img, order, predicted[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)[0]
+        return stripes.columns[0], stripes.window_pairs, stripes.window_successive
+
+    parts = run_bands(band, image, params, rig)
+    column = np.concatenate([c for c, _, _ in parts], axis=0)
+    doubt = code_order_doubt((sum(p for _, p, _ in parts), sum(q for _, _, q in parts)), what="reference capture")
+    if doubt:
+        raise ValueError(doubt)
     coverage = float(np.isfinite(column).mean())
     if coverage < params.min_reference_coverage:
         raise ValueError(
@@ -699,6 +788,12 @@ def decode_reference(
 # calibrated rig adds well under 0.5 %; a reference of another rig lies far outside: a 0.120 m
 # baseline read as 0.093 m puts the plane ~29 % off).
 REFERENCE_Z0_TOLERANCE = 0.03
+# Over this (but within the tolerance) the decode warns: reference-mode depths carry the
+# reference's depth error in proportion (Eq. 14: 1/Z = 1/Z0 + d/(f b)), 0.5 % = 5 mm at 1 m,
+# ten times the decoder's own error on a board (assumption: a rig from `simbench calibrate`
+# triangulates a plane within ~0.1 %: its focal lengths within 0.03 %, baseline within 0.01 mm,
+# results/table3.md).
+REFERENCE_Z0_WARNING = 0.005
 # the reference check reads every 4th row and column (~77 k pixels of a 1280x960 reference, a
 # median no different at that tolerance; the whole map took ~0.35 s of every command-line decode)
 REFERENCE_CHECK_STRIDE = 4
@@ -706,28 +801,27 @@ REFERENCE_CHECK_STRIDE = 4
 
 def reference_plane_offset(reference: ReferenceMap, rig: Rig) -> float:
     """Where a decoded reference plane lies relative to Z0 by triangulation with ``rig``:
-    the median over its decoded pixels (every :data:`REFERENCE_CHECK_STRIDE`-th row and column)
-    of ``(Z - Z0) / Z0`` (to first order in the column's change with depth); NaN when nothing
-    decoded.
+    ``(Z - Z0) / Z0`` of the median triangulated depth Z over its decoded pixels (every
+    :data:`REFERENCE_CHECK_STRIDE`-th row and column; :func:`simbench.rig.triangulate_columns`,
+    exact - a first-order form used before read 1.168 m for a plane at 1.200 m); NaN when
+    nothing decoded.
 
     Reference mode matches captures against the reference and so cannot itself tell a
     reference of another rig, or a wrong Z0: depths then come out wrong everywhere, without a
-    word.  Triangulating the reference with the rig can (:data:`REFERENCE_Z0_TOLERANCE`).
+    word.  Triangulating the reference with the rig can (:data:`REFERENCE_Z0_TOLERANCE`,
+    :data:`REFERENCE_Z0_WARNING`).
     """
     z0 = float(reference.z0_m)
-    dz = 0.01 * z0
     s = REFERENCE_CHECK_STRIDE
     col = np.asarray(reference.column_px)[::s, ::s]
     rows, cols = np.nonzero(np.isfinite(col))
     if rows.size == 0:
         return float("nan")
-    rows, cols, col = rows * s, cols * s, col[rows, cols]
-    c0 = projector_column_at_depth(z0, rig, rows=rows, cols=cols)
-    slope = (projector_column_at_depth(z0 + dz, rig, rows=rows, cols=cols) - c0) / dz  # columns per metre
-    ok = np.isfinite(slope) & (np.abs(slope) > 1e-6)
-    if not ok.any():
+    z = triangulate_columns(col[rows, cols], rig, rows=rows * s, cols=cols * s)
+    z = z[np.isfinite(z)]
+    if not z.size:
         return float("nan")
-    return float(np.median((col[ok] - c0[ok]) / slope[ok])) / z0
+    return float(np.median(z)) / z0 - 1.0
 
 
 def decode(
@@ -796,8 +890,11 @@ def decode(
         at = dict(rows=np.array([h // 2]), cols=np.array([w // 2]))
         depth_sign = float(np.sign(np.diff([projector_column_at_depth(z, rig, **at)[0] for z in (zmin, zmax)])[0]))
 
+    succession = []  # (pairs, successive) per band (list.append is atomic across the band threads)
+
     def band(img, order, rows, crop):
         stripes, stages = _columns(img, order, expected[rows], rig=rig, params=params, crop=crop, unmixing=unmixing)
+        succession.append((stripes.window_pairs, stripes.window_successive))
         # paper Eq. 14-15: a column the reference row never shows (near the image's ends, for
         # surfaces off the reference depth) cannot be matched: it is triangulated with the rig
         how = "reference matching" if ref is not None else "triangulation"
@@ -869,4 +966,5 @@ def decode(
         column_px=col_out,
         stripe_index=index_out,
         stages=stages,
+        window_succession=(sum(p for p, _ in succession), sum(q for _, q in succession)),
     )

@@ -18,6 +18,7 @@ all (:func:`simbench.io.write_files`).
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import time
 from collections.abc import Callable, Mapping
@@ -112,6 +113,7 @@ class FileDecode:
     thresholded : (H, W) bool, the decoded pixels ``--min-confidence`` made holes, where the
         system knows them apart from pixels it never decoded (None: told by a positive
         confidence under the threshold)
+    cause : why nothing was decoded where the system knows it (the warning names it)
     """
 
     depth_m: np.ndarray
@@ -126,6 +128,7 @@ class FileDecode:
     capture_file: str = ""
     commit: Callable[[], None] = field(default=lambda: None)
     thresholded: np.ndarray | None = None
+    cause: str = ""
 
 
 def confidence_path(request: DecodeRequest) -> Path:
@@ -245,8 +248,17 @@ def decode_files(request: DecodeRequest) -> str:
             files[d / "intensity.png"] = png_bytes(_to_u8(res.stages["intensity"], 0.0, 1.0))
         files[d / "depth.png"] = png_bytes(_to_u8(res.depth_m, *_finite_range(res.depth_m)))
         stages = sorted(p.name for p in files if p.parent == d)
+        # a folder an earlier decode wrote keeps none of its stage files this decode has not
+        # (the colour-robust decoder's crease_bias.npy beside the paper decoder's stages)
+        stale = sorted(set(_listed_stages(d)) - set(stages) - {"stages.json"})
         files[d / "stages.json"] = json_bytes(
-            {"command": "simbench decode", "capture": res.capture_file or request.capture, "files": stages}
+            {
+                "command": "simbench decode",
+                "capture": res.capture_file or request.capture,
+                "decoded": res.summary,
+                "confidence": res.confidence_meaning,
+                "files": stages,
+            }
         )
         msg += f", stages in {d}/"
     if len({p.resolve() for p in files}) != len(files):
@@ -255,6 +267,9 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
+    if request.debug_dir:
+        for name in stale:
+            (Path(request.debug_dir) / name).unlink(missing_ok=True)
     hint = nothing_decoded_hint(
         res.valid,
         res.colours,
@@ -262,10 +277,21 @@ def decode_files(request: DecodeRequest) -> str:
         confidence=res.confidence,
         min_confidence=request.min_confidence,
         thresholded=res.thresholded,
+        cause=res.cause,
     )
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
+
+
+def _listed_stages(folder: Path) -> list[str]:
+    """The stage files an earlier ``simbench decode --debug-dir`` listed in ``folder``'s
+    stages.json (plain names only: nothing outside the folder), or none."""
+    try:
+        listed = json.loads((folder / "stages.json").read_text(encoding="utf-8")).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [n for n in listed if isinstance(n, str) and n == Path(n).name and n not in ("", ".", "..")]
 
 
 # under this share of decoded pixels a decode is reported as (nearly) empty
@@ -280,10 +306,12 @@ def nothing_decoded_hint(
     confidence: np.ndarray | None = None,
     min_confidence: float | None = None,
     thresholded: np.ndarray | None = None,
+    cause: str = "",
 ) -> str:
     """A warning for a decode that found (almost) nothing - under :data:`NOTHING_DECODED_SHARE`
     of the pixels - naming the likely cause where the 8-bit capture shows it (dark, saturated)
-    or a working range other than the default was asked for; "" otherwise.  The decode itself
+    or a working range other than the default was asked for, or the system's own ``cause``; ""
+    otherwise.  The decode itself
     stands (NaN where nothing decoded): a dark frame is a legal image, but a user who passed the
     wrong file should hear of it."""
     share = float(np.mean(valid)) if np.size(valid) else 0.0
@@ -312,6 +340,8 @@ def nothing_decoded_hint(
                 f"--min-confidence {min_confidence:g} made holes of {100 * float(np.mean(under)):.1f} % of the pixels "
                 f"(the most confident has {float(np.max(conf[under])):.4g})"
             )
+    if cause:
+        why = cause
     what = "no pixel" if share == 0 else f"only {100 * share:.2f} % of the pixels"
     return f"{what} decoded: {why}"
 

@@ -131,7 +131,7 @@ class ReferenceCalibration:
             def scaled(img, name):
                 return None if img is None else adc_full_scale(img, bits=self.adc_bits, where=name)
 
-            primaries = None
+            primaries = dark = None  # a decoder that does not unmix reads the reference alone
             if params.unmix:
                 if not self.frames:
                     raise ValueError(
@@ -139,12 +139,13 @@ class ReferenceCalibration:
                         "frames=True)"
                     )
                 primaries = [scaled(self.frames[k], f"calibration frame {k}") for k in ("red", "green", "blue")]
+                dark = scaled(self.frames.get("dark"), "calibration frame dark")
             ref, store = lookup_decoded_reference(
                 scaled(self.image, "reference"),
                 rig=rig,
                 params=params,
                 primaries=primaries,
-                dark=scaled(self.frames.get("dark"), "calibration frame dark"),
+                dark=dark,
                 cache=self.cache,
             )
             store()

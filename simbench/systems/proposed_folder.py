@@ -139,6 +139,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     the colour-fringe sensor's decoder."""
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode
+    from simbench.decode.pipeline import code_order_doubt, without_depth
     from simbench.decode.persist import lookup_decoded_reference
     from simbench.manifest import read_manifest
     from simbench.pattern import pattern_from_options
@@ -221,6 +222,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
             f"--calibration {request.calibration}: those frames are for the colour-robust decoder's unmixing; add "
             "--robust (or --decoder unmix=true), or leave --calibration out"
         )
+    # a bare reference (no recording) with no Z0 given is taken at 1 m: said so wherever Z0 is named
+    z0_assumed = (
+        z0_asked is None
+        and reference_path is not None
+        and Path(reference_path).is_file()
+        and recording_manifest_of(reference_path) is None
+    )
     cache = RenderCache(request.cache_dir)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:
@@ -230,7 +238,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     elif reference is not None:
         reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
     if reference is not None:
-        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path)
+        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path, z0_assumed=z0_assumed)
     elif request.rig is not None and reference_path is not None and Path(reference_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
         # its Z0 by that rig too (a rig of another baseline decoded 95 % at 77 mm MAE without a
@@ -240,11 +248,16 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         plane, store_plane = lookup_decoded_reference(
             _camera_image(reference_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path)
+        _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path, z0_assumed=z0_assumed)
         store_plane()
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
+    # a mirrored or red/green-swapped capture decodes half its stripes to wrong columns, each
+    # confirmed by a neighbour: none of it is written (code_order_doubt)
+    doubt = code_order_doubt(result.window_succession)
+    if doubt:
+        result = without_depth(result)
     ref_note = (
         ""
         if reference is None
@@ -268,7 +281,11 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     stages = ChainMap(
         result.stages, {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
     )
-    z0_note = f", Z0 = {float(reference.z0_m)} m" if reference is not None else ""  # (none used: no Z0)
+    z0_note = (  # (none used: no Z0)
+        f", Z0 = {float(reference.z0_m)} m{' (assumed: no --z0 given)' if z0_assumed else ''}"
+        if reference is not None
+        else ""
+    )
     return FileDecode(
         depth_m=result.depth_m,
         valid=result.valid,
@@ -281,22 +298,37 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         stages=stages,
         capture_file=capture_path,
         commit=store_reference,
+        cause=doubt,
     )
 
 
-def _check_reference_plane(reference, rig, *, reference_path, rig_path) -> None:
+def _check_reference_plane(reference, rig, *, reference_path, rig_path, z0_assumed: bool = False) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
-    of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before."""
-    from simbench.decode import REFERENCE_Z0_TOLERANCE, reference_plane_offset
+    of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
+    tolerance but over :data:`simbench.decode.REFERENCE_Z0_WARNING` it warns: reference-mode
+    depths carry that error (a Z0 2 % off gave 20 mm MAE on a plane, exit 0, without a word)."""
+    from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_offset
 
     offset = reference_plane_offset(reference, rig)
-    if np.isfinite(offset) and abs(offset) > REFERENCE_Z0_TOLERANCE:
-        z = reference.z0_m * (1 + offset)
+    if not np.isfinite(offset) or abs(offset) <= REFERENCE_Z0_WARNING:
+        return
+    z = reference.z0_m * (1 + offset)
+    where = (
+        f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z:.4f} m, not its Z0 = "
+        f"{reference.z0_m:g} m{' (assumed: no --z0 given)' if z0_assumed else ''} ({100 * offset:+.2f} %"
+    )
+    if abs(offset) > REFERENCE_Z0_TOLERANCE:
         raise ValueError(
-            f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z:.3f} m, not its Z0 = "
-            f"{reference.z0_m:g} m ({100 * offset:+.1f} %, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it "
-            "captured with this rig, and at this Z0?"
+            f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it captured with this rig, and at this Z0?"
         )
+    logging.getLogger("simbench").warning(
+        "%s, more than %.1f %%): reference-mode depths carry that error (~%.0f mm at Z0); give --z0 %.4f if the board "
+        "stood there, or check the rig",
+        where,
+        100 * REFERENCE_Z0_WARNING,
+        1000 * abs(z - reference.z0_m),
+        z,
+    )
 
 
 def _check_same_recording_rig(capture_path, reference_path, manifests: dict) -> None:
