@@ -88,9 +88,12 @@ def _decode_render_folder(out: Path, depth: Path, *extra: str) -> int:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sensor, max_mae_mm", [("minimal", 0.3), ("paper", 1.0)])
-def test_render_decode_score_end_to_end(tmp_path, capsys, variant, sensor, max_mae_mm):
+def test_render_decode_score_end_to_end(tmp_path, capsys, monkeypatch, variant, sensor, max_mae_mm):
     """The pipeline issue's bound with the minimal camera; with the physical paper model
     (distortion in rig.toml, undistorted by decode) the error grows but stays sub-millimetre."""
+    import simbench.cli.render
+
+    monkeypatch.setattr(simbench.cli.render, "PROGRESS_MIN_S", 0.0)  # every entry, on any machine
     out = tmp_path / "wp"
     assert main(["render", str(SCENES / "white_plane.toml"), "--out", str(out), "--seed", "3", "--sensor", sensor]) == 0
     # progress on the way (a cold render is silent for a minute otherwise): each costly entry made
@@ -947,3 +950,22 @@ def test_the_nothing_decoded_hint_blames_the_threshold_only_for_holes_it_made():
     some[:5] = True
     made = nothing_decoded_hint(valid, dim, confidence=conf, min_confidence=0.1, thresholded=some)
     assert "made holes of 25.0 % of the pixels" in made
+
+
+@pytest.mark.slow
+def test_render_warns_of_a_reference_plane_outside_the_working_range(tmp_path, capsys, variant):
+    """A new user's audit: Z0 = 100 m rendered without a word (a 270-s exposure), and its decode
+    blamed saturation.  Rendered at 2.5 m here: legal, with a warning naming the range and the
+    exposure."""
+    scene = tmp_path / "far.toml"
+    scene.write_text(
+        'rig = "paper"\nreference_depth_m = 2.5\n\n[[object]]\ntype = "plane"\ncenter_m = [0.0, 0.0, 2.5]\n'
+        "size_m = [4.0, 3.0]\n"
+    )
+    argv = ["render", str(scene), "--out", str(tmp_path / "o"), "--spp", "1", "--no-cache", "--sensor", "minimal"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "its reference plane (reference_depth_m = 2.5 m) lies outside the decoder's default working range" in err
+    scene.write_text(scene.read_text().replace("2.5", "1.2"))
+    assert main(["render", str(scene), "--out", str(tmp_path / "n"), "--spp", "1", "--no-cache"]) == 0
+    assert "working range" not in capsys.readouterr().err

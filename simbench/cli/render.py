@@ -72,8 +72,9 @@ def _cmd_render(args) -> int:
     cache = cache_of(args)
 
     def made(kind: str, seconds: float) -> None:
-        # progress on a cold render (a minute or more): each path-traced render, and anything else slow
-        if kind == "radiance" or seconds >= 1.0:
+        # progress on a cold render (a minute or more): each entry that took a while to make (a
+        # render that fails at once - nothing in view - keeps its one line of error)
+        if seconds >= PROGRESS_MIN_S:
             print(
                 f"simbench: {kind} made in {seconds:.1f} s ({time.perf_counter() - t0:.0f} s so far)",
                 file=sys.stderr,
@@ -108,7 +109,33 @@ def _cmd_render(args) -> int:
         print(f"  (replaced {replaced} there)")
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
+    _warn_reference_outside_range(scene, rec.meta)
     return 0
+
+
+# render's progress lines: each render cache entry (a path-traced render, ground truth, ...) made
+# in at least this long
+PROGRESS_MIN_S = 1.0
+
+
+def _warn_reference_outside_range(scene, meta: dict) -> None:
+    """A reference plane outside the decoder's default working range is legal, but the decode
+    then needs --near/--far around it, and the exposure set for a white board there may be
+    long past any camera's (a new user's audit: Z0 = 100 m gave a 270-s exposure, and its
+    decode pointed at saturation, not at the distance)."""
+    from simbench.systems.files import WORKING_RANGE_M
+
+    z0 = float(scene.reference_depth_m)
+    near, far = WORKING_RANGE_M
+    if near <= z0 <= far:
+        return
+    exposure = meta.get("exposure_s")
+    told = f"; the exposure set for a white board there: {exposure:.3g} s" if isinstance(exposure, float) else ""
+    print(
+        f"simbench: warning: {scene.name}: its reference plane (reference_depth_m = {z0:g} m) lies outside the "
+        f"decoder's default working range {near:g}-{far:g} m (decode needs --near/--far around it){told}",
+        file=sys.stderr,
+    )
 
 
 def _earlier_recording(out: Path) -> str:
