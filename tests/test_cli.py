@@ -20,6 +20,10 @@ def test_pattern_command(tmp_path, capsys):
     assert "p.png" in out and "period 21 px" in out and "(window 3)" in out, out
     assert main(["pattern", "--out", str(tmp_path / "q.png"), "--order", "4", "--period", "24"]) == 0
     assert "period 24 px, codes 0000100110101111 (window 4)" in capsys.readouterr().out
+    # a long window's cycle is shortened (order 12: 4096 codes printed whole before)
+    assert main(["pattern", "--out", str(tmp_path / "r.png"), "--order", "12"]) == 0
+    out = capsys.readouterr().out
+    assert "...11111111 (4096 codes) (window 12)" in out and not re.search(r"[01]{100}", out), out
 
 
 @pytest.mark.parametrize(

@@ -30,6 +30,8 @@ def _cmd_pattern(args) -> int:
     spec = pattern_spec(args, (args.height, args.width))
     path = save_png(args.out, quantize(fringe_pattern(spec)))
     codes = "".join(map(str, spec.codes()))
+    if len(codes) > 64:  # a long window's cycle (order 12: 4096 codes) is no line to read
+        codes = f"{codes[:32]}...{codes[-8:]} ({len(codes)} codes)"
     print(
         f"pattern {args.width}x{args.height}, period {spec.period_px} px, codes {codes} (window {spec.order}) -> {path}"
     )
