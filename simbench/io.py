@@ -38,6 +38,7 @@ __all__ = [
     "save_png",
     "load_image",
     "adc_full_scale",
+    "camera_full_scale",
     "narrow_uint16_hint",
     "save_exr",
     "save_ply",
@@ -617,6 +618,13 @@ def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarr
             f"not that camera's image as recorded (scaled to 16 bits? then it is read as it is, without the bits)"
         )
     return np.multiply(img, np.float32(1.0 / full), dtype=np.float32)
+
+
+def camera_full_scale(img: np.ndarray, *, bits: int) -> np.ndarray:
+    """A simulated camera's recording (``bits``: its ADC's) as every reader takes it: a 10- or
+    12-bit camera's uint16 digital numbers as float32 of its full scale
+    (:func:`adc_full_scale`), any other camera's image as it is (read by its dtype's range)."""
+    return adc_full_scale(img, bits=bits if bits in (10, 12) else None, where="the camera's recording")
 
 
 def narrow_uint16_hint(img: np.ndarray) -> str:

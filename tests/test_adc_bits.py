@@ -132,3 +132,21 @@ def test_a_twelve_bit_recording_decodes_as_recorded(tmp_path, variant, capsys):
     # read_recording gives the capture at full scale and the calibration its bits
     capture, cal, _ = get_system("proposed").read_recording(rec)
     assert capture.dtype == np.float32 and cal.adc_bits == 12
+
+
+@pytest.mark.slow
+def test_a_twelve_bit_camera_serves_the_phase_shifting_reference_too(tmp_path, variant):
+    """The review's find: the phase-shifting system's grey frames (and the calibration's, the
+    same path) read a 12-bit camera's uint16 as /65535, 16 times too dark for its modulation
+    threshold."""
+    sensor = tmp_path / "b12.toml"
+    sensor.write_text(
+        (SCENES.parent / "simbench" / "presets" / "paper.toml").read_text().replace("\nbits = 8\n", "\nbits = 12\n")
+    )
+    rec = tmp_path / "ps"
+    argv = ["render", str(SCENES / "white_plane.toml"), "--system", "phase_shift", "--out", str(rec)]
+    assert main([*argv, "--spp", "1", "--sensor", str(sensor), "--no-cache"]) == 0
+    assert main(["decode", str(rec), "--out", str(tmp_path / "d.npy")]) == 0
+    depth, gt = np.load(tmp_path / "d.npy"), np.load(rec / "gt_depth.npy")
+    ok = np.isfinite(gt)
+    assert np.isfinite(depth[ok]).mean() > 0.97 and np.nanmedian(np.abs(depth - gt)) < 1e-3

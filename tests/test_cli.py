@@ -918,6 +918,13 @@ def test_score_refuses_a_lit_mask_that_is_not_one_and_warns_of_inputs_that_are_n
     assert f"lies in the recording {r}, whose ground truth is not {other / 'gt_depth.npy'}" in err, err
     assert main(["score", str(r / "decoded.npy"), "--gt", str(r / "gt_depth.npy")]) == 0
     assert "warning" not in capsys.readouterr().err
+    # a meta.json of the user's own beside the depth map is no recording: scored as any file
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "meta.json").write_text('{"note": "mine"}')
+    np.save(mine / "d.npy", gt + np.float32(0.0004))
+    assert main(["score", str(mine / "d.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err
 
 
 def test_a_competitors_min_confidence_that_removes_nothing_says_so(tmp_path, capsys):

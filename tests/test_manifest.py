@@ -81,8 +81,8 @@ def test_a_folder_decodes_with_its_recorded_pattern(tmp_path, capsys):
     if rc == 0:
         wrong = np.load(tmp_path / "wrong.npy")
         assert np.isfinite(wrong).mean() < 0.8 or np.nanmean(np.abs(wrong - 1.1)) > 5e-3
-    else:  # the reference, decoded with the wrong pattern, reads out of its order (or off Z0)
-        assert rc == 2 and ("does not read in this pattern's order" in err or "triangulates" in err), err
+    else:  # the reference, decoded with the wrong pattern, does not triangulate to Z0
+        assert rc == 2 and "triangulates" in err, err
     for option, value in (("--order", "3"), ("--period", "25"), ("--channels", "grb"), ("--sequence", "00010111")):
         rc, _, err = _run(["decode", r, "--out", tmp_path / "x.npy", option, value], capsys)
         assert rc == 2 and f"{option} {value} contradicts the recording" in err and "order 4" in err, err
@@ -279,6 +279,31 @@ def test_a_bare_reference_of_another_rig_or_depth_is_refused(tmp_path, capsys):
     assert rc == 2 and "not its Z0 = 1 m" in err and "captured with this rig" in err, err
     rc, _, err = _run([*base, "--reference", tmp_path / "ref.png", "--z0", "1.1"], capsys)
     assert rc == 2 and "not its Z0 = 1.1 m" in err, err
+    # the projector on the other side: no ray meets its column in front of the camera (the exact
+    # triangulation gives no depth there; the check said nothing of it at first)
+    (tmp_path / "left.toml").write_text(_rig_text(**{"pose.position_m": "[-0.093, 0.0, 0.0]"}))
+    rc, _, err = _run(
+        [*base[:2], "--rig", tmp_path / "left.toml", *base[4:], "--reference", tmp_path / "ref.png"], capsys
+    )
+    assert rc == 2 and ("captured with this rig" in err or "decodes at only" in err), err
+
+
+def test_reference_plane_offset_is_inf_when_no_ray_meets_its_column_in_front():
+    """A map whose columns no ray of the rig meets in front of the camera (a projector on the
+    other side) gives inf, which the check refuses, not NaN, which it reads as nothing decoded."""
+    import tomllib
+
+    from simbench.decode import ReferenceMap, reference_plane_offset
+    from simbench.rig import projector_column_at_depth, rig_from_dict
+
+    rig = rig_from_dict(tomllib.loads(TINY_RIG))
+    col = projector_column_at_depth(1.0, rig).astype(np.float32)
+    ref = ReferenceMap(column_px=col, expected_px=col, inverse=np.zeros((1, 1), np.float32), z0_m=1.0)
+    assert reference_plane_offset(ref, rig) == pytest.approx(0.0, abs=1e-6)
+    left = rig_from_dict(tomllib.loads(TINY_RIG.replace("[0.093, 0.0, 0.0]", "[-0.093, 0.0, 0.0]")))
+    assert reference_plane_offset(ref, left) == float("inf")
+    empty = ReferenceMap(column_px=np.full_like(col, np.nan), expected_px=col, inverse=ref.inverse, z0_m=1.0)
+    assert np.isnan(reference_plane_offset(empty, rig))
 
 
 def test_a_reference_a_little_off_its_z0_is_decoded_with_a_warning(tmp_path, capsys, caplog):

@@ -47,6 +47,7 @@ import numpy as np
 from simbench.calibration.poses import DEPTH_RANGE_M, Pose, calibration_poses
 from simbench.calibration.target import CalibrationTarget
 from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
+from simbench.io import camera_full_scale
 from simbench.sim.mitsuba_dict import RenderSettings
 from simbench.rig import Intrinsics, Rig, angles_xyz_deg
 from simbench.seeds import DEFAULT_SEED, derive_seed, frame_seed
@@ -410,7 +411,9 @@ def _observe(scene, target, sensor, cols, rows, render, render_seed, noise_seed,
         # comes from the cache (computing it per frame took ~80 ms)
         drive = ProjectorDrive(scene, frame, sensor, cache=render.cache, phase=phase).array()
         q = render_channels(dark, drive, sensor, seed=render_seed, render=settings) + ambient[settings.spp]
-        grey.append(record(q, sensor=sensor, scene=scene, rng=frame_seed(noise_seed, k)))
+        # (a 10- or 12-bit camera's digital numbers at its own full scale, not uint16's)
+        rec = record(q, sensor=sensor, scene=scene, rng=frame_seed(noise_seed, k))
+        grey.append(camera_full_scale(rec, bits=sensor.camera.bits))
     corners = find_corners(_grey_u8(grey[0]), target=target)
     if corners is None:
         log.warning("%s: the target's corners were not found; the pose is left out", scene.name)

@@ -135,9 +135,14 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
     from simbench.manifest import file_sha256
     from simbench.systems.files import recording_manifest_of
 
+    from simbench.manifest import ManifestError
+
     if not depth_path.is_file() or not gt_path.is_file():
         return ""
-    meta = recording_manifest_of(depth_path)
+    try:  # a folder with a meta.json of the user's own (no recording) tells nothing
+        meta = recording_manifest_of(depth_path)
+    except (ManifestError, ValueError, OSError):
+        return ""
     if meta is None or "gt_depth" not in meta.get("sha256", {}):
         return ""
     if file_sha256(gt_path) == meta["sha256"]["gt_depth"]:

@@ -111,7 +111,8 @@ def _cmd_render(args) -> int:
         print(f"  (replaced {replaced} there)")
     for key, path in files.items():
         print(f"  {key:17s} {path.name}")
-    _warn_reference_outside_range(scene, rec.meta)
+    if hasattr(rec.calibration, "reference_map"):  # a system decoding against the scene's reference plane
+        _warn_reference_outside_range(scene, rec.meta)
     return 0
 
 

@@ -21,7 +21,7 @@ from simbench.cache import RenderCache
 from simbench.decode import decode, decode_reference
 from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import RunConfig, figure_png, git_commit, library_scene_path
-from simbench.io import check_own_folder, json_bytes, write_files
+from simbench.io import camera_full_scale, check_own_folder, json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.sim.scene import load_scene
 from simbench.systems.proposed import acquire
@@ -100,9 +100,11 @@ def run_demo(
         )
         t1 = time.perf_counter()
         params = dataclasses.replace(config.decoder, z0_m=scene.reference_depth_m)
-        ref = decode_reference(acq.reference, rig=acq.scene.rig, params=params)
+        # (a 10- or 12-bit camera's digital numbers at its own full scale, not uint16's)
+        reference, capture = (camera_full_scale(a, bits=sensor.camera.bits) for a in (acq.reference, acq.capture))
+        ref = decode_reference(reference, rig=acq.scene.rig, params=params)
         t2 = time.perf_counter()
-        result = decode(acq.capture, rig=acq.scene.rig, params=params, reference=ref)
+        result = decode(capture, rig=acq.scene.rig, params=params, reference=ref)
         t3 = time.perf_counter()
         band_px = config.edge_band_px if name != "white_plane" else 0
         band = edge_band(acq.gt.depth_m, object_id=acq.gt.object_id, band_px=band_px) if band_px else None

@@ -240,20 +240,25 @@ def decode_files(request: DecodeRequest) -> str:
         if res.stages is None:
             raise ValueError(f"--debug-dir: the {name} system's decoder has no stage images to write")
         d = Path(request.debug_dir)
-        for key, arr in res.stages.items():
-            files[d / f"{key}.npy"] = npy_bytes(arr)
+        stage_files = {f"{key}.npy": npy_bytes(arr) for key, arr in res.stages.items()}
         if "wrapped_phase" in res.stages:
-            files[d / "wrapped_phase.png"] = png_bytes(_to_u8(res.stages["wrapped_phase"], -np.pi, np.pi))
+            stage_files["wrapped_phase.png"] = png_bytes(_to_u8(res.stages["wrapped_phase"], -np.pi, np.pi))
         if "intensity" in res.stages:
-            files[d / "intensity.png"] = png_bytes(_to_u8(res.stages["intensity"], 0.0, 1.0))
-        files[d / "depth.png"] = png_bytes(_to_u8(res.depth_m, *_finite_range(res.depth_m)))
-        stages = sorted(p.name for p in files if p.parent == d)
+            stage_files["intensity.png"] = png_bytes(_to_u8(res.stages["intensity"], 0.0, 1.0))
+        stage_files["depth.png"] = png_bytes(_to_u8(res.depth_m, *_finite_range(res.depth_m)))
+        # the stage files only: --out, its confidence or --ply may lie in the folder too, and are
+        # neither listed nor ever removed as a stage
+        outputs = {p.resolve() for p in files}
+        stages = sorted(n for n in stage_files if (d / n).resolve() not in outputs)
+        files.update({d / n: stage_files[n] for n in stages})
         # a folder an earlier decode wrote keeps none of its stage files this decode has not
         # (the colour-robust decoder's crease_bias.npy beside the paper decoder's stages)
-        stale = sorted(set(_listed_stages(d)) - set(stages) - {"stages.json"})
+        here = {p.name for p in outputs if p.parent == d.resolve()}  # (an --out named like a stage stays)
+        stale = sorted(set(_listed_stages(d)) - set(stages) - here - {"stages.json"})
         files[d / "stages.json"] = json_bytes(
             {
                 "command": "simbench decode",
+                "format": STAGES_FORMAT,
                 "capture": res.capture_file or request.capture,
                 "decoded": res.summary,
                 "confidence": res.confidence_meaning,
@@ -284,11 +289,17 @@ def decode_files(request: DecodeRequest) -> str:
     return msg
 
 
+# stages.json's format: 2 lists the stage files alone (format 1, unmarked, listed --out and the
+# other outputs that lay in the folder too: its list is never used to remove anything)
+STAGES_FORMAT = 2
+
+
 def _listed_stages(folder: Path) -> list[str]:
     """The stage files an earlier ``simbench decode --debug-dir`` listed in ``folder``'s
     stages.json (plain names only: nothing outside the folder), or none."""
     try:
-        listed = json.loads((folder / "stages.json").read_text(encoding="utf-8")).get("files", [])
+        info = json.loads((folder / "stages.json").read_text(encoding="utf-8"))
+        listed = info.get("files", []) if info.get("format") == STAGES_FORMAT else []
     except (OSError, ValueError, AttributeError):
         return []
     return [n for n in listed if isinstance(n, str) and n == Path(n).name and n not in ("", ".", "..")]

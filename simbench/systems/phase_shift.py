@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
+from simbench.io import camera_full_scale
 from simbench.sim.mitsuba_dict import RenderSettings
 from simbench.sim.scene import SceneSpec
 from simbench.systems import SystemDepth, SystemInfo, SystemOptions
@@ -158,7 +159,9 @@ class PhaseShiftSystem:
             recordings = record_channels(
                 scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds, window_s=window
             )
-            frames.append([grey_frame(r) for r in recordings])
+            # (a 10- or 12-bit camera's digital numbers at its own full scale, not uint16's)
+            bits = self.sensor.camera.bits
+            frames.append([grey_frame(camera_full_scale(r, bits=bits)) for r in recordings])
         return [np.stack([f[i] for f in frames]) for i in range(len(noise_seeds))]
 
     def frame_period_s(self, scene: SceneSpec) -> float:

@@ -153,12 +153,6 @@ class ReferenceCalibration:
         return self._maps[key]
 
 
-def _narrow_adc_bits(bits: int) -> int | None:
-    """``bits`` where a camera's uint16 images hold digital numbers of fewer bits (10, 12), else
-    None: an 8- or 16-bit camera's images are read by their dtype's range."""
-    return bits if bits in (10, 12) else None
-
-
 class ColourFringeSystem:
     """The proposed sensor (module docstring); ``options`` gives its sensor model, decoder,
     camera scale and reference-board form."""
@@ -254,7 +248,7 @@ class ColourFringeSystem:
             image=image,
             frames=cal,
             cache=render.cache,
-            adc_bits=_narrow_adc_bits(self.sensor.camera.bits),
+            adc_bits=self.sensor.camera.bits if self.sensor.camera.bits in (10, 12) else None,
         )
 
     def _record(self, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, pattern_u8=None) -> np.ndarray:
@@ -319,13 +313,13 @@ class ColourFringeSystem:
         ``scene.rig`` (which may be a calibrated rig rather than the one the scene was rendered
         with; the reference map is then decoded with it too)."""
         from simbench.decode import decode
-        from simbench.io import adc_full_scale
+        from simbench.io import camera_full_scale
 
         params = params if params is not None else self.decoder
         params = _with(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
         # a 10- or 12-bit camera's digital numbers, read against its own full scale (any other
         # camera's images by their dtype's range, as the decoder reads arrays)
-        raw = adc_full_scale(raw, bits=_narrow_adc_bits(self.sensor.camera.bits), where="capture")
+        raw = camera_full_scale(raw, bits=self.sensor.camera.bits)
         ref = None
         if params.mode == "reference" or params.unmix:
             if calibration is None:

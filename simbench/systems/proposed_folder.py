@@ -107,7 +107,7 @@ def _decoder_params(request: DecodeRequest, base=None):
     return with_assignments(robust_params(base) if request.robust else base, request.decoder)
 
 
-def _camera_image(path: str | Path, rig, request: DecodeRequest) -> np.ndarray:
+def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool = True) -> np.ndarray:
     """An image of the decode (the capture, the reference, a calibration frame) at its camera's
     full scale (:func:`simbench.io.adc_full_scale`): the ADC bits its recording's manifest
     records, else ``--bits``, else the dtype's range - with a warning where a 16-bit image's
@@ -127,10 +127,10 @@ def _camera_image(path: str | Path, rig, request: DecodeRequest) -> np.ndarray:
             f"{recorded}-bit digital numbers; leave --bits out to decode it as recorded"
         )
     bits = recorded if recorded is not None else request.bits
-    if bits is None:
-        hint = narrow_uint16_hint(img)
-        if hint:
-            logging.getLogger("simbench").warning("%s: %s", path, hint)
+    if bits is None and hint:  # (not for a dark calibration frame: a 16-bit camera's reads low too)
+        told = narrow_uint16_hint(img)
+        if told:
+            logging.getLogger("simbench").warning("%s: %s", path, told)
     return adc_full_scale(img, bits=bits, where=str(path))
 
 
@@ -229,6 +229,12 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         and Path(reference_path).is_file()
         and recording_manifest_of(reference_path) is None
     )
+    # where Z0 came from, for the reference check's advice: a recording's Z0 cannot be the error
+    recorded_ref = reference_path is not None and Path(reference_path).is_file() and not z0_assumed
+    z0_kind = {
+        "z0_assumed": z0_assumed,
+        "recorded_z0": recorded_ref and recording_manifest_of(reference_path) is not None,
+    }
     cache = RenderCache(request.cache_dir)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:
@@ -238,7 +244,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     elif reference is not None:
         reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
     if reference is not None:
-        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path, z0_assumed=z0_assumed)
+        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path, **z0_kind)
     elif request.rig is not None and reference_path is not None and Path(reference_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
         # its Z0 by that rig too (a rig of another baseline decoded 95 % at 77 mm MAE without a
@@ -248,7 +254,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         plane, store_plane = lookup_decoded_reference(
             _camera_image(reference_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path, z0_assumed=z0_assumed)
+        _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path, **z0_kind)
         store_plane()
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
@@ -278,9 +284,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}; {threshold}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
     # a stage of the same name wins, as when they were unpacked over these
-    stages = ChainMap(
-        result.stages, {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
-    )
+    final = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
+    # a refused decode's own column and confidence stages would hold what was refused: the blank
+    # ones win there (the other stages stay, to see why)
+    stages = ChainMap(final, result.stages) if doubt else ChainMap(result.stages, final)
     z0_note = (  # (none used: no Z0)
         f", Z0 = {float(reference.z0_m)} m{' (assumed: no --z0 given)' if z0_assumed else ''}"
         if reference is not None
@@ -302,7 +309,9 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     )
 
 
-def _check_reference_plane(reference, rig, *, reference_path, rig_path, z0_assumed: bool = False) -> None:
+def _check_reference_plane(
+    reference, rig, *, reference_path, rig_path, z0_assumed: bool = False, recorded_z0: bool = False
+) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
     tolerance but over :data:`simbench.decode.REFERENCE_Z0_WARNING` it warns: reference-mode
@@ -310,8 +319,14 @@ def _check_reference_plane(reference, rig, *, reference_path, rig_path, z0_assum
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_offset
 
     offset = reference_plane_offset(reference, rig)
-    if not np.isfinite(offset) or abs(offset) <= REFERENCE_Z0_WARNING:
+    if np.isnan(offset) or abs(offset) <= REFERENCE_Z0_WARNING:
         return
+    if np.isinf(offset):
+        raise ValueError(
+            f"the reference plane {reference_path} does not triangulate with the rig {rig_path}: most of its decoded "
+            "pixels' rays meet their projector columns behind the camera - was it captured with this rig (its "
+            "projector on this side)?"
+        )
     z = reference.z0_m * (1 + offset)
     where = (
         f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z:.4f} m, not its Z0 = "
@@ -321,13 +336,17 @@ def _check_reference_plane(reference, rig, *, reference_path, rig_path, z0_assum
         raise ValueError(
             f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it captured with this rig, and at this Z0?"
         )
+    advice = (
+        "the rig given (--rig) is not the one it was recorded with, or not calibrated closely enough"
+        if recorded_z0
+        else f"give --z0 {z:.4f} if the board stood there, or check the rig"
+    )
     logging.getLogger("simbench").warning(
-        "%s, more than %.1f %%): reference-mode depths carry that error (~%.0f mm at Z0); give --z0 %.4f if the board "
-        "stood there, or check the rig",
+        "%s, more than %.1f %%): reference-mode depths carry that error (~%.0f mm at Z0); %s",
         where,
         100 * REFERENCE_Z0_WARNING,
         1000 * abs(z - reference.z0_m),
-        z,
+        advice,
     )
 
 
@@ -369,7 +388,7 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
         )
     for p in paths.values():
         recording_manifest_of(p)
-    frames = {k: _camera_image(p, rig, request) for k, p in paths.items()}
+    frames = {k: _camera_image(p, rig, request, hint=False) for k, p in paths.items()}
     if reference is None:
         reference = _camera_image(reference_path, rig, request)
     z0_asked, z0_option = _asked_z0(request, params)
