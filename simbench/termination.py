@@ -15,18 +15,26 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-__all__ = ["request", "requested", "held", "run_or_hold"]
+__all__ = ["request", "requested", "requested_signal", "held", "run_or_hold"]
 
 _REQUESTED = threading.Event()
+# the signal that asked (SIGTERM 15, or SIGINT 2: Ctrl-C's KeyboardInterrupt is re-wrapped by a render too)
+_SIGNAL = [15]
 # depth of the main thread's held steps, and what a signal handler asked to run meanwhile
 # (signal handlers run in the main thread only, so only its steps can be cut)
 _HELD = 0
 _PENDING: list[Callable[[], None]] = []
 
 
-def request() -> None:
-    """Note that the process is to stop (called by the SIGTERM handler)."""
+def request(signum: int = 15) -> None:
+    """Note that the process is to stop (called by the SIGTERM and SIGINT handlers)."""
+    _SIGNAL[0] = int(signum)
     _REQUESTED.set()
+
+
+def requested_signal() -> int:
+    """The signal :func:`request` was called for (15 SIGTERM, 2 SIGINT)."""
+    return _SIGNAL[0]
 
 
 def requested() -> bool:

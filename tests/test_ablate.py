@@ -355,6 +355,36 @@ def test_a_termination_inside_a_run_stops_the_sweep_instead_of_recording_a_failu
     assert "error" in run_one({**params, "run.spp": 0}, seed=1, cache_dir=None)  # without it: a recorded failure
 
 
+@pytest.mark.parametrize("signum", [15, 2], ids=["SIGTERM", "Ctrl-C"])
+def test_a_termination_stops_a_whole_sweep_and_its_runs_are_redone(monkeypatch, tmp_path, signum):
+    """A new user's audit: `ablate` (one worker) went on after Ctrl-C and SIGTERM - the worker
+    layer recorded the re-raised, re-wrapped error as a failed run - and a restart counted the
+    failed runs as done.  Now the sweep stops, and a failed run is run again by the next start."""
+    import json
+
+    from simbench import termination
+    from simbench.experiments.ablate import execute
+
+    sw = _sweep(axis=[{"name": "decoder.voting", "values": [True, False]}])
+    calls = []
+
+    def interrupted(params, *, seed, cache_dir):
+        calls.append(params)
+        termination.request(signum)
+        raise RuntimeError("drjit.custom(<_RenderOp>): KeyboardInterrupt")
+
+    try:
+        with pytest.raises(RuntimeError, match="KeyboardInterrupt"):
+            execute.run_sweep(sw, out_dir=tmp_path, cache_dir=None, run_fn=interrupted)
+    finally:
+        termination._REQUESTED.clear()
+    assert len(calls) == 1 and not (tmp_path / f"{sw.name}.runs.jsonl").exists()
+    # a failed run's record (as the old code wrote) is not a finished run
+    runs = expand(sw)
+    (tmp_path / f"{sw.name}.runs.jsonl").write_text(json.dumps({"key": runs[0]["key"], "run": 0, "error": "x"}) + "\n")
+    assert set(execute._load_done(tmp_path / f"{sw.name}.runs.jsonl")) == set()
+
+
 def test_speed_is_an_axis():
     """Issue 37's ablation axis: scene.speed_m_s moves the first object (scene.motion: lateral or
     axial), validated; speed 0 is the static scene, its cache keys unchanged."""

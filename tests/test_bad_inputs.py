@@ -1123,6 +1123,12 @@ for cid, argv, msg in [
         msg,
         setup=(lambda d: _recording(d, {"device": "tof"})) if "rec" in cid or "not-npy" in cid else None,
     )
+case(  # a new user's audit: the rig was announced as an override and changed only the point cloud
+    "system-decode-rig-for-a-factory-calibrated-device",
+    lambda d: ["decode", str(d / "rec"), "--rig", str(d / "r.toml"), "--out", str(d / "x.npy")],
+    ("--rig applies to systems decoding with the scene's rig", "tof", "factory calibration"),
+    setup=lambda d: (_recording(d, {"device": "tof"}), (d / "r.toml").write_text(TINY_RIG)),
+)
 case(
     "system-decode-device-json-invalid",
     lambda d: ["decode", str(d / "rec"), "--out", str(d / "x.npy")],
@@ -1202,6 +1208,8 @@ for cid, argv, msg in [
     ("ablate-file-missing", ["ablate", "nope.toml"], "nope.toml"),
     ("ablate-unknown-study", ["ablate", "periods"], "built-in"),
     ("ablate-workers-zero", ["ablate", "period", "--workers", "0"], "--workers"),
+    # a new user's audit: two studies of one name wrote one csv, md, png and run log
+    ("ablate-one-name-twice", ["ablate", "period", "period"], ("are both the study 'period'", "overwrite")),
     ("demo-spp-zero", ["demo", "--spp", "0"], "--spp"),
     ("demo-seed-word", ["demo", "--seed", "x"], "--seed"),
     ("demo-unknown-scene", ["demo", "--out", "demo", "--scenes", "white_plane", "no_such_scene"], "no_such_scene"),

@@ -898,5 +898,6 @@ def test_a_signal_while_a_lock_is_taken_or_let_go_leaves_no_lock_file(tmp_path, 
             for _ in range(1000):
                 pass
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGTERM, previous[0])
+        signal.signal(signal.SIGINT, previous[1])
         termination._REQUESTED.clear()

@@ -137,6 +137,9 @@ def main(argv: list[str] | None = None) -> int:
 
         if not termination.requested():
             return _report_error(exc, args)
+        if termination.requested_signal() == 2:  # Ctrl-C, re-wrapped by a render
+            print("simbench: interrupted", file=sys.stderr)
+            return 130
         print(_TERMINATED_LINE, file=sys.stderr)
         _quiet_finalizers(args)
         return 143
@@ -144,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
         if previous is not None:
             import signal
 
-            signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGTERM, previous[0])
+            signal.signal(signal.SIGINT, previous[1])
 
 
 # a value that argparse would take for an option, since it begins with "-": "-1G", "-1e3", "-inf"
@@ -200,7 +204,8 @@ class _Terminated(BaseException):
 
 
 def _on_sigterm_raise():
-    """Turn SIGTERM into :class:`_Terminated` while a command runs; returns the handler to
+    """Turn SIGTERM into :class:`_Terminated` while a command runs, and note Ctrl-C before its
+    KeyboardInterrupt (:mod:`simbench.termination`); returns the SIGTERM and SIGINT handlers to
     restore (None off the main thread, where signals cannot be handled)."""
     import signal
     import threading
@@ -222,7 +227,18 @@ def _on_sigterm_raise():
         termination.request()
         termination.run_or_hold(_raise_terminated)  # not inside a cache lock's taking or letting go
 
-    return signal.signal(signal.SIGTERM, handler)
+    def interrupted(signum, frame):
+        # Ctrl-C raises KeyboardInterrupt as ever; noted first, so that code which records a failed
+        # task and goes on (an ablation run) sees it through a render's re-wrapping RuntimeError
+        from simbench import termination
+
+        termination.request(signal.SIGINT)
+        signal.default_int_handler(signum, frame)
+
+    previous_int = signal.getsignal(signal.SIGINT)
+    if previous_int is signal.default_int_handler:  # (not where a caller set its own)
+        signal.signal(signal.SIGINT, interrupted)
+    return signal.signal(signal.SIGTERM, handler), previous_int
 
 
 def _raise_terminated() -> None:

@@ -142,6 +142,14 @@ def _cmd_ablate(args) -> int:
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
     for sweep in sweeps:
         check_sweep(sweep)  # and every run's values
+    seen: dict[str, str] = {}
+    for n, sweep in zip(names, sweeps):
+        if sweep.name in seen:  # their tables, plots and run log would be one file each
+            raise ValueError(
+                f"{seen[sweep.name]} and {n} are both the study {sweep.name!r} (named by the file's stem): their "
+                f"files in {args.out} would overwrite each other; rename one, or run them into other --out folders"
+            )
+        seen[sweep.name] = n
     select_variant(args.variant)
     command = (
         "simbench ablate " + " ".join(sys.argv[2:])

@@ -175,6 +175,7 @@ class _Caught:
         try:
             return self.fn(*args, **kwargs)
         except Exception as exc:  # noqa: BLE001 - handed to on_error
+            _reraise_if_stopping()
             return _Failed(exc)
 
 
@@ -183,9 +184,20 @@ def _caught(run: Callable[[Task], Any]) -> Callable[[Task], Any]:
         try:
             return run(task)
         except Exception as exc:  # noqa: BLE001 - handed to on_error
+            _reraise_if_stopping()
             return _Failed(exc)
 
     return wrapped
+
+
+def _reraise_if_stopping() -> None:
+    """Inside an ``except``: re-raise when the process was asked to stop (SIGTERM or Ctrl-C
+    re-wrapped as a RuntimeError by a render), which is no failure of the task to record (a new
+    user's audit: `ablate` recorded each Ctrl-C as a failed run and went on)."""
+    from simbench import termination
+
+    if termination.requested():
+        raise
 
 
 def _or_error(on_result: Callable, on_error: Callable) -> Callable:

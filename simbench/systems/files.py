@@ -378,6 +378,13 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
         )
     if request.debug_dir:
         raise ValueError(f"--debug-dir: the {name} system's decoder has no stage images to write")
+    if request.rig is not None and not system.info().uses_scene_rig:
+        # (its decode keeps the device's factory calibration: a rig would change only the point
+        # cloud's rays - a new user's audit found a Kinect cloud twice as wide, the depth unchanged)
+        raise ValueError(
+            f"--rig applies to systems decoding with the scene's rig; the {name} system keeps its device's factory "
+            "calibration: leave --rig out"
+        )
     check_outputs(request, inputs=[request.capture, request.rig])
     raw, cal, scene = system.read_recording(Path(request.capture))
     if request.rig is not None:

@@ -93,6 +93,9 @@ def _load_done(path: Path) -> dict[str, dict]:
         for line in path.read_text().splitlines():
             try:
                 rec = json.loads(line)
+                if rec.get("error"):  # a failed run is run again by the next start (it was done, not finished)
+                    done.pop(rec["key"], None)
+                    continue
                 done[rec["key"]] = rec
             except (ValueError, KeyError, TypeError):
                 continue  # a line cut by an interruption: that run is redone
