@@ -136,6 +136,20 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     assert any(
         "not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path)
     )
+    # a run of one of the file's targets is checked on that target's entries (a new user's audit:
+    # `reproduce budget --check results/quick/thresholds.toml` was refused), the others not measured by it
+    from simbench.experiments.reproduce import check_threshold_names, load_thresholds
+
+    table1_only = {k: v for k, v in measured.items() if k.startswith("table1/")}
+    both = write_thresholds(
+        tmp_path / "both.toml", {**table1_only, "fig9/1.0m/stripe_order_errors": 0}, margin=0.25, command="t"
+    )
+    check_threshold_names(load_thresholds(both), ["table1"], path=both)
+    assert check_thresholds(table1_only, both, targets=["table1"]) == []
+    assert any("fig9" in f and "not measured" in f for f in check_thresholds(table1_only, both))
+    assert any("gt_mae_mm" in f for f in check_thresholds(worse, both, targets=["table1"]))
+    with pytest.raises(ValueError, match=r"not made by the targets of this run \(\['budget'\]\): it holds"):
+        check_threshold_names(load_thresholds(both), ["budget"], path=both)
 
 
 def test_same_values_counts_bit_equal_metrics_and_names_the_farthest(tmp_path):

@@ -24,6 +24,7 @@ from simbench.cli.options import (
 
 def _cmd_demo(args) -> int:
     from simbench.experiments.demo import DEFAULT_SCENES, demo_config, run_demo
+    from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER
     from simbench.variant import select_variant
 
     spp, sampler = render_settings(args)
@@ -31,7 +32,24 @@ def _cmd_demo(args) -> int:
     cfg = demo_config(spp=spp, sampler=sampler, seed=args.seed, sensor=args.camera)
     scenes = tuple(args.scenes) if args.scenes else DEFAULT_SCENES
     cache_dir = None if args.no_cache else args.cache
-    run_demo(args.out, config=cfg, scenes=scenes, cache_dir=cache_dir, progress=lambda s: print(s, flush=True))
+    # what was asked, for "Made by" (the defaults left out: `simbench demo --out results/demo` is make reproduce's)
+    given = [
+        ("--spp", args.spp),
+        ("--sampler", args.sampler if args.sampler != DEFAULT_SAMPLER else None),
+        ("--seed", args.seed if args.seed != DEFAULT_SEED else None),
+        ("--sensor", args.camera if args.camera != "minimal" else None),
+        ("--scenes", " ".join(args.scenes) if args.scenes else None),
+        ("--variant", args.variant),
+    ]
+    command = " ".join([f"simbench demo --out {args.out}"] + [f"{k} {v}" for k, v in given if v is not None])
+    run_demo(
+        args.out,
+        config=cfg,
+        scenes=scenes,
+        cache_dir=cache_dir,
+        progress=lambda s: print(s, flush=True),
+        command=command,
+    )
     print(f"wrote {args.out}/summary.md, metrics.json, provenance.json and one figure per scene")
     return 0
 
@@ -101,7 +119,7 @@ def _cmd_reproduce(args) -> int:
         )
         print(f"wrote thresholds {path}")
     if args.check:
-        failures = check_thresholds(metrics, args.check)
+        failures = check_thresholds(metrics, args.check, targets=args.targets)
         if failures:
             for f in failures:
                 print(f"simbench: regression: {f}", file=sys.stderr)

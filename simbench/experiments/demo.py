@@ -72,9 +72,12 @@ def run_demo(
     scenes: tuple[str, ...] = DEFAULT_SCENES,
     cache_dir: str | Path | None = None,
     progress: Callable[[str], None] = log.info,
+    command: str = "",
 ) -> dict:
     """Render (through the render cache in ``cache_dir``; None: none), decode and score each
-    scene; write figures and tables to ``out_dir``.
+    scene; write figures and tables to ``out_dir``.  ``command``: the command line that asked
+    (recorded as "Made by"; default ``simbench demo --out OUT_DIR``).  Figures of scenes an earlier
+    demo wrote there and this one does not are removed (the summary would not list them).
 
     A Mitsuba variant must already be selected.
     """
@@ -90,6 +93,8 @@ def run_demo(
     rows = []
     names, scenes = scenes, [load_scene(library_scene_path(name)) for name in scenes]  # all checked before rendering
     check_own_folder(out, marker="provenance.json", written_by="simbench demo", what="demo --out")
+    command = command or f"simbench demo --out {out_dir}"
+    earlier = _earlier_scenes(out)
     files: dict[Path, bytes] = {}
     for i, (name, scene) in enumerate(zip(names, scenes)):
         t0 = time.perf_counter()
@@ -140,7 +145,7 @@ def run_demo(
         )
     cfg = {**config.to_dict(), "scenes": list(names)}
     provenance = {
-        "command": "simbench demo --out " + str(out_dir),
+        "command": command,
         "config": cfg,
         "variant": mi.variant(),
         "versions": versions(),
@@ -168,9 +173,9 @@ def run_demo(
     w.writerows(rows)
     files[out / "summary.csv"] = buf.getvalue().encode()
     md = [
-        "# Pipeline demo: white plane, tilted plane, sphere, step",
+        "# Pipeline demo: " + ", ".join(name.replace("_", " ") for name in names),
         "",
-        f"Made by `simbench demo --out {out_dir}` (sensor `{config.sensor}`, {config.spp} spp, base seed "
+        f"Made by `{command}` (sensor `{config.sensor}`, {config.spp} spp, base seed "
         f"{config.seed}, "
         f"variant `{mi.variant()}`). Errors exclude a {config.edge_band_px}-px band at depth edges (none on the white "
         f"plane); "
@@ -188,4 +193,17 @@ def run_demo(
         )
     files[out / "summary.md"] = ("\n".join(md) + "\n").encode()
     write_files(files)  # the folder's files together, or none of them
+    for name in sorted(set(earlier) - set(names)):
+        (out / f"{name}.png").unlink(missing_ok=True)
     return {"rows": rows, "provenance": provenance}
+
+
+def _earlier_scenes(out: Path) -> list[str]:
+    """The scenes an earlier demo in ``out`` recorded in its provenance (plain names), or none."""
+    import json
+
+    try:
+        names = json.loads((out / "provenance.json").read_text(encoding="utf-8"))["config"]["scenes"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [n for n in names if isinstance(n, str) and n == Path(n).name and n not in ("", ".", "..")]

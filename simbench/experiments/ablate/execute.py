@@ -102,6 +102,32 @@ def _load_done(path: Path) -> dict[str, dict]:
     return done
 
 
+def _named_files_digest(params: dict) -> str:
+    """The first 8 hex digits of the SHA-256 of the sensor and scene files a run's values name
+    (a preset's own file too), "" when they name none."""
+    import hashlib
+
+    from simbench.experiments.common import library_scene_path
+    from simbench.sim.sensor import PRESETS_DIR, SENSOR_PRESETS
+
+    files = []
+    sensor = params.get("sensor.preset")
+    if isinstance(sensor, str):
+        files.append(PRESETS_DIR / f"{sensor}.toml" if sensor in SENSOR_PRESETS else Path(sensor))
+    if isinstance(params.get("scene.name"), str):
+        try:
+            files.append(library_scene_path(params["scene.name"]))
+        except ValueError:
+            pass  # (refused with its own message by the run)
+    h = hashlib.sha256()
+    for f in files:
+        try:
+            h.update(f.read_bytes())
+        except OSError:
+            h.update(str(f).encode())
+    return h.hexdigest()[:8] if files else ""
+
+
 def _append(path: Path, rec: dict) -> None:
     with open(path, "a", encoding="utf-8") as f:
         f.write(json.dumps(rec, sort_keys=True, default=str) + "\n")
@@ -138,7 +164,10 @@ def run_sweep(
         check_sweep(sweep)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    runs = expand(sweep)
+    # a run's log key covers the files its values name, so a resumed sweep whose sensor or scene
+    # file changed runs again rather than reusing their old results (a new user's audit: a sensor
+    # file's read noise raised 40-fold, and the resume kept 0.2486 mm)
+    runs = [{**r, "key": r["key"] + _named_files_digest(r["params"])} for r in expand(sweep)]
     log = out / f"{sweep.name}.runs.jsonl"
     done = _load_done(log)
     todo = [r for r in runs if r["key"] not in done]
