@@ -1202,6 +1202,12 @@ for cid, argv, msg in [
     ("reproduce-seed-negative", ["reproduce", "--seed", "-1"], "--seed"),
     ("reproduce-repeats-zero", ["reproduce", "--repeats", "0"], "--repeats"),
     ("reproduce-margin-negative", ["reproduce", "--margin", "-1"], "--margin"),
+    # a second audit: ignored without a word
+    (
+        "reproduce-margin-without-write",
+        ["reproduce", "table1", "--margin", "0.5"],
+        "--margin applies to --write-thresholds",
+    ),
     ("reproduce-sensor-unknown", ["reproduce", "table1", "--sensor", "flea4"], "unknown sensor"),
     ("reproduce-decoder-bad", ["reproduce", "table1", "--decoder", "voting=maybe"], "voting"),
     ("reproduce-check-missing", ["reproduce", "table1", "--check", "nope.toml"], "nope.toml"),
@@ -1242,6 +1248,12 @@ case(
     lambda d: ["reproduce", "table1", "--quick", "--check", str(d / "t.toml")],
     "not made by the targets",
     files={"t.toml": '["fig9/x/rmse_mm"]\nmax = 1\n'},
+)
+case(  # a second audit: failed only after printing every table
+    "crosstalk-out-a-folder",
+    lambda d: ["crosstalk", "--out", str(d / "dir")],
+    "is a folder",
+    setup=lambda d: (d / "dir").mkdir(),
 )
 case(
     "reproduce-write-thresholds-a-folder",  # issue 33: wrote every result, then failed

@@ -156,7 +156,7 @@ def add_parsers(sub, kw: dict) -> None:
         "--distortion",
         choices=distortion_models(),
         default="radial",
-        help="lens model fitted: radial (k1, k2) or radial_tangential (also p1, p2, Bouguet's default)",
+        help="lens model fitted: radial (k1, k2; the default) or radial_tangential (also p1, p2, Bouguet's default)",
     )
     s.add_argument("--out", required=True, help="output folder (written whole or not at all)")
     s.add_argument("--overwrite", action="store_true", help="replace the output folder even if it holds other files")

@@ -71,13 +71,16 @@ def _cmd_reproduce(args) -> int:
 
     # everything a user can get wrong is checked before the first render
     check_targets(args.targets)
+    if args.margin is not None and not args.write_thresholds:
+        raise ValueError("--margin applies to --write-thresholds (the margin of the thresholds it writes)")
+    margin = 0.25 if args.margin is None else args.margin
     if args.check:
         check_threshold_names(load_thresholds(args.check), args.targets, path=args.check)
     if args.write_thresholds:
         from simbench.io import check_output_file
 
         check_output_file(args.write_thresholds, what="--write-thresholds")
-        kept_thresholds(args.write_thresholds, args.targets, margin=args.margin, quick=args.quick)
+        kept_thresholds(args.write_thresholds, args.targets, margin=margin, quick=args.quick)
     if args.camera is not None:
         get_sensor(args.camera)
     overrides = {
@@ -115,7 +118,7 @@ def _cmd_reproduce(args) -> int:
     )
     if args.write_thresholds:
         path = write_thresholds(
-            args.write_thresholds, metrics, margin=args.margin, command=command, targets=args.targets, quick=args.quick
+            args.write_thresholds, metrics, margin=margin, command=command, targets=args.targets, quick=args.quick
         )
         print(f"wrote thresholds {path}")
     if args.check:
@@ -137,6 +140,10 @@ def _cmd_crosstalk(args) -> int:
     from simbench.io import atomic_write_text
     from simbench.experiments.crosstalk import crosstalk_report
 
+    if args.out:  # before the report is printed (a folder given failed only after it)
+        from simbench.io import check_output_file
+
+        check_output_file(args.out, what="--out")
     text = crosstalk_report({name: srgb for name, (srgb, _) in PAPER_TABLE1.items()})
     print(text)
     if args.out:
@@ -311,7 +318,10 @@ def add_parsers(sub, kw: dict) -> None:
         help="write a thresholds TOML from this run's metrics (an existing file keeps its other targets' entries)",
     )
     s.add_argument(
-        "--margin", type=float_in(lo=0.0, hi=10.0), default=0.25, help="relative margin for --write-thresholds"
+        "--margin",
+        type=float_in(lo=0.0, hi=10.0),
+        default=None,
+        help="relative margin for --write-thresholds (default 0.25)",
     )
     s.add_argument(
         "--workers",
