@@ -42,6 +42,24 @@ def acquisitions(variant):
     return get
 
 
+def bare_files(folder: Path, capture, reference, rig) -> list[str]:
+    """``capture.png``, ``reference.png`` and ``rig.toml`` written to ``folder`` (no recording
+    manifest: bare files, as a user's own), and the ``simbench decode`` arguments naming them."""
+    from simbench.io import save_png
+    from simbench.rig import save_rig
+
+    save_png(folder / "capture.png", capture)
+    save_png(folder / "reference.png", reference)
+    save_rig(rig, folder / "rig.toml")
+    return [
+        str(folder / "capture.png"),
+        "--reference",
+        str(folder / "reference.png"),
+        "--rig",
+        str(folder / "rig.toml"),
+    ]
+
+
 @pytest.fixture(autouse=True)
 def _in_a_fresh_folder(tmp_path, monkeypatch):
     """Every test runs in its own empty working folder: the CLI's relative defaults (the render

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 
 from simbench.cli import main
-from simbench.io import adc_full_scale, narrow_uint16_hint, save_png
+from simbench.io import adc_full_scale, narrow_uint16_hint
 from simbench.pattern import PatternSpec, fringe_pattern, quantize
-from simbench.rig import paper_rig, save_rig
+from simbench.rig import paper_rig
 from simbench.sim.camera import simple_camera
 from simbench.sim.projector import transfer_curve
 from simbench.sim.sensor import get_sensor
 from simbench.sim.synthetic import synthetic_plane_capture
 
-from .conftest import SCENES
+from .conftest import SCENES, bare_files
 
 RIG = paper_rig()
 
@@ -77,17 +77,7 @@ def test_a_twelve_bit_camera_decodes_in_memory_as_an_eight_bit_one_does():
 
 
 def _bare_files(tmp_path, bits: int) -> list[str]:
-    cap, ref = _plane_pair(bits)
-    save_png(tmp_path / "capture.png", cap)
-    save_png(tmp_path / "reference.png", ref)
-    save_rig(RIG, tmp_path / "rig.toml")
-    return [
-        str(tmp_path / "capture.png"),
-        "--reference",
-        str(tmp_path / "reference.png"),
-        "--rig",
-        str(tmp_path / "rig.toml"),
-    ]
+    return bare_files(tmp_path, *_plane_pair(bits), RIG)
 
 
 def test_bare_twelve_bit_files_decode_with_bits_and_warn_without(tmp_path, capsys, caplog):

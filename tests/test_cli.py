@@ -141,25 +141,17 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, monkeypatch, variant, 
 def _synthetic_recording(tmp_path):
     import numpy as np
 
-    from simbench.io import save_png
     from simbench.pattern import PatternSpec, fringe_pattern, quantize
     from simbench.sim.projector import transfer_curve
-    from simbench.rig import paper_rig, save_rig
+    from simbench.rig import paper_rig
     from simbench.sim.synthetic import synthetic_plane_capture
+
+    from .conftest import bare_files
 
     rig = paper_rig()
     drive = transfer_curve(quantize(fringe_pattern(PatternSpec())), transfer="linear")
-    for name, depth in (("capture", 1.1), ("reference", 1.0)):
-        img = synthetic_plane_capture(drive, rig, point_m=(0, 0, depth))[0]
-        save_png(tmp_path / f"{name}.png", np.round(np.clip(img, 0, 1) * 255).astype(np.uint8))
-    save_rig(rig, tmp_path / "rig.toml")
-    return [
-        str(tmp_path / "capture.png"),
-        "--reference",
-        str(tmp_path / "reference.png"),
-        "--rig",
-        str(tmp_path / "rig.toml"),
-    ]
+    cap, ref = (synthetic_plane_capture(drive, rig, point_m=(0, 0, depth))[0] for depth in (1.1, 1.0))
+    return bare_files(tmp_path, *(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8) for img in (cap, ref)), rig)
 
 
 def test_decode_takes_decoder_parameters(tmp_path, capsys):

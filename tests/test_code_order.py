@@ -20,9 +20,9 @@ from simbench.decode.pipeline import (
     code_order_doubt,
     without_depth,
 )
-from simbench.io import save_png
-from simbench.rig import save_rig
 from simbench.systems import get_system
+
+from .conftest import bare_files
 
 SYSTEM = get_system("proposed")
 RAW, CAL, SCENE = SYSTEM.bench_inputs(scene="plane", frames=True)
@@ -91,15 +91,8 @@ def test_without_depth_leaves_nothing_decoded():
 
 
 def _files(tmp_path, capture, reference) -> list[str]:
-    save_png(tmp_path / "capture.png", np.ascontiguousarray(capture))
-    save_png(tmp_path / "reference.png", np.ascontiguousarray(reference))
-    save_rig(SCENE.rig, tmp_path / "rig.toml")
     return [
-        str(tmp_path / "capture.png"),
-        "--reference",
-        str(tmp_path / "reference.png"),
-        "--rig",
-        str(tmp_path / "rig.toml"),
+        *bare_files(tmp_path, np.ascontiguousarray(capture), np.ascontiguousarray(reference), SCENE.rig),
         "--z0",
         "1.0",
     ]
