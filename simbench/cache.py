@@ -53,6 +53,7 @@ from simbench.manifest import file_sha256
 __all__ = [
     "CACHE_FORMAT",
     "MARKER_NAME",
+    "PROGRESS_MIN_S",
     "RENDER_VERSION",
     "CacheEntry",
     "NotACacheError",
@@ -74,6 +75,10 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 RENDER_VERSION = 1
+
+# a command's progress lines (``RenderCache.on_made``): the entries made in at least this long (a
+# path-traced render, ground truth; not the many sub-second ones beside them)
+PROGRESS_MIN_S = 1.0
 
 # The cache folder's marker: a CACHEDIR.TAG (Cache Directory Tagging Specification, Bryan Ford
 # 2004: its first line is this signature) whose second line names simbench and the format of the
@@ -149,6 +154,10 @@ def check_cache_folder(root: str | Path) -> Path:
             "use a new folder"
         )
     others = sorted(e.name for e in os.scandir(root) if not _is_own_name(e.name))
+    if others == [MARKER_NAME] and _marker_format(root) == CACHE_FORMAT:
+        # another process sharing a new folder marked it between our look and the listing (two
+        # ablate workers starting on one new cache: one of them failed its run)
+        return root
     if others:
         shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
         raise NotACacheError(

@@ -41,6 +41,8 @@ __all__ = [
     "camera_full_scale",
     "narrow_uint16_hint",
     "save_exr",
+    "stored_adc_bits",
+    "load_depth_map",
     "save_ply",
     "read_toml",
     "read_json_dict",
@@ -482,6 +484,30 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
     return arr
 
 
+def load_depth_map(path: str | Path, *, expected_shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """A depth map from an .npy file (:func:`load_npy`) or a one-channel OpenEXR file (``render``
+    writes ``gt_depth`` as both, the same values; read with Mitsuba's ``Bitmap``); errors name
+    the file and what is wrong.  Its dtype and shape as stored (the caller checks them)."""
+    path = Path(path)
+    if path.suffix.lower() != ".exr":
+        return load_npy(path, expected_shape=expected_shape)
+    if not path.is_file():
+        raise FileNotFoundError(f"file not found: {path}")
+    import mitsuba as mi
+
+    try:
+        arr = np.array(mi.Bitmap(str(path)))
+    except RuntimeError as exc:
+        raise ValueError(f"{path}: not a readable OpenEXR file ({str(exc).splitlines()[0]})") from None
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if arr.ndim != 2:
+        raise ValueError(f"{path}: {arr.shape[2]} channels; a depth map has one")
+    if expected_shape is not None and arr.shape != tuple(expected_shape):
+        raise ValueError(f"{path}: shape {arr.shape}, expected {tuple(expected_shape)}")
+    return arr
+
+
 def save_png(path: str | Path, image: np.ndarray) -> Path:
     """Save an RGB (H, W, 3) or grey (H, W) uint8/uint16 image as PNG (RGB order in memory).
 
@@ -585,6 +611,13 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
 ADC_BITS = (8, 10, 12, 16)
 
 
+def stored_adc_bits(bits: int) -> int | None:
+    """The bits a reader of a ``bits``-bit camera's images must be told (:func:`adc_full_scale`):
+    a 10- or 12-bit camera's, whose digital numbers fill only part of their uint16; None for an 8-
+    or 16-bit camera's, read by their dtype's range."""
+    return bits if bits in (10, 12) else None
+
+
 def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarray:
     """A capture as the decoder reads it, given the bits of the camera's ADC that recorded it.
 
@@ -624,7 +657,7 @@ def camera_full_scale(img: np.ndarray, *, bits: int) -> np.ndarray:
     """A simulated camera's recording (``bits``: its ADC's) as every reader takes it: a 10- or
     12-bit camera's uint16 digital numbers as float32 of its full scale
     (:func:`adc_full_scale`), any other camera's image as it is (read by its dtype's range)."""
-    return adc_full_scale(img, bits=bits if bits in (10, 12) else None, where="the camera's recording")
+    return adc_full_scale(img, bits=stored_adc_bits(bits), where="the camera's recording")
 
 
 def narrow_uint16_hint(img: np.ndarray) -> str:
@@ -685,14 +718,16 @@ def read_toml(path: str | Path, *, what: str) -> dict:
     import tomllib
 
     path = Path(path)
+    if path.is_dir():  # e.g. calibrate's --out folder given as the rig
+        inside = path / f"{what}.toml"
+        hint = f" (give {inside}, the {what} file in it)" if inside.is_file() else ""
+        raise ValueError(f"{path}: a folder, not a {what} file{hint}")
     if not path.is_file():
         raise FileNotFoundError(f"{what} file not found: {path}")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not a UTF-8 text file (byte {exc.start}), so not TOML") from None
-    except IsADirectoryError:
-        raise ValueError(f"{path}: a folder, not a {what} file") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

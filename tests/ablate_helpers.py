@@ -27,11 +27,11 @@ def _row(seed: int) -> dict:
     }
 
 
-def quick_run(params: dict, *, seed: int, cache_dir) -> dict:
+def quick_run(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
     return _row(seed)
 
 
-def dies_once(params: dict, *, seed: int, cache_dir) -> dict:
+def dies_once(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
     """Kills its worker the first time it sees its marker path, succeeds after."""
     marker = Path(params["scene.name"])
     if marker.name.startswith("die") and not marker.exists():
@@ -40,21 +40,29 @@ def dies_once(params: dict, *, seed: int, cache_dir) -> dict:
     return _row(seed)
 
 
-def always_dies(params: dict, *, seed: int, cache_dir) -> dict:
+def always_dies(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
     if Path(params["scene.name"]).name.startswith("die"):
         os.kill(os.getpid(), signal.SIGKILL)
     return _row(seed)
 
 
-def slow_run(params: dict, *, seed: int, cache_dir) -> dict:
+def slow_run(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
     """Says it has started (touches its marker path), then takes ten minutes."""
     Path(params["scene.name"]).touch()
     time.sleep(600)
     return _row(seed)
 
 
-def fails_on_marker(params: dict, *, seed: int, cache_dir) -> dict:
+def fails_on_marker(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
     """Fails as run_one records a failure when ``scene.name`` is ``fail``."""
     if params["scene.name"] == "fail":
         return {"error": "RuntimeError: failed on purpose", "traceback": "", "timing": {}}
+    return _row(seed)
+
+
+def talking_run(params: dict, *, seed: int, cache_dir, label: str = "") -> dict:
+    """Says a line inside the run as run_one does (through the worker's state), then succeeds."""
+    from simbench.experiments.workers import worker_state
+
+    worker_state().emit(f"[{label}] inside, pid {os.getpid()}")
     return _row(seed)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import pytest
 
@@ -128,13 +129,20 @@ def test_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path):
 
 
 @pytest.mark.slow
-def test_phase_method_axis(tmp_path, variant):
+def test_phase_method_axis(tmp_path, monkeypatch, variant):
     """Every registered phase method runs through a sweep; the decoder-only axis renders the scene
     once (one capture and one reference radiance in the cache) (an unknown method is refused before
     any run: test_a_value_that_cannot_run_fails_the_sweep_before_any_run)."""
+    import simbench.cache
+
+    monkeypatch.setattr(simbench.cache, "PROGRESS_MIN_S", 0.0)  # every entry, on any machine
     sweep = _sweep(axis=[{"name": "decoder.phase_method", "values": ["gabor", "ftp", "wfr"]}])
-    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    lines = []
+    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lines.append)
     assert len(list((tmp_path / "cache").glob("radiance-*.npz"))) == 2
+    # the first run's renders said so as they were made; the others read them from the cache
+    assert any(re.fullmatch(r"\[ablate t run 0\] radiance made in \d+\.\d s \(\d+ s so far\)", x) for x in lines)
+    assert not any(x.startswith("[ablate t run 1] radiance") for x in lines)
     for r in rows[:3]:
         assert (
             r["error"] == "" and r["completeness"] > 0.95 and r["stripe_order_errors"] == 0 and r["gt_mae_mm"] < 1.0
@@ -240,6 +248,26 @@ def test_a_killed_worker_costs_its_run_one_retry_and_the_table_is_complete(tmp_p
     assert (tmp_path / "die1").exists()  # it did die once
     _run_markers(names, tmp_path / "ref", ablate_helpers.quick_run, workers=1)
     assert (tmp_path / "out" / "w.csv").read_bytes() == (tmp_path / "ref" / "w.csv").read_bytes()
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_runs_own_progress_lines_reach_the_sweeps_progress(tmp_path, variant, workers):
+    """A cold run renders for minutes: its lines (run_one's cache entries made) reach the sweep's
+    ``progress`` from this process and from pool workers, named by the sweep and run (a new
+    user's audit: a 36-spp run was silent for minutes)."""
+    import os
+
+    from tests import ablate_helpers
+
+    lines = []
+    names = [str(tmp_path / "a"), str(tmp_path / "b")]
+    run_sweep(
+        _marker_sweep(names), out_dir=tmp_path, cache_dir=None, workers=workers, variant=variant,
+        progress=lines.append, run_fn=ablate_helpers.talking_run,
+    )  # fmt: skip
+    inside = sorted(x for x in lines if "inside" in x)
+    assert [x.split(",")[0] for x in inside] == ["[ablate w run 0] inside", "[ablate w run 1] inside"]
+    assert (str(os.getpid()) in inside[0]) == (workers == 1)
 
 
 def test_a_run_that_kills_its_worker_twice_is_recorded_as_failed(tmp_path, variant):
@@ -368,7 +396,7 @@ def test_a_termination_stops_a_whole_sweep_and_its_runs_are_redone(monkeypatch, 
     sw = _sweep(axis=[{"name": "decoder.voting", "values": [True, False]}])
     calls = []
 
-    def interrupted(params, *, seed, cache_dir):
+    def interrupted(params, *, seed, cache_dir, label=""):
         calls.append(params)
         termination.request(signum)
         raise RuntimeError("drjit.custom(<_RenderOp>): KeyboardInterrupt")
@@ -444,3 +472,17 @@ def test_a_runs_log_key_covers_the_files_its_values_name(tmp_path):
     assert _named_files_digest(params) != before
     assert _named_files_digest({"sensor.preset": "minimal"}) != _named_files_digest({"sensor.preset": "paper"})
     assert _named_files_digest({"decoder.voting": True}) == ""
+
+
+def test_builtin_runs_every_built_in_study_and_the_files_named_beside_it(tmp_path, monkeypatch):
+    """`ablate builtin mine.toml`: every built-in study, then the file's (a second audit: 'builtin'
+    was read as a file of that name unless it stood alone)."""
+    import simbench.experiments.ablate as ablate
+    from simbench.cli import main
+
+    (tmp_path / "mine.toml").write_text('name = "mine"\n[[axis]]\nname = "decoder.voting"\nvalues = [true, false]\n')
+    ran = []
+    monkeypatch.setattr(ablate, "run_sweep", lambda sweep, **kw: ran.append(sweep.name) or [])
+    monkeypatch.setattr("simbench.variant.select_variant", lambda v: None)
+    assert main(["ablate", "builtin", str(tmp_path / "mine.toml"), "--out", str(tmp_path / "out")]) == 0
+    assert ran == [*BUILTIN_STUDIES, "mine"]

@@ -168,6 +168,13 @@ def test_the_api_makes_what_the_command_line_makes(tmp_path, variant):
     )
     assert r.returncode == 0, r.stderr
     cli_scores = json.loads(r.stdout)
+    # the EXR beside it holds the same values (a second audit: score read only .npy)
+    r = subprocess.run(
+        [*cli, "score", "rec/depth.npy", "--gt", "rec/gt_depth.exr", "--column", "rec/stages/column.npy", "--json"],
+        **run,
+    )
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == cli_scores
     code = f"""
 import json, sys
 import numpy as np

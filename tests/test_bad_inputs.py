@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from simbench.cli import main
+from simbench.io import save_exr
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
@@ -584,6 +585,13 @@ case(
     "decode-reference-mode-without-reference", lambda d: _decode(d, reference=None), "--reference", setup=render_folder
 )
 case("decode-rig-missing", lambda d: _decode(d, rig="nope.toml"), "nope.toml", setup=render_folder)
+# a second audit: calibrate's --out folder given as the rig read "rig file not found"
+case(
+    "decode-rig-a-folder",
+    lambda d: _decode(d, rig="."),
+    ("a folder, not a rig file", "rig.toml, the rig file in it"),
+    setup=render_folder,
+)
 case(
     "decode-rig-invalid",
     lambda d: _decode(d, rig="bad.toml"),
@@ -956,6 +964,18 @@ for cid, argv, msg, setup in [
         "nope.npy",
         render_folder,
     ),
+    (  # a second audit: .exr was read as .npy ("not a NumPy .npy file")
+        "gt-exr-not-exr",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.exr")],
+        ("g.exr", "not a readable OpenEXR file"),
+        lambda d: (render_folder(d), (d / "g.exr").write_text("depth\n")),
+    ),
+    (
+        "gt-exr-three-channels",
+        lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.exr")],
+        ("g.exr", "3 channels; a depth map has one"),
+        lambda d: (render_folder(d), save_exr(d / "g.exr", np.ones((120, 160, 3), np.float32))),
+    ),
     (
         "gt-3d",
         lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.npy")],
@@ -1216,6 +1236,14 @@ for cid, argv, msg in [
     ("ablate-workers-zero", ["ablate", "period", "--workers", "0"], "--workers"),
     # a new user's audit: two studies of one name wrote one csv, md, png and run log
     ("ablate-one-name-twice", ["ablate", "period", "period"], ("are both the study 'period'", "overwrite")),
+    # a second audit: 'builtin' beside a study read as a file named builtin; --scheduler took --workers
+    ("ablate-builtin-and-its-study", ["ablate", "builtin", "period"], ("'builtin' runs every built-in", "period")),
+    ("ablate-builtin-twice", ["ablate", "builtin", "builtin"], "'builtin' runs every built-in"),
+    (
+        "ablate-workers-and-scheduler",
+        ["ablate", "period", "--workers", "2", "--scheduler", "tcp://127.0.0.1:9"],
+        "--workers and --scheduler",
+    ),
     ("demo-spp-zero", ["demo", "--spp", "0"], "--spp"),
     ("demo-seed-word", ["demo", "--seed", "x"], "--seed"),
     ("demo-unknown-scene", ["demo", "--out", "demo", "--scenes", "white_plane", "no_such_scene"], "no_such_scene"),

@@ -847,6 +847,39 @@ def test_the_cache_marker(tmp_path):
         RenderCache(legacy)
 
 
+def test_a_folder_another_process_marks_while_it_is_checked_is_a_cache(tmp_path, monkeypatch):
+    """Two processes starting on one new cache folder: the first marks it after the second
+    found no marker but before the second listed the folder, which then saw a CACHEDIR.TAG
+    among 'other files' and refused the cache (found with `ablate --workers 2`, one failed run)."""
+    import simbench.cache as cache_module
+    from simbench.cache import MARKER_NAME, NotACacheError, check_cache_folder, claim_cache_folder
+
+    marked = tmp_path / "marked"
+    claim_cache_folder(marked)
+    tag = (marked / MARKER_NAME).read_bytes()
+    new = tmp_path / "new"
+    new.mkdir()
+    real = cache_module._marker_format
+    looks = []
+
+    def other_process_marks_after_our_first_look(root):
+        looks.append(root)
+        out = real(root)
+        if len(looks) == 1:
+            (new / MARKER_NAME).write_bytes(tag)
+        return out
+
+    monkeypatch.setattr(cache_module, "_marker_format", other_process_marks_after_our_first_look)
+    assert check_cache_folder(new) == new and len(looks) == 2
+    # a marker of another tool's, or another file beside ours, is still refused
+    looks.clear()
+    (new / MARKER_NAME).unlink()
+    monkeypatch.setattr(cache_module, "_marker_format", real)
+    (new / MARKER_NAME).write_text("Signature: 8a477f597d28d172789f06886806bc55\n# cargo\n")
+    with pytest.raises(NotACacheError, match="other files"):
+        check_cache_folder(new)
+
+
 def test_a_signal_while_a_lock_is_taken_or_let_go_leaves_no_lock_file(tmp_path, monkeypatch):
     """CI's SIGTERM test, rarely, under load, found a lock file left after the run ended: the
     handler's exception came between creating the file and holding it (or holding it and

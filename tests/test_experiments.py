@@ -113,6 +113,28 @@ def test_a_thresholds_margin_that_cannot_merge_is_refused_before_the_run(tmp_pat
     assert not out.exists() and not cache.exists()  # refused before anything ran
 
 
+def test_a_check_against_thresholds_of_the_other_resolution_is_refused_before_the_run(tmp_path, capsys):
+    """A second audit: a quick run checked against full-resolution thresholds failed (or passed)
+    them for the resolution alone; and every file's header said it was `make quick`'s."""
+    from simbench.cli import main
+
+    metric = {"table1/white/paper/gt_mae_mm": 0.3}
+    full = write_thresholds(
+        tmp_path / "full.toml", metric, margin=0.25, command="simbench reproduce table1", quick=False
+    )
+    quick = write_thresholds(
+        tmp_path / "quick.toml", metric, margin=0.25, command="simbench reproduce table1 --quick", quick=True
+    )
+    assert full.read_text().startswith("# Regression thresholds for full-resolution runs: ")
+    assert quick.read_text().startswith("# Regression thresholds for quick runs (`--quick`): ")
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    for path, flags, run in ((full, ["--quick"], "quick"), (quick, [], "full")):
+        argv = ["reproduce", "table1", *flags, "--out", str(out), "--cache", str(cache), "--check", str(path)]
+        assert main(argv) == 2
+        assert f"holds thresholds of a {'full' if run == 'quick' else 'quick'} run" in capsys.readouterr().err
+        assert not out.exists() and not cache.exists()  # refused before anything ran
+
+
 def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     measured = {
         "table1/white/paper/gt_mae_mm": 0.3,
@@ -378,11 +400,15 @@ def test_targets_give_the_same_files_alone_after_others_and_on_workers(tmp_path,
     flatness = {p: b for p, b in together.items() if p.name.startswith("flatness")}
     assert len(flatness) >= 3 and flatness == {p: b for p, b in alone.items() if p.name != "metrics.json"}
     distributed = pytest.importorskip("distributed")
+    # the workers' temporary folders go where this test can see them (they were left in /tmp)
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "workers_tmp"))
+    (tmp_path / "workers_tmp").mkdir()
     with (
         distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster,
         distributed.Client(cluster) as client,
     ):
         on_dask = run(["budget", "flatness"], "dask", scheduler=client)
+        assert not list((tmp_path / "workers_tmp").glob("simbench-reproduce-*"))  # each task removed its own
         deadline = time.monotonic() + 10  # the workers' lines come as Dask events, asynchronously
         while not any(m.startswith("flatness done") for m in messages) and time.monotonic() < deadline:
             time.sleep(0.1)

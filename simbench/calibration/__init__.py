@@ -8,10 +8,18 @@ seeded poses, rendered through the sensor model, solved with OpenCV.
 """
 
 from simbench.calibration.poses import Pose, calibration_poses
-from simbench.calibration.procedure import CalibrationResult, CalibrationView, calibrate_rig, rig_errors, true_rig
+from simbench.calibration.procedure import (
+    CalibrationResult,
+    CalibrationView,
+    calibrate_rig,
+    check_calibration,
+    rig_errors,
+    true_rig,
+)
 from simbench.calibration.target import CalibrationTarget, get_target, load_target
 
 __all__ = [
+    "check_calibration",
     "CalibrationTarget",
     "get_target",
     "load_target",

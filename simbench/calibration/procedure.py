@@ -56,6 +56,7 @@ __all__ = [
     "CalibrationView",
     "CalibrationResult",
     "calibrate_rig",
+    "check_calibration",
     "observe_pose",
     "find_corners",
     "projector_points",
@@ -613,6 +614,23 @@ def rig_errors(estimated: Rig, truth: Rig) -> dict[str, float]:
     return out
 
 
+def check_calibration(rig: Rig, *, target: CalibrationTarget, sensor: object | None) -> None:
+    """A ValueError, before any render, when :func:`calibrate_rig` cannot calibrate ``rig`` with
+    ``target`` through ``sensor``: a rig whose lenses are not the sensor model's, a target that
+    looks the same turned by 180 degrees."""
+    from simbench.sim.sensor import check_rig_lens
+
+    if sensor is not None:  # (tests observe poses without one)
+        check_rig_lens(rig, sensor, where=f"the rig to calibrate ({rig.name})")
+    columns, rows = target.squares
+    if (columns + rows) % 2 == 0:  # (a printed chart in a scene may have any counts)
+        raise ValueError(
+            f"calibration target {target.name!r}: squares {[columns, rows]} - give one count even and the other odd: "
+            f"with {columns - 1} x {rows - 1} inner corners the board looks the same turned by 180 degrees, and its "
+            "corners could be found in either order (OpenCV's rule for calibration checkerboards)"
+        )
+
+
 def calibrate_rig(
     rig: Rig,
     *,
@@ -640,17 +658,7 @@ def calibrate_rig(
     distortion : the lens model fitted (:data:`DISTORTION_MODELS`)
     progress : called with (poses done, poses) after each pose
     """
-    from simbench.sim.sensor import check_rig_lens
-
-    if sensor is not None:  # (tests observe poses without one)
-        check_rig_lens(rig, sensor, where=f"the rig to calibrate ({rig.name})")
-    columns, rows = target.squares
-    if (columns + rows) % 2 == 0:  # (a printed chart in a scene may have any counts)
-        raise ValueError(
-            f"calibration target {target.name!r}: squares {[columns, rows]} - give one count even and the other odd: "
-            f"with {columns - 1} x {rows - 1} inner corners the board looks the same turned by 180 degrees, and its "
-            "corners could be found in either order (OpenCV's rule for calibration checkerboards)"
-        )
+    check_calibration(rig, target=target, sensor=sensor)
     plan = calibration_poses(target, rig, count=poses, rng=derive_seed(seed, "calibration/poses"))
     views: list[CalibrationView | None] = [None] * len(plan)
     # Processes sharing the cache (reproduce's workers, which all calibrate the run's rig

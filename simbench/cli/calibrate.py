@@ -22,7 +22,7 @@ from simbench.cli.options import (
 
 
 def _cmd_calibrate(args) -> int:
-    from simbench.calibration import calibrate_rig, get_target, true_rig
+    from simbench.calibration import calibrate_rig, check_calibration, get_target, true_rig
     from simbench.calibration.procedure import DEFAULT_POSES
     from simbench.calibration.report import write_calibration
     from simbench.sim.sensor import get_sensor
@@ -37,7 +37,14 @@ def _cmd_calibrate(args) -> int:
     check_sampler(args.sampler, args.spp)
     check_sampler(args.sampler, args.corner_spp)
     check_output_directory(args.out, manifest="calibration.json", overwrite=args.overwrite)
+    check_calibration(rig, target=target, sensor=sensor)
     variant = select_variant(args.variant)
+    advice = (
+        f"(OpenCV asks for >= {DEFAULT_POSES}): its lens distortion and principal points are poorly determined "
+        "(report.md: its errors against the true rig) - fine for trying the commands, not for results"
+    )
+    if args.poses < DEFAULT_POSES:  # said before minutes of rendering, not after (a second audit)
+        print(f"simbench: warning: a rig from {args.poses} poses {advice}", file=sys.stderr, flush=True)
     cache = cache_of(args)
     render = RenderSettings(spp=args.spp, sampler=args.sampler, max_depth=args.max_depth, cache=cache)
     t0 = time.perf_counter()
@@ -91,13 +98,8 @@ def _cmd_calibrate(args) -> int:
     )
     for key, path in files.items():
         print(f"  {key:9s} {path.name}")
-    if len(result.used_views) < DEFAULT_POSES:
-        print(
-            f"simbench: warning: a rig from {len(result.used_views)} poses (OpenCV asks for >= {DEFAULT_POSES}): its "
-            "lens distortion and principal points are poorly determined (report.md: its errors against the true rig) - "
-            "fine for trying the commands, not for results",
-            file=sys.stderr,
-        )
+    if len(result.used_views) < min(args.poses, DEFAULT_POSES):  # poses the target's corners were not found in
+        print(f"simbench: warning: a rig from {len(result.used_views)} of {args.poses} poses {advice}", file=sys.stderr)
     return 0
 
 

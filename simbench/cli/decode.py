@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from simbench import api
+from simbench.io import ADC_BITS
 from simbench.cli.options import (
     add_pattern_options,
     float_in,
@@ -49,16 +50,16 @@ def _cmd_decode(args) -> int:
 
 
 def _cmd_score(args) -> int:
-    from simbench.io import load_npy
+    from simbench.io import load_depth_map, load_npy
     from simbench.systems.files import recording_manifest_of
     from simbench.metrics import depth_errors, edge_band, implausible_depth, implausible_columns
 
     if args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
-    gt = _depth_map(load_npy(args.gt), args.gt, what="ground truth")
+    gt = _depth_map(load_depth_map(args.gt), args.gt, what="ground truth")
     if not np.isfinite(gt).any():
         raise ValueError(f"{args.gt}: the ground truth has no finite depth: nothing to score against")
-    depth = _depth_map(load_npy(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
+    depth = _depth_map(load_depth_map(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
     gt_dir = Path(args.gt).parent
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
@@ -203,7 +204,7 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--bits",
         type=int,
-        choices=(8, 10, 12, 16),
+        choices=ADC_BITS,
         default=None,
         help="the bits of the camera's ADC, for images that do not record them: a 10- or 12-bit camera's 16-bit "
         "image holds its digital numbers, 0 to 2^bits - 1 (default: a recording's camera, else the image's "
@@ -250,8 +251,10 @@ def add_parsers(sub, kw: dict) -> None:
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth", **kw)
-    s.add_argument("depth", help="depth map .npy (metres, NaN = invalid)")
-    s.add_argument("--gt", required=True, help="ground-truth depth .npy (gt_lit.npy beside it defines the region)")
+    s.add_argument("depth", help="depth map .npy or one-channel .exr (metres, NaN = invalid)")
+    s.add_argument(
+        "--gt", required=True, help="ground-truth depth .npy or .exr (gt_lit.npy beside it defines the region)"
+    )
     s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
     s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")
     s.add_argument("--gt-column", help="true columns .npy (default: gt_column.npy beside --gt)")

@@ -75,7 +75,7 @@ def _cmd_reproduce(args) -> int:
         raise ValueError("--margin applies to --write-thresholds (the margin of the thresholds it writes)")
     margin = 0.25 if args.margin is None else args.margin
     if args.check:
-        check_threshold_names(load_thresholds(args.check), args.targets, path=args.check)
+        check_threshold_names(load_thresholds(args.check), args.targets, path=args.check, quick=args.quick)
     if args.write_thresholds:
         from simbench.io import check_output_file
 
@@ -163,7 +163,14 @@ def _cmd_ablate(args) -> int:
     from simbench.experiments.ablate import BUILTIN_STUDIES, check_sweep, load_sweep, run_sweep
     from simbench.variant import select_variant
 
-    names = list(BUILTIN_STUDIES) if args.sweep == ["builtin"] else args.sweep
+    if "builtin" in args.sweep:
+        named = sorted({n for n in args.sweep if n in BUILTIN_STUDIES})
+        if named or args.sweep.count("builtin") > 1:
+            raise ValueError(
+                f"'builtin' runs every built-in study ({', '.join(named) or 'builtin'} among them, named again): "
+                "give 'builtin' or the studies"
+            )
+    names = [m for n in args.sweep for m in (BUILTIN_STUDIES if n == "builtin" else [n])]
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
     for sweep in sweeps:
         check_sweep(sweep)  # and every run's values

@@ -39,7 +39,7 @@ def _cmd_pattern(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from simbench import api
+    from simbench import api, cache as cache_module
     from simbench.decode import DecoderParams
     from simbench.io import check_output_directory
     from simbench.sim.scene import load_scene
@@ -76,7 +76,7 @@ def _cmd_render(args) -> int:
     def made(kind: str, seconds: float) -> None:
         # progress on a cold render (a minute or more): each entry that took a while to make (a
         # render that fails at once - nothing in view - keeps its one line of error)
-        if seconds >= PROGRESS_MIN_S:
+        if seconds >= cache_module.PROGRESS_MIN_S:
             print(
                 f"simbench: {kind} made in {seconds:.1f} s ({time.perf_counter() - t0:.0f} s so far)",
                 file=sys.stderr,
@@ -114,11 +114,6 @@ def _cmd_render(args) -> int:
     if hasattr(rec.calibration, "reference_map"):  # a system decoding against the scene's reference plane
         _warn_reference_outside_range(scene, rec.meta)
     return 0
-
-
-# render's progress lines: each render cache entry (a path-traced render, ground truth, ...) made
-# in at least this long
-PROGRESS_MIN_S = 1.0
 
 
 def _warn_reference_outside_range(scene, meta: dict) -> None:

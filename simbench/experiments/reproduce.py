@@ -172,13 +172,9 @@ def _worker_start(
 ):
     """A worker's session, made once (systems and calibrations are then shared by the targets it
     runs, as in one process); its progress goes to the parent through ``emit``.  ``out_dir``
-    None (a cluster worker): a temporary folder of its own, whose files :func:`_worker_run`
-    sends back."""
-    if out_dir is None:
-        import tempfile
-
-        out_dir = tempfile.mkdtemp(prefix="simbench-reproduce-")
-    return Session(config, out_dir=out_dir, cache_dir=cache_dir, progress=emit, command=command)
+    None (a cluster worker): each task writes into a temporary folder of its own, whose files
+    :func:`_worker_task` sends back and then removes."""
+    return Session(config, out_dir=out_dir or ".", cache_dir=cache_dir, progress=emit, command=command)
 
 
 def _worker_run(name: str, ship: bool = False, part: tuple | None = None) -> tuple:
@@ -197,6 +193,9 @@ def _worker_task(name: str, ship: bool = False, part: tuple | None = None) -> tu
     bytes}; removed here; a part writes none)."""
     from simbench.experiments.workers import worker_state
 
+    import shutil
+    import tempfile
+
     session = worker_state()
     cache = session.cache
     cache.hits, cache.misses, cache.made = 0, 0, {}
@@ -204,14 +203,24 @@ def _worker_task(name: str, ship: bool = False, part: tuple | None = None) -> tu
         split, index, total, part_name = part
         measured = split.measure_part(session, part_name, index=index, total=total)
         return measured, cache.hits, cache.misses, cache.made, {}
-    metrics = _run_target(session, name)
-    files: dict[str, bytes] = {}
     if ship:
-        for path in sorted(p for p in session.out.rglob("*") if p.is_file()):
-            files[path.relative_to(session.out).as_posix()] = path.read_bytes()
-            path.unlink()
-        for folder in sorted((p for p in session.out.rglob("*") if p.is_dir()), reverse=True):
-            folder.rmdir()  # emptied above, deepest first: the worker's folder holds nothing between targets
+        # the task's own folder, removed whatever happens (a worker's one folder, kept for its
+        # life, was left in /tmp when the worker ended: 82 after a day of tests here)
+        session.out = Path(tempfile.mkdtemp(prefix="simbench-reproduce-"))
+    try:
+        metrics = _run_target(session, name)
+        files = (
+            {
+                p.relative_to(session.out).as_posix(): p.read_bytes()
+                for p in sorted(session.out.rglob("*"))
+                if p.is_file()
+            }
+            if ship
+            else {}
+        )
+    finally:
+        if ship:
+            shutil.rmtree(session.out, ignore_errors=True)
     return metrics, cache.hits, cache.misses, cache.made, files
 
 
@@ -516,8 +525,9 @@ def write_thresholds(
         this = f"# Then for {' '.join(_resolve(targets))}: "
         updates = [line for line in text if line.startswith("# Then for ") and not line.startswith(this)]
         written_by = "\n".join([*header, *updates, this + command])
+    runs = {True: "quick runs (`--quick`)", False: "full-resolution runs", None: "runs"}[quick]
     lines = [
-        "# Regression thresholds for `make quick` (`simbench reproduce all hard_scenes --quick`, run by .ci/run).",
+        f"# Regression thresholds for {runs}: `simbench reproduce TARGETS --check FILE` fails a run outside them.",
         written_by,
         f"# Margin {margin!r}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
         "# stripe-order errors max = measured*(1+margin)+20; their rate and the share of pixels > 5 mm wrong",
@@ -565,13 +575,25 @@ def kept_thresholds(path: str | Path, targets: list[str], *, margin: float, quic
             f"{path}: its margin is {found.group(1)}, not {margin!r}; to change the margin write the whole file "
             f"anew (a run that also makes {held})"
         )
-    written = re.search(r"^# Written by: (.*)$", text, flags=re.M)
-    if quick is not None and written is not None and ("--quick" in written.group(1).split()) != quick:
+    _check_resolution(path, quick)
+    return kept
+
+
+def _check_resolution(path: Path, quick: bool | None) -> None:
+    """A ValueError when thresholds file ``path`` was written by a run of the other resolution
+    than ``quick`` (its header's command; a file that names none is taken as it is)."""
+    if quick is None:
+        return
+    written = re.search(r"^# Written by: (.*)$", Path(path).read_text(encoding="utf-8"), flags=re.M)
+    if (
+        written is not None
+        and written.group(1) != "(not recorded)"
+        and ("--quick" in written.group(1).split()) != quick
+    ):
         raise ValueError(
             f"{path} holds thresholds of a {'full' if quick else 'quick'} run ({written.group(1)}); "
             f"this run is {'quick' if quick else 'full'}"
         )
-    return kept
 
 
 def load_thresholds(path: str | Path) -> dict:
@@ -588,11 +610,17 @@ def load_thresholds(path: str | Path) -> dict:
     return table
 
 
-def check_threshold_names(table: dict, targets: list[str], *, path: str | Path = "thresholds") -> None:
+def check_threshold_names(
+    table: dict, targets: list[str], *, path: str | Path = "thresholds", quick: bool | None = None
+) -> None:
     """Before a run: every metric a thresholds file names must come from one of the targets the
     run makes (``TARGET/.../METRIC``), so a misnamed or unselected metric fails at once rather
     than as "not measured" after the run.  (The parts between the target and the metric depend
-    on what the run makes; they are checked after it, as ``not measured``.)"""
+    on what the run makes; they are checked after it, as ``not measured``.)  ``quick`` given:
+    the file must have been written by a run of that resolution (a quick run checked against
+    full-resolution thresholds fails them, or passes them, for the resolution alone)."""
+    if quick is not None and Path(path).is_file():
+        _check_resolution(Path(path), quick)
     names = set(check_targets(targets))
     for name in table:
         parts = str(name).split("/")

@@ -38,7 +38,7 @@ from simbench.experiments.common import (
     score,
     write_table,
 )
-from simbench.io import atomic_write_text
+from simbench.io import atomic_write_text, camera_full_scale
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
 from simbench.metrics import code_stripes
 from simbench.optics import undistort_image
@@ -137,7 +137,8 @@ def measure_board(session: Session, part: str) -> dict:
     mat = scene.objects[0].material
     placement = session.seeds_used[f"{label}/placement"]
     # on the ground truth's grid: the ideal pinhole's, which the decoder also undistorts to
-    image = undistort_image(cap.raw, cap.scene.rig.camera)
+    # (a 10/12-bit camera's digital numbers at its own full scale, as the decoder reads them)
+    image = undistort_image(camera_full_scale(cap.raw, bits=sub.sensor.camera.bits), cap.scene.rig.camera)
     stripes = code_stripes(image, cap.gt.column_px, pattern=cfg.decoder.pattern, where=cap.gt.lit)
     content = {
         "code1_eq13": stripes["code1_eq13"],

@@ -20,7 +20,8 @@ import os
 import threading
 import uuid
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -111,7 +112,8 @@ def run_tasks(
         when None; the tasks are submitted in the order given, Dask's priority falling with it,
         so the longest given first start first).
     setup : run once in each local worker as ``setup(emit, *setup_args)`` (``emit(str)`` sends a
-        line to ``progress``); what it returns is :func:`worker_state` there.  On Dask, once per
+        line to ``progress``); what it returns is :func:`worker_state` there (with one worker and
+        no ``in_parent``: made in this process for the run, ``emit`` being ``progress``).  On Dask, once per
         worker thread (a worker's threads may run tasks side by side), its lines sent as Dask
         events (:data:`PROGRESS_TOPIC`) that this process passes to ``progress``.
     in_parent : this process takes tasks too, as one of the ``workers``, running
@@ -131,8 +133,9 @@ def run_tasks(
             tasks, fn, scheduler, on_result, variant=variant, setup=setup, setup_args=setup_args, progress=progress
         )
     elif workers <= 1:
-        for task in tasks:
-            on_result(task, run_here(task))
+        with _parent_as_worker(None if in_parent is not None else setup, setup_args, progress):
+            for task in tasks:
+                on_result(task, run_here(task))
     else:
         _run_local(
             tasks,
@@ -146,6 +149,24 @@ def run_tasks(
             in_parent=None if in_parent is None else run_here,
             progress=progress,
         )
+
+
+@contextmanager
+def _parent_as_worker(setup, setup_args: tuple, progress: Callable[[str], None]) -> Iterator[None]:
+    """This process as the one worker: ``setup(progress, *setup_args)`` made its
+    :func:`worker_state` (its lines go straight to ``progress``) while the tasks run here."""
+    if setup is None:
+        yield
+        return
+    had, before = hasattr(_thread, "state"), getattr(_thread, "state", None)
+    _thread.state = setup(progress, *setup_args)
+    try:
+        yield
+    finally:
+        if had:
+            _thread.state = before
+        else:
+            del _thread.state
 
 
 class _Failed:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench import native, validate
+from simbench.io import ADC_BITS
 from simbench.seeds import RngLike
 
 if TYPE_CHECKING:
@@ -65,7 +66,7 @@ class SimpleCamera:
             "exposure": v.number(self.exposure, "exposure", lo=0.0, lo_open=True),
             "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
             "read_noise_e": v.number(self.read_noise_e, "read_noise_e", lo=0.0),
-            "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
+            "bits": v.choice(v.integer(self.bits, "bits"), "bits", ADC_BITS),
             "noise": v.boolean(self.noise, "noise"),
         }
         for name, value in values.items():

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from simbench import validate
-from simbench.io import read_toml
+from simbench.io import ADC_BITS, read_toml
 from simbench.sim.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
 from simbench.sim.camera import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
@@ -144,7 +144,7 @@ class Lens:
 
 def _bits(bits: object) -> int:
     """The ADC's bits, checked (the offset's bound needs them before the other fields)."""
-    return validate.choice(validate.integer(bits, "bits"), "bits", (8, 10, 12, 16))
+    return validate.choice(validate.integer(bits, "bits"), "bits", ADC_BITS)
 
 
 @dataclass(frozen=True)
@@ -193,7 +193,7 @@ class PhysicalCamera:
                 "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
                 "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True, hi=1e7),
                 "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0, hi=1e4),
-                "bits": v.choice(v.integer(self.bits, "bits"), "bits", (8, 10, 12, 16)),
+                "bits": v.choice(v.integer(self.bits, "bits"), "bits", ADC_BITS),
                 "gain_dn_per_e": v.optional(
                     v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True, hi=1e4
                 ),

@@ -233,6 +233,7 @@ class ColourFringeSystem:
     ) -> ReferenceCalibration:
         """Record the reference plane behind ``scene`` (prepared) and, with ``frames`` (default:
         when the decoder unmixes), the calibration frames; seeds from :meth:`reference_label`."""
+        from simbench.io import stored_adc_bits
         from simbench.pattern import calibration_frames
         from simbench.sim.photometry import REFERENCE_ALBEDO
 
@@ -248,7 +249,7 @@ class ColourFringeSystem:
             image=image,
             frames=cal,
             cache=render.cache,
-            adc_bits=self.sensor.camera.bits if self.sensor.camera.bits in (10, 12) else None,
+            adc_bits=stored_adc_bits(self.sensor.camera.bits),
         )
 
     def _record(self, scene: SceneSpec, label: str, *, seeds, render: RenderSettings, pattern_u8=None) -> np.ndarray:

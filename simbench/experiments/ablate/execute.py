@@ -21,15 +21,29 @@ log = logging.getLogger(__name__)
 __all__ = ["run_one", "run_sweep", "WORKER_DIED"]
 
 
-def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
+def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "ablate") -> dict:
     """Render (through the cache), record, decode and score one parameter set.  Returns the
-    metrics and timings, or ``{"error": ...}``; never raises for a bad parameter value."""
+    metrics and timings, or ``{"error": ...}``; never raises for a bad parameter value.
+
+    Its progress (each render cache entry made in at least
+    :data:`simbench.cache.PROGRESS_MIN_S`, calibration poses), its lines starting ``[label]``,
+    goes to the sweep's ``progress`` through the worker's :func:`_run_progress` state; a run
+    called otherwise is silent."""
     t0 = time.perf_counter()
     try:
         import sys
 
+        from simbench import cache as cache_module
         from simbench.experiments.common import Session, score
+        from simbench.experiments.workers import worker_state
         from simbench.variant import select_variant
+
+        emit = worker_state()
+        if not isinstance(emit, _RunProgress):
+            emit = _RunProgress(lambda line: None)
+
+        def say(line: str) -> None:
+            emit.emit(f"[{label}] {line}")
 
         # a Dask worker arrives here without an entry point: choose the variant first (it must
         # steer Dr.Jit's libLLVM before Mitsuba is imported)
@@ -39,8 +53,15 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
         sensor = sensor_for(params)
         config = run_config_for(params, seed=seed, sensor=sensor, decoder=decoder)
         session = Session(
-            config, out_dir=".", cache_dir=cache_dir, progress=lambda s: None, command="simbench ablate", sensor=sensor
+            config, out_dir=".", cache_dir=cache_dir, progress=say, command="simbench ablate", sensor=sensor
         )
+
+        def made(kind: str, seconds: float) -> None:
+            # a cold run renders for minutes: each costly entry made says so (a new user's audit)
+            if seconds >= cache_module.PROGRESS_MIN_S:
+                say(f"{kind} made in {seconds:.1f} s ({time.perf_counter() - t0:.0f} s so far)")
+
+        session.cache.on_made = made
         raw = scene_for(params)
         # every object placed by hand, each with its own seeded error (as Table 1 places its board)
         scene = session.prepare(session.place(raw, "ablate", [o.name for o in raw.objects]))
@@ -79,6 +100,18 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None) -> dict:
             "traceback": traceback.format_exc(limit=4),
             "timing": {"setup_s": time.perf_counter() - t0},
         }
+
+
+class _RunProgress:
+    """A worker's line to the sweep's ``progress`` (the worker pool's ``emit``): the state
+    :func:`_run_progress` makes in every worker, which :func:`run_one` finds there."""
+
+    def __init__(self, emit: Callable[[str], None]) -> None:
+        self.emit = emit
+
+
+def _run_progress(emit: Callable[[str], None]) -> _RunProgress:
+    return _RunProgress(emit)
 
 
 WORKER_DIED = "worker process died twice on this run (killed, or out of memory)"
@@ -152,14 +185,17 @@ def run_sweep(
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``); None = a local
     process pool of ``workers`` processes (1 = in this process).  ``run_fn`` runs one
-    parameter set (:func:`run_one`; another module-level function with its signature can
-    stand in, e.g. to test the runner).  A pool worker that dies costs its runs one retry;
-    a run that kills its worker twice is recorded as failed (:func:`simbench.experiments.workers.run_tasks`).  For
-    :func:`run_one`, every run's values are checked first
+    parameter set (:func:`run_one`; another module-level function with its signature,
+    ``(params, *, seed, cache_dir, label)``, can stand in, e.g. to test the runner).  A pool
+    worker that dies costs its runs one retry; a run that kills its worker twice is recorded as
+    failed (:func:`simbench.experiments.workers.run_tasks`).  ``workers`` > 1 with a
+    ``scheduler`` is refused.  For :func:`run_one`, every run's values are checked first
     (:func:`~simbench.experiments.ablate.mapping.check_sweep`, which builds what it builds): a
     value that cannot run raises ``ValueError`` before anything is run or written.  A stand-in
     ``run_fn`` reads the parameters its own way, and checks them itself.
     """
+    if scheduler is not None and workers > 1:
+        raise ValueError("--workers and --scheduler: choose one (the cluster's workers run the sweep)")
     if run_fn is run_one:
         check_sweep(sweep)
     out = Path(out_dir)
@@ -190,7 +226,14 @@ def run_sweep(
 
     from simbench.experiments.workers import Task, run_tasks
 
-    tasks = [Task(r["key"], (r["params"],), {"seed": r["seed"], "cache_dir": cache}) for r in todo]
+    tasks = [
+        Task(
+            r["key"],
+            (r["params"],),
+            {"seed": r["seed"], "cache_dir": cache, "label": f"ablate {sweep.name} run {r['run']}"},
+        )
+        for r in todo
+    ]
     by_key = {r["key"]: r for r in todo}
     run_tasks(
         tasks,
@@ -198,6 +241,7 @@ def run_sweep(
         workers=workers,
         scheduler=scheduler,
         variant=variant,
+        setup=_run_progress,
         on_result=lambda task, res: finished(by_key[task.key], res),
         on_died=lambda task: finished(by_key[task.key], {"error": WORKER_DIED, "timing": {}}),
         # e.g. Dask's KilledWorker: the cluster retried the run and gave up
