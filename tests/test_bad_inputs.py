@@ -584,6 +584,12 @@ case("decode-reference-missing", lambda d: _decode(d, reference="nope.png"), "no
 case(
     "decode-reference-mode-without-reference", lambda d: _decode(d, reference=None), "--reference", setup=render_folder
 )
+case(  # a third audit: NumPy bytes written under a .png name, exit 0
+    "decode-confidence-not-npy",
+    lambda d: [*_decode(d), "--confidence", str(d / "c.png")],
+    "--confidence must name a .npy file",
+    setup=render_folder,
+)
 case("decode-rig-missing", lambda d: _decode(d, rig="nope.toml"), "nope.toml", setup=render_folder)
 # a second audit: calibrate's --out folder given as the rig read "rig file not found"
 case(

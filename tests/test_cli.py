@@ -2,6 +2,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from simbench.cli import main
@@ -127,6 +128,19 @@ def test_render_decode_score_end_to_end(tmp_path, capsys, monkeypatch, variant, 
         == 0
     )
     assert (tmp_path / "c.ply").is_file() and (tmp_path / "dbg" / "wrapped_phase.npy").is_file()
+    # the cloud's colours on the ideal grid its points are on (the paper camera's lens undistorted)
+    import trimesh
+
+    from simbench.io import load_image
+    from simbench.optics import undistort_image
+    from simbench.rig import load_rig
+
+    cloud = trimesh.load(tmp_path / "c.ply")
+    valid = np.isfinite(np.load(tmp_path / "d.npy"))
+    camera = load_rig(out / "rig.toml").camera
+    assert camera.has_distortion == (sensor == "paper")
+    want = undistort_image(load_image(out / "capture.png"), camera)[valid]
+    assert np.array_equal(np.asarray(cloud.colors)[:, :3], want)
     m = _score_json(capsys, tmp_path / "d.npy", gt=out / "gt_depth.npy", column=tmp_path / "dbg" / "column.npy")
     assert m["mae_mm"] < max_mae_mm and m["completeness"] > 0.99 and m["stripe_order_errors"] == 0
     assert meta["sensor"]["name"] == sensor
@@ -972,3 +986,16 @@ def test_render_warns_of_a_reference_plane_outside_the_working_range(tmp_path, c
     scene.write_text(scene.read_text().replace("2.5", "1.2"))
     assert main(["render", str(scene), "--out", str(tmp_path / "n"), "--spp", "1", "--no-cache"]) == 0
     assert "working range" not in capsys.readouterr().err
+
+
+def test_score_counts_stripe_order_errors_in_the_recordings_period(capsys):
+    """A third audit: `score --column` counted a period-30 recording's columns against 21 px
+    unless --period was given; the recording's meta.json names its pattern."""
+    from simbench.cli.decode import _score_period
+
+    recorded = {"pattern": {"period_px": 30.0}}
+    assert _score_period(None, recorded) == 30.0 and _score_period(None, None) == 21.0
+    assert _score_period(None, {"system": "kinect"}) == 21.0
+    assert _score_period(30.0, recorded) == 30.0 and capsys.readouterr().err == ""
+    assert _score_period(21.0, recorded) == 21.0  # as given, with a word
+    assert "--period 21, but the recording was made with a period of 30 px" in capsys.readouterr().err

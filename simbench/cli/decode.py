@@ -54,7 +54,7 @@ def _cmd_score(args) -> int:
     from simbench.systems.files import recording_manifest_of
     from simbench.metrics import depth_errors, edge_band, implausible_depth, implausible_columns
 
-    if args.period <= 2:
+    if args.period is not None and args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
     gt = _depth_map(load_depth_map(args.gt), args.gt, what="ground truth")
     if not np.isfinite(gt).any():
@@ -63,9 +63,12 @@ def _cmd_score(args) -> int:
     gt_dir = Path(args.gt).parent
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
+    recorded = None
     for p in (Path(args.gt), lit_path, col_gt_path):  # inside a recording folder: as recorded
         if p.is_file():
-            recording_manifest_of(p)
+            meta = recording_manifest_of(p)
+            recorded = meta if p == Path(args.gt) else recorded
+    period = _score_period(args.period, recorded)
     region = _mask(load_npy(lit_path, expected_shape=gt.shape), lit_path) if lit_path.is_file() else np.isfinite(gt)
     other = _not_the_recordings_truth(Path(args.depth), Path(args.gt))
     if other:
@@ -82,7 +85,7 @@ def _cmd_score(args) -> int:
         kw = {
             "column_px": load_npy(args.column, expected_shape=gt.shape),
             "gt_column_px": load_npy(col_gt_path, expected_shape=gt.shape),
-            "period_px": args.period,
+            "period_px": period,
         }
     if kw:
         for warning in implausible_columns(kw["column_px"], kw["gt_column_px"]):
@@ -153,6 +156,24 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
         f"it lies in the recording {depth_path.parent}, whose ground truth is not {gt_path} (another SHA-256): "
         f"scored against another recording's truth? (that recording's is {own})"
     )
+
+
+def _score_period(given: float | None, recorded: dict | None) -> float:
+    """The fringe period stripe-order errors are counted in: ``--period``, else the pattern the
+    ground truth's recording was made with, else the paper's (an audit: a period-30 recording's
+    columns were counted against 21 px)."""
+    from simbench.pattern import PatternSpec
+
+    pattern = (recorded or {}).get("pattern")
+    own = float(pattern["period_px"]) if isinstance(pattern, dict) and "period_px" in pattern else None
+    if given is None:
+        return own if own is not None else PatternSpec().period_px
+    if own is not None and given != own:
+        print(
+            f"simbench: warning: --period {given:g}, but the recording was made with a period of {own:g} px",
+            file=sys.stderr,
+        )
+    return given
 
 
 def _depth_map(a: np.ndarray, path, *, what: str) -> np.ndarray:
@@ -261,8 +282,9 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--period",
         type=float_in(lo=2.0, hi=16384.0, lo_open=True),
-        default=21.0,
-        help="fringe period, projector px (a column off by more than half of it is a stripe-order error)",
+        default=None,
+        help="fringe period, projector px (a column off by more than half of it is a stripe-order error; default: the "
+        "recording's pattern's, else 21)",
     )
     s.add_argument(
         "--edge-band",

@@ -170,6 +170,8 @@ def check_request_paths(request: DecodeRequest) -> None:
         raise ValueError(f"--out must name a .npy file, got {request.out}")
     if request.ply and Path(request.ply).suffix.lower() != ".ply":
         raise ValueError(f"--ply must name a .ply file, got {request.ply}")
+    if confidence_path(request).suffix != ".npy":  # (an audit: NumPy bytes were written as c.png)
+        raise ValueError(f"--confidence must name a .npy file, got {request.confidence}")
     if request.debug_dir and Path(request.debug_dir).exists() and not Path(request.debug_dir).is_dir():
         raise ValueError(f"--debug-dir {request.debug_dir} exists and is not a folder")
 
@@ -232,7 +234,8 @@ def decode_files(request: DecodeRequest) -> str:
     msg = (
         f"decoded {res.valid.mean() * 100:.2f} % of the image's pixels in {res.elapsed_s * 1000:.0f} ms "
         # the decode alone; a user timing the command sees the files read and checked too (an audit)
-        f"({time.perf_counter() - t0:.2f} s with reading the files; {res.summary}) -> {request.out}, confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
+        f"({time.perf_counter() - t0:.2f} s with reading the files; {res.summary}) -> {request.out}, "
+        f"confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
     )
     if request.ply:
         pts = points_from_depth(res.depth_m, res.camera)
