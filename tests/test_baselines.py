@@ -5,6 +5,7 @@ render with Mitsuba and hold the issue's validation checks against published mea
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -239,8 +240,10 @@ def test_recording_files_round_trip(tmp_path, device):
 
     system = get_system(device)
     raw, cal, scene = system.bench_inputs()
-    gt = SimpleNamespace(depth_m=np.full(system.model.camera.size_hw, 1.1, np.float32))
+    hw = system.model.camera.size_hw
+    gt = SimpleNamespace(depth_m=np.full(hw, 1.1, np.float32), lit=np.ones(hw, bool), object_id=np.zeros(hw, np.int16))
     system.write_recording(tmp_path, raw, cal, scene=scene, gt=gt, meta={"seed": 1})
+    assert np.array_equal(np.load(tmp_path / "gt_lit.npy"), gt.lit)  # what `score` reads beside gt_depth.npy
     assert system_of_recording(tmp_path) == device
     other = get_system(device)
     raw2, cal2, scene2 = other.read_recording(tmp_path)
@@ -319,7 +322,7 @@ def test_tof_flying_pixels_at_the_depth_step(variant):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("device", ["kinect", "tof"])
-def test_cli_system_render_decode_score(tmp_path, variant, device):
+def test_cli_system_render_decode_score(tmp_path, capsys, variant, device):
     from simbench.cli import main
 
     assert (
@@ -340,7 +343,19 @@ def test_cli_system_render_decode_score(tmp_path, variant, device):
     assert (
         main(["decode", str(tmp_path / "rec"), "--out", str(tmp_path / "d.npy"), "--ply", str(tmp_path / "c.ply")]) == 0
     )
-    assert main(["score", str(tmp_path / "d.npy"), "--gt", str(tmp_path / "rec" / "gt_depth.npy")]) == 0
+    capsys.readouterr()
+    gt_file = str(tmp_path / "rec" / "gt_depth.npy")
+    assert main(["score", str(tmp_path / "d.npy"), "--gt", gt_file, "--edge-band", "5", "--json"]) == 0
+    # the command line scores what the Python API scores: the lit pixels, off the objects' edges
+    # (a third audit: without gt_lit.npy and gt_object_id.npy in the folder it scored every pixel
+    # with a depth, shadows too - 0.46 against 0.27 mm MAE)
+    import simbench
+
+    rec = simbench.record(SCENES / "discontinuity.toml", system=device, spp=4, cache=".cache/simbench")
+    api = simbench.score(simbench.depth(rec), rec, edge_band_px=5)
+    cli = json.loads(capsys.readouterr().out)
+    assert cli == {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in api.items()}
+    assert np.array_equal(np.load(tmp_path / "rec" / "gt_lit.npy"), rec.gt.lit)
     depth = np.load(tmp_path / "d.npy")
     assert depth.dtype == np.float32 and np.isfinite(depth).mean() > 0.8
     # the confidence map beside the depth, in the system's unit; a threshold above the

@@ -132,6 +132,15 @@ def test_a_reference_of_another_rig_is_refused(tmp_path, capsys):
     assert rc == 2 and "recorded with another rig" in err, err
 
 
+def _truth(shape_hw):
+    """A ground truth of a plane at 1 m, every pixel lit, one object."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(
+        depth_m=np.ones(shape_hw, np.float32), lit=np.ones(shape_hw, bool), object_id=np.zeros(shape_hw, np.int16)
+    )
+
+
 def test_every_systems_folder_is_sealed(tmp_path):
     """A ToF folder had no manifest: a shifted taps.npy or a doubled modulation_hz decoded."""
     from simbench.systems.recording import read_device_info, write_device_recording
@@ -144,7 +153,7 @@ def test_every_systems_folder_is_sealed(tmp_path):
         "tof",
         model,
         {"taps": lambda d: (np.save(d / "taps.npy", taps), d / "taps.npy")[1]},
-        gt_depth_m=np.ones((4, 3), np.float32),
+        gt=_truth((4, 3)),
         info={"modulation_note": "x"},
     )
     read_device_info(tmp_path / "rec", "tof", ToFModel)
@@ -346,7 +355,7 @@ def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
         "tof",
         model,
         {"taps": lambda d: (np.save(d / "taps.npy", taps), d / "taps.npy")[1]},
-        gt_depth_m=np.ones((model.height_px, model.width_px), np.float32),
+        gt=_truth((model.height_px, model.width_px)),
         info={},
     )
     raw, _, _ = get_system("tof").read_recording(tmp_path / "rec")

@@ -90,9 +90,7 @@ class IdealDepthCamera:
         from simbench.io import save_npy
 
         writers = {"depth": lambda d: save_npy(d / "depth.npy", raw)}
-        return write_device_recording(
-            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
-        )
+        return write_device_recording(out_dir, self.name, self.model, writers, gt=gt, info=meta, overwrite=overwrite)
 
     def read_recording(self, in_dir):
         from simbench.systems.recording import read_device_info

@@ -724,9 +724,7 @@ class KinectSystem:
             "reference": lambda d: save_png(d / "reference.png", np.asarray(calibration.reference, np.uint16)),
         }
         info = {**meta, "electrons_per_radiance": calibration.electrons_per_radiance}
-        return write_device_recording(
-            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=info, overwrite=overwrite
-        )
+        return write_device_recording(out_dir, self.name, self.model, writers, gt=gt, info=info, overwrite=overwrite)
 
     def read_recording(self, in_dir):
         """(IR frame, calibration, scene) of a folder written by :meth:`write_recording`; the

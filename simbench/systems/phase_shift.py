@@ -252,9 +252,7 @@ class PhaseShiftSystem:
             "frames": lambda d: save_npy(d / "frames.npy", np.asarray(raw, np.float32)),
             "rig": lambda d: save_rig(scene.rig, d / "rig.toml"),
         }
-        return write_device_recording(
-            out_dir, self.name, self.spec, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
-        )
+        return write_device_recording(out_dir, self.name, self.spec, writers, gt=gt, info=meta, overwrite=overwrite)
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, None, SceneSpec]:
         from simbench.systems.recording import read_device_info

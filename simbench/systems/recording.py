@@ -23,14 +23,16 @@ def write_device_recording(
     model: object,
     writers: dict[str, Callable[[Path], Path]],
     *,
-    gt_depth_m: np.ndarray,
+    gt: object,
     info: dict,
     overwrite: bool = False,
 ) -> dict[str, Path]:
     """Write ``writers`` (key -> function writing one file into the folder it is given and
-    returning its path), ``gt_depth.npy``/``.exr`` (z-depth, m) and ``device.json``
-    (``{"device": name, **model's parameters, **info}``, sealed with every file's SHA-256:
-    :func:`simbench.manifest.seal_manifest`)."""
+    returning its path), the ground truth ``gt`` (:class:`simbench.sim.truth.GroundTruth` at the
+    device's pixels: ``gt_depth.npy``/``.exr``, z-depth in m, ``gt_lit.npy`` and
+    ``gt_object_id.npy``, the region and the objects ``simbench score`` reads beside it, as in
+    the proposed sensor's folder) and ``device.json`` (``{"device": name, **model's parameters,
+    **info}``, sealed with every file's SHA-256: :func:`simbench.manifest.seal_manifest`)."""
     from simbench.io import output_directory, save_exr, save_json, save_npy
     from simbench.systems import RECORDING_MANIFESTS
 
@@ -39,8 +41,13 @@ def write_device_recording(
     with output_directory(out, manifest=RECORDING_MANIFESTS, overwrite=overwrite) as tmp:
         for key, write in writers.items():
             names[key] = write(tmp).name
-        names["gt_depth"] = save_npy(tmp / "gt_depth.npy", gt_depth_m.astype(np.float32)).name
-        names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", gt_depth_m.astype(np.float32)).name
+        depth_m = np.asarray(gt.depth_m, np.float32)
+        names["gt_depth"] = save_npy(tmp / "gt_depth.npy", depth_m).name
+        names["gt_depth_exr"] = save_exr(tmp / "gt_depth.exr", depth_m).name
+        # (without them `score` scored every pixel with a depth, shadows too, and the API only the
+        # lit ones: a third audit found the two 0.46 and 0.27 mm apart on one folder)
+        names["gt_lit"] = save_npy(tmp / "gt_lit.npy", np.asarray(gt.lit, bool)).name
+        names["gt_object_id"] = save_npy(tmp / "gt_object_id.npy", gt.object_id).name
         manifest = seal_manifest(tmp, {"device": name, **asdict(model), **info}, names)
         save_json(tmp / DEVICE_MANIFEST, manifest)
     return {**{k: out / n for k, n in names.items()}, "device": out / DEVICE_MANIFEST}

@@ -483,9 +483,7 @@ class ToFSystem:
         from simbench.io import save_npy
 
         writers = {"taps": lambda d: save_npy(d / "taps.npy", np.asarray(raw, np.float32))}
-        return write_device_recording(
-            out_dir, self.name, self.model, writers, gt_depth_m=gt.depth_m, info=meta, overwrite=overwrite
-        )
+        return write_device_recording(out_dir, self.name, self.model, writers, gt=gt, info=meta, overwrite=overwrite)
 
     def read_recording(self, in_dir):
         from pathlib import Path
