@@ -210,3 +210,34 @@ def test_a_fourth_system_runs_through_table3_and_the_cli(ideal_system, tmp_path,
     assert "ideal depth camera" in capsys.readouterr().out
     depth, gt = np.load(tmp_path / "d.npy"), np.load(rec / "gt_depth.npy")
     assert np.array_equal(np.isfinite(depth), np.isfinite(gt)) and np.nanmax(np.abs(depth - gt)) == 0.0
+
+
+def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, variant):
+    """docs/extending.md: a package's entry point in the group ``simbench.systems`` registers its
+    system in every process - `simbench render --system NAME` in a fresh process takes it (a third
+    audit: register_system alone reaches only the process that calls it, and the docs promised the
+    command line).  The plugin here: a dist-info folder on PYTHONPATH naming this file's ideal
+    depth camera."""
+    import os
+    import subprocess
+    import sys
+
+    site = tmp_path / "site"
+    info = site / "simbench_ideal_plugin-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: simbench-ideal-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[simbench.systems]\nideal_depth = tests.test_systems:IdealDepthCamera\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(root)])}
+    simbench = [str(Path(sys.executable).parent / "simbench")]
+    run = dict(cwd=tmp_path, env=env, capture_output=True, text=True)
+    r = subprocess.run(
+        [*simbench, "render", "--system", "ideal_depth", str(SCENES / "white_plane.toml"), "--out", "rec"], **run
+    )
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "rec" / "device.json").read_text())["device"] == "ideal_depth"
+    r = subprocess.run([*simbench, "decode", "rec", "--out", "d.npy"], **run)
+    assert r.returncode == 0 and "ideal depth camera" in r.stdout, r.stderr
+    # without the plugin: unknown, the registered names listed
+    r = subprocess.run([*simbench, "decode", "rec", "--out", "e.npy"], **{**run, "env": os.environ})
+    assert r.returncode == 2 and "unknown depth system 'ideal_depth'" in r.stderr

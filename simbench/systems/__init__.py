@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,7 +54,10 @@ __all__ = [
     "system_names",
     "system_of_recording",
     "DEFAULT_SYSTEM",
+    "PLUGIN_GROUP",
 ]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -198,14 +202,40 @@ def unregister_system(name: str) -> None:
     _SYSTEMS.pop(name, None)
 
 
+# depth systems other installed packages provide, found when the registry is first read: in the
+# package's pyproject.toml, [project.entry-points."simbench.systems"] my_sensor = "my_package.my_module:MySensor"
+PLUGIN_GROUP = "simbench.systems"
+_plugins_read = False
+
+
+def _read_plugins() -> None:
+    """Register the systems of :data:`PLUGIN_GROUP`'s entry points (once per process), so that
+    another process - ``simbench render --system NAME``, a pool or Dask worker - knows them too;
+    a name already registered keeps its system (with a warning)."""
+    global _plugins_read
+    if _plugins_read:
+        return
+    _plugins_read = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=PLUGIN_GROUP):
+        if ep.name in _SYSTEMS:
+            log.warning("depth system plugin %s = %r ignored: %r is registered already", ep.name, ep.value, ep.name)
+            continue
+        register_system(ep.name, ep.value)
+
+
 def system_names() -> list[str]:
-    """The registered system names, in registration order."""
+    """The registered system names, in registration order (the built-in ones, then those of
+    installed plugins, :data:`PLUGIN_GROUP`, then those registered in this process)."""
+    _read_plugins()
     return list(_SYSTEMS)
 
 
 def get_system(name: str, options: SystemOptions | None = None) -> DepthSystem:
     """The depth system ``name`` built for ``options``; ValueError listing the registered names
     when ``name`` is unknown."""
+    _read_plugins()
     if name not in _SYSTEMS:
         raise ValueError(f"unknown depth system {name!r}; registered: {system_names()}")
     factory = _SYSTEMS[name]
@@ -298,7 +328,7 @@ def system_of_recording(in_dir: str | Path) -> str:
         if path.is_file():
             info = json_object(path)  # its seal is checked by the system's reader
             name = info.get("system", info.get("device", DEFAULT_SYSTEM))
-            if not isinstance(name, str) or name not in _SYSTEMS:
+            if not isinstance(name, str) or name not in system_names():
                 raise ValueError(f"{path}: unknown depth system {name!r}; registered: {system_names()}")
             return name
     raise FileNotFoundError(
