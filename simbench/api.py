@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from simbench.decode import DecoderParams
     from simbench.pattern import PatternSpec
     from simbench.sim.scene import SceneSpec
+    from simbench.sim.sensor import SensorModel
     from simbench.systems import Recording, SystemDepth
 
 __all__ = ["Recorded", "record", "depth", "score", "DEFAULT_CACHE"]
@@ -68,6 +69,8 @@ class Recorded:
     # what the system's folder records about it (meta.json / device.json):
     # :meth:`simbench.systems.DepthSystem.write_recording` writes it with the frames
     meta: dict = field(default_factory=dict)
+    # the sensor model it was recorded through (None: the preset settings["sensor"] names)
+    sensor: SensorModel | None = None
 
     @property
     def raw(self) -> np.ndarray:
@@ -115,7 +118,7 @@ def record(
     scene: str | Path | SceneSpec,
     *,
     system: str = "proposed",
-    sensor: str | None = None,
+    sensor: str | Path | SensorModel | None = None,
     seed: int | None = None,
     spp: int | None = None,
     sampler: str | None = None,
@@ -127,7 +130,9 @@ def record(
 ) -> Recorded:
     """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
     ``system`` (:func:`simbench.systems.system_names`), the proposed one through the sensor model
-    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor` or a TOML file; None = ``paper``).
+    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor`, a TOML file or a
+    :class:`simbench.sim.sensor.SensorModel`, e.g. one of :func:`simbench.sim.sensor.with_effects`;
+    None = ``paper``).
     A ``sensor``, ``pattern`` or ``calibration_frames`` that the system does not record with
     (:attr:`simbench.systems.SystemInfo.recording_options`: the competitors carry their own
     devices) is a ``ValueError``.
@@ -146,7 +151,7 @@ def record(
     ((960, 1280, 3), dtype('uint8'))
     """
     from simbench.decode import DecoderParams
-    from simbench.sim.sensor import check_rig_lens, get_sensor
+    from simbench.sim.sensor import SensorModel, check_rig_lens, get_sensor
     from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
     from simbench.sim.scene import load_scene
     from simbench.seeds import DEFAULT_SEED, SeedLog
@@ -170,9 +175,14 @@ def record(
         "pattern": pattern is not None,
         "calibration_frames": bool(calibration_frames),
     }
-    sensor = "paper" if sensor is None else sensor
-    sensor_model = get_sensor(sensor)
+    sensor_model = sensor if isinstance(sensor, SensorModel) else get_sensor("paper" if sensor is None else sensor)
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
+    if pattern is None and system == "proposed":
+        # the paper's pattern at the scene's projector, as `simbench render` makes it (a scene
+        # with a projector of its own size was refused: "pattern size (1140, 1824) differs")
+        from simbench.pattern import pattern_from_options
+
+        pattern = pattern_from_options(spec.rig.projector.size_hw)
     options = SystemOptions(sensor=sensor_model, decoder=None if pattern is None else DecoderParams(pattern=pattern))
     the_system = get_system(system, options)
     info = the_system.info()
@@ -191,7 +201,10 @@ def record(
     store = cache if isinstance(cache, RenderCache) else RenderCache(None if cache is None else str(cache))
     settings = {
         "system": system,
-        "sensor": sensor,
+        # (a system that carries its own device records with no sensor model of ours)
+        "sensor": (sensor_model.name if isinstance(sensor, SensorModel) else str(sensor or "paper"))
+        if takes is None or "sensor" in takes
+        else None,
         "seed": seed,
         "spp": spp,
         "sampler": sampler,
@@ -215,7 +228,7 @@ def record(
         from simbench.systems import Recording
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
-        return Recorded(system, rec, calibration, settings, meta=acq.meta)
+        return Recorded(system, rec, calibration, settings, meta=acq.meta, sensor=sensor_model)
     seeds = SeedLog(seed)
     render_settings = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=store)
     prepared = the_system.prepare(spec)
@@ -231,7 +244,7 @@ def record(
         "seeds": dict(seeds.used),
         "variant": used_variant,
     }
-    return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta)
+    return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta, sensor=sensor_model)
 
 
 def _pattern_words(pattern: PatternSpec) -> str:
@@ -274,7 +287,7 @@ def depth(
             min_confidence, "min_confidence", lo=MIN_CONFIDENCE_RANGE[0], hi=MIN_CONFIDENCE_RANGE[1]
         )
     rec = recorded.recording
-    options = SystemOptions(sensor=get_sensor(recorded.settings.get("sensor", "paper")))
+    options = SystemOptions(sensor=recorded.sensor or get_sensor(recorded.settings.get("sensor") or "paper"))
     if recorded.system == "proposed":
         system = get_system("proposed", options)
         # the pattern it was recorded with (an audit: a period-30 recording was decoded with the

@@ -77,12 +77,16 @@ def choose_variant(
     if requested:
         if requested not in available:
             raise ValueError(f"unknown Mitsuba variant {requested!r}; available: {available}")
+        # simbench renders three primaries as RGB channels (spectral and polarised variants
+        # return other layouts); a CUDA variant needs a GPU, an LLVM one libLLVM
+        usable = [
+            v
+            for v in available
+            if v.endswith("_rgb") and (cuda or not v.startswith("cuda_")) and (llvm_ok or not v.startswith("llvm_"))
+        ]
         if requested.startswith("cuda_") and not cuda:
-            raise ValueError(f"variant {requested} needs a CUDA GPU, and none is usable here; available: {available}")
+            raise ValueError(f"variant {requested} needs a CUDA GPU, and none is usable here; usable here: {usable}")
         if not requested.endswith("_rgb"):
-            # simbench renders three primaries as RGB channels (spectral and polarised variants
-            # return other layouts)
-            usable = [v for v in available if v.endswith("_rgb") and (cuda or not v.startswith("cuda_"))]
             raise ValueError(f"variant {requested}: simbench renders in an RGB variant; usable here: {usable}")
         if requested.startswith("llvm_") and not llvm_ok:
             raise ValueError(

@@ -109,6 +109,29 @@ def test_min_confidence_is_the_decoders_own_threshold():
     )
 
 
+def test_record_takes_a_sensor_model_object(tmp_path, variant):
+    """A third audit: a SensorModel (with_effects makes them) was refused as a preset name with a
+    repr of hundreds of characters; a system with its own device records 'sensor': None, not
+    'paper'.  A tiny rig and 1 spp: the sensor model is the claim, not the picture."""
+    import dataclasses
+
+    import simbench
+    from simbench.sim.sensor import get_sensor
+    from simbench.systems import get_system
+
+    from .test_bad_inputs import PLANE, TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text('rig = "rig.toml"\n' + PLANE)
+    model = dataclasses.replace(get_sensor("minimal"), name="mine")
+    rec = simbench.record(tmp_path / "s.toml", sensor=model, spp=1, cache=None)
+    assert rec.sensor is model and rec.settings["sensor"] == "mine" and rec.meta["sensor"]["name"] == "mine"
+    assert simbench.depth(rec).depth_m.shape == (120, 160)
+    assert rec.pattern.size_hw == (285, 456)  # the paper's pattern at the scene's projector, as `render` makes it
+    assert simbench.record(tmp_path / "s.toml", spp=1, cache=None).settings["sensor"] == "paper"
+    assert get_system("kinect").info().recording_options is not None  # (so a Kinect's 'sensor' is None)
+
+
 def test_depth_refuses_what_it_cannot_do():
     import simbench
 

@@ -113,8 +113,10 @@ def test_variants_that_cannot_render_here_are_refused_with_one_line():
     available) were an ImportError and a RuntimeError, exit 1."""
     from simbench.variant import choose_variant
 
-    with pytest.raises(ValueError, match="needs a CUDA GPU"):
+    with pytest.raises(ValueError, match="needs a CUDA GPU") as err:
         choose_variant("cuda_ad_rgb", available=ALL, llvm_version=(19, 1, 0), cuda=False)
+    # what it lists can run here (a third audit: the CUDA variants were listed as "available")
+    assert "cuda_" not in str(err.value).split("usable here:")[1] and "llvm_ad_rgb" in str(err.value)
     assert choose_variant("cuda_ad_rgb", available=ALL, llvm_version=None, cuda=True)[0] == "cuda_ad_rgb"
     with pytest.raises(ValueError, match="RGB variant; usable here: .*scalar_rgb"):
         choose_variant("scalar_spectral", available=[*ALL, "scalar_spectral"], llvm_version=(19, 1, 0), cuda=False)
