@@ -247,11 +247,10 @@ def record(
     return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta, sensor=sensor_model)
 
 
-def _pattern_words(pattern: PatternSpec) -> str:
-    codes = "".join(map(str, pattern.codes()))
-    return (
-        f"period {pattern.period_px:g} px, order {pattern.order}, codes {codes[:24]}{'...' if len(codes) > 24 else ''}"
-    )
+def _same_codes(pattern: PatternSpec) -> PatternSpec:
+    """``pattern`` with its sequence as the codes it projects (the default De Bruijn sequence
+    given explicitly and left None project the same pattern)."""
+    return dataclasses.replace(pattern, sequence=tuple(int(c) for c in pattern.codes()))
 
 
 def depth(
@@ -268,11 +267,14 @@ def depth(
     colour-robust decoder at its operating point; needs ``record(..., calibration_frames=True)``)
     or a :class:`simbench.decode.DecoderParams`; ``mode`` ``"reference"`` (default: the reference
     plane, paper Sec. 5.4) or ``"calibrated"`` (triangulation with the rig, Eq. 15).
-    ``min_confidence`` turns pixels below it into holes (every system; in the system's own unit,
-    :attr:`simbench.systems.SystemInfo.confidence`).
+    ``min_confidence``: the operating point, pixels below it holes (every system; in the system's
+    own unit, :attr:`simbench.systems.SystemInfo.confidence`); for the proposed sensor the
+    decoder's own threshold, as ``simbench decode --min-confidence`` sets it - in [0, 1e4], and
+    below the colour-robust decoder's default (3) it keeps more pixels, not fewer.
     """
     from simbench.decode import DecoderParams, robust_params
     from simbench.decode.pipeline import code_order_doubt, without_depth
+    from simbench.systems.proposed import describe_pattern
     from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemDepth, SystemOptions, get_system
 
@@ -300,10 +302,11 @@ def depth(
             params = robust_params(params) if decoder == "robust" else params
         else:
             params = decoder
-            if params.pattern != pattern:
+            if _same_codes(params.pattern) != _same_codes(pattern):
+                recorded_as = "the one recorded" if recorded.pattern else "the paper's (no pattern recorded)"
                 raise ValueError(
-                    f"the decoder's pattern ({_pattern_words(params.pattern)}) is not the one recorded "
-                    f"({_pattern_words(pattern)}): decode with dataclasses.replace(params, pattern=recorded.pattern)"
+                    f"the decoder's pattern ({describe_pattern(params.pattern)}) is not {recorded_as} "
+                    f"({describe_pattern(pattern)}): decode with dataclasses.replace(params, pattern=recorded.pattern)"
                 )
         if min_confidence is not None:
             # the decode's own threshold, as `simbench decode --min-confidence` sets it (an audit:

@@ -207,7 +207,8 @@ def test_decode_writes_the_confidence_beside_the_depth_and_applies_the_operating
     for bad, match in (
         (["--confidence", str(tmp_path / "e.npy")], "--confidence"),
         (["--min-confidence", "-1"], "--min-confidence"),
-        (["--confidence", args[0]], "input"),
+        (["--confidence", args[0]], "--confidence must name a .npy file"),  # the capture: refused, untouched
+        (["--confidence", str(tmp_path / "c.png")], "--confidence must name a .npy file"),
     ):
         assert main([*argv[:-2], *bad]) == 2
         assert match in capsys.readouterr().err
@@ -995,7 +996,8 @@ def test_score_counts_stripe_order_errors_in_the_recordings_period(capsys):
 
     recorded = {"pattern": {"period_px": 30.0}}
     assert _score_period(None, recorded) == 30.0 and _score_period(None, None) == 21.0
-    assert _score_period(None, {"system": "kinect"}) == 21.0
+    assert _score_period(None, {"device": "kinect"}) == 21.0
+    assert _score_period(None, {"device": "phase_shift", "period_px": 18}) == 18.0
     assert _score_period(30.0, recorded) == 30.0 and capsys.readouterr().err == ""
     assert _score_period(21.0, recorded) == 21.0  # as given, with a word
     assert "--period 21, but the recording was made with a period of 30 px" in capsys.readouterr().err

@@ -126,6 +126,16 @@ def test_a_check_against_thresholds_of_the_other_resolution_is_refused_before_th
         tmp_path / "quick.toml", metric, margin=0.25, command="simbench reproduce table1 --quick", quick=True
     )
     assert full.read_text().startswith("# Regression thresholds for full-resolution runs: ")
+    # the header says it, whatever the command recorded (the review: `python -m simbench` recorded
+    # no --quick, and its own file was refused)
+    from simbench.experiments.reproduce import check_threshold_names, load_thresholds
+
+    bare = write_thresholds(
+        tmp_path / "bare.toml", metric, margin=0.25, command="simbench reproduce table1", quick=True
+    )
+    check_threshold_names(load_thresholds(bare), ["table1"], path=bare, quick=True)
+    with pytest.raises(ValueError, match=r"thresholds of a quick run \(its header: quick runs\); this run is full"):
+        check_threshold_names(load_thresholds(bare), ["table1"], path=bare, quick=False)
     assert quick.read_text().startswith("# Regression thresholds for quick runs (`--quick`): ")
     out, cache = tmp_path / "out", tmp_path / "cache"
     for path, flags, run in ((full, ["--quick"], "quick"), (quick, [], "full")):

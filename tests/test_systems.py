@@ -226,7 +226,9 @@ def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, 
     info = site / "simbench_ideal_plugin-0.1.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: simbench-ideal-plugin\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text("[simbench.systems]\nideal_depth = tests.test_systems:IdealDepthCamera\n")
+    (info / "entry_points.txt").write_text(
+        "[simbench.systems]\nideal_depth = tests.test_systems:IdealDepthCamera\nmy-sensor = nowhere:Nothing\n"
+    )
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(root)])}
     simbench = [str(Path(sys.executable).parent / "simbench")]
@@ -235,6 +237,8 @@ def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, 
         [*simbench, "render", "--system", "ideal_depth", str(SCENES / "white_plane.toml"), "--out", "rec"], **run
     )
     assert r.returncode == 0, r.stderr
+    # a broken plugin beside it is named and left out; the rest of simbench works
+    assert "depth system plugin my-sensor = 'nowhere:Nothing' of simbench-ideal-plugin ignored" in r.stderr
     assert json.loads((tmp_path / "rec" / "device.json").read_text())["device"] == "ideal_depth"
     r = subprocess.run([*simbench, "decode", "rec", "--out", "d.npy"], **run)
     assert r.returncode == 0 and "ideal depth camera" in r.stdout, r.stderr

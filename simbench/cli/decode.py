@@ -149,7 +149,7 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
         return ""
     if meta is None or "gt_depth" not in meta.get("sha256", {}):
         return ""
-    if file_sha256(gt_path) == meta["sha256"]["gt_depth"]:
+    if file_sha256(gt_path) in {meta["sha256"].get(k) for k in ("gt_depth", "gt_depth_exr")}:  # .npy or .exr
         return ""
     own = depth_path.parent / meta["files"]["gt_depth"]
     return (
@@ -164,8 +164,11 @@ def _score_period(given: float | None, recorded: dict | None) -> float:
     columns were counted against 21 px)."""
     from simbench.pattern import PatternSpec
 
-    pattern = (recorded or {}).get("pattern")
-    own = float(pattern["period_px"]) if isinstance(pattern, dict) and "period_px" in pattern else None
+    recorded = recorded or {}
+    pattern = recorded.get("pattern")
+    # the proposed sensor's pattern, or a device's own period (the phase-shift system's device.json)
+    own = pattern.get("period_px") if isinstance(pattern, dict) else recorded.get("period_px")
+    own = float(own) if isinstance(own, (int, float)) and not isinstance(own, bool) else None
     if given is None:
         return own if own is not None else PatternSpec().period_px
     if own is not None and given != own:

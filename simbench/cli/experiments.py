@@ -101,10 +101,12 @@ def _cmd_reproduce(args) -> int:
         config = replace(config, decoder=with_assignments(config.decoder, args.decoder))
     out = args.out or ("results/quick" if args.quick else "results")
     select_variant(args.variant)
+    # the command as typed (`simbench ...` or `python -m simbench ...`); called from Python, what
+    # the options make of it (--quick among them: a thresholds file records its runs' resolution)
     command = (
         "simbench " + " ".join(sys.argv[1:])
-        if sys.argv[0].endswith("simbench")
-        else "simbench reproduce " + " ".join(args.targets)
+        if sys.argv[1:2] == ["reproduce"]
+        else "simbench reproduce " + " ".join(args.targets) + (" --quick" if args.quick else "")
     )
     metrics = reproduce(
         args.targets,
@@ -185,7 +187,7 @@ def _cmd_ablate(args) -> int:
     select_variant(args.variant)
     command = (
         "simbench ablate " + " ".join(sys.argv[2:])
-        if sys.argv[0].endswith("simbench")
+        if sys.argv[1:2] == ["ablate"]
         else "simbench ablate " + " ".join(args.sweep)
     )
     for sweep in sweeps:

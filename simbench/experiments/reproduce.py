@@ -585,17 +585,23 @@ def kept_thresholds(path: str | Path, targets: list[str], *, margin: float, quic
 
 def _check_resolution(path: Path, quick: bool | None) -> None:
     """A ValueError when thresholds file ``path`` was written by a run of the other resolution
-    than ``quick`` (its header's command; a file that names none is taken as it is)."""
+    than ``quick`` (its header says which; a file that does not is taken as it is)."""
     if quick is None:
         return
-    written = re.search(r"^# Written by: (.*)$", Path(path).read_text(encoding="utf-8"), flags=re.M)
-    if (
-        written is not None
-        and written.group(1) != "(not recorded)"
-        and ("--quick" in written.group(1).split()) != quick
-    ):
+    text = Path(path).read_text(encoding="utf-8")
+    # the header's first line names the runs (:func:`write_thresholds`); a file written before it
+    # did, by the command that wrote it
+    header = re.search(r"^# Regression thresholds for (quick|full-resolution) runs", text, flags=re.M)
+    written = re.search(r"^# Written by: (.*)$", text, flags=re.M)
+    if header is not None:
+        theirs, what = header.group(1) == "quick", f"its header: {header.group(1)} runs"
+    elif written is not None and written.group(1) != "(not recorded)":
+        theirs, what = "--quick" in written.group(1).split(), written.group(1)
+    else:
+        return
+    if theirs != quick:
         raise ValueError(
-            f"{path} holds thresholds of a {'full' if quick else 'quick'} run ({written.group(1)}); "
+            f"{path} holds thresholds of a {'quick' if theirs else 'full'} run ({what}); "
             f"this run is {'quick' if quick else 'full'}"
         )
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import logging
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -206,6 +207,7 @@ def unregister_system(name: str) -> None:
 # package's pyproject.toml, [project.entry-points."simbench.systems"] my_sensor = "my_package.my_module:MySensor"
 PLUGIN_GROUP = "simbench.systems"
 _plugins_read = False
+_plugins_lock = threading.Lock()
 
 
 def _read_plugins() -> None:
@@ -215,19 +217,32 @@ def _read_plugins() -> None:
     global _plugins_read
     if _plugins_read:
         return
-    _plugins_read = True
-    from importlib.metadata import entry_points
+    with _plugins_lock:  # (a Dask worker's threads may ask at once)
+        if _plugins_read:
+            return
+        from importlib.metadata import entry_points
 
-    for ep in entry_points(group=PLUGIN_GROUP):
-        if ep.name in _SYSTEMS:
-            log.warning("depth system plugin %s = %r ignored: %r is registered already", ep.name, ep.value, ep.name)
-            continue
-        register_system(ep.name, ep.value)
+        for ep in entry_points(group=PLUGIN_GROUP):
+            package = getattr(ep.dist, "name", None) or "an installed package"
+            if ep.name in _SYSTEMS:
+                log.warning(
+                    "depth system plugin %s = %r of %s ignored: %r is registered already",
+                    ep.name,
+                    ep.value,
+                    package,
+                    ep.name,
+                )
+                continue
+            try:
+                register_system(ep.name, ep.value)
+            except ValueError as exc:  # one broken plugin does not stop the others, nor simbench
+                log.warning("depth system plugin %s = %r of %s ignored: %s", ep.name, ep.value, package, exc)
+        _plugins_read = True
 
 
 def system_names() -> list[str]:
-    """The registered system names, in registration order (the built-in ones, then those of
-    installed plugins, :data:`PLUGIN_GROUP`, then those registered in this process)."""
+    """The registered system names, in registration order (the built-in ones first; installed
+    plugins' (:data:`PLUGIN_GROUP`) join when the registry is first read)."""
     _read_plugins()
     return list(_SYSTEMS)
 
