@@ -16,6 +16,12 @@ from simbench.systems.files import DecodeRequest, confidence_path, decode_files
 from .test_systems import IdealDepthCamera
 
 
+def _float_image(path: str) -> np.ndarray:
+    from simbench.io import load_image
+
+    return load_image(path).astype(np.float32) / 255
+
+
 def _plane_images(tmp_path: Path) -> dict:
     """A synthetic capture of a plane at 1.1 m, its reference plane at 1.0 m and the rig."""
     from simbench.io import save_png
@@ -64,9 +70,13 @@ def test_an_image_without_a_rig_or_reference_is_refused_before_anything_is_writt
         decode_files(DecodeRequest(capture=inputs["capture"], rig=inputs["rig"], out=str(tmp_path / "d.npy")))
     with pytest.raises(ValueError, match="--out must name a .npy file"):
         decode_files(DecodeRequest(out=str(tmp_path / "d.png"), **inputs))
-    with pytest.raises(ValueError, match="is a file of the recording being decoded \\(or an input\\)"):
+    with pytest.raises(ValueError, match="--confidence must name a .npy file"):  # an input: refused, untouched
         decode_files(DecodeRequest(out=str(tmp_path / "d.npy"), confidence=inputs["reference"], **inputs))
-    assert not list(tmp_path.glob("*.npy"))
+    np.save(tmp_path / "capture.npy", _float_image(inputs["capture"]))
+    float_inputs = {**inputs, "capture": str(tmp_path / "capture.npy")}
+    with pytest.raises(ValueError, match="is a file of the recording being decoded \\(or an input\\)"):
+        decode_files(DecodeRequest(out=str(tmp_path / "d.npy"), confidence=float_inputs["capture"], **float_inputs))
+    assert [p.name for p in tmp_path.glob("*.npy")] == ["capture.npy"]
 
 
 def test_calibrated_mode_needs_no_reference(tmp_path):
@@ -122,7 +132,7 @@ def ideal_folder(tmp_path):
 
 def test_a_folder_decodes_its_system_way_and_refuses_the_colour_fringe_options(ideal_folder, tmp_path):
     msg = decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "d.npy")))
-    assert "(ideal depth camera)" in msg
+    assert "; ideal depth camera)" in msg
     depth = np.load(tmp_path / "d.npy")
     assert np.isnan(depth[:10]).all() and (depth[10:] == np.float32(1.2)).all()
     assert (np.load(tmp_path / "d_confidence.npy") == 0).all()  # no confidence map: zeros
