@@ -27,7 +27,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
 
     Its progress (each render cache entry made in at least
     :data:`simbench.cache.PROGRESS_MIN_S`, calibration poses), its lines starting ``[label]``,
-    goes to the sweep's ``progress`` through the worker's :func:`_run_progress` state; a run
+    goes to the sweep's ``progress`` through the worker's :class:`_RunProgress` state; a run
     called otherwise is silent."""
     t0 = time.perf_counter()
     try:
@@ -103,15 +103,11 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
 
 
 class _RunProgress:
-    """A worker's line to the sweep's ``progress`` (the worker pool's ``emit``): the state
-    :func:`_run_progress` makes in every worker, which :func:`run_one` finds there."""
+    """A worker's line to the sweep's ``progress`` (the worker pool's ``emit``): the pool's
+    setup, so the state every worker holds, which :func:`run_one` finds there."""
 
     def __init__(self, emit: Callable[[str], None]) -> None:
         self.emit = emit
-
-
-def _run_progress(emit: Callable[[str], None]) -> _RunProgress:
-    return _RunProgress(emit)
 
 
 WORKER_DIED = "worker process died twice on this run (killed, or out of memory)"
@@ -241,7 +237,7 @@ def run_sweep(
         workers=workers,
         scheduler=scheduler,
         variant=variant,
-        setup=_run_progress,
+        setup=_RunProgress,
         on_result=lambda task, res: finished(by_key[task.key], res),
         on_died=lambda task: finished(by_key[task.key], {"error": WORKER_DIED, "timing": {}}),
         # e.g. Dask's KilledWorker: the cluster retried the run and gave up
