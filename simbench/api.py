@@ -69,7 +69,8 @@ class Recorded:
     # what the system's folder records about it (meta.json / device.json):
     # :meth:`simbench.systems.DepthSystem.write_recording` writes it with the frames
     meta: dict = field(default_factory=dict)
-    # the sensor model it was recorded through (None: the preset settings["sensor"] names)
+    # the sensor model the proposed sensor records through (record() sets it; a Recorded made by
+    # hand without it: the preset settings["sensor"] names)
     sensor: SensorModel | None = None
 
     @property
@@ -139,7 +140,8 @@ def record(
 
     ``calibration_frames``: the proposed sensor also records the reference plane under black and
     each primary, which the colour-robust decoder needs.  ``pattern``: what the proposed sensor
-    projects (default: the paper's; the other systems project their own).  ``cache``: the render
+    projects (default: the paper's, at the scene projector's size, as ``simbench render`` makes it;
+    the other systems project their own).  ``cache``: the render
     cache folder or a :class:`simbench.cache.RenderCache` (None: render everything, store
     nothing).
 

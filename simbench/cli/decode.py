@@ -78,6 +78,8 @@ def _cmd_score(args) -> int:
         raise ValueError(f"--edge-band must be >= 0, got {args.edge_band}")
     if args.edge_band > 0:
         obj_path = gt_dir / "gt_object_id.npy"
+        if obj_path.is_file():  # inside a recording folder: as recorded, as the files above
+            recording_manifest_of(obj_path)
         obj = load_npy(obj_path, expected_shape=gt.shape) if obj_path.is_file() else None
         exclude = edge_band(gt, object_id=obj, band_px=args.edge_band)
     kw = {}
@@ -286,8 +288,8 @@ def add_parsers(sub, kw: dict) -> None:
         "--period",
         type=float_in(lo=2.0, hi=16384.0, lo_open=True),
         default=None,
-        help="fringe period, projector px (a column off by more than half of it is a stripe-order error; default: the "
-        "recording's pattern's, else 21)",
+        help="fringe period, projector px (a column off by more than half of it is a stripe-order error; default: that "
+        "of the recording --gt lies in - its pattern's, or a phase-shift folder's - else 21)",
     )
     s.add_argument(
         "--edge-band",

@@ -165,6 +165,8 @@ def _cmd_ablate(args) -> int:
     from simbench.experiments.ablate import BUILTIN_STUDIES, check_sweep, load_sweep, run_sweep
     from simbench.variant import select_variant
 
+    if args.scheduler is not None and args.workers > 1:  # before --fresh forgets a run log
+        raise ValueError("--workers and --scheduler: choose one (the cluster's workers run the sweep)")
     if "builtin" in args.sweep:
         named = sorted({n for n in args.sweep if n in BUILTIN_STUDIES})
         if named or args.sweep.count("builtin") > 1:
@@ -321,10 +323,13 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4"
     )
-    s.add_argument("--check", help="thresholds TOML: exit 1 when a metric is worse")
+    s.add_argument(
+        "--check", help="thresholds TOML: exit 1 when a metric is worse (one of the other resolution is refused)"
+    )
     s.add_argument(
         "--write-thresholds",
-        help="write a thresholds TOML from this run's metrics (an existing file keeps its other targets' entries)",
+        help="write a thresholds TOML from this run's metrics (an existing file keeps its other targets' entries; it "
+        "must be of this run's resolution and margin)",
     )
     s.add_argument(
         "--margin",
@@ -365,9 +370,14 @@ def add_parsers(sub, kw: dict) -> None:
         help="run ablation sweeps (TOML files or built-in study names; 'builtin' = all built-in studies)",
         **kw,
     )
-    s.add_argument("sweep", nargs="+", help="sweep TOML file(s), built-in study name(s), or 'builtin'")
+    s.add_argument(
+        "sweep",
+        nargs="+",
+        help="sweep TOML file(s) and built-in study name(s); 'builtin' (beside files, not beside its own studies) = "
+        "every built-in study",
+    )
     s.add_argument("--out", default="results/ablations", help="output folder")
-    s.add_argument("--workers", type=int_in(1, 256), default=1, help="local worker processes")
+    s.add_argument("--workers", type=int_in(1, 256), default=1, help="local worker processes (not with --scheduler)")
     s.add_argument("--fresh", action="store_true", help="forget finished runs (the run log) and redo every run")
     s.add_argument(
         "--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead"

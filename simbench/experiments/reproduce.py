@@ -516,8 +516,9 @@ def write_thresholds(
     too - its entries of other targets are kept (as ``metrics.json`` keeps their metrics), so that
     an intended change to one target re-derives that target's thresholds only; the header keeps
     the command that wrote the file and adds this one.  The file's margin must be ``margin``.  A
-    run of every target writes it anew.  ``quick``: whether the run was ``--quick`` (a file of the
-    other resolution keeps no entries of this one: :func:`kept_thresholds`)."""
+    run of every target writes it anew.  ``quick``: whether the run was ``--quick`` (the header's
+    first line names the runs the file is for; a file of the other resolution that would keep
+    entries is refused: :func:`kept_thresholds`)."""
     from simbench import validate
 
     path = Path(path)
