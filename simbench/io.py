@@ -359,6 +359,13 @@ def check_output_folder(path: str | Path, *, what: str = "output") -> Path:
         raise ValueError(f"{what}: {d} is a file, so {path} cannot be created")
     if not os.access(d, os.W_OK | os.X_OK):
         raise ValueError(f"{what}: cannot write in {d} (permission denied or a read-only file system)")
+    # os.access passes for root where a write still fails (/proc, /sys, some network mounts): a probe
+    try:
+        fd, probe = tempfile.mkstemp(dir=d, prefix=".simbench-probe-")
+    except OSError as exc:
+        raise ValueError(f"{what}: cannot write in {d} ({exc.strerror or exc})") from None
+    os.close(fd)
+    os.unlink(probe)
     return path
 
 

@@ -732,6 +732,13 @@ case(
     "is a folder",
     setup=lambda d: (render_folder(d), (d / "p.ply").mkdir()),
 )
+if Path("/proc/self").is_dir():  # Linux: os.access lets root "write" in /proc, where no file can be made
+    case(
+        "decode-ply-in-proc",
+        lambda d: _decode(d, "--ply", "/proc/x.ply"),
+        "--ply: cannot write in /proc",
+        setup=lambda d: render_folder(d),
+    )
 case(
     "decode-out-is-a-folder",
     lambda d: ["decode", str(d / "r"), "--out", str(d / "o.npy")],
