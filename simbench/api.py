@@ -22,6 +22,7 @@ sensor: the paper's decoder against the reference plane, Sec. 5.4), and ``score`
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import sys
 from dataclasses import dataclass, field
@@ -230,7 +231,8 @@ def record(
         from simbench.systems import Recording
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
-        return Recorded(system, rec, calibration, settings, meta=acq.meta, sensor=sensor_model)
+        meta = {**acq.meta, **_scene_record(scene, spec)}
+        return Recorded(system, rec, calibration, settings, meta=meta, sensor=sensor_model)
     seeds = SeedLog(seed)
     render_settings = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=store)
     prepared = the_system.prepare(spec)
@@ -239,7 +241,7 @@ def record(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
     meta = {
-        "scene": str(scene) if isinstance(scene, (str, Path)) else spec.name,
+        **_scene_record(scene, spec),
         "spp": spp,
         "sampler": sampler,
         "seed": seed,
@@ -247,6 +249,21 @@ def record(
         "variant": used_variant,
     }
     return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta, sensor=sensor_model)
+
+
+def _scene_record(scene, spec: SceneSpec) -> dict:
+    """What a recording's manifest says of its scene: its name, the file it was read from (as
+    given; None for a SceneSpec) and the SHA-256 of everything about it that affects a render
+    (:func:`simbench.sim.scene.scene_fingerprint`), so that two scenes of one name - a static and
+    a moving board, say - are told apart (a fourth audit: only the name was recorded)."""
+    from simbench.io import json_bytes
+    from simbench.sim.scene import scene_fingerprint
+
+    return {
+        "scene": spec.name,
+        "scene_file": str(scene) if isinstance(scene, (str, Path)) else None,
+        "scene_sha256": hashlib.sha256(json_bytes(scene_fingerprint(spec))).hexdigest(),
+    }
 
 
 def _same_codes(pattern: PatternSpec) -> PatternSpec:
@@ -271,8 +288,9 @@ def depth(
     plane, paper Sec. 5.4) or ``"calibrated"`` (triangulation with the rig, Eq. 15).
     ``min_confidence``: the operating point, pixels below it holes (every system; in the system's
     own unit, :attr:`simbench.systems.SystemInfo.confidence`); for the proposed sensor the
-    decoder's own threshold, as ``simbench decode --min-confidence`` sets it - in [0, 1e4], and
-    below the colour-robust decoder's default (3) it keeps more pixels, not fewer.
+    decoder's own threshold, as ``simbench decode --min-confidence`` sets it - in [0, 1e4] (the
+    fringe SNR's cap; other systems' units: [0, 1e6]), and below the colour-robust decoder's
+    default (3) it keeps more pixels, not fewer.
     """
     from simbench.decode import DecoderParams, robust_params
     from simbench.decode.pipeline import code_order_doubt, without_depth

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench import validate
+from simbench import termination, validate
 
 __all__ = [
     "check_not_protected",
@@ -401,7 +401,8 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     """Write several files all or nothing.
 
     Every file is first written to a temporary file beside its destination (creating missing
-    folders); only when all of them are written are they renamed into place.  If any write
+    folders); only when all of them are written are they renamed into place (a Ctrl-C or
+    SIGTERM meanwhile takes effect after the last rename, :func:`simbench.termination.held`).  If any write
     fails (an unwritable folder, a full disk), the temporary files and the folders this call
     created are removed and the error is raised: no destination is touched.
 
@@ -436,8 +437,9 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
         _raise_with_filename(exc, path)
         raise
     try:
-        for tmp, path in staged:
-            os.replace(tmp, path)
+        with termination.held():  # Ctrl-C or SIGTERM between two renames would leave a mixed set
+            for tmp, path in staged:
+                os.replace(tmp, path)
     finally:  # a rename that failed leaves no temporary file behind
         for tmp, _ in staged:
             if os.path.exists(tmp):

@@ -36,14 +36,19 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:
     return out
 
 
-def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
-    """``rows`` as a CSV file of ``columns`` (floats to 6 significant digits), written atomically."""
+def table_text(rows: list[dict], columns: list[str]) -> str:
+    """``rows`` as CSV text of ``columns`` (floats to 6 significant digits)."""
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     w.writeheader()
     for r in rows:
         w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    return atomic_write_text(path_csv, buf.getvalue())
+    return buf.getvalue()
+
+
+def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
+    """``rows`` as a CSV file of ``columns`` (:func:`table_text`), written atomically."""
+    return atomic_write_text(path_csv, table_text(rows, columns))
 
 
 def panel_row(n_panels: int, width: float = 4.6) -> tuple:

@@ -5,9 +5,10 @@ an exception raised inside a Mitsuba render comes back out of Dr.Jit re-wrapped 
 ``RuntimeError``, which code that records failures and goes on (an ablation run) would record as
 a failed run and carry on.  Such code asks :func:`requested` and re-raises instead.
 
-A few steps must not be cut in two by that exception - creating a cache lock file and taking
-the lock, or removing it and letting the lock go: :func:`held` defers the handler's raise to the
-end of such a step (:func:`run_or_hold`)."""
+A few steps must not be cut in two by that exception (or by Ctrl-C's KeyboardInterrupt) -
+creating a cache lock file and taking the lock, removing it and letting the lock go, renaming a
+set of files into place (:func:`simbench.io.write_files`): :func:`held` defers the handler's raise
+to the end of such a step (:func:`run_or_hold`)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ def requested() -> bool:
 
 @contextmanager
 def held() -> Iterator[None]:
-    """A step the SIGTERM handler's exception must not cut in two (main thread; elsewhere,
+    """A step the SIGTERM and SIGINT handlers' exceptions must not cut in two (main thread; elsewhere,
     where no handler runs, nothing is held): what :func:`run_or_hold` was asked to run meanwhile
     runs when the outermost held step ends."""
     global _HELD

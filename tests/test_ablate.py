@@ -486,3 +486,29 @@ def test_builtin_runs_every_built_in_study_and_the_files_named_beside_it(tmp_pat
     monkeypatch.setattr("simbench.variant.select_variant", lambda v: None)
     assert main(["ablate", "builtin", str(tmp_path / "mine.toml"), "--out", str(tmp_path / "out")]) == 0
     assert ran == [*BUILTIN_STUDIES, "mine"]
+
+
+def test_an_interrupt_while_the_report_is_made_leaves_the_previous_set_whole(tmp_path, monkeypatch):
+    """A new user's audit: Ctrl-C while a rerun's report was written left its table and Markdown
+    beside the previous run's provenance (whose hash of the table then failed).  The set is now
+    written all or nothing."""
+    import hashlib
+
+    from simbench.experiments.ablate import report
+    from tests.ablate_helpers import quick_run
+
+    run_sweep(_sweep(seed=6), out_dir=tmp_path, cache_dir=None, progress=lambda s: None, run_fn=quick_run)
+    before = {p.name: p.read_bytes() for p in tmp_path.glob("t.*") if not p.name.endswith(".jsonl")}
+    assert set(before) == {"t.csv", "t.timings.csv", "t.md", "t.png", "t.provenance.json"}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "_plot", interrupted)  # the table and the Markdown are made by then
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(_sweep(seed=3), out_dir=tmp_path, cache_dir=None, progress=lambda s: None, run_fn=quick_run)
+    after = {p.name: p.read_bytes() for p in tmp_path.glob("t.*") if not p.name.endswith(".jsonl")}
+    assert after == before
+    hashes = json.loads(before["t.provenance.json"])["files"]
+    assert hashes == {n: hashlib.sha256(before[n]).hexdigest() for n in hashes} and "t.csv" in hashes
+    assert not list(tmp_path.glob(".*.tmp"))

@@ -732,6 +732,25 @@ case(
     "is a folder",
     setup=lambda d: (render_folder(d), (d / "p.ply").mkdir()),
 )
+# a fourth audit: --decoder pattern= and min_confidence= won over the options that say the same
+case(
+    "decode-decoder-pattern-against-the-recording",
+    lambda d: _decode(d, "--decoder", "pattern={period_px=30}"),
+    ("--decoder pattern=", "contradicts the recording"),
+    setup=lambda d: render_folder(d),
+)
+case(
+    "decode-period-and-decoder-pattern",
+    lambda d: _decode(d, "--period", "25", "--decoder", "pattern={period_px=21}"),
+    ("--period", "--decoder pattern=", "disagree"),
+    setup=lambda d: (render_folder(d), (d / "r" / "meta.json").unlink()),
+)
+case(
+    "decode-min-confidence-twice",
+    lambda d: _decode(d, "--min-confidence", "2", "--decoder", "min_confidence=5"),
+    "--min-confidence 2 and --decoder min_confidence=5 disagree",
+    setup=lambda d: render_folder(d),
+)
 if Path("/proc/self").is_dir():  # Linux: os.access lets root "write" in /proc, where no file can be made
     case(
         "decode-ply-in-proc",
@@ -1342,6 +1361,11 @@ for cid, body, msg in [
         "twice",
     ),
     ("not-toml", "name = [", "not valid TOML"),
+    (  # a fourth audit: the base value was dropped without a word
+        "base-and-axis",
+        'name = "s"\n[base]\n"decoder.voting" = false\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n',
+        "both in [base] and as an [[axis]]",
+    ),
     # issue 33: values that validate nowhere but in the run gave exit 0 and "1 runs (1 failed)"
     ("voting-maybe", 'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true, "maybe"]\n', "voting"),
     ("spp-zero", 'name = "s"\n[[axis]]\nname = "run.spp"\nvalues = [4, 0]\n', "run.spp"),
@@ -1365,6 +1389,14 @@ for cid, body, msg in [
         msg,
         files={"s.toml": body},
     )
+
+
+case(  # a fourth audit: a raw "[Errno 17] File exists"
+    "ablate-out-is-a-file",
+    lambda d: ["ablate", str(d / "s.toml"), "--out", str(d / "s.toml")],
+    "is a file, not a folder",
+    files={"s.toml": 'name = "s"\n[[axis]]\nname = "decoder.voting"\nvalues = [true]\n'},
+)
 
 
 # ---------------------------------------------------------------------------------- runner

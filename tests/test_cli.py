@@ -721,6 +721,12 @@ def test_a_debug_dir_is_reused_by_later_decodes(tmp_path, capsys):
     assert not (dbg / "crease_bias.npy").exists() and (dbg / "notes.txt").read_text() == "mine"
     assert sorted(info["files"]) == sorted(p.name for p in dbg.iterdir() if p.name not in ("stages.json", "notes.txt"))
     assert info["decoded"].startswith("reference mode") and "fringe SNR" in info["confidence"]
+    # the decode's settings (a fourth audit: docs/usage.md promised them, none were there)
+    assert info["system"] == "proposed" and info["settings"]["rig"] == str(r / "rig.toml")
+    decoder = info["settings"]["decoder"]
+    assert decoder["crease_doubt"] is False and decoder["pattern"]["period_px"] == 21 and decoder["mode"] == "reference"
+    assert main([*base, "--min-confidence", "2.5"]) == 0
+    assert json.loads((dbg / "stages.json").read_text())["settings"]["decoder"]["min_confidence"] == 2.5
 
 
 def test_after_sigterm_a_half_built_objects_finalizer_prints_nothing(capsys, monkeypatch):
@@ -783,8 +789,18 @@ def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_forei
     assert render("--sensor", "ideal") == 0
     assert "(replaced a tof recording of scene" in capsys.readouterr().out
     assert (out / "meta.json").is_file() and not (out / "device.json").exists()
+    # each manifest names the scene alike: its name, its file and its render content's SHA-256 (a
+    # fourth audit: meta.json held the name alone, device.json the path as typed)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["scene"] == "tiny" and meta["scene_file"] == str(tmp_path / "s.toml")
     assert render("--system", "tof") == 0
     assert "(replaced a proposed recording of scene tiny there)" in capsys.readouterr().out
+    device = json.loads((out / "device.json").read_text())
+    assert device["scene"] == "tiny" and device["scene_file"] == meta["scene_file"]
+    assert device["scene_sha256"] == meta["scene_sha256"] and len(meta["scene_sha256"]) == 64
+    (tmp_path / "s.toml").write_text(TINY_SCENE.replace("1.1]", "1.2]"))  # the same name, another scene
+    assert render("--system", "tof") == 0
+    assert json.loads((out / "device.json").read_text())["scene_sha256"] != meta["scene_sha256"]
     foreign = tmp_path / "mine"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("keep me")

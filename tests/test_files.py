@@ -135,7 +135,10 @@ def test_a_folder_decodes_its_system_way_and_refuses_the_colour_fringe_options(i
     assert "; ideal depth camera)" in msg
     depth = np.load(tmp_path / "d.npy")
     assert np.isnan(depth[:10]).all() and (depth[10:] == np.float32(1.2)).all()
-    assert (np.load(tmp_path / "d_confidence.npy") == 0).all()  # no confidence map: zeros
+    # no confidence map: no file (a fourth audit: an all-zero one read as "zero confidence everywhere")
+    assert not (tmp_path / "d_confidence.npy").exists() and "no confidence map (the ideal_depth system" in msg
+    with pytest.raises(ValueError, match="--confidence c.npy: the ideal_depth system gives no confidence map"):
+        decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "e.npy"), confidence="c.npy"))
     for given, flags in (
         ({"z0_m": 1.0, "robust": True}, "--z0, --robust apply"),
         ({"period_px": 30}, "--period applies"),

@@ -245,3 +245,52 @@ def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, 
     # without the plugin: unknown, the registered names listed
     r = subprocess.run([*simbench, "decode", "rec", "--out", "e.npy"], **{**run, "env": os.environ})
     assert r.returncode == 2 and "unknown depth system 'ideal_depth'" in r.stderr
+
+
+def test_a_broken_plugin_is_named_as_the_plugins_fault_not_simbenchs(tmp_path, monkeypatch, capsys):
+    """A fourth audit: a plugin that failed to import, a factory that raised, an entry point naming
+    no system, or a bug inside a plugin's own method were each reported as "simbench: internal
+    error ... please report it", naming neither the plugin nor its package."""
+    from types import SimpleNamespace
+
+    import simbench.systems as systems
+    from simbench.cli import _report_error
+
+    site = tmp_path / "site"
+    info = site / "brk_plugins-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: brk-plugins\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[simbench.systems]\nboom = brk_boom:Thing\nnumber = brk_parts:NUMBER\nfaulty = brk_parts:faulty\n"
+    )
+    (site / "brk_boom.py").write_text('raise RuntimeError("boom at import")\n')
+    (site / "brk_parts.py").write_text(
+        "NUMBER = 42\n\n\ndef faulty(options):\n    return Faulty()\n\n\n"
+        "class Faulty:\n    def decode(self):\n        return {}['missing']\n"
+    )
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setattr(systems, "_SYSTEMS", dict(systems._SYSTEMS))
+    monkeypatch.setattr(systems, "_PLUGINS", {})
+    monkeypatch.setattr(systems, "_plugins_read", False)
+    with pytest.raises(ValueError, match=r"plugin 'boom' \(brk_boom:Thing of brk-plugins\) could not be built: Runt"):
+        systems.get_system("boom")
+    with pytest.raises(ValueError, match=r"plugin 'number' .* TypeError: 'int' object is not callable"):
+        systems.get_system("number")
+    with pytest.raises(ValueError, match=r"plugin 'faulty' .* returned a Faulty, not a DepthSystem"):
+        systems.get_system("faulty")
+    # a failure inside the plugin's own code, met later
+    import brk_parts
+
+    try:
+        brk_parts.Faulty().decode()
+    except KeyError as exc:
+        assert _report_error(exc, SimpleNamespace(debug=False)) == 1
+    err = capsys.readouterr().err
+    # (two entry points of one module: both named)
+    assert err.startswith("simbench: error in the depth system plugins 'number', 'faulty' (code of brk-plugins: brk_")
+    assert "report it to the plugin's authors" in err
+    # simbench's own failure stays its internal error
+    try:
+        systems.get_system(None)  # type: ignore[arg-type]
+    except Exception as exc:  # noqa: BLE001
+        assert systems.plugin_in_traceback(exc) is None

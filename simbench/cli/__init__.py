@@ -177,6 +177,16 @@ def _report_error(exc: Exception, args) -> int:
     if isinstance(exc, (ValueError, OSError)):
         print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
         return 2
+    from simbench.systems import plugin_in_traceback
+
+    plugin = plugin_in_traceback(exc)
+    if plugin is not None:  # another package's bug, not simbench's
+        print(
+            f"simbench: error in the {plugin} ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the "
+            "traceback and report it to the plugin's authors",
+            file=sys.stderr,
+        )
+        return 1
     print(
         f"simbench: internal error ({type(exc).__name__}: {_one_line(exc)}); rerun with --debug for the traceback "
         f"and please report it",
@@ -233,7 +243,8 @@ def _on_sigterm_raise():
         from simbench import termination
 
         termination.request(signal.SIGINT)
-        signal.default_int_handler(signum, frame)
+        # not between a cache lock's taking and its file, nor between two renames of a file set
+        termination.run_or_hold(lambda: signal.default_int_handler(signum, frame))
 
     previous_int = signal.getsignal(signal.SIGINT)
     if previous_int is signal.default_int_handler:  # (not where a caller set its own)

@@ -163,6 +163,7 @@ def _cmd_crosstalk(args) -> int:
 
 def _cmd_ablate(args) -> int:
     from simbench.experiments.ablate import BUILTIN_STUDIES, check_sweep, load_sweep, run_sweep
+    from simbench.io import check_output_folder
     from simbench.variant import select_variant
 
     if args.scheduler is not None and args.workers > 1:  # before --fresh forgets a run log
@@ -175,6 +176,7 @@ def _cmd_ablate(args) -> int:
                 "give 'builtin' or the studies"
             )
     names = [m for n in args.sweep for m in (BUILTIN_STUDIES if n == "builtin" else [n])]
+    check_output_folder(args.out, what="--out")
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
     for sweep in sweeps:
         check_sweep(sweep)  # and every run's values
@@ -182,8 +184,9 @@ def _cmd_ablate(args) -> int:
     for n, sweep in zip(names, sweeps):
         if sweep.name in seen:  # their tables, plots and run log would be one file each
             raise ValueError(
-                f"{seen[sweep.name]} and {n} are both the study {sweep.name!r} (named by the file's stem): their "
-                f"files in {args.out} would overwrite each other; rename one, or run them into other --out folders"
+                f"{seen[sweep.name]} and {n} are both the study {sweep.name!r} (named by its `name` key, else by the "
+                f"file's stem): their files in {args.out} would overwrite each other; rename one, or run them into "
+                "other --out folders"
             )
         seen[sweep.name] = n
     select_variant(args.variant)

@@ -24,7 +24,9 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import logging
+import sys
 import threading
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +58,7 @@ __all__ = [
     "system_of_recording",
     "DEFAULT_SYSTEM",
     "PLUGIN_GROUP",
+    "plugin_in_traceback",
 ]
 
 log = logging.getLogger(__name__)
@@ -207,6 +210,8 @@ def unregister_system(name: str) -> None:
 # package's pyproject.toml, [project.entry-points."simbench.systems"] my_sensor = "my_package.my_module:MySensor"
 PLUGIN_GROUP = "simbench.systems"
 _plugins_read = False
+# name -> (the entry point's "module:attribute", the package that declares it)
+_PLUGINS: dict[str, tuple[str, str]] = {}
 _plugins_lock = threading.Lock()
 
 
@@ -235,6 +240,7 @@ def _read_plugins() -> None:
                 continue
             try:
                 register_system(ep.name, ep.value)
+                _PLUGINS[ep.name] = (ep.value, package)
             except ValueError as exc:  # one broken plugin does not stop the others, nor simbench
                 log.warning("depth system plugin %s = %r of %s ignored: %s", ep.name, ep.value, package, exc)
         _plugins_read = True
@@ -254,16 +260,62 @@ def get_system(name: str, options: SystemOptions | None = None) -> DepthSystem:
     if name not in _SYSTEMS:
         raise ValueError(f"unknown depth system {name!r}; registered: {system_names()}")
     factory = _SYSTEMS[name]
-    if isinstance(factory, str):
-        module, _, attr = factory.partition(":")
-        factory = getattr(importlib.import_module(module), attr)
-        _SYSTEMS[name] = factory
-    system = factory(options or SystemOptions())
+    try:
+        if isinstance(factory, str):
+            module, _, attr = factory.partition(":")
+            factory = getattr(importlib.import_module(module), attr)
+            _SYSTEMS[name] = factory
+        system = factory(options or SystemOptions())
+    except Exception as exc:
+        if name not in _PLUGINS:
+            raise
+        # another package's code: its failure named as its, not as simbench's own error
+        raise ValueError(f"{_plugin_label(name)} could not be built: {type(exc).__name__}: {exc}") from exc
     if not isinstance(system, DepthSystem):
-        raise TypeError(f"the factory of depth system {name!r} returned a {type(system).__name__}, not a DepthSystem")
+        what = _plugin_label(name) if name in _PLUGINS else f"the factory of depth system {name!r}"
+        error = ValueError if name in _PLUGINS else TypeError
+        raise error(f"{what} returned a {type(system).__name__}, not a DepthSystem (see docs/extending.md)")
     if system.name != name:
         raise ValueError(f"depth system registered as {name!r} calls itself {system.name!r}")
     return system
+
+
+def _plugin_label(name: str) -> str:
+    value, package = _PLUGINS[name]
+    return f"depth system plugin {name!r} ({value} of {package})"
+
+
+def _plugin_files(name: str) -> tuple[list[Path], list[Path]]:
+    """(folders, files) of the plugin's code, as far as it is imported: its top-level package's
+    folders, or a top-level module's own file."""
+    top = sys.modules.get(_PLUGINS[name][0].partition(":")[0].split(".")[0])
+    if top is None:
+        return [], []
+    folders = [Path(p).resolve() for p in getattr(top, "__path__", None) or []]
+    file = getattr(top, "__file__", None)
+    return folders, ([Path(file).resolve()] if file and not folders else [])
+
+
+def plugin_in_traceback(exc: BaseException) -> str | None:
+    """The plugin whose code raised ``exc`` (:func:`_plugin_label`; every entry point of that code
+    named when several share it): the innermost frame of its traceback that is either a plugin's
+    or simbench's own decides; None when it is simbench's (or no plugin is loaded)."""
+    ours = Path(__file__).resolve().parents[1]  # the simbench package
+    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
+        path = Path(frame.filename).resolve()
+        names = []
+        for name in _PLUGINS:
+            folders, files = _plugin_files(name)
+            if path in files or any(f in path.parents for f in folders):
+                names.append(name)
+        if len(names) == 1:
+            return _plugin_label(names[0])
+        if names:
+            packages = sorted({_PLUGINS[n][1] for n in names})
+            return f"depth system plugins {', '.join(map(repr, names))} (code of {', '.join(packages)}: {path.name})"
+        if ours in path.parents:
+            return None
+    return None
 
 
 def acquire(

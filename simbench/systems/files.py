@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -101,7 +102,8 @@ COMMON_FIELDS = frozenset({"capture", "out", "confidence", "ply", "debug_dir", "
 class FileDecode:
     """A system's decode of a request, before anything is written.
 
-    depth_m, valid, confidence : (H, W) float32 metres (NaN invalid), bool, float32
+    depth_m, valid, confidence : (H, W) float32 metres (NaN invalid), bool, float32 (confidence
+        None: the system gives none, and no confidence file is written)
     camera : the :class:`simbench.rig.Intrinsics` the depth map is on (for the point cloud)
     colours : (H, W, 3) uint8 per pixel for the point cloud, or None
     summary : what was done, for the one-line report (mode, Z0, reference, overrides)
@@ -114,11 +116,13 @@ class FileDecode:
         system knows them apart from pixels it never decoded (None: told by a positive
         confidence under the threshold)
     cause : why nothing was decoded where the system knows it (the warning names it)
+    settings : what the decode was made with (the decoder's parameters, the files it read), for
+        ``--debug-dir``'s stages.json
     """
 
     depth_m: np.ndarray
     valid: np.ndarray
-    confidence: np.ndarray
+    confidence: np.ndarray | None
     camera: Any
     summary: str
     confidence_meaning: str
@@ -129,6 +133,7 @@ class FileDecode:
     commit: Callable[[], None] = field(default=lambda: None)
     thresholded: np.ndarray | None = None
     cause: str = ""
+    settings: dict = field(default_factory=dict)
 
 
 def confidence_path(request: DecodeRequest) -> Path:
@@ -230,12 +235,19 @@ def decode_files(request: DecodeRequest) -> str:
     system = get_system(name)
     hook = getattr(system, "decode_files", None)
     res = hook(request) if hook is not None else _decode_folder(system, request)
-    files = {Path(request.out): npy_bytes(res.depth_m), confidence_path(request): npy_bytes(res.confidence)}
+    files = {Path(request.out): npy_bytes(res.depth_m)}
+    if res.confidence is not None:
+        files[confidence_path(request)] = npy_bytes(res.confidence)
+        confidence_note = f"confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
+    elif request.confidence:
+        raise ValueError(f"--confidence {request.confidence}: the {name} system gives no confidence map")
+    else:
+        confidence_note = f"no confidence map (the {name} system gives none)"
     msg = (
         f"decoded {res.valid.mean() * 100:.2f} % of the image's pixels in {res.elapsed_s * 1000:.0f} ms "
         # the decode alone; a user timing the command sees the files read and checked too (an audit)
         f"({time.perf_counter() - t0:.2f} s with reading the files; {res.summary}) -> {request.out}, "
-        f"confidence ({res.confidence_meaning}) -> {confidence_path(request)}"
+        f"{confidence_note}"
     )
     if request.ply:
         pts = points_from_depth(res.depth_m, res.camera)
@@ -260,13 +272,18 @@ def decode_files(request: DecodeRequest) -> str:
         # (the colour-robust decoder's crease_bias.npy beside the paper decoder's stages)
         here = {p.name for p in outputs if p.parent == d.resolve()}  # (an --out named like a stage stays)
         stale = sorted(set(_listed_stages(d)) - set(stages) - here - {"stages.json"})
+        # the command as typed where it is one (the marker's "simbench decode" prefix either way)
+        command = "simbench " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["decode"] else "simbench decode"
         files[d / "stages.json"] = json_bytes(
             {
-                "command": "simbench decode",
+                "command": command,
                 "format": STAGES_FORMAT,
                 "capture": res.capture_file or request.capture,
+                "system": name,
                 "decoded": res.summary,
-                "confidence": res.confidence_meaning,
+                "confidence": res.confidence_meaning if res.confidence is not None else "none",
+                # (a fourth audit: docs/usage.md said it names the decode's settings; it named none)
+                "settings": res.settings,
                 "files": stages,
             }
         )
@@ -429,12 +446,14 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
     return FileDecode(
         depth_m=res.depth_m,
         valid=res.valid,
-        confidence=res.confidence if res.confidence is not None else np.zeros(res.depth_m.shape, np.float32),
+        # (a fourth audit: an all-zero map was written, read as "zero confidence everywhere")
+        confidence=res.confidence,
         camera=scene.rig.camera,
         summary=info.label + over,
         confidence_meaning=meaning,
         elapsed_s=dt,
         thresholded=thresholded,
+        settings={"rig": request.rig, "min_confidence": request.min_confidence},
     )
 
 

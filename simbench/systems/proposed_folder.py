@@ -84,6 +84,12 @@ def _z0_for(reference: Path, z0: float | None, *, option: str = "--z0") -> float
     return recorded
 
 
+def _projected(pattern):
+    """``pattern`` with its sequence as the codes it projects (the default sequence given
+    explicitly and left unset compare equal)."""
+    return dataclasses.replace(pattern, sequence=tuple(int(c) for c in pattern.codes()))
+
+
 def _decoder_names(request: DecodeRequest) -> set[str]:
     """The parameters the request's ``--decoder name=value`` items set."""
     return {item.partition("=")[0] for item in request.decoder}
@@ -216,7 +222,27 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     base = DecoderParams(pattern=pattern, mode=mode, z0_m=z0, depth_range_m=(request.near_m, request.far_m))
     params = _decoder_params(request, base)
+    if any(n == "pattern" or n.startswith("pattern.") for n in named) and _projected(params.pattern) != _projected(
+        pattern
+    ):
+        # (a fourth audit: --decoder pattern= won over --period without a word, and over a recording's
+        # pattern too, whose decode then failed as if the reference were at fault)
+        if recorded is not None:
+            raise ValueError(
+                f"--decoder pattern= ({describe_pattern(params.pattern)}) contradicts the recording, made with the "
+                f"pattern {describe_pattern(pattern)} (meta.json); leave it out to decode it as recorded"
+            )
+        if any(x is not None for x in (request.period_px, request.order, request.sequence, request.channels)):
+            raise ValueError(
+                f"the pattern options (--period, --order, --sequence, --channels: {describe_pattern(pattern)}) and "
+                f"--decoder pattern= ({describe_pattern(params.pattern)}) disagree: give one"
+            )
     if request.min_confidence is not None:
+        if "min_confidence" in named and params.min_confidence != request.min_confidence:
+            raise ValueError(
+                f"--min-confidence {request.min_confidence:g} and --decoder min_confidence={params.min_confidence:g} "
+                "disagree: give one"
+            )
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
     if request.calibration is not None and not params.unmix:
         raise ValueError(
@@ -309,6 +335,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         capture_file=capture_path,
         commit=store_reference,
         cause=doubt,
+        settings={
+            "decoder": dataclasses.asdict(params),
+            "rig": rig_path,
+            "reference": reference_path if reference is not None else None,
+            "calibration_frames": request.calibration,
+            "bits": request.bits,
+        },
     )
 
 

@@ -17,7 +17,7 @@ from simbench.experiments.ablate.spec import (
     REF_METRICS,
     Sweep,
 )
-from simbench.io import atomic_write_bytes, atomic_write_text, save_json
+from simbench.io import json_bytes, write_files
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +52,8 @@ def _fmt(v) -> str:
 
 
 def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
-    from simbench.experiments.common import git_commit, write_table
+    from simbench.experiments.common import git_commit
+    from simbench.report import table_text
     from simbench.sim.keys import versions
 
     axis_names = [k for k, _ in sweep.axes]
@@ -68,16 +69,20 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
         "placement_seed",
         "error",
     ]
-    files = [write_table(out / f"{sweep.name}.csv", rows, cols)]
     timing_rows = [{"run": r["run"], **done.get(r["key"], {}).get("timing", {})} for r in runs]
-    files.append(
-        write_table(out / f"{sweep.name}.timings.csv", timing_rows, ["run", "setup_s", "render_record_s", "decode_s"])
-    )
-    files.append(atomic_write_text(out / f"{sweep.name}.md", _markdown(sweep, rows, command)))
-    files.append(atomic_write_bytes(out / f"{sweep.name}.png", _plot(sweep, rows)))
+    # the set is made first and written all or nothing: an interrupt while the plot is drawn (or
+    # a full disk) leaves the previous set whole, never a table of this run beside another's
+    # provenance
+    files = {
+        out / f"{sweep.name}.csv": table_text(rows, cols).encode("utf-8"),
+        out / f"{sweep.name}.timings.csv": table_text(
+            timing_rows, ["run", "setup_s", "render_record_s", "decode_s"]
+        ).encode("utf-8"),
+        out / f"{sweep.name}.md": _markdown(sweep, rows, command).encode("utf-8"),
+        out / f"{sweep.name}.png": _plot(sweep, rows),
+    }
     base = {k: _fmt(v) for k, v in {**DEFAULTS, **sweep.base}.items()}
-    save_json(
-        out / f"{sweep.name}.provenance.json",
+    files[out / f"{sweep.name}.provenance.json"] = json_bytes(
         {
             "command": command,
             "sweep_file": sweep.path,
@@ -95,9 +100,10 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
             ),
             "versions": versions(),
             "git_commit": git_commit(),
-            "files": {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
-        },
+            "files": {p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()},
+        }
     )
+    write_files(files)
 
 
 def _groups(sweep: Sweep, rows: list[dict]) -> list[tuple[tuple, list[dict]]]:

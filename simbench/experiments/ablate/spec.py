@@ -159,6 +159,9 @@ class Sweep:
         names = [k for k, _ in self.axes]
         if len(set(names)) != len(names):
             raise ValueError(f"an axis is given twice: {names}")
+        both = sorted(set(names) & set(self.base))
+        if both:  # the axis would override the base silently
+            raise ValueError(f"{both} both in [base] and as an [[axis]]: give each in one place")
         if self.combine not in ("grid", "zip"):
             raise ValueError(f"combine must be 'grid' or 'zip', got {self.combine!r}")
         if self.combine == "zip" and len({len(v) for _, v in self.axes}) != 1:
