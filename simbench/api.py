@@ -180,6 +180,10 @@ def record(
     }
     sensor_model = sensor if isinstance(sensor, SensorModel) else get_sensor("paper" if sensor is None else sensor)
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
+    from simbench.sim.timeline import placement_warnings
+
+    for told in placement_warnings(spec):
+        logging.getLogger("simbench").warning("scene %s: %s", spec.name, told)
     if pattern is None and system == "proposed":
         # the paper's pattern at the scene's projector, as `simbench render` makes it (a scene
         # with a projector of its own size was refused: "pattern size (1140, 1824) differs")
@@ -338,6 +342,10 @@ def depth(
                 "the colour-robust decoder unmixes with the reference plane's calibration frames: record with "
                 "calibration_frames=True"
             )
+        from simbench.decode.params import pattern_on_rig_warnings
+
+        for told in pattern_on_rig_warnings(rec.scene.rig, params):  # as `simbench decode` warns
+            logging.getLogger("simbench").warning("%s", told)
         result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
         # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
         # red and green swapped) gives no depth rather than half of it wrong

@@ -180,6 +180,11 @@ class PatternSpec:
             self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
         )
         object.__setattr__(self, "order", validate.integer(self.order, "order", lo=2, hi=16))
+        if w < self.order * self.period_px:  # (a new user's audit: `pattern --period 1000` passed)
+            raise ValueError(
+                f"period {self.period_px} px over a {w} px wide pattern: {w / self.period_px:.1f} stripes, fewer than "
+                f"one De Bruijn window of {self.order}: no stripe could be decoded"
+            )
         object.__setattr__(self, "dc", validate.number(self.dc, "dc", lo=0.0, hi=1.0))
         object.__setattr__(
             self, "amplitude", validate.number(self.amplitude, "amplitude", lo=0.0, hi=0.5, lo_open=True)

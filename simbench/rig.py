@@ -48,6 +48,8 @@ __all__ = [
     "triangulate_columns",
     "projector_column_at_depth",
     "scale_camera",
+    "check_stripe_baseline",
+    "MIN_BASELINE_X_SHARE",
 ]
 
 
@@ -205,6 +207,28 @@ class Rig:
     def is_rectified(self) -> bool:
         """Parallel optical axes, baseline along +x: the geometry of paper Sec. 5.4."""
         return self._rectified
+
+
+# the least share of the baseline along the camera's x axis the colour-fringe decoders take: its
+# vertical stripes code the projector's column, which only the x component turns into depth
+# (assumption: a rig under a tenth of its baseline along x decodes nothing a user would want)
+MIN_BASELINE_X_SHARE = 0.1
+
+
+def check_stripe_baseline(rig: Rig) -> None:
+    """Refuse a rig whose baseline is not along the camera's x axis, for a decoder of vertical
+    stripes (the projector's columns): a baseline along y or z moves no column with depth (a new
+    user's audit: a vertical baseline rendered, then failed to decode with hints of a wrong rig or
+    an unlit capture)."""
+    b = np.asarray(rig.position_m, np.float64)
+    norm = float(np.linalg.norm(b))
+    if abs(b[0]) < MIN_BASELINE_X_SHARE * norm:
+        raise ValueError(
+            f"rig {rig.name!r}: the projector sits at {[round(float(v), 4) for v in b]} m, its baseline "
+            f"{abs(b[0]) * 1000:.1f} mm along the camera's x axis of {norm * 1000:.1f} mm: the pattern's vertical "
+            "stripes code the projector's column, which only a baseline along x turns into depth - place the "
+            "projector beside the camera (position_m = [b, 0, 0], b > 0 on its right or < 0 on its left)"
+        )
 
 
 def paper_rig() -> Rig:

@@ -176,6 +176,7 @@ for opt, bad, msg in [
     ("--channels", "rgba", "permutation"),
     ("--channels", "", "permutation"),
     ("--channels", "xyz", "permutation"),
+    ("--period", "1000", "fewer than one De Bruijn window"),  # 1.8 stripes over 1824 px (an audit)
 ]:
     case(f"pattern{opt}={bad!r}", lambda d, o=opt, b=bad: ["pattern", "--out", str(d / "p.png"), o, b], msg)
 case(
@@ -316,6 +317,9 @@ for cid, changes, msg in [
     ("position-far", {"pose.position_m": "[1000.0, 0.0, 0.0]"}, "position_m"),
     ("rotation-inf", {"pose.rotation_deg": "[0.0, inf, 0.0]"}, "rotation_deg"),
     ("rotation-two", {"pose.rotation_deg": "[0.0, 0.0]"}, "rotation_deg"),
+    # a new user's audit of their own rigs: each rendered, then decoded nothing with misleading hints
+    ("vertical-baseline", {"pose.position_m": "[0.0, 0.093, 0.0]"}, "0.0 mm along the camera's x axis of 93.0 mm"),
+    ("off-centre-principal-point-under-the-thin-lens", {"camera.cx_px": "85.0"}, "principal point (85, 59.5) is off"),
 ]:
     case(
         f"render-rig-{cid}",

@@ -785,7 +785,10 @@ def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_forei
         return main(argv)
 
     assert render("--system", "tof") == 0
-    assert "replaced" not in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "replaced" not in out_text
+    # the device's own rig, said (a new user's audit: their rig was set aside without a word)
+    assert "own 176x144 rig: the scene's rig 'tiny' set aside" in out_text
     assert render("--sensor", "ideal") == 0
     assert "(replaced a tof recording of scene" in capsys.readouterr().out
     assert (out / "meta.json").is_file() and not (out / "device.json").exists()

@@ -2,6 +2,7 @@
 
 import dataclasses
 import os
+import re
 
 import numpy as np
 import pytest
@@ -898,3 +899,39 @@ def test_the_carrier_bank_gives_the_same_bits_on_any_number_of_threads():
         for r in runs[1:]:
             for a, b in ((r.depth_m, runs[0].depth_m), (r.confidence, runs[0].confidence), (r.valid, runs[0].valid)):
                 assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f")
+
+
+@pytest.mark.parametrize("mode", ["reference", "calibrated"])
+def test_a_projector_on_the_cameras_left_decodes_the_true_depth(mode):
+    """A new user's audit: with the projector at x < 0 the reference mode's depths were mirrored
+    about Z0 (1/Z = 2/Z0 - 1/Z_true: 319 mm MAE on a step, exit 0) - the disparity's sign was the
+    baseline's length's.  The mirrored paper rig decodes planes off Z0 as the paper rig does."""
+    left = dataclasses.replace(RIG, position_m=(-RIG.position_m[0], 0.0, 0.0))
+    ref_img, _, _ = synthetic_plane_capture(DRIVE, left, point_m=(0, 0, 1.0))
+    ref = decode_reference(ref_img, rig=left, params=DecoderParams())
+    for depth in (0.9, 1.3):
+        img, col, z = synthetic_plane_capture(DRIVE, left, point_m=(0, 0, depth))
+        r = decode(img, rig=left, params=DecoderParams(mode=mode), reference=ref)
+        assert r.valid[np.isfinite(col)].mean() > 0.99
+        dz = r.depth_m[r.valid] - z[r.valid]
+        assert np.sqrt(np.mean(dz**2)) < 0.02 * depth**2 / (left.projector.focal_px * left.baseline_m), depth
+
+
+def test_the_pattern_on_the_rig_warns_of_undersampling_and_of_a_range_past_one_cycle():
+    """A new user's audit of their own patterns: a period of 8 px (a 64 px cycle against the
+    working range's 160 px of disparity) put half a step's pixels a whole cycle off - 380-430 mm
+    - at 99 % completeness without a word; a period of 2.3 camera pixels decoded nothing, with
+    hints of a wrong reference.  The paper's rig and pattern give neither warning (the range spans
+    158 of the cycle's 168 px)."""
+    from simbench.decode.params import pattern_on_rig_warnings
+
+    assert pattern_on_rig_warnings(RIG, DecoderParams()) == []
+    (told,) = pattern_on_rig_warnings(RIG, DecoderParams(pattern=PatternSpec(period_px=8)))
+    assert "repeats every 64 projector px" in told and "spans 158 px" in told
+    # the range it suggests is one cycle wide: no warning there
+    near, far = (float(x) for x in re.search(r"e\.g\. ([\d.]+)-([\d.]+) m", told).groups())
+    narrow = DecoderParams(pattern=PatternSpec(period_px=8), depth_range_m=(near, far * 0.999))
+    assert pattern_on_rig_warnings(RIG, narrow) == []
+    small = dataclasses.replace(RIG, camera=dataclasses.replace(RIG.camera, focal_px=RIG.projector.focal_px / 6))
+    (told,) = pattern_on_rig_warnings(small, DecoderParams())
+    assert "3.5 camera pixels" in told

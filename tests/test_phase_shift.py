@@ -194,3 +194,30 @@ def test_a_linear_phase_drift_gives_the_predicted_phase_error(steps, drift_rad):
     assert error.mean() == pytest.approx((steps - 1) * drift_rad / 2, abs=1e-3)
     r = np.sin(drift_rad / 2) / np.sin(2 * np.pi / steps - drift_rad / 2)
     assert np.ptp(error) == pytest.approx(2 * np.arcsin(abs(r)), rel=1e-3)
+
+
+def test_the_sequence_follows_the_scenes_projector(tmp_path):
+    """A new user's audit: a rig with a projector of another size than the paper's was refused
+    ("pattern size (1140, 1824) differs from the projector's"), with no option to change it.  The
+    default sequence now takes the projector's size (here 456 x 285: 6 Gray bits, 10 exposures),
+    the folder records it, and the command line and the Python API decode it alike."""
+    import simbench
+    from simbench.cli import main
+    from tests.test_bad_inputs import TINY_RIG
+    from tests.test_cli import TINY_SCENE
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    out = tmp_path / "ps"
+    cache = str(tmp_path / "cache")
+    argv = ["render", str(tmp_path / "s.toml"), "--system", "phase_shift", "--out", str(out), "--spp", "4"]
+    assert main([*argv, "--cache", cache]) == 0
+    device = json.loads((out / "device.json").read_text())
+    assert device["size_hw"] == [285, 456]
+    spec = PhaseShiftSpec(size_hw=(285, 456))
+    assert np.load(out / "frames.npy").shape == (spec.captures, 120, 160) and spec.captures == 10
+    assert main(["decode", str(out), "--out", str(tmp_path / "d.npy")]) == 0
+    depth = np.load(tmp_path / "d.npy")
+    assert np.isfinite(depth).mean() > 0.9 and np.nanmedian(depth) == pytest.approx(1.1, abs=2e-3)
+    rec = simbench.record(tmp_path / "s.toml", system="phase_shift", spp=4, cache=cache)
+    assert np.array_equal(simbench.depth(rec).depth_m, depth, equal_nan=True)

@@ -402,3 +402,39 @@ def test_a_bad_mesh_never_reaches_the_renderer(tmp_path):
         assert res.returncode == 2, (res.returncode, res.stderr)
         assert res.stderr.count("\n") == 1 and "indexes vertex 99999" in res.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_placements_no_view_could_mean_are_warned_of_and_the_shipped_scenes_have_none(tmp_path):
+    """A new user's audit: a mesh in millimetres (200 "m" across, the camera inside it), an object
+    wholly behind the camera and a camera inside a sphere each rendered without a word."""
+    import shutil
+
+    from simbench.sim.timeline import placement_warnings
+
+    for path in sorted(SCENES.glob("*.toml")):
+        assert placement_warnings(load_scene(path)) == [], path.name
+    shutil.copy(SCENES / "meshes" / "cone.ply", tmp_path / "cone.ply")
+    scene = scene_from_dict(
+        {
+            "name": "odd",
+            "rig": "paper",
+            "object": [
+                {
+                    "type": "mesh",
+                    "name": "mm",
+                    "file": str(tmp_path / "cone.ply"),
+                    "translate_m": [0, 0, 1.0],
+                    "scale": 1000.0,
+                },
+                {"type": "sphere", "name": "behind", "center_m": [0, 0, -2.0], "radius_m": 0.5},
+                {"type": "sphere", "name": "around", "center_m": [0, 0, 0.1], "radius_m": 0.5},
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.5], "size_m": [2.0, 2.0]},
+            ],
+        }
+    )
+    told = placement_warnings(scene)
+    assert any("'mm': the mesh spans" in t and "`scale = 0.001`" in t for t in told)
+    assert any("'behind' lies wholly behind the camera" in t for t in told)
+    assert any("inside the bounds of object 'around'" in t for t in told)
+    assert any("inside the bounds of object 'mm'" in t for t in told)
+    assert not any("'wall'" in t for t in told)

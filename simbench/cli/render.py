@@ -57,6 +57,17 @@ def _cmd_render(args) -> int:
     pattern_given = any(getattr(args, k) is not None for k in ("period", "order", "sequence", "channels"))
     options = system.info().recording_options  # None: a system that does not say takes what applies
     takes_pattern = options is None or "pattern" in options
+    if options is not None and "pattern" in options:  # a system that projects the coded pattern
+        import logging
+
+        from simbench.decode.params import pattern_on_rig_warnings
+        from simbench.rig import check_stripe_baseline
+
+        check_stripe_baseline(scene.rig)  # before the renders: no decode of it could read depth
+        # what the pattern on this rig will give the decoder (its default working range), before
+        # minutes of rendering (a new user's audit: each was found only after the decode)
+        for told in pattern_on_rig_warnings(scene.rig, DecoderParams(pattern=pattern)):
+            logging.getLogger("simbench").warning("%s: %s", args.scene, told)
     spp, sampler = render_settings(args)
     # before minutes of rendering
     check_output_directory(args.out, manifest=RECORDING_MANIFESTS, overwrite=args.overwrite)
@@ -107,6 +118,10 @@ def _cmd_render(args) -> int:
         f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
+    info = system.info()
+    if not info.uses_scene_rig:  # (a new user's audit: their own rig was set aside without a word)
+        h, w = info.size_hw
+        print(f"  (with the {info.label}'s own {w}x{h} rig: the scene's rig {scene.rig.name!r} set aside)")
     if replaced:
         print(f"  (replaced {replaced} there)")
     for key, path in files.items():
@@ -190,8 +205,9 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--system",
         default=DEFAULT_SYSTEM,
-        help=f"depth system (registered: {', '.join(registered_systems())}); the others replace the scene's rig with "
-        "their own",
+        help=f"depth system (registered: {', '.join(registered_systems())}); the colour-fringe sensor and phase "
+        "shifting record with the scene's rig, a device with its own (the Kinect, the ToF camera) sets it aside and "
+        "says so",
     )
     s.add_argument(
         "--out", required=True, help="output folder (written whole or not at all; an earlier render there is replaced)"

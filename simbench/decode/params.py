@@ -18,6 +18,8 @@ from simbench.pattern import PatternSpec
 from simbench.rig import Rig
 
 __all__ = [
+    "MIN_CAMERA_PERIOD_PX",
+    "pattern_on_rig_warnings",
     "DecoderParams",
     "AddedCheck",
     "PAPER_ADDED_CHECKS",
@@ -396,6 +398,48 @@ class DecoderParams:
         if self.camera_period_px is not None:
             return float(self.camera_period_px)
         return self.period_px * rig.camera.focal_px / rig.projector.focal_px
+
+
+# below this many camera pixels per fringe period the phase fit cannot follow the fringe (Nyquist:
+# 2 px; assumption: twice that, where a Gabor window of a quarter period spans a single pixel)
+MIN_CAMERA_PERIOD_PX = 4.0
+
+
+def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
+    """What the pattern and the rig make of the decode before it runs, as warnings (a new user's
+    audit of their own rigs and patterns: each was silent):
+
+    - the fringe's period in the camera (:meth:`DecoderParams.camera_period`) under
+      :data:`MIN_CAMERA_PERIOD_PX`: little or nothing decodes;
+    - the working range wider than the code's cycle: with ``f_p b`` (projector focal length times
+      the baseline's x component) the range spans ``f_p b (1/near - 1/far)`` projector pixels of
+      disparity; past one cycle of stripes (``L T``) a pixel can decode a whole cycle off and still
+      land inside the range - a wrong depth with a high confidence (within one cycle such a pixel
+      lands outside the range and is a hole).
+    """
+    out = []
+    camera_period = params.camera_period(rig)
+    if camera_period < MIN_CAMERA_PERIOD_PX:
+        out.append(
+            f"the fringe's period is {camera_period:.1f} camera pixels ({params.period_px} projector px x "
+            f"{rig.camera.focal_px:g} / {rig.projector.focal_px:g}), under the {MIN_CAMERA_PERIOD_PX:g} the phase fit "
+            "needs (Nyquist: 2): expect little or no depth; choose a longer --period"
+        )
+    fb = rig.projector.focal_px * abs(rig.position_m[0])
+    near, far = params.depth_range_m
+    span = params.cycle * params.period_px
+    extent = fb * (1.0 / near - 1.0 / far)
+    if extent > span:
+        inv_far = 1.0 / near - span / fb
+        deepest = f"{near:g}-{1.0 / inv_far:.3g} m" if inv_far > 0 else f"from {near:g} m on"
+        out.append(
+            f"the pattern's code repeats every {span} projector px ({params.cycle} stripes of {params.period_px} px), "
+            f"and with this rig (f_p b = {fb:.1f} px m) the working range {near:g}-{far:g} m spans {extent:.0f} px "
+            f"of disparity: a pixel can decode a whole cycle off and still lie in the range (a wrong depth, not a "
+            f"hole); a range of one cycle, e.g. {deepest} (--near/--far), or a longer cycle "
+            "(--period, --order) keeps every depth right"
+        )
+    return out
 
 
 def _pattern_of(value) -> PatternSpec:

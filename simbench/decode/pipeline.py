@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
@@ -65,6 +66,7 @@ from simbench.pattern import (
 )
 from simbench.rig import (
     Rig,
+    check_stripe_baseline,
     projector_column_at_depth,
     triangulate_columns,
     triangulation_steps,
@@ -884,6 +886,7 @@ def decode(
         Never raises on a legal image: what cannot be decoded is NaN in ``depth_m`` and False
         in ``valid``.
     """
+    check_stripe_baseline(rig)
     with stage("input check and undistortion"):
         image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
     h, w = image.shape[:2]
@@ -912,7 +915,9 @@ def decode(
     conf_out = np.empty((h, w), np.float32)
     col_out = np.empty((h, w), np.float32)
     index_out = np.empty((h, w), np.int32)
-    inv_fb = 1.0 / (rig.camera.focal_px * rig.baseline_m)
+    # paper Eq. 14 with the baseline's sign: a projector on the camera's left (x < 0) turns the
+    # disparity's (an audit: such a rig's depths came out mirrored about Z0, 1/Z = 2/Z0 - 1/Z_true)
+    inv_fb = math.copysign(1.0, rig.position_m[0]) / (rig.camera.focal_px * rig.baseline_m)
     if params.crease_doubt:
         crease_px = int(round(CREASE_SCALE_PERIODS * params.camera_period(rig)))
         # kappa over a bias in projector px: kappa T / (2 pi bias), the stability term's scale

@@ -74,6 +74,38 @@ def _extent_points(obj: SceneObject) -> np.ndarray:
     return origin + local @ rotation_xyz_deg(p["rotation_deg"]).T
 
 
+# a mesh wider than this is taken for one in other units than metres (assumption: a bench-top
+# structured-light scene spans metres, and a millimetre mesh of a 10 cm object spans 100 "m")
+MESH_MAX_EXTENT_M = 20.0
+
+
+def placement_warnings(scene: SceneSpec) -> list[str]:
+    """What a scene file places where no camera view of it could mean it (a new user's audit: each
+    rendered without a word): a mesh tens of metres across (in millimetres, not metres), an object
+    wholly behind the camera, the camera inside a solid object's bounds.  Warnings, not errors:
+    a room around the camera, or an object behind it that lights the scene, may be meant."""
+    out = []
+    extents = [_extent_points(obj) for obj in scene.objects]
+    # (all of them behind: the render's "no object is visible" error says it)
+    some_in_front = any((pts[:, 2] > 0).any() for pts in extents)
+    for obj, pts in zip(scene.objects, extents):
+        span = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+        if obj.kind == "mesh" and span > MESH_MAX_EXTENT_M:
+            out.append(
+                f"object {obj.name!r}: the mesh spans {span:.4g} m across - scene units are metres (a mesh in "
+                "millimetres? `scale = 0.001` in its [[object]])"
+            )
+        if (pts[:, 2] <= 0).all() and some_in_front:
+            out.append(f"object {obj.name!r} lies wholly behind the camera (z <= 0 m): no pixel sees it")
+        elif obj.kind in ("box", "sphere", "mesh") and ((pts.min(axis=0) < 0) & (pts.max(axis=0) > 0)).all():
+            out.append(
+                f"the camera (at the origin) is inside the bounds of object {obj.name!r} "
+                f"({np.round(pts.min(axis=0), 3).tolist()} to {np.round(pts.max(axis=0), 3).tolist()} m): it sees "
+                "the object from within"
+            )
+    return out
+
+
 def image_motion_px(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: float) -> float:
     """The largest distance (camera pixels) any moving object's extent points travel across the
     image between ``t0_s`` and ``t1_s``, checked along the way (a rotation can bring a point back);

@@ -90,6 +90,19 @@ class PhaseShiftSystem:
         self._optics = ColourFringeSystem(options)
         self.sensor = self._optics.sensor
         self.spec = spec if spec is not None else PhaseShiftSpec()
+        self._spec_given = spec is not None
+
+    def spec_for(self, scene: SceneSpec) -> PhaseShiftSpec:
+        """The sequence for ``scene``'s projector: the one given, or the default sequence at the
+        projector's size (a new user's audit: a rig with a 1280x800 projector was refused, "pattern
+        size (1140, 1824) differs", with no option to change it - the proposed sensor's pattern
+        follows the projector, and so does this one now)."""
+        size = tuple(scene.rig.projector.size_hw)
+        if tuple(self.spec.size_hw) == size:
+            return self.spec
+        if self._spec_given:
+            raise ValueError(f"pattern size {self.spec.size_hw} differs from the projector's {size}")
+        return dataclasses.replace(self.spec, size_hw=size)
 
     def info(self) -> SystemInfo:
         s = self.spec
@@ -142,15 +155,12 @@ class PhaseShiftSystem:
         from simbench.sim.drive import DriveImage, ProjectorDrive, exposure_phase
         from simbench.sim.timeline import is_moving, scene_at
 
-        if tuple(self.spec.size_hw) != scene.rig.projector.size_hw:
-            raise ValueError(
-                f"pattern size {self.spec.size_hw} differs from the projector's {scene.rig.projector.size_hw}"
-            )
+        spec = self.spec_for(scene)
         phase = exposure_phase(render_seed)
         windows = self.frame_windows_s(scene) if is_moving(scene) else None
         frames = []  # per projector frame, its recording per noise seed (grey)
-        for k, digest in enumerate(_frame_digests(self.spec, render.cache)):
-            frame = DriveImage(digest, lambda k=k: self.frames_u8()[k])  # made only for a render not cached
+        for k, digest in enumerate(_frame_digests(spec, render.cache)):
+            frame = DriveImage(digest, lambda k=k: _frames_u8(spec)[k])  # made only for a render not cached
             window = None if windows is None else windows[k]
             # the projector's defocus follows the geometry at the frame's mid-exposure
             posed = scene if window is None else scene_at(scene, 0.5 * (window[0] + window[1]))
@@ -180,7 +190,7 @@ class PhaseShiftSystem:
         camera's exposure, the proposed sensor's camera: global shutter)."""
         exposure = self._optics.capture_window_s(scene)[1]
         period = self.frame_period_s(scene)
-        return [(k * period, k * period + exposure) for k in range(self.spec.captures)]
+        return [(k * period, k * period + exposure) for k in range(self.spec_for(scene).captures)]
 
     def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
         """From the first frame's start to the last one's end (12 frames: ~0.33 s at the paper
@@ -200,7 +210,7 @@ class PhaseShiftSystem:
             raise ValueError(f"frames of shape {frames.shape[1:]} do not match the camera's {cam.size_hw}")
         if cam.has_distortion:
             frames = np.stack([undistort_image(f, cam) for f in frames])
-        r = decode_phase_shift(frames, spec=self.spec)
+        r = decode_phase_shift(frames, spec=self.spec_for(scene))
         z = triangulate_columns(r.column_px, scene.rig)
         near, far = DEPTH_RANGE_M
         with np.errstate(invalid="ignore"):
@@ -252,7 +262,8 @@ class PhaseShiftSystem:
             "frames": lambda d: save_npy(d / "frames.npy", np.asarray(raw, np.float32)),
             "rig": lambda d: save_rig(scene.rig, d / "rig.toml"),
         }
-        return write_device_recording(out_dir, self.name, self.spec, writers, gt=gt, info=meta, overwrite=overwrite)
+        spec = self.spec_for(scene)
+        return write_device_recording(out_dir, self.name, spec, writers, gt=gt, info=meta, overwrite=overwrite)
 
     def read_recording(self, in_dir: Path) -> tuple[np.ndarray, None, SceneSpec]:
         from simbench.systems.recording import read_device_info
@@ -261,6 +272,7 @@ class PhaseShiftSystem:
 
         d = Path(in_dir)
         self.spec, info = read_device_info(d, self.name, PhaseShiftSpec)
+        self._spec_given = True  # the folder's own sequence
         rig = load_rig(d / "rig.toml")
         frames = load_npy(d / "frames.npy", expected_shape=(self.spec.captures, *rig.camera.size_hw))
         return frames, None, SceneSpec(name=str(info.get("scene", d.name)), rig=rig, objects=())

@@ -207,9 +207,10 @@ class ColourFringeSystem:
         """The scene with the run's camera resolution, the rendered rig and the sensor model's
         lenses and ambient light (:func:`simbench.sim.capture.physical_scene`)."""
         from simbench.sim.mitsuba_dict import realised_rig
-        from simbench.rig import scale_camera
+        from simbench.rig import check_stripe_baseline, scale_camera
         from simbench.sim.capture import physical_scene
 
+        check_stripe_baseline(scene.rig)  # before minutes of rendering what no decoder reads
         rig = scene.rig if self.camera_scale == 1 else scale_camera(scene.rig, self.camera_scale)
         return physical_scene(dataclasses.replace(scene, rig=realised_rig(rig)), self.sensor)
 
