@@ -617,14 +617,14 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
 
 
 # the ADC depths a camera may have (simbench.sim.camera, simbench.sim.sensor)
-ADC_BITS = (8, 10, 12, 16)
+ADC_BITS = (8, 10, 12, 14, 16)
 
 
 def stored_adc_bits(bits: int) -> int | None:
     """The bits a reader of a ``bits``-bit camera's images must be told (:func:`adc_full_scale`):
-    a 10- or 12-bit camera's, whose digital numbers fill only part of their uint16; None for an 8-
-    or 16-bit camera's, read by their dtype's range."""
-    return bits if bits in (10, 12) else None
+    a 10-, 12- or 14-bit camera's, whose digital numbers fill only part of their uint16; None for an
+    8- or 16-bit camera's, read by their dtype's range."""
+    return bits if bits in (10, 12, 14) else None
 
 
 def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarray:

@@ -34,8 +34,10 @@ def test_adc_full_scale_reads_digital_numbers_against_their_own_range():
         adc_full_scale(dn, bits=10, where="x")
     with pytest.raises(ValueError, match="an 8-bit image, not the 12-bit camera's"):
         adc_full_scale(np.zeros((1, 1), np.uint8), bits=12, where="x")
+    # a 14-bit camera (common in scientific cameras; a new user's audit found it refused)
+    assert adc_full_scale(dn, bits=14, where="x").tolist() == [[0.0, np.float32(1 / 16383), np.float32(4095 / 16383)]]
     with pytest.raises(ValueError, match="bits must be one of"):
-        adc_full_scale(dn, bits=14, where="x")
+        adc_full_scale(dn, bits=15, where="x")
     assert "give --bits 12" in narrow_uint16_hint(dn) and "16 times darker" in narrow_uint16_hint(dn)
     assert narrow_uint16_hint(np.array([[60000]], np.uint16)) == "" and narrow_uint16_hint(dn.astype(np.uint8)) == ""
 
@@ -59,9 +61,10 @@ def test_a_twelve_bit_camera_decodes_in_memory_as_an_eight_bit_one_does():
     scene = SceneSpec(name="plane", rig=RIG, objects=(), reference_depth_m=1.0)
     minimal = get_sensor("minimal")
     out = {}
-    for bits in (8, 12):
+    for bits in (8, 12, 14):
         cap, ref = _plane_pair(bits)
         assert cap.dtype == np.uint8 if bits == 8 else (cap.dtype == np.uint16 and cap.max() > 1023)
+        assert bits != 14 or 4095 < cap.max() <= 16383
         sensor = dataclasses.replace(minimal, camera=dataclasses.replace(minimal.camera, bits=bits))
         system = get_system("proposed", SystemOptions(sensor=sensor))
         cal = ReferenceCalibration(rig=RIG, image=ref, adc_bits=bits)

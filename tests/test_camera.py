@@ -198,6 +198,7 @@ def test_fixed_pattern_is_drawn_once_with_the_bits_of_a_fresh_draw():
         {"cfa": "none", "prnu": 0.0, "dsnu_e": 0.0},
         {"cfa": "GBRG", "bits": 12, "offset_dn": 3.5, "dark_current_e_s": 40.0},
         {"cfa": "none", "bits": 16, "noise": False, "dark_noise_e": 0.0},
+        {"cfa": "RGGB", "bits": 14, "offset_dn": 16.0},
         {"cfa": "BGGR", "dark_noise_e": 0.0, "prnu": 0.05, "dsnu_e": 0.0},
     ],
 )
