@@ -289,7 +289,9 @@ def depth(
     For the proposed sensor, ``decoder`` is ``"paper"`` (the paper's decoder), ``"robust"`` (our
     colour-robust decoder at its operating point; needs ``record(..., calibration_frames=True)``)
     or a :class:`simbench.decode.DecoderParams`; ``mode`` ``"reference"`` (default: the reference
-    plane, paper Sec. 5.4) or ``"calibrated"`` (triangulation with the rig, Eq. 15).
+    plane, paper Sec. 5.4; a DecoderParams' own mode where it is given one) or ``"calibrated"``
+    (triangulation with the rig, Eq. 15).  ``mode`` and ``min_confidence``, given, replace the
+    DecoderParams' own.
     ``min_confidence``: the operating point, pixels below it holes (every system; in the system's
     own unit, :attr:`simbench.systems.SystemInfo.confidence`); for the proposed sensor the
     decoder's own threshold, as ``simbench decode --min-confidence`` sets it - in [0, 1e4] (the
@@ -336,7 +338,9 @@ def depth(
             # the decode's own threshold, as `simbench decode --min-confidence` sets it (an audit:
             # thresholding after the robust decoder's own 3 ignored any value below it)
             params = dataclasses.replace(params, min_confidence=min_confidence)
-        mode = mode or "reference"
+        # mode given: it; else a DecoderParams' own (a review: mode=None decoded DecoderParams(mode="calibrated")
+        # by reference matching)
+        mode = mode or (params.mode if not isinstance(decoder, str) else "reference")
         if params.unmix and not recorded.calibration.frames:
             raise ValueError(
                 "the colour-robust decoder unmixes with the reference plane's calibration frames: record with "
@@ -344,8 +348,15 @@ def depth(
             )
         from simbench.decode.params import pattern_on_rig_warnings
 
-        for told in pattern_on_rig_warnings(rec.scene.rig, params):  # as `simbench decode` warns
-            logging.getLogger("simbench").warning("%s", told)
+        from simbench.decode.pipeline import channel_order_doubt
+
+        raw_rgb = rec.raw if rec.raw.ndim == 3 else None
+        checks = [*pattern_on_rig_warnings(rec.scene.rig, params)]
+        if raw_rgb is not None:
+            checks.append(channel_order_doubt(raw_rgb, rig=rec.scene.rig, params=params))
+        for told in checks:  # as `simbench decode` warns
+            if told:
+                logging.getLogger("simbench").warning("%s", told)
         result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
         # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
         # red and green swapped) gives no depth rather than half of it wrong

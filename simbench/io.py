@@ -402,7 +402,8 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
 
     Every file is first written to a temporary file beside its destination (creating missing
     folders); only when all of them are written are they renamed into place (a Ctrl-C or
-    SIGTERM meanwhile takes effect after the last rename, :func:`simbench.termination.held`).  If any write
+    SIGTERM meanwhile takes effect after the last rename under the command line's signal
+    handlers, :func:`simbench.termination.held`; Python's own Ctrl-C handler does not wait).  If any write
     fails (an unwritable folder, a full disk), the temporary files and the folders this call
     created are removed and the error is raised: no destination is touched.
 
@@ -630,7 +631,7 @@ def stored_adc_bits(bits: int) -> int | None:
 def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarray:
     """A capture as the decoder reads it, given the bits of the camera's ADC that recorded it.
 
-    The decoder takes uint8 / 255 and uint16 / 65535 as full scale.  A 10- or 12-bit camera's
+    The decoder takes uint8 / 255 and uint16 / 65535 as full scale.  A 10-, 12- or 14-bit camera's
     image is stored in uint16 as its digital numbers, 0 to ``2**bits - 1`` (as the simulated
     camera records them, and as most machine-vision software saves such frames unscaled), so it
     is returned as float32 ``DN / (2**bits - 1)``; an 8- or 16-bit camera's image (or ``bits``
@@ -670,13 +671,13 @@ def camera_full_scale(img: np.ndarray, *, bits: int) -> np.ndarray:
 
 
 def narrow_uint16_hint(img: np.ndarray) -> str:
-    """A hint for a uint16 image read at the full 16-bit range whose values all fit in 12 or
-    10 bits (a 10- or 12-bit camera's digital numbers, which would then read 16 or 64 times too
-    dark); "" otherwise."""
+    """A hint for a uint16 image read at the full 16-bit range whose values all fit in 14, 12 or
+    10 bits (a 10-, 12- or 14-bit camera's digital numbers, which would then read 4, 16 or 64 times
+    too dark); "" otherwise."""
     if img.dtype != np.uint16:
         return ""
     top = int(img.max(initial=0))
-    for bits in (10, 12):
+    for bits in (10, 12, 14):
         if 0 < top <= (1 << bits) - 1:
             return (
                 f"a 16-bit image whose largest value is {top}, within {bits} bits: if it holds a {bits}-bit camera's "

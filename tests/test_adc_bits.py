@@ -39,6 +39,7 @@ def test_adc_full_scale_reads_digital_numbers_against_their_own_range():
     with pytest.raises(ValueError, match="bits must be one of"):
         adc_full_scale(dn, bits=15, where="x")
     assert "give --bits 12" in narrow_uint16_hint(dn) and "16 times darker" in narrow_uint16_hint(dn)
+    assert "give --bits 14" in narrow_uint16_hint(np.array([[10000]], np.uint16))
     assert narrow_uint16_hint(np.array([[60000]], np.uint16)) == "" and narrow_uint16_hint(dn.astype(np.uint8)) == ""
 
 

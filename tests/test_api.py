@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -213,6 +214,15 @@ def test_depth_and_score_check_their_arguments():
         simbench.depth(rec, mode="triangulate")
     with pytest.raises(ValueError, match="depth\\(\\) decodes what record\\(\\) returned"):
         simbench.depth(rec.raw)
+    # a DecoderParams' own mode where mode= is not given (a review: mode=None decoded
+    # DecoderParams(mode="calibrated") by reference matching)
+    from simbench.decode import DecoderParams
+
+    params = DecoderParams(mode="calibrated", min_confidence=2.0)
+    cal = simbench.depth(rec, decoder=params).depth_m
+    assert np.array_equal(cal, simbench.depth(rec, decoder=params, mode="calibrated").depth_m, equal_nan=True)
+    ref = simbench.depth(rec, decoder=dataclasses.replace(params, mode="reference")).depth_m
+    assert not np.array_equal(cal, ref, equal_nan=True)
     depth = simbench.depth(rec)
     with pytest.raises(ValueError, match="edge_band_px must be an integer"):
         simbench.score(depth, rec, edge_band_px=2.5)

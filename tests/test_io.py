@@ -145,3 +145,28 @@ def test_a_full_disk_names_the_file_in_every_writer(tmp_path, monkeypatch):
         with output_directory(tmp_path / "out", manifest="m.json"):
             raise OSError(errno.ENOSPC, "No space left on device")
     assert info.value.filename == str(tmp_path / "out") and list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_between_a_sets_renames_takes_effect_after_the_last(tmp_path, monkeypatch):
+    """write_files renames its set under termination.held(): Ctrl-C or SIGTERM (the CLI's handlers
+    call run_or_hold) after the first rename waits until the last, so the set is whole."""
+    import os
+
+    from simbench import io, termination
+
+    real, done = os.replace, []
+
+    def interrupt():
+        raise KeyboardInterrupt
+
+    def replace(src, dst):
+        real(src, dst)
+        done.append(dst)
+        if len(done) == 1:  # the signal arrives between the renames
+            termination.run_or_hold(interrupt)
+
+    monkeypatch.setattr(io.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        io.write_files({tmp_path / "a.csv": b"new a", tmp_path / "b.json": b"new b"})
+    assert (tmp_path / "a.csv").read_bytes() == b"new a" and (tmp_path / "b.json").read_bytes() == b"new b"
+    assert len(done) == 2 and not list(tmp_path.glob(".*.tmp"))

@@ -428,6 +428,15 @@ def test_placements_no_view_could_mean_are_warned_of_and_the_shipped_scenes_have
                 },
                 {"type": "sphere", "name": "behind", "center_m": [0, 0, -2.0], "radius_m": 0.5},
                 {"type": "sphere", "name": "around", "center_m": [0, 0, 0.1], "radius_m": 0.5},
+                # its bounding box holds the camera, the ball does not (a review: warned by the box)
+                {"type": "sphere", "name": "beside", "center_m": [0.3, 0.3, 0.3], "radius_m": 0.5},
+                {
+                    "type": "box",
+                    "name": "turned",
+                    "center_m": [0, 0, 0.4],
+                    "size_m": [0.2, 0.2, 0.2],
+                    "rotation_deg": [0, 45, 0],
+                },
                 {"type": "plane", "name": "wall", "center_m": [0, 0, 1.5], "size_m": [2.0, 2.0]},
             ],
         }
@@ -437,4 +446,4 @@ def test_placements_no_view_could_mean_are_warned_of_and_the_shipped_scenes_have
     assert any("'behind' lies wholly behind the camera" in t for t in told)
     assert any("inside the bounds of object 'around'" in t for t in told)
     assert any("inside the bounds of object 'mm'" in t for t in told)
-    assert not any("'wall'" in t for t in told)
+    assert not any("'wall'" in t or "'beside'" in t or "'turned'" in t for t in told)

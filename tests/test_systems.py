@@ -290,7 +290,10 @@ def test_a_broken_plugin_is_named_as_the_plugins_fault_not_simbenchs(tmp_path, m
     assert err.startswith("simbench: error in the depth system plugins 'number', 'faulty' (code of brk-plugins: brk_")
     assert "report it to the plugin's authors" in err
     # simbench's own failure stays its internal error
-    try:
+    with pytest.raises(ValueError) as own:
         systems.get_system(None)  # type: ignore[arg-type]
-    except Exception as exc:  # noqa: BLE001
-        assert systems.plugin_in_traceback(exc) is None
+    assert systems.plugin_in_traceback(own.value) is None
+    # a system registered later under a plugin's name is no longer the plugin's
+    systems.register_system("faulty", lambda options: 42, replace=True)
+    with pytest.raises(TypeError, match="the factory of depth system 'faulty' returned a int"):
+        systems.get_system("faulty")

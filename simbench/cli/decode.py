@@ -232,7 +232,7 @@ def add_parsers(sub, kw: dict) -> None:
         type=int,
         choices=ADC_BITS,
         default=None,
-        help="the bits of the camera's ADC, for images that do not record them: a 10- or 12-bit camera's 16-bit "
+        help="the bits of the camera's ADC, for images that do not record them: a 10-, 12- or 14-bit camera's 16-bit "
         "image holds its digital numbers, 0 to 2^bits - 1 (default: a recording's camera, else the image's "
         "dtype: 8-bit / 255, 16-bit / 65535)",
     )

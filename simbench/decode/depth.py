@@ -129,7 +129,9 @@ def match_reference(column: np.ndarray, table: np.ndarray) -> np.ndarray:
 
 
 def depth_from_disparity(x_ref: np.ndarray, *, focal_px: float, baseline_m: float, z0_m: float) -> np.ndarray:
-    """Depth from the disparity to the reference plane: ``1/Z = 1/Z0 + (x - x_r)/(f*B)``.
+    """Depth from the disparity to the reference plane: ``1/Z = 1/Z0 + (x - x_r)/(f*B)``, ``B`` the
+    baseline signed as the projector's x position (negative on the camera's left: its length alone
+    mirrors the depths about Z0).
 
     Returns
     -------

@@ -421,9 +421,8 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
     camera_period = params.camera_period(rig)
     if camera_period < MIN_CAMERA_PERIOD_PX:
         out.append(
-            f"the fringe's period is {camera_period:.1f} camera pixels ({params.period_px} projector px x "
-            f"{rig.camera.focal_px:g} / {rig.projector.focal_px:g}), under the {MIN_CAMERA_PERIOD_PX:g} the phase fit "
-            "needs (Nyquist: 2): expect little or no depth; choose a longer --period"
+            f"the fringe's period is {camera_period:.1f} camera pixels, under the {MIN_CAMERA_PERIOD_PX:g} the phase "
+            "fit needs (Nyquist: 2): expect little or no depth; choose a longer --period"
         )
     fb = rig.projector.focal_px * abs(rig.position_m[0])
     near, far = params.depth_range_m
@@ -431,7 +430,9 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
     extent = fb * (1.0 / near - 1.0 / far)
     if extent > span:
         inv_far = 1.0 / near - span / fb
-        deepest = f"{near:g}-{1.0 / inv_far:.3g} m" if inv_far > 0 else f"from {near:g} m on"
+        # (rounded down: a far limit rounded up would be past one cycle again)
+        far_ok = math.floor(1000.0 / inv_far) / 1000.0 if inv_far > 0 else math.inf
+        deepest = f"{near:g}-{far_ok:g} m" if inv_far > 0 else f"from {near:g} m on"
         out.append(
             f"the pattern's code repeats every {span} projector px ({params.cycle} stripes of {params.period_px} px), "
             f"and with this rig (f_p b = {fb:.1f} px m) the working range {near:g}-{far:g} m spans {extent:.0f} px "

@@ -97,13 +97,27 @@ def placement_warnings(scene: SceneSpec) -> list[str]:
             )
         if (pts[:, 2] <= 0).all() and some_in_front:
             out.append(f"object {obj.name!r} lies wholly behind the camera (z <= 0 m): no pixel sees it")
-        elif obj.kind in ("box", "sphere", "mesh") and ((pts.min(axis=0) < 0) & (pts.max(axis=0) > 0)).all():
+        elif _holds_the_camera(obj, pts):
             out.append(
                 f"the camera (at the origin) is inside the bounds of object {obj.name!r} "
                 f"({np.round(pts.min(axis=0), 3).tolist()} to {np.round(pts.max(axis=0), 3).tolist()} m): it sees "
                 "the object from within"
             )
     return out
+
+
+def _holds_the_camera(obj: SceneObject, pts: np.ndarray) -> bool:
+    """Whether the origin (the camera) is inside a solid object: a sphere or a box exactly, a
+    mesh by its bounding box."""
+    p = dict(obj.params)
+    if obj.kind == "sphere":
+        return float(np.linalg.norm(p["center_m"])) < float(p["radius_m"])
+    if obj.kind == "box":
+        local = rotation_xyz_deg(p["rotation_deg"]).T @ -np.asarray(p["center_m"], np.float64)
+        return bool((np.abs(local) < np.asarray(p["size_m"], np.float64) / 2.0).all())
+    if obj.kind == "mesh":
+        return bool(((pts.min(axis=0) < 0) & (pts.max(axis=0) > 0)).all())
+    return False
 
 
 def image_motion_px(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: float) -> float:

@@ -199,11 +199,13 @@ def register_system(name: str, factory: Callable[[SystemOptions], DepthSystem] |
     if name in _SYSTEMS and not replace:
         raise ValueError(f"a depth system {name!r} is already registered")
     _SYSTEMS[name] = factory
+    _PLUGINS.pop(name, None)  # (a plugin's entry is put back by _read_plugins after this call)
 
 
 def unregister_system(name: str) -> None:
     """Remove ``name`` from the registry (a test's own system, for example)."""
     _SYSTEMS.pop(name, None)
+    _PLUGINS.pop(name, None)
 
 
 # depth systems other installed packages provide, found when the registry is first read: in the

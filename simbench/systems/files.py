@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import shlex
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -51,7 +52,7 @@ class DecodeRequest:
     plane capture, its calibration frames' folder, the decoding ``mode``, Z0, the working range,
     the pattern (None = as recorded, or the default), the colour-robust decoder and other
     decoder settings as ``name=value`` items, and the bits of the camera's ADC for images that
-    do not record them (a 10- or 12-bit camera's uint16 digital numbers).  None or empty = not
+    do not record them (a 10-, 12- or 14-bit camera's uint16 digital numbers).  None or empty = not
     given.
     """
 
@@ -273,7 +274,9 @@ def decode_files(request: DecodeRequest) -> str:
         here = {p.name for p in outputs if p.parent == d.resolve()}  # (an --out named like a stage stays)
         stale = sorted(set(_listed_stages(d)) - set(stages) - here - {"stages.json"})
         # the command as typed where it is one (the marker's "simbench decode" prefix either way)
-        command = "simbench " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["decode"] else "simbench decode"
+        argv = sys.argv[1:]
+        at = argv.index("decode") + 1 if "decode" in argv[:2] else None  # (after a leading --debug too)
+        command = "simbench decode" + ("" if at is None else " " + shlex.join(argv[at:]))
         files[d / "stages.json"] = json_bytes(
             {
                 "command": command,

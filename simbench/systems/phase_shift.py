@@ -169,7 +169,7 @@ class PhaseShiftSystem:
             recordings = record_channels(
                 scene, drive, self.sensor, seed=render_seed, render=render, rngs=seeds, window_s=window
             )
-            # (a 10- or 12-bit camera's digital numbers at its own full scale, not uint16's)
+            # (a 10-, 12- or 14-bit camera's digital numbers at its own full scale, not uint16's)
             bits = self.sensor.camera.bits
             frames.append([grey_frame(camera_full_scale(r, bits=bits)) for r in recordings])
         return [np.stack([f[i] for f in frames]) for i in range(len(noise_seeds))]

@@ -109,7 +109,7 @@ class ReferenceCalibration:
     image: np.ndarray
     frames: dict = field(default_factory=dict)
     cache: object = None
-    # the bits of the camera's ADC (None: the images' dtype's range): a 10- or 12-bit camera's
+    # the bits of the camera's ADC (None: the images' dtype's range): a 10-, 12- or 14-bit camera's
     # uint16 images hold its digital numbers (simbench.io.adc_full_scale)
     adc_bits: int | None = None
     _maps: dict = field(default_factory=dict, repr=False)
@@ -319,7 +319,7 @@ class ColourFringeSystem:
 
         params = params if params is not None else self.decoder
         params = _with(params, z0_m=scene.reference_depth_m, mode=mode or params.mode)
-        # a 10- or 12-bit camera's digital numbers, read against its own full scale (any other
+        # a 10-, 12- or 14-bit camera's digital numbers, read against its own full scale (any other
         # camera's images by their dtype's range, as the decoder reads arrays)
         raw = camera_full_scale(raw, bits=self.sensor.camera.bits)
         ref = None
@@ -414,7 +414,7 @@ class ColourFringeSystem:
         (``simbench render``); the scene carries the recorded rig and Z0, no objects.  The
         manifest and every file are checked (:func:`simbench.manifest.read_manifest`), and a
         folder recorded with another pattern than this system's is refused (it would decode
-        wrongly without a word).  A 10- or 12-bit camera's capture comes as float32 of its full
+        wrongly without a word).  A 10-, 12- or 14-bit camera's capture comes as float32 of its full
         scale (:func:`simbench.io.adc_full_scale`), the calibration with its ``adc_bits``."""
         from simbench.io import adc_full_scale, load_image
         from simbench.rig import load_rig

@@ -246,8 +246,11 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
     from simbench.decode.params import pattern_on_rig_warnings
 
-    for told in pattern_on_rig_warnings(rig, params):
-        logging.getLogger("simbench").warning("%s: %s", capture_path, told)
+    from simbench.decode.pipeline import channel_order_doubt
+
+    for told in [*pattern_on_rig_warnings(rig, params), channel_order_doubt(capture, rig=rig, params=params)]:
+        if told:
+            logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     if request.calibration is not None and not params.unmix:
         raise ValueError(
             f"--calibration {request.calibration}: those frames are for the colour-robust decoder's unmixing; add "
