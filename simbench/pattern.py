@@ -170,15 +170,9 @@ class PatternSpec:
 
     def __post_init__(self) -> None:
         check_channels(self.channels)
-        if isinstance(self.size_hw, (str, bytes)) or len(self.size_hw) != 2:
-            raise ValueError(f"pattern size_hw must be (height, width), got {self.size_hw!r}")
-        w, h = validate.image_size(
-            self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height")
-        )
+        (h, w), period = checked_size_and_period(self.size_hw, self.period_px)
         object.__setattr__(self, "size_hw", (h, w))
-        object.__setattr__(
-            self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
-        )
+        object.__setattr__(self, "period_px", period)
         object.__setattr__(self, "order", validate.integer(self.order, "order", lo=2, hi=16))
         if w < self.order * self.period_px:  # (a new user's audit: `pattern --period 1000` passed)
             raise ValueError(
@@ -207,6 +201,15 @@ class PatternSpec:
     def cycle_stripes(self) -> int:
         """Number of stripes L in one cycle (paper: 8)."""
         return 2**self.order if self.sequence is None else len(self.sequence)
+
+
+def checked_size_and_period(size_hw, period_px) -> tuple[tuple[int, int], int]:
+    """A projector pattern's (height, width) and fringe period in pixels, checked (the coded
+    pattern's and the phase-shift sequence's alike)."""
+    if isinstance(size_hw, (str, bytes)) or len(size_hw) != 2:
+        raise ValueError(f"pattern size_hw must be (height, width), got {size_hw!r}")
+    w, h = validate.image_size(size_hw[1], size_hw[0], "pattern", names=("pattern width", "pattern height"))
+    return (h, w), validate.integer(period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
 
 
 def check_channels(channels: str) -> tuple[int, int, int]:

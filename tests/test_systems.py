@@ -212,6 +212,17 @@ def test_a_fourth_system_runs_through_table3_and_the_cli(ideal_system, tmp_path,
     assert np.array_equal(np.isfinite(depth), np.isfinite(gt)) and np.nanmax(np.abs(depth - gt)) == 0.0
 
 
+def _plugin_site(tmp_path, package: str, entry_points: str):
+    """A folder for PYTHONPATH holding an installed package's dist-info: ``package`` with the
+    ``simbench.systems`` entry points ``entry_points`` (lines ``name = module:attribute``)."""
+    site = tmp_path / "site"
+    info = site / f"{package.replace('-', '_')}-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {package}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[simbench.systems]\n{entry_points}\n")
+    return site
+
+
 def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, variant):
     """docs/extending.md: a package's entry point in the group ``simbench.systems`` registers its
     system in every process - `simbench render --system NAME` in a fresh process takes it (a third
@@ -222,12 +233,10 @@ def test_an_installed_plugins_system_runs_in_a_fresh_simbench_process(tmp_path, 
     import subprocess
     import sys
 
-    site = tmp_path / "site"
-    info = site / "simbench_ideal_plugin-0.1.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: simbench-ideal-plugin\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[simbench.systems]\nideal_depth = tests.test_systems:IdealDepthCamera\nmy-sensor = nowhere:Nothing\n"
+    site = _plugin_site(
+        tmp_path,
+        "simbench-ideal-plugin",
+        "ideal_depth = tests.test_systems:IdealDepthCamera\nmy-sensor = nowhere:Nothing",
     )
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(root)])}
@@ -256,12 +265,8 @@ def test_a_broken_plugin_is_named_as_the_plugins_fault_not_simbenchs(tmp_path, m
     import simbench.systems as systems
     from simbench.cli import _report_error
 
-    site = tmp_path / "site"
-    info = site / "brk_plugins-0.1.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: brk-plugins\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(
-        "[simbench.systems]\nboom = brk_boom:Thing\nnumber = brk_parts:NUMBER\nfaulty = brk_parts:faulty\n"
+    site = _plugin_site(
+        tmp_path, "brk-plugins", "boom = brk_boom:Thing\nnumber = brk_parts:NUMBER\nfaulty = brk_parts:faulty"
     )
     (site / "brk_boom.py").write_text('raise RuntimeError("boom at import")\n')
     (site / "brk_parts.py").write_text(

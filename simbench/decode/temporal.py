@@ -28,7 +28,7 @@ import numpy as np
 
 from simbench import validate
 from simbench.literature import PAPER_PERIOD_PX
-from simbench.pattern import column_from_phase, phase_from_column
+from simbench.pattern import checked_size_and_period, column_from_phase, phase_from_column
 
 __all__ = [
     "AXES",
@@ -73,15 +73,9 @@ class PhaseShiftSpec:
     def __post_init__(self) -> None:
         # size and period checked as the single-shot pattern's are (not its De Bruijn window's
         # width: a phase-shift period may be as wide as the pattern)
-        if isinstance(self.size_hw, (str, bytes)) or len(self.size_hw) != 2:
-            raise ValueError(f"pattern size_hw must be (height, width), got {self.size_hw!r}")
-        w, h = validate.image_size(
-            self.size_hw[1], self.size_hw[0], "pattern", names=("pattern width", "pattern height")
-        )
-        object.__setattr__(self, "size_hw", (h, w))
-        object.__setattr__(
-            self, "period_px", validate.integer(self.period_px, "period_px", lo=4, hi=validate.MAX_SIDE_PX)
-        )
+        size_hw, period = checked_size_and_period(self.size_hw, self.period_px)
+        object.__setattr__(self, "size_hw", size_hw)
+        object.__setattr__(self, "period_px", period)
         object.__setattr__(self, "steps", validate.integer(self.steps, "steps", lo=4, hi=64))
         object.__setattr__(
             self, "min_modulation", validate.number(self.min_modulation, "min_modulation", lo=0.0, hi=1.0)
