@@ -270,12 +270,6 @@ def _scene_record(scene, spec: SceneSpec) -> dict:
     }
 
 
-def _same_codes(pattern: PatternSpec) -> PatternSpec:
-    """``pattern`` with its sequence as the codes it projects (the default De Bruijn sequence
-    given explicitly and left None project the same pattern)."""
-    return dataclasses.replace(pattern, sequence=tuple(int(c) for c in pattern.codes()))
-
-
 def depth(
     recorded: Recorded,
     *,
@@ -328,7 +322,7 @@ def depth(
             params = robust_params(params) if decoder == "robust" else params
         else:
             params = decoder
-            if _same_codes(params.pattern) != _same_codes(pattern):
+            if not params.pattern.projects_as(pattern):
                 recorded_as = "the one recorded" if recorded.pattern else "the paper's (no pattern recorded)"
                 raise ValueError(
                     f"the decoder's pattern ({describe_pattern(params.pattern)}) is not {recorded_as} "
@@ -346,17 +340,10 @@ def depth(
                 "the colour-robust decoder unmixes with the reference plane's calibration frames: record with "
                 "calibration_frames=True"
             )
-        from simbench.decode.params import pattern_on_rig_warnings
+        from simbench.decode.pipeline import capture_warnings
 
-        from simbench.decode.pipeline import channel_order_doubt
-
-        raw_rgb = rec.raw if rec.raw.ndim == 3 else None
-        checks = [*pattern_on_rig_warnings(rec.scene.rig, params)]
-        if raw_rgb is not None:
-            checks.append(channel_order_doubt(raw_rgb, rig=rec.scene.rig, params=params))
-        for told in checks:  # as `simbench decode` warns
-            if told:
-                logging.getLogger("simbench").warning("%s", told)
+        for told in capture_warnings(rec.raw, rig=rec.scene.rig, params=params):  # as `simbench decode` warns
+            logging.getLogger("simbench").warning("%s", told)
         result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
         # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
         # red and green swapped) gives no depth rather than half of it wrong

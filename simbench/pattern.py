@@ -21,6 +21,8 @@ Conventions (stated once, used everywhere)
 
 from __future__ import annotations
 
+import dataclasses
+
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -196,6 +198,13 @@ class PatternSpec:
     def codes(self) -> np.ndarray:
         """The stripe codes of one cycle, shape (L,), uint8."""
         return code_sequence(self.sequence, order=self.order)
+
+    def projects_as(self, other: "PatternSpec") -> bool:
+        """Whether ``other`` projects the same pattern (its sequence compared as the codes it
+        projects: the default De Bruijn sequence given explicitly and left unset are one)."""
+        return dataclasses.replace(self, sequence=tuple(int(c) for c in self.codes())) == dataclasses.replace(
+            other, sequence=tuple(int(c) for c in other.codes())
+        )
 
     @property
     def cycle_stripes(self) -> int:

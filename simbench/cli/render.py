@@ -61,9 +61,8 @@ def _cmd_render(args) -> int:
         import logging
 
         from simbench.decode.params import pattern_on_rig_warnings
-        from simbench.rig import check_stripe_baseline
 
-        check_stripe_baseline(scene.rig)  # before the renders: no decode of it could read depth
+        # (a rig no decoder reads is refused by the system's prepare(), before any render)
         # what the pattern on this rig will give the decoder (its default working range), before
         # minutes of rendering (a new user's audit: each was found only after the decode)
         for told in pattern_on_rig_warnings(scene.rig, DecoderParams(pattern=pattern)):

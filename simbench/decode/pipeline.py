@@ -738,6 +738,16 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
     )
 
 
+def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams) -> list[str]:
+    """What `simbench decode` and :func:`simbench.depth` warn of before decoding ``capture``: the
+    pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`) and the capture's
+    channel order (:func:`channel_order_doubt`)."""
+    from simbench.decode.params import pattern_on_rig_warnings
+
+    told = channel_order_doubt(capture, rig=rig, params=params)
+    return [*pattern_on_rig_warnings(rig, params), *([told] if told else [])]
+
+
 def without_depth(result: _R) -> _R:
     """``result`` (a :class:`DecodeResult`, or any result with ``depth_m``, ``valid``,
     ``confidence`` and optionally ``column_px`` and ``stripe_index``) with nothing decoded: NaN

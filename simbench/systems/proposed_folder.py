@@ -84,12 +84,6 @@ def _z0_for(reference: Path, z0: float | None, *, option: str = "--z0") -> float
     return recorded
 
 
-def _projected(pattern):
-    """``pattern`` with its sequence as the codes it projects (the default sequence given
-    explicitly and left unset compare equal)."""
-    return dataclasses.replace(pattern, sequence=tuple(int(c) for c in pattern.codes()))
-
-
 def _decoder_names(request: DecodeRequest) -> set[str]:
     """The parameters the request's ``--decoder name=value`` items set."""
     return {item.partition("=")[0] for item in request.decoder}
@@ -222,9 +216,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     base = DecoderParams(pattern=pattern, mode=mode, z0_m=z0, depth_range_m=(request.near_m, request.far_m))
     params = _decoder_params(request, base)
-    if any(n == "pattern" or n.startswith("pattern.") for n in named) and _projected(params.pattern) != _projected(
-        pattern
-    ):
+    if any(n == "pattern" or n.startswith("pattern.") for n in named) and not params.pattern.projects_as(pattern):
         # (a fourth audit: --decoder pattern= won over --period without a word, and over a recording's
         # pattern too, whose decode then failed as if the reference were at fault)
         if recorded is not None:
@@ -244,13 +236,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
                 "disagree: give one"
             )
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
-    from simbench.decode.params import pattern_on_rig_warnings
+    from simbench.decode.pipeline import capture_warnings
 
-    from simbench.decode.pipeline import channel_order_doubt
-
-    for told in [*pattern_on_rig_warnings(rig, params), channel_order_doubt(capture, rig=rig, params=params)]:
-        if told:
-            logging.getLogger("simbench").warning("%s: %s", capture_path, told)
+    for told in capture_warnings(capture, rig=rig, params=params):
+        logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     if request.calibration is not None and not params.unmix:
         raise ValueError(
             f"--calibration {request.calibration}: those frames are for the colour-robust decoder's unmixing; add "
