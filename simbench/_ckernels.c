@@ -725,6 +725,34 @@ void neighbour_correct(int64_t n, const int32_t *restrict positions, const int64
     }
 }
 
+/* simbench.decode.debruijn.contested_positions: out[j] = 1 where the kept position kept[j]
+ * has a rival h != kept[j] that the linked stripes within reach predict (positions[j + o] - o
+ * mod cycle) on both sides, at least once on each and min_support times in all.
+ * counts: 2 cycle int64 of scratch. */
+void contested_positions(int64_t n, const int32_t *restrict positions, const int32_t *restrict kept,
+                         const int64_t *restrict left, const int64_t *restrict right, int64_t cycle, int64_t reach,
+                         int64_t min_support, int64_t *restrict counts, uint8_t *restrict out) {
+    int64_t *cl = counts, *cr = counts + cycle;
+    for (int64_t j = 0; j < n; j++) {
+        out[j] = 0;
+        const int32_t w = kept[j];
+        if (w < 0) continue;
+        for (int64_t v = 0; v < 2 * cycle; v++) counts[v] = 0;
+        for (int64_t off = -reach; off <= reach; off++) {
+            const int64_t src = j + off;
+            const int ok = off < 0 ? (left[j] >= -off) : (right[j] >= off);
+            if (off == 0 || !ok || src < 0 || src >= n || positions[src] < 0) continue;
+            const int64_t h = pymod((int64_t)positions[src] - off, cycle);
+            if (h != w) (off < 0 ? cl : cr)[h] += 1;
+        }
+        for (int64_t h = 0; h < cycle; h++)
+            if (cl[h] >= 1 && cr[h] >= 1 && cl[h] + cr[h] >= min_support) {
+                out[j] = 1;
+                break;
+            }
+    }
+}
+
 /* Wraps (0 or 1) across the invalid gap between pixels xl and x of one row, or -1
  * (simbench.decode._kernels documents the rule). */
 static int64_t bridge(const float *restrict wr, const uint8_t *restrict valid, int64_t w, int64_t xl, int64_t x,

@@ -275,6 +275,27 @@ def drop_broken_links(positions, linked_prev, *, cycle):
     return out
 
 
+def contested_positions(positions, kept, linked_prev, *, cycle, reach, min_support):
+    n = positions.size
+    left, right = chain_extent(linked_prev)
+    idx = np.arange(n)
+    counts = {side: np.zeros((n, cycle), np.int64) for side in ("left", "right")}
+    for off in range(-reach, reach + 1):
+        if off == 0:
+            continue
+        src = idx + off
+        ok = ((left >= -off) if off < 0 else (right >= off)) & (src >= 0) & (src < n)
+        p = np.full(n, -1, np.int64)
+        p[ok] = positions[src[ok]]
+        ok &= p >= 0
+        h = (p - off) % cycle
+        ok &= h != kept
+        np.add.at(counts["left" if off < 0 else "right"], (idx[ok], h[ok]), 1)
+    cl, cr = counts["left"], counts["right"]
+    rival = ((cl >= 1) & (cr >= 1) & (cl + cr >= min_support)).any(axis=1)
+    return (kept >= 0) & rival
+
+
 def neighbour_correct(
     positions: np.ndarray,
     linked_prev: np.ndarray,

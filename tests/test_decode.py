@@ -10,6 +10,7 @@ import pytest
 from simbench.decode import DecoderParams, decode, decode_reference
 from simbench.decode.color import Stripes
 from simbench.decode.debruijn import (
+    contested_positions,
     drop_broken_links,
     keep_certain_sides,
     keep_straddler_parts,
@@ -142,6 +143,30 @@ def test_neighbour_correction_repairs_a_wrong_code():
     assert np.array_equal(fixed, truth)
     off, _ = neighbour_correct(raw, linked, cycle=8, reach=0)
     assert np.array_equal(off, raw)
+
+
+def test_a_run_is_contested_when_the_stripes_on_both_sides_agree_through_it():
+    """Two chains of true positions with a run of four stripes between them that reads another
+    stretch of the sequence (W + 4): the run's stripes are contested, every other stripe is
+    not; a hidden depth edge (the chain after it a whole other stretch) contests nothing."""
+    n, cycle = 40, 8
+    truth = np.arange(n, dtype=np.int32) % cycle
+    linked = np.ones(n, bool)
+    linked[0] = False
+    run = slice(18, 22)
+    misread = truth.copy()
+    misread[run] = (truth[run] + 4) % cycle
+    kw = dict(cycle=cycle, reach=cycle, min_support=3)
+    got = contested_positions(misread, misread, linked, **kw)
+    assert np.array_equal(np.flatnonzero(got), np.arange(18, 22))
+    dropped = misread.copy()
+    dropped[[17, 22]] = -1  # the link check dropped the broken links' outer stripes
+    assert np.array_equal(np.flatnonzero(contested_positions(misread, dropped, linked, **kw)), np.arange(18, 22))
+    edge = np.where(np.arange(n) < 20, truth, (truth + 3) % cycle).astype(np.int32)
+    assert not contested_positions(edge, edge, linked, **kw).any()
+    unlinked = linked.copy()
+    unlinked[22] = False  # a chain that ends after the run: nothing on its right agrees
+    assert not contested_positions(misread, misread, unlinked, **kw)[run].any()
 
 
 def test_stripe_floor_is_the_lowest_value_over_each_stripes_own_pixels():
@@ -958,3 +983,32 @@ def test_a_capture_with_its_channels_out_of_order_is_doubted():
     # a pattern that puts the fringe in green reads that capture as it should
     gbr = DecoderParams(pattern=PatternSpec(channels="rbg"))
     assert channel_order_doubt(cap[..., [0, 2, 1]], rig=RIG, params=gbr) == ""
+
+
+def test_a_coherent_run_of_misread_codes_is_contested_and_scores_zero():
+    """A run of stripes whose codes read like another stretch of the De Bruijn sequence (here
+    stripes 0-3 of one cycle printed with the codes of stripes 4-7: JPEG's chroma subsampling of
+    a dark board made such runs) predicts one other position coherently: without the check its
+    stripes decode half a cycle off at full fringe SNR; with ``position_doubt`` every pixel off by
+    a period or more scores 0 and pixels beyond the votes' reach keep their confidence bits."""
+    spec = PatternSpec()
+    t, n = spec.period_px, spec.codes().size
+    drive = quantize(fringe_pattern(spec)).copy()
+    first = 5 * n * t  # stripe 0 of the sixth cycle, near the middle of the view at 1 m
+    for j in range(n // 2):
+        a, b = first + j * t, first + (j + n // 2) * t
+        drive[:, a : a + t, :2] = drive[:, b : b + t, :2]
+    img, col, _ = synthetic_plane_capture(transfer_curve(drive, transfer="linear"), RIG, point_m=(0, 0, 1.0))
+    params = DecoderParams(mode="calibrated")
+    plain = decode(img, rig=RIG, params=params)
+    doubt = decode(img, rig=RIG, params=dataclasses.replace(params, position_doubt=True))
+    assert np.array_equal(plain.valid, doubt.valid)  # the term moves no stripe
+    off = plain.valid & (np.abs(plain.column_px - col) > t)
+    assert off.sum() > 1000 and np.median(plain.confidence[off]) > 30  # silent: a clean fringe
+    assert (doubt.confidence[off] == 0).all()
+    assert doubt.stages["contested"][off].all()
+    away = np.isfinite(col) & (np.abs(col - (first + n * t / 2)) > (n + 2 * params.neighbour_reach) * t)
+    assert np.array_equal(plain.confidence[away], doubt.confidence[away])
+    at_point = dataclasses.replace(params, position_doubt=True, min_confidence=3.0)
+    kept = decode(img, rig=RIG, params=at_point)
+    assert not (kept.valid & (np.abs(kept.column_px - col) > 0.5 * t)).any()

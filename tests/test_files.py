@@ -137,6 +137,14 @@ def test_a_folder_decodes_its_system_way_and_refuses_the_colour_fringe_options(i
     assert np.isnan(depth[:10]).all() and (depth[10:] == np.float32(1.2)).all()
     # no confidence map: no file (a fourth audit: an all-zero one read as "zero confidence everywhere")
     assert not (tmp_path / "d_confidence.npy").exists() and "no confidence map (the ideal_depth system" in msg
+    # ... and an earlier decode's confidence map there is removed, not left to read as this one's
+    depth = np.load(tmp_path / "d.npy")
+    np.save(tmp_path / "d_confidence.npy", np.ones(depth.shape, np.float32))
+    np.save(tmp_path / "other_confidence.npy", np.ones((3, 3), np.float32))
+    msg = decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "d.npy")))
+    assert not (tmp_path / "d_confidence.npy").exists() and "removed " in msg and "an earlier decode's" in msg
+    msg = decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "other.npy")))
+    assert (tmp_path / "other_confidence.npy").exists() and "removed" not in msg  # not a map of this image
     with pytest.raises(ValueError, match="--confidence c.npy: the ideal_depth system gives no confidence map"):
         decode_files(DecodeRequest(capture=str(ideal_folder), out=str(tmp_path / "e.npy"), confidence="c.npy"))
     for given, flags in (

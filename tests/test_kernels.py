@@ -240,6 +240,24 @@ def test_segmentation_edge_cases():
 
 
 @pytest.mark.parametrize("corrupt", [0.15, 0.6], ids=["mostly-right", "mostly-wrong"])
+@pytest.mark.parametrize("reach,min_support", [(1, 1), (3, 2), (8, 3)])
+def test_contested_positions_match_numpy(reach, min_support, corrupt):
+    rng = np.random.default_rng(reach + 10)
+    n, cycle = 5000, 8
+    linked = rng.random(n) > 0.1
+    linked[0] = False
+    true = np.arange(n) % cycle
+    positions = np.where(rng.random(n) < corrupt, rng.integers(-1, cycle, n), true).astype(np.int32)
+    kept, _ = debruijn.neighbour_correct(positions, linked, cycle=cycle, reach=3, min_support=2)
+    kw = dict(cycle=cycle, reach=reach, min_support=min_support)
+    got = debruijn.contested_positions(positions, kept, linked, **kw)
+    same(got, ref.contested_positions(positions, kept, linked, **kw))
+    assert 0 < got.sum() < (kept >= 0).sum()
+    empty = np.zeros(0, np.int32)
+    same(debruijn.contested_positions(empty, empty, empty.astype(bool), **kw), np.zeros(0, bool))
+
+
+@pytest.mark.parametrize("corrupt", [0.15, 0.6], ids=["mostly-right", "mostly-wrong"])
 @pytest.mark.parametrize("reach,min_support", [(1, 1), (2, 2), (3, 2), (4, 3)])
 def test_neighbour_correction_matches_numpy(reach, min_support, corrupt):
     """Also where most stripes are wrong, so that the kernel's majority shortcut and its full

@@ -221,3 +221,9 @@ def test_the_sequence_follows_the_scenes_projector(tmp_path):
     assert np.isfinite(depth).mean() > 0.9 and np.nanmedian(depth) == pytest.approx(1.1, abs=2e-3)
     rec = simbench.record(tmp_path / "s.toml", system="phase_shift", spp=4, cache=cache)
     assert np.array_equal(simbench.depth(rec).depth_m, depth, equal_nan=True)
+    # the frames it projects on that scene are that sequence's (its own: the paper projector's)
+    from simbench.systems.phase_shift import PhaseShiftSystem
+
+    system = PhaseShiftSystem()
+    assert system.frames_u8(rec.scene).shape == (10, 285, 456, 3)
+    assert system.frames_u8().shape == (system.info().captures, 1140, 1824, 3)

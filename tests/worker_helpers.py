@@ -55,13 +55,10 @@ def split_measure(session, part: str) -> dict:
 
 
 def split_write(session, results: list[dict]) -> dict:
-    from simbench.io import atomic_write_text
-
     WRITTEN_BY.clear()
     WRITTEN_BY.update(r["pid"] for r in results)
     text = "".join(f"{r['part']} {r['seed']}\n" for r in results)
-    path = atomic_write_text(session.out / "split.txt", text)
-    session.provenance("split", [path])
+    session.write_results("split", {"split.txt": text})
     return {f"split/{r['part']}": r["seed"] for r in results}
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "window_positions",
     "drop_broken_links",
     "neighbour_correct",
+    "contested_positions",
     "segment_stripes",
     "vote_codes",
     "front_end",
@@ -70,6 +71,7 @@ _SIGNATURES = {
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
+    "contested_positions": (None, [_I, _P, _P, _P, _P, _I, _I, _I, _P, _P]),
     "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P, _P]),
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
@@ -346,6 +348,27 @@ def neighbour_correct(positions, left, right, cycle, reach, min_support, out, su
         counts.ctypes.data,
         _ptr(out, "out", np.int32, (n,), writable=True),
         _ptr(support, "support", np.int32, (n,), writable=True),
+    )
+
+
+def contested_positions(positions, kept, left, right, cycle, reach, min_support, out) -> None:
+    """``out`` (bool) where a kept stripe's position (``kept`` >= 0) has a rival that the
+    linked stripes within ``reach`` predict (``positions[j + o] - o mod L``) on both sides, at
+    least once on each and ``min_support`` times in all."""
+    n = positions.size
+    cycle = _cycle(cycle)
+    counts = np.empty(2 * cycle, np.int64)
+    _library().contested_positions(
+        n,
+        _ptr(positions, "positions", np.int32),
+        _ptr(kept, "kept", np.int32, (n,)),
+        _ptr(left, "left", np.int64, (n,)),
+        _ptr(right, "right", np.int64, (n,)),
+        cycle,
+        int(reach),
+        int(min_support),
+        counts.ctypes.data,
+        _ptr(out, "out", np.bool_, (n,), writable=True),
     )
 
 

@@ -23,6 +23,7 @@ __all__ = [
     "window_positions_of_stripes",
     "neighbour_correct",
     "drop_broken_links",
+    "contested_positions",
     "keep_certain_sides",
     "keep_straddler_parts",
     "stripe_floor",
@@ -136,6 +137,58 @@ def drop_broken_links(positions: np.ndarray, linked_prev: np.ndarray, *, cycle: 
     out = np.empty(positions.size, np.int32)
     _kernels.drop_broken_links(
         np.ascontiguousarray(positions, dtype=np.int32), np.ascontiguousarray(linked_prev, dtype=bool), cycle, out
+    )
+    return out
+
+
+def contested_positions(
+    positions: np.ndarray,
+    kept: np.ndarray,
+    linked_prev: np.ndarray,
+    *,
+    cycle: int,
+    reach: int,
+    min_support: int,
+) -> np.ndarray:
+    """The kept stripes whose position a run of other stripes around them contests (ours).
+
+    A stripe is contested when another position is predicted for it (``W[j + o] - o mod L``,
+    from the windows' positions before the correction) by linked stripes on both of its sides
+    within ``reach``, at least once on each and ``min_support`` times in all.  A run of misread
+    codes that reads like another stretch of the sequence decodes coherently, so that the
+    neighbour correction keeps it (its stripes vote for one another); the stripes beyond it on
+    both sides still agree with each other through it, and that is what this finds.  A hidden
+    depth edge contests nothing: the other surface predicts its positions from one side only
+    (:func:`keep_certain_sides` keeps such a stripe).  A thin object between two hidden edges
+    reads like such a run and is doubted too - a cost in completeness, not a wrong depth.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (S,), int32; W of each stripe's own window, -1 unknown
+    kept : ndarray, shape (S,), int32; the W decided for each stripe, -1 dropped
+    linked_prev : ndarray, shape (S,), bool
+    cycle : int
+    reach : int
+        Neighbours per side that are looked at.
+    min_support : int
+        The rival's votes, both sides together, that make a contest: as many as a position needs
+        to be kept (``DecoderParams.min_support``).
+
+    Returns
+    -------
+    ndarray, shape (S,), bool
+    """
+    out = np.empty(positions.size, bool)
+    left, right = chain_extent(linked_prev)
+    _kernels.contested_positions(
+        np.ascontiguousarray(positions, dtype=np.int32),
+        np.ascontiguousarray(kept, dtype=np.int32),
+        left,
+        right,
+        cycle,
+        reach,
+        min_support,
+        out,
     )
     return out
 

@@ -250,6 +250,16 @@ class DecoderParams:
         :func:`simbench.decode.depth.crease_bias` predicts from the decoded column map's concave
         second difference (interreflection shifts the fringe itself near a crease, where no
         window's fit can see it).  The colour-robust decoder; off = no crease term.
+    position_doubt : bool
+        A stripe whose De Bruijn position is contested scores confidence 0 (ours;
+        :func:`simbench.decode.debruijn.contested_positions`): another position is predicted
+        for it by the stripes on both of its sides within one cycle, at least once on each and
+        ``min_support`` times in all.  A run of misread codes that reads like another stretch of
+        the sequence decodes coherently (its stripes vote for one another) while the stripes
+        beyond it still agree through it (JPEG's chroma subsampling of a dark blue board: runs
+        of 3-4 stripes half a cycle off, 685 mm wrong at full fringe SNR).  After the link
+        check, so it moves no stripe.  The colour-robust decoder; off = not checked (the paper's
+        decoder).
     min_confidence : float
         The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
         is below it become holes (NaN depth, not valid);
@@ -301,6 +311,7 @@ class DecoderParams:
     carrier_bank: bool = False
     centroid_correction: bool = False
     crease_doubt: bool = False
+    position_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
     mode: str = "reference"
@@ -346,6 +357,7 @@ class DecoderParams:
             "carrier_bank": v.boolean(self.carrier_bank, "carrier_bank"),
             "centroid_correction": v.boolean(self.centroid_correction, "centroid_correction"),
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
+            "position_doubt": v.boolean(self.position_doubt, "position_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
             "mode": v.choice(self.mode, "mode", MODES),
@@ -466,7 +478,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     the lit test looks across a whole code window).  Its confidence folds in the phase's
     stability against the window's width (``phase_stability``), takes the better of the two
     windows' fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases
-    (``crease_doubt``); where the nominal phase fit fails it tries other carriers
+    (``crease_doubt``) and the stripes whose De Bruijn position another candidate contests
+    (``position_doubt``); where the nominal phase fit fails it tries other carriers
     (``carrier_bank``, with the Gabor fit), and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
     and the part of a stripe that the confidence shows to lie on their own side of the edge
@@ -484,6 +497,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         phase_stability=True,
         narrow_snr=True,
         crease_doubt=True,
+        position_doubt=True,
         carrier_bank=params.phase_method == "gabor",
         centroid_correction=params.phase_method == "gabor",
         min_confidence=ROBUST_MIN_CONFIDENCE,

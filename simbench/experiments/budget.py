@@ -23,10 +23,9 @@ from simbench.sim.sensor import (
     with_effects,
     with_lateral_colour,
 )
-from simbench.experiments.common import RunConfig, Session, Split, markdown_table, write_table
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, table_text
 from simbench.experiments.common import score
 from simbench.experiments.table1 import PAPER_TABLE1
-from simbench.io import atomic_write_text
 from simbench.sim.scene import BUDGET_BOW_M_PER_M, BUDGET_WAVINESS_M, with_subsurface
 
 __all__ = ["budget_rows", "converged_spp", "run_budget", "SPLIT", "budget_parts", "measure_row", "write_budget"]
@@ -198,12 +197,8 @@ def write_budget(session: Session, measured: list[dict]) -> dict:
         "ref_completeness",
         "ref_stripe_order_errors",
     ]
-    out = session.out
-    files = [
-        write_table(out / "budget.csv", rows, cols),
-        atomic_write_text(out / "budget.md", _markdown(session, rows, repeats)),
-    ]
-    session.provenance("budget", files, extra={"sensors": {key: sensor.name for key, _, sensor in specs}})
+    files = {"budget.csv": table_text(rows, cols), "budget.md": _markdown(session, rows, repeats)}
+    session.write_results("budget", files, extra={"sensors": {key: sensor.name for key, _, sensor in specs}})
     return metrics
 
 

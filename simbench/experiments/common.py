@@ -38,8 +38,8 @@ from simbench.calibration.procedure import (
 from simbench.decode import DecoderParams
 from simbench.decode.pipeline import DecodeResult, ReferenceMap
 from simbench.sim.sensor import SensorModel, get_sensor, sensor_to_dict
-from simbench.io import save_json
-from simbench.report import figure_png, markdown_table, write_table
+from simbench.io import json_bytes, write_files
+from simbench.report import figure_png, markdown_table, table_text
 from simbench.metrics import depth_errors, edge_band
 from simbench.metrics import score as metrics_score
 from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
@@ -78,7 +78,7 @@ __all__ = [
     "calibration_sentence",
     "other_rig",
     "RIGS",
-    "write_table",
+    "table_text",
     "markdown_table",
     "figure_png",
     "git_commit",
@@ -489,8 +489,14 @@ class Session:
         return self.proposed.decode(cap.raw, cal, scene=scene, params=params, mode=mode).detail
 
     # provenance --------------------------------------------------------------------------
-    def provenance(self, name: str, files: list[Path], extra: dict | None = None) -> Path:
-        """``<name>.provenance.json`` beside the files: command, config, seeds, versions."""
+    def write_results(self, name: str, files: dict[str, bytes | str], extra: dict | None = None) -> list[Path]:
+        """A target's files (paths relative to the output folder: their bytes, or text written
+        as UTF-8) and ``<name>.provenance.json`` beside them (command, config, seeds, versions,
+        each file's SHA-256), written together, all or nothing (:func:`simbench.io.write_files`):
+        an interrupted or failed write leaves the previous set whole, never a table beside a
+        provenance record whose hashes are another run's.  Returns the files' paths (the
+        record's last)."""
+        data = {rel: b if isinstance(b, bytes) else b.encode("utf-8") for rel, b in files.items()}
         record = {
             "command": self.command,
             "config": self.config.to_dict(),
@@ -499,10 +505,11 @@ class Session:
             "versions": versions(),
             "git_commit": git_commit(),
             "seeds": dict(sorted(self.seeds_used.items())),
-            "files": {str(p.relative_to(self.out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in files},
+            "files": {str(Path(rel)): hashlib.sha256(b).hexdigest() for rel, b in data.items()},
             **(extra or {}),
         }
-        return save_json(self.out / f"{name}.provenance.json", record)
+        data[f"{name}.provenance.json"] = json_bytes(record)
+        return write_files({self.out / rel: b for rel, b in data.items()})
 
     def timed(self, what: str) -> _Timer:
         return _Timer(self.progress, what)

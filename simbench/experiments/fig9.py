@@ -29,9 +29,8 @@ from simbench.experiments.common import (
     other_rig,
     score,
     sensor_caveat,
-    write_table,
+    table_text,
 )
-from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import CHIABRANDO_TOF, PAPER_COMPETITORS, nguyen_kinect_sigma_mm
 
 __all__ = ["DEPTHS_M", "SPLIT", "run_fig9", "measure_depth", "write_fig9", "fig9_parts", "fig9_plot"]
@@ -151,7 +150,6 @@ def write_fig9(session: Session, measured: list[dict]) -> dict:
     cfg = session.config
     rows = [r for m in measured for r in m["rows"]]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
-    out = session.out
     cols = [
         "sensor",
         "depth_m",
@@ -175,21 +173,18 @@ def write_fig9(session: Session, measured: list[dict]) -> dict:
         "board_depth_m",
         "board_tilt_deg",
     ]
-    files = [write_table(out / "fig9.csv", rows, cols)]
-    files.append(
-        atomic_write_bytes(
-            out / "fig9.png",
-            fig9_plot(
-                rows,
-                title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)",
-                other_rig_name=other_rig(session),
-            ),
-        )
-    )
-    files.append(atomic_write_text(out / "fig9.md", _markdown(session, rows)))
+    files = {
+        "fig9.csv": table_text(rows, cols),
+        "fig9.png": fig9_plot(
+            rows,
+            title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)",
+            other_rig_name=other_rig(session),
+        ),
+        "fig9.md": _markdown(session, rows),
+    }
     other = other_rig(session)
     scene = session.scene(fig9_parts(cfg)[-1])  # the rig every depth shares
-    session.provenance("fig9", files, extra={"calibration": calibration_summary(session, scene)} if other else None)
+    session.write_results("fig9", files, extra={"calibration": calibration_summary(session, scene)} if other else None)
     return metrics
 
 

@@ -22,8 +22,8 @@ from simbench.decode import robust_params
 from simbench.experiments.common import RunConfig, Session, Split, made_by, scene_errors
 from simbench.experiments.hard_scenes import WRONG_MM, object_scores
 from simbench.metrics import edge_band
-from simbench.report import figure_png, markdown_table, panel_row, write_table
-from simbench.io import atomic_write_bytes, atomic_write_text, ply_bytes
+from simbench.report import figure_png, markdown_table, panel_row, table_text
+from simbench.io import ply_bytes
 from simbench.metrics import points_from_depth
 
 if TYPE_CHECKING:
@@ -43,7 +43,7 @@ __all__ = [
     "write_figures",
     "measure_specular",
     "specular_parts",
-    "write_specular",
+    "specular_files",
     "shown_raw",
     "shaded_view",
     "stages_figure",
@@ -194,13 +194,12 @@ def measure_figure(session: Session, name: str) -> dict:
 def write_figures(session: Session, measured: list[dict]) -> dict:
     """The figures' files from :func:`measure_figure`'s results (in :func:`figures_parts`' order)."""
     cfg = session.config
-    out = session.out / "figures"
     scenes, specular = measured[: len(FIGURE_SCENES)], measured[len(FIGURE_SCENES) :]
-    files = [atomic_write_bytes(out / rel, data) for m in scenes for rel, data in m["files"].items()]
+    files = {f"figures/{rel}": data for m in scenes for rel, data in m["files"].items()}
     rows = [m["row"] for m in scenes]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = ["scene", "figure", *SUMMARY_KEYS, "render", "noise"]
-    files.append(write_table(out / "summary.csv", rows, cols))
+    files["figures/summary.csv"] = table_text(rows, cols)
     cam = session.scene(FIG6_SCENE).rig.camera
     md = [
         "# Qualitative figures (paper Fig. 6, 11, 12, 13)",
@@ -236,9 +235,9 @@ def write_figures(session: Session, measured: list[dict]) -> dict:
             for r in rows
         ],
     )
-    files.append(atomic_write_text(out / "summary.md", "\n".join(md) + "\n"))
-    files += write_specular(session, specular)
-    session.provenance("figures/figures", files)
+    files["figures/summary.md"] = "\n".join(md) + "\n"
+    files.update(specular_files(session, specular))
+    session.write_results("figures/figures", files)
     return metrics
 
 
@@ -299,7 +298,7 @@ def measure_specular(session: Session, system: str) -> dict:
     lights, the MAE against ground truth and the share of decoded pixels more than 5 mm wrong,
     off an edge band (the run's, scaled to the system's focal length).  Returns its rows, metrics
     and the figure's panels - per label what it recorded, its depth and the truth, float32 arrays
-    (:func:`write_specular` draws the figure from every system's)."""
+    (:func:`specular_files` draws the figure from every system's)."""
     cfg = session.config
     recs = _specular_recordings(session, system)
     scene = session.raw_scene(SPECULAR_SCENE)
@@ -318,17 +317,16 @@ def measure_specular(session: Session, system: str) -> dict:
     return {"rows": rows, "metrics": metrics, "panels": panels}
 
 
-def write_specular(session: Session, measured: list[dict]) -> list:
+def specular_files(session: Session, measured: list[dict]) -> dict[str, bytes | str]:
     """The specular scene's table, figure and text from :func:`measure_specular`'s results (in
-    :func:`specular_parts`' order)."""
+    :func:`specular_parts`' order), by their paths in the output folder."""
     cfg = session.config
-    out = session.out / "figures"
     rows = [r for m in measured for r in m["rows"]]
     panels = {name: p for m in measured for name, p in m["panels"].items()}
-    files = [
-        write_table(out / "specular.csv", rows, ["system", "object", "pixels", *SPECULAR_KEYS, "render", "noise"]),
-        atomic_write_bytes(out / "specular_systems.png", specular_figure(panels)),
-    ]
+    files = {
+        "figures/specular.csv": table_text(rows, ["system", "object", "pixels", *SPECULAR_KEYS, "render", "noise"]),
+        "figures/specular_systems.png": specular_figure(panels),
+    }
     cam = session.scene(SPECULAR_SCENE).rig.camera
     md = [
         "# Specular highlights, every system",
@@ -356,7 +354,7 @@ def write_specular(session: Session, measured: list[dict]) -> list:
             for r in rows
         ],
     )
-    files.append(atomic_write_text(out / "specular.md", "\n".join(md) + "\n"))
+    files["figures/specular.md"] = "\n".join(md) + "\n"
     return files
 
 

@@ -34,9 +34,8 @@ from simbench.experiments.common import (
     figure_png,
     markdown_table,
     score,
-    write_table,
+    table_text,
 )
-from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.metrics import plane_fit_error, points_from_depth
 
 if TYPE_CHECKING:
@@ -138,16 +137,12 @@ def write_flatness(session: Session, measured: list[dict]) -> dict:
         "reference_bow_mm_per_m",
         "reference_waviness_phase_rad",
     ]
-    out = session.out
-    files = [
-        write_table(out / "flatness.csv", rows, cols),
-        atomic_write_bytes(
-            out / "flatness.png",
-            flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness"),
-        ),
-        atomic_write_text(out / "flatness.md", _markdown(session, rows)),
-    ]
-    session.provenance(
+    files = {
+        "flatness.csv": table_text(rows, cols),
+        "flatness.png": flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness"),
+        "flatness.md": _markdown(session, rows),
+    }
+    session.write_results(
         "flatness",
         files,
         extra={

@@ -38,8 +38,7 @@ import numpy as np
 
 from simbench.decode import robust_params
 from simbench.decode.pipeline import apply_min_confidence
-from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, write_table
-from simbench.io import atomic_write_bytes, atomic_write_text
+from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, table_text
 from simbench.metrics import edge_band
 
 if TYPE_CHECKING:
@@ -233,19 +232,18 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
     rows = [m["row"] for m in measured]
     curves = [c for m in measured for c in m["curves"]]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
-    out = session.out
     cols = ["scene", "class", "scored_pixels"]
     cols += [f"{d}_{k}" for d in (*DECODERS, REFERENCE_SYSTEM) for k in SCORE_KEYS]
     cols += ["render", "noise", f"{REFERENCE_SYSTEM}_render_seed", f"{REFERENCE_SYSTEM}_noise_seed"]
-    files = [
-        write_table(out / "hard_scenes.csv", rows, cols),
-        write_table(
-            out / "hard_scenes_confidence.csv", curves, ["scene", "decoder", "threshold", "completeness", "wrong_share"]
+    files = {
+        "hard_scenes.csv": table_text(rows, cols),
+        "hard_scenes_confidence.csv": table_text(
+            curves, ["scene", "decoder", "threshold", "completeness", "wrong_share"]
         ),
-        atomic_write_bytes(out / "hard_scenes_confidence.png", _curve_plot(curves, operating)),
-        atomic_write_text(out / "hard_scenes.md", _markdown(session, rows, curves, operating)),
-    ]
-    session.provenance(
+        "hard_scenes_confidence.png": _curve_plot(curves, operating),
+        "hard_scenes.md": _markdown(session, rows, curves, operating),
+    }
+    session.write_results(
         "hard_scenes",
         files,
         extra={

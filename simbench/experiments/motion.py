@@ -31,8 +31,7 @@ import math
 import numpy as np
 
 from simbench.decode import robust_params
-from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, write_table
-from simbench.io import atomic_write_bytes, atomic_write_text
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.metrics import edge_band
 from simbench.report import figure_png
 from simbench.sim.motion import Motion
@@ -192,13 +191,12 @@ def write_motion(session: Session, measured: list[dict]) -> dict:
         "pixels",
         "note",
     ]
-    out = session.out
-    files = [
-        write_table(out / "motion.csv", rows, cols),
-        atomic_write_text(out / "motion.md", _markdown(session, sub, rows, summary, timing, speeds, scenes)),
-        atomic_write_bytes(out / "motion.png", _figure(rows, scenes)),
-    ]
-    session.provenance(
+    files = {
+        "motion.csv": table_text(rows, cols),
+        "motion.md": _markdown(session, sub, rows, summary, timing, speeds, scenes),
+        "motion.png": _figure(rows, scenes),
+    }
+    session.write_results(
         "motion",
         files,
         extra={

@@ -24,9 +24,8 @@ import dataclasses
 
 import numpy as np
 
-from simbench.experiments.common import RunConfig, Session, Split, markdown_table, write_table
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, table_text
 from simbench.experiments.table3 import PLACED
-from simbench.io import atomic_write_text
 from simbench.metrics import edge_band
 from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
@@ -179,12 +178,8 @@ def write_render_noise(session: Session, measured: list[dict]) -> dict:
         "meets_target",
         "pixels",
     ]
-    out = session.out
-    files = [
-        write_table(out / "render_noise.csv", rows, cols),
-        atomic_write_text(out / "render_noise.md", _markdown(session, rows)),
-    ]
-    session.provenance("render_noise", files, extra={"repeats": REPEATS, "target_ratio": TARGET_RATIO})
+    files = {"render_noise.csv": table_text(rows, cols), "render_noise.md": _markdown(session, rows)}
+    session.write_results("render_noise", files, extra={"repeats": REPEATS, "target_ratio": TARGET_RATIO})
     return metrics
 
 

@@ -36,9 +36,9 @@ from simbench.experiments.common import (
     markdown_table,
     other_rig,
     score,
-    write_table,
+    table_text,
 )
-from simbench.io import atomic_write_text, camera_full_scale
+from simbench.io import camera_full_scale
 from simbench.literature import PAPER_TABLE1  # paper Table 1: colour -> (sRGB, MAE mm)
 from simbench.metrics import code_stripes
 from simbench.optics import undistort_image
@@ -215,10 +215,8 @@ def write_table1(session: Session, measured: list[dict]) -> dict:
         f"{BOARD}_depth_m",
         f"{BOARD}_tilt_deg",
     ]
-    out = session.out
-    files = [write_table(out / "table1.csv", rows, cols)]
-    files.append(atomic_write_text(out / "table1.md", _markdown(session, rows)))
-    session.provenance(
+    files = {"table1.csv": table_text(rows, cols), "table1.md": _markdown(session, rows)}
+    session.write_results(
         "table1",
         files,
         extra={

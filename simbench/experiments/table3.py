@@ -34,9 +34,8 @@ from simbench.experiments.common import (
     scene_errors,
     score,
     sensor_caveat,
-    write_table,
+    table_text,
 )
-from simbench.io import atomic_write_bytes, atomic_write_text
 from simbench.literature import (
     PAPER_COMPETITORS,  # system -> (the paper's name for it, its column in PAPER_TABLE3)
     PAPER_TABLE3,  # paper Table 3 (mm): object -> (proposed, Kinect, ToF)
@@ -311,7 +310,6 @@ def write_table3(session: Session, measured: list[dict], *, systems: tuple[str, 
     for w in what_if:
         metrics.update(w["metrics"])
     whole = proposed["whole"]
-    out = session.out
     cols = ["object", "paper_mm", "face_pixels"]
     cols += [
         f"{d}_{m}_{k}"
@@ -330,16 +328,15 @@ def write_table3(session: Session, measured: list[dict], *, systems: tuple[str, 
     cols += ["render", "noise", "placement"]
     cols += [f"{n}_{k}" for n in PLACED for k in ("depth_m", "tilt_deg")]
     cols += [f"{d}_{k}_seed" for d in competitors for k in ("render", "noise")]
-    files = [write_table(out / "table3.csv", rows, cols)]
-    files.append(atomic_write_text(out / "table3.md", _markdown(session, rows, whole, competitors)))
     panels = [proposed["panel"], *(c["panel"] for c in competitors.values())]
-    files.append(
-        atomic_write_bytes(
-            out / "fig10.png",
-            cross_section_figure(panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)"),
-        )
-    )
-    session.provenance(
+    files = {
+        "table3.csv": table_text(rows, cols),
+        "table3.md": _markdown(session, rows, whole, competitors),
+        "fig10.png": cross_section_figure(
+            panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)"
+        ),
+    }
+    session.write_results(
         "table3",
         files,
         extra={

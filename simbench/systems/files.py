@@ -223,6 +223,17 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
         check_cache_location(request.cache_dir, what="--cache")
 
 
+def _is_confidence_of(path: Path, depth: np.ndarray) -> bool:
+    """Whether ``path`` holds a confidence map (float32 .npy) of ``depth``'s shape."""
+    if not path.is_file():
+        return False
+    try:
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+    except (OSError, ValueError):
+        return False
+    return arr.dtype == np.float32 and arr.shape == depth.shape
+
+
 def decode_files(request: DecodeRequest) -> str:
     """Decode ``request.capture`` with the system it belongs to and write the outputs; the
     one-line report of what was decoded and where it went."""
@@ -244,6 +255,12 @@ def decode_files(request: DecodeRequest) -> str:
         raise ValueError(f"--confidence {request.confidence}: the {name} system gives no confidence map")
     else:
         confidence_note = f"no confidence map (the {name} system gives none)"
+    # an earlier decode's confidence beside --out would read as this depth's (a system without
+    # one decoding into the folder where another wrote NAME_confidence.npy): removed with the write
+    stale_confidence = None
+    if res.confidence is None and not request.confidence and _is_confidence_of(confidence_path(request), res.depth_m):
+        stale_confidence = confidence_path(request)
+        confidence_note += f"; removed {stale_confidence}, an earlier decode's"
     msg = (
         f"decoded {res.valid.mean() * 100:.2f} % of the image's pixels in {res.elapsed_s * 1000:.0f} ms "
         # the decode alone; a user timing the command sees the files read and checked too (an audit)
@@ -297,6 +314,8 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
+    if stale_confidence is not None:
+        stale_confidence.unlink(missing_ok=True)
     if request.debug_dir:
         for name in stale:
             (Path(request.debug_dir) / name).unlink(missing_ok=True)

@@ -105,6 +105,9 @@ class PhaseShiftSystem:
         return dataclasses.replace(self.spec, size_hw=size)
 
     def info(self) -> SystemInfo:
+        """The system as it records with its own sequence - the default one at the paper
+        projector's size unless a sequence was given; a scene's projector of another width takes
+        another number of Gray-code frames (:meth:`spec_for`, ``.captures``)."""
         s = self.spec
         return SystemInfo(
             name=self.name,
@@ -125,9 +128,10 @@ class PhaseShiftSystem:
             },
         )
 
-    def frames_u8(self) -> np.ndarray:
-        """The projector frames as 8-bit RGB drives, shape (K, Hp, Wp, 3), read-only."""
-        return _frames_u8(self.spec)
+    def frames_u8(self, scene: SceneSpec | None = None) -> np.ndarray:
+        """The projector frames as 8-bit RGB drives, shape (K, Hp, Wp, 3), read-only: those it
+        projects on ``scene`` (:meth:`spec_for`), else its own sequence's."""
+        return _frames_u8(self.spec if scene is None else self.spec_for(scene))
 
     def prepare(self, scene: SceneSpec) -> SceneSpec:
         return self._optics.prepare(scene)
