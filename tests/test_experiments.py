@@ -672,3 +672,26 @@ def test_known_task_seconds_order_the_pool_longest_first_across_targets(tmp_path
     shipped = task_seconds(tmp_path, profile)  # unreadable: the shipped record
     assert shipped and set(shipped) <= {t.key for t in _tasks(list(TARGETS), cfg)}
     assert task_seconds(None, "full llvm_ad_rgb") and not task_seconds(None, "other profile")
+
+
+def test_a_targets_files_and_provenance_are_written_as_one_set(tmp_path):
+    """The provenance record hashes the bytes it writes with them; a set that cannot be written
+    whole (here a folder where one file goes) leaves the previous set as it was, so that a table
+    never stands beside a record of another run's hashes."""
+    import hashlib
+
+    from simbench.experiments.common import Session
+
+    session = Session(RunConfig.preset(quick=True), out_dir=tmp_path, cache_dir=None, progress=lambda s: None)
+    paths = session.write_results("t", {"t.csv": "a,b\n1,2\n", "sub/t.png": b"\x89PNG"}, extra={"k": 1})
+    assert [p.name for p in paths] == ["t.csv", "t.png", "t.provenance.json"]
+    record = json.loads((tmp_path / "t.provenance.json").read_text())
+    assert record["k"] == 1
+    assert record["files"] == {
+        rel: hashlib.sha256((tmp_path / rel).read_bytes()).hexdigest() for rel in ("t.csv", "sub/t.png")
+    }
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    (tmp_path / "t.md").mkdir()
+    with pytest.raises(ValueError, match="t.md is a folder"):
+        session.write_results("t", {"t.csv": "a,b\n3,4\n", "t.md": "# t\n"})
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
