@@ -987,6 +987,11 @@ def test_the_nothing_decoded_hint_blames_the_threshold_only_for_holes_it_made():
     some[:5] = True
     made = nothing_decoded_hint(valid, dim, confidence=conf, min_confidence=0.1, thresholded=some)
     assert "made holes of 25.0 % of the pixels" in made
+    # one channel clipped over most of the capture (the fringe's, three times too bright) is named
+    bright = dim.copy()
+    bright[..., 2] = 255
+    bright[:4, :, 2] = 200
+    assert "the capture is saturated: B on 80 % of its pixels (at 255)" in nothing_decoded_hint(valid, bright)
 
 
 @pytest.mark.slow

@@ -378,11 +378,18 @@ def nothing_decoded_hint(
         why = f"is the scene within the working range asked for, {near:g}-{far:g} m (--near, --far)?"
     if capture_u8 is not None and capture_u8.size:
         top = int(capture_u8.max())
-        clipped = float((capture_u8 >= 255).all(axis=-1).mean()) if capture_u8.ndim == 3 else 0.0
+        full = capture_u8 >= 255
+        clipped = float(full.all(axis=-1).mean()) if capture_u8.ndim == 3 else float(full.mean())
+        # one channel clipped is enough to lose the fringe (a capture three times too bright:
+        # blue, the fringe, at 255 over most of it while red and green were not)
+        per_channel = full.reshape(-1, capture_u8.shape[-1]).mean(axis=0) if capture_u8.ndim == 3 else []
         if top <= 16:
             why = f"the capture is dark (its brightest value {top} of 255)"
         elif clipped >= 0.5:
             why = f"{100 * clipped:.0f} % of the capture's pixels are saturated in every channel"
+        elif len(per_channel) == 3 and max(per_channel) >= 0.5:
+            names = " and ".join(f"{c} on {100 * v:.0f} %" for c, v in zip("RGB", per_channel) if v >= 0.5)
+            why = f"the capture is saturated: {names} of its pixels (at 255) - expose it shorter"
     if min_confidence is not None and confidence is not None:
         conf = np.asarray(confidence, np.float32)
         under = np.isfinite(conf) & (conf > 0) & (conf < np.float32(min_confidence))
