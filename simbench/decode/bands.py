@@ -27,6 +27,14 @@ def fit_halo_rows(params: DecoderParams, rig: Rig) -> int:
     return int(np.ceil(3.0 * sy))
 
 
+def code_pool_rows(params: DecoderParams, rig: Rig) -> int:
+    """The rows above and below a pixel that vote on its code with ``pool_code``
+    (:func:`simbench.decode.color.pool_code_rows`): the phase fit's own reach,
+    :func:`fit_halo_rows` - the code reads no row the phase does not already stand on; 0
+    without ``pool_code``."""
+    return fit_halo_rows(params, rig) if params.pool_code else 0
+
+
 def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple[list[tuple[int, int]], int, int]:
     """Row bands, the halo (rows) each needs, and the worker threads: one band per thread, never
     thinner than 4 phase-fit halos (or 32 rows).
@@ -44,7 +52,8 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     kept each decode's images alive, and since that is gone one band per thread is the faster
     plan: single-thread 1280x960 decode 15.8 -> 15.2 ms median, 2 threads unchanged.)"""
     fit_halo = fit_halo_rows(params, rig)
-    halo = fit_halo
+    # the pooled code's rows need their phase exact: their own fit window beyond them
+    halo = fit_halo + code_pool_rows(params, rig)
     if params.albedo_flatten:  # (it needs color_normalize: DecoderParams checks)
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
     most = max(1, height // max(4 * fit_halo, 32))

@@ -31,6 +31,7 @@ __all__ = [
     "Stripes",
     "segment_stripes",
     "vote_codes",
+    "pool_code_rows",
 ]
 
 
@@ -650,6 +651,61 @@ def segment_stripes(
         stop=stop[:n].copy(),
         linked_prev=linked_prev[:n].copy(),
     )
+
+
+def pool_code_rows(
+    code: np.ndarray,
+    wrapped: np.ndarray,
+    valid: np.ndarray,
+    *,
+    rows: int,
+    tolerance_rad: float = np.pi / 4,
+    out_rows: slice | None = None,
+) -> np.ndarray:
+    """Each pixel's code voted by the pixels above and below it in the same stripe (ours).
+
+    The stripes run down the image (the baseline runs along x), so a pixel's code is also the
+    code of the pixels ``rows`` above and below it whose wrapped phase lies within
+    ``tolerance_rad`` of its own (the same place in the same period; a surface tilted about x
+    moves the phase slowly from row to row) and that are valid.  The pixel's code is the sign
+    of its own vote (``+1`` for code 1, ``-1`` for 0) plus theirs, a tie 1 (Eq. 13's ``>=``).
+    The vote of one row's stripe (:func:`vote_codes`) then stands on ``2 rows + 1`` rows' pixels:
+    where the code channels are at the noise (a dark board seen through a noisy sensor) one row's
+    vote misreads stripes while the pooled one does not.  At a horizontal depth edge the rows
+    beyond it are another stripe; the phase test keeps a quarter of such rows (a random phase
+    jump) and the pixel's own side outvotes them but within a few rows of the edge.
+
+    Parameters
+    ----------
+    code : ndarray, shape (H, W), bool
+    wrapped : ndarray, shape (H, W), float32; the wrapped phase
+    valid : ndarray, shape (H, W), bool; the pixels whose phase stands
+    rows : int
+        Rows above and below that vote.
+    tolerance_rad : float
+        Largest phase difference of a voting pixel (assumption: pi/4, as a bridged gap's,
+        :func:`segment_stripes`).
+    out_rows : slice, optional
+        The rows to return (default all); the others only vote.
+
+    Returns
+    -------
+    ndarray, shape (len(out_rows), W), bool
+    """
+    code = np.ascontiguousarray(code, dtype=bool)
+    h, w = code.shape
+    r0, r1, _ = (out_rows or slice(0, h)).indices(h)
+    out = np.empty((r1 - r0, w), bool)
+    _kernels.pool_code_rows(
+        code,
+        np.ascontiguousarray(wrapped, dtype=np.float32),
+        np.ascontiguousarray(valid, dtype=bool),
+        r0,
+        rows,
+        tolerance_rad,
+        out,
+    )
+    return out
 
 
 def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:

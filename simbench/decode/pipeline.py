@@ -20,6 +20,7 @@ from simbench.decode.color import (
     code_at_row_ends,
     normalized_color_code,
     overlay_weights,
+    pool_code_rows,
     segment_stripes,
     unmix,
     vote_codes,
@@ -58,7 +59,7 @@ from simbench.decode.params import (
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
 )
-from simbench.decode.bands import fit_halo_rows, run_bands
+from simbench.decode.bands import code_pool_rows, fit_halo_rows, run_bands
 from simbench.optics import undistort_image
 from simbench.pattern import (
     check_channels,
@@ -325,7 +326,7 @@ def _columns(
                 lit,
                 code_full,
             )
-            code = code_full[crop]
+            code_ext = code_full[_pool_rows(crop, hb, params, rig)]
     else:
         with stage("to float"):
             rgb = _to_float(image if order == [0, 1, 2] else image[..., order])
@@ -343,7 +344,7 @@ def _columns(
                     # rest of the work needs the fit's rows only: copies of them, so that the band's
                     # images are freed (the memory a band thread holds at once decides whether the
                     # allocator hands it fresh pages every decode: ~8 ms more a decode when it did)
-                    halo = fit_halo_rows(params, rig)
+                    halo = fit_halo_rows(params, rig) + code_pool_rows(params, rig)
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
                     image, gain = image[fit], gain[fit].copy()
@@ -393,16 +394,18 @@ def _columns(
         with stage("intensity overlay (Eq. 9)"):
             intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)
         with stage("colour code (Eq. 13)"):
+            # the rows the pooled code reads too (ext = crop without pooling)
+            ext = _pool_rows(crop, image.shape[0], params, rig)
             if span is None:
-                code = color_code(rgb[crop])
+                code_ext = color_code(rgb[ext])
             else:
-                code = code_at_row_ends(
-                    unmixed[crop],
-                    normalized_color_code(rgb[crop], span[crop]),
+                code_ext = code_at_row_ends(
+                    unmixed[ext],
+                    normalized_color_code(rgb[ext], span[ext]),
                     period_px=t_cam,
                     order=params.order,
                     min_span=norm["min_span"],
-                    gain=None if gain is None else gain[crop],
+                    gain=None if gain is None else gain[ext],
                 )
     sx = params.sigma_periods * t_cam
     method = PHASE_METHODS[params.phase_method]
@@ -422,6 +425,30 @@ def _columns(
             )
         else:
             phase = method(intensity, sigma_x_px=sx, offset=False, **fit)
+    ext = _pool_rows(crop, intensity.shape[0], params, rig)
+    if params.pool_code:
+        with stage("colour code pooled down the stripes"):
+            # the fitted phase as it stands here: the stripes' rows are where it is exact
+            valid_ext = np.empty(lit[ext].shape, bool)
+            _kernels.validity(
+                lit[ext],
+                phase.support[ext],
+                phase.amplitude[ext],
+                phase.residual[ext],
+                params.min_window_support,
+                params.min_amplitude,
+                params.max_residual,
+                valid_ext,
+            )
+            code = pool_code_rows(
+                code_ext,
+                phase.wrapped[ext],
+                valid_ext,
+                rows=code_pool_rows(params, rig),
+                out_rows=slice(crop.start - ext.start, crop.stop - ext.start),
+            )
+    else:
+        code = code_ext
     narrow = None
     if params.phase_stability:
         with stage(f"phase stability ({params.phase_method} at {STABILITY_WINDOW_SCALE:g} x the window)"):
@@ -575,6 +602,13 @@ def _columns(
 
     st.put("unwrapped_phase", unwrapped)
     return band, st
+
+
+def _pool_rows(crop: slice, height: int, params: DecoderParams, rig: Rig) -> slice:
+    """``crop`` with the rows above and below it that the pooled code reads (``crop`` itself
+    without ``pool_code``), within the ``height`` rows at hand."""
+    k = code_pool_rows(params, rig)
+    return slice(max(0, crop.start - k), min(height, crop.stop + k))
 
 
 def _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam) -> tuple:
