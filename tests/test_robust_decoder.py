@@ -612,3 +612,30 @@ def test_the_code_pooled_down_the_stripes_reads_a_dark_board_under_noise(calibra
         out[pool] = r.valid[lit].mean(), np.sum(r.valid & (np.abs(r.column_px - col) > 0.5 * 21))
     assert out[False][1] > 500 and out[False][0] < 0.9, out
     assert out[True][1] == 0 and out[True][0] > 0.98, out
+
+
+@pytest.mark.parametrize("path", ["fused", "general", "albedo"])
+def test_the_pooled_code_does_not_depend_on_threads(calibration, path):
+    """The pooled code (``pool_code``) reads the fit's rows beyond a band's own, and their phase
+    needs the fit's window beyond them: on a noisy dark board, where the row-wise codes differ from
+    row to row and the pooling decides many of them, the pooled code and the depth are the same
+    bits in 1, 2, 3 and 7 bands - through the paper's fused front end, the general path and the
+    albedo flattening's re-sliced rows."""
+    ref, f = calibration
+    img, _ = _frames((0.03, 0.03, 0.6), depth=1.05, noise=0.01, seed=3)
+    robust = robust_params(DecoderParams(mode="calibrated"))
+    p = {
+        "fused": DecoderParams(mode="calibrated", pool_code=True),
+        "general": dataclasses.replace(robust, albedo_flatten=False),
+        "albedo": robust,
+    }[path]
+    rmap = None
+    if p.unmix:
+        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+    unpooled = decode(img, rig=RIG, params=dataclasses.replace(p, pool_code=False, threads=1), reference=rmap)
+    one = decode(img, rig=RIG, params=dataclasses.replace(p, threads=1), reference=rmap)
+    assert (unpooled.stages["code"] != one.stages["code"]).mean() > 0.01  # the pooling decides codes here
+    for threads in (2, 3, 7):
+        r = decode(img, rig=RIG, params=dataclasses.replace(p, threads=threads), reference=rmap)
+        assert np.array_equal(r.stages["code"], one.stages["code"]), threads
+        assert np.array_equal(r.depth_m, one.depth_m, equal_nan=True), threads

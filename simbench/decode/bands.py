@@ -39,8 +39,9 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     """Row bands, the halo (rows) each needs, and the worker threads: one band per thread, never
     thinner than 4 phase-fit halos (or 32 rows).
 
-    The halo is what a band's rows read beyond themselves: the phase fit's window (3 sigma_y)
-    and, with the albedo flattening, the rows its gain reads
+    The halo is what a band's rows read beyond themselves: the phase fit's window (3 sigma_y),
+    with ``pool_code`` the rows whose code votes on theirs (:func:`code_pool_rows`: their phase
+    must be exact too, so the fit's window beyond them as well) and, with the albedo flattening, the rows its gain reads
     (:func:`simbench.decode.color.albedo_gain_reach_rows`: the gain of the fit's rows must be the
     whole image's).  With less, a band's rows near its ends would see a gain made of a truncated
     image, and the result would follow the thread count (it did, until 2026-11-26: the

@@ -175,7 +175,7 @@ class DecoderParams:
         Before the vote, each pixel's code is voted by the pixels above and below it in the same
         stripe (same wrapped phase, within pi/4), over the rows the phase fit reads
         (:func:`simbench.decode.bands.code_pool_rows`, :func:`simbench.decode.color.pool_code_rows`;
-        ours): a stripe's vote then stands on ~20 rows instead of one.  Where the code channels
+        ours): a stripe's vote then stands on ~19 rows instead of one.  Where the code channels
         are at the noise one row's vote misreads stripes - whole runs of them, which the
         neighbour correction then keeps (Gaussian noise of 5 DN on the dark measured blue board,
         whose code stripes are 4-7 DN: 0.09 % of the decoded pixels 170-690 mm wrong at the
@@ -268,8 +268,10 @@ class DecoderParams:
         the sequence decodes coherently (its stripes vote for one another) while the stripes
         beyond it still agree through it (JPEG's chroma subsampling of a dark blue board: runs
         of 3-4 stripes half a cycle off, 685 mm wrong at full fringe SNR).  After the link
-        check, so it moves no stripe.  The colour-robust decoder; off = not checked (the paper's
-        decoder).
+        check, so it moves no stripe; it makes holes through ``min_confidence`` only (above 0).
+        The stripes of such a run that the neighbour correction did put right are contested too
+        (their own windows' misread positions are among the rival's votes): a cost in
+        completeness only.  The colour-robust decoder; off = not checked (the paper's decoder).
     min_confidence : float
         The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
         is below it become holes (NaN depth, not valid);

@@ -123,8 +123,10 @@ class DecodeResult:
     valid : ndarray, shape (H, W), bool
     confidence : ndarray, shape (H, W), float32; the fringe SNR
         (:func:`simbench.decode.phase.fringe_snr`; with ``params.phase_stability`` capped at
-        :data:`STABILITY_KAPPA_RAD` over the phase's change) of every pixel the decoder found a depth for,
-        those below ``params.min_confidence`` (now holes) included; 0 where it found none
+        :data:`STABILITY_KAPPA_RAD` over the phase's change, and the other terms of
+        :func:`simbench.decode.robust_params`) of every pixel the decoder found a depth for,
+        those below ``params.min_confidence`` (now holes) included; 0 where it found none, and on a
+        stripe whose position is contested (``params.position_doubt``)
     column_px : ndarray, shape (H, W), float32; decoded projector column, NaN if invalid
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
     stages : Mapping of str -> ndarray; intermediate images (paper Fig. 6), made on first access
@@ -295,7 +297,8 @@ def _columns(
 
     ``image`` is the band of the checked capture (any dtype :func:`as_float_image` takes,
     channels in the capture's order; ``order`` lists the indices of code 1, code 0 and the
-    fringe) plus a halo of rows above and below for the phase fit and, with the albedo flattening,
+    fringe) plus a halo of rows above and below for the phase fit, with ``pool_code`` the rows
+    whose code votes on the band's (and their own fit's rows) and, with the albedo flattening,
     the rows its gain reads (:func:`simbench.decode.bands.row_bands`); ``crop`` selects the band's
     own rows, to which everything after the fit is restricted.
     Returns (:class:`BandStripes`, stages) for the cropped rows; the stage images of the

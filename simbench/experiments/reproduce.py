@@ -367,7 +367,7 @@ def _run_in_workers(
     A split target's parts are measured on the workers and its files written here once all are
     in.  The cache's counts of the other workers are added to ``session``'s."""
     from simbench.experiments.workers import run_tasks
-    from simbench.io import atomic_write_bytes
+    from simbench.io import write_files
 
     done: dict[str, dict] = {}
     durations: dict[str, float] = {}  # task -> seconds on its worker
@@ -384,10 +384,8 @@ def _run_in_workers(
         else:
             parts.setdefault(task.args[0], {})[part[1]] = value
         counts.append(tuple(count))
-        for rel, data in files.items():
-            target = session.out / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_bytes(target, data)
+        # a target's files and its provenance as one set, as a local run writes them (Session.write_results)
+        write_files({session.out / rel: data for rel, data in files.items()})
 
     def here(task):
         t0 = time.perf_counter()

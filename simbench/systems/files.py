@@ -259,7 +259,10 @@ def decode_files(request: DecodeRequest) -> str:
     # one decoding into the folder where another wrote NAME_confidence.npy): removed with the write
     stale_confidence = None
     if res.confidence is None and not request.confidence and _is_confidence_of(confidence_path(request), res.depth_m):
+        from simbench.io import check_not_protected
+
         stale_confidence = confidence_path(request)
+        check_not_protected(stale_confidence)  # (a recording's listed file is never removed)
         confidence_note += f"; removed {stale_confidence}, an earlier decode's"
     msg = (
         f"decoded {res.valid.mean() * 100:.2f} % of the image's pixels in {res.elapsed_s * 1000:.0f} ms "
@@ -314,7 +317,7 @@ def decode_files(request: DecodeRequest) -> str:
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
     write_files(files)
-    if stale_confidence is not None:
+    if stale_confidence is not None and stale_confidence.resolve() not in {p.resolve() for p in files}:
         stale_confidence.unlink(missing_ok=True)
     if request.debug_dir:
         for name in stale:
