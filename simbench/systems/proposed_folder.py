@@ -304,8 +304,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     caps = [
         c for c, on in (("the phase stability", params.phase_stability), ("the crease bias", params.crease_doubt)) if on
     ]
-    doubt = ", 0 on a contested stripe order" if params.position_doubt else ""
-    meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{doubt}; {threshold}"
+    contested = ", 0 on a contested stripe order" if params.position_doubt else ""
+    meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
     # a stage of the same name wins, as when they were unpacked over these
     final = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
