@@ -329,7 +329,9 @@ def _columns(
                 lit,
                 code_full,
             )
-            code_ext = code_full[_pool_rows(crop, hb, params, rig)]
+            # the rows the pooled code reads too (ext = crop without pooling)
+            ext = _pool_rows(crop, hb, params, rig)
+            code_ext = code_full[ext]
     else:
         with stage("to float"):
             rgb = _to_float(image if order == [0, 1, 2] else image[..., order])
@@ -428,30 +430,27 @@ def _columns(
             )
         else:
             phase = method(intensity, sigma_x_px=sx, offset=False, **fit)
-    ext = _pool_rows(crop, intensity.shape[0], params, rig)
+    inner = slice(crop.start - ext.start, crop.stop - ext.start)  # crop's rows within ext
+    with stage("validity"):
+        # over ext, which the pooled code reads; the centroid correction below moves the phase
+        # only, not what this reads
+        valid_ext = np.empty(lit[ext].shape, bool)
+        _kernels.validity(
+            lit[ext],
+            phase.support[ext],
+            phase.amplitude[ext],
+            phase.residual[ext],
+            params.min_window_support,
+            params.min_amplitude,
+            params.max_residual,
+            valid_ext,
+        )
+    code = code_ext
     if params.pool_code:
         with stage("colour code pooled down the stripes"):
-            # the fitted phase as it stands here: the stripes' rows are where it is exact
-            valid_ext = np.empty(lit[ext].shape, bool)
-            _kernels.validity(
-                lit[ext],
-                phase.support[ext],
-                phase.amplitude[ext],
-                phase.residual[ext],
-                params.min_window_support,
-                params.min_amplitude,
-                params.max_residual,
-                valid_ext,
-            )
             code = pool_code_rows(
-                code_ext,
-                phase.wrapped[ext],
-                valid_ext,
-                rows=code_pool_rows(params, rig),
-                out_rows=slice(crop.start - ext.start, crop.stop - ext.start),
+                code_ext, phase.wrapped[ext], valid_ext, rows=code_pool_rows(params, rig), out_rows=inner
             )
-    else:
-        code = code_ext
     narrow = None
     if params.phase_stability:
         with stage(f"phase stability ({params.phase_method} at {STABILITY_WINDOW_SCALE:g} x the window)"):
@@ -473,17 +472,7 @@ def _columns(
             phase.residual[crop],
             phase.support[crop],
         )
-        valid = np.empty(lit.shape, bool)
-        _kernels.validity(
-            lit,
-            support_w,
-            amplitude,
-            residual,
-            params.min_window_support,
-            params.min_amplitude,
-            params.max_residual,
-            valid,
-        )
+        valid = valid_ext[inner]
     with stage("stripe segmentation and voting"):
         stripes = segment_stripes(
             wrapped,
