@@ -351,6 +351,18 @@ def depth(
         if doubt:
             logging.getLogger("simbench").warning("no pixel decoded: %s", doubt)
             result = dataclasses.replace(without_depth(result), detail=without_depth(result.detail))
+        else:
+            from simbench.decode.pipeline import registration_warning
+
+            # as the system decoded it: the scene's Z0, the mode asked (the paper's decoder measures no
+            # registration: it is measured here, against the reference capture's in reference mode)
+            used = dataclasses.replace(params, mode=mode, z0_m=rec.scene.reference_depth_m)
+            ref = None
+            if mode == "reference" and result.detail.registration_px is None:
+                ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=rec.scene.rig)
+            told = registration_warning(rec.raw, result.detail, rig=rec.scene.rig, params=used, reference=ref)
+            if told:
+                logging.getLogger("simbench").warning("%s", told)
     else:
         if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
             raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")

@@ -40,9 +40,10 @@ def test_a_reference_is_stored_on_commit_and_read_back_bit_for_bit(tmp_path, ref
     again, store_again = lookup_decoded_reference(reference_image, rig=RIG, params=params, cache=cache)
     store_again()
     assert cache.hits == 1 and _entries(tmp_path / "c") == 1
-    for field in ("column_px", "expected_px", "inverse"):
+    for field in ("column_px", "expected_px", "inverse", "registration_px"):
         assert np.array_equal(getattr(again, field), getattr(direct, field), equal_nan=True)
         assert np.array_equal(getattr(ref, field), getattr(direct, field), equal_nan=True)
+    assert direct.registration_px.shape == (3, 4) and np.abs(direct.registration_px).max() < 0.02
     assert again.z0_m == direct.z0_m and again.mixing is None
 
 

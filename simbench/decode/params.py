@@ -272,6 +272,15 @@ class DecoderParams:
         The stripes of such a run that the neighbour correction did put right are contested too
         (their own windows' misread positions are among the rival's votes): a cost in
         completeness only.  The colour-robust decoder; off = not checked (the paper's decoder).
+    registration_doubt : bool
+        Cap the confidence by the capture's colour registration (ours;
+        :mod:`simbench.decode.registration`): where the code channels' fringe lies more than
+        :data:`simbench.decode.registration.REGISTRATION_FLOOR_PX` from the fringe channel's
+        (against the reference capture's in reference mode; the median of its tiles), every
+        pixel scores at most :data:`STABILITY_KAPPA_RAD` over the excess's phase - the most
+        bias it can give the decoded phase (one capture cannot tell which channel moved).  A
+        capture whose blue channel is shifted one pixel decodes completely, at full fringe SNR,
+        ~5 mm off at 1 m.  The colour-robust decoder; off = not measured (the paper's decoder).
     min_confidence : float
         The operating point: decoded pixels whose confidence (:attr:`DecodeResult.confidence`)
         is below it become holes (NaN depth, not valid);
@@ -325,6 +334,7 @@ class DecoderParams:
     centroid_correction: bool = False
     crease_doubt: bool = False
     position_doubt: bool = False
+    registration_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
     mode: str = "reference"
@@ -372,6 +382,7 @@ class DecoderParams:
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "pool_code": v.boolean(self.pool_code, "pool_code"),
             "position_doubt": v.boolean(self.position_doubt, "position_doubt"),
+            "registration_doubt": v.boolean(self.registration_doubt, "registration_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
             "mode": v.choice(self.mode, "mode", MODES),
@@ -493,7 +504,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     stability against the window's width (``phase_stability``), takes the better of the two
     windows' fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases
     (``crease_doubt``) and the stripes whose De Bruijn position another candidate contests
-    (``position_doubt``); where the nominal phase fit fails it tries other carriers
+    (``position_doubt``) and the pixels where the capture's colour channels are misregistered
+    (``registration_doubt``); where the nominal phase fit fails it tries other carriers
     (``carrier_bank``, with the Gabor fit), and its operating point makes the pixels below
     :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
     and the part of a stripe that the confidence shows to lie on their own side of the edge
@@ -512,6 +524,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         narrow_snr=True,
         crease_doubt=True,
         position_doubt=True,
+        registration_doubt=True,
         pool_code=True,
         carrier_bank=params.phase_method == "gabor",
         centroid_correction=params.phase_method == "gabor",

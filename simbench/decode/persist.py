@@ -75,6 +75,8 @@ def lookup_decoded_reference(
         }
         if ref.mixing is not None:
             arrays["mixing"] = ref.mixing
+        if ref.registration_px is not None:
+            arrays["registration_px"] = ref.registration_px
 
     def store() -> None:
         if fresh and parts is not None:
@@ -86,5 +88,6 @@ def lookup_decoded_reference(
         inverse=arrays["inverse"],
         z0_m=float(arrays["z0_m"]),
         mixing=arrays.get("mixing"),
+        registration_px=arrays.get("registration_px"),
     )
     return ref, store

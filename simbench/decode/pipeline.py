@@ -50,6 +50,7 @@ from simbench.decode.phase import (
     overlay_intensity,
 )
 from simbench.decode.profile import stage
+from simbench.decode.registration import registration_cap, registration_change, registration_doubt, registration_px
 from simbench.decode.params import (
     CREASE_BIAS_RATIO,
     CREASE_MAX_STEP_PX,
@@ -87,6 +88,7 @@ __all__ = [
     "REFERENCE_Z0_TOLERANCE",
     "REFERENCE_Z0_WARNING",
     "code_order_doubt",
+    "registration_warning",
     "without_depth",
     "MIN_WINDOW_SUCCESSION",
     "decode",
@@ -105,6 +107,9 @@ class ReferenceMap:
     mixing : ndarray, shape (3, 3), float64, or None; the projector-to-camera coupling matrix
         K (:func:`simbench.decode.color.mixing_matrix`), when calibration captures under each
         primary came with the reference
+    registration_px : ndarray, shape (TY, TX), float64, or None; the reference capture's colour
+        registration per tile (:func:`simbench.decode.registration.registration_px`), what a
+        capture's is compared with in reference mode (None: with 0)
     """
 
     column_px: np.ndarray
@@ -112,6 +117,7 @@ class ReferenceMap:
     inverse: np.ndarray
     z0_m: float
     mixing: np.ndarray | None = None
+    registration_px: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -135,6 +141,10 @@ class DecodeResult:
         successive windows as the capture is, with red and green swapped, read right to left, and
         both - the last three counted only where fewer than :data:`ALTERNATIVES_BELOW` read as
         the capture is (0 otherwise); before the neighbour correction (:func:`code_order_doubt`)
+    registration_px : ndarray, shape (TY, TX), float64, or None; with
+        ``params.registration_doubt``, the code channels' fringe position against the fringe
+        channel's per tile, camera px, less the reference capture's in reference mode
+        (:func:`simbench.decode.registration.registration_change`); None when not measured
     """
 
     depth_m: np.ndarray
@@ -144,6 +154,7 @@ class DecodeResult:
     stripe_index: np.ndarray
     stages: Mapping = field(default_factory=dict)
     window_succession: tuple[int, int, int, int, int] = (0, 0, 0, 0, 0)
+    registration_px: np.ndarray | None = None
 
 
 class LazyStages(Mapping):
@@ -795,6 +806,29 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams) ->
     return [*pattern_on_rig_warnings(rig, params), *([told] if told else [])]
 
 
+def registration_warning(
+    capture: np.ndarray,
+    result: DecodeResult,
+    *,
+    rig: Rig,
+    params: DecoderParams,
+    reference: ReferenceMap | None = None,
+) -> str:
+    """What `simbench decode` and :func:`simbench.depth` warn of a capture whose colour channels
+    seem misregistered (:func:`simbench.decode.registration.registration_doubt`), or "": from
+    ``result.registration_px`` where the decode measured it (``params.registration_doubt``),
+    else measured here (the paper's decoder; against ``reference``'s in reference mode)."""
+    change = result.registration_px
+    # a reference-mode decode measured it against its reference's
+    against_reference = params.mode == "reference" and (reference is not None or change is not None)
+    if change is None:
+        image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
+        t_cam = params.camera_period(rig)
+        own = registration_px(image, order=list(check_channels(params.channels)), period_px=t_cam)
+        change = registration_change(own, reference.registration_px if against_reference else None, period_px=t_cam)
+    return registration_doubt(change, against_reference=against_reference)
+
+
 def without_depth(result: _R) -> _R:
     """``result`` (a :class:`DecodeResult`, or any result with ``depth_m``, ``valid``,
     ``confidence`` and optionally ``column_px`` and ``stripe_index``) with nothing decoded: NaN
@@ -924,7 +958,17 @@ def decode_reference(
         )
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
-    return ReferenceMap(column_px=column, expected_px=expected, inverse=inverse, z0_m=params.z0_m, mixing=mixing)
+    registration = registration_px(
+        image, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
+    )
+    return ReferenceMap(
+        column_px=column,
+        expected_px=expected,
+        inverse=inverse,
+        z0_m=params.z0_m,
+        mixing=mixing,
+        registration_px=registration,
+    )
 
 
 # How far a decoded reference plane may lie from Z0, relative (assumption: a lab places its
@@ -1101,6 +1145,16 @@ def decode(
                 cap=(crease_kappa_px, valid_out, conf_out),
             )
         stages.put("crease_bias", bias)
+    registration = None
+    if params.registration_doubt:
+        with stage("colour registration"):
+            t_cam = params.camera_period(rig)
+            own = registration_px(image, order=list(check_channels(params.channels)), period_px=t_cam)
+            against = ref.registration_px if ref is not None else None
+            registration = registration_change(own, against, period_px=t_cam)
+            cap = registration_cap(registration, period_px=t_cam)
+            if cap is not None:
+                np.minimum(conf_out, np.float32(cap), out=conf_out, where=valid_out)
     if params.min_confidence > 0.0:
         with stage("operating point (min_confidence)"):
             doubtful = valid_out & (conf_out < np.float32(params.min_confidence))
@@ -1116,4 +1170,5 @@ def decode(
         stripe_index=index_out,
         stages=stages,
         window_succession=tuple(map(sum, zip(*succession))) if succession else (0, 0, 0, 0, 0),
+        registration_px=registration,
     )

@@ -140,7 +140,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     the colour-fringe sensor's decoder."""
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode
-    from simbench.decode.pipeline import code_order_doubt, without_depth
+    from simbench.decode.pipeline import code_order_doubt, registration_warning, without_depth
     from simbench.decode.persist import lookup_decoded_reference
     from simbench.manifest import read_manifest
     from simbench.pattern import pattern_from_options
@@ -287,6 +287,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     doubt = code_order_doubt(result.window_succession)
     if doubt:
         result = without_depth(result)
+    else:
+        told = registration_warning(capture, result, rig=rig, params=params, reference=reference)
+        if told:
+            logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     ref_note = (
         ""
         if reference is None
@@ -302,7 +306,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     )
     snr = "fringe SNR (the better of the wide and the narrow window's)" if params.narrow_snr else "fringe SNR"
     caps = [
-        c for c, on in (("the phase stability", params.phase_stability), ("the crease bias", params.crease_doubt)) if on
+        c
+        for c, on in (
+            ("the phase stability", params.phase_stability),
+            ("the crease bias", params.crease_doubt),
+            ("the colour registration", params.registration_doubt),
+        )
+        if on
     ]
     contested = ", 0 on a contested stripe order" if params.position_doubt else ""
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}"
