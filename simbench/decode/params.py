@@ -272,6 +272,14 @@ class DecoderParams:
         The stripes of such a run that the neighbour correction did put right are contested too
         (their own windows' misread positions are among the rival's votes): a cost in
         completeness only.  The colour-robust decoder; off = not checked (the paper's decoder).
+    shadow_doubt : bool
+        A pixel beside a dark run along its row - a shadow, not a fringe's trough - scores
+        confidence 0 (ours; :func:`simbench.decode.phase.shadow_margin`): within
+        :data:`simbench.decode.phase.SHADOW_REACH_SIGMAS` of the wide window's sigma of it, its
+        window holds the fringe cut off wherever the shadow's penumbra cuts it, and the fit is
+        biased at a fringe SNR above the operating point (the paper's step: pixels 3-6 px
+        before the cube's shadow 16-19 mm off at 3.6-4.9).  After the link check, so it moves no
+        stripe.  The colour-robust decoder; off = not checked (the paper's decoder).
     registration_doubt : bool
         Cap the confidence by the capture's colour registration (ours;
         :mod:`simbench.decode.registration`): where the code channels' fringe lies more than
@@ -334,6 +342,7 @@ class DecoderParams:
     centroid_correction: bool = False
     crease_doubt: bool = False
     position_doubt: bool = False
+    shadow_doubt: bool = False
     registration_doubt: bool = False
     min_confidence: float = 0.0
     min_reference_coverage: float = 0.5
@@ -382,6 +391,7 @@ class DecoderParams:
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "pool_code": v.boolean(self.pool_code, "pool_code"),
             "position_doubt": v.boolean(self.position_doubt, "position_doubt"),
+            "shadow_doubt": v.boolean(self.shadow_doubt, "shadow_doubt"),
             "registration_doubt": v.boolean(self.registration_doubt, "registration_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
             "min_reference_coverage": v.number(self.min_reference_coverage, "min_reference_coverage", lo=0.0, hi=1.0),
@@ -494,22 +504,22 @@ def _pattern_of(value) -> PatternSpec:
 
 
 def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
-    """Our colour-robust decoder (not the paper's): ``params`` with the primaries unmixed by
-    the coupling matrix measured on the reference plane (Caspi et al. 1998) and each channel
-    normalised by its local range across neighbouring stripes, so that the code (Eq. 13) and
-    the fringe (Eq. 9) no longer depend on the surface colour or on a stripe's colour; its
-    validity tests then act on signal relative to the local range (``min_amplitude``,
-    :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it;
-    the lit test looks across a whole code window).  Its confidence folds in the phase's
-    stability against the window's width (``phase_stability``), takes the better of the two
-    windows' fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases
-    (``crease_doubt``) and the stripes whose De Bruijn position another candidate contests
-    (``position_doubt``) and the pixels where the capture's colour channels are misregistered
-    (``registration_doubt``); where the nominal phase fit fails it tries other carriers
-    (``carrier_bank``, with the Gabor fit), and its operating point makes the pixels below
-    :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps the stripe
-    and the part of a stripe that the confidence shows to lie on their own side of the edge
-    (``link_keep_certain``, ``link_split``).  Everything else as ``params``."""
+    """Our colour-robust decoder (not the paper's): ``params`` with the primaries unmixed by the
+    coupling matrix measured on the reference plane (Caspi et al. 1998) and each channel
+    normalised by its local range across neighbouring stripes, so that the code (Eq. 13) and the
+    fringe (Eq. 9) no longer depend on the surface colour or on a stripe's colour; its validity
+    tests then act on signal relative to the local range (``min_amplitude``,
+    :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it; the
+    lit test looks across a whole code window). Its confidence folds in the phase's stability
+    against the window's width (``phase_stability``), takes the better of the two windows'
+    fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
+    and the stripes whose De Bruijn position another candidate contests (``position_doubt``),
+    the pixels beside a shadow (``shadow_doubt``) and those of a capture whose colour channels
+    are misregistered (``registration_doubt``); where the nominal phase fit fails it tries other
+    carriers (``carrier_bank``, with the Gabor fit), and its operating point makes the pixels
+    below :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps
+    the stripe and the part of a stripe that the confidence shows to lie on their own side of
+    the edge (``link_keep_certain``, ``link_split``). Everything else as ``params``."""
     return dataclasses.replace(
         params,
         unmix=True,
@@ -524,6 +534,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         narrow_snr=True,
         crease_doubt=True,
         position_doubt=True,
+        shadow_doubt=True,
         registration_doubt=True,
         pool_code=True,
         carrier_bank=params.phase_method == "gabor",

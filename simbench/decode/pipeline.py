@@ -48,6 +48,7 @@ from simbench.decode.phase import (
     fringe_snr,
     off_discontinuity,
     overlay_intensity,
+    shadow_margin,
 )
 from simbench.decode.profile import stage
 from simbench.decode.registration import registration_cap, registration_change, registration_doubt, registration_px
@@ -131,8 +132,9 @@ class DecodeResult:
         (:func:`simbench.decode.phase.fringe_snr`; with ``params.phase_stability`` capped at
         :data:`STABILITY_KAPPA_RAD` over the phase's change, and the other terms of
         :func:`simbench.decode.robust_params`) of every pixel the decoder found a depth for,
-        those below ``params.min_confidence`` (now holes) included; 0 where it found none, and on a
-        stripe whose position is contested (``params.position_doubt``)
+        those below ``params.min_confidence`` (now holes) included; 0 where it found none, on a
+        stripe whose position is contested (``params.position_doubt``) and beside a shadow
+        (``params.shadow_doubt``)
     column_px : ndarray, shape (H, W), float32; decoded projector column, NaN if invalid
     stripe_index : ndarray, shape (H, W), int32; n of Eq. 14, -1 if invalid
     stages : Mapping of str -> ndarray; intermediate images (paper Fig. 6), made on first access
@@ -562,6 +564,12 @@ def _columns(
             )
             if contested.any():
                 confidence[_per_pixel(contested, lab, False)] = 0.0
+    beside_shadow = None
+    if params.shadow_doubt:
+        with stage("shadow margin"):
+            # after the link check, as the contested positions: it moves no stripe
+            beside_shadow = shadow_margin(intensity, period_px=t_cam, sigma_x_px=sx)
+            confidence[beside_shadow] = 0.0
     succession = _window_succession(raw_w, stripe_code, stripes.linked_prev, params=params)
     band = BandStripes(
         labels=lab,
@@ -597,6 +605,8 @@ def _columns(
     st.put("support", lambda: _per_pixel(support, lab, 0))
     if contested is not None:
         st.put("contested", lambda: _per_pixel(contested, lab, False))
+    if beside_shadow is not None:
+        st.put("shadow_margin", beside_shadow)
     st.put("column", lambda: band.columns[0])
 
     def unwrapped():
