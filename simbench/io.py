@@ -39,6 +39,9 @@ __all__ = [
     "load_image",
     "adc_full_scale",
     "camera_full_scale",
+    "ENCODINGS",
+    "check_encoding",
+    "linearize",
     "narrow_uint16_hint",
     "save_exr",
     "stored_adc_bits",
@@ -661,6 +664,57 @@ def adc_full_scale(img: np.ndarray, *, bits: int | None, where: str) -> np.ndarr
             f"not that camera's image as recorded (scaled to 16 bits? then it is read as it is, without the bits)"
         )
     return np.multiply(img, np.float32(1.0 / full), dtype=np.float32)
+
+
+# How an image's values encode light: linear (a machine-vision camera's raw digital numbers, the
+# simulated camera's), sRGB's transfer function (IEC 61966-2-1: most consumer cameras' and image
+# tools' 8-bit output), or a pure power law ``gamma=G`` (value = light ** (1 / G): a camera's
+# "gamma" setting, e.g. 2.2).
+ENCODINGS = ("linear", "srgb", "gamma=G")
+GAMMA_RANGE = (1.0, 4.0)
+
+
+def check_encoding(text: str) -> str:
+    """``text`` as an encoding name (:data:`ENCODINGS`), normalised ("sRGB" -> "srgb",
+    "gamma=2.20" -> "gamma=2.2"); ValueError naming the valid ones otherwise."""
+    t = str(text).strip().lower()
+    if t in ("linear", "srgb"):
+        return t
+    if t.startswith("gamma="):
+        try:
+            g = float(t[6:])
+        except ValueError:
+            g = float("nan")
+        if GAMMA_RANGE[0] <= g <= GAMMA_RANGE[1]:
+            return f"gamma={g:g}"
+        raise ValueError(
+            f"encoding {text!r}: the gamma must be a number from {GAMMA_RANGE[0]:g} to {GAMMA_RANGE[1]:g} "
+            "(e.g. gamma=2.2)"
+        )
+    raise ValueError(f"encoding {text!r} is not one of {', '.join(ENCODINGS)}")
+
+
+def linearize(img: np.ndarray, *, encoding: str) -> np.ndarray:
+    """An image's values as linear light, float32 in [0, 1] of its full scale (an integer image's
+    by its dtype's range, a float image's as it is); a ``linear`` image is returned unchanged.
+
+    A camera's encoded output fed to the decoder as if linear bends the fringe: a step captured
+    through gamma 1/2.2 (every frame, reference and calibration frames too) decoded by the
+    colour-robust decoder 64 % complete with 0.17 % of its pixels > 5 mm wrong (94 % and 0.04 %
+    linearised first).
+    """
+    name = check_encoding(encoding)
+    if name == "linear":
+        return img
+    a = np.asarray(img)
+    scale = 1.0 / float(np.iinfo(a.dtype).max) if a.dtype.kind in "ui" else 1.0
+    v = np.clip(a.astype(np.float32) * np.float32(scale), 0.0, 1.0)
+    if name == "srgb":
+        # IEC 61966-2-1 (the sRGB standard's decoding function)
+        return np.where(
+            v <= 0.04045, v / np.float32(12.92), ((v + np.float32(0.055)) / np.float32(1.055)) ** 2.4
+        ).astype(np.float32)
+    return (v ** np.float32(float(name[6:]))).astype(np.float32)
 
 
 def camera_full_scale(img: np.ndarray, *, bits: int) -> np.ndarray:

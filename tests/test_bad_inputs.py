@@ -762,6 +762,18 @@ if Path("/proc/self").is_dir():  # Linux: os.access lets root "write" in /proc, 
         "--ply: cannot write in /proc",
         setup=lambda d: render_folder(d),
     )
+for bad, msg in (
+    ("gamma", "is not one of linear, srgb, gamma=G"),
+    ("gamma=9", "from 1 to 4"),
+    ("gamma=x", "from 1 to 4"),
+):
+    case(f"decode-encoding-{bad}", lambda d, b=bad: _decode(d, "--encoding", b), msg, setup=lambda d: render_folder(d))
+case(  # a simbench recording's images are linear: no encoding to undo
+    "decode-encoding-of-a-recording",
+    lambda d: ["decode", str(d / "r"), "--out", str(d / "o.npy"), "--encoding", "srgb"],
+    "is a simbench recording's image, whose camera records linear digital numbers",
+    setup=lambda d: render_folder(d),
+)
 case(
     "decode-out-is-a-folder",
     lambda d: ["decode", str(d / "r"), "--out", str(d / "o.npy")],

@@ -13,6 +13,7 @@ from simbench import api
 from simbench.io import ADC_BITS
 from simbench.cli.options import (
     add_pattern_options,
+    encoding,
     float_in,
     int_in,
     DEFAULT_CACHE,
@@ -44,6 +45,7 @@ def _cmd_decode(args) -> int:
         robust=args.robust,
         decoder=tuple(args.decoder or ()),
         bits=args.bits,
+        encoding=args.encoding,
     )
     print(decode_files(request))
     return 0
@@ -235,6 +237,15 @@ def add_parsers(sub, kw: dict) -> None:
         help="the bits of the camera's ADC, for images that do not record them: a 10-, 12- or 14-bit camera's 16-bit "
         "image holds its digital numbers, 0 to 2^bits - 1 (default: a recording's camera, else the image's "
         "dtype: 8-bit / 255, 16-bit / 65535)",
+    )
+    s.add_argument(
+        "--encoding",
+        type=encoding,
+        default="linear",
+        metavar="{linear,srgb,gamma=G}",
+        help="how the images' values encode light (the capture's, the reference's, the calibration frames'): linear "
+        "(the default: a machine-vision camera's raw digital numbers, a simbench recording's), srgb (IEC 61966-2-1, "
+        "most consumer cameras' 8-bit output) or gamma=G (value = light^(1/G)); encoded images are linearised first",
     )
     s.add_argument(
         "--z0",

@@ -59,6 +59,16 @@ def checked(convert: Callable[[str], object], check: str, what: str, **limits: o
     return parse
 
 
+def encoding(text: str) -> str:
+    """An argparse type: an image encoding (:func:`simbench.io.check_encoding`)."""
+    from simbench.io import check_encoding
+
+    try:
+        return check_encoding(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def int_in(lo: int | None = None, hi: int | None = None) -> Callable[[str], object]:
     """An argparse type: an integer checked by :func:`simbench.validate.integer`."""
     return checked(int, "integer", "an integer", lo=lo, hi=hi)

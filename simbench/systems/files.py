@@ -51,9 +51,10 @@ class DecodeRequest:
     The other fields are options of the colour-fringe (proposed) sensor's decoder: a reference
     plane capture, its calibration frames' folder, the decoding ``mode``, Z0, the working range,
     the pattern (None = as recorded, or the default), the colour-robust decoder and other
-    decoder settings as ``name=value`` items, and the bits of the camera's ADC for images that
-    do not record them (a 10-, 12- or 14-bit camera's uint16 digital numbers).  None or empty = not
-    given.
+    decoder settings as ``name=value`` items, the bits of the camera's ADC for images that
+    do not record them (a 10-, 12- or 14-bit camera's uint16 digital numbers), and how the images'
+    values encode light (:data:`simbench.io.ENCODINGS`: linear, or linearised first).  None or
+    empty = not given.
     """
 
     capture: str
@@ -77,6 +78,7 @@ class DecodeRequest:
     robust: bool = False
     decoder: tuple[str, ...] = ()
     bits: int | None = None
+    encoding: str = "linear"
 
 
 # how the command line names each option of a request, for messages that tell a user what to change
@@ -94,6 +96,7 @@ FLAGS = {
     "near_m": "--near",
     "far_m": "--far",
     "bits": "--bits",
+    "encoding": "--encoding",
 }
 # the options every system takes (the rest are the colour-fringe decoder's)
 COMMON_FIELDS = frozenset({"capture", "out", "confidence", "ply", "debug_dir", "rig", "min_confidence", "cache_dir"})

@@ -114,13 +114,19 @@ def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool =
     records, else ``--bits``, else the dtype's range - with a warning where a 16-bit image's
     values all fit in 10 or 12 bits (a 12-bit camera's frame read as 16-bit decodes at a
     sixteenth of its brightness: half the pixels lost, and no other word of it)."""
-    from simbench.io import adc_full_scale, load_image, narrow_uint16_hint
+    from simbench.io import adc_full_scale, check_encoding, linearize, load_image, narrow_uint16_hint
 
     path = Path(path)
     img = load_image(path, expected_size_hw=rig.camera.size_hw)
     meta = recording_manifest_of(path)
     recorded = None
+    encoding = check_encoding(request.encoding)
     if meta is not None and path.name in meta.get("files", {}).values():
+        if encoding != "linear":
+            raise ValueError(
+                f"--encoding {encoding}: {path} is a simbench recording's image, whose camera records linear digital "
+                "numbers; leave --encoding out to decode it as recorded"
+            )
         recorded = recorded_adc_bits(meta, where=str(path.parent / RENDER_MANIFEST))
     if recorded is not None and request.bits is not None and request.bits != recorded:
         raise ValueError(
@@ -132,7 +138,7 @@ def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool =
         told = narrow_uint16_hint(img)
         if told:
             logging.getLogger("simbench").warning("%s: %s", path, told)
-    return adc_full_scale(img, bits=bits, where=str(path))
+    return linearize(adc_full_scale(img, bits=bits, where=str(path)), encoding=encoding)
 
 
 def decode_capture_files(request: DecodeRequest) -> FileDecode:
@@ -146,6 +152,9 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     from simbench.pattern import pattern_from_options
     from simbench.rig import load_rig
 
+    from simbench.io import check_encoding, load_image
+
+    encoding = check_encoding(request.encoding)
     asked = _decoder_params(request)  # bad values fail before any file is read (on the decoder they will change)
     # --decoder mode= and z0_m= say what --mode and --z0 say: the same checks, and a pair that disagrees is refused
     named = _decoder_names(request)
@@ -301,6 +310,9 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     )
     over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
+    # the point cloud's colours: an 8-bit capture's values as stored (an encoded one's too, not its
+    # linearised light, which would show dark)
+    shown = capture if encoding == "linear" else load_image(capture_path, expected_size_hw=rig.camera.size_hw)
     threshold = (
         f"holes below {params.min_confidence:g}" if params.min_confidence > 0 else "no threshold: every decoded pixel"
     )
@@ -338,7 +350,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         elapsed_s=dt,
         # on the ideal pinhole grid the points are on (an audit: the raw capture's colours sat up to
         # 4 px off them at the corners under the paper camera's lens)
-        colours=undistort_image(capture, rig.camera) if capture.dtype == np.uint8 else None,
+        colours=undistort_image(shown, rig.camera) if shown.dtype == np.uint8 else None,
         stages=stages,
         capture_file=capture_path,
         commit=store_reference,
@@ -349,6 +361,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
             "reference": reference_path if reference is not None else None,
             "calibration_frames": request.calibration,
             "bits": request.bits,
+            "encoding": encoding,
         },
     )
 
