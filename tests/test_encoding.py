@@ -67,3 +67,37 @@ def test_an_srgb_cameras_frames_decode_when_linearised(tmp_path):
     # measured: linear 100 % / 0.92 mm (paper), 55 % / 0.56 mm (robust); srgb 100 % / 0.21 mm, 99.85 % / 0.21 mm
     assert got["linear", False][1] > 0.6 and got["linear", True][0] < 0.7, got
     assert got["srgb", False][1] < 0.3 and got["srgb", True][0] > 0.99 and got["srgb", True][1] < 0.3, got
+
+
+def test_an_encoded_capture_and_reference_read_as_linear_are_warned_of(tmp_path, caplog):
+    """The fringe's second harmonic against its first (simbench.decode.registration): ~0 for a
+    linear capture of the pattern, -0.13 to -0.17 for sRGB-encoded rendered scenes and -0.24 for
+    this darker synthetic plane; over 0.05 the decode names it, for the capture and the
+    reference, and not once linearised."""
+    from simbench.decode.registration import fringe_harmonic_ratio
+
+    system = get_system("proposed")
+    raw, cal, scene = system.bench_inputs(scene="plane")
+    t = system.decoder.camera_period(scene.rig)
+    srgb = np.round(255 * colour.cctf_encoding(raw / 255.0, function="sRGB")).astype(np.uint8)
+    assert abs(fringe_harmonic_ratio(raw, order=[0, 1, 2], period_px=t)) < 0.01
+    assert fringe_harmonic_ratio(srgb, order=[0, 1, 2], period_px=t) < -0.1
+    assert abs(fringe_harmonic_ratio(linearize(srgb, encoding="srgb"), order=[0, 1, 2], period_px=t)) < 0.01
+    ref = np.round(255 * colour.cctf_encoding(cal.image / 255.0, function="sRGB")).astype(np.uint8)
+    files = [*bare_files(tmp_path, srgb, ref, scene.rig), "--z0", "1.0", "--out", str(tmp_path / "d.npy")]
+    assert main(["decode", *files]) == 0
+    assert "capture.png: the capture's fringe holds a second harmonic -0.2" in caplog.text
+    assert "reference.png: the reference capture's fringe holds a second harmonic" in caplog.text
+    assert "give --encoding srgb" in caplog.text
+    caplog.clear()
+    assert main(["decode", *files, "--encoding", "srgb"]) == 0
+    assert "second harmonic" not in caplog.text
+
+
+def test_no_fringe_no_linearity_to_judge():
+    from simbench.decode.registration import encoding_doubt, fringe_harmonic_ratio
+
+    noise = np.random.default_rng(3).integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    for img in (noise, np.zeros((480, 640, 3), np.uint8), np.full((480, 640, 3), 255, np.uint8)):
+        ratio = fringe_harmonic_ratio(img, order=[0, 1, 2], period_px=10.9)
+        assert np.isnan(ratio) and encoding_doubt(ratio) == ""

@@ -51,7 +51,14 @@ from simbench.decode.phase import (
     shadow_margin,
 )
 from simbench.decode.profile import stage
-from simbench.decode.registration import registration_cap, registration_change, registration_doubt, registration_px
+from simbench.decode.registration import (
+    encoding_doubt,
+    fringe_harmonic_ratio,
+    registration_cap,
+    registration_change,
+    registration_doubt,
+    registration_px,
+)
 from simbench.decode.params import (
     CREASE_BIAS_RATIO,
     CREASE_MAX_STEP_PX,
@@ -90,6 +97,7 @@ __all__ = [
     "REFERENCE_Z0_WARNING",
     "code_order_doubt",
     "registration_warning",
+    "reference_warnings",
     "without_depth",
     "MIN_WINDOW_SUCCESSION",
     "decode",
@@ -808,12 +816,32 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
 
 def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams) -> list[str]:
     """What `simbench decode` and :func:`simbench.depth` warn of before decoding ``capture``: the
-    pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`) and the capture's
-    channel order (:func:`channel_order_doubt`)."""
+    pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`), the capture's
+    channel order (:func:`channel_order_doubt`) and its fringe's linearity
+    (:func:`simbench.decode.registration.encoding_doubt`)."""
     from simbench.decode.params import pattern_on_rig_warnings
 
-    told = channel_order_doubt(capture, rig=rig, params=params)
-    return [*pattern_on_rig_warnings(rig, params), *([told] if told else [])]
+    told = [channel_order_doubt(capture, rig=rig, params=params)]
+    told.append(
+        encoding_doubt(
+            fringe_harmonic_ratio(
+                capture, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
+            )
+        )
+    )
+    return [*pattern_on_rig_warnings(rig, params), *(t for t in told if t)]
+
+
+def reference_warnings(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> list[str]:
+    """What `simbench decode` warns of a reference-plane capture before decoding with it: its
+    fringe's linearity (:func:`simbench.decode.registration.encoding_doubt`; the plane faces the
+    rig, so its fringe runs at the period demodulated at, and a camera's encoding shows there
+    whatever the scene)."""
+    ratio = fringe_harmonic_ratio(
+        reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
+    )
+    told = encoding_doubt(ratio, what="reference capture")
+    return [told] if told else []
 
 
 def registration_warning(

@@ -38,6 +38,9 @@ __all__ = [
     "registration_change",
     "registration_cap",
     "registration_shift_px",
+    "NONLINEAR_FRINGE_RATIO",
+    "fringe_harmonic_ratio",
+    "encoding_doubt",
     "registration_doubt",
 ]
 
@@ -208,4 +211,68 @@ def registration_doubt(change_px: np.ndarray | None, *, against_reference: bool,
         "colour; a demosaicing, resizing or processing step that shifted one channel)? Had the fringe channel "
         "moved, its depths carry a bias of about that many pixels' disparity (the colour-robust decoder's "
         "confidence says so: registration_doubt)"
+    )
+
+
+# The fringe's linearity.  The pattern's fringe is a cosine of the projector's drive; a capture
+# whose values encode light non-linearly (an sRGB camera's 8-bit output, a camera's gamma) bends
+# it, and its second harmonic, phase-locked to the first (a symmetric bend: cos 2 phi), grows.
+# Measured as the coherent ratio sum(H2 conj(H1)^2) / sum(|H1|^3) over the fringe channel's rows
+# (demodulated as the registration's): clean captures of the white, dark, dark measured blue and
+# saturated orange boards, the printed chart, the step, the bust, the 90-degree corner, the pink
+# and cyan clutter and their reference planes, within +-0.007 (the 45-degree corner: no fringe at
+# the period, not judged); the same encoded by sRGB -0.13 to -0.17 (gamma 2.2: -0.13 to -0.16; the
+# benchmark's darker synthetic plane -0.24), but the 90-degree corner's 0.00 (its faces' fringe runs far off
+# the period demodulated at, and the reference plane's -0.17 tells it).  Over this ratio's
+# magnitude the decode warns.
+NONLINEAR_FRINGE_RATIO = 0.05
+# below this share of the channel's RMS in its first harmonic's phasor there is no fringe to judge
+# (a noise image read a ratio of +0.05)
+FRINGE_PRESENCE = 0.2
+
+
+def fringe_harmonic_ratio(image: np.ndarray, *, order: list[int], period_px: float) -> float:
+    """The fringe channel's second harmonic against its first (constants above): ~0 for a
+    linear capture of the pattern, negative where the image's values compress the light (sRGB,
+    gamma > 1); NaN where no fringe is read.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3)
+        A capture, channels in its own order (``order``: code 1, code 0, fringe).
+    period_px : float
+        The fringe's period in camera pixels.
+    """
+    a = np.ascontiguousarray(np.asarray(image)[::REGISTRATION_ROW_STEP, :, order[2]], dtype=np.float32)
+    w = a.shape[1]
+    box = (max(1, int(round(REGISTRATION_BOX_PERIODS * period_px))), 1)
+    a = a - cv2.blur(a, box)
+    x = np.arange(w, dtype=np.float64)
+
+    def harmonic(k: int) -> np.ndarray:
+        wx = k * 2.0 * np.pi / float(period_px) * x
+        c, s = np.cos(wx).astype(np.float32), np.sin(wx).astype(np.float32)
+        return cv2.blur(a * c, box) - 1j * cv2.blur(a * s, box)
+
+    edge = min(box[0] // 2, (w - 1) // 2)
+    h1, h2 = harmonic(1)[:, edge : w - edge], harmonic(2)[:, edge : w - edge]
+    norm = float(np.sum(np.abs(h1) ** 3))
+    # a fringe is there: its first harmonic's phasor (A/2 for a cosine of amplitude A) against the
+    # channel's RMS (A/sqrt 2): 0.71 for a clean fringe, ~0.05 for noise (the box's average)
+    rms = float(np.sqrt(np.mean(a[:, edge : w - edge] ** 2)))
+    if not norm > 0.0 or not float(np.mean(np.abs(h1))) > FRINGE_PRESENCE * rms:
+        return math.nan
+    return float(np.real(np.sum(h2 * np.conj(h1) ** 2)) / norm)
+
+
+def encoding_doubt(ratio: float, *, what: str = "capture") -> str:
+    """Why the image's fringe seems bent by a non-linear encoding (:func:`fringe_harmonic_ratio`
+    beyond :data:`NONLINEAR_FRINGE_RATIO`), or ""."""
+    if not abs(ratio) > NONLINEAR_FRINGE_RATIO:
+        return ""
+    return (
+        f"the {what}'s fringe holds a second harmonic {ratio:+.2f} of its first (a linear capture of the pattern: "
+        f"within +-0.01): are its values gamma-encoded (an sRGB camera's, a camera's gamma)? Then give --encoding srgb "
+        "or --encoding gamma=G; else the projector's output is not linear in its drive. A bent fringe loses the "
+        "colour-robust decoder pixels and biases the depth"
     )

@@ -245,10 +245,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
                 "disagree: give one"
             )
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
-    from simbench.decode.pipeline import capture_warnings
+    from simbench.decode.pipeline import capture_warnings, reference_warnings
 
     for told in capture_warnings(capture, rig=rig, params=params):
         logging.getLogger("simbench").warning("%s: %s", capture_path, told)
+    if isinstance(reference, np.ndarray):
+        for told in reference_warnings(reference, rig=rig, params=params):
+            logging.getLogger("simbench").warning("%s: %s", reference_path, told)
     if request.calibration is not None and not params.unmix:
         raise ValueError(
             f"--calibration {request.calibration}: those frames are for the colour-robust decoder's unmixing; add "
