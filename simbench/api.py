@@ -358,7 +358,7 @@ def depth(
             # registration: it is measured here, against the reference capture's in reference mode)
             used = dataclasses.replace(params, mode=mode, z0_m=rec.scene.reference_depth_m)
             ref = None
-            if mode == "reference" and result.detail.registration_px is None:
+            if mode == "reference":  # the decode's own (cached): what its registration was measured against
                 ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=rec.scene.rig)
             told = registration_warning(rec.raw, result.detail, rig=rec.scene.rig, params=used, reference=ref)
             if told:

@@ -101,3 +101,14 @@ def test_no_fringe_no_linearity_to_judge():
     for img in (noise, np.zeros((480, 640, 3), np.uint8), np.full((480, 640, 3), 255, np.uint8)):
         ratio = fringe_harmonic_ratio(img, order=[0, 1, 2], period_px=10.9)
         assert np.isnan(ratio) and encoding_doubt(ratio) == ""
+
+
+def test_the_warning_reads_the_bends_sign_against_the_encoding_given():
+    from simbench.decode.registration import encoding_doubt
+
+    assert encoding_doubt(0.04) == encoding_doubt(-0.04) == ""
+    assert "give --encoding srgb" in encoding_doubt(-0.2)
+    assert "--encoding srgb leaves it compressed" in encoding_doubt(-0.2, encoding="srgb")
+    # a linear image read as sRGB expands (+0.27 on the benchmark's plane)
+    assert "was the image linear already (then leave --encoding out)?" in encoding_doubt(0.27, encoding="srgb")
+    assert "not linear" in encoding_doubt(0.27)

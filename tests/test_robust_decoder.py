@@ -659,6 +659,17 @@ def test_the_shadow_margin_marks_the_pixels_beside_a_dark_run_not_a_fringes_trou
     expected[200 - reach : 200] = expected[233 : 233 + reach] = True
     for row in marked:
         np.testing.assert_array_equal(row, expected)
+    # an even half period (a review: OpenCV's opening by an even width moved the run a pixel right,
+    # leaving the first lit pixel after it unmarked)
+    t2 = 20.0
+    lit2 = (0.47 + 0.39 * np.cos(2 * np.pi * x / t2)).astype(np.float32)[None]
+    lit2[:, 200:240] = 0.03  # between two crests (a trough beside it would lengthen the dark run)
+    reach2 = round(1.25 * 0.25 * t2)  # 6 px
+    expected2 = np.zeros(400, bool)
+    expected2[200 - reach2 : 200] = expected2[240 : 240 + reach2] = True
+    np.testing.assert_array_equal(shadow_margin(lit2, period_px=t2, sigma_x_px=0.25 * t2)[0], expected2)
+    with pytest.raises(ValueError, match="shadow_doubt needs color_normalize"):
+        DecoderParams(shadow_doubt=True)
 
 
 @pytest.fixture(scope="module")

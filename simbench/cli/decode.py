@@ -245,7 +245,8 @@ def add_parsers(sub, kw: dict) -> None:
         metavar="{linear,srgb,gamma=G}",
         help="how the images' values encode light (the capture's, the reference's, the calibration frames'): linear "
         "(the default: a machine-vision camera's raw digital numbers, a simbench recording's), srgb (IEC 61966-2-1, "
-        "most consumer cameras' 8-bit output) or gamma=G (value = light^(1/G)); encoded images are linearised first",
+        "most consumer cameras' 8-bit output) or gamma=G (value = light^(1/G), G from 1 to 4); encoded images are "
+        "linearised first",
     )
     s.add_argument(
         "--z0",

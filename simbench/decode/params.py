@@ -409,6 +409,11 @@ class DecoderParams:
             raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
         if fixed["albedo_flatten"] and not fixed["color_normalize"]:
             raise ValueError("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
+        if fixed["shadow_doubt"] and not fixed["color_normalize"]:
+            raise ValueError(
+                "shadow_doubt needs color_normalize = true (its level is one of the normalised intensity: on raw "
+                "channels a dark board would read as a shadow)"
+            )
         if fixed["narrow_snr"] and not fixed["phase_stability"]:
             raise ValueError("narrow_snr needs phase_stability = true (the narrow window is the stability term's fit)")
         if fixed["carrier_bank"] and fixed["phase_method"] != "gabor":

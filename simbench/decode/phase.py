@@ -252,7 +252,9 @@ def shadow_margin(intensity: np.ndarray, *, period_px: float, sigma_x_px: float)
     """
     i = np.asarray(intensity, np.float32)
     dark = (~(i >= np.float32(SHADOW_LEVEL))).astype(np.uint8)
-    run = max(1, int(round(SHADOW_MIN_RUN_PERIODS * period_px)))
+    # an odd width: OpenCV's opening by an even one moves the run a pixel right (its erosion and
+    # dilation share the anchor), off the first lit pixel after it
+    run = max(1, int(round(SHADOW_MIN_RUN_PERIODS * period_px))) | 1
     runs = cv2.morphologyEx(dark, cv2.MORPH_OPEN, np.ones((1, run), np.uint8), borderType=cv2.BORDER_REPLICATE)
     reach = max(1, int(round(SHADOW_REACH_SIGMAS * sigma_x_px)))
     near = cv2.dilate(runs, np.ones((1, 2 * reach + 1), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)

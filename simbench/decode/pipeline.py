@@ -814,11 +814,12 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
     )
 
 
-def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams) -> list[str]:
+def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, encoding: str = "linear") -> list[str]:
     """What `simbench decode` and :func:`simbench.depth` warn of before decoding ``capture``: the
     pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`), the capture's
     channel order (:func:`channel_order_doubt`) and its fringe's linearity
-    (:func:`simbench.decode.registration.encoding_doubt`)."""
+    (:func:`simbench.decode.registration.encoding_doubt`; ``encoding``: how it was read,
+    :data:`simbench.io.ENCODINGS`)."""
     from simbench.decode.params import pattern_on_rig_warnings
 
     told = [channel_order_doubt(capture, rig=rig, params=params)]
@@ -826,13 +827,16 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams) ->
         encoding_doubt(
             fringe_harmonic_ratio(
                 capture, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
-            )
+            ),
+            encoding=encoding,
         )
     )
     return [*pattern_on_rig_warnings(rig, params), *(t for t in told if t)]
 
 
-def reference_warnings(reference: np.ndarray, *, rig: Rig, params: DecoderParams) -> list[str]:
+def reference_warnings(
+    reference: np.ndarray, *, rig: Rig, params: DecoderParams, encoding: str = "linear"
+) -> list[str]:
     """What `simbench decode` warns of a reference-plane capture before decoding with it: its
     fringe's linearity (:func:`simbench.decode.registration.encoding_doubt`; the plane faces the
     rig, so its fringe runs at the period demodulated at, and a camera's encoding shows there
@@ -840,7 +844,7 @@ def reference_warnings(reference: np.ndarray, *, rig: Rig, params: DecoderParams
     ratio = fringe_harmonic_ratio(
         reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
     )
-    told = encoding_doubt(ratio, what="reference capture")
+    told = encoding_doubt(ratio, what="reference capture", encoding=encoding)
     return [told] if told else []
 
 
@@ -855,10 +859,13 @@ def registration_warning(
     """What `simbench decode` and :func:`simbench.depth` warn of a capture whose colour channels
     seem misregistered (:func:`simbench.decode.registration.registration_doubt`), or "": from
     ``result.registration_px`` where the decode measured it (``params.registration_doubt``),
-    else measured here (the paper's decoder; against ``reference``'s in reference mode)."""
+    else measured here (the paper's decoder); against ``reference``'s registration in reference
+    mode (the decode's own reference: a map without one, or none, is compared with 0, as
+    :func:`decode` does)."""
     change = result.registration_px
-    # a reference-mode decode measured it against its reference's
-    against_reference = params.mode == "reference" and (reference is not None or change is not None)
+    if not isinstance(reference, ReferenceMap):
+        reference = None
+    against_reference = params.mode == "reference" and reference is not None and reference.registration_px is not None
     if change is None:
         image = _ideal_image(_check_capture(capture, rig.camera.size_hw), rig)
         t_cam = params.camera_period(rig)

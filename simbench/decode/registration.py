@@ -174,8 +174,8 @@ def registration_shift_px(change_px: np.ndarray | None) -> float:
     :func:`registration_change` (NaN when none was measured).  A channel shifted in processing
     moves every tile alike; a tile's own offset also holds what the light did there - a 45-degree
     corner's interreflection, a glossy box face's - which the median of the image's tiles does not
-    follow (tiles of clean captures up to 0.55 px off, their median within 0.03 px but the 45-degree
-    corner's, 0.12 px; constants above).  A lens's lateral colour, which varies over the image,
+    follow (tiles of clean captures up to 0.48 px off, their median within 0.02 px but the 45-degree
+    corner's, 0.11 px; constants above).  A lens's lateral colour, which varies over the image,
     is left to the reference (in reference mode the reference capture holds it too)."""
     if change_px is None:
         return math.nan
@@ -197,8 +197,8 @@ def registration_cap(change_px: np.ndarray | None, *, period_px: float) -> float
 
 def registration_doubt(change_px: np.ndarray | None, *, against_reference: bool, what: str = "capture") -> str:
     """Why the capture's colour channels seem misregistered, from its :func:`registration_change`
-    (``against_reference``: the reference capture's subtracted), or "" when no tile is
-    :data:`REGISTRATION_WARN_PX` off (:func:`registration_shift_px`)."""
+    (``against_reference``: the reference capture's subtracted), or "" when its shift (the median
+    tile, :func:`registration_shift_px`) is under :data:`REGISTRATION_WARN_PX`."""
     shift = registration_shift_px(change_px)
     if not abs(shift) >= REGISTRATION_WARN_PX:
         return ""
@@ -265,14 +265,28 @@ def fringe_harmonic_ratio(image: np.ndarray, *, order: list[int], period_px: flo
     return float(np.real(np.sum(h2 * np.conj(h1) ** 2)) / norm)
 
 
-def encoding_doubt(ratio: float, *, what: str = "capture") -> str:
-    """Why the image's fringe seems bent by a non-linear encoding (:func:`fringe_harmonic_ratio`
-    beyond :data:`NONLINEAR_FRINGE_RATIO`), or ""."""
+def encoding_doubt(ratio: float, *, what: str = "capture", encoding: str = "linear") -> str:
+    """Why the image's fringe seems bent (:func:`fringe_harmonic_ratio` beyond
+    :data:`NONLINEAR_FRINGE_RATIO`), read with ``encoding`` (:data:`simbench.io.ENCODINGS`), or
+    "".  Negative: the values compress the light (an encoding left in, clipping); positive: they
+    expand it (an image linearised that was linear: +0.27 for the benchmark's plane read as sRGB)."""
     if not abs(ratio) > NONLINEAR_FRINGE_RATIO:
         return ""
-    return (
+    head = (
         f"the {what}'s fringe holds a second harmonic {ratio:+.2f} of its first (a linear capture of the pattern: "
-        f"within +-0.01): are its values gamma-encoded (an sRGB camera's, a camera's gamma)? Then give --encoding srgb "
-        "or --encoding gamma=G; else the projector's output is not linear in its drive. A bent fringe loses the "
-        "colour-robust decoder pixels and biases the depth"
+        "within +-0.01)"
     )
+    if ratio < 0.0 and encoding == "linear":
+        why = (
+            "are its values gamma-encoded (an sRGB camera's, a camera's gamma)? Then give --encoding srgb or "
+            "--encoding gamma=G; else is it saturated, or the projector's output not linear in its drive?"
+        )
+    elif ratio < 0.0:
+        why = (
+            f"--encoding {encoding} leaves it compressed: is its encoding another (a larger gamma), or is it saturated?"
+        )
+    elif encoding == "linear":
+        why = "its values expand the light: is the projector's output or the camera's response not linear?"
+    else:
+        why = f"--encoding {encoding} expands it: was the image linear already (then leave --encoding out)?"
+    return f"{head}: {why} A bent fringe loses the colour-robust decoder pixels and biases the depth"

@@ -113,7 +113,8 @@ def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool =
     full scale (:func:`simbench.io.adc_full_scale`): the ADC bits its recording's manifest
     records, else ``--bits``, else the dtype's range - with a warning where a 16-bit image's
     values all fit in 10 or 12 bits (a 12-bit camera's frame read as 16-bit decodes at a
-    sixteenth of its brightness: half the pixels lost, and no other word of it)."""
+    sixteenth of its brightness: half the pixels lost, and no other word of it) - then as linear
+    light, by ``--encoding`` (:func:`simbench.io.linearize`)."""
     from simbench.io import adc_full_scale, check_encoding, linearize, load_image, narrow_uint16_hint
 
     path = Path(path)
@@ -247,10 +248,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
     from simbench.decode.pipeline import capture_warnings, reference_warnings
 
-    for told in capture_warnings(capture, rig=rig, params=params):
+    for told in capture_warnings(capture, rig=rig, params=params, encoding=encoding):
         logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     if isinstance(reference, np.ndarray):
-        for told in reference_warnings(reference, rig=rig, params=params):
+        for told in reference_warnings(reference, rig=rig, params=params, encoding=encoding):
             logging.getLogger("simbench").warning("%s: %s", reference_path, told)
     if request.calibration is not None and not params.unmix:
         raise ValueError(
@@ -450,7 +451,13 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
         recording_manifest_of(p)
     frames = {k: _camera_image(p, rig, request, hint=False) for k, p in paths.items()}
     if reference is None:
+        # calibrated mode: read here only (reference mode's was read, and warned of, with the capture)
+        from simbench.decode.pipeline import reference_warnings
+        from simbench.io import check_encoding
+
         reference = _camera_image(reference_path, rig, request)
+        for told in reference_warnings(reference, rig=rig, params=params, encoding=check_encoding(request.encoding)):
+            logging.getLogger("simbench").warning("%s: %s", reference_path, told)
     z0_asked, z0_option = _asked_z0(request, params)
     z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     ref_params = dataclasses.replace(params, mode="reference", z0_m=z0)
