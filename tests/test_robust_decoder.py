@@ -38,18 +38,23 @@ def _frames(rho=(0.8, 0.8, 0.8), depth=1.0, noise=0.0, seed=0):
     return _camera(img * np.asarray(rho, np.float32), noise=noise, seed=seed), col
 
 
-@pytest.fixture(scope="module")
-def calibration():
-    hp, wp = RIG.projector.size_hw
+def _primary_frames(rig) -> dict:
+    """The reference plane (1.0 m, albedo 0.8) under black and under each primary at full drive."""
+    hp, wp = rig.projector.size_hw
     frames = {}
     for name, p in (("dark", None), ("red", 0), ("green", 1), ("blue", 2)):
         drive = np.zeros((hp, wp, 3), np.float32)
         if p is not None:
             drive[..., p] = 1.0
-        img, _, _ = synthetic_plane_capture(drive, RIG, point_m=(0, 0, 1.0), supersample=1, albedo=0.8)
+        img, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=1, albedo=0.8)
         frames[name] = _camera(img, noise=0.002, seed=p or 9)
+    return frames
+
+
+@pytest.fixture(scope="module")
+def calibration():
     ref, _ = _frames(noise=0.002, seed=11)
-    return ref, frames
+    return ref, _primary_frames(RIG)
 
 
 def test_mixing_matrix_recovers_the_coupling(calibration):
@@ -678,18 +683,9 @@ def full_rig_board():
     1.0 m (the shadow margin's reach, 1.25 window sigmas, is 7 px there: the half-scale rig of
     the tests above puts it at 3 px, inside a penumbra of 1-2 px)."""
     rig = paper_rig()
-    drive = DRIVE
-    hp, wp = rig.projector.size_hw
-    frames = {}
-    for name, p in (("dark", None), ("red", 0), ("green", 1), ("blue", 2)):
-        d = np.zeros((hp, wp, 3), np.float32)
-        if p is not None:
-            d[..., p] = 1.0
-        img, _, _ = synthetic_plane_capture(d, rig, point_m=(0, 0, 1.0), supersample=1, albedo=0.8)
-        frames[name] = _camera(img, noise=0.002, seed=p or 9)
-    ref, _, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=1, albedo=1.0)
-    white, col, _ = synthetic_plane_capture(drive, rig, point_m=(0, 0, 1.0), supersample=1, albedo=1.0)
-    return rig, _camera(ref * np.float32(0.8), noise=0.002, seed=11), frames, _camera(white), col
+    white, col, _ = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.0), supersample=1, albedo=1.0)
+    ref = _camera(white * np.float32(0.8), noise=0.002, seed=11)
+    return rig, ref, _primary_frames(rig), _camera(white), col
 
 
 def test_the_pixels_beside_a_shadow_score_zero_where_the_cut_fringe_biases_their_fit(full_rig_board):
