@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import errno
 import json
+import functools
 import os
 import re
 import tempfile
@@ -707,8 +708,23 @@ def linearize(img: np.ndarray, *, encoding: str) -> np.ndarray:
     if name == "linear":
         return img
     a = np.asarray(img)
+    if a.dtype in (np.uint8, np.uint16):
+        # through a table of every value the dtype holds: the same bits, ~10x faster on a capture
+        return _decoding_table(name, a.dtype.str)[a]
     scale = 1.0 / float(np.iinfo(a.dtype).max) if a.dtype.kind in "ui" else 1.0
-    v = np.clip(a.astype(np.float32) * np.float32(scale), 0.0, 1.0)
+    return _decoded(np.clip(a.astype(np.float32) * np.float32(scale), 0.0, 1.0), name)
+
+
+@functools.lru_cache(maxsize=8)
+def _decoding_table(name: str, dtype: str) -> np.ndarray:
+    values = np.arange(np.iinfo(np.dtype(dtype)).max + 1, dtype=np.dtype(dtype))
+    table = linearize(values.astype(np.float32) * np.float32(1.0 / float(values[-1])), encoding=name)
+    table.setflags(write=False)
+    return table
+
+
+def _decoded(v: np.ndarray, name: str) -> np.ndarray:
+    """``v`` (float32 in [0, 1]) decoded by the encoding ``name`` (not linear)."""
     if name == "srgb":
         # IEC 61966-2-1 (the sRGB standard's decoding function)
         return np.where(
