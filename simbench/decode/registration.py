@@ -78,6 +78,30 @@ REGISTRATION_FLOOR_PX = 0.15
 REGISTRATION_WARN_PX = 0.3
 
 
+def _box(period_px: float) -> tuple[int, int]:
+    """The row average's window (width, height) for OpenCV: :data:`REGISTRATION_BOX_PERIODS`."""
+    return (max(1, int(round(REGISTRATION_BOX_PERIODS * period_px))), 1)
+
+
+def _less_mean(a: np.ndarray, box: tuple[int, int]) -> np.ndarray:
+    """A channel less its local mean along the row: the box spans whole periods only to the pixel,
+    and a bright flat channel, a saturated one, read as a coherent fringe through it."""
+    return a - cv2.blur(a, box)
+
+
+def _phasor(a: np.ndarray, omega: float, box: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """``a`` times exp(-i omega x), averaged along the row: its local phasor at ``omega`` (rad per
+    px), as (cosine part, sine part): the phasor is ``cos - i sin``."""
+    wx = omega * np.arange(a.shape[1], dtype=np.float64)
+    return cv2.blur(a * np.cos(wx).astype(np.float32), box), cv2.blur(a * np.sin(wx).astype(np.float32), box)
+
+
+def _edge(box: tuple[int, int], w: int) -> int:
+    """The columns at each end of a row not counted: within half a box the average reads the
+    border's reflection (tiles there read 0.03-0.05 px off on saturated boards)."""
+    return min(box[0] // 2, (w - 1) // 2)
+
+
 def _tile_edges(n_px: int, period_px: float) -> np.ndarray:
     n = max(1, round(n_px / (REGISTRATION_TILE_PERIODS * period_px)))
     return np.linspace(0, n_px, n + 1).round().astype(int)
@@ -108,25 +132,13 @@ def registration_px(image: np.ndarray, *, order: list[int], period_px: float) ->
     sub = np.ascontiguousarray(rows[..., order], dtype=np.float32)
     w = sub.shape[1]
     omega = 2.0 * np.pi / float(period_px)
-    x = np.arange(w, dtype=np.float64)
-    cos_x = np.cos(omega * x).astype(np.float32)
-    sin_x = np.sin(omega * x).astype(np.float32)
-    box = (max(1, int(round(REGISTRATION_BOX_PERIODS * period_px))), 1)
-
-    def demodulated(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # the channel less its local mean, times exp(-i omega x), averaged along the row: its local
-        # fringe phasor (the mean removed first: the box spans whole periods only to the pixel,
-        # and a bright flat channel, a saturated one, read as a coherent fringe through it)
-        a = a - cv2.blur(a, box)
-        return cv2.blur(a * cos_x, box), cv2.blur(a * sin_x, box)
-
+    box = _box(period_px)
     code_sum = np.ascontiguousarray(sub[..., 0] + sub[..., 1])
-    sc, ss = demodulated(code_sum)
-    fc, fs = demodulated(np.ascontiguousarray(sub[..., 2]))
+    sc, ss = _phasor(_less_mean(code_sum, box), omega, box)
+    fc, fs = _phasor(_less_mean(np.ascontiguousarray(sub[..., 2]), box), omega, box)
     # (sc - i ss) * conj(fc - i fs): the code channels' phasor against the fringe channel's,
-    # summed per tile - within half a box of the row's ends the average reads the border's
-    # reflection (tiles there read 0.03-0.05 px off on saturated boards): not counted
-    edge = min(box[0] // 2, (w - 1) // 2)
+    # summed per tile (the rows' ends not counted, :func:`_edge`)
+    edge = _edge(box, w)
     keep = np.s_[:, edge : w - edge]
     re = sc[keep] * fc[keep] + ss[keep] * fs[keep]
     im = sc[keep] * fs[keep] - ss[keep] * fc[keep]
@@ -245,16 +257,14 @@ def fringe_harmonic_ratio(image: np.ndarray, *, order: list[int], period_px: flo
     """
     a = np.ascontiguousarray(np.asarray(image)[::REGISTRATION_ROW_STEP, :, order[2]], dtype=np.float32)
     w = a.shape[1]
-    box = (max(1, int(round(REGISTRATION_BOX_PERIODS * period_px))), 1)
-    a = a - cv2.blur(a, box)
-    x = np.arange(w, dtype=np.float64)
+    box = _box(period_px)
+    a = _less_mean(a, box)
 
     def harmonic(k: int) -> np.ndarray:
-        wx = k * 2.0 * np.pi / float(period_px) * x
-        c, s = np.cos(wx).astype(np.float32), np.sin(wx).astype(np.float32)
-        return cv2.blur(a * c, box) - 1j * cv2.blur(a * s, box)
+        c, s = _phasor(a, k * 2.0 * np.pi / float(period_px), box)
+        return c - 1j * s
 
-    edge = min(box[0] // 2, (w - 1) // 2)
+    edge = _edge(box, w)
     h1, h2 = harmonic(1)[:, edge : w - edge], harmonic(2)[:, edge : w - edge]
     norm = float(np.sum(np.abs(h1) ** 3))
     # a fringe is there: its first harmonic's phasor (A/2 for a cosine of amplitude A) against the
