@@ -16,6 +16,8 @@ from simbench.decode.debruijn import (
     keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
+    stripe_vote_margin,
+    uncertain_positions,
     window_positions_of_stripes,
 )
 from simbench.pattern import PatternSpec, de_bruijn, fringe_pattern, quantize, window_positions
@@ -167,6 +169,68 @@ def test_a_run_is_contested_when_the_stripes_on_both_sides_agree_through_it():
     unlinked = linked.copy()
     unlinked[22] = False  # a chain that ends after the run: nothing on its right agrees
     assert not contested_positions(misread, misread, unlinked, **kw)[run].any()
+
+
+def test_a_chain_of_stripes_read_from_a_few_pixels_is_uncertain():
+    """Exact: a short chain (the rows of a dark print's squares: pieces of stripes on the ink
+    around a whole stripe on the paper) that misreads coherently - every window W + 3, as one
+    time in four: the neighbour correction keeps it (its windows vote for one another), and with
+    nothing on either side of it no rival contests it.  Its pieces' codes do not count as read,
+    so no window of read codes is left and every stripe of it, the whole one too, is uncertain.
+    In a long well-read chain a lone uncertain code costs nothing (the windows around it still
+    give its position), a run of them only where fewer than ``min_support`` windows are left
+    (the decoder's 1: none); dropped stripes are never uncertain."""
+    cycle = 8
+    kw = dict(cycle=cycle, reach=3, min_support=3)
+    truth = np.arange(6, dtype=np.int32)
+    linked = np.ones(6, bool)
+    linked[0] = False
+    misread = (truth + 3) % cycle
+    kept, _ = neighbour_correct(misread, linked, **kw)
+    assert np.array_equal(kept, misread)
+    assert not contested_positions(misread, kept, linked, **{**kw, "reach": cycle}).any()
+    pieces = np.array([False, False, True, False, False, True])
+    assert uncertain_positions(misread, kept, linked, pieces, order=3, **kw).all()
+    assert not uncertain_positions(misread, kept, linked, np.ones(6, bool), order=3, **kw).any()
+    dropped = np.full(6, -1, np.int32)
+    assert not uncertain_positions(misread, dropped, linked, pieces, order=3, **kw).any()
+    n = 40
+    long = np.arange(n, dtype=np.int32) % cycle
+    chain = np.ones(n, bool)
+    chain[0] = False
+    lone = np.ones(n, bool)
+    lone[10] = False
+    assert not uncertain_positions(long, long, chain, lone, order=3, **kw).any()
+    run = np.ones(n, bool)
+    run[18:23] = False  # windows 17-23 set aside: stripes 18-22 keep two or fewer within 3, 17 and 23 three
+    got = np.flatnonzero(uncertain_positions(long, long, chain, run, order=3, **kw))
+    assert got.tolist() == [18, 19, 20, 21, 22]
+    one = {**kw, "min_support": 1}  # the decoder's: one window of read codes, stripe 20 has none
+    assert np.flatnonzero(uncertain_positions(long, long, chain, run, order=3, **one)).tolist() == [20]
+    assert uncertain_positions(misread, kept, linked, pieces, order=3, **one).all()
+
+
+def test_stripe_vote_margin_counts_a_stripes_own_pixels():
+    """The net vote is the stripe's own pixels (a bridged gap left out) times (2 agreement - 1):
+    a tie is 0, a whole agreeing stripe its width."""
+    labels = np.full((2, 12), -1, np.int32)
+    labels[0, 0:4], labels[0, 4:12], labels[1, 2:9] = 0, 1, 2
+    labels[1, 5] = -1  # a bridged gap inside stripe 2
+    stripes = Stripes(
+        labels=labels,
+        row=np.array([0, 0, 1], np.int32),
+        start=np.array([0, 4, 2], np.int32),
+        stop=np.array([4, 12, 9], np.int32),
+        linked_prev=np.array([False, True, False]),
+    )
+    margin = stripe_vote_margin(np.array([0.5, 1.0, 5 / 6], np.float32), stripes)
+    np.testing.assert_allclose(margin, [0.0, 8.0, 4.0], atol=1e-5)
+    assert (
+        stripe_vote_margin(
+            np.empty(0, np.float32), Stripes(labels, *(np.empty(0, np.int32),) * 3, np.empty(0, bool))
+        ).size
+        == 0
+    )
 
 
 def test_stripe_floor_is_the_lowest_value_over_each_stripes_own_pixels():

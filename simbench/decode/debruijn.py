@@ -24,6 +24,9 @@ __all__ = [
     "neighbour_correct",
     "drop_broken_links",
     "contested_positions",
+    "CODE_VOTE_PERIODS",
+    "stripe_vote_margin",
+    "uncertain_positions",
     "keep_certain_sides",
     "keep_straddler_parts",
     "stripe_floor",
@@ -191,6 +194,97 @@ def contested_positions(
         out,
     )
     return out
+
+
+# The net vote (pixels for a stripe's code less those against it) under which the code does not
+# count as read (DecoderParams.code_doubt), in fringe periods of the camera: a stripe is a period
+# wide, so a whole one on lit paper holds ~0.8 T of votes; 0.2 T is a piece of a stripe (the
+# 2-px pieces on a checkerboard's ink at T = 10.5 px) or a tie.  Measured on the synthetic 20:1
+# checkerboard of 1.5-period squares (tests/test_robust_decoder.py): 0.2 T leaves none of the
+# 675 pixels half a cycle off (0.1 T: 29 of a 1.6-period board's, a period off), at a cost of
+# 0.02 % of the 3.4-period board's pixels and 0.1 % of a noisy dark board's; of the 25 rendered
+# hard scenes only the sphere before a wall moved (98.104 -> 98.100 % complete, 0.049 -> 0.045 %
+# of its pixels more than 5 mm wrong; results/hard_scenes.md).
+CODE_VOTE_PERIODS = 0.2
+
+
+def stripe_vote_margin(agreement: np.ndarray, stripes: Stripes) -> np.ndarray:
+    """The net vote for each stripe's code: its own pixels (its label's) agreeing with the code
+    less those against it.
+
+    Parameters
+    ----------
+    agreement : ndarray, shape (S,), float32; the share of the stripe's pixels agreeing with its
+        code (:func:`simbench.decode.color.vote_codes`)
+    stripes : :class:`simbench.decode.color.Stripes`
+
+    Returns
+    -------
+    ndarray, shape (S,), float32; pixels (0 for a tie)
+    """
+    n = stripes.count
+    if n == 0:
+        return np.empty(0, np.float32)
+    w = stripes.labels.shape[1]
+    own = np.append((stripes.labels >= 0).ravel(), False).astype(np.int32)
+    base = stripes.row.astype(np.int64) * w
+    idx = np.empty(2 * n, np.int64)
+    idx[0::2] = base + stripes.start
+    idx[1::2] = base + stripes.stop
+    # stripes lie in scan order without overlap: their [start, stop) hold their own pixels and
+    # those of a gap they were bridged across (unlabelled)
+    count = np.add.reduceat(own, idx)[0::2].astype(np.float32)
+    return count * (np.float32(2.0) * np.asarray(agreement, np.float32) - np.float32(1.0))
+
+
+def uncertain_positions(
+    positions: np.ndarray,
+    kept: np.ndarray,
+    linked_prev: np.ndarray,
+    certain: np.ndarray,
+    *,
+    order: int,
+    cycle: int,
+    reach: int,
+    min_support: int,
+) -> np.ndarray:
+    """The kept stripes whose position the windows of well-read codes do not give (ours).
+
+    The windows (``positions``, before the correction) that hold a stripe whose code is not
+    ``certain`` are set aside, and the neighbour correction (:func:`neighbour_correct`) run over
+    the rest: a kept stripe it gives no position, or another, is uncertain.  A stripe whose own
+    code is uncertain keeps its position where windows of well-read codes around it predict it;
+    a chain of pieces of stripes, whose codes are ties or read from a couple of pixels, reads
+    like some stretch of the sequence one time in four (of the 2**5 codes of five stripes, 8 do)
+    and is set aside as a whole.  The decoder asks ``min_support`` 1 of it (one window of read
+    codes, no rival among them): the kept stripe had the correction's own votes already.
+
+    Parameters
+    ----------
+    positions : ndarray, shape (S,), int32; W of each stripe's own window, -1 unknown
+    kept : ndarray, shape (S,), int32; the W decided for each stripe, -1 dropped
+    linked_prev : ndarray, shape (S,), bool
+    certain : ndarray, shape (S,), bool; the stripes whose code counts as read
+    order, cycle : int
+    reach, min_support : int
+        As :func:`neighbour_correct`, for the windows of read codes.
+
+    Returns
+    -------
+    ndarray, shape (S,), bool
+    """
+    certain = np.asarray(certain, bool)
+    whole = certain.copy()
+    h = (order - 1) // 2  # stripe j's window: j - h .. j - h + order - 1 (window_positions_of_stripes)
+    for o in range(1, h + 1):
+        whole[o:] &= certain[:-o]
+    for o in range(1, order - h):
+        whole[:-o] &= certain[o:]
+    # a window leaving its chain is -1 already: the shifts across a chain's end change nothing
+    read = np.where(whole, np.asarray(positions, np.int32), np.int32(-1))
+    again, _ = neighbour_correct(read, linked_prev, cycle=cycle, reach=reach, min_support=min_support)
+    kept = np.asarray(kept, np.int32)
+    return (kept >= 0) & (again != kept)
 
 
 def stripe_floor(values: np.ndarray, stripes: Stripes) -> np.ndarray:

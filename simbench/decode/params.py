@@ -272,6 +272,19 @@ class DecoderParams:
         The stripes of such a run that the neighbour correction did put right are contested too
         (their own windows' misread positions are among the rival's votes): a cost in
         completeness only.  The colour-robust decoder; off = not checked (the paper's decoder).
+    code_doubt : bool
+        A stripe whose De Bruijn position rests on codes read from too few pixels scores
+        confidence 0 (ours; :func:`simbench.decode.debruijn.uncertain_positions`): the windows
+        holding a stripe whose net vote (its pixels agreeing with its code less those against
+        it, :func:`simbench.decode.color.stripe_vote_margin`) is under
+        :data:`simbench.decode.debruijn.CODE_VOTE_PERIODS` of a period are set aside, and at
+        least one of the rest must give the stripe the position it was given, no other more often.
+        Short chains of pieces of stripes - a print whose dark squares are 1.5 periods wide
+        leaves 2-px pieces of the stripes on its ink, their codes tied or misread - read like
+        another stretch of the sequence and vote for one another (a 20:1 checkerboard: 675
+        pixels half a cycle off at median fringe SNR 17.7, on the paper stripes between the
+        pieces), with no rival on both sides for ``position_doubt``.  After the link check, so
+        it moves no stripe.  The colour-robust decoder; off = not checked (the paper's decoder).
     shadow_doubt : bool
         A pixel beside a dark run along its row - a shadow, not a fringe's trough - scores
         confidence 0 (ours; :func:`simbench.decode.phase.shadow_margin`): within
@@ -342,6 +355,7 @@ class DecoderParams:
     centroid_correction: bool = False
     crease_doubt: bool = False
     position_doubt: bool = False
+    code_doubt: bool = False
     shadow_doubt: bool = False
     registration_doubt: bool = False
     min_confidence: float = 0.0
@@ -391,6 +405,7 @@ class DecoderParams:
             "crease_doubt": v.boolean(self.crease_doubt, "crease_doubt"),
             "pool_code": v.boolean(self.pool_code, "pool_code"),
             "position_doubt": v.boolean(self.position_doubt, "position_doubt"),
+            "code_doubt": v.boolean(self.code_doubt, "code_doubt"),
             "shadow_doubt": v.boolean(self.shadow_doubt, "shadow_doubt"),
             "registration_doubt": v.boolean(self.registration_doubt, "registration_doubt"),
             "min_confidence": v.number(self.min_confidence, "min_confidence", lo=0.0, hi=MAX_FRINGE_SNR),
@@ -518,9 +533,10 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     lit test looks across a whole code window). Its confidence folds in the phase's stability
     against the window's width (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
-    and the stripes whose De Bruijn position another candidate contests (``position_doubt``),
-    the pixels beside a shadow (``shadow_doubt``) and those of a capture whose colour channels
-    are misregistered (``registration_doubt``); where the nominal phase fit fails it tries other
+    and the stripes whose De Bruijn position another candidate contests (``position_doubt``) or
+    rests on codes read from too few pixels (``code_doubt``), the pixels beside a shadow
+    (``shadow_doubt``) and those of a capture whose colour channels are misregistered
+    (``registration_doubt``); where the nominal phase fit fails it tries other
     carriers (``carrier_bank``, with the Gabor fit), and its operating point makes the pixels
     below :data:`ROBUST_MIN_CONFIDENCE` holes; of a broken link (a hidden depth edge) it keeps
     the stripe and the part of a stripe that the confidence shows to lie on their own side of
@@ -539,6 +555,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         narrow_snr=True,
         crease_doubt=True,
         position_doubt=True,
+        code_doubt=True,
         shadow_doubt=True,
         registration_doubt=True,
         pool_code=True,

@@ -26,12 +26,15 @@ from simbench.decode.color import (
     vote_codes,
 )
 from simbench.decode.debruijn import (
+    CODE_VOTE_PERIODS,
     contested_positions,
     drop_broken_links,
     keep_certain_sides,
     keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
+    stripe_vote_margin,
+    uncertain_positions,
     window_positions_of_stripes,
 )
 from simbench.decode.depth import (
@@ -572,6 +575,26 @@ def _columns(
             )
             if contested.any():
                 confidence[_per_pixel(contested, lab, False)] = 0.0
+    uncertain = None
+    if params.code_doubt:
+        with stage("uncertain codes"):
+            # after the link check, as the contested positions: it moves no stripe
+            margin = stripe_vote_margin(agreement, stripes)
+            uncertain = uncertain_positions(
+                raw_w,
+                w_fixed,
+                stripes.linked_prev,
+                margin >= np.float32(CODE_VOTE_PERIODS * t_cam),
+                order=params.order,
+                cycle=params.cycle,
+                reach=params.neighbour_reach,
+                # one window of read codes suffices: the correction's min_support votes are had
+                # already (requiring them of read codes alone doubted 2 % of a noisy dark board
+                # that decodes with no wrong pixel: tests/test_robust_decoder.py)
+                min_support=1,
+            )
+            if uncertain.any():
+                confidence[_per_pixel(uncertain, lab, False)] = 0.0
     beside_shadow = None
     if params.shadow_doubt:
         with stage("shadow margin"):
@@ -613,6 +636,8 @@ def _columns(
     st.put("support", lambda: _per_pixel(support, lab, 0))
     if contested is not None:
         st.put("contested", lambda: _per_pixel(contested, lab, False))
+    if uncertain is not None:
+        st.put("uncertain_code", lambda: _per_pixel(uncertain, lab, False))
     if beside_shadow is not None:
         st.put("shadow_margin", beside_shadow)
     st.put("column", lambda: band.columns[0])

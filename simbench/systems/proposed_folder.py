@@ -331,6 +331,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         if on
     ]
     contested = ", 0 on a contested stripe order" if params.position_doubt else ""
+    contested += ", 0 on a stripe order read from too few pixels' codes" if params.code_doubt else ""
     contested += ", 0 beside a shadow" if params.shadow_doubt else ""
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
