@@ -883,10 +883,10 @@ int64_t segment_stripes(int64_t h, int64_t w, const float *restrict wrapped, con
 
 /* Per stripe: share of its pixels with code 1 (float64; pixels of a bridged gap are not its own);
  * the code is the majority (ties give 1) or, without voting, the middle pixel's; agreement =
- * share agreeing with it. */
+ * share agreeing with it; votes = its own pixels. */
 void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_t *restrict labels,
                 const int32_t *restrict row, const int32_t *restrict start, const int32_t *restrict stop,
-                int64_t voting, uint8_t *restrict out, float *restrict agreement) {
+                int64_t voting, uint8_t *restrict out, float *restrict agreement, int32_t *restrict votes) {
     for (int64_t s = 0; s < n; s++) {
         const int64_t o = (int64_t)row[s] * w;
         int32_t ones = 0, count = 0; /* branch-free int32 sums: the loop vectorises */
@@ -903,6 +903,7 @@ void vote_codes(int64_t n, int64_t w, const uint8_t *restrict code, const int32_
             c = code[o + ((int64_t)start[s] + stop[s] - 1) / 2] ? 1 : 0;
         out[s] = c;
         agreement[s] = (float)(c == 1 ? frac : 1.0 - frac);
+        votes[s] = count;
     }
 }
 

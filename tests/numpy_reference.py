@@ -214,7 +214,7 @@ def _bridge_gaps(wrapped, labels, row, start, stop, linked_prev, bounds, omega, 
     return Stripes(labels=labels, row=row[keep], start=start[keep], stop=stop[keep], linked_prev=linked_prev[keep])
 
 
-def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # one histogram over (stripe, code) pairs; label -1 (invalid) lands in the first two bins
     key = (stripes.labels.ravel() + 1) * 2 + code.ravel()
     hist = np.bincount(key, minlength=2 * (stripes.count + 1)).reshape(-1, 2)[1:].astype(np.float64)
@@ -227,7 +227,7 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
         mid = (stripes.start + stripes.stop - 1) // 2
         out = code[stripes.row, mid].astype(np.uint8)
     agreement = np.where(out == 1, frac, 1.0 - frac).astype(np.float32)
-    return out, agreement
+    return out, agreement, counts.astype(np.int32)
 
 
 def chain_extent(linked_prev: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,6 @@ from simbench.decode.debruijn import (
     keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
-    stripe_vote_margin,
     uncertain_positions,
     window_positions_of_stripes,
 )
@@ -208,29 +207,6 @@ def test_a_chain_of_stripes_read_from_a_few_pixels_is_uncertain():
     one = {**kw, "min_support": 1}  # the decoder's: one window of read codes, stripe 20 has none
     assert np.flatnonzero(uncertain_positions(long, long, chain, run, order=3, **one)).tolist() == [20]
     assert uncertain_positions(misread, kept, linked, pieces, order=3, **one).all()
-
-
-def test_stripe_vote_margin_counts_a_stripes_own_pixels():
-    """The net vote is the stripe's own pixels (a bridged gap left out) times (2 agreement - 1):
-    a tie is 0, a whole agreeing stripe its width."""
-    labels = np.full((2, 12), -1, np.int32)
-    labels[0, 0:4], labels[0, 4:12], labels[1, 2:9] = 0, 1, 2
-    labels[1, 5] = -1  # a bridged gap inside stripe 2
-    stripes = Stripes(
-        labels=labels,
-        row=np.array([0, 0, 1], np.int32),
-        start=np.array([0, 4, 2], np.int32),
-        stop=np.array([4, 12, 9], np.int32),
-        linked_prev=np.array([False, True, False]),
-    )
-    margin = stripe_vote_margin(np.array([0.5, 1.0, 5 / 6], np.float32), stripes)
-    np.testing.assert_allclose(margin, [0.0, 8.0, 4.0], atol=1e-5)
-    assert (
-        stripe_vote_margin(
-            np.empty(0, np.float32), Stripes(labels, *(np.empty(0, np.int32),) * 3, np.empty(0, bool))
-        ).size
-        == 0
-    )
 
 
 def test_stripe_floor_is_the_lowest_value_over_each_stripes_own_pixels():

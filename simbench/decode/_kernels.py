@@ -74,7 +74,7 @@ _SIGNATURES = {
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
     "contested_positions": (None, [_I, _P, _P, _P, _P, _I, _I, _I, _P, _P]),
     "segment_stripes": (_I, [_I, _I, _P, _P, _F, _F, _I, _D, _D, _P, _P, _P, _P, _P, _P]),
-    "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P]),
+    "vote_codes": (None, [_I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P]),
     "front_end": (None, [_I, _I, _P, _I, _I, _I, _I, _I, _I, _F, _F, _P, _P, _P, _P, _P]),
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
     "pool_code_rows": (None, [_I, _I, _I, _I, _P, _P, _P, _I, _F, _P, _P]),
@@ -417,10 +417,10 @@ def segment_stripes(wrapped, valid, lo, hi, max_gap, omega, tol, labels, row, st
     )
 
 
-def vote_codes(code, labels, row, start, stop, voting, out, agreement) -> None:
+def vote_codes(code, labels, row, start, stop, voting, out, agreement, votes) -> None:
     """Per stripe: share of its pixels with code 1 (float64; pixels of a gap it was bridged
     across are not its own); the code is the majority (ties give 1) or, without voting, the
-    middle pixel's; ``agreement`` = share agreeing with it."""
+    middle pixel's; ``agreement`` = share agreeing with it; ``votes`` = its own pixels."""
     h, w = labels.shape
     n = row.size
     _library().vote_codes(
@@ -434,6 +434,7 @@ def vote_codes(code, labels, row, start, stop, voting, out, agreement) -> None:
         int(bool(voting)),
         _ptr(out, "out", np.uint8, (n,), writable=True),
         _ptr(agreement, "agreement", np.float32, (n,), writable=True),
+        _ptr(votes, "votes", np.int32, (n,), writable=True),
     )
 
 

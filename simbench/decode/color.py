@@ -708,7 +708,7 @@ def pool_code_rows(
     return out
 
 
-def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One code per stripe.
 
     With ``voting`` (paper Sec. 5.2) the majority of the stripe's pixels (its label's, not
@@ -719,6 +719,8 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     -------
     stripe_code : ndarray, shape (S,), uint8
     agreement : ndarray, shape (S,), float32; share of the stripe's pixels agreeing with it
+    votes : ndarray, shape (S,), int32; the stripe's own pixels (its net vote for its code is
+        ``votes * (2 agreement - 1)``: :data:`simbench.decode.debruijn.CODE_VOTE_PERIODS`)
 
     References
     ----------
@@ -727,6 +729,7 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
     """
     out = np.empty(stripes.count, np.uint8)
     agreement = np.empty(stripes.count, np.float32)
+    votes = np.empty(stripes.count, np.int32)
     _kernels.vote_codes(
         np.ascontiguousarray(code, dtype=bool),
         stripes.labels,
@@ -736,5 +739,6 @@ def vote_codes(code: np.ndarray, stripes: Stripes, *, voting: bool = True) -> tu
         bool(voting),
         out,
         agreement,
+        votes,
     )
-    return out, agreement
+    return out, agreement, votes

@@ -25,7 +25,6 @@ __all__ = [
     "drop_broken_links",
     "contested_positions",
     "CODE_VOTE_PERIODS",
-    "stripe_vote_margin",
     "uncertain_positions",
     "keep_certain_sides",
     "keep_straddler_parts",
@@ -206,35 +205,6 @@ def contested_positions(
 # hard scenes only the sphere before a wall moved (98.104 -> 98.100 % complete, 0.049 -> 0.045 %
 # of its pixels more than 5 mm wrong; results/hard_scenes.md).
 CODE_VOTE_PERIODS = 0.2
-
-
-def stripe_vote_margin(agreement: np.ndarray, stripes: Stripes) -> np.ndarray:
-    """The net vote for each stripe's code: its own pixels (its label's) agreeing with the code
-    less those against it.
-
-    Parameters
-    ----------
-    agreement : ndarray, shape (S,), float32; the share of the stripe's pixels agreeing with its
-        code (:func:`simbench.decode.color.vote_codes`)
-    stripes : :class:`simbench.decode.color.Stripes`
-
-    Returns
-    -------
-    ndarray, shape (S,), float32; pixels (0 for a tie)
-    """
-    n = stripes.count
-    if n == 0:
-        return np.empty(0, np.float32)
-    w = stripes.labels.shape[1]
-    own = np.append((stripes.labels >= 0).ravel(), False).astype(np.int32)
-    base = stripes.row.astype(np.int64) * w
-    idx = np.empty(2 * n, np.int64)
-    idx[0::2] = base + stripes.start
-    idx[1::2] = base + stripes.stop
-    # stripes lie in scan order without overlap: their [start, stop) hold their own pixels and
-    # those of a gap they were bridged across (unlabelled)
-    count = np.add.reduceat(own, idx)[0::2].astype(np.float32)
-    return count * (np.float32(2.0) * np.asarray(agreement, np.float32) - np.float32(1.0))
 
 
 def uncertain_positions(

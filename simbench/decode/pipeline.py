@@ -33,7 +33,6 @@ from simbench.decode.debruijn import (
     keep_straddler_parts,
     neighbour_correct,
     stripe_floor,
-    stripe_vote_margin,
     uncertain_positions,
     window_positions_of_stripes,
 )
@@ -506,7 +505,7 @@ def _columns(
             max_step_ratio=params.stripe_step_ratio[1],
             max_gap_px=int(params.bridge_gap_periods * t_cam),
         )
-        stripe_code, agreement = vote_codes(code, stripes, voting=params.voting)
+        stripe_code, agreement, votes = vote_codes(code, stripes, voting=params.voting)
     lab = stripes.labels
     with stage("confidence"):
         confidence = fringe_snr(residual)
@@ -579,7 +578,7 @@ def _columns(
     if params.code_doubt:
         with stage("uncertain codes"):
             # after the link check, as the contested positions: it moves no stripe
-            margin = stripe_vote_margin(agreement, stripes)
+            margin = votes * (np.float32(2.0) * agreement - np.float32(1.0))  # the net vote
             uncertain = uncertain_positions(
                 raw_w,
                 w_fixed,
