@@ -578,7 +578,11 @@ case(
 )
 for cid, content, msg in [
     ("reference-black", np.zeros((120, 160, 3), np.uint8), "reference capture decodes at only"),
-    ("reference-saturated", np.full((120, 160, 3), 255, np.uint8), "reference capture decodes at only"),
+    (
+        "reference-saturated",
+        np.full((120, 160, 3), 255, np.uint8),
+        ("reference capture decodes at only", "(100 % of it is clipped: expose shorter)"),
+    ),
     ("reference-noise", RNG.integers(0, 256, (120, 160, 3), dtype=np.uint8), "reference capture decodes at only"),
     ("reference-wrong-size", np.zeros((60, 80, 3), np.uint8), "80x60"),
     ("reference-empty", b"", "empty"),

@@ -25,6 +25,13 @@ from simbench.decode.color import (
     unmix,
     vote_codes,
 )
+from simbench.decode.integrity import (
+    CLIPPED_SHARE_WARN,
+    block_artifacts,
+    clipped_share,
+    clipping_doubt,
+    compression_doubt,
+)
 from simbench.decode.debruijn import (
     CODE_VOTE_PERIODS,
     contested_positions,
@@ -841,12 +848,13 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
 def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, encoding: str = "linear") -> list[str]:
     """What `simbench decode` and :func:`simbench.depth` warn of before decoding ``capture``: the
     pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`), the capture's
-    channel order (:func:`channel_order_doubt`) and its fringe's linearity
+    channel order (:func:`channel_order_doubt`), its fringe's linearity
     (:func:`simbench.decode.registration.encoding_doubt`; ``encoding``: how it was read,
-    :data:`simbench.io.ENCODINGS`)."""
+    :data:`simbench.io.ENCODINGS`), JPEG compression and clipping
+    (:mod:`simbench.decode.integrity`)."""
     from simbench.decode.params import pattern_on_rig_warnings
 
-    told = [channel_order_doubt(capture, rig=rig, params=params)]
+    told = [channel_order_doubt(capture, rig=rig, params=params), *_integrity_warnings(capture, params, "capture")]
     told.append(
         encoding_doubt(
             fringe_harmonic_ratio(
@@ -864,12 +872,26 @@ def reference_warnings(
     """What `simbench decode` warns of a reference-plane capture before decoding with it: its
     fringe's linearity (:func:`simbench.decode.registration.encoding_doubt`; the plane faces the
     rig, so its fringe runs at the period demodulated at, and a camera's encoding shows there
-    whatever the scene)."""
+    whatever the scene), JPEG compression and clipping (:mod:`simbench.decode.integrity`)."""
     ratio = fringe_harmonic_ratio(
         reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
     )
-    told = encoding_doubt(ratio, what="reference capture", encoding=encoding)
-    return [told] if told else []
+    told = [encoding_doubt(ratio, what="reference capture", encoding=encoding)]
+    # a reference clipped over half of it is refused, and the refusal says so (decode_reference)
+    told += _integrity_warnings(reference, params, "reference capture", refused_clipped=0.5)
+    return [t for t in told if t]
+
+
+def _integrity_warnings(
+    image: np.ndarray, params: DecoderParams, what: str, *, refused_clipped: float = np.inf
+) -> list[str]:
+    """:mod:`simbench.decode.integrity`'s doubts of ``image`` (JPEG blocks, clipped pixels); no
+    clipping doubt from ``refused_clipped`` of the pixels on."""
+    clipped = clipped_share(image, saturation_level=params.saturation_level)
+    return [
+        compression_doubt(block_artifacts(image), what=what),
+        clipping_doubt(clipped, what=what) if clipped < refused_clipped else "",
+    ]
 
 
 def registration_warning(
@@ -1020,10 +1042,12 @@ def decode_reference(
         raise ValueError(doubt)
     coverage = float(np.isfinite(column).mean())
     if coverage < params.min_reference_coverage:
+        clipped = clipped_share(image, saturation_level=params.saturation_level)
         raise ValueError(
             f"the reference capture decodes at only {100 * coverage:.1f} % of its pixels (at least "
             f"{100 * params.min_reference_coverage:.0f} % expected of a lit plane at Z0 = {params.z0_m:g} m): "
             "is it the reference-plane capture, taken with this pattern and rig?"
+            + (f" ({100 * clipped:.0f} % of it is clipped: expose shorter)" if clipped >= CLIPPED_SHARE_WARN else "")
         )
     expected = np.where(np.isfinite(column), column, predicted)
     inverse = inverse_column_table(column, projector_width=rig.projector.width_px)
