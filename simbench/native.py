@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SOURCE", "LENS_SOURCE", "SOURCES", "bind", "ptr", "f32", "compiler"]
+__all__ = ["SOURCE", "LENS_SOURCE", "SOURCES", "bind", "ptr", "f32", "compiler", "stale_sources"]
 
 # the decoder's loops, the triangulation and the plane fit
 SOURCE = Path(__file__).with_name("_ckernels.c")
@@ -45,7 +45,21 @@ def _built_file() -> str:
             "simbench's compiled loops (simbench/_ckernels.c, _lens.c) are not built: "
             "run `make setup` (or `pip install -e .`; it needs a C compiler)"
         )
+    stale = stale_sources(Path(spec.origin))
+    if stale:
+        # a loop whose C signature changed would read its arguments from the old one's places
+        raise ImportError(
+            f"simbench's compiled loops ({Path(spec.origin).name}) are older than {', '.join(stale)}: "
+            "rebuild them with `make setup` (or `pip install -e .`)"
+        )
     return spec.origin
+
+
+def stale_sources(built: Path, sources: tuple[Path, ...] = SOURCES) -> list[str]:
+    """The names of ``sources`` changed after ``built`` was made (by modification time), where
+    they are at hand (an installed package may not ship them)."""
+    made = built.stat().st_mtime
+    return [s.name for s in sources if s.is_file() and s.stat().st_mtime > made]
 
 
 @lru_cache(maxsize=1)

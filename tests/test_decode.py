@@ -171,10 +171,10 @@ def test_a_run_is_contested_when_the_stripes_on_both_sides_agree_through_it():
 
 
 def test_a_chain_of_stripes_read_from_a_few_pixels_is_uncertain():
-    """Exact: a short chain (the rows of a dark print's squares: pieces of stripes on the ink
+    """Exact: a short chain (the rows of a dark print's squares: read of stripes on the ink
     around a whole stripe on the paper) that misreads coherently - every window W + 3, as one
     time in four: the neighbour correction keeps it (its windows vote for one another), and with
-    nothing on either side of it no rival contests it.  Its pieces' codes do not count as read,
+    nothing on either side of it no rival contests it.  Its read' codes do not count as read,
     so no window of read codes is left and every stripe of it, the whole one too, is uncertain.
     In a long well-read chain a lone uncertain code costs nothing (the windows around it still
     give its position), a run of them only where fewer than ``min_support`` windows are left
@@ -188,11 +188,11 @@ def test_a_chain_of_stripes_read_from_a_few_pixels_is_uncertain():
     kept, _ = neighbour_correct(misread, linked, **kw)
     assert np.array_equal(kept, misread)
     assert not contested_positions(misread, kept, linked, **{**kw, "reach": cycle}).any()
-    pieces = np.array([False, False, True, False, False, True])
-    assert uncertain_positions(misread, kept, linked, pieces, order=3, **kw).all()
+    read = np.array([False, False, True, False, False, True])
+    assert uncertain_positions(misread, kept, linked, read, order=3, **kw).all()
     assert not uncertain_positions(misread, kept, linked, np.ones(6, bool), order=3, **kw).any()
     dropped = np.full(6, -1, np.int32)
-    assert not uncertain_positions(misread, dropped, linked, pieces, order=3, **kw).any()
+    assert not uncertain_positions(misread, dropped, linked, read, order=3, **kw).any()
     n = 40
     long = np.arange(n, dtype=np.int32) % cycle
     chain = np.ones(n, bool)
@@ -206,7 +206,23 @@ def test_a_chain_of_stripes_read_from_a_few_pixels_is_uncertain():
     assert got.tolist() == [18, 19, 20, 21, 22]
     one = {**kw, "min_support": 1}  # the decoder's: one window of read codes, stripe 20 has none
     assert np.flatnonzero(uncertain_positions(long, long, chain, run, order=3, **one)).tolist() == [20]
-    assert uncertain_positions(misread, kept, linked, pieces, order=3, **one).all()
+    assert uncertain_positions(misread, kept, linked, read, order=3, **one).all()
+
+
+@pytest.mark.parametrize("order, windows", [(3, [19, 20, 21]), (4, [18, 19, 20, 21]), (5, [18, 19, 20, 21, 22])])
+def test_the_windows_set_aside_are_those_holding_an_unread_code(order, windows):
+    """Stripe j's window is stripes j - h .. j - h + order - 1, h = (order - 1) // 2
+    (window_positions_of_stripes): one unread code (stripe 20) sets aside exactly the windows
+    that hold it - with no correction (reach 0) those stripes are the uncertain ones, for the
+    asymmetric even-order window too."""
+    n, cycle = 40, 1 << order
+    truth = np.arange(n, dtype=np.int32) % cycle
+    linked = np.ones(n, bool)
+    linked[0] = False
+    read = np.ones(n, bool)
+    read[20] = False
+    got = uncertain_positions(truth, truth, linked, read, order=order, cycle=cycle, reach=0, min_support=1)
+    assert np.flatnonzero(got).tolist() == windows
 
 
 def test_stripe_floor_is_the_lowest_value_over_each_stripes_own_pixels():

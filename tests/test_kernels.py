@@ -849,3 +849,24 @@ def test_crease_bias_matches_numpy():
         np.fmin(want, np.float32(1.34) / got, out=want, where=valid)
     depth._kernels.crease_bias(col, 22, 0.3, 3.0, 2, np.empty_like(col), cap=(np.float32(1.34), valid, conf))
     same(conf, want)
+
+
+def test_a_library_older_than_its_sources_is_named_stale(tmp_path):
+    """A C loop whose signature changed (vote_codes gained an output) would read the new call's
+    arguments from the old signature's places: loading a library built before its sources were
+    last changed is refused, naming them (and `make setup`)."""
+    import os
+
+    from simbench import native
+
+    built = tmp_path / "_ckernels.so"
+    built.write_bytes(b"")
+    src = [tmp_path / "_ckernels.c", tmp_path / "_lens.c"]
+    for s in src:
+        s.write_text("/* */")
+    t = built.stat().st_mtime
+    os.utime(src[0], (t - 10, t - 10))
+    os.utime(src[1], (t + 10, t + 10))
+    assert native.stale_sources(built, tuple(src)) == ["_lens.c"]
+    assert native.stale_sources(built, (tmp_path / "missing.c", src[0])) == []  # not shipped: not judged
+    assert native.stale_sources(__import__("pathlib").Path(native._built_file())) == []  # this build: current

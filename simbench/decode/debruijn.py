@@ -201,7 +201,7 @@ def contested_positions(
 # 2-px pieces on a checkerboard's ink at T = 10.5 px) or a tie.  Measured on the synthetic 20:1
 # checkerboard of 1.5-period squares (tests/test_robust_decoder.py): 0.2 T leaves none of the
 # 675 pixels half a cycle off (0.1 T: 29 of a 1.6-period board's, a period off), at a cost of
-# 0.02 % of the 3.4-period board's pixels and 0.1 % of a noisy dark board's; of the 25 rendered
+# 0.02 % of the 3.4-period board's pixels and 0.13 % of a noisy dark board's; of the 25 rendered
 # hard scenes only the sphere before a wall moved (98.104 -> 98.100 % complete, 0.049 -> 0.045 %
 # of its pixels more than 5 mm wrong; results/hard_scenes.md).
 CODE_VOTE_PERIODS = 0.2
@@ -227,7 +227,8 @@ def uncertain_positions(
     a chain of pieces of stripes, whose codes are ties or read from a couple of pixels, reads
     like some stretch of the sequence one time in four (of the 2**5 codes of five stripes, 8 do)
     and is set aside as a whole.  The decoder asks ``min_support`` 1 of it (one window of read
-    codes, no rival among them): the kept stripe had the correction's own votes already.
+    codes, no rival as often: :func:`neighbour_correct` needs a strict plurality): the kept stripe
+    had the correction's own votes already.
 
     Parameters
     ----------

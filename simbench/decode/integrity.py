@@ -43,7 +43,8 @@ __all__ = [
 JPEG_BLOCK_PX = 8
 # the block ratio a capture is warned of from: clean rendered captures (25 hard scenes) read
 # 1.00-1.01; re-encoded by OpenCV at JPEG quality 98 1.07-1.55, at 95 1.14 and more, at 90 1.32
-# and more; the benchmark plane (tests/test_integrity.py) 1.38, 2.5, 5.3 and, at 75 and below, inf
+# and more; the benchmark plane (tests/test_integrity.py) at 98, 95 and 90 1.38, 2.5 and 5.3, at
+# 75 and below inf
 BLOCK_RATIO_WARN = 1.1
 # the share of clipped pixels a capture is warned of from: a glossy board's highlight clips
 # 2.4 % of hard_glossy_005 with no wrong pixel; exposed 2x, 5-21 % of a scene clip and the
@@ -66,7 +67,7 @@ def block_artifacts(image: np.ndarray) -> float:
     Returns
     -------
     float; ~1 for an image without blocks, inf for one flat within its blocks but not at their
-    edges, NaN for one too small (< 2 blocks) or flat
+    edges, NaN for one too small (under 17 rows: two block edges) or flat
     """
     x = np.asarray(image)
     if x.dtype not in (np.uint8, np.uint16, np.float32):
@@ -91,9 +92,9 @@ def block_artifacts(image: np.ndarray) -> float:
         seen = (inner > 0) | (edge > 0)
         if not seen.any():
             continue
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):
             ratio = float(np.median(edge[seen] / inner[seen]))
-        if not ratio <= best:  # NaN best: the first
+        if not math.isnan(ratio) and not ratio <= best:  # NaN best: the first number
             best = ratio
     return best
 
@@ -128,7 +129,7 @@ def clipped_share(image: np.ndarray, *, saturation_level: float = 1.0) -> float:
         return 0.0
     full = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
     level = np.float64(saturation_level) * full
-    if img.ndim == 3 and img.dtype in (np.uint8, np.uint16, np.float32):
+    if img.ndim == 3 and img.shape[2] == 3 and img.dtype in (np.uint8, np.uint16, np.float32):
         peak = cv2.max(cv2.max(img[..., 0], img[..., 1]), img[..., 2])  # OpenCV's: ~10x numpy's any()
     else:
         peak = img.max(axis=2) if img.ndim == 3 else img
@@ -141,7 +142,7 @@ def clipping_doubt(share: float, *, what: str = "capture") -> str:
     if not share >= CLIPPED_SHARE_WARN:
         return ""
     return (
-        f"{100 * share:.1f} % of the {what}'s pixels are clipped in a colour channel: no fringe is read there, and "
+        f"{100 * share:.1f} % of the {what}'s pixels are clipped in a colour channel: their samples are skipped, and "
         "the phase beside a clipped run is biased at a confidence above the operating point (the hard scenes "
         "exposed 2x: up to 0.2 % of the kept pixels more than 5 mm off, at a fringe SNR up to 63). Expose shorter"
     )

@@ -276,9 +276,9 @@ class DecoderParams:
         A stripe whose De Bruijn position rests on codes read from too few pixels scores
         confidence 0 (ours; :func:`simbench.decode.debruijn.uncertain_positions`): the windows
         holding a stripe whose net vote (its pixels agreeing with its code less those against
-        it: :func:`simbench.decode.color.vote_codes`' votes) is under
+        it: ``votes * (2 agreement - 1)`` of :func:`simbench.decode.color.vote_codes`) is under
         :data:`simbench.decode.debruijn.CODE_VOTE_PERIODS` of a period are set aside, and at
-        least one of the rest must give the stripe the position it was given, no other more often.
+        least one of the rest must give the stripe the position it was given, no other as often.
         Short chains of pieces of stripes - a print whose dark squares are 1.5 periods wide
         leaves 2-px pieces of the stripes on its ink, their codes tied or misread - read like
         another stretch of the sequence and vote for one another (a 20:1 checkerboard: 675

@@ -585,7 +585,8 @@ def _columns(
     if params.code_doubt:
         with stage("uncertain codes"):
             # after the link check, as the contested positions: it moves no stripe
-            margin = votes * (np.float32(2.0) * agreement - np.float32(1.0))  # the net vote
+            # the net vote, a whole number (agreement is a float32 share of the votes)
+            margin = np.rint(votes * (np.float32(2.0) * agreement - np.float32(1.0)))
             uncertain = uncertain_positions(
                 raw_w,
                 w_fixed,
@@ -877,8 +878,12 @@ def reference_warnings(
         reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
     )
     told = [encoding_doubt(ratio, what="reference capture", encoding=encoding)]
-    # a reference clipped over half of it is refused, and the refusal says so (decode_reference)
-    told += _integrity_warnings(reference, params, "reference capture", refused_clipped=0.5)
+    # a reference clipped over more than 1 - min_reference_coverage of it is refused (a clipped
+    # sample is skipped, and a window under half certain gives no phase), and the refusal says so
+    # (decode_reference): no warning line before that error's
+    told += _integrity_warnings(
+        reference, params, "reference capture", refused_clipped=1.0 - params.min_reference_coverage
+    )
     return [t for t in told if t]
 
 
@@ -886,11 +891,11 @@ def _integrity_warnings(
     image: np.ndarray, params: DecoderParams, what: str, *, refused_clipped: float = np.inf
 ) -> list[str]:
     """:mod:`simbench.decode.integrity`'s doubts of ``image`` (JPEG blocks, clipped pixels); no
-    clipping doubt from ``refused_clipped`` of the pixels on."""
+    clipping doubt beyond ``refused_clipped`` of the pixels."""
     clipped = clipped_share(image, saturation_level=params.saturation_level)
     return [
         compression_doubt(block_artifacts(image), what=what),
-        clipping_doubt(clipped, what=what) if clipped < refused_clipped else "",
+        clipping_doubt(clipped, what=what) if clipped <= refused_clipped else "",
     ]
 
 

@@ -388,7 +388,7 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "of its sides contest (`DecoderParams.position_doubt`: a run of misread codes that reads like another "
         "stretch of the sequence decodes coherently, while the stripes beyond it agree through it) or that the "
         "windows of its well-read codes do not give (`DecoderParams.code_doubt`: pieces of stripes on a dark print, "
-        "their codes read from a couple of pixels, read like some stretch of the sequence as often as not), and 0 "
+        "their codes read from a couple of pixels, read like some stretch of the sequence one time in four), and 0 "
         "within 1.25 "
         "window sigmas of a shadow (`DecoderParams.shadow_doubt`: the window there fits a fringe the shadow's penumbra "
         "cuts off at any phase); and it is capped, "
