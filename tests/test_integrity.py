@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from simbench.cli import main
+from simbench.io import save_png
 from simbench.decode import DecoderParams, robust_params
 from simbench.decode.integrity import (
     BLOCK_RATIO_WARN,
@@ -106,3 +107,19 @@ def test_decode_warns_of_a_jpeg_and_a_clipped_capture(tmp_path, caplog):
     main(["decode", *files])
     assert "capture.png: " in caplog.text and "of the capture's pixels are clipped in a colour channel" in caplog.text
     assert "reference.png: the reference capture shows JPEG's 8x8 blocks" in caplog.text
+
+
+def test_decode_refuses_clipped_calibration_frames_in_one_line(tmp_path, capsys):
+    """The colour-robust decoder's coupling matrix is the median of each primary's frame over the
+    plane: frames exposed 3x (each primary's own channel at full scale over the plane) would give
+    the clipping level's matrix and unmix every capture wrongly - refused, naming the frame."""
+    files = [*bare_files(tmp_path, RAW, CAL.image, SCENE.rig), "--z0", "1.0", "--out", str(tmp_path / "d.npy")]
+    frames = tmp_path / "cal"
+    frames.mkdir()
+    for name, frame in CAL.frames.items():
+        bright = frame if name == "dark" else np.clip(frame.astype(np.int32) * 3, 0, 255).astype(np.uint8)
+        save_png(frames / f"calibration_{name}.png", bright)
+    rc = main(["decode", *files, "--robust", "--calibration", str(frames)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert "the calibration capture under projector primary R is clipped" in err[0], err

@@ -77,6 +77,16 @@ def test_mixing_matrix_rejects_unusable_frames(calibration):
         mixing_matrix([f["red"], f["dark"], f["blue"]], f["dark"])
     with pytest.raises(ValueError, match="3 primaries"):
         mixing_matrix([f["red"], f["green"]], f["dark"])
+
+    # exposed 3x (each primary's own channel ~0.57 -> 1.71): at full scale over the whole plane,
+    # the median - so the column of K - would be the clipping level, not the light; 1.5x (0.86) holds
+    def exposed(x):
+        return [np.clip(f["dark"] + (f[c] - f["dark"]) * np.float32(x), 0.0, 1.0) for c in ("red", "green", "blue")]
+
+    bright = exposed(3.0)
+    with pytest.raises(ValueError, match="primary R is clipped: camera channel R at full scale on 100 %"):
+        mixing_matrix(bright, f["dark"])
+    np.testing.assert_allclose(mixing_matrix(exposed(1.5), f["dark"]), K, atol=1e-3)
     with pytest.raises(ValueError, match="shape"):
         mixing_matrix([f["red"], f["green"], f["blue"][:10]], f["dark"])
 

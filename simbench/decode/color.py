@@ -109,7 +109,9 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
     Raises
     ------
     ValueError
-        When a primary does not lift its own channel above the dark frame, or K is singular.
+        When a primary does not lift its own channel above the dark frame, when a capture is
+        clipped (a channel at full scale, 1.0) on half of ``region`` or more - the median, and
+        so K, would then be the clipping level's, not the light's - or when K is singular.
 
     References
     ----------
@@ -127,6 +129,14 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
         f = _calibration_frame(img)
         if f.shape != d.shape:
             raise ValueError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
+        clipped = (f[sel] >= 1.0).mean(axis=0)
+        if clipped.max() >= 0.5:
+            c = int(np.argmax(clipped))
+            raise ValueError(
+                f"the calibration capture under projector primary {'RGB'[p]} is clipped: camera channel {'RGB'[c]} at "
+                f"full scale on {100 * clipped[c]:.0f} % of the plane, so the coupling matrix would be the clipping "
+                "level's - expose the calibration frames (and the captures) shorter"
+            )
         k[:, p] = np.median((f - d)[sel], axis=0)
         if not k[p, p] > 1e-3:
             raise ValueError(
