@@ -1551,11 +1551,23 @@ void albedo_proxy(int64_t n, const float *restrict rgb, const float *restrict k,
  * pixel, a = left + eps, b = right + eps with eps = 1e-3 + 0.02 max(left, right), the step's
  * ratio q = max(a, b) / min(a, b); a cut where q > ratio_min and q is the largest within t
  * pixels either side (ends replicated), never within m - 1 columns of the left end or m of the
- * right.  The ratio in double is compared directly (a logarithm would be monotone in it and
- * add only its last-bit differences between machines' libraries).  cs: w + 2 m + 1 doubles, q:
- * w + 2 t doubles of scratch. */
+ * right.  Each cut is then moved to the column within t of it (inside the same limits) where the
+ * ratio of the t values either side is the largest (the first of equals): a segment narrower than
+ * m lies wholly inside one of the m-wide windows along a plateau of q, and only the narrower
+ * windows' ratio peaks at its edge.  The ratio in double is compared directly (a logarithm would
+ * be monotone in it and add only its last-bit differences between machines' libraries).  cs:
+ * w + 2 m + 1 doubles, q: w + 2 t doubles, pos: w int64 of scratch. */
+static inline double step_ratio(const double *cs, int64_t c, int64_t k) {
+    /* the ratio of the means of the k values left (ending at c - 1 of the padded row) and right */
+    const double left = (cs[c] - cs[c - k]) / (double)k;
+    const double right = (cs[c + k] - cs[c]) / (double)k;
+    const double eps = 1e-3 + 0.02 * (left > right ? left : right);
+    const double a = left + eps, b = right + eps;
+    return a > b ? a / b : b / a;
+}
+
 void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, double ratio_min,
-                  double *restrict cs, double *restrict q, uint8_t *restrict cuts) {
+                  double *restrict cs, double *restrict q, int64_t *restrict pos, uint8_t *restrict cuts) {
     const int64_t m = 2 * t, np_ = w + 2 * m;
     for (int64_t y = 0; y < h; y++) {
         const float *row = g + y * w;
@@ -1567,19 +1579,14 @@ void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, doub
             cs[i + 1] = cs[i] + (double)row[x];
         }
         double *qq = q + t; /* q[-t .. w + t) with the ends replicated */
-        for (int64_t x = 0; x < w; x++) {
-            const double left = (cs[x + m + 1] - cs[x + 1]) / (double)m;
-            const double right = (cs[x + 2 * m + 1] - cs[x + m + 1]) / (double)m;
-            const double eps = 1e-3 + 0.02 * (left > right ? left : right);
-            const double a = left + eps, b = right + eps;
-            qq[x] = a > b ? a / b : b / a;
-        }
+        for (int64_t x = 0; x < w; x++) qq[x] = step_ratio(cs, x + m + 1, m);
         for (int64_t i = 0; i < t; i++) {
             q[i] = qq[0];
             qq[w + i] = qq[w - 1];
         }
         for (int64_t x = 0; x < w; x++) cut[x] = 0;
         const int64_t x1 = w - m;
+        int64_t n = 0;
         for (int64_t x = m - 1; x < x1; x++) {
             const double v = qq[x];
             if (!(v > ratio_min)) continue;
@@ -1589,7 +1596,21 @@ void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, doub
                     top = 0;
                     break;
                 }
-            cut[x] = (uint8_t)top;
+            if (top) pos[n++] = x;
+        }
+        for (int64_t k = 0; k < n; k++) {
+            const int64_t j0 = pos[k] - t < m - 1 ? m - 1 : pos[k] - t;
+            const int64_t j1 = pos[k] + t > x1 - 1 ? x1 - 1 : pos[k] + t;
+            int64_t best = j0;
+            double top = -1.0;
+            for (int64_t j = j0; j <= j1; j++) {
+                const double v = step_ratio(cs, j + m + 1, t);
+                if (v > top) {
+                    top = v;
+                    best = j;
+                }
+            }
+            cut[best] = 1;
         }
     }
 }

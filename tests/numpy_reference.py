@@ -557,16 +557,19 @@ def albedo_proxy(rgb, k, *, share):
     return proxy, total > 0
 
 
-def albedo_step_ratio(g, *, t):
+def albedo_step_ratio(g, *, t, n=None):
     """The step ratio max(a, b) / min(a, b) of simbench.decode.color.albedo_edges (a, b: the means
-    of the 2 t values left and right of each column, plus their floor), and the old score, its
-    logarithm |log a - log b| as float32."""
-    n = 2 * t
+    of the n = 2 t values left and right of each column, plus their floor), and the old score, its
+    logarithm |log a - log b| as float32; ``n`` another window (the refinement's t), the row
+    padded by 2 t either side all the same (so that the prefix sums are the same numbers)."""
+    pad = 2 * t
+    n = pad if n is None else n
     h, w = g.shape
-    cs = np.zeros((h, w + 2 * n + 1), np.float64)
-    np.cumsum(np.pad(g, ((0, 0), (n, n)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
-    left = (cs[:, n + 1 : n + 1 + w] - cs[:, 1 : 1 + w]) / n
-    right = (cs[:, 2 * n + 1 : 2 * n + 1 + w] - cs[:, n + 1 : n + 1 + w]) / n
+    cs = np.zeros((h, w + 2 * pad + 1), np.float64)
+    np.cumsum(np.pad(g, ((0, 0), (pad, pad)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
+    c = pad + 1
+    left = (cs[:, c : c + w] - cs[:, c - n : c - n + w]) / n
+    right = (cs[:, c + n : c + n + w] - cs[:, c : c + w]) / n
     eps = 1e-3 + 0.02 * np.maximum(left, right)
     a, b = left + eps, right + eps
     return np.maximum(a, b) / np.minimum(a, b), np.abs(np.log(a) - np.log(b)).astype(np.float32)
@@ -588,7 +591,14 @@ def albedo_edges(g, *, t, ratio_min, log_score=False):
     n = 2 * t
     cuts[:, : n - 1] = False
     cuts[:, max(0, g.shape[1] - n) :] = False
-    return cuts
+    # each cut moved to the column within t (and the same limits) where the ratio over t values
+    # either side is the largest, the first of equals
+    narrow, _ = albedo_step_ratio(g, t=t, n=t)
+    out = np.zeros_like(cuts)
+    for y, x in zip(*np.nonzero(cuts)):
+        lo, hi = max(n - 1, x - t), min(g.shape[1] - n - 1, x + t)
+        out[y, lo + int(np.argmax(narrow[y, lo : hi + 1]))] = True
+    return out
 
 
 def overlay_weights(raw, span, *, unmixing, half, floor):

@@ -64,7 +64,7 @@ _SIGNATURES = {
     "normalize_scratch_floats": (_I, [_I, _I]),
     "normalize_channels": (None, [_I, _I, _P, _P, _I, _F, _I, _P, _P, _P]),
     "albedo_proxy": (None, [_I, _P, _P, _F, _P, _P]),
-    "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P]),
+    "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P, _P]),
     "box_level": (None, [_I, _I, _P, _I, _F, _P]),
     "noise_weights": (None, [_I, _P, _P, _P, _P]),
     "robust_fringe_code": (None, [_I, _P, _P, _P, _P, _P, _P]),
@@ -649,7 +649,8 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
     ``cuts[y, x]`` (bool) where the means of the ``2 t`` values either side of the step between
     columns x and x + 1 (ends replicated) differ by more than ``ratio_min`` (with a floor, see
     :func:`simbench.decode.color.albedo_edges`) and the ratio is the largest within ``t``
-    pixels."""
+    pixels; each cut then moved to the column within ``t`` of it where the ratio of the ``t``
+    values either side is the largest (the first of equals)."""
     h, w = g.shape
     t = int(t)
     if h < 1 or w < 1:
@@ -658,6 +659,7 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
         raise ValueError(f"t must be >= 1, got {t}")
     cs = np.empty(w + 4 * t + 1, np.float64)
     q = np.empty(w + 2 * t, np.float64)
+    pos = np.empty(w, np.int64)
     _library().albedo_edges(
         h,
         w,
@@ -666,6 +668,7 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
         float(ratio_min),
         cs.ctypes.data,
         q.ctypes.data,
+        pos.ctypes.data,
         _ptr(cuts, "cuts", np.bool_, (h, w), writable=True),
     )
 

@@ -26,6 +26,7 @@ __all__ = [
     "segment_mean",
     "albedo_gain",
     "albedo_gain_reach_rows",
+    "albedo_step_pixels",
     "overlay_weights",
     "normalized_color_code",
     "Stripes",
@@ -331,6 +332,12 @@ ALBEDO_MIN_SEGMENT_PERIODS = 1.5
 ALBEDO_MIN_CHANNEL_SHARE = 0.1
 # the most a pixel's channels are amplified (a 0.04-albedo ink beside 0.8 paper needs 20x)
 ALBEDO_MAX_GAIN = 50.0
+# a step of the flattening's gain along a row by this factor or more marks the two pixels that
+# straddle it as mixed (DecoderParams.albedo_edge_skip; assumption: 2 - where the gain steps by
+# 2x a mixed pixel's light is off its side's by up to 2x, beyond what a window's fit absorbs as a
+# change of fringe amplitude.  Measured on the 25 hard scenes, 2026-11-29: 1.5 and 3 move no scene
+# by more than 0.4 % of its pixels - the 3:1 chart 99.40 % kept at 1.5, 99.39 % at 2, 99.01 % at 3)
+ALBEDO_SKIP_RATIO = 2.0
 # a segment whose fringe visibility (the proxy's standard deviation over its mean, rows averaged
 # over ALBEDO_EDGE_ROWS) is under this share of the most visible one within the window carries no
 # fringe - a projector shadow, not dark ink - and is not brightened (assumption: 0.5; measured
@@ -431,6 +438,38 @@ def albedo_gain_reach_rows(period_px: float, order: int) -> int:
     decoder's row bands carry this many rows more than the phase fit needs
     (:func:`simbench.decode.bands.row_bands`), so that a band's gain is the whole image's."""
     return _code_window_px(period_px, order) + ALBEDO_EDGE_ROWS // 2 + ALBEDO_MEAN_ROWS // 2
+
+
+def albedo_step_pixels(gain: np.ndarray, *, ratio: float = ALBEDO_SKIP_RATIO) -> np.ndarray:
+    """The pixels on either side of a step of :func:`albedo_gain` along a row by ``ratio`` or more
+    (ours; ``DecoderParams.albedo_edge_skip``).
+
+    The gain is a step where the print's albedo is one; the camera's blur is not: the two pixels
+    straddling the edge hold both sides' light, which the gain flattens by the wrong factor - the
+    dark side's pixel, amplified ~20x beside a 20:1 ink, carries the paper's fringe at 20x into
+    every window over it.  Their samples are left out of the phase fit (their own phase then comes
+    from their neighbours', as a clipped pixel's does): on ``scenes/hard_chart_high.toml`` 81.9 ->
+    86.7 % of the pixels kept at the operating point, the 3:1 chart 97.1 -> 99.4 %.
+
+    Parameters
+    ----------
+    gain : ndarray, shape (H, W), float32 >= 1
+    ratio : float
+        The step, as the larger gain over the smaller, from which the pixels are marked.
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    g = np.asarray(gain, np.float32)
+    out = np.zeros(g.shape, bool)
+    if g.shape[1] < 2:
+        return out
+    a, b = g[:, 1:], g[:, :-1]
+    step = (a >= np.float32(ratio) * b) | (b >= np.float32(ratio) * a)
+    out[:, 1:] |= step
+    out[:, :-1] |= step
+    return out
 
 
 def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: int) -> np.ndarray:

@@ -169,6 +169,12 @@ class DecoderParams:
         (:func:`simbench.decode.color.albedo_gain`; ours, needs ``color_normalize``): each
         segment between two steps brought to its brighter neighbour's level, so that a window
         over the step sees one fringe.  Off = the paper's decoder.
+    albedo_edge_skip : bool
+        With ``albedo_flatten``, the two pixels straddling a step of its gain by
+        :data:`simbench.decode.color.ALBEDO_SKIP_RATIO` or more carry no sample in the phase fit
+        (:func:`simbench.decode.color.albedo_step_pixels`; ours): the camera's blur mixes the
+        two sides' light in them, which a gain that steps cannot flatten.  Off = every pixel's
+        sample counts (and without ``albedo_flatten`` there is no gain: nothing is skipped).
     voting : bool
         Majority vote of codes per stripe (paper Sec. 5.2); off = the stripe's middle pixel.
     pool_code : bool
@@ -335,6 +341,7 @@ class DecoderParams:
     unmix: bool = False
     color_normalize: bool = False
     albedo_flatten: bool = False
+    albedo_edge_skip: bool = False
     voting: bool = True
     pool_code: bool = False
     neighbour_reach: int = 3
@@ -379,6 +386,7 @@ class DecoderParams:
             "unmix": v.boolean(self.unmix, "unmix"),
             "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
             "albedo_flatten": v.boolean(self.albedo_flatten, "albedo_flatten"),
+            "albedo_edge_skip": v.boolean(self.albedo_edge_skip, "albedo_edge_skip"),
             "voting": v.boolean(self.voting, "voting"),
             "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
@@ -530,7 +538,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     fringe (Eq. 9) no longer depend on the surface colour or on a stripe's colour; its validity
     tests then act on signal relative to the local range (``min_amplitude``,
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it; the
-    lit test looks across a whole code window). Its confidence folds in the phase's stability
+    lit test looks across a whole code window; the pixels straddling a printed step, which the
+    camera's blur mixes, carry no sample: ``albedo_edge_skip``). Its confidence folds in the phase's stability
     against the window's width (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
     and the stripes whose De Bruijn position another candidate contests (``position_doubt``) or
@@ -546,6 +555,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         unmix=True,
         color_normalize=True,
         albedo_flatten=True,
+        albedo_edge_skip=True,
         link_keep_certain=ROBUST_MIN_CONFIDENCE,
         link_split=True,
         intensity_mode="weighted",

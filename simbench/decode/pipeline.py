@@ -16,6 +16,7 @@ from simbench.decode.color import (
     color_code,
     mixing_matrix,
     albedo_gain,
+    albedo_step_pixels,
     normalize_channels,
     code_at_row_ends,
     normalized_color_code,
@@ -418,6 +419,10 @@ def _columns(
                     saturation_level=params.saturation_level,
                     window_periods=window,
                 )
+        if gain is not None and params.albedo_edge_skip:
+            with stage("albedo edges skipped"):
+                # (gain has the fit's rows, as certainty: image and gain were cut to them together)
+                certainty = np.where(albedo_step_pixels(gain), np.float32(0.0), certainty)
         unmixed = rgb
         if span is not None:
             rgb = normed
