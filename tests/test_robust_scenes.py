@@ -40,6 +40,9 @@ PASSING = [
     "robust_violet",
     "robust_dark",
     "robust_tilt_x45",
+    # in neither list from 2026-11-25 (its xfail removed, the scene not added here) to 2026-11-29:
+    # 99.72 % complete, MAE 0.24 / 0.25 mm, none > 5 mm wrong, both modes
+    "robust_tilt_y45",
     "step",
     # 2026-11-26: 97.43 % complete, none > 5 mm wrong, both modes (96.39 % once the captures lost
     # their black end columns, 97.43 % with the narrow window's SNR beside the depth edges)
@@ -114,6 +117,16 @@ def _check(scores: dict, name: str) -> None:
         assert m["mae_mm"] <= MAX_MAE_MM, what
         assert m["stripe_order_errors"] == 0, what
         assert m["wrong_share"] <= MAX_WRONG_SHARE, what
+
+
+def test_every_robustness_scene_is_held_to_the_bound_or_a_known_shortfall():
+    """A scene of ``scenes/robust_*.toml`` in neither list goes untested (robust_tilt_y45 did, for
+    four days, after its xfail was removed)."""
+    from pathlib import Path
+
+    scenes = {p.stem for p in (Path(__file__).resolve().parents[1] / "scenes").glob("robust_*.toml")}
+    assert scenes <= set(PASSING) | set(SHORTFALLS), sorted(scenes - set(PASSING) - set(SHORTFALLS))
+    assert not set(PASSING) & set(SHORTFALLS)
 
 
 @pytest.mark.parametrize("name", PASSING)
