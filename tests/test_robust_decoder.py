@@ -278,11 +278,12 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
     """A 20:1 checkerboard of 1.5-period squares: on the ink the stripes keep pieces of a couple
     of pixels, their codes tied or misread, and a short chain of them reads like another stretch
     of the sequence; the whole paper stripes between them inherit that position at full fringe
-    SNR (measured without ``code_doubt``: 675 pixels kept at the operating point half a cycle or
-    so off, at a median confidence of 17.7 - above the right pixels' 9.4).  With it, no lit pixel
-    kept is more than half a period off, on 1.5- and 1.75-period squares (1.75: 30 pixels a period
-    off without it, beside the squares' edges); the 3.4-period board loses under 1 % of what it
-    kept off the edges' band (measured 0.02 %)."""
+    SNR (measured without ``code_doubt``: 1582 pixels kept at the operating point half a cycle or
+    so off; 675, at a median confidence of 17.7 - above the right pixels' 9.4 -, before the
+    flattening's gain lost its jumps half a window from each step, 2026-11-29).  With it, no lit
+    pixel kept is more than half a period off, on 1.5- and 1.75-period squares (1.75: 47 pixels a
+    period off without it, beside the squares' edges); the 3.4-period board, whose codes are all
+    read, loses under 1 % of what it kept off the edges' band (measured nothing)."""
     ref, f = calibration
     p = robust_params(DecoderParams(mode="calibrated"))
     rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
@@ -297,7 +298,8 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
             kept[periods, doubt] = (int(wrong.sum()), int((r.valid & region).sum()))
             positions.append(r.stages["position"])
             if doubt:
-                assert r.stages["uncertain_code"].any() and not r.confidence[r.stages["uncertain_code"]].any()
+                assert not r.confidence[r.stages["uncertain_code"]].any()
+                assert r.stages["uncertain_code"].any() or periods == 3.4
         assert np.array_equal(*positions)  # it moves no stripe: the confidence alone
     assert kept[1.5, False][0] > 300 and kept[1.75, False][0] > 0, kept
     assert kept[1.5, True][0] == kept[1.75, True][0] == kept[3.4, True][0] == 0, kept
@@ -540,6 +542,37 @@ def test_albedo_gain_brightens_faint_ink_but_not_a_projector_shadow():
     ink = cv2.erode(printed.astype(np.uint8), np.ones((1, int(t)), np.uint8)).astype(bool)
     assert np.median(gain[ink]) > 10.0, np.median(gain[ink])
     assert np.all(gain[inner] == 1.0), np.percentile(gain[inner], [50, 99, 100])
+
+
+def test_albedo_gain_varies_without_a_jump_away_from_its_steps(monkeypatch):
+    """The gain steps at the albedo steps it finds and nowhere else: along every row across a
+    3:1 print (a step at 0.3 of the row), neighbouring pixels' gains more than two pixels from
+    every cut differ by under 5 % (measured up to 3.4 %: just after a cut a segment's mean, its
+    window cut short, follows the fringe a little; until 2026-11-29 the fade jumped from 1 to 1/2
+    half a window beyond each step - measured here 1.09x, on robust_printed 1.4x - a gain step inside the uniform
+    print that the phase fit read as an albedo step).  (The step test also cuts this print where
+    the proxy's normalisation ramps back up on the print, ~3.5 periods past its edge.)"""
+    img, _ = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
+    h, w = img.shape[:2]
+    rho = np.full((h, w, 1), 0.8, np.float32)
+    rho[:, int(0.3 * w) :] = 0.8 / 3
+    cap = _printed(img, rho, noise=0.002, seed=3)
+    rgb = unmix(cap, np.linalg.inv(K).astype(np.float32))
+    t = PARAMS_PERIOD_PX
+    _, span = normalize_channels(rgb, period_px=t, order=3, min_span=0.01, return_span=True)
+    found = []
+    edges = color._edges_of_rows
+    monkeypatch.setattr(color, "_edges_of_rows", lambda g, **kw: found.append(edges(g, **kw)) or found[-1])
+    gain = albedo_gain(rgb, span, period_px=t, order=3)
+    cut = int(0.3 * w) - 1
+    assert found[0][:, cut].mean() > 0.9
+    assert np.median(gain[:, cut + 1 : cut + int(t)]) > 1.8  # the print is brightened
+    ratio = np.maximum(gain[:, 1:] / gain[:, :-1], gain[:, :-1] / gain[:, 1:])
+    # (a row's segment means are averaged with its neighbours': a cut in the next row counts)
+    rows = color.ALBEDO_MEAN_ROWS
+    near = cv2.dilate(found[0].astype(np.uint8), np.ones((rows, 5), np.uint8)).astype(bool)[:, :-1]
+    ratio[near] = 1.0
+    assert ratio.max() < 1.05, (ratio.max(), np.unravel_index(ratio.argmax(), ratio.shape))
 
 
 def _one_period_step(far_brightness: float):

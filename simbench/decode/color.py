@@ -498,8 +498,11 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     4. gain = (that mean's running maximum over the window, box-averaged) / (that mean), so that
        every segment is brought to the brighter neighbour's level and the result varies slowly.
        Segments shorter than :data:`ALBEDO_MIN_SEGMENT_PERIODS` periods keep gain 1, and the
-       gain fades to 1 over a window's width away from any step, so that uniform surfaces (and
-       the results on them) are left as they were.
+       gain fades to 1 over a window's width beyond half a window from any step, linearly and
+       without a jump, so that uniform surfaces (and the results on them) are left as they were.
+       (Until 2026-11-29 the fade jumped from 1 to 1/2 at half a window from a step - a gain
+       step of up to 2x inside a uniform print, which the phase fit read as an albedo step: on
+       ``scenes/robust_printed.toml``'s green tile ~1000 pixels 1.1 projector px, 5 mm, off.)
 
     Shading, falloff and any change slower than a window pass through; depth edges with a
     brightness step are flattened like printed ones.
@@ -566,8 +569,10 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         gain = np.where(mean > 1e-6, level / np.maximum(mean, 1e-6), 1.0)
     gain = np.minimum(gain, ALBEDO_MAX_GAIN)
     gain[short | ~defined | shadow] = 1.0
-    near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, width), np.uint8)).astype(np.float32)
-    fade = np.maximum(cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE), near)
+    # 1 within half a window of a step, then down to 0 over a window's width: the box mean of a
+    # run reaching a window beyond the step (continuous; a jump in the fade is a step in the gain)
+    near = cv2.dilate(cuts.astype(np.uint8), np.ones((1, 2 * width - 1), np.uint8)).astype(np.float32)
+    fade = cv2.blur(near, (width, 1), borderType=cv2.BORDER_REPLICATE)
     return (1.0 + (gain - 1.0) * fade).astype(np.float32)
 
 
