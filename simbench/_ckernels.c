@@ -1554,7 +1554,12 @@ void albedo_proxy(int64_t n, const float *restrict rgb, const float *restrict k,
  * right.  Each cut is then moved to the column within t of it (inside the same limits) where the
  * ratio of the t values either side is the largest (the first of equals): a segment narrower than
  * m lies wholly inside one of the m-wide windows along a plateau of q, and only the narrower
- * windows' ratio peaks at its edge.  The ratio in double is compared directly (a logarithm would
+ * windows' ratio peaks at its edge.  Beside each cut so placed, on its darker side between
+ * t / 2 + 1 and t columns away, the far edge of a dark strip narrower than a period (a seam
+ * between two faces, a thin shadow or line: the step test's maximum rule keeps one cut of
+ * such a strip) is cut too: the column there whose narrow ratio rises back towards the light
+ * (the other way than the cut's), exceeds strip_min and is the largest within t / 2 either side
+ * (the first such of the largest).  The ratio in double is compared directly (a logarithm would
  * be monotone in it and add only its last-bit differences between machines' libraries).  cs:
  * w + 2 m + 1 doubles, q: w + 2 t doubles, pos: w int64 of scratch. */
 static inline double step_ratio(const double *cs, int64_t c, int64_t k) {
@@ -1566,7 +1571,12 @@ static inline double step_ratio(const double *cs, int64_t c, int64_t k) {
     return a > b ? a / b : b / a;
 }
 
-void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, double ratio_min,
+static inline int rises(const double *cs, int64_t c, int64_t k) {
+    /* the mean of the k values right of the step over those left of it is the larger */
+    return cs[c + k] - cs[c] > cs[c] - cs[c - k];
+}
+
+void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, double ratio_min, double strip_min,
                   double *restrict cs, double *restrict q, int64_t *restrict pos, uint8_t *restrict cuts) {
     const int64_t m = 2 * t, np_ = w + 2 * m;
     for (int64_t y = 0; y < h; y++) {
@@ -1611,6 +1621,25 @@ void albedo_edges(int64_t h, int64_t w, const float *restrict g, int64_t t, doub
                 }
             }
             cut[best] = 1;
+            /* the strip's far edge: on the darker side, rising back the other way */
+            const int up = rises(cs, best + m + 1, t);
+            const int64_t half = t / 2;
+            const int64_t a0 = up ? best - t : best + half + 1, a1 = up ? best - half - 1 : best + t;
+            int64_t far = -1;
+            double ftop = strip_min;
+            for (int64_t j = a0 < m - 1 ? m - 1 : a0; j <= (a1 > x1 - 1 ? x1 - 1 : a1); j++) {
+                if (rises(cs, j + m + 1, t) == up) continue;
+                const double v = step_ratio(cs, j + m + 1, t);
+                if (!(v > ftop)) continue;
+                int peak = 1;
+                for (int64_t i = j - half; i <= j + half && peak; i++)
+                    if (i >= 0 && i < w && step_ratio(cs, i + m + 1, t) > v) peak = 0;
+                if (peak) {
+                    ftop = v;
+                    far = j;
+                }
+            }
+            if (far >= 0) cut[far] = 1;
         }
     }
 }

@@ -575,7 +575,7 @@ def albedo_step_ratio(g, *, t, n=None):
     return np.maximum(a, b) / np.minimum(a, b), np.abs(np.log(a) - np.log(b)).astype(np.float32)
 
 
-def albedo_edges(g, *, t, ratio_min, log_score=False):
+def albedo_edges(g, *, t, ratio_min, strip_min=np.inf, log_score=False):
     """Cuts where the step ratio exceeds ratio_min and is the largest within t columns (ends
     replicated), never within 2 t - 1 columns of the left end or 2 t of the right; with
     ``log_score`` as it was decided before (the float32 logarithm against its window maximum
@@ -594,10 +594,32 @@ def albedo_edges(g, *, t, ratio_min, log_score=False):
     # each cut moved to the column within t (and the same limits) where the ratio over t values
     # either side is the largest, the first of equals
     narrow, _ = albedo_step_ratio(g, t=t, n=t)
+    # the side the narrow windows' mean is larger on (prefix sums as the ratio's)
+    pad = 2 * t
+    cs = np.zeros((g.shape[0], g.shape[1] + 2 * pad + 1), np.float64)
+    np.cumsum(np.pad(g, ((0, 0), (pad, pad)), mode="edge"), axis=1, dtype=np.float64, out=cs[:, 1:])
+    c = pad + 1 + np.arange(g.shape[1])
+    up = (cs[:, c + t] - cs[:, c]) > (cs[:, c] - cs[:, c - t])
     out = np.zeros_like(cuts)
+    half = t // 2
+    w = g.shape[1]
     for y, x in zip(*np.nonzero(cuts)):
-        lo, hi = max(n - 1, x - t), min(g.shape[1] - n - 1, x + t)
-        out[y, lo + int(np.argmax(narrow[y, lo : hi + 1]))] = True
+        lo, hi = max(n - 1, x - t), min(w - n - 1, x + t)
+        best = lo + int(np.argmax(narrow[y, lo : hi + 1]))
+        out[y, best] = True
+        # a dark strip's far edge: on the darker side, half a period to a period away, rising the
+        # other way, over strip_min, the largest within half a period either side
+        a0, a1 = (best - t, best - half - 1) if up[y, best] else (best + half + 1, best + t)
+        far, top = -1, strip_min
+        for j in range(max(n - 1, a0), min(w - n - 1, a1) + 1):
+            v = narrow[y, j]
+            if up[y, j] == up[y, best] or not v > top:
+                continue
+            if (narrow[y, max(0, j - half) : min(w, j + half + 1)] > v).any():
+                continue
+            far, top = j, v
+        if far >= 0:
+            out[y, far] = True
     return out
 
 

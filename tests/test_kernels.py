@@ -728,7 +728,7 @@ def test_kernel_wrappers_refuse_empty_images_and_negative_windows():
     with pytest.raises(ValueError, match="half"):
         _kernels.box_level(np.ones((2, 5, 3), np.float32), -2, 0.04, np.empty((2, 5, 3), np.float32))
     with pytest.raises(ValueError, match="W >= 1"):
-        _kernels.albedo_edges(np.empty((3, 0), np.float32), 21, 1.35, np.empty((3, 0), bool))
+        _kernels.albedo_edges(np.empty((3, 0), np.float32), 21, 1.35, 1.8, np.empty((3, 0), bool))
     e = np.empty((3, 0), np.float32)
     with pytest.raises(ValueError, match="W >= 1"):
         _kernels.albedo_segments(e, e, np.empty((3, 0), bool), 91, 10, 30.0, e, e, np.empty((3, 0), bool))
@@ -784,8 +784,13 @@ def test_albedo_edges_match_numpy_and_rank_as_the_logarithm_did(seed):
     import cv2
 
     rows = cv2.blur(g, (1, color.ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
-    same(got, ref.albedo_edges(rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO))
-    same(got, ref.albedo_edges(rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO, log_score=True))
+    same(got, ref.albedo_edges(rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO, strip_min=color.ALBEDO_STRIP_RATIO))
+    same(
+        got,
+        ref.albedo_edges(
+            rows, t=t, ratio_min=color.ALBEDO_EDGE_RATIO, strip_min=color.ALBEDO_STRIP_RATIO, log_score=True
+        ),
+    )
     assert got.any()
     # black with noise: the floor keeps it free of steps
     assert not color.albedo_edges(

@@ -511,6 +511,35 @@ def test_albedo_edges_find_both_edges_of_a_dark_strip_narrower_than_their_window
         assert cols.size == 2 and abs(cols[0] - (a - 1)) <= 3 and abs(cols[1] - (b - 1)) <= 3, (y, cols)
 
 
+def test_albedo_edges_cut_both_edges_of_a_seam_narrower_than_a_period():
+    """A dark seam 0.7 periods wide (albedo 0.15) between two boards (0.8 and 0.7; Table 3's cube
+    and cuboid faces meet at such a seam): the step test's maximum rule keeps one cut of it, at
+    its near edge, and the segment beyond then began in the seam, its mean there dragged down
+    and its first ~50 px brightened 1.25x (Table 3's cuboid).  The seam's far edge is cut too
+    (ALBEDO_STRIP_RATIO): in every row a cut within a pixel of the seam's near edge and one at
+    most half a period past its far edge (measured 6-7 px: the seam lies wholly inside the
+    one-period windows too, along a plateau as long as the period less the seam), so that the
+    next board's segment starts off the seam; without it (measured) one cut in most rows.  No
+    cut on a board without a seam, one beside a plain step."""
+    t = 21.0
+    rng = np.random.default_rng(5)
+    x = np.arange(400)
+    a, b = 200, 200 + int(0.7 * t)
+    fringe = 0.5 + 0.5 * np.cos(2 * np.pi * (x - 1.7) / t)
+
+    def cuts_of(albedo):
+        rows = np.tile(fringe * albedo, (12, 1)) + rng.normal(0.0, 0.005, (12, 400))
+        return albedo_edges(rows.astype(np.float32), period_px=t)
+
+    seam = cuts_of(np.where(x < a, 0.8, np.where(x < b, 0.15, 0.7)))
+    for y in range(12):
+        cols = np.flatnonzero(seam[y])
+        assert cols.size == 2 and abs(cols[0] - (a - 1)) <= 1 and b - 1 <= cols[1] <= b - 1 + t / 2, (y, cols)
+    assert not cuts_of(np.full(400, 0.8)).any()
+    step = cuts_of(np.where(x < a, 0.8, 0.15))
+    assert all(np.flatnonzero(step[y]).size == 1 for y in range(12)), [np.flatnonzero(r) for r in step]
+
+
 def _shadow_and_ink(*, ink: float, noise=0.002, seed=7):
     """The board with two dark vertical strips 2.5 periods wide: a projector shadow (no pattern
     light, only the ambient) and a print of reflectance ``ink``, whose fringe is as faint."""

@@ -64,7 +64,7 @@ _SIGNATURES = {
     "normalize_scratch_floats": (_I, [_I, _I]),
     "normalize_channels": (None, [_I, _I, _P, _P, _I, _F, _I, _P, _P, _P]),
     "albedo_proxy": (None, [_I, _P, _P, _F, _P, _P]),
-    "albedo_edges": (None, [_I, _I, _P, _I, _D, _P, _P, _P, _P]),
+    "albedo_edges": (None, [_I, _I, _P, _I, _D, _D, _P, _P, _P, _P]),
     "box_level": (None, [_I, _I, _P, _I, _F, _P]),
     "noise_weights": (None, [_I, _P, _P, _P, _P]),
     "robust_fringe_code": (None, [_I, _P, _P, _P, _P, _P, _P]),
@@ -644,13 +644,15 @@ def albedo_proxy(rgb, k, share, proxy, defined) -> None:
     )
 
 
-def albedo_edges(g, t, ratio_min, cuts) -> None:
+def albedo_edges(g, t, ratio_min, strip_min, cuts) -> None:
     """Albedo steps along the rows of ``g`` ((H, W) float32, the proxy averaged over rows):
     ``cuts[y, x]`` (bool) where the means of the ``2 t`` values either side of the step between
     columns x and x + 1 (ends replicated) differ by more than ``ratio_min`` (with a floor, see
     :func:`simbench.decode.color.albedo_edges`) and the ratio is the largest within ``t``
     pixels; each cut then moved to the column within ``t`` of it where the ratio of the ``t``
-    values either side is the largest (the first of equals)."""
+    values either side is the largest (the first of equals), and the far edge of a dark strip
+    narrower than a period beside it cut too where its ratio exceeds ``strip_min`` (see
+    ``albedo_edges`` in simbench/_ckernels.c)."""
     h, w = g.shape
     t = int(t)
     if h < 1 or w < 1:
@@ -666,6 +668,7 @@ def albedo_edges(g, t, ratio_min, cuts) -> None:
         _ptr(g, "g", np.float32, (h, w)),
         t,
         float(ratio_min),
+        float(strip_min),
         cs.ctypes.data,
         q.ctypes.data,
         pos.ctypes.data,

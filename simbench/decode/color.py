@@ -319,6 +319,15 @@ def code_at_row_ends(
 # measured on scenes/hard_paint_orange.toml; below the low-contrast chart's 1.6x,
 # scenes/hard_chart_low.toml)
 ALBEDO_EDGE_RATIO = 1.35
+# the far edge of a dark strip narrower than a period beside a step (a seam between two faces, a
+# thin shadow or printed line) is cut where the one-period ratio back towards the light exceeds
+# this (assumption: 1.8, above the code runs' swing on saturated prints; measured 2026-11-29: the
+# seam between Table 3's cube and cuboid faces, ~2x darker, left uncut, the cuboid's segment began
+# in it and its first ~50 px were brightened 1.25x - its MAE by the colour-robust decoder 0.148 ->
+# 0.133 mm with it (0.172 with the gain's continuous fade before it); at 1.35 the red and orange
+# tiles of scenes/robust_printed.toml were cut at their code runs, 96.8 -> 96.0 % complete and
+# 0.04 -> 0.10 % wrong)
+ALBEDO_STRIP_RATIO = 1.8
 # rows averaged before the step test (a step along the stripes is one in every row; noise is not)
 ALBEDO_EDGE_ROWS = 5
 # rows the per-row albedo is averaged over (the gain of one row's 4-period mean is noisy on dark ink)
@@ -427,7 +436,7 @@ def _rows_mean(proxy: np.ndarray) -> np.ndarray:
 
 def _edges_of_rows(g: np.ndarray, *, period_px: float) -> np.ndarray:
     cuts = np.empty(g.shape, bool)
-    _kernels.albedo_edges(g, max(2, int(round(period_px))), ALBEDO_EDGE_RATIO, cuts)
+    _kernels.albedo_edges(g, max(2, int(round(period_px))), ALBEDO_EDGE_RATIO, ALBEDO_STRIP_RATIO, cuts)
     return cuts
 
 
