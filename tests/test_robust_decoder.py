@@ -779,6 +779,36 @@ def test_the_centroid_correction_does_not_follow_the_row_bands():
     assert np.array_equal(kept[:, 20:], whole[0][:, 20:], equal_nan=True)  # the rest corrected as before
 
 
+@pytest.mark.parametrize("width", [1280, 1279, 1001])
+def test_the_centroid_correction_does_not_follow_where_its_blocks_start(width):
+    """The correction works in blocks of columns around the pixels it corrects, and where a block
+    starts follows the certainty elsewhere in the band (a shadow's or a skipped edge's columns
+    within reach merge into the block of the image's right border); OpenCV filters a row's last
+    columns (its width modulo the vector width) in scalar code, a last bit off: padded to
+    CENTROID_BLOCK_ALIGN columns, the right border's pixels keep the same bits whether or not
+    rows elsewhere hold an uncertain patch near them (before: 1 ulp apart on up to ~170 of them,
+    and on scenes/robust_printed.toml between 1 and 2 row bands)."""
+    from simbench.decode.phase import centroid_corrected, gaussian_kernel
+
+    h = 160
+    x = np.arange(width, dtype=np.float64)
+    y = np.arange(h, dtype=np.float64)[:, None]
+    omega = 2 * np.pi / CC_PERIOD
+    wide = np.angle(np.exp(1j * (1.15 * omega * x + 0.01 * y))).astype(np.float32)
+    narrow = np.angle(np.exp(1j * (1.15 * omega * x + 0.01 * y + 0.002))).astype(np.float32)
+    cert = np.ones((h, width), np.float32)
+    patched = cert.copy()
+    patched[130:150, width - 163 : width - 130] = 0.0
+    kw = dict(sigma_y_px=CC_SY, period_px=CC_PERIOD)
+    plain = centroid_corrected([(wide, CC_SX), (narrow, CC_SX / 2)], cert, **kw)
+    other = centroid_corrected([(wide, CC_SX), (narrow, CC_SX / 2)], patched, **kw)
+    halo = len(gaussian_kernel(CC_SY)) // 2
+    rows = slice(0, 130 - 2 * halo)
+    for a, b in zip(plain, other):
+        assert not np.array_equal(a[:, -10:], wide[:, -10:])  # the border's pixels are corrected
+        assert np.array_equal(a[rows], b[rows], equal_nan=True)
+
+
 def test_the_centroid_correction_is_the_colour_robust_decoders_and_needs_the_gabor_fit():
     assert robust_params(DecoderParams()).centroid_correction and not DecoderParams().centroid_correction
     assert not robust_params(DecoderParams(phase_method="ftp")).centroid_correction

@@ -637,6 +637,11 @@ def _centroid(c: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray
         return np.where(total > np.float32(1e-6), moment / total, np.float32(np.nan)).astype(np.float32)
 
 
+# columns a block of centroid_corrected is padded to a multiple of (64 float32: wider than any
+# vector unit's, 16 for AVX-512)
+CENTROID_BLOCK_ALIGN = 64
+
+
 def _wrap(a: np.ndarray) -> np.ndarray:
     """``a`` wrapped to [-pi, pi) (the fit's convention: pi itself folds to -pi), float32."""
     two_pi = np.float32(2 * np.pi)
@@ -698,7 +703,14 @@ def centroid_corrected(
         y0, y1 = max(0, int(in_rows[0]) - ry), min(h, int(in_rows[-1]) + ry + 1)
         cs = np.ascontiguousarray(c[y0:y1, a:b])
         block_cut, block_cand = cut[y0:y1, a:b], cand[y0:y1, a:b]
-        dxs = [_centroid(cs, sx, sigma_y_px) for sx in sigmas]
+        # OpenCV's filters take a row's last few columns (its width modulo the vector width) in
+        # scalar code, a last bit off the vector code's: a block as wide as a whole number of the
+        # widest vectors (the outside uncertain, as the image's) gives each pixel the same bits
+        # wherever the block starts - which follows the row band's cut pixels (measured: the
+        # right border's pixels 1 ulp apart between 1 and 2 bands on scenes/robust_printed.toml)
+        padded = np.zeros((y1 - y0, -(-(b - a) // CENTROID_BLOCK_ALIGN) * CENTROID_BLOCK_ALIGN), np.float32)
+        padded[:, : b - a] = cs
+        dxs = [_centroid(padded, sx, sigma_y_px)[:, : b - a] for sx in sigmas]
         with np.errstate(invalid="ignore"):
             # a wholly uncertain window (a shadow wider than it) has no phase to step: its fit
             # returns 0, which would pull the rate towards 0
