@@ -251,6 +251,15 @@ def _checkerboard(ink: float, *, square_periods: float = 3.4, noise=0.002, seed=
 PARAMS_PERIOD_PX = robust_params().camera_period(RIG)
 
 
+def _robust_decode(calibration, cap: np.ndarray, **changes):
+    """``cap`` decoded by triangulation with the colour-robust decoder, ``changes`` made to its
+    parameters, against the reference plane of ``calibration`` (the module's fixture)."""
+    ref, f = calibration
+    p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), **changes)
+    rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+    return decode(cap, rig=RIG, params=p, reference=rmap)
+
+
 def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     """An 8:1 grey checkerboard of 3.4-period squares (between scenes/hard_chart_mid.toml's
     3:1 and hard_chart_high.toml's 20:1, their squares' size): with the albedo steps flattened
@@ -259,14 +268,11 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     windows over the steps fit a jumping fringe and fall below the operating point (measured
     here: 99.2 % against 80.7 %; at 3:1 99.99 % against 97.2 %; on the rendered 3:1 chart, with
     the camera's blur, 99.7 % against 82.8 %, results/hard_scenes.md)."""
-    ref, f = calibration
     cap, col, band = _checkerboard(0.1)
     region = np.isfinite(col) & ~band
     out = {}
     for flatten in (True, False):
-        p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), albedo_flatten=flatten)
-        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
-        r = decode(cap, rig=RIG, params=p, reference=rmap)
+        r = _robust_decode(calibration, cap, albedo_flatten=flatten)
         ok = r.valid & region
         err = np.abs(r.column_px[ok] - col[ok])
         assert np.all(err < 0.5 * 21), f"stripe-order error (flatten {flatten})"
@@ -328,16 +334,13 @@ def test_skipping_the_blurred_albedo_edges_keeps_more_of_a_printed_checkerboard(
     more of the board decodes above the operating point, no less accurately (measured: 92.2 ->
     95.1 % of the pixels off the steps' band, mean error 0.101 -> 0.099 projector px; the
     rendered 20:1 chart 81.9 -> 86.7 %), and no stripe order is lost."""
-    ref, f = calibration
     cap, col, band = _checkerboard(0.04, noise=0.0)
     cap = cv2.GaussianBlur(cap, (0, 0), 1.0)
     cap = np.clip(cap + np.random.default_rng(6).normal(0.0, 0.002, cap.shape).astype(np.float32), 0.0, 1.0)
     region = np.isfinite(col) & ~band
     out = {}
     for skip in (False, True):
-        p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), albedo_edge_skip=skip)
-        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
-        r = decode(cap, rig=RIG, params=p, reference=rmap)
+        r = _robust_decode(calibration, cap, albedo_edge_skip=skip)
         err = np.abs(r.column_px - col)
         assert not (r.valid & np.isfinite(col) & (err > 0.5 * 21)).any(), skip
         ok = r.valid & region
