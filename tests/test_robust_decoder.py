@@ -543,6 +543,32 @@ def test_albedo_edges_cut_both_edges_of_a_seam_narrower_than_a_period():
     assert all(np.flatnonzero(step[y]).size == 1 for y in range(12)), [np.flatnonzero(r) for r in step]
 
 
+def test_the_fringe_channel_drops_a_cut_it_does_not_see_where_it_can_judge():
+    """A cut where the code pair steps 2x: the blue fringe (no code in it) steps 2x too at a
+    neutral print's edge - kept; it stays flat where the step is the code's (a saturated print's
+    run of one code colour) - dropped; and where blue comes back weakly (under half the strongest
+    channel, a red print) it cannot judge - kept."""
+    from simbench.decode.color import fringe_confirmed
+
+    t = 21.0
+    x = np.arange(400)
+    fringe = (0.5 + 0.5 * np.cos(2 * np.pi * x / t)).astype(np.float32)
+    step = np.where(x < 200, 1.0, 0.5).astype(np.float32)
+    cuts = np.zeros((12, 400), bool)
+    cuts[:, 199] = True
+
+    def capture(r, g, b):
+        return np.ascontiguousarray(np.stack([np.tile(v, (12, 1)) for v in (r, g, b)], axis=-1), np.float32)
+
+    neutral = capture(0.8 * step, 0.8 * step, fringe * step)
+    code_run = capture(0.8 * step, 0.8 * step, fringe)
+    red = capture(0.8 * step, 0.3 * step, 0.2 * fringe)
+    assert fringe_confirmed(cuts, neutral, period_px=t)[:, 199].all()
+    assert not fringe_confirmed(cuts, code_run, period_px=t).any()
+    assert fringe_confirmed(cuts, red, period_px=t)[:, 199].all()
+    assert not fringe_confirmed(np.zeros_like(cuts), neutral, period_px=t).any()
+
+
 def _shadow_and_ink(*, ink: float, noise=0.002, seed=7):
     """The board with two dark vertical strips 2.5 periods wide: a projector shadow (no pattern
     light, only the ambient) and a print of reflectance ``ink``, whose fringe is as faint."""
@@ -579,11 +605,12 @@ def test_albedo_gain_brightens_faint_ink_but_not_a_projector_shadow():
 def test_albedo_gain_varies_without_a_jump_away_from_its_steps(monkeypatch):
     """The gain steps at the albedo steps it finds and nowhere else: along every row across a
     3:1 print (a step at 0.3 of the row), neighbouring pixels' gains more than two pixels from
-    every cut differ by under 5 % (measured up to 3.4 %: just after a cut a segment's mean, its
+    every cut differ by under 7 % (measured up to 5.8 %: just after a cut a segment's mean, its
     window cut short, follows the fringe a little; until 2026-11-29 the fade jumped from 1 to 1/2
-    half a window beyond each step - measured here 1.09x, on robust_printed 1.4x - a gain step inside the uniform
+    half a window beyond each step - measured here 1.32x, on robust_printed 1.4x - a gain step inside the uniform
     print that the phase fit read as an albedo step).  (The step test also cuts this print where
-    the proxy's normalisation ramps back up on the print, ~3.5 periods past its edge.)"""
+    the proxy's normalisation ramps back up on the print, ~3.5 periods past its edge, a cut the
+    blue fringe then drops: fringe_confirmed.)"""
     img, _ = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
     h, w = img.shape[:2]
     rho = np.full((h, w, 1), 0.8, np.float32)
@@ -604,7 +631,7 @@ def test_albedo_gain_varies_without_a_jump_away_from_its_steps(monkeypatch):
     rows = color.ALBEDO_MEAN_ROWS
     near = cv2.dilate(found[0].astype(np.uint8), np.ones((rows, 5), np.uint8)).astype(bool)[:, :-1]
     ratio[near] = 1.0
-    assert ratio.max() < 1.05, (ratio.max(), np.unravel_index(ratio.argmax(), ratio.shape))
+    assert ratio.max() < 1.07, (ratio.max(), np.unravel_index(ratio.argmax(), ratio.shape))
 
 
 def _one_period_step(far_brightness: float):

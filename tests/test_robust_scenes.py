@@ -43,6 +43,9 @@ PASSING = [
     # in neither list from 2026-11-25 (its xfail removed, the scene not added here) to 2026-11-29:
     # 99.72 % complete, MAE 0.24 / 0.25 mm, none > 5 mm wrong, both modes
     "robust_tilt_y45",
+    # a strict xfail until 2026-11-29 (below), then: 97.53 % complete, 0.043 % / 0.040 % > 5 mm
+    # wrong, MAE 0.37 / 0.35 mm, both modes (16 spp)
+    "robust_printed",
     "step",
     # 2026-11-26: 97.43 % complete, none > 5 mm wrong, both modes (96.39 % once the captures lost
     # their black end columns, 97.43 % with the narrow window's SNR beside the depth edges)
@@ -52,20 +55,13 @@ PASSING = [
 # to PASSING).  (robust_staircase was one from issue 17 to 2026-11-26: slivers between the image
 # border and projector shadows, stripes dropped beside a shadowless depth edge, then pixels under
 # the operating point beside the edges - 89.4 % at first.)
-SHORTFALLS = {
-    # measured 2026-11-25 (16 spp) at the operating point 3 with the albedo flattening and its shadow
-    # guard: 95.5 % complete, 0.12 % (calibrated) / 0.13 % (reference) of the decoded pixels > 5 mm
-    # wrong, MAE 0.42 / 0.39 mm (before the flattening 95.2 % and 0.50 %; with no threshold 97.9 % but
-    # 1.2 % wrong).  The wrong pixels and the holes lie beside the tile edges, where the window
-    # straddles an albedo step, and on the saturated tiles.  2026-11-26, captures without the black
-    # end columns and the narrow window's SNR: 95.6 % complete, 0.098 % / 0.100 % wrong, MAE 0.40 mm.
-    # 2026-11-29, the albedo steps' cuts refined and their straddling pixels left out of the fit:
-    # 96.71 % complete (both modes), 0.097 % / 0.094 % wrong, MAE 0.38 / 0.37 mm; the gain's fade
-    # without its jump: 96.82 %, 0.042 % / 0.040 %, MAE 0.367 / 0.354 mm.  What is left: the red
-    # and orange tiles (92 and 89 %), whose albedo proxy follows the code (their green and blue
-    # come back weakly), cut inside the tile.
-    "robust_printed": "saturated tiles cut by false albedo steps: 96.8 % complete (0.04 % > 5 mm wrong) at the "
-    "operating point (issue 35)",
+SHORTFALLS: dict[str, str] = {
+    # robust_printed, from 2026-11-25 to 2026-11-29: 95.5 % complete and 0.12 % / 0.13 % > 5 mm wrong
+    # at the operating point (before the albedo flattening 95.2 % and 0.50 %; with no threshold
+    # 97.9 % but 1.2 %); 95.6 % and 0.10 % once the captures lost their black end columns; 96.71 %
+    # and 0.097 % with the steps' cuts placed at their edges and the straddling pixels skipped;
+    # 96.82 % and 0.042 % with the gain's fade without a jump; then 97.53 % and 0.043 % once the
+    # blue fringe confirms the cuts (the code runs of its red, orange and purple tiles had cut them).
 }
 
 

@@ -27,6 +27,7 @@ __all__ = [
     "albedo_gain",
     "albedo_gain_reach_rows",
     "albedo_step_pixels",
+    "fringe_confirmed",
     "overlay_weights",
     "normalized_color_code",
     "Stripes",
@@ -328,6 +329,16 @@ ALBEDO_EDGE_RATIO = 1.35
 # tiles of scenes/robust_printed.toml were cut at their code runs, 96.8 -> 96.0 % complete and
 # 0.04 -> 0.10 % wrong)
 ALBEDO_STRIP_RATIO = 1.8
+# a cut is dropped where the blue fringe, which carries no code, comes back at this share or more
+# of the strongest channel on both sides and steps by less than this ratio (fringe_confirmed;
+# assumption: 0.5 - blue at least half the strongest channel, well above a saturated print's
+# crosstalk residue; 1.1 - a print step the proxy sees at 1.35 or more shows in blue too, unless
+# the two inks reflect blue alike.  Measured 2026-11-29 on scenes/robust_printed.toml (16 spp):
+# 96.67 -> 97.53 % complete at 0.040 % wrong; share 0.25: 97.35 %; without the share test (blue
+# judging everywhere) 97.28 % but 0.18 % wrong - the red tile's real edges dropped; the 25 hard
+# scenes within 0.1 % and Table 3 the same)
+ALBEDO_CONFIRM_SHARE = 0.5
+ALBEDO_CONFIRM_RATIO = 1.1
 # rows averaged before the step test (a step along the stripes is one in every row; noise is not)
 ALBEDO_EDGE_ROWS = 5
 # rows the per-row albedo is averaged over (the gain of one row's 4-period mean is noisy on dark ink)
@@ -440,6 +451,53 @@ def _edges_of_rows(g: np.ndarray, *, period_px: float) -> np.ndarray:
     return cuts
 
 
+def fringe_confirmed(cuts: np.ndarray, rgb: np.ndarray, *, period_px: float) -> np.ndarray:
+    """``cuts`` less those the fringe channel contradicts (ours; :func:`albedo_gain`'s).
+
+    The proxy's code pair follows the code on a saturated print: where one code colour comes back
+    weakly, the crosstalk residue the unmixing (calibrated on white) leaves in it makes the stripes
+    of one code brighter, and a run of three of them reads as a step (measured on
+    ``scenes/robust_printed.toml``: cuts inside its red, orange and purple tiles, gain jumps of
+    2-3x within one print).  The blue fringe carries no code: where blue comes back at
+    :data:`ALBEDO_CONFIRM_SHARE` or more of the strongest channel on both sides of a cut, its means
+    over two periods either side (rows averaged as the step test's) must differ by
+    :data:`ALBEDO_CONFIRM_RATIO` or more, else the cut is dropped; where blue is weaker it cannot
+    judge and the cut stays.
+
+    Parameters
+    ----------
+    cuts : ndarray, shape (H, W), bool; :func:`albedo_edges`' (``cuts[y, x]``: a step between x and x + 1)
+    rgb : ndarray, shape (H, W, 3), float32; the unmixed capture the proxy was made from
+    period_px : float
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    ys, xs = np.nonzero(cuts)
+    if ys.size == 0:
+        return cuts
+    m = 2 * max(2, int(round(period_px)))
+    rows, row_of = np.unique(ys, return_inverse=True)
+    c = xs + m + 1
+    means = []
+    for ch in range(3):
+        g = _rows_mean(np.ascontiguousarray(rgb[..., ch], np.float32))[rows].astype(np.float64)
+        cs = np.zeros((rows.size, g.shape[1] + 2 * m + 1))
+        np.cumsum(np.pad(g, ((0, 0), (m, m)), mode="edge"), axis=1, out=cs[:, 1:])
+        means.append(((cs[row_of, c] - cs[row_of, c - m]) / m, (cs[row_of, c + m] - cs[row_of, c]) / m))
+    (r_l, r_r), (g_l, g_r), (b_l, b_r) = means
+    judged = (b_l >= ALBEDO_CONFIRM_SHARE * np.maximum(np.maximum(r_l, g_l), b_l)) & (
+        b_r >= ALBEDO_CONFIRM_SHARE * np.maximum(np.maximum(r_r, g_r), b_r)
+    )
+    eps = 1e-3 + 0.02 * np.maximum(b_l, b_r)
+    ratio = np.maximum(b_l + eps, b_r + eps) / np.minimum(b_l + eps, b_r + eps)
+    drop = judged & (ratio < ALBEDO_CONFIRM_RATIO)
+    out = cuts.copy()
+    out[ys[drop], xs[drop]] = False
+    return out
+
+
 def albedo_gain_reach_rows(period_px: float, order: int) -> int:
     """How many rows above and below a pixel :func:`albedo_gain` reads to make that pixel's gain:
     the spans' box mean (half a window), the edge rows' mean and erosion
@@ -500,7 +558,8 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
        :data:`ALBEDO_MIN_CHANNEL_SHARE` of the strongest (its crosstalk residue would make the
        proxy follow the code) and the pair where one code colour does not come back (a magenta
        board: its green-coded stripes are dark); with neither, the gain is 1;
-    2. the steps of the proxy along the rows (:func:`albedo_edges`);
+    2. the steps of the proxy along the rows (:func:`albedo_edges`), less those the blue fringe,
+       which carries no code, contradicts where it can judge (:func:`fringe_confirmed`);
     3. the proxy's mean over the normalisation window, kept inside each segment
        (:func:`segment_mean`), averaged over :data:`ALBEDO_MEAN_ROWS` rows: the segment's
        brightness;
@@ -546,7 +605,7 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
     rows = _rows_mean(proxy)
-    cuts = _edges_of_rows(rows, period_px=period_px) & defined
+    cuts = fringe_confirmed(_edges_of_rows(rows, period_px=period_px) & defined, rgb, period_px=period_px)
     if not cuts.any():
         # no step: the fade below is 0 everywhere and the gain exactly 1; no segment to measure
         return np.ones(proxy.shape, np.float32)
