@@ -597,6 +597,12 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
     proxy = np.empty(k.shape[:2], np.float32)
     total_pos = np.empty(k.shape[:2], bool)
     _kernels.albedo_proxy(np.ascontiguousarray(rgb, np.float32), k, ALBEDO_MIN_CHANNEL_SHARE, proxy, total_pos)
+    rows = _rows_mean(proxy)
+    steps = _edges_of_rows(rows, period_px=period_px)
+    # no step in the band (a uniform surface: most bands of most scenes): the gain is 1, and the
+    # tests below, which only remove steps, need not run (~3 ms a band at the paper's resolution)
+    if not steps.any():
+        return np.ones(proxy.shape, np.float32)
     # only where the proxy is defined across a whole window (it is not, where it would follow the
     # code, and a border between defined and not is no albedo step)
     defined = cv2.erode(
@@ -604,8 +610,7 @@ def albedo_gain(rgb: np.ndarray, span: np.ndarray, *, period_px: float, order: i
         np.ones((ALBEDO_EDGE_ROWS, 4 * half + 1), np.uint8),
         borderType=cv2.BORDER_REPLICATE,
     ).astype(bool)
-    rows = _rows_mean(proxy)
-    cuts = fringe_confirmed(_edges_of_rows(rows, period_px=period_px) & defined, rgb, period_px=period_px)
+    cuts = fringe_confirmed(steps & defined, rgb, period_px=period_px)
     if not cuts.any():
         # no step: the fade below is 0 everywhere and the gain exactly 1; no segment to measure
         return np.ones(proxy.shape, np.float32)
