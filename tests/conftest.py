@@ -17,9 +17,29 @@ def variant() -> str:
     return select_variant()
 
 
+def run_folder(config, tmp_path_factory) -> Path:
+    """A folder of this test run's, shared by its pytest-xdist worker processes (the parent of
+    each worker's own base folder; the base folder itself without workers): new each run."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if hasattr(config, "workerinput") else base
+
+
 @pytest.fixture(scope="session")
-def acquisitions(variant):
-    """Full-resolution, 16 spp, noisy acquisitions of the pipeline scenes (rendered once)."""
+def shared_render_cache(request, tmp_path_factory):
+    """A render cache shared by this run's test processes, for fixtures whose renders several
+    test files read (each file runs whole in one worker, so a per-process fixture rendered them
+    once per worker: the white board's 16-spp renders four times, ~30 s).  The cache makes an
+    entry once under its key's lock and the others read it (:meth:`simbench.cache.RenderCache.get_or_make`);
+    that a cached recording is the bits of a fresh one is tests/test_cache.py's claim."""
+    from simbench.cache import RenderCache
+
+    return RenderCache(run_folder(request.config, tmp_path_factory) / "shared-render-cache")
+
+
+@pytest.fixture(scope="session")
+def acquisitions(variant, shared_render_cache):
+    """Full-resolution, 16 spp, noisy acquisitions of the pipeline scenes (rendered once per
+    test run, :func:`shared_render_cache`)."""
     from simbench.pattern import PatternSpec
     from simbench.sim.scene import load_scene
     from simbench.sim.sensor import get_sensor
@@ -36,6 +56,7 @@ def acquisitions(variant):
                 sensor=get_sensor("minimal"),
                 spp=16,
                 seed=seed,
+                cache=shared_render_cache,
             )
         return cache[key]
 
