@@ -50,6 +50,7 @@ __all__ = [
     "scale_camera",
     "check_stripe_baseline",
     "MIN_BASELINE_X_SHARE",
+    "rig_differences",
 ]
 
 
@@ -229,6 +230,46 @@ def check_stripe_baseline(rig: Rig) -> None:
             "stripes code the projector's column, which only a baseline along x turns into depth - place the "
             "projector beside the camera (position_m = [b, 0, 0], b > 0 on its right or < 0 on its left)"
         )
+
+
+# How far a rig may lie from another and still describe the same device (rig_differences): a
+# calibration of a rig, even a poor one, stays well within these (assumption: published
+# projector-camera calibrations report focal lengths within ~1 %, principal points within a few
+# pixels, baselines within ~1 % and rotations within ~0.5 deg; this repository's 10-pose
+# calibration, results/calibration/report.md, within 0.03 %, 0.4 px, 0.3 mm), and a rig beyond
+# them decodes to depths off by about as much (depth scales with baseline and focal length)
+SAME_RIG_FOCAL_SHARE = 0.05
+SAME_RIG_PRINCIPAL_SHARE = 0.05
+SAME_RIG_POSITION_SHARE = 0.05
+SAME_RIG_ROTATION_DEG = 5.0
+
+
+def rig_differences(rig: Rig, other: Rig) -> list[str]:
+    """What makes ``rig`` another device than ``other`` - not a calibration of it: image sizes
+    that differ, a focal length more than :data:`SAME_RIG_FOCAL_SHARE` off, a principal point more
+    than :data:`SAME_RIG_PRINCIPAL_SHARE` of the image's size off, a projector position more than
+    :data:`SAME_RIG_POSITION_SHARE` of ``other``'s baseline off, or a rotation more than
+    :data:`SAME_RIG_ROTATION_DEG` off; each as one phrase (empty: the same device)."""
+    out = []
+    for dev in ("camera", "projector"):
+        a, b = getattr(rig, dev), getattr(other, dev)
+        if a.size_hw != b.size_hw:
+            out.append(f"{dev} {a.width_px}x{a.height_px} against {b.width_px}x{b.height_px}")
+            continue
+        if abs(a.focal_px - b.focal_px) > SAME_RIG_FOCAL_SHARE * b.focal_px:
+            out.append(f"{dev} focal length {a.focal_px:g} px against {b.focal_px:g}")
+        if max(abs(a.cx_px - b.cx_px) / b.width_px, abs(a.cy_px - b.cy_px) / b.height_px) > SAME_RIG_PRINCIPAL_SHARE:
+            out.append(f"{dev} principal point ({a.cx_px:g}, {a.cy_px:g}) against ({b.cx_px:g}, {b.cy_px:g})")
+    moved = float(np.linalg.norm(np.subtract(rig.position_m, other.position_m)))
+    if moved > SAME_RIG_POSITION_SHARE * other.baseline_m:
+        out.append(
+            f"baseline {1000 * rig.baseline_m:.1f} mm against {1000 * other.baseline_m:.1f} "
+            f"(the projector {1000 * moved:.1f} mm apart)"
+        )
+    turn = float(np.clip((np.trace(rig.rotation @ other.rotation.T) - 1.0) / 2.0, -1.0, 1.0))
+    if np.degrees(np.arccos(turn)) > SAME_RIG_ROTATION_DEG:
+        out.append(f"projector turned {np.degrees(np.arccos(turn)):.1f} deg from the other's")
+    return out
 
 
 def paper_rig() -> Rig:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from simbench.cli import main
+from simbench.cli.options import DEFAULT_CACHE
 from simbench.io import load_image
 from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
 
@@ -553,6 +554,12 @@ def test_cache_info_and_prune(tmp_path, capsys):
     assert "expected a size such as 500M, 10G or 1.5GiB, got '-1G'" in capsys.readouterr().err
     assert main(["cache", "info", "--cache", str(tmp_path / "none")]) == 2
     assert "no such cache folder" in capsys.readouterr().err
+    # the default folder before any render made it (a fresh checkout, this test's empty working
+    # folder): an empty cache, not an error (a new user's audit, 2026-11-29)
+    assert not Path(DEFAULT_CACHE).exists()
+    assert main(["cache", "info"]) == 0 and "not made yet (0 entries" in capsys.readouterr().out
+    assert main(["cache", "prune", "--max-size", "1G"]) == 0 and "nothing to remove" in capsys.readouterr().out
+    assert not Path(DEFAULT_CACHE).exists()
 
 
 @pytest.mark.parametrize(
@@ -1041,3 +1048,25 @@ def test_decode_warns_of_a_capture_whose_channels_are_out_of_order(tmp_path, cap
     argv[1] = str(r / "capture.png")
     assert main([*argv, "--out", str(tmp_path / "e.npy")]) == 0
     assert "fringe seems" not in capsys.readouterr().err
+
+
+def test_debug_after_the_command_shows_the_traceback_and_keeps_the_exit_status(tmp_path, capsys):
+    """A new user's audit (2026-11-29): ``decode --debug DIR ...`` was taken for ``--debug-dir DIR``
+    (argparse's prefixes) and wrote stage images; ``--debug`` after the command was refused, and
+    with it bad input exited 1 (the traceback raised) where it exits 2."""
+    missing = [
+        "decode",
+        str(tmp_path / "none.png"),
+        "--rig",
+        str(tmp_path / "none.toml"),
+        "--out",
+        str(tmp_path / "d.npy"),
+    ]
+    for argv in (["--debug", *missing], [*missing, "--debug"], [missing[0], "--debug", *missing[1:]]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "Traceback" in err and err.rstrip().endswith("rig file not found: " + str(tmp_path / "none.toml")), err
+    assert main(missing) == 2 and "Traceback" not in capsys.readouterr().err
+    # no prefixes: --debug-d is no --debug-dir
+    assert main([*missing, "--debug-d", str(tmp_path / "dbg")]) == 2
+    assert "unrecognized arguments: --debug-d" in capsys.readouterr().err and not (tmp_path / "dbg").exists()

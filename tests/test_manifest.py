@@ -132,6 +132,72 @@ def test_a_reference_of_another_rig_is_refused(tmp_path, capsys):
     assert rc == 2 and "recorded with another rig" in err, err
 
 
+def test_a_recorded_capture_refuses_another_rigs_file(tmp_path, capsys):
+    """A new user's audit (2026-11-29): a capture recorded with a 150 mm baseline decoded in
+    calibrated mode with a 93 mm rig, bare or as a folder: exit 0, 268 mm MAE.  Another device's rig
+    is refused (simbench.rig.rig_differences); a calibration of the recorded rig decodes, and so
+    does the image copied out of its recording folder, with any rig."""
+    import shutil
+
+    from simbench.rig import load_rig, rig_differences
+
+    from .test_bad_inputs import _rig_text, _seal
+
+    r = render_folder(tmp_path)
+    (r / "rig.toml").write_text(_rig_text(**{"pose.position_m": "[0.150, 0.0, 0.0]"}))
+    _seal(r, reference_depth_m=1.0)
+    other = tmp_path / "paper_like.toml"
+    other.write_text(_rig_text())  # 93 mm
+    for capture in (r / "capture.png", r):
+        rc, _, err = _run(
+            ["decode", capture, "--rig", other, "--mode", "calibrated", "--out", tmp_path / "d.npy"], capsys
+        )
+        assert rc == 2 and "another rig than" in err and "baseline 93.0 mm against 150.0" in err, err
+        assert not (tmp_path / "d.npy").exists()
+    # a calibration of the recorded rig: 1 mm, 0.3 % of the focal length, 2 px and 0.2 deg off
+    near = tmp_path / "calibrated.toml"
+    near.write_text(
+        _rig_text(
+            **{
+                "pose.position_m": "[0.151, 0.0, 0.0]",
+                "pose.rotation_deg": "[0.0, 0.2, 0.0]",
+                "camera.focal_px": "289.9",
+                "camera.cx_px": "81.5",
+            }
+        )
+    )
+    assert rig_differences(load_rig(near), load_rig(r / "rig.toml")) == []
+    rc, _, err = _run(
+        ["decode", r / "capture.png", "--rig", near, "--mode", "calibrated", "--out", tmp_path / "d.npy"], capsys
+    )
+    assert rc == 0, err
+    loose = tmp_path / "loose.png"
+    shutil.copyfile(r / "capture.png", loose)
+    rc, _, err = _run(["decode", loose, "--rig", other, "--mode", "calibrated", "--out", tmp_path / "e.npy"], capsys)
+    assert rc == 0, err
+
+
+def test_rig_differences_names_each_kind_of_other_device():
+    from simbench.rig import Intrinsics, Rig, rig_differences
+
+    cam, proj = Intrinsics.centred(160, 120, 289.0), Intrinsics.centred(456, 285, 557.0)
+    base = Rig(cam, proj, (0.093, 0.0, 0.0))
+    assert rig_differences(base, base) == []
+    cases = {
+        "camera focal length": Rig(Intrinsics.centred(160, 120, 310.0), proj, (0.093, 0.0, 0.0)),
+        "projector principal point": Rig(cam, Intrinsics(456, 285, 557.0, 260.0, 142.0), (0.093, 0.0, 0.0)),
+        "camera 320x240": Rig(Intrinsics.centred(320, 240, 289.0), proj, (0.093, 0.0, 0.0)),
+        "baseline": Rig(cam, proj, (0.093, 0.0, 0.006)),
+        "turned": Rig(cam, proj, (0.093, 0.0, 0.0), (0.0, 6.0, 0.0)),
+    }
+    for phrase, rig in cases.items():
+        found = rig_differences(rig, base)
+        assert len(found) == 1 and phrase in found[0], (phrase, found)
+    # within the bounds: a calibration's error, not another device
+    near = Rig(Intrinsics.centred(160, 120, 292.0), proj, (0.095, 0.0, 0.001), (0.5, 0.5, 0.0))
+    assert rig_differences(near, base) == []
+
+
 def _truth(shape_hw):
     """A ground truth of a plane at 1 m, every pixel lit, one object."""
     from types import SimpleNamespace

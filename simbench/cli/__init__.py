@@ -38,7 +38,18 @@ def _parser() -> argparse.ArgumentParser:
     decode.add_parsers(sub, kw)
     experiments.add_parsers(sub, kw)
     cache.add_parsers(sub, kw)
+    _debug_after_the_command(sub)
     return p
+
+
+def _debug_after_the_command(sub: argparse._SubParsersAction) -> None:
+    """``--debug`` taken after a command too (``simbench decode ... --debug``), as users type it;
+    the command's own default leaves the one given before the command standing."""
+    for parser in sub.choices.values():
+        parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks")
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                _debug_after_the_command(action)
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -127,9 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError, AttributeError):  # a stdout without a descriptor (a test's buffer)
             pass
         return 141
-    except MemoryError:
-        if args.debug:
-            raise
+    except MemoryError as exc:
+        _traceback_if_asked(exc, args)
         print("simbench: error: out of memory (the inputs ask for more than this machine has)", file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - SIGTERM re-wrapped by a render (simbench.termination)
@@ -169,11 +179,18 @@ def _negative_values_attached(argv: list[str]) -> list[str]:
     return out
 
 
+def _traceback_if_asked(exc: BaseException, args) -> None:
+    if getattr(args, "debug", False):
+        import traceback
+
+        traceback.print_exception(exc, file=sys.stderr)
+
+
 def _report_error(exc: Exception, args) -> int:
     """One line for a failed command: exit 2 for bad input (missing or unreadable files,
-    invalid values), 1 for anything else, a bug (``--debug``: the traceback instead)."""
-    if args.debug:
-        raise exc
+    invalid values), 1 for anything else, a bug (``--debug``: the traceback first, the same exit
+    status: a script's handling of bad input does not change with it)."""
+    _traceback_if_asked(exc, args)
     if isinstance(exc, (ValueError, OSError)):
         print(f"simbench: error: {_one_line(exc)}{_disk_full_hint(exc, args)}", file=sys.stderr)
         return 2

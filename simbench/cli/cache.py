@@ -14,11 +14,22 @@ from simbench.cli.options import (
 )
 
 
+def _default_not_made(args) -> bool:
+    """The default cache folder, before any render made it (a fresh checkout): an empty cache,
+    not an error; a folder given with --cache that is not there stays one (a typo)."""
+    from pathlib import Path
+
+    return str(args.cache) == str(DEFAULT_CACHE) and not Path(args.cache).exists()
+
+
 def _cmd_cache_info(args) -> int:
     import shutil
 
     from simbench.cache import cache_entries
 
+    if _default_not_made(args):
+        print(f"cache {args.cache}: not made yet (0 entries: the first render makes it)")
+        return 0
     entries = cache_entries(args.cache)
     kinds: dict[str, list] = {}
     for c in entries:
@@ -45,6 +56,9 @@ def _cmd_cache_prune(args) -> int:
 
     if args.max_size is None and args.unused_days is None:
         raise ValueError("cache prune: give --max-size, --unused-days or both (what to keep)")
+    if _default_not_made(args):
+        print(f"cache {args.cache}: not made yet, nothing to remove")
+        return 0
     before = cache_entries(args.cache)
     result = prune_cache(
         args.cache,

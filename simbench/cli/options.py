@@ -16,7 +16,14 @@ if TYPE_CHECKING:
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with the CLI's error convention: one line on stderr, exit status 2."""
+    """argparse with the CLI's error convention: one line on stderr, exit status 2; options only
+    by their whole names (argparse's prefix matching took ``decode --debug DIR`` for
+    ``--debug-dir DIR`` and wrote stage images where a traceback was asked for: a new user's
+    audit, 2026-11-29)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:  # noqa: D102 - argparse's hook
         where = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""

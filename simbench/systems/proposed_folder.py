@@ -208,6 +208,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     if recorded is not None and recorded["files"].get("capture") != Path(capture_path).name:
         recorded = None  # an image beside a recording, not its capture: decoded as any image
     if recorded is not None:
+        _check_recorded_rig(rig, rig_path, capture_path, recorded)
         pattern = _recorded_pattern(
             request, recorded_pattern(recorded, where=str(Path(capture_path).parent / "meta.json"))
         )
@@ -424,6 +425,34 @@ def _check_same_recording_rig(capture_path, reference_path, manifests: dict) -> 
         raise ValueError(
             f"--reference {reference_path} was recorded with another rig than {capture_path} (their folders' rig.toml "
             "differ): a reference plane belongs to the rig it was captured with"
+        )
+
+
+def _check_recorded_rig(rig, rig_path, capture_path, recorded: dict) -> None:
+    """A recording's capture decodes with its own rig or a calibration of it: a ``--rig`` that
+    describes another device (:func:`simbench.rig.rig_differences` against the rig.toml recorded
+    beside the capture) is refused.  In calibrated mode nothing else would notice: a new user's
+    audit (2026-11-29) decoded a capture recorded with a 150 mm baseline with the paper rig's 93 mm,
+    exit 0, 268 mm MAE.  To decode an image with another rig on purpose, copy it out of its
+    recording folder (an image without a recording is decoded as any image)."""
+    from simbench.manifest import file_sha256
+    from simbench.rig import load_rig, rig_differences
+
+    name = recorded["files"].get("rig")
+    if name is None:
+        return
+    path = Path(capture_path).parent / name
+    if not path.is_file() or Path(rig_path).resolve() == path.resolve():
+        return
+    if file_sha256(path) != recorded["sha256"].get("rig"):
+        raise ValueError(f"{path} does not match its folder's manifest (SHA-256 differs): the folder mixes files")
+    far = rig_differences(rig, load_rig(path))
+    if far:
+        raise ValueError(
+            f"--rig {rig_path} is another rig than {capture_path} was recorded with ({path}): "
+            + "; ".join(far)
+            + " - decode with the recorded rig or a calibration of it (to decode with this rig on purpose, copy the "
+            "image out of its recording folder)"
         )
 
 
