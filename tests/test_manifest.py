@@ -426,3 +426,29 @@ def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
     )
     raw, _, _ = get_system("tof").read_recording(tmp_path / "rec")
     assert np.array_equal(raw, taps)
+
+
+def test_a_phase_shift_recording_refuses_another_rigs_file(tmp_path, capsys):
+    """The same for a system decoding with the scene's rig (phase shifting): `decode FOLDER --rig`
+    of another device refused, a calibration of the recorded rig announced and decoded."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from simbench.rig import save_rig
+    from simbench.systems import get_system
+
+    system = get_system("phase_shift")
+    raw, cal, scene = system.bench_inputs()
+    hw = scene.rig.camera.size_hw
+    gt = SimpleNamespace(depth_m=np.full(hw, 1.0, np.float32), lit=np.ones(hw, bool), object_id=np.zeros(hw, np.int16))
+    system.write_recording(tmp_path / "ps", raw, cal, scene=scene, gt=gt, meta={"seed": 1})
+    wide = dataclasses.replace(scene.rig, position_m=(0.150, 0.0, 0.0))
+    near = dataclasses.replace(scene.rig, position_m=(scene.rig.position_m[0] + 0.0005, 0.0, 0.0))
+    save_rig(wide, tmp_path / "wide.toml")
+    save_rig(near, tmp_path / "near.toml")
+    rc, _, err = _run(["decode", tmp_path / "ps", "--rig", tmp_path / "wide.toml", "--out", tmp_path / "d.npy"], capsys)
+    assert rc == 2 and "another rig than" in err and "baseline 150.0 mm" in err, err
+    rc, out, err = _run(
+        ["decode", tmp_path / "ps", "--rig", tmp_path / "near.toml", "--out", tmp_path / "d.npy"], capsys
+    )
+    assert rc == 0 and "overriding the recording: rig" in out, (out, err)

@@ -453,6 +453,16 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
                 f"--rig {request.rig}: camera {rig.camera.width_px}x{rig.camera.height_px}, but the recording's is "
                 f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
             )
+        from simbench.rig import rig_differences
+
+        far = rig_differences(rig, scene.rig)
+        if far:  # (as the proposed sensor's folders: simbench.systems.proposed_folder._check_recorded_rig)
+            raise ValueError(
+                f"--rig {request.rig} is another rig than {request.capture} was recorded with: "
+                + "; ".join(far)
+                + " - "
+                "decode with the recorded rig or a calibration of it"
+            )
         scene = dataclasses.replace(scene, rig=rig)
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)
