@@ -452,3 +452,37 @@ def test_a_phase_shift_recording_refuses_another_rigs_file(tmp_path, capsys):
         ["decode", tmp_path / "ps", "--rig", tmp_path / "near.toml", "--out", tmp_path / "d.npy"], capsys
     )
     assert rc == 0 and "overriding the recording: rig" in out, (out, err)
+
+
+def test_calibration_frames_of_another_rig_are_refused(tmp_path, capsys):
+    """`--robust --calibration FOLDER` of another rig's recording (a new user's audit, 2026-11-29:
+    accepted unchallenged) is refused as another rig's --reference is; the same rig's frames pass
+    this check."""
+    import shutil
+
+    from simbench.io import save_json
+    from simbench.pattern import PatternSpec
+    from simbench.systems.proposed import pattern_record
+
+    from .test_bad_inputs import _rig_text
+
+    a = render_folder(tmp_path / "a" if (tmp_path / "a").mkdir() is None else None)
+    b = render_folder(tmp_path / "b" if (tmp_path / "b").mkdir() is None else None)
+    frames = {f"calibration_{k}": f"calibration_{k}.png" for k in ("dark", "red", "green", "blue")}
+    names = {"capture": "capture.png", "reference": "reference.png", "rig": "rig.toml", "gt_depth": "gt_depth.npy"}
+    for folder, rig_text in ((a, _rig_text()), (b, _rig_text(**{"pose.position_m": "[0.120, 0.0, 0.0]"}))):
+        (folder / "rig.toml").write_text(rig_text)
+        for name in frames.values():
+            shutil.copyfile(folder / "reference.png", folder / name)
+        (folder / "meta.json").unlink()
+        record = {
+            "system": "proposed",
+            "pattern": pattern_record(PatternSpec(size_hw=(285, 456))),
+            "reference_depth_m": 1.0,
+        }
+        save_json(folder / "meta.json", seal_manifest(folder, record, {**names, **frames}))
+    argv = ["decode", a, "--robust", "--mode", "calibrated", "--out", tmp_path / "d.npy"]
+    rc, _, err = _run([*argv, "--calibration", b], capsys)
+    assert rc == 2 and "calibration frame" in err and "another rig than the reference" in err, err
+    rc, _, err = _run(argv, capsys)  # its own frames: past this check (what the frames hold is the decoder's affair)
+    assert "another rig" not in err, err

@@ -413,15 +413,22 @@ def _check_reference_plane(
     )
 
 
-def _check_same_recording_rig(capture_path, reference_path, manifests: dict) -> None:
+def _check_same_recording_rig(capture_path, reference_path, manifests: dict, *, what: str = "reference") -> None:
     """A reference from another recording folder must have been recorded with the capture's rig
     (their manifests' rig.toml digests): a reference of another baseline decodes to wrong
-    depths everywhere without a word."""
+    depths everywhere without a word.  So too the colour-robust decoder's calibration frames,
+    against the reference (``what="calibration frame"``: a new user's audit, 2026-11-29, gave
+    ``--calibration`` another rig's folder unchallenged)."""
     cap, ref = manifests.get(capture_path), manifests.get(reference_path)
     if cap is None or ref is None or cap is ref:
         return
     a, b = cap["sha256"].get("rig"), ref["sha256"].get("rig")
     if a is not None and b is not None and a != b:
+        if what != "reference":
+            raise ValueError(
+                f"the {what} {reference_path} was recorded with another rig than the reference {capture_path} (their "
+                "folders' rig.toml differ): calibration frames belong to the rig and plane they were captured with"
+            )
         raise ValueError(
             f"--reference {reference_path} was recorded with another rig than {capture_path} (their folders' rig.toml "
             "differ): a reference plane belongs to the rig it was captured with"
@@ -477,8 +484,14 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
             f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench "
             f"render --calibration-frames`, or give --calibration FOLDER)"
         )
+    ref_manifest = recording_manifest_of(reference_path) if Path(reference_path).is_file() else None
     for p in paths.values():
-        recording_manifest_of(p)
+        _check_same_recording_rig(
+            str(reference_path),
+            str(p),
+            {reference_path: ref_manifest, str(p): recording_manifest_of(p)},
+            what="calibration frame",
+        )
     frames = {k: _camera_image(p, rig, request, hint=False) for k, p in paths.items()}
     if reference is None:
         # calibrated mode: read here only (reference mode's was read, and warned of, with the capture)
