@@ -109,6 +109,22 @@ def test_decode_warns_of_a_jpeg_and_a_clipped_capture(tmp_path, caplog):
     assert "reference.png: the reference capture shows JPEG's 8x8 blocks" in caplog.text
 
 
+def test_a_capture_saturated_all_over_is_told_of_once(tmp_path, caplog):
+    """A capture at 255 everywhere: the nothing-decoded warning names its saturation, without the
+    clipping doubt about the phase beside clipped runs before it (a new user's audit, 2026-11-29:
+    there are no kept pixels for it to be about); at 50 % clipped that doubt stands
+    (test_decode_warns_of_a_jpeg_and_a_clipped_capture)."""
+    from simbench.decode.pipeline import CAPTURE_CLIPPED_UNDECODABLE
+    from simbench.systems.files import NOTHING_DECODED_SHARE
+
+    assert CAPTURE_CLIPPED_UNDECODABLE == pytest.approx(1.0 - NOTHING_DECODED_SHARE)
+    white = np.full_like(RAW, 255)
+    files = [*bare_files(tmp_path, white, CAL.image, SCENE.rig), "--z0", "1.0", "--out", str(tmp_path / "d.npy")]
+    assert main(["decode", *files]) == 0
+    assert "clipped in a colour channel" not in caplog.text, caplog.text
+    assert "no pixel decoded: 100 % of the capture's pixels are saturated in every channel" in caplog.text
+
+
 def test_decode_refuses_clipped_calibration_frames_in_one_line(tmp_path, capsys):
     """The colour-robust decoder's coupling matrix is the median of each primary's frame over the
     plane: frames exposed 3x (each primary's own channel at full scale over the plane) would give

@@ -851,6 +851,13 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
     )
 
 
+# A capture clipped in a channel on more than this share of its pixels decodes under 1 - this
+# share of them (a clipped sample is skipped), and the warning for a decode that found almost
+# nothing (simbench.systems.files.NOTHING_DECODED_SHARE, 1 %) names the saturation: no clipping
+# doubt about "the phase beside a clipped run" before it (a new user's audit, 2026-11-29)
+CAPTURE_CLIPPED_UNDECODABLE = 0.99
+
+
 def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, encoding: str = "linear") -> list[str]:
     """What `simbench decode` and :func:`simbench.depth` warn of before decoding ``capture``: the
     pattern on the rig (:func:`simbench.decode.params.pattern_on_rig_warnings`), the capture's
@@ -860,7 +867,10 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, en
     (:mod:`simbench.decode.integrity`)."""
     from simbench.decode.params import pattern_on_rig_warnings
 
-    told = [channel_order_doubt(capture, rig=rig, params=params), *_integrity_warnings(capture, params, "capture")]
+    told = [
+        channel_order_doubt(capture, rig=rig, params=params),
+        *_integrity_warnings(capture, params, "capture", refused_clipped=CAPTURE_CLIPPED_UNDECODABLE),
+    ]
     told.append(
         encoding_doubt(
             fringe_harmonic_ratio(
