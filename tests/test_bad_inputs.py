@@ -978,18 +978,11 @@ def _bare_copies(d: Path) -> None:
 # images of no recording with a rig of another baseline: their reference plane tells (its Z0)
 case(
     "decode-calibrated-bare-images-rig-of-another-baseline",
-    lambda d: [
-        "decode",
-        str(d / "bare" / "capture.png"),
-        "--reference",
-        str(d / "bare" / "reference.png"),
-        "--mode",
-        "calibrated",
-        "--rig",
-        str(d / "other.toml"),
-        "--out",
-        str(d / "x.npy"),
-    ],
+    # (tmp_path has no spaces)
+    lambda d: (
+        f"decode {d}/bare/capture.png --reference {d}/bare/reference.png --mode calibrated --rig {d}/other.toml "
+        f"--out {d}/x.npy".split()
+    ),
     "triangulates with the rig",
     setup=_bare_copies,
 )
