@@ -172,6 +172,22 @@ def recording_manifest_of(path: str | Path) -> dict | None:
     return None
 
 
+def refuse_another_rig(rig, recorded, *, rig_path, capture, hint: str = "") -> None:
+    """A ValueError when ``rig`` (given as ``--rig rig_path``) describes another device than the
+    rig ``capture`` was recorded with (:func:`simbench.rig.rig_differences`): a recording decodes
+    with its own rig or a calibration of it, never silently with another's (a new user's audit,
+    2026-11-29: a 150 mm baseline's capture decoded with a 93 mm rig, exit 0, 268 mm MAE).
+    ``hint``: what the caller adds to the line."""
+    from simbench.rig import rig_differences
+
+    far = rig_differences(rig, recorded)
+    if far:
+        raise ValueError(
+            f"--rig {rig_path} is another rig than {capture} was recorded with{hint}: {'; '.join(far)} - decode with "
+            "the recorded rig or a calibration of it"
+        )
+
+
 def check_request_paths(request: DecodeRequest) -> None:
     """The output paths' kinds, before anything else: a depth map is .npy, a point cloud .ply,
     the stage folder a folder."""
@@ -453,16 +469,7 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
                 f"--rig {request.rig}: camera {rig.camera.width_px}x{rig.camera.height_px}, but the recording's is "
                 f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
             )
-        from simbench.rig import rig_differences
-
-        far = rig_differences(rig, scene.rig)
-        if far:  # (as the proposed sensor's folders: simbench.systems.proposed_folder._check_recorded_rig)
-            raise ValueError(
-                f"--rig {request.rig} is another rig than {request.capture} was recorded with: "
-                + "; ".join(far)
-                + " - "
-                "decode with the recorded rig or a calibration of it"
-            )
+        refuse_another_rig(rig, scene.rig, rig_path=request.rig, capture=request.capture)
         scene = dataclasses.replace(scene, rig=rig)
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)

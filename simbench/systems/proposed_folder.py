@@ -28,6 +28,7 @@ from simbench.systems.files import (
     FileDecode,
     check_outputs,
     recording_manifest_of,
+    refuse_another_rig,
 )
 
 __all__ = [
@@ -443,7 +444,7 @@ def _check_recorded_rig(rig, rig_path, capture_path, recorded: dict) -> None:
     exit 0, 268 mm MAE.  To decode an image with another rig on purpose, copy it out of its
     recording folder (an image without a recording is decoded as any image)."""
     from simbench.manifest import file_sha256
-    from simbench.rig import load_rig, rig_differences
+    from simbench.rig import load_rig
 
     name = recorded["files"].get("rig")
     if name is None:
@@ -453,14 +454,13 @@ def _check_recorded_rig(rig, rig_path, capture_path, recorded: dict) -> None:
         return
     if file_sha256(path) != recorded["sha256"].get("rig"):
         raise ValueError(f"{path} does not match its folder's manifest (SHA-256 differs): the folder mixes files")
-    far = rig_differences(rig, load_rig(path))
-    if far:
-        raise ValueError(
-            f"--rig {rig_path} is another rig than {capture_path} was recorded with ({path}): "
-            + "; ".join(far)
-            + " - decode with the recorded rig or a calibration of it (to decode with this rig on purpose, copy the "
-            "image out of its recording folder)"
-        )
+    refuse_another_rig(
+        rig,
+        load_rig(path),
+        rig_path=rig_path,
+        capture=capture_path,
+        hint=f" ({path}; to decode with this rig on purpose, copy the image out of its recording folder)",
+    )
 
 
 def _calibrated_reference(request, rig, params, reference, *, reference_path, cache=None):
