@@ -553,6 +553,27 @@ def test_made_entries_are_counted_per_kind_with_their_own_time(tmp_path, monkeyp
     assert RenderCache(None).made_summary() == "nothing"
 
 
+def test_the_ambient_renders_sample_count_is_a_quarter_that_the_sampler_accepts():
+    """simbench.sim.mitsuba_dict.ambient_spp: the largest count at most spp / 4 that the sampler
+    renders exactly (check_sampler), at least 1; the projector's own where the sampler accepts no
+    smaller count."""
+    from simbench.sim.mitsuba_dict import SAMPLERS, ambient_spp, check_sampler
+
+    assert [ambient_spp(s, "multijitter") for s in (1, 4, 9, 16, 36, 64, 100)] == [1, 1, 1, 4, 9, 16, 25]
+    assert [ambient_spp(s, "independent") for s in (1, 3, 4, 10, 36)] == [1, 1, 1, 2, 9]
+    assert [ambient_spp(s, "ldsampler") for s in (4, 16, 64, 256)] == [1, 4, 16, 64]
+    assert [ambient_spp(s, "orthogonal") for s in (4, 9, 25, 49, 121)] == [4, 9, 4, 9, 25]
+    for sampler in SAMPLERS:
+        for spp in (1, 4, 9, 16, 25, 36, 49, 64, 121, 256):
+            try:
+                check_sampler(sampler, spp)
+            except ValueError:
+                continue
+            n = ambient_spp(spp, sampler)
+            check_sampler(sampler, n)
+            assert n <= max(1, spp // 4) or n == spp
+
+
 def test_samples_per_pass_keep_every_pixel_in_one_dr_jit_work_unit(variant):
     """A pass's sample count divides 16384 (the work unit of a large wavefront) and 4 (the
     SIMD packet, the unit's granularity on a small one), and the passes make up the count;

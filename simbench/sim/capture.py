@@ -18,7 +18,7 @@ from simbench.sim.scene import scene_fingerprint
 from simbench.sim.sensor import SensorModel, apply_to_rig, sensor_to_dict
 from simbench.sim.drive import DriveImage, ProjectorDrive, mono_drive
 from simbench.sim.keys import recording_libraries, renderer_id, seed_key, sim_code_digest
-from simbench.sim.mitsuba_dict import RenderSettings, film_settings, pass_settings
+from simbench.sim.mitsuba_dict import RenderSettings, ambient_spp, film_settings, pass_settings
 from simbench.optics import camera_lens_image, lens_field
 from simbench.sim.subsurface import get_medium, subsurface_image
 from simbench.sim.photometry import (
@@ -393,10 +393,11 @@ def render_channels(
     the same image in the three primaries (phase-shift and calibration frames) and every path
     bounces once off Lambertian surfaces (:func:`single_bounce`: direct light, or a printed target
     alone), one render of the reflectances each channel records (:func:`grey_scene`; their ambient
-    light likewise, :func:`grey_ambient_scene`).  The ambient light is rendered
-    apart (light adds linearly; one emitter per render keeps the path tracer's noise that of a
-    single light) and, with crosstalk, once per primary's materials: light of the projector's
-    white.  Then the translucent objects' subsurface
+    light likewise, :func:`grey_ambient_scene`).  The ambient light is rendered apart (light
+    adds linearly; one emitter per render keeps the path tracer's noise that of a single light),
+    at a quarter of the samples (:func:`simbench.sim.mitsuba_dict.ambient_spp`), and, with
+    crosstalk, once per primary's materials: light of the projector's white.  Then the
+    translucent objects' subsurface
     scattering (:mod:`simbench.sim.subsurface`, on the ideal pixel grid, per camera channel with that
     band's medium: an approximation where a channel sees several primaries, and it spreads all the
     object's light, a glossy coating's highlight included), the camera lens distortion and
@@ -434,12 +435,14 @@ def render_channels(
     ambient = max(scene.ambient_rgb) > 0
     dark = dataclasses.replace(scene, ambient_rgb=(0.0, 0.0, 0.0))
     kw = {"spp": render.spp, "max_depth": render.max_depth, "sampler": render.sampler, "cache": render.cache}
+    # the ambient light, smooth and faint, at fewer samples (simbench.sim.mitsuba_dict.ambient_spp)
+    akw = {**kw, "spp": ambient_spp(render.spp, render.sampler)}
     lazy = isinstance(drive, ProjectorDrive)
     if not sensor.crosstalk:
         q = cached_radiance(dark, drive.image() if lazy else drive, seed=seed, **kw)
         if ambient:
             flat = uniform_ambient(scene, max_depth=render.max_depth)
-            q = q + (flat if flat is not None else cached_radiance(scene, None, seed=_ambient_seed(seed), **kw))
+            q = q + (flat if flat is not None else cached_radiance(scene, None, seed=_ambient_seed(seed), **akw))
     else:
         weights = channel_weights(sensor, scene.rig)
         q = np.zeros((scene.rig.camera.height_px, scene.rig.camera.width_px, 3), np.float32)
@@ -468,7 +471,7 @@ def render_channels(
         # the ambient light, which no drive colours, likewise where it bounces once
         ambient_per_primary = ambient and not ambient_once and not once
         if ambient and not ambient_once and once:
-            q += cached_radiance(grey_ambient_scene(scene, weights), None, seed=_ambient_seed(seed), **kw)
+            q += cached_radiance(grey_ambient_scene(scene, weights), None, seed=_ambient_seed(seed), **akw)
         if (response is None and grey is None) or ambient_per_primary:
             for p in range(3):
                 r = np.zeros_like(q)
@@ -479,7 +482,7 @@ def render_channels(
                     if mono is not None if lazy else mono.any():
                         r = cached_radiance(_primary_scene(dark, p), mono, seed=seed, **kw)
                 if ambient_per_primary:
-                    r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **kw)
+                    r = r + cached_radiance(_primary_scene(scene, p), None, seed=_ambient_seed(seed), **akw)
                 q += r * weights[:, p].astype(np.float32)
     q = with_translucency(q, translucent_scene, cache=render.cache)
     return camera_lens_image(q, camera, lateral_colour_px=lateral_px).astype(np.float32, copy=False)

@@ -25,6 +25,8 @@ __all__ = [
     "DEFAULT_SAMPLER",
     "DEFAULT_SPP",
     "check_sampler",
+    "AMBIENT_SPP_DIVISOR",
+    "ambient_spp",
     "samples_per_pass",
     "pass_settings",
     "film_settings",
@@ -159,6 +161,14 @@ SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler
 # Independent sampling would need ~150-190 spp for it (1.02 at 16 spp, falling as 1/sqrt(spp)).
 DEFAULT_SAMPLER = "multijitter"
 DEFAULT_SPP = 36
+# The ambient light's renders take a quarter of the projector renders' samples.  The ambient light
+# is 2 % of the projector's white (assumption: paper.toml [ambient]) and smooth, so its sampling
+# noise is small beside the camera's: measured on scenes/sphere.toml under the `paper` sensor
+# (tests/test_physics_renders.py), its render at 9 spp adds ~1-2 % to a lit pixel's noise
+# variance (36 spp: a quarter of that), and it saves about a fifth of the render time of every
+# scene that is not one diffuse object filling the view (where the ambient light is a constant
+# and is not rendered: simbench.sim.capture.uniform_ambient).
+AMBIENT_SPP_DIVISOR = 4
 
 
 @dataclass(frozen=True)
@@ -187,6 +197,20 @@ def check_sampler(sampler: str, spp: int) -> None:
         raise ValueError(
             f"the ldsampler needs a sample count that is a square power of two (4, 16, 64, 256 ...), got {spp}"
         )
+
+
+def ambient_spp(spp: int, sampler: str) -> int:
+    """Samples per pixel of an ambient-light render made beside projector renders of ``spp``:
+    the largest count ``sampler`` accepts (:func:`check_sampler`) that is at most
+    ``spp // AMBIENT_SPP_DIVISOR`` and at least 1; ``spp`` itself where the sampler accepts none
+    (the orthogonal sampler below 49)."""
+    for n in range(max(1, int(spp) // AMBIENT_SPP_DIVISOR), 0, -1):
+        try:
+            check_sampler(sampler, n)
+        except ValueError:
+            continue
+        return n
+    return int(spp)
 
 
 # Dr.Jit's LLVM backend runs a kernel over the sample wavefront (pixels x samples per pass, a
