@@ -11,7 +11,7 @@ The common case in three calls (:mod:`simbench.api`)::
 
 __version__ = "0.1.0"
 
-__all__ = ["record", "depth", "score", "Recorded"]
+__all__ = ["record", "depth", "score", "Recorded", "SimbenchWarning"]
 
 _API = frozenset(__all__)
 

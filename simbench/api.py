@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import logging
 import sys
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from simbench.sim.sensor import SensorModel
     from simbench.systems import Recording, SystemDepth
 
-__all__ = ["Recorded", "record", "depth", "score", "DEFAULT_CACHE"]
+__all__ = ["Recorded", "record", "depth", "score", "SimbenchWarning", "DEFAULT_CACHE"]
 
 DEFAULT_CACHE = ".cache/simbench"  # the command line's render cache folder
 # the ranges the command line's options take too (simbench.cli.options): seeds exact in JSON and
@@ -52,6 +52,15 @@ MAX_DEPTH_RANGE = (2, 1024)
 # confidence thresholds, in the systems' own units (the fringe SNR is < ~1e3)
 MIN_CONFIDENCE_RANGE = (0.0, 1e6)
 EDGE_BAND_RANGE_PX = (0, 1000)
+
+
+class SimbenchWarning(UserWarning):
+    """What the command line prints as a warning, told to a Python caller: a scene whose objects
+    leave the view (:func:`record`), a capture that is dark, saturated or off the reference
+    plane's registration, stripes read out of the pattern's order (:func:`depth`), a depth map in
+    other units or of another scene (:func:`score`).  The call still returns its result.  A
+    warning, not a logged line, so that a script can filter it or turn it into an error
+    (``warnings.simplefilter("error", simbench.SimbenchWarning)``)."""
 
 
 @dataclass(frozen=True)
@@ -183,7 +192,7 @@ def record(
     from simbench.sim.timeline import placement_warnings
 
     for told in placement_warnings(spec):
-        logging.getLogger("simbench").warning("scene %s: %s", spec.name, told)
+        warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     if pattern is None and system == "proposed":
         # the paper's pattern at the scene's projector, as `simbench render` makes it (a scene
         # with a projector of its own size was refused: "pattern size (1140, 1824) differs")
@@ -343,13 +352,13 @@ def depth(
         from simbench.decode.pipeline import capture_warnings
 
         for told in capture_warnings(rec.raw, rig=rec.scene.rig, params=params):  # as `simbench decode` warns
-            logging.getLogger("simbench").warning("%s", told)
+            warnings.warn(told, SimbenchWarning, stacklevel=2)
         result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
         # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
         # red and green swapped) gives no depth rather than half of it wrong
         doubt = code_order_doubt(result.detail.window_succession)
         if doubt:
-            logging.getLogger("simbench").warning("no pixel decoded: %s", doubt)
+            warnings.warn(f"no pixel decoded: {doubt}", SimbenchWarning, stacklevel=2)
             result = dataclasses.replace(without_depth(result), detail=without_depth(result.detail))
         else:
             from simbench.decode.pipeline import registration_warning
@@ -362,7 +371,7 @@ def depth(
                 ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=rec.scene.rig)
             told = registration_warning(rec.raw, result.detail, rig=rec.scene.rig, params=used, reference=ref)
             if told:
-                logging.getLogger("simbench").warning("%s", told)
+                warnings.warn(told, SimbenchWarning, stacklevel=2)
     else:
         if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
             raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")
@@ -408,10 +417,9 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     period = None if column is None else pattern.period_px if pattern else get_system(recorded.system).info().period_px
     kw = {"column_px": column, "gt_column_px": gt.column_px, "period_px": period} if period else {}
     # as `simbench score`: a map in other units, or of another scene, is scored with a warning
-    log = logging.getLogger("simbench")
     for warning in implausible_depth(depth_m, gt.depth_m, np.asarray(gt.lit, bool)):
-        log.warning("score: the depth map: %s", warning)
+        warnings.warn(f"score: the depth map: {warning}", SimbenchWarning, stacklevel=2)
     if kw:
         for warning in implausible_columns(column, gt.column_px):
-            log.warning("score: the depth's column_px: %s", warning)
+            warnings.warn(f"score: the depth's column_px: {warning}", SimbenchWarning, stacklevel=2)
     return depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)

@@ -185,22 +185,25 @@ def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypa
     assert not any(tmp_path.iterdir())
 
 
-def test_score_warns_as_the_command_line_does(caplog):
+def test_score_warns_as_the_command_line_does():
     """A depth map in millimetres scored from Python: the numbers, and the command line's warning
-    (the audit: simbench.score had none of them)."""
-    import logging
+    (the audit: simbench.score had none of them) as a warning a script can filter or raise
+    (another audit: it was a logged line, which only Python's last-resort handler printed)."""
+    import warnings
 
     import simbench
 
     rec = _recorded()
     depth = simbench.depth(rec)
-    with caplog.at_level(logging.WARNING, logger="simbench"):
+    with pytest.warns(simbench.SimbenchWarning, match="its median depth is 1e\\+03x the ground truth's") as told:
         m = simbench.score(depth.depth_m * 1000, rec)
-    assert m["mae_mm"] > 1e5 and "its median depth is 1e+03x the ground truth's" in caplog.text
-    caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="simbench"):
-        simbench.score(depth, rec)
-    assert caplog.text == ""
+    assert m["mae_mm"] > 1e5
+    assert told[0].filename == __file__  # pointed at the caller's line, not the library's
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", simbench.SimbenchWarning)
+        with pytest.raises(simbench.SimbenchWarning, match="score: the depth map"):
+            simbench.score(depth.depth_m * 1000, rec)
+        simbench.score(depth, rec)  # a plausible map: nothing to tell
 
 
 def test_depth_and_score_check_their_arguments():
