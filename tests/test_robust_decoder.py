@@ -313,16 +313,35 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
     assert kept[3.4, True][1] > 0.99 * kept[3.4, False][1], kept
 
 
-def test_albedo_step_pixels_are_the_two_straddling_a_step_of_the_gain():
+def test_albedo_step_pixels_are_the_two_straddling_a_step_of_the_gain_and_one_more_on_its_bright_side():
     """Exact: a row's gain steps 1 -> 20 (ink), 20 -> 1, 1 -> 1.5 and 1.5 -> 3 (2x): the two pixels
-    around each step of 2x or more are marked, the 1.5x step's not; a uniform gain marks nothing."""
+    around each step of 2x or more are marked, and the next one on the step's brighter (lower gain)
+    side, whichever side that is; the 1.5x step's none; a uniform gain marks nothing; a reach of 1
+    marks the pair alone, one of 3 a further pixel, and a reach beyond the row stops at its ends."""
     gain = np.ones((2, 40), np.float32)
     gain[:, 5:10] = 20.0
     gain[:, 20:30] = 1.5
     gain[:, 30:] = 3.0
     got = albedo_step_pixels(gain)
-    assert np.flatnonzero(got[0]).tolist() == [4, 5, 9, 10, 29, 30]
+    assert np.flatnonzero(got[0]).tolist() == [3, 4, 5, 9, 10, 11, 28, 29, 30]
     assert np.array_equal(got[0], got[1])
+    assert np.flatnonzero(albedo_step_pixels(gain, bright_px=1)[0]).tolist() == [4, 5, 9, 10, 29, 30]
+    assert np.flatnonzero(albedo_step_pixels(gain, bright_px=3)[0]).tolist() == [
+        2,
+        3,
+        4,
+        5,
+        9,
+        10,
+        11,
+        12,
+        27,
+        28,
+        29,
+        30,
+    ]
+    edge = np.array([[1.0, 4.0, 4.0]], np.float32)
+    assert albedo_step_pixels(edge, bright_px=5)[0].tolist() == [True, True, False]
     assert not albedo_step_pixels(np.ones((3, 9), np.float32)).any()
     assert not albedo_step_pixels(np.ones((3, 1), np.float32)).any()
 
