@@ -317,7 +317,8 @@ def test_albedo_step_pixels_are_the_two_straddling_a_step_of_the_gain_and_one_mo
     """Exact: a row's gain steps 1 -> 20 (ink), 20 -> 1, 1 -> 1.5 and 1.5 -> 3 (2x): the two pixels
     around each step of 2x or more are marked, and the next one on the step's brighter (lower gain)
     side, whichever side that is; the 1.5x step's none; a uniform gain marks nothing; a reach of 1
-    marks the pair alone, one of 3 a further pixel, and a reach beyond the row stops at its ends."""
+    marks the pair alone, one of 3 a further pixel, and a reach beyond the row stops at its ends.
+    Down a column only the row on the step's bright side is marked."""
     gain = np.ones((2, 40), np.float32)
     gain[:, 5:10] = 20.0
     gain[:, 20:30] = 1.5
@@ -342,6 +343,12 @@ def test_albedo_step_pixels_are_the_two_straddling_a_step_of_the_gain_and_one_mo
     ]
     edge = np.array([[1.0, 4.0, 4.0]], np.float32)
     assert albedo_step_pixels(edge, bright_px=5)[0].tolist() == [True, True, False]
+    # down a column (a printed edge along the rows): the bright row of the two around the step only
+    rows = np.ones((8, 5), np.float32)
+    rows[3:6] = 20.0
+    rows[6:] = 1.5
+    assert np.flatnonzero(albedo_step_pixels(rows)[:, 2]).tolist() == [2, 6]
+    assert albedo_step_pixels(rows).all(axis=1).tolist() == [False, False, True, False, False, False, True, False]
     assert not albedo_step_pixels(np.ones((3, 9), np.float32)).any()
     assert not albedo_step_pixels(np.ones((3, 1), np.float32)).any()
 

@@ -371,6 +371,15 @@ ALBEDO_SKIP_RATIO = 2.0
 # 0.1-0.5 % from the second pixel - the rest, pixels whose gain's step sits a pixel off their
 # row's edge (the step is found in rows averaged over ALBEDO_EDGE_ROWS), is a guess
 ALBEDO_SKIP_BRIGHT_PX = 2
+# and down the columns, at a printed edge along the rows, the one row of the straddling pair on the
+# step's bright side.  Such an edge biases no phase (the rows it mixes see the same projector
+# columns), but the mixed rows' fringe, flattened by the wrong gain, adds to the residual of every
+# window reaching them: on the 20:1 ink, whose fringe SNR is ~4-5 away from any edge (the operating
+# point is 3), the windows within ~8 rows of the edge fell to 2.1-3 (measured 2026-11-30, the
+# rendered 20:1 chart at 1280x960).  Share kept at the operating point (rows left out: none / the
+# bright one / the dark one / both): 91.2 / 95.6 / 94.9 / 95.9 % at 1280x960, 84.6 / 87.6 / 88.3 /
+# 84.0 % at 640x480 (both rows take more of a short window's support than it keeps); the bright one
+# gains at both resolutions
 # a segment whose fringe visibility (the proxy's standard deviation over its mean, rows averaged
 # over ALBEDO_EDGE_ROWS) is under this share of the most visible one within the window carries no
 # fringe - a projector shadow, not dark ink - and is not brightened (assumption: 0.5; measured
@@ -523,15 +532,18 @@ def albedo_gain_reach_rows(period_px: float, order: int) -> int:
 def albedo_step_pixels(
     gain: np.ndarray, *, ratio: float = ALBEDO_SKIP_RATIO, bright_px: int = ALBEDO_SKIP_BRIGHT_PX
 ) -> np.ndarray:
-    """The pixels beside a step of :func:`albedo_gain` along a row by ``ratio`` or more (ours;
-    ``DecoderParams.albedo_edge_skip``): the two that straddle it and, on its brighter side (the
-    lower gain), those out to ``bright_px`` from it.
+    """The pixels beside a step of :func:`albedo_gain` by ``ratio`` or more (ours;
+    ``DecoderParams.albedo_edge_skip``): along a row, the two that straddle it and, on its brighter
+    side (the lower gain), those out to ``bright_px`` from it; down a column, the one of the two on
+    its brighter side.
 
     The gain is a step where the print's albedo is one; the camera's blur is not: the two pixels
     straddling the edge hold both sides' light, which the gain flattens by the wrong factor - the
     dark side's pixel, amplified ~20x beside a 20:1 ink, carries the paper's fringe at 20x into
     every window over it - and on the step's bright side the next pixel is biased too
-    (:data:`ALBEDO_SKIP_BRIGHT_PX`; the cause only partly known).  Their samples are left out of
+    (:data:`ALBEDO_SKIP_BRIGHT_PX`; the cause only partly known).  Down a column the step is a
+    printed edge along the rows, which biases no phase but adds its mixed rows to the residual of
+    the windows over them, the fringe SNR the confidence is.  Their samples are left out of
     the phase fit (their own phase then comes from their neighbours', as a clipped pixel's does): on
     ``scenes/hard_chart_high.toml`` 81.9 -> 86.7 % of the pixels kept at the operating point with
     the pair, the 3:1 chart 97.1 -> 99.4 %.
@@ -542,25 +554,31 @@ def albedo_step_pixels(
     ratio : float
         The step, as the larger gain over the smaller, from which the pixels are marked.
     bright_px : int >= 1
-        Pixels marked on the step's brighter side, the straddling one included (1: the pair only).
+        Pixels marked along a row on the step's brighter side, the straddling one included (1:
+        the pair only).
 
     Returns
     -------
     ndarray, shape (H, W), bool
     """
     g = np.asarray(gain, np.float32)
+    r = np.float32(ratio)
     out = np.zeros(g.shape, bool)
-    w = g.shape[1]
-    if w < 2:
-        return out
-    a, b = g[:, 1:], g[:, :-1]  # the gain right and left of each boundary between two pixels
-    up = a >= np.float32(ratio) * b  # brighter (lower gain) on the left
-    down = b >= np.float32(ratio) * a  # brighter on the right
-    out[:, 1:] |= up | down
-    out[:, :-1] |= up | down
-    for s in range(1, min(bright_px, w - 1)):
-        out[:, : w - 1 - s] |= up[:, s:]
-        out[:, 1 + s :] |= down[:, : w - 1 - s]
+    h, w = g.shape
+    if w >= 2:
+        a, b = g[:, 1:], g[:, :-1]  # the gain right and left of each boundary between two pixels
+        up = a >= r * b  # brighter (lower gain) on the left
+        down = b >= r * a  # brighter on the right
+        out[:, 1:] |= up | down
+        out[:, :-1] |= up | down
+        for s in range(1, min(bright_px, w - 1)):
+            out[:, : w - 1 - s] |= up[:, s:]
+            out[:, 1 + s :] |= down[:, : w - 1 - s]
+    if h >= 2:
+        # down the columns: the bright row of the pair (ALBEDO_SKIP_BRIGHT_PX's comment)
+        below, above = g[1:], g[:-1]
+        out[:-1] |= below >= r * above
+        out[1:] |= above >= r * below
     return out
 
 

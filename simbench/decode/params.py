@@ -171,8 +171,9 @@ class DecoderParams:
         over the step sees one fringe.  Off = the paper's decoder.
     albedo_edge_skip : bool
         With ``albedo_flatten``, the two pixels straddling a step of its gain by
-        :data:`simbench.decode.color.ALBEDO_SKIP_RATIO` or more, and the next one on the step's
-        bright side, carry no sample in the phase fit
+        :data:`simbench.decode.color.ALBEDO_SKIP_RATIO` or more along a row, and the next one on
+        the step's bright side, and down a column the bright one of the pair, carry no sample in
+        the phase fit
         (:func:`simbench.decode.color.albedo_step_pixels`; ours): the camera's blur mixes the
         two sides' light in them, which a gain that steps cannot flatten.  Off = every pixel's
         sample counts (and without ``albedo_flatten`` there is no gain: nothing is skipped).
