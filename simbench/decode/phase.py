@@ -30,6 +30,7 @@ from simbench.decode import _kernels
 __all__ = [
     "INTENSITY_MODES",
     "overlay_intensity",
+    "window_share",
     "certainty_window_px",
     "certainty_map",
     "PhaseResult",
@@ -296,6 +297,29 @@ def gaussian_kernel(sigma: float) -> np.ndarray:
     x = np.arange(-r, r + 1, dtype=np.float64)
     k = np.exp(-0.5 * (x / sigma) ** 2)
     return (k / k.sum()).astype(np.float32)
+
+
+def window_share(weights: np.ndarray, *, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
+    """Each pixel's Gaussian window's share of its weight on ``weights``: the window of
+    :func:`gabor_phase` (:func:`gaussian_kernel` in x and y, unit sum; nothing beyond the image),
+    so that for a certainty map it is that fit's ``support``.
+
+    Parameters
+    ----------
+    weights : ndarray, shape (H, W), float32 in [0, 1]
+    sigma_x_px, sigma_y_px : float
+        The window's standard deviations.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32 in [0, 1]
+    """
+    import cv2
+
+    w = np.ascontiguousarray(weights, dtype=np.float32)
+    kx, ky = gaussian_kernel(float(sigma_x_px)), gaussian_kernel(float(sigma_y_px))
+    out = cv2.sepFilter2D(w, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+    return np.clip(out, np.float32(0.0), np.float32(1.0))
 
 
 def magnitude(

@@ -51,6 +51,7 @@ from simbench.decode.depth import (
     match_reference,
 )
 from simbench.decode.phase import (
+    CARRIER_BANK,
     bank_fit,
     centroid_corrected,
     certainty_map,
@@ -59,6 +60,7 @@ from simbench.decode.phase import (
     off_discontinuity,
     overlay_intensity,
     shadow_margin,
+    window_share,
 )
 from simbench.decode.profile import stage
 from simbench.decode.registration import (
@@ -340,6 +342,7 @@ def _columns(
     # "lit" looks across the neighbouring stripes: twice the normalisation window, so that
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
+    skipped = None  # the certainty of the samples the albedo-edge skip leaves out
     if _fused_front_end(params, unmixing, image):
         # the same bits as the general path below, in one pass over the capture
         with stage("front end (float, lit/clipped, Eq. 9, Eq. 13)"):
@@ -422,7 +425,9 @@ def _columns(
         if gain is not None and params.albedo_edge_skip:
             with stage("albedo edges skipped"):
                 # (gain has the fit's rows, as certainty: image and gain were cut to them together)
-                certainty = np.where(albedo_step_pixels(gain), np.float32(0.0), certainty)
+                mixed = albedo_step_pixels(gain)
+                skipped = np.where(mixed, certainty, np.float32(0.0))
+                certainty = np.where(mixed, np.float32(0.0), certainty)
         unmixed = rgb
         if span is not None:
             rgb = normed
@@ -465,6 +470,13 @@ def _columns(
             )
         else:
             phase = method(intensity, sigma_x_px=sx, offset=False, **fit)
+    if skipped is not None and skipped.any():
+        with stage("albedo edges skipped"):
+            # the support test guards against windows reaching off the lit surface (a shadow, the
+            # image's border); a sample left out for its mixed light is on it: it still counts
+            # (support = the share of the window's weight on lit samples, used or not)
+            share = _window_shares(skipped, carrier, sigma_x_px=sx, sigma_y_px=fit["sigma_y_px"])
+            phase = dataclasses.replace(phase, support=np.minimum(phase.support + share, np.float32(1.0)))
     inner = slice(crop.start - ext.start, crop.stop - ext.start)  # crop's rows within ext
     with stage("validity"):
         # over ext, which the pooled code reads; the centroid correction below moves the phase
@@ -667,6 +679,19 @@ def _pool_rows(crop: slice, height: int, params: DecoderParams, rig: Rig) -> sli
     without ``pool_code``), within the ``height`` rows at hand."""
     k = code_pool_rows(params, rig)
     return slice(max(0, crop.start - k), min(height, crop.stop + k))
+
+
+def _window_shares(weights, carrier, *, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
+    """Each pixel's window's share of its weight on ``weights`` (:func:`window_share`), the window
+    its own fit used: the nominal one, or its carrier bank entry's (``carrier`` > 0)."""
+    share = window_share(weights, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
+    if carrier is not None:
+        for k, (scale_x, scale_y) in enumerate(CARRIER_BANK, 1):
+            mine = carrier == k
+            if mine.any():
+                own = window_share(weights, sigma_x_px=sigma_x_px * scale_x, sigma_y_px=sigma_y_px * scale_y)
+                share = np.where(mine, own, share)
+    return share
 
 
 def _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam) -> tuple:
