@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simbench import SimbenchWarning
 from simbench.cache import RenderCache
 
 if TYPE_CHECKING:
@@ -52,15 +53,6 @@ MAX_DEPTH_RANGE = (2, 1024)
 # confidence thresholds, in the systems' own units (the fringe SNR is < ~1e3)
 MIN_CONFIDENCE_RANGE = (0.0, 1e6)
 EDGE_BAND_RANGE_PX = (0, 1000)
-
-
-class SimbenchWarning(UserWarning):
-    """What the command line prints as a warning, told to a Python caller: a scene whose objects
-    leave the view (:func:`record`), a capture that is dark, saturated or off the reference
-    plane's registration, stripes read out of the pattern's order (:func:`depth`), a depth map in
-    other units or of another scene (:func:`score`).  The call still returns its result.  A
-    warning, not a logged line, so that a script can filter it or turn it into an error
-    (``warnings.simplefilter("error", simbench.SimbenchWarning)``)."""
 
 
 @dataclass(frozen=True)

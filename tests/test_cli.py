@@ -1070,3 +1070,27 @@ def test_debug_after_the_command_shows_the_traceback_and_keeps_the_exit_status(t
     # no prefixes: --debug-d is no --debug-dir
     assert main([*missing, "--debug-d", str(tmp_path / "dbg")]) == 2
     assert "unrecognized arguments: --debug-d" in capsys.readouterr().err and not (tmp_path / "dbg").exists()
+
+
+def test_the_apis_warnings_are_the_command_lines_one_line_messages(tmp_path, monkeypatch, capsys):
+    """``simbench render`` records through the Python API, whose sanity messages are
+    ``simbench.SimbenchWarning`` (a review: the command line printed them in Python's
+    ``file:line: SimbenchWarning:`` form, with the source line): one ``simbench: ...`` line, each time,
+    and pytest's warnings-as-errors (as ``python -W error``) do not turn them into a traceback."""
+    import warnings
+
+    import simbench
+    from simbench import api
+
+    def record(*args, **kwargs):
+        warnings.warn("scene told: an object 40 m across", simbench.SimbenchWarning, stacklevel=2)
+        warnings.warn("scene told: an object 40 m across", simbench.SimbenchWarning, stacklevel=2)
+        raise ValueError("stopped before rendering")
+
+    monkeypatch.setattr(api, "record", record)
+    argv = ["render", str(SCENES / "step.toml"), "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "c")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("simbench: scene told: an object 40 m across\n") == 2, err
+    assert "SimbenchWarning" not in err and "warnings.warn" not in err
+    assert "simbench: error: stopped before rendering" in err

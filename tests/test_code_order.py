@@ -6,7 +6,6 @@ the neighbouring stripes still succeed each other; a capture of the pattern read
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

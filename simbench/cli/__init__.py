@@ -10,6 +10,7 @@ adding its commands to the parser; the options they share are in :mod:`~simbench
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import os
 import re
@@ -124,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     previous = _on_sigterm_raise()
     try:
-        return args.fn(args)
+        with _warnings_as_lines():
+            return args.fn(args)
     except KeyboardInterrupt:
         print("simbench: interrupted", file=sys.stderr)
         return 130
@@ -159,6 +161,29 @@ def main(argv: list[str] | None = None) -> int:
 
             signal.signal(signal.SIGTERM, previous[0])
             signal.signal(signal.SIGINT, previous[1])
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    """The library's :class:`simbench.SimbenchWarning` (what the Python API warns of) printed as
+    the command line's other messages are, one ``simbench: ...`` line each, every time (not as
+    Python's ``file:line: SimbenchWarning: ...`` with the source line, once per place)."""
+    import warnings
+
+    from simbench import SimbenchWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, SimbenchWarning):
+            logging.getLogger("simbench").warning("%s", message)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", SimbenchWarning)
+        warnings.showwarning = show
+        yield
 
 
 # a value that argparse would take for an option, since it begins with "-": "-1G", "-1e3", "-inf"

@@ -523,10 +523,12 @@ def fringe_confirmed(cuts: np.ndarray, rgb: np.ndarray, *, period_px: float) -> 
 def albedo_gain_reach_rows(period_px: float, order: int) -> int:
     """How many rows above and below a pixel :func:`albedo_gain` reads to make that pixel's gain:
     the spans' box mean (half a window), the edge rows' mean and erosion
-    (:data:`ALBEDO_EDGE_ROWS`), the segment means' row average (:data:`ALBEDO_MEAN_ROWS`).  The
+    (:data:`ALBEDO_EDGE_ROWS`), the segment means' row average (:data:`ALBEDO_MEAN_ROWS`), and
+    one row more: :func:`albedo_step_pixels` compares each row's gain with the next row's.  The
     decoder's row bands carry this many rows more than the phase fit needs
-    (:func:`simbench.decode.bands.row_bands`), so that a band's gain is the whole image's."""
-    return _code_window_px(period_px, order) + ALBEDO_EDGE_ROWS // 2 + ALBEDO_MEAN_ROWS // 2
+    (:func:`simbench.decode.bands.row_bands`), so that a band's gain and skipped pixels are the
+    whole image's."""
+    return _code_window_px(period_px, order) + ALBEDO_EDGE_ROWS // 2 + ALBEDO_MEAN_ROWS // 2 + 1
 
 
 def albedo_step_pixels(
@@ -562,6 +564,9 @@ def albedo_step_pixels(
     -------
     ndarray, shape (H, W), bool
     """
+    from simbench import validate as v
+
+    bright_px = v.integer(bright_px, "bright_px", lo=1)
     g = np.asarray(gain, np.float32)
     r = np.float32(ratio)
     out = np.zeros(g.shape, bool)

@@ -33,7 +33,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from simbench.decode.phase import PhaseResult, check_phase_inputs, gaussian_kernel, magnitude
+from simbench.decode.phase import PhaseResult, check_phase_inputs, gaussian_kernel, magnitude, window_share
 
 __all__ = ["ftp_phase", "wfr_phase", "ridge_frequencies"]
 
@@ -60,9 +60,7 @@ def _background(intensity: np.ndarray, certainty: np.ndarray, *, period_px: floa
 
 
 def _support(certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
-    return cv2.sepFilter2D(
-        certainty, cv2.CV_32F, gaussian_kernel(sigma_x_px), gaussian_kernel(sigma_y_px), borderType=cv2.BORDER_CONSTANT
-    )
+    return window_share(certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
 
 
 def _result(intensity, certainty, *, background, analytic_re, analytic_im, support, sigma_x_px, offset) -> PhaseResult:

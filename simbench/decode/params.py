@@ -172,7 +172,8 @@ class DecoderParams:
     albedo_edge_skip : bool
         With ``albedo_flatten``, the two pixels straddling a step of its gain by
         :data:`simbench.decode.color.ALBEDO_SKIP_RATIO` or more, along a row and down a column,
-        and along a row the next two on the step's bright side, carry no sample in the phase fit
+        and along a row the next ones on the step's bright side (out to
+        :data:`simbench.decode.color.ALBEDO_SKIP_BRIGHT_PX`), carry no sample in the phase fit
         (but count for a window's support: they are lit surface)
         (:func:`simbench.decode.color.albedo_step_pixels`; ours): the camera's blur mixes the
         two sides' light in them, which a gain that steps cannot flatten.  Off = every pixel's
@@ -541,7 +542,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     tests then act on signal relative to the local range (``min_amplitude``,
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it; the
     lit test looks across a whole code window; the pixels straddling a printed step, which the
-    camera's blur mixes, and the next two on its bright side carry no sample: ``albedo_edge_skip``).
+    camera's blur mixes, and the next ones on its bright side carry no sample: ``albedo_edge_skip``).
     Its confidence folds in the phase's stability against the window's width
     (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)

@@ -312,14 +312,11 @@ def window_share(weights: np.ndarray, *, sigma_x_px: float, sigma_y_px: float) -
 
     Returns
     -------
-    ndarray, shape (H, W), float32 in [0, 1]
+    ndarray, shape (H, W), float32 in [0, 1] (to rounding)
     """
-    import cv2
-
     w = np.ascontiguousarray(weights, dtype=np.float32)
     kx, ky = gaussian_kernel(float(sigma_x_px)), gaussian_kernel(float(sigma_y_px))
-    out = cv2.sepFilter2D(w, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
-    return np.clip(out, np.float32(0.0), np.float32(1.0))
+    return cv2.sepFilter2D(w, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
 
 
 def magnitude(

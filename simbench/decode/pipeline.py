@@ -342,7 +342,7 @@ def _columns(
     # "lit" looks across the neighbouring stripes: twice the normalisation window, so that
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
-    skipped = None  # the certainty of the samples the albedo-edge skip leaves out
+    skipped = mixed = None  # the albedo-edge skip's pixels, and the certainty of those it leaves out
     if _fused_front_end(params, unmixing, image):
         # the same bits as the general path below, in one pass over the capture
         with stage("front end (float, lit/clipped, Eq. 9, Eq. 13)"):
@@ -386,6 +386,11 @@ def _columns(
                     halo = fit_halo_rows(params, rig) + code_pool_rows(params, rig)
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
+                    if params.albedo_edge_skip:
+                        # before the cut: the step test down a column compares the fit's first and
+                        # last rows with the rows beyond them (the band carries one more for it)
+                        wide = slice(max(0, fit.start - 1), min(gain.shape[0], fit.stop + 1))
+                        mixed = albedo_step_pixels(gain[wide])[fit.start - wide.start :][: fit.stop - fit.start]
                     image, gain = image[fit], gain[fit].copy()
                     raw = raw[fit].copy()
                     rgb = raw if unmixing is None else rgb[fit].copy()
@@ -422,10 +427,9 @@ def _columns(
                     saturation_level=params.saturation_level,
                     window_periods=window,
                 )
-        if gain is not None and params.albedo_edge_skip:
+        if mixed is not None and mixed.any():  # (a band whose own gain is all 1 may border a step)
             with stage("albedo edges skipped"):
-                # (gain has the fit's rows, as certainty: image and gain were cut to them together)
-                mixed = albedo_step_pixels(gain)
+                # (mixed has the fit's rows, as certainty: image and gain were cut to them together)
                 skipped = np.where(mixed, certainty, np.float32(0.0))
                 certainty = np.where(mixed, np.float32(0.0), certainty)
         unmixed = rgb
@@ -474,7 +478,7 @@ def _columns(
         with stage("albedo edges skipped"):
             # the support test guards against windows reaching off the lit surface (a shadow, the
             # image's border); a sample left out for its mixed light is on it: it still counts
-            # (support = the share of the window's weight on lit samples, used or not)
+            # (support = the share of the window's weight on certain samples, used or not)
             share = _window_shares(skipped, carrier, sigma_x_px=sx, sigma_y_px=fit["sigma_y_px"])
             phase = dataclasses.replace(phase, support=np.minimum(phase.support + share, np.float32(1.0)))
     inner = slice(crop.start - ext.start, crop.stop - ext.start)  # crop's rows within ext
