@@ -375,7 +375,7 @@ def test_samples_skipped_at_albedo_edges_leave_no_window_short_of_support(calibr
 
 def test_skipping_the_blurred_albedo_edges_keeps_more_of_a_printed_checkerboard(calibration):
     """A 20:1 checkerboard of 3.4-period squares seen through a camera's blur (Gaussian, sigma
-    1 px): the two pixels straddling each step hold both sides' light, which the flattening's
+    1 px): the pixels straddling each step hold both sides' light, which the flattening's
     step of a gain brightens 20x on the ink side; left out of the fit (``albedo_edge_skip``),
     more of the board decodes above the operating point, no less accurately (measured: 92.2 ->
     95.1 % of the pixels off the steps' band, mean error 0.101 -> 0.099 projector px; the

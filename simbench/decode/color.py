@@ -352,8 +352,9 @@ ALBEDO_MIN_SEGMENT_PERIODS = 1.5
 ALBEDO_MIN_CHANNEL_SHARE = 0.1
 # the most a pixel's channels are amplified (a 0.04-albedo ink beside 0.8 paper needs 20x)
 ALBEDO_MAX_GAIN = 50.0
-# a step of the flattening's gain along a row by this factor or more marks the two pixels that
-# straddle it as mixed (DecoderParams.albedo_edge_skip; assumption: 2 - where the gain steps by
+# a step of the flattening's gain by this factor or more marks the pixels beside it as mixed (the
+# pair straddling it, along a row and down a column, and along a row its bright side out to
+# ALBEDO_SKIP_BRIGHT_PX; DecoderParams.albedo_edge_skip; assumption: 2 - where the gain steps by
 # 2x a mixed pixel's light is off its side's by up to 2x, beyond what a window's fit absorbs as a
 # change of fringe amplitude.  Measured on the 25 hard scenes, 2026-11-29: 1.5 and 3 move no scene
 # by more than 0.4 % of its pixels - the 3:1 chart 99.40 % kept at 1.5, 99.39 % at 2, 99.01 % at 3)

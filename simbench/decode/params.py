@@ -71,7 +71,8 @@ ROBUST_MIN_AMPLITUDE = 0.02
 # 97.1-100 % / 0 % (the turned and grey ones 98.4 and 98.0 %), printed charts of 3:1 and 1.6:1
 # 97.1 % and 100 % / 0 %, glossy boards 98.4-100 % / 0 %.  Short of the goals there: the box
 # interior (90.1 %: its right face, lit at grazing incidence, decodes nowhere), the 20:1 chart
-# (81.4 %, 0.008 % wrong) and the fine chart (squares under a period: nothing).  Not tuned on any
+# (81.4 %, 0.008 % wrong, then; 88.5 % after the 2026-11-29 step placement, 96.6 % with the
+# 2026-11-30 albedo-edge skip) and the fine chart (squares under a period: nothing).  Not tuned on any
 # table of the paper; a white board scores ~30.
 ROBUST_MIN_CONFIDENCE = 3.0
 # The phase-stability term of the confidence (DecoderParams.phase_stability): the phase is fitted
@@ -542,7 +543,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     tests then act on signal relative to the local range (``min_amplitude``,
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it; the
     lit test looks across a whole code window; the pixels straddling a printed step, which the
-    camera's blur mixes, and the next ones on its bright side carry no sample: ``albedo_edge_skip``).
+    camera's blur mixes, and along a row the next ones on its bright side carry no sample, but
+    count for their windows' support: ``albedo_edge_skip``).
     Its confidence folds in the phase's stability against the window's width
     (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
