@@ -59,10 +59,6 @@ def _background(intensity: np.ndarray, certainty: np.ndarray, *, period_px: floa
     return out
 
 
-def _support(certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
-    return window_share(certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
-
-
 def _result(intensity, certainty, *, background, analytic_re, analytic_im, support, sigma_x_px, offset) -> PhaseResult:
     """PhaseResult from the analytic fringe ``(B/2) exp(i psi)`` (normalised to a full window)."""
     kx = gaussian_kernel(sigma_x_px)
@@ -150,7 +146,7 @@ def ftp_phase(
         background=background,
         analytic_re=np.ascontiguousarray(analytic.real, dtype=np.float32),
         analytic_im=np.ascontiguousarray(analytic.imag, dtype=np.float32),
-        support=_support(c, sigma_x_px, sigma_y_px),
+        support=window_share(c, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px),
         sigma_x_px=sigma_x_px,
         offset=offset,
     )
@@ -253,7 +249,7 @@ def wfr_phase(
     best_re /= 1 + best_eps
     best_im /= 1 - best_eps
     # the window moments of the certainty turn the sums into a full-window fringe estimate
-    support = _support(c, sigma_x_px, sigma_y_px)
+    support = window_share(c, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
     scale = np.zeros_like(support)
     np.divide(np.float32(1), support, out=scale, where=support > 0.05)
     return _result(
