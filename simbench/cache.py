@@ -100,6 +100,14 @@ _KEY = r"[0-9a-f]{32}"
 _ENTRY_RE = re.compile(rf"({_KIND})-{_KEY}\.npz")
 _LOCK_RE = re.compile(rf"{_KIND}-{_KEY}\.lock")
 _TEMP_RE = re.compile(rf"\.(?:{_KIND}-{_KEY}|CACHEDIR)\.[A-Za-z0-9_]+\.tmp")
+# The small per-user memos (:func:`user_cache_dir`: the code digests here, the spectral memo of
+# simbench.sim.spectral.memo_path) and their atomic writes' temporary files.  They share the
+# default folder ~/.cache/simbench with the render cache's default .cache/simbench when the working
+# folder is the home folder, so a render cache tolerates them (and never prunes them).
+_MEMO_RE = re.compile(
+    r"(\.)?(?:code-digests-v\d+-python\d+\.\d+|spectral-colour[0-9A-Za-z.+_-]*-[0-9a-f]{16})"
+    r"(?(1)\.[A-Za-z0-9_]+\.tmp|\.json)"
+)
 
 
 class NotACacheError(ValueError):
@@ -123,7 +131,9 @@ def _marker_format(root: Path) -> int | None:
 
 
 def _is_own_name(name: str) -> bool:
-    return bool(_ENTRY_RE.fullmatch(name) or _LOCK_RE.fullmatch(name) or _TEMP_RE.fullmatch(name))
+    return bool(
+        _ENTRY_RE.fullmatch(name) or _LOCK_RE.fullmatch(name) or _TEMP_RE.fullmatch(name) or _MEMO_RE.fullmatch(name)
+    )
 
 
 def check_cache_folder(root: str | Path) -> Path:

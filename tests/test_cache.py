@@ -817,6 +817,41 @@ def test_a_folder_of_a_users_files_is_neither_a_cache_nor_pruned(tmp_path):
     assert {p.name: p.read_bytes() for p in (tmp_path / "project").iterdir()} == before
 
 
+def test_the_per_user_memos_may_share_the_render_caches_folder(tmp_path, monkeypatch):
+    """``simbench render`` run from the home folder: the render cache's default ``.cache/simbench``
+    is then ``~/.cache/simbench``, where the per-user memos (code digests, spectral values) were
+    written first, and the cache refused the folder as "holding other files".  The memos, named
+    by their own writers (and their temporary files), are tolerated; a prune leaves them; a
+    user's file beside them is still refused."""
+    import shutil
+
+    from simbench.cache import NotACacheError, check_cache_folder, prune_cache, source_digest
+    from simbench.sim import spectral
+
+    home = tmp_path / "home"
+    monkeypatch.setenv("SIMBENCH_CACHE_DIR", str(home))
+    (tmp_path / "m.py").write_text("x = 1\n")
+    source_digest([tmp_path / "m.py"])  # writes the code-digest memo, by its writer's name
+    memo = spectral.memo_path()
+    memo.write_text("{}")  # the spectral memo, by the name its writer gives it
+    (home / f".{memo.stem}.a1B2_c3d4.tmp").write_text("")  # an atomic write's temporary file
+    names = {p.name for p in home.iterdir()}
+    assert len(names) == 3 and any(n.startswith("code-digests-") for n in names), names
+
+    other = tmp_path / "other"
+    shutil.copytree(home, other)
+    assert check_cache_folder(other) == other  # unmarked, the memos alone: a cache
+    (other / "notes.json").write_text("{}")
+    with pytest.raises(NotACacheError, match=r"other files \(notes\.json\)"):
+        check_cache_folder(other)
+
+    cache = RenderCache(home)
+    cache.store("truth", {"i": 1}, {"d": np.ones(2)})
+    assert cache.lookup("truth", {"i": 1})["d"][0] == 1
+    prune_cache(home, max_bytes=0, unused_for_s=0)
+    assert names <= {p.name for p in home.iterdir()}
+
+
 def test_a_marked_cache_prunes_only_its_own_files(tmp_path):
     """A user's files copied into a real cache stay through a prune to size 0; its entries go."""
     import os

@@ -97,6 +97,7 @@ def memo_path() -> Path | None:
         version = metadata.version("colour-science")
     except metadata.PackageNotFoundError:
         return None
+    # simbench.cache._MEMO_RE knows this name (a render cache in the same folder tolerates it)
     return Path(root) / f"spectral-colour{version}-{_source_digest()}.json"
 
 
