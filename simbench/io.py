@@ -13,13 +13,14 @@ import functools
 import os
 import re
 import tempfile
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from simbench import termination, validate
+from simbench import SimbenchWarning, termination, validate
 
 __all__ = [
     "check_not_protected",
@@ -207,7 +208,21 @@ def check_output_directory(path: str | Path, *, manifest: str | Sequence[str], o
         raise ValueError(f"{path} exists and is not a folder")
     if path.is_dir():
         _check_replaceable(path, manifest, overwrite)
+        _check_removable(path)
     check_output_folder(path.parent, what=str(path))  # the new folder is built beside it, then swapped in
+
+
+def _check_removable(folder: Path) -> None:
+    """ValueError unless the files of ``folder`` (an output to be replaced) can be removed: every
+    folder in it writable and searchable.  (Without the check, a read-only old output was swapped
+    out and its removal failed after the new one had taken its place: the command reported a
+    failure that had replaced the folder, and left the old one as a hidden sibling.)"""
+    for d, _, _ in os.walk(folder):
+        if not os.access(d, os.W_OK | os.X_OK):
+            raise ValueError(
+                f"{folder} cannot be replaced: its files cannot be removed ({d} is not writable); make it writable "
+                "or choose another output folder"
+            )
 
 
 @contextmanager
@@ -217,7 +232,10 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
     Yields a temporary sibling folder to fill; when the block succeeds it takes ``path``'s
     place in one atomic step (an existing output is swapped out and removed), so a reader sees
     the old folder or the new one, never a mix.  If the block fails, or the process is killed,
-    ``path`` is untouched; a killed run's temporary sibling is removed by the next run.
+    ``path`` is untouched; a killed run's temporary sibling is removed by the next run.  An old
+    output whose files cannot be removed (a read-only folder) is refused before any work; should
+    its removal still fail after the swap, the new output stands and a
+    :class:`simbench.SimbenchWarning` names where the old one was left.
 
     Parameters
     ----------
@@ -244,14 +262,14 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
         os.chmod(tmp, 0o777 & ~_umask())
         if not path.exists():
             os.rename(tmp, path)
-        elif _exchange(tmp, path):
-            shutil.rmtree(tmp)  # now the old folder
+            return
+        if _exchange(tmp, path):
+            old = tmp  # now the old folder
         else:
             old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-{os.getpid()}-", dir=path.parent))
             os.rmdir(old)
             os.rename(path, old)
             os.rename(tmp, path)
-            shutil.rmtree(old)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         for c in reversed(created):  # innermost first
@@ -261,6 +279,16 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
                 break
         _raise_with_filename(exc, path)
         raise
+    # the new output is in place: what is left is the old one's removal, which cannot undo it
+    try:
+        shutil.rmtree(old)
+    except OSError as exc:
+        warnings.warn(
+            f"{path} was written, but the output it replaced could not be removed ({exc.strerror or exc}): "
+            f"it is left as {old}",
+            SimbenchWarning,
+            stacklevel=3,
+        )
 
 
 def _umask() -> int:

@@ -124,6 +124,61 @@ def test_an_output_folder_given_as_a_symbolic_link_is_refused_before_any_work(tm
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"] and (tmp_path / "link").is_symlink()
 
 
+def test_an_old_output_that_cannot_be_removed_is_refused_before_any_work(tmp_path, monkeypatch):
+    """A read-only recording folder given as ``--out`` again: the new render was swapped in, then
+    removing the old one failed, so the command reported a failure that had replaced the folder
+    and left the old one as a hidden sibling.  Now a folder whose files cannot be removed is
+    refused before any work (the permission faked: root may remove anything), and nothing
+    changes."""
+    import os
+
+    from simbench.io import check_output_directory, output_directory
+
+    out = tmp_path / "rec"
+    with output_directory(out, manifest="m.json") as d:
+        (d / "m.json").write_text('{"files": {"sub": "sub"}}')
+        (d / "sub").mkdir()
+        (d / "sub" / "x.txt").write_text("old")
+    real_access = os.access
+    locked = {str(out / "sub")}
+    monkeypatch.setattr(os, "access", lambda p, mode: False if str(p) in locked else real_access(p, mode))
+    with pytest.raises(
+        ValueError, match=r"rec cannot be replaced: its files cannot be removed \(.*sub is not writable"
+    ):
+        check_output_directory(out, manifest="m.json")
+    with pytest.raises(ValueError, match="cannot be replaced"):
+        with output_directory(out, manifest="m.json"):
+            raise AssertionError("the block ran")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"] and (out / "sub" / "x.txt").read_text() == "old"
+
+
+def test_an_old_output_whose_removal_fails_after_the_swap_leaves_the_new_one_and_says_where(tmp_path, monkeypatch):
+    """Should the old output's removal still fail once the new one is in place (a file made
+    read-only between the check and the swap), the write has succeeded: no error, and a
+    SimbenchWarning names where the old folder was left."""
+    import shutil
+
+    import simbench
+    from simbench.io import output_directory
+
+    def write(text):
+        with output_directory(tmp_path / "rec", manifest="m.json") as d:
+            (d / "m.json").write_text('{"files": {"x.txt": "x.txt"}}')
+            (d / "x.txt").write_text(text)
+
+    def refuse(path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    write("old")
+    monkeypatch.setattr(shutil, "rmtree", refuse)
+    message = r"rec was written, but the output it replaced could not be removed \(Permission denied\): it is left as "
+    with pytest.warns(simbench.SimbenchWarning, match=message):
+        write("new")
+    assert (tmp_path / "rec" / "x.txt").read_text() == "new"
+    left = [p for p in tmp_path.iterdir() if p.name != "rec"]
+    assert len(left) == 1 and left[0].name.startswith(".rec.") and (left[0] / "x.txt").read_text() == "old"
+
+
 def test_a_full_disk_names_the_file_in_every_writer(tmp_path, monkeypatch):
     """Issue 33: a full disk named no file (so the CLI's free-space hint measured the working
     folder's disk, not the one written): write_files and output_directory name their target."""
