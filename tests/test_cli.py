@@ -1020,6 +1020,43 @@ def test_render_warns_of_a_reference_plane_outside_the_working_range(tmp_path, c
     assert "working range" not in capsys.readouterr().err
 
 
+def test_score_refuses_a_recording_that_lost_a_file_its_manifest_lists(tmp_path, capsys):
+    """A user's audit (2026-11-30): with gt_lit.npy removed from a recording, `score` took every
+    finite pixel as its region (95.23 % of 1228800 pixels instead of 98.54 % of 1187520), exit 0,
+    while `decode` refuses such a folder.  A file the manifest lists and score reads by default
+    (the region, the object ids of the edge band) must be there; one given (--lit) stands in."""
+    import numpy as np
+
+    import json
+
+    from simbench.io import save_json, save_npy
+    from simbench.manifest import seal_manifest
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    save_npy(r / "gt_object_id.npy", np.zeros((120, 160), np.int32))
+    data = json.loads((r / "meta.json").read_text())
+    (r / "meta.json").unlink()
+    save_json(
+        r / "meta.json",
+        seal_manifest(r, data, {**data["files"], "gt_lit": "gt_lit.npy", "gt_object_id": "gt_object_id.npy"}),
+    )
+    argv = ["score", str(r / "depth.npy"), "--gt", str(r / "gt_depth.npy")]
+    assert main(argv) == 0 and main([*argv, "--edge-band", "5"]) == 0
+    capsys.readouterr()
+    lit = (r / "gt_lit.npy").read_bytes()
+    (r / "gt_lit.npy").unlink()
+    assert main(argv) == 2
+    assert f"{r / 'gt_lit.npy'} is missing: the recording's manifest lists it" in capsys.readouterr().err
+    save_npy(tmp_path / "mine.npy", np.ones((120, 160), bool))
+    assert main([*argv, "--lit", str(tmp_path / "mine.npy")]) == 0
+    (r / "gt_lit.npy").write_bytes(lit)
+    (r / "gt_object_id.npy").unlink()
+    assert main(argv) == 0  # the edge band is not asked for
+    assert main([*argv, "--edge-band", "5"]) == 2
+    assert "gt_object_id.npy is missing: the recording's manifest lists it (the edge band" in capsys.readouterr().err
+
+
 def test_score_counts_stripe_order_errors_in_the_recordings_period(capsys):
     """A third audit: `score --column` counted a period-30 recording's columns against 21 px
     unless --period was given; the recording's meta.json names its pattern."""
