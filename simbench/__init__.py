@@ -15,17 +15,7 @@ __all__ = ["record", "depth", "score", "Recorded", "SimbenchWarning"]
 
 _API = frozenset(["record", "depth", "score", "Recorded"])
 
-
-class SimbenchWarning(UserWarning):
-    """The Python API's sanity checks, told to the caller: a scene whose objects leave the view
-    (:func:`record`), a capture that is dark, saturated or off the reference plane's
-    registration, stripes read out of the pattern's order (:func:`depth`), a depth map in other
-    units or of another scene (:func:`score`).  (Notices about the set-up - a sensor file that
-    leaves keys out, a projector principal point rendered elsewhere, the Mitsuba variant - are
-    logged, logger ``simbench``.)  The call still returns its result.  A
-    warning, not a logged line, so that a script can filter it or turn it into an error
-    (``warnings.simplefilter("error", simbench.SimbenchWarning)``); the command line prints each
-    as a ``simbench: ...`` line."""
+from simbench.warn import SimbenchWarning  # noqa: E402  (a base module: io warns with it too)
 
 
 def __getattr__(name: str):

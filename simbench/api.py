@@ -131,9 +131,10 @@ def record(
     cache: str | Path | RenderCache | None = DEFAULT_CACHE,
     variant: str | None = None,
 ) -> Recorded:
-    """Render and record ``scene`` (a scene file or a loaded scene) with the depth system
-    ``system`` (:func:`simbench.systems.system_names`), the proposed one through the sensor model
-    ``sensor`` (a preset of :func:`simbench.sim.sensor.get_sensor`, a TOML file or a
+    """Render and record ``scene`` (a scene file, a library scene by name - ``"step"`` - or a
+    loaded scene) with the depth system ``system`` (:func:`simbench.systems.system_names`), the
+    proposed one through the sensor model ``sensor`` (a preset of
+    :func:`simbench.sim.sensor.get_sensor`, a TOML file or a
     :class:`simbench.sim.sensor.SensorModel`, e.g. one of :func:`simbench.sim.sensor.with_effects`;
     None = ``paper``).
     A ``sensor``, ``pattern`` or ``calibration_frames`` that the system does not record with
@@ -157,6 +158,7 @@ def record(
     from simbench.decode import DecoderParams
     from simbench.sim.sensor import SensorModel, check_rig_lens, get_sensor
     from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP, check_sampler
+    from simbench.experiments.common import scene_file
     from simbench.sim.scene import load_scene
     from simbench.seeds import DEFAULT_SEED, SeedLog
     from simbench.systems import RenderSettings, SystemOptions, acquire, get_system
@@ -180,7 +182,7 @@ def record(
         "calibration_frames": bool(calibration_frames),
     }
     sensor_model = sensor if isinstance(sensor, SensorModel) else get_sensor("paper" if sensor is None else sensor)
-    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene)
+    spec = scene if isinstance(scene, SceneSpec) else load_scene(scene_file(scene))
     from simbench.sim.timeline import placement_warnings
 
     for told in placement_warnings(spec):

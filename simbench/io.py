@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simbench import SimbenchWarning, termination, validate
+from simbench import termination, validate
+from simbench.warn import SimbenchWarning
 
 __all__ = [
     "check_not_protected",

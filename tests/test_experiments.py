@@ -7,6 +7,7 @@ import re
 import time
 
 import pytest
+from pathlib import Path
 
 from simbench.experiments.common import RunConfig
 from simbench.seeds import derive_seed as label_seed
@@ -462,6 +463,32 @@ def test_library_scene_names_stay_inside_the_library(tmp_path):
             library_scene_path(name)
     with pytest.raises(ValueError, match="no scene 'no_such'.*white_plane"):
         library_scene_path("no_such")
+
+
+def test_a_scene_is_a_path_or_a_library_name_from_any_folder(tmp_path, monkeypatch, capsys):
+    """A new user's audit (2026-11-30): the README's `simbench render scenes/step.toml` from
+    another folder said only "scene file not found".  A path is taken as it is; a bare name of
+    the library is its scene from any folder; a missing path says where the library is."""
+    from simbench.cli import main
+    from simbench.experiments.common import SCENES_DIR, scene_file
+
+    monkeypatch.chdir(tmp_path)
+    assert scene_file("step") == SCENES_DIR / "step.toml"
+    mine = tmp_path / "step"
+    mine.write_text("")
+    assert scene_file("step") == Path("step")  # a file of that name in the working folder wins
+    mine.unlink()
+    with pytest.raises(
+        FileNotFoundError, match=rf"scenes/step.toml \(relative paths .* is {SCENES_DIR}/step.toml: give"
+    ):
+        scene_file("scenes/step.toml")
+    with pytest.raises(FileNotFoundError, match=r"not found: nothing.toml \(a library scene may be given by name"):
+        scene_file("nothing.toml")
+    for bad in ("../scenes/step", "step.toml"):  # a name is a stem; folders are paths
+        with pytest.raises(FileNotFoundError):
+            scene_file(bad)
+    assert main(["render", "scenes/step.toml", "--out", "o", "--no-cache"]) == 2
+    assert "its name `step` from any folder" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 def test_a_split_targets_parts_run_side_by_side_and_write_what_one_process_writes(tmp_path, variant, monkeypatch):

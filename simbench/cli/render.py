@@ -41,6 +41,7 @@ def _cmd_pattern(args) -> int:
 def _cmd_render(args) -> int:
     from simbench import api, cache as cache_module
     from simbench.decode import DecoderParams
+    from simbench.experiments.common import scene_file
     from simbench.io import check_output_directory
     from simbench.sim.scene import load_scene
     from simbench.sim.sensor import get_sensor
@@ -48,7 +49,7 @@ def _cmd_render(args) -> int:
 
     if args.system not in system_names():  # an unknown name fails before anything else
         get_system(args.system)
-    scene = load_scene(args.scene)
+    scene = load_scene(scene_file(args.scene))
     pattern = pattern_spec(args, scene.rig.projector.size_hw)
     # a system that projects a coded pattern projects the pattern options'; the others their own
     system = get_system(
@@ -200,7 +201,10 @@ def add_parsers(sub, kw: dict) -> None:
     s = sub.add_parser(
         "render", help="render a scene with a depth system: its raw frames, calibration, ground truth, metadata", **kw
     )
-    s.add_argument("scene", help="scene TOML file (see scenes/README.md)")
+    s.add_argument(
+        "scene",
+        help="scene TOML file, or a library scene by name from any folder (step: scenes/step.toml; scenes/README.md)",
+    )
     s.add_argument(
         "--system",
         default=DEFAULT_SYSTEM,

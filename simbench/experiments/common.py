@@ -78,6 +78,7 @@ __all__ = [
     "calibration_sentence",
     "other_rig",
     "RIGS",
+    "scene_file",
     "table_text",
     "markdown_table",
     "figure_png",
@@ -111,6 +112,34 @@ def library_scene_path(name: object) -> Path:
     if not path.is_file():
         raise ValueError(f"no scene {name!r} in {SCENES_DIR}; scenes: {available}")
     return path
+
+
+def scene_file(scene: str | Path) -> Path:
+    """The scene file a command or :func:`simbench.record` is given: a path, as it is, or else a
+    library scene's name (``step``: ``scenes/step.toml`` of the repository, from any working
+    folder).
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither; the message says how to reach the library (a new user's audit, 2026-11-30:
+        the README's ``scenes/step.toml`` run from another folder said only "not found").
+    """
+    path = Path(scene)
+    if path.exists():
+        return path
+    name = str(scene)
+    if _SCENE_NAME.fullmatch(name) and (SCENES_DIR / f"{name}.toml").is_file():
+        return SCENES_DIR / f"{name}.toml"
+    if (SCENES_DIR / f"{path.stem}.toml").is_file():
+        hint = (
+            f"relative paths start from the working folder; the library's scene of that name is "
+            f"{SCENES_DIR / (path.stem + '.toml')}: give that path, or its name `{path.stem}` from any folder"
+        )
+    else:
+        some = ", ".join(sorted(p.stem for p in SCENES_DIR.glob("*.toml"))[:6])
+        hint = f"a library scene may be given by name from any folder ({some}, ...: {SCENES_DIR})"
+    raise FileNotFoundError(f"scene file not found: {scene} ({hint})")
 
 
 # the rigs a decoder may be given (RunConfig.rig)
