@@ -62,6 +62,16 @@ def test_material_errors_name_the_problem(extra, match):
         scene_from_dict({"object": [{**PLANE, **extra}]})
 
 
+def test_rgb_is_three_reflectances_or_one_for_a_grey():
+    """scenes/README.md writes plaster as ``rgb = 0.85``: a user's audit (2026-11-30) found such a
+    file refused with "'float' object is not iterable"; anything else names the key."""
+    grey = scene_from_dict({"object": [{**PLANE, "rgb": 0.85}]}).objects[0].material
+    assert grey.rgb == (0.85, 0.85, 0.85)
+    for bad in (True, "white", [0.5, 0.5], 2.0, {"r": 1}):
+        with pytest.raises(ValueError, match=r"object\[0\] .*rgb reflectance"):
+            scene_from_dict({"object": [{**PLANE, "rgb": bad}]})
+
+
 def test_srgb8_and_plastic_reach_the_material():
     s = scene_from_dict({"object": [{**PLANE, "srgb8": [0, 255, 255], "material": "plastic", "roughness": 0.2}]})
     m = s.objects[0].material

@@ -19,7 +19,7 @@ A scene file::
     center_m = [0.0, 0.0, 1.0]
     size_m = [1.5, 1.2]           # plane: (x, y) extent; box: (x, y, z) extent
     rotation_deg = [0, 30, 0]     # about x, y, z; R = Rz @ Ry @ Rx
-    rgb = [0.8, 0.8, 0.8]         # linear diffuse reflectance (two-sided Lambertian)
+    rgb = [0.8, 0.8, 0.8]         # linear diffuse reflectance (two-sided Lambertian; one number: a grey)
 
 Instead of ``rgb`` an object may give ``srgb8 = [255, 0, 0]``, an 8-bit sRGB colour as printed
 on a colour board (paper Table 1), turned into a reflectance by :func:`paint_reflectance`, or
@@ -350,7 +350,7 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
             spectrum = d["spectrum"]
             rgb = measured_linear_srgb(spectrum)
         else:
-            rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else tuple(d.get("rgb", (0.8, 0.8, 0.8)))
+            rgb = paint_reflectance(d["srgb8"]) if "srgb8" in d else _reflectance(d.get("rgb", (0.8, 0.8, 0.8)))
         mat_kind = str(d.get("material", "diffuse"))
         if "roughness" in d and mat_kind not in _GLOSSY:
             raise ValueError(f"roughness applies to material = {' or '.join(map(repr, _GLOSSY))} only")
@@ -788,6 +788,14 @@ def check_mesh_file(path: str, mtime_ns: int = 0, size: int = 0) -> tuple[int, i
     if not (area2 > 0).all():
         log.info("mesh %s: %d of %d faces have zero area", name, int((area2 == 0).sum()), len(faces))
     return len(vertices), len(faces)
+
+
+def _reflectance(value: object) -> object:
+    """A scene's ``rgb``: a list of three reflectances, or one number for a grey (``rgb = 0.85``,
+    as scenes/README.md writes plaster); anything else as given, for the material's check to name."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return (value, value, value)
+    return tuple(value) if isinstance(value, list) else value
 
 
 def _parse_mesh(d: dict, where: str, base_dir: Path) -> dict:
