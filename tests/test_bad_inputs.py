@@ -188,7 +188,7 @@ case("pattern-out-under-a-file", lambda d: ["pattern", "--out", str(d / "f" / "p
 case(
     "pattern-out-is-a-folder",
     lambda d: ["pattern", "--out", str(d / "dir")],
-    "dir",
+    "dir is a folder; give a file path",  # checked before the pattern is made (it said "[Errno 21]")
     setup=lambda d: (d / "dir").mkdir(),
 )
 case(

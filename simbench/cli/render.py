@@ -24,10 +24,11 @@ from simbench.cli.options import (
 
 
 def _cmd_pattern(args) -> int:
-    from simbench.io import save_png
+    from simbench.io import check_output_file, save_png
     from simbench.pattern import fringe_pattern, quantize
 
     spec = pattern_spec(args, (args.height, args.width))
+    check_output_file(args.out, what="--out")  # a folder, or one this process may not write in
     path = save_png(args.out, quantize(fringe_pattern(spec)))
     codes = "".join(map(str, spec.codes()))
     if len(codes) > 64:  # a long window's cycle (order 12: 4096 codes) is no line to read
