@@ -64,6 +64,7 @@ __all__ = [
     "cache_usage",
     "check_cache_folder",
     "check_cache_location",
+    "CACHE_HINT",
     "claim_cache_folder",
     "prune_cache",
     "file_digest",
@@ -177,9 +178,10 @@ def check_cache_folder(root: str | Path) -> Path:
     return root
 
 
-def check_cache_location(root: str | Path, *, what: str = "cache") -> Path:
+def check_cache_location(root: str | Path, *, what: str = "cache", hint: str = "") -> Path:
     """Check, before any work, that ``root`` can serve as a cache folder: a marked cache or
-    one that can be made there (not a file, not under a file, writable).
+    one that can be made there (not a file, not under a file, writable).  ``hint`` ends the
+    message (the command line's: how to do without the default folder).
 
     Raises
     ------
@@ -189,10 +191,19 @@ def check_cache_location(root: str | Path, *, what: str = "cache") -> Path:
     """
     from simbench.io import check_output_folder
 
-    root = check_output_folder(root, what=what)
-    if root.exists():
-        check_cache_folder(root)
+    try:
+        root = check_output_folder(root, what=what)
+        if root.exists():
+            check_cache_folder(root)
+    except ValueError as exc:
+        if not hint:
+            raise
+        raise type(exc)(f"{exc}; {hint}") from None
     return root
+
+
+# what the command line adds to a cache folder's error
+CACHE_HINT = "pass --no-cache to store nothing, or --cache DIR for another folder"
 
 
 def claim_cache_folder(root: str | Path) -> Path:

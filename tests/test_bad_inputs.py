@@ -719,7 +719,7 @@ case(
 case(
     "decode-cache-is-a-file",
     lambda d: _decode(d, "--cache", str(d / "f")),
-    "is a file, not a folder",
+    ("is a file, not a folder", "pass --no-cache to store nothing, or --cache DIR for another folder"),
     setup=lambda d: (render_folder(d), (d / "f").write_text("x")),
 )
 case(
@@ -731,7 +731,7 @@ case(
 case(
     "decode-cache-of-other-files",
     lambda d: _decode(d, "--cache", str(d / "mine")),
-    "not a simbench render cache",
+    ("not a simbench render cache", "; pass --no-cache to store nothing"),
     setup=lambda d: (render_folder(d), (d / "mine").mkdir(), (d / "mine" / "notes.txt").write_text("x")),
 )
 case(
@@ -864,6 +864,12 @@ case(
     "render-cache-is-out",
     lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x")],
     "overlap",
+)
+case(
+    "render-cache-under-a-file",
+    lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "f" / "c")],
+    ("is a file, so", "; pass --no-cache to store nothing, or --cache DIR for another folder"),
+    files=_w("f", "x"),
 )
 case(
     "render-cache-inside-out",

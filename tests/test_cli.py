@@ -1020,6 +1020,26 @@ def test_render_warns_of_a_reference_plane_outside_the_working_range(tmp_path, c
     assert "working range" not in capsys.readouterr().err
 
 
+def test_cache_and_no_cache_exclude_each_other_in_every_command(capsys):
+    """A user's audit (2026-11-30): ``--no-cache --cache X`` ignored X without a word, even a file.
+    Every command that takes both refuses the pair, before any work."""
+    from simbench.cli import _parser
+
+    parser = _parser()
+    commands = [
+        name
+        for action in parser._subparsers._group_actions
+        for name, sub in action.choices.items()
+        if {"--cache", "--no-cache"} <= set(sub._option_string_actions)
+    ]
+    assert {"render", "decode", "calibrate", "demo", "reproduce", "ablate"} <= set(commands), commands
+    for name in commands:
+        with pytest.raises(SystemExit) as stop:
+            parser.parse_args([name, "--no-cache", "--cache", "somewhere"])
+        assert stop.value.code == 2
+        assert "argument --cache: not allowed with argument --no-cache" in capsys.readouterr().err, name
+
+
 def test_score_refuses_a_recording_that_lost_a_file_its_manifest_lists(tmp_path, capsys):
     """A user's audit (2026-11-30): with gt_lit.npy removed from a recording, `score` took every
     finite pixel as its region (95.23 % of 1228800 pixels instead of 98.54 % of 1187520), exit 0,

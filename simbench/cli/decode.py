@@ -12,11 +12,11 @@ import numpy as np
 from simbench import api
 from simbench.io import ADC_BITS
 from simbench.cli.options import (
+    add_cache_options,
     add_pattern_options,
     encoding,
     float_in,
     int_in,
-    DEFAULT_CACHE,
 )
 
 
@@ -291,13 +291,12 @@ def add_parsers(sub, kw: dict) -> None:
         metavar="NAME=VALUE",
         help="other decoder parameters, e.g. phase_method=ftp voting=false",
     )
-    s.add_argument(
-        "--cache",
-        default=DEFAULT_CACHE,
-        help="cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and "
+    add_cache_options(
+        s,
+        "cache folder for decoded reference planes (keyed by the reference's bytes, rig, decoder settings and "
         "decoder code)",
+        "decode the reference plane every time, store nothing",
     )
-    s.add_argument("--no-cache", action="store_true", help="decode the reference plane every time, store nothing")
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth", **kw)

@@ -18,7 +18,6 @@ from simbench.cli.options import (
     int_in,
     registered_systems,
     render_settings,
-    DEFAULT_CACHE,
 )
 
 
@@ -306,8 +305,7 @@ def add_parsers(sub, kw: dict) -> None:
     )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
-    s.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
-    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+    add_cache_options(s, "render cache folder")
     s.add_argument("--seed", type=SEED, default=None, help=f"base seed (default {DEFAULT_SEED})")
     add_render_options(s, quick_spp=4)
     s.add_argument(
@@ -385,8 +383,7 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--scheduler", default=None, help="Dask distributed scheduler address (tcp://host:8786): run there instead"
     )
-    s.add_argument("--cache", default=DEFAULT_CACHE, help="render cache folder")
-    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+    add_cache_options(s, "render cache folder")
     s.add_argument("--variant", default=None, help="Mitsuba variant (default: the fastest this machine runs)")
     s.set_defaults(fn=_cmd_ablate)
 

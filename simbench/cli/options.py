@@ -140,13 +140,16 @@ def add_render_options(s, *, quick_spp: int | None = None) -> None:
     )
 
 
-def add_cache_options(s) -> None:
-    s.add_argument(
-        "--cache",
-        default=DEFAULT_CACHE,
-        help="render cache folder (renders and ground truth keyed by everything that affects them)",
-    )
-    s.add_argument("--no-cache", action="store_true", help="render everything, store nothing")
+def add_cache_options(
+    s,
+    cache_help: str = "render cache folder (renders and ground truth keyed by everything that affects them)",
+    no_cache_help: str = "render everything, store nothing",
+) -> None:
+    """``--cache DIR`` and ``--no-cache``, which exclude each other (given both, the folder was
+    ignored without a word, even one that could not serve as a cache)."""
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--cache", default=DEFAULT_CACHE, help=f"{cache_help} (default: {DEFAULT_CACHE})")
+    g.add_argument("--no-cache", action="store_true", help=no_cache_help)
 
 
 def cache_of(args: argparse.Namespace) -> RenderCache:

@@ -74,14 +74,14 @@ def _cmd_render(args) -> int:
     check_output_directory(args.out, manifest=RECORDING_MANIFESTS, overwrite=args.overwrite)
     replaced = _earlier_recording(Path(args.out))
     if not args.no_cache:
-        from simbench.cache import check_cache_location
+        from simbench.cache import CACHE_HINT, check_cache_location
 
         cache_dir, out_dir = Path(args.cache).resolve(), Path(args.out).resolve()
         if cache_dir == out_dir or out_dir in cache_dir.parents or cache_dir in out_dir.parents:
             raise ValueError(
                 f"--cache {args.cache} and --out {args.out} overlap: the render cache needs its own folder"
             )
-        check_cache_location(args.cache, what="--cache")
+        check_cache_location(args.cache, what="--cache", hint=CACHE_HINT)
     t0 = time.perf_counter()
     cache = cache_of(args)
 

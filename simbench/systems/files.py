@@ -205,7 +205,7 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
     """Every output writable before the decode starts (a folder in the way, a file above one, no
     permission; the reference cache too), and none of them one of the ``inputs`` or a file of a
     recording among them (``--out FOLDER/gt_depth.npy`` replaced the ground truth)."""
-    from simbench.cache import check_cache_location
+    from simbench.cache import CACHE_HINT, check_cache_location
     from simbench.io import check_output_file, check_own_folder
     from simbench.manifest import listed_files
     from simbench.systems import RECORDING_MANIFESTS
@@ -239,7 +239,7 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
         if debug == out or out in debug.parents:
             raise ValueError(f"--debug-dir {request.debug_dir} is --out {request.out} or under it: give another folder")
     if request.cache_dir is not None:
-        check_cache_location(request.cache_dir, what="--cache")
+        check_cache_location(request.cache_dir, what="--cache", hint=CACHE_HINT)
 
 
 def _is_confidence_of(path: Path, depth: np.ndarray) -> bool:
