@@ -114,7 +114,8 @@ def _cmd_score(args) -> int:
             f"{m['p95_mm']:.4f} mm"
         )
         print(
-            f"completeness {100 * m['completeness']:.2f} % of {m['n_region']} pixels, outliers (> 5 mm) "
+            f"completeness {100 * m['completeness']:.2f} % of the {m['n_region']} pixels of the region "
+            f"({lit_path.name if lit_path.is_file() else 'finite ground truth'}), outliers (> 5 mm) "
             f"{100 * m['outlier_share']:.3f} %"
         )
         if "stripe_order_errors" in m:
@@ -232,7 +233,9 @@ def add_parsers(sub, kw: dict) -> None:
         "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
         "competitor's validity threshold)",
     )
-    s.add_argument("--ply", help="also write the point cloud as PLY")
+    s.add_argument(
+        "--ply", help="also write the point cloud as PLY (x, y, z in metres, the camera's frame: OpenCV axes; RGB)"
+    )
     s.add_argument("--debug-dir", help="write every decoder stage here")
     s.add_argument(
         "--mode",
@@ -318,7 +321,8 @@ def add_parsers(sub, kw: dict) -> None:
         "--edge-band",
         type=int_in(*api.EDGE_BAND_RANGE_PX),
         default=0,
-        help="exclude pixels this close to depth edges (px)",
+        help="leave the pixels this close to a depth edge or an object's boundary (px) out of the error statistics "
+        "(they still count for completeness)",
     )
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.set_defaults(fn=_cmd_score)

@@ -301,7 +301,7 @@ def add_parsers(sub, kw: dict) -> None:
         # listed here, not imported (every command would pay the experiments' imports, ~45 ms);
         # tests/test_cli.py checks the list against simbench.experiments.reproduce.TARGETS
         help="table1, table3, fig9, figures, budget, render_noise, flatness, motion, hard_scenes or all (default: "
-        "every target but hard_scenes: ~42-52 min from an empty cache on 2 cores with AVX-512, docs/results.md)",
+        "every target but hard_scenes: ~42-60 min from an empty cache on 2 cores, README.md's measurements)",
     )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")

@@ -130,7 +130,8 @@ def add_render_options(s, *, quick_spp: int | None = None) -> None:
         type=SPP,
         default=None,
         help=f"path-tracing samples per pixel (default: {DEFAULT_SPP}{quick}); the stratified, multijitter and "
-        "ldsampler samplers take a square count (4, 9, 16, 25, 36 ...; ldsampler a power of two's square)",
+        "ldsampler samplers take a square count (4, 9, 16, 25, 36 ...; ldsampler a power of two's square), the "
+        "orthogonal sampler a prime's square (4, 9, 25, 49 ...)",
     )
     s.add_argument(
         "--sampler",

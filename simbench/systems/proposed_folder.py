@@ -306,13 +306,15 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         told = registration_warning(capture, result, rig=rig, params=params, reference=reference)
         if told:
             logging.getLogger("simbench").warning("%s: %s", capture_path, told)
+    # in calibrated mode the reference serves the colour unmixing only (its coupling matrix)
+    role = " (for its colour unmixing)" if params.mode == "calibrated" else ""
     ref_note = (
         ""
         if reference is None
         else (
-            ", reference map from the cache"
+            f", reference map{role} from the cache"
             if cache.hits
-            else ", reference decoded" + ("" if cache.root is None else " and cached")
+            else f", reference decoded{role}" + ("" if cache.root is None else " and cached")
         )
     )
     over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
