@@ -370,6 +370,8 @@ def pattern_from_options(
     (``sequence`` as text, e.g. ``"00010111"``); an option left None keeps the default."""
     try:
         codes = None if sequence is None else parse_sequence(sequence)
+        if codes is not None:  # its windows at the order it is given with (PatternSpec's check, named)
+            check_sequence(codes, order=PatternSpec.order if order is None else order)
     except ValueError as exc:
         raise ValueError(f"--sequence: {exc}") from None
     given = {"period_px": period_px, "order": order, "channels": channels}

@@ -194,7 +194,7 @@ case(
 case(
     "pattern-sequence-for-other-order",
     lambda d: ["pattern", "--out", str(d / "p.png"), "--order", "2", "--sequence", "00010111"],
-    "repeats",
+    "--sequence: window at position 1 repeats",  # the option named (a user's audit, 2026-11-30)
 )
 
 
