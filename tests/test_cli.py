@@ -1127,6 +1127,11 @@ def test_debug_after_the_command_shows_the_traceback_and_keeps_the_exit_status(t
     # no prefixes: --debug-d is no --debug-dir
     assert main([*missing, "--debug-d", str(tmp_path / "dbg")]) == 2
     assert "unrecognized arguments: --debug-d" in capsys.readouterr().err and not (tmp_path / "dbg").exists()
+    # an option the command does not take points at the command's help (it said "see simbench --help")
+    assert main([*missing, "--foo"]) == 2
+    assert "error: decode: unrecognized arguments: --foo (see simbench decode --help)" in capsys.readouterr().err
+    assert main(["cache", "info", "--foo"]) == 2
+    assert "cache info: unrecognized arguments: --foo (see simbench cache info --help)" in capsys.readouterr().err
 
 
 def test_the_apis_warnings_are_the_command_lines_one_line_messages(tmp_path, monkeypatch, capsys):

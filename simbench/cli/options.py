@@ -29,6 +29,23 @@ class Parser(argparse.ArgumentParser):
         where = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
         self.exit(2, f"simbench: error: {where}{message} (see {self.prog} --help)\n")
 
+    def parse_args(self, args=None, namespace=None) -> argparse.Namespace:  # noqa: D102 - argparse's
+        # an option the command does not take is the command's error, pointing at its own help
+        # (argparse reports it from the top parser: "see simbench --help", which lists no options)
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self._chosen(ns).error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns
+
+    def _chosen(self, ns: argparse.Namespace) -> Parser:
+        """The (sub)command parser that ``ns`` was parsed by: this one, or a command's below it."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                sub = action.choices.get(getattr(ns, action.dest, None) or "")
+                if isinstance(sub, Parser):
+                    return sub._chosen(ns)
+        return self
+
 
 class Formatter(argparse.HelpFormatter):
     """Every option's help ends with its default (unless it has none or says it already)."""
