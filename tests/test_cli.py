@@ -451,8 +451,9 @@ def test_render_reruns_from_the_render_cache(tmp_path, capsys, variant):
 
     # the rerun looks up fewer entries than the first run stored (a cached drive digest spares
     # building the drive, and with it the defocus depth map), and finds every one
-    hits = re.search(r"(\d+) of (\d+) from the render cache", second)
-    assert n > 0 and ", 0 of " in first and hits and hits.group(1) == hits.group(2) and 0 < int(hits.group(1)) <= n
+    made = re.search(r"render cache: 0 entries read, (\d+) made", first)
+    hits = re.search(r"render cache: (\d+) entries read, 0 made", second)
+    assert n > 0 and made and int(made.group(1)) == n and hits and 0 < int(hits.group(1)) <= n
     for name in ("capture.png", "reference.png", "gt_depth.npy"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     assert main([*base[:-2], "--no-cache", "--out", str(tmp_path / "c")]) == 0

@@ -114,7 +114,9 @@ def _cmd_render(args) -> int:
     files = system.write_recording(
         Path(args.out), rec.raw, rec.calibration, scene=rec.scene, gt=rec.gt, meta=rec.meta, overwrite=args.overwrite
     )
-    cached = f", {cache.hits} of {cache.hits + cache.misses} from the render cache" if cache.root is not None else ""
+    # entries read and made, not "n of m": a warm run looks up fewer entries than a cold one made
+    # (a cached result spares the lookups of what it was made from)
+    cached = f", render cache: {cache.hits} entries read, {cache.misses} made" if cache.root is not None else ""
     print(
         f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
