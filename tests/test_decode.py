@@ -785,6 +785,20 @@ def test_with_changes_is_the_one_way_from_names_to_decoder_settings():
         with_changes(base, {"sigma": 1.0})
 
 
+def test_decoder_assignments_take_without_repeated_and_any_other_name_once():
+    """A user's audit (2026-11-30): ``--decoder without=lit_test without=max_residual`` switched
+    off max_residual alone (the last value won), and ``voting=false voting=true`` decoded with
+    voting.  ``without`` accumulates (repeated or a list); another name given twice is refused."""
+    from simbench.decode import DecoderParams, with_assignments, without_checks
+
+    both = without_checks(DecoderParams(), ["lit_test", "max_residual"])
+    assert with_assignments(DecoderParams(), ["without=lit_test", "without=max_residual"]) == both
+    assert with_assignments(DecoderParams(), ['without=["lit_test", "max_residual"]']) == both
+    assert with_assignments(DecoderParams(), ["without=lit_test", "voting=false"]).voting is False
+    with pytest.raises(ValueError, match=r"--decoder: voting is given twice \(False and True\): give it once"):
+        with_assignments(DecoderParams(), ["voting=false", "voting=true"])
+
+
 def test_the_narrow_snr_stands_only_where_the_wide_window_is_clean_enough_itself():
     """off_discontinuity: beside a residual peak, a pixel whose wide residual is low relative to
     the peak but whose wide SNR is under NARROW_SNR_MIN_WIDE_SNR (its far side large in absolute

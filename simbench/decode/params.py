@@ -679,7 +679,9 @@ def with_assignments(params: DecoderParams, items: Sequence[str]) -> DecoderPara
     """``params`` with ``name=value`` items applied (:func:`with_changes`): each value parsed as
     a TOML scalar or array (``voting=false``, ``depth_range_m=[0.5, 2.0]``), a bare word as a
     string (``phase_method=ftp``); ``without=NAME`` switches an added check off.  The command
-    line's ``--decoder`` items.
+    line's ``--decoder`` items.  ``without`` may be given more than once (``without=lit_test
+    without=max_residual``, or a list: ``without=["lit_test", "max_residual"]``); any other name
+    once (a second value silently won before: a user's audit, 2026-11-30).
 
     Examples
     --------
@@ -689,15 +691,24 @@ def with_assignments(params: DecoderParams, items: Sequence[str]) -> DecoderPara
     import tomllib
 
     names = {f.name for f in dataclasses.fields(params)} | {"without"}
-    changes = {}
+    changes: dict = {}
+    off: list = []
     for item in items:
         key, sep, text = item.partition("=")
         if not sep or key not in names:
             raise ValueError(f"--decoder takes name=value with name one of {sorted(names)}; got {item!r}")
         try:
-            changes[key] = tomllib.loads(f"v = {text}")["v"]
+            value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            changes[key] = text  # a bare word: phase_method=ftp
+            value = text  # a bare word: phase_method=ftp
+        if key == "without":
+            off += value if isinstance(value, list) else [value]
+        elif key in changes:
+            raise ValueError(f"--decoder: {key} is given twice ({changes[key]!r} and {value!r}): give it once")
+        else:
+            changes[key] = value
+    if off:
+        changes["without"] = off
     try:
         return with_changes(params, changes)
     except ValueError as exc:
