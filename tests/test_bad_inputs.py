@@ -1011,6 +1011,29 @@ case(
     setup=lambda d: (render_folder(d), (d / "other.toml").write_text(_rig_text(**{"pose.position_m": "[0.12, 0, 0]"}))),
 )
 
+# a docs audit (2026-11-30): a rig within the recorded rig's tolerances (baseline +4 %) but off
+# by more than the reference plane allows decoded a recording's capture given alone at 40 mm MAE,
+# exit 0, where the folder form refused it by its reference plane: both forms check it now
+for form in ("folder", "capture"):
+    case(
+        f"decode-calibrated-{form}-rig-4-percent-off",
+        lambda d, form=form: [
+            "decode",
+            str(d / "r") if form == "folder" else str(d / "r" / "capture.png"),
+            "--mode",
+            "calibrated",
+            "--rig",
+            str(d / "near.toml"),
+            "--out",
+            str(d / "x.npy"),
+        ],
+        ("reference.png triangulates with the rig", "more than 3 %"),
+        setup=lambda d: (
+            render_folder(d),
+            (d / "near.toml").write_text(_rig_text(**{"pose.position_m": "[0.0967, 0, 0]"})),
+        ),
+    )
+
 # ----------------------------------------------------------------------------------- score
 for cid, argv, msg, setup in [
     (

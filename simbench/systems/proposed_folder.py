@@ -281,18 +281,25 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     elif reference is not None:
         reference, store_reference = lookup_decoded_reference(reference, rig=rig, params=params, cache=cache)
+    # a recording's capture given alone: its folder's reference plane checks the rig as the
+    # folder form's does (a docs audit, 2026-11-30: the step recording's capture with a rig whose
+    # principal point was 51 px off decoded 95 % at 318 mm MAE, exit 0; the folder refused it)
+    check_path = reference_path
+    if check_path is None and recorded is not None and isinstance(recorded["files"].get("reference"), str):
+        check_path = str(Path(capture_path).parent / recorded["files"]["reference"])
+        z0_kind = {"z0_assumed": False, "recorded_z0": True}
     if reference is not None:
         _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path, **z0_kind)
-    elif request.rig is not None and reference_path is not None and Path(reference_path).is_file():
+    elif request.rig is not None and check_path is not None and Path(check_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
         # its Z0 by that rig too (a rig of another baseline decoded 95 % at 77 mm MAE without a
         # word; the check costs a decode of the reference, cached, where a rig is given)
-        ref_z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)  # (an image's: as --z0 says, or 1 m)
+        ref_z0 = _z0_for(Path(check_path), z0_asked, option=z0_option)  # (an image's: as --z0 says, or 1 m)
         ref_params = dataclasses.replace(params, mode="reference", z0_m=ref_z0)
         plane, store_plane = lookup_decoded_reference(
-            _camera_image(reference_path, rig, request), rig=rig, params=ref_params, cache=cache
+            _camera_image(check_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        _check_reference_plane(plane, rig, reference_path=reference_path, rig_path=rig_path, **z0_kind)
+        _check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, **z0_kind)
         store_plane()
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
