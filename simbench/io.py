@@ -583,9 +583,12 @@ def png_bytes(image: np.ndarray, *, name: str = "image") -> bytes:
     return enc.tobytes()
 
 
-def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = None, channels: int = 3) -> np.ndarray:
+def load_image(
+    path: str | Path, *, expected_size_hw: tuple[int, int] | None = None, channels: int = 3, bits: int | None = None
+) -> np.ndarray:
     """Load a capture (PNG/TIFF/...; .npy for float captures) as RGB, shape (H, W, 3), or with
-    ``channels=1`` as a grey image, shape (H, W).
+    ``channels=1`` as a grey image, shape (H, W).  ``bits``: the camera's ADC bits the caller was
+    told (``--bits``), for the advice on a float image beyond full scale.
 
     Raises
     ------
@@ -629,6 +632,9 @@ def load_image(path: str | Path, *, expected_size_hw: tuple[int, int] | None = N
             lo, hi = float(finite.min()), float(finite.max())
             if lo < 0.0:
                 hint = "no camera records negative light: an image after background subtraction or other processing?"
+            elif bits is not None and bits > 8 and hi <= (1 << bits) - 1:
+                full = (1 << bits) - 1
+                hint = f"{bits}-bit digital numbers? divide by {full}, or save them as uint16 with --bits {bits}"
             elif hi <= 255.0:
                 hint = "8-bit values? divide by 255, or save it as uint8"
             else:

@@ -101,6 +101,26 @@ def test_bare_twelve_bit_files_decode_with_bits_and_warn_without(tmp_path, capsy
     assert "capture.png: values up to" in err and "above a 10-bit camera's largest digital number 1023" in err
 
 
+def test_bits_is_refused_for_a_float_capture_and_named_in_its_range_advice(tmp_path, capsys):
+    """A docs audit (2026-11-30): ``--bits 12`` was ignored for a float .npy capture without a word,
+    and one holding 12-bit digital numbers as floats was told "16-bit values? divide by 65535"."""
+    from simbench.io import load_image, save_npy
+
+    args = _bare_files(tmp_path, 12)
+    dn = load_image(tmp_path / "capture.png").astype(np.float32)
+    save_npy(tmp_path / "dn.npy", dn)  # 0 .. 4095 as floats
+    save_npy(tmp_path / "unit.npy", dn / 4095)  # full scale
+    for name, told in [
+        ("dn.npy", "12-bit digital numbers? divide by 4095, or save them as uint16 with --bits 12"),
+        ("unit.npy", "--bits 12: " + str(tmp_path / "unit.npy") + " is a float image, read as full scale"),
+    ]:
+        argv = ["decode", str(tmp_path / name), *args[1:], "--out", str(tmp_path / "d.npy"), "--bits", "12"]
+        assert main(argv) == 2
+        assert told in capsys.readouterr().err, name
+    argv = ["decode", str(tmp_path / "dn.npy"), *args[1:], "--out", str(tmp_path / "d.npy")]
+    assert main(argv) == 2 and "16-bit values? divide by 65535" in capsys.readouterr().err  # not told the bits
+
+
 @pytest.mark.slow
 def test_a_twelve_bit_recording_decodes_as_recorded(tmp_path, variant, capsys):
     """`simbench render --sensor` with a 12-bit camera, then `simbench decode FOLDER`: the folder's

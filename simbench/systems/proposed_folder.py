@@ -119,7 +119,13 @@ def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool =
     from simbench.io import adc_full_scale, check_encoding, linearize, load_image, narrow_uint16_hint
 
     path = Path(path)
-    img = load_image(path, expected_size_hw=rig.camera.size_hw)
+    img = load_image(path, expected_size_hw=rig.camera.size_hw, bits=request.bits)
+    if request.bits is not None and img.dtype.kind == "f":
+        # (a docs audit, 2026-11-30: --bits was ignored for a float capture without a word)
+        raise ValueError(
+            f"--bits {request.bits}: {path} is a float image, read as full scale in [0, 1]; --bits is for integer "
+            "images holding a camera's digital numbers (uint16): leave it out"
+        )
     meta = recording_manifest_of(path)
     recorded = None
     encoding = check_encoding(request.encoding)
