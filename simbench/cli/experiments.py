@@ -246,7 +246,7 @@ def _cmd_bench(args) -> int:
         if args.json
         else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({setup}): median "
         f"{res['median_ms']:.1f} ms, "
-        f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} threads)"
+        f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} thread{'s' if res['threads'] != 1 else ''})"
         + (
             f"; {res['ratio']:.2f}x the paper decoder's median {res['baseline_median_ms']:.1f} ms, timed alongside"
             if "ratio" in res
