@@ -241,12 +241,13 @@ def _cmd_bench(args) -> int:
         + ([f"{args.mode} mode"] if args.mode else [])
         + (["colour-robust decoder"] if args.robust else [])
     )
+    threads = f"{res['threads']} thread" + ("s" if res["threads"] != 1 else "")
     print(
         json.dumps(res, indent=2)
         if args.json
         else f"{res['device']} decode of one {res['size_wh'][0]}x{res['size_wh'][1]} capture ({setup}): median "
         f"{res['median_ms']:.1f} ms, "
-        f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({res['threads']} thread{'s' if res['threads'] != 1 else ''})"
+        f"min {res['min_ms']:.1f} ms over {res['repeats']} runs ({threads})"
         + (
             f"; {res['ratio']:.2f}x the paper decoder's median {res['baseline_median_ms']:.1f} ms, timed alongside"
             if "ratio" in res
