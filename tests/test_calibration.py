@@ -377,6 +377,7 @@ def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
     first = captured.out
     # the poses counted, not the cache's look-ups (each pose also reads its projector depth map)
     assert "reprojection RMS" in first and "0 of 3 poses from the cache" in first, first
+    assert "replaced an earlier calibration" not in first
     # fewer poses than OpenCV asks for: the user is told what such a rig is good for
     assert captured.err.startswith("simbench: warning: a rig from 3 poses (OpenCV asks for >= 10)"), captured.err
     assert captured.err.count("warning: a rig from") == 1  # before the poses' renders, once
@@ -389,7 +390,8 @@ def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
     report = (out / "report.md").read_text()
     assert "Estimated rig against the true rig" in report and "camera focal" in report
     assert main(argv + ["--overwrite"]) == 0
-    assert "3 of 3 poses from the cache" in capsys.readouterr().out
+    again = capsys.readouterr().out
+    assert "3 of 3 poses from the cache" in again and "(replaced an earlier calibration there)" in again
     assert json.loads((out / "calibration.json").read_text())["rig"] == info["rig"]  # deterministic
     from simbench.rig import load_rig
 

@@ -37,6 +37,9 @@ def _cmd_calibrate(args) -> int:
     check_sampler(args.sampler, args.spp)
     check_sampler(args.sampler, args.corner_spp)
     check_output_directory(args.out, manifest="calibration.json", overwrite=args.overwrite)
+    # an earlier calibration there is replaced: said with the result, as render says it (a docs
+    # audit, 2026-11-30: calibrate replaced its own folder without a word)
+    replaced = (Path(args.out) / "calibration.json").is_file()
     check_calibration(rig, target=target, sensor=sensor)
     variant = select_variant(args.variant)
     advice = (
@@ -98,6 +101,8 @@ def _cmd_calibrate(args) -> int:
     )
     for key, path in files.items():
         print(f"  {key:9s} {path.name}")
+    if replaced:
+        print("  (replaced an earlier calibration there)")
     if len(result.used_views) < min(args.poses, DEFAULT_POSES):  # poses the target's corners were not found in
         print(f"simbench: warning: a rig from {len(result.used_views)} of {args.poses} poses {advice}", file=sys.stderr)
     return 0
