@@ -128,9 +128,10 @@ def scene_file(scene: str | Path) -> Path:
     path = Path(scene)
     if path.exists():
         return path
-    name = str(scene)
-    if _SCENE_NAME.fullmatch(name) and (SCENES_DIR / f"{name}.toml").is_file():
-        return SCENES_DIR / f"{name}.toml"
+    try:
+        return library_scene_path(str(scene))
+    except ValueError:  # no name of the library (a path, or no such scene)
+        pass
     if (SCENES_DIR / f"{path.stem}.toml").is_file():
         hint = (
             f"relative paths start from the working folder; the library's scene of that name is "
