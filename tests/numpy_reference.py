@@ -713,6 +713,50 @@ def crease_bias(column, *, reach, factor, max_step, rows_reach=0, trusted=None):
     return out
 
 
+def edge_bend(column, *, reach, fit, max_step):
+    """simbench.decode.depth.edge_bend_bias in numpy: per row, the runs of finite columns with
+    steps of at most ``max_step``; at each end a hole or larger step ends, in a run of at least
+    ``reach + fit``, the least-squares line through the ``fit`` columns from ``reach`` off the end
+    (float64 sums in order from the end: cumulative sums), extrapolated to the ``reach`` columns
+    nearest the end; |column - line| there as float32, the larger of two, else 0."""
+    c = np.asarray(column, np.float32)
+    h, w = c.shape
+    out = np.zeros((h, w), np.float32)
+    if reach < 1 or fit < 2:
+        return out
+    n = float(fit)
+    su, suu = n * (n - 1.0) / 2.0, (n - 1.0) * n * (2.0 * n - 1.0) / 6.0
+    det = n * suu - su * su
+    with np.errstate(invalid="ignore"):
+        joined = np.abs(np.diff(c, axis=1)) <= np.float32(max_step)
+    for r in range(h):
+        fin = np.isfinite(c[r])
+        x = 0
+        while x < w:
+            if not fin[x]:
+                x += 1
+                continue
+            e = x
+            while e + 1 < w and joined[r, e]:
+                e += 1
+            if e - x + 1 >= reach + fit:
+                for end, step, has_edge in ((e, -1, e + 1 < w), (x, 1, x > 0)):
+                    if not has_edge:
+                        continue
+                    f0 = end + step * reach
+                    u = np.arange(fit, dtype=np.float64)
+                    y = c[r, f0 + step * np.arange(fit)].astype(np.float64)
+                    sy, suy = np.cumsum(y)[-1], np.cumsum(u * y)[-1]
+                    slope = (n * suy - su * sy) / det
+                    icpt = (sy - slope * su) / n
+                    k = np.arange(1, reach + 1, dtype=np.float64)
+                    xs = f0 - step * np.arange(1, reach + 1)
+                    d = np.abs((c[r, xs].astype(np.float64) - (icpt - slope * k)).astype(np.float32))
+                    out[r, xs] = np.maximum(out[r, xs], d)
+            x = e + 1
+    return out
+
+
 def emva_camera(
     radiance: np.ndarray,
     *,

@@ -850,6 +850,32 @@ def test_crease_bias_is_the_concave_second_difference_and_nothing_else():
     np.testing.assert_allclose(got[20], want / 41, atol=2e-6)  # one row's break over the mean's 41 rows
 
 
+def test_edge_bend_bias_is_the_maps_distance_from_its_line_beside_an_edge_and_nothing_else():
+    """Closed form: a plane's linear column map bent by ``b(k)`` at the ``k``-th pixel before a
+    hole or a depth step reads ``|b(k)|`` within the reach of it and 0 beyond; the straight map
+    beside the same edges, the row's own ends, and a run shorter than reach + fit read 0."""
+    from simbench.decode.depth import edge_bend_bias
+
+    reach, fit = 11, 22
+    x = np.arange(200, dtype=np.float64)
+    line = 0.5 * x + 300.0  # values exact in float32
+    bend = np.zeros(200)
+    bend[90:100] = -0.125 * np.arange(1, 11)  # towards the hole at 100: -0.125 .. -1.25 px
+    maps = np.stack([line, line + bend, line, line + bend, line]).astype(np.float32)
+    maps[:2, 100:108] = np.nan  # a hole
+    maps[2:4, 100:] += 40.0  # a depth step, no hole
+    maps[4, 30:] = np.nan  # a 30-px run from the row's start: shorter than reach + fit
+    got = edge_bend_bias(maps, reach_px=reach, fit_px=fit, max_step_px=3.0)
+    want = np.abs(bend).astype(np.float32)
+    assert np.all(got[[0, 2, 4]] < 1e-4)  # the straight map: float32 rounding of 300-400 px only
+    np.testing.assert_allclose(got[1, :100], want[:100], atol=1e-4)
+    np.testing.assert_allclose(got[3], want, atol=1e-4)  # the far side of the step: straight
+    assert np.all(got[1, 108:] < 1e-4)  # after the hole, straight
+    assert np.all(got[:, :89] < 1e-4) and np.all(got[:, -reach:] < 1e-4)  # the row's ends are no edge
+    with pytest.raises(ValueError, match="column_px"):
+        edge_bend_bias(np.zeros(5, np.float32), reach_px=reach, fit_px=fit, max_step_px=3.0)
+
+
 def _corner_capture(opening_deg: float, crease_m: float = 1.2):
     """A vertical crease at x = 0, z = crease_m, opening towards the camera (concave, < 180 deg)
     or away from it (a ridge, > 180 deg), noise-free: each pixel the nearer face (concave) or the

@@ -856,6 +856,42 @@ def test_crease_bias_matches_numpy():
     same(conf, want)
 
 
+def test_edge_bend_matches_numpy():
+    """The edge term's C loops: the bits of its numpy form on a noisy map with depth steps, holes,
+    runs shorter than the reach and fit, a run at the row's end and a single-pixel run, for reaches
+    and fits from none to more than a row."""
+    rng = np.random.default_rng(5)
+    x = np.arange(300, dtype=np.float32)
+    col = np.tile(0.9 * x + 40.0, (10, 1)).astype(np.float32)
+    col += rng.normal(0.0, 0.05, col.shape).astype(np.float32)
+    col[1, 180:] += 12.0  # a depth edge without a hole
+    col[2, 100:111] = np.nan  # a hole
+    col[3, :] = np.nan
+    col[3, 150] = 7.0  # a lone decoded pixel
+    col[4, 40:] = np.nan  # a run at the row's start, a hole after it
+    col[5, 20:25] = np.nan
+    col[5, 60:65] = np.nan  # a 35-px run between holes
+    col[6, 120:] += np.linspace(0.0, 3.0, 180, dtype=np.float32) ** 2  # a bend, no edge
+    col[7, 95:100] -= np.array([0.2, 0.4, 0.8, 1.2, 2.0], np.float32)  # bent towards a hole
+    col[7, 100:110] = np.nan
+    for reach in (0, 1, 5, 11, 150, 400):
+        for fit in (0, 1, 2, 22, 300):
+            got = np.empty_like(col)
+            depth._kernels.edge_bend(col, reach, fit, 3.0, got)
+            same(got, ref.edge_bend(col, reach=reach, fit=fit, max_step=3.0))
+    got = np.empty_like(col)
+    depth._kernels.edge_bend(col, 11, 22, 3.0, got)
+    assert (got[7, 89:100] > 0).all() and got[7, 99] > 1.5 and (got[7, :89] == 0).all()
+    # the confidence cap in the same call: fmin(conf, kappa / bias) where valid
+    conf = rng.uniform(0.0, 40.0, col.shape).astype(np.float32)
+    valid = rng.random(col.shape) < 0.8
+    want = conf.copy()
+    with np.errstate(divide="ignore"):
+        np.fmin(want, np.float32(1.34) / got, out=want, where=valid)
+    depth._kernels.edge_bend(col, 11, 22, 3.0, np.empty_like(col), cap=(np.float32(1.34), valid, conf))
+    same(conf, want)
+
+
 def test_a_library_older_than_its_sources_is_named_stale(tmp_path):
     """A C loop whose signature changed (vote_codes gained an output) would read the new call's
     arguments from the old signature's places: loading a library built before its sources were

@@ -5,8 +5,8 @@
 - :mod:`~simbench.decode.phase`: the Gabor phase and the fringe SNR (Sec. 5.3);
   :mod:`~simbench.decode.fourier`: FTP and windowed Fourier ridges, interchangeable with it
 - :mod:`~simbench.decode.debruijn`: De Bruijn unwrapping with neighbour correction (Sec. 5.2)
-- :mod:`~simbench.decode.depth`: reference-plane matching and depth (Sec. 5.4); the crease term of
-  the colour-robust decoder's confidence
+- :mod:`~simbench.decode.depth`: reference-plane matching and depth (Sec. 5.4); the crease and edge
+  terms of the colour-robust decoder's confidence
 - :mod:`~simbench.decode.params`: the parameters (:class:`DecoderParams`, :func:`robust_params`)
 - :mod:`~simbench.decode.pipeline`: the chain; :mod:`~simbench.decode.bands`: its row bands in
   threads; :mod:`~simbench.decode.persist`: decoded reference planes cached
@@ -20,6 +20,8 @@ from simbench.decode.params import (
     CREASE_BIAS_RATIO,
     CREASE_MAX_STEP_PX,
     CREASE_SCALE_PERIODS,
+    EDGE_BEND_FIT_PERIODS,
+    EDGE_BEND_REACH_SIGMAS,
     with_assignments,
     with_changes,
     without_checks,
@@ -49,6 +51,8 @@ __all__ = [
     "CREASE_BIAS_RATIO",
     "CREASE_MAX_STEP_PX",
     "CREASE_SCALE_PERIODS",
+    "EDGE_BEND_FIT_PERIODS",
+    "EDGE_BEND_REACH_SIGMAS",
     "with_assignments",
     "with_changes",
     "without_checks",

@@ -44,6 +44,7 @@ __all__ = [
     "robust_fringe_code",
     "albedo_segments",
     "crease_bias",
+    "edge_bend",
 ]
 
 _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
@@ -79,6 +80,7 @@ _SIGNATURES = {
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
     "pool_code_rows": (None, [_I, _I, _I, _I, _P, _P, _P, _I, _F, _P, _P]),
     "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _P, _F, _P, _P, _P, _P, _P]),
+    "edge_bend": (None, [_I, _I, _P, _I, _I, _F, _P, _F, _P, _P]),
     "decode_tail": (
         None,
         [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
@@ -795,4 +797,30 @@ def crease_bias(
         broken.ctypes.data,
         sums.ctypes.data,
         counts.ctypes.data,
+    )
+
+
+def edge_bend(column, reach: int, fit: int, max_step: float, out, *, cap=None) -> None:
+    """Over ``column`` ((H, W) float32), per row: at each end of a run of finite columns (steps
+    between neighbours at most ``max_step``) that a hole or a larger step ends, where the run is
+    at least ``reach + fit`` long, ``out`` = |column - the least-squares line through the ``fit``
+    columns from ``reach`` pixels off the end, extrapolated| for the ``reach`` columns nearest the
+    end (the larger of two), else 0.  ``cap = (kappa, valid, conf)``: also ``conf = fmin(conf,
+    kappa / out)`` where ``valid``, in place."""
+    h, w = column.shape
+    reach, fit = int(reach), int(fit)
+    if reach < 0 or fit < 0:
+        raise ValueError(f"reach and fit must be >= 0, got {reach}, {fit}")
+    kappa, valid, conf = cap if cap is not None else (0.0, None, None)
+    _library().edge_bend(
+        h,
+        w,
+        _ptr(column, "column", np.float32, (h, w)),
+        reach,
+        fit,
+        _f32(max_step),
+        _ptr(out, "out", np.float32, (h, w), writable=True),
+        _f32(kappa),
+        None if cap is None else _ptr(valid, "valid", np.bool_, (h, w)),
+        None if cap is None else _ptr(conf, "conf", np.float32, (h, w), writable=True),
     )

@@ -206,6 +206,45 @@ def crease_bias(
     return out
 
 
+def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_step_px: float) -> np.ndarray:
+    """Measured phase bias beside depth edges and holes, in projector pixels (ours; the
+    colour-robust decoder's ``edge_doubt``).
+
+    Within its reach of a depth edge the phase fit's window holds both sides' fringes, and the
+    decoded column map bends towards the other side's: beside the deep staircase's 200 mm step
+    (``scenes/hard_stairs_deep.toml``) 0.2 px 6 px from the undecoded gap, 0.8 px (6 mm) 2 px from
+    it, at a fringe SNR of 3-4 - the wide window fits both fringes' mix well enough, and the
+    narrow window, still reaching across, moves with it.  The bend is what the map itself shows:
+    along each row, at each end of a run of decoded columns that a hole or a step over
+    ``max_step_px`` ends (the row's own ends are no edge), the least-squares line through the
+    ``fit_px`` columns from ``reach_px`` pixels off the end - beyond the windows that reach across
+    - extrapolated to the ``reach_px`` columns nearest the end; the bias is each one's distance
+    from it (the larger, where both ends of a short run reach a pixel).  0 where not measured: a
+    run shorter than ``reach_px + fit_px``, and everything farther from an end.  A surface that
+    curves within the reach shows as bend too (a sphere's limb, seen at grazing incidence).
+
+    Parameters
+    ----------
+    column_px : ndarray, shape (H, W), float32; projector column, NaN where none
+    reach_px : int
+        Camera pixels from an end whose bias is measured (the decoder: the wide window's 2 sigma).
+    fit_px : int
+        Camera pixels the line is fitted over (the decoder: one camera period).
+    max_step_px : float
+        A larger step between neighbouring pixels is a depth edge.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32, >= 0
+    """
+    c = np.ascontiguousarray(column_px, dtype=np.float32)
+    if c.ndim != 2:
+        raise ValueError(f"column_px: expected shape (H, W), got {c.shape}")
+    out = np.empty(c.shape, np.float32)
+    _kernels.edge_bend(c, int(reach_px), int(fit_px), max_step_px, out)
+    return out
+
+
 def crease_trusted(valid: np.ndarray, *, scale_px: int) -> np.ndarray:
     """The columns :func:`crease_bias` may read in the decoder: the valid ones at least half of
     ``scale_px`` from an invalid one along the row (beside a hole - a depth edge's, a shadow's -

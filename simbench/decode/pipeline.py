@@ -75,6 +75,8 @@ from simbench.decode.params import (
     CREASE_BIAS_RATIO,
     CREASE_MAX_STEP_PX,
     CREASE_SCALE_PERIODS,
+    EDGE_BEND_FIT_PERIODS,
+    EDGE_BEND_REACH_SIGMAS,
     DecoderParams,
     PHASE_METHODS,
     STABILITY_KAPPA_RAD,
@@ -1287,6 +1289,20 @@ def decode(
                 cap=(crease_kappa_px, valid_out, conf_out),
             )
         stages.put("crease_bias", bias)
+    if params.edge_doubt:
+        # after the bands too: the bend is read along whole rows of the final column map
+        with stage("edge bend"):
+            t_cam = params.camera_period(rig)
+            bend = np.empty((h, w), np.float32)
+            _kernels.edge_bend(
+                col_out,
+                int(np.ceil(EDGE_BEND_REACH_SIGMAS * params.sigma_periods * t_cam)),
+                int(round(EDGE_BEND_FIT_PERIODS * t_cam)),
+                CREASE_MAX_STEP_PX,
+                bend,
+                cap=(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi), valid_out, conf_out),
+            )
+        stages.put("edge_bend", bend)
     registration = None
     if params.registration_doubt:
         with stage("colour registration"):

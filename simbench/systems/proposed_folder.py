@@ -343,6 +343,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         for c, on in (
             ("the phase stability", params.phase_stability),
             ("the crease bias", params.crease_doubt),
+            ("the bend beside depth edges", params.edge_doubt),
             ("the colour registration", params.registration_doubt),
         )
         if on
