@@ -1154,6 +1154,6 @@ def test_the_apis_warnings_are_the_command_lines_one_line_messages(tmp_path, mon
     argv = ["render", str(SCENES / "step.toml"), "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "c")]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert err.count("simbench: scene told: an object 40 m across\n") == 2, err
+    assert err.count("simbench: warning: scene told: an object 40 m across\n") == 2, err
     assert "SimbenchWarning" not in err and "warnings.warn" not in err
     assert "simbench: error: stopped before rendering" in err

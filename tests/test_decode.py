@@ -861,7 +861,10 @@ def test_edge_bend_bias_is_the_maps_distance_from_its_line_beside_an_edge_and_no
     line = 0.5 * x + 300.0  # values exact in float32
     bend = np.zeros(200)
     bend[90:100] = -0.125 * np.arange(1, 11)  # towards the hole at 100: -0.125 .. -1.25 px
-    maps = np.stack([line, line + bend, line, line + bend, line]).astype(np.float32)
+    ends = np.zeros(200)
+    ends[:10] = 0.125 * np.arange(10, 0, -1)  # bent at both of the row's own ends, as before a hole
+    ends[190:] = -0.125 * np.arange(1, 11)
+    maps = np.stack([line, line + bend, line, line + bend, line, line + ends]).astype(np.float32)
     maps[:2, 100:108] = np.nan  # a hole
     maps[2:4, 100:] += 40.0  # a depth step, no hole
     maps[4, 30:] = np.nan  # a 30-px run from the row's start: shorter than reach + fit
@@ -871,7 +874,12 @@ def test_edge_bend_bias_is_the_maps_distance_from_its_line_beside_an_edge_and_no
     np.testing.assert_allclose(got[1, :100], want[:100], atol=1e-4)
     np.testing.assert_allclose(got[3], want, atol=1e-4)  # the far side of the step: straight
     assert np.all(got[1, 108:] < 1e-4)  # after the hole, straight
-    assert np.all(got[:, :89] < 1e-4) and np.all(got[:, -reach:] < 1e-4)  # the row's ends are no edge
+    assert np.all(got[:, :89] == 0.0) and np.all(got[5] == 0.0)  # the row's own ends are no edge
+    # ... but a hole is: the same row with one undecoded pixel after its end reads the bend there
+    holed = np.append(maps[5], np.float32(np.nan))[None, :]
+    got = edge_bend_bias(holed, reach_px=reach, fit_px=fit, max_step_px=3.0)[0]
+    np.testing.assert_allclose(got[189:200], np.abs(ends[189:200]), atol=1e-4)
+    assert np.all(got[:189] == 0.0) and got[199] > 1.2
     with pytest.raises(ValueError, match="column_px"):
         edge_bend_bias(np.zeros(5, np.float32), reach_px=reach, fit_px=fit, max_step_px=3.0)
 

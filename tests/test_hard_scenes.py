@@ -99,8 +99,8 @@ def test_the_confidence_curve_keeps_the_pixels_at_or_above_each_threshold():
 
 def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_goals():
     """Closed form: scene a meets both goals at 2 and 3, scene b at 3 and 4, scene c never: 3
-    (two scenes); with b meeting them at 2 too, the lower of 2 and 3; of two thresholds that as
-    many scenes meet, the one with fewer wrong pixels."""
+    (two scenes); of thresholds that as many scenes meet, the highest (since 2026-11-30: it keeps
+    a subset of the lower's pixels, so the fewest wrong ones)."""
     from simbench.experiments.hard_scenes import operating_point
 
     def rows(scene, met):
@@ -117,16 +117,12 @@ def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_
 
     curves = rows("a", {2, 3}) + rows("b", {3, 4}) + rows("c", set())
     assert operating_point(curves) == 3.0
-    assert operating_point(rows("a", {2, 3}) + rows("b", {2, 3, 4})) == 2.0
+    assert operating_point(rows("a", {2, 3}) + rows("b", {2, 3, 4})) == 3.0  # 2 and 3 tie: the higher
+    assert operating_point(rows("a", {2, 3, 4}) + rows("b", {2, 3, 4})) == 4.0
     wrong = [dict(c, wrong_share=0.01) if c["threshold"] == 3.0 else c for c in curves]
-    assert operating_point(wrong) == 2.0  # 1 % wrong at 3: a meets them at 2, b at 4; the lower wins
-    # of equals, the fewest wrong pixels first: a and b meet both at 2 and at 3, with more wrong at 2
-    safer = [
-        dict(c, wrong_share=0.0005 if c["threshold"] == 2.0 else 0.0) for c in rows("a", {2, 3}) + rows("b", {2, 3})
-    ]
-    assert operating_point(safer) == 3.0
-    nan = [dict(c, wrong_share=float("nan")) for c in rows("c", set())]  # a scene decoding nothing: no share
-    assert operating_point(safer + nan) == 3.0
+    assert operating_point(wrong) == 4.0  # 1 % wrong at 3: a meets them at 2, b at 4; the higher wins
+    nan = [dict(c, wrong_share=float("nan"), completeness=0.0) for c in rows("c", set())]  # c decodes nothing
+    assert operating_point(rows("a", {2, 3}) + rows("b", {3}) + nan) == 3.0
     with pytest.raises(ValueError, match="paper"):
         operating_point(curves, decoder="paper")
 

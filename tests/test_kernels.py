@@ -874,8 +874,8 @@ def test_edge_bend_matches_numpy():
     col[6, 120:] += np.linspace(0.0, 3.0, 180, dtype=np.float32) ** 2  # a bend, no edge
     col[7, 95:100] -= np.array([0.2, 0.4, 0.8, 1.2, 2.0], np.float32)  # bent towards a hole
     col[7, 100:110] = np.nan
-    for reach in (0, 1, 5, 11, 150, 400):
-        for fit in (0, 1, 2, 22, 300):
+    for reach in (0, 1, 5, 11, 150, 400, 2**62):
+        for fit in (0, 1, 2, 22, 300, 2**62):
             got = np.empty_like(col)
             depth._kernels.edge_bend(col, reach, fit, 3.0, got)
             same(got, ref.edge_bend(col, reach=reach, fit=fit, max_step=3.0))

@@ -766,6 +766,7 @@ def test_the_edge_term_doubts_the_pixels_a_window_straddling_a_depth_edge_biases
     of the decoded map there (``edge_doubt``, :func:`simbench.decode.depth.edge_bend_bias`) and
     doubts them: none over half a pixel, max 0.26, at 96.4 instead of 98.4 % of those pixels.
     Never a stripe-order error."""
+    from simbench.decode import EDGE_BEND_REACH_SIGMAS
     from simbench.decode.depth import edge_bend_bias
 
     ref, f = calibration
@@ -782,16 +783,11 @@ def test_the_edge_term_doubts_the_pixels_a_window_straddling_a_depth_edge_biases
         assert np.all(err < 0.5 * 21)
         out[edge] = (int((err > 0.5).sum()), float(err.max()), float(r.valid[near].mean()))
         if edge:
-            bend = r.stages["edge_bend"]
-            assert np.array_equal(
-                bend,
-                edge_bend_bias(
-                    r.stages["column"],
-                    reach_px=int(np.ceil(2.0 * 0.25 * PARAMS_PERIOD_PX)),
-                    fit_px=round(PARAMS_PERIOD_PX),
-                    max_step_px=3.0,
-                ),
-            )
+            # the stage is the function's, on the column map before the operating point's holes
+            every = decode(cap, rig=RIG, params=dataclasses.replace(p, min_confidence=0.0), reference=rmap)
+            reach = int(np.ceil(EDGE_BEND_REACH_SIGMAS * p.sigma_periods * PARAMS_PERIOD_PX))
+            want = edge_bend_bias(every.column_px, reach_px=reach, fit_px=round(PARAMS_PERIOD_PX), max_step_px=3.0)
+            assert np.array_equal(r.stages["edge_bend"], want) and (want > 0).any()
     assert out[False][0] > 100 and out[False][1] > 0.6, out
     assert out[True][0] == 0 and out[True][1] < 0.4, out
     assert out[False][2] - 0.03 < out[True][2] < out[False][2], out

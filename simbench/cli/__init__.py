@@ -53,13 +53,23 @@ def _debug_after_the_command(sub: argparse._SubParsersAction) -> None:
                 _debug_after_the_command(action)
 
 
+class _LevelFormatter(logging.Formatter):
+    """``simbench: warning: ...`` for a warning, as the commands' own warnings read (``score``,
+    ``calibrate``); ``simbench: error: ...`` for an error; other records ``simbench: ...``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        level = {logging.WARNING: "warning: ", logging.ERROR: "error: "}.get(record.levelno, "")
+        return f"simbench: {level}{super().format(record)}"
+
+
 class _StderrHandler(logging.StreamHandler):
-    """Library messages (``logging``, logger ``simbench``) as ``simbench: ...`` lines on the
-    current ``sys.stderr`` (looked up per record, so redirected streams see them)."""
+    """Library messages (``logging``, logger ``simbench``) as ``simbench: warning: ...`` lines
+    (:class:`_LevelFormatter`) on the current ``sys.stderr`` (looked up per record, so redirected
+    streams see them)."""
 
     def __init__(self) -> None:
         super().__init__()
-        self.setFormatter(logging.Formatter("simbench: %(message)s"))
+        self.setFormatter(_LevelFormatter())
 
     @property
     def stream(self):

@@ -811,6 +811,8 @@ def edge_bend(column, reach: int, fit: int, max_step: float, out, *, cap=None) -
     reach, fit = int(reach), int(fit)
     if reach < 0 or fit < 0:
         raise ValueError(f"reach and fit must be >= 0, got {reach}, {fit}")
+    # no run is longer than the row: beyond it the same result, and reach + fit cannot overflow
+    reach, fit = min(reach, w + 1), min(fit, w + 1)
     kappa, valid, conf = cap if cap is not None else (0.0, None, None)
     _library().edge_bend(
         h,
