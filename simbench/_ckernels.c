@@ -1780,6 +1780,17 @@ void albedo_segments(int64_t h, int64_t w, const float *restrict proxy, const fl
     }
 }
 
+/* A row's confidence capped by a bias (the crease and edge terms): k = fminf(k, kappa / o) where
+ * ok, without fminf's call (q = kappa / o is never NaN; kappa / 0 = inf leaves k), branch-free so
+ * that it vectorises. */
+static inline void cap_confidence_row(int64_t w, const float *restrict o, float kappa, const uint8_t *restrict ok,
+                                      float *restrict k) {
+    for (int64_t x = 0; x < w; x++) {
+        const float q = kappa / o[x], kx = k[x];
+        k[x] = (ok[x] && (q < kx || kx != kx)) ? q : kx;
+    }
+}
+
 /* The predicted bias at concave creases (simbench.decode.depth.crease_bias) of an (h, w) float32
  * column map.  Per row, into signed (scratch, h x w): v = factor d2 with d2 = (c[x + L] - 2 c[x]) +
  * c[x - L] (factor = -sign(d column / d depth) * bias ratio), NaN where one of the 2 L steps between
@@ -1855,16 +1866,8 @@ void crease_bias(int64_t h, int64_t w, const float *restrict col, int64_t reach,
             const float m = counts[x] > 0 ? (float)(sums[x] / (double)counts[x]) : 0.0f;
             o[x] = (v[x] == v[x] && m > 0.0f) ? m : 0.0f;
         }
-        if (conf) {
-            /* fminf(k, q) without its call (q = kappa / o is never NaN; kappa / 0 = inf leaves k),
-             * branch-free so that it vectorises */
-            const uint8_t *ok = valid + r * w;
-            float *k = conf + r * w;
-            for (int64_t x = 0; x < w; x++) {
-                const float q = kappa / o[x], kx = k[x];
-                k[x] = (ok[x] && (q < kx || kx != kx)) ? q : kx;
-            }
-        }
+        if (conf)
+            cap_confidence_row(w, o, kappa, valid + r * w, conf + r * w);
     }
 }
 
@@ -1922,13 +1925,7 @@ void edge_bend(int64_t h, int64_t w, const float *restrict col, int64_t reach, i
             }
             s = e + 1;
         }
-        if (conf) {
-            const uint8_t *ok = valid + r * w;
-            float *k = conf + r * w;
-            for (int64_t x = 0; x < w; x++) {
-                const float q = kappa / o[x], kx = k[x];
-                k[x] = (ok[x] && (q < kx || kx != kx)) ? q : kx;
-            }
-        }
+        if (conf)
+            cap_confidence_row(w, o, kappa, valid + r * w, conf + r * w);
     }
 }
