@@ -1220,10 +1220,11 @@ def decode(
     # paper Eq. 14 with the baseline's sign: a projector on the camera's left (x < 0) turns the
     # disparity's (an audit: such a rig's depths came out mirrored about Z0, 1/Z = 2/Z0 - 1/Z_true)
     inv_fb = math.copysign(1.0, rig.position_m[0]) / (rig.camera.focal_px * rig.baseline_m)
+    # the crease and edge terms' kappa over a bias in projector px: kappa T / (2 pi bias), the
+    # stability term's scale
+    bias_kappa_px = np.float32(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi))
     if params.crease_doubt:
         crease_px = int(round(CREASE_SCALE_PERIODS * params.camera_period(rig)))
-        # kappa over a bias in projector px: kappa T / (2 pi bias), the stability term's scale
-        crease_kappa_px = np.float32(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi))
         at = dict(rows=np.array([h // 2]), cols=np.array([w // 2]))
         depth_sign = float(np.sign(np.diff([projector_column_at_depth(z, rig, **at)[0] for z in (zmin, zmax)])[0]))
 
@@ -1286,7 +1287,7 @@ def decode(
                 crease_px,
                 bias,
                 trusted=trusted,
-                cap=(crease_kappa_px, valid_out, conf_out),
+                cap=(bias_kappa_px, valid_out, conf_out),
             )
         stages.put("crease_bias", bias)
     if params.edge_doubt:
@@ -1300,7 +1301,7 @@ def decode(
                 int(round(EDGE_BEND_FIT_PERIODS * t_cam)),
                 CREASE_MAX_STEP_PX,
                 bend,
-                cap=(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi), valid_out, conf_out),
+                cap=(bias_kappa_px, valid_out, conf_out),
             )
         stages.put("edge_bend", bend)
     registration = None
