@@ -139,3 +139,21 @@ def test_decode_refuses_clipped_calibration_frames_in_one_line(tmp_path, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1, err
     assert "the calibration capture under projector primary R is clipped" in err[0], err
+    assert f"the calibration frames in {frames}/" in err[0] and "calibration_dark.png" in err[0], err
+
+
+def test_decode_refuses_calibration_frames_in_the_wrong_order(tmp_path, capsys):
+    """A new user's audit (2026-11-30): the green and blue frames renamed decoded a chart with 8 % of
+    its depths > 5 mm wrong, exit 0, without a word; refused now, in one line naming the folder."""
+    files = [*bare_files(tmp_path, RAW, CAL.image, SCENE.rig), "--z0", "1.0", "--out", str(tmp_path / "d.npy")]
+    frames = tmp_path / "cal"
+    frames.mkdir()
+    swap = {"green": "blue", "blue": "green"}
+    for name, frame in CAL.frames.items():
+        save_png(frames / f"calibration_{swap.get(name, name)}.png", frame)
+    rc = main(["decode", *files, "--robust", "--calibration", str(frames)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert f"the calibration frames in {frames}/" in err[0], err
+    assert "named green looks blue" in err[0] and "named blue looks green" in err[0], err
+    assert not (tmp_path / "d.npy").exists()

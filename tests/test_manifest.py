@@ -405,6 +405,72 @@ def test_a_reference_a_little_off_its_z0_is_decoded_with_a_warning(tmp_path, cap
     assert z == pytest.approx(1.02, abs=1e-3), caplog.text
 
 
+def test_a_reference_captured_with_another_pattern_is_refused(tmp_path, capsys):
+    """A new user's audit (2026-11-30): the reference of a recording made with a 24-px period given
+    to a 21-px capture was refused only because its plane happened to triangulate 13 % off Z0 (at
+    24 px 3.6 %: a little less and it would have decoded with a warning).  The reference's
+    recorded pattern is compared now, in both modes, for a folder's capture and a bare image."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a = _folder_with_pattern(tmp_path / "a")
+    b = _folder_with_pattern(tmp_path / "b", period_px=24)
+    (tmp_path / "cap.png").write_bytes((a / "capture.png").read_bytes())
+    for capture in (a, tmp_path / "cap.png"):
+        for mode in ("reference", "calibrated"):
+            argv = ["decode", capture, "--reference", b / "reference.png", "--mode", mode, "--rig", a / "rig.toml"]
+            rc, _, err = _run([*argv, "--out", tmp_path / "d.npy", "--no-cache"], capsys)
+            assert rc == 2 and "was captured with the pattern period 24 px" in err, err
+            assert "the capture is decoded with period 21 px" in err and not (tmp_path / "d.npy").exists(), err
+    # its own folder's reference, given explicitly: accepted
+    argv = ["decode", a, "--reference", a / "reference.png", "--out", tmp_path / "d.npy", "--no-cache"]
+    assert _run(argv, capsys)[0] == 0
+
+
+def test_a_rig_whose_camera_tilts_the_reference_plane_is_refused_or_warned(tmp_path, capsys, caplog):
+    """A new user's audit (2026-11-30): a rig whose camera focal length was 3.8 % off left the
+    reference plane's median at Z0 (the only thing checked) but tilted it -9.5 / +11.6 % across the
+    image, and a chart decoded at 54 mm MAE in calibrated mode, exit 0, without a word.  The plane's
+    2nd and 98th percentiles are checked against its median now: the true rig passes in silence, a
+    focal length 1 % off warns (the spread named), 3.8 % off is refused (both modes)."""
+    import tomllib
+
+    from simbench.decode import DecoderParams, decode_reference, reference_plane_extent
+    from simbench.io import load_image
+    from simbench.pattern import PatternSpec
+    from simbench.rig import rig_from_dict
+
+    from .test_bad_inputs import _rig_text
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    _tiny_plane_png(tmp_path / "cap.png", TINY_RIG, 1.1)
+    _tiny_plane_png(tmp_path / "ref.png", TINY_RIG, 1.0)
+    rig = rig_from_dict(tomllib.loads(TINY_RIG))
+    ref = decode_reference(
+        load_image(tmp_path / "ref.png"),
+        rig=rig,
+        params=DecoderParams(pattern=PatternSpec(size_hw=rig.projector.size_hw)),
+    )
+    low, med, high = reference_plane_extent(ref, rig)
+    assert max(abs(low - med), abs(high - med)) < 0.004 and abs(med) < 5e-4  # (0.23 %: under the 0.5 % warning)
+    spreads = {}
+    for factor in (1.01, 1.038):
+        text = _rig_text(**{"camera.focal_px": f"{289.0 * factor:.4f}"})
+        (tmp_path / f"f{factor}.toml").write_text(text)
+        low, med, high = reference_plane_extent(ref, rig_from_dict(tomllib.loads(text)))
+        spreads[factor] = max(abs(low - med), abs(high - med))
+    assert 0.005 < spreads[1.01] < 0.03 < spreads[1.038], spreads
+    for mode in ("reference", "calibrated"):
+        base = ["decode", tmp_path / "cap.png", "--reference", tmp_path / "ref.png", "--mode", mode, "--z0", "1.0"]
+        base += ["--out", tmp_path / "d.npy", "--no-cache"]
+        caplog.clear()
+        rc, _, err = _run([*base, "--rig", tmp_path / "rig.toml"], capsys)
+        assert rc == 0 and "tilted" not in caplog.text and "tilted" not in err, (caplog.text, err)
+        rc, _, err = _run([*base, "--rig", tmp_path / "f1.01.toml"], capsys)
+        assert rc == 0 and "tilted or bent more than 0.5 %" in caplog.text, caplog.text
+        rc, _, err = _run([*base, "--rig", tmp_path / "f1.038.toml"], capsys)
+        assert rc == 2 and "tilted or bent more than 3 %" in err and "focal length" in err, err
+
+
 def test_a_tof_folder_with_read_noise_below_zero_decodes(tmp_path):
     """Issue 33 audit: read noise makes dim taps negative (render scenes/sphere.toml --system tof);
     a check for non-negative taps refused every such folder."""

@@ -2,12 +2,21 @@
 decoding of its own patterns, phase noise against the closed form, complementary Gray-code
 robustness, and renders with no order errors."""
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, gray_order, phase_shift_frames, wrapped_phase
+from simbench.decode.temporal import (
+    PhaseShiftSpec,
+    decode_phase_shift,
+    fit_noise,
+    gray_code_min_snr,
+    gray_order,
+    phase_shift_frames,
+    wrapped_phase,
+)
 
 from .conftest import SCENES
 
@@ -85,6 +94,94 @@ def test_complementary_gray_code_survives_shifted_code_edges(shift_periods):
     j = gray_order(frames[spec.steps :], np.full((1, w), 0.5))
     plain = ((j >> 1) + (r.wrapped + np.pi) / (2 * np.pi)) * spec.period_px - 0.5
     assert np.abs(plain[0, inner] - u[inner]).max() > 10  # a period off: why the complement is needed
+
+
+@pytest.mark.parametrize("steps", [4, 8])
+def test_the_fit_residual_measures_each_frames_noise(steps):
+    """fit_noise against theory: the residual sum of squares of the 3-parameter fit has
+    expectation (N - 3) sigma**2, so the pooled estimate's median is sigma (within 3 %; the
+    chi-square median sits 1 % below the mean at 25 degrees of freedom) and its spread
+    1 / sqrt(2 x 25 (N - 3)) relative (within 25 %: neighbouring windows share pixels, the
+    spread is measured on windows 5 px apart)."""
+    rng = np.random.default_rng(10 + steps)
+    a, b, sigma = 0.4, 0.25, 0.01
+    phi = rng.uniform(-np.pi, np.pi, size=(300, 400))
+    d = 2 * np.pi * np.arange(steps) / steps
+    frames = a + b * np.cos(phi[None] - d[:, None, None]) + rng.normal(0, sigma, size=(steps, *phi.shape))
+    noise = fit_noise(frames, *wrapped_phase(frames, steps=steps))
+    assert noise.shape == phi.shape and noise.dtype == np.float64
+    assert np.median(noise) == pytest.approx(sigma, rel=0.03)
+    apart = noise[2:-2:5, 2:-2:5]
+    assert np.std(apart) / np.mean(apart) == pytest.approx(1 / np.sqrt(2 * 25 * (steps - 3)), rel=0.25)
+    # a noise-free fringe leaves only rounding; a second harmonic h cos 2(phi - d) (a projector's
+    # gamma) is what N = 4 cannot fit: it reads (-1)^n h cos 2 phi in frame n, a residual sum of
+    # 4 h^2 cos^2 2 phi over N - 3 = 1 degree of freedom, sqrt(2) h over random phases
+    clean = a + b * np.cos(phi[None] - d[:, None, None])
+    assert fit_noise(clean, *wrapped_phase(clean, steps=steps)).max() < 1e-12
+    if steps == 4:
+        bent = clean + 0.02 * np.cos(2 * (phi[None] - d[:, None, None]))
+        got = np.median(fit_noise(bent, *wrapped_phase(bent, steps=4)))
+        assert got == pytest.approx(np.sqrt(2) * 0.02, rel=0.05)
+    with pytest.raises(ValueError, match="N >= 4"):
+        fit_noise(frames[:3], *wrapped_phase(frames[:3], steps=3))
+
+
+def _noisy_rows(snr: float, rows: int, rng, *, albedo: float = 1.0, spec: PhaseShiftSpec | None = None):
+    """``rows`` rows of the sequence seen by a camera pixel per projector column: a surface of
+    ``albedo`` under white 1.0 (so B = M = albedo / 2: the fringe's contrast 1) and each frame's
+    noise sigma = B / snr."""
+    spec = spec or PhaseShiftSpec(size_hw=(1, 1824))
+    sigma = 0.5 * albedo / snr
+    clean = albedo * phase_shift_frames(spec).astype(np.float64)
+    frames = clean + rng.normal(0.0, sigma, size=(clean.shape[0], rows, clean.shape[2]))
+    return frames, spec
+
+
+def test_the_gray_codes_snr_threshold_holds_its_error_rate():
+    """gray_code_min_snr against its derivation and a Monte Carlo of the decoder: at the threshold
+    (4.09 at 4 steps and 8 bits) at most 0.1 % of pixels take a wrong period number (the bound
+    sums every bit's flip; measured 0.087 %), while at SNR 2.5 8.3 % do - so the threshold is
+    what decides."""
+    from statistics import NormalDist
+
+    t = gray_code_min_snr(steps=4, bits=8)
+    assert t == pytest.approx(4.0945, abs=1e-3)
+    assert 8 * NormalDist().cdf(-t / np.sqrt(1.25)) == pytest.approx(1e-3, rel=1e-9)
+    assert gray_code_min_snr(steps=4, bits=8, error_rate=1e-4) > t > gray_code_min_snr(steps=8, bits=8)
+    rng = np.random.default_rng(2017)
+    u = np.arange(1824, dtype=np.float64)
+    inner = slice(21, 1824 - 21)  # (at the pattern's ends noise may put a column outside it: a hole)
+    wrong = {}
+    for snr in (t, 2.5):
+        frames, spec = _noisy_rows(snr, 400, rng)
+        r = decode_phase_shift(frames, spec=spec)
+        # every pixel has B = 0.5 >= 0.02: a hole or a column off by half a period or more is a misread
+        wrong[snr] = np.mean(~(np.abs(r.column_px - u)[:, inner] < spec.period_px / 2))
+    assert wrong[t] <= 1e-3 and wrong[2.5] > 5e-3, wrong
+
+
+def test_a_dark_print_is_judged_against_its_noise_not_an_absolute_level():
+    """The reference's rule (simbench.systems.phase_shift.reference_spec): a 2 %-albedo ink (B =
+    0.01, half the old absolute floor) at SNR 10 decodes, where the absolute B >= 0.02 dropped it;
+    noise alone (no fringe) does not, and neither does a noise-free pixel with no fringe (0 / 0)."""
+    from simbench.systems.phase_shift import reference_spec
+
+    rng = np.random.default_rng(5)
+    ref = dataclasses.replace(reference_spec(), size_hw=(1, 1824))
+    assert ref.min_modulation == 0.0 and ref.min_snr == pytest.approx(gray_code_min_snr(steps=4, bits=8))
+    frames, _ = _noisy_rows(10.0, 20, rng, albedo=0.02, spec=ref)
+    u = np.arange(1824, dtype=np.float64)
+    r = decode_phase_shift(frames, spec=ref)
+    assert r.valid.mean() > 0.999 and np.nanmax(np.abs(r.column_px - u)) < 2.0
+    assert np.median(r.snr) == pytest.approx(10.0, rel=0.05)
+    assert not decode_phase_shift(frames, spec=dataclasses.replace(ref, min_modulation=0.02, min_snr=0.0)).valid.any()
+    # ambient light and noise, no fringe: B is the noise's own (Rayleigh), SNR ~ 1
+    dark = 0.1 + rng.normal(0.0, 0.005, size=frames.shape)
+    r = decode_phase_shift(dark, spec=ref)
+    assert r.valid.mean() < 1e-3 and np.median(r.snr) < 2
+    assert not decode_phase_shift(np.full(frames.shape, 0.3), spec=ref).valid.any()
+    r = decode_phase_shift(np.zeros(frames.shape), spec=ref)
+    assert not r.valid.any() and np.isnan(r.snr).all()
 
 
 def test_dark_pixels_are_invalid_not_errors():
@@ -227,3 +324,40 @@ def test_the_sequence_follows_the_scenes_projector(tmp_path):
     system = PhaseShiftSystem()
     assert system.frames_u8(rec.scene).shape == (10, 285, 456, 3)
     assert system.frames_u8().shape == (system.info().captures, 1140, 1824, 3)
+
+
+def test_a_folder_recorded_before_the_snr_rule_decodes_with_its_own_rule(tmp_path):
+    """A recording's device.json holds its sequence; one written before 2026-11-30 has no
+    ``min_snr`` and ``min_modulation = 0.02``: it decodes with that rule (its dark print a hole),
+    a folder written now with the SNR rule (the same frames decoded)."""
+    from simbench.io import save_json, save_npy
+    from simbench.manifest import seal_manifest
+    from simbench.systems.phase_shift import PhaseShiftSystem, reference_spec
+
+    from .test_bad_inputs import TINY_RIG
+
+    spec = dataclasses.replace(reference_spec(), size_hw=(285, 456))
+    # every camera pixel sees projector column 200 of a 2 %-albedo print: B = 0.01 at SNR 10
+    clean = 0.02 * phase_shift_frames(spec)[:, :1, 200:201].astype(np.float64)
+    rng = np.random.default_rng(7)
+    frames = (clean + rng.normal(0.0, 0.001, size=(spec.captures, 120, 160))).astype(np.float32)
+    decoded = {}
+    for name, device in (
+        ("old", {k: v for k, v in dataclasses.asdict(spec).items() if k != "min_snr"} | {"min_modulation": 0.02}),
+        ("new", dataclasses.asdict(spec)),
+    ):
+        rec = tmp_path / name
+        rec.mkdir()
+        save_npy(rec / "frames.npy", frames)
+        (rec / "rig.toml").write_text(TINY_RIG)
+        files = {"frames": "frames.npy", "rig": "rig.toml"}
+        save_json(rec / "device.json", seal_manifest(rec, {"device": "phase_shift", **device}, files))
+        system = PhaseShiftSystem()
+        raw, _, scene = system.read_recording(rec)
+        decoded[name] = (system.spec, system.decode(raw, None, scene=scene).detail)
+    old_spec, old = decoded["old"]
+    new_spec, new = decoded["new"]
+    assert (old_spec.min_snr, old_spec.min_modulation) == (0.0, 0.02)
+    assert new_spec.min_snr == pytest.approx(4.0945, abs=1e-3) and new_spec.min_modulation == 0.0
+    assert not old.valid.any()
+    assert new.valid.mean() > 0.999 and np.nanmax(np.abs(new.column_px - 200.0)) < 2.0

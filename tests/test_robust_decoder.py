@@ -99,6 +99,49 @@ def test_mixing_matrix_rejects_unusable_frames(calibration):
         mixing_matrix([f["red"], f["green"], f["blue"][:10]], f["dark"])
 
 
+@pytest.mark.parametrize(
+    "order, says",
+    [
+        (("red", "blue", "green"), ["named green looks blue", "named blue looks green"]),
+        (("blue", "green", "red"), ["named red looks blue", "named blue looks red"]),
+        (("green", "red", "blue"), ["named red looks green", "named green looks red"]),
+        (("green", "blue", "red"), ["named red looks green", "named green looks blue", "named blue looks red"]),
+    ],
+)
+def test_calibration_frames_in_the_wrong_order_are_refused(calibration, order, says):
+    """A new user's audit (2026-11-30): the green and blue calibration captures renamed gave K with
+    0.34 and 0.25 on its diagonal, and the chart decoded with 8 % of its depths > 5 mm wrong, exit 0.
+    Each channel responds most to its own primary, whatever the gains (the product of K along each
+    assignment of channels to primaries scales alike with every gain): any other order is refused,
+    naming what each capture looks like - and a camera with very unequal channel gains, or a
+    projector with very unequal primaries, is not mistaken for one."""
+    from simbench.decode.color import CalibrationFrameError
+
+    _, f = calibration
+    with pytest.raises(CalibrationFrameError) as err:
+        mixing_matrix([f[c] for c in order], f["dark"])
+    for text in says:
+        assert text in str(err.value), str(err.value)
+    # channel gains 0.2 / 1 / 3 and primary powers 3 / 0.3 / 1 (scaled frames, the same order): accepted
+    gain = np.array([0.2, 1.0, 3.0], np.float32)
+    power = {"red": 3.0, "green": 0.3, "blue": 1.0}
+    scaled = [(f[c] - f["dark"]) * gain * np.float32(0.25 * power[c]) for c in ("red", "green", "blue")]
+    dark = np.zeros_like(f["dark"])
+    k = mixing_matrix([np.clip(x, 0, 1) for x in scaled], dark)
+    np.testing.assert_allclose(k, (K * gain[:, None]) / gain[None, :] * 1.0, atol=2e-3)
+
+
+def test_a_bright_frame_named_dark_is_called_so(calibration):
+    """A new user's audit (2026-11-30): a lit frame as the dark one was blamed on the blue primary;
+    a dark frame in a primary's place is still that primary's fault."""
+    _, f = calibration
+    white = np.clip(f["red"] + f["green"] + f["blue"] - 2 * f["dark"], 0, 1)
+    with pytest.raises(ValueError, match="the dark frame is brighter than the capture under projector primary R"):
+        mixing_matrix([f["red"], f["green"], f["blue"]], white)
+    with pytest.raises(ValueError, match="primary G does not light camera channel G above the dark frame"):
+        mixing_matrix([f["red"], f["green"], f["blue"]], f["green"])
+
+
 def test_unmix_needs_the_calibration(calibration):
     ref, f = calibration
     p = robust_params()

@@ -40,7 +40,9 @@ from simbench.decode.pipeline import (
     decode,
     REFERENCE_Z0_TOLERANCE,
     REFERENCE_Z0_WARNING,
+    REFERENCE_EXTENT_PERCENTILES,
     decode_reference,
+    reference_plane_extent,
     reference_plane_offset,
 )
 
@@ -64,8 +66,10 @@ __all__ = [
     "decode",
     "decode_reference",
     "reference_plane_offset",
+    "reference_plane_extent",
     "REFERENCE_Z0_TOLERANCE",
     "REFERENCE_Z0_WARNING",
+    "REFERENCE_EXTENT_PERCENTILES",
     "robust_params",
     "ROBUST_MIN_AMPLITUDE",
     "ROBUST_MIN_CONFIDENCE",

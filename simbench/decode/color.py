@@ -19,6 +19,7 @@ from simbench.decode import _kernels
 __all__ = [
     "color_code",
     "mixing_matrix",
+    "CalibrationFrameError",
     "unmix",
     "normalize_channels",
     "code_at_row_ends",
@@ -110,10 +111,12 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
 
     Raises
     ------
-    ValueError
+    CalibrationFrameError (a ValueError)
         When a primary does not lift its own channel above the dark frame, when a capture is
         clipped (a channel at full scale, 1.0) on half of ``region`` or more - the median, and
-        so K, would then be the clipping level's, not the light's - or when K is singular.
+        so K, would then be the clipping level's, not the light's - when the captures read as lit
+        by other primaries than their order says (:func:`_check_primary_order`), or when K is
+        singular.
 
     References
     ----------
@@ -127,28 +130,72 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
     if sel.shape != d.shape[:2] or not sel.any():
         raise ValueError("region must be a non-empty (H, W) mask of the calibration captures")
     k = np.empty((3, 3))
+    own = np.empty(3)  # each capture's own channel, median over the region
     for p, img in enumerate(primaries):
         f = _calibration_frame(img)
         if f.shape != d.shape:
-            raise ValueError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
+            raise CalibrationFrameError(f"primary capture {p} has shape {f.shape}, the dark frame {d.shape}")
         clipped = (f[sel] >= 1.0).mean(axis=0)
         if clipped.max() >= 0.5:
             c = int(np.argmax(clipped))
-            raise ValueError(
+            raise CalibrationFrameError(
                 f"the calibration capture under projector primary {'RGB'[p]} is clipped: camera channel {'RGB'[c]} at "
                 f"full scale on {100 * clipped[c]:.0f} % of the plane, so the coupling matrix would be the clipping "
                 "level's - expose the calibration frames (and the captures) shorter"
             )
         k[:, p] = np.median((f - d)[sel], axis=0)
+        own[p] = np.median(f[sel][:, p])
+    # (first: a capture of another primary in this one's place does not light its own channel either)
+    _check_primary_order(k)
+    for p in range(3):
         if not k[p, p] > 1e-3:
-            raise ValueError(
+            if np.median(d[sel][:, p]) > own[p] + 1e-3:
+                raise CalibrationFrameError(
+                    f"the dark frame is brighter than the capture under projector primary {'RGB'[p]} in camera channel "
+                    f"{'RGB'[p]}: is the dark frame the plane under a black projector frame?"
+                )
+            raise CalibrationFrameError(
                 f"projector primary {'RGB'[p]} does not light camera channel {'RGB'[p]} above the dark frame: not a "
                 f"calibration capture"
             )
     k /= np.diag(k)[None, :]
     if np.linalg.cond(k) > 1e3:
-        raise ValueError(f"the coupling matrix is singular (condition number {np.linalg.cond(k):.3g})")
+        raise CalibrationFrameError(f"the coupling matrix is singular (condition number {np.linalg.cond(k):.3g})")
     return k
+
+
+class CalibrationFrameError(ValueError):
+    """A calibration capture that is not what its name says (:func:`mixing_matrix`); the
+    command line names the frames' files with it."""
+
+
+# The captures' order is judged by the product of K's entries along each assignment of camera
+# channels to primaries, prod_p k[sigma(p), p]: a camera channel's gain and a primary's power
+# scale every assignment's product alike, so only the light's spectral overlap decides, and the
+# true assignment (each channel with its own primary) wins by far - on the perfect white of
+# results/crosstalk.md the best other one (G and B exchanged) reaches 0.34 x 0.25 = 0.085 of it.
+# A new user's audit (2026-11-30) renamed the green and blue captures: K then read 0.34 and 0.25
+# on its diagonal, and the unmixing made 8 % of the chart's depths > 5 mm wrong, exit 0, without a
+# word.  Another assignment is taken as the frames' order when it beats the named one outright.
+_PRIMARY_NAMES = ("red", "green", "blue")
+
+
+def _check_primary_order(k: np.ndarray) -> None:
+    """Raise :class:`CalibrationFrameError` when the three captures read in another order than
+    their names (``k``: the raw medians, rows camera channels, columns the captures)."""
+    import itertools
+
+    lifted = np.maximum(np.asarray(k, np.float64), 0.0)
+    scores = {perm: float(np.prod([lifted[perm[p], p] for p in range(3)])) for perm in itertools.permutations(range(3))}
+    best = max(scores, key=scores.get)
+    if best == (0, 1, 2) or scores[best] <= scores[(0, 1, 2)]:
+        return
+    named = [f"the capture named {_PRIMARY_NAMES[p]} looks {_PRIMARY_NAMES[best[p]]}" for p in range(3) if best[p] != p]
+    raise CalibrationFrameError(
+        "the calibration captures read as lit by other primaries than their names say: "
+        + "; ".join(named)
+        + " (each camera channel responds most to its own primary): were the frames renamed or the channels reordered?"
+    )
 
 
 def _calibration_frame(img) -> np.ndarray:

@@ -21,6 +21,7 @@ References
 from __future__ import annotations
 
 import math
+import statistics
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -38,12 +39,19 @@ __all__ = [
     "wrapped_phase",
     "drift_phase_error",
     "gray_order",
+    "fit_noise",
+    "gray_code_min_snr",
     "decode_phase_shift",
     "TemporalResult",
 ]
 
 
 AXES = ("columns", "rows")
+
+# The square window (px) over which fit_noise pools the N-step fit's residuals: 25 (N - 3) degrees
+# of freedom, so that the noise is known to ~14 % (one standard deviation) at N = 4, from pixels
+# at most 2 px apart (a surface's own, but beside its edges).
+NOISE_WINDOW_PX = 5
 
 
 @dataclass(frozen=True)
@@ -58,7 +66,12 @@ class PhaseShiftSpec:
         a projector's gamma or a camera's saturation bring)
     min_modulation : modulation ``B`` (image units, 0-1) below which a pixel is invalid (no
         fringe: shadow, black surface; assumption: 2 % of full scale, a few times an 8-bit
-        camera's noise in a fringe fitted over N frames)
+        camera's noise in a fringe fitted over N frames).  An absolute level: it also drops a
+        dark surface whose fringe stands well clear of its noise (a 20:1 print's ink, B ~ 0.017
+        at 11 times the noise); ``min_snr`` judges against the noise instead
+    min_snr : modulation SNR ``B / sigma`` below which a pixel is invalid (0: not used), with
+        ``sigma`` each frame's noise as the N-step fit's residual shows it
+        (:func:`fit_noise`); :data:`GRAY_CODE_MIN_SNR` is what the Gray code needs
     axis : ``"columns"`` (vertical fringes: every pixel gets its projector column, what
         triangulation needs) or ``"rows"`` (horizontal fringes, projector rows: with the
         columns, a projector pixel per camera pixel, what calibrating the projector needs)
@@ -69,6 +82,7 @@ class PhaseShiftSpec:
     steps: int = 4
     min_modulation: float = 0.02
     axis: str = "columns"
+    min_snr: float = 0.0
 
     def __post_init__(self) -> None:
         # size and period checked as the single-shot pattern's are (not its De Bruijn window's
@@ -81,6 +95,7 @@ class PhaseShiftSpec:
             self, "min_modulation", validate.number(self.min_modulation, "min_modulation", lo=0.0, hi=1.0)
         )
         object.__setattr__(self, "axis", validate.choice(self.axis, "axis", AXES))
+        object.__setattr__(self, "min_snr", validate.number(self.min_snr, "min_snr", lo=0.0, hi=1e6))
 
     @property
     def extent_px(self) -> int:
@@ -224,13 +239,60 @@ def grey_frame(image: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class TemporalResult:
     """column_px (H, W) float64, NaN invalid; valid (H, W) bool; modulation (H, W) float64
-    (``B``, the confidence); wrapped (H, W) float64; order (H, W) int64, the period number."""
+    (``B``); wrapped (H, W) float64; order (H, W) int64, the period number; snr (H, W) float64,
+    the modulation SNR ``B / sigma`` (:func:`fit_noise`; NaN where both are 0)."""
 
     column_px: np.ndarray
     valid: np.ndarray
     modulation: np.ndarray
     wrapped: np.ndarray
     order: np.ndarray
+    snr: np.ndarray
+
+
+def fit_noise(frames: np.ndarray, phi: np.ndarray, mean: np.ndarray, mod: np.ndarray) -> np.ndarray:
+    """Each frame's noise (standard deviation, image units) as the N-step fit leaves it: the
+    residual sum of squares of ``I_n = A + B cos(phi - 2 pi n / N)`` at every pixel, whose
+    expectation is ``(N - 3) sigma**2`` for independent noise of standard deviation ``sigma``,
+    averaged over :data:`NOISE_WINDOW_PX` x :data:`NOISE_WINDOW_PX` pixels (the image's ends
+    replicated) and divided by ``N - 3``.
+
+    It measures what the fringe model does not explain, whatever its cause: the camera's noise,
+    and also a fringe harmonic that N steps alias onto the residual (the second, at N = 4: a
+    projector's gamma, a clipped fringe) and a surface that moved between frames, each of which
+    makes the phase less certain too.  ``frames`` (N, H, W); ``phi``, ``mean``, ``mod`` of
+    :func:`wrapped_phase` on them.  Returns (H, W) float64."""
+    import cv2
+
+    f = np.asarray(frames, dtype=np.float64)
+    n = f.shape[0]
+    if n < 4:
+        raise ValueError(f"the noise needs N >= 4 steps (N - 3 degrees of freedom a pixel), got {n}")
+    rss = np.zeros(f.shape[1:], np.float64)
+    for k in range(n):
+        r = f[k] - mean - mod * np.cos(phi - 2.0 * np.pi * k / n)
+        rss += r * r
+    pooled = cv2.blur(rss, (NOISE_WINDOW_PX, NOISE_WINDOW_PX), borderType=cv2.BORDER_REPLICATE)
+    return np.sqrt(np.maximum(pooled, 0.0) / (n - 3))
+
+
+def gray_code_min_snr(*, steps: int, bits: int, error_rate: float = 1e-3) -> float:
+    """The modulation SNR ``B / sigma`` (``sigma`` each frame's noise) above which a pixel's
+    ``bits`` Gray-code frames misread its period number with probability at most
+    ``error_rate`` (default: the 0.1 % of pixels more than 5 mm wrong that issue 35 allows).
+
+    A Gray-code frame reads ``A +- M`` where ``2 M`` is the pixel's step between a white and a
+    black projector pixel, and the N fringe frames' modulation is ``B = c M`` with ``c <= 1``
+    their contrast at the fringe's frequency (defocus and blur lower a fine fringe's, not a
+    broad stripe's): ``M >= B``.  The bit is read against ``A``, the mean of the N frames, so the
+    noise of ``I - A`` is ``sigma sqrt(1 + 1 / N)`` and a bit flips with probability at most
+    ``Phi(-SNR / sqrt(1 + 1 / N))``; a pixel's ``bits`` frames, at most ``bits`` times that.  (A
+    bit next to its own transition reads less, but there the complementary choice takes the
+    other period number, whose transitions are a quarter period away; and the phase, whose noise
+    is ``sqrt(2 / N) / SNR`` rad, 0.17 rad at N = 4 and SNR 4.1, is wrong by the quarter period
+    that would change the period number at 9 standard deviations.)  4.09 at N = 4, 8 bits."""
+    z = -statistics.NormalDist().inv_cdf(error_rate / bits)
+    return z * math.sqrt(1.0 + 1.0 / steps)
 
 
 def decode_phase_shift(frames: np.ndarray, *, spec: PhaseShiftSpec) -> TemporalResult:
@@ -262,5 +324,12 @@ def decode_phase_shift(frames: np.ndarray, *, spec: PhaseShiftSpec) -> TemporalR
     k = np.where(frac < 0.25, k2, np.where(frac > 0.75, k2 - 1, k1))
     column = column_from_phase(phi + 2.0 * np.pi * k, period_px=spec.period_px)
     w = spec.extent_px
-    valid = np.isfinite(column) & (mod >= spec.min_modulation) & (column >= -0.5) & (column <= w - 0.5)
-    return TemporalResult(column_px=np.where(valid, column, np.nan), valid=valid, modulation=mod, wrapped=phi, order=k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (no noise and no fringe: 0 / 0, NaN, invalid; no noise and a fringe: inf, valid)
+        snr = mod / fit_noise(f[: spec.steps], phi, mean, mod)
+        valid = np.isfinite(column) & (mod >= spec.min_modulation) & (column >= -0.5) & (column <= w - 0.5)
+        if spec.min_snr > 0:
+            valid &= snr >= spec.min_snr
+    return TemporalResult(
+        column_px=np.where(valid, column, np.nan), valid=valid, modulation=mod, wrapped=phi, order=k, snr=snr
+    )

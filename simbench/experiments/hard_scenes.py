@@ -297,6 +297,12 @@ def _curve_plot(curves: list[dict], operating: dict) -> bytes:
     return figure_png(fig, dpi=110)
 
 
+def _reference_min_snr() -> float:
+    from simbench.systems.phase_shift import reference_spec
+
+    return reference_spec().min_snr
+
+
 def short_of_goals(row: dict, system: str) -> list[str]:
     """Which of issue 35's three goals a scene's results row (:func:`measure_scene`'s) misses
     for ``system`` (a decoder or the reference): ``"complete"``, ``"MAE"``, ``"wrong"`` (a
@@ -366,7 +372,8 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "The proposed sensor's capture decoded by triangulation with the paper's decoder (no confidence threshold: "
         "the paper describes none) and with our colour-robust decoder at its operating point (confidence >= "
         f"{operating['robust']:g}: pixels below are holes), beside the multi-shot phase-shifting reference (12 "
-        "exposures on the same projector and camera). "
+        "exposures on the same projector and camera; pixels whose modulation SNR is below what its Gray code needs, "
+        f"{_reference_min_snr():.3g}, are holes: `docs/competitors.md`). "
         f"Scored over the lit pixels off a {cfg.edge_band_px}-px band at every depth edge and object boundary: "
         "*complete* = decoded share, *MAE* against ground truth, *> 5 mm* = share of the decoded pixels more than "
         "5 mm wrong. Issue 35's goal for the colour-robust decoder: >= 97 % complete, MAE <= 0.5 mm, <= 0.1 % "

@@ -20,7 +20,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.decode.temporal import PhaseShiftSpec, decode_phase_shift, grey_frame, phase_shift_frames
+from simbench.decode.temporal import (
+    PhaseShiftSpec,
+    decode_phase_shift,
+    gray_code_min_snr,
+    grey_frame,
+    phase_shift_frames,
+)
 from simbench.io import camera_full_scale
 from simbench.sim.mitsuba_dict import RenderSettings
 from simbench.sim.scene import SceneSpec
@@ -29,10 +35,24 @@ from simbench.systems import SystemDepth, SystemInfo, SystemOptions
 if TYPE_CHECKING:
     from simbench.cache import RenderCache
 
-__all__ = ["PhaseShiftSystem", "DEPTH_RANGE_M"]
+__all__ = ["PhaseShiftSystem", "DEPTH_RANGE_M", "reference_spec"]
 
 # depths outside are invalid (the working range of simbench.decode.DecoderParams' default)
 DEPTH_RANGE_M = (0.75, 1.75)
+
+
+def reference_spec() -> PhaseShiftSpec:
+    """The reference's sequence (4 steps, the paper's period, 8 Gray-code bits at the paper
+    projector's width), its pixels judged against their own noise: valid where the modulation SNR
+    reaches what the Gray code needs for <= 0.1 % misread period numbers
+    (:func:`simbench.decode.temporal.gray_code_min_snr`, 4.09), with no absolute floor.  Until
+    2026-11-30 it was the absolute ``B >= 0.02`` of :class:`PhaseShiftSpec`: a level that suits a
+    white board, which dropped a 20:1 print's ink (``B`` ~0.017 at ~11 times its noise, not one
+    pixel of it 5 mm wrong when kept: ``scenes/hard_chart_high.toml``, 54 % of the chart scored)."""
+    base = PhaseShiftSpec()
+    return dataclasses.replace(
+        base, min_modulation=0.0, min_snr=gray_code_min_snr(steps=base.steps, bits=base.gray_bits)
+    )
 
 
 @lru_cache(maxsize=2)
@@ -77,6 +97,18 @@ def _frame_digests(spec: PhaseShiftSpec, cache: "RenderCache | None" = None) -> 
     return _digests[spec]
 
 
+def _confidence_text(s: PhaseShiftSpec) -> str:
+    holes = []
+    if s.min_snr > 0:
+        holes.append(f"pixels below {s.min_snr:.3g} are holes")
+    if s.min_modulation > 0:
+        holes.append(f"pixels whose modulation B is below {s.min_modulation:g} (full-scale units) are holes")
+    return (
+        f"modulation SNR of the {s.steps}-step fit: the fringe modulation B over each frame's noise as the "
+        f"fit's residual shows it (simbench.decode.temporal.fit_noise)" + "".join("; " + h for h in holes)
+    )
+
+
 class PhaseShiftSystem:
     """The multi-shot reference (module docstring); ``options`` gives the sensor model and the
     camera scale (the proposed sensor's), ``spec`` the sequence."""
@@ -89,7 +121,7 @@ class PhaseShiftSystem:
 
         self._optics = ColourFringeSystem(options)
         self.sensor = self._optics.sensor
-        self.spec = spec if spec is not None else PhaseShiftSpec()
+        self.spec = spec if spec is not None else reference_spec()
         self._spec_given = spec is not None
 
     def spec_for(self, scene: SceneSpec) -> PhaseShiftSpec:
@@ -117,10 +149,7 @@ class PhaseShiftSystem:
             period_px=s.period_px,
             uses_scene_rig=True,
             recording_options=("sensor",),  # its own sequence, not the coded pattern
-            confidence=(
-                f"fringe modulation B of the {s.steps}-step fit (full-scale units, 0-1); pixels below "
-                f"{s.min_modulation:g} are holes"
-            ),
+            confidence=_confidence_text(s),
             numbers={
                 "steps": (s.steps, "assumption: the common choice; N steps are blind to fringe harmonics up to N - 2"),
                 "period_px": (s.period_px, "the paper's period (same spatial frequency as the proposed pattern)"),
@@ -222,7 +251,7 @@ class PhaseShiftSystem:
         return SystemDepth(
             depth_m=np.where(valid, z, np.nan).astype(np.float32),
             valid=valid,
-            confidence=r.modulation.astype(np.float32),
+            confidence=r.snr.astype(np.float32),
             column_px=np.where(valid, r.column_px, np.nan),
             detail=r,
         )

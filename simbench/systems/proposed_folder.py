@@ -254,6 +254,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
                 "disagree: give one"
             )
         params = dataclasses.replace(params, min_confidence=request.min_confidence)
+    _check_reference_pattern(reference_path, params.pattern, manifests)
     from simbench.decode.pipeline import capture_warnings, reference_warnings
 
     for told in capture_warnings(capture, rig=rig, params=params, encoding=encoding):
@@ -396,10 +397,13 @@ def _check_reference_plane(
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
     tolerance but over :data:`simbench.decode.REFERENCE_Z0_WARNING` it warns: reference-mode
     depths carry that error (a Z0 2 % off gave 20 mm MAE on a plane, exit 0, without a word)."""
-    from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_offset
+    from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_extent
 
-    offset = reference_plane_offset(reference, rig)
-    if np.isnan(offset) or abs(offset) <= REFERENCE_Z0_WARNING:
+    low, offset, high = reference_plane_extent(reference, rig)
+    if np.isnan(offset):
+        return
+    if abs(offset) <= REFERENCE_Z0_WARNING:
+        _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path)
         return
     if np.isinf(offset):
         raise ValueError(
@@ -428,6 +432,39 @@ def _check_reference_plane(
         1000 * abs(z - reference.z0_m),
         advice,
     )
+    _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path)
+
+
+def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_path) -> None:
+    """The reference plane must be flat and square across the image too, not only at its Z0 in
+    the median: its depth's 2nd and 98th percentiles against the median
+    (:func:`simbench.decode.reference_plane_extent`), within the same tolerances.  A camera focal
+    length or distortion off tilts and bends the plane about its centre, and the depths carry that
+    (a focal length 3.8 % off: 54 mm MAE without a word)."""
+    from simbench.decode import REFERENCE_EXTENT_PERCENTILES, REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING
+
+    worst = max(abs(low - median), abs(high - median))
+    if worst <= REFERENCE_Z0_WARNING:
+        return
+    z0 = reference.z0_m
+    p_lo, p_hi = REFERENCE_EXTENT_PERCENTILES
+    where = (
+        f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z0 * (1 + low):.4f} - "
+        f"{z0 * (1 + high):.4f} m across the image ({p_lo:g}th - {p_hi:g}th percentile, {100 * (low - median):+.2f} / "
+        f"{100 * (high - median):+.2f} % about its median): tilted or bent"
+    )
+    if worst > REFERENCE_Z0_TOLERANCE:
+        raise ValueError(
+            f"{where} more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %: the rig's camera (focal length, principal point "
+            "or distortion) is not the one it was captured with - was it captured with this rig?"
+        )
+    logging.getLogger("simbench").warning(
+        "%s more than %.1f %%: depths carry that error (~%.0f mm at the image's edges); check the rig's camera "
+        "(focal length, principal point, distortion), or that the board stood square to the camera",
+        where,
+        100 * REFERENCE_Z0_WARNING,
+        1000 * worst * z0,
+    )
 
 
 def _check_same_recording_rig(capture_path, reference_path, manifests: dict, *, what: str = "reference") -> None:
@@ -449,6 +486,27 @@ def _check_same_recording_rig(capture_path, reference_path, manifests: dict, *, 
         raise ValueError(
             f"--reference {reference_path} was recorded with another rig than {capture_path} (their folders' rig.toml "
             "differ): a reference plane belongs to the rig it was captured with"
+        )
+
+
+def _check_reference_pattern(reference_path, pattern: PatternSpec, manifests: dict) -> None:
+    """A reference plane from a recording folder must have been captured with the pattern the
+    capture is decoded with (its manifest records it): a new user's audit (2026-11-30) gave the
+    reference of a recording made with a 24-px period to a 21-px capture, and only the plane's Z0
+    check happened to refuse it (3.6 % off: a little nearer, and it would have decoded with a
+    warning)."""
+    if reference_path is None:
+        return
+    meta = manifests.get(reference_path)
+    if meta is None or meta["files"].get("reference") != Path(reference_path).name:
+        return  # a bare image (or one that is not its folder's reference): nothing recorded
+    where = str(Path(reference_path).parent / RENDER_MANIFEST)
+    recorded = recorded_pattern(meta, where=where)
+    if not recorded.projects_as(pattern):
+        raise ValueError(
+            f"--reference {reference_path} was captured with the pattern {describe_pattern(recorded)} ({where}), the "
+            f"capture is decoded with {describe_pattern(pattern)}: a reference plane must be captured with the "
+            "capture's pattern"
         )
 
 
@@ -520,14 +578,21 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
     z0_asked, z0_option = _asked_z0(request, params)
     z0 = _z0_for(Path(reference_path), z0_asked, option=z0_option)
     ref_params = dataclasses.replace(params, mode="reference", z0_m=z0)
-    return lookup_decoded_reference(
-        reference,
-        rig=rig,
-        params=ref_params,
-        primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]],
-        dark=frames["dark"],
-        cache=cache,
-    )
+    from simbench.decode.color import CalibrationFrameError
+
+    try:
+        return lookup_decoded_reference(
+            reference,
+            rig=rig,
+            params=ref_params,
+            primaries=[frames[k] for k in CALIBRATION_FRAMES[1:]],
+            dark=frames["dark"],
+            cache=cache,
+        )
+    except CalibrationFrameError as exc:
+        # (a new user's audit, 2026-11-30: these errors named no file)
+        names = ", ".join(p.name for p in paths.values())
+        raise CalibrationFrameError(f"the calibration frames in {folder}/ ({names}): {exc}") from None
 
 
 def pattern_record(pattern: PatternSpec) -> dict:
