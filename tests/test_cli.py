@@ -349,6 +349,30 @@ def test_help_exits_zero_and_usage_errors_are_one_line(capsys):
     )
 
 
+def test_robust_preset_switches_that_a_setting_excludes_are_named_together(tmp_path, capsys):
+    """A new user's audit (2026-11-30): `--robust --decoder phase_method=ftp` (the help's own
+    example setting) was refused for carrier_bank, which the user never set; fixed by hand it then
+    failed for centroid_correction.  One line names every preset switch the setting excludes and
+    the assignments that lift them; given, the decoder is the robust one with the Fourier phase."""
+    from simbench.systems.files import DecodeRequest
+    from simbench.systems.proposed_folder import _decoder_params
+
+    argv = ["decode", str(tmp_path / "nope"), "--robust", "--decoder", "phase_method=ftp", "--out", "x.npy"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--robust sets carrier_bank=true, centroid_correction=true" in err, err
+    assert "add --decoder carrier_bank=false centroid_correction=false" in err, err
+    assert len(err.strip().splitlines()) == 1, err
+    request = DecodeRequest(
+        capture="x",
+        out="x.npy",
+        robust=True,
+        decoder=("phase_method=ftp", "carrier_bank=false", "centroid_correction=false"),
+    )
+    params = _decoder_params(request)
+    assert params.phase_method == "ftp" and params.unmix and params.color_normalize
+
+
 def test_decode_robust_needs_the_reference_and_its_calibration_frames(tmp_path, capsys):
     """The colour-robust decoder calibrates its unmixing on the reference plane: without the
     reference or its four calibration frames, one clear line and exit 2, nothing written."""

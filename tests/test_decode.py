@@ -1089,6 +1089,26 @@ def test_a_capture_with_its_channels_out_of_order_is_doubted():
     assert channel_order_doubt(cap[..., [0, 2, 1]], rig=RIG, params=gbr) == ""
 
 
+@pytest.mark.slow
+def test_a_printed_charts_channels_out_of_order_are_doubted(tmp_path, variant):
+    """A new user's audit (2026-11-30): the 20:1 chart (scenes/hard_chart_high.toml) saved BGR
+    decoded with 871 pixels > 5 mm wrong and no warning - its printed edges lift every channel's
+    code band, and the channel holding the fringe read 2.4 times the blue one's ratio, under the
+    margin of 3 then.  Rendered here at the quick run's size: R/B and G/B swapped are doubted, the
+    capture as it is and with red and green swapped (code_order_doubt's case) are not."""
+    from simbench.decode.pipeline import channel_order_doubt
+    from simbench.experiments.common import RunConfig, Session
+
+    cfg = RunConfig.preset(quick=True)
+    session = Session(cfg, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None, command="test")
+    cap = session.capture(session.prepare(session.raw_scene("hard_chart_high")), "test/chart")[0]
+    img, rig, params = np.asarray(cap.raw), cap.scene.rig, DecoderParams()
+    assert channel_order_doubt(img, rig=rig, params=params) == ""
+    assert channel_order_doubt(img[..., [1, 0, 2]], rig=rig, params=params) == ""
+    assert "the fringe seems to be in the red channel" in channel_order_doubt(img[..., ::-1], rig=rig, params=params)
+    assert "in the green channel" in channel_order_doubt(img[..., [0, 2, 1]], rig=rig, params=params)
+
+
 def test_a_coherent_run_of_misread_codes_is_contested_and_scores_zero():
     """A run of stripes whose codes read like another stretch of the De Bruijn sequence (here
     stripes 0-3 of one cycle printed with the codes of stripes 4-7: JPEG's chroma subsampling of

@@ -426,6 +426,23 @@ def test_a_reference_captured_with_another_pattern_is_refused(tmp_path, capsys):
     assert _run(argv, capsys)[0] == 0
 
 
+def test_calibration_frames_dropped_into_a_recording_are_refused(tmp_path, capsys):
+    """A new user's audit (2026-11-30): another recording's calibration frames copied into a folder
+    rendered without them were used by `--robust`, without a word (given with --calibration, the
+    same frames were refused for their rig).  A frame in a recording folder must be one of its
+    files; copied to a folder of their own they are judged as frames given with --calibration."""
+    from simbench.io import save_png
+    from simbench.pattern import CALIBRATION_FRAMES
+
+    r = _folder_with_pattern(tmp_path)
+    frame = np.full((120, 160, 3), 40, np.uint8)
+    for name in CALIBRATION_FRAMES:
+        save_png(r / f"calibration_{name}.png", frame)
+    rc, _, err = _run(["decode", r, "--robust", "--out", tmp_path / "d.npy", "--no-cache"], capsys)
+    assert rc == 2 and "calibration_dark.png lies in a recording folder whose manifest does not list it" in err, err
+    assert not (tmp_path / "d.npy").exists()
+
+
 def test_a_rig_whose_camera_tilts_the_reference_plane_is_refused_or_warned(tmp_path, capsys, caplog):
     """A new user's audit (2026-11-30): a rig whose camera focal length was 3.8 % off left the
     reference plane's median at Z0 (the only thing checked) but tilted it -9.5 / +11.6 % across the

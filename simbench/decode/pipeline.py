@@ -839,9 +839,19 @@ _CODE_BAND = (0.3, 0.65)
 # (white step), 75 (blue board), 21 (red paint), 3.7 (the 20:1 chart, its other channels' 1.6), 2.0
 # (the green board: dark in blue, whose red channel, 68, holds the fringe's crosstalk alone - at 0.14
 # of blue's power); with red and blue swapped, or green and blue, the blue channel's is 2.0-4.5, the
-# channel holding the fringe 6-17 times it at 1.7-48 times its power.  Only those five are doubted
+# channel holding the fringe 6-17 times it at 1.7-48 times its power.  The margin was 3 until a new
+# user's audit (2026-11-30) swapped the 20:1 chart's red and blue: its printed edges lift every
+# channel's code band, the channel holding the fringe read only 2.4 times the blue one's ratio, and
+# 871 pixels decoded > 5 mm wrong without a word.  Measured again on the 64 scenes of scenes/ (the
+# quick run's 640x480, 4 spp) and the hard scenes at full resolution, R/B and G/B swapped: a capture
+# in order whose fringe ratio is under _FRINGE_RATIO_LOW, with another channel over the power margin,
+# reads at most 1.31 times its fringe channel's ratio there (the yellow-green paint), a swap at least
+# 2.22 (the 20:1 chart, G/B, quick; the 3:1 chart 2.9-3.4, the deep stairs 3.7); 1.75 lies between
+# (their geometric mean, 1.7, rounded up).  The 10 mm chart (1.0-1.1 either way) and swaps on boards
+# that absorb a channel (power under the margin, or the fringe channel's ratio over 6) stay unseen:
+# 34 of the 128 swaps.
 _FRINGE_RATIO_LOW = 6.0
-_FRINGE_RATIO_MARGIN = 3.0
+_FRINGE_RATIO_MARGIN = 1.75
 _FRINGE_POWER_MARGIN = 1.2
 _NAMES = "red", "green", "blue"
 

@@ -106,7 +106,34 @@ def _decoder_params(request: DecodeRequest, base=None):
     from simbench.decode import DecoderParams, robust_params, with_assignments
 
     base = base if base is not None else DecoderParams()
-    return with_assignments(robust_params(base) if request.robust else base, request.decoder)
+    if not request.robust:
+        return with_assignments(base, request.decoder)
+    robust = robust_params(base)
+    try:
+        return with_assignments(robust, request.decoder)
+    except ValueError as exc:
+        # (a new user's audit, 2026-11-30: --robust --decoder phase_method=ftp, the help's own example,
+        # was refused for settings the user never gave): the preset's switches that the request's
+        # settings exclude, all of them, named in one line
+        flags = ("carrier_bank", "centroid_correction", "phase_stability", "narrow_snr")
+        off, message = [], str(exc)
+        while True:
+            named = [n for n in flags if n in message and n not in off and getattr(robust, n) is True]
+            if not named:
+                break
+            off += named
+            try:
+                with_assignments(robust, [*request.decoder, *(f"{n}=false" for n in off)])
+                message = ""
+            except ValueError as again:
+                message = str(again)
+        if not off or message:
+            raise
+        raise ValueError(
+            f"{exc}; --robust sets {', '.join(f'{n}=true' for n in off)}: add --decoder "
+            + " ".join(f"{n}=false" for n in off)
+            + " to use it so"
+        ) from None
 
 
 def _camera_image(path: str | Path, rig, request: DecodeRequest, *, hint: bool = True) -> np.ndarray:
@@ -560,6 +587,16 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
         )
     ref_manifest = recording_manifest_of(reference_path) if Path(reference_path).is_file() else None
     for p in paths.values():
+        # a frame inside a recording folder must be one of its files (a new user's audit, 2026-11-30:
+        # another recording's frames dropped into a folder rendered without them were used, no word)
+        own = recording_manifest_of(p)
+        if own is not None and p.name not in own["files"].values():
+            raise ValueError(
+                f"{p} lies in a recording folder whose manifest does not list it ({folder}/{RENDER_MANIFEST}): it is "
+                "not part of that recording. Calibration frames belong to the rig and reference plane they were "
+                "captured with: render them with `simbench render --calibration-frames`, or give the folder they "
+                "were recorded in with --calibration FOLDER"
+            )
         _check_same_recording_rig(
             str(reference_path),
             str(p),
