@@ -1087,8 +1087,11 @@ def test_score_refuses_a_recording_that_lost_a_file_its_manifest_lists(tmp_path,
         seal_manifest(r, data, {**data["files"], "gt_lit": "gt_lit.npy", "gt_object_id": "gt_object_id.npy"}),
     )
     argv = ["score", str(r / "depth.npy"), "--gt", str(r / "gt_depth.npy")]
-    assert main(argv) == 0 and main([*argv, "--edge-band", "5"]) == 0
-    capsys.readouterr()
+    assert main(argv) == 0 and "band" not in capsys.readouterr().out
+    # (a new user's audit, 2026-11-30: the text named no edge band; the pixels it leaves out now)
+    assert main([*argv, "--edge-band", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "(errors off a 5-px band at depth edges and object boundaries: " in out and " pixels left out)" in out, out
     lit = (r / "gt_lit.npy").read_bytes()
     (r / "gt_lit.npy").unlink()
     assert main(argv) == 2

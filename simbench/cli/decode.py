@@ -109,9 +109,15 @@ def _cmd_score(args) -> int:
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
         print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
     else:
+        band = ""
+        if exclude is not None:
+            left = int(np.count_nonzero(exclude & region & np.isfinite(gt)))
+            band = (
+                f" (errors off a {args.edge_band}-px band at depth edges and object boundaries: {left} pixels left out)"
+            )
         print(
             f"MAE {m['mae_mm']:.4f} mm  RMSE {m['rmse_mm']:.4f} mm  median {m['median_mm']:.4f} mm  p95 "
-            f"{m['p95_mm']:.4f} mm"
+            f"{m['p95_mm']:.4f} mm{band}"
         )
         print(
             f"completeness {100 * m['completeness']:.2f} % of the {m['n_region']} pixels of the region "
