@@ -1184,3 +1184,28 @@ def test_the_apis_warnings_are_the_command_lines_one_line_messages(tmp_path, mon
     assert err.count("simbench: warning: scene told: an object 40 m across\n") == 2, err
     assert "SimbenchWarning" not in err and "warnings.warn" not in err
     assert "simbench: error: stopped before rendering" in err
+
+
+def test_decode_writes_a_record_of_what_its_files_are(tmp_path, capsys):
+    """A new user's audit (2026-11-30): depth.npy and its confidence said nothing of their units,
+    decoder or threshold - only stdout did.  Beside --out, NAME_decode.json records what the depth
+    and the confidence are, the operating point, the capture, the settings and the command; it is
+    an output like the others (checked before the decode, written with them)."""
+    import json
+
+    from tests.test_bad_inputs import render_folder
+
+    r = render_folder(tmp_path)
+    out = tmp_path / "o" / "d.npy"
+    argv = ["decode", str(r), "--out", str(out), "--min-confidence", "2", "--no-cache"]
+    assert main(argv) == 0
+    assert "record -> " in capsys.readouterr().out
+    record = json.loads((tmp_path / "o" / "d_decode.json").read_text())
+    assert record["format"] == 1 and record["system"] == "proposed" and record["min_confidence"] == 2.0
+    assert record["command"].startswith("simbench decode") and record["capture"].endswith("capture.png")
+    assert record["depth"]["file"] == "d.npy" and "z-depth in metres" in record["depth"]["meaning"]
+    assert 0.9 < record["depth"]["valid_share"] <= 1.0
+    assert record["confidence"]["file"] == "d_confidence.npy" and "SNR" in record["confidence"]["meaning"]
+    assert record["settings"]["decoder"]["min_confidence"] == 2.0 and record["point_cloud"] is None
+    assert main(["decode", str(r), "--out", str(tmp_path / "o" / "d.npy"), "--ply", str(tmp_path / "o" / "d.ply")]) == 0
+    assert json.loads((tmp_path / "o" / "d_decode.json").read_text())["point_cloud"] == "d.ply"

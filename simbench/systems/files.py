@@ -121,7 +121,7 @@ class FileDecode:
         confidence under the threshold)
     cause : why nothing was decoded where the system knows it (the warning names it)
     settings : what the decode was made with (the decoder's parameters, the files it read), for
-        ``--debug-dir``'s stages.json
+        the decode's record (:func:`record_path`) and ``--debug-dir``'s stages.json
     """
 
     depth_m: np.ndarray
@@ -147,6 +147,22 @@ def confidence_path(request: DecodeRequest) -> Path:
         return Path(request.confidence)
     out = Path(request.out)
     return out.with_name(f"{out.stem}_confidence.npy")
+
+
+def record_path(request: DecodeRequest) -> Path:
+    """Where the decode's record goes: NAME_decode.json beside ``request.out`` (what the depth map
+    and the confidence are, in which units, and what made them)."""
+    out = Path(request.out)
+    return out.with_name(f"{out.stem}_decode.json")
+
+
+# the decode record's format (record_path)
+RECORD_FORMAT = 1
+# what every system's depth map is (simbench.systems.SystemDepth, the ground truth's convention)
+DEPTH_MEANING = (
+    "z-depth in metres along the camera's optical axis (OpenCV axes: x right, y down, z forward), float32, "
+    "one value per pixel of the ideal pinhole image (lens distortion undone); NaN where nothing was decoded"
+)
 
 
 def recording_manifest_of(path: str | Path) -> dict | None:
@@ -219,7 +235,8 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
             listed = set().union(*(listed_files(folder / m) for m in RECORDING_MANIFESTS))
             protected |= listed
             folders |= {f.parent for f in listed}
-    outputs = [Path(request.out), confidence_path(request)] + ([Path(request.ply)] if request.ply else [])
+    outputs = [Path(request.out), confidence_path(request), record_path(request)]
+    outputs += [Path(request.ply)] if request.ply else []
     if request.debug_dir and Path(request.debug_dir).resolve() in folders:
         raise ValueError(f"--debug-dir {request.debug_dir} is a recording's folder: its stage images would mix with it")
     for out in outputs:
@@ -229,6 +246,7 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
             )
     check_output_file(request.out, what="--out")
     check_output_file(confidence_path(request), what="--confidence")
+    check_output_file(record_path(request), what="the decode's record (NAME_decode.json beside --out)")
     if Path(request.out).resolve() == confidence_path(request).resolve():
         raise ValueError(f"--confidence {confidence_path(request)} is --out: give another path")
     if request.ply:
@@ -312,13 +330,9 @@ def decode_files(request: DecodeRequest) -> str:
         # (the colour-robust decoder's crease_bias.npy beside the paper decoder's stages)
         here = {p.name for p in outputs if p.parent == d.resolve()}  # (an --out named like a stage stays)
         stale = sorted(set(_listed_stages(d)) - set(stages) - here - {"stages.json"})
-        # the command as typed where it is one (the marker's "simbench decode" prefix either way)
-        argv = sys.argv[1:]
-        at = argv.index("decode") + 1 if "decode" in argv[:2] else None  # (after a leading --debug too)
-        command = "simbench decode" + ("" if at is None else " " + shlex.join(argv[at:]))
         files[d / "stages.json"] = json_bytes(
             {
-                "command": command,
+                "command": _command_line(),
                 "format": STAGES_FORMAT,
                 "capture": res.capture_file or request.capture,
                 "system": name,
@@ -330,8 +344,33 @@ def decode_files(request: DecodeRequest) -> str:
             }
         )
         msg += f", stages in {d}/"
+    # what the files are and what made them, beside the depth map (a new user's audit, 2026-11-30:
+    # the .npy files said nothing of their units, decoder or threshold; only stdout did)
+    files[record_path(request)] = json_bytes(
+        {
+            "format": RECORD_FORMAT,
+            "command": _command_line(),
+            "simbench": _version(),
+            "capture": res.capture_file or request.capture,
+            "system": name,
+            "decoded": res.summary,
+            "depth": {"file": Path(request.out).name, "meaning": DEPTH_MEANING, "valid_share": float(res.valid.mean())},
+            "confidence": (
+                None
+                if res.confidence is None
+                else {"file": confidence_path(request).name, "meaning": res.confidence_meaning}
+            ),
+            "min_confidence": request.min_confidence,
+            "point_cloud": Path(request.ply).name if request.ply else None,
+            "settings": res.settings,
+        }
+    )
+    msg += f", record -> {record_path(request)}"
     if len({p.resolve() for p in files}) != len(files):
-        raise ValueError("--out, --confidence, --ply and the --debug-dir files must be different paths")
+        raise ValueError(
+            "--out, --confidence, --ply, the decode's record (NAME_decode.json) and the --debug-dir files must be "
+            "different paths"
+        )
     # only now, the decode done: a failed decode leaves nothing behind, not even a cache entry; and
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
@@ -353,6 +392,22 @@ def decode_files(request: DecodeRequest) -> str:
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
+
+
+def _command_line() -> str:
+    """The command as typed where it is one (the marker's "simbench decode" prefix either way)."""
+    argv = sys.argv[1:]
+    at = argv.index("decode") + 1 if "decode" in argv[:2] else None  # (after a leading --debug too)
+    return "simbench decode" + ("" if at is None else " " + shlex.join(argv[at:]))
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("simbench")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 # stages.json's format: 2 lists the stage files alone (format 1, unmarked, listed --out and the
