@@ -396,7 +396,10 @@ def check_output_folder(path: str | Path, *, what: str = "output") -> Path:
     try:
         fd, probe = tempfile.mkstemp(dir=d, prefix=".simbench-probe-")
     except OSError as exc:
-        raise ValueError(f"{what}: cannot write in {d} ({exc.strerror or exc})") from None
+        # (a new user's audit: "--ply /proc/nope/c.ply" read "cannot write in /proc" - the folder to
+        # be made is what fails, named now)
+        target = d if d == path else f"{path}: cannot create it in {d}"
+        raise ValueError(f"{what}: cannot write in {target} ({exc.strerror or exc})") from None
     os.close(fd)
     os.unlink(probe)
     return path

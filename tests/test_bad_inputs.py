@@ -766,6 +766,12 @@ if Path("/proc/self").is_dir():  # Linux: os.access lets root "write" in /proc, 
         "--ply: cannot write in /proc",
         setup=lambda d: render_folder(d),
     )
+    case(  # a new user's audit (2026-11-30): the folder that cannot be made is the one named
+        "decode-ply-in-a-new-folder-in-proc",
+        lambda d: _decode(d, "--ply", "/proc/nope/x.ply"),
+        "--ply: cannot write in /proc/nope: cannot create it in /proc",
+        setup=lambda d: render_folder(d),
+    )
 for bad, msg in (
     ("gamma", "is not one of linear, srgb, gamma=G"),
     ("gamma=9", "from 1 to 4"),

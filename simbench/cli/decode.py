@@ -237,7 +237,8 @@ def add_parsers(sub, kw: dict) -> None:
         default=None,
         help="the operating point: decoded pixels whose confidence is below it become holes (default: the decoder's "
         "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
-        "competitor's validity threshold)",
+        "competitor's validity threshold; a competitor's own threshold always applies, so a lower value changes "
+        "nothing there - the decode's line says so)",
     )
     s.add_argument(
         "--ply", help="also write the point cloud as PLY (x, y, z in metres, the camera's frame: OpenCV axes; RGB)"
