@@ -1208,4 +1208,17 @@ def test_decode_writes_a_record_of_what_its_files_are(tmp_path, capsys):
     assert record["confidence"]["file"] == "d_confidence.npy" and "SNR" in record["confidence"]["meaning"]
     assert record["settings"]["decoder"]["min_confidence"] == 2.0 and record["point_cloud"] is None
     assert main(["decode", str(r), "--out", str(tmp_path / "o" / "d.npy"), "--ply", str(tmp_path / "o" / "d.ply")]) == 0
-    assert json.loads((tmp_path / "o" / "d_decode.json").read_text())["point_cloud"] == "d.ply"
+    record = json.loads((tmp_path / "o" / "d_decode.json").read_text())
+    assert record["point_cloud"] == "d.ply" and record["min_confidence"] == 0.0  # (the paper decoder: none)
+    capsys.readouterr()
+    # a second audit (2026-11-30): --debug-dir named as the record wrote the depth, then failed
+    rc = main(
+        ["decode", str(r), "--out", str(tmp_path / "p" / "w.npy"), "--debug-dir", str(tmp_path / "p" / "w_decode.json")]
+    )
+    assert rc == 2 and "--debug-dir" in capsys.readouterr().err and not (tmp_path / "p").exists()
+    # ... and a confidence written over an earlier depth left that depth's record calling it a depth
+    assert (
+        main(["decode", str(r), "--out", str(tmp_path / "o" / "y.npy"), "--confidence", str(tmp_path / "o" / "d.npy")])
+        == 0
+    )
+    assert not (tmp_path / "o" / "d_decode.json").exists() and (tmp_path / "o" / "y_decode.json").is_file()

@@ -484,6 +484,15 @@ def test_a_rig_whose_camera_tilts_the_reference_plane_is_refused_or_warned(tmp_p
         assert rc == 0 and "tilted" not in caplog.text and "tilted" not in err, (caplog.text, err)
         rc, _, err = _run([*base, "--rig", tmp_path / "f1.01.toml"], capsys)
         assert rc == 0 and "tilted or bent more than 0.5 %" in caplog.text, caplog.text
+        assert "(2nd - 98th percentile" in caplog.text, caplog.text
+        # (a second audit: reference mode takes the camera's geometry from the reference - its depths
+        # carry far less of the tilt than calibrated mode's; the warning said the same for both)
+        carried = (
+            "calibrated-mode depths carry that error"
+            if mode == "calibrated"
+            else "reference-mode depths carry far less"
+        )
+        assert carried in caplog.text, caplog.text
         rc, _, err = _run([*base, "--rig", tmp_path / "f1.038.toml"], capsys)
         assert rc == 2 and "tilted or bent more than 3 %" in err and "focal length" in err, err
 

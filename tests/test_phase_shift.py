@@ -315,6 +315,10 @@ def test_the_sequence_follows_the_scenes_projector(tmp_path):
     assert np.load(out / "frames.npy").shape == (spec.captures, 120, 160) and spec.captures == 10
     assert main(["decode", str(out), "--out", str(tmp_path / "d.npy")]) == 0
     depth = np.load(tmp_path / "d.npy")
+    # the decode's record holds the sequence the folder records, its validity rule with it
+    record = json.loads((tmp_path / "d_decode.json").read_text())
+    assert record["settings"]["device"]["min_snr"] == pytest.approx(4.0945, abs=1e-3)
+    assert record["settings"]["device"]["size_hw"] == [285, 456] and "modulation SNR" in record["confidence"]["meaning"]
     assert np.isfinite(depth).mean() > 0.9 and np.nanmedian(depth) == pytest.approx(1.1, abs=2e-3)
     rec = simbench.record(tmp_path / "s.toml", system="phase_shift", spp=4, cache=cache)
     assert np.array_equal(simbench.depth(rec).depth_m, depth, equal_nan=True)

@@ -132,14 +132,21 @@ def test_calibration_frames_in_the_wrong_order_are_refused(calibration, order, s
 
 
 def test_a_bright_frame_named_dark_is_called_so(calibration):
-    """A new user's audit (2026-11-30): a lit frame as the dark one was blamed on the blue primary;
-    a dark frame in a primary's place is still that primary's fault."""
+    """New users' audits (2026-11-30): a lit frame as the dark one was blamed on the blue primary,
+    and half the red frame as the dark one (no channel of a primary's capture under it) decoded 4
+    points less complete without a word: a dark frame brighter than any capture in any channel is
+    named; a frame copied over another is named too (it was "singular")."""
     _, f = calibration
     white = np.clip(f["red"] + f["green"] + f["blue"] - 2 * f["dark"], 0, 1)
-    with pytest.raises(ValueError, match="the dark frame is brighter than the capture under projector primary R"):
+    with pytest.raises(ValueError, match=r"the dark frame is brighter than the capture named \w+ in camera channel"):
         mixing_matrix([f["red"], f["green"], f["blue"]], white)
-    with pytest.raises(ValueError, match="primary G does not light camera channel G above the dark frame"):
+    with pytest.raises(ValueError, match="the dark frame is brighter than the capture named red in camera channel G"):
         mixing_matrix([f["red"], f["green"], f["blue"]], f["green"])
+    half_red = f["dark"] + (f["red"] - f["dark"]) * np.float32(0.5)
+    with pytest.raises(ValueError, match=r"the dark frame is brighter than the capture named \w+ in camera channel R"):
+        mixing_matrix([f["red"], f["green"], f["blue"]], half_red)
+    with pytest.raises(ValueError, match="the captures named red and green light the camera's channels alike"):
+        mixing_matrix([f["red"], f["red"], f["blue"]], f["dark"])
 
 
 def test_unmix_needs_the_calibration(calibration):

@@ -145,6 +145,18 @@ def mixing_matrix(primaries: Sequence[np.ndarray], dark: np.ndarray, *, region: 
             )
         k[:, p] = np.median((f - d)[sel], axis=0)
         own[p] = np.median(f[sel][:, p])
+    # a dark frame brighter than a capture in any channel is no dark frame (a lit frame in its place:
+    # a new user's audit, 2026-11-30, decoded 4 points less complete with half the red frame as the
+    # dark one, without a word); noise leaves the medians of unlit channels within ~1e-3 of 0
+    low = k < -np.maximum(1e-3, 0.02 * np.diag(k)[None, :])
+    if low.any():
+        c, p = (int(i) for i in np.unravel_index(np.argmin(np.where(low, k, np.inf)), k.shape))
+        raise CalibrationFrameError(
+            f"the dark frame is brighter than the capture named {_PRIMARY_NAMES[p]} in camera channel {'RGB'[c]} "
+            f"(by {-k[c, p]:.3g} of full scale, median over the plane): is the dark frame the plane under a black "
+            "projector frame?"
+        )
+    _check_alike(k)
     # (first: a capture of another primary in this one's place does not light its own channel either)
     _check_primary_order(k)
     for p in range(3):
@@ -196,6 +208,21 @@ def _check_primary_order(k: np.ndarray) -> None:
         + "; ".join(named)
         + " (each camera channel responds most to its own primary): were the frames renamed or the channels reordered?"
     )
+
+
+def _check_alike(k: np.ndarray) -> None:
+    """Raise :class:`CalibrationFrameError` when two captures light the camera's channels in the
+    same proportions (one copied over another: the matrix was refused as singular, naming
+    neither)."""
+    cols = np.maximum(np.asarray(k, np.float64), 0.0)
+    norm = np.linalg.norm(cols, axis=0)
+    for a in range(3):
+        for b in range(a + 1, 3):
+            if norm[a] > 0 and norm[b] > 0 and float(cols[:, a] @ cols[:, b]) / (norm[a] * norm[b]) > 0.999:
+                raise CalibrationFrameError(
+                    f"the captures named {_PRIMARY_NAMES[a]} and {_PRIMARY_NAMES[b]} light the camera's channels alike "
+                    "(the same primary twice?): each must be the plane under its own primary"
+                )
 
 
 def _calibration_frame(img) -> np.ndarray:

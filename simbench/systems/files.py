@@ -256,6 +256,13 @@ def check_outputs(request: DecodeRequest, *, inputs: list[str | None]) -> None:
         debug, out = Path(request.debug_dir).resolve(), Path(request.out).resolve()
         if debug == out or out in debug.parents:
             raise ValueError(f"--debug-dir {request.debug_dir} is --out {request.out} or under it: give another folder")
+        others = {p.resolve() for p in outputs}
+        if debug in others or others & set(debug.parents):
+            # (a new user's audit, 2026-11-30: --debug-dir named as the decode's record wrote the depth
+            # and the confidence, then failed on the record with a raw errno)
+            raise ValueError(
+                f"--debug-dir {request.debug_dir} is another output's path or under it: give another folder"
+            )
     if request.cache_dir is not None:
         check_cache_location(request.cache_dir, what="--cache", hint=CACHE_HINT)
 
@@ -360,7 +367,9 @@ def decode_files(request: DecodeRequest) -> str:
                 if res.confidence is None
                 else {"file": confidence_path(request).name, "meaning": res.confidence_meaning}
             ),
-            "min_confidence": request.min_confidence,
+            # the operating point in force: the decoder's (the proposed sensor's), or the one given; a
+            # competitor's own validity rule is in confidence.meaning and settings.device
+            "min_confidence": res.settings.get("decoder", {}).get("min_confidence", request.min_confidence),
             "point_cloud": Path(request.ply).name if request.ply else None,
             "settings": res.settings,
         }
@@ -374,9 +383,12 @@ def decode_files(request: DecodeRequest) -> str:
     # only now, the decode done: a failed decode leaves nothing behind, not even a cache entry; and
     # before the outputs, so that a cache that cannot take the entry fails with no output written
     res.commit()
+    stale_records = _stale_records(files, request)
     write_files(files)
     if stale_confidence is not None and stale_confidence.resolve() not in {p.resolve() for p in files}:
         stale_confidence.unlink(missing_ok=True)
+    for path in stale_records:
+        path.unlink(missing_ok=True)
     if request.debug_dir:
         for name in stale:
             (Path(request.debug_dir) / name).unlink(missing_ok=True)
@@ -392,6 +404,30 @@ def decode_files(request: DecodeRequest) -> str:
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
+
+
+def _stale_records(files: dict, request: DecodeRequest) -> list[Path]:
+    """The decode records that describe, as their depth map, a file this decode overwrites with
+    something else (``--confidence c/x.npy`` over an earlier ``--out c/x.npy``: its x_decode.json
+    would still call it the depth in metres - a new user's audit, 2026-11-30); removed with the write."""
+    from simbench.io import check_not_protected
+
+    written = {p.resolve() for p in files}
+    stale = []
+    for path in files:
+        if path.resolve() == Path(request.out).resolve() or path.suffix != ".npy":
+            continue
+        record = path.with_name(f"{path.stem}_decode.json")
+        if not record.is_file() or record.resolve() in written:
+            continue
+        try:
+            described = json.loads(record.read_text()).get("depth", {}).get("file")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if described == path.name:
+            check_not_protected(record)
+            stale.append(record)
+    return stale
 
 
 def _command_line() -> str:
@@ -560,8 +596,18 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
         confidence_meaning=meaning,
         elapsed_s=dt,
         thresholded=thresholded,
-        settings={"rig": request.rig, "min_confidence": request.min_confidence},
+        settings={"rig": request.rig, "min_confidence": request.min_confidence, "device": _device_parameters(system)},
     )
+
+
+def _device_parameters(system) -> dict | None:
+    """A competitor's parameters as its recording holds them (its sequence or device model), for
+    the decode's record: its own validity rule among them (e.g. phase shifting's ``min_snr``)."""
+    for name in ("spec", "model"):
+        value = getattr(system, name, None)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return dataclasses.asdict(value)
+    return None
 
 
 def _finite_range(a: np.ndarray) -> tuple[float, float]:

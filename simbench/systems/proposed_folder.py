@@ -323,7 +323,9 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         check_path = str(Path(capture_path).parent / recorded["files"]["reference"])
         z0_kind = {"z0_assumed": False, "recorded_z0": True}
     if reference is not None:
-        _check_reference_plane(reference, rig, reference_path=reference_path, rig_path=rig_path, **z0_kind)
+        _check_reference_plane(
+            reference, rig, reference_path=reference_path, rig_path=rig_path, mode=params.mode, **z0_kind
+        )
     elif request.rig is not None and check_path is not None and Path(check_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
         # its Z0 by that rig too (a rig of another baseline decoded 95 % at 77 mm MAE without a
@@ -333,7 +335,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         plane, store_plane = lookup_decoded_reference(
             _camera_image(check_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        _check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, **z0_kind)
+        _check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind)
         store_plane()
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
@@ -418,7 +420,14 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
 
 
 def _check_reference_plane(
-    reference, rig, *, reference_path, rig_path, z0_assumed: bool = False, recorded_z0: bool = False
+    reference,
+    rig,
+    *,
+    reference_path,
+    rig_path,
+    z0_assumed: bool = False,
+    recorded_z0: bool = False,
+    mode: str = "calibrated",
 ) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
@@ -430,7 +439,7 @@ def _check_reference_plane(
     if np.isnan(offset):
         return
     if abs(offset) <= REFERENCE_Z0_WARNING:
-        _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path)
+        _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path, mode=mode)
         return
     if np.isinf(offset):
         raise ValueError(
@@ -459,10 +468,10 @@ def _check_reference_plane(
         1000 * abs(z - reference.z0_m),
         advice,
     )
-    _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path)
+    _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path, mode=mode)
 
 
-def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_path) -> None:
+def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_path, mode: str = "calibrated") -> None:
     """The reference plane must be flat and square across the image too, not only at its Z0 in
     the median: its depth's 2nd and 98th percentiles against the median
     (:func:`simbench.decode.reference_plane_extent`), within the same tolerances.  A camera focal
@@ -477,7 +486,8 @@ def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_p
     p_lo, p_hi = REFERENCE_EXTENT_PERCENTILES
     where = (
         f"the reference plane {reference_path} triangulates with the rig {rig_path} to Z = {z0 * (1 + low):.4f} - "
-        f"{z0 * (1 + high):.4f} m across the image ({p_lo:g}th - {p_hi:g}th percentile, {100 * (low - median):+.2f} / "
+        f"{z0 * (1 + high):.4f} m across the image ({_ordinal(p_lo)} - {_ordinal(p_hi)} percentile, "
+        f"{100 * (low - median):+.2f} / "
         f"{100 * (high - median):+.2f} % about its median): tilted or bent"
     )
     if worst > REFERENCE_Z0_TOLERANCE:
@@ -485,13 +495,28 @@ def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_p
             f"{where} more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %: the rig's camera (focal length, principal point "
             "or distortion) is not the one it was captured with - was it captured with this rig?"
         )
+    # (a new user's audit, 2026-11-30: the same words in reference mode overstated its error 30-fold -
+    # matching against the reference takes the camera's geometry from the reference itself)
+    carried = (
+        f"calibrated-mode depths carry that error (~{1000 * worst * z0:.0f} mm at the image's edges)"
+        if mode == "calibrated"
+        else "reference-mode depths carry far less of it (they match columns against the reference, Eq. 14), "
+        f"calibrated-mode ones all of it (~{1000 * worst * z0:.0f} mm at the image's edges)"
+    )
     logging.getLogger("simbench").warning(
-        "%s more than %.1f %%: depths carry that error (~%.0f mm at the image's edges); check the rig's camera "
-        "(focal length, principal point, distortion), or that the board stood square to the camera",
+        "%s more than %.1f %%: %s; check the rig's camera (focal length, principal point, distortion), or that the "
+        "board stood square to the camera",
         where,
         100 * REFERENCE_Z0_WARNING,
-        1000 * worst * z0,
+        carried,
     )
+
+
+def _ordinal(x: float) -> str:
+    n = int(x)
+    if x != n:
+        return f"{x:g}th"
+    return f"{n}{'th' if 10 <= n % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')}"
 
 
 def _check_same_recording_rig(capture_path, reference_path, manifests: dict, *, what: str = "reference") -> None:
