@@ -293,7 +293,7 @@ def test_a_linear_phase_drift_gives_the_predicted_phase_error(steps, drift_rad):
     assert np.ptp(error) == pytest.approx(2 * np.arcsin(abs(r)), rel=1e-3)
 
 
-def test_the_sequence_follows_the_scenes_projector(tmp_path):
+def test_the_sequence_follows_the_scenes_projector(tmp_path, capsys, caplog):
     """A new user's audit: a rig with a projector of another size than the paper's was refused
     ("pattern size (1140, 1824) differs from the projector's"), with no option to change it.  The
     default sequence now takes the projector's size (here 456 x 285: 6 Gray bits, 10 exposures),
@@ -319,6 +319,24 @@ def test_the_sequence_follows_the_scenes_projector(tmp_path):
     record = json.loads((tmp_path / "d_decode.json").read_text())
     assert record["settings"]["device"]["min_snr"] == pytest.approx(4.0945, abs=1e-3)
     assert record["settings"]["device"]["size_hw"] == [285, 456] and "modulation SNR" in record["confidence"]["meaning"]
+    # a --rig whose camera is off (a new user's audit, 2026-11-30: 4 % in focal length gave 60 mm,
+    # exit 0) is tried on a plane as the recorded rig sees it: refused over 3 %, warned over 0.5 %
+    from simbench.rig import load_rig, save_rig
+
+    recorded = load_rig(out / "rig.toml")
+    for factor, rc_expected in ((1.0, 0), (1.01, 0), (1.04, 2)):
+        camera = dataclasses.replace(recorded.camera, focal_px=recorded.camera.focal_px * factor)
+        save_rig(dataclasses.replace(recorded, camera=camera), tmp_path / "r.toml")
+        argv = ["decode", str(out), "--rig", str(tmp_path / "r.toml"), "--out", str(tmp_path / "e.npy")]
+        with caplog.at_level("WARNING", logger="simbench"):
+            caplog.clear()
+            rc = main(argv)
+        err = capsys.readouterr().err
+        assert rc == rc_expected, (factor, err)
+        warned = "puts a plane the recorded rig sees at 1 m at" in caplog.text
+        assert warned == (factor == 1.01), (factor, caplog.text)
+        if rc_expected:
+            assert "is not a calibration of the rig" in err, err
     assert np.isfinite(depth).mean() > 0.9 and np.nanmedian(depth) == pytest.approx(1.1, abs=2e-3)
     rec = simbench.record(tmp_path / "s.toml", system="phase_shift", spp=4, cache=cache)
     assert np.array_equal(simbench.depth(rec).depth_m, depth, equal_nan=True)

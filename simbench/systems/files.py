@@ -561,6 +561,7 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
                 f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
             )
         refuse_another_rig(rig, scene.rig, rig_path=request.rig, capture=request.capture)
+        _check_rig_on_a_plane(rig, scene.rig, rig_path=request.rig, capture=request.capture)
         scene = dataclasses.replace(scene, rig=rig)
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)
@@ -597,6 +598,50 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
         elapsed_s=dt,
         thresholded=thresholded,
         settings={"rig": request.rig, "min_confidence": request.min_confidence, "device": _device_parameters(system)},
+    )
+
+
+# the plane a competitor's --rig is tried on (m): the middle of the working range
+RIG_CHECK_DEPTH_M = 1.0
+
+
+def _check_rig_on_a_plane(rig, recorded, *, rig_path, capture) -> None:
+    """A ``--rig`` for a recording decoded by triangulation with no reference plane (phase
+    shifting): a fronto-parallel plane at :data:`RIG_CHECK_DEPTH_M`, seen through the recorded rig
+    (each ideal pixel's projector column), triangulated with ``rig`` must lie there across the
+    image within the proposed sensor's reference-plane tolerances (2nd-98th percentile within
+    :data:`simbench.decode.REFERENCE_Z0_TOLERANCE`, a warning over ..._WARNING).  A new user's
+    audit (2026-11-30): phase shifting decoded with a camera focal length 4 % off - inside
+    :func:`simbench.rig.rig_differences`' 5 % - triangulated 60 mm wrong with only "overriding the
+    recording" said.  (Lens distortion is not compared: the plane is on the ideal pixel grid.)"""
+    from simbench.decode import REFERENCE_EXTENT_PERCENTILES, REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING
+    from simbench.rig import projector_column_at_depth, triangulate_columns
+
+    h, w = recorded.camera.size_hw
+    rows, cols = (a.ravel() for a in np.mgrid[0:h:8, 0:w:8])
+    col = projector_column_at_depth(RIG_CHECK_DEPTH_M, recorded, rows=rows, cols=cols)
+    z = triangulate_columns(col, rig, rows=rows, cols=cols)
+    ok = np.isfinite(z) & (z > 0)
+    if 2 * int(ok.sum()) < z.size:
+        raise ValueError(f"--rig {rig_path} triangulates no plane in front of the camera from {capture}'s recorded rig")
+    lo, hi = np.percentile(z[ok] / RIG_CHECK_DEPTH_M - 1.0, REFERENCE_EXTENT_PERCENTILES)
+    worst = max(abs(lo), abs(hi))
+    if worst <= REFERENCE_Z0_WARNING:
+        return
+    where = (
+        f"--rig {rig_path} puts a plane the recorded rig sees at {RIG_CHECK_DEPTH_M:g} m at "
+        f"{RIG_CHECK_DEPTH_M * (1 + lo):.4f} - {RIG_CHECK_DEPTH_M * (1 + hi):.4f} m across the image"
+    )
+    if worst > REFERENCE_Z0_TOLERANCE:
+        raise ValueError(
+            f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} % off: it is not a calibration of the rig "
+            f"{capture} was recorded with"
+        )
+    logging.getLogger("simbench").warning(
+        "%s (more than %.1f %% off): depths by triangulation carry that (~%.0f mm at 1 m)",
+        where,
+        100 * REFERENCE_Z0_WARNING,
+        1000 * worst * RIG_CHECK_DEPTH_M,
     )
 
 
