@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import os
 import sys
 import warnings
 from dataclasses import dataclass, field
@@ -41,9 +42,14 @@ if TYPE_CHECKING:
     from simbench.sim.sensor import SensorModel
     from simbench.systems import Recording, SystemDepth
 
-__all__ = ["Recorded", "record", "depth", "score", "SimbenchWarning", "DEFAULT_CACHE"]
+__all__ = ["Recorded", "record", "depth", "score", "SimbenchWarning", "DEFAULT_CACHE", "RENDER_CACHE_VARIABLE"]
 
-DEFAULT_CACHE = ".cache/simbench"  # the command line's render cache folder
+# The render cache folder of the command line and of this API: $SIMBENCH_RENDER_CACHE, else
+# .cache/simbench under the working folder.  (A new user's audit, 2026-11-30: a library scene
+# rendered from two working folders rendered twice, and SIMBENCH_CACHE_DIR - the folder of the
+# small per-user memos, simbench.cache.user_cache_dir - read as if it were this one.)
+RENDER_CACHE_VARIABLE = "SIMBENCH_RENDER_CACHE"
+DEFAULT_CACHE = os.environ.get(RENDER_CACHE_VARIABLE) or ".cache/simbench"
 # the ranges the command line's options take too (simbench.cli.options): seeds exact in JSON and
 # NumPy (63 bits), samples per pixel, path length (2 = direct light; Mitsuba's -1, unbounded, is
 # not offered: Russian roulette ends paths anyway)

@@ -1222,3 +1222,26 @@ def test_decode_writes_a_record_of_what_its_files_are(tmp_path, capsys):
         == 0
     )
     assert not (tmp_path / "o" / "d_decode.json").exists() and (tmp_path / "o" / "y_decode.json").is_file()
+
+
+def test_the_render_cache_default_follows_its_environment_variable(tmp_path):
+    """A new user's audit (2026-11-30): a library scene rendered from two working folders rendered
+    twice (the default cache is .cache/simbench under each), and SIMBENCH_CACHE_DIR, the small
+    memos' folder, read like the render cache's.  SIMBENCH_RENDER_CACHE names the default render
+    cache of every command (a fresh process: the default is read at import)."""
+    import os
+    import subprocess
+    import sys
+
+    from simbench.api import RENDER_CACHE_VARIABLE
+
+    assert RENDER_CACHE_VARIABLE == "SIMBENCH_RENDER_CACHE"
+    exe = [sys.executable, "-m", "simbench"]
+    env = {**os.environ, RENDER_CACHE_VARIABLE: str(tmp_path / "rc")}
+    run = subprocess.run([*exe, "cache", "info"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0 and f"cache {tmp_path / 'rc'}: not made yet" in run.stdout, run.stdout + run.stderr
+    helped = subprocess.run([*exe, "render", "--help"], env=env, capture_output=True, text=True, timeout=120)
+    assert "$SIMBENCH_RENDER_CACHE sets another" in " ".join(helped.stdout.split()), helped.stdout
+    env.pop(RENDER_CACHE_VARIABLE)
+    run = subprocess.run([*exe, "cache", "info"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert "cache .cache/simbench: not made yet" in run.stdout, run.stdout + run.stderr

@@ -166,7 +166,11 @@ def add_cache_options(
     """``--cache DIR`` and ``--no-cache``, which exclude each other (given both, the folder was
     ignored without a word, even one that could not serve as a cache)."""
     g = s.add_mutually_exclusive_group()
-    g.add_argument("--cache", default=DEFAULT_CACHE, help=f"{cache_help} (default: {DEFAULT_CACHE})")
+    g.add_argument(
+        "--cache",
+        default=DEFAULT_CACHE,
+        help=f"{cache_help} (default: {DEFAULT_CACHE}; ${api.RENDER_CACHE_VARIABLE} sets another)",
+    )
     g.add_argument("--no-cache", action="store_true", help=no_cache_help)
 
 

@@ -292,7 +292,7 @@ def _curve_plot(curves: list[dict], operating: dict) -> bytes:
         ax.set_xlabel("completeness (% of lit pixels off the edge band)")
         ax.set_title(f"{titles[d]}: confidence >= threshold (square: operating point {operating[d]:g})", fontsize=9)
         ax.grid(alpha=0.3, which="both")
-    axes[0].set_ylabel("decoded pixels > 5 mm wrong (%; 1e-4 = none)")
+    axes[0].set_ylabel("decoded pixels > 5 mm wrong (%; none drawn at 0.01)")
     axes[1].legend(fontsize=6, ncol=2)
     return figure_png(fig, dpi=110)
 
