@@ -614,17 +614,15 @@ def _check_rig_on_a_plane(rig, recorded, *, rig_path, capture) -> None:
     audit (2026-11-30): phase shifting decoded with a camera focal length 4 % off - inside
     :func:`simbench.rig.rig_differences`' 5 % - triangulated 60 mm wrong with only "overriding the
     recording" said.  (Lens distortion is not compared: the plane is on the ideal pixel grid.)"""
-    from simbench.decode import REFERENCE_EXTENT_PERCENTILES, REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING
-    from simbench.rig import projector_column_at_depth, triangulate_columns
+    from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, ReferenceMap, reference_plane_extent
+    from simbench.rig import projector_column_at_depth
 
-    h, w = recorded.camera.size_hw
-    rows, cols = (a.ravel() for a in np.mgrid[0:h:8, 0:w:8])
-    col = projector_column_at_depth(RIG_CHECK_DEPTH_M, recorded, rows=rows, cols=cols)
-    z = triangulate_columns(col, rig, rows=rows, cols=cols)
-    ok = np.isfinite(z) & (z > 0)
-    if 2 * int(ok.sum()) < z.size:
+    # the plane as the recorded rig's reference would map it, read as the reference check reads one
+    col = projector_column_at_depth(RIG_CHECK_DEPTH_M, recorded).astype(np.float32)
+    plane = ReferenceMap(column_px=col, expected_px=col, inverse=np.zeros((1, 1), np.float32), z0_m=RIG_CHECK_DEPTH_M)
+    lo, _, hi = reference_plane_extent(plane, rig)
+    if np.isinf(lo):
         raise ValueError(f"--rig {rig_path} triangulates no plane in front of the camera from {capture}'s recorded rig")
-    lo, hi = np.percentile(z[ok] / RIG_CHECK_DEPTH_M - 1.0, REFERENCE_EXTENT_PERCENTILES)
     worst = max(abs(lo), abs(hi))
     if worst <= REFERENCE_Z0_WARNING:
         return
