@@ -175,3 +175,29 @@ def test_a_scene_is_short_of_the_goals_it_misses():
         "complete",
         "MAE",
     ]
+
+
+def test_the_confidence_plot_gives_each_scene_of_a_class_its_own_style_and_draws_every_case():
+    """Within a class's panel no two scenes share a colour and marker (one panel of 25 with a
+    10-colour cycle gave three scenes each colour until 2026-11-30); a scene with nothing
+    decoded (no wrong share), one complete with none wrong, and one outside the classes draw."""
+    import cv2
+
+    from simbench.experiments.hard_scenes import _curve_plot, _scene_style
+
+    most = max(list(HARD_SCENES.values()).count(c) for c in set(HARD_SCENES.values()))
+    styles = [_scene_style(k) for k in range(max(most, 20))]
+    assert len(set(styles)) == len(styles)
+    curves = []
+    for name, (complete, wrong) in {
+        "hard_chart_fine": (0.0, float("nan")),
+        "hard_chart_high": (1.0, 0.0),
+        "hard_corner_090": (0.95, 0.002),
+        "my_own_scene": (0.5, 0.01),
+    }.items():
+        for d in ("paper", "robust"):
+            for t in (0.0, 3.0):
+                curves.append(dict(scene=name, decoder=d, threshold=t, completeness=complete, wrong_share=wrong))
+    png = cv2.imdecode(np.frombuffer(_curve_plot(curves, {"paper": 0.0, "robust": 3.0}), np.uint8), cv2.IMREAD_COLOR)
+    # two rows (decoders) of three columns (the two classes and the scene outside them): wider than tall
+    assert png is not None and png.shape[1] > png.shape[0]
