@@ -512,3 +512,78 @@ def test_an_interrupt_while_the_report_is_made_leaves_the_previous_set_whole(tmp
     hashes = json.loads(before["t.provenance.json"])["files"]
     assert hashes == {n: hashlib.sha256(before[n]).hexdigest() for n in hashes} and "t.csv" in hashes
     assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_the_plot_draws_combinations_with_the_same_values_as_one_line_naming_them_all():
+    """A factor that changes nothing (here decoder.voting) gives one line per value of the others,
+    labelled with every combination it stands for; a combination that differs stays a line of
+    its own (the design_choices study drew eight lines on top of each other, two visible)."""
+    from simbench.experiments.ablate.report import plot_series
+
+    sweep = _sweep(
+        axis=[
+            {"name": "decoder.intensity_mode", "values": ["overlay", "blue"]},
+            {"name": "decoder.voting", "values": [True, False]},
+            {"name": "scene.name", "values": ["plane_white", "plane_pink", "plane_red"]},
+        ]
+    )
+    mae = {("overlay", "plane_white"): 0.4, ("blue", "plane_white"): 1.0, ("overlay", "plane_pink"): 1.1}
+    mae |= {("blue", "plane_pink"): 0.38, ("overlay", "plane_red"): 0.5, ("blue", "plane_red"): 0.6}
+    rows = []
+    for mode in ("overlay", "blue"):
+        for voting in ("on", "off"):
+            for name in ("plane_white", "plane_pink", "plane_red"):
+                for rep in range(2):
+                    value = mae[mode, name] + 0.01 * rep
+                    if name == "plane_red" and voting == "off":
+                        value += 0.1  # voting matters on this one
+                    row = {"decoder.intensity_mode": mode, "decoder.voting": voting, "scene.name": name}
+                    rows.append({**row, "repeat": rep, "error": "", "gt_mae_mm": value})
+    x_vals, lines = plot_series(sweep, rows)
+    assert x_vals == ["overlay", "blue"]
+    labels = [label for label, *_ in lines]
+    assert labels == [
+        "voting=on|off, name=plane_white (2 sets, the same values)",
+        "voting=on|off, name=plane_pink (2 sets, the same values)",
+        "voting=on, name=plane_red",
+        "voting=off, name=plane_red",
+    ], labels
+    _, mean, lo, hi = lines[0]
+    assert (
+        mean == pytest.approx([0.405, 1.005]) and lo == pytest.approx([0.4, 1.0]) and hi == pytest.approx([0.41, 1.01])
+    )
+
+
+def test_a_resume_reuses_only_the_runs_its_own_code_made(tmp_path, monkeypatch):
+    """Until 2026-11-30 a resumed sweep kept every finished run whatever code had made it (the
+    built-in studies' logs predated a decoder change that moved the paper sensor's results) and
+    wrote the sweep's provenance with the new commit.  Runs of another code digest, or logged
+    before the digest was kept, run again and the line says why; the provenance names the code."""
+    from simbench.experiments.ablate import execute
+    from tests.ablate_helpers import quick_run
+
+    sweep = _sweep(seed=7)
+    messages = []
+    run_sweep(sweep, out_dir=tmp_path, cache_dir=None, progress=messages.append, run_fn=quick_run)
+    log = tmp_path / "t.runs.jsonl"
+    code = execute.code_digest()
+    assert [json.loads(x)["code"] for x in log.read_text().splitlines()] == [code, code]
+    assert json.loads((tmp_path / "t.provenance.json").read_text())["code"] == [code]
+    messages.clear()
+    run_sweep(sweep, out_dir=tmp_path, cache_dir=None, progress=messages.append, run_fn=quick_run)
+    assert "2 runs, 2 already done, 0 to run" in messages[0] and "another version" not in messages[0]
+    # another version of the code
+    monkeypatch.setattr(execute, "code_digest", lambda: "0123456789abcdef")
+    messages.clear()
+    run_sweep(sweep, out_dir=tmp_path, cache_dir=None, progress=messages.append, run_fn=quick_run)
+    assert "2 runs, 0 already done, 2 to run (2 of them finished by another version of simbench's code" in messages[0]
+    assert json.loads((tmp_path / "t.provenance.json").read_text())["code"] == ["0123456789abcdef"]
+    # a log from before the digest was kept
+    monkeypatch.undo()
+    recs = [json.loads(x) for x in log.read_text().splitlines()]
+    log.write_text("".join(json.dumps({k: v for k, v in r.items() if k != "code"}) + "\n" for r in recs))
+    messages.clear()
+    run_sweep(sweep, out_dir=tmp_path, cache_dir=None, progress=messages.append, run_fn=quick_run)
+    assert "0 already done, 2 to run (2 of them" in messages[0]
+    # the code digest follows every module of the package
+    assert len(code) == 16 and code == execute.code_digest()

@@ -427,6 +427,8 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
 
 
 def _figure(rows: list[dict], scenes: dict) -> bytes:
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
     from simbench.report import panel_row
 
     panels = [(s, d) for s in scenes for d in DIRECTIONS]
@@ -446,15 +448,28 @@ def _figure(rows: list[dict], scenes: dict) -> bytes:
             if not rs:
                 continue
             x = [max(r["speed_m_s"], 3e-4) for r in rs]  # speed 0 drawn at the axis' left end
-            ax.plot(x, [r["gt_mae_mm"] for r in rs], "o-", color=colours[name], label=_label(s, d))
+            label = _label(s, d)
+            if any(r.get("note") for r in rows if r["row"] == name):
+                # (phase shifting: not run where the object moves too far during its sequence)
+                label += (
+                    f" (run up to {max(r['speed_m_s'] for r in rows if r['row'] == name and not r.get('note')):g} m/s)"
+                )
+            ax.plot(x, [r["gt_mae_mm"] for r in rs], "o-", color=colours[name], label=label)
             static = rs[0]["gt_mae_mm"] if rs[0]["speed_m_s"] == 0 else math.nan
             if math.isfinite(static):
                 ax.axhline(HOLD_FACTOR * static, color=colours[name], ls=":", lw=0.8)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # plain numbers at 1, 2 and 5 of each decade (the default labelled a short range's minor ticks
+        # as 4 x 10^0)
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("speed (m/s; 0 at the left edge)")
         ax.set_title(f"{scene_name}, {direction}")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel(f"GT MAE (mm); dotted: {HOLD_FACTOR:g}x static")
-    axes[0].legend(fontsize=7)
+    # below the panels: inside the first one it covered the phase-shifting curve
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8, frameon=False)
     return figure_png(fig, dpi=110)

@@ -157,6 +157,18 @@ def _named_files_digest(params: dict) -> str:
     return h.hexdigest()[:8] if files else ""
 
 
+def code_digest() -> str:
+    """The first 16 hex digits of the SHA-256 of simbench's code - every module of the package and
+    its C loops - as a run's log records it: a resumed sweep reuses only runs its own code made
+    (until 2026-11-30 a resume after a decoder change kept every finished run's old metrics and
+    wrote the sweep's provenance with the new commit)."""
+    import simbench
+    from simbench.cache import source_digest
+
+    root = Path(simbench.__file__).parent
+    return source_digest(sorted([*root.rglob("*.py"), *root.glob("*.c")]))[:16]
+
+
 def _append(path: Path, rec: dict) -> None:
     with open(path, "a", encoding="utf-8") as f:
         f.write(json.dumps(rec, sort_keys=True, default=str) + "\n")
@@ -201,16 +213,26 @@ def run_sweep(
     # file's read noise raised 40-fold, and the resume kept 0.2486 mm)
     runs = [{**r, "key": r["key"] + _named_files_digest(r["params"])} for r in expand(sweep)]
     log = out / f"{sweep.name}.runs.jsonl"
+    code = code_digest()
     done = _load_done(log)
+    # a run another version of the code made is not this code's result: it runs again
+    other = {k for k, rec in done.items() if rec.get("code") != code}
+    wanted = {r["key"] for r in runs}
+    for k in other:
+        del done[k]
     todo = [r for r in runs if r["key"] not in done]
-    progress(f"[ablate {sweep.name}] {len(runs)} runs, {len(runs) - len(todo)} already done, {len(todo)} to run")
+    stale = len(other & wanted)
+    progress(
+        f"[ablate {sweep.name}] {len(runs)} runs, {len(runs) - len(todo)} already done, {len(todo)} to run"
+        + (f" ({stale} of them finished by another version of simbench's code: run again)" if stale else "")
+    )
     cache = None if cache_dir is None else str(cache_dir)
     n = 0
 
     def finished(run: dict, res: dict) -> None:
         nonlocal n
         n += 1
-        rec = {"key": run["key"], "run": run["run"], **res}
+        rec = {"key": run["key"], "run": run["run"], "code": code, **res}
         _append(log, rec)
         done[run["key"]] = rec
         status = (

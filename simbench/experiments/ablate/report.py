@@ -100,6 +100,8 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
             ),
             "versions": versions(),
             "git_commit": git_commit(),
+            # the code that made the runs (a resume reuses only the runs of its own code)
+            "code": sorted({str(done.get(r["key"], {}).get("code", "unknown")) for r in runs if r["key"] in done}),
             "files": {p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()},
         }
     )
@@ -185,20 +187,19 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def plot_series(sweep: Sweep, rows: list[dict]) -> tuple[list, list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]]:
+    """The plot's x values and its lines: (label, mean, min, max of ``sweep.plot_metric`` over the
+    repetitions at each x), one line per combination of the other axes' values (grid sweeps) - and
+    one line for combinations whose values are the same to the last bit, labelled with all of them
+    (drawn apart, a factor that changes nothing left one line on top of the others, in the last
+    one's colour, under a legend of as many entries: the design_choices study's eight were two)."""
     axis_names = [k for k, _ in sweep.axes]
     x_name = axis_names[0]
     x_vals = list(dict.fromkeys(r[x_name] for r in rows))
     series_names = axis_names[1:] if sweep.combine == "grid" else []
     series = list(dict.fromkeys(tuple(r[k] for k in series_names) for r in rows))
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
-    numeric = all(_is_number(v) for v in x_vals)
-    pos = [float(v) for v in x_vals] if numeric else list(range(len(x_vals)))
+    same_values: dict[bytes, list[tuple]] = {}  # a line's values -> the combinations that have exactly them
+    values = {}
     for s in series:
         means, lo, hi = [], [], []
         for xv in x_vals:
@@ -213,9 +214,40 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
             means.append(np.mean(vals) if vals else np.nan)
             lo.append(np.min(vals) if vals else np.nan)
             hi.append(np.max(vals) if vals else np.nan)
-        means, lo, hi = map(np.array, (means, lo, hi))
-        label = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in zip(series_names, s)) or sweep.plot_metric
-        ax.errorbar(pos, means, yerr=[means - lo, hi - means], fmt="o-", capsize=3, label=label)
+        values[s] = tuple(np.array(v, np.float64) for v in (means, lo, hi))
+        same_values.setdefault(np.stack(values[s]).tobytes(), []).append(s)
+    short = [k.split(".")[-1] for k in series_names]
+    lines = []
+    for same in same_values.values():
+        sets = [list(dict.fromkeys(s[i] for s in same)) for i in range(len(series_names))]
+        if len(same) == math.prod(len(v) for v in sets):
+            # every combination of the factors' values: each factor's values once
+            label = ", ".join(f"{k}={'|'.join(map(str, v))}" for k, v in zip(short, sets))
+        else:
+            label = "; ".join(", ".join(f"{k}={v}" for k, v in zip(short, s)) for s in same)
+        label = label or sweep.plot_metric
+        if len(same) > 1:
+            label += f" ({len(same)} sets, the same values)"
+        lines.append((label, *values[same[0]]))
+    return x_vals, lines
+
+
+def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x_name = sweep.axes[0][0]
+    x_vals, lines = plot_series(sweep, rows)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    numeric = all(_is_number(v) for v in x_vals)
+    pos = [float(v) for v in x_vals] if numeric else list(range(len(x_vals)))
+    for i, (label, means, lo, hi) in enumerate(lines):
+        # each line its own marker and dash, the later ones' markers smaller, so that lines close
+        # together stay told apart
+        style = dict(marker="osD^v<>p"[i % 8], ls=("-", "--", "-.", ":")[i % 4], ms=max(3.0, 7.0 - 0.5 * i))
+        ax.errorbar(pos, means, yerr=[means - lo, hi - means], capsize=3, label=label, **style)
     if not numeric:
         ax.set_xticks(pos, x_vals, rotation=20, fontsize=8)
     ax.set_xlabel(x_name)
