@@ -95,6 +95,22 @@ def test_the_confidence_curve_keeps_the_pixels_at_or_above_each_threshold():
     assert curve[3.0]["completeness"] == pytest.approx(0.4) and curve[3.0]["wrong_share"] == 0.0
     assert curve[6.0]["completeness"] == pytest.approx(0.25) and curve[6.0]["wrong_share"] == 0.0
     assert curve[11.0]["completeness"] == 0.0 and np.isnan(curve[11.0]["wrong_share"])
+    # every decoded pixel counts in wrong_share_all: 5 more outside the region, at confidence 20,
+    # two of them 6 mm off, one where the truth sees nothing; completeness is the region's still
+    outside = np.zeros((4, 5), bool)
+    outside.reshape(-1)[10:15] = True
+    depth.reshape(-1)[10:15] = [1.0, 1.0, 1.006, 0.994, 1.0]
+    conf.reshape(-1)[10:15] = 20.0
+    gt.reshape(-1)[14] = np.nan
+    curve = {c["threshold"]: c for c in confidence_curve(depth, conf, gt, ~outside, thresholds=(0.0, 3.0, 11.0))}
+    assert curve[0.0]["completeness"] == pytest.approx(10 / 15) and curve[0.0]["wrong_share"] == 0.2
+    assert curve[0.0]["wrong_share_all"] == pytest.approx(5 / 15)
+    assert curve[3.0]["wrong_share_all"] == pytest.approx(3 / 13) and curve[3.0]["wrong_share"] == 0.0
+    assert curve[11.0]["completeness"] == 0.0 and curve[11.0]["wrong_share_all"] == pytest.approx(3 / 5)
+    from simbench.experiments.hard_scenes import wrong_share_all
+
+    assert wrong_share_all(depth, gt) == pytest.approx(5 / 15)
+    assert np.isnan(wrong_share_all(np.full((2, 2), np.nan), np.ones((2, 2))))
 
 
 def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_goals():
@@ -111,6 +127,7 @@ def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_
                 "threshold": float(t),
                 "completeness": 0.99 if t in met else 0.5,
                 "wrong_share": 0.0,
+                "wrong_share_all": 0.0,
             }
             for t in (0, 2, 3, 4)
         ]
@@ -119,9 +136,11 @@ def test_the_operating_point_is_the_threshold_under_which_most_scenes_meet_both_
     assert operating_point(curves) == 3.0
     assert operating_point(rows("a", {2, 3}) + rows("b", {2, 3, 4})) == 3.0  # 2 and 3 tie: the higher
     assert operating_point(rows("a", {2, 3, 4}) + rows("b", {2, 3, 4})) == 4.0
-    wrong = [dict(c, wrong_share=0.01) if c["threshold"] == 3.0 else c for c in curves]
+    wrong = [dict(c, wrong_share_all=0.01) if c["threshold"] == 3.0 else c for c in curves]
     assert operating_point(wrong) == 4.0  # 1 % wrong at 3: a meets them at 2, b at 4; the higher wins
-    nan = [dict(c, wrong_share=float("nan"), completeness=0.0) for c in rows("c", set())]  # c decodes nothing
+    # the goal counts every decoded pixel: wrong ones in the edge band alone (wrong_share 0) count
+    assert operating_point([dict(c, wrong_share=0.0) for c in wrong]) == 4.0
+    nan = [dict(c, wrong_share_all=float("nan"), completeness=0.0) for c in rows("c", set())]  # c decodes nothing
     assert operating_point(rows("a", {2, 3}) + rows("b", {3}) + nan) == 3.0
     with pytest.raises(ValueError, match="paper"):
         operating_point(curves, decoder="paper")
@@ -144,7 +163,10 @@ def test_the_committed_operating_point_is_the_rules_pick_on_the_committed_full_r
                 **r,
                 "threshold": float(r["threshold"]),
                 "completeness": float(r["completeness"]),
-                "wrong_share": float(r["wrong_share"]) if r["wrong_share"] not in ("", "nan") else float("nan"),
+                **{
+                    k: float(r[k]) if r[k] not in ("", "nan") else float("nan")
+                    for k in ("wrong_share", "wrong_share_all")
+                },
             }
             for r in csv.DictReader(f)
         ]
@@ -161,12 +183,15 @@ def test_a_scene_is_short_of_the_goals_it_misses():
         "robust_completeness": 0.975,
         "robust_gt_mae_mm": 0.45,
         "robust_wrong_share": 0.0,
+        "robust_wrong_share_all": 0.0,
         "phase_shift_completeness": 1.0,
         "phase_shift_gt_mae_mm": 0.48,
-        "phase_shift_wrong_share": 0.004,
+        "phase_shift_wrong_share": 0.0,  # none off the band: the goal counts every decoded pixel
+        "phase_shift_wrong_share_all": 0.004,
         "paper_completeness": 0.0,
         "paper_gt_mae_mm": float("nan"),
         "paper_wrong_share": float("nan"),
+        "paper_wrong_share_all": float("nan"),
     }
     assert short_of_goals(row, "robust") == []
     assert short_of_goals(row, "phase_shift") == ["wrong"]
@@ -197,7 +222,16 @@ def test_the_confidence_plot_gives_each_scene_of_a_class_its_own_style_and_draws
     }.items():
         for d in ("paper", "robust"):
             for t in (0.0, 3.0):
-                curves.append(dict(scene=name, decoder=d, threshold=t, completeness=complete, wrong_share=wrong))
+                curves.append(
+                    dict(
+                        scene=name,
+                        decoder=d,
+                        threshold=t,
+                        completeness=complete,
+                        wrong_share=wrong,
+                        wrong_share_all=wrong,
+                    )
+                )
     png = cv2.imdecode(np.frombuffer(_curve_plot(curves, {"paper": 0.0, "robust": 3.0}), np.uint8), cv2.IMREAD_COLOR)
     # two rows (decoders) of three columns (the two classes and the scene outside them): wider than tall
     assert png is not None and png.shape[1] > png.shape[0]

@@ -11,8 +11,13 @@ over the pixels the projector lights:
 
 - ``completeness``: decoded share of those pixels;
 - ``gt_mae_mm``: mean absolute error against ground truth over the decoded ones;
-- ``wrong_share``: share of the decoded pixels more than 5 mm from ground truth - wrong depths
-  the output does not mark (the issue's goal: at most 0.1 %);
+- ``wrong_share``: share of those decoded pixels more than 5 mm from ground truth;
+- ``wrong_share_all``: share of every decoded pixel of the image more than 5 mm from ground
+  truth - the edge band, shadows and pixels the projector does not reach included, a decoded
+  pixel where the truth sees nothing counted wrong: the wrong depths the output does not mark
+  (the issue's goal: at most 0.1 % of the decoded pixels; until 2026-11-30 judged on
+  ``wrong_share``, which a review of the protocols found blind to the band it leaves out - the
+  90-degree corner's crease kept 0.51 % of its decoded pixels 5-7 mm wrong there, unseen);
 - ``stripe_order_errors`` (structured light): pixels whose decoded projector column is off by
   more than half a period.
 
@@ -23,7 +28,8 @@ against the wrong share when only the decoded pixels whose confidence (the fring
 :func:`simbench.decode.phase.fringe_snr`, for the colour-robust decoder capped by the phase's
 stability) reaches each of :data:`CONFIDENCE_THRESHOLDS` are kept -
 the curves the operating point is chosen from.  What it cannot see: errors under 5 mm that are
-systematic (the MAE shows them), and pixels the ground truth calls unlit (shadows are not scored).
+systematic (the MAE shows them); completeness and MAE leave the edge band and the unlit pixels out
+(``wrong_share_all`` does not).
 
 Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_confidence.csv``,
 ``hard_scenes_confidence.png`` and ``hard_scenes.provenance.json``.
@@ -102,7 +108,7 @@ GOAL_WRONG_SHARE = 0.001
 GOAL_MAE_MM = 0.5
 # confidence thresholds the curves are drawn at (0: every decoded pixel)
 CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0)
-SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "stripe_order_errors")
+SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "stripe_order_errors")
 
 
 def _scores(rec, depth, period_px, region) -> dict:
@@ -111,6 +117,7 @@ def _scores(rec, depth, period_px, region) -> dict:
         "completeness": s["completeness"],
         "gt_mae_mm": s["gt_mae_mm"],
         "wrong_share": _wrong_share(rec, depth, region),
+        "wrong_share_all": wrong_share_all(depth.depth_m, rec.gt.depth_m),
         "stripe_order_errors": s.get("stripe_order_errors", float("nan")),
     }
 
@@ -118,6 +125,23 @@ def _scores(rec, depth, period_px, region) -> dict:
 def _wrong_share(rec, depth, region) -> float:
     err = np.abs(depth.depth_m - rec.gt.depth_m)[region & np.isfinite(depth.depth_m)]
     return float(np.mean(err > WRONG_MM / 1000.0)) if err.size else float("nan")
+
+
+def _wrong_everywhere(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> np.ndarray:
+    """Per pixel: decoded and more than :data:`WRONG_MM` from the truth, or decoded where the
+    truth sees nothing."""
+    gt = np.asarray(gt_depth_m, np.float64)
+    d = np.asarray(depth_m, np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(d) & ~(np.abs(d - gt) <= WRONG_MM / 1000.0)
+
+
+def wrong_share_all(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> float:
+    """The share of every decoded pixel (finite depth) more than :data:`WRONG_MM` from
+    ``gt_depth_m``, a decoded pixel where the truth is NaN (nothing seen) counting wrong: the
+    edge band, shadows and unlit pixels included (the module doc); NaN where nothing is decoded."""
+    n = int(np.isfinite(np.asarray(depth_m)).sum())
+    return float(_wrong_everywhere(depth_m, gt_depth_m).sum() / n) if n else float("nan")
 
 
 def object_scores(rec: Recording, depth: "SystemDepth | DecodeResult", region: np.ndarray) -> dict:
@@ -142,22 +166,30 @@ def confidence_curve(
     *,
     thresholds: tuple[float, ...] = CONFIDENCE_THRESHOLDS,
 ) -> list[dict]:
-    """Completeness (share of ``region``) and wrong share (of the kept pixels, > :data:`WRONG_MM`
-    from ``gt_depth_m``) when only the decoded pixels of ``region`` whose ``confidence`` reaches
-    each of ``thresholds`` are kept; the wrong share is NaN where none is kept."""
+    """Completeness (share of ``region``) and wrong shares (> :data:`WRONG_MM` from
+    ``gt_depth_m``) when only the decoded pixels whose ``confidence`` reaches each of
+    ``thresholds`` are kept: ``wrong_share`` of the kept pixels of ``region``,
+    ``wrong_share_all`` of every kept pixel of the image (:func:`wrong_share_all`); NaN where none
+    is kept."""
     decoded = region & np.isfinite(depth_m)
     n_region = max(int(region.sum()), 1)
     conf = confidence[decoded]
     wrong = np.abs(depth_m - gt_depth_m)[decoded] > WRONG_MM / 1000.0
+    anywhere = np.isfinite(depth_m)
+    conf_all = np.asarray(confidence)[anywhere]
+    wrong_all = _wrong_everywhere(depth_m, gt_depth_m)[anywhere]
     out = []
     for t in thresholds:
         kept = conf >= t
         n = int(kept.sum())
+        kept_all = conf_all >= t
+        n_all = int(kept_all.sum())
         out.append(
             {
                 "threshold": float(t),
                 "completeness": n / n_region,
                 "wrong_share": float(wrong[kept].mean()) if n else float("nan"),
+                "wrong_share_all": float(wrong_all[kept_all].mean()) if n_all else float("nan"),
             }
         )
     return out
@@ -166,7 +198,8 @@ def confidence_curve(
 def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
     """The rule :data:`simbench.decode.ROBUST_MIN_CONFIDENCE` was chosen by: the threshold of
     ``curves`` (rows of :func:`confidence_curve` with ``scene`` and ``decoder``) under which the
-    most scenes meet both goals (:data:`GOAL_COMPLETENESS`, :data:`GOAL_WRONG_SHARE`); of equals,
+    most scenes meet both goals (:data:`GOAL_COMPLETENESS` of ``completeness``,
+    :data:`GOAL_WRONG_SHARE` of ``wrong_share_all``, every decoded pixel's); of equals,
     the highest - a higher threshold keeps a subset of the pixels, so the fewest wrong ones.
     (A policy changed on 2026-11-30, after the edge term's curves were seen: until then of equals
     the lowest, the most complete, which on those curves picks 2 - 22 scenes meet both goals at 2
@@ -178,7 +211,7 @@ def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
 
     def meeting(t: float) -> int:
         return sum(
-            c["completeness"] >= GOAL_COMPLETENESS and c["wrong_share"] <= GOAL_WRONG_SHARE
+            c["completeness"] >= GOAL_COMPLETENESS and c["wrong_share_all"] <= GOAL_WRONG_SHARE
             for c in rows
             if c["threshold"] == t
         )
@@ -242,7 +275,7 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
     files = {
         "hard_scenes.csv": table_text(rows, cols),
         "hard_scenes_confidence.csv": table_text(
-            curves, ["scene", "decoder", "threshold", "completeness", "wrong_share"]
+            curves, ["scene", "decoder", "threshold", "completeness", "wrong_share", "wrong_share_all"]
         ),
         "hard_scenes_confidence.png": _curve_plot(curves, operating),
         "hard_scenes.md": _markdown(session, rows, curves, operating),
@@ -317,7 +350,9 @@ def _curve_plot(curves: list[dict], operating: dict) -> bytes:
                 xs = [
                     100 * max(1.0 - c["completeness"], 1e-4) if np.isfinite(c["completeness"]) else np.nan for c in cs
                 ]
-                ys = [100 * max(c["wrong_share"], 1e-4) if np.isfinite(c["wrong_share"]) else np.nan for c in cs]
+                ys = [
+                    100 * max(c["wrong_share_all"], 1e-4) if np.isfinite(c["wrong_share_all"]) else np.nan for c in cs
+                ]
                 colour, marker = _scene_style(k)
                 label = name.removeprefix("hard_")
                 if not any(c["completeness"] > 0 for c in cs):
@@ -369,7 +404,7 @@ def short_of_goals(row: dict, system: str) -> list[str]:
     """Which of issue 35's three goals a scene's results row (:func:`measure_scene`'s) misses
     for ``system`` (a decoder or the reference): ``"complete"``, ``"MAE"``, ``"wrong"`` (a
     decoder that decodes nothing misses all three; an empty list: it meets them)."""
-    c, mae, wrong = (row[f"{system}_{k}"] for k in ("completeness", "gt_mae_mm", "wrong_share"))
+    c, mae, wrong = (row[f"{system}_{k}"] for k in ("completeness", "gt_mae_mm", "wrong_share_all"))
     misses = []
     if not c >= GOAL_COMPLETENESS:
         misses.append("complete")
@@ -398,20 +433,21 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
     size = f"{cam.width_px}x{cam.height_px} camera, " if cam else ""
     header = ["scene", "class"]
     for d, title in (("paper", "paper's decoder"), ("robust", "colour-robust"), (REFERENCE_SYSTEM, "phase shifting")):
-        header += [f"{title}: complete", "MAE mm", "> 5 mm"]
+        header += [f"{title}: complete", "MAE mm", "> 5 mm", "> 5 mm, all decoded"]
     table = []
     for r in rows:
         cells = [f"`{r['scene']}`", r["class"]]
         for d in ("paper", "robust", REFERENCE_SYSTEM):
             cells += [_fmt(r[f"{d}_completeness"], True), _fmt(r[f"{d}_gt_mae_mm"]), _fmt(r[f"{d}_wrong_share"], True)]
+            cells.append(_fmt(r[f"{d}_wrong_share_all"], True))
         table.append(cells)
     # per threshold, over the scenes: the worst completeness and wrong share, and how many scenes meet both goals
     sweep = []
     for d in DECODERS:
         for t in CONFIDENCE_THRESHOLDS:
             cs = [c for c in curves if c["decoder"] == d and c["threshold"] == t]
-            wrong = [c["wrong_share"] for c in cs if np.isfinite(c["wrong_share"])]
-            meet = sum(c["completeness"] >= GOAL_COMPLETENESS and c["wrong_share"] <= GOAL_WRONG_SHARE for c in cs)
+            wrong = [c["wrong_share_all"] for c in cs if np.isfinite(c["wrong_share_all"])]
+            meet = sum(c["completeness"] >= GOAL_COMPLETENESS and c["wrong_share_all"] <= GOAL_WRONG_SHARE for c in cs)
             mark = " (operating point)" if t == operating[d] else ""
             sweep.append(
                 [
@@ -437,9 +473,12 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "exposures on the same projector and camera; pixels whose modulation SNR is below what its Gray code needs, "
         f"{_reference_min_snr():.3g}, are holes: `docs/competitors.md`). "
         f"Scored over the lit pixels off a {cfg.edge_band_px}-px band at every depth edge and object boundary: "
-        "*complete* = decoded share, *MAE* against ground truth, *> 5 mm* = share of the decoded pixels more than "
-        "5 mm wrong. Issue 35's goal for the colour-robust decoder: >= 97 % complete, MAE <= 0.5 mm, <= 0.1 % "
-        "wrong, on every scene.",
+        "*complete* = decoded share, *MAE* against ground truth, *> 5 mm* = share of those decoded pixels more than "
+        "5 mm wrong; *> 5 mm, all decoded* = share of every decoded pixel of the image more than 5 mm wrong - the "
+        "edge band, shadows and unlit pixels included, a depth where the truth sees nothing counted wrong: the wrong "
+        "depths the output does not mark, which the goals count (until 2026-11-30 they counted the band-free share, "
+        "blind to the band: a review of the protocols). Issue 35's goal for the colour-robust decoder: >= 97 % "
+        "complete, MAE <= 0.5 mm, <= 0.1 % of the decoded pixels wrong, on every scene.",
         "",
         *markdown_table(header, table),
         "",
@@ -483,16 +522,17 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
                 "confidence >=",
                 "worst completeness",
                 "median completeness",
-                "worst > 5 mm",
+                "worst > 5 mm (all decoded)",
                 "scenes <= 0.1 % wrong",
                 "scenes meeting both goals",
             ],
             sweep,
         ),
         "",
-        "What it cannot see: systematic errors under 5 mm are in the MAE only; shadowed pixels (unlit in the ground "
-        "truth) are not scored; the confidence is the phase fit's, so a wrong stripe order (a whole period off) on "
-        "a clean fringe keeps a high confidence - the stripe-order column of `hard_scenes.csv` counts those.",
+        "What it cannot see: systematic errors under 5 mm are in the MAE only, which leaves the edge band and the "
+        "shadowed pixels (unlit in the ground truth) out; the confidence is the phase fit's, so a wrong stripe order "
+        "(a whole period off) on a clean fringe keeps a high confidence - the stripe-order column of "
+        "`hard_scenes.csv` counts those.",
         "",
     ]
     return "\n".join(lines)
