@@ -587,3 +587,35 @@ def test_a_resume_reuses_only_the_runs_its_own_code_made(tmp_path, monkeypatch):
     assert "0 already done, 2 to run (2 of them" in messages[0]
     # the code digest follows every module of the package
     assert len(code) == 16 and code == execute.code_digest()
+
+
+def test_a_sweep_takes_a_scene_of_ones_own_by_its_path_and_its_key_follows_the_mesh_it_names(tmp_path, monkeypatch):
+    """A new user's audit (2026-11-30): `scene.name` took only a scene of scenes/ (a researcher's
+    own scene could not be swept without copying it into the checkout), and a resume after the
+    mesh a scene names changed kept the old mesh's results (the key hashed the scene file alone)."""
+    import shutil
+
+    from simbench.experiments.ablate.execute import _named_files_digest
+    from simbench.experiments.ablate.mapping import scene_for
+
+    from .conftest import ROOT
+
+    shutil.copy(ROOT / "scenes" / "meshes" / "cone.ply", tmp_path / "blob.ply")
+    (tmp_path / "mine.toml").write_text(
+        'rig = "paper"\nreference_depth_m = 1.0\n[[object]]\ntype = "mesh"\nname = "blob"\nfile = "blob.ply"\n'
+        "translate_m = [0.0, 0.0, 1.0]\nrgb = [0.8, 0.8, 0.8]\n"
+    )
+    monkeypatch.chdir(tmp_path)
+    for value in ("mine.toml", str(tmp_path / "mine.toml")):
+        params = {"scene.name": value}
+        assert [o.name for o in scene_for(params).objects] == ["blob"]
+    params = {"scene.name": "mine.toml"}
+    before = _named_files_digest(params)
+    shutil.copy(ROOT / "scenes" / "meshes" / "pear.ply", tmp_path / "blob.ply")  # the mesh, not the scene file
+    assert _named_files_digest(params) != before
+    with pytest.raises(ValueError, match="no scene file 'other.toml'"):
+        scene_for({"scene.name": "other.toml"})
+    with pytest.raises(ValueError, match="not a name of scenes/"):
+        scene_for({"scene.name": "white plane"})
+    # a sweep naming it runs: the values are checked before the first run
+    check_sweep(_sweep(base={**FAST_BASE, "scene.name": "mine.toml"}))

@@ -35,7 +35,8 @@ Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
   :data:`simbench.sim.sensor.EFFECTS` switched on over the ``ideal`` model, taken from
   ``sensor.source`` (default ``paper``); ``sensor.<table>.<key>``: one number of the sensor model
   (e.g. ``sensor.camera.dark_noise_e``, ``sensor.ambient.ratio``, ``sensor.projector.lumens``);
-- ``scene.name`` (a file of ``scenes/``), ``scene.srgb8`` (repaint every object), ``scene.depth_m``
+- ``scene.name`` (a scene of ``scenes/`` by name, or a scene TOML of one's own by its path),
+  ``scene.srgb8`` (repaint every object), ``scene.depth_m``
   (move the scene so its first object's centre is at this depth), ``scene.tilt_deg`` (the first
   object's rotation about the vertical axis), ``scene.speed_m_s`` and ``scene.motion`` (the first
   object moving ``lateral``-ly or ``axial``-ly at that speed during the exposure:

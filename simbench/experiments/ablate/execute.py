@@ -133,19 +133,26 @@ def _load_done(path: Path) -> dict[str, dict]:
 
 def _named_files_digest(params: dict) -> str:
     """The first 8 hex digits of the SHA-256 of the sensor and scene files a run's values name
-    (a preset's own file too), "" when they name none."""
+    (a preset's own file too) and of everything the scene file names in turn - its meshes and
+    rig, by the scene's fingerprint (:func:`simbench.sim.scene.scene_fingerprint`, what a render
+    is keyed by; a new user's audit, 2026-11-30: a resume after a mesh file changed kept the old
+    mesh's results) - "" when they name none."""
     import hashlib
 
-    from simbench.experiments.common import library_scene_path
+    from simbench.experiments.ablate.mapping import scene_path
+    from simbench.io import json_bytes
+    from simbench.sim.scene import load_scene, scene_fingerprint
     from simbench.sim.sensor import PRESETS_DIR, SENSOR_PRESETS
 
     files = []
     sensor = params.get("sensor.preset")
     if isinstance(sensor, str):
         files.append(PRESETS_DIR / f"{sensor}.toml" if sensor in SENSOR_PRESETS else Path(sensor))
+    scene = None
     if isinstance(params.get("scene.name"), str):
         try:
-            files.append(library_scene_path(params["scene.name"]))
+            scene = scene_path(params["scene.name"])
+            files.append(scene)
         except ValueError:
             pass  # (refused with its own message by the run)
     h = hashlib.sha256()
@@ -154,6 +161,11 @@ def _named_files_digest(params: dict) -> str:
             h.update(f.read_bytes())
         except OSError:
             h.update(str(f).encode())
+    if scene is not None:
+        try:
+            h.update(json_bytes(scene_fingerprint(load_scene(scene))))
+        except (ValueError, OSError):
+            pass  # (the same)
     return h.hexdigest()[:8] if files else ""
 
 

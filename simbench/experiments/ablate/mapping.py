@@ -4,6 +4,8 @@ the sensor model, scene and decoder settings it runs with."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
+import os
 import logging
 from typing import TYPE_CHECKING
 
@@ -62,11 +64,24 @@ def sensor_for(params: dict) -> SensorModel:
     return sensor
 
 
-def scene_for(params: dict) -> SceneSpec:
+def scene_path(value: object) -> Path:
+    """The scene file ``scene.name`` names: a scene of ``scenes/`` by name, or a researcher's own
+    scene TOML by its path (one ending in ``.toml`` or holding a folder; relative to the working
+    folder, as ``sensor.preset``'s files are).  Raises ValueError where there is no such file."""
     from simbench.experiments.common import library_scene_path
+
+    if isinstance(value, str) and (value.endswith(".toml") or "/" in value or os.sep in value):
+        path = Path(value).expanduser()
+        if not path.is_file():
+            raise ValueError(f"scene.name: no scene file {value!r} (from {Path.cwd()})")
+        return path
+    return library_scene_path(value)
+
+
+def scene_for(params: dict) -> SceneSpec:
     from simbench.sim.scene import load_scene, paint_reflectance, with_subsurface
 
-    scene = load_scene(library_scene_path(params["scene.name"]))
+    scene = load_scene(scene_path(params["scene.name"]))
     objs = list(scene.objects)
     if "scene.srgb8" in params:
         rgb = paint_reflectance(params["scene.srgb8"])

@@ -70,7 +70,7 @@ def _parameters() -> dict[str, str]:
         "sensor.preset": "sensor model: a preset (ideal, minimal, paper) or a TOML file",
         "sensor.effects": "list of physical effects switched on over the ideal model",
         "sensor.source": "where sensor.effects take their values from (default paper)",
-        "scene.name": "scene file of scenes/",
+        "scene.name": "a scene of scenes/ by name, or your own scene TOML by its path (ending in .toml)",
         "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
         "scene.subsurface": "make every object translucent as this medium (simbench.sim.subsurface.MEDIA) or opaque "
         "('none'); not given: as the scene file says",
