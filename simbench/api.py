@@ -245,6 +245,8 @@ def record(
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
         meta = {**acq.meta, **_scene_record(scene, spec)}
+        for told in recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern)):
+            warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
         return Recorded(system, rec, calibration, settings, meta=meta, sensor=sensor_model)
     seeds = SeedLog(seed)
     render_settings = RenderSettings(spp=spp, sampler=sampler, max_depth=max_depth, cache=store)
@@ -253,6 +255,8 @@ def record(
     rec = acquire(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
+    for told in recording_warnings(spec, rec.gt):
+        warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     meta = {
         **_scene_record(scene, spec),
         "spp": spp,
@@ -262,6 +266,42 @@ def record(
         "variant": used_variant,
     }
     return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta, sensor=sensor_model)
+
+
+# a share of the lit pixels beyond the decoder's working range worth a warning (the hard scenes'
+# goal for wrong depths: 0.1 % of the decoded pixels)
+OUT_OF_RANGE_SHARE = 0.001
+
+
+def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None) -> list[str]:
+    """What the ground truth of a recording shows that its scene file did not (a new user's audit,
+    2026-11-30, each recorded and decoded without a word): an object no pixel sees (outside the
+    view, or hidden behind another), and - with ``decoder``, the colour-fringe sensor's - lit
+    surface beyond the decoder's working range (``depth_range_m``), where the pattern's code
+    repeats: such a pixel decodes a whole code cycle off, a confident wrong depth inside the
+    range (a wall at 2.5 m read at 0.83 m, 78 % of it at confidence 6), or not at all."""
+    out = []
+    seen = np.unique(np.asarray(gt.object_id)[np.asarray(gt.object_id) >= 0])
+    unseen = [o.name for i, o in enumerate(spec.objects) if i not in set(seen.tolist())]
+    if unseen:
+        out.append(
+            f"no pixel sees object(s) {', '.join(repr(n) for n in unseen)} (outside the camera's view, or hidden "
+            "behind another object)"
+        )
+    if decoder is not None:
+        near, far = decoder.depth_range_m
+        z = np.asarray(gt.depth_m, np.float64)[np.asarray(gt.lit, bool)]
+        outside = (z < near) | (z > far)
+        if z.size and outside.mean() > OUT_OF_RANGE_SHARE:
+            out.append(
+                f"{100 * outside.mean():.1f} % of the lit pixels lie outside the decoder's working range "
+                f"{near:g}-{far:g} m (DecoderParams.depth_range_m; the lit surface spans {z.min():.3g}-{z.max():.3g} "
+                "m): the pattern's code repeats every cycle, so there a pixel decodes a whole cycle off - a wrong "
+                "depth inside the range, at "
+                "full confidence - or not at all. Place the scene within the range, or decode with a range that holds "
+                "it (simbench decode --near/--far), no wider than one code cycle of disparity"
+            )
+    return out
 
 
 def _scene_record(scene, spec: SceneSpec) -> dict:

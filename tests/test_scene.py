@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -447,3 +449,44 @@ def test_placements_no_view_could_mean_are_warned_of_and_the_shipped_scenes_have
     assert any("inside the bounds of object 'around'" in t for t in told)
     assert any("inside the bounds of object 'mm'" in t for t in told)
     assert not any("'wall'" in t or "'beside'" in t or "'turned'" in t for t in told)
+
+
+def test_a_recording_warns_of_objects_no_pixel_sees_and_of_lit_surface_beyond_the_working_range():
+    """A new user's audit (2026-11-30): a blob moved 3 m aside rendered without a word, and a wall
+    at 2.5 m - beyond the decoder's 0.75-1.75 m, where the code repeats - decoded at 0.83 m, 78 %
+    of it at confidence 6, exit 0.  The ground truth tells both (simbench.api.recording_warnings)."""
+    from simbench.api import recording_warnings
+    from simbench.decode import DecoderParams
+    from simbench.sim.truth import GroundTruth
+
+    scene = scene_from_dict(
+        {
+            "name": "s",
+            "rig": "paper",
+            "object": [
+                {"type": "sphere", "name": "ball", "center_m": [0, 0, 1.0], "radius_m": 0.1},
+                {"type": "sphere", "name": "aside", "center_m": [3.0, 0, 1.0], "radius_m": 0.1},
+                {"type": "plane", "name": "wall", "center_m": [0, 0, 1.5], "size_m": [2.0, 2.0]},
+            ],
+        }
+    )
+    oid = np.full((100, 100), 2, np.int16)
+    oid[40:60, 40:60] = 0
+    depth = np.where(oid == 0, 1.0, 1.5).astype(np.float32)
+    gt = GroundTruth(depth_m=depth, column_px=np.zeros(depth.shape), object_id=oid, lit=np.ones(depth.shape, bool))
+    told = recording_warnings(scene, gt, DecoderParams())
+    assert len(told) == 1 and "no pixel sees object(s) 'aside'" in told[0]
+    # the wall at 2.5 m: 96 % of the lit pixels beyond the far end
+    far = GroundTruth(
+        depth_m=np.where(oid == 0, 1.0, 2.5).astype(np.float32), column_px=gt.column_px, object_id=oid, lit=gt.lit
+    )
+    told = recording_warnings(scene, far, DecoderParams())
+    assert "96.0 % of the lit pixels lie outside the decoder's working range 0.75-1.75 m" in told[1]
+    assert "1-2.5 m" in told[1] and "--near/--far" in told[1]
+    # unlit pixels beyond it do not count, nor does a competitor (no decoder range), nor a sliver under 0.1 %
+    assert len(recording_warnings(scene, dataclasses.replace(far, lit=oid == 0), DecoderParams())) == 1
+    assert len(recording_warnings(scene, far)) == 1
+    sliver = far.depth_m.copy()
+    sliver[:] = 1.0
+    sliver[0, :5] = 2.5  # 0.05 %
+    assert len(recording_warnings(scene, dataclasses.replace(far, depth_m=sliver), DecoderParams())) == 1
