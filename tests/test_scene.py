@@ -490,3 +490,50 @@ def test_a_recording_warns_of_objects_no_pixel_sees_and_of_lit_surface_beyond_th
     sliver[:] = 1.0
     sliver[0, :5] = 2.5  # 0.05 %
     assert len(recording_warnings(scene, dataclasses.replace(far, depth_m=sliver), DecoderParams())) == 1
+
+
+def test_meshes_mitsubas_loader_would_not_read_as_they_are_go_to_it_as_arrays(tmp_path, variant):
+    """A new user's audit (2026-11-30): a PLY of quads and an OBJ with relative indices - legal
+    files - failed inside Mitsuba with its loader's messages, and a mesh without vertex normals
+    was not the same bits between cold renders.  Such files go to Mitsuba as arrays (trimesh's
+    triangles, our angle-weighted normals, which the mesh keeps as given); the library's meshes,
+    triangles with normals, go as files, as before (their cache keys unchanged)."""
+    import mitsuba as mi
+    import trimesh
+
+    from simbench.sim.scene import mesh_arrays, object_to_mitsuba, scene_fingerprint, vertex_normals
+    from simbench.sim.truth import ground_truth
+
+    for path in sorted((SCENES / "meshes").glob("*.ply")):
+        assert mesh_arrays(str(path)) is None, path.name
+    # a cube's corner: the angle-weighted normal points along the diagonal
+    cube = trimesh.creation.box(extents=(1, 1, 1))
+    n = vertex_normals(cube.vertices, cube.faces)
+    assert np.allclose(np.abs(n), 1 / np.sqrt(3)) and np.allclose(np.sign(n), np.sign(cube.vertices))
+    # a ball without normals: given as arrays, the normals radial, and the Mitsuba mesh holds them as given
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    (tmp_path / "ball.ply").write_bytes(trimesh.exchange.ply.export_ply(ball, include_attributes=False))
+    assert b"nx" not in (tmp_path / "ball.ply").read_bytes()[:400]
+    vertices, faces, normals = mesh_arrays(str(tmp_path / "ball.ply"))
+    assert np.all(np.einsum("ij,ij->i", normals, vertices / np.linalg.norm(vertices, axis=1, keepdims=True)) > 0.995)
+    quad = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+    quad += "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    quad += "-0.1 -0.1 0\n0.1 -0.1 0\n0.1 0.1 0\n-0.1 0.1 0\n4 0 1 2 3\n"
+    (tmp_path / "quad.ply").write_text(quad)
+    (tmp_path / "neg.obj").write_text("v -0.1 -0.1 0\nv 0.1 -0.1 0\nv 0 0.1 0\nf -3 -2 -1\n")
+    objects = []
+    for name, x in (("ball.ply", 0.0), ("quad.ply", -0.16), ("neg.obj", 0.16)):
+        objects.append({"type": "mesh", "name": name.replace(".", "_"), "file": name, "translate_m": [x, 0, 1.0]})
+        objects[-1]["scale"] = 0.05 if name == "ball.ply" else 1.0
+    scene = scene_from_dict({"name": "own", "rig": "paper", "object": objects}, base_dir=tmp_path)
+    mesh = object_to_mitsuba(scene.objects[0])
+    got = np.asarray(mi.traverse(mesh)["vertex_normals"]).reshape(-1, 3)
+    assert np.array_equal(got, normals.astype(np.float32))  # no normals of Mitsuba's own
+    assert "read" in scene_fingerprint(scene)["objects"][1]["params"]["file"]
+    # the ball (its front at 0.95 m), the quad and the triangle of relative indices all render, each whole
+    gt = ground_truth(scene)
+    assert gt.depth_m[480, 640] == pytest.approx(0.95, abs=1e-3)
+    cam = scene.rig.camera
+    for k, (half, area_m2) in enumerate(((0.05, np.pi * 0.05**2), (0.1, 0.04), (0.1, 0.02))):
+        seen = (gt.object_id == k).sum() * (1.0 / cam.focal_px) ** 2  # m^2 at 1 m
+        assert seen == pytest.approx(area_m2, rel=0.05), (k, seen)
