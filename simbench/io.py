@@ -530,11 +530,22 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
     return arr
 
 
+# image files a depth map is sometimes saved as, which hold no metres
+IMAGE_SUFFIXES = frozenset({".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm"})
+
+
 def load_depth_map(path: str | Path, *, expected_shape: tuple[int, ...] | None = None) -> np.ndarray:
     """A depth map from an .npy file (:func:`load_npy`) or a one-channel OpenEXR file (``render``
     writes ``gt_depth`` as both, the same values; read with Mitsuba's ``Bitmap``); errors name
     the file and what is wrong.  Its dtype and shape as stored (the caller checks them)."""
     path = Path(path)
+    if path.suffix.lower() in IMAGE_SUFFIXES:
+        # (a new user's audit: a 16-bit PNG depth read "not a NumPy .npy file", naming no way on)
+        raise ValueError(
+            f"{path}: a depth map is read from .npy or .exr, float metres with NaN holes; an image file holds "
+            "integers in units of its own (e.g. millimetres in a 16-bit PNG): convert it, e.g. "
+            "numpy.save('depth.npy', png.astype(numpy.float32) / 1000) with 0 set to NaN"
+        )
     if path.suffix.lower() != ".exr":
         return load_npy(path, expected_shape=expected_shape)
     if not path.is_file():

@@ -15,6 +15,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -1057,7 +1058,7 @@ for cid, argv, msg, setup in [
     (
         "depth-png",
         lambda d: ["score", str(d / "r" / "capture.png"), "--gt", str(d / "r" / "gt_depth.npy")],
-        "not a NumPy",
+        ("capture.png", "float metres with NaN holes"),
         render_folder,
     ),
     (
@@ -1083,6 +1084,12 @@ for cid, argv, msg, setup in [
         lambda d: ["score", str(d / "r" / "depth.npy"), "--gt", str(d / "g.exr")],
         ("g.exr", "not a readable OpenEXR file"),
         lambda d: (render_folder(d), (d / "g.exr").write_text("depth\n")),
+    ),
+    (  # a new user's audit (2026-11-30): a 16-bit PNG depth read "not a NumPy .npy file"
+        "depth-png16",
+        lambda d: ["score", str(d / "d.png"), "--gt", str(d / "r" / "gt_depth.npy")],
+        ("d.png", "float metres with NaN holes", "millimetres in a 16-bit PNG"),
+        lambda d: (render_folder(d), cv2.imwrite(str(d / "d.png"), np.full((120, 160), 1000, np.uint16))),
     ),
     (
         "gt-exr-three-channels",
