@@ -438,7 +438,12 @@ def score(
         )
     if edge_band_px > 0:
         band = edge_band(gt.depth_m, object_id=gt.object_id, band_px=edge_band_px)
-        off_edges = depth_errors(depth_m, gt.depth_m, region=region, exclude=band)
+        # (the caller's exclusions too: until 2026-11-30 they were dropped here, so the edge MAE
+        # counted pixels the other statistics leave out - a review of the protocols; no caller
+        # passed both)
+        off_edges = depth_errors(
+            depth_m, gt.depth_m, region=region, exclude=band if exclude is None else band | exclude
+        )
         out.update(
             {
                 "gt_p95_mm": m["p95_mm"],

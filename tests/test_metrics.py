@@ -246,3 +246,22 @@ def test_score_reports_no_plane_fit_where_the_truth_is_not_flat():
     out = scored(step)
     assert np.isnan(out["plane_mae_mm"]) and np.isnan(out["plane_rms_mm"])
     assert out["gt_mae_mm"] == pytest.approx(0.5 * np.sqrt(2 / np.pi), rel=0.05)  # the errors still scored
+
+
+def test_the_edge_mae_leaves_out_the_callers_exclusions_too():
+    """A review (2026-11-30): with an edge band the MAE off the edges dropped the caller's
+    ``exclude``, counting pixels every other statistic leaves out."""
+    from simbench.metrics import score
+    from simbench.sim.truth import GroundTruth
+
+    cam = Intrinsics.centred(60, 40, 100.0)
+    truth = np.ones((40, 60), np.float32)
+    gt = GroundTruth(
+        depth_m=truth, column_px=np.full(truth.shape, np.nan), object_id=np.zeros(truth.shape, np.int16), lit=truth > 0
+    )
+    depth = truth + np.float32(0.001)
+    exclude = np.zeros(truth.shape, bool)
+    exclude[10:20, 10:20] = True
+    depth[exclude] += np.float32(1.0)  # a metre off, excluded
+    out = score(depth, gt, camera=cam, exclude=exclude, edge_band_px=2)
+    assert out["gt_mae_mm"] == pytest.approx(1.0, rel=1e-3) and out["edge2_mae_mm"] == pytest.approx(1.0, rel=1e-3)
