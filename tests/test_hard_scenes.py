@@ -235,3 +235,29 @@ def test_the_confidence_plot_gives_each_scene_of_a_class_its_own_style_and_draws
     png = cv2.imdecode(np.frombuffer(_curve_plot(curves, {"paper": 0.0, "robust": 3.0}), np.uint8), cv2.IMREAD_COLOR)
     # two rows (decoders) of three columns (the two classes and the scene outside them): wider than tall
     assert png is not None and png.shape[1] > png.shape[0]
+
+
+def test_the_held_out_line_names_the_scenes_the_pick_rests_on():
+    """The rule picks on the scenes it is reported on; the table says how the pick moves when each
+    scene is left out (a review of the protocols, 2026-11-30: in-sample tuning, unreported)."""
+    from simbench.experiments.hard_scenes import _held_out
+
+    def rows(scene, met):
+        return [
+            {
+                "scene": scene,
+                "decoder": "robust",
+                "threshold": float(t),
+                "wrong_share": 0.0,
+                "wrong_share_all": 0.0,
+                "completeness": 0.99 if t in met else 0.5,
+            }
+            for t in (2, 3, 4)
+        ]
+
+    steady = rows("a", {3}) + rows("b", {3}) + rows("c", {3})
+    assert "picks the same threshold every time" in _held_out(steady)
+    # a and b meet the goals at 3, c at 4, d at 2 and 4: 4 by the tie-break (two each); without c, 3
+    swing = rows("a", {3}) + rows("b", {3}) + rows("c", {4}) + rows("d", {2, 4})
+    line = _held_out(swing)
+    assert "without `c` 3" in line and "4 otherwise" in line and "without `a`" not in line
