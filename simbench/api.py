@@ -283,7 +283,7 @@ def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None
     out = []
     seen = np.unique(np.asarray(gt.object_id)[np.asarray(gt.object_id) >= 0])
     unseen = [o.name for i, o in enumerate(spec.objects) if i not in set(seen.tolist())]
-    if unseen:
+    if unseen and seen.size:  # (none seen at all: the render's own error says it)
         out.append(
             f"no pixel sees object(s) {', '.join(repr(n) for n in unseen)} (outside the camera's view, or hidden "
             "behind another object)"

@@ -1466,9 +1466,15 @@ for cid, body, msg in [
     ("sensor-toml-missing", 'name = "s"\n[[axis]]\nname = "sensor.preset"\nvalues = ["x.toml"]\n', "x.toml"),
     ("camera-scale-zero", 'name = "s"\n[[axis]]\nname = "run.camera_scale"\nvalues = [0.0]\n', "run.camera_scale"),
     ("rig-unknown", 'name = "s"\n[[axis]]\nname = "run.rig"\nvalues = ["guessed"]\n', "rig"),
-    (
+    (  # a path is a scene file of one's own since 2026-11-30 (a new user's audit), read where the user
+        # points and naming no output; one that is not there is refused by its name
         "scene-traversal",
         'name = "s"\n[[axis]]\nname = "scene.name"\nvalues = ["plane_white", "../../tmp/evil"]\n',
+        "no scene file '../../tmp/evil'",
+    ),
+    (
+        "scene-not-a-name",
+        'name = "s"\n[[axis]]\nname = "scene.name"\nvalues = ["white plane"]\n',
         "not a name of scenes/",
     ),
 ]:

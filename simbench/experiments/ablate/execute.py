@@ -174,10 +174,9 @@ def code_digest() -> str:
     its C loops - as a run's log records it: a resumed sweep reuses only runs its own code made
     (until 2026-11-30 a resume after a decoder change kept every finished run's old metrics and
     wrote the sweep's provenance with the new commit)."""
-    import simbench
     from simbench.cache import source_digest
 
-    root = Path(simbench.__file__).parent
+    root = Path(__file__).resolve().parents[2]  # the package (not `import simbench`: its api is a layer above)
     return source_digest(sorted([*root.rglob("*.py"), *root.glob("*.c")]))[:16]
 
 
