@@ -26,6 +26,7 @@ __all__ = [
     "match_reference",
     "depth_from_disparity",
     "crease_bias",
+    "crease_apex_bias",
     "crease_trusted",
 ]
 
@@ -243,6 +244,81 @@ def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_ste
     out = np.empty(c.shape, np.float32)
     _kernels.edge_bend(c, int(reach_px), int(fit_px), max_step_px, out)
     return out
+
+
+def crease_apex_bias(
+    bias: np.ndarray,
+    column_px: np.ndarray,
+    *,
+    scale_px: int,
+    depth_sign: float,
+    peak_px: int,
+    apex_px: int,
+    apex_factor: float,
+    lobe_share: float,
+) -> np.ndarray:
+    """:func:`crease_bias`'s prediction raised at the apex of a fold (ours; the colour-robust
+    decoder's ``crease_doubt``): ``bias`` times ``apex_factor`` within ``apex_px`` of each row's
+    apex, there the largest ``bias`` within ``apex_px``.
+
+    The crease term predicts a bias of a fixed share of the decoded map's concave second
+    difference ``D2`` (:data:`simbench.decode.params.CREASE_BIAS_RATIO`, a least-squares fit over a
+    period of the crease); at the apex the error reaches a larger share of it, 0.47-0.55 on the
+    library's corners, and counting every decoded pixel the 90-degree corner kept 0.51 % of them
+    5-7 mm wrong within 2 px of its crease at confidence 3.1-3.5 (2026-11-30).  An apex is a pixel
+    whose ``bias`` is positive and the largest within ``peak_px`` along its row; it is a fold -
+    a crease of the surface - when ``D2`` (averaged over ``scale_px`` rows either side, in the
+    concave sense) falls nowhere within ``2 scale_px`` of it below ``-lobe_share`` times its own:
+    a printed albedo step also bends the decoded map, but as an S, concave on one side and convex
+    on the other (on the 20:1 chart the convex lobe reached 0.6-1.4 of the concave peak, on the
+    corners from 45 to 120 degrees at most 0.12 of it).
+
+    Parameters
+    ----------
+    bias : ndarray, shape (H, W), float32 >= 0; :func:`crease_bias`'s prediction
+    column_px : ndarray, shape (H, W), float32; the decoded projector column, NaN where none
+    scale_px : int
+        ``L`` of :func:`crease_bias`.
+    depth_sign : float
+        As for :func:`crease_bias`.
+    peak_px, apex_px : int
+        The apex's reach along the row, and how far from it the raised prediction reaches.
+    apex_factor : float
+        The apex's share of ``D2`` over :func:`crease_bias`'s.
+    lobe_share : float
+        The deepest convex lobe, as a share of the apex's ``D2``, of a fold.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32, >= ``bias``
+    """
+    b = np.ascontiguousarray(bias, dtype=np.float32)
+    if not (b > 0).any():
+        return b
+    c = np.asarray(column_px, np.float64)
+    h, w = c.shape
+    L = int(scale_px)
+    d2 = np.full((h, w), np.nan)
+    if w > 2 * L:
+        # in the concave sense: positive where crease_bias predicts a bias
+        d2[:, L:-L] = -np.sign(depth_sign) * (c[:, 2 * L :] - 2.0 * c[:, L:-L] + c[:, : -2 * L])
+    ok = np.isfinite(d2)
+    rows = np.ones((2 * L + 1, 1), np.float64)
+    total = cv2.filter2D(np.where(ok, d2, 0.0), -1, rows, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.filter2D(ok.astype(np.float64), -1, rows, borderType=cv2.BORDER_CONSTANT)
+    mean = np.where(count > 0, total / np.maximum(count, 1.0), 0.0)
+    apex = (b > 0) & (b >= cv2.dilate(b, np.ones((1, 2 * int(peak_px) + 1), np.uint8)))
+    lobe = np.ones((1, 4 * L + 1), np.uint8)
+    deepest = -cv2.dilate(-mean, lobe)
+    # judged only where D2 is known across the whole reach (not by the image's sides, nor a hole)
+    known = cv2.erode((count > 0).astype(np.uint8), lobe, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    fold = apex & known.astype(bool) & (deepest >= -lobe_share * mean)
+    if not fold.any():
+        return b
+    reach = np.ones((1, 2 * int(apex_px) + 1), np.uint8)
+    near = cv2.dilate(fold.view(np.uint8), reach).astype(bool)
+    raised = cv2.dilate(np.where(fold, b, np.float32(0.0)), reach) * np.float32(apex_factor)
+    return np.where(near, np.maximum(b, raised), b).astype(np.float32)
 
 
 def crease_trusted(valid: np.ndarray, *, scale_px: int) -> np.ndarray:

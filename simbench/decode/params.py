@@ -118,6 +118,24 @@ STABILITY_KAPPA_RAD = 0.4
 CREASE_SCALE_PERIODS = 1.0
 CREASE_BIAS_RATIO = 0.3
 CREASE_MAX_STEP_PX = 3.0
+# ... and at a fold's apex (simbench.decode.depth.crease_apex_bias) the error's share of D2 measured
+# there, 0.55 (the largest of the 0.47-0.55 above; assumption: the apex is where that measurement
+# was made), within CREASE_APEX_PERIODS of a camera period of the row's apex - the largest
+# prediction within CREASE_PEAK_PERIODS - and only where no convex lobe deeper than
+# CREASE_LOBE_SHARE of the apex's D2 lies within two periods (a printed step bends the map into
+# an S).  Chosen 2026-11-30 when the hard scenes began counting every decoded pixel: the
+# 90-degree corner kept 0.51 % of its decoded pixels 5-7 mm wrong within 2 px of its crease, at
+# confidence 3.1-3.5, where the prediction at 0.3 x D2 is 0.41-0.44 projector px and the error
+# 0.8.  The reach: the error's peak lay up to 4 px from the prediction's, its > 5 mm part ~4 px
+# wide (0.4 periods); the lobe share: the corners' deepest convex lobe 0.12 of the apex's D2 at
+# most, the 20:1 chart's 0.63 at least (0.3 between).  Designed on the 90-degree corner and the
+# 20:1 chart and measured on all 25 hard scenes (in sample): the 90-degree corner 0.514 -> 0.089 %
+# wrong at 99.99 -> 99.30 % complete, the 105-degree one 0.073 -> 0.003 % at 100 -> 99.23 %, the
+# 120-degree one 100 -> 99.39 %, the box interior 89.66 -> 89.56 %, the rest within 0.06 points.
+CREASE_APEX_SHARE = 0.55
+CREASE_APEX_PERIODS = 0.4
+CREASE_PEAK_PERIODS = 0.5
+CREASE_LOBE_SHARE = 0.3
 # ... and the columns within half a period of a hole count as such a step: beside a depth edge the
 # fit's windows straddle it and bend the decoded map, which read as a crease 20-26 px from
 # robust_staircase's step edges (16 spp: 96.3 % complete with the term, 97.1 % without, none wrong

@@ -46,6 +46,7 @@ from simbench.decode.debruijn import (
 )
 from simbench.decode.depth import (
     absolute_column,
+    crease_apex_bias,
     crease_trusted,
     inverse_column_table,
     match_reference,
@@ -72,8 +73,12 @@ from simbench.decode.registration import (
     registration_px,
 )
 from simbench.decode.params import (
+    CREASE_APEX_PERIODS,
+    CREASE_APEX_SHARE,
     CREASE_BIAS_RATIO,
+    CREASE_LOBE_SHARE,
     CREASE_MAX_STEP_PX,
+    CREASE_PEAK_PERIODS,
     CREASE_SCALE_PERIODS,
     EDGE_BEND_FIT_PERIODS,
     EDGE_BEND_REACH_SIGMAS,
@@ -1332,6 +1337,22 @@ def decode(
                 trusted=trusted,
                 cap=(bias_kappa_px, valid_out, conf_out),
             )
+            # raised at a fold's apex, where the error's share of the map's bend is larger
+            t_cam = params.camera_period(rig)
+            apex = crease_apex_bias(
+                bias,
+                col_out,
+                scale_px=crease_px,
+                depth_sign=depth_sign,
+                peak_px=max(1, int(round(CREASE_PEAK_PERIODS * t_cam))),
+                apex_px=max(1, int(round(CREASE_APEX_PERIODS * t_cam))),
+                apex_factor=CREASE_APEX_SHARE / CREASE_BIAS_RATIO,
+                lobe_share=CREASE_LOBE_SHARE,
+            )
+            if apex is not bias:
+                raised = valid_out & (apex > bias)
+                np.minimum(conf_out, bias_kappa_px / np.maximum(apex, np.float32(1e-30)), out=conf_out, where=raised)
+                bias = apex
         stages.put("crease_bias", bias)
     if params.edge_doubt:
         # after the bands too: the bend is read along whole rows of the final column map

@@ -384,7 +384,7 @@ def _curve_plot(curves: list[dict], operating: dict) -> bytes:
                 )
                 ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.3), ncol=2, frameon=False)
             if col == 0:
-                ax.set_ylabel(f"{titles[d]}\ndecoded pixels > 5 mm wrong (%)", fontsize=8)
+                ax.set_ylabel(f"{titles[d]}\nof every decoded pixel, > 5 mm wrong (%)", fontsize=8)
     fig.suptitle(
         "Hard scenes: pixels lost against pixels > 5 mm wrong as the confidence threshold rises (square: the "
         f"operating point, paper's decoder {operating['paper']:g}, colour-robust {operating['robust']:g}; the "

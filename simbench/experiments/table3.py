@@ -545,7 +545,9 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
             (
                 "Kinect and ToF: the simulated Kinect-v1-like speckle sensor (640x480) and SR4000-like ToF camera "
                 "(176x144) of `simbench.systems.kinect` and `.tof`, on the same scene from the same camera centre, "
-                "scored with the same protocol at their own resolutions (edge band scaled to the same angle). "
+                "scored with the same protocol at their own resolutions (edge band scaled to the same angle, rounded "
+                "to whole pixels and at least one: the ToF camera's one pixel is ~2x the angle of the main camera's "
+                "band, which leaves more of its edge pixels out - in its favour). "
                 if all(d in competitors for d in COMPETITORS)
                 else ""
             )
