@@ -231,7 +231,7 @@ def _rays(camera: Intrinsics) -> np.ndarray:
 
 
 # assumption: a plane fit (3 parameters) says something about a surface only from ~100 points
-# on; below that (a board decoded at 0.01 %) it reports NaN instead of a flattering ~0 mm
+# on; below that (a board decoded at well under 0.01 %) it reports NaN instead of a flattering ~0 mm
 MIN_PLANE_POINTS = 100
 # ... and only from points that spread across the image in both directions: the points of one
 # image line lie in one plane through the camera centre whatever their depths, so a fit to them
@@ -344,8 +344,8 @@ def _plane_of_centred(q: np.ndarray) -> dict:
 
 # the plane fit of score() is reported where the ground truth over the decoded pixels lies within
 # this RMS of its own least-squares plane (assumption: 1 mm - 5x the largest board form of the
-# flatness study, results/flatness.md, 0.21 mm RMS, and above the decoders' plane-fit residuals of
-# Table 1; a step, a sphere or a box in the region is far beyond it)
+# flatness study, results/flatness.md, 0.21 mm RMS, and above the colour-robust decoder's plane-fit
+# residuals of Table 1, at most 0.65 mm; a step, a sphere or a box in the region is far beyond it)
 PLANAR_TRUTH_RMS_MM = 1.0
 
 
