@@ -873,6 +873,11 @@ def test_the_crease_prediction_is_raised_at_a_folds_apex_and_not_at_a_prints_ben
     assert np.array_equal(got[20, ~near], bias[20, ~near])
     assert np.array_equal(got[41:], bias[41:])  # the print's S: its convex lobe as deep as its concave one
     assert np.all(got >= bias)
+    # an apex under min_px is not raised (a plane's fitted ripple): the prediction comes back as it was
+    small = crease_apex_bias(
+        bias, maps, peak_px=10, apex_px=8, apex_factor=0.55 / 0.3, lobe_share=0.3, min_px=10.0, **kw
+    )
+    assert small is bias
     flat = np.zeros((5, 300), np.float32)
     assert crease_apex_bias(flat, maps[:5], peak_px=10, apex_px=8, apex_factor=2.0, lobe_share=0.3, **kw) is flat
 

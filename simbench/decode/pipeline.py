@@ -73,6 +73,7 @@ from simbench.decode.registration import (
     registration_px,
 )
 from simbench.decode.params import (
+    CREASE_APEX_MIN_PX,
     CREASE_APEX_PERIODS,
     CREASE_APEX_SHARE,
     CREASE_BIAS_RATIO,
@@ -1348,6 +1349,7 @@ def decode(
                 apex_px=max(1, int(round(CREASE_APEX_PERIODS * t_cam))),
                 apex_factor=CREASE_APEX_SHARE / CREASE_BIAS_RATIO,
                 lobe_share=CREASE_LOBE_SHARE,
+                min_px=CREASE_APEX_MIN_PX,
             )
             if apex is not bias:
                 raised = valid_out & (apex > bias)
