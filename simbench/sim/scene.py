@@ -943,7 +943,7 @@ def _loader_reads_as_is(path: str) -> bool:
             if not {"nx", "ny", "nz"} <= names:
                 return False
             # every face a triangle: the face list's counts, read after the vertices
-            return _ply_faces_are_triangles(path, text, f)
+            return _ply_faces_are_triangles(path, text)
     with open(path, encoding="utf-8", errors="replace") as f:
         has_normals = False
         for line in f:
@@ -956,14 +956,13 @@ def _loader_reads_as_is(path: str) -> bool:
         return has_normals
 
 
-def _ply_faces_are_triangles(path: str, header: str, f) -> bool:
+def _ply_faces_are_triangles(path: str, header: str) -> bool:
     """Whether every face of a PLY file has three corners (trimesh splits larger ones silently,
-    Mitsuba's loader refuses them): the file's face count against trimesh's triangles."""
-    import trimesh
-
+    Mitsuba's loader refuses them): the header's face count against the triangles
+    :func:`check_mesh_file` read (its memo: the file is not parsed again)."""
     declared = [int(line.split()[2]) for line in header.splitlines() if line.startswith("element face")]
-    mesh = trimesh.load(path, process=False, validate=False, force="mesh")
-    return bool(declared) and len(mesh.faces) == declared[0]
+    st = Path(path).stat()
+    return bool(declared) and check_mesh_file(path, st.st_mtime_ns, st.st_size)[1] == declared[0]
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
