@@ -5,6 +5,8 @@
 * :func:`plane_fit_error` - paper Table 1: mean absolute residual to a least-squares plane.
 * :func:`edge_band` - pixels near depth discontinuities, to exclude from edge-sensitive scores.
 * :func:`score` - the scores every experiment reports, one protocol for every depth system.
+* :func:`wrong_pixels` - decoded pixels far from every depth the truth takes there: one instant,
+  or a moving scene's instants over its capture.
 * :func:`code_stripes` - what a capture holds in the stripes of each code, and how often the
   paper's colour code (Eq. 13) reads them right: why a board can or cannot be decoded.
 """
@@ -32,6 +34,7 @@ __all__ = [
     "pixel_spread",
     "points_from_depth",
     "score",
+    "wrong_pixels",
     "code_stripes",
     "implausible_depth",
     "implausible_columns",
@@ -452,6 +455,35 @@ def score(
             }
         )
     return out
+
+
+def wrong_pixels(depth_m: np.ndarray, truth_depth_m: np.ndarray, *, wrong_m: float) -> np.ndarray:
+    """Per pixel: decoded (finite depth) and farther than ``wrong_m`` from every truth, a truth of
+    NaN (nothing seen) near nothing - a depth where the truth sees nothing is wrong.
+
+    Parameters
+    ----------
+    depth_m : ndarray, shape (H, W)
+        Decoded depth (m), NaN where not decoded.
+    truth_depth_m : ndarray, shape (H, W) or (K, H, W)
+        The truth, or K truths (a moving scene at K instants of its capture: a depth any of them
+        takes there is right, so a blurred pixel is judged by what it saw, not by one instant).
+    wrong_m : float
+        The distance (m) beyond which a depth is wrong.
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    d = np.asarray(depth_m, np.float64)
+    truths = np.asarray(truth_depth_m)
+    if truths.shape[-2:] != d.shape or truths.ndim not in (2, 3):
+        raise ValueError(f"truth of shape {truths.shape} for a depth map of shape {d.shape}")
+    near = np.zeros(d.shape, bool)
+    with np.errstate(invalid="ignore"):
+        for t in truths.reshape(-1, *d.shape):
+            near |= np.abs(d - np.asarray(t, np.float64)) <= wrong_m
+    return np.isfinite(d) & ~near
 
 
 def code_stripes(

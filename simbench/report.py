@@ -9,7 +9,6 @@ import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 
 from simbench.io import atomic_write_text
 
@@ -51,13 +50,15 @@ def write_table(path_csv: Path, rows: list[dict], columns: list[str]) -> Path:
     return atomic_write_text(path_csv, table_text(rows, columns))
 
 
-def panel_row(n_panels: int, width: float = 4.6) -> tuple:
+def panel_row(n_panels: int, width: float = 4.6, *, rows: int = 1) -> tuple:
     """(pyplot, figure, axes): one row of ``n_panels`` panels ``width`` inches wide, on the Agg
-    backend (no display needed)."""
+    backend (no display needed); ``rows`` > 1: that many such rows, axes of shape (rows, n_panels)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, n_panels, figsize=(width * n_panels, width * 0.82), constrained_layout=True)
-    return plt, fig, np.atleast_1d(axes)
+    fig, axes = plt.subplots(
+        rows, n_panels, figsize=(width * n_panels, width * 0.82 * rows), constrained_layout=True, squeeze=False
+    )
+    return plt, fig, axes[0] if rows == 1 else axes

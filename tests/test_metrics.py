@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from simbench.metrics import code_stripes, depth_errors, edge_band, plane_fit_error, points_from_depth
+from simbench.metrics import code_stripes, depth_errors, edge_band, plane_fit_error, points_from_depth, wrong_pixels
 from simbench.pattern import PatternSpec, fringe_pattern
 from simbench.rig import Intrinsics
 
@@ -265,3 +265,22 @@ def test_the_edge_mae_leaves_out_the_callers_exclusions_too():
     depth[exclude] += np.float32(1.0)  # a metre off, excluded
     out = score(depth, gt, camera=cam, exclude=exclude, edge_band_px=2)
     assert out["gt_mae_mm"] == pytest.approx(1.0, rel=1e-3) and out["edge2_mae_mm"] == pytest.approx(1.0, rel=1e-3)
+
+
+def test_a_depth_is_wrong_only_if_far_from_every_truth():
+    """wrong_pixels: decoded and more than wrong_m from each truth; a truth of NaN near nothing
+    (a depth where nothing is seen is wrong); a pixel not decoded never wrong; a stack of truths
+    (a moving scene's instants) admits a depth any of them takes there."""
+    depth = np.array([[1.000, 1.004, 1.006, np.nan], [1.300, 1.150, 1.0, 1.0]])
+    truth = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, 1.0, np.nan, 1.0]])
+    assert wrong_pixels(depth, truth, wrong_m=0.005).tolist() == [
+        [False, False, True, False],
+        [True, True, True, False],
+    ]
+    later = truth.copy()
+    later[1, :2] = 1.3  # the wall behind, seen at another instant of the capture
+    swept = wrong_pixels(depth, np.stack([truth, later]), wrong_m=0.005)
+    # the wall's depth is right where the wall was seen; halfway between the two is still wrong
+    assert swept.tolist() == [[False, False, True, False], [False, True, True, False]]
+    with pytest.raises(ValueError, match=r"truth of shape \(2, 3\)"):
+        wrong_pixels(depth, np.ones((2, 3)), wrong_m=0.005)

@@ -400,3 +400,43 @@ def test_the_motion_study_measures_a_capture_in_three_parts_the_slowest_ranked_f
     slowest = max(parts, key=motion_cost)
     assert slowest.endswith(f"/{MULTI_SHOT_MAX_SPEED_M_S:g}/phase_shift")
     assert motion_cost(f"bust/lateral/{fast:g}/phase_shift") == 0.0 < motion_cost(f"bust/lateral/{fast:g}/proposed")
+
+
+def test_the_truth_over_a_capture_holds_every_depth_a_pixel_saw(variant):
+    """capture_truths: a board sliding before a wall posed at instants <= SWEEP_STEP_PX of image
+    motion apart over the exposure, first and last at the window's ends; a pixel the board's edge
+    crosses sees the board at one end and the wall at the other (the mid-capture truth alone
+    calls the wall's depth there wrong: the motion study's blind spot); a static scene keeps its
+    one truth."""
+    from types import SimpleNamespace
+
+    from simbench.experiments.motion import SWEEP_STEP_PX, capture_truths
+    from simbench.metrics import wrong_pixels
+    from simbench.systems import SystemOptions, get_system
+
+    system = get_system("proposed", SystemOptions(camera_scale=0.25))
+    scene = system.prepare(_board_before_wall(velocity_m_s=[0.5, 0.0, 0.0]))
+    cam = scene.rig.camera
+    window = (0.0, 0.02)
+    travel = cam.focal_px * 0.5 * 0.02 / 1.0  # the board's edge, f v T / Z
+    mid = scene_at(scene, 0.01)
+    from simbench.sim.truth import ground_truth
+
+    gt_mid = ground_truth(mid)
+    rec = SimpleNamespace(scene=scene, gt=SimpleNamespace(motion_px=np.zeros(1), depth_m=gt_mid.depth_m))
+    truths = capture_truths(rec, window)
+    assert truths.shape == (math.ceil(image_motion_px(scene, cam, *window) / SWEEP_STEP_PX) + 1, *gt_mid.depth_m.shape)
+    assert np.array_equal(truths[0], ground_truth(scene_at(scene, 0.0)).depth_m)
+    assert np.array_equal(truths[-1], ground_truth(scene_at(scene, 0.02)).depth_m)
+    row = cam.height_px // 2
+    edge_start = cam.focal_px * -0.15 / 1.0 + cam.cx_px  # the board's left edge at t = 0 (it moves right)
+    u = int(edge_start + 0.25 * travel)  # covered at the start, the wall's at mid-capture
+    assert np.isclose(truths[0, row, u], 1.0) and np.isclose(gt_mid.depth_m[row, u], 1.3, atol=1e-3)
+    board_depth = np.full(gt_mid.depth_m.shape, np.nan, np.float32)
+    board_depth[row, u] = 1.0  # the board's depth, seen there for part of the exposure
+    assert not wrong_pixels(board_depth, truths, wrong_m=0.005)[row, u]
+    assert wrong_pixels(board_depth, gt_mid.depth_m, wrong_m=0.005)[row, u]
+    board_depth[row, u] = 1.15  # between the two: seen at no instant
+    assert wrong_pixels(board_depth, truths, wrong_m=0.005)[row, u]
+    still = SimpleNamespace(scene=scene, gt=SimpleNamespace(motion_px=None, depth_m=gt_mid.depth_m))
+    assert capture_truths(still, window).shape == (1, *gt_mid.depth_m.shape)

@@ -45,7 +45,7 @@ import numpy as np
 from simbench.decode import robust_params
 from simbench.decode.pipeline import apply_min_confidence
 from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, table_text
-from simbench.metrics import edge_band
+from simbench.metrics import edge_band, wrong_pixels
 
 if TYPE_CHECKING:
     from simbench.decode.pipeline import DecodeResult
@@ -130,10 +130,7 @@ def _wrong_share(rec, depth, region) -> float:
 def _wrong_everywhere(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> np.ndarray:
     """Per pixel: decoded and more than :data:`WRONG_MM` from the truth, or decoded where the
     truth sees nothing."""
-    gt = np.asarray(gt_depth_m, np.float64)
-    d = np.asarray(depth_m, np.float64)
-    with np.errstate(invalid="ignore"):
-        return np.isfinite(d) & ~(np.abs(d - gt) <= WRONG_MM / 1000.0)
+    return wrong_pixels(depth_m, gt_depth_m, wrong_m=WRONG_MM / 1000.0)
 
 
 def wrong_share_all(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> float:
