@@ -229,6 +229,13 @@ def test_threshold_rules():
     assert t["a/stripe_order_error_rate"]["max"] == pytest.approx(0.0005)
     assert "a/nan_mm" not in t
     assert "a/bias_mm" not in thresholds_from({"a/bias_mm": -0.4}, margin=0.5)  # signed: no max
+    # every wrong share is held: of a region, of every decoded pixel (issue 35's goal), of the image
+    shares = thresholds_from(
+        {"a/wrong_share": 0.01, "a/wrong_share_all": 0.002, "a/wrong_share_image": 0.0}, margin=0.5
+    )
+    assert [shares[f"a/{k}"]["max"] for k in ("wrong_share", "wrong_share_all", "wrong_share_image")] == pytest.approx(
+        [0.0155, 0.0035, 0.0005]
+    )
     # a row that decodes under 1 % of its region: no error threshold (its stripe-order errors hold it)
     sparse = {"b/mae_mm": 60.0, "b/completeness": 0.005, "b/stripe_order_errors": 900, "b/c/mae_mm": 1.0}
     t = thresholds_from({**sparse, "b/c/completeness": 0.01}, margin=0.5)
