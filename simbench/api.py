@@ -245,7 +245,9 @@ def record(
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
         meta = {**acq.meta, **_scene_record(scene, spec)}
-        for told in recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern)):
+        told_all = recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern))
+        told_all += motion_warnings(acq.scene, rec.gt, the_system)
+        for told in told_all:
             warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
         return Recorded(system, rec, calibration, settings, meta=meta, sensor=sensor_model)
     seeds = SeedLog(seed)
@@ -255,7 +257,7 @@ def record(
     rec = acquire(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
-    for told in recording_warnings(spec, rec.gt):
+    for told in [*recording_warnings(spec, rec.gt), *motion_warnings(rec.scene, rec.gt, the_system)]:
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     meta = {
         **_scene_record(scene, spec),
@@ -301,6 +303,92 @@ def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None
                 "full confidence - or not at all. Place the scene within the range, or decode with a range that holds "
                 "it (simbench decode --near/--far), no wider than one code cycle of disparity"
             )
+    return out
+
+
+# an object whose image travels more than this share of its own extent (along its motion) during
+# the capture is mostly smeared into what lies behind it: most of its pixels see it for part of the
+# capture only, and decode a blend of it and the background, or the background (an audit,
+# 2026-11-30: a sphere crossing the view at 40 m/s, invisible in the capture, decoded at the wall's
+# depth, 360 mm wrong, at confidence 7-8, without a word)
+SMEAR_EXTENT_SHARE = 0.5
+# a system that combines several exposures (SystemInfo.captures > 1: phase shifting's 12) assumes
+# the scene still across them: warned where a surface moves more than this during the sequence
+# (the motion study, results/motion.md: 4-step phase shifting's MAE doubles between 3 and 10 mm/s,
+# 1-3 mm over its 0.32 s sequence)
+STILL_TRAVEL_MM = 1.0
+
+
+def motion_warnings(scene: SceneSpec, gt, system) -> list[str]:
+    """What a moving scene's recording cannot be trusted for, from its time model and the truth at
+    mid-capture (``scene``: the system's prepared scene; ``gt``: its
+    :class:`simbench.sim.truth.GroundTruth` with ``motion_px``): an object smeared over more than
+    :data:`SMEAR_EXTENT_SHARE` of its own image extent; a multi-exposure system's scene moving more
+    than :data:`STILL_TRAVEL_MM` during its sequence; a blur the time slices sample more coarsely
+    than :data:`simbench.sim.motion.MAX_SLICE_MOTION_PX` (their count is capped at
+    :data:`simbench.sim.motion.MAX_SLICES`).  Nothing for a static scene."""
+    from simbench.rig import pixel_rays
+    from simbench.sim.motion import MAX_SLICE_MOTION_PX, MAX_SLICES
+    from simbench.sim.timeline import image_motion_px, is_moving, slice_count
+
+    if gt.motion_px is None or not is_moving(scene):
+        return []
+    t0, t1 = system.capture_window_s(scene)
+    duration = t1 - t0
+    out = []
+    motion = np.asarray(gt.motion_px, np.float64)
+    object_id = np.asarray(gt.object_id)
+    rows, cols = np.indices(object_id.shape)
+    rays = None
+    for k, obj in enumerate(scene.objects):
+        sel = object_id == k
+        if obj.motion is None or obj.motion.is_static or not sel.any():
+            continue
+        travel = np.hypot(motion[sel, 0], motion[sel, 1])
+        worst = int(np.argmax(travel))
+        if travel[worst] > 0:
+            direction = motion[sel][worst] / travel[worst]
+            along = cols[sel] * direction[0] + rows[sel] * direction[1]
+            extent = float(along.max() - along.min() + 1.0)
+            if travel[worst] > SMEAR_EXTENT_SHARE * extent:
+                out.append(
+                    f"object {obj.name!r} moves {travel[worst]:.0f} px across the image during the "
+                    f"{duration * 1e3:.3g} ms capture, more than {SMEAR_EXTENT_SHARE:g} of its own {extent:.0f} px "
+                    "extent: most of its pixels see it for part of the capture only, and their depth is a blend of it "
+                    "and what lies behind it, or the background's - at full confidence (docs/motion.md)"
+                )
+        if system.info().captures > 1:
+            if rays is None:
+                rays = pixel_rays(scene.rig.camera)
+            m = obj.motion
+            points = rays[sel] * np.asarray(gt.depth_m, np.float64)[sel, None]
+            centre = np.asarray(m.centre_m if m.centre_m is not None else points.mean(axis=0))
+            reach = float(np.linalg.norm(points - centre, axis=1).max())
+            moved_mm = (
+                1e3
+                * duration
+                * (float(np.linalg.norm(m.velocity_m_s)) + np.radians(abs(m.angular_velocity_deg_s)) * reach)
+            )
+            if moved_mm > STILL_TRAVEL_MM:
+                out.append(
+                    f"object {obj.name!r} moves up to {moved_mm:.3g} mm during the {duration:.3g} s sequence of "
+                    f"{system.info().captures} exposures, which the {system.name} decode assumes still: beyond "
+                    f"~{STILL_TRAVEL_MM:g} mm its error grows many-fold (results/motion.md: 4-step phase shifting's "
+                    "MAE doubles between 3 and 10 mm/s)"
+                )
+    # each exposure's blur is rendered over its own window (phase shifting's frames, the ToF's
+    # samples; one window for the others, the Kinect's whole rolling readout)
+    frames = getattr(system, "frame_windows_s", None)
+    for w0, w1 in frames(scene) if frames is not None else [(t0, t1)]:
+        travel_all = image_motion_px(scene, scene.rig.camera, w0, w1)
+        n = slice_count(scene, scene.rig.camera, (w0, w1))
+        if travel_all / n > MAX_SLICE_MOTION_PX * 1.001:
+            out.append(
+                f"the blur is sampled in {n} time slices (at most {MAX_SLICES}) over {travel_all:.0f} px of image "
+                f"motion in an exposure: {travel_all / n:.2f} px a slice, more than {MAX_SLICE_MOTION_PX:g} - a "
+                "strobed sequence of images, not a smooth blur; lower the speed or the exposure"
+            )
+            break
     return out
 
 

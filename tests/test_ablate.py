@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 
 import pytest
@@ -427,8 +428,11 @@ def test_speed_is_an_axis():
     assert axial.objects[0].motion.velocity_m_s == (0.0, 0.0, -0.5) and axial.objects[1].motion is None
     lateral = scene_for({"scene.name": "motion_board", "scene.speed_m_s": 0.2})
     assert lateral.objects[0].motion.velocity_m_s == (0.2, 0.0, 0.0)
+    away = scene_for({"scene.name": "motion_board", "scene.speed_m_s": -0.3, "scene.motion": "axial"})
+    assert away.objects[0].motion.velocity_m_s == (-0.0, -0.0, 0.3)  # a negative speed: the other way
     for bad, match in (
-        ({"scene.speed_m_s": -1.0}, "scene.speed_m_s must be a finite number in"),
+        ({"scene.speed_m_s": -60.0}, "scene.speed_m_s must be a finite number in"),
+        ({"scene.speed_m_s": math.nan}, "scene.speed_m_s must be a finite number in"),
         ({"scene.speed_m_s": 0.1, "scene.motion": "up"}, "scene.motion must be one of"),
         ({"scene.motion": "sideways"}, "scene.motion must be one of"),
     ):
@@ -436,6 +440,39 @@ def test_speed_is_an_axis():
             scene_for({"scene.name": "motion_board", **bad})
     sweep = sweep_from_dict({"name": "speed", "axis": [{"name": "scene.speed_m_s", "values": [0.0, 0.3]}]})
     assert [r["params"]["scene.speed_m_s"] for r in expand(sweep)] == [0.0, 0.3]
+
+
+def test_a_speed_sets_the_velocity_of_a_scene_files_own_motion(tmp_path):
+    """A scene file whose object moves and turns: speed 0 stops its translation (a sweep's still
+    row is still - an audit found it moving with the file's velocity) and keeps its rotation;
+    another speed replaces the velocity and keeps the rotation too."""
+    from simbench.experiments.ablate.mapping import scene_for
+
+    path = tmp_path / "turning.toml"
+    path.write_text(
+        """name = "turning"
+[[object]]
+type = "box"
+name = "box"
+center_m = [0.0, 0.0, 1.0]
+size_m = [0.1, 0.1, 0.1]
+velocity_m_s = [0.5, 0.0, 0.0]
+angular_velocity_deg_s = 200.0
+
+[[object]]
+type = "plane"
+name = "wall"
+center_m = [0.0, 0.0, 1.3]
+size_m = [2.0, 2.0]
+"""
+    )
+    file_motion = scene_for({"scene.name": str(path)}).objects[0].motion
+    assert file_motion.velocity_m_s == (0.5, 0.0, 0.0) and file_motion.angular_velocity_deg_s == 200.0
+    still = scene_for({"scene.name": str(path), "scene.speed_m_s": 0.0}).objects[0].motion
+    assert still.velocity_m_s == (0.0, 0.0, 0.0) and still.angular_velocity_deg_s == 200.0
+    fast = scene_for({"scene.name": str(path), "scene.speed_m_s": 0.2, "scene.motion": "axial"}).objects[0].motion
+    assert fast.velocity_m_s == (0.0, 0.0, -0.2) and fast.angular_velocity_deg_s == 200.0
+    assert fast.axis == file_motion.axis
 
 
 def test_the_documented_sweep_file_loads_as_written(tmp_path):

@@ -440,3 +440,50 @@ def test_the_truth_over_a_capture_holds_every_depth_a_pixel_saw(variant):
     assert wrong_pixels(board_depth, truths, wrong_m=0.005)[row, u]
     still = SimpleNamespace(scene=scene, gt=SimpleNamespace(motion_px=None, depth_m=gt_mid.depth_m))
     assert capture_truths(still, window).shape == (1, *gt_mid.depth_m.shape)
+
+
+@pytest.mark.parametrize(
+    ("system_name", "speed_m_s", "expected"),
+    [
+        ("proposed", 0.5, []),  # 4 px in the 27 ms exposure: a blur the decoders hold
+        ("proposed", 40.0, ["more than 0.5 of its own", "strobed"]),  # the audit's invisible sphere
+        ("phase_shift", 0.5, ["more than 0.5 of its own", "which the phase_shift decode assumes still"]),
+        ("phase_shift", 0.002, []),  # 0.65 mm over the 0.32 s sequence
+    ],
+)
+def test_a_recording_says_when_motion_makes_its_depth_untrustworthy(variant, system_name, speed_m_s, expected):
+    """motion_warnings: an object smeared over more than half its own image extent, a
+    multi-exposure decode whose scene moves more than STILL_TRAVEL_MM, a blur sampled more
+    coarsely than MAX_SLICE_MOTION_PX a slice (the slice cap) - each warned, each from the time
+    model and the truth at mid-capture; a blur the systems hold, nothing."""
+    from simbench.api import motion_warnings
+    from simbench.sim.timeline import motion_field_px
+    from simbench.sim.truth import ground_truth
+    from simbench.systems import SystemOptions, get_system
+
+    system = get_system(system_name, SystemOptions(camera_scale=0.25))
+    window = system.capture_window_s(system.prepare(_board_before_wall()))
+    # the board centred in the view at mid-capture
+    start_x = -0.5 * speed_m_s * (window[0] + window[1])
+    scene = system.prepare(
+        scene_from_dict(
+            {
+                "name": "board_before_wall",
+                "object": [
+                    {"type": "plane", "name": "wall", "center_m": [0, 0, 1.3], "size_m": [2, 2]},
+                    {
+                        "type": "plane",
+                        "name": "board",
+                        "center_m": [start_x, 0.0, 1.0],
+                        "size_m": [0.2, 0.3],
+                        "velocity_m_s": [speed_m_s, 0.0, 0.0],
+                    },
+                ],
+            }
+        )
+    )
+    gt = ground_truth(scene_at(scene, 0.5 * (window[0] + window[1])))
+    motion = motion_field_px(gt.depth_m, gt.object_id, scene, scene.rig.camera, window)
+    told = motion_warnings(scene, dataclasses.replace(gt, motion_px=motion), system)
+    assert len(told) == len(expected) and all(e in t for e, t in zip(expected, told)), told
+    assert all("'board'" in t for t in told if "object" in t)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +41,9 @@ from simbench.report import figure_png
 from simbench.sim.motion import Motion
 from simbench.sim.timeline import image_motion_px, scene_at
 from simbench.sim.truth import ground_truth
+
+if TYPE_CHECKING:
+    from simbench.systems import Recording
 
 __all__ = [
     "SPEEDS_M_S",
@@ -237,7 +241,7 @@ def _region(rec, moving_id: int, band_px: int) -> np.ndarray:
     return region
 
 
-def capture_truths(rec, window_s: tuple[float, float]) -> np.ndarray:
+def capture_truths(rec: "Recording", window_s: tuple[float, float]) -> np.ndarray:
     """The truth's depth (m) at instants over ``rec``'s capture (``window_s``: its system's
     ``capture_window_s``), shape (K, H, W), float32: the
     moving scene posed at K evenly spaced instants from the capture's start to its end, K such that

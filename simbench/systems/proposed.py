@@ -290,14 +290,16 @@ class ColourFringeSystem:
     def capture_window_s(self, scene: SceneSpec) -> tuple[float, float]:
         """The time model: the capture is one exposure of the camera, from 0 to its exposure
         time (:func:`simbench.sim.photometry.exposure_s`: the auto exposure on the white board,
-        ~10 ms for the paper's set-up).  The Flea3 FL3-U3-13E4C has a global shutter (Sony ICX445
+        ~27 ms with the paper sensor model).  The Flea3 FL3-U3-13E4C has a global shutter (Sony ICX445
         CCD: every pixel integrates over the same window; Point Grey Flea3 USB 3.0 Technical
         Reference), so there is no rolling-shutter skew."""
         from simbench.sim.photometry import exposure_s, white_board
 
         if not self.sensor.is_physical:
             raise ValueError(
-                "a moving scene needs the physical (emva) camera's exposure time; the simple camera has none"
+                f"a moving scene needs a physical (emva) camera's exposure time; the sensor model {self.sensor.name!r} "
+                "has a simple camera, without one: record it with --sensor paper (or ideal, or a sensor TOML whose "
+                '[camera] model = "emva")'
             )
         return (0.0, float(exposure_s(self.sensor, scene.rig, **white_board(scene))))
 

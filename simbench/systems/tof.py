@@ -450,6 +450,10 @@ class ToFSystem:
         windows = tap_windows_s(self.model)
         return (windows[0][0], windows[-1][1])
 
+    def frame_windows_s(self, scene: SceneSpec) -> list[tuple[float, float]]:
+        """Each correlation sample's window (:func:`tap_windows_s`), rendered as its own blur."""
+        return [tuple(w) for w in tap_windows_s(self.model)]
+
     def decode(self, raw: np.ndarray, calibration=None, *, scene: SceneSpec | None = None):
         from simbench.systems import SystemDepth
 

@@ -108,14 +108,18 @@ def scene_for(params: dict) -> SceneSpec:
             rx, _, rz = q.get("rotation_deg", (0.0, 0.0, 0.0))
             q["rotation_deg"] = (rx, float(params["scene.tilt_deg"]), rz)
             objs[0] = dataclasses.replace(objs[0], params=tuple(sorted(q.items())))
-    if params.get("scene.speed_m_s"):
+    if "scene.speed_m_s" in params:
+        # the first object's velocity, speed 0 included (until 2026-11-30 a speed of 0 kept the scene
+        # file's own motion, so a sweep's "still" row moved, and any other speed dropped the file's
+        # rotation): its rotation, if the file gives one, is kept
         from simbench.experiments.motion import DIRECTIONS
         from simbench.sim.motion import MAX_SPEED_M_S, Motion
 
-        speed = validate.number(params["scene.speed_m_s"], "scene.speed_m_s", lo=0.0, hi=MAX_SPEED_M_S)
+        speed = validate.number(params["scene.speed_m_s"], "scene.speed_m_s", lo=-MAX_SPEED_M_S, hi=MAX_SPEED_M_S)
         direction = validate.choice(params.get("scene.motion", "lateral"), "scene.motion", DIRECTIONS)
         velocity = tuple(speed * u for u in DIRECTIONS[direction])
-        objs[0] = dataclasses.replace(objs[0], motion=Motion(velocity_m_s=velocity))
+        motion = dataclasses.replace(objs[0].motion or Motion(), velocity_m_s=velocity)
+        objs[0] = dataclasses.replace(objs[0], motion=None if motion.is_static else motion)
     elif "scene.motion" in params:
         validate.choice(params["scene.motion"], "scene.motion", ("lateral", "axial"))
     scene = dataclasses.replace(scene, objects=tuple(objs))
