@@ -498,6 +498,7 @@ def acquire_with_calibration(
     from simbench.seeds import SeedLog
     from simbench.sim.photometry import REFERENCE_ALBEDO, white_board
     from simbench.sim.keys import versions
+    from simbench.sim.timeline import is_moving, slice_count
     from simbench.systems import acquire as acquire_recording
 
     rig = realised_rig(scene.rig)
@@ -537,6 +538,10 @@ def acquire_with_calibration(
         "variant": mi.variant(),
         "versions": versions(),
     }
+    if is_moving(scene):  # how the blur was integrated (docs/motion.md): the window and its slice count
+        window = system.capture_window_s(scene)
+        meta["capture_window_s"] = [float(window[0]), float(window[1])]
+        meta["time_slices"] = slice_count(scene, scene.rig.camera, window)
     reference = calibration.image if calibration is not None else np.zeros_like(rec.raw)
     acq = Acquisition(
         scene=scene,
