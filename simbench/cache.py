@@ -171,9 +171,17 @@ def check_cache_folder(root: str | Path) -> Path:
         return root
     if others:
         shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+        # a marker damaged (emptied, overwritten) in a folder of cache entries locked the whole cache
+        # out with advice that threw it away (an audit, 2026-11-30): say how to keep it
+        damaged_marker = (
+            f" - if this is a simbench cache whose {MARKER_NAME} was damaged, delete that file and it is "
+            "marked again on the next run"
+            if others == [MARKER_NAME]
+            else ""
+        )
         raise NotACacheError(
             f"{root}: not a simbench render cache (no {MARKER_NAME} of simbench's) and it holds other files "
-            f"({shown}); give an empty or new folder as the cache"
+            f"({shown}); give an empty or new folder as the cache{damaged_marker}"
         )
     return root
 
@@ -502,9 +510,10 @@ class RenderCache:
         sources = sorted(sources)
         if sources:
             arrays = {**arrays, _SOURCES_KEY: np.frombuffer("\n".join(sources).encode("ascii"), np.uint8)}
+        path = self.root / f"{self.key(kind, parts)}.npz"
+        arrays = {**arrays, _NAME_KEY: np.frombuffer(path.stem.encode("ascii"), np.uint8)}
         buf = io.BytesIO()
         np.savez(buf, **arrays, **{_DIGEST_KEY: np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8)})
-        path = self.root / f"{self.key(kind, parts)}.npz"
         try:
             atomic_write_bytes(path, buf.getvalue())
             self._note_source(path.stem, sources)
@@ -526,6 +535,11 @@ class RenderCache:
 
 _DIGEST_KEY = "__sha256__"
 _SOURCES_KEY = "__sources__"  # the keys of the entries an entry was made from, newline-separated ASCII
+# the entry's own key, under the checksum: a file renamed or copied under another entry's name (by
+# hand, or a sync tool) is damaged, not another key's arrays - an audit (2026-11-30) swapped two
+# recordings' file names and `render` sealed the other capture, exit 0.  Entries written before
+# it have none and are read as before.
+_NAME_KEY = "__key__"
 
 
 def _pop_sources(arrays: dict[str, np.ndarray]) -> list[str]:
@@ -635,6 +649,9 @@ def _read_entry(path: Path) -> dict[str, np.ndarray] | None:
         return None
     stored = out.pop(_DIGEST_KEY, None)
     if stored is None or stored.dtype != np.uint8 or stored.tobytes().hex() != _arrays_digest(out):
+        return None
+    name = out.pop(_NAME_KEY, None)
+    if name is not None and name.tobytes() != path.stem.encode("ascii"):
         return None
     return out
 

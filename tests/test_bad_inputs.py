@@ -878,6 +878,13 @@ case(
     ("is a file, so", "; pass --no-cache to store nothing, or --cache DIR for another folder"),
     files=_w("f", "x"),
 )
+# a third audit (2026-11-30): calibrate did not check its cache first - "[Errno 20] Not a directory"
+case(
+    "calibrate-cache-under-a-file",
+    lambda d: ["calibrate", "--poses", "3", "--out", str(d / "cal"), "--cache", str(d / "f" / "c")],
+    ("is a file, so", "; pass --no-cache to store nothing, or --cache DIR for another folder"),
+    files=_w("f", "x"),
+)
 case(
     "render-cache-inside-out",
     lambda d: ["render", str(SCENES / "white_plane.toml"), "--out", str(d / "x"), "--cache", str(d / "x" / "c")],

@@ -41,6 +41,28 @@ def test_damaged_entry_is_remade(tmp_path):
     assert np.array_equal(out["a"], np.zeros(3)) and cache.misses == 2
 
 
+def test_an_entry_under_another_entrys_name_is_damaged_not_served(tmp_path):
+    """Two entries' files swapped (by hand, a sync tool): each checksum still matches its arrays,
+    but the key stored under it does not match the file's name - both re-made, never served as
+    the other key's (an audit, 2026-11-30: two recordings swapped, `render` sealed the other
+    capture, exit 0).  An entry written before the key was stored (none) is read as before."""
+    cache = RenderCache(tmp_path)
+    cache.get_or_make("recording", {"x": 1}, lambda: {"a": np.ones(3)})
+    cache.get_or_make("recording", {"x": 2}, lambda: {"a": np.full(3, 2.0)})
+    one, two = (tmp_path / f"{cache.key('recording', {'x': x})}.npz" for x in (1, 2))
+    swap = tmp_path / "swap"
+    one.rename(swap), two.rename(one), swap.rename(two)
+    fresh = RenderCache(tmp_path)
+    out = fresh.get_or_make("recording", {"x": 1}, lambda: {"a": np.zeros(3)})
+    assert np.array_equal(out["a"], np.zeros(3)) and (fresh.hits, fresh.damaged) == (0, 1)
+    with np.load(two) as z:  # an older entry: no key inside, its checksum re-made over the rest
+        arrays = {k: z[k] for k in z.files if k not in ("__key__", "__sha256__")}
+    from simbench.cache import _arrays_digest
+
+    np.savez(two, **arrays, __sha256__=np.frombuffer(bytes.fromhex(_arrays_digest(arrays)), np.uint8))
+    assert np.array_equal(RenderCache(tmp_path).lookup("recording", {"x": 2})["a"], np.ones(3))
+
+
 @pytest.mark.parametrize(
     "damage", ["truncate", "flip_zip_byte", "flip_array_byte", "empty", "no_checksum", "wrong_checksum"]
 )
@@ -901,6 +923,12 @@ def test_the_cache_marker(tmp_path):
     (legacy / MARKER_NAME).write_text("Signature: 8a477f597d28d172789f06886806bc55\n# cargo\n")
     with pytest.raises(NotACacheError, match="other files.*CACHEDIR.TAG"):
         RenderCache(legacy)
+    # our own marker damaged (emptied): the error says how to keep the cache, and that works
+    (legacy / MARKER_NAME).write_text("")
+    with pytest.raises(NotACacheError, match="was damaged, delete that file"):
+        RenderCache(legacy)
+    (legacy / MARKER_NAME).unlink()
+    assert RenderCache(legacy).lookup("truth", {"i": 2})["d"][0] == 0
 
 
 def test_a_folder_another_process_marks_while_it_is_checked_is_a_cache(tmp_path, monkeypatch):

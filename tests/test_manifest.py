@@ -578,3 +578,25 @@ def test_calibration_frames_of_another_rig_are_refused(tmp_path, capsys):
     assert rc == 2 and "calibration frame" in err and "another rig than the reference" in err, err
     rc, _, err = _run(argv, capsys)  # its own frames: past this check (what the frames hold is the decoder's affair)
     assert "another rig" not in err, err
+
+
+def test_a_rig_whose_reference_plane_lands_off_its_z0_warns_in_the_words_of_the_mode(tmp_path, capsys, caplog):
+    """A reference plane that triangulates with the rig 0.5-3 % off its Z0 warns; which depths
+    carry the error depends on what is off - a third audit (2026-11-30) got "reference-mode depths
+    carry that error" in calibrated mode, where a baseline 2.7 % long gave 26.6 mm MAE and reference
+    mode 2.4 mm: each mode now names its own case."""
+    from .test_bad_inputs import _rig_text
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    _tiny_plane_png(tmp_path / "cap.png", TINY_RIG, 1.1)
+    _tiny_plane_png(tmp_path / "ref.png", TINY_RIG, 1.0)
+    (tmp_path / "long.toml").write_text(_rig_text(**{"pose.position_m": "[0.0949, 0, 0]"}))  # +2 % baseline
+    for mode, carried in (
+        ("calibrated", "calibrated-mode depths carry that error"),
+        ("reference", "reference-mode depths carry that error"),
+    ):
+        caplog.clear()
+        argv = ["decode", tmp_path / "cap.png", "--reference", tmp_path / "ref.png", "--mode", mode, "--z0", "1.0"]
+        rc, _, err = _run([*argv, "--out", tmp_path / "d.npy", "--no-cache", "--rig", tmp_path / "long.toml"], capsys)
+        assert rc == 0 and "triangulates with the rig" in caplog.text and carried in caplog.text, (caplog.text, err)
+        assert ("far less" in caplog.text) == (mode == "reference")

@@ -41,6 +41,10 @@ def _cmd_calibrate(args) -> int:
     # audit, 2026-11-30: calibrate replaced its own folder without a word)
     replaced = (Path(args.out) / "calibration.json").is_file()
     check_calibration(rig, target=target, sensor=sensor)
+    if not args.no_cache:  # as render and decode check it (an audit: calibrate failed mid-run on a raw errno)
+        from simbench.cache import CACHE_HINT, check_cache_location
+
+        check_cache_location(args.cache, what="--cache", hint=CACHE_HINT)
     variant = select_variant(args.variant)
     advice = (
         f"(OpenCV asks for >= {DEFAULT_POSES}): its lens distortion and principal points are poorly determined "

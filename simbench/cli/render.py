@@ -116,7 +116,10 @@ def _cmd_render(args) -> int:
     )
     # entries read and made, not "n of m": a warm run looks up fewer entries than a cold one made
     # (a cached result spares the lookups of what it was made from)
-    cached = f", render cache: {cache.hits} entries read, {cache.misses} made" if cache.root is not None else ""
+    damaged = f" ({cache.damaged} of them damaged entries, re-made)" if cache.damaged else ""
+    cached = (
+        f", render cache: {cache.hits} entries read, {cache.misses} made{damaged}" if cache.root is not None else ""
+    )
     print(
         f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
