@@ -454,18 +454,9 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
     lines += markdown_table(hdr, body)
     lines += ["", "MAE (mm) / completeness by speed:", ""]
     hdr = ["scene", "motion", "speed (m/s)", *[_label(s, d) for s, d in ROWS]]
-    body = []
-    for scene_name in scenes:
-        for direction in DIRECTIONS:
-            for speed in speeds:
-                cells = []
-                for s, d in ROWS:
-                    row = _find(rows, scene_name, direction, speed, s, d)
-                    cells.append(
-                        "not run" if row["note"] else f"{row['gt_mae_mm']:.3f} / {100 * row['completeness']:.1f} %"
-                    )
-                body.append([scene_name, direction, f"{speed:g}", *cells])
-    lines += markdown_table(hdr, body)
+    lines += markdown_table(
+        hdr, _by_speed(rows, scenes, speeds, lambda r: f"{r['gt_mae_mm']:.3f} / {100 * r['completeness']:.1f} %")
+    )
     lines += [
         "",
         "Wrong depth (> 5 mm), % of the decoded pixels: of the object's (the region above) / of the whole image's "
@@ -476,6 +467,16 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
         "motion, a long sequence): any depth in it is right there; the object's MAE is not.",
         "",
     ]
+    lines += markdown_table(
+        hdr,
+        _by_speed(rows, scenes, speeds, lambda r: f"{_percent(r['wrong_share'])} / {_percent(r['wrong_share_image'])}"),
+    )
+    return "\n".join(lines) + "\n"
+
+
+def _by_speed(rows: list[dict], scenes, speeds, cell) -> list[list[str]]:
+    """A table body: a row per scene, direction and speed, a column per system of :data:`ROWS`,
+    each cell ``cell(row)`` ("not run" where the system did not run)."""
     body = []
     for scene_name in scenes:
         for direction in DIRECTIONS:
@@ -483,14 +484,9 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
                 cells = []
                 for s, d in ROWS:
                     row = _find(rows, scene_name, direction, speed, s, d)
-                    cells.append(
-                        "not run"
-                        if row["note"]
-                        else f"{_percent(row['wrong_share'])} / {_percent(row['wrong_share_image'])}"
-                    )
+                    cells.append("not run" if row["note"] else cell(row))
                 body.append([scene_name, direction, f"{speed:g}", *cells])
-    lines += markdown_table(hdr, body)
-    return "\n".join(lines) + "\n"
+    return body
 
 
 def _find(rows: list[dict], scene_name: str, direction: str, speed: float, system: str, decoder: str) -> dict:
