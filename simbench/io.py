@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import errno
+import hashlib
 import json
 import functools
 import os
@@ -27,6 +28,7 @@ __all__ = [
     "check_not_protected",
     "check_own_folder",
     "check_output_directory",
+    "file_sha256",
     "atomic_write_bytes",
     "atomic_write_text",
     "json_bytes",
@@ -165,6 +167,15 @@ def _exchange(a: Path, b: Path) -> bool:
     return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
 
 
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
 def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: bool) -> None:
     """May ``folder`` be replaced by a new output?  Yes if empty; if it is an output of the
     same kind (a ``manifest`` - or one of several names - lists every file in it); or, with
@@ -175,13 +186,18 @@ def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: b
     if not entries:
         return
     listed: set[str] | None = None
+    digests: dict = {}
     for name in names:
         m = folder / name
         if not m.is_file():
             continue
         try:
-            files = json.loads(m.read_text(encoding="utf-8")).get("files", {})
+            data = json.loads(m.read_text(encoding="utf-8"))
+            files = data.get("files", {})
             listed = {str(v) for v in (files.values() if isinstance(files, dict) else files)} | {name}
+            sha = data.get("sha256")
+            if isinstance(files, dict) and isinstance(sha, dict):
+                digests = {str(files[k]): sha[k] for k in files if k in sha}
             break
         except (ValueError, AttributeError, UnicodeDecodeError):
             continue
@@ -191,6 +207,15 @@ def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: b
             f"never replaces such a folder, --overwrite or not: choose another output folder"
         )
     extra = [e for e in entries if e not in listed]
+    if digests and not overwrite:
+        # a listed file changed since the command wrote it (a rig.toml edited by hand: an audit,
+        # 2026-11-30, saw calibrate replace it without --overwrite) is the user's work now
+        changed = [n for n, d in sorted(digests.items()) if (folder / n).is_file() and file_sha256(folder / n) != d]
+        if changed:
+            raise ValueError(
+                f"{folder}: {', '.join(changed)} changed since this command wrote it (edited by hand?); pass "
+                "--overwrite to replace the folder whole, or choose another output folder"
+            )
     if extra and not overwrite:
         shown = ", ".join(extra[:4]) + (", ..." if len(extra) > 4 else "")
         raise ValueError(

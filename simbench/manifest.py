@@ -23,7 +23,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from simbench.io import json_bytes
+from simbench.io import file_sha256, json_bytes
 
 __all__ = [
     "MANIFEST_FORMAT",
@@ -42,15 +42,6 @@ _SELF_KEY = "manifest_sha256"
 
 class ManifestError(ValueError):
     """A recording folder's manifest or files are not what was recorded."""
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 of a file's bytes, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _content_sha256(data: dict) -> str:

@@ -225,3 +225,28 @@ def test_an_interrupt_between_a_sets_renames_takes_effect_after_the_last(tmp_pat
         io.write_files({tmp_path / "a.csv": b"new a", tmp_path / "b.json": b"new b"})
     assert (tmp_path / "a.csv").read_bytes() == b"new a" and (tmp_path / "b.json").read_bytes() == b"new b"
     assert len(done) == 2 and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_an_output_whose_listed_file_was_edited_needs_overwrite(tmp_path):
+    """A folder the command wrote, whose manifest lists its files with their SHA-256 (a sealed
+    recording, a calibration): replaced by a rerun while every file is as written; once a file
+    was changed (a rig.toml edited by hand - an audit, 2026-11-30, saw calibrate replace it without
+    a word) only with --overwrite.  A manifest without digests is replaced as before."""
+    import hashlib
+    import json
+
+    from simbench.io import check_output_directory
+
+    out = tmp_path / "cal"
+    out.mkdir()
+    (out / "rig.toml").write_text("focal_px = 2000.0\n")
+    digest = hashlib.sha256(b"focal_px = 2000.0\n").hexdigest()
+    manifest = {"files": {"rig": "rig.toml"}, "sha256": {"rig": digest}}
+    (out / "calibration.json").write_text(json.dumps(manifest))
+    check_output_directory(out, manifest="calibration.json")
+    (out / "rig.toml").write_text("focal_px = 2010.0\n")
+    with pytest.raises(ValueError, match=r"rig.toml changed since this command wrote it.*--overwrite"):
+        check_output_directory(out, manifest="calibration.json")
+    check_output_directory(out, manifest="calibration.json", overwrite=True)
+    (out / "calibration.json").write_text(json.dumps({"files": {"rig": "rig.toml"}}))
+    check_output_directory(out, manifest="calibration.json")

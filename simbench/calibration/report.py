@@ -6,6 +6,7 @@ and the residuals).
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 
@@ -217,8 +218,11 @@ def write_calibration(
         "rig": rig_toml(result.rig).encode(),
         "report": calibration_markdown(result, target=target, truth=truth, settings=settings, command=command).encode(),
         "figure": calibration_figure(result, target=target, truth=truth),
-        "manifest": json_bytes(manifest),
     }
+    # each file's SHA-256: a rerun into the folder replaces it only while no file was changed since
+    # (an edited rig.toml is the user's: --overwrite to replace it)
+    manifest["sha256"] = {k: hashlib.sha256(data).hexdigest() for k, data in contents.items()}
+    contents["manifest"] = json_bytes(manifest)
     out = Path(out_dir)
     with output_directory(out, manifest=files["manifest"], overwrite=overwrite) as tmp:
         write_files({tmp / files[k]: data for k, data in contents.items()})
