@@ -329,6 +329,7 @@ def motion_warnings(scene: SceneSpec, gt, system) -> list[str]:
     :data:`simbench.sim.motion.MAX_SLICES`).  Nothing for a static scene."""
     from simbench.rig import pixel_rays
     from simbench.sim.motion import MAX_SLICE_MOTION_PX, MAX_SLICES
+    from simbench.sim.scene import OBJECT_KIND_TABLE
     from simbench.sim.timeline import image_motion_px, is_moving, slice_count
 
     if gt.motion_px is None or not is_moving(scene):
@@ -362,7 +363,9 @@ def motion_warnings(scene: SceneSpec, gt, system) -> list[str]:
                 rays = pixel_rays(scene.rig.camera)
             m = obj.motion
             points = rays[sel] * np.asarray(gt.depth_m, np.float64)[sel, None]
-            centre = np.asarray(m.centre_m if m.centre_m is not None else points.mean(axis=0))
+            # the rotation's centre as the motion turns about it: its own, or the object's position
+            position = dict(obj.params)[OBJECT_KIND_TABLE[obj.kind].position_key]
+            centre = np.asarray(m.centre_m if m.centre_m is not None else position, np.float64)
             reach = float(np.linalg.norm(points - centre, axis=1).max())
             moved_mm = (
                 1e3
