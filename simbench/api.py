@@ -189,10 +189,6 @@ def record(
     }
     sensor_model = sensor if isinstance(sensor, SensorModel) else get_sensor("paper" if sensor is None else sensor)
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene_file(scene))
-    from simbench.sim.timeline import placement_warnings
-
-    for told in placement_warnings(spec):
-        warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     if pattern is None and system == "proposed":
         # the paper's pattern at the scene's projector, as `simbench render` makes it (a scene
         # with a projector of its own size was refused: "pattern size (1140, 1824) differs")
@@ -213,6 +209,12 @@ def record(
         )
     if info.uses_scene_rig:  # (the competitors replace the scene's rig with their own)
         check_rig_lens(spec.rig, sensor_model, where=f"scene {scene if isinstance(scene, (str, Path)) else spec.name}")
+    from simbench.sim.timeline import is_moving, placement_warnings
+
+    # a moving object is followed over the system's capture (it may come into view during it)
+    window = the_system.capture_window_s(spec) if is_moving(spec) else (0.0, 0.0)
+    for told in placement_warnings(spec, window_s=window):
+        warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     used_variant = _ensure_variant(variant)
     store = cache if isinstance(cache, RenderCache) else RenderCache(None if cache is None else str(cache))
     settings = {

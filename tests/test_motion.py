@@ -95,6 +95,106 @@ def test_image_motion_is_the_pinholes_closed_form():
     assert np.allclose(slice_times((0.0, 1.0), 4), [0.125, 0.375, 0.625, 0.875])
 
 
+def test_a_segments_length_in_view_is_the_brute_force_count():
+    """:func:`simbench.sim.timeline._in_view_length` (cut at the near plane, projected, clipped to
+    the image) against the segment sampled at 20001 points: the summed steps between consecutive
+    samples both in front and inside the image, to 1 % of the image's size."""
+    from simbench.sim.timeline import _in_view_length
+
+    cam = scale_camera(_plane_scene().rig, 0.25).camera
+    rng = np.random.default_rng(5)
+    p0 = rng.uniform([-0.4, -0.3, -0.5], [0.4, 0.3, 2.0], (300, 3))
+    p1 = p0 + rng.normal(0.0, 0.6, (300, 3))
+    got = _in_view_length(p0, p1, cam, near_m=0.05)
+    s = np.linspace(0.0, 1.0, 20001)[:, None, None]
+    pts = p0 + s * (p1 - p0)  # (S, N, 3)
+    z = pts[..., 2]
+    uv = cam.focal_px * pts[..., :2] / np.where(z > 0, z, 1.0)[..., None] + (cam.cx_px, cam.cy_px)
+    inside = (z >= 0.05) & (uv[..., 0] >= -0.5) & (uv[..., 0] <= cam.width_px - 0.5)
+    inside &= (uv[..., 1] >= -0.5) & (uv[..., 1] <= cam.height_px - 0.5)
+    both = inside[1:] & inside[:-1]
+    want = np.where(both, np.linalg.norm(np.diff(uv, axis=0), axis=-1), 0.0).sum(axis=0)
+    assert (got > 0).sum() > 30 and (got == 0).sum() > 30  # both kinds drawn
+    assert np.allclose(got, want, atol=0.01 * cam.width_px)
+
+
+def _floor_scene(**motion):
+    return scene_from_dict(
+        {
+            "name": "floor",
+            "rig": "paper",
+            "object": [
+                # a floor 0.3 m below the camera from 0.5 m behind it to 4.5 m ahead
+                {
+                    "type": "plane",
+                    "name": "floor",
+                    "center_m": [0.0, 0.3, 2.0],
+                    "size_m": [3.0, 5.0],
+                    "rotation_deg": [90.0, 0.0, 0.0],
+                    **motion,
+                },
+                {"type": "plane", "name": "wall", "center_m": [0.0, 0.0, 4.5], "size_m": [4.0, 4.0]},
+            ],
+        }
+    )
+
+
+def test_a_floor_reaching_behind_the_camera_is_sliced_by_its_part_in_view():
+    """An audit (2026-11-30): the motion of points behind the camera was left out, so a floor
+    reaching behind it was measured by its far corners (0.50 px a slice in view).  Now its nearest
+    visible row - the image's bottom edge, where the floor meets the view - sets the count: a floor
+    0.3 m down, seen from the bottom row (depth z_b = 0.3 f / (H - 1 - cy)) moving sideways at v
+    for T moves f v T / z_b pixels there."""
+    scene = _floor_scene(velocity_m_s=[0.5, 0.0, 0.0])
+    cam = scale_camera(scene.rig, 0.25).camera
+    t = 0.03
+    z_bottom = 0.3 * cam.focal_px / (cam.height_px - 0.5 - cam.cy_px)
+    want = cam.focal_px * 0.5 * t / z_bottom
+    # the surface samples resolve the bottom row's depth to 1/64 of the floor's length (5 %)
+    assert want * 0.95 <= image_motion_px(scene, cam, 0.0, t) <= want * 1.0001
+    assert slice_count(scene, cam, (0.0, t)) >= math.ceil(0.95 * want / MAX_SLICE_MOTION_PX)
+
+
+def test_an_object_behind_the_camera_that_comes_into_view_is_sliced_and_not_called_unseen():
+    """An object behind the camera at time 0 that enters the view during the capture was rendered
+    as an instant (no slices) and warned of as one no pixel sees."""
+    from simbench.sim.timeline import placement_warnings
+
+    scene = scene_from_dict(
+        {
+            "name": "enters",
+            "rig": "paper",
+            "object": [
+                {
+                    "type": "sphere",
+                    "name": "ball",
+                    "center_m": [0.0, 0.0, -0.2],
+                    "radius_m": 0.1,
+                    "velocity_m_s": [0.0, 0.0, 40.0],
+                },
+                {"type": "plane", "name": "wall", "center_m": [0.0, 0.0, 1.5], "size_m": [4.0, 4.0]},
+            ],
+        }
+    )
+    cam = scale_camera(scene.rig, 0.25).camera
+    window = (0.0, 0.03)  # the ball passes from 0.2 m behind to 1.0 m ahead
+    assert slice_count(scene, cam, window) > 1
+    assert any("'ball' lies wholly behind the camera" in t for t in placement_warnings(scene))
+    assert placement_warnings(scene, window_s=window) == []
+    stays = dataclasses.replace(
+        scene,
+        objects=(
+            dataclasses.replace(
+                scene.objects[0], motion=scene.objects[0].motion.__class__(velocity_m_s=(0.0, 0.0, -1.0))
+            ),
+            scene.objects[1],
+        ),
+    )
+    assert any(
+        "behind the camera (z <= 0 m) throughout the capture" in t for t in placement_warnings(stays, window_s=window)
+    )
+
+
 def test_the_sample_budget_is_split_across_the_slices():
     assert slice_spp(64, 4) == 16 and slice_spp(64, 3) == 21 and slice_spp(64, 63) == 1
     assert slice_spp(16, 40) == 1  # more slices than samples: one each (40 in all)

@@ -18,6 +18,10 @@ from simbench.cache import RenderCache
 from simbench.rig import Intrinsics, Rig
 from simbench.sim.scene import SceneSpec, object_to_mitsuba
 
+# the camera's near clipping distance (Mitsuba's default is 0.01 m; a millimetre lets a scene put
+# a surface close to the lens): nearer points are not seen
+CAMERA_NEAR_CLIP_M = 1e-3
+
 __all__ = [
     "projector_texture",
     "realised_rig",
@@ -363,7 +367,7 @@ def mitsuba_scene(
             # principal point towards -x/-y (checked by tests/test_render.py).
             "principal_point_offset_x": ((cam.width_px - 1) / 2.0 - cam.cx_px) / cam.width_px,
             "principal_point_offset_y": ((cam.height_px - 1) / 2.0 - cam.cy_px) / cam.height_px,
-            "near_clip": 1e-3,
+            "near_clip": CAMERA_NEAR_CLIP_M,
             "far_clip": 1e3,
             "to_world": _look_at_z(mi, (0, 0, 0)),
             "film": {
