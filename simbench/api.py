@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from simbench.decode import DecoderParams
     from simbench.pattern import PatternSpec
     from simbench.sim.scene import SceneSpec
+    from simbench.rig import Rig
     from simbench.sim.sensor import SensorModel
     from simbench.systems import Recording, SystemDepth
 
@@ -412,15 +413,65 @@ def _scene_record(scene, spec: SceneSpec) -> dict:
     }
 
 
+def _decoding_rig(rig, recorded: Recorded, options, *, mode: str) -> Rig:
+    """``rig`` (a Rig or a rig TOML) checked as ``simbench decode --rig`` checks it: a calibration
+    of the rig ``recorded`` was recorded with, for a system that decodes with the scene's rig."""
+    from simbench.rig import Rig, load_rig
+    from simbench.systems import get_system
+    from simbench.systems.files import check_rig_on_a_plane, refuse_another_rig
+
+    if isinstance(rig, (str, Path)):
+        name, rig = str(rig), load_rig(rig)
+    elif isinstance(rig, Rig):
+        name = repr(rig.name) if rig.name else "given"
+    else:
+        raise ValueError(f"rig must be a Rig, a rig TOML file (str or Path) or None, got {type(rig).__name__}")
+    system = get_system(recorded.system, options)
+    if not system.info().uses_scene_rig:
+        raise ValueError(
+            f"rig applies to systems decoding with the scene's rig; the {recorded.system} system keeps its device's "
+            "factory calibration: leave rig out"
+        )
+    label = f"rig {name}"
+    recorded_rig = recorded.recording.scene.rig
+    if rig.camera.size_hw != recorded_rig.camera.size_hw:
+        raise ValueError(
+            f"{label}: camera {rig.camera.width_px}x{rig.camera.height_px}, but the recording's is "
+            f"{recorded_rig.camera.width_px}x{recorded_rig.camera.height_px}"
+        )
+    refuse_another_rig(rig, recorded_rig, rig_path=None, capture="the recording", label=label)
+    if recorded.system == "proposed":
+        from simbench.decode import DecoderParams
+        from simbench.systems.proposed_folder import check_reference_plane
+
+        # the recording's reference plane, decoded with this rig, must lie at its Z0 (as a folder's is)
+        params = DecoderParams(
+            pattern=recorded.pattern or system.pattern, z0_m=recorded.recording.scene.reference_depth_m
+        )
+        plane = recorded.calibration.reference_map(params, rig=rig)
+        check_reference_plane(plane, rig, reference_path="of the recording", rig_path=name, recorded_z0=True, mode=mode)
+    else:
+        check_rig_on_a_plane(rig, recorded_rig, rig_path=None, capture="the recording", label=label)
+    return rig
+
+
 def depth(
     recorded: Recorded,
     *,
     decoder: str | DecoderParams = "paper",
     mode: str | None = None,
     min_confidence: float | None = None,
+    rig: Rig | str | Path | None = None,
 ) -> SystemDepth:
     """``recorded`` decoded the way its system decodes, into depth (float32 metres, NaN where
     invalid), a validity mask and a per-pixel confidence (:class:`simbench.systems.SystemDepth`).
+
+    ``rig``: the rig the decoder believes (a :class:`simbench.rig.Rig` or a rig TOML, e.g.
+    ``simbench calibrate``'s rig.toml), as ``simbench decode --rig`` takes it; None = the rig it
+    was recorded with.  It must be a calibration of that rig - the same camera size, no
+    parameter far off (:func:`simbench.rig.rig_differences`), its reference plane (the proposed
+    sensor's) or a plane at 1 m (phase shifting) triangulated within tolerance - else a
+    ``ValueError``; systems that keep their device's factory calibration (Kinect, ToF) take none.
 
     For the proposed sensor, ``decoder`` is ``"paper"`` (the paper's decoder), ``"robust"`` (our
     colour-robust decoder at its operating point; needs ``record(..., calibration_frames=True)``)
@@ -452,6 +503,10 @@ def depth(
         )
     rec = recorded.recording
     options = SystemOptions(sensor=recorded.sensor or get_sensor(recorded.settings.get("sensor") or "paper"))
+    scene = rec.scene
+    if rig is not None:
+        asked = mode or (decoder.mode if not isinstance(decoder, str) else "reference")
+        scene = dataclasses.replace(scene, rig=_decoding_rig(rig, recorded, options, mode=asked))
     if recorded.system == "proposed":
         system = get_system("proposed", options)
         # the pattern it was recorded with (an audit: a period-30 recording was decoded with the
@@ -484,9 +539,9 @@ def depth(
             )
         from simbench.decode.pipeline import capture_warnings
 
-        for told in capture_warnings(rec.raw, rig=rec.scene.rig, params=params):  # as `simbench decode` warns
+        for told in capture_warnings(rec.raw, rig=scene.rig, params=params):  # as `simbench decode` warns
             warnings.warn(told, SimbenchWarning, stacklevel=2)
-        result = system.decode(rec.raw, recorded.calibration, scene=rec.scene, params=params, mode=mode)
+        result = system.decode(rec.raw, recorded.calibration, scene=scene, params=params, mode=mode)
         # as `simbench decode`: a capture whose stripes do not read in the pattern's order (mirrored,
         # red and green swapped) gives no depth rather than half of it wrong
         doubt = code_order_doubt(result.detail.window_succession)
@@ -498,17 +553,17 @@ def depth(
 
             # as the system decoded it: the scene's Z0, the mode asked (the paper's decoder measures no
             # registration: it is measured here, against the reference capture's in reference mode)
-            used = dataclasses.replace(params, mode=mode, z0_m=rec.scene.reference_depth_m)
+            used = dataclasses.replace(params, mode=mode, z0_m=scene.reference_depth_m)
             ref = None
             if mode == "reference":  # the decode's own (cached): what its registration was measured against
-                ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=rec.scene.rig)
-            told = registration_warning(rec.raw, result.detail, rig=rec.scene.rig, params=used, reference=ref)
+                ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=scene.rig)
+            told = registration_warning(rec.raw, result.detail, rig=scene.rig, params=used, reference=ref)
             if told:
                 warnings.warn(told, SimbenchWarning, stacklevel=2)
     else:
         if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
             raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")
-        result = get_system(recorded.system, options).decode(rec.raw, recorded.calibration, scene=rec.scene)
+        result = get_system(recorded.system, options).decode(rec.raw, recorded.calibration, scene=scene)
     if min_confidence is None or recorded.system == "proposed":
         return result
     if result.confidence is None:

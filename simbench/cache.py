@@ -17,6 +17,9 @@ a warm run reads recordings, not the renders under them, and those must not look
 :func:`cache_usage` tells what a cache holds and :func:`prune_cache` removes the entries used
 least recently (``simbench cache info|prune``).  A disk that fills up does not stop a run: an
 entry that cannot be stored for lack of space is logged once and the run goes on uncached.
+A cache this process cannot write (a read-only mount, another user's folder: a cache shared read
+only) is read: its hits are served, what a run makes is used and not stored (logged once), and no
+lock is taken.
 
 A cache folder carries a marker, :data:`MARKER_NAME` (a ``CACHEDIR.TAG`` of the Cache Directory
 Tagging Specification, so that backup tools skip it, naming simbench and the cache's format).
@@ -28,6 +31,7 @@ marked folder, and in it only the files whose names and contents are a cache's o
 from __future__ import annotations
 
 import ast
+import errno
 import hashlib
 import io
 import json
@@ -187,8 +191,9 @@ def check_cache_folder(root: str | Path) -> Path:
 
 
 def check_cache_location(root: str | Path, *, what: str = "cache", hint: str = "") -> Path:
-    """Check, before any work, that ``root`` can serve as a cache folder: a marked cache or
-    one that can be made there (not a file, not under a file, writable).  ``hint`` ends the
+    """Check, before any work, that ``root`` can serve as a cache folder: a marked cache (read
+    only where it cannot be written) or one that can be made there (not a file, not under a file,
+    writable).  ``hint`` ends the
     message (the command line's: how to do without the default folder).
 
     Raises
@@ -200,7 +205,14 @@ def check_cache_location(root: str | Path, *, what: str = "cache", hint: str = "
     from simbench.io import check_output_folder
 
     try:
-        root = check_output_folder(root, what=what)
+        try:
+            root = check_output_folder(root, what=what)
+        except ValueError:
+            # a marked cache this process cannot write is read (module docstring); a folder that
+            # is not one yet, or cannot be made, is the error
+            if not (Path(root).is_dir() and _marker_format(Path(root)) == CACHE_FORMAT):
+                raise
+            root = Path(root)
         if root.exists():
             check_cache_folder(root)
     except ValueError as exc:
@@ -210,6 +222,26 @@ def check_cache_location(root: str | Path, *, what: str = "cache", hint: str = "
     return root
 
 
+# the errors of a write to a folder this process may not write: the cache is read only then
+READ_ONLY_ERRNOS = (errno.EROFS, errno.EACCES, errno.EPERM)
+
+
+def _can_write(root: Path) -> bool:
+    """Whether this process can create a file in the folder ``root`` (a probe: ``os.access``
+    passes for root on a read-only mount)."""
+    if not os.access(root, os.W_OK | os.X_OK):
+        return False
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(dir=root, prefix=".simbench-probe-")
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
+
+
 # what the command line adds to a cache folder's error
 CACHE_HINT = "pass --no-cache to store nothing, or --cache DIR for another folder"
 
@@ -217,7 +249,7 @@ CACHE_HINT = "pass --no-cache to store nothing, or --cache DIR for another folde
 def claim_cache_folder(root: str | Path) -> Path:
     """Make ``root`` a cache folder (created if missing, the marker written), or
     :class:`NotACacheError` when it holds other things (:func:`check_cache_folder`).  A
-    folder that cannot be written keeps no marker (reading it still works)."""
+    folder that cannot be written keeps no marker (it is read: :class:`RenderCache`)."""
     root = Path(root)
     if not root.exists():
         try:
@@ -354,7 +386,9 @@ class RenderCache:
     entries made per kind: ``{kind: (count, seconds)}``, the seconds spent in their ``make``
     with the entries made inside it (a recording's render) counted to their own kind.  That is
     where a cold run's time goes (:meth:`made_summary`).  ``unstored`` counts the entries made
-    but not stored because the cache's disk was full (logged once per cache object).
+    but not stored because the cache's disk was full or the cache is read only
+    (:attr:`read_only`: a folder this process cannot write is read, its misses made and not
+    stored; logged once per cache object).
 
     A folder holding other files than a cache's raises :class:`NotACacheError` here; the
     folder and its marker are written with the first entry (:func:`claim_cache_folder`), so a
@@ -363,8 +397,11 @@ class RenderCache:
 
     def __init__(self, root: str | Path | None) -> None:
         self.root = None if root is None else Path(root)
+        self.read_only = False
         if self.root is not None and self.root.exists():
             check_cache_folder(self.root)  # a wrong folder is refused before any work
+            if self.root.is_dir() and not _can_write(self.root):
+                self._go_read_only("this process cannot write in it")
         self._claimed = False
         self.hits = 0
         self.misses = 0
@@ -446,11 +483,23 @@ class RenderCache:
         ``wait=False``: None, at once, when another process is making the entry - for a caller
         with several entries to make, to make the others first (and come back for this one)."""
         out = self.lookup(kind, parts)
-        if out is None:
+        if out is None and self.read_only:
+            with self.making(kind) as sources:
+                out = make()
+            self.store(kind, parts, out, sources=sources)
+        elif out is None:
             self._claim()
-            lock = _KeyLock(self.root, self.key(kind, parts))
+            lock = _KeyLock(None if self.read_only else self.root, self.key(kind, parts))
             try:  # not only `with lock`: a signal between acquire_now and entering must let it go too
-                if not wait and not lock.acquire_now():
+                try:
+                    got = lock.acquire_now()
+                except OSError as exc:
+                    if exc.errno not in READ_ONLY_ERRNOS:
+                        raise
+                    self._go_read_only(os.strerror(exc.errno))  # (the folder became unwritable)
+                    lock = _KeyLock(None, "")
+                    got = True
+                if not wait and not got:
                     self.misses -= 1  # not looked up yet, as far as the counts go: the caller comes back
                     return None
                 with lock:
@@ -465,6 +514,17 @@ class RenderCache:
             finally:
                 lock.release()
         return out
+
+    def _go_read_only(self, why: str) -> None:
+        """Read the cache from here on: no entry stored, no lock taken (logged the first time)."""
+        if not self.read_only:
+            self.read_only = True
+            log.warning(
+                "render cache %s is read only (%s): its entries are read, and what this run makes is used and not "
+                "stored",
+                self.root,
+                why,
+            )
 
     def _claim(self) -> None:
         """Create the folder with its marker before the first lock or entry is written."""
@@ -492,7 +552,11 @@ class RenderCache:
                 self._used(path, _pop_sources(out))
                 self.hits += 1
                 return out
-            path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
+            try:
+                path.unlink(missing_ok=True)  # a damaged entry is re-made, never trusted
+            except OSError as exc:  # (a read-only cache keeps it: it is never read as good)
+                if exc.errno not in READ_ONLY_ERRNOS:
+                    raise
             self.damaged += 1
         self.misses += 1
         return None
@@ -501,10 +565,14 @@ class RenderCache:
         """Store ``arrays`` under ``(kind, parts)`` (atomically, with their checksum), with the
         keys of the entries they were made from (``sources``, from :meth:`making`).
 
-        A full disk (or quota) does not raise: the entry is not stored (``unstored``), the
-        first time is logged, and the caller goes on with the arrays it has.  Any other
-        error writing the cache (a read-only folder, say) raises."""
+        A full disk (or quota) or a cache this process cannot write does not raise: the entry
+        is not stored (``unstored``), the first time is logged, and the caller goes on with the
+        arrays it has.  Any other error writing the cache raises."""
         if self.root is None:
+            return
+        if self.read_only:
+            with self._lock:
+                self.unstored += 1
             return
         self._claim()
         sources = sorted(sources)
@@ -518,6 +586,11 @@ class RenderCache:
             atomic_write_bytes(path, buf.getvalue())
             self._note_source(path.stem, sources)
         except OSError as exc:
+            if exc.errno in READ_ONLY_ERRNOS:
+                self._go_read_only(os.strerror(exc.errno))
+                with self._lock:
+                    self.unstored += 1
+                return
             if exc.errno not in DISK_FULL_ERRNOS:
                 raise
             with self._lock:

@@ -143,6 +143,45 @@ def test_depth_refuses_what_it_cannot_do():
         simbench.depth(rec, decoder="robust")
 
 
+def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path):
+    """``depth(rig=...)``: the rig the decoder believes, a Rig or a TOML (an audit, 2026-11-30:
+    the API had no way to decode with a calibrated rig).  The recorded rig gives the same depth;
+    a calibration 0.3 % long in baseline moves calibrated-mode depth by ~0.3 % and reference-mode
+    depth far less; another device, another camera size, or a rig whose reference plane lies far
+    from its Z0 are refused as ``decode --rig`` refuses them; a Kinect takes none."""
+    import dataclasses
+
+    import simbench
+    from simbench.rig import save_rig
+
+    rec = _recorded()
+    recorded_rig = rec.recording.scene.rig
+    for mode in ("reference", "calibrated"):
+        same = simbench.depth(rec, mode=mode, rig=recorded_rig)
+        assert np.array_equal(same.depth_m, simbench.depth(rec, mode=mode).depth_m, equal_nan=True)
+    longer = dataclasses.replace(recorded_rig, position_m=tuple(1.003 * x for x in recorded_rig.position_m))
+    path = save_rig(longer, tmp_path / "rig.toml")
+    base = {m: np.nanmedian(simbench.depth(rec, mode=m).depth_m) for m in ("reference", "calibrated")}
+    moved = {m: np.nanmedian(simbench.depth(rec, mode=m, rig=path).depth_m) for m in ("reference", "calibrated")}
+    assert moved["calibrated"] / base["calibrated"] == pytest.approx(1.003, abs=5e-4)
+    # reference mode: the error scales with (Z - Z0) / Z, ~0.1 at this plane 1.1 m away, Z0 = 1 m
+    assert abs(moved["reference"] / base["reference"] - 1) < 0.15 * 0.003
+    far = dataclasses.replace(recorded_rig, position_m=(0.150, 0.0, 0.0), name="wide")
+    with pytest.raises(ValueError, match="rig 'wide' is another rig than the recording was recorded with"):
+        simbench.depth(rec, rig=far)
+    small = dataclasses.replace(recorded_rig, camera=dataclasses.replace(recorded_rig.camera, width_px=640))
+    with pytest.raises(ValueError, match="camera 640x"):
+        simbench.depth(rec, rig=small)
+    # inside rig_differences' tolerances, but its reference plane 4 % off its Z0: not a calibration of it
+    off = dataclasses.replace(recorded_rig, position_m=tuple(1.04 * x for x in recorded_rig.position_m))
+    with pytest.raises(ValueError, match="reference plane of the recording triangulates with the rig"):
+        simbench.depth(rec, mode="calibrated", rig=off)
+    with pytest.raises(ValueError, match="rig must be a Rig, a rig TOML file"):
+        simbench.depth(rec, rig=0.093)
+    with pytest.raises(ValueError, match="the kinect system keeps its device's factory calibration"):
+        simbench.depth(_recorded("kinect"), rig=recorded_rig)
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [

@@ -734,7 +734,8 @@ def test_pruning_removes_killed_writers_leftovers_and_only_those(tmp_path):
 
 def test_a_full_disk_leaves_entries_unstored_and_the_run_going(tmp_path, monkeypatch, caplog):
     """ENOSPC (or a quota) writing an entry: the made arrays are returned, nothing is stored,
-    one warning names the cache and how to free it; other write errors still raise."""
+    one warning names the cache and how to free it; other write errors (but a read-only cache's,
+    below) still raise."""
     import errno
     import logging
 
@@ -753,12 +754,74 @@ def test_a_full_disk_leaves_entries_unstored_and_the_run_going(tmp_path, monkeyp
     (record,) = caplog.records
     assert str(tmp_path) in record.getMessage() and "simbench cache prune" in record.getMessage()
 
+    def failing(path, data):
+        raise OSError(errno.EIO, "Input/output error", str(path))
+
+    monkeypatch.setattr(module, "atomic_write_bytes", failing)
+    with pytest.raises(OSError, match="Input/output"):
+        cache.get_or_make("radiance", {"x": 3}, lambda: {"a": np.arange(2.0)})
+
+
+def test_a_cache_this_process_cannot_write_is_read(tmp_path, monkeypatch, caplog):
+    """A cache shared read only (a read-only mount, another user's folder): its entries are
+    served, a miss is made, used and not stored, no lock is taken, one warning says so - whether
+    the folder is unwritable from the start or a write is refused (EACCES, EROFS) mid-run.  An
+    audit (2026-11-30): the docstrings said reading such a cache worked; every command refused it.
+    (Simulated: the tests run as root, for whom a chmod-ed folder stays writable.)"""
+    import errno
+    import logging
+
+    import simbench.cache as module
+    from simbench.cache import CACHE_HINT, check_cache_location
+
+    RenderCache(tmp_path).get_or_make("radiance", {"x": 1}, lambda: {"a": np.arange(3.0)})
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.setattr(module, "_can_write", lambda root: False)
+
+    def refused(path, data):  # nothing may be written
+        pytest.fail(f"wrote {path}")
+
+    monkeypatch.setattr(module, "atomic_write_bytes", refused)
+    with caplog.at_level(logging.WARNING, logger="simbench.cache"):
+        cache = RenderCache(tmp_path)
+        assert cache.read_only
+        hit = cache.get_or_make("radiance", {"x": 1}, lambda: pytest.fail("a hit"))
+        made = cache.get_or_make("radiance", {"x": 2}, lambda: {"a": np.arange(4.0)})
+        cache.get_or_make("radiance", {"x": 3}, lambda: {"a": np.arange(5.0)}, wait=False)
+    assert np.array_equal(hit["a"], np.arange(3.0)) and np.array_equal(made["a"], np.arange(4.0))
+    assert (cache.hits, cache.misses, cache.unstored) == (1, 2, 2)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no entry, lock or temporary
+    (record,) = caplog.records
+    assert "is read only" in record.getMessage() and str(tmp_path) in record.getMessage()
+
+    # a write refused mid-run: the same, from then on
+    monkeypatch.setattr(module, "_can_write", lambda root: True)
+    calls = []
+
     def denied(path, data):
+        calls.append(path)
         raise PermissionError(errno.EACCES, "Permission denied", str(path))
 
     monkeypatch.setattr(module, "atomic_write_bytes", denied)
-    with pytest.raises(PermissionError):
-        cache.get_or_make("radiance", {"x": 3}, lambda: {"a": np.arange(2.0)})
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="simbench.cache"):
+        cache = RenderCache(tmp_path)
+        for x in (4, 5):
+            assert np.array_equal(cache.get_or_make("radiance", {"x": x}, lambda: {"a": np.zeros(x)})["a"], np.zeros(x))
+    assert cache.read_only and cache.unstored == 2 and len(calls) == 1 and len(caplog.records) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+    # the command line's check takes a marked cache it cannot write, not an unmarked folder
+    import simbench.io
+
+    def unwritable(path, *, what="output"):
+        raise ValueError(f"{what}: cannot write in {path} (Read-only file system)")
+
+    monkeypatch.setattr(simbench.io, "check_output_folder", unwritable)
+    assert check_cache_location(tmp_path, what="--cache", hint=CACHE_HINT) == tmp_path
+    (tmp_path / "other").mkdir()
+    with pytest.raises(ValueError, match="cannot write in .*other.*--no-cache"):
+        check_cache_location(tmp_path / "other", what="--cache", hint=CACHE_HINT)
 
 
 def test_a_hit_marks_what_its_entry_was_made_from_used_too(tmp_path):

@@ -50,8 +50,9 @@ def test_an_image_decodes_as_the_paper_sensor_with_its_stages(tmp_path):
     inputs = _plane_images(tmp_path)
     request = DecodeRequest(out=str(tmp_path / "d.npy"), debug_dir=str(tmp_path / "stages"), **inputs)
     msg = decode_files(request)
+    assert msg.startswith("decoded ")
     assert (
-        msg.startswith("decoded ") and "reference mode, Z0 = 1.0 m (assumed: no --z0 given), reference decoded)" in msg
+        f"reference mode, Z0 = 1.0 m (assumed: no --z0 given), reference decoded, rig {tmp_path / 'rig.toml'})" in msg
     )
     depth = np.load(tmp_path / "d.npy")
     assert np.nanmedian(depth) == pytest.approx(1.1, abs=1e-3) and np.isfinite(depth).mean() > 0.95

@@ -323,7 +323,13 @@ def _disk_full_hint(exc: BaseException, args) -> str:
         free = f"{human_bytes(shutil.disk_usage(where).free)} free there now; "
     except OSError:
         free = ""
-    cache = getattr(args, "cache", None) or DEFAULT_CACHE
+    # the cache the command used; without one (--no-cache, a command that keeps none) the default
+    # cache where there is one - a cache the command did not use was named (an audit, 2026-11-30)
+    cache = None if getattr(args, "no_cache", False) else getattr(args, "cache", None)
+    if cache is None and Path(DEFAULT_CACHE).is_dir():
+        cache = DEFAULT_CACHE
+    if cache is None:
+        return f" ({free.removesuffix('; ')})" if free else ""
     return (
         f" ({free}`simbench cache info --cache {cache}` shows what the render cache holds, "
         f"`simbench cache prune --cache {cache} --max-size SIZE` frees it)"

@@ -117,6 +117,10 @@ def _cmd_render(args) -> int:
     # entries read and made, not "n of m": a warm run looks up fewer entries than a cold one made
     # (a cached result spares the lookups of what it was made from)
     damaged = f" ({cache.damaged} of them damaged entries, re-made)" if cache.damaged else ""
+    if cache.unstored:
+        damaged += (
+            f", {cache.unstored} not stored ({'the cache is read only' if cache.read_only else 'its disk is full'})"
+        )
     cached = (
         f", render cache: {cache.hits} entries read, {cache.misses} made{damaged}" if cache.root is not None else ""
     )

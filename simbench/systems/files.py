@@ -30,7 +30,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DecodeRequest", "FileDecode", "decode_files", "recording_manifest_of", "confidence_path"]
+__all__ = [
+    "DecodeRequest",
+    "FileDecode",
+    "decode_files",
+    "recording_manifest_of",
+    "confidence_path",
+    "refuse_another_rig",
+    "check_rig_on_a_plane",
+]
 
 
 # the command line's working range (--near, --far), metres: the paper's rig's ~0.9-1.4 m with margin
@@ -188,19 +196,20 @@ def recording_manifest_of(path: str | Path) -> dict | None:
     return None
 
 
-def refuse_another_rig(rig, recorded, *, rig_path, capture, hint: str = "") -> None:
-    """A ValueError when ``rig`` (given as ``--rig rig_path``) describes another device than the
-    rig ``capture`` was recorded with (:func:`simbench.rig.rig_differences`): a recording decodes
-    with its own rig or a calibration of it, never silently with another's (a new user's audit,
-    2026-11-29: a 150 mm baseline's capture decoded with a 93 mm rig, exit 0, 268 mm MAE).
-    ``hint``: what the caller adds to the line."""
+def refuse_another_rig(rig, recorded, *, rig_path, capture, hint: str = "", label: str | None = None) -> None:
+    """A ValueError when ``rig`` (given as ``--rig rig_path``; ``label`` names it otherwise)
+    describes another device than the rig ``capture`` was recorded with
+    (:func:`simbench.rig.rig_differences`): a recording decodes with its own rig or a calibration
+    of it, never silently with another's (a new user's audit, 2026-11-29: a 150 mm baseline's
+    capture decoded with a 93 mm rig, exit 0, 268 mm MAE).  ``hint``: what the caller adds to the
+    line."""
     from simbench.rig import rig_differences
 
     far = rig_differences(rig, recorded)
     if far:
         raise ValueError(
-            f"--rig {rig_path} is another rig than {capture} was recorded with{hint}: {'; '.join(far)} - decode with "
-            "the recorded rig or a calibration of it"
+            f"{label or f'--rig {rig_path}'} is another rig than {capture} was recorded with{hint}: {'; '.join(far)} - "
+            "decode with the recorded rig or a calibration of it"
         )
 
 
@@ -561,7 +570,7 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
                 f"{scene.rig.camera.width_px}x{scene.rig.camera.height_px}"
             )
         refuse_another_rig(rig, scene.rig, rig_path=request.rig, capture=request.capture)
-        _check_rig_on_a_plane(rig, scene.rig, rig_path=request.rig, capture=request.capture)
+        check_rig_on_a_plane(rig, scene.rig, rig_path=request.rig, capture=request.capture)
         scene = dataclasses.replace(scene, rig=rig)
     t0 = time.perf_counter()
     res = system.decode(raw, cal, scene=scene)
@@ -605,29 +614,31 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
 RIG_CHECK_DEPTH_M = 1.0
 
 
-def _check_rig_on_a_plane(rig, recorded, *, rig_path, capture) -> None:
-    """A ``--rig`` for a recording decoded by triangulation with no reference plane (phase
-    shifting): a fronto-parallel plane at :data:`RIG_CHECK_DEPTH_M`, seen through the recorded rig
-    (each ideal pixel's projector column), triangulated with ``rig`` must lie there across the
-    image within the proposed sensor's reference-plane tolerances (2nd-98th percentile within
-    :data:`simbench.decode.REFERENCE_Z0_TOLERANCE`, a warning over ..._WARNING).  A new user's
-    audit (2026-11-30): phase shifting decoded with a camera focal length 4 % off - inside
-    :func:`simbench.rig.rig_differences`' 5 % - triangulated 60 mm wrong with only "overriding the
-    recording" said.  (Lens distortion is not compared: the plane is on the ideal pixel grid.)"""
+def check_rig_on_a_plane(rig, recorded, *, rig_path, capture, label: str | None = None) -> None:
+    """A ``--rig`` (``label`` names it otherwise) for a recording decoded by triangulation with
+    no reference plane (phase shifting): a fronto-parallel plane at :data:`RIG_CHECK_DEPTH_M`,
+    seen through the recorded rig (each ideal pixel's projector column), triangulated with
+    ``rig`` must lie there across the image within the proposed sensor's reference-plane
+    tolerances (2nd-98th percentile within :data:`simbench.decode.REFERENCE_Z0_TOLERANCE`, a
+    warning over ..._WARNING).  A new user's audit (2026-11-30): phase shifting decoded with a
+    camera focal length 4 % off - inside :func:`simbench.rig.rig_differences`' 5 % - triangulated
+    60 mm wrong with only "overriding the recording" said.  (Lens distortion is not compared: the
+    plane is on the ideal pixel grid.)"""
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, ReferenceMap, reference_plane_extent
     from simbench.rig import projector_column_at_depth
 
     # the plane as the recorded rig's reference would map it, read as the reference check reads one
     col = projector_column_at_depth(RIG_CHECK_DEPTH_M, recorded).astype(np.float32)
     plane = ReferenceMap(column_px=col, expected_px=col, inverse=np.zeros((1, 1), np.float32), z0_m=RIG_CHECK_DEPTH_M)
+    label = label or f"--rig {rig_path}"
     lo, _, hi = reference_plane_extent(plane, rig)
     if np.isinf(lo):
-        raise ValueError(f"--rig {rig_path} triangulates no plane in front of the camera from {capture}'s recorded rig")
+        raise ValueError(f"{label} triangulates no plane in front of the camera from {capture}'s recorded rig")
     worst = max(abs(lo), abs(hi))
     if worst <= REFERENCE_Z0_WARNING:
         return
     where = (
-        f"--rig {rig_path} puts a plane the recorded rig sees at {RIG_CHECK_DEPTH_M:g} m at "
+        f"{label} puts a plane the recorded rig sees at {RIG_CHECK_DEPTH_M:g} m at "
         f"{RIG_CHECK_DEPTH_M * (1 + lo):.4f} - {RIG_CHECK_DEPTH_M * (1 + hi):.4f} m across the image"
     )
     if worst > REFERENCE_Z0_TOLERANCE:

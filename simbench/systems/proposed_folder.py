@@ -33,6 +33,7 @@ from simbench.systems.files import (
 
 __all__ = [
     "RENDER_MANIFEST",
+    "check_reference_plane",
     "decode_capture_files",
     "describe_pattern",
     "pattern_record",
@@ -323,7 +324,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         check_path = str(Path(capture_path).parent / recorded["files"]["reference"])
         z0_kind = {"z0_assumed": False, "recorded_z0": True}
     if reference is not None:
-        _check_reference_plane(
+        check_reference_plane(
             reference, rig, reference_path=reference_path, rig_path=rig_path, mode=params.mode, **z0_kind
         )
     elif request.rig is not None and check_path is not None and Path(check_path).is_file():
@@ -335,7 +336,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         plane, store_plane = lookup_decoded_reference(
             _camera_image(check_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        _check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind)
+        check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind)
         store_plane()
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
@@ -398,7 +399,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         valid=result.valid,
         confidence=result.confidence,
         camera=rig.camera,
-        summary=f"{params.mode} mode{z0_note}{ref_note}{over}",
+        # the rig the depth was triangulated with, always (an audit: named only when --rig overrode it)
+        summary=f"{params.mode} mode{z0_note}{ref_note}{'' if over else f', rig {rig_path}'}{over}",
         confidence_meaning=meaning,
         elapsed_s=dt,
         # on the ideal pinhole grid the points are on (an audit: the raw capture's colours sat up to
@@ -419,7 +421,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     )
 
 
-def _check_reference_plane(
+def check_reference_plane(
     reference,
     rig,
     *,
