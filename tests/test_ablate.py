@@ -442,6 +442,24 @@ def test_speed_is_an_axis():
     assert [r["params"]["scene.speed_m_s"] for r in expand(sweep)] == [0.0, 0.3]
 
 
+def test_spin_is_an_axis_and_keeps_the_translation():
+    """scene.spin_deg_s turns the first object about the vertical axis through it (0: not turning),
+    with a speed's translation kept; validated."""
+    from simbench.experiments.ablate.mapping import scene_for
+    from simbench.sim.scene import scene_fingerprint
+
+    still = scene_for({"scene.name": "motion_board"})
+    assert scene_fingerprint(scene_for({"scene.name": "motion_board", "scene.spin_deg_s": 0.0})) == scene_fingerprint(
+        still
+    )
+    both = scene_for({"scene.name": "motion_board", "scene.speed_m_s": 0.2, "scene.spin_deg_s": -90.0})
+    m = both.objects[0].motion
+    assert m.velocity_m_s == (0.2, 0.0, 0.0) and m.angular_velocity_deg_s == -90.0 and m.axis == (0.0, 1.0, 0.0)
+    assert m.centre_m is None  # about the object's own position
+    with pytest.raises(ValueError, match="scene.spin_deg_s must be a finite number in"):
+        scene_for({"scene.name": "motion_board", "scene.spin_deg_s": 1e6})
+
+
 def test_a_speed_sets_the_velocity_of_a_scene_files_own_motion(tmp_path):
     """A scene file whose object moves and turns: speed 0 stops its translation (a sweep's still
     row is still - an audit found it moving with the file's velocity) and keeps its rotation;

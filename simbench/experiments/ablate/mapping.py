@@ -122,6 +122,17 @@ def scene_for(params: dict) -> SceneSpec:
         objs[0] = dataclasses.replace(objs[0], motion=None if motion.is_static else motion)
     elif "scene.motion" in params:
         validate.choice(params["scene.motion"], "scene.motion", ("lateral", "axial"))
+    if "scene.spin_deg_s" in params:
+        # the first object turning about the vertical axis through its own position (its file's
+        # axis and centre, if it gives them), 0 = not turning; its translation is kept (an audit,
+        # 2026-11-30: a sweep could not set rotation at all)
+        from simbench.sim.motion import MAX_ANGULAR_DEG_S, Motion
+
+        spin = validate.number(
+            params["scene.spin_deg_s"], "scene.spin_deg_s", lo=-MAX_ANGULAR_DEG_S, hi=MAX_ANGULAR_DEG_S
+        )
+        motion = dataclasses.replace(objs[0].motion or Motion(), angular_velocity_deg_s=spin)
+        objs[0] = dataclasses.replace(objs[0], motion=None if motion.is_static else motion)
     scene = dataclasses.replace(scene, objects=tuple(objs))
     if "scene.subsurface" in params:  # absent: as the scene file says
         medium = params["scene.subsurface"]

@@ -79,6 +79,8 @@ def _parameters() -> dict[str, str]:
         "scene.speed_m_s": "speed of the first object (m/s; simbench.sim.motion), in the scene.motion direction",
         "scene.motion": "direction of that motion: lateral (+x, sideways) or axial (-z, towards the camera); "
         "default lateral",
+        "scene.spin_deg_s": "rotation speed of the first object about the vertical axis through it (deg/s; its "
+        "scene file's axis and centre where it gives them)",
         "decoder.without": "the paper decoder's added checks switched off (simbench.decode.PAPER_ADDED_CHECKS): "
         "none, all, a name or a list of names",
         "run.spp": "samples per pixel",
