@@ -26,6 +26,7 @@ from simbench.warn import SimbenchWarning
 
 __all__ = [
     "check_not_protected",
+    "claim_output",
     "check_own_folder",
     "check_output_directory",
     "file_sha256",
@@ -315,6 +316,55 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
             SimbenchWarning,
             stacklevel=3,
         )
+
+
+@contextmanager
+def claim_output(path: str | Path, *, what: str = "--out") -> Iterator[None]:
+    """Hold, for the block, an exclusive claim among processes on writing the output ``path``
+    (a ``flock`` on a lock file in its nearest existing folder, named by a hash of its absolute
+    path): a second command writing the same output fails at once, before its work, instead of
+    both running for minutes and the later silently replacing the earlier (an audit, 2026-11-30:
+    two ``calibrate`` runs into one --out both reported success).  Where no lock file can be made
+    (a folder this process cannot write), nothing is claimed: the output's own checks say why.
+
+    Raises
+    ------
+    ValueError
+        Another process holds the claim.
+    """
+    import fcntl
+    import hashlib
+
+    target = Path(os.path.abspath(path))
+    folder = target.parent
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
+    lock = folder / f".simbench-out-{hashlib.sha256(os.fsencode(target)).hexdigest()[:16]}.lock"
+    while True:
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            yield
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise ValueError(
+                f"{what} {path}: another process is writing it now (another simbench command with the same {what}?): "
+                "wait for it to finish, or choose another folder"
+            ) from None
+        try:
+            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+                break  # (else the holder removed the file between our open and our lock: again)
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
+        os.close(fd)
 
 
 def _umask() -> int:

@@ -250,3 +250,42 @@ def test_an_output_whose_listed_file_was_edited_needs_overwrite(tmp_path):
     check_output_directory(out, manifest="calibration.json", overwrite=True)
     (out / "calibration.json").write_text(json.dumps({"files": {"rig": "rig.toml"}}))
     check_output_directory(out, manifest="calibration.json")
+
+
+def test_one_writer_of_an_output_at_a_time(tmp_path, capsys):
+    """An audit (2026-11-30): two ``calibrate`` runs into one --out both reported success, the
+    later silently replacing the earlier.  A second claim on an output (another process's - or
+    another open file description's, as here) fails at once, naming the output; the claim is
+    let go, and its lock file removed, when the block ends, by an error too.  Through the command
+    line: render and calibrate refuse before their work."""
+    import subprocess
+    import sys
+
+    from simbench.cli import main
+    from simbench.io import claim_output
+
+    out = tmp_path / "new" / "out"  # (its folder not made yet: the lock goes in the nearest one)
+    with claim_output(out):
+        with pytest.raises(ValueError, match=r"--out .*out: another process is writing it now"):
+            with claim_output(out):
+                pass
+        with claim_output(tmp_path / "other"):  # another output: free
+            pass
+        # another process
+        code = "import sys; from simbench.io import claim_output\nwith claim_output(sys.argv[1]): pass"
+        res = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True)
+        assert res.returncode == 1 and "another process is writing it now" in res.stderr
+        for argv in (
+            ["render", "white_plane", "--out", str(out)],
+            ["calibrate", "--poses", "3", "--out", str(out)],
+        ):
+            assert main(argv) == 2
+            err = capsys.readouterr().err
+            assert err.count("\n") == 1 and "another process is writing it now" in err
+    assert not list(tmp_path.glob(".simbench-out-*")) and not (tmp_path / "new").exists()
+    with pytest.raises(RuntimeError):
+        with claim_output(out):
+            raise RuntimeError("the work failed")
+    with claim_output(out):  # let go
+        pass
+    assert not list(tmp_path.glob(".simbench-out-*"))

@@ -22,6 +22,14 @@ from simbench.cli.options import (
 
 
 def _cmd_calibrate(args) -> int:
+    from simbench.io import claim_output
+
+    # one writer of an output folder at a time: a second fails before its work
+    with claim_output(args.out):
+        return _calibrate(args)
+
+
+def _calibrate(args) -> int:
     from simbench.calibration import calibrate_rig, check_calibration, get_target, true_rig
     from simbench.calibration.procedure import DEFAULT_POSES
     from simbench.calibration.report import write_calibration

@@ -40,6 +40,14 @@ def _cmd_pattern(args) -> int:
 
 
 def _cmd_render(args) -> int:
+    from simbench.io import claim_output
+
+    # one writer of an output folder at a time: a second fails before its work
+    with claim_output(args.out):
+        return _render(args)
+
+
+def _render(args) -> int:
     from simbench import api, cache as cache_module
     from simbench.decode import DecoderParams
     from simbench.experiments.common import scene_file
