@@ -249,6 +249,7 @@ def record(
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
         meta = {**acq.meta, **_scene_record(scene, spec)}
         told_all = recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern))
+        told_all += exposure_warnings(rec.raw, acq.scene, sensor_model)
         told_all += motion_warnings(acq.scene, rec.gt, the_system)
         for told in told_all:
             warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
@@ -260,16 +261,31 @@ def record(
     rec = acquire(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
-    for told in [*recording_warnings(spec, rec.gt), *motion_warnings(rec.scene, rec.gt, the_system)]:
+    told_all = [*recording_warnings(spec, rec.gt), *motion_warnings(rec.scene, rec.gt, the_system)]
+    if takes is None or "sensor" in takes:  # (a system recording through our sensor model)
+        told_all += exposure_warnings(rec.raw, rec.scene, sensor_model)
+    for told in told_all:
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     meta = {
         **_scene_record(scene, spec),
         "spp": spp,
         "sampler": sampler,
+        "max_depth": max_depth,
         "seed": seed,
         "seeds": dict(seeds.used),
         "variant": used_variant,
     }
+    if takes is None or "sensor" in takes:
+        # the sensor model it recorded through, and its exposure, as the proposed sensor's meta.json
+        # holds them (an audit: two phase-shift folders of one scene through two sensor models
+        # differed only in their files' checksums)
+        from simbench.sim.photometry import exposure_s, white_board
+        from simbench.sim.sensor import sensor_to_dict
+
+        meta["sensor"] = sensor_to_dict(sensor_model)
+        meta["exposure_s"] = (
+            exposure_s(sensor_model, prepared.rig, **white_board(prepared)) if sensor_model.is_physical else None
+        )
     return Recorded(system, rec, calibration, {**settings, "seeds": dict(seeds.used)}, meta=meta, sensor=sensor_model)
 
 
@@ -306,6 +322,65 @@ def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None
                 "full confidence - or not at all. Place the scene within the range, or decode with a range that holds "
                 "it (simbench decode --near/--far), no wider than one code cycle of disparity"
             )
+    return out
+
+
+# a recording with more than this share of its pixels clipped in some channel is warned of (a
+# glossy board's highlight clips well under it; an audit's capture under ambient light twice the
+# projector's white was 100 % clipped, recorded without a word), and one whose brightest value is
+# under DARK_CAPTURE_LEVEL of full scale
+CLIPPED_CAPTURE_SHARE = 0.05
+DARK_CAPTURE_LEVEL = 0.02
+
+
+def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
+    """What a recording's exposure spoiled: a capture clipped over more than
+    :data:`CLIPPED_CAPTURE_SHARE` of its pixels (with the reasons the sensor model gives: the
+    auto exposure meters the projector's white on the board, not the room's light or the dark
+    current), or one nearly black.  ``raw``: the capture as recorded (integer codes of
+    ``sensor``'s ADC, or floats in [0, 1]; (H, W, 3), or (K, H, W) frames)."""
+    from simbench.sim.sensor import PhysicalCamera
+
+    a = np.asarray(raw)
+    top = float(sensor.camera.max_dn) if np.issubdtype(a.dtype, np.integer) else 1.0
+    full = a >= top
+    clipped = full.any(axis=-1) if a.ndim == 3 and a.shape[-1] == 3 else full
+    share = float(clipped.mean()) if clipped.size else 0.0
+    out = []
+    if share > CLIPPED_CAPTURE_SHARE:
+        cam = sensor.camera
+        why = []
+        if isinstance(cam, PhysicalCamera):
+            from simbench.sim.photometry import exposure_s, white_board
+
+            t = exposure_s(sensor, scene.rig, **white_board(scene))
+            if cam.exposure_s is None:
+                why.append(
+                    f"the auto exposure ({t * 1e3:.3g} ms) brings the white board to "
+                    f"{100 * cam.auto_exposure_fraction:.0f} % of the full well under the projector's white alone "
+                    "(docs/sensor-model.md)"
+                )
+                limit = 1.0 / cam.auto_exposure_fraction - 1.0
+                if sensor.ambient_ratio > limit:
+                    why.append(
+                        f"the room's light ([ambient] ratio {sensor.ambient_ratio:g} of the projector's white) takes "
+                        f"it past the full well (above {limit:.2f}): lower the ratio, or set [camera] exposure_s"
+                    )
+            else:
+                why.append(f"the exposure set, {t:.4g} s ([camera] exposure_s, seconds)")
+            dark = cam.dark_current_e_s * t
+            if dark > 0.1 * cam.full_well_e:
+                why.append(f"dark current alone fills {100 * min(1.0, dark / cam.full_well_e):.0f} % of the full well")
+        out.append(
+            f"{100 * share:.1f} % of the capture's pixels are clipped in some channel"
+            + (f": {'; '.join(why)}" if why else "")
+            + " - their fringe is lost and a decode leaves them out"
+        )
+    elif a.size and float(a.max()) < DARK_CAPTURE_LEVEL * top:
+        out.append(
+            f"the capture is dark: its brightest value is {float(a.max()):.4g} of {top:g} - too short an exposure, too "
+            "little light or too little gain for a fringe above the noise"
+        )
     return out
 
 

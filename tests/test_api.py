@@ -317,3 +317,33 @@ print(json.dumps({{k: (None if isinstance(v, float) and not np.isfinite(v) else 
     assert r.returncode == 0, r.stderr[-3000:]
     api_scores = json.loads(r.stdout.strip().splitlines()[-1])
     assert api_scores == cli_scores
+
+
+@pytest.mark.slow
+def test_record_warns_of_a_clipped_capture_and_records_a_sensor_competitors_sensor(tmp_path, variant):
+    """The audit's cases through simbench.record (as `simbench render` calls it): room light twice
+    the projector's white clipped the whole capture without a word; a phase-shift recording's
+    manifest held no sensor model (two sensors' folders differed only in their checksums)."""
+    import dataclasses
+    import json
+
+    import simbench
+    from simbench.sim.sensor import get_sensor, sensor_from_dict
+    from tests.test_bad_inputs import TINY_RIG
+    from tests.test_cli import TINY_SCENE
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    roomy = dataclasses.replace(get_sensor("paper"), ambient_ratio=2.0)
+    with pytest.warns(simbench.SimbenchWarning, match=r"100\.0 % of the capture's pixels are clipped.*ratio 2"):
+        simbench.record(tmp_path / "s.toml", sensor=roomy, spp=1, cache=None)
+    rec = simbench.record(tmp_path / "s.toml", system="phase_shift", spp=1, cache=None)
+    assert rec.meta["sensor"]["name"] == "paper" and rec.meta["exposure_s"] == pytest.approx(0.027, rel=0.2)
+    sensor_from_dict(rec.meta["sensor"])  # the sensor as recorded, whole
+    from simbench.systems import get_system
+
+    files = get_system("phase_shift").write_recording(
+        tmp_path / "ps", rec.raw, rec.calibration, scene=rec.recording.scene, gt=rec.recording.gt, meta=rec.meta
+    )
+    device = json.loads((tmp_path / "ps" / "device.json").read_text())
+    assert device["sensor"] == rec.meta["sensor"] and device["exposure_s"] == rec.meta["exposure_s"] and files

@@ -115,6 +115,63 @@ def test_bad_sensor_files_are_clear():
         get_sensor("/nonexistent/sensor.toml")
 
 
+def test_a_sensors_numbers_out_of_any_cameras_range_are_refused():
+    """An audit (2026-11-30): a pixel pitch written in millimetres (0.00345) gave a 13106 s auto
+    exposure and a capture of dark current, exit 0; the simple camera took full_well_e = 1e30 and
+    read_noise_e = 1e25, which the emva camera refuses.  An auto exposure over an hour - far too
+    little light - is refused with what to check."""
+    from simbench.sim.photometry import exposure_s, white_board
+    from simbench.sim.scene import SceneSpec
+
+    base = sensor_to_dict(get_sensor("paper"))
+    with pytest.raises(ValueError, match=r"pixel_pitch_um must be a finite number in \[0.5, 100\]"):
+        sensor_from_dict({**base, "camera": {**base["camera"], "pixel_pitch_um": 0.00345}})
+    with pytest.raises(ValueError, match="pixel_pitch_um"):
+        sensor_from_dict({**base, "projector": {**base["projector"], "pixel_pitch_um": 0.0054}})
+    simple = sensor_to_dict(get_sensor("minimal"))
+    for key, value in (("full_well_e", 1e30), ("read_noise_e", 1e25)):
+        with pytest.raises(ValueError, match=key):
+            sensor_from_dict({**simple, "camera": {**simple["camera"], key: value}})
+    dim = sensor_from_dict({**base, "projector": {**base["projector"], "lumens": 1e-3}})
+    board = white_board(SceneSpec(name="s", rig=RIG, objects=()))
+    with pytest.raises(ValueError, match=r"auto exposure comes to 40\d\d s, longer than .* \(3600 s\).*lumens"):
+        exposure_s(dim, RIG, **board)
+    assert exposure_s(get_sensor("paper"), RIG, **board) == pytest.approx(0.027, rel=0.1)
+
+
+def test_a_clipped_or_dark_capture_is_warned_of_with_the_sensors_reasons():
+    """simbench.api.exposure_warnings: over 5 % of the pixels clipped in some channel, said with why
+    (the auto exposure meters the projector's white only: an ambient ratio above 1/0.7 - 1 clips the
+    board itself; a hand-set exposure; dark current), or a capture nearly black; a glossy board's
+    few clipped pixels and a plain capture, nothing."""
+    from simbench.api import exposure_warnings
+    from simbench.sim.scene import SceneSpec
+
+    scene = SceneSpec(name="s", rig=RIG, objects=())
+    paper = get_sensor("paper")
+    ok = np.full((40, 50, 3), 120, np.uint8)
+    assert exposure_warnings(ok, scene, paper) == []
+    glossy = ok.copy()
+    glossy[:3, :, 0] = 255  # 3 rows of 40 clipped in red: 7.5 % of the pixels (1 row of 38: 2.6 %)
+    assert exposure_warnings(glossy[2:], scene, paper) == []
+    (told,) = exposure_warnings(glossy, scene, paper)
+    assert told.startswith("7.5 % of the capture's pixels are clipped in some channel: the auto exposure (")
+    assert "ambient" not in told
+    roomy = dataclasses.replace(paper, ambient_ratio=2.0)
+    (told,) = exposure_warnings(np.full((4, 5, 3), 255, np.uint8), scene, roomy)
+    assert "100.0 % of the capture's pixels" in told and "[ambient] ratio 2 of the projector's white" in told
+    assert "(above 0.43)" in told
+    fixed = dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, exposure_s=13.1, dark_current_e_s=1e3))
+    (told,) = exposure_warnings(np.full((4, 5, 3), 255, np.uint8), scene, fixed)
+    assert "the exposure set, 13.1 s" in told and "dark current alone fills 100 % of the full well" in told
+    (told,) = exposure_warnings(np.full((4, 5, 3), 3, np.uint8), scene, paper)
+    assert told.startswith("the capture is dark: its brightest value is 3 of 255")
+    twelve = dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, bits=12))
+    assert exposure_warnings(np.full((4, 5, 3), 255, np.uint16), scene, twelve) == []  # 255 of 4095
+    frames = np.ones((12, 4, 5), np.float32)  # phase shifting's grey frames in [0, 1]
+    assert "100.0 %" in exposure_warnings(frames, scene, paper)[0]
+
+
 def test_photometry_follows_the_camera_equation():
     paper = get_sensor("paper")
     e = electrons_per_radiance_s(paper, RIG)

@@ -136,6 +136,17 @@ def _render(args) -> int:
         f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
         f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
+    t_exp = rec.meta.get("exposure_s")
+    if t_exp:  # (an audit: only meta.json said it)
+        from simbench.sim.sensor import PhysicalCamera
+
+        cam = rec.sensor.camera if rec.sensor is not None else None
+        how = (
+            f"the auto exposure: the white board at {100 * cam.auto_exposure_fraction:.0f} % of the full well"
+            if isinstance(cam, PhysicalCamera) and cam.exposure_s is None
+            else "as the sensor model sets it"
+        )
+        print(f"  exposure {t_exp * 1e3:.4g} ms ({how})")
     info = system.info()
     if not info.uses_scene_rig:  # (a new user's audit: their own rig was set aside without a word)
         h, w = info.size_hw

@@ -35,6 +35,17 @@ __all__ = [
 ]
 
 
+# Physical bounds of a camera's numbers, shared by both camera models (each far outside any
+# camera sold, inside what the model means; simbench.sim.sensor.PhysicalCamera argues them):
+# full well at most 1e7 e- (large-pixel CCDs hold ~1 Me-), temporal and fixed-pattern noise at
+# most 1e4 e-, exposure at most an hour, pixels at least half a micrometre (the smallest made
+# are ~0.56 um)
+MAX_FULL_WELL_E = 1e7
+MAX_NOISE_E = 1e4
+MAX_EXPOSURE_S = 3600.0
+MIN_PIXEL_PITCH_UM = 0.5
+
+
 @dataclass(frozen=True)
 class SimpleCamera:
     """Parameters of the minimal camera step.
@@ -64,8 +75,10 @@ class SimpleCamera:
         v = validate
         values = {
             "exposure": v.number(self.exposure, "exposure", lo=0.0, lo_open=True),
-            "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True),
-            "read_noise_e": v.number(self.read_noise_e, "read_noise_e", lo=0.0),
+            # the physical camera's bounds (an audit: full_well_e = 1e30 and read_noise_e = 1e25 were
+            # taken here, refused by the emva model); ``exposure`` is a ratio, not a time: unbounded
+            "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True, hi=MAX_FULL_WELL_E),
+            "read_noise_e": v.number(self.read_noise_e, "read_noise_e", lo=0.0, hi=MAX_NOISE_E),
             "bits": v.choice(v.integer(self.bits, "bits"), "bits", ADC_BITS),
             "noise": v.boolean(self.noise, "noise"),
         }

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simbench.sim.camera import MAX_EXPOSURE_S
 from simbench.sim.sensor import PhysicalCamera, SensorModel
 from simbench.rig import Rig
 
@@ -211,7 +212,15 @@ def exposure_s(
         "projector_scale": projector_scale,
     }
     board = _white_board_electrons_s(sensor, rig, **kw) * white_balance_gains(sensor, rig, **kw)
-    return float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
+    t = float(cam.auto_exposure_fraction * cam.full_well_e / board.max())
+    if t > MAX_EXPOSURE_S:
+        # (an audit: a pixel pitch written in mm made it 13106 s, and the capture all dark current)
+        raise ValueError(
+            f"sensor {sensor.name!r}: the auto exposure comes to {t:.4g} s, longer than an exposure_s may be "
+            f"({MAX_EXPOSURE_S:g} s): the white board at {reference_depth_m:g} m gets {board.max():.3g} e-/s - check "
+            f"the camera's pixel_pitch_um ({cam.pixel_pitch_um:g} um), qe and lens f_number, and the projector's lumens"
+        )
+    return t
 
 
 def channel_weights(sensor: SensorModel, rig: Rig) -> np.ndarray:

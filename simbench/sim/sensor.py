@@ -50,7 +50,15 @@ from simbench import validate
 from simbench.io import ADC_BITS, read_toml
 from simbench.sim.projector import DMD_LAYOUTS, TIMINGS, TRANSFERS
 from simbench.rig import Intrinsics, Rig
-from simbench.sim.camera import CFA_PATTERNS, DEMOSAIC_METHODS, SimpleCamera
+from simbench.sim.camera import (
+    CFA_PATTERNS,
+    DEMOSAIC_METHODS,
+    MAX_EXPOSURE_S,
+    MAX_FULL_WELL_E,
+    MAX_NOISE_E,
+    MIN_PIXEL_PITCH_UM,
+    SimpleCamera,
+)
 
 log = logging.getLogger(__name__)
 
@@ -185,14 +193,18 @@ class PhysicalCamera:
         # - dark current: 1-100 e-/s uncooled at room temperature, ~1e4 e-/s hot: at most 1e6 e-/s;
         # - gain: at most 1e4 DN/e- (a 16-bit ADC over a 6.5 e- full well);
         # - black level (offset): a few % of the ADC range; at most half of it, else the capture
-        #   has no room for a signal.
+        #   has no room for a signal;
+        # - pixel pitch: the smallest pixels made are ~0.56 um (2023 smartphone sensors), the
+        #   largest ~25 um; under MIN_PIXEL_PITCH_UM is a unit slip (3.45 um written 0.00345, in mm:
+        #   an audit's auto exposure came to 13106 s);
+        # - exposure: at most MAX_EXPOSURE_S.
         _set(
             self,
             {
-                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=MIN_PIXEL_PITCH_UM, hi=100.0),
                 "qe": v.numbers(self.qe, "qe", 3, lo=0.0, hi=1.0, lo_open=True),
-                "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True, hi=1e7),
-                "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0, hi=1e4),
+                "full_well_e": v.number(self.full_well_e, "full_well_e", lo=0.0, lo_open=True, hi=MAX_FULL_WELL_E),
+                "dark_noise_e": v.number(self.dark_noise_e, "dark_noise_e", lo=0.0, hi=MAX_NOISE_E),
                 "bits": v.choice(v.integer(self.bits, "bits"), "bits", ADC_BITS),
                 "gain_dn_per_e": v.optional(
                     v.number, self.gain_dn_per_e, "gain_dn_per_e", lo=0.0, lo_open=True, hi=1e4
@@ -200,9 +212,11 @@ class PhysicalCamera:
                 "offset_dn": v.number(self.offset_dn, "offset_dn", lo=0.0, hi=0.5 * ((1 << _bits(self.bits)) - 1)),
                 "dark_current_e_s": v.number(self.dark_current_e_s, "dark_current_e_s", lo=0.0, hi=1e6),
                 "prnu": v.number(self.prnu, "prnu", lo=0.0, hi=1.0),
-                "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0, hi=1e4),
+                "dsnu_e": v.number(self.dsnu_e, "dsnu_e", lo=0.0, hi=MAX_NOISE_E),
                 "fixed_pattern_seed": v.integer(self.fixed_pattern_seed, "fixed_pattern_seed", lo=0, hi=2**63 - 1),
-                "exposure_s": v.optional(v.number, self.exposure_s, "exposure_s", lo=0.0, hi=3600.0, lo_open=True),
+                "exposure_s": v.optional(
+                    v.number, self.exposure_s, "exposure_s", lo=0.0, hi=MAX_EXPOSURE_S, lo_open=True
+                ),
                 "auto_exposure_fraction": v.number(
                     self.auto_exposure_fraction, "auto_exposure_fraction", lo=0.0, hi=1.0, lo_open=True
                 ),
@@ -248,7 +262,8 @@ class ProjectorModel:
                 "gamma": v.number(self.gamma, "gamma", lo=0.0, hi=10.0, lo_open=True),
                 "contrast_ratio": v.number(self.contrast_ratio, "contrast_ratio", lo=1.0, allow_inf=True),
                 "dmd": v.choice(self.dmd, "dmd", DMD_LAYOUTS),
-                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=0.0, hi=100.0, lo_open=True),
+                # (DMD micromirrors 5.4-13.7 um, LCoS pixels ~3-8 um: MIN_PIXEL_PITCH_UM is far below)
+                "pixel_pitch_um": v.number(self.pixel_pitch_um, "pixel_pitch_um", lo=MIN_PIXEL_PITCH_UM, hi=100.0),
                 "timing": v.choice(self.timing, "timing", TIMINGS),
                 # assumption: video inputs run at up to a few hundred frames per second
                 "frame_rate_hz": v.number(self.frame_rate_hz, "frame_rate_hz", lo=1.0, hi=1000.0),
