@@ -397,3 +397,15 @@ def test_a_rig_whose_lens_is_not_the_sensor_models_is_refused():
         ValueError, match=r"^r: the rig's camera distortion \[-0.2, 0.0, 0.0, 0.0, 0.0\] is not the lens"
     ):
         check_rig_lens(odd, paper, where="r")
+
+
+def test_a_projector_lens_left_out_takes_the_projector_lenses_f_number():
+    """A sensor file without [projector.lens] took the camera lens's default f/4 (reported so),
+    while the code's projector lens is f/2: now f/2 either way, and so reported."""
+    from simbench.sim.sensor import PROJECTOR_F_NUMBER, ProjectorModel, left_out_keys
+
+    base = sensor_to_dict(get_sensor("paper"))
+    data = {**base, "projector": {k: v for k, v in base["projector"].items() if k != "lens"}}
+    sensor = sensor_from_dict(data)
+    assert sensor.projector.lens.f_number == PROJECTOR_F_NUMBER == ProjectorModel().lens.f_number == 2.0
+    assert "projector.lens.f_number = 2.0" in left_out_keys(data, sensor)

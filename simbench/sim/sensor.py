@@ -236,6 +236,10 @@ class PhysicalCamera:
         return self.gain_dn_per_e if self.gain_dn_per_e is not None else self.max_dn / self.full_well_e
 
 
+# assumption: pico-projector lenses are fast, about f/2 (the paper preset's [projector.lens])
+PROJECTOR_F_NUMBER = 2.0
+
+
 @dataclass(frozen=True)
 class ProjectorModel:
     """The projector's physics (see :mod:`simbench.sim.projector`)."""
@@ -248,7 +252,7 @@ class ProjectorModel:
     pixel_pitch_um: float = 5.4
     timing: str = "triggered"
     frame_rate_hz: float = 60.0
-    lens: Lens = field(default_factory=lambda: Lens(f_number=2.0))
+    lens: Lens = field(default_factory=lambda: Lens(f_number=PROJECTOR_F_NUMBER))
 
     def __post_init__(self) -> None:
         v = validate
@@ -377,7 +381,13 @@ def sensor_from_dict(data: dict, *, where: str = "sensor") -> SensorModel:
     else:
         raise ValueError(f"{where}.camera.model must be 'emva' or 'simple', got {model!r}")
     prj = dict(_table(data, "projector", where))
-    prj_lens = _build(Lens, _table(prj, "lens", f"{where}.projector"), f"{where}.projector.lens")
+    # the projector lens's own default f-number where the file gives none (an audit: a file without
+    # [projector.lens] got the camera lens's f/4, the code's projector f/2)
+    prj_lens = _build(
+        Lens,
+        {"f_number": PROJECTOR_F_NUMBER, **_table(prj, "lens", f"{where}.projector")},
+        f"{where}.projector.lens",
+    )
     prj.pop("lens", None)
     projector = _build(
         ProjectorModel, {**prj, "lens": prj_lens}, f"{where}.projector", convert={"contrast_ratio": _inf_or_number}
