@@ -211,9 +211,10 @@ def record(
     if info.uses_scene_rig:  # (the competitors replace the scene's rig with their own)
         check_rig_lens(spec.rig, sensor_model, where=f"scene {scene if isinstance(scene, (str, Path)) else spec.name}")
     from simbench.sim.timeline import is_moving, placement_warnings
+    from simbench.systems import capture_window
 
     # a moving object is followed over the system's capture (it may come into view during it)
-    window = the_system.capture_window_s(spec) if is_moving(spec) else (0.0, 0.0)
+    window = capture_window(the_system, the_system.prepare(spec)) if is_moving(spec) else (0.0, 0.0)
     for told in placement_warnings(spec, window_s=window):
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     used_variant = _ensure_variant(variant)
@@ -338,17 +339,25 @@ def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
     :data:`CLIPPED_CAPTURE_SHARE` of its pixels (with the reasons the sensor model gives: the
     auto exposure meters the projector's white on the board, not the room's light or the dark
     current), or one nearly black.  ``raw``: the capture as recorded (integer codes of
-    ``sensor``'s ADC, or floats in [0, 1]; (H, W, 3), or (K, H, W) frames)."""
+    ``sensor``'s ADC, clipped at its top or the full well's code if lower; or floats in [0, 1];
+    (H, W, 3), or (K, H, W) frames, whose pixels count once a frame).  Phase shifting's frames
+    are grey (the channels' mean): a pixel clipped in one channel only does not show in them."""
     from simbench.sim.sensor import PhysicalCamera
 
     a = np.asarray(raw)
-    top = float(sensor.camera.max_dn) if np.issubdtype(a.dtype, np.integer) else 1.0
+    cam = sensor.camera
+    top, black = 1.0, 0.0
+    if np.issubdtype(a.dtype, np.integer):
+        top = float(cam.max_dn)
+        if isinstance(cam, PhysicalCamera):
+            # a full well below the ADC's top (a gain set low) clips there; the black level is no signal
+            top = min(top, float(round(cam.offset_dn + cam.gain * cam.full_well_e)))
+            black = float(cam.offset_dn)
     full = a >= top
     clipped = full.any(axis=-1) if a.ndim == 3 and a.shape[-1] == 3 else full
     share = float(clipped.mean()) if clipped.size else 0.0
     out = []
     if share > CLIPPED_CAPTURE_SHARE:
-        cam = sensor.camera
         why = []
         if isinstance(cam, PhysicalCamera):
             from simbench.sim.photometry import exposure_s, white_board
@@ -376,10 +385,11 @@ def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
             + (f": {'; '.join(why)}" if why else "")
             + " - their fringe is lost and a decode leaves them out"
         )
-    elif a.size and float(a.max()) < DARK_CAPTURE_LEVEL * top:
+    elif a.size and float(a.max()) - black < DARK_CAPTURE_LEVEL * (top - black):
+        above = f" ({black:g} the black level)" if black else ""
         out.append(
-            f"the capture is dark: its brightest value is {float(a.max()):.4g} of {top:g} - too short an exposure, too "
-            "little light or too little gain for a fringe above the noise"
+            f"the capture is dark: its brightest value is {float(a.max()):.4g} of {top:g}{above} - too short an "
+            "exposure, too little light or too little gain for a fringe above the noise"
         )
     return out
 
@@ -408,7 +418,7 @@ def motion_warnings(scene: SceneSpec, gt, system) -> list[str]:
     from simbench.rig import pixel_rays
     from simbench.sim.motion import MAX_SLICE_MOTION_PX, MAX_SLICES
     from simbench.sim.scene import OBJECT_KIND_TABLE
-    from simbench.sim.timeline import image_motion_px, is_moving, slice_count
+    from simbench.sim.timeline import image_speed_px_s, is_moving, slice_count
 
     if gt.motion_px is None or not is_moving(scene):
         return []
@@ -461,13 +471,15 @@ def motion_warnings(scene: SceneSpec, gt, system) -> list[str]:
     # samples; one window for the others, the Kinect's whole rolling readout)
     frames = getattr(system, "frame_windows_s", None)
     for w0, w1 in frames(scene) if frames is not None else [(t0, t1)]:
-        travel_all = image_motion_px(scene, scene.rig.camera, w0, w1)
+        # the fastest in-view motion over a slice's length (the slices are even in time)
+        reach = image_speed_px_s(scene, scene.rig.camera, w0, w1) * (w1 - w0)
         n = slice_count(scene, scene.rig.camera, (w0, w1))
-        if travel_all / n > MAX_SLICE_MOTION_PX * 1.001:
+        if reach / n > MAX_SLICE_MOTION_PX * 1.001:
             out.append(
-                f"the blur is sampled in {n} time slices (at most {MAX_SLICES}) over {travel_all:.0f} px of image "
-                f"motion in an exposure: {travel_all / n:.2f} px a slice, more than {MAX_SLICE_MOTION_PX:g} - a "
-                "strobed sequence of images, not a smooth blur; lower the speed or the exposure"
+                f"the blur is sampled in {n} time slices (at most {MAX_SLICES}) over an exposure in which the image "
+                f"moves at up to {reach:.0f} px an exposure: {reach / n:.2f} px a slice, more than "
+                f"{MAX_SLICE_MOTION_PX:g} - a strobed sequence of images, not a smooth blur; lower the speed or the "
+                "exposure"
             )
             break
     return out

@@ -234,7 +234,9 @@ def _can_write(root: Path) -> bool:
     import tempfile
 
     try:
-        fd, probe = tempfile.mkstemp(dir=root, prefix=".simbench-probe-")
+        # named as the cache's own temporaries (_TEMP_RE): another process checking a new, still
+        # unmarked cache folder meanwhile must not take the probe for a user's file (a review)
+        fd, probe = tempfile.mkstemp(dir=root, prefix=".CACHEDIR.", suffix=".tmp")
     except OSError:
         return False
     os.close(fd)

@@ -320,12 +320,13 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
 
 @contextmanager
 def claim_output(path: str | Path, *, what: str = "--out") -> Iterator[None]:
-    """Hold, for the block, an exclusive claim among processes on writing the output ``path``
-    (a ``flock`` on a lock file in its nearest existing folder, named by a hash of its absolute
-    path): a second command writing the same output fails at once, before its work, instead of
-    both running for minutes and the later silently replacing the earlier (an audit, 2026-11-30:
-    two ``calibrate`` runs into one --out both reported success).  Where no lock file can be made
-    (a folder this process cannot write), nothing is claimed: the output's own checks say why.
+    """Hold, for the block, an exclusive claim among this host's processes on writing the output
+    ``path`` (a ``flock`` on a lock file named by a hash of its real absolute path, in a folder of
+    the system's temporary directory - the same file however the path is spelled and whatever
+    folders the work creates): a second command writing the same output fails at once, before
+    its work, instead of both running for minutes and the later silently replacing the earlier
+    (an audit, 2026-11-30: two ``calibrate`` runs into one --out both reported success).  Where
+    no lock file can be made, nothing is claimed (logged).
 
     Raises
     ------
@@ -333,19 +334,19 @@ def claim_output(path: str | Path, *, what: str = "--out") -> Iterator[None]:
         Another process holds the claim.
     """
     import fcntl
-    import hashlib
+    import logging
 
-    target = Path(os.path.abspath(path))
-    folder = target.parent
-    while not folder.is_dir() and folder != folder.parent:
-        folder = folder.parent
-    lock = folder / f".simbench-out-{hashlib.sha256(os.fsencode(target)).hexdigest()[:16]}.lock"
-    while True:
+    target = Path(os.path.realpath(os.path.abspath(path)))
+    folder = Path(tempfile.gettempdir()) / f"simbench-outputs-{os.getuid()}"
+    lock = folder / f"{hashlib.sha256(os.fsencode(target)).hexdigest()[:32]}.lock"
+    fd = None
+    while fd is None:
         try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError:
-            yield
-            return
+            folder.mkdir(mode=0o700, exist_ok=True)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o600)
+        except OSError as exc:
+            logging.getLogger("simbench").debug("no claim on %s: %s", path, exc)
+            break
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -355,16 +356,18 @@ def claim_output(path: str | Path, *, what: str = "--out") -> Iterator[None]:
                 "wait for it to finish, or choose another folder"
             ) from None
         try:
-            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
-                break  # (else the holder removed the file between our open and our lock: again)
+            same = os.stat(lock).st_ino == os.fstat(fd).st_ino
         except FileNotFoundError:
-            pass
-        os.close(fd)
+            same = False
+        if not same:  # the holder removed the file between our open and our lock: again
+            os.close(fd)
+            fd = None
     try:
         yield
     finally:
-        lock.unlink(missing_ok=True)
-        os.close(fd)
+        if fd is not None:
+            lock.unlink(missing_ok=True)
+            os.close(fd)
 
 
 def _umask() -> int:

@@ -1081,3 +1081,20 @@ def test_a_signal_while_a_lock_is_taken_or_let_go_leaves_no_lock_file(tmp_path, 
         signal.signal(signal.SIGTERM, previous[0])
         signal.signal(signal.SIGINT, previous[1])
         termination._REQUESTED.clear()
+
+
+def test_the_write_probe_is_named_as_the_caches_own_temporaries(tmp_path, monkeypatch):
+    """A review: the read-only check's probe file, seen by another process checking a new, still
+    unmarked cache folder (two workers starting on one new cache), made it "not a simbench render
+    cache".  Left behind (the probing process stopped between its create and its delete), it is
+    one of the cache's own temporaries."""
+    import os
+
+    import simbench.cache as module
+    from simbench.cache import check_cache_folder
+
+    monkeypatch.setattr(os, "unlink", lambda path: None)
+    assert module._can_write(tmp_path)
+    monkeypatch.undo()
+    (probe,) = tmp_path.iterdir()
+    assert check_cache_folder(tmp_path) == tmp_path and module._is_own_name(probe.name)

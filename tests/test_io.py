@@ -1,3 +1,4 @@
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -255,20 +256,29 @@ def test_an_output_whose_listed_file_was_edited_needs_overwrite(tmp_path):
 def test_one_writer_of_an_output_at_a_time(tmp_path, capsys):
     """An audit (2026-11-30): two ``calibrate`` runs into one --out both reported success, the
     later silently replacing the earlier.  A second claim on an output (another process's - or
-    another open file description's, as here) fails at once, naming the output; the claim is
-    let go, and its lock file removed, when the block ends, by an error too.  Through the command
-    line: render and calibrate refuse before their work."""
+    another open file description's, as here) fails at once, naming the output, however the path
+    is spelled and after the first's work made its folders (a review: the lock had moved with the
+    nearest existing folder); the claim is let go, and its lock file removed, when the block ends,
+    by an error too.  Through the command line: render and calibrate refuse before their work."""
+    import os
     import subprocess
     import sys
 
     from simbench.cli import main
     from simbench.io import claim_output
 
-    out = tmp_path / "new" / "out"  # (its folder not made yet: the lock goes in the nearest one)
+    out = tmp_path / "new" / "out"
+    (tmp_path / "link").symlink_to(tmp_path)
     with claim_output(out):
+        locks = list(Path(tempfile.gettempdir(), f"simbench-outputs-{os.getuid()}").glob("*.lock"))
         with pytest.raises(ValueError, match=r"--out .*out: another process is writing it now"):
             with claim_output(out):
                 pass
+        out.mkdir(parents=True)  # the work made its folders
+        for spelling in (out, tmp_path / "link" / "new" / "out", f"{tmp_path}/new/../new/out"):
+            with pytest.raises(ValueError, match="another process is writing it now"):
+                with claim_output(spelling):
+                    pass
         with claim_output(tmp_path / "other"):  # another output: free
             pass
         # another process
@@ -282,10 +292,9 @@ def test_one_writer_of_an_output_at_a_time(tmp_path, capsys):
             assert main(argv) == 2
             err = capsys.readouterr().err
             assert err.count("\n") == 1 and "another process is writing it now" in err
-    assert not list(tmp_path.glob(".simbench-out-*")) and not (tmp_path / "new").exists()
+    assert locks and not any(p.exists() for p in locks)
     with pytest.raises(RuntimeError):
         with claim_output(out):
             raise RuntimeError("the work failed")
     with claim_output(out):  # let go
         pass
-    assert not list(tmp_path.glob(".simbench-out-*"))

@@ -14,7 +14,15 @@ import pytest
 from simbench.rig import scale_camera
 from simbench.sim.motion import MAX_SLICE_MOTION_PX, slice_times
 from simbench.sim.scene import load_scene, scene_fingerprint, scene_from_dict
-from simbench.sim.timeline import image_motion_px, is_moving, object_at, scene_at, slice_count, slice_spp
+from simbench.sim.timeline import (
+    image_motion_px,
+    image_speed_px_s,
+    is_moving,
+    object_at,
+    scene_at,
+    slice_count,
+    slice_spp,
+)
 
 from .conftest import SCENES
 
@@ -95,17 +103,18 @@ def test_image_motion_is_the_pinholes_closed_form():
     assert np.allclose(slice_times((0.0, 1.0), 4), [0.125, 0.375, 0.625, 0.875])
 
 
-def test_a_segments_length_in_view_is_the_brute_force_count():
-    """:func:`simbench.sim.timeline._in_view_length` (cut at the near plane, projected, clipped to
-    the image) against the segment sampled at 20001 points: the summed steps between consecutive
-    samples both in front and inside the image, to 1 % of the image's size."""
-    from simbench.sim.timeline import _in_view_length
+def test_a_segments_length_and_time_in_view_are_the_brute_force_counts():
+    """:func:`simbench.sim.timeline._in_view` (cut at the near plane, projected, clipped to the
+    image; the clip mapped back to the segment's time) against the segment sampled at 20001
+    points evenly in time: the summed steps between consecutive samples both in front and inside
+    the image, to 1 % of the image's size, and the share of the samples inside, to 0.001."""
+    from simbench.sim.timeline import _in_view
 
     cam = scale_camera(_plane_scene().rig, 0.25).camera
     rng = np.random.default_rng(5)
     p0 = rng.uniform([-0.4, -0.3, -0.5], [0.4, 0.3, 2.0], (300, 3))
     p1 = p0 + rng.normal(0.0, 0.6, (300, 3))
-    got = _in_view_length(p0, p1, cam, near_m=0.05)
+    got, share = _in_view(p0, p1, cam, near_m=0.05)
     s = np.linspace(0.0, 1.0, 20001)[:, None, None]
     pts = p0 + s * (p1 - p0)  # (S, N, 3)
     z = pts[..., 2]
@@ -115,7 +124,47 @@ def test_a_segments_length_in_view_is_the_brute_force_count():
     both = inside[1:] & inside[:-1]
     want = np.where(both, np.linalg.norm(np.diff(uv, axis=0), axis=-1), 0.0).sum(axis=0)
     assert (got > 0).sum() > 30 and (got == 0).sum() > 30  # both kinds drawn
+    assert ((share > 0.05) & (share < 0.95)).sum() > 10  # segments partly in view among them
     assert np.allclose(got, want, atol=0.01 * cam.width_px)
+    assert np.allclose(share, inside.mean(axis=0), atol=1e-3)
+
+
+def test_slices_keep_an_object_in_view_for_part_of_the_window_to_their_bound():
+    """A review: the count came from a point's whole in-view travel spread over the whole window,
+    so a ball crossing into the view during it moved ~2.5 px a slice (10x the bound).  Measured
+    by brute force on the slices' instants: no surface point in view at two consecutive
+    instants moves more than MAX_SLICE_MOTION_PX (5 % over: the count's 33 steps)."""
+    from simbench.sim.timeline import _surface_points
+
+    scene = scene_from_dict(
+        {
+            "name": "crossing",
+            "rig": "paper",
+            "object": [
+                {
+                    "type": "sphere",
+                    "name": "ball",
+                    "center_m": [-0.70, 0.0, 2.0],
+                    "radius_m": 0.05,
+                    "velocity_m_s": [2.0, 0.0, 0.0],
+                },
+                {"type": "plane", "name": "wall", "center_m": [0.0, 0.0, 2.5], "size_m": [4.0, 4.0]},
+            ],
+        }
+    )
+    cam = scale_camera(scene.rig, 0.25).camera
+    window = (0.0, 0.08)  # the ball enters the view ~50 ms in
+    n = slice_count(scene, cam, window)
+    ball = scene.objects[0]
+    pts = _surface_points(ball)
+    times = np.linspace(*window, n + 1)
+    at = np.stack([ball.motion.apply(pts, t, centre_m=np.asarray(ball.get("center_m"))) for t in times])
+    uv = cam.focal_px * at[..., :2] / at[..., 2:3] + (cam.cx_px, cam.cy_px)
+    inside = (uv[..., 0] >= -0.5) & (uv[..., 0] <= cam.width_px - 0.5)
+    step = np.linalg.norm(np.diff(uv, axis=0), axis=-1)
+    assert (inside[0] == 0).all() and inside[-1].any()  # out of view at the start, in at the end
+    assert step[inside[1:] & inside[:-1]].max() <= 1.05 * MAX_SLICE_MOTION_PX
+    assert n < 256
 
 
 def _floor_scene(**motion):
@@ -526,7 +575,8 @@ def test_the_truth_over_a_capture_holds_every_depth_a_pixel_saw(variant):
     gt_mid = ground_truth(mid)
     rec = SimpleNamespace(scene=scene, gt=SimpleNamespace(motion_px=np.zeros(1), depth_m=gt_mid.depth_m))
     truths = capture_truths(rec, window)
-    assert truths.shape == (math.ceil(image_motion_px(scene, cam, *window) / SWEEP_STEP_PX) + 1, *gt_mid.depth_m.shape)
+    reach = image_speed_px_s(scene, cam, *window) * (window[1] - window[0])
+    assert truths.shape == (math.ceil(reach / SWEEP_STEP_PX) + 1, *gt_mid.depth_m.shape)
     assert np.array_equal(truths[0], ground_truth(scene_at(scene, 0.0)).depth_m)
     assert np.array_equal(truths[-1], ground_truth(scene_at(scene, 0.02)).depth_m)
     row = cam.height_px // 2

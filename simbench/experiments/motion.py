@@ -39,7 +39,7 @@ from simbench.experiments.common import RunConfig, Session, Split, markdown_tabl
 from simbench.metrics import edge_band, wrong_pixels
 from simbench.report import figure_png
 from simbench.sim.motion import Motion
-from simbench.sim.timeline import image_motion_px, scene_at
+from simbench.sim.timeline import image_speed_px_s, scene_at
 from simbench.sim.truth import ground_truth
 
 if TYPE_CHECKING:
@@ -254,8 +254,9 @@ def capture_truths(rec: "Recording", window_s: tuple[float, float]) -> np.ndarra
     if rec.gt.motion_px is None:
         return rec.gt.depth_m[None]
     t0, t1 = window_s
-    travel = image_motion_px(scene, scene.rig.camera, t0, t1)
-    n = int(min(MAX_SWEEP_INSTANTS, max(2, math.ceil(travel / SWEEP_STEP_PX) + 1)))
+    # evenly spaced instants: the fastest in-view motion sets their count (timeline.slice_count)
+    reach = image_speed_px_s(scene, scene.rig.camera, t0, t1) * (t1 - t0)
+    n = int(min(MAX_SWEEP_INSTANTS, max(2, math.ceil(reach / SWEEP_STEP_PX) + 1)))
     pinhole = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
     return np.stack([ground_truth(scene_at(pinhole, float(t))).depth_m for t in np.linspace(t0, t1, n)])
 

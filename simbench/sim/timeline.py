@@ -16,7 +16,16 @@ from simbench.sim.scene import OBJECT_KIND_TABLE, SceneObject, SceneSpec, target
 if TYPE_CHECKING:
     from simbench.rig import Intrinsics
 
-__all__ = ["is_moving", "object_at", "scene_at", "image_motion_px", "motion_field_px", "slice_count", "slice_spp"]
+__all__ = [
+    "is_moving",
+    "object_at",
+    "scene_at",
+    "image_motion_px",
+    "image_speed_px_s",
+    "motion_field_px",
+    "slice_count",
+    "slice_spp",
+]
 
 
 def is_moving(scene: SceneSpec) -> bool:
@@ -108,7 +117,7 @@ def placement_warnings(scene: SceneSpec, *, window_s: tuple[float, float] = (0.0
                 "millimetres? `scale = 0.001` in its [[object]])"
             )
         if (track[..., 2] <= 0).all() and some_in_front:
-            during = " throughout the capture" if len(track) > 1 else ""
+            during = " throughout the capture" if len(track) > 1 and window_s[1] > window_s[0] else ""
             out.append(f"object {obj.name!r} lies wholly behind the camera (z <= 0 m){during}: no pixel sees it")
         elif _holds_the_camera(obj, pts):
             out.append(
@@ -159,12 +168,14 @@ def _surface_points(obj: SceneObject) -> np.ndarray:
     return np.unique(centre + faces @ axes, axis=0)
 
 
-def _in_view_length(p0: np.ndarray, p1: np.ndarray, camera: Intrinsics, *, near_m: float) -> np.ndarray:
-    """Per straight 3-D segment ``p0 -> p1`` (shape (N, 3) each, camera frame), the length
-    (camera pixels) of its image inside the image: the segment cut at the near plane ``near_m``
-    (what lies before it no pixel sees), projected (a straight segment in front of a pinhole
-    images to a straight segment) and clipped to the image rectangle (Liang-Barsky).  0 where no
-    part of it is in view."""
+def _in_view(p0: np.ndarray, p1: np.ndarray, camera: Intrinsics, *, near_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per straight 3-D segment ``p0 -> p1`` (shape (N, 3) each, camera frame, travelled at a
+    constant velocity): the length (camera pixels) of its image inside the image, and the share
+    of the segment's time spent there.  The segment is cut at the near plane ``near_m`` (what
+    lies before it no pixel sees), projected (a straight segment in front of a pinhole images to
+    a straight segment) and clipped to the image rectangle (Liang-Barsky); the clip's image
+    parameter ``s`` maps back to the segment's own ``u = s z0 / ((1 - s) z1 + s z0)``
+    (perspective-correct interpolation).  (0, 0) where no part of it is in view."""
     d = p1 - p0
     lo, hi = np.zeros(len(p0)), np.ones(len(p0))
     # z(t) = z0 + t dz >= near
@@ -176,9 +187,10 @@ def _in_view_length(p0: np.ndarray, p1: np.ndarray, camera: Intrinsics, *, near_
     flat_behind = (d[:, 2] == 0) & (p0[:, 2] < near_m)
     ok = (lo < hi) & ~flat_behind
     q0, q1 = p0 + lo[:, None] * d, p0 + hi[:, None] * d
+    z0, z1 = np.where(ok, q0[:, 2], 1.0), np.where(ok, q1[:, 2], 1.0)
     f = camera.focal_px
-    uv0 = f * q0[:, :2] / np.where(ok, q0[:, 2], 1.0)[:, None] + (camera.cx_px, camera.cy_px)
-    uv1 = f * q1[:, :2] / np.where(ok, q1[:, 2], 1.0)[:, None] + (camera.cx_px, camera.cy_px)
+    uv0 = f * q0[:, :2] / z0[:, None] + (camera.cx_px, camera.cy_px)
+    uv1 = f * q1[:, :2] / z1[:, None] + (camera.cx_px, camera.cy_px)
     e = uv1 - uv0
     s0, s1 = np.zeros(len(p0)), np.ones(len(p0))
     # the image's pixels span [-0.5, W - 0.5] x [-0.5, H - 0.5] (OpenCV centres)
@@ -192,7 +204,42 @@ def _in_view_length(p0: np.ndarray, p1: np.ndarray, camera: Intrinsics, *, near_
             s1 = np.where(ge < 0, np.minimum(s1, s), s1)
             ok &= ~((ge == 0) & (g0 < 0))
     ok &= s0 <= s1
-    return np.where(ok, np.clip(s1 - s0, 0.0, None) * np.linalg.norm(e, axis=1), 0.0)
+    length = np.where(ok, np.clip(s1 - s0, 0.0, None) * np.linalg.norm(e, axis=1), 0.0)
+
+    def back(s: np.ndarray) -> np.ndarray:  # image parameter -> the near-cut segment's own
+        return s * z0 / ((1.0 - s) * z1 + s * z0)
+
+    share = np.where(ok, (hi - lo) * np.clip(back(np.clip(s1, 0, 1)) - back(np.clip(s0, 0, 1)), 0.0, None), 0.0)
+    return length, share
+
+
+# the time steps over which a window's motion is followed (a point's path between two is taken
+# straight; 32 intervals keep a rotation's chord and a point's entry into the view within a few %
+# of the window)
+MOTION_STEPS = 33
+
+
+def _image_motion(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: float) -> tuple[float, float]:
+    """(:func:`image_motion_px`, :func:`image_speed_px_s`) of one pass over the points."""
+    from simbench.sim.mitsuba_dict import CAMERA_NEAR_CLIP_M
+
+    travel, speed = 0.0, 0.0
+    steps = np.linspace(t0_s, t1_s, MOTION_STEPS)
+    dt = (t1_s - t0_s) / (MOTION_STEPS - 1)
+    for obj in scene.objects:
+        if obj.motion is None or obj.motion.is_static:
+            continue
+        pts = _surface_points(obj)
+        position = np.asarray(dict(obj.params)[_position_key(obj)], np.float64)
+        tracks = np.stack([obj.motion.apply(pts, t, centre_m=position) for t in steps])  # (T, N, 3)
+        seen = [_in_view(a, b, camera, near_m=CAMERA_NEAR_CLIP_M) for a, b in zip(tracks[:-1], tracks[1:])]
+        travel = max(travel, float(np.max(sum(length for length, _ in seen))))
+        if dt > 0:
+            for length, share in seen:
+                moving = share > 0
+                if moving.any():
+                    speed = max(speed, float(np.max(length[moving] / (share[moving] * dt))))
+    return travel, speed
 
 
 def image_motion_px(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: float) -> float:
@@ -202,30 +249,30 @@ def image_motion_px(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: flo
     near plane or outside the image is left out, so an object reaching behind the camera (a floor)
     is measured on its part in view, and one that comes into view during the window on the path
     it travels there.  The points: samples of each object's bounds (:data:`FACE_SAMPLES`)."""
-    from simbench.sim.mitsuba_dict import CAMERA_NEAR_CLIP_M
+    return _image_motion(scene, camera, t0_s, t1_s)[0]
 
-    worst = 0.0
-    steps = np.linspace(t0_s, t1_s, 9)
-    for obj in scene.objects:
-        if obj.motion is None or obj.motion.is_static:
-            continue
-        pts = _surface_points(obj)
-        position = np.asarray(dict(obj.params)[_position_key(obj)], np.float64)
-        tracks = np.stack([obj.motion.apply(pts, t, centre_m=position) for t in steps])  # (T, N, 3)
-        seen = sum(_in_view_length(a, b, camera, near_m=CAMERA_NEAR_CLIP_M) for a, b in zip(tracks[:-1], tracks[1:]))
-        worst = max(worst, float(np.max(seen)))
-    return worst
+
+def image_speed_px_s(scene: SceneSpec, camera: Intrinsics, t0_s: float, t1_s: float) -> float:
+    """The fastest any point of a moving object moves across the image (camera pixels a second)
+    while in view between ``t0_s`` and ``t1_s`` (over each of :data:`MOTION_STEPS` - 1 steps, the
+    path it travels in view over the time it spends there); 0 for a static scene or an empty
+    window.  What sets time slices and truth instants evenly spaced over a window: an object in
+    view for part of the window (entering or leaving it) moves its whole image travel in that
+    part, and an object approaching the camera speeds up across the image."""
+    return _image_motion(scene, camera, t0_s, t1_s)[1]
 
 
 def slice_count(scene: SceneSpec, camera: Intrinsics, window_s: tuple[float, float]) -> int:
     """Time slices that integrate ``window_s`` (module docstring): 1 for a static scene or an
-    empty window; enough that no point moves more than :data:`MAX_SLICE_MOTION_PX` per slice,
-    at most :data:`MAX_SLICES`."""
+    empty window; enough that no point in view moves more than :data:`MAX_SLICE_MOTION_PX` per
+    slice (:func:`image_speed_px_s` times the slice's length), at most :data:`MAX_SLICES`."""
     t0, t1 = window_s
     if t1 <= t0 or not is_moving(scene):
         return 1
-    travel = image_motion_px(scene, camera, t0, t1)
-    return int(min(MAX_SLICES, max(1, math.ceil(travel / MAX_SLICE_MOTION_PX))))
+    # evenly spaced slices: the fastest in-view motion sets the count (a review: the whole travel
+    # of an object in view for part of the window fell into fewer slices than it needs)
+    reach = image_speed_px_s(scene, camera, t0, t1) * (t1 - t0)
+    return int(min(MAX_SLICES, max(1, math.ceil(reach / MAX_SLICE_MOTION_PX))))
 
 
 def slice_spp(spp: int, n: int) -> int:

@@ -591,6 +591,8 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
     else:
         thresholded = None
     over = f"; overriding the recording: rig {request.rig} instead of the recorded one" if request.rig else ""
+    if info.uses_scene_rig and not request.rig:  # the rig its depth was triangulated with, always
+        over = f", rig {Path(request.capture) / 'rig.toml'}"
     meaning = info.confidence + (
         f"; and, by --min-confidence, below {request.min_confidence:g}{over_floor}"
         if request.min_confidence is not None

@@ -362,6 +362,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     )
     over = "; overriding the recording: " + ", ".join(overrides) if overrides else ""
+    rig_named = any(o.startswith("rig ") for o in overrides)
     # the point cloud's colours: an 8-bit capture's values as stored (an encoded one's too, not its
     # linearised light, which would show dark)
     shown = capture if encoding == "linear" else load_image(capture_path, expected_size_hw=rig.camera.size_hw)
@@ -400,7 +401,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         confidence=result.confidence,
         camera=rig.camera,
         # the rig the depth was triangulated with, always (an audit: named only when --rig overrode it)
-        summary=f"{params.mode} mode{z0_note}{ref_note}{'' if over else f', rig {rig_path}'}{over}",
+        summary=f"{params.mode} mode{z0_note}{ref_note}{'' if rig_named else f', rig {rig_path}'}{over}",
         confidence_meaning=meaning,
         elapsed_s=dt,
         # on the ideal pinhole grid the points are on (an audit: the raw capture's colours sat up to

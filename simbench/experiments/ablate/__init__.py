@@ -41,7 +41,8 @@ Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
   object's rotation about the vertical axis), ``scene.speed_m_s`` and ``scene.motion`` (the first
   object moving ``lateral``-ly or ``axial``-ly at that speed during the exposure:
   :mod:`simbench.sim.motion`), ``scene.spin_deg_s`` (the first object turning at that rate about
-  the vertical axis through it);
+  the vertical axis through it, or its scene file's own rotation axis and centre where it gives
+  them);
 - ``run.spp``, ``run.sampler``, ``run.camera_scale``, ``run.max_depth``.
 
 Execution: a local process pool (``workers``) or a Dask distributed cluster (``scheduler``); each
