@@ -279,8 +279,10 @@ def output_directory(path: str | Path, *, manifest: str | Sequence[str], overwri
     """
     import shutil
 
-    path = Path(path)
     check_output_directory(path, manifest=manifest, overwrite=overwrite)
+    # the folder the path names (a new user's "x/../out", x missing, failed on a raw errno after
+    # making x: the kernel resolves "x/.." only once x exists)
+    path = Path(os.path.realpath(path))
     created = _make_parents(path)
     _remove_stale_siblings(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-{os.getpid()}-", dir=path.parent))
@@ -426,9 +428,10 @@ def save_npy(path: str | Path, array: np.ndarray) -> Path:
 
 
 def _make_parents(path: Path) -> list[Path]:
-    """Create ``path``'s missing parent folders; returns them, outermost first."""
+    """Create ``path``'s missing parent folders (of its real path: ``x/../out`` is ``out``);
+    returns them, outermost first."""
     missing = []
-    d = path.parent
+    d = Path(os.path.realpath(path)).parent
     while not d.exists():
         missing.append(d)
         d = d.parent
@@ -533,7 +536,8 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
         for path, data in files.items():
             path = Path(path)
             created += _make_parents(path)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
+            real_dir = Path(os.path.realpath(path)).parent  # (x/../d.npy with x missing: d.npy)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=real_dir)
             staged.append((tmp, path))
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
@@ -554,7 +558,7 @@ def write_files(files: dict[str | Path, bytes]) -> list[Path]:
     try:
         with termination.held():  # Ctrl-C or SIGTERM between two renames would leave a mixed set
             for tmp, path in staged:
-                os.replace(tmp, path)
+                os.replace(tmp, Path(tmp).parent / path.name)
     finally:  # a rename that failed leaves no temporary file behind
         for tmp, _ in staged:
             if os.path.exists(tmp):

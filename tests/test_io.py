@@ -269,8 +269,10 @@ def test_one_writer_of_an_output_at_a_time(tmp_path, capsys):
 
     out = tmp_path / "new" / "out"
     (tmp_path / "link").symlink_to(tmp_path)
+    folder = Path(tempfile.gettempdir(), f"simbench-outputs-{os.getuid()}")
+    others = set(folder.glob("*.lock"))  # (other processes' claims)
     with claim_output(out):
-        locks = list(Path(tempfile.gettempdir(), f"simbench-outputs-{os.getuid()}").glob("*.lock"))
+        locks = set(folder.glob("*.lock")) - others
         with pytest.raises(ValueError, match=r"--out .*out: another process is writing it now"):
             with claim_output(out):
                 pass
@@ -298,3 +300,17 @@ def test_one_writer_of_an_output_at_a_time(tmp_path, capsys):
             raise RuntimeError("the work failed")
     with claim_output(out):  # let go
         pass
+
+
+def test_an_output_path_through_a_missing_folder_and_back_is_the_folder_it_names(tmp_path, monkeypatch):
+    """A hands-on run (2026-11-30): ``render --out ./x/../out`` with no x made x, then failed on a
+    raw "[Errno 17] File exists: 'x/..'" (the kernel resolves x/.. only once x exists).  The real
+    path is written: out, and no x; a file output likewise."""
+    from simbench.io import output_directory, write_files
+
+    monkeypatch.chdir(tmp_path)
+    with output_directory("x/../out", manifest="m.json") as tmp:
+        (tmp / "m.json").write_text('{"files": {}}')
+    assert (tmp_path / "out" / "m.json").is_file() and not (tmp_path / "x").exists()
+    assert write_files({"y/../f.bin": b"abc"}) == [Path("y/../f.bin")]
+    assert (tmp_path / "f.bin").read_bytes() == b"abc" and not (tmp_path / "y").exists()
