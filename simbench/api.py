@@ -250,7 +250,8 @@ def record(
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
         meta = {**acq.meta, **_scene_record(scene, spec)}
         told_all = recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern))
-        told_all += exposure_warnings(rec.raw, acq.scene, sensor_model)
+        if (np.asarray(rec.gt.object_id) >= 0).any():  # (none seen: the render's own error says it)
+            told_all += exposure_warnings(rec.raw, acq.scene, sensor_model)
         told_all += motion_warnings(acq.scene, rec.gt, the_system)
         for told in told_all:
             warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
@@ -263,7 +264,8 @@ def record(
         the_system, prepared, spec.name, seeds=seeds, render=render_settings, calibration=calibration, prepared=True
     )[0]
     told_all = [*recording_warnings(spec, rec.gt), *motion_warnings(rec.scene, rec.gt, the_system)]
-    if takes is None or "sensor" in takes:  # (a system recording through our sensor model)
+    seen = (np.asarray(rec.gt.object_id) >= 0).any()  # (none seen: the render's own error says it)
+    if seen and (takes is None or "sensor" in takes):  # (a system recording through our sensor model)
         told_all += exposure_warnings(rec.raw, rec.scene, sensor_model)
     for told in told_all:
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)

@@ -26,9 +26,12 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from simbench.rig import Rig
 
 __all__ = [
     "DecodeRequest",
@@ -196,7 +199,15 @@ def recording_manifest_of(path: str | Path) -> dict | None:
     return None
 
 
-def refuse_another_rig(rig, recorded, *, rig_path, capture, hint: str = "", label: str | None = None) -> None:
+def refuse_another_rig(
+    rig: Rig,
+    recorded: Rig,
+    *,
+    rig_path: str | Path | None,
+    capture: str | Path,
+    hint: str = "",
+    label: str | None = None,
+) -> None:
     """A ValueError when ``rig`` (given as ``--rig rig_path``; ``label`` names it otherwise)
     describes another device than the rig ``capture`` was recorded with
     (:func:`simbench.rig.rig_differences`): a recording decodes with its own rig or a calibration
@@ -616,7 +627,9 @@ def _decode_folder(system: Any, request: DecodeRequest) -> FileDecode:
 RIG_CHECK_DEPTH_M = 1.0
 
 
-def check_rig_on_a_plane(rig, recorded, *, rig_path, capture, label: str | None = None) -> None:
+def check_rig_on_a_plane(
+    rig: Rig, recorded: Rig, *, rig_path: str | Path | None, capture: str | Path, label: str | None = None
+) -> None:
     """A ``--rig`` (``label`` names it otherwise) for a recording decoded by triangulation with
     no reference plane (phase shifting): a fronto-parallel plane at :data:`RIG_CHECK_DEPTH_M`,
     seen through the recorded rig (each ideal pixel's projector column), triangulated with

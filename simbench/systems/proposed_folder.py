@@ -16,11 +16,16 @@ import logging
 import time
 from collections import ChainMap
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simbench.optics import undistort_image
 from simbench.pattern import PatternSpec
+
+if TYPE_CHECKING:
+    from simbench.decode import ReferenceMap
+    from simbench.rig import Rig
 
 from simbench.systems.files import (
     WORKING_RANGE_M,
@@ -423,11 +428,11 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
 
 
 def check_reference_plane(
-    reference,
-    rig,
+    reference: ReferenceMap,
+    rig: Rig,
     *,
-    reference_path,
-    rig_path,
+    reference_path: str | Path,
+    rig_path: str | Path,
     z0_assumed: bool = False,
     recorded_z0: bool = False,
     mode: str = "calibrated",
