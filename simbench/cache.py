@@ -229,19 +229,11 @@ READ_ONLY_ERRNOS = (errno.EROFS, errno.EACCES, errno.EPERM)
 def _can_write(root: Path) -> bool:
     """Whether this process can create a file in the folder ``root`` (a probe: ``os.access``
     passes for root on a read-only mount)."""
-    if not os.access(root, os.W_OK | os.X_OK):
-        return False
-    import tempfile
+    from simbench.io import write_probe
 
-    try:
-        # named as the cache's own temporaries (_TEMP_RE): another process checking a new, still
-        # unmarked cache folder meanwhile must not take the probe for a user's file (a review)
-        fd, probe = tempfile.mkstemp(dir=root, prefix=".CACHEDIR.", suffix=".tmp")
-    except OSError:
-        return False
-    os.close(fd)
-    os.unlink(probe)
-    return True
+    # the probe named as the cache's own temporaries (_TEMP_RE): another process checking a new,
+    # still unmarked cache folder meanwhile must not take it for a user's file (a review)
+    return os.access(root, os.W_OK | os.X_OK) and write_probe(root, prefix=".CACHEDIR.", suffix=".tmp") is None
 
 
 # what the command line adds to a cache folder's error

@@ -473,17 +473,26 @@ def check_output_folder(path: str | Path, *, what: str = "output") -> Path:
         raise ValueError(f"{what}: {d} is a file, so {path} cannot be created")
     if not os.access(d, os.W_OK | os.X_OK):
         raise ValueError(f"{what}: cannot write in {d} (permission denied or a read-only file system)")
-    # os.access passes for root where a write still fails (/proc, /sys, some network mounts): a probe
-    try:
-        fd, probe = tempfile.mkstemp(dir=d, prefix=".simbench-probe-")
-    except OSError as exc:
+    exc = write_probe(d)
+    if exc is not None:
         # (a new user's audit: "--ply /proc/nope/c.ply" read "cannot write in /proc" - the folder to
         # be made is what fails, named now)
         target = d if d == path else f"{path}: cannot create it in {d}"
         raise ValueError(f"{what}: cannot write in {target} ({exc.strerror or exc})") from None
+    return path
+
+
+def write_probe(folder: str | Path, *, prefix: str = ".simbench-probe-", suffix: str = "") -> OSError | None:
+    """None if this process can create a file in ``folder`` (a probe file made there and
+    removed: ``os.access`` passes for root where a write still fails - /proc, /sys, a read-only
+    mount), else the error."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=prefix, suffix=suffix)
+    except OSError as exc:
+        return exc
     os.close(fd)
     os.unlink(probe)
-    return path
+    return None
 
 
 def check_own_folder(path: str | Path, *, marker: str, written_by: str, what: str) -> Path:
