@@ -876,13 +876,41 @@ def prune_cache(
     return PruneResult(removed, _leftovers(root, now_s=now_s, remove=not dry_run))
 
 
+def damaged_entries(root: str | Path) -> list[Path]:
+    """The damaged entries of the cache folder ``root``, by name: files named as entries
+    (``KIND-KEY.npz``) that begin as an entry does (a zip's local header) but are not readable as
+    one - truncated, bit-flipped (:func:`cache_entries` leaves them out; a look-up removes and
+    re-makes them).  A file of an entry's name that is no zip at all is not taken for one (a
+    user's, :func:`prune_cache` never touches it).  Entries are written whole under a temporary
+    name and renamed, so a file of an entry's name is never one being written."""
+    root = check_cache_folder(root)
+
+    def zip_begun(path: str) -> bool:
+        try:
+            with open(path, "rb") as fh:
+                return fh.read(4) == b"PK\x03\x04"
+        except OSError:
+            return False
+
+    with os.scandir(root) as it:
+        return sorted(
+            Path(e.path)
+            for e in it
+            if _ENTRY_RE.fullmatch(e.name)
+            and e.is_file(follow_symlinks=False)
+            and zip_begun(e.path)
+            and not _is_entry_file(e.path)
+        )
+
+
 def _leftovers(root: Path, *, now_s: float, remove: bool) -> list[Path]:
-    """Temporary files of killed writers, and lock files no process holds (removed if
-    ``remove``); only files named as the cache's own, and no lock with content (ours are
-    empty)."""
+    """Temporary files of killed writers, lock files no process holds and damaged entries
+    (:func:`damaged_entries`; removed if ``remove``); only files named as the cache's own, and no
+    lock with content (ours are empty)."""
     import fcntl
 
     out = []
+    damaged = set(damaged_entries(root))
     for e in os.scandir(root):
         if not e.is_file(follow_symlinks=False):
             continue
@@ -891,7 +919,11 @@ def _leftovers(root: Path, *, now_s: float, remove: bool) -> list[Path]:
             st = e.stat(follow_symlinks=False)
         except FileNotFoundError:
             continue
-        if _TEMP_RE.fullmatch(e.name):
+        if p in damaged:  # (as a look-up removes one)
+            out.append(p)
+            if remove:
+                p.unlink(missing_ok=True)
+        elif _TEMP_RE.fullmatch(e.name):
             if now_s - st.st_mtime > STALE_TEMP_S:
                 out.append(p)
                 if remove:

@@ -1098,3 +1098,27 @@ def test_the_write_probe_is_named_as_the_caches_own_temporaries(tmp_path, monkey
     monkeypatch.undo()
     (probe,) = tmp_path.iterdir()
     assert check_cache_folder(tmp_path) == tmp_path and module._is_own_name(probe.name)
+
+
+def test_damaged_entries_are_counted_by_info_and_removed_by_prune(tmp_path, capsys):
+    """An audit (2026-11-30): a damaged entry (truncated, overwritten) was seen by neither `cache
+    info` nor `cache prune` - kept for ever unless looked up.  Now info counts it and prune removes
+    it (as a look-up does), never a good entry or a user's file."""
+    from simbench.cache import damaged_entries, prune_cache
+    from simbench.cli import main
+
+    cache = RenderCache(tmp_path)
+    cache.get_or_make("radiance", {"x": 1}, lambda: {"a": np.arange(3.0)})
+    cache.get_or_make("radiance", {"x": 2}, lambda: {"a": np.arange(4.0)})
+    good, bad = sorted(tmp_path.glob("radiance-*.npz"))
+    bad.write_bytes(bad.read_bytes()[:40])  # truncated
+    (tmp_path / "notes.txt").write_text("mine")  # (a user's file in a marked cache: never touched)
+    assert damaged_entries(tmp_path) == [bad]
+    assert main(["cache", "info", "--cache", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 entries" in out and "and 1 damaged (files named as entries, not readable as one: 40 B" in out
+    would = prune_cache(tmp_path, max_bytes=1 << 30, dry_run=True)
+    assert would.leftovers == [bad] and bad.exists()
+    assert main(["cache", "prune", "--cache", str(tmp_path), "--max-size", "1G"]) == 0
+    assert "1 leftovers (killed writers', damaged entries)" in capsys.readouterr().out
+    assert not bad.exists() and good.exists() and (tmp_path / "notes.txt").exists()

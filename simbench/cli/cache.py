@@ -25,18 +25,25 @@ def _default_not_made(args) -> bool:
 def _cmd_cache_info(args) -> int:
     import shutil
 
-    from simbench.cache import cache_entries
+    from simbench.cache import cache_entries, damaged_entries
 
     if _default_not_made(args):
         print(f"cache {args.cache}: not made yet (0 entries: the first render makes it)")
         return 0
     entries = cache_entries(args.cache)
+    damaged = damaged_entries(args.cache)
     kinds: dict[str, list] = {}
     for c in entries:
         kinds.setdefault(c.kind, []).append(c)
     total = sum(c.size_bytes for c in entries)
     free = shutil.disk_usage(args.cache).free
     print(f"cache {args.cache}: {len(entries)} entries, {human_bytes(total)} ({human_bytes(free)} free on its disk)")
+    if damaged:  # (an audit: unseen, and never pruned)
+        size = sum(p.stat().st_size for p in damaged if p.exists())
+        print(
+            f"  and {len(damaged)} damaged (files named as entries, not readable as one: {human_bytes(size)}; each is "
+            "made again when next needed, `simbench cache prune` removes them)"
+        )
     if not entries:
         return 0
 
@@ -73,7 +80,7 @@ def _cmd_cache_prune(args) -> int:
     if args.dry_run:
         for path in result.paths:
             print(f"would remove {path}")
-    extra = f" and {len(result.leftovers)} leftovers of killed writers" if result.leftovers else ""
+    extra = f" and {len(result.leftovers)} leftovers (killed writers', damaged entries)" if result.leftovers else ""
     rules = []
     if args.unused_days is not None:
         rules.append(f"those unused for {args.unused_days:g} days")
