@@ -252,6 +252,15 @@ def record(
         told_all = recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern))
         if (np.asarray(rec.gt.object_id) >= 0).any():  # (none seen: the render's own error says it)
             told_all += exposure_warnings(rec.raw, acq.scene, sensor_model)
+            if calibration is not None:  # the white board itself (a docs check: room light at 0.5 of the
+                # projector's white clipped 3.2 % of the reference plane and none of the capture, unsaid)
+                told_all += exposure_warnings(
+                    calibration.image,
+                    acq.scene,
+                    sensor_model,
+                    what="reference plane's capture",
+                    clipped_share=CLIPPED_REFERENCE_SHARE,
+                )
         told_all += motion_warnings(acq.scene, rec.gt, the_system)
         for told in told_all:
             warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
@@ -334,16 +343,25 @@ def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None
 # under DARK_CAPTURE_LEVEL of full scale
 CLIPPED_CAPTURE_SHARE = 0.05
 DARK_CAPTURE_LEVEL = 0.02
+# ... and the reference plane's capture - the white board the auto exposure puts at 70 % of the full
+# well: none of it clips unless something else adds light (a docs check: room light at 0.5 of the
+# projector's white clipped 3.2 % of it, under the capture's bound)
+CLIPPED_REFERENCE_SHARE = 0.01
 
 
-def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
+def exposure_warnings(
+    raw: np.ndarray, scene: SceneSpec, sensor, *, what: str = "capture", clipped_share: float = CLIPPED_CAPTURE_SHARE
+) -> list[str]:
     """What a recording's exposure spoiled: a capture clipped over more than
     :data:`CLIPPED_CAPTURE_SHARE` of its pixels (with the reasons the sensor model gives: the
     auto exposure meters the projector's white on the board, not the room's light or the dark
     current), or one nearly black.  ``raw``: the capture as recorded (integer codes of
     ``sensor``'s ADC, clipped at its top or the full well's code if lower; or floats in [0, 1];
     (H, W, 3), or (K, H, W) frames, whose pixels count once a frame).  Phase shifting's frames
-    are grey (the channels' mean): a pixel clipped in one channel only does not show in them."""
+    are grey (the channels' mean): a pixel clipped in one channel only does not show in them.
+    ``what``: the image's name in the warning, ``clipped_share`` its bound (the reference plane's
+    capture is checked too, at :data:`CLIPPED_REFERENCE_SHARE`: the white board the auto exposure
+    is set on is where room light clips first)."""
     from simbench.sim.sensor import PhysicalCamera
 
     a = np.asarray(raw)
@@ -359,7 +377,7 @@ def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
     clipped = full.any(axis=-1) if a.ndim == 3 and a.shape[-1] == 3 else full
     share = float(clipped.mean()) if clipped.size else 0.0
     out = []
-    if share > CLIPPED_CAPTURE_SHARE:
+    if share > clipped_share:
         why = []
         if isinstance(cam, PhysicalCamera):
             from simbench.sim.photometry import exposure_s, white_board
@@ -383,14 +401,14 @@ def exposure_warnings(raw: np.ndarray, scene: SceneSpec, sensor) -> list[str]:
             if dark > 0.1 * cam.full_well_e:
                 why.append(f"dark current alone fills {100 * min(1.0, dark / cam.full_well_e):.0f} % of the full well")
         out.append(
-            f"{100 * share:.1f} % of the capture's pixels are clipped in some channel"
+            f"{100 * share:.1f} % of the {what}'s pixels are clipped in some channel"
             + (f": {'; '.join(why)}" if why else "")
             + " - their fringe is lost and a decode leaves them out"
         )
     elif a.size and float(a.max()) - black < DARK_CAPTURE_LEVEL * (top - black):
         above = f" ({black:g} the black level)" if black else ""
         out.append(
-            f"the capture is dark: its brightest value is {float(a.max()):.4g} of {top:g}{above} - too short an "
+            f"the {what} is dark: its brightest value is {float(a.max()):.4g} of {top:g}{above} - too short an "
             "exposure, too little light or too little gain for a fringe above the noise"
         )
     return out

@@ -878,9 +878,11 @@ def prune_cache(
 
 def damaged_entries(root: str | Path) -> list[Path]:
     """The damaged entries of the cache folder ``root``, by name: files named as entries
-    (``KIND-KEY.npz``) that begin as an entry does (a zip's local header) but are not readable as
-    one - truncated, bit-flipped (:func:`cache_entries` leaves them out; a look-up removes and
-    re-makes them).  A file of an entry's name that is no zip at all is not taken for one (a
+    (``KIND-KEY.npz``) that begin as an entry does (a zip's local header) but whose zip directory
+    is unreadable or lacks the entry's checksum - truncated, overwritten (:func:`cache_entries`
+    leaves them out; a look-up removes and re-makes them).  One damaged inside its arrays (a
+    flipped byte) is found by a look-up's checksum only (reading every entry's arrays here would
+    take minutes).  A file of an entry's name that is no zip at all is not taken for one (a
     user's, :func:`prune_cache` never touches it).  Entries are written whole under a temporary
     name and renamed, so a file of an entry's name is never one being written."""
     root = check_cache_folder(root)

@@ -166,6 +166,13 @@ def test_a_clipped_or_dark_capture_is_warned_of_with_the_sensors_reasons():
     assert "the exposure set, 13.1 s" in told and "dark current alone fills 100 % of the full well" in told
     (told,) = exposure_warnings(np.full((4, 5, 3), 3, np.uint8), scene, paper)
     assert told.startswith("the capture is dark: its brightest value is 3 of 255")
+    # the reference plane's capture (the white board) at its own, lower bound: 1 row of 38 clipped
+    from simbench.api import CLIPPED_REFERENCE_SHARE
+
+    (told,) = exposure_warnings(
+        glossy[2:], scene, paper, what="reference plane's capture", clipped_share=CLIPPED_REFERENCE_SHARE
+    )
+    assert told.startswith("2.6 % of the reference plane's capture's pixels are clipped")
     twelve = dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, bits=12))
     assert exposure_warnings(np.full((4, 5, 3), 255, np.uint16), scene, twelve) == []  # 255 of 4095
     frames = np.ones((12, 4, 5), np.float32)  # phase shifting's grey frames in [0, 1]
