@@ -1871,52 +1871,45 @@ void crease_bias(int64_t h, int64_t w, const float *restrict col, int64_t reach,
     }
 }
 
-/* The bend of an (h, w) float32 column map beside its depth edges and holes
- * (simbench.decode.depth.edge_bend_bias).  Per row, the runs of finite columns whose steps between
- * neighbours are at most max_step; at each end of a run that a hole or a larger step ends (not the
- * row's end), when the run is at least reach + fit long: the least-squares line through the fit
- * columns reach to reach + fit - 1 pixels from the end (in double, sums in order from the end),
- * extrapolated to the reach columns nearest the end; out = |column - line| there as float (the
- * larger where both ends of a run reach a pixel), 0 elsewhere.  With conf (NULL: not written):
- * conf = fminf(conf, kappa / out) where valid (the pipeline's confidence cap, in the same call). */
-void edge_bend(int64_t h, int64_t w, const float *restrict col, int64_t reach, int64_t fit, float max_step,
-               float *restrict out, float kappa, const uint8_t *restrict valid, float *restrict conf) {
+/* edge_bend's pass over n_lines lines of len pixels each, element x of line l at l * ls + x * ps
+ * (rows: ls = w, ps = 1; columns: ls = 1, ps = w): out = the larger of out and each pixel's bend
+ * (out zeroed by the caller). */
+static inline void edge_bend_lines(int64_t n_lines, int64_t len, int64_t ls, int64_t ps, const float *restrict col,
+                                   int64_t reach, int64_t fit, float max_step, float *restrict out) {
+    if (reach < 1 || fit < 2)
+        return;
     /* the fit's abscissae are u = 0 .. fit - 1 counted from the fit's end nearest the edge */
     const double n = (double)fit, su = n * (n - 1.0) / 2.0, suu = (n - 1.0) * n * (2.0 * n - 1.0) / 6.0;
     const double det = n * suu - su * su;
-    for (int64_t r = 0; r < h; r++) {
-        const float *c = col + r * w;
-        float *o = out + r * w;
-        for (int64_t x = 0; x < w; x++)
-            o[x] = 0.0f;
-        if (reach < 1 || fit < 2)
-            continue;
+    for (int64_t l = 0; l < n_lines; l++) {
+        const float *c = col + l * ls;
+        float *o = out + l * ls;
         int64_t s = 0;
-        while (s < w) {
-            if (!(c[s] == c[s])) {
+        while (s < len) {
+            if (!(c[s * ps] == c[s * ps])) {
                 s++;
                 continue;
             }
             int64_t e = s;
-            while (e + 1 < w && fabsf(c[e + 1] - c[e]) <= max_step)
+            while (e + 1 < len && fabsf(c[(e + 1) * ps] - c[e * ps]) <= max_step)
                 e++;
-            /* the run [s, e]; its ends: e (dir -1: the fit lies to the left) if a hole or a step
+            /* the run [s, e]; its ends: e (dir -1: the fit lies before it) if a hole or a step
              * follows, s (dir +1) if one precedes */
             if (e - s + 1 >= reach + fit) {
                 for (int side = 0; side < 2; side++) {
                     const int64_t end = side == 0 ? e : s, dir = side == 0 ? -1 : 1;
-                    if ((side == 0 && e + 1 >= w) || (side == 1 && s == 0))
+                    if ((side == 0 && e + 1 >= len) || (side == 1 && s == 0))
                         continue;
-                    const int64_t f0 = end + dir * reach; /* the fit's first column (u = 0) */
+                    const int64_t f0 = end + dir * reach; /* the fit's first pixel (u = 0) */
                     double sy = 0.0, suy = 0.0;
                     for (int64_t u = 0; u < fit; u++) {
-                        const double y = (double)c[f0 + dir * u];
+                        const double y = (double)c[(f0 + dir * u) * ps];
                         sy += y;
                         suy += (double)u * y;
                     }
                     const double slope = (n * suy - su * sy) / det, icpt = (sy - slope * su) / n;
                     for (int64_t k = 1; k <= reach; k++) {
-                        const int64_t x = f0 - dir * k; /* u = -k */
+                        const int64_t x = (f0 - dir * k) * ps; /* u = -k */
                         const float d = fabsf((float)((double)c[x] - (icpt - slope * (double)k)));
                         if (d > o[x])
                             o[x] = d;
@@ -1925,7 +1918,27 @@ void edge_bend(int64_t h, int64_t w, const float *restrict col, int64_t reach, i
             }
             s = e + 1;
         }
-        if (conf)
-            cap_confidence_row(w, o, kappa, valid + r * w, conf + r * w);
     }
+}
+
+/* The bend of an (h, w) float32 column map beside its depth edges and holes
+ * (simbench.decode.depth.edge_bend_bias).  Per row, the runs of finite columns whose steps between
+ * neighbours are at most max_step; at each end of a run that a hole or a larger step ends (not the
+ * row's end), when the run is at least reach + fit long: the least-squares line through the fit
+ * columns reach to reach + fit - 1 pixels from the end (in double, sums in order from the end),
+ * extrapolated to the reach columns nearest the end; out = |column - line| there as float (the
+ * larger where both ends of a run reach a pixel), 0 elsewhere.  Then the same down each image
+ * column with reach_y and fit_y (a depth edge across the rows; reach_y 0: not read), out the
+ * larger of the two.  With conf (NULL: not written): conf = fminf(conf, kappa / out) where valid
+ * (the pipeline's confidence cap, in the same call). */
+void edge_bend(int64_t h, int64_t w, const float *restrict col, int64_t reach, int64_t fit, int64_t reach_y,
+               int64_t fit_y, float max_step, float *restrict out, float kappa, const uint8_t *restrict valid,
+               float *restrict conf) {
+    for (int64_t i = 0; i < h * w; i++)
+        out[i] = 0.0f;
+    edge_bend_lines(h, w, w, 1, col, reach, fit, max_step, out);
+    edge_bend_lines(w, h, 1, w, col, reach_y, fit_y, max_step, out);
+    if (conf)
+        for (int64_t r = 0; r < h; r++)
+            cap_confidence_row(w, out + r * w, kappa, valid + r * w, conf + r * w);
 }

@@ -556,7 +556,9 @@ def _decoding_rig(rig, recorded: Recorded, options, *, mode: str) -> Rig:
             pattern=recorded.pattern or system.pattern, z0_m=recorded.recording.scene.reference_depth_m
         )
         plane = recorded.calibration.reference_map(params, rig=rig)
-        check_reference_plane(plane, rig, reference_path="of the recording", rig_path=name, recorded_z0=True, mode=mode)
+        check_reference_plane(
+            plane, rig, reference_path="of the recording", rig_path=name, recorded_z0=True, mode=mode, rig_option="rig="
+        )
     else:
         check_rig_on_a_plane(rig, recorded_rig, rig_path=None, capture="the recording", label=label)
     return rig

@@ -143,7 +143,7 @@ def test_depth_refuses_what_it_cannot_do():
         simbench.depth(rec, decoder="robust")
 
 
-def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path):
+def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplog):
     """``depth(rig=...)``: the rig the decoder believes, a Rig or a TOML (an audit, 2026-11-30:
     the API had no way to decode with a calibrated rig).  The recorded rig gives the same depth;
     a calibration 0.3 % long in baseline moves calibrated-mode depth by ~0.3 % and reference-mode
@@ -172,6 +172,11 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path):
     small = dataclasses.replace(recorded_rig, camera=dataclasses.replace(recorded_rig.camera, width_px=640))
     with pytest.raises(ValueError, match="camera 640x"):
         simbench.depth(rec, rig=small)
+    # 1.5 % long: warned, in the API's own words (the command line's advice named --rig)
+    warned = dataclasses.replace(recorded_rig, position_m=tuple(1.015 * x for x in recorded_rig.position_m))
+    with caplog.at_level("WARNING", logger="simbench"):
+        simbench.depth(rec, mode="calibrated", rig=warned)
+    assert "the rig given (rig=) is not the one it was recorded with" in caplog.text and "--rig" not in caplog.text
     # inside rig_differences' tolerances, but its reference plane 4 % off its Z0: not a calibration of it
     off = dataclasses.replace(recorded_rig, position_m=tuple(1.04 * x for x in recorded_rig.position_m))
     with pytest.raises(ValueError, match="reference plane of the recording triangulates with the rig"):

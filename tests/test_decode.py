@@ -914,6 +914,13 @@ def test_edge_bend_bias_is_the_maps_distance_from_its_line_beside_an_edge_and_no
     assert np.all(got[:189] == 0.0) and got[199] > 1.2
     with pytest.raises(ValueError, match="column_px"):
         edge_bend_bias(np.zeros(5, np.float32), reach_px=reach, fit_px=fit, max_step_px=3.0)
+    # down the columns: the same maps turned a quarter, with the rows' pass off and on
+    turned = np.ascontiguousarray(maps.T)
+    alone = edge_bend_bias(turned, reach_px=0, fit_px=0, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
+    assert np.array_equal(alone, edge_bend_bias(maps, reach_px=reach, fit_px=fit, max_step_px=3.0).T)
+    assert not edge_bend_bias(turned, reach_px=reach, fit_px=fit, max_step_px=3.0).any()  # rows: no edge
+    both = edge_bend_bias(turned, reach_px=reach, fit_px=fit, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
+    assert np.array_equal(both, alone)
 
 
 def _corner_capture(opening_deg: float, crease_m: float = 1.2):

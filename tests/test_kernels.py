@@ -882,6 +882,22 @@ def test_edge_bend_matches_numpy():
     got = np.empty_like(col)
     depth._kernels.edge_bend(col, 11, 22, 3.0, got)
     assert (got[7, 89:100] > 0).all() and got[7, 99] > 1.5 and (got[7, :89] == 0).all()
+    # down the columns: the numpy form of the map turned a quarter, the larger of the two passes
+    turned = np.ascontiguousarray(np.vstack([col, col[::-1] + 2.0]).T)  # (300, 20): runs down 300 rows
+    for reach, fit, reach_y, fit_y in (
+        (0, 0, 11, 22),
+        (3, 5, 11, 22),
+        (11, 22, 1, 2),
+        (11, 22, 0, 22),
+        (2, 4, 400, 2**62),
+    ):
+        both = np.empty_like(turned)
+        depth._kernels.edge_bend(turned, reach, fit, 3.0, both, reach_y=reach_y, fit_y=fit_y)
+        rows = ref.edge_bend(turned, reach=reach, fit=fit, max_step=3.0)
+        cols = ref.edge_bend(np.ascontiguousarray(turned.T), reach=reach_y, fit=fit_y, max_step=3.0).T
+        same(both, np.maximum(rows, cols))
+    with pytest.raises(ValueError, match="must be >= 0"):
+        depth._kernels.edge_bend(col, 11, 22, 3.0, np.empty_like(col), reach_y=-1, fit_y=2)
     # the confidence cap in the same call: fmin(conf, kappa / bias) where valid
     conf = rng.uniform(0.0, 40.0, col.shape).astype(np.float32)
     valid = rng.random(col.shape) < 0.8

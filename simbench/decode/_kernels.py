@@ -80,7 +80,7 @@ _SIGNATURES = {
     "validity": (None, [_I, _P, _P, _P, _P, _F, _F, _F, _P]),
     "pool_code_rows": (None, [_I, _I, _I, _I, _P, _P, _P, _I, _F, _P, _P]),
     "crease_bias": (None, [_I, _I, _P, _I, _F, _F, _I, _P, _P, _P, _F, _P, _P, _P, _P, _P]),
-    "edge_bend": (None, [_I, _I, _P, _I, _I, _F, _P, _F, _P, _P]),
+    "edge_bend": (None, [_I, _I, _P, _I, _I, _I, _I, _F, _P, _F, _P, _P]),
     "decode_tail": (
         None,
         [_I, _I, _I, _P, _P, _P, _P, _P, _F, _F, _I, _I, _P, _F, _F, _P, _I, _I, _I, _F, _F, _P] + [_P] * 5,
@@ -800,19 +800,23 @@ def crease_bias(
     )
 
 
-def edge_bend(column, reach: int, fit: int, max_step: float, out, *, cap=None) -> None:
+def edge_bend(
+    column, reach: int, fit: int, max_step: float, out, *, reach_y: int = 0, fit_y: int = 0, cap=None
+) -> None:
     """Over ``column`` ((H, W) float32), per row: at each end of a run of finite columns (steps
     between neighbours at most ``max_step``) that a hole or a larger step ends, where the run is
     at least ``reach + fit`` long, ``out`` = |column - the least-squares line through the ``fit``
     columns from ``reach`` pixels off the end, extrapolated| for the ``reach`` columns nearest the
-    end (the larger of two), else 0.  ``cap = (kappa, valid, conf)``: also ``conf = fmin(conf,
-    kappa / out)`` where ``valid``, in place."""
+    end (the larger of two), else 0; then the same down each image column with ``reach_y`` and
+    ``fit_y`` (0: not read), ``out`` the larger of the two.  ``cap = (kappa, valid, conf)``: also
+    ``conf = fmin(conf, kappa / out)`` where ``valid``, in place."""
     h, w = column.shape
-    reach, fit = int(reach), int(fit)
-    if reach < 0 or fit < 0:
-        raise ValueError(f"reach and fit must be >= 0, got {reach}, {fit}")
-    # no run is longer than the row: beyond it the same result, and reach + fit cannot overflow
+    reach, fit, reach_y, fit_y = int(reach), int(fit), int(reach_y), int(fit_y)
+    if min(reach, fit, reach_y, fit_y) < 0:
+        raise ValueError(f"reaches and fits must be >= 0, got {reach}, {fit}, {reach_y}, {fit_y}")
+    # no run is longer than its line: beyond it the same result, and reach + fit cannot overflow
     reach, fit = min(reach, w + 1), min(fit, w + 1)
+    reach_y, fit_y = min(reach_y, h + 1), min(fit_y, h + 1)
     kappa, valid, conf = cap if cap is not None else (0.0, None, None)
     _library().edge_bend(
         h,
@@ -820,6 +824,8 @@ def edge_bend(column, reach: int, fit: int, max_step: float, out, *, cap=None) -
         _ptr(column, "column", np.float32, (h, w)),
         reach,
         fit,
+        reach_y,
+        fit_y,
         _f32(max_step),
         _ptr(out, "out", np.float32, (h, w), writable=True),
         _f32(kappa),

@@ -207,7 +207,9 @@ def crease_bias(
     return out
 
 
-def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_step_px: float) -> np.ndarray:
+def edge_bend_bias(
+    column_px: np.ndarray, *, reach_px: int, fit_px: int, max_step_px: float, reach_y_px: int = 0, fit_y_px: int = 0
+) -> np.ndarray:
     """Measured phase bias beside depth edges and holes, in projector pixels (ours; the
     colour-robust decoder's ``edge_doubt``).
 
@@ -222,7 +224,9 @@ def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_ste
     - extrapolated to the ``reach_px`` columns nearest the end; the bias is each one's distance
     from it (the larger, where both ends of a short run reach a pixel).  0 where not measured: a
     run shorter than ``reach_px + fit_px``, and everything farther from an end.  A surface that
-    curves within the reach shows as bend too (a sphere's limb, seen at grazing incidence).
+    curves within the reach shows as bend too (a sphere's limb, seen at grazing incidence).  With
+    ``reach_y_px`` the same down each image column, with ``fit_y_px`` (an edge along the rows: the
+    window reaches across it by its extent along y), the bias the larger of the two.
 
     Parameters
     ----------
@@ -232,7 +236,11 @@ def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_ste
     fit_px : int
         Camera pixels the line is fitted over (the decoder: one camera period).
     max_step_px : float
-        A larger step between neighbouring pixels is a depth edge.
+        A larger step between neighbouring pixels is a depth edge (the decoder:
+        :meth:`simbench.decode.DecoderParams.edge_step_px`).
+    reach_y_px, fit_y_px : int
+        The same down the columns (the decoder: the wide window's 2 sigma along y, one camera
+        period); 0: along the rows only.
 
     Returns
     -------
@@ -242,7 +250,7 @@ def edge_bend_bias(column_px: np.ndarray, *, reach_px: int, fit_px: int, max_ste
     if c.ndim != 2:
         raise ValueError(f"column_px: expected shape (H, W), got {c.shape}")
     out = np.empty(c.shape, np.float32)
-    _kernels.edge_bend(c, int(reach_px), int(fit_px), max_step_px, out)
+    _kernels.edge_bend(c, int(reach_px), int(fit_px), max_step_px, out, reach_y=int(reach_y_px), fit_y=int(fit_y_px))
     return out
 
 

@@ -107,9 +107,14 @@ STABILITY_KAPPA_RAD = 0.4
 # The break is read over one camera period either side along the row and averaged over one period
 # of rows either side (CREASE_SCALE_PERIODS; the error's measured blur, ~14 px, lies within it, and
 # a wider reach costs more pixels beside creases; a crease is a line, the map's noise is not: row
-# by row the saturated green board's noise doubted 1.3 % of it, averaged 0.06 %).  A step over
-# CREASE_MAX_STEP_PX between neighbours (three times a fronto-parallel surface's slope of ~1) is a
-# depth edge, not a crease.  CREASE_BIAS_RATIO (2026-11-26, designed on the 60, 90 and 120-degree
+# by row the saturated green board's noise doubted 1.3 % of it, averaged 0.06 %).  A step between
+# neighbours over CREASE_MAX_STEP_SLOPES times a fronto-parallel surface's slope (T / T_cam projector
+# px per camera px: DecoderParams.edge_step_px) is a depth edge, not a crease - an angle, the same at
+# every camera resolution.  (Until 2026-11-30 a fixed 3 projector px: right at the paper's
+# resolution, where the slope is 0.96, but at a quarter of it the slope is 3.85 and every
+# neighbour's step read as an edge, so that neither this term nor the edge term below measured
+# anything - the motion study's still board kept 0.71 % of its decoded pixels > 5 mm wrong.)
+# CREASE_BIAS_RATIO (2026-11-26, designed on the 60, 90 and 120-degree
 # corners, then checked on 45 and 75 degrees, rendered afterwards): the corners' peak error over
 # D2 at the crease is 0.47-0.55 and the least-squares fit of the error to D2 within a period of
 # the crease 0.09-0.16 (the triangle D2 outlasts the error's tail); of 0.25, 0.3 and 0.35, 0.3 is
@@ -121,7 +126,7 @@ STABILITY_KAPPA_RAD = 0.4
 # takes it to 0.044 %.)
 CREASE_SCALE_PERIODS = 1.0
 CREASE_BIAS_RATIO = 0.3
-CREASE_MAX_STEP_PX = 3.0
+CREASE_MAX_STEP_SLOPES = 3.0
 # ... and at a fold's apex (simbench.decode.depth.crease_apex_bias) the error's share of D2 measured
 # there, 0.55 (the largest of the 0.47-0.55 above; assumption: the apex is where that measurement
 # was made), within CREASE_APEX_PERIODS of a camera period of the row's apex - the largest
@@ -157,9 +162,15 @@ CREASE_APEX_MIN_PX = 0.15
 # ~11 px: where the window's weight on the far side, ~2 % at 2 sigma, can still move the phase)
 # scores STABILITY_KAPPA_RAD over the decoded map's bend there, measured against the line fitted
 # over the next EDGE_BEND_FIT_PERIODS camera periods (one period: the map's ripple at the fringe's
-# period averaged out), a step over CREASE_MAX_STEP_PX being an edge as for the crease term (in
-# projector px per camera px: at half the paper's resolution a surface tilted enough breaks every
-# run there, and the term measures nothing).  It reads every decoded column, those other terms
+# period averaged out), a step over DecoderParams.edge_step_px being an edge as for the crease term.
+# Then the same down each image column, within EDGE_BEND_REACH_SIGMAS of the window's sigma along y
+# (sigma_y_ratio of the wide sigma: 4 px at a quarter of the paper's resolution, 7 at full) of a
+# depth edge across the rows, the line fitted over as many pixels (2026-11-30: read along the rows
+# only, the term saw no edge that runs along them - the top and bottom of an object - and at a
+# quarter of the paper's resolution 284 of the motion study's still board's 311 pixels > 5 mm wrong
+# lay there, at confidence 3-26; with the column pass 63 of 67503 decoded, 0.093 %.  At full
+# resolution the hard scenes moved by at most 0.03 points of completeness, the sphere before a wall's
+# wrong share 0.046 -> 0.039 %).  It reads every decoded column, those other terms
 # doubt too.  The deep staircase, 2026-11-30: 0.068 % of its pixels more than 5 mm wrong at 3 (all
 # 2-7 px beside its 200 mm step, at fringe SNR 3-4) -> none, at 98.18 -> 97.97 % complete; the
 # sphere before a wall 0.045 -> 0.026 %, the box interior 0.019 -> 0.011 %.  Reaches of 8 and 14 px
@@ -332,8 +343,9 @@ class DecoderParams:
         confidence so far and :data:`STABILITY_KAPPA_RAD` over the bias (in phase) that
         :func:`simbench.decode.depth.edge_bend_bias` measures as the decoded column map's bend
         within :data:`EDGE_BEND_REACH_SIGMAS` window sigmas of the edge (the window there holds
-        both sides' fringes, and the narrow window of the stability term still reaches across).
-        The colour-robust decoder; off = no edge term.
+        both sides' fringes, and the narrow window of the stability term still reaches across),
+        along the rows and down the columns (an edge along the rows, within the window's
+        extent along y).  The colour-robust decoder; off = no edge term.
     position_doubt : bool
         A stripe whose De Bruijn position is contested scores confidence 0 (ours;
         :func:`simbench.decode.debruijn.contested_positions`): another position is predicted
@@ -543,6 +555,12 @@ class DecoderParams:
         if self.camera_period_px is not None:
             return float(self.camera_period_px)
         return self.period_px * rig.camera.focal_px / rig.projector.focal_px
+
+    def edge_step_px(self, rig: Rig) -> float:
+        """The step of the decoded column map between neighbouring camera pixels (projector px)
+        over which the crease and edge terms see a depth edge: :data:`CREASE_MAX_STEP_SLOPES`
+        times a fronto-parallel surface's slope, ``T / T_cam``."""
+        return CREASE_MAX_STEP_SLOPES * self.period_px / self.camera_period(rig)
 
 
 # below this many camera pixels per fringe period the phase fit cannot follow the fringe (Nyquist:

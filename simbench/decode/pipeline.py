@@ -78,7 +78,6 @@ from simbench.decode.params import (
     CREASE_APEX_SHARE,
     CREASE_BIAS_RATIO,
     CREASE_LOBE_SHARE,
-    CREASE_MAX_STEP_PX,
     CREASE_PEAK_PERIODS,
     CREASE_SCALE_PERIODS,
     EDGE_BEND_FIT_PERIODS,
@@ -1321,6 +1320,7 @@ def decode(
 
     parts = run_bands(band, image, params, rig)
     stages = _merge_stages(parts)
+    max_step_px = np.float32(params.edge_step_px(rig))
     if params.crease_doubt:
         # after the bands: the break of the column map's slope is averaged down the crease, over
         # rows of neighbouring bands
@@ -1332,7 +1332,7 @@ def decode(
                 col_out,
                 crease_px,
                 np.float32(-depth_sign * CREASE_BIAS_RATIO),
-                CREASE_MAX_STEP_PX,
+                max_step_px,
                 crease_px,
                 bias,
                 trusted=trusted,
@@ -1361,12 +1361,17 @@ def decode(
         with stage("edge bend"):
             t_cam = params.camera_period(rig)
             bend = np.empty((h, w), np.float32)
+            sigma_x = params.sigma_periods * t_cam
+            fit_px = int(round(EDGE_BEND_FIT_PERIODS * t_cam))
             _kernels.edge_bend(
                 col_out,
-                int(np.ceil(EDGE_BEND_REACH_SIGMAS * params.sigma_periods * t_cam)),
-                int(round(EDGE_BEND_FIT_PERIODS * t_cam)),
-                CREASE_MAX_STEP_PX,
+                int(np.ceil(EDGE_BEND_REACH_SIGMAS * sigma_x)),
+                fit_px,
+                max_step_px,
                 bend,
+                # down the columns too: the window reaches across an edge along the rows
+                reach_y=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sigma_x * params.sigma_y_ratio)),
+                fit_y=fit_px,
                 cap=(bias_kappa_px, valid_out, conf_out),
             )
         stages.put("edge_bend", bend)

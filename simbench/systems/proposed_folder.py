@@ -436,6 +436,7 @@ def check_reference_plane(
     z0_assumed: bool = False,
     recorded_z0: bool = False,
     mode: str = "calibrated",
+    rig_option: str = "--rig",
 ) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
@@ -465,7 +466,7 @@ def check_reference_plane(
             f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it captured with this rig, and at this Z0?"
         )
     advice = (
-        "the rig given (--rig) is not the one it was recorded with, or not calibrated closely enough"
+        f"the rig given ({rig_option}) is not the one it was recorded with, or not calibrated closely enough"
         if recorded_z0
         else f"give --z0 {z:.4f} if the board stood there, or check the rig"
     )
