@@ -914,13 +914,22 @@ def test_edge_bend_bias_is_the_maps_distance_from_its_line_beside_an_edge_and_no
     assert np.all(got[:189] == 0.0) and got[199] > 1.2
     with pytest.raises(ValueError, match="column_px"):
         edge_bend_bias(np.zeros(5, np.float32), reach_px=reach, fit_px=fit, max_step_px=3.0)
-    # down the columns: the same maps turned a quarter, with the rows' pass off and on
+    # down the columns: the same maps turned a quarter read the same, turned back
     turned = np.ascontiguousarray(maps.T)
     alone = edge_bend_bias(turned, reach_px=0, fit_px=0, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
     assert np.array_equal(alone, edge_bend_bias(maps, reach_px=reach, fit_px=fit, max_step_px=3.0).T)
-    assert not edge_bend_bias(turned, reach_px=reach, fit_px=fit, max_step_px=3.0).any()  # rows: no edge
-    both = edge_bend_bias(turned, reach_px=reach, fit_px=fit, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
-    assert np.array_equal(both, alone)
+    # both passes on one map with an edge of each kind: the larger of the two, each one's own
+    plane = np.tile(line.astype(np.float32), (200, 1))
+    plane[40:50, :] += bend[90:100, None].astype(np.float32)  # bent down the columns (-0.125 .. -1.25)
+    plane[50:58, 60:160] = np.nan  # ... towards a hole across the rows
+    plane[120:130, :] += bend.astype(np.float32)  # bent along the rows
+    plane[120:130, 100:108] = np.nan  # ... towards a hole in them
+    rows = edge_bend_bias(plane, reach_px=reach, fit_px=fit, max_step_px=3.0)
+    cols = edge_bend_bias(plane, reach_px=0, fit_px=0, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
+    both = edge_bend_bias(plane, reach_px=reach, fit_px=fit, max_step_px=3.0, reach_y_px=reach, fit_y_px=fit)
+    assert np.array_equal(both, np.maximum(rows, cols))
+    assert rows[125, 99] > 1.2 and cols[125, 99] < 1e-4  # the hole in the rows: the rows' pass alone
+    assert cols[49, 100] > 1.0 and rows[49, 100] < 1e-4  # the bend towards the hole below: the columns'
 
 
 def _corner_capture(opening_deg: float, crease_m: float = 1.2):

@@ -906,6 +906,17 @@ def test_edge_bend_matches_numpy():
         np.fmin(want, np.float32(1.34) / got, out=want, where=valid)
     depth._kernels.edge_bend(col, 11, 22, 3.0, np.empty_like(col), cap=(np.float32(1.34), valid, conf))
     same(conf, want)
+    # ... after both passes: the cap reads their larger bend
+    conf = rng.uniform(0.0, 40.0, turned.shape).astype(np.float32)
+    valid = rng.random(turned.shape) < 0.8
+    depth._kernels.edge_bend(turned, 3, 5, 3.0, both, reach_y=11, fit_y=22)
+    want = conf.copy()
+    with np.errstate(divide="ignore"):
+        np.fmin(want, np.float32(1.34) / both, out=want, where=valid)
+    depth._kernels.edge_bend(
+        turned, 3, 5, 3.0, np.empty_like(turned), reach_y=11, fit_y=22, cap=(np.float32(1.34), valid, conf)
+    )
+    same(conf, want)
 
 
 def test_a_library_older_than_its_sources_is_named_stale(tmp_path):

@@ -860,6 +860,7 @@ def test_the_edge_term_reads_down_the_columns_an_edge_along_the_rows(calibration
     off (1301 over half a pixel within 30 rows of it, ~10 mm at 1.2 m), and along the rows the map
     runs straight on - the rows' pass sees no edge.  Down the columns it does: 97 over half a
     pixel (at most 0.62), at 92.4 instead of 95.8 % of those pixels.  Never a stripe-order error."""
+    from simbench.decode import EDGE_BEND_REACH_SIGMAS
     from simbench.decode.depth import edge_bend_bias
 
     ref, f = calibration
@@ -880,7 +881,7 @@ def test_the_edge_term_reads_down_the_columns_an_edge_along_the_rows(calibration
             sx = p.sigma_periods * PARAMS_PERIOD_PX
             rows = edge_bend_bias(
                 every.column_px,
-                reach_px=int(np.ceil(2 * sx)),
+                reach_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx)),
                 fit_px=round(PARAMS_PERIOD_PX),
                 max_step_px=p.edge_step_px(RIG),
             )

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from simbench.decode import robust_params
-from simbench.metrics import depth_errors, edge_band
+from simbench.metrics import depth_errors, edge_band, wrong_pixels
 
 pytestmark = pytest.mark.slow
 
@@ -172,7 +172,8 @@ def test_a_quarter_resolution_capture_keeps_few_confident_wrong_depths_at_its_ed
     decoded pixel of the motion study's still board before a wall and of the bust, at the
     operating point, against the truth.  Measured 2026-11-30 (16 spp): the board 0.093 / 0.122 %
     of its decoded pixels > 5 mm wrong (calibrated / reference), the bust 0.283 / 0.278 % (of
-    which ~45 pixels a code cycle off, 0.07 %: the bust at ~0.97 m decoded at the wall's 1.35 m).
+    which ~49 pixels, 0.08 %, on its outline, decoded within ~5 mm of the wall's depth beside it:
+    pixels that see both, whose truth - the ray through the pixel's centre - meets the bust).
     Before the crease and edge terms' step became an angle (DecoderParams.edge_step_px: a fixed 3
     projector px, under this camera's fronto-parallel slope of 3.85, broke every run) and the edge
     term read down the columns too: 0.744 / 0.753 % and 0.592 / 0.568 %.  Bounds: about twice
@@ -183,6 +184,7 @@ def test_a_quarter_resolution_capture_keeps_few_confident_wrong_depths_at_its_ed
     for mode in ("calibrated", "reference"):
         r = sub.decode(cap, params, mode=mode)
         decoded = np.isfinite(r.depth_m)
-        wrong = float(np.mean(np.abs(r.depth_m - cap.gt.depth_m)[decoded] > WRONG_MM / 1000.0))
+        # as the motion study counts it: a depth where the truth sees nothing is wrong too
+        wrong = float(wrong_pixels(r.depth_m, cap.gt.depth_m, wrong_m=WRONG_MM / 1000.0).sum() / decoded.sum())
         assert decoded.mean() > 0.8, (mode, decoded.mean())
         assert wrong <= QUARTER_WRONG_SHARE[name], f"{name} ({mode}): {100 * wrong:.3f} % > {WRONG_MM:g} mm wrong"

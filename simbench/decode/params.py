@@ -164,16 +164,21 @@ CREASE_APEX_MIN_PX = 0.15
 # over the next EDGE_BEND_FIT_PERIODS camera periods (one period: the map's ripple at the fringe's
 # period averaged out), a step over DecoderParams.edge_step_px being an edge as for the crease term.
 # Then the same down each image column, within EDGE_BEND_REACH_SIGMAS of the window's sigma along y
-# (sigma_y_ratio of the wide sigma: 4 px at a quarter of the paper's resolution, 7 at full) of a
-# depth edge across the rows, the line fitted over as many pixels (2026-11-30: read along the rows
-# only, the term saw no edge that runs along them - the top and bottom of an object - and at a
-# quarter of the paper's resolution 284 of the motion study's still board's 311 pixels > 5 mm wrong
-# lay there, at confidence 3-26; with the column pass 63 of 67503 decoded, 0.093 %.  At full
-# resolution the hard scenes moved by at most 0.03 points of completeness, the sphere before a wall's
-# wrong share 0.046 -> 0.039 %).  It reads every decoded column, those other terms
+# (sigma_y_ratio of the wide sigma: 7 px at the paper's resolution, 2 at a quarter of it) of a
+# depth edge across the rows, the line fitted over as many pixels, with the same step (down the
+# columns a fronto-parallel surface's slope is ~0, so the step is a steeper angle there than along
+# the rows; no scene here needed a tighter one).  2026-11-30: read along the rows only, the term
+# saw no edge that runs along them - the top and bottom of an object.  At a quarter of the paper's
+# resolution the motion study's still board kept 490 of its decoded pixels > 5 mm wrong (0.71 %),
+# all but 33 within a pixel of its outline, 286 of them beside its top and bottom edges; with the
+# step above as an angle (rows only) 311, 284 of them there, at confidence 3-26; with the column
+# pass 63 of 67503 decoded (0.093 %).  At full resolution the hard scenes moved by at most 0.03
+# points of completeness, the sphere before a wall's share of every decoded pixel wrong
+# (wrong_share_all) 0.046 -> 0.039 % and off the edge band (wrong_share) 0.027 -> 0.026 %.  It
+# reads every decoded column, those other terms
 # doubt too.  The deep staircase, 2026-11-30: 0.068 % of its pixels more than 5 mm wrong at 3 (all
 # 2-7 px beside its 200 mm step, at fringe SNR 3-4) -> none, at 98.18 -> 97.97 % complete; the
-# sphere before a wall 0.045 -> 0.026 %, the box interior 0.019 -> 0.011 %.  Reaches of 8 and 14 px
+# sphere before a wall 0.045 -> 0.026 %, the box interior 0.019 -> 0.011 % (off the edge band).  Reaches of 8 and 14 px
 # and fits of a half, one and a half and two periods, measured before choosing, moved the hard
 # scenes' completeness by at most 0.13 points and their wrong shares by at most 0.015 points.
 EDGE_BEND_REACH_SIGMAS = 2.0
