@@ -692,8 +692,10 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     (:func:`simbench.metrics.depth_errors`): MAE, RMSE, median and p95 error (mm), completeness
     over the lit pixels, the share of outliers more than 5 mm off and, where the system decodes
     projector columns, stripe-order errors; pixels within ``edge_band_px`` of a depth edge are
-    left out of the errors (the completeness still counts them)."""
-    from simbench.metrics import depth_errors, edge_band, implausible_columns, implausible_depth
+    left out of the errors (the completeness still counts them).  Of a moving recording, against
+    its truth at mid-capture, with ``image_motion_px``: its fastest pixel's image motion over the
+    capture (:data:`simbench.metrics.MOVING_TRUTH_NOTE`)."""
+    from simbench.metrics import depth_errors, edge_band, image_motion_px, implausible_columns, implausible_depth
     from simbench.systems import get_system
 
     from simbench import validate as v
@@ -719,4 +721,7 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     if kw:
         for warning in implausible_columns(column, gt.column_px):
             warnings.warn(f"score: the depth's column_px: {warning}", SimbenchWarning, stacklevel=2)
-    return depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)
+    scores = depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)
+    if getattr(gt, "motion_px", None) is not None:  # as `simbench score`: the truth is one moving instant
+        scores["image_motion_px"] = image_motion_px(gt.motion_px)
+    return scores

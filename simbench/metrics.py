@@ -35,6 +35,8 @@ __all__ = [
     "points_from_depth",
     "score",
     "wrong_pixels",
+    "image_motion_px",
+    "MOVING_TRUTH_NOTE",
     "code_stripes",
     "implausible_depth",
     "implausible_columns",
@@ -76,6 +78,34 @@ def edge_band(
         k = np.ones((2 * band_px + 1, 2 * band_px + 1), np.uint8)
         edge = cv2.dilate(edge.astype(np.uint8), k) > 0
     return edge & seen
+
+
+def image_motion_px(motion_px: np.ndarray | None) -> float:
+    """The largest image motion of a recording's pixels over its capture (camera px; 0 for a
+    still one): the length of ``motion_px``'s (dx, dy) at its fastest pixel.
+
+    Parameters
+    ----------
+    motion_px : ndarray, shape (H, W, 2), float, or None
+        Each pixel's image motion over the capture (:attr:`simbench.sim.truth.GroundTruth.motion_px`,
+        a recording's ``gt_motion.npy``).
+    """
+    if motion_px is None:
+        return 0.0
+    m = np.asarray(motion_px, np.float64)
+    if m.ndim != 3 or m.shape[-1] != 2:
+        raise ValueError(f"motion_px: expected shape (H, W, 2), got {m.shape}")
+    length = np.hypot(m[..., 0], m[..., 1])
+    return float(np.nanmax(length)) if np.isfinite(length).any() else 0.0
+
+
+# what a score of a moving recording measures (the truth is one instant; the motion study's measure
+# judges each pixel against every depth it saw: simbench.experiments.motion.capture_truths)
+MOVING_TRUTH_NOTE = (
+    "the recording moves ({px:.1f} px of image motion over its capture at the fastest pixel): its ground truth is "
+    "the scene at mid-capture, so depth smeared beside a moving outline counts as error here "
+    "(`simbench reproduce motion` judges each pixel against every depth it saw; docs/motion.md)"
+)
 
 
 def depth_errors(

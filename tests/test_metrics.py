@@ -284,3 +284,18 @@ def test_a_depth_is_wrong_only_if_far_from_every_truth():
     assert swept.tolist() == [[False, False, True, False], [False, True, True, False]]
     with pytest.raises(ValueError, match=r"truth of shape \(2, 3\)"):
         wrong_pixels(depth, np.ones((2, 3)), wrong_m=0.005)
+
+
+def test_image_motion_is_the_fastest_pixels_travel():
+    """``image_motion_px``: the longest (du, dv) of a motion map (3-4-5), 0 for a still recording
+    (None) or one that sees nothing move (NaN and zeros), a map of another shape refused."""
+    from simbench.metrics import image_motion_px
+
+    m = np.zeros((4, 5, 2), np.float32)
+    m[1, 2] = (3.0, -4.0)
+    m[2, 3] = (1.0, 1.0)
+    m[0, 0] = np.nan
+    assert image_motion_px(m) == 5.0
+    assert image_motion_px(None) == 0.0 and image_motion_px(np.full((2, 2, 2), np.nan)) == 0.0
+    with pytest.raises(ValueError, match=r"expected shape \(H, W, 2\)"):
+        image_motion_px(np.zeros((4, 5)))

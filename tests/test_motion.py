@@ -669,3 +669,50 @@ def test_a_moving_recording_states_its_window_and_slices_and_warns_of_a_smear(va
     assert rec.meta["time_slices"] == slice_count(rec.recording.scene, rec.recording.scene.rig.camera, (t0, t1)) > 1
     with pytest.warns(simbench.SimbenchWarning, match="more than 0.5 of its own"):
         simbench.record(scene_file(1.0), spp=1, calibration_frames=False)
+
+
+@pytest.mark.slow
+def test_a_moving_recording_is_scored_against_one_instant_and_says_so(variant, tmp_path, capsys):
+    """`simbench score` and `simbench.score` of a moving recording (a ball at 0.5 m/s before a
+    wall, a quarter-resolution paper rig): the scores carry ``image_motion_px``, the fastest pixel's
+    image motion (f v T / Z), and the text a note that the truth is the scene at mid-capture; a
+    competitor's folder keeps gt_motion.npy too (the Kinect's); a still recording neither."""
+    import json
+
+    import simbench
+    from simbench.cli import main
+    from simbench.rig import get_rig, save_rig
+
+    save_rig(scale_camera(get_rig("paper"), 0.25), tmp_path / "rig_q.toml")
+
+    def scene_file(speed: float) -> str:
+        path = tmp_path / f"ball_{speed:g}.toml"
+        path.write_text(
+            f'name = "ball"\nrig = "rig_q.toml"\n[[object]]\ntype = "sphere"\nname = "ball"\n'
+            f"center_m = [0.0, 0.0, 1.0]\nradius_m = 0.02\nvelocity_m_s = [{speed}, 0.0, 0.0]\n"
+            '[[object]]\ntype = "plane"\nname = "wall"\ncenter_m = [0.0, 0.0, 1.3]\nsize_m = [2.0, 1.6]\n'
+        )
+        return str(path)
+
+    rec = simbench.record(scene_file(0.5), spp=1)
+    t0, t1 = rec.meta["capture_window_s"]
+    want = rec.scene.rig.camera.focal_px * 0.5 * (t1 - t0) / 1.0  # the ball's nearest point, at 0.98 m
+    scores = simbench.score(rec.gt.depth_m, rec)
+    assert scores["image_motion_px"] == pytest.approx(want, rel=0.05) and scores["mae_mm"] == 0.0
+    for system in ("proposed", "kinect"):
+        out = tmp_path / system
+        assert main(["render", scene_file(0.5), "--out", str(out), "--spp", "1", "--system", system]) == 0
+        assert (out / "gt_motion.npy").is_file()
+        capsys.readouterr()
+        assert main(["score", str(out / "gt_depth.npy"), "--gt", str(out / "gt_depth.npy")]) == 0
+        text = capsys.readouterr().out
+        assert "note: the recording moves (" in text and "the scene at mid-capture" in text, text
+        assert main(["score", str(out / "gt_depth.npy"), "--gt", str(out / "gt_depth.npy"), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["image_motion_px"] > 1.0
+    still = tmp_path / "still"
+    assert main(["render", scene_file(0.0), "--out", str(still), "--spp", "1"]) == 0
+    capsys.readouterr()
+    assert main(["score", str(still / "gt_depth.npy"), "--gt", str(still / "gt_depth.npy")]) == 0
+    assert "note:" not in capsys.readouterr().out and not (still / "gt_motion.npy").exists()
+    still_rec = simbench.record(scene_file(0.0), spp=1)
+    assert "image_motion_px" not in simbench.score(still_rec.gt.depth_m, still_rec)

@@ -54,7 +54,8 @@ def _cmd_decode(args) -> int:
 def _cmd_score(args) -> int:
     from simbench.io import load_depth_map, load_npy
     from simbench.systems.files import recording_manifest_of
-    from simbench.metrics import depth_errors, edge_band, implausible_depth, implausible_columns
+    from simbench.metrics import MOVING_TRUTH_NOTE, depth_errors, edge_band, image_motion_px
+    from simbench.metrics import implausible_columns, implausible_depth
 
     if args.period is not None and args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
@@ -105,6 +106,12 @@ def _cmd_score(args) -> int:
         )
     for warning in implausible_depth(depth, gt, region):
         print(f"simbench: warning: {args.depth}: {warning}", file=sys.stderr)
+    motion_name = (recorded or {}).get("files", {}).get("gt_motion")
+    if motion_name:  # a moving recording: its truth is one instant (as simbench.score says)
+        motion_path = gt_dir / motion_name
+        _refuse_missing(motion_path, recorded, "a moving recording would be scored as a still one")
+        recording_manifest_of(motion_path)
+        m["image_motion_px"] = image_motion_px(load_npy(motion_path, expected_shape=(*gt.shape, 2)))
     if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
         print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
@@ -129,6 +136,8 @@ def _cmd_score(args) -> int:
                 f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid "
                 f"pixels)"
             )
+        if "image_motion_px" in m:
+            print(f"note: {MOVING_TRUTH_NOTE.format(px=m['image_motion_px'])}")
     return 0
 
 

@@ -30,9 +30,10 @@ def write_device_recording(
     """Write ``writers`` (key -> function writing one file into the folder it is given and
     returning its path), the ground truth ``gt`` (:class:`simbench.sim.truth.GroundTruth` at the
     device's pixels: ``gt_depth.npy``/``.exr``, z-depth in m, ``gt_lit.npy`` and
-    ``gt_object_id.npy``, the region and the objects ``simbench score`` reads beside it, as in
-    the proposed sensor's folder) and ``device.json`` (``{"device": name, **model's parameters,
-    **info}``, sealed with every file's SHA-256: :func:`simbench.manifest.seal_manifest`)."""
+    ``gt_object_id.npy``, the region and the objects ``simbench score`` reads beside it, and of a
+    moving scene ``gt_motion.npy``, as in the proposed sensor's folder) and ``device.json``
+    (``{"device": name, **model's parameters, **info}``, sealed with every file's SHA-256:
+    :func:`simbench.manifest.seal_manifest`)."""
     from simbench.io import output_directory, save_exr, save_json, save_npy
     from simbench.systems import RECORDING_MANIFESTS
 
@@ -48,6 +49,8 @@ def write_device_recording(
         # lit ones: a third audit found the two 0.46 and 0.27 mm apart on one folder)
         names["gt_lit"] = save_npy(tmp / "gt_lit.npy", np.asarray(gt.lit, bool)).name
         names["gt_object_id"] = save_npy(tmp / "gt_object_id.npy", gt.object_id).name
+        if getattr(gt, "motion_px", None) is not None:  # a moving scene: each pixel's image motion, as
+            names["gt_motion"] = save_npy(tmp / "gt_motion.npy", gt.motion_px).name  # the proposed folder's
         manifest = seal_manifest(tmp, {"device": name, **asdict(model), **info}, names)
         save_json(tmp / DEVICE_MANIFEST, manifest)
     return {**{k: out / n for k, n in names.items()}, "device": out / DEVICE_MANIFEST}
