@@ -561,6 +561,19 @@ class DecoderParams:
             return float(self.camera_period_px)
         return self.period_px * rig.camera.focal_px / rig.projector.focal_px
 
+    def column_noise_px(self, rig: Rig) -> float:
+        """The decoded projector column's noise (1 sigma, projector px) at a fringe SNR of 1 - at
+        SNR ``s``, this over ``s``: ``T / (2 pi sqrt(N))``, with ``N = 4 pi sigma_x sigma_y`` the wide
+        window's samples (its Gaussian weights' effective count).  The fringe SNR measures the
+        fringe, not the phase: ``N`` grows with the camera period squared, so the same SNR - and the
+        same operating point - means ``T_cam,ref / T_cam`` times this noise at another camera period
+        (0.22 px at the paper's 21.8 px, 0.89 at a quarter of its resolution).  Measured on noisy
+        synthetic planes within ~1.1-1.4x of it where the noise dominates (tests/test_decode.py); the
+        fringe's own ripple adds a floor (~0.05 projector px at the paper's resolution)."""
+        sigma_x = self.sigma_periods * self.camera_period(rig)
+        n = 4.0 * math.pi * sigma_x * sigma_x * self.sigma_y_ratio
+        return self.period_px / (2.0 * math.pi * math.sqrt(n))
+
     def edge_step_px(self, rig: Rig) -> float:
         """The step of the decoded column map between neighbouring camera pixels (projector px)
         over which the crease and edge terms see a depth edge: :data:`CREASE_MAX_STEP_SLOPES`

@@ -388,7 +388,11 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     contested = ", 0 on a contested stripe order" if params.position_doubt else ""
     contested += ", 0 on a stripe order read from too few pixels' codes" if params.code_doubt else ""
     contested += ", 0 beside a shadow" if params.shadow_doubt else ""
-    meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}"
+    noise = (
+        f"the column's noise at fringe SNR s ~{params.column_noise_px(rig):.2f}/s projector px (1 sigma) with this "
+        f"rig's {params.camera_period(rig):.1f}-px camera period"
+    )
+    meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}; {noise}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
     # a stage of the same name wins, as when they were unpacked over these
     final = {"column": result.column_px, "valid": result.valid, "confidence": result.confidence}
