@@ -95,9 +95,14 @@ ROBUST_MIN_CONFIDENCE = 3.0
 # fringe gives the same phase at both widths up to noise.  kappa = 0.4 rad (assumption, set before
 # the operating point was chosen: a pixel scoring 4 has moved 0.1 rad, 0.33 projector px or
 # ~1.6 mm at 1 m, a third of the 5 mm that counts as wrong).  At a threshold of 3 the phase
-# may move by 0.13 rad (~2.2 mm); noise alone moves it by ~0.04 rad (1 sigma) at SNR 3 (the
+# may move by 0.13 rad (~2.2 mm); noise alone moves it by ~0.022 rad (1 sigma) at SNR 3 (the
 # narrow window's phase variance less the wide one's: 1/(SNR^2 N_eff) with N_eff = 4 pi sigma_x
-# sigma_y, ~72 and ~36 samples), so noise trips it at ~3 sigma.
+# sigma_y, 112 and 224 samples at the paper's camera period - DecoderParams.column_noise_px, its
+# test), so noise trips it at ~6 sigma there; at a quarter of that resolution (7 and 14 samples)
+# it moves by ~0.09 rad and trips it at ~1.5 sigma: the still white board's median confidence
+# there is 6.7 with the term (and the narrow window's SNR), 9.6 without, its share under 3 7.8
+# against 3.4 % (at full resolution 27.5 either way; 16 spp, motion_board).  (Until 2026-11-30
+# this comment said ~0.04 rad, from 72 and 36 samples, and ~3 sigma: kappa did not rest on it.)
 STABILITY_WINDOW_SCALE = 0.5
 STABILITY_KAPPA_RAD = 0.4
 # The crease term of the confidence (DecoderParams.crease_doubt,
