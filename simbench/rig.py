@@ -51,6 +51,8 @@ __all__ = [
     "check_stripe_baseline",
     "MIN_BASELINE_X_SHARE",
     "rig_differences",
+    "rig_from_opencv",
+    "OPENCV_SQUARE_PIXEL_SHARE",
 ]
 
 
@@ -208,6 +210,100 @@ class Rig:
     def is_rectified(self) -> bool:
         """Parallel optical axes, baseline along +x: the geometry of paper Sec. 5.4."""
         return self._rectified
+
+
+# fx and fy of one device this far apart (relative) are taken as one square pixel's focal length
+# (their mean); farther apart, refused (assumption: a calibration's fx, fy of a square-pixel sensor
+# agree within its ~0.1-0.3 % uncertainty; a rig has one focal length per device, as Mitsuba's
+# sensors and the simulated projector do)
+OPENCV_SQUARE_PIXEL_SHARE = 0.005
+
+
+def _opencv_intrinsics(matrix, distortion, size_wh, who: str) -> Intrinsics:
+    k = np.asarray(matrix, dtype=np.float64)
+    if k.shape != (3, 3) or not np.allclose(k[2], (0.0, 0.0, 1.0)) or k[1, 0] != 0.0:
+        raise ValueError(f"{who}: a camera matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {k.tolist()}")
+    fx, fy = float(k[0, 0]), float(k[1, 1])
+    if abs(k[0, 1]) > 1e-9 * fx:
+        raise ValueError(f"{who}: skew {k[0, 1]:g} px: a rig's pixels are square and unskewed")
+    if not (fx > 0 and fy > 0) or abs(fx - fy) > OPENCV_SQUARE_PIXEL_SHARE * max(fx, fy):
+        raise ValueError(
+            f"{who}: fx = {fx:g} and fy = {fy:g} px differ by more than {100 * OPENCV_SQUARE_PIXEL_SHARE:g} %: a rig "
+            "has square pixels (calibrate with cv2.CALIB_FIX_ASPECT_RATIO, or check the image size)"
+        )
+    d = np.ravel(np.asarray(distortion if distortion is not None else (), dtype=np.float64))
+    if d.size > 5 and np.any(d[5:] != 0.0):
+        raise ValueError(
+            f"{who}: {d.size} distortion coefficients; a rig takes OpenCV's first five (k1, k2, p1, p2, k3): "
+            "calibrate without the rational, thin-prism and tilted models"
+        )
+    d = np.pad(d[:5], (0, 5 - min(d.size, 5)))
+    w, h = (int(v) for v in size_wh)
+    return Intrinsics(w, h, 0.5 * (fx + fy), float(k[0, 2]), float(k[1, 2]), tuple(float(x) for x in d))
+
+
+def rig_from_opencv(
+    *,
+    camera_matrix: np.ndarray,
+    camera_distortion: np.ndarray | None,
+    camera_size_wh: tuple[int, int],
+    projector_matrix: np.ndarray,
+    projector_distortion: np.ndarray | None,
+    projector_size_wh: tuple[int, int],
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    translation_unit_m: float,
+    name: str = "opencv",
+) -> Rig:
+    """A rig from a projector-camera stereo calibration in OpenCV's conventions:
+    ``cv2.stereoCalibrate`` with the camera as its first device and the projector as its second,
+    whose ``R, T`` map a point from the camera's frame into the projector's, ``X_p = R X_c + T``.
+    The rig's pose is the inverse: ``position_m = -R^T T * translation_unit_m`` (the projector's
+    optical centre in the camera frame) and ``rotation_deg`` the angles of ``R^T`` (projector axes in
+    camera axes).
+
+    Parameters
+    ----------
+    camera_matrix, projector_matrix : ndarray, shape (3, 3)
+        OpenCV camera matrices ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``: fx and fy within
+        :data:`OPENCV_SQUARE_PIXEL_SHARE` of each other (their mean is taken), no skew.  The
+        projector's in the pixels of the pattern image it projects (a DLP4500 calibrated on its
+        912-px native grid projects an 1824-px pattern: scale its row of the matrix by 2 first).
+    camera_distortion, projector_distortion : array of up to 5 floats, or None
+        OpenCV's ``(k1, k2, p1, p2, k3)``; longer vectors only if their extra terms are 0.
+    camera_size_wh, projector_size_wh : (width, height) in px
+    rotation : ndarray, shape (3, 3) or (3,)
+        ``R`` of ``cv2.stereoCalibrate``, or its Rodrigues vector.
+    translation : array of 3 floats
+        ``T`` of ``cv2.stereoCalibrate``, in the unit of the calibration target's coordinates.
+    translation_unit_m : float
+        Metres per unit of ``T`` (0.001 for a target measured in mm): no default, since OpenCV's
+        ``T`` carries whatever unit the target's square size was given in.
+    name : str
+
+    Returns
+    -------
+    Rig
+    """
+    import cv2
+
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape in ((3,), (3, 1), (1, 3)):
+        r = cv2.Rodrigues(r.reshape(3, 1))[0]
+    if r.shape != (3, 3):
+        raise ValueError(f"rotation: a 3x3 matrix or a Rodrigues vector, got shape {r.shape}")
+    t = np.ravel(np.asarray(translation, dtype=np.float64))
+    if t.shape != (3,):
+        raise ValueError(f"translation: 3 numbers, got {t.size}")
+    unit = validate.number(translation_unit_m, "translation_unit_m", lo=0.0, lo_open=True, hi=1.0)
+    position = -r.T @ t * unit
+    return Rig(
+        camera=_opencv_intrinsics(camera_matrix, camera_distortion, camera_size_wh, "camera"),
+        projector=_opencv_intrinsics(projector_matrix, projector_distortion, projector_size_wh, "projector"),
+        position_m=tuple(float(x) for x in position),
+        rotation_deg=angles_xyz_deg(r.T),
+        name=name,
+    )
 
 
 # the least share of the baseline along the camera's x axis the colour-fringe decoders take: its

@@ -1583,3 +1583,75 @@ def test_a_sample_in_fresh_processes(tmp_path):
         lines = res.stderr.strip().splitlines()
         assert res.returncode == 2 and len(lines) == 1 and lines[0].startswith("simbench: error:"), (c.id, res.stderr)
     assert len([c for c in CASES if c.id in SAMPLE]) == len(SAMPLE)
+
+
+def test_a_projector_on_another_pixel_grid_is_named_and_not_blamed_on_the_channels(tmp_path, capsys, caplog):
+    """A lab user's audit (2026-11-30): a projector written on a grid half the pattern's (its focal
+    length and size halved, as a DLP4500 calibrated on its 912-px native grid for an 1824-px
+    pattern) was told its capture's channels were out of order, then its reference decoded 0 %.
+    The capture's and the reference's fringe repeat at half the period that rig predicts: said so,
+    with the rig's numbers, and not the channels; the right rig says nothing of it."""
+    from simbench.cli import main
+
+    lab = _lab_copies(render_folder(tmp_path))
+    half = tmp_path / "half.toml"
+    half.write_text(_rig_text(**{"projector.width_px": "228", "projector.focal_px": "278.5"}))
+    argv = ["decode", str(lab / "capture.png"), "--reference", str(lab / "reference.png"), "--z0", "1.0"]
+    main([*argv, "--rig", str(half), "--out", str(tmp_path / "h.npy")])
+    err = capsys.readouterr().err + caplog.text
+    assert (
+        "capture.png: the capture's fringe repeats every 10.9 camera px along the rows, but the rig predicts 21.8"
+        in err
+    )
+    assert "reference capture's fringe repeats every 10.9" in err and "the projector's 278.5" in err, err
+    assert "channel" not in err, err
+    caplog.clear()
+    assert main([*argv, "--rig", str(lab / "rig.toml"), "--out", str(tmp_path / "d.npy")]) == 0
+    assert "repeats every" not in capsys.readouterr().err + caplog.text
+
+
+def test_calibrated_mode_with_no_reference_plane_says_nothing_checks_the_rig(tmp_path, capsys, caplog):
+    """A lab user's audit (2026-11-30): rigs converted wrongly from OpenCV's stereo calibration (T's
+    sign flipped, R inverted, cx and cy swapped) each decoded a lone capture 92-96 % complete and
+    57-360 mm off in calibrated mode, exit 0, without a word.  Nothing in one capture can check a
+    rig, so the decode says so; with a reference plane it checks (and refused each of them)."""
+    from simbench.cli import main
+
+    lab = _lab_copies(render_folder(tmp_path))
+    argv = ["decode", str(lab / "capture.png"), "--rig", str(lab / "rig.toml"), "--mode", "calibrated"]
+    assert main([*argv, "--out", str(tmp_path / "a.npy")]) == 0
+    err = capsys.readouterr().err + caplog.text
+    assert "calibrated mode with no reference plane: nothing checks the rig" in err and "--reference" in err, err
+    caplog.clear()
+    argv += ["--reference", str(lab / "reference.png"), "--z0", "1.0"]
+    assert main([*argv, "--out", str(tmp_path / "b.npy")]) == 0
+    assert "nothing checks the rig" not in capsys.readouterr().err + caplog.text
+    # a recording's own capture: its folder's reference plane checks the rig (nothing to say)
+    r = tmp_path / "r"
+    assert (
+        main(
+            [
+                "decode",
+                str(r / "capture.png"),
+                "--rig",
+                str(r / "rig.toml"),
+                "--mode",
+                "calibrated",
+                "--out",
+                str(tmp_path / "c.npy"),
+            ]
+        )
+        == 0
+    )
+    assert "nothing checks the rig" not in capsys.readouterr().err + caplog.text
+
+
+def _lab_copies(r: Path) -> Path:
+    """A render folder's capture, reference and rig copied out of it, as a lab's own files."""
+    import shutil
+
+    lab = r.parent / "lab"
+    lab.mkdir()
+    for name in ("capture.png", "reference.png", "rig.toml"):
+        shutil.copy(r / name, lab / name)
+    return lab

@@ -1227,7 +1227,7 @@ def test_decode_writes_a_record_of_what_its_files_are(tmp_path, capsys):
     assert 0.9 < record["depth"]["valid_share"] <= 1.0
     assert record["confidence"]["file"] == "d_confidence.npy" and "SNR" in record["confidence"]["meaning"]
     # what a confidence means in noise for this rig (DecoderParams.column_noise_px)
-    assert "the column's noise at fringe SNR s ~" in record["confidence"]["meaning"]
+    assert "the column's random noise at fringe SNR s ~" in record["confidence"]["meaning"]
     assert record["settings"]["decoder"]["min_confidence"] == 2.0 and record["point_cloud"] is None
     assert main(["decode", str(r), "--out", str(tmp_path / "o" / "d.npy"), "--ply", str(tmp_path / "o" / "d.ply")]) == 0
     record = json.loads((tmp_path / "o" / "d_decode.json").read_text())

@@ -157,3 +157,32 @@ def test_decode_refuses_calibration_frames_in_the_wrong_order(tmp_path, capsys):
     assert f"the calibration frames in {frames}/" in err[0], err
     assert "named green looks blue" in err[0] and "named blue looks green" in err[0], err
     assert not (tmp_path / "d.npy").exists()
+
+
+def test_calibration_frames_may_be_tiff_as_a_labs_camera_writes_them(tmp_path, capsys):
+    """A lab user's audit (2026-11-30): `--calibration` with TIFF frames failed on "needs
+    calibration_*.png" while the docs advise PNG or TIFF.  TIFF frames decode as their PNGs do (the
+    same depth, bit for bit); a frame in two formats is refused (which one was meant?)."""
+    import cv2
+
+    files = [*bare_files(tmp_path, RAW, CAL.image, SCENE.rig), "--z0", "1.0"]
+    depth = {}
+    for kind in ("png", "tiff"):
+        frames = tmp_path / kind
+        frames.mkdir()
+        for name, frame in CAL.frames.items():
+            if kind == "png":
+                save_png(frames / f"calibration_{name}.png", frame)
+            else:
+                assert cv2.imwrite(str(frames / f"calibration_{name}.tiff"), frame[..., ::-1])
+        out = tmp_path / f"{kind}.npy"
+        assert main(["decode", *files, "--out", str(out), "--robust", "--calibration", str(frames)]) == 0
+        depth[kind] = np.load(out)
+    assert np.array_equal(depth["png"], depth["tiff"], equal_nan=True) and np.isfinite(depth["png"]).mean() > 0.5
+    save_png(tmp_path / "tiff" / "calibration_red.png", CAL.frames["red"])
+    capsys.readouterr()
+    rc = main(["decode", *files, "--out", str(tmp_path / "x.npy"), "--robust", "--calibration", str(tmp_path / "tiff")])
+    assert (
+        rc == 2
+        and "holds 2 calibration_red frames (calibration_red.png, calibration_red.tiff)" in capsys.readouterr().err
+    )

@@ -135,3 +135,65 @@ def test_compiled_triangulation_gives_the_bits_of_the_numpy_form(distortion, rot
 def test_triangulation_refuses_a_band_without_rows():
     with pytest.raises(ValueError, match=r"\(H, W\)"):
         triangulate_columns(np.zeros(5), paper_rig())
+
+
+def test_a_rig_from_an_opencv_stereo_calibration_projects_as_opencv_does():
+    """rig_from_opencv: R, T of cv2.stereoCalibrate (camera first: X_p = R X_c + T, T in mm) give the
+    rig whose projector pixels are those cv2.projectPoints computes with R, T and the projector's
+    matrix and distortion, to 1e-6 px, for a toed-in, rolled and raised projector; R as a Rodrigues
+    vector the same; the pose is the inverse of OpenCV's (position -R^T T, rotation R^T); fx != fy
+    beyond 0.5 %, skew, and rational-model coefficients refused (a lab user's audit, 2026-11-30:
+    the conversion was documented nowhere, and each mistake in it decoded silently wrong)."""
+    import cv2
+
+    from simbench.rig import project_to_projector, rig_from_opencv, rotation_xyz_deg
+
+    r_rig = rotation_xyz_deg((1.5, -6.0, 0.8))  # projector axes in camera axes
+    position = np.array([0.093, -0.012, 0.004])  # m, the projector's centre in the camera frame
+    r_cv = r_rig.T
+    t_mm = -r_cv @ position * 1000.0
+    k_cam = np.array([[2312.0, 0.0, 641.2], [0.0, 2313.1, 478.9], [0.0, 0.0, 1.0]])
+    k_prj = np.array([[2228.0, 0.0, 905.0], [0.0, 2227.0, 1130.5], [0.0, 0.0, 1.0]])
+    d_cam, d_prj = np.array([-0.08, 0.1, 0.001, -0.0005, 0.0]), np.array([-0.02, 0.01, 0.0, 0.0, 0.0])
+    kw = dict(
+        camera_matrix=k_cam,
+        camera_distortion=d_cam,
+        camera_size_wh=(1280, 960),
+        projector_matrix=k_prj,
+        projector_distortion=d_prj,
+        projector_size_wh=(1824, 1140),
+        translation=t_mm,
+        translation_unit_m=0.001,
+    )
+    rig = rig_from_opencv(rotation=r_cv, **kw)
+    assert np.allclose(rig.position_m, position, atol=1e-12) and np.allclose(rig.rotation, r_rig, atol=1e-12)
+    assert rig.camera.focal_px == pytest.approx(2312.55) and rig.projector.cx_px == 905.0
+    assert rig.camera.distortion == tuple(d_cam) and rig.projector.size_hw == (1140, 1824)
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(-0.3, 0.3, 200), rng.uniform(-0.2, 0.2, 200), rng.uniform(0.7, 1.5, 200)])
+    want = cv2.projectPoints(pts, cv2.Rodrigues(r_cv)[0], t_mm / 1000.0, k_prj, d_prj)[0][:, 0]
+    u, v, _ = project_to_projector(pts, rig)
+    # (the rig's one focal length is fx's and fy's mean: compare with OpenCV at that focal length)
+    want_sq = cv2.projectPoints(pts, cv2.Rodrigues(r_cv)[0], t_mm / 1000.0, _square(k_prj), d_prj)[0][:, 0]
+    assert np.allclose(np.column_stack([u, v]), want_sq, atol=1e-6)
+    assert np.abs(np.column_stack([u, v]) - want).max() < 0.6  # fy 0.045 % off the mean: < 1 px at the edge
+    same = rig_from_opencv(rotation=cv2.Rodrigues(r_cv)[0], **kw)
+    assert np.allclose(same.rotation, rig.rotation, atol=1e-12) and same.position_m == pytest.approx(rig.position_m)
+    with pytest.raises(ValueError, match="fx = 2312 and fy = 2400 px differ by more than 0.5 %"):
+        rig_from_opencv(rotation=r_cv, **{**kw, "camera_matrix": np.diag([2312.0, 2400.0, 1.0])})
+    with pytest.raises(ValueError, match="skew"):
+        rig_from_opencv(
+            rotation=r_cv, **{**kw, "projector_matrix": k_prj + np.array([[0, 3.0, 0], [0, 0, 0], [0, 0, 0]])}
+        )
+    with pytest.raises(ValueError, match="8 distortion coefficients"):
+        rig_from_opencv(rotation=r_cv, **{**kw, "camera_distortion": np.r_[d_cam, 0.01, 0.0, 0.0]})
+    # OpenCV's 8-coefficient vector with its rational terms 0 is its 5
+    assert rig_from_opencv(rotation=r_cv, **{**kw, "camera_distortion": np.r_[d_cam, 0.0, 0.0, 0.0]}) == rig
+    with pytest.raises(ValueError, match="translation_unit_m"):
+        rig_from_opencv(rotation=r_cv, **{**kw, "translation_unit_m": 0.0})
+
+
+def _square(k: np.ndarray) -> np.ndarray:
+    out = k.copy()
+    out[0, 0] = out[1, 1] = 0.5 * (k[0, 0] + k[1, 1])
+    return out

@@ -244,7 +244,8 @@ def add_parsers(sub, kw: dict) -> None:
         "--min-confidence",
         type=float_in(lo=api.MIN_CONFIDENCE_RANGE[0], hi=api.MIN_CONFIDENCE_RANGE[1]),
         default=None,
-        help="the operating point: decoded pixels whose confidence is below it become holes (default: the decoder's "
+        help="the operating point: decoded pixels whose confidence is below it become holes (the colour-fringe "
+        "sensor's fringe SNR is at most 1e4; default: the decoder's "
         "own: for the colour-robust decoder simbench.decode.ROBUST_MIN_CONFIDENCE, none for the paper's decoder, each "
         "competitor's validity threshold; a competitor's own threshold always applies, so a lower value changes "
         "nothing there - the decode's line says so)",
@@ -301,8 +302,9 @@ def add_parsers(sub, kw: dict) -> None:
     s.add_argument(
         "--calibration",
         default=None,
-        help="folder holding calibration_{dark,red,green,blue}.png (`simbench render --calibration-frames`; default: "
-        "the --reference folder)",
+        help="folder holding calibration_{dark,red,green,blue}.png, .tif, .tiff or .npy (the reference plane under "
+        "black and each primary at full drive: `simbench render --calibration-frames`, or a lab's own; default: the "
+        "--reference folder)",
     )
     s.add_argument(
         "--decoder",

@@ -574,7 +574,11 @@ class DecoderParams:
         same operating point - means ``T_cam,ref / T_cam`` times this noise at another camera period
         (0.22 px at the paper's 21.8 px, 0.89 at a quarter of its resolution).  Measured on noisy
         synthetic planes within ~1.1-1.4x of it where the noise dominates (tests/test_decode.py); the
-        fringe's own ripple adds a floor (~0.05 projector px at the paper's resolution)."""
+        decoder's systematic errors add to it - the fringe's own ripple, ~0.05 projector px on a
+        noise-free synthetic plane at the paper's resolution, and on a rendered scene (a lab user's
+        audit, the step at 4 spp, high-passed) the paper decoder's column spread was 1.8-5.6x this
+        over fringe SNR 5-40, the colour-robust decoder's 0.6-1.6x (its confidence is capped below
+        the SNR)."""
         sigma_x = self.sigma_periods * self.camera_period(rig)
         n = 4.0 * math.pi * sigma_x * sigma_x * self.sigma_y_ratio
         return self.period_px / (2.0 * math.pi * math.sqrt(n))

@@ -910,6 +910,88 @@ def channel_order_doubt(capture: np.ndarray, *, rig: Rig, params: DecoderParams,
     )
 
 
+# The fringe's period measured along the rows against the rig's prediction (fringe_period_doubt): a
+# capture whose strongest repetition lies beyond this ratio either way, with no more than
+# FRINGE_NEAR_SHARE of that peak's power anywhere within it, is doubted.  Measured (2026-11-30, every
+# library scene at 4 spp, 320x240): the strongest repetition within 0.86-1.17 of the prediction but
+# the 10 mm chart's (2.1: its squares, a period wide, repeat every two), whose fringe still holds 0.65
+# of that peak's power within the ratio; a projector focal length on another pixel grid (a DLP4500
+# calibrated on its 912-px native grid, the pattern drawn on 1824) is off 2x, with 0.007 there.
+FRINGE_PERIOD_TOLERANCE = 1.35
+FRINGE_NEAR_SHARE = 0.1
+# ... only where the peak stands out of its band this many times the band's median power (a capture
+# with no fringe to speak of - dark, unlit - is left to the other checks)
+FRINGE_PEAK_PROMINENCE = 10.0
+
+
+def _row_spectrum(image: np.ndarray, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frequency in cycles per camera px, power) along ``image``'s rows: ``rows`` rows evenly
+    spaced, the channels summed (the paper's pattern's R + G + B is twice its fringe, whatever the
+    code), each row's mean removed and a Hann window applied, the rows' power summed."""
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 3:
+        img = img.sum(axis=2)
+    h, w = img.shape
+    pick = np.unique(np.linspace(0, h - 1, min(rows, h)).astype(int))
+    lines = img[pick]
+    lines = np.nan_to_num(lines - np.nanmean(lines, axis=1, keepdims=True))
+    return np.fft.rfftfreq(w), (np.abs(np.fft.rfft(lines * np.hanning(w), axis=1)) ** 2).sum(axis=0)
+
+
+def fringe_period_px(image: np.ndarray, *, period_px: float, rows: int = 64) -> float:
+    """The period (camera px) at which ``image``'s light repeats along its rows most strongly
+    (:func:`_row_spectrum`), within a factor of 4 of ``period_px`` either way; NaN where no peak
+    stands out (:data:`FRINGE_PEAK_PROMINENCE`).  The peak is refined by a parabola through its log
+    power."""
+    if np.ndim(image) < 2 or np.shape(image)[1] < 16:
+        return math.nan
+    freq, power = _row_spectrum(image, rows)
+    w = np.shape(image)[1]
+    f0 = 1.0 / period_px
+    band = np.flatnonzero((freq >= max(f0 / 4.0, 3.0 / w)) & (freq <= min(4.0 * f0, 0.5)))
+    if band.size < 5:
+        return math.nan
+    k = band[np.argmax(power[band])]
+    if not power[k] > FRINGE_PEAK_PROMINENCE * np.median(power[band]):
+        return math.nan
+    f = freq[k]
+    if 0 < k < len(power) - 1 and min(power[k - 1], power[k + 1]) > 0:
+        a, b, c = np.log(power[k - 1 : k + 2])
+        if a - 2 * b + c < 0:
+            f += 0.5 * (a - c) / (a - 2 * b + c) * (freq[1] - freq[0])
+    return float(1.0 / f)
+
+
+def fringe_period_doubt(image: np.ndarray, *, rig: Rig, params: DecoderParams, what: str = "capture") -> str:
+    """Why ``image``'s fringe seems not to repeat at the period the rig predicts
+    (:meth:`DecoderParams.camera_period`: the pattern's period times the camera's focal length over
+    the projector's), or "": its strongest repetition (:func:`fringe_period_px`) off by more than
+    :data:`FRINGE_PERIOD_TOLERANCE` either way, with under :data:`FRINGE_NEAR_SHARE` of its power
+    within that ratio of the prediction (a print that repeats more strongly than the fringe leaves
+    the fringe's peak in place).  The decoder demodulates at the predicted period, so such a capture
+    decodes little or wrongly, and the channel-order and encoding checks, which read the spectrum
+    there, would blame the wrong thing (a lab user's audit, 2026-11-30: a projector written on its
+    native 912-px grid was told its capture's channels were out of order, then its reference decoded
+    0 %)."""
+    predicted = params.camera_period(rig)
+    measured = fringe_period_px(image, period_px=predicted)
+    if not np.isfinite(measured) or 1.0 / FRINGE_PERIOD_TOLERANCE <= measured / predicted <= FRINGE_PERIOD_TOLERANCE:
+        return ""
+    freq, power = _row_spectrum(image, 64)
+    near = (freq >= 1.0 / (predicted * FRINGE_PERIOD_TOLERANCE)) & (freq <= FRINGE_PERIOD_TOLERANCE / predicted)
+    peak = power[np.argmin(np.abs(freq - 1.0 / measured))]
+    if near.any() and power[near].max() >= FRINGE_NEAR_SHARE * peak:
+        return ""
+    return (
+        f"the {what}'s fringe repeats every {measured:.1f} camera px along the rows, but the rig predicts "
+        f"{predicted:.1f} (the pattern's {params.period_px:g}-px period x the camera's focal length "
+        f"{rig.camera.focal_px:g} / the projector's {rig.projector.focal_px:g}): is the projector's focal length (and "
+        "size, principal point) in the pixels of the pattern image it projects - a projector calibrated on another "
+        "grid (a DLP4500's 912-px native one for an 1824-px pattern) is off by their ratio - or the pattern's period "
+        "(--period)? Depths decoded so are missing or wrong"
+    )
+
+
 # A capture clipped in a channel on more than this share of its pixels decodes under 1 - this
 # share of them (a clipped sample is skipped), and the warning for a decode that found almost
 # nothing (simbench.systems.files.NOTHING_DECODED_SHARE, 1 %) names the saturation: no clipping
@@ -926,10 +1008,11 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, en
     (:mod:`simbench.decode.integrity`)."""
     from simbench.decode.params import pattern_on_rig_warnings
 
-    told = [
-        channel_order_doubt(capture, rig=rig, params=params),
-        *_integrity_warnings(capture, params, "capture", refused_clipped=CAPTURE_CLIPPED_UNDECODABLE),
-    ]
+    integrity = _integrity_warnings(capture, params, "capture", refused_clipped=CAPTURE_CLIPPED_UNDECODABLE)
+    period = fringe_period_doubt(capture, rig=rig, params=params)
+    if period:  # the channel-order and encoding checks read the spectrum at the predicted period
+        return [*pattern_on_rig_warnings(rig, params), period, *(t for t in integrity if t)]
+    told = [channel_order_doubt(capture, rig=rig, params=params), *integrity]
     told.append(
         encoding_doubt(
             fringe_harmonic_ratio(
@@ -948,10 +1031,14 @@ def reference_warnings(
     fringe's linearity (:func:`simbench.decode.registration.encoding_doubt`; the plane faces the
     rig, so its fringe runs at the period demodulated at, and a camera's encoding shows there
     whatever the scene), JPEG compression and clipping (:mod:`simbench.decode.integrity`)."""
-    ratio = fringe_harmonic_ratio(
-        reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
-    )
-    told = [encoding_doubt(ratio, what="reference capture", encoding=encoding)]
+    period = fringe_period_doubt(reference, rig=rig, params=params, what="reference capture")
+    if period:
+        told = [period]
+    else:
+        ratio = fringe_harmonic_ratio(
+            reference, order=list(check_channels(params.channels)), period_px=params.camera_period(rig)
+        )
+        told = [encoding_doubt(ratio, what="reference capture", encoding=encoding)]
     # a reference clipped over more than 1 - min_reference_coverage of it is refused (a clipped
     # sample is skipped, and a window under half certain gives no phase), and the refusal says so
     # (decode_reference): no warning line before that error's

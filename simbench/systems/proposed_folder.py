@@ -343,6 +343,19 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
         check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind)
         store_plane()
+    elif params.mode == "calibrated" and request.rig is not None:
+        # a lone capture triangulated with a rig nothing checks (a lab user's audit, 2026-11-30: a
+        # rig converted from OpenCV's stereo calibration with T's sign flipped, R inverted, its
+        # rotation left out or cx and cy swapped each decoded 92-96 % of the pixels 57-360 mm off,
+        # exit 0; given a reference plane, each was refused)
+        logging.getLogger("simbench").warning(
+            "%s: calibrated mode with no reference plane: nothing checks the rig %s against this capture - a rig "
+            "converted wrongly (the translation's sign or units, the rotation's direction, a principal point) "
+            "decodes most pixels at wrong depths without a word. Give --reference with a capture of a flat board "
+            "at a known distance (--z0) to check it (docs/lab.md)",
+            capture_path,
+            rig_path,
+        )
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
     dt = time.perf_counter() - t0
@@ -389,8 +402,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     contested += ", 0 on a stripe order read from too few pixels' codes" if params.code_doubt else ""
     contested += ", 0 beside a shadow" if params.shadow_doubt else ""
     noise = (
-        f"the column's noise at fringe SNR s ~{params.column_noise_px(rig):.2f}/s projector px (1 sigma) with this "
-        f"rig's {params.camera_period(rig):.1f}-px camera period"
+        f"the column's random noise at fringe SNR s ~{params.column_noise_px(rig):.2f}/s projector px (1 sigma) with "
+        f"this rig's {params.camera_period(rig):.1f}-px camera period, the decoder's systematic errors besides"
     )
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}; {noise}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
@@ -614,6 +627,22 @@ def _check_recorded_rig(rig, rig_path, capture_path, recorded: dict) -> None:
     )
 
 
+# the calibration frames' file types, as a capture's (a lab's camera writes TIFF as often as PNG)
+CALIBRATION_FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+
+
+def _calibration_frame(folder: Path, kind: str) -> Path | None:
+    """``folder``'s ``calibration_<kind>`` frame in one of :data:`CALIBRATION_FRAME_SUFFIXES`, None
+    if there is none; two of them are refused (which one was meant?)."""
+    found = [folder / f"calibration_{kind}{s}" for s in CALIBRATION_FRAME_SUFFIXES]
+    found = [p for p in found if p.is_file()]
+    if len(found) > 1:
+        raise ValueError(
+            f"{folder}/ holds {len(found)} calibration_{kind} frames ({', '.join(p.name for p in found)}): keep one"
+        )
+    return found[0] if found else None
+
+
 def _calibrated_reference(request, rig, params, reference, *, reference_path, cache=None):
     """The decoded reference with its coupling matrix (the colour-robust decoder's unmixing):
     the reference capture (``reference``, or read from ``reference_path`` in calibrated mode) and
@@ -628,12 +657,12 @@ def _calibrated_reference(request, rig, params, reference, *, reference_path, ca
             "calibration frames)"
         )
     folder = Path(request.calibration) if request.calibration is not None else Path(reference_path).parent
-    paths = {k: folder / f"calibration_{k}.png" for k in CALIBRATION_FRAMES}
-    missing = [p.name for p in paths.values() if not p.is_file()]
+    paths = {k: _calibration_frame(folder, k) for k in CALIBRATION_FRAMES}
+    missing = [f"calibration_{k}.png" for k, p in paths.items() if p is None]
     if missing:
         raise ValueError(
-            f"the colour-robust decoder needs the calibration frames {missing} in {folder}/ (render with `simbench "
-            f"render --calibration-frames`, or give --calibration FOLDER)"
+            f"the colour-robust decoder needs the calibration frames {missing} (or .tif, .tiff, .npy) in {folder}/ "
+            "(render with `simbench render --calibration-frames`, or give --calibration FOLDER)"
         )
     ref_manifest = recording_manifest_of(reference_path) if Path(reference_path).is_file() else None
     for p in paths.values():
