@@ -53,6 +53,7 @@ __all__ = [
     "rig_differences",
     "rig_from_opencv",
     "OPENCV_SQUARE_PIXEL_SHARE",
+    "OPENCV_BASELINE_RANGE_M",
 ]
 
 
@@ -217,6 +218,9 @@ class Rig:
 # agree within its ~0.1-0.3 % uncertainty; a rig has one focal length per device, as Mitsuba's
 # sensors and the simulated projector do)
 OPENCV_SQUARE_PIXEL_SHARE = 0.005
+# the baselines a converted calibration may give (m; assumption: a projector-camera depth rig is
+# 1 mm to 10 m across - outside that, T's unit was read wrongly: mm as m is 1000x, m as mm 1/1000x)
+OPENCV_BASELINE_RANGE_M = (0.001, 10.0)
 
 
 def _opencv_intrinsics(matrix, distortion, size_wh, who: str) -> Intrinsics:
@@ -229,7 +233,9 @@ def _opencv_intrinsics(matrix, distortion, size_wh, who: str) -> Intrinsics:
     if not (fx > 0 and fy > 0) or abs(fx - fy) > OPENCV_SQUARE_PIXEL_SHARE * max(fx, fy):
         raise ValueError(
             f"{who}: fx = {fx:g} and fy = {fy:g} px differ by more than {100 * OPENCV_SQUARE_PIXEL_SHARE:g} %: a rig "
-            "has square pixels (calibrate with cv2.CALIB_FIX_ASPECT_RATIO, or check the image size)"
+            "has square pixels. A projector calibrated on a grid of other proportions than its pattern image (a "
+            "DLP4500's native 912-px-wide grid for its 1824-px pattern: fx about half fy) needs its matrix in the "
+            "pattern's pixels (there: fx' = 2 fx, cx' = 2 (cx + 0.5) - 0.5); a camera, cv2.CALIB_FIX_ASPECT_RATIO"
         )
     d = np.ravel(np.asarray(distortion if distortion is not None else (), dtype=np.float64))
     if d.size > 5 and np.any(d[5:] != 0.0):
@@ -268,7 +274,8 @@ def rig_from_opencv(
         OpenCV camera matrices ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``: fx and fy within
         :data:`OPENCV_SQUARE_PIXEL_SHARE` of each other (their mean is taken), no skew.  The
         projector's in the pixels of the pattern image it projects (a DLP4500 calibrated on its
-        912-px native grid projects an 1824-px pattern: scale its row of the matrix by 2 first).
+        912-px native grid projects an 1824-px pattern: its first row in the pattern's pixels
+        first, ``fx' = 2 fx``, ``cx' = 2 (cx + 0.5) - 0.5``).
     camera_distortion, projector_distortion : array of up to 5 floats, or None
         OpenCV's ``(k1, k2, p1, p2, k3)``; longer vectors only if their extra terms are 0.
     camera_size_wh, projector_size_wh : (width, height) in px
@@ -278,7 +285,8 @@ def rig_from_opencv(
         ``T`` of ``cv2.stereoCalibrate``, in the unit of the calibration target's coordinates.
     translation_unit_m : float
         Metres per unit of ``T`` (0.001 for a target measured in mm): no default, since OpenCV's
-        ``T`` carries whatever unit the target's square size was given in.
+        ``T`` carries whatever unit the target's square size was given in.  A baseline outside
+        :data:`OPENCV_BASELINE_RANGE_M` is refused (a unit read wrongly).
     name : str
 
     Returns
@@ -297,6 +305,13 @@ def rig_from_opencv(
         raise ValueError(f"translation: 3 numbers, got {t.size}")
     unit = validate.number(translation_unit_m, "translation_unit_m", lo=0.0, lo_open=True, hi=1.0)
     position = -r.T @ t * unit
+    baseline = float(np.linalg.norm(position))
+    if not OPENCV_BASELINE_RANGE_M[0] <= baseline <= OPENCV_BASELINE_RANGE_M[1]:
+        raise ValueError(
+            f"the projector would be {baseline:.6g} m from the camera (|T| = {np.linalg.norm(t):g} x "
+            f"translation_unit_m {unit:g}): is translation_unit_m the metres per unit of T - the unit of the "
+            "calibration target's square size (0.001 for mm)?"
+        )
     return Rig(
         camera=_opencv_intrinsics(camera_matrix, camera_distortion, camera_size_wh, "camera"),
         projector=_opencv_intrinsics(projector_matrix, projector_distortion, projector_size_wh, "projector"),

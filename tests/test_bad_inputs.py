@@ -1622,10 +1622,16 @@ def test_calibrated_mode_with_no_reference_plane_says_nothing_checks_the_rig(tmp
     assert main([*argv, "--out", str(tmp_path / "a.npy")]) == 0
     err = capsys.readouterr().err + caplog.text
     assert "calibrated mode with no reference plane: nothing checks the rig" in err and "--reference" in err, err
+    # ... and the decode's record keeps it, beside the depth
+    import json
+
+    kept = json.loads((tmp_path / "a_decode.json").read_text())["warnings"]
+    assert any("nothing checks the rig" in w for w in kept), kept
     caplog.clear()
     argv += ["--reference", str(lab / "reference.png"), "--z0", "1.0"]
     assert main([*argv, "--out", str(tmp_path / "b.npy")]) == 0
     assert "nothing checks the rig" not in capsys.readouterr().err + caplog.text
+    assert json.loads((tmp_path / "b_decode.json").read_text())["warnings"] == []
     # a recording's own capture: its folder's reference plane checks the rig (nothing to say)
     r = tmp_path / "r"
     assert (

@@ -191,6 +191,15 @@ def test_a_rig_from_an_opencv_stereo_calibration_projects_as_opencv_does():
     assert rig_from_opencv(rotation=r_cv, **{**kw, "camera_distortion": np.r_[d_cam, 0.0, 0.0, 0.0]}) == rig
     with pytest.raises(ValueError, match="translation_unit_m"):
         rig_from_opencv(rotation=r_cv, **{**kw, "translation_unit_m": 0.0})
+    # T in mm read as metres, or in metres read as mm: the unit named, not a range of position_m
+    for unit, far in ((1.0, "93.8563 m"), (1e-6, "9.38563e-05 m")):
+        with pytest.raises(ValueError, match=f"the projector would be {far}.* is translation_unit_m the metres"):
+            rig_from_opencv(rotation=r_cv, **{**kw, "translation_unit_m": unit})
+    # a projector calibrated on its native half-width grid: the message names the conversion
+    native = k_prj.copy()
+    native[0] = [k_prj[0, 0] / 2, 0.0, (k_prj[0, 2] + 0.5) / 2 - 0.5]
+    with pytest.raises(ValueError, match=r"fx' = 2 fx, cx' = 2 \(cx \+ 0\.5\) - 0\.5"):
+        rig_from_opencv(rotation=r_cv, **{**kw, "projector_matrix": native})
 
 
 def _square(k: np.ndarray) -> np.ndarray:

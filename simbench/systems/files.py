@@ -17,6 +17,8 @@ all (:func:`simbench.io.write_files`).
 
 from __future__ import annotations
 
+import contextlib
+
 import dataclasses
 import json
 import logging
@@ -298,6 +300,25 @@ def _is_confidence_of(path: Path, depth: np.ndarray) -> bool:
     return arr.dtype == np.float32 and arr.shape == depth.shape
 
 
+@contextlib.contextmanager
+def _warnings_told():
+    """The messages of the warnings the ``simbench`` logger gives inside the block, as a list
+    (filled as they come; they are still logged as before)."""
+    told: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            told.append(record.getMessage())
+
+    handler = _Keep(logging.WARNING)
+    logger = logging.getLogger("simbench")
+    logger.addHandler(handler)
+    try:
+        yield told
+    finally:
+        logger.removeHandler(handler)
+
+
 def decode_files(request: DecodeRequest) -> str:
     """Decode ``request.capture`` with the system it belongs to and write the outputs; the
     one-line report of what was decoded and where it went."""
@@ -310,7 +331,8 @@ def decode_files(request: DecodeRequest) -> str:
     name = system_of_recording(request.capture) if Path(request.capture).is_dir() else DEFAULT_SYSTEM
     system = get_system(name)
     hook = getattr(system, "decode_files", None)
-    res = hook(request) if hook is not None else _decode_folder(system, request)
+    with _warnings_told() as told:
+        res = hook(request) if hook is not None else _decode_folder(system, request)
     files = {Path(request.out): npy_bytes(res.depth_m)}
     if res.confidence is not None:
         files[confidence_path(request)] = npy_bytes(res.confidence)
@@ -392,6 +414,9 @@ def decode_files(request: DecodeRequest) -> str:
             "min_confidence": res.settings.get("decoder", {}).get("min_confidence", request.min_confidence),
             "point_cloud": Path(request.ply).name if request.ply else None,
             "settings": res.settings,
+            # what the decode warned of, kept with the depth (a lab user's audit, 2026-11-30: "nothing
+            # checks the rig" went to the terminal only, not to the files a batch run keeps)
+            "warnings": told,
         }
     )
     msg += f", record -> {record_path(request)}"
