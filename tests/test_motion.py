@@ -647,19 +647,10 @@ def test_a_moving_recording_states_its_window_and_slices_and_warns_of_a_smear(va
     warning where the object crosses more than half its own extent (a 2 cm ball at 1 m/s: 17 px
     of travel, its extent 23 px; at 0.5 m/s 8.5 px, nothing said)."""
     import simbench
-    from simbench.rig import get_rig, save_rig
     from simbench.sim.timeline import slice_count
 
-    save_rig(scale_camera(get_rig("paper"), 0.25), tmp_path / "rig_q.toml")
-
-    def scene_file(speed: float) -> str:
-        path = tmp_path / f"ball_{speed:g}.toml"
-        path.write_text(
-            f'name = "ball"\nrig = "rig_q.toml"\n[[object]]\ntype = "sphere"\nname = "ball"\n'
-            f"center_m = [{-0.0135 * speed:.6f}, 0.0, 1.0]\nradius_m = 0.02\nvelocity_m_s = [{speed}, 0.0, 0.0]\n"
-            '[[object]]\ntype = "plane"\nname = "wall"\ncenter_m = [0.0, 0.0, 1.3]\nsize_m = [2.0, 1.6]\n'
-        )
-        return str(path)
+    def scene_file(speed: float) -> str:  # the ball centred at mid-exposure
+        return _ball_before_a_wall(tmp_path, speed, x_m=-0.0135 * speed)
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", simbench.SimbenchWarning)
@@ -681,18 +672,9 @@ def test_a_moving_recording_is_scored_against_one_instant_and_says_so(variant, t
 
     import simbench
     from simbench.cli import main
-    from simbench.rig import get_rig, save_rig
-
-    save_rig(scale_camera(get_rig("paper"), 0.25), tmp_path / "rig_q.toml")
 
     def scene_file(speed: float) -> str:
-        path = tmp_path / f"ball_{speed:g}.toml"
-        path.write_text(
-            f'name = "ball"\nrig = "rig_q.toml"\n[[object]]\ntype = "sphere"\nname = "ball"\n'
-            f"center_m = [0.0, 0.0, 1.0]\nradius_m = 0.02\nvelocity_m_s = [{speed}, 0.0, 0.0]\n"
-            '[[object]]\ntype = "plane"\nname = "wall"\ncenter_m = [0.0, 0.0, 1.3]\nsize_m = [2.0, 1.6]\n'
-        )
-        return str(path)
+        return _ball_before_a_wall(tmp_path, speed, x_m=0.0)
 
     rec = simbench.record(scene_file(0.5), spp=1)
     t0, t1 = rec.meta["capture_window_s"]
@@ -716,3 +698,19 @@ def test_a_moving_recording_is_scored_against_one_instant_and_says_so(variant, t
     assert "note:" not in capsys.readouterr().out and not (still / "gt_motion.npy").exists()
     still_rec = simbench.record(scene_file(0.0), spp=1)
     assert "image_motion_px" not in simbench.score(still_rec.gt.depth_m, still_rec)
+
+
+def _ball_before_a_wall(folder, speed_m_s: float, *, x_m: float) -> str:
+    """A scene file in ``folder``: a 2 cm ball at (``x_m``, 0, 1 m) moving sideways at
+    ``speed_m_s`` before a wall at 1.3 m, on the paper rig at a quarter of its resolution
+    (``rig_q.toml`` beside it)."""
+    from simbench.rig import get_rig, save_rig
+
+    save_rig(scale_camera(get_rig("paper"), 0.25), folder / "rig_q.toml")
+    path = folder / f"ball_{speed_m_s:g}.toml"
+    path.write_text(
+        f'name = "ball"\nrig = "rig_q.toml"\n[[object]]\ntype = "sphere"\nname = "ball"\n'
+        f"center_m = [{x_m:.6f}, 0.0, 1.0]\nradius_m = 0.02\nvelocity_m_s = [{speed_m_s}, 0.0, 0.0]\n"
+        '[[object]]\ntype = "plane"\nname = "wall"\ncenter_m = [0.0, 0.0, 1.3]\nsize_m = [2.0, 1.6]\n'
+    )
+    return str(path)

@@ -819,35 +819,14 @@ def test_the_edge_term_doubts_the_pixels_a_window_straddling_a_depth_edge_biases
     of the decoded map there (``edge_doubt``, :func:`simbench.decode.depth.edge_bend_bias`) and
     doubts them: none over half a pixel, max 0.26, at 96.4 instead of 98.4 % of those pixels.
     Never a stripe-order error."""
-    from simbench.decode import EDGE_BEND_REACH_SIGMAS
-    from simbench.decode.depth import edge_bend_bias
-
-    ref, f = calibration
     cap, col, region, _ = _one_period_step(0.8, jump_periods=1.5, blur_px=2.0)
     h, w = col.shape
     x, y = np.arange(w)[None, :], np.arange(h)[:, None]
     near = region & (np.abs(x - w // 2) < 60) & (y > 20) & (y < h - 20)  # the image's own borders apart
-    out = {}
-    for edge in (False, True):
-        p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), edge_doubt=edge)
-        rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
-        r = decode(cap, rig=RIG, params=p, reference=rmap)
-        err = np.abs(r.column_px - col)[r.valid & near]
-        assert np.all(err < 0.5 * 21)
-        out[edge] = (int((err > 0.5).sum()), float(err.max()), float(r.valid[near].mean()))
-        if edge:
-            # the stage is the function's, on the column map before the operating point's holes
-            every = decode(cap, rig=RIG, params=dataclasses.replace(p, min_confidence=0.0), reference=rmap)
-            sx = p.sigma_periods * PARAMS_PERIOD_PX
-            want = edge_bend_bias(
-                every.column_px,
-                reach_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx)),
-                fit_px=round(PARAMS_PERIOD_PX),
-                max_step_px=p.edge_step_px(RIG),
-                reach_y_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx * p.sigma_y_ratio)),
-                fit_y_px=round(PARAMS_PERIOD_PX),
-            )
-            assert np.array_equal(r.stages["edge_bend"], want) and (want > 0).any()
+    out, every, stage = _edge_term_off_and_on(calibration, cap, col, near)
+    # the stage is the function's, on the column map before the operating point's holes
+    want = _decoders_edge_bend(every, down_columns=True)
+    assert np.array_equal(stage, want) and (want > 0).any()
     assert out[False][0] > 100 and out[False][1] > 0.6, out
     assert out[True][0] == 0 and out[True][1] < 0.4, out
     assert out[False][2] - 0.03 < out[True][2] < out[False][2], out
@@ -860,14 +839,24 @@ def test_the_edge_term_reads_down_the_columns_an_edge_along_the_rows(calibration
     off (1301 over half a pixel within 30 rows of it, ~10 mm at 1.2 m), and along the rows the map
     runs straight on - the rows' pass sees no edge.  Down the columns it does: 97 over half a
     pixel (at most 0.62), at 92.4 instead of 95.8 % of those pixels.  Never a stripe-order error."""
-    from simbench.decode import EDGE_BEND_REACH_SIGMAS
-    from simbench.decode.depth import edge_bend_bias
-
-    ref, f = calibration
     cap, col, _, _ = _one_period_step(0.8, jump_periods=1.25, blur_px=1.0, across_rows=True)
     h, w = col.shape
     x, y = np.arange(w)[None, :], np.arange(h)[:, None]
     near = np.isfinite(col) & (np.abs(y - h // 2) < 30) & (x > 20) & (x < w - 20)
+    out, every, stage = _edge_term_off_and_on(calibration, cap, col, near)
+    band = (np.abs(y - h // 2) < 8) & (x > 40) & (x < w - 40)
+    assert not _decoders_edge_bend(every, down_columns=False)[band].any() and (stage[band] > 0.5).any()
+    assert out[False][0] > 1000 and out[False][1] > 1.5, out
+    assert out[True][0] < 0.1 * out[False][0] and out[True][1] < 0.7, out
+    assert out[False][2] - 0.05 < out[True][2] < out[False][2], out
+
+
+def _edge_term_off_and_on(calibration, cap, col, near) -> tuple[dict, np.ndarray, np.ndarray]:
+    """``cap`` decoded by the colour-robust decoder without and with its edge term: per setting,
+    (pixels of ``near`` over half a projector px off ``col``, the largest error, the share of
+    ``near`` decoded) - never a stripe off; then, with the term, the column map before the
+    operating point's holes and the ``edge_bend`` stage."""
+    ref, f = calibration
     out = {}
     for edge in (False, True):
         p = dataclasses.replace(robust_params(DecoderParams(mode="calibrated")), edge_doubt=edge)
@@ -876,20 +865,26 @@ def test_the_edge_term_reads_down_the_columns_an_edge_along_the_rows(calibration
         err = np.abs(r.column_px - col)[r.valid & near]
         assert np.all(err < 0.5 * 21)
         out[edge] = (int((err > 0.5).sum()), float(err.max()), float(r.valid[near].mean()))
-        if edge:
-            every = decode(cap, rig=RIG, params=dataclasses.replace(p, min_confidence=0.0), reference=rmap)
-            sx = p.sigma_periods * PARAMS_PERIOD_PX
-            rows = edge_bend_bias(
-                every.column_px,
-                reach_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx)),
-                fit_px=round(PARAMS_PERIOD_PX),
-                max_step_px=p.edge_step_px(RIG),
-            )
-            band = (np.abs(y - h // 2) < 8) & (x > 40) & (x < w - 40)
-            assert not rows[band].any() and (r.stages["edge_bend"][band] > 0.5).any()
-    assert out[False][0] > 1000 and out[False][1] > 1.5, out
-    assert out[True][0] < 0.1 * out[False][0] and out[True][1] < 0.7, out
-    assert out[False][2] - 0.05 < out[True][2] < out[False][2], out
+    every = decode(cap, rig=RIG, params=dataclasses.replace(p, min_confidence=0.0), reference=rmap)
+    return out, every.column_px, r.stages["edge_bend"]
+
+
+def _decoders_edge_bend(column: np.ndarray, *, down_columns: bool) -> np.ndarray:
+    """:func:`simbench.decode.depth.edge_bend_bias` of ``column`` with the colour-robust decoder's
+    reaches, fits and step on :data:`RIG` (along the rows, and down the columns if asked)."""
+    from simbench.decode import EDGE_BEND_REACH_SIGMAS
+    from simbench.decode.depth import edge_bend_bias
+
+    p = robust_params(DecoderParams(mode="calibrated"))
+    sx = p.sigma_periods * PARAMS_PERIOD_PX
+    return edge_bend_bias(
+        column,
+        reach_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx)),
+        fit_px=round(PARAMS_PERIOD_PX),
+        max_step_px=p.edge_step_px(RIG),
+        reach_y_px=int(np.ceil(EDGE_BEND_REACH_SIGMAS * sx * p.sigma_y_ratio)) if down_columns else 0,
+        fit_y_px=round(PARAMS_PERIOD_PX) if down_columns else 0,
+    )
 
 
 # --- the window-centroid correction (DecoderParams.centroid_correction) -------------------------
