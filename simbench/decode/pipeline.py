@@ -945,8 +945,12 @@ def fringe_period_px(image: np.ndarray, *, period_px: float, rows: int = 64) -> 
     power."""
     if np.ndim(image) < 2 or np.shape(image)[1] < 16:
         return math.nan
-    freq, power = _row_spectrum(image, rows)
-    w = np.shape(image)[1]
+    return _peak_period(*_row_spectrum(image, rows), period_px, width=np.shape(image)[1])
+
+
+def _peak_period(freq: np.ndarray, power: np.ndarray, period_px: float, *, width: int) -> float:
+    """:func:`fringe_period_px` of a row spectrum (:func:`_row_spectrum`) of rows ``width`` px long."""
+    w = width
     f0 = 1.0 / period_px
     band = np.flatnonzero((freq >= max(f0 / 4.0, 3.0 / w)) & (freq <= min(4.0 * f0, 0.5)))
     if band.size < 5:
@@ -973,11 +977,13 @@ def fringe_period_doubt(image: np.ndarray, *, rig: Rig, params: DecoderParams, w
     there, would blame the wrong thing (a lab user's audit, 2026-11-30: a projector written on its
     native 912-px grid was told its capture's channels were out of order, then its reference decoded
     0 %)."""
+    if np.ndim(image) < 2 or np.shape(image)[1] < 16:
+        return ""
     predicted = params.camera_period(rig)
-    measured = fringe_period_px(image, period_px=predicted)
+    freq, power = _row_spectrum(image, 64)
+    measured = _peak_period(freq, power, predicted, width=np.shape(image)[1])
     if not np.isfinite(measured) or 1.0 / FRINGE_PERIOD_TOLERANCE <= measured / predicted <= FRINGE_PERIOD_TOLERANCE:
         return ""
-    freq, power = _row_spectrum(image, 64)
     near = (freq >= 1.0 / (predicted * FRINGE_PERIOD_TOLERANCE)) & (freq <= FRINGE_PERIOD_TOLERANCE / predicted)
     peak = power[np.argmin(np.abs(freq - 1.0 / measured))]
     if near.any() and power[near].max() >= FRINGE_NEAR_SHARE * peak:
