@@ -1216,3 +1216,32 @@ def test_the_column_noise_at_a_fringe_snr_is_the_windows_closed_form(scale):
     assert 0.9 < np.std(err) / predicted < 1.5, (np.std(err), predicted)
     if scale == 1.0:
         assert p.column_noise_px(rig) == pytest.approx(0.223, abs=0.001)
+
+
+def test_the_fringe_period_check_tells_a_projector_grid_from_a_print_that_repeats():
+    """fringe_period_doubt: a plane's capture repeats at the rig's predicted camera period (to 1 %)
+    and is not doubted; decoded with the projector's focal length halved (a projector written on a
+    grid half the pattern's) it is, naming both periods; a print of squares a period wide (the 10 mm
+    chart's kind: their square wave, of twice the period, repeats more strongly than the fringe)
+    leaves the fringe's peak in place and is not doubted; a black capture has no peak (NaN, "")."""
+    from simbench.decode.pipeline import fringe_period_doubt, fringe_period_px
+    from simbench.rig import scale_camera
+
+    rig = scale_camera(RIG, 0.25)
+    img, _, _ = synthetic_plane_capture(DRIVE, rig, point_m=(0, 0, 1.0), supersample=2, albedo=1.0)
+    cap = np.clip(img / img.max() * 0.8, 0, 1).astype(np.float32)
+    p = DecoderParams()
+    t_cam = p.camera_period(rig)
+    assert fringe_period_px(cap, period_px=t_cam) == pytest.approx(t_cam, rel=0.01)
+    assert fringe_period_doubt(cap, rig=rig, params=p) == ""
+    half = dataclasses.replace(rig, projector=dataclasses.replace(rig.projector, focal_px=rig.projector.focal_px / 2))
+    told = fringe_period_doubt(cap, rig=half, params=p)
+    measured = float(re.search(r"repeats every ([0-9.]+) camera px", told).group(1))
+    assert measured == pytest.approx(t_cam, abs=0.06) and f"but the rig predicts {2 * t_cam:.1f}" in told, told
+    x = np.arange(cap.shape[1])
+    squares = np.where(np.sin(2 * np.pi * x / (2.1 * t_cam)) > 0, 1.0, 0.1).astype(np.float32)
+    printed = cap * squares[None, :, None]
+    assert fringe_period_px(printed, period_px=t_cam) > 1.35 * t_cam  # the print repeats most strongly
+    assert fringe_period_doubt(printed, rig=rig, params=p) == ""
+    black = np.zeros_like(cap)
+    assert np.isnan(fringe_period_px(black, period_px=t_cam)) and fringe_period_doubt(black, rig=rig, params=p) == ""
