@@ -163,9 +163,15 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     assert any(
         "stripe_order_errors" in f for f in check_thresholds({**measured, "fig9/1.0m/stripe_order_errors": 100}, path)
     )
+    # a metric the run did not make at all is the file's fault (a misspelt name: it exited 1 as a
+    # regression), named with the nearest the run made; one it made as NaN is not measured
     missing = dict(measured)
     del missing["table1/white/paper/gt_mae_mm"]
-    assert any("not measured" in f for f in check_thresholds(missing, path))
+    with pytest.raises(ValueError, match=r"1 metric\(s\) this run does not make: table1/white/paper/gt_mae_mm$"):
+        check_thresholds(missing, path)
+    typo = {("table1/white/paper/gt_mea_mm" if k.endswith("gt_mae_mm") else k): v for k, v in measured.items()}
+    with pytest.raises(ValueError, match=r"gt_mae_mm \(did you mean table1/white/paper/gt_mea_mm\?\)"):
+        check_thresholds(typo, path)
     assert any(
         "not measured" in f for f in check_thresholds({**measured, "table1/white/paper/gt_mae_mm": math.nan}, path)
     )
@@ -179,10 +185,16 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     )
     check_threshold_names(load_thresholds(both), ["table1"], path=both)
     assert check_thresholds(table1_only, both, targets=["table1"]) == []
-    assert any("fig9" in f and "not measured" in f for f in check_thresholds(table1_only, both))
+    with pytest.raises(ValueError, match="this run does not make: fig9/1.0m/stripe_order_errors"):
+        check_thresholds(table1_only, both)
     assert any("gt_mae_mm" in f for f in check_thresholds(worse, both, targets=["table1"]))
     with pytest.raises(ValueError, match=r"not made by the targets of this run \(\['budget'\]\): it holds"):
         check_threshold_names(load_thresholds(both), ["budget"], path=both)
+    # an empty (or comment-only) file checks nothing: refused (it printed "all metrics within")
+    empty = tmp_path / "empty.toml"
+    empty.write_text("# hello\n")
+    with pytest.raises(ValueError, match="holds no thresholds"):
+        check_threshold_names(load_thresholds(empty), ["table1"], path=empty)
 
 
 def test_same_values_counts_bit_equal_metrics_and_names_the_farthest(tmp_path):
@@ -729,3 +741,45 @@ def test_a_targets_files_and_provenance_are_written_as_one_set(tmp_path):
     with pytest.raises(ValueError, match="t.md is a folder"):
         session.write_results("t", {"t.csv": "a,b\n3,4\n", "t.md": "# t\n"})
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_reproduce_gives_decoder_assignments_to_both_decoders_and_compares_with_the_run_before(
+    tmp_path, monkeypatch, capsys
+):
+    """A decoder developer's audit (2026-11-30): `reproduce --decoder crease_doubt=false` reached the
+    paper's decoder only (the colour-robust one rebuilt its own settings, and the hard scenes' robust
+    columns came out the same bits without a word); a run writing into the folder of the thresholds
+    it checks compared its metrics with themselves ("288 of 288 the same bits"); an --out that is a
+    file was refused only after the run.  Now the assignments go on top of both decoders' own
+    settings (recorded in the provenance: robust_decoder), the committed metrics are read before the
+    run, and --out is checked first."""
+    from simbench.cli import main
+    from simbench.decode import robust_params
+    import simbench.experiments.reproduce as reproduce_module
+
+    committed = {"budget/a/gt_mae_mm": 0.5, "budget/b/gt_mae_mm": 0.7}
+    (tmp_path / "metrics.json").write_text(json.dumps(committed))
+    check = write_thresholds(tmp_path / "thresholds.toml", committed, margin=0.25, command="t", quick=True)
+    seen = {}
+
+    def run(targets, *, config, out_dir, **_):  # a run that writes over the committed metrics
+        seen["config"] = config
+        made = {**committed, "budget/b/gt_mae_mm": 0.71}
+        (Path(out_dir) / "metrics.json").write_text(json.dumps(made))
+        return made
+
+    monkeypatch.setattr(reproduce_module, "reproduce", run)
+    argv = ["reproduce", "budget", "--quick", "--check", str(check), "--out", str(tmp_path)]
+    assert main([*argv, "--decoder", "crease_doubt=false", "sigma_periods=0.3"]) == 0
+    cfg = seen["config"]
+    assert cfg.decoder.sigma_periods == 0.3 and not cfg.decoder.crease_doubt
+    robust = cfg.robust()
+    assert robust.sigma_periods == 0.3 and not robust.crease_doubt and robust.unmix and robust.edge_doubt
+    assert cfg.to_dict()["robust_decoder"]["crease_doubt"] is False
+    assert "1 of 2 metrics the same bits" in capsys.readouterr().out
+    plain = RunConfig.preset(quick=True)
+    assert plain.robust() == robust_params(plain.decoder) and "robust_decoder" not in plain.to_dict()
+    seen.clear()
+    (tmp_path / "afile").write_text("")
+    assert main([*argv[:-1], str(tmp_path / "afile")]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err and not seen  # refused before the run

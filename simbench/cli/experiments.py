@@ -60,6 +60,7 @@ def _cmd_reproduce(args) -> int:
         check_targets,
         check_threshold_names,
         check_thresholds,
+        earlier_run,
         kept_thresholds,
         load_thresholds,
         reproduce,
@@ -95,10 +96,22 @@ def _cmd_reproduce(args) -> int:
     }
     config = RunConfig.preset(quick=args.quick, **overrides)  # checks spp against the sampler
     if args.decoder:
-        from simbench.decode import with_assignments
+        from simbench.decode import robust_params, with_assignments
 
-        config = replace(config, decoder=with_assignments(config.decoder, args.decoder))
+        # both decoders: the colour-robust one's own settings first, the assignments on top (a
+        # decoder developer's audit, 2026-11-30: `--decoder crease_doubt=false` reached the paper's
+        # decoder only, and the hard scenes' robust columns came out the same bits without a word)
+        config = replace(
+            config,
+            decoder=with_assignments(config.decoder, args.decoder),
+            robust_decoder=with_assignments(robust_params(config.decoder), args.decoder),
+        )
     out = args.out or ("results/quick" if args.quick else "results")
+    from simbench.io import check_output_folder
+
+    check_output_folder(out, what="--out")  # before the run, not after it (a decoder developer's audit)
+    # the committed metrics a check compares with, read before the run may write over them
+    earlier = earlier_run(Path(args.check).with_name("metrics.json")) if args.check else None
     select_variant(args.variant)
     # the command as typed (`simbench ...` or `python -m simbench ...`); called from Python, what
     # the options make of it (--quick among them: a thresholds file records its runs' resolution)
@@ -128,11 +141,12 @@ def _cmd_reproduce(args) -> int:
             for f in failures:
                 print(f"simbench: regression: {f}", file=sys.stderr)
             print(f"simbench: {len(failures)} metric(s) worse than {args.check}", file=sys.stderr)
+            if Path(args.check).with_name("metrics.json").exists():
+                print(same_values(metrics, earlier), file=sys.stderr)
             return 1
         print(f"all metrics within {args.check}")
-        committed = Path(args.check).with_name("metrics.json")
-        if committed.exists():
-            print(same_values(metrics, committed))
+        if Path(args.check).with_name("metrics.json").exists():
+            print(same_values(metrics, earlier))
     return 0
 
 
@@ -323,7 +337,11 @@ def add_parsers(sub, kw: dict) -> None:
         help="sensor model: preset (ideal, minimal, paper, paper_sim) or TOML file (default: paper)",
     )
     s.add_argument(
-        "--decoder", nargs="*", metavar="NAME=VALUE", help="decoder parameter overrides, e.g. sigma_periods=0.4"
+        "--decoder",
+        nargs="*",
+        metavar="NAME=VALUE",
+        help="decoder parameter overrides, e.g. sigma_periods=0.4, for both decoders: the paper's, and the "
+        "colour-robust one on top of its own settings (both recorded in the provenance)",
     )
     s.add_argument(
         "--check", help="thresholds TOML: exit 1 when a metric is worse (one of the other resolution is refused)"

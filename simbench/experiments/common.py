@@ -164,6 +164,9 @@ class RunConfig:
     edge_band_px : band at depth edges left out of error statistics
     decoder : the paper's decoder settings (the colour-robust decoder is
         :func:`simbench.decode.robust_params` of them)
+    robust_decoder : the colour-robust decoder's settings where the run changes them
+        (``reproduce --decoder``: the same assignments on top of its own); None = :meth:`robust`'s
+        default, :func:`simbench.decode.robust_params` of ``decoder``
     placement_depth_mm, placement_tilt_deg : how precisely test objects are placed
         (:class:`simbench.sim.scene.Placement`: each object gets its own seeded error within these
         bounds, independent of the reference plane; 0 = exactly on the nominal pose)
@@ -195,6 +198,7 @@ class RunConfig:
     board_bow_mm_per_m: float = 0.0
     board_waviness_mm: float = 0.0
     decoder: DecoderParams = field(default_factory=DecoderParams)
+    robust_decoder: DecoderParams | None = None
     rig: str = "true"
     calibration_poses: int = DEFAULT_POSES
     calibration_bow_mm_per_m: float = 0.0
@@ -208,6 +212,13 @@ class RunConfig:
         validate.integer(self.calibration_poses, "calibration_poses", lo=3, hi=200)
         validate.boolean(self.compare_rigs, "compare_rigs")
         self.calibration_target()  # validates the target's form
+
+    def robust(self) -> DecoderParams:
+        """The colour-robust decoder's settings for this run: ``robust_decoder``, else
+        :func:`simbench.decode.robust_params` of the paper's."""
+        from simbench.decode import robust_params
+
+        return self.robust_decoder if self.robust_decoder is not None else robust_params(self.decoder)
 
     def calibration_target(self) -> CalibrationTarget:
         """The printed target of the run's calibration: the default one with the run's form error."""
@@ -257,11 +268,15 @@ class RunConfig:
         four decoder-relevant fields inline (period_px, order, sequence, channels), the layout
         of every provenance file so far, plus any other pattern field that is not the default."""
         d = asdict(self)
-        pattern = d["decoder"].pop("pattern")
         default = asdict(PatternSpec())
-        inline = {k: pattern.pop(k) for k in ("period_px", "order", "sequence", "channels")}
-        extra = {k: v for k, v in pattern.items() if v != default[k]}
-        d["decoder"] = {**inline, **({"pattern": extra} if extra else {}), **d["decoder"]}
+        for key in ("decoder", "robust_decoder"):
+            if d[key] is None:  # (the robust decoder's own defaults: written only where changed)
+                del d[key]
+                continue
+            pattern = d[key].pop("pattern")
+            inline = {k: pattern.pop(k) for k in ("period_px", "order", "sequence", "channels")}
+            extra = {k: v for k, v in pattern.items() if v != default[k]}
+            d[key] = {**inline, **({"pattern": extra} if extra else {}), **d[key]}
         return d
 
 

@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.decode import robust_params
 from simbench.experiments.common import RunConfig, Session, Split, made_by, scene_errors
 from simbench.experiments.hard_scenes import WRONG_MM, object_scores
 from simbench.metrics import edge_band
@@ -265,7 +264,7 @@ def _specular_recordings(session: Session, system: str) -> dict:
     if system == "proposed":
         cap = session.capture(session.prepare(raw), label)[0]
         for name in names:
-            params = cfg.decoder if name == "proposed/paper" else robust_params(cfg.decoder)
+            params = cfg.decoder if name == "proposed/paper" else cfg.robust()
             out[name] = (cap, session.decode(cap, params, mode="calibrated"), shown_raw(cap.image, cap.image.shape[:2]))
     else:
         rec, depth = session.acquire(system, raw, label)[0]

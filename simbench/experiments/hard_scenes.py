@@ -42,7 +42,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.decode import robust_params
 from simbench.decode.pipeline import apply_min_confidence
 from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, table_text
 from simbench.metrics import edge_band, wrong_pixels
@@ -221,7 +220,7 @@ def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
 def _decoders(config: RunConfig) -> tuple[dict, dict]:
     """The decoders' parameters (decoded once with no threshold: the curves need every decoded
     pixel's confidence) and their operating points."""
-    robust = robust_params(config.decoder)
+    robust = config.robust()
     params = {"paper": config.decoder, "robust": dataclasses.replace(robust, min_confidence=0.0)}
     return params, {"paper": config.decoder.min_confidence, "robust": robust.min_confidence}
 

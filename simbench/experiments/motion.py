@@ -34,7 +34,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.decode import robust_params
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.metrics import edge_band, wrong_pixels
 from simbench.report import figure_png
@@ -305,7 +304,7 @@ def _row_set(
         motion_px = float(np.abs(cap.gt.motion_px).max()) if cap.gt.motion_px is not None else 0.0
         truths = capture_truths(cap, window)
         for decoder in ("paper", "robust"):
-            params = cfg.decoder if decoder == "paper" else robust_params(cfg.decoder)
+            params = cfg.decoder if decoder == "paper" else cfg.robust()
             result = sub.decode(cap, params, mode="calibrated")
             sc = score(cap, result, params.period_px, region=region)
             sc["wrong_share"] = _wrong_share(result.depth_m, cap, region)

@@ -38,6 +38,7 @@ __all__ = [
     "load_thresholds",
     "check_thresholds",
     "same_values",
+    "earlier_run",
     "thresholds_from",
     "task_summary",
     "list_schedule_s",
@@ -641,8 +642,11 @@ def check_threshold_names(
             )
     # a file of several targets' entries checks a run of some of them on theirs (a new user's audit:
     # `reproduce budget --check results/quick/thresholds.toml` was refused); one with none of this
-    # run's would check nothing
-    if table and not any(str(name).split("/")[0] in names for name in table):
+    # run's would check nothing - nor would an empty one (a decoder developer's audit, 2026-11-30:
+    # an empty or comment-only file printed "all metrics within" and exited 0)
+    if not table:
+        raise ValueError(f"{path}: holds no thresholds (an empty table checks nothing)")
+    if not any(str(name).split("/")[0] in names for name in table):
         held = sorted({str(name).split("/")[0] for name in table})
         raise ValueError(
             f"{path}: its metrics are not made by the targets of this run ({sorted(names)}): it holds {held}'s only"
@@ -652,13 +656,23 @@ def check_threshold_names(
 def check_thresholds(metrics: dict, thresholds_path: str | Path, *, targets: list[str] | None = None) -> list[str]:
     """Failures (one line each) of ``metrics`` against a thresholds file; empty = pass.
 
-    A metric named in the file but missing from ``metrics`` (or NaN) fails too.  ``targets``:
-    only the entries of these targets are checked (a run of some of the file's targets).
+    A metric named in the file but NaN in ``metrics`` fails too; one the run did not make at all
+    is a ``ValueError`` naming it (a misspelt name is the file's fault, not a regression: it exited
+    1 as one, a decoder developer's audit, 2026-11-30).  ``targets``: only the entries of these
+    targets are checked (a run of some of the file's targets).
     """
     table = load_thresholds(thresholds_path)
     if targets is not None:
         run = set(check_targets(targets))
         table = {k: v for k, v in table.items() if str(k).split("/")[0] in run}
+    unknown = sorted(name for name in table if name not in metrics)
+    if unknown:
+        import difflib
+
+        near = {n: difflib.get_close_matches(n, list(metrics), n=1, cutoff=0.9) for n in unknown[:5]}
+        shown = "; ".join(f"{n}{f' (did you mean {m[0]}?)' if m else ''}" for n, m in near.items())
+        more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
+        raise ValueError(f"{thresholds_path}: {len(unknown)} metric(s) this run does not make: {shown}{more}")
     failures = []
     for name, t in sorted(table.items()):
         v = metrics.get(name)
@@ -672,13 +686,12 @@ def check_thresholds(metrics: dict, thresholds_path: str | Path, *, targets: lis
     return failures
 
 
-def same_values(metrics: dict, reference_path: str | Path) -> str:
-    """One line on how many of ``metrics`` equal, bit for bit, those of an earlier run's
-    ``metrics.json`` (the committed one beside a thresholds file), with the CPU each run was made
-    on and the metric farthest apart - what a check on another machine tells about
-    reproducibility across CPUs (docs/rendering.md), which thresholds cannot."""
-    from simbench.sim.keys import cpu_model
-
+def earlier_run(reference_path: str | Path) -> dict | str:
+    """What :func:`same_values` compares with, read now: an earlier run's ``metrics.json`` and
+    the CPU its targets' provenance files record ({"path", "metrics", "cpu_of"}), or why not (a
+    string).  Read before a run that may write over it (a decoder developer's audit, 2026-11-30:
+    `reproduce --quick --check results/quick/thresholds.toml`, writing into results/quick, compared
+    its metrics with themselves: "288 of 288 the same bits")."""
     path = Path(reference_path)
     try:
         reference = json.loads(path.read_text())
@@ -692,6 +705,21 @@ def same_values(metrics: dict, reference_path: str | Path) -> str:
             continue
         if cpu:
             cpu_of[prov.name.split(".")[0]] = cpu
+    return {"path": path, "metrics": reference, "cpu_of": cpu_of}
+
+
+def same_values(metrics: dict, reference: str | Path | dict) -> str:
+    """One line on how many of ``metrics`` equal, bit for bit, those of an earlier run's
+    ``metrics.json`` (the committed one beside a thresholds file: its path, or
+    :func:`earlier_run`'s reading of it), with the CPU each run was made on and the metric
+    farthest apart - what a check on another machine tells about reproducibility across CPUs
+    (docs/rendering.md), which thresholds cannot."""
+    from simbench.sim.keys import cpu_model
+
+    earlier = reference if isinstance(reference, dict) else earlier_run(reference)
+    if isinstance(earlier, str):
+        return earlier
+    path, reference, cpu_of = earlier["path"], earlier["metrics"], earlier["cpu_of"]
     cpus = sorted(set(cpu_of.values()))
     if len(cpus) <= 1:
         made_on = cpus[0] if cpus else "a CPU not recorded"

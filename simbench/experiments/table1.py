@@ -24,7 +24,6 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING
 
-from simbench.decode import robust_params
 from simbench.sim.sensor import get_sensor
 from simbench.experiments.common import (
     RunConfig,
@@ -127,7 +126,7 @@ def measure_board(session: Session, part: str) -> dict:
     """One board (``set/colour``) recorded, decoded by both decoders with both protocols and
     scored: its rows and metrics (plain data)."""
     cfg = session.config
-    params = {"paper": cfg.decoder, "robust": robust_params(cfg.decoder)}
+    params = {"paper": cfg.decoder, "robust": cfg.robust()}
     board_set, colour = part.split("/")
     rows, metrics = [], {}
     sub = board_session(session, board_set)

@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from simbench.decode import robust_params
 from simbench.sim.sensor import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
 from simbench.experiments.common import (
     RunConfig,
@@ -204,7 +203,7 @@ def _measure_proposed(session: Session) -> dict:
     rig), scored per face: per object its columns, the metrics, the whole scene's errors and its
     Fig. 10 panel."""
     cfg = session.config
-    params = {"paper": cfg.decoder, "robust": robust_params(cfg.decoder)}
+    params = {"paper": cfg.decoder, "robust": cfg.robust()}
     _, label, scene, cap, faces = _proposed_capture(session)
     results = {(d, m): session.decode(cap, params[d], mode=m) for d, m in VARIANTS}
     other = other_rig(session)
@@ -260,7 +259,7 @@ def _measure_what_if(session: Session, effect: str) -> dict:
     columns = {name: {} for name in PAPER_TABLE3}
     metrics = {}
     for d, m in WHAT_IF_VARIANTS:
-        w_result = sub.decode(w_cap, cfg.decoder if d == "paper" else robust_params(cfg.decoder), mode=m)
+        w_result = sub.decode(w_cap, cfg.decoder if d == "paper" else cfg.robust(), mode=m)
         for name in PAPER_TABLE3:
             sc = score(w_cap, w_result, cfg.decoder.period_px, region=faces[name])
             for k in WHAT_IF_KEYS:
