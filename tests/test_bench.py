@@ -141,6 +141,21 @@ def test_benchmark_of_the_colour_robust_decoder():
         run_decode_benchmark(repeats=1, device="kinect", robust=True)
 
 
+def test_a_decoder_variant_is_timed_as_assigned():
+    """``bench --decoder NAME=VALUE`` (a decoder developer's audit, 2026-11-30: a variant could not
+    be timed): the assignments go on top of the timed decoder's settings - the paper's, or with
+    --robust the colour-robust one's - and the result says which; a competitor takes none."""
+    from simbench.experiments.bench import run_decode_benchmark
+
+    res = run_decode_benchmark(repeats=1, warmup=0, decoder=["phase_method=ftp"])
+    assert res["decoder_assignments"] == ["phase_method=ftp"] and res["decoder"] == "paper"
+    assert any(k.startswith("phase (ftp") for k in res["stages_ms"]), res["stages_ms"]
+    robust = run_decode_benchmark(repeats=1, warmup=0, robust=True, decoder=["crease_doubt=false"])
+    assert "crease doubt" not in robust["stages_ms"] and "edge bend" in robust["stages_ms"], robust["stages_ms"]
+    with pytest.raises(ValueError, match="--decoder apply to the proposed decoder, not to 'tof'"):
+        run_decode_benchmark(repeats=1, device="tof", decoder=["voting=false"])
+
+
 def test_the_colour_robust_benchmark_times_the_paper_decoder_alongside(capsys):
     """`simbench bench --robust --max-ratio R`: the paper decoder timed on the same capture after
     each colour-robust run; the ratio of the medians is reported and guarded (CI's machines differ

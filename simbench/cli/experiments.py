@@ -248,12 +248,14 @@ def _cmd_bench(args) -> int:
         mode=args.mode,
         robust=args.robust,
         baseline=args.max_ratio is not None,
+        decoder=tuple(args.decoder or ()),
     )
     setup = ", ".join(
         [res["scene"]]
         + ([f"rig {args.rig}"] if rig is not None else [])
         + ([f"{args.mode} mode"] if args.mode else [])
         + (["colour-robust decoder"] if args.robust else [])
+        + ([f"decoder {' '.join(args.decoder)}"] if args.decoder else [])
     )
     threads = f"{res['threads']} thread" + ("s" if res["threads"] != 1 else "")
     print(
@@ -438,6 +440,13 @@ def add_parsers(sub, kw: dict) -> None:
         action="store_true",
         help="colour-fringe decoder: time our colour-robust decoder (with its calibration frames) instead of the "
         "paper's",
+    )
+    s.add_argument(
+        "--decoder",
+        nargs="*",
+        metavar="NAME=VALUE",
+        help="colour-fringe decoder: time a variant, e.g. phase_method=ftp (on top of the colour-robust decoder's own "
+        "settings with --robust; the paper decoder timed alongside stays the paper's)",
     )
     s.add_argument("--repeats", type=int_in(1, 100000), default=20, help="timed decodes (after one warm-up)")
     s.add_argument(

@@ -13,6 +13,8 @@ takes (the certainty's window sums computed for the pixels whose window reaches 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import dataclasses
 import os
 import statistics
@@ -60,6 +62,7 @@ def run_decode_benchmark(
     mode: str | None = None,
     robust: bool = False,
     baseline: bool = False,
+    decoder: Sequence[str] = (),
 ) -> dict:
     """Time one decode by the depth system ``device`` (any registered name,
     :mod:`simbench.systems`) of its benchmark inputs (``bench_inputs``) at its native
@@ -74,7 +77,9 @@ def run_decode_benchmark(
     through the projector's lens); ``mode`` (``reference`` or ``calibrated``) overrides the
     decoder's mode; ``robust`` times our colour-robust decoder
     (:func:`simbench.decode.robust_params`: its calibration frames come with the inputs) instead
-    of the paper's.  The reference map is decoded once, before the timed runs.
+    of the paper's; ``decoder``: ``NAME=VALUE`` assignments (:func:`simbench.decode.with_assignments`)
+    on top of the timed decoder's settings, to time a variant.  The reference map is decoded once,
+    before the timed runs.
 
     ``baseline`` (with ``robust``): the paper's decoder timed too, each of its runs right after one
     of the colour-robust decoder's on the same capture, so that both see the machine in the same
@@ -84,8 +89,10 @@ def run_decode_benchmark(
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if device not in system_names():
         raise ValueError(f"unknown benchmark device {device!r}; valid: {system_names()}")
-    if device != "proposed" and (rig is not None or mode is not None or robust):
-        raise ValueError(f"a rig, a decoder mode and --robust apply to the proposed decoder, not to {device!r}")
+    if device != "proposed" and (rig is not None or mode is not None or robust or decoder):
+        raise ValueError(
+            f"a rig, a decoder mode, --robust and --decoder apply to the proposed decoder, not to {device!r}"
+        )
     if mode is not None and mode not in MODES:
         raise ValueError(f"unknown decoder mode {mode!r}; valid: {list(MODES)}")
     if baseline and not robust:
@@ -103,10 +110,11 @@ def run_decode_benchmark(
         spec = dataclasses.replace(spec, rig=rig)
 
     extra = {"mode": mode} if mode is not None else {}
-    if robust:
-        from simbench.decode import robust_params
+    if robust or decoder:
+        from simbench.decode import robust_params, with_assignments
 
-        extra["params"] = robust_params(system.decoder)
+        timed = robust_params(system.decoder) if robust else system.decoder
+        extra["params"] = with_assignments(timed, list(decoder)) if decoder else timed
 
     def run():
         system.decode(raw, cal, scene=spec, **extra)
@@ -144,6 +152,7 @@ def run_decode_benchmark(
         # the mode the decoder ran in (its own default where none was asked for; None: the system has no modes)
         "mode": mode if mode is not None else getattr(getattr(system, "decoder", None), "mode", None),
         "decoder": "robust" if robust else ("paper" if device == "proposed" else None),
+        "decoder_assignments": list(decoder),
         "size_wh": [w, h],
         "repeats": repeats,
         "median_ms": statistics.median(times),
