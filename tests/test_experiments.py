@@ -783,3 +783,39 @@ def test_reproduce_gives_decoder_assignments_to_both_decoders_and_compares_with_
     (tmp_path / "afile").write_text("")
     assert main([*argv[:-1], str(tmp_path / "afile")]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err and not seen  # refused before the run
+
+
+def test_thresholds_state_their_run_settings_and_a_check_of_other_settings_is_refused(tmp_path, capsys):
+    """A decoder developer's audit (2026-11-30): a quick run at --spp 16 was checked against
+    thresholds measured at 4 spp without a word (the file recorded quick vs full only).  The header
+    states the run's settings (THRESHOLD_RUN_SETTINGS); a check - or a --write-thresholds that keeps
+    entries - of a run at others is refused before the run; a file without the line is taken as it
+    is (written before it was)."""
+    from simbench.cli import main
+    from simbench.experiments.reproduce import THRESHOLD_RUN_SETTINGS, check_run_settings
+
+    settings = {k: getattr(RunConfig.preset(quick=True), k) for k in THRESHOLD_RUN_SETTINGS}
+    path = write_thresholds(
+        tmp_path / "t.toml", {"budget/a/gt_mae_mm": 0.5}, margin=0.25, command="t", quick=True, settings=settings
+    )
+    assert "# Run settings: sensor='paper', spp=4, sampler='multijitter', max_depth=6, seed=" in path.read_text()
+    check_run_settings(path, settings)
+    with pytest.raises(ValueError, match=r"runs at spp=4; this run is at spp=16: a check compares like runs only"):
+        check_run_settings(path, {**settings, "spp": 16})
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    argv = ["reproduce", "budget", "--quick", "--spp", "16", "--out", str(out), "--cache", str(cache)]
+    assert main([*argv, "--check", str(path)]) == 2
+    assert "this run is at spp=16" in capsys.readouterr().err and not out.exists()  # refused before the run
+    both = write_thresholds(
+        tmp_path / "both.toml",
+        {"budget/a/gt_mae_mm": 0.5, "table1/b/gt_mae_mm": 0.4},
+        margin=0.25,
+        command="t",
+        quick=True,
+        settings=settings,
+    )
+    assert main([*argv, "--write-thresholds", str(both)]) == 2  # it would keep table1's 4-spp entries
+    assert "this run is at spp=16" in capsys.readouterr().err and not out.exists()
+    old = tmp_path / "old.toml"
+    old.write_text("\n".join(line for line in path.read_text().splitlines() if not line.startswith("# Run settings")))
+    check_run_settings(old, {**settings, "spp": 16})  # no line: as it is

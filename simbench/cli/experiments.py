@@ -59,6 +59,8 @@ def _cmd_reproduce(args) -> int:
     from simbench.experiments.reproduce import (
         check_targets,
         check_threshold_names,
+        THRESHOLD_RUN_SETTINGS,
+        check_run_settings,
         check_thresholds,
         earlier_run,
         kept_thresholds,
@@ -106,6 +108,11 @@ def _cmd_reproduce(args) -> int:
             decoder=with_assignments(config.decoder, args.decoder),
             robust_decoder=with_assignments(robust_params(config.decoder), args.decoder),
         )
+    settings = {k: getattr(config, k) for k in THRESHOLD_RUN_SETTINGS}
+    if args.check:
+        check_run_settings(args.check, settings)  # before the run: thresholds of like runs only
+    if args.write_thresholds and kept_thresholds(args.write_thresholds, args.targets, margin=margin, quick=args.quick):
+        check_run_settings(args.write_thresholds, settings)  # the entries it keeps are of like runs
     out = args.out or ("results/quick" if args.quick else "results")
     from simbench.io import check_output_folder
 
@@ -132,7 +139,13 @@ def _cmd_reproduce(args) -> int:
     )
     if args.write_thresholds:
         path = write_thresholds(
-            args.write_thresholds, metrics, margin=margin, command=command, targets=args.targets, quick=args.quick
+            args.write_thresholds,
+            metrics,
+            margin=margin,
+            command=command,
+            targets=args.targets,
+            quick=args.quick,
+            settings=settings,
         )
         print(f"wrote thresholds {path}")
     if args.check:

@@ -38,6 +38,8 @@ __all__ = [
     "load_thresholds",
     "check_thresholds",
     "same_values",
+    "check_run_settings",
+    "THRESHOLD_RUN_SETTINGS",
     "earlier_run",
     "thresholds_from",
     "task_summary",
@@ -509,6 +511,7 @@ def write_thresholds(
     command: str,
     targets: list[str] | None = None,
     quick: bool | None = None,
+    settings: dict | None = None,
 ) -> Path:
     """A thresholds TOML from measured metrics (the header states the rules and the margin).
 
@@ -518,7 +521,9 @@ def write_thresholds(
     the command that wrote the file and adds this one.  The file's margin must be ``margin``.  A
     run of every target writes it anew.  ``quick``: whether the run was ``--quick`` (the header's
     first line names the runs the file is for; a file of the other resolution that would keep
-    entries is refused: :func:`kept_thresholds`)."""
+    entries is refused: :func:`kept_thresholds`).  ``settings``: the run's
+    :data:`THRESHOLD_RUN_SETTINGS`, stated in the header (a check of a run at other settings is
+    refused: :func:`check_run_settings`)."""
     from simbench import validate
 
     path = Path(path)
@@ -540,6 +545,7 @@ def write_thresholds(
         f"# threshold for a row that decodes under {MIN_SCORED_COMPLETENESS:.0%} of its region (the errors of a few"
         " stray pixels): its stripe-order errors hold it.",
         "# Regenerate only for an intended change, and say why in the commit.",
+        *([_settings_line(settings)] if settings else []),
         "",
     ]
     table = {**kept, **thresholds_from(metrics, margin=validate.number(margin, "margin", lo=0.0))}
@@ -549,6 +555,44 @@ def write_thresholds(
             lines.append(f"{k} = {v!r}" if not isinstance(v, float) else f"{k} = {v:.6g}")
         lines.append("")
     return atomic_write_text(path, "\n".join(lines))
+
+
+# the run settings a thresholds file states and a check must share (the measured values depend on
+# each; a decoder developer's audit, 2026-11-30: a quick run at --spp 16 was checked against 4-spp
+# thresholds without a word).  The decoder is not among them: its changes are what a check measures.
+THRESHOLD_RUN_SETTINGS = ("sensor", "spp", "sampler", "max_depth", "seed", "camera_scale")
+_SETTINGS_PREFIX = "# Run settings: "
+
+
+def _settings_line(settings: dict) -> str:
+    return _SETTINGS_PREFIX + ", ".join(f"{k}={settings[k]!r}" for k in THRESHOLD_RUN_SETTINGS if k in settings)
+
+
+def check_run_settings(path: str | Path, settings: dict) -> None:
+    """A ValueError when thresholds file ``path`` states run settings
+    (:data:`THRESHOLD_RUN_SETTINGS`, its header's ``# Run settings:`` line) that ``settings`` (this
+    run's) differ from; a file that states none (written before the line was) is taken as it is."""
+    import ast
+
+    text = Path(path).read_text(encoding="utf-8") if Path(path).is_file() else ""
+    line = next((ln for ln in text.splitlines() if ln.startswith(_SETTINGS_PREFIX)), None)
+    if line is None:
+        return
+    theirs = {}
+    for item in line[len(_SETTINGS_PREFIX) :].split(", "):
+        key, _, value = item.partition("=")
+        try:
+            theirs[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise ValueError(f"{path}: unreadable run settings line {line!r}") from None
+    differ = [k for k in THRESHOLD_RUN_SETTINGS if k in theirs and k in settings and theirs[k] != settings[k]]
+    if differ:
+        them = ", ".join(f"{k}={theirs[k]!r}" for k in differ)
+        mine = ", ".join(f"{k}={settings[k]!r}" for k in differ)
+        raise ValueError(
+            f"{path} holds thresholds of runs at {them}; this run is at {mine}: a check compares like runs only "
+            "(write thresholds for these settings with --write-thresholds FILE)"
+        )
 
 
 def kept_thresholds(path: str | Path, targets: list[str], *, margin: float, quick: bool | None = None) -> dict:
