@@ -190,6 +190,14 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     assert any("gt_mae_mm" in f for f in check_thresholds(worse, both, targets=["table1"]))
     with pytest.raises(ValueError, match=r"not made by the targets of this run \(\['budget'\]\): it holds"):
         check_threshold_names(load_thresholds(both), ["budget"], path=both)
+    # a bound on the side that holds nothing back: refused (`min = 0` for an error passed every run)
+    wrong_side = tmp_path / "side.toml"
+    wrong_side.write_text('["table1/white/paper/gt_mae_mm"]\nmin = 0\n')
+    with pytest.raises(ValueError, match="has no max, and a higher gt_mae_mm is worse: give max"):
+        load_thresholds(wrong_side)
+    wrong_side.write_text('["table1/white/paper/completeness"]\nmax = 1\n')
+    with pytest.raises(ValueError, match="has no min, and a lower completeness is worse: give min"):
+        load_thresholds(wrong_side)
     # an empty (or comment-only) file checks nothing: refused (it printed "all metrics within")
     empty = tmp_path / "empty.toml"
     empty.write_text("# hello\n")

@@ -662,6 +662,15 @@ def load_thresholds(path: str | Path) -> dict:
         for k in ("max", "min"):
             if k in t:
                 validate.number(t[k], f"{path}: [{name!r}] {k}")
+        # the bound that holds a regression back (a decoder developer's audit, 2026-11-30: `min = 0`
+        # written in place of an error's `max` passed every run)
+        side = _rule(str(name), 1.0, 0.0)
+        if side is not None and side[0] not in t:
+            worse = "higher" if side[0] == "max" else "lower"
+            raise ValueError(
+                f"{path}: [{name!r}] has no {side[0]}, and a {worse} {str(name).rsplit('/', 1)[-1]} is worse: give "
+                f"{side[0]} (the bound that fails a regression)"
+            )
     return table
 
 
