@@ -26,6 +26,7 @@ import hashlib
 import os
 import sys
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -274,7 +275,11 @@ def record(
     )[0]
     told_all = [*recording_warnings(spec, rec.gt), *motion_warnings(rec.scene, rec.gt, the_system)]
     seen = (np.asarray(rec.gt.object_id) >= 0).any()  # (none seen: the render's own error says it)
-    if seen and (takes is None or "sensor" in takes):  # (a system recording through our sensor model)
+    # a system recording through our sensor model; one that does not say, where its frames read as a
+    # camera's (an extender's audit, 2026-11-30: an ideal depth camera's metres, 1 m and more, were
+    # told "50 % of the capture's pixels are clipped ... auto exposure")
+    through_sensor = "sensor" in takes if takes is not None else _camera_values(rec.raw)
+    if seen and through_sensor:
         told_all += exposure_warnings(rec.raw, rec.scene, sensor_model)
     for told in told_all:
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
@@ -347,6 +352,16 @@ DARK_CAPTURE_LEVEL = 0.02
 # well: none of it clips unless something else adds light (a docs check: room light at 0.5 of the
 # projector's white clipped 3.2 % of it, under the capture's bound)
 CLIPPED_REFERENCE_SHARE = 0.01
+
+
+def _camera_values(raw: np.ndarray) -> bool:
+    """Whether ``raw`` holds what a camera records (:func:`exposure_warnings`' inputs): an ADC's
+    integer codes, or light in [0, 1]."""
+    a = np.asarray(raw)
+    if np.issubdtype(a.dtype, np.integer):
+        return True
+    finite = a[np.isfinite(a)] if np.issubdtype(a.dtype, np.floating) else a
+    return bool(finite.size == 0 or (finite.min() >= 0.0 and finite.max() <= 1.0))
 
 
 def exposure_warnings(
@@ -571,6 +586,7 @@ def depth(
     mode: str | None = None,
     min_confidence: float | None = None,
     rig: Rig | str | Path | None = None,
+    decoder_settings: Mapping[str, object] | None = None,
 ) -> SystemDepth:
     """``recorded`` decoded the way its system decodes, into depth (float32 metres, NaN where
     invalid), a validity mask and a per-pixel confidence (:class:`simbench.systems.SystemDepth`).
@@ -593,8 +609,13 @@ def depth(
     decoder's own threshold, as ``simbench decode --min-confidence`` sets it - in [0, 1e4] (the
     fringe SNR's cap; other systems' units: [0, 1e6]), and below the colour-robust decoder's
     default (3) it keeps more pixels, not fewer.
+    ``decoder_settings``: settings on top of the named decoder's (``"paper"`` or ``"robust"``,
+    with the recorded pattern), as ``simbench decode --decoder NAME=VALUE`` gives them
+    (:func:`simbench.decode.params.with_changes`), e.g. ``depth(rec, decoder="robust",
+    decoder_settings={"voting": False})``; a DecoderParams carries its own.
     """
     from simbench.decode import DecoderParams, robust_params
+    from simbench.decode.params import with_changes
     from simbench.decode.pipeline import code_order_doubt, without_depth
     from simbench.systems.proposed import describe_pattern
     from simbench.sim.sensor import get_sensor
@@ -610,11 +631,33 @@ def depth(
         min_confidence = v.number(
             min_confidence, "min_confidence", lo=MIN_CONFIDENCE_RANGE[0], hi=MIN_CONFIDENCE_RANGE[1]
         )
+    if decoder_settings is not None:
+        if not isinstance(decoder_settings, Mapping):
+            raise ValueError(
+                f"decoder_settings must be a mapping of decoder settings, got {type(decoder_settings).__name__}"
+            )
+        if not isinstance(decoder, str):
+            raise ValueError(
+                "decoder_settings= go on top of decoder='paper' or 'robust'; a DecoderParams carries its own (give "
+                "dataclasses.replace(params, ...) instead)"
+            )
+        # (a review: each was dropped without a word) the scene's own Z0 is the reference plane's
+        if "z0_m" in decoder_settings:
+            raise ValueError(
+                "decoder_settings: z0_m is the recording's own (its reference plane's depth): leave it out"
+            )
+        for name, given in (("mode", mode), ("min_confidence", min_confidence)):
+            if name in decoder_settings and given is not None and decoder_settings[name] != given:
+                raise ValueError(
+                    f"{name}={given!r} and decoder_settings {name}={decoder_settings[name]!r} disagree: give one"
+                )
+    # the mode a DecoderParams or the settings name, else reference matching
+    own_mode = decoder.mode if not isinstance(decoder, str) else (decoder_settings or {}).get("mode", "reference")
     rec = recorded.recording
     options = SystemOptions(sensor=recorded.sensor or get_sensor(recorded.settings.get("sensor") or "paper"))
     scene = rec.scene
     if rig is not None:
-        asked = mode or (decoder.mode if not isinstance(decoder, str) else "reference")
+        asked = mode or own_mode
         scene = dataclasses.replace(scene, rig=_decoding_rig(rig, recorded, options, mode=asked))
     if recorded.system == "proposed":
         system = get_system("proposed", options)
@@ -626,21 +669,24 @@ def depth(
                 raise ValueError(f"decoder must be 'paper', 'robust' or a DecoderParams, got {decoder!r}")
             params = DecoderParams(pattern=pattern)
             params = robust_params(params) if decoder == "robust" else params
+            if decoder_settings is not None:
+                params = with_changes(params, dict(decoder_settings))
         else:
             params = decoder
-            if not params.pattern.projects_as(pattern):
-                recorded_as = "the one recorded" if recorded.pattern else "the paper's (no pattern recorded)"
-                raise ValueError(
-                    f"the decoder's pattern ({describe_pattern(params.pattern)}) is not {recorded_as} "
-                    f"({describe_pattern(pattern)}): decode with dataclasses.replace(params, pattern=recorded.pattern)"
-                )
+        if not params.pattern.projects_as(pattern):
+            recorded_as = "the one recorded" if recorded.pattern else "the paper's (no pattern recorded)"
+            raise ValueError(
+                f"the decoder's pattern ({describe_pattern(params.pattern)}) is not {recorded_as} "
+                f"({describe_pattern(pattern)}): decode with dataclasses.replace(params, pattern=recorded.pattern), "
+                "or name the decoder ('paper', 'robust') and give decoder_settings={...} on top of it"
+            )
         if min_confidence is not None:
             # the decode's own threshold, as `simbench decode --min-confidence` sets it (an audit:
             # thresholding after the robust decoder's own 3 ignored any value below it)
             params = dataclasses.replace(params, min_confidence=min_confidence)
         # mode given: it; else a DecoderParams' own (a review: mode=None decoded DecoderParams(mode="calibrated")
         # by reference matching)
-        mode = mode or (params.mode if not isinstance(decoder, str) else "reference")
+        mode = mode or own_mode
         if params.unmix and not recorded.calibration.frames:
             raise ValueError(
                 "the colour-robust decoder unmixes with the reference plane's calibration frames: record with "
@@ -670,8 +716,11 @@ def depth(
             if told:
                 warnings.warn(told, SimbenchWarning, stacklevel=2)
     else:
-        if not (isinstance(decoder, str) and decoder == "paper") or mode is not None:
-            raise ValueError(f"the {recorded.system} system decodes its own way: decoder and mode are the proposed's")
+        if not (isinstance(decoder, str) and decoder == "paper") or mode is not None or decoder_settings is not None:
+            raise ValueError(
+                f"the {recorded.system} system decodes its own way: decoder, decoder_settings and mode are the "
+                "proposed's"
+            )
         result = get_system(recorded.system, options).decode(rec.raw, recorded.calibration, scene=scene)
     if min_confidence is None or recorded.system == "proposed":
         return result

@@ -674,3 +674,60 @@ def test_a_sweep_takes_a_scene_of_ones_own_by_its_path_and_its_key_follows_the_m
         scene_for({"scene.name": "white plane"})
     # a sweep naming it runs: the values are checked before the first run
     check_sweep(_sweep(base={**FAST_BASE, "scene.name": "mine.toml"}))
+
+
+def test_the_table_says_n_a_where_a_metric_was_not_measured():
+    """A plane fit of a scene that is not a plane is NaN (metrics.score_depth): the sweep's table
+    says n/a there, not 'nan', and says what n/a means; measured values print as numbers."""
+    from simbench.experiments.ablate.report import _markdown
+
+    sweep = _sweep(axis=[{"name": "scene.name", "values": ["step", "plane_white"]}])
+    keys = ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm", "outlier_share")
+    keys += ("completeness", "stripe_order_errors", "ref_plane_mae_mm", "ref_gt_mae_mm", "ref_completeness")
+    rows = []
+    for name, plane in (("step", float("nan")), ("plane_white", 0.4125)):
+        rec = {k: 0.5 for k in keys} | {"plane_mae_mm": plane, "ref_plane_mae_mm": plane}
+        rows.append({"scene.name": name, "repeat": 0, "error": "", **rec})
+    text = _markdown(sweep, rows, "simbench ablate x.toml")
+    step = next(line for line in text.splitlines() if line.startswith("| step"))
+    white = next(line for line in text.splitlines() if line.startswith("| plane_white"))
+    assert "nan" not in text
+    assert step.split("|")[2].strip() == "n/a" and step.split("|")[10].strip() == "n/a", step
+    assert white.split("|")[2].strip() == "0.4125", white
+    assert "`n/a`: not measured" in text
+
+
+@pytest.mark.slow
+def test_a_run_records_what_the_decoder_says_of_the_pattern_on_the_rig(tmp_path, variant):
+    """A code cycle shorter than the working range's disparity (period 8: 64 projector px against
+    158) gets `simbench decode`'s warning in the run's row, the CSV and the table, beside the
+    numbers it explains (a pattern designer's audit: a period-8 run's 113 mm MAE came without a
+    word); the paper's pattern gets none."""
+    sweep = _sweep(axis=[{"name": "pattern.period_px", "values": [8, 21]}])
+    rows = run_sweep(sweep, out_dir=tmp_path, cache_dir=tmp_path / "cache", progress=lambda s: None)
+    fine, paper = rows
+    assert fine["error"] == "" and paper["error"] == ""
+    assert (
+        fine["warnings"].startswith("the pattern's code repeats every 64 projector px")
+        and "whole cycle off" in (fine["warnings"])
+    )
+    assert paper["warnings"] == ""
+    table = _table(tmp_path / "t.csv")
+    assert table[0]["warnings"] == fine["warnings"] and table[1]["warnings"] == ""
+    text = (tmp_path / "t.md").read_text()
+    assert "Warnings (the decoder's checks of the pattern on the rig" in text
+    assert "- `pattern.period_px = 8`: the pattern's code repeats" in text and "`pattern.period_px = 21`" not in text
+
+
+def test_the_plot_says_its_axes_in_words_with_units():
+    """A figure audit (2026-11-30): the ablation plots' axes read raw keys ('gt_mae_mm',
+    'pattern.order'), completeness was drawn as 0-1 and categories were joined by lines.  The axes
+    say what they are, with units (shares as %), and the parameter's key beside its words."""
+    from simbench.experiments.ablate.report import axis_words, metric_words
+
+    assert metric_words("gt_mae_mm") == ("depth error against ground truth, MAE (mm), triangulation", 1.0)
+    assert metric_words("ref_completeness") == ("completeness (% of the lit pixels), reference plane", 100.0)
+    assert metric_words("outlier_share")[1] == 100.0
+    assert axis_words("pattern.period_px") == "fringe period T (projector px) [pattern.period_px]"
+    assert axis_words("sensor.camera.dark_noise_e") == "sensor.camera.dark_noise_e"  # (its key holds its unit)
+    assert axis_words("decoder.voting") == "decoder.voting"

@@ -87,6 +87,24 @@ def test_depth_decodes_with_the_pattern_recorded():
         simbench.depth(rec, decoder=DecoderParams(voting=False))
     ok = simbench.depth(rec, decoder=DecoderParams(pattern=rec.pattern, voting=False))
     assert ok.valid.mean() > 0.95
+    # a pattern designer's audit: a setting on top of a named decoder, without naming the pattern
+    same = simbench.depth(rec, decoder="paper", decoder_settings={"voting": False})
+    assert np.array_equal(same.depth_m, ok.depth_m, equal_nan=True)
+    with pytest.raises(ValueError, match="unknown decoder setting"):
+        simbench.depth(rec, decoder_settings={"votes": False})
+    with pytest.raises(ValueError, match="not the one recorded"):
+        simbench.depth(rec, decoder_settings={"pattern": {"period_px": 21}})
+    with pytest.raises(ValueError, match="a DecoderParams carries its own"):
+        simbench.depth(rec, decoder=DecoderParams(pattern=rec.pattern), decoder_settings={"voting": False})
+    # (a review: a mode among the settings was dropped, Z0 overwritten, a disagreement kept one side)
+    by_settings = simbench.depth(rec, decoder_settings={"mode": "calibrated"})
+    by_mode = simbench.depth(rec, mode="calibrated")
+    assert np.array_equal(by_settings.depth_m, by_mode.depth_m, equal_nan=True)
+    assert not np.array_equal(by_settings.depth_m, simbench.depth(rec).depth_m, equal_nan=True)
+    with pytest.raises(ValueError, match="z0_m is the recording's own"):
+        simbench.depth(rec, decoder_settings={"z0_m": 1.1})
+    with pytest.raises(ValueError, match="min_confidence=2.0 and decoder_settings min_confidence=3.0 disagree"):
+        simbench.depth(rec, min_confidence=2.0, decoder_settings={"min_confidence": 3.0})
 
 
 def test_min_confidence_is_the_decoders_own_threshold():

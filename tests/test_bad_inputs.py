@@ -1625,13 +1625,26 @@ def test_calibrated_mode_with_no_reference_plane_says_nothing_checks_the_rig(tmp
     # ... and the decode's record keeps it, beside the depth
     import json
 
-    kept = json.loads((tmp_path / "a_decode.json").read_text())["warnings"]
-    assert any("nothing checks the rig" in w for w in kept), kept
+    record = json.loads((tmp_path / "a_decode.json").read_text())
+    assert any("nothing checks the rig" in w for w in record["warnings"]), record["warnings"]
+    # an image records no pattern (a pattern designer's audit, 2026-11-30: a period-30 capture read as
+    # period 21 decoded 88 % of its pixels 244 mm off, told only of the rig): the default is named as
+    # assumed, in the warning, the decode's line and its record
+    assumed = "nor the pattern, taken as the default (period 21 px, order 3, sequence 00010111, channels rgb"
+    assert assumed in err, err
+    assert "pattern period 21 px, order 3, sequence 00010111, channels rgb (assumed" in record["decoded"], record
+    assert record["settings"]["pattern_assumed"] is True
+    caplog.clear()
+    assert main([*argv, "--period", "21", "--out", str(tmp_path / "p.npy")]) == 0
+    err = capsys.readouterr().err + caplog.text
+    assert "nothing checks the rig" in err and "nor the pattern" not in err, err
+    assert json.loads((tmp_path / "p_decode.json").read_text())["settings"]["pattern_assumed"] is False
     caplog.clear()
     argv += ["--reference", str(lab / "reference.png"), "--z0", "1.0"]
     assert main([*argv, "--out", str(tmp_path / "b.npy")]) == 0
     assert "nothing checks the rig" not in capsys.readouterr().err + caplog.text
-    assert json.loads((tmp_path / "b_decode.json").read_text())["warnings"] == []
+    record = json.loads((tmp_path / "b_decode.json").read_text())
+    assert record["warnings"] == [] and record["settings"]["pattern_assumed"] is True
     # a recording's own capture: its folder's reference plane checks the rig (nothing to say)
     r = tmp_path / "r"
     assert (

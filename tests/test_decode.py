@@ -1058,6 +1058,65 @@ def test_bank_fit_keeps_the_nominal_fit_wherever_it_passes_and_reuses_a_choice()
     assert np.array_equal(narrow.wrapped[fast], alone.wrapped[fast])
 
 
+def test_the_carrier_bank_skips_a_carrier_past_the_sampling_limit():
+    """A fringe of 2.5 camera px: the bank's faster carrier (2.5 / 1.4 = 1.8 px) cannot be in a
+    sampled image and is not fitted (a pattern designer's audit, 2026-11-30: a 2.1-px camera period
+    failed the colour-robust decode with "period_px must be > 2, got 1.48"); the other entry is."""
+    from simbench.decode.phase import CARRIER_BANK, bank_fit, gabor_phase
+
+    assert 2.5 * CARRIER_BANK[0][0] < 2 < 2.5 * CARRIER_BANK[1][0]
+    t, h, w = 2.5, 24, 120
+    x = np.arange(w, dtype=np.float64)
+    rng = np.random.default_rng(0)
+    img = np.tile(0.5 + 0.4 * np.cos(2 * np.pi * x / t), (h, 1)) + rng.normal(0, 0.05, (h, w))
+    cert = np.ones((h, w), np.float32)
+    kw = dict(certainty=cert, period_px=t, sigma_x_px=0.25 * t, sigma_y_px=0.15 * t)
+    # max_residual 0: every pixel fails the nominal fit, so the bank is tried everywhere
+    got, choice = bank_fit(gabor_phase, img.astype(np.float32), max_residual=0.0, **kw)
+    assert not (choice == 1).any() and (choice == 2).any()
+    assert np.isfinite(got.wrapped).mean() > 0.9
+
+
+def test_the_channel_and_encoding_checks_do_not_read_a_fringe_too_fine_to_read(monkeypatch):
+    """Under MIN_CAMERA_PERIOD_PX camera px the capture's spectrum at the fringe's period says
+    nothing of its channels (a pattern designer's audit, 2026-11-30: a 3.1-px fringe in the blue
+    channel was said to be in the green): the period warning alone, not the channel-order or
+    encoding checks."""
+    import dataclasses
+
+    import simbench.decode.pipeline as pipeline
+    from simbench.decode import DecoderParams
+    from simbench.decode.params import MIN_CAMERA_PERIOD_PX
+    from simbench.rig import paper_rig
+
+    rig = paper_rig()
+    capture = np.random.default_rng(0).uniform(0, 1, (*rig.camera.size_hw, 3)).astype(np.float32)
+    asked = []
+    monkeypatch.setattr(pipeline, "channel_order_doubt", lambda *a, **k: asked.append("channels") or "")
+    monkeypatch.setattr(pipeline, "fringe_harmonic_ratio", lambda *a, **k: asked.append("encoding") or 1.0)
+    fine = DecoderParams(camera_period_px=0.9 * MIN_CAMERA_PERIOD_PX)
+    told = pipeline.capture_warnings(capture, rig=rig, params=fine)
+    assert any("under the 4 the phase fit needs" in t for t in told) and asked == [], (told, asked)
+    pipeline.reference_warnings(capture, rig=rig, params=fine)
+    assert asked == []
+    pipeline.capture_warnings(capture, rig=rig, params=dataclasses.replace(fine, camera_period_px=None))
+    assert asked == ["channels", "encoding"]
+
+
+def test_a_camera_period_set_by_hand_is_not_told_as_the_rigs_prediction():
+    """--decoder camera_period_px=X against a fringe at the rig's period: the doubt names X as the
+    setting and gives the rig's own prediction beside it (a pattern designer's audit, 2026-11-30:
+    X was called the rig's prediction, beside a product of the rig's numbers that was not X)."""
+    from simbench.decode import DecoderParams
+    from simbench.decode.pipeline import fringe_period_doubt
+    from simbench.systems import get_system
+
+    capture, _, scene = get_system("proposed").bench_inputs()
+    told = fringe_period_doubt(capture, rig=scene.rig, params=DecoderParams(camera_period_px=10.9))
+    assert "but the decoder's camera_period_px (--decoder) is 10.9 (the rig predicts 21.8:" in told, told
+    assert fringe_period_doubt(capture, rig=scene.rig, params=DecoderParams()) == ""
+
+
 def test_the_carrier_bank_gives_the_same_bits_on_any_number_of_threads():
     """The bank refits slices of columns chosen per row band; with the carrier referred to the
     image's columns the result does not depend on the bands: a side wall seen in the upper half

@@ -827,3 +827,14 @@ def test_thresholds_state_their_run_settings_and_a_check_of_other_settings_is_re
     old = tmp_path / "old.toml"
     old.write_text("\n".join(line for line in path.read_text().splitlines() if not line.startswith("# Run settings")))
     check_run_settings(old, {**settings, "spp": 16})  # no line: as it is
+
+
+def test_a_quick_runs_figures_say_so_in_their_titles():
+    """A figure audit (2026-11-30): results/quick's figures bore the full run's titles ("paper
+    Fig. 11: geometries") with other numbers; a run at other settings than the full reproduction's
+    names its camera size and samples."""
+    from simbench.experiments.common import RunConfig
+
+    assert RunConfig().figure_note() == ""
+    assert RunConfig.preset(quick=True).figure_note() == " [quick run: 640x480, 4 spp]"
+    assert RunConfig(camera_scale=0.25).figure_note() == " [320x240, 36 spp]"

@@ -52,7 +52,8 @@ def test_an_image_decodes_as_the_paper_sensor_with_its_stages(tmp_path):
     msg = decode_files(request)
     assert msg.startswith("decoded ")
     assert (
-        f"reference mode, Z0 = 1.0 m (assumed: no --z0 given), reference decoded, rig {tmp_path / 'rig.toml'})" in msg
+        f"reference mode, Z0 = 1.0 m (assumed: no --z0 given), reference decoded, rig {tmp_path / 'rig.toml'}, "
+        "pattern period 21 px, order 3, sequence 00010111, channels rgb (assumed: no pattern option given))" in msg
     )
     depth = np.load(tmp_path / "d.npy")
     assert np.nanmedian(depth) == pytest.approx(1.1, abs=1e-3) and np.isfinite(depth).mean() > 0.95

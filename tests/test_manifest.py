@@ -391,7 +391,7 @@ def test_a_reference_a_little_off_its_z0_is_decoded_with_a_warning(tmp_path, cap
     _tiny_plane_png(tmp_path / "ref_102.png", TINY_RIG, 1.02)
     base = ["decode", tmp_path / "cap.png", "--rig", tmp_path / "rig.toml", "--out", tmp_path / "d.npy", "--no-cache"]
     rc, out, _ = _run([*base, "--reference", tmp_path / "ref.png", "--z0", "1.0"], capsys)
-    assert rc == 0 and "triangulates" not in caplog.text and "(assumed" not in out
+    assert rc == 0 and "triangulates" not in caplog.text and "Z0 = 1.0 m (assumed" not in out
     rc, out, _ = _run([*base, "--reference", tmp_path / "ref.png", "--z0", "1.02"], capsys)
     z = float(re.search(r"to Z = (\d\.\d{4}) m, not its Z0 = 1.02 m \(-\d", caplog.text).group(1))
     assert rc == 0 and z == pytest.approx(1.0, abs=1e-3), caplog.text

@@ -157,6 +157,24 @@ def test_bench_inputs_decode_to_the_plane(name):
     assert np.nanmedian(depth.depth_m) == pytest.approx(1.1, abs=0.005)
 
 
+@pytest.mark.slow
+def test_a_system_that_does_not_say_gets_no_exposure_warning_on_frames_that_are_no_image(
+    ideal_system, tmp_path, variant
+):
+    """An extender's audit (2026-11-30): the ideal depth camera (recording_options None: every
+    record() option handed on) records (H, W) metres; at 1 m and beyond they were checked as a
+    camera's image in [0, 1] - "50 % of the capture's pixels are clipped ... auto exposure".  Its
+    record gives no warning (pytest turns one into an error)."""
+    import simbench
+
+    from .test_bad_inputs import PLANE, TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text('rig = "rig.toml"\n' + PLANE.replace("[0.0, 0.0, 1.0]", "[0.0, 0.0, 1.2]"))
+    rec = simbench.record(tmp_path / "s.toml", system=ideal_system, spp=1, cache=None)
+    assert np.nanmin(rec.raw) == pytest.approx(1.2, abs=0.01)
+
+
 def test_bench_runs_a_registered_system(ideal_system):
     from simbench.experiments.bench import run_decode_benchmark
 

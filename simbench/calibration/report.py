@@ -63,14 +63,18 @@ def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, 
     ax[0].set_xlim(-0.5, cam.width_px - 0.5)
     ax[0].set_ylim(cam.height_px - 0.5, -0.5)
     ax[0].set_aspect("equal")
-    ax[0].set_title("(a) corners found, camera image (px)")
+    ax[0].set_xlabel("camera image x (px)")
+    ax[0].set_ylabel("camera image y (px)")
+    ax[0].set_title("(a) corners found, a colour per pose")
     sx, sy = target.size_m
     outline = np.array([[-sx / 2, 0, 0], [sx / 2, 0, 0]])
     for k, v in enumerate(result.views):
         ends = outline @ v.pose.rotation.T + np.asarray(v.pose.center_m)
         style = "-" if v.camera_px is not None else ":"
         ax[1].plot(ends[:, 0], ends[:, 2], style, color=colours[k], lw=2)
-        ax[1].annotate(str(k), (v.pose.center_m[0], v.pose.center_m[2]), fontsize=7)
+        # the number beyond the target's right end (at its centre, near poses' numbers overlapped:
+        # a figure audit, 2026-11-30)
+        ax[1].annotate(str(k), (ends[1, 0], ends[1, 2]), xytext=(3, 0), textcoords="offset points", fontsize=7)
     ax[1].plot([0], [0], "ks", label="camera")
     ax[1].plot([truth.position_m[0]], [truth.position_m[2]], "r^", label="projector")
     ax[1].set_xlabel("x (m)")
@@ -86,7 +90,9 @@ def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, 
     ax[2].set_aspect("equal")
     ax[2].axhline(0, color="0.7", lw=0.5)
     ax[2].axvline(0, color="0.7", lw=0.5)
-    ax[2].set_title("(c) reprojection residuals (px)")
+    ax[2].set_xlabel("residual x (px)")
+    ax[2].set_ylabel("residual y (px)")
+    ax[2].set_title("(c) reprojection residuals")
     ax[2].legend(fontsize=7)
     return figure_png(fig, dpi=110)
 

@@ -6,6 +6,7 @@ place where ``name=value`` settings become parameters (:func:`with_changes`,
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from simbench import validate
 from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, MAX_FRINGE_SNR, gabor_phase
+from simbench.extensions import after_load, load_extensions
 from simbench.pattern import PatternSpec
 from simbench.rig import Rig
 
@@ -32,11 +34,43 @@ __all__ = [
     "STABILITY_KAPPA_RAD",
     "STABILITY_WINDOW_SCALE",
     "PHASE_METHODS",
+    "phase_method_code",
     "MODES",
 ]
 
 # each: (intensity, *, certainty, period_px, sigma_x_px, sigma_y_px, offset=True) -> PhaseResult
 PHASE_METHODS = {"gabor": gabor_phase, "ftp": ftp_phase, "wfr": wfr_phase}
+
+
+_BUILTIN_PHASE_METHODS = dict(PHASE_METHODS)
+
+
+def _keep_builtin_phase_methods() -> None:
+    for name, fn in _BUILTIN_PHASE_METHODS.items():
+        if PHASE_METHODS.get(name) is not fn:
+            logging.getLogger("simbench").warning(
+                "a simbench extension replaced the phase method %r: left as simbench's (register yours under a name "
+                "of its own)",
+                name,
+            )
+            PHASE_METHODS[name] = fn
+
+
+after_load(_keep_builtin_phase_methods)
+
+
+def phase_method_code(name: str) -> str | None:
+    """:func:`simbench.cache.foreign_code_digest` of the phase method registered as ``name``: None
+    for simbench's own, whose code the decoder's source digest keys; a digest of a user's own
+    method's code, which every cached decode it makes is keyed by too (an installed package's
+    methods are imported first where ``name`` is unknown: a worker's unpickled settings)."""
+    from simbench.cache import foreign_code_digest
+
+    if name not in PHASE_METHODS:
+        load_extensions()
+    return foreign_code_digest(PHASE_METHODS[name])
+
+
 MODES = ("reference", "calibrated")
 # Gaps the colour-robust decoder bridges, in camera periods (assumption: just under one period,
 # so that at the nominal period at most one wrap hides in a gap - where the local period is
@@ -464,6 +498,8 @@ class DecoderParams:
     threads: int | None = None
 
     def __post_init__(self) -> None:
+        if self.phase_method not in PHASE_METHODS:
+            load_extensions()  # phase methods of installed packages (simbench.extensions), once per process
         v = validate
         fixed = {
             "pattern": _pattern_of(self.pattern),

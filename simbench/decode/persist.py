@@ -20,7 +20,7 @@ import numpy as np
 
 from simbench import native
 from simbench.cache import RenderCache, array_digest, source_digest
-from simbench.decode.params import DecoderParams
+from simbench.decode.params import DecoderParams, phase_method_code
 from simbench.decode.pipeline import ReferenceMap, decode_reference
 from simbench.rig import Rig, rig_to_dict
 
@@ -62,6 +62,9 @@ def lookup_decoded_reference(
             "decoder": settings,
             "decoder_source": decoder_fingerprint(),
         }
+        foreign = phase_method_code(params.phase_method)
+        if foreign is not None:  # (only then: simbench's own methods keep their keys)
+            parts["phase_method_code"] = foreign
         arrays = cache.lookup("reference_map", parts)
     fresh = arrays is None
     if fresh:

@@ -580,6 +580,11 @@ def bank_fit(
         return nominal, choice
     parts = [a.copy() for a in (nominal.wrapped, nominal.amplitude, nominal.residual, nominal.support)]
     for j, (scale_x, scale_y) in enumerate(bank, 1):
+        if not period_px * scale_x > 2:
+            # a carrier at or past the sampling limit (2 px) cannot be in the image (a pattern
+            # designer's audit, 2026-11-30: a 2.1-px camera period failed the decode with "period_px
+            # must be > 2, got 1.48", the bank's faster carrier)
+            continue
         need = todo if choose else choice == j
         # only the columns within the window's reach of a pixel that needs this fit: a pixel's
         # fit reads its window alone, and with the carrier referred to the image's columns

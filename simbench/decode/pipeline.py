@@ -53,6 +53,7 @@ from simbench.decode.depth import (
 )
 from simbench.decode.phase import (
     CARRIER_BANK,
+    PhaseResult,
     bank_fit,
     centroid_corrected,
     certainty_map,
@@ -82,8 +83,10 @@ from simbench.decode.params import (
     CREASE_SCALE_PERIODS,
     EDGE_BEND_FIT_PERIODS,
     EDGE_BEND_REACH_SIGMAS,
+    MIN_CAMERA_PERIOD_PX,
     DecoderParams,
     PHASE_METHODS,
+    phase_method_code,
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
 )
@@ -477,7 +480,10 @@ def _columns(
                     gain=None if gain is None else gain[ext],
                 )
     sx = params.sigma_periods * t_cam
+    user_code = phase_method_code(params.phase_method)  # (first: it imports an installed package's methods)
     method = PHASE_METHODS[params.phase_method]
+    if user_code is not None:
+        method = _checked_phase_method(method, params.phase_method)
     carrier = None
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
@@ -824,6 +830,37 @@ def _window_succession(
     return (pairs, as_read, *counts)
 
 
+def _checked_phase_method(method: Callable[..., PhaseResult], name: str) -> Callable[..., PhaseResult]:
+    """A phase method registered from outside simbench, its result checked against the contract
+    of :class:`simbench.decode.phase.PhaseResult` (an extender's audit, 2026-11-30: a method
+    returning its phase in [0, 2 pi), as ``cv2.phase`` does, decoded 71 % of the pixels 39 mm off
+    without a word; a wrong shape failed on an internal array's name)."""
+
+    def checked(intensity: np.ndarray, **kw) -> PhaseResult:
+        out = method(intensity, **kw)
+        if not isinstance(out, PhaseResult):
+            raise ValueError(f"phase method {name!r} returned {type(out).__name__}, not a PhaseResult")
+        for field_name in ("wrapped", "amplitude", "residual", "support"):
+            a = getattr(out, field_name)
+            if not (isinstance(a, np.ndarray) and a.shape == intensity.shape and a.dtype == np.float32):
+                got = f"{a.dtype} {a.shape}" if isinstance(a, np.ndarray) else type(a).__name__
+                raise ValueError(
+                    f"phase method {name!r}: its {field_name} must be float32 of the image's shape "
+                    f"{intensity.shape}, got {got}"
+                )
+        with np.errstate(invalid="ignore"):
+            outside = np.abs(out.wrapped) > np.float32(np.pi + 1e-4)
+        if outside.any():
+            raise ValueError(
+                f"phase method {name!r}: its wrapped phase must lie in [-pi, pi) radians; "
+                f"{int(outside.sum())} pixels lie outside (up to {float(np.nanmax(np.abs(out.wrapped))):.3g}): "
+                "a phase in [0, 2 pi) or in degrees decodes to wrong columns"
+            )
+        return out
+
+    return checked
+
+
 def code_order_doubt(window_succession: tuple[int, ...], *, what: str = "capture") -> str:
     """Why a decode reads its pattern in the wrong order, from its
     :attr:`DecodeResult.window_succession`, or "" when it reads best as it is (or too few
@@ -988,6 +1025,16 @@ def fringe_period_doubt(image: np.ndarray, *, rig: Rig, params: DecoderParams, w
     peak = power[np.argmin(np.abs(freq - 1.0 / measured))]
     if near.any() and power[near].max() >= FRINGE_NEAR_SHARE * peak:
         return ""
+    if params.camera_period_px is not None:
+        # (a pattern designer's audit, 2026-11-30: the override was told as the rig's prediction, beside a
+        # product of the rig's numbers that was not it)
+        rig_period = dataclasses.replace(params, camera_period_px=None).camera_period(rig)
+        return (
+            f"the {what}'s fringe repeats every {measured:.1f} camera px along the rows, but the decoder's "
+            f"camera_period_px (--decoder) is {predicted:.1f} (the rig predicts {rig_period:.1f}: the pattern's "
+            f"{params.period_px:g}-px period x the camera's focal length {rig.camera.focal_px:g} / the projector's "
+            f"{rig.projector.focal_px:g}). Depths decoded so are missing or wrong"
+        )
     return (
         f"the {what}'s fringe repeats every {measured:.1f} camera px along the rows, but the rig predicts "
         f"{predicted:.1f} (the pattern's {params.period_px:g}-px period x the camera's focal length "
@@ -1016,8 +1063,12 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, en
 
     integrity = _integrity_warnings(capture, params, "capture", refused_clipped=CAPTURE_CLIPPED_UNDECODABLE)
     period = fringe_period_doubt(capture, rig=rig, params=params)
-    if period:  # the channel-order and encoding checks read the spectrum at the predicted period
-        return [*pattern_on_rig_warnings(rig, params), period, *(t for t in integrity if t)]
+    if period or _unreadable_period(rig, params):
+        # the channel-order and encoding checks read the spectrum at the predicted period: not where
+        # the fringe does not repeat there, nor where it is too fine to read (pattern_on_rig_warnings
+        # says so; a pattern designer's audit, 2026-11-30: a 3.1-px fringe was said to be in the green
+        # channel)
+        return [*pattern_on_rig_warnings(rig, params), *(t for t in (period, *integrity) if t)]
     told = [channel_order_doubt(capture, rig=rig, params=params), *integrity]
     told.append(
         encoding_doubt(
@@ -1030,6 +1081,10 @@ def capture_warnings(capture: np.ndarray, *, rig: Rig, params: DecoderParams, en
     return [*pattern_on_rig_warnings(rig, params), *(t for t in told if t)]
 
 
+def _unreadable_period(rig: Rig, params: DecoderParams) -> bool:
+    return params.camera_period(rig) < MIN_CAMERA_PERIOD_PX
+
+
 def reference_warnings(
     reference: np.ndarray, *, rig: Rig, params: DecoderParams, encoding: str = "linear"
 ) -> list[str]:
@@ -1038,7 +1093,7 @@ def reference_warnings(
     rig, so its fringe runs at the period demodulated at, and a camera's encoding shows there
     whatever the scene), JPEG compression and clipping (:mod:`simbench.decode.integrity`)."""
     period = fringe_period_doubt(reference, rig=rig, params=params, what="reference capture")
-    if period:
+    if period or _unreadable_period(rig, params):
         told = [period]
     else:
         ratio = fringe_harmonic_ratio(

@@ -213,6 +213,18 @@ class RunConfig:
         validate.boolean(self.compare_rigs, "compare_rigs")
         self.calibration_target()  # validates the target's form
 
+    def figure_note(self) -> str:
+        """What a figure's title adds to tell a run's figures from the full reproduction's: the
+        quick run's camera size and samples (a figure audit, 2026-11-30: results/quick's figures
+        bore the full run's titles), else ""."""
+        if not self.quick and self.camera_scale == 1.0 and self.spp == DEFAULT_SPP:
+            return ""
+        from simbench.rig import paper_rig
+
+        cam = paper_rig().camera
+        w, h = (round(self.camera_scale * n) for n in (cam.width_px, cam.height_px))
+        return f" [{'quick run: ' if self.quick else ''}{w}x{h}, {self.spp} spp]"
+
     def robust(self) -> DecoderParams:
         """The colour-robust decoder's settings for this run: ``robust_decoder``, else
         :func:`simbench.decode.robust_params` of the paper's."""

@@ -177,7 +177,8 @@ def write_fig9(session: Session, measured: list[dict]) -> dict:
         "fig9.csv": table_text(rows, cols),
         "fig9.png": fig9_plot(
             rows,
-            title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)",
+            title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)"
+            + cfg.figure_note(),
             other_rig_name=other_rig(session),
         ),
         "fig9.md": _markdown(session, rows),
@@ -228,37 +229,45 @@ def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "cal
     import matplotlib.pyplot as plt
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 5.4), constrained_layout=True)
+    # each system its own colour and marker (not colour alone); dashed lines are the other rig's only
+    # (a figure audit, 2026-11-30: the plane residual was dashed too, and drawn under the RMSE it equals)
+    markers = dict(zip(SENSORS, "osD^"))
     for axis, sensors in ((ax, SENSORS), (ax2, ("proposed",))):
         for i, sensor in enumerate(sensors):
             if not any(r.get("sensor", "proposed") == sensor for r in rows):
                 continue
             label = f"{sensor_label(sensor)}: RMSE vs ground truth"
-            _errorbar(axis, rows, "rmse_mm", sensor, fmt="o-", color=f"C{SENSORS.index(sensor)}", label=label)
+            color = f"C{SENSORS.index(sensor)}"
+            _errorbar(axis, rows, "rmse_mm", sensor, fmt=f"{markers[sensor]}-", color=color, label=label)
             if _has_other_rig(rows, sensor):
                 label = f"{sensor_label(sensor)}: with the {other_rig_name} rig"
-                color = f"C{SENSORS.index(sensor)}"
                 _errorbar(axis, rows, "other_rig_rmse_mm", sensor, fmt="x--", color=color, alpha=0.7, label=label)
             if sensor == "proposed":
-                label = "proposed: RMS residual to fitted plane"
-                _errorbar(axis, rows, "plane_rms_mm", sensor, fmt="s--", color="C0", alpha=0.6, label=label)
+                label = "proposed: RMS residual to fitted plane (open squares)"
+                _errorbar(
+                    axis, rows, "plane_rms_mm", sensor, fmt="s", ms=9, mfc="none", mew=1.2, color="C0", label=label
+                )
                 if axis is ax2 and all("ref_rmse_mm" in r for r in rows if r.get("sensor", "proposed") == "proposed"):
+                    # (black: C3 is phase shifting's colour in the left panel)
                     label = "proposed, reference-plane protocol: RMSE vs ground truth"
-                    _errorbar(axis, rows, "ref_rmse_mm", sensor, fmt="^:", color="C3", alpha=0.8, label=label)
+                    _errorbar(axis, rows, "ref_rmse_mm", sensor, fmt="^:", color="k", alpha=0.8, label=label)
     zz = np.linspace(min(DEPTHS_M), max(DEPTHS_M), 50)
     if any(r.get("sensor") == "kinect" for r in rows):
-        ax.plot(zz, nguyen_kinect_sigma_mm(zz), ":", color="C1", label="real Kinect v1: Nguyen et al. 2012 model")
+        label = "real Kinect v1, Nguyen et al. 2012 model: sigma_z"
+        ax.plot(zz, nguyen_kinect_sigma_mm(zz), ":", color="C1", label=label)
     if any(r.get("sensor") == "tof" for r in rows):
-        ax.plot(*CHIABRANDO_TOF, "*", ms=12, color="C2", label="real SR4000: Chiabrando et al. 2009")
+        label = "real SR4000, Chiabrando et al. 2009: temporal sigma"
+        ax.plot(*CHIABRANDO_TOF, "*", ms=12, color="C2", label=label)
     for axis in (ax, ax2):
         axis.set_xlabel("board depth (m)")
-        axis.set_ylabel("RMSE (mm)")
+        axis.set_ylabel("RMSE (mm); real devices: sigma (mm)" if axis is ax else "RMSE (mm)")
         axis.set_ylim(bottom=0)
         axis.grid(alpha=0.3)
     # below the axes: inside, the full panel's nine entries covered the ToF and Kinect curves at 1.1-1.3 m
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False, handlelength=1.4)
     ax2.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1, frameon=False)
     ax2.set_title("proposed method alone (zoomed)", fontsize=9)
-    fig.suptitle(title, fontsize=10)
+    fig.suptitle(f"{title} (bars: min to max over the repetitions)", fontsize=10)
     return figure_png(fig, dpi=110)
 
 

@@ -176,7 +176,8 @@ def measure_figure(session: Session, name: str) -> dict:
     metrics = {f"figures/{name}/{k}": m[k] for k in ("mae_mm", "completeness", "stripe_order_error_rate")}
     title = (
         f"paper {fig_id.replace('fig', 'Fig. ')}: {name} - "
-        f"MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} %"
+        f"MAE {m['mae_mm']:.3f} mm, completeness {100 * m['completeness']:.2f} % (the paper's decoder)"
+        f"{cfg.figure_note()}"
     )
     s = cfg.ply_stride
     pts = points_from_depth(result.depth_m, scene.rig.camera)[::s, ::s]
@@ -186,7 +187,9 @@ def measure_figure(session: Session, name: str) -> dict:
         f"{fig_id}_{name}.ply": ply_bytes(pts[ok], cap.image[::s, ::s][ok]),
     }
     if name == FIG6_SCENE:
-        files["fig6_stages.png"] = stages_figure(cap, result, title=f"paper Fig. 6: the decoder's stages on {name}")
+        files["fig6_stages.png"] = stages_figure(
+            cap, result, title=f"paper Fig. 6: the decoder's stages on {name}{cfg.figure_note()}"
+        )
     return {"row": row, "metrics": metrics, "files": files}
 
 
@@ -361,6 +364,15 @@ def _pct(x: float) -> str:
     return "-" if not np.isfinite(x) else f"{100 * x:.2f} %"
 
 
+def _system_words(name: str) -> str:
+    """A panel's system in words (a figure audit, 2026-11-30: the columns read 'proposed/paper')."""
+    from simbench.systems import get_system
+
+    if name.startswith("proposed/"):
+        return {"paper": "paper's decoder", "robust": "colour-robust decoder"}.get(name.split("/")[1], name)
+    return get_system(name).info().label
+
+
 def specular_figure(panels: dict) -> bytes:
     """One column per system: what it recorded, its depth, its error against ground truth
     (``panels``: label -> (recorded image, depth, true depth), as :func:`measure_specular` gives)."""
@@ -374,8 +386,8 @@ def specular_figure(panels: dict) -> bytes:
     lo, hi = _depth_range(next(iter(panels.values()))[2])
     for j, (name, (img, depth_m, truth_m)) in enumerate(panels.items()):
         axes[0, j].imshow(img, cmap=None if img.ndim == 3 else "gray", vmin=0, vmax=1)
-        axes[0, j].set_title(f"{name}: recorded", fontsize=9)
-        axes[1, j].imshow(depth_m, cmap="viridis", vmin=lo, vmax=hi)
+        axes[0, j].set_title(f"{_system_words(name)}: recorded", fontsize=9)
+        shown = axes[1, j].imshow(depth_m, cmap="viridis", vmin=lo, vmax=hi)
         axes[1, j].set_title("depth; white = no depth", fontsize=9)
         err = (depth_m - truth_m) * 1000.0
         im = axes[2, j].imshow(err, cmap="coolwarm", vmin=-WRONG_MM, vmax=WRONG_MM)
@@ -383,6 +395,7 @@ def specular_figure(panels: dict) -> bytes:
         for ax in axes[:, j]:
             ax.set_xticks([])
             ax.set_yticks([])
-    fig.colorbar(im, ax=axes[2, :].tolist(), shrink=0.8)
+    fig.colorbar(shown, ax=axes[1, :].tolist(), shrink=0.8, label="depth (m)")
+    fig.colorbar(im, ax=axes[2, :].tolist(), shrink=0.8, label="depth - truth (mm)")
     fig.suptitle("Specular highlights: aluminium sphere, glossy box, chrome tile (scenes/specular.toml)")
     return figure_png(fig, dpi=80)

@@ -139,7 +139,9 @@ def write_flatness(session: Session, measured: list[dict]) -> dict:
     ]
     files = {
         "flatness.csv": table_text(rows, cols),
-        "flatness.png": flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness"),
+        "flatness.png": flatness_plot(
+            rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness{cfg.figure_note()}"
+        ),
         "flatness.md": _markdown(session, rows),
     }
     session.write_results(

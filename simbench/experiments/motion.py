@@ -209,7 +209,7 @@ def write_motion(session: Session, measured: list[dict]) -> dict:
     files = {
         "motion.csv": table_text(rows, cols),
         "motion.md": _markdown(session, sub, rows, summary, timing, speeds, scenes),
-        "motion.png": _figure(rows, scenes),
+        "motion.png": _figure(rows, scenes, note=sub.config.figure_note()),
     }
     session.write_results(
         "motion",
@@ -505,22 +505,29 @@ def _percent(share: float) -> str:
     return "-" if not math.isfinite(share) else f"{100 * share:.2f} %"
 
 
-WRONG_FLOOR_PERCENT = 0.01  # the figure's floor for a wrong share of 0 (a log axis)
+# the figure's level for a wrong share of 0 (a log axis): under one pixel of the study's 320x240
+# (0.0013 %), so that every share measured shows as it is
+WRONG_FLOOR_PERCENT = 0.001
+# speed 0 on the log speed axis: the still capture, drawn apart (an open marker, not joined to the
+# moving ones: on the line it read as a measurement at 0.3 mm/s - a figure audit, 2026-11-30)
+STILL_AT_M_S = 3e-4
+_DIRECTION_WORDS = {"lateral": "sideways", "axial": "towards the camera"}
 
 
-def _figure(rows: list[dict], scenes: dict) -> bytes:
+def _figure(rows: list[dict], scenes: dict, *, note: str = "") -> bytes:
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     from simbench.report import panel_row
 
     panels = [(s, d) for s in scenes for d in DIRECTIONS]
     plt, fig, axes = panel_row(len(panels), width=3.6, rows=2)
+    # a colour and a marker each (not colour alone: red and green told two systems apart)
     colours = {
-        "proposed_paper": "tab:blue",
-        "proposed_robust": "tab:green",
-        "phase_shift": "tab:red",
-        "kinect": "tab:orange",
-        "tof": "tab:purple",
+        "proposed_paper": ("tab:blue", "o"),
+        "proposed_robust": ("tab:green", "s"),
+        "phase_shift": ("tab:red", "^"),
+        "kinect": ("tab:orange", "D"),
+        "tof": ("tab:purple", "v"),
     }
     for col, (scene_name, direction) in enumerate(panels):
         ax, ax_wrong = axes[0, col], axes[1, col]
@@ -530,37 +537,49 @@ def _figure(rows: list[dict], scenes: dict) -> bytes:
             rs = [r for r in rs if math.isfinite(r["gt_mae_mm"])]
             if not rs:
                 continue
-            x = [max(r["speed_m_s"], 3e-4) for r in rs]  # speed 0 drawn at the axis' left end
+            colour, marker = colours[name]
             label = _label(s, d)
             if any(r.get("note") for r in rows if r["row"] == name):
                 # (phase shifting: not run where the object moves too far during its sequence)
                 label += (
                     f" (run up to {max(r['speed_m_s'] for r in rows if r['row'] == name and not r.get('note')):g} m/s)"
                 )
-            ax.plot(x, [r["gt_mae_mm"] for r in rs], "o-", color=colours[name], label=label)
-            static = rs[0]["gt_mae_mm"] if rs[0]["speed_m_s"] == 0 else math.nan
-            if math.isfinite(static):
-                ax.axhline(HOLD_FACTOR * static, color=colours[name], ls=":", lw=0.8)
-            # percent; none wrong drawn at the axis' floor
-            wrong = [max(100 * r["wrong_share_image"], WRONG_FLOOR_PERCENT) for r in rs]
-            ax_wrong.plot(x, wrong, "o-", color=colours[name])
+            still = [r for r in rs if r["speed_m_s"] == 0]
+            moving = [r for r in rs if r["speed_m_s"] > 0]
+            # percent; none wrong drawn at WRONG_FLOOR_PERCENT
+            wrong = lambda rr: [max(100 * r["wrong_share_image"], WRONG_FLOOR_PERCENT) for r in rr]  # noqa: E731
+            speeds = [r["speed_m_s"] for r in moving]
+            ax.plot(speeds, [r["gt_mae_mm"] for r in moving], "-", marker=marker, ms=4, color=colour, label=label)
+            ax_wrong.plot(speeds, wrong(moving), "-", marker=marker, ms=4, color=colour)
+            if still:
+                kw = dict(marker=marker, ms=5, mfc="none", color=colour, ls="none")
+                ax.plot([STILL_AT_M_S], [still[0]["gt_mae_mm"]], **kw)
+                ax_wrong.plot([STILL_AT_M_S], wrong(still[:1]), **kw)
+                ax.axhline(HOLD_FACTOR * still[0]["gt_mae_mm"], color=colour, ls=":", lw=0.8)
         ax.set_yscale("log")
         # plain numbers at 1, 2 and 5 of each decade (the default labelled a short range's minor ticks
         # as 4 x 10^0)
         ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
         ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         ax.yaxis.set_minor_formatter(NullFormatter())
-        ax.set_title(f"{scene_name}, {direction}")
+        ax.set_title(f"{scene_name}, {_DIRECTION_WORDS.get(direction, direction)} ({direction})")
         ax_wrong.set_yscale("log")
         ax_wrong.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-        ax_wrong.set_ylim(bottom=WRONG_FLOOR_PERCENT * 0.8)
+        if any(r["wrong_share_image"] == 0 for r in rows if r["scene"] == scene_name and r["direction"] == direction):
+            ax_wrong.set_ylim(bottom=WRONG_FLOOR_PERCENT * 0.8)  # (the level a share of 0 is drawn at)
+        ax_wrong.set_xlabel("speed (m/s)")
         for a in (ax, ax_wrong):
             a.set_xscale("log")
             a.grid(True, which="both", alpha=0.3)
-        ax_wrong.set_xlabel("speed (m/s; 0 at the left edge)")
+            a.axvline(STILL_AT_M_S * 2, color="0.6", lw=0.6)  # the still capture's column, set apart
     axes[0, 0].set_ylabel(f"object's MAE (mm)\ndotted: {HOLD_FACTOR:g}x static")
     axes[1, 0].set_ylabel(f"wrong (> 5 mm), % of the image's\ndecoded pixels ({WRONG_FLOOR_PERCENT:g}: none)")
     # below the panels: inside the first one it covered the phase-shifting curve
     handles, labels = axes[0, 0].get_legend_handles_labels()
+    from matplotlib.lines import Line2D
+
+    handles.append(Line2D([], [], marker="o", mfc="none", color="0.3", ls="none"))
+    labels.append("open: still (speed 0), left of the grey line")
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.suptitle(f"Moving scenes: depth error against the object's speed{note}", fontsize=10)
     return figure_png(fig, dpi=110)

@@ -336,7 +336,7 @@ def write_table3(session: Session, measured: list[dict], *, systems: tuple[str, 
         "table3.csv": table_text(rows, cols),
         "table3.md": _markdown(session, rows, whole, competitors) + common,
         "fig10.png": cross_section_figure(
-            panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects)"
+            panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects){cfg.figure_note()}"
         ),
     }
     session.write_results(
@@ -638,6 +638,8 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    import textwrap
+
     fig, axes = plt.subplots(
         len(panels),
         2,
@@ -646,29 +648,41 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
         gridspec_kw={"width_ratios": [1, 1.6]},
         squeeze=False,
     )
+    # one depth scale for every sensor's map, with its colour bar (a figure audit, 2026-11-30: each row
+    # was scaled to itself, so one depth had other colours in other rows, and no bar said which)
+    truth = np.concatenate([np.asarray(p[2], np.float64)[np.isfinite(p[2])] for p in panels])
+    lo, hi = (np.percentile(truth, (0.5, 99.5)) * 1000) if truth.size else (None, None)
+    fits = [("r", ":"), ("m", "--"), ("k", "-.")]  # (each face's fit its own line)
     for (label, cam, gt_depth, depth, faces), (ax0, ax) in zip(panels, axes):
         any_face = np.logical_or.reduce(list(faces.values()))
         rows = np.flatnonzero(any_face.any(axis=1))
         row = int(np.median(rows)) if rows.size else depth.shape[0] // 2
         xn = (np.arange(depth.shape[1]) - cam.cx_px) / cam.focal_px
-        ax0.imshow(depth, cmap="viridis")
+        shown = ax0.imshow(depth * 1000, cmap="viridis", vmin=lo, vmax=hi)
+        fig.colorbar(shown, ax=ax0, shrink=0.85, label="depth (mm)")
         ax0.axhline(row, color="r", lw=0.8)
-        ax0.set_title(f"{label}: depth; red: the cross-section row", fontsize=9)
+        ax0.set_title(textwrap.fill(f"{label}: depth; red: the cross-section row", 55), fontsize=9)
         ax0.set_xticks([])
         ax0.set_yticks([])
         ax.plot(xn, gt_depth[row] * 1000, color="0.6", lw=2.5, label="ground truth")
         ax.plot(
             xn, depth[row] * 1000, color="C0", lw=0.8, marker="." if depth.shape[1] < 400 else None, ms=3, label=label
         )
-        for name, face in faces.items():
+        for (name, face), (colour, dash) in zip(faces.items(), fits * len(faces)):
             xs = np.flatnonzero(face[row] & np.isfinite(depth[row]))
             if xs.size > 2:
                 coef = np.polyfit(xs, depth[row, xs] * 1000, 1)
-                ax.plot(xn[xs], np.polyval(coef, xs), "r:", lw=1.5, label=f"least-squares fit ({name})")
+                ax.plot(
+                    xn[xs], np.polyval(coef, xs), color=colour, ls=dash, lw=1.5, label=f"least-squares fit ({name})"
+                )
         ax.set_xlabel("normalised image x, (x - cx) / f")
         ax.set_ylabel("depth (mm)")
         ax.invert_yaxis()
         ax.legend(loc="best", fontsize=7)
         ax.set_title(f"{label}: row {row}", fontsize=9)
+    # one x range for every cross-section (the rows' faces line up)
+    spans = [a.get_xlim() for a in axes[:, 1]]
+    for a in axes[:, 1]:
+        a.set_xlim(min(x for x, _ in spans), max(x for _, x in spans))
     fig.suptitle(title)
     return figure_png(fig, dpi=80)

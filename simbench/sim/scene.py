@@ -57,7 +57,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -65,7 +65,8 @@ from pathlib import Path
 import numpy as np
 
 from simbench import validate
-from simbench.cache import file_digest
+from simbench.cache import file_digest, foreign_code_digest
+from simbench.extensions import after_load, load_extensions
 from simbench.io import read_toml
 from simbench.rig import Rig, get_rig, rig_to_dict, rotation_xyz_deg
 from simbench.seeds import RngLike
@@ -324,6 +325,8 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
     if not isinstance(d, dict):
         raise ValueError(f"{where}: expected a table")
     kind = d.get("type")
+    if kind not in OBJECT_KINDS:
+        load_extensions()  # object kinds of installed packages (simbench.extensions), once per process
     if kind not in OBJECT_KINDS:
         raise ValueError(f"{where}: unknown type {kind!r}; valid types: {sorted(OBJECT_KINDS)}")
     allowed = _COMMON_KEYS + MOTION_KEYS + OBJECT_KINDS[kind]
@@ -648,7 +651,15 @@ def object_to_mitsuba(obj: SceneObject, *, key: str | None = None) -> object:
     names a dict entry's shape)."""
     import mitsuba as mi
 
-    return OBJECT_KIND_TABLE[obj.kind].to_mitsuba(mi, obj, _bsdf(obj.material), key or obj.name)
+    out = _object_kind(obj.kind).to_mitsuba(mi, obj, _bsdf(obj.material), key or obj.name)
+    # a kind's own code may return anything: Mitsuba crashed the process on None (an extender's audit,
+    # 2026-11-30: exit 139, no message)
+    if not (isinstance(out, dict) and isinstance(out.get("type"), str)) and not isinstance(out, mi.Object):
+        raise ValueError(
+            f"object {obj.name!r}: the {obj.kind!r} kind's to_mitsuba returned {type(out).__name__}, not a Mitsuba "
+            "plugin dict (with its 'type') or object"
+        )
+    return out
 
 
 # ---------------------------------------------------------------------------------------
@@ -1021,8 +1032,46 @@ OBJECT_KIND_TABLE: dict[str, ObjectKind] = {
         ("file", "scale", "translate_m", "rotation_deg"), _parse_mesh, _mesh_to_mitsuba, position_key="translate_m"
     ),
 }
-# kind -> the keys a scene file may give it
-OBJECT_KINDS = {name: k.keys for name, k in OBJECT_KIND_TABLE.items()}
+
+
+class _KindKeys(Mapping):
+    """kind -> the keys a scene file may give it: a view of :data:`OBJECT_KIND_TABLE`, so that a kind
+    added there is read at once (a copy made at import refused one: an extender's audit)."""
+
+    def __getitem__(self, name: str) -> tuple[str, ...]:
+        return OBJECT_KIND_TABLE[name].keys
+
+    def __iter__(self):
+        return iter(OBJECT_KIND_TABLE)
+
+    def __len__(self) -> int:
+        return len(OBJECT_KIND_TABLE)
+
+
+OBJECT_KINDS: Mapping[str, tuple[str, ...]] = _KindKeys()
+_BUILTIN_KINDS = dict(OBJECT_KIND_TABLE)
+
+
+def _keep_builtin_kinds() -> None:
+    for name, kind in _BUILTIN_KINDS.items():
+        if OBJECT_KIND_TABLE.get(name) is not kind:
+            log.warning(
+                "a simbench extension replaced the object kind %r: left as simbench's (register yours under a name "
+                "of its own)",
+                name,
+            )
+            OBJECT_KIND_TABLE[name] = kind
+
+
+after_load(_keep_builtin_kinds)
+
+
+def _object_kind(name: str) -> ObjectKind:
+    """The registered kind ``name`` (an installed package's kinds imported first where it is unknown:
+    a worker's unpickled scene)."""
+    if name not in OBJECT_KIND_TABLE:
+        load_extensions()
+    return OBJECT_KIND_TABLE[name]
 
 
 def _formed_board(mi, obj: SceneObject, bsdf: dict, key: str, *, texcoords: bool = False):
@@ -1092,6 +1141,10 @@ def scene_fingerprint(scene: SceneSpec) -> dict:
             medium = dataclasses.asdict(get_medium(o.material.subsurface))
             material.append({"subsurface": o.material.subsurface, **medium})
         entry = {"kind": o.kind, "name": o.name, "params": params, "material": material}
+        kind = _object_kind(o.kind)
+        foreign = foreign_code_digest(kind.parse, kind.to_mitsuba)
+        if foreign is not None:  # a user's own kind, by its code (only then: simbench's keep their keys)
+            entry["kind_code"] = foreign
         if o.motion is not None:  # only when it moves, so that static scenes keep their cache keys
             entry["motion"] = o.motion.to_dict()
         objects.append(entry)

@@ -124,7 +124,10 @@ class ReferenceCalibration:
             raise ValueError(
                 f"rig camera {rig.camera.size_hw} does not match the reference's {self.rig.camera.size_hw}"
             )
-        key = (params, rig)
+        from simbench.decode.params import phase_method_code
+
+        # a user's phase method edited and registered again under its name decodes afresh
+        key = (params, rig, phase_method_code(params.phase_method))
         if key not in self._maps:
             from simbench.io import adc_full_scale
 

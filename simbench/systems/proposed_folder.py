@@ -267,7 +267,17 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         )
     base = DecoderParams(pattern=pattern, mode=mode, z0_m=z0, depth_range_m=(request.near_m, request.far_m))
     params = _decoder_params(request, base)
-    if any(n == "pattern" or n.startswith("pattern.") for n in named) and not params.pattern.projects_as(pattern):
+    # an image records no pattern: with no pattern option the default is taken, which the reference
+    # plane checks but nothing else does (a pattern designer's audit, 2026-11-30: a period-30 or
+    # order-4 capture triangulated alone decoded 66-96 % of its pixels 87-298 mm off, exit 0, told only
+    # that nothing checked the rig)
+    pattern_named = any(n == "pattern" or n.startswith("pattern.") for n in named)  # (--decoder pattern=...)
+    pattern_assumed = (
+        recorded is None
+        and all(x is None for x in (request.period_px, request.order, request.sequence, request.channels))
+        and not pattern_named
+    )
+    if pattern_named and not params.pattern.projects_as(pattern):
         # (a fourth audit: --decoder pattern= won over --period without a word, and over a recording's
         # pattern too, whose decode then failed as if the reference were at fault)
         if recorded is not None:
@@ -348,13 +358,21 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         # rig converted from OpenCV's stereo calibration with T's sign flipped, R inverted, its
         # rotation left out or cx and cy swapped each decoded 92-96 % of the pixels 57-360 mm off,
         # exit 0; given a reference plane, each was refused)
+        assumed = (
+            f" nor the pattern, taken as the default ({_short_pattern(params.pattern)}: an image does not record "
+            "which pattern lit it; --period/--order/--sequence/--channels give yours)"
+            if pattern_assumed
+            else ""
+        )
         logging.getLogger("simbench").warning(
-            "%s: calibrated mode with no reference plane: nothing checks the rig %s against this capture - a rig "
-            "converted wrongly (the translation's sign or units, the rotation's direction, a principal point) "
+            "%s: calibrated mode with no reference plane: nothing checks the rig %s against this capture%s - a rig "
+            "converted wrongly (the translation's sign or units, the rotation's direction, a principal point)%s "
             "decodes most pixels at wrong depths without a word. Give --reference with a capture of a flat board "
             "at a known distance (--z0) to check it (docs/lab.md)",
             capture_path,
             rig_path,
+            assumed,
+            " or a pattern other than the one decoded with" if pattern_assumed else "",
         )
     t0 = time.perf_counter()
     result = decode(capture, rig=rig, params=params, reference=reference)
@@ -403,7 +421,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     contested += ", 0 beside a shadow" if params.shadow_doubt else ""
     noise = (
         f"the column's random noise at fringe SNR s ~{params.column_noise_px(rig):.2f}/s projector px (1 sigma) with "
-        f"this rig's {params.camera_period(rig):.1f}-px camera period, the decoder's systematic errors besides"
+        f"{'this rig' if params.camera_period_px is None else '--decoder camera_period_px'}'s "
+        f"{params.camera_period(rig):.1f}-px camera period, the decoder's systematic errors besides"
     )
     meaning = f"{snr}{', capped by ' + ' and '.join(caps) if caps else ''}{contested}; {threshold}; {noise}"
     # the decoder's stage images stay lazy (made only for --debug-dir: stacking the bands' took ~90 ms);
@@ -423,7 +442,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         confidence=result.confidence,
         camera=rig.camera,
         # the rig the depth was triangulated with, always (an audit: named only when --rig overrode it)
-        summary=f"{params.mode} mode{z0_note}{ref_note}{'' if rig_named else f', rig {rig_path}'}{over}",
+        summary=f"{params.mode} mode{z0_note}{ref_note}{'' if rig_named else f', rig {rig_path}'}{over}"
+        + (f", pattern {_short_pattern(params.pattern)} (assumed: no pattern option given)" if pattern_assumed else ""),
         confidence_meaning=meaning,
         elapsed_s=dt,
         # on the ideal pinhole grid the points are on (an audit: the raw capture's colours sat up to
@@ -440,6 +460,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
             "calibration_frames": request.calibration,
             "bits": request.bits,
             "encoding": encoding,
+            "pattern_assumed": pattern_assumed,
         },
     )
 
@@ -775,6 +796,11 @@ def recorded_adc_bits(meta: dict, *, where: str) -> int | None:
     if not isinstance(camera, dict) or "bits" not in camera:
         return None
     return validate.choice(validate.integer(camera["bits"], f"{where}: sensor.camera.bits"), "bits", ADC_BITS)
+
+
+def _short_pattern(p: PatternSpec) -> str:
+    # the pattern options' own terms (simbench pattern --help)
+    return f"period {p.period_px} px, order {p.order}, sequence {''.join(map(str, p.codes()))}, channels {p.channels}"
 
 
 def describe_pattern(p: PatternSpec) -> str:

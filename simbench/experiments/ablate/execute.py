@@ -35,6 +35,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
 
         from simbench import cache as cache_module
         from simbench.experiments.common import Session, score
+        from simbench.decode.params import pattern_on_rig_warnings
         from simbench.experiments.workers import worker_state
         from simbench.variant import select_variant
 
@@ -68,7 +69,14 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
         t1 = time.perf_counter()
         cap = session.capture(scene, "ablate")[0]
         t2 = time.perf_counter()
-        row = {}
+        # what `simbench decode` says of the pattern on the rig before decoding (a fringe too fine for
+        # the camera, a working range past the code's cycle): the table says it beside the numbers it
+        # explains (a pattern designer's audit, 2026-11-30: a period-8 run's 112.7 mm MAE and 32 %
+        # outliers came with no word of the range's ambiguity the command line names)
+        told = pattern_on_rig_warnings(cap.scene.rig, decoder)
+        for line in told:
+            say(f"warning: {line}")
+        row = {"warnings": told}
         for mode, prefix in MODES.items():
             result = session.decode(cap, decoder, mode=mode)
             row.update(
@@ -171,13 +179,23 @@ def _named_files_digest(params: dict) -> str:
 
 def code_digest() -> str:
     """The first 16 hex digits of the SHA-256 of simbench's code - every module of the package and
-    its C loops - as a run's log records it: a resumed sweep reuses only runs its own code made
-    (until 2026-11-30 a resume after a decoder change kept every finished run's old metrics and
-    wrote the sweep's provenance with the new commit)."""
-    from simbench.cache import source_digest
+    its C loops, and after a ``+`` those of the code of phase methods and object kinds registered
+    from outside it (:func:`simbench.cache.foreign_code_digest`) - as a run's log records it: a
+    resumed sweep reuses only runs its own code made (until 2026-11-30 a resume after a decoder
+    change kept every finished run's old metrics and wrote the sweep's provenance with the new
+    commit)."""
+    from simbench.cache import foreign_code_digest, source_digest
+    from simbench.decode.params import PHASE_METHODS
+    from simbench.sim.scene import OBJECT_KIND_TABLE
 
     root = Path(__file__).resolve().parents[2]  # the package (not `import simbench`: its api is a layer above)
-    return source_digest(sorted([*root.rglob("*.py"), *root.glob("*.c")]))[:16]
+    digest = source_digest(sorted([*root.rglob("*.py"), *root.glob("*.c")]))[:16]
+    # a user's own phase methods and object kinds, registered in this process, by their code (an
+    # extender's audit, 2026-11-30: a resume after an edit of one kept its runs' old metrics)
+    foreign = foreign_code_digest(
+        *PHASE_METHODS.values(), *(f for k in OBJECT_KIND_TABLE.values() for f in (k.parse, k.to_mitsuba))
+    )
+    return digest if foreign is None else f"{digest}+{foreign[:16]}"
 
 
 def _append(path: Path, rec: dict) -> None:

@@ -38,6 +38,7 @@ def sweep_rows(sweep: Sweep, runs: list[dict], done: dict) -> list[dict]:
             noise_seed=rec.get("noise_seed", ""),
             placement_seed=rec.get("placement_seed", ""),
             error=rec.get("error", "not run"),
+            warnings=" | ".join(rec.get("warnings", ())),
         )
         rows.append(row)
     return rows
@@ -68,6 +69,7 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
         "noise_seed",
         "placement_seed",
         "error",
+        "warnings",
     ]
     timing_rows = [{"run": r["run"], **done.get(r["key"], {}).get("timing", {})} for r in runs]
     # the set is made first and written all or nothing: an interrupt while the plot is drawn (or
@@ -121,6 +123,12 @@ def _mean(rows: list[dict], key: str) -> float:
     return float(np.mean(vals)) if vals else float("nan")
 
 
+def _cell(value: float, spec: str) -> str:
+    # NaN (a plane fit of a scene that is not a plane, an error over no decoded pixel) would print
+    # as "nan" in a table meant for a paper
+    return spec.format(value) if math.isfinite(value) else "n/a"
+
+
 def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
     from simbench.experiments.common import markdown_table
 
@@ -142,7 +150,10 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
         "Every object of the scene is placed with the run's placement tolerance (seeded, independent of the reference "
         "plane; `run.placement_depth_mm`, `run.placement_tilt_deg`). Decoded by triangulation with the rig (paper Eq. "
         "15; "
-        "the first columns) and against the separately captured reference plane (Sec. 5.4; `ref. plane` columns).",
+        "the first columns) and against the separately captured reference plane (Sec. 5.4; `ref. plane` columns). "
+        "`n/a`: not measured in any repetition - a plane fit where the scene over the decoded pixels is not a "
+        "plane (`simbench.metrics.PLANAR_TRUTH_RMS_MM`), an error where no pixel decoded, any metric where every "
+        "repetition failed (`errors`).",
         "",
         "Mean over repetitions (failed runs left out; `errors` counts them):",
         "",
@@ -154,14 +165,14 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
             [
                 *combo,
                 *(
-                    f"{_mean(group, k):.4g}"
+                    _cell(_mean(group, k), "{:.4g}")
                     for k in ("plane_mae_mm", "gt_mae_mm", "gt_rmse_mm", "gt_p95_mm", "edge5_mae_mm")
                 ),
-                f"{100 * _mean(group, 'outlier_share'):.3f} %",
-                f"{100 * _mean(group, 'completeness'):.2f} %",
-                f"{_mean(group, 'stripe_order_errors'):.0f}",
-                *(f"{_mean(group, k):.4g}" for k in ("ref_plane_mae_mm", "ref_gt_mae_mm")),
-                f"{100 * _mean(group, 'ref_completeness'):.2f} %",
+                _cell(100 * _mean(group, "outlier_share"), "{:.3f} %"),
+                _cell(100 * _mean(group, "completeness"), "{:.2f} %"),
+                _cell(_mean(group, "stripe_order_errors"), "{:.0f}"),
+                *(_cell(_mean(group, k), "{:.4g}") for k in ("ref_plane_mae_mm", "ref_gt_mae_mm")),
+                _cell(100 * _mean(group, "ref_completeness"), "{:.2f} %"),
                 str(errs),
             ]
         )
@@ -184,6 +195,18 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
     failures = sorted({r["error"] for r in rows if r["error"]})
     if failures:
         lines += ["", "Errors:", ""] + [f"- {e}" for e in failures]
+    told: dict[str, list[str]] = {}
+    for combo, group in _groups(sweep, rows):
+        for w in dict.fromkeys(w for r in group for w in r.get("warnings", "").split(" | ") if w):
+            told.setdefault(w, []).append(", ".join(f"{k} = {v}" for k, v in zip(axis_names, combo)))
+    if told:
+        lines += [
+            "",
+            "Warnings (the decoder's checks of the pattern on the rig, as `simbench decode` gives them; in a sweep its "
+            "options are `pattern.period_px`, `pattern.order` and `decoder.depth_range_m`):",
+            "",
+        ]
+        lines += [f"- {', '.join(f'`{c}`' for c in combos)}: {w}" for w, combos in told.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -232,7 +255,48 @@ def plot_series(sweep: Sweep, rows: list[dict]) -> tuple[list, list[tuple[str, n
     return x_vals, lines
 
 
+# what each metric is, in words, and the factor it is drawn with (shares as %)
+_METRIC_WORDS = {
+    "plane_mae_mm": ("plane-fit residual, mean absolute (mm)", 1.0),
+    "gt_mae_mm": ("depth error against ground truth, MAE (mm)", 1.0),
+    "gt_rmse_mm": ("depth error against ground truth, RMSE (mm)", 1.0),
+    "gt_p95_mm": ("depth error, 95th percentile (mm)", 1.0),
+    "outlier_share": ("pixels more than 5 mm off (%)", 100.0),
+    "edge5_mae_mm": (f"MAE off a {EDGE_BAND_PX}-px band at depth edges (mm)", 1.0),
+    "completeness": ("completeness (% of the lit pixels)", 100.0),
+    "stripe_order_errors": ("stripe-order errors (pixels)", 1.0),
+    "stripe_order_error_rate": ("stripe-order errors (% of the decoded pixels)", 100.0),
+}
+
+
+def metric_words(metric: str) -> tuple[str, float]:
+    """(an axis label in words with its unit, the factor the values are drawn with) of a sweep's
+    metric: triangulated with the rig (paper Eq. 15) or, ``ref_*``, against the reference plane."""
+    ref = metric.startswith("ref_")
+    words, factor = _METRIC_WORDS[metric[4:] if ref else metric]
+    return f"{words}, {'reference plane' if ref else 'triangulation'}", factor
+
+
+def axis_words(name: str) -> str:
+    """A sweep axis in words (its description, :data:`PARAMETERS`) with its key, for a plot."""
+    from simbench.experiments.ablate.spec import PARAMETERS
+
+    described = PARAMETERS.get(name, "")
+    if not described or described.startswith("DecoderParams."):
+        return name
+    # up to the first ':' or ';' outside brackets (a review: "speed (m/s; ...)" lost its bracket's end)
+    depth, cut = 0, len(described)
+    for i, ch in enumerate(described):
+        depth += (ch == "(") - (ch == ")")
+        if depth == 0 and ch in ":;":
+            cut = i
+            break
+    return f"{described[:cut].rstrip()} [{name}]"
+
+
 def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
+    import textwrap
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -240,24 +304,40 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
 
     x_name = sweep.axes[0][0]
     x_vals, lines = plot_series(sweep, rows)
+    ylabel, factor = metric_words(sweep.plot_metric)
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     numeric = all(_is_number(v) for v in x_vals)
-    pos = [float(v) for v in x_vals] if numeric else list(range(len(x_vals)))
+    pos = np.array([float(v) for v in x_vals] if numeric else list(range(len(x_vals))), np.float64)
+    # values of a category are not joined by lines (there is nothing between two boards), and the
+    # series are set a little apart so that their bars stay visible (a figure audit, 2026-11-30)
+    dodge = 0.0 if numeric else min(0.08, 0.6 / max(1, len(lines)))
     for i, (label, means, lo, hi) in enumerate(lines):
         # each line its own marker and dash, the later ones' markers smaller, so that lines close
-        # together stay told apart
-        style = dict(marker="osD^v<>p"[i % 8], ls=("-", "--", "-.", ":")[i % 4], ms=max(3.0, 7.0 - 0.5 * i))
-        ax.errorbar(pos, means, yerr=[means - lo, hi - means], capsize=3, label=label, **style)
+        # together stay told apart (and not by colour alone)
+        style = dict(marker="osD^v<>p"[i % 8], ls=("-", "--", "-.", ":")[i % 4] if numeric else "none")
+        m, a, b = (factor * v for v in (means, lo, hi))
+        at = pos + dodge * (i - (len(lines) - 1) / 2)
+        ax.errorbar(at, m, yerr=[m - a, b - m], capsize=3, label=label, ms=max(3.0, 7.0 - 0.5 * i), **style)
     if not numeric:
-        ax.set_xticks(pos, x_vals, rotation=20, fontsize=8)
-    ax.set_xlabel(x_name)
-    ax.set_ylabel(sweep.plot_metric)
+        ax.set_xticks(pos, x_vals, rotation=20, ha="right", rotation_mode="anchor", fontsize=8)
+    elif len(x_vals) <= 8 and all(float(v).is_integer() for v in x_vals):
+        ax.set_xticks(pos, [str(int(float(v))) for v in x_vals])
+    ax.set_xlabel(textwrap.fill(axis_words(x_name), 80), fontsize=9)
+    ax.set_ylabel(textwrap.fill(ylabel, 45), fontsize=9)
+    ax.margins(y=0.08)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    import textwrap
-
-    ax.set_title(textwrap.fill(f"ablation {sweep.name}: {sweep.description}", 90), fontsize=8)
+    if len(lines) > 3:  # (beside the data a long legend hid it: the voting study's eight entries)
+        fig.legend(loc="outside lower center", ncol=math.ceil(len(lines) / 6), fontsize=7)
+        fig.set_figheight(4.2 + 0.13 * min(len(lines), 6))
+    elif len(lines) > 1 or (lines and lines[0][0] != sweep.plot_metric):
+        ax.legend(fontsize=7)
+    described = sweep.description.rstrip()
+    described += "" if not described or described.endswith(".") else "."
+    caption = f"ablation {sweep.name}: {described} Bars: min to max over {sweep.repeats} repetition(s).".replace(
+        ":  ", ": "
+    )
+    ax.set_title(textwrap.fill(caption, 90), fontsize=8)
     from simbench.experiments.common import figure_png
 
     return figure_png(fig, dpi=100)
