@@ -838,3 +838,42 @@ def test_a_quick_runs_figures_say_so_in_their_titles():
     assert RunConfig().figure_note() == ""
     assert RunConfig.preset(quick=True).figure_note() == " [quick run: 640x480, 4 spp]"
     assert RunConfig(camera_scale=0.25).figure_note() == " [320x240, 36 spp]"
+
+
+def test_provenance_names_the_source_paths_not_in_its_commit(tmp_path):
+    """A result made from an uncommitted tree says so (a commit that never lands would otherwise
+    be the only - and a wrong - record of the code that made it); results/ itself is not source."""
+    import subprocess
+
+    from simbench.experiments.common import git_state
+
+    assert git_state(tmp_path) == {"git_commit": "unknown", "git_uncommitted": None}  # not a checkout
+
+    def git(*args):
+        subprocess.run(
+            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True, capture_output=True
+        )
+
+    git("init", "-q")
+    (tmp_path / "simbench").mkdir()
+    (tmp_path / "simbench" / "a.py").write_text("x = 1\n")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "t.md").write_text("1\n")
+    git("add", ".")
+    git("commit", "-q", "-m", "c")
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=tmp_path, capture_output=True, text=True).stdout.strip()
+    assert git_state(tmp_path) == {"git_commit": head, "git_uncommitted": []}
+
+    (tmp_path / "results" / "t.md").write_text("2\n")  # a run rewriting results/: still clean
+    (tmp_path / "notes.txt").write_text("not source\n")
+    assert git_state(tmp_path)["git_uncommitted"] == []
+
+    (tmp_path / "simbench" / "a.py").write_text("x = 2\n")
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / "new.toml").write_text("")
+    (tmp_path / "Makefile").write_text("all:\n")
+    git("add", "Makefile")
+    assert git_state(tmp_path) == {
+        "git_commit": head,
+        "git_uncommitted": ["Makefile", "scenes/new.toml", "simbench/a.py"],
+    }

@@ -83,6 +83,7 @@ __all__ = [
     "markdown_table",
     "figure_png",
     "git_commit",
+    "git_state",
 ]
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
@@ -560,7 +561,7 @@ class Session:
             "sensor": sensor_to_dict(self.sensor),
             "variant": self.variant,
             "versions": versions(),
-            "git_commit": git_commit(),
+            **git_state(),
             "seeds": dict(sorted(self.seeds_used.items())),
             "files": {str(Path(rel)): hashlib.sha256(b).hexdigest() for rel, b in data.items()},
             **(extra or {}),
@@ -741,10 +742,40 @@ def scene_errors(rec: Recording, result: DecodeResult, *, period_px: float, edge
     )
 
 
-def git_commit() -> str:
+def git_commit(root: Path | None = None) -> str:
+    """The commit checked out in the project's tree (or ``root``); ``"unknown"`` outside a git
+    checkout."""
     try:
         return subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=SCENES_DIR.parent
+            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True, cwd=root or SCENES_DIR.parent
         ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
+
+
+# what makes results: a change here that is not committed is not in ``git_commit``'s tree
+SOURCE_PATHS = ("simbench", "scenes", "pyproject.toml", "Makefile")
+
+
+def git_state(root: Path | None = None) -> dict:
+    """``git_commit`` and ``git_uncommitted``: the source paths (:data:`SOURCE_PATHS`) that differ
+    from that commit - modified, staged, deleted or untracked (``None`` outside a checkout).
+
+    A result made from an uncommitted tree names a commit whose code did not make it; the list
+    says so, where a bare commit hash would be silently wrong (and a commit that never lands
+    leaves the list as the only trace that the code was not the commit's).  ``results/`` itself
+    is not a source path: a run rewrites it while it runs.
+    """
+    commit = git_commit(root)
+    try:
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=all", "--", *SOURCE_PATHS],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=root or SCENES_DIR.parent,
+        ).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return {"git_commit": commit, "git_uncommitted": None}
+    paths = sorted({line[3:].split(" -> ")[-1].strip('"') for line in out.splitlines() if line.strip()})
+    return {"git_commit": commit, "git_uncommitted": paths}

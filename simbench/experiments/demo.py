@@ -20,7 +20,7 @@ import numpy as np
 from simbench.cache import RenderCache
 from simbench.decode import decode, decode_reference
 from simbench.sim.sensor import get_sensor
-from simbench.experiments.common import RunConfig, figure_png, git_commit, library_scene_path
+from simbench.experiments.common import RunConfig, figure_png, git_state, library_scene_path
 from simbench.io import camera_full_scale, check_own_folder, json_bytes, write_files
 from simbench.metrics import edge_band, score
 from simbench.sim.scene import load_scene
@@ -149,7 +149,7 @@ def run_demo(
         "config": cfg,
         "variant": mi.variant(),
         "versions": versions(),
-        "git_commit": git_commit(),
+        **git_state(),
     }
     files[out / "metrics.json"] = json_bytes({"rows": rows})
     files[out / "provenance.json"] = json_bytes(provenance)

@@ -53,7 +53,7 @@ def _fmt(v) -> str:
 
 
 def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, out: Path, command: str) -> None:
-    from simbench.experiments.common import git_commit
+    from simbench.experiments.common import git_state
     from simbench.report import table_text
     from simbench.sim.keys import versions
 
@@ -101,7 +101,7 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
                 {str(done.get(r["key"], {}).get("variant", "unknown")) for r in runs if r["key"] in done}
             ),
             "versions": versions(),
-            "git_commit": git_commit(),
+            **git_state(),
             # the code that made the runs (a resume reuses only the runs of its own code)
             "code": sorted({str(done.get(r["key"], {}).get("code", "unknown")) for r in runs if r["key"] in done}),
             "files": {p.name: hashlib.sha256(data).hexdigest() for p, data in files.items()},
