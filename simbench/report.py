@@ -1,5 +1,6 @@
-"""Writing results: Markdown tables, CSV tables and matplotlib figures as PNG bytes - shared by
-every writer of results (the experiments, the calibration report, the ablations), so that none
+"""Writing results: Markdown tables, CSV tables and matplotlib figures as PNG bytes (and, for
+plots of measured values, vector PDF: for a paper, where a PNG's pixels blur) - shared by every
+writer of results (the experiments, the calibration report, the ablations), so that none
 of them imports another's internals."""
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from simbench.io import atomic_write_text
 if TYPE_CHECKING:
     import matplotlib.figure
 
-__all__ = ["figure_png", "markdown_table", "write_table", "panel_row"]
+__all__ = ["figure_png", "figure_formats", "figure_files", "markdown_table", "write_table", "panel_row"]
 
 
 def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
@@ -26,6 +27,30 @@ def figure_png(fig: matplotlib.figure.Figure, *, dpi: int) -> bytes:
     fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
     return buf.getvalue()
+
+
+# no creation date in a PDF: the same figure gives the same bytes (determinism, provenance hashes)
+_PDF_METADATA = {"CreationDate": None}
+
+
+def figure_formats(fig: matplotlib.figure.Figure, *, dpi: int) -> dict[str, bytes]:
+    """A matplotlib figure as ``{"png": ..., "pdf": ...}``: PNG at ``dpi`` to view, PDF (vector:
+    lines, markers and text scale for a paper's column; images inside stay raster) to print.
+    Both deterministic (the PDF carries no creation date); closes the figure."""
+    import matplotlib.pyplot as plt
+
+    out = {}
+    for fmt, kw in (("png", {"dpi": dpi}), ("pdf", {"metadata": _PDF_METADATA})):
+        buf = io.BytesIO()
+        fig.savefig(buf, format=fmt, **kw)
+        out[fmt] = buf.getvalue()
+    plt.close(fig)
+    return out
+
+
+def figure_files(stem: str, formats: dict[str, bytes]) -> dict[str, bytes]:
+    """``{"STEM.png": ..., "STEM.pdf": ...}`` from :func:`figure_formats`'s result."""
+    return {f"{stem}.{fmt}": data for fmt, data in formats.items()}
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> list[str]:

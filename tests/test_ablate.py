@@ -554,7 +554,7 @@ def test_an_interrupt_while_the_report_is_made_leaves_the_previous_set_whole(tmp
 
     run_sweep(_sweep(seed=6), out_dir=tmp_path, cache_dir=None, progress=lambda s: None, run_fn=quick_run)
     before = {p.name: p.read_bytes() for p in tmp_path.glob("t.*") if not p.name.endswith(".jsonl")}
-    assert set(before) == {"t.csv", "t.timings.csv", "t.md", "t.png", "t.provenance.json"}
+    assert set(before) == {"t.csv", "t.timings.csv", "t.md", "t.png", "t.pdf", "t.provenance.json"}
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt

@@ -387,6 +387,7 @@ def test_cli_calibrates_under_the_paper_sensor(tmp_path, variant, capsys):
     # the paper sensor's camera lens: k1 = -0.08 (simbench/presets/paper.toml), found to 0.02
     assert abs(info["errors"]["camera_k1"]) < 0.02 and abs(info["errors"]["baseline_mm"]) < 1.0, info["errors"]
     assert (out / "calibration.png").stat().st_size > 10_000
+    assert (out / "calibration.pdf").read_bytes().startswith(b"%PDF-")
     report = (out / "report.md").read_text()
     assert "Estimated rig against the true rig" in report and "camera focal" in report
     assert main(argv + ["--overwrite"]) == 0

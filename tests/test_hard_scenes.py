@@ -232,7 +232,9 @@ def test_the_confidence_plot_gives_each_scene_of_a_class_its_own_style_and_draws
                         wrong_share_all=wrong,
                     )
                 )
-    png = cv2.imdecode(np.frombuffer(_curve_plot(curves, {"paper": 0.0, "robust": 3.0}), np.uint8), cv2.IMREAD_COLOR)
+    made = _curve_plot(curves, {"paper": 0.0, "robust": 3.0})
+    assert made["pdf"].startswith(b"%PDF-")
+    png = cv2.imdecode(np.frombuffer(made["png"], np.uint8), cv2.IMREAD_COLOR)
     # two rows (decoders) of three columns (the two classes and the scene outside them): wider than tall
     assert png is not None and png.shape[1] > png.shape[0]
 

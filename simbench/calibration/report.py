@@ -1,7 +1,7 @@
 """What ``simbench calibrate`` writes: the estimated rig (``rig.toml``, the format every
 ``--rig`` option reads), ``calibration.json`` (settings, seeds, poses, reprojection RMS, the
-per-parameter error against the true rig), ``report.md`` and ``calibration.png`` (the poses
-and the residuals).
+per-parameter error against the true rig), ``report.md`` and ``calibration.png``/``.pdf`` (the
+poses and the residuals).
 """
 
 from __future__ import annotations
@@ -49,10 +49,11 @@ _PARAMETERS = (
 )
 
 
-def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, truth: Rig) -> bytes:
-    """PNG: (a) the corners of every view in the camera image, (b) the poses seen from above
+def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, truth: Rig) -> dict[str, bytes]:
+    """PNG and PDF (:func:`simbench.report.figure_formats`):
+    (a) the corners of every view in the camera image, (b) the poses seen from above
     with the camera and projector, (c) the stereo residuals of camera and projector."""
-    from simbench.report import figure_png, panel_row
+    from simbench.report import figure_formats, panel_row
 
     plt, fig, ax = panel_row(3, width=4.4)
     cam = truth.camera
@@ -94,7 +95,7 @@ def calibration_figure(result: CalibrationResult, *, target: CalibrationTarget, 
     ax[2].set_ylabel("residual y (px)")
     ax[2].set_title("(c) reprojection residuals")
     ax[2].legend(fontsize=7)
-    return figure_png(fig, dpi=110)
+    return figure_formats(fig, dpi=110)
 
 
 def _rms(r: np.ndarray) -> float:
@@ -197,6 +198,7 @@ def write_calibration(
         "rig": "rig.toml",
         "report": "report.md",
         "figure": "calibration.png",
+        "figure_pdf": "calibration.pdf",
         "manifest": "calibration.json",
     }
     manifest = {
@@ -223,8 +225,9 @@ def write_calibration(
     contents = {
         "rig": rig_toml(result.rig).encode(),
         "report": calibration_markdown(result, target=target, truth=truth, settings=settings, command=command).encode(),
-        "figure": calibration_figure(result, target=target, truth=truth),
     }
+    figure = calibration_figure(result, target=target, truth=truth)
+    contents["figure"], contents["figure_pdf"] = figure["png"], figure["pdf"]
     # each file's SHA-256: a rerun into the folder replaces it only while no file was changed since
     # (an edited rig.toml is the user's: --overwrite to replace it)
     manifest["sha256"] = {k: hashlib.sha256(data).hexdigest() for k, data in contents.items()}

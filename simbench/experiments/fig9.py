@@ -17,13 +17,13 @@ import warnings
 
 import numpy as np
 
+from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import (
     RunConfig,
     Session,
     Split,
     calibration_sentence,
     calibration_summary,
-    figure_png,
     made_by,
     markdown_table,
     other_rig,
@@ -175,11 +175,14 @@ def write_fig9(session: Session, measured: list[dict]) -> dict:
     ]
     files = {
         "fig9.csv": table_text(rows, cols),
-        "fig9.png": fig9_plot(
-            rows,
-            title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)"
-            + cfg.figure_note(),
-            other_rig_name=other_rig(session),
+        **figure_files(
+            "fig9",
+            fig9_plot(
+                rows,
+                title=f"Fig. 9: RMSE of a white board against depth ({cfg.fig9_repeats} recordings per depth)"
+                + cfg.figure_note(),
+                other_rig_name=other_rig(session),
+            ),
         ),
         "fig9.md": _markdown(session, rows),
     }
@@ -219,8 +222,9 @@ def _errorbar(axis, rows: list[dict], key: str, sensor: str, **style) -> None:
     axis.errorbar(zs, mean, yerr=[mean - lo, hi - mean], capsize=3, **style)
 
 
-def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "calibrated") -> bytes:
-    """PNG: mean RMSE per depth with min-max bars (from the rows of ``fig9.csv``); dashed: the
+def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "calibrated") -> dict[str, bytes]:
+    """PNG and PDF (:func:`simbench.report.figure_formats`):
+    mean RMSE per depth with min-max bars (from the rows of ``fig9.csv``); dashed: the
     same recordings decoded with the other rig (``other_rig_name``, the calibrated one in a run
     on the true rig)."""
     import matplotlib
@@ -268,7 +272,7 @@ def fig9_plot(rows: list[dict], *, title: str, other_rig_name: str | None = "cal
     ax2.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=1, frameon=False)
     ax2.set_title("proposed method alone (zoomed)", fontsize=9)
     fig.suptitle(f"{title} (bars: min to max over the repetitions)", fontsize=10)
-    return figure_png(fig, dpi=110)
+    return figure_formats(fig, dpi=110)
 
 
 def _markdown(session: Session, rows: list[dict]) -> str:

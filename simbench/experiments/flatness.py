@@ -27,11 +27,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import (
     RunConfig,
     Session,
     Split,
-    figure_png,
     markdown_table,
     score,
     table_text,
@@ -139,8 +139,9 @@ def write_flatness(session: Session, measured: list[dict]) -> dict:
     ]
     files = {
         "flatness.csv": table_text(rows, cols),
-        "flatness.png": flatness_plot(
-            rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness{cfg.figure_note()}"
+        **figure_files(
+            "flatness",
+            flatness_plot(rows, title=f"{SCENE}, sensor {cfg.sensor}: error against board flatness{cfg.figure_note()}"),
         ),
         "flatness.md": _markdown(session, rows),
     }
@@ -165,8 +166,9 @@ def run_flatness(session: Session) -> dict:
     return SPLIT.run(session)
 
 
-def flatness_plot(rows: list[dict], *, title: str) -> bytes:
-    """PNG: the scores against the bow (left) and the ripple amplitude (right)."""
+def flatness_plot(rows: list[dict], *, title: str) -> dict[str, bytes]:
+    """PNG and PDF (:func:`simbench.report.figure_formats`): the scores
+    against the bow (left) and the ripple amplitude (right)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -196,7 +198,7 @@ def flatness_plot(rows: list[dict], *, title: str) -> bytes:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
-    return figure_png(fig, dpi=110)
+    return figure_formats(fig, dpi=110)
 
 
 def _markdown(session: Session, rows: list[dict]) -> str:

@@ -43,7 +43,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.decode.pipeline import apply_min_confidence
-from simbench.experiments.common import RunConfig, Session, Split, figure_png, markdown_table, score, table_text
+from simbench.report import figure_files, figure_formats
+from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.metrics import edge_band, wrong_pixels
 
 if TYPE_CHECKING:
@@ -274,7 +275,7 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
         "hard_scenes_confidence.csv": table_text(
             curves, ["scene", "decoder", "threshold", "completeness", "wrong_share", "wrong_share_all"]
         ),
-        "hard_scenes_confidence.png": _curve_plot(curves, operating, note=session.config.figure_note()),
+        **figure_files("hard_scenes_confidence", _curve_plot(curves, operating, note=session.config.figure_note())),
         "hard_scenes.md": _markdown(session, rows, curves, operating),
     }
     session.write_results(
@@ -314,8 +315,8 @@ def _scene_style(k: int) -> tuple[tuple[float, float, float], str]:
     return tuple(colours[(2 * k) % 20 + (2 * k) // 20 % 2]), _MARKERS[k % len(_MARKERS)]
 
 
-def _curve_plot(curves: list[dict], operating: dict, *, note: str = "") -> bytes:
-    """PNG: each scene's completeness-vs-wrong-pixel curve, a row per decoder and a column per
+def _curve_plot(curves: list[dict], operating: dict, *, note: str = "") -> dict[str, bytes]:
+    """PNG and PDF: each scene's completeness-vs-wrong-pixel curve, a row per decoder and a column per
     scene class (:data:`HARD_SCENES`; a scene outside it in a column of its own), each scene of a
     class in its own colour and marker (one panel held all 25 until 2026-11-30, and its colour
     cycle of 10 gave three scenes each colour); both axes logarithmic (the pixels lost, not those
@@ -396,7 +397,7 @@ def _curve_plot(curves: list[dict], operating: dict, *, note: str = "") -> bytes
         f"{100 * _NONE_AT:.5f} %){note}",
         fontsize=9,
     )
-    return figure_png(fig, dpi=110)
+    return figure_formats(fig, dpi=110)
 
 
 def _held_out(curves: list[dict]) -> str:

@@ -36,7 +36,7 @@ import numpy as np
 
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.metrics import edge_band, wrong_pixels
-from simbench.report import figure_png
+from simbench.report import figure_files, figure_formats
 from simbench.sim.motion import Motion
 from simbench.sim.timeline import image_speed_px_s, scene_at
 from simbench.sim.truth import ground_truth
@@ -209,7 +209,7 @@ def write_motion(session: Session, measured: list[dict]) -> dict:
     files = {
         "motion.csv": table_text(rows, cols),
         "motion.md": _markdown(session, sub, rows, summary, timing, speeds, scenes),
-        "motion.png": _figure(rows, scenes, note=sub.config.figure_note()),
+        **figure_files("motion", _figure(rows, scenes, note=sub.config.figure_note())),
     }
     session.write_results(
         "motion",
@@ -514,7 +514,7 @@ STILL_AT_M_S = 3e-4
 _DIRECTION_WORDS = {"lateral": "sideways", "axial": "towards the camera"}
 
 
-def _figure(rows: list[dict], scenes: dict, *, note: str = "") -> bytes:
+def _figure(rows: list[dict], scenes: dict, *, note: str = "") -> dict[str, bytes]:
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     from simbench.report import panel_row
@@ -582,4 +582,4 @@ def _figure(rows: list[dict], scenes: dict, *, note: str = "") -> bytes:
     labels.append("open: still (speed 0), left of the grey line")
     fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8, frameon=False)
     fig.suptitle(f"Moving scenes: depth error against the object's speed{note}", fontsize=10)
-    return figure_png(fig, dpi=110)
+    return figure_formats(fig, dpi=110)

@@ -21,13 +21,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from simbench.sim.sensor import PAPER_LATERAL_COLOUR_PX, SensorModel, with_lateral_colour
+from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import (
     RunConfig,
     Session,
     Split,
     calibration_sentence,
     calibration_summary,
-    figure_png,
     markdown_table,
     other_rig,
     scene_errors,
@@ -335,8 +335,11 @@ def write_table3(session: Session, measured: list[dict], *, systems: tuple[str, 
     files = {
         "table3.csv": table_text(rows, cols),
         "table3.md": _markdown(session, rows, whole, competitors) + common,
-        "fig10.png": cross_section_figure(
-            panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects){cfg.figure_note()}"
+        **figure_files(
+            "fig10",
+            cross_section_figure(
+                panels, title=f"Fig. 10: cross-sections of {SCENE} (the row through both objects){cfg.figure_note()}"
+            ),
         ),
     }
     session.write_results(
@@ -628,8 +631,9 @@ def rig_section(session: Session, rows: list[dict], competitors: dict) -> list[s
     return lines
 
 
-def cross_section_figure(panels: list, *, title: str) -> bytes:
-    """PNG: one row per sensor - its depth map, and decoded and true depth along the image row
+def cross_section_figure(panels: list, *, title: str) -> dict[str, bytes]:
+    """PNG and PDF (:func:`simbench.report.figure_formats`):
+    one row per sensor - its depth map, and decoded and true depth along the image row
     through the middle of the faces with each face's least-squares line (the paper's red
     dotted 'actual depth').  ``panels``: (label, camera, gt_depth, depth, faces) per sensor;
     the x axis is the normalised image coordinate (x - cx) / f, the same for every camera."""
@@ -685,4 +689,4 @@ def cross_section_figure(panels: list, *, title: str) -> bytes:
     for a in axes[:, 1]:
         a.set_xlim(min(x for x, _ in spans), max(x for _, x in spans))
     fig.suptitle(title)
-    return figure_png(fig, dpi=80)
+    return figure_formats(fig, dpi=80)

@@ -81,7 +81,7 @@ def write_sweep(sweep: Sweep, rows: list[dict], runs: list[dict], done: dict, ou
             timing_rows, ["run", "setup_s", "render_record_s", "decode_s"]
         ).encode("utf-8"),
         out / f"{sweep.name}.md": _markdown(sweep, rows, command).encode("utf-8"),
-        out / f"{sweep.name}.png": _plot(sweep, rows),
+        **{out / f"{sweep.name}.{fmt}": data for fmt, data in _plot(sweep, rows).items()},
     }
     base = {k: _fmt(v) for k, v in {**DEFAULTS, **sweep.base}.items()}
     files[out / f"{sweep.name}.provenance.json"] = json_bytes(
@@ -294,7 +294,7 @@ def axis_words(name: str) -> str:
     return f"{described[:cut].rstrip()} [{name}]"
 
 
-def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
+def _plot(sweep: Sweep, rows: list[dict]) -> dict[str, bytes]:
     import textwrap
 
     import matplotlib
@@ -338,9 +338,9 @@ def _plot(sweep: Sweep, rows: list[dict]) -> bytes:
         ":  ", ": "
     )
     ax.set_title(textwrap.fill(caption, 90), fontsize=8)
-    from simbench.experiments.common import figure_png
+    from simbench.report import figure_formats
 
-    return figure_png(fig, dpi=100)
+    return figure_formats(fig, dpi=100)
 
 
 def _is_number(s: str) -> bool:
