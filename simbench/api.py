@@ -616,7 +616,7 @@ def depth(
     """
     from simbench.decode import DecoderParams, robust_params
     from simbench.decode.params import with_changes
-    from simbench.decode.pipeline import code_order_doubt, without_depth
+    from simbench.decode.pipeline import code_order_doubt, code_succession_doubt, without_depth
     from simbench.systems.proposed import describe_pattern
     from simbench.sim.sensor import get_sensor
     from simbench.systems import SystemDepth, SystemOptions, get_system
@@ -713,6 +713,9 @@ def depth(
             if mode == "reference":  # the decode's own (cached): what its registration was measured against
                 ref = recorded.calibration.reference_map(dataclasses.replace(used, mode="reference"), rig=scene.rig)
             told = registration_warning(rec.raw, result.detail, rig=scene.rig, params=used, reference=ref)
+            if told:
+                warnings.warn(told, SimbenchWarning, stacklevel=2)
+            told = code_succession_doubt(result.detail.window_succession)
             if told:
                 warnings.warn(told, SimbenchWarning, stacklevel=2)
     else:

@@ -12,10 +12,12 @@ import pytest
 from simbench.cli import main
 from simbench.decode import robust_params
 from simbench.decode.pipeline import (
+    MIN_AS_READ,
     MIN_WINDOW_PAIRS,
     _alternative_tables,
     _window_table,
     code_order_doubt,
+    code_succession_doubt,
     without_depth,
 )
 from simbench.systems import get_system
@@ -143,3 +145,74 @@ def test_the_api_gives_no_depth_for_a_mirrored_capture():
     assert not d.valid.any() and np.isnan(d.depth_m).all() and not d.detail.valid.any()
     ok = simbench.depth(dataclasses.replace(rec, recording=Recording("proposed", SCENE, RAW, gt, {})))
     assert ok.valid.mean() > 0.97
+
+
+def _other_pattern(**changes):
+    """The benchmark's capture and reference plane lit by another pattern (the decoder assumes the
+    paper's)."""
+    import dataclasses
+
+    from simbench.decode import DecoderParams
+    from simbench.pattern import PatternSpec
+    from simbench.systems import SystemOptions
+    from simbench.systems.proposed import ColourFringeSystem
+
+    params = dataclasses.replace(DecoderParams(), pattern=PatternSpec(**changes))
+    raw, cal, _ = ColourFringeSystem(SystemOptions(decoder=params)).bench_inputs(scene="plane")
+    return raw, cal.image
+
+
+ORDER4 = _other_pattern(order=4)
+
+
+def test_code_succession_doubt_is_for_stripes_in_order_that_do_not_follow_the_pattern():
+    assert code_succession_doubt((1000, 1000, 0, 0, 0)) == ""
+    assert code_succession_doubt((1000, int(MIN_AS_READ * 1000), 0, 0, 0)) == ""
+    assert code_succession_doubt((MIN_WINDOW_PAIRS - 1, 0, 0, 0, 0)) == ""  # too few to tell
+    # a reading out of order says more (code_order_doubt): not this doubt
+    assert code_succession_doubt((1000, 500, 1000, 1000, 0)) == "" and code_order_doubt((1000, 500, 1000, 1000, 0))
+    msg = code_succession_doubt((1000, 480, 500, 500, 480))
+    assert msg.startswith("only 48 % of 1000 neighbouring stripes of the capture read successive De Bruijn windows")
+    assert "another window order or sequence" in msg and "its depth is doubtful" in msg
+    assert "reads it whole" in code_succession_doubt((1000, 480, 500, 500, 480), what="reference capture")
+
+
+@pytest.mark.parametrize("robust", [False, True], ids=["paper", "robust"])
+def test_a_capture_of_another_window_order_is_doubted_and_the_patterns_own_is_not(robust):
+    """B(2,4) read as B(2,3): every stripe reads a valid window, about half in succession; the
+    paper's decoder decodes two thirds of the pixels there, three quarters of them > 5 mm wrong
+    (the rest where a window of B(2,4) happens to stand where B(2,3)'s does)."""
+    params = robust_params(SYSTEM.decoder) if robust else None
+    good = SYSTEM.decode(RAW, CAL, scene=SCENE, params=params).detail
+    assert code_succession_doubt(good.window_succession) == ""
+    r = SYSTEM.decode(ORDER4[0], CAL, scene=SCENE, params=params).detail
+    pairs, as_read, *_ = r.window_succession
+    assert pairs > 10_000 and as_read / pairs == pytest.approx(0.48, abs=0.03)
+    assert code_order_doubt(r.window_succession) == ""  # no other reading explains it
+    assert code_succession_doubt(r.window_succession).startswith("only 48 %")
+    if not robust:
+        wrong = np.abs(r.depth_m - 1.1) > 0.005
+        assert r.valid.mean() > 0.5 and wrong[r.valid].mean() > 0.7
+
+
+def test_the_command_line_tells_of_a_capture_of_another_pattern(tmp_path, caplog, capsys):
+    """Alone (calibrated mode, nothing to check it against) it is decoded with a warning that
+    names the doubt; with its reference plane (of the same pattern) it is refused, naming it."""
+    from simbench.rig import save_rig
+
+    out = tmp_path / "d.npy"
+    args = _files(tmp_path, *ORDER4)
+    save_rig(SCENE.rig, tmp_path / "rig.toml")
+    assert (
+        main(["decode", args[0], "--rig", str(tmp_path / "rig.toml"), "--mode", "calibrated", "--out", str(out)]) == 0
+    )
+    assert "only 48 % of" in caplog.text and "another window order or sequence (--order/--sequence)" in caplog.text
+    assert main(["decode", *args, "--out", str(tmp_path / "e.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "only 48 % of" in err and "of the reference capture" in err and not (tmp_path / "e.npy").exists()
+    # a pattern of another period reads its windows in succession: the reference's Z0 refuses it, and
+    # names the pattern assumed as a cause beside the rig
+    period24 = _other_pattern(period_px=24)
+    assert main(["decode", *_files(tmp_path, *period24), "--out", str(tmp_path / "f.npy")]) == 2
+    err = capsys.readouterr().err
+    assert "not its Z0 = 1 m" in err and "Or lit by another pattern than the one assumed (period 21 px" in err

@@ -120,6 +120,7 @@ __all__ = [
     "REFERENCE_Z0_WARNING",
     "REFERENCE_EXTENT_PERCENTILES",
     "code_order_doubt",
+    "code_succession_doubt",
     "registration_warning",
     "reference_warnings",
     "without_depth",
@@ -788,6 +789,12 @@ MIN_WINDOW_SUCCESSION = 0.75
 WINDOW_SUCCESSION_MARGIN = 0.2
 # fewer pairs than this say nothing either way (a nearly dark capture)
 MIN_WINDOW_PAIRS = 200
+# Read in order but not as the pattern decoded with: a capture of another pattern of the same
+# period - another window order or sequence - reads valid windows that succeed each other about
+# half the time (orders 4 and 5 read as B(2,3): 0.48 of the pairs; the benchmark plane, both
+# decoders), and the paper's decoder decodes 66-76 % of its pixels there, every one wrong.  A
+# capture of the pattern reads >= MIN_AS_READ (measured: see the note below).
+MIN_AS_READ = 0.8
 _READINGS = ("with its red and green channels swapped", "mirrored (or rotated 180 degrees)", "mirrored and swapped")
 
 
@@ -878,6 +885,27 @@ def code_order_doubt(window_succession: tuple[int, ...], *, what: str = "capture
         f"stripes read successive De Bruijn windows that way, {100 * as_read / pairs:.0f} % as it is - is the "
         "image mirrored or rotated 180 degrees, or are its red and green channels swapped (--channels)?"
     )
+
+
+def code_succession_doubt(window_succession: tuple[int, ...], *, what: str = "capture") -> str:
+    """Why a decode's stripes seem not to follow the pattern decoded with, from its
+    :attr:`DecodeResult.window_succession`, or "": fewer than :data:`MIN_AS_READ` of its
+    neighbouring stripes read successive De Bruijn windows, and no other reading
+    (:func:`code_order_doubt`, which says more) explains it.  A doubt, not a proof: codes that the
+    scene's colours defeat read poorly too, so the command line and :func:`simbench.depth` warn
+    and keep the depth, and :func:`decode_reference` - a flat board, whose codes read whole -
+    refuses."""
+    pairs, as_read, *_ = (tuple(window_succession) + (0, 0, 0))[:5]
+    if pairs < MIN_WINDOW_PAIRS or as_read >= MIN_AS_READ * pairs or code_order_doubt(window_succession):
+        return ""
+    said = (
+        f"only {100 * as_read / pairs:.0f} % of {pairs} neighbouring stripes of the {what} read successive "
+        f"De Bruijn windows of the pattern decoded with (a capture of it: >= {100 * MIN_AS_READ:.0f} %) - was it "
+        "lit by another pattern, of another window order or sequence (--order/--sequence)?"
+    )
+    if what.startswith("reference"):
+        return said + " A flat board lit by the pattern reads it whole"
+    return said + " Otherwise its colours defeat the stripe code; either way its depth is doubtful"
 
 
 # per channel, the power along the rows in the fringe's band over that in the code's (relative to
@@ -1245,7 +1273,8 @@ def decode_reference(
         When less than ``params.min_reference_coverage`` of the pixels decode (a black,
         saturated or unrelated image is not a reference), when its stripes do not read in the
         pattern's order (:func:`code_order_doubt`: a mirrored or red/green-swapped reference
-        passes the coverage and Z0 checks and makes every depth wrong), or calibration captures
+        passes the coverage and Z0 checks and makes every depth wrong) or follow it too poorly to
+        be of the pattern decoded with (:func:`code_succession_doubt`), or calibration captures
         are missing, mis-sized or unusable.
     """
     image = _ideal_image(_check_capture(reference, rig.camera.size_hw), rig)
@@ -1264,7 +1293,10 @@ def decode_reference(
 
     parts = run_bands(band, image, params, rig)
     column = np.concatenate([c for c, _ in parts], axis=0)
-    doubt = code_order_doubt(tuple(map(sum, zip(*(w for _, w in parts)))), what="reference capture")
+    succession = tuple(map(sum, zip(*(w for _, w in parts))))
+    doubt = code_order_doubt(succession, what="reference capture") or code_succession_doubt(
+        succession, what="reference capture"
+    )
     if doubt:
         raise ValueError(doubt)
     coverage = float(np.isfinite(column).mean())

@@ -187,7 +187,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
     the colour-fringe sensor's decoder."""
     from simbench.cache import RenderCache
     from simbench.decode import DecoderParams, decode
-    from simbench.decode.pipeline import code_order_doubt, registration_warning, without_depth
+    from simbench.decode.pipeline import code_order_doubt, code_succession_doubt, registration_warning, without_depth
     from simbench.decode.persist import lookup_decoded_reference
     from simbench.manifest import read_manifest
     from simbench.pattern import pattern_from_options
@@ -323,6 +323,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         "z0_assumed": z0_assumed,
         "recorded_z0": recorded_ref and recording_manifest_of(reference_path) is not None,
     }
+    assumed = {"pattern_assumed": _short_pattern(params.pattern) if pattern_assumed else ""}
     cache = RenderCache(request.cache_dir)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:
@@ -340,7 +341,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         z0_kind = {"z0_assumed": False, "recorded_z0": True}
     if reference is not None:
         check_reference_plane(
-            reference, rig, reference_path=reference_path, rig_path=rig_path, mode=params.mode, **z0_kind
+            reference, rig, reference_path=reference_path, rig_path=rig_path, mode=params.mode, **z0_kind, **assumed
         )
     elif request.rig is not None and check_path is not None and Path(check_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
@@ -351,7 +352,9 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         plane, store_plane = lookup_decoded_reference(
             _camera_image(check_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
-        check_reference_plane(plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind)
+        check_reference_plane(
+            plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind, **assumed
+        )
         store_plane()
     elif params.mode == "calibrated" and request.rig is not None:
         # a lone capture triangulated with a rig nothing checks (a lab user's audit, 2026-11-30: a
@@ -384,6 +387,10 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         result = without_depth(result)
     else:
         told = registration_warning(capture, result, rig=rig, params=params, reference=reference)
+        if told:
+            logging.getLogger("simbench").warning("%s: %s", capture_path, told)
+        # stripes in order but not the pattern's windows: another pattern, or colours that defeat the code
+        told = code_succession_doubt(result.window_succession)
         if told:
             logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     # in calibrated mode the reference serves the colour unmixing only (its coupling matrix)
@@ -475,18 +482,22 @@ def check_reference_plane(
     recorded_z0: bool = False,
     mode: str = "calibrated",
     rig_option: str = "--rig",
+    pattern_assumed: str = "",
 ) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
     tolerance but over :data:`simbench.decode.REFERENCE_Z0_WARNING` it warns: reference-mode
-    depths carry that error (a Z0 2 % off gave 20 mm MAE on a plane, exit 0, without a word)."""
+    depths carry that error (a Z0 2 % off gave 20 mm MAE on a plane, exit 0, without a word).
+    ``pattern_assumed``: the pattern taken for a bare image (none given), named in a refusal as
+    a cause (a capture of period 24 decoded at 21 lies 3.6 % off Z0, blamed on the rig alone)."""
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_extent
 
     low, offset, high = reference_plane_extent(reference, rig)
     if np.isnan(offset):
         return
+    tilt = dict(reference_path=reference_path, rig_path=rig_path, mode=mode, pattern_assumed=pattern_assumed)
     if abs(offset) <= REFERENCE_Z0_WARNING:
-        _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path, mode=mode)
+        _check_reference_tilt(reference, low, offset, high, **tilt)
         return
     if np.isinf(offset):
         raise ValueError(
@@ -502,12 +513,13 @@ def check_reference_plane(
     if abs(offset) > REFERENCE_Z0_TOLERANCE:
         raise ValueError(
             f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %): was it captured with this rig, and at this Z0?"
+            + _pattern_question(pattern_assumed)
         )
     advice = (
         f"the rig given ({rig_option}) is not the one it was recorded with, or not calibrated closely enough"
         if recorded_z0
         else f"give --z0 {z:.4f} if the board stood there, or check the rig"
-    )
+    ) + _pattern_question(pattern_assumed)
     # which depths carry it depends on what is off (an audit, 2026-11-30: the one text named reference
     # mode to a calibrated-mode user whose rig's baseline was 2.7 % long - 26.6 mm MAE in calibrated
     # mode, 2.4 mm in reference mode)
@@ -527,10 +539,21 @@ def check_reference_plane(
         carried,
         advice,
     )
-    _check_reference_tilt(reference, low, offset, high, reference_path=reference_path, rig_path=rig_path, mode=mode)
+    _check_reference_tilt(reference, low, offset, high, **tilt)
 
 
-def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_path, mode: str = "calibrated") -> None:
+def _pattern_question(pattern_assumed: str) -> str:
+    if not pattern_assumed:
+        return ""
+    return (
+        f" Or lit by another pattern than the one assumed ({pattern_assumed}: an image does not record its pattern; "
+        "--period/--order/--sequence/--channels give yours)?"
+    )
+
+
+def _check_reference_tilt(
+    reference, low, median, high, *, reference_path, rig_path, mode: str = "calibrated", pattern_assumed: str = ""
+) -> None:
     """The reference plane must be flat and square across the image too, not only at its Z0 in
     the median: its depth's 2nd and 98th percentiles against the median
     (:func:`simbench.decode.reference_plane_extent`), within the same tolerances.  A camera focal
@@ -553,6 +576,7 @@ def _check_reference_tilt(reference, low, median, high, *, reference_path, rig_p
         raise ValueError(
             f"{where} more than {100 * REFERENCE_Z0_TOLERANCE:.0f} %: the rig's camera (focal length, principal point "
             "or distortion) is not the one it was captured with - was it captured with this rig?"
+            + _pattern_question(pattern_assumed)
         )
     # (a new user's audit, 2026-11-30: the same words in reference mode overstated its error 30-fold -
     # matching against the reference takes the camera's geometry from the reference itself)
