@@ -56,6 +56,8 @@ def test_a_figure_is_written_as_png_and_as_a_vector_pdf_the_same_bytes_every_tim
     assert made["png"].startswith(b"\x89PNG\r\n\x1a\n") and made["pdf"].startswith(b"%PDF-")
     assert b"CreationDate" not in made["pdf"]
     assert b"/Type /Font" in made["pdf"]  # text as text (a vector figure), not pixels
+    # embedded as TrueType: journals' PDF checks refuse matplotlib's default Type 3 fonts
+    assert b"/Type3" not in made["pdf"] and b"CIDFontType2" in made["pdf"]
     assert figure_formats(_plot_figure(), dpi=50) == made
     # and in another process (a date or a process id would differ there)
     code = (
