@@ -429,11 +429,19 @@ def _code_bytes(files: tuple[tuple[str, int, int], ...]) -> tuple[bytes, ...]:
     return tuple(out)
 
 
+# CPython before 3.11.8 and 3.12.1 counts the AST constructor's depth in state the threads of an
+# interpreter share (python/cpython#106905): two threads parsing at once raised "SystemError: AST
+# constructor recursion depth mismatch" - the decoder's bands, each digesting a user's phase
+# method on its first decode, did (a test run, 2026-12-01)
+_AST_LOCK = threading.Lock()
+
+
 def code_text(source: str | bytes) -> str:
     """What a Python module does, as text: its syntax tree (:func:`ast.dump`, without line
     numbers) with every module, class and function docstring removed - the same for two sources
-    that differ only in comments, docstrings or layout."""
-    tree = ast.parse(source)
+    that differ only in comments, docstrings or layout.  Thread-safe (one parse at a time)."""
+    with _AST_LOCK:
+        tree = ast.parse(source)
     for node in ast.walk(tree):
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
             body = node.body

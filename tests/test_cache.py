@@ -1122,3 +1122,36 @@ def test_damaged_entries_are_counted_by_info_and_removed_by_prune(tmp_path, caps
     assert main(["cache", "prune", "--cache", str(tmp_path), "--max-size", "1G"]) == 0
     assert "1 leftovers (killed writers', damaged entries)" in capsys.readouterr().out
     assert not bad.exists() and good.exists() and (tmp_path / "notes.txt").exists()
+
+
+def test_code_text_parses_from_many_threads_at_once():
+    """CPython < 3.11.8 keeps the AST constructor's depth in state an interpreter's threads share
+    (python/cpython#106905): two parses interleaved - here by a garbage collection whose callback
+    lets another thread run, as a finalizer would - raised SystemError ("AST constructor recursion
+    depth mismatch"), as the decoder's bands did digesting a user's phase method.  One parse at a
+    time (without the lock this failed 3 of 3 runs on 3.11.7)."""
+    import gc
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    from simbench.cache import code_text
+
+    source = (Path(__file__).resolve().parents[1] / "simbench" / "decode" / "pipeline.py").read_text()
+    expected = code_text(source)
+
+    def parse(_):
+        return [code_text(source) for _ in range(3)]
+
+    def switch(phase, info):
+        time.sleep(0)
+
+    threshold = gc.get_threshold()
+    gc.callbacks.append(switch)
+    gc.set_threshold(50)
+    try:
+        with ThreadPoolExecutor(4) as pool:
+            texts = [t for got in pool.map(parse, range(8)) for t in got]
+    finally:
+        gc.callbacks.remove(switch)
+        gc.set_threshold(*threshold)
+    assert texts == [expected] * 24
