@@ -216,3 +216,17 @@ def test_the_command_line_tells_of_a_capture_of_another_pattern(tmp_path, caplog
     assert main(["decode", *_files(tmp_path, *period24), "--out", str(tmp_path / "f.npy")]) == 2
     err = capsys.readouterr().err
     assert "not its Z0 = 1 m" in err and "Or lit by another pattern than the one assumed (period 21 px" in err
+
+
+def test_the_api_warns_of_a_capture_that_does_not_follow_its_pattern():
+    """simbench.depth as the command line: the doubt is a warning, the depth kept."""
+    import simbench
+    from simbench.api import Recorded
+    from simbench.systems import Recording
+
+    gt = type("GT", (), {})()
+    gt.depth_m = np.full(RAW.shape[:2], 1.1, np.float32)
+    rec = Recorded("proposed", Recording("proposed", SCENE, ORDER4[0], gt, {}), CAL, {"sensor": "minimal"})
+    with pytest.warns(simbench.SimbenchWarning, match="only 48 % of .* neighbouring stripes of the capture"):
+        d = simbench.depth(rec)
+    assert d.valid.mean() > 0.5  # kept: a doubt, not a proof
