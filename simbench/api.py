@@ -715,7 +715,7 @@ def depth(
             told = registration_warning(rec.raw, result.detail, rig=scene.rig, params=used, reference=ref)
             if told:
                 warnings.warn(told, SimbenchWarning, stacklevel=2)
-            told = code_succession_doubt(result.detail.window_succession)
+            told = code_succession_doubt(result.detail.window_succession, pattern_known=True)
             if told:
                 warnings.warn(told, SimbenchWarning, stacklevel=2)
     else:

@@ -227,6 +227,9 @@ def test_the_api_warns_of_a_capture_that_does_not_follow_its_pattern():
     gt = type("GT", (), {})()
     gt.depth_m = np.full(RAW.shape[:2], 1.1, np.float32)
     rec = Recorded("proposed", Recording("proposed", SCENE, ORDER4[0], gt, {}), CAL, {"sensor": "minimal"})
-    with pytest.warns(simbench.SimbenchWarning, match="only 48 % of .* neighbouring stripes of the capture"):
+    with pytest.warns(simbench.SimbenchWarning, match="only 48 % of .* neighbouring stripes of the capture") as told:
         d = simbench.depth(rec)
+    # a recording's pattern is known: its colours are the cause named, not another pattern
+    said = " ".join(str(w.message) for w in told)
+    assert "its colours defeat the stripe code" in said and "another window order" not in said
     assert d.valid.mean() > 0.5  # kept: a doubt, not a proof

@@ -877,3 +877,24 @@ def test_provenance_names_the_source_paths_not_in_its_commit(tmp_path):
         "git_commit": head,
         "git_uncommitted": ["Makefile", "scenes/new.toml", "simbench/a.py"],
     }
+
+
+def test_provenance_names_a_renamed_source_both_ways_and_odd_names_as_they_are(tmp_path):
+    import subprocess
+
+    from simbench.experiments.common import git_state
+
+    def git(*args):
+        subprocess.run(
+            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True, capture_output=True
+        )
+
+    git("init", "-q")
+    (tmp_path / "simbench").mkdir()
+    (tmp_path / "simbench" / "a.py").write_text("x = 1\n")
+    git("add", ".")
+    git("commit", "-q", "-m", "c")
+    git("mv", "simbench/a.py", "simbench/b -> c.py")
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / 'né "w".toml').write_text("")
+    assert git_state(tmp_path)["git_uncommitted"] == ['scenes/né "w".toml', "simbench/a.py", "simbench/b -> c.py"]

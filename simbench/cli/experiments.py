@@ -238,7 +238,7 @@ def _cmd_ablate(args) -> int:
         failed = sum(1 for r in rows if r["error"])
         print(
             f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> "
-            f"{args.out}/{sweep.name}.csv, .md, .png"
+            f"{args.out}/{sweep.name}.csv, .md, .png, .pdf"
         )
     return 0
 

@@ -799,7 +799,10 @@ MIN_WINDOW_PAIRS = 200
 # reference 1.00; under MIN_AS_READ only boards of saturated primaries that neither decodes (<= 3 %:
 # Table 1's pure red, green and blue, its paint cyan), whose codes their colour defeats - which
 # the doubt names as its other cause.  At full resolution (2026-11-28, the paper's decoder, 509
-# recordings) every capture of the pattern read >= 0.925.
+# recordings) every capture of the pattern read >= 0.925.  A reference refused for it is one the
+# coverage check would pass: in noise a reference plane reads whole or not at all (the benchmark's
+# reference under Gaussian noise up to 0.3 of full scale and washed out to 0.1 of its contrast:
+# >= 0.997 in succession wherever it decodes, under 200 linked pairs where it does not).
 MIN_AS_READ = 0.8
 _READINGS = ("with its red and green channels swapped", "mirrored (or rotated 180 degrees)", "mirrored and swapped")
 
@@ -893,22 +896,27 @@ def code_order_doubt(window_succession: tuple[int, ...], *, what: str = "capture
     )
 
 
-def code_succession_doubt(window_succession: tuple[int, ...], *, what: str = "capture") -> str:
+def code_succession_doubt(
+    window_succession: tuple[int, ...], *, what: str = "capture", pattern_known: bool = False
+) -> str:
     """Why a decode's stripes seem not to follow the pattern decoded with, from its
     :attr:`DecodeResult.window_succession`, or "": fewer than :data:`MIN_AS_READ` of its
     neighbouring stripes read successive De Bruijn windows, and no other reading
     (:func:`code_order_doubt`, which says more) explains it.  A doubt, not a proof: codes that the
     scene's colours defeat read poorly too, so the command line and :func:`simbench.depth` warn
     and keep the depth, and :func:`decode_reference` - a flat board, whose codes read whole -
-    refuses."""
+    refuses.  ``pattern_known``: the capture's pattern is recorded (a recording folder), so only
+    its colours are named as the cause."""
     pairs, as_read, *_ = (tuple(window_succession) + (0, 0, 0))[:5]
     if pairs < MIN_WINDOW_PAIRS or as_read >= MIN_AS_READ * pairs or code_order_doubt(window_succession):
         return ""
     said = (
         f"only {100 * as_read / pairs:.0f} % of {pairs} neighbouring stripes of the {what} read successive "
-        f"De Bruijn windows of the pattern decoded with (a capture of it that decodes: over 90 %) - was it "
-        "lit by another pattern, of another window order or sequence (--order/--sequence)?"
+        "De Bruijn windows of the pattern decoded with (a capture of it that decodes: over 90 %)"
     )
+    if pattern_known:
+        return said + ": its colours defeat the stripe code (a code channel dark or saturated); its depth is doubtful"
+    said += " - was it lit by another pattern, of another window order or sequence (--order/--sequence)?"
     if what.startswith("reference"):
         return said + " A flat board lit by the pattern reads it whole"
     return said + " Otherwise its colours defeat the stripe code; either way its depth is doubtful"

@@ -768,14 +768,21 @@ def git_state(root: Path | None = None) -> dict:
     """
     commit = git_commit(root)
     try:
+        # -z: paths as they are (no quoting), a rename's two paths apart; no optional lock, so a
+        # run never holds the index a user's own git command is waiting for
         out = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=all", "--", *SOURCE_PATHS],
+            ["git", "--no-optional-locks", "status", "--porcelain=v1", "-z", "--untracked-files=all", "--"]
+            + list(SOURCE_PATHS),
             capture_output=True,
-            text=True,
             check=True,
             cwd=root or SCENES_DIR.parent,
-        ).stdout
+        ).stdout.decode("utf-8", "surrogateescape")
     except (OSError, subprocess.CalledProcessError):
         return {"git_commit": commit, "git_uncommitted": None}
-    paths = sorted({line[3:].split(" -> ")[-1].strip('"') for line in out.splitlines() if line.strip()})
-    return {"git_commit": commit, "git_uncommitted": paths}
+    paths, fields = set(), iter(out.split("\0"))
+    for entry in fields:
+        if len(entry) > 3:
+            paths.add(entry[3:])
+            if entry[0] in "RC":  # a rename's or copy's source follows as a field of its own
+                paths.add(next(fields, ""))
+    return {"git_commit": commit, "git_uncommitted": sorted(paths - {""})}

@@ -7,7 +7,7 @@ least-squares plane of the decoded points (the plane-fit form of the paper's pro
 the figure shows the mean over recordings with the min-max spread.  The paper prints Fig. 9 as
 a chart without numbers; its text states only that the RMSE grows with depth and stays below
 the Kinect's and the ToF camera's, so no paper values stand beside ours.  The Kinect and
-ToF curves come with the competitor-sensors issue.  Writes ``fig9.png``, ``fig9.csv``,
+ToF curves come with the competitor-sensors issue.  Writes ``fig9.png``, ``.pdf``, ``fig9.csv``,
 ``fig9.md`` and ``fig9.provenance.json``.
 """
 

@@ -1,7 +1,7 @@
 """Error against board flatness: the white board of Table 1 (and the reference board) given a
 form error - a bow, then a ripple - at growing levels, decoded by the run's (paper's) decoder
 by triangulation (paper Eq. 15) and against the reference plane (Sec. 5.4).  Writes
-``flatness.md``, ``flatness.csv``, ``flatness.png`` and ``flatness.provenance.json``.
+``flatness.md``, ``flatness.csv``, ``flatness.png``, ``.pdf`` and ``flatness.provenance.json``.
 
 What each score sees:
 

@@ -32,7 +32,7 @@ systematic (the MAE shows them); completeness and MAE leave the edge band and th
 (``wrong_share_all`` does not).
 
 Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_confidence.csv``,
-``hard_scenes_confidence.png`` and ``hard_scenes.provenance.json``.
+``hard_scenes_confidence.png``, ``.pdf`` and ``hard_scenes.provenance.json``.
 """
 
 from __future__ import annotations

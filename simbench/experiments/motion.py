@@ -1,5 +1,5 @@
 """Moving scenes (issue 37): depth error against object speed, for every system with a time model.
-Writes ``motion.md``, ``motion.csv``, ``motion.png`` and ``motion.provenance.json``.
+Writes ``motion.md``, ``motion.csv``, ``motion.png``, ``.pdf`` and ``motion.provenance.json``.
 
 The paper's case for a single-shot pattern is dynamic scenes (Sec. 1).  Here an object of two
 scenes - the white board of ``scenes/motion_board.toml`` (before a wall) and the plaster bust of

@@ -7,7 +7,7 @@ least-squares plane - the paper's "actual depth obtained by the Least Squares Fi
 and the mean absolute error against ground truth.  The Kinect and ToF columns come from the
 simulated competitors (:mod:`simbench.systems.kinect`, :mod:`simbench.systems.tof`) on the same
 scene, scored the same way at their own resolutions (the edge band scaled to the same angle).  Writes ``table3.md``,
-``table3.csv``, ``fig10.png`` (cross-sections of the three sensors, as the paper's Fig. 10) and
+``table3.csv``, ``fig10.png``/``.pdf`` (cross-sections of the three sensors, as the paper's Fig. 10) and
 ``table3.provenance.json``.
 """
 

@@ -390,7 +390,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         if told:
             logging.getLogger("simbench").warning("%s: %s", capture_path, told)
         # stripes in order but not the pattern's windows: another pattern, or colours that defeat the code
-        told = code_succession_doubt(result.window_succession)
+        told = code_succession_doubt(result.window_succession, pattern_known=recorded is not None)
         if told:
             logging.getLogger("simbench").warning("%s: %s", capture_path, told)
     # in calibrated mode the reference serves the colour unmixing only (its coupling matrix)
@@ -519,7 +519,7 @@ def check_reference_plane(
         f"the rig given ({rig_option}) is not the one it was recorded with, or not calibrated closely enough"
         if recorded_z0
         else f"give --z0 {z:.4f} if the board stood there, or check the rig"
-    ) + _pattern_question(pattern_assumed)
+    ) + ("." + _pattern_question(pattern_assumed) if pattern_assumed else "")
     # which depths carry it depends on what is off (an audit, 2026-11-30: the one text named reference
     # mode to a calibrated-mode user whose rig's baseline was 2.7 % long - 26.6 mm MAE in calibrated
     # mode, 2.4 mm in reference mode)
