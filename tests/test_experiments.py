@@ -840,28 +840,37 @@ def test_a_quick_runs_figures_say_so_in_their_titles():
     assert RunConfig(camera_scale=0.25).figure_note() == " [320x240, 36 spp]"
 
 
-def test_provenance_names_the_source_paths_not_in_its_commit(tmp_path):
-    """A result made from an uncommitted tree says so (a commit that never lands would otherwise
-    be the only - and a wrong - record of the code that made it); results/ itself is not source."""
+def _git_repo(root: Path):
+    """A git repository at ``root`` holding ``simbench/a.py`` (and ``results/t.md``) committed;
+    returns a function running git there."""
     import subprocess
 
-    from simbench.experiments.common import git_state
-
-    assert git_state(tmp_path) == {"git_commit": "unknown", "git_uncommitted": None}  # not a checkout
-
     def git(*args):
-        subprocess.run(
-            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True, capture_output=True
+        return (
+            subprocess.run(
+                ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=root, check=True, capture_output=True
+            )
+            .stdout.decode()
+            .strip()
         )
 
     git("init", "-q")
-    (tmp_path / "simbench").mkdir()
-    (tmp_path / "simbench" / "a.py").write_text("x = 1\n")
-    (tmp_path / "results").mkdir()
-    (tmp_path / "results" / "t.md").write_text("1\n")
+    for rel, text in (("simbench/a.py", "x = 1\n"), ("results/t.md", "1\n")):
+        (root / rel).parent.mkdir(exist_ok=True)
+        (root / rel).write_text(text)
     git("add", ".")
     git("commit", "-q", "-m", "c")
-    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=tmp_path, capture_output=True, text=True).stdout.strip()
+    return git
+
+
+def test_provenance_names_the_source_paths_not_in_its_commit(tmp_path):
+    """A result made from an uncommitted tree says so (a commit that never lands would otherwise
+    be the only - and a wrong - record of the code that made it); results/ itself is not source."""
+    from simbench.experiments.common import git_state
+
+    assert git_state(tmp_path) == {"git_commit": "unknown", "git_uncommitted": None}  # not a checkout
+    git = _git_repo(tmp_path)
+    head = git("rev-parse", "HEAD")
     assert git_state(tmp_path) == {"git_commit": head, "git_uncommitted": []}
 
     (tmp_path / "results" / "t.md").write_text("2\n")  # a run rewriting results/: still clean
@@ -880,20 +889,9 @@ def test_provenance_names_the_source_paths_not_in_its_commit(tmp_path):
 
 
 def test_provenance_names_a_renamed_source_both_ways_and_odd_names_as_they_are(tmp_path):
-    import subprocess
-
     from simbench.experiments.common import git_state
 
-    def git(*args):
-        subprocess.run(
-            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True, capture_output=True
-        )
-
-    git("init", "-q")
-    (tmp_path / "simbench").mkdir()
-    (tmp_path / "simbench" / "a.py").write_text("x = 1\n")
-    git("add", ".")
-    git("commit", "-q", "-m", "c")
+    git = _git_repo(tmp_path)
     git("mv", "simbench/a.py", "simbench/b -> c.py")
     (tmp_path / "scenes").mkdir()
     (tmp_path / "scenes" / 'né "w".toml').write_text("")
