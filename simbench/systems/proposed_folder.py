@@ -323,7 +323,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         "z0_assumed": z0_assumed,
         "recorded_z0": recorded_ref and recording_manifest_of(reference_path) is not None,
     }
-    assumed = {"pattern_assumed": _short_pattern(params.pattern) if pattern_assumed else ""}
+    pattern_kind = {"pattern_assumed": _short_pattern(params.pattern) if pattern_assumed else ""}
     cache = RenderCache(request.cache_dir)
     store_reference = lambda: None  # noqa: E731
     if params.unmix:
@@ -341,7 +341,13 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         z0_kind = {"z0_assumed": False, "recorded_z0": True}
     if reference is not None:
         check_reference_plane(
-            reference, rig, reference_path=reference_path, rig_path=rig_path, mode=params.mode, **z0_kind, **assumed
+            reference,
+            rig,
+            reference_path=reference_path,
+            rig_path=rig_path,
+            mode=params.mode,
+            **z0_kind,
+            **pattern_kind,
         )
     elif request.rig is not None and check_path is not None and Path(check_path).is_file():
         # calibrated mode with a rig given: the recording's reference plane, decoded, must lie at
@@ -353,7 +359,7 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
             _camera_image(check_path, rig, request), rig=rig, params=ref_params, cache=cache
         )
         check_reference_plane(
-            plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind, **assumed
+            plane, rig, reference_path=check_path, rig_path=rig_path, mode=params.mode, **z0_kind, **pattern_kind
         )
         store_plane()
     elif params.mode == "calibrated" and request.rig is not None:
