@@ -560,7 +560,7 @@ def test_the_truth_over_a_capture_holds_every_depth_a_pixel_saw(variant):
     one truth."""
     from types import SimpleNamespace
 
-    from simbench.experiments.motion import SWEEP_STEP_PX, capture_truths
+    from simbench.experiments.motion import SWEEP_STEP_PX, capture_states, capture_truths, motion_classes
     from simbench.metrics import wrong_pixels
     from simbench.systems import SystemOptions, get_system
 
@@ -591,6 +591,47 @@ def test_the_truth_over_a_capture_holds_every_depth_a_pixel_saw(variant):
     assert wrong_pixels(board_depth, truths, wrong_m=0.005)[row, u]
     still = SimpleNamespace(scene=scene, gt=SimpleNamespace(motion_px=None, depth_m=gt_mid.depth_m))
     assert capture_truths(still, window).shape == (1, *gt_mid.depth_m.shape)
+
+    # the same instants with the projector's light: the edge's pixel moved; the board's shadow on
+    # the wall slides with it, so wall pixels it crosses are lit part of the time (shadowed), and
+    # every one of them sees the wall throughout
+    depth_k, lit_k = capture_states(rec, window)
+    assert np.array_equal(depth_k, truths) and lit_k.shape == truths.shape and lit_k.dtype == bool
+    assert np.array_equal(lit_k[0], ground_truth(scene_at(scene, 0.0)).lit)
+    moved, shadowed = motion_classes(depth_k, lit_k, wrong_m=0.005)
+    assert moved[row, u] and not shadowed[row, u]
+    assert shadowed[row].any() and np.allclose(depth_k[:, shadowed], 1.3, atol=0.01)
+    # the shadow's border travels as the board's does, seen from the projector: a few pixels a row
+    assert 0.5 * travel <= shadowed[row].sum() <= 3 * travel
+    assert not (moved | shadowed)[:, : int(edge_start) - int(3 * travel)].any()  # far from both: neither
+
+
+def test_motion_classes_tell_a_moved_surface_from_a_crossing_shadow():
+    """motion_classes on hand-made truths: a depth range over the threshold or a surface seen part
+    of the time is moved; a still surface lit part of the time is shadowed; a moved pixel is never
+    also shadowed; a static capture (one instant) has neither.  The whole image's wrong shares
+    split by them (_wrong_shares_image)."""
+    from simbench.experiments.motion import _wrong_shares_image, motion_classes
+
+    depth = np.full((3, 1, 6), 1.0, np.float32)
+    lit = np.ones((3, 1, 6), bool)
+    depth[:, 0, 1] = (1.0, 1.003, 1.004)  # within 5 mm: still
+    depth[:, 0, 2] = (1.0, 1.003, 1.006)  # 6 mm: moved
+    depth[0, 0, 3] = np.nan  # came into view
+    lit[1, 0, 4] = False  # a shadow crossed a still surface
+    depth[2, 0, 5], lit[2, 0, 5] = 1.2, False  # moved and in shadow at the end: moved only
+    moved, shadowed = motion_classes(depth, lit, wrong_m=0.005)
+    assert moved[0].tolist() == [False, False, True, True, False, True]
+    assert shadowed[0].tolist() == [False, False, False, False, True, False]
+    assert not any(a.any() for a in motion_classes(depth[:1], lit[:1], wrong_m=0.005))
+
+    decoded = np.array([[1.0, 1.5, 1.5, 1.5, 1.5, np.nan]], np.float32)  # four wrong of five decoded
+    shares = _wrong_shares_image(decoded, (depth, lit))
+    assert shares == pytest.approx(
+        {"wrong_share_image": 0.8, "wrong_share_image_moved": 0.4, "wrong_share_image_shadowed": 0.2}
+    )
+    nothing = _wrong_shares_image(np.full((1, 6), np.nan, np.float32), (depth, lit))
+    assert all(math.isnan(v) for v in nothing.values()) and len(nothing) == 3
 
 
 @pytest.mark.parametrize(

@@ -15,7 +15,8 @@ recording with the same seeds at every speed (common random numbers: the speed i
 difference).  That region cannot see depth a system smears beyond the object's mid-capture
 outline (onto the wall it passes, or between the two), so every decoded pixel of the image is
 judged too, against every depth its pixel's truth takes during the capture
-(``wrong_share_image``: :func:`capture_truths`).
+(``wrong_share_image``: :func:`capture_truths`), and its wrong pixels told apart by where motion
+changed what they recorded (:func:`motion_classes`).
 
 Budget (stated, not hidden): the experiment renders at a quarter of the camera's resolution
 (:data:`CAMERA_SCALE`) with 64 samples a pixel in every capture (:data:`SPP`), since a blurred
@@ -57,6 +58,8 @@ __all__ = [
     "motion_parts",
     "holds_up_to",
     "capture_truths",
+    "capture_states",
+    "motion_classes",
 ]
 
 SPEEDS_M_S = (0.0, 0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
@@ -86,6 +89,9 @@ WRONG_M = 0.005  # a decoded depth this far from the truth is wrong (the hard sc
 # seen on both sides, and a slope of up to 10 mm a pixel changes the depth by < 5 mm between two)
 SWEEP_STEP_PX = 0.5
 MAX_SWEEP_INSTANTS = 257
+# the whole image's wrong shares: all, and where motion changed the pixel's surface or its light
+# (motion_classes)
+WRONG_IMAGE = ("wrong_share_image", "wrong_share_image_moved", "wrong_share_image_shadowed")
 
 
 def _label(system: str, decoder: str) -> str:
@@ -200,7 +206,7 @@ def write_motion(session: Session, measured: list[dict]) -> dict:
         "gt_mae_mm",
         "completeness",
         "wrong_share",
-        "wrong_share_image",
+        *WRONG_IMAGE,
         "capture_s",
         "image_motion_px",
         "pixels",
@@ -240,6 +246,17 @@ def _region(rec, moving_id: int, band_px: int) -> np.ndarray:
     return region
 
 
+def _capture_instants(scene, window_s: tuple[float, float]) -> list:
+    """The truth (:class:`simbench.sim.truth.GroundTruth`) of moving ``scene`` at evenly spaced
+    instants over ``window_s`` (:func:`capture_truths`)."""
+    t0, t1 = window_s
+    # evenly spaced instants: the fastest in-view motion sets their count (timeline.slice_count)
+    reach = image_speed_px_s(scene, scene.rig.camera, t0, t1) * (t1 - t0)
+    n = int(min(MAX_SWEEP_INSTANTS, max(2, math.ceil(reach / SWEEP_STEP_PX) + 1)))
+    pinhole = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
+    return [ground_truth(scene_at(pinhole, float(t))) for t in np.linspace(t0, t1, n)]
+
+
 def capture_truths(rec: "Recording", window_s: tuple[float, float]) -> np.ndarray:
     """The truth's depth (m) at instants over ``rec``'s capture (``window_s``: its system's
     ``capture_window_s``), shape (K, H, W), float32: the
@@ -249,22 +266,47 @@ def capture_truths(rec: "Recording", window_s: tuple[float, float]) -> np.ndarra
     at a pixel is one the pixel saw during the capture: judged against them, a blurred pixel is
     wrong only if it is far from everything it saw (lenient where a rolling shutter's row saw
     less than the whole capture: the Kinect's rows are judged against the frame's window)."""
-    scene = rec.scene
     if rec.gt.motion_px is None:
         return rec.gt.depth_m[None]
-    t0, t1 = window_s
-    # evenly spaced instants: the fastest in-view motion sets their count (timeline.slice_count)
-    reach = image_speed_px_s(scene, scene.rig.camera, t0, t1) * (t1 - t0)
-    n = int(min(MAX_SWEEP_INSTANTS, max(2, math.ceil(reach / SWEEP_STEP_PX) + 1)))
-    pinhole = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
-    return np.stack([ground_truth(scene_at(pinhole, float(t))).depth_m for t in np.linspace(t0, t1, n)])
+    return np.stack([gt.depth_m for gt in _capture_instants(rec.scene, window_s)])
 
 
-def _wrong_share_image(depth_m: np.ndarray, truths: np.ndarray) -> float:
-    """Share of every decoded pixel of the image more than 5 mm from every one of ``truths``
-    (:func:`capture_truths`); NaN where nothing is decoded."""
+def capture_states(rec: "Recording", window_s: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`capture_truths` and, at the same instants, whether the projector lit each pixel
+    (``GroundTruth.lit``: seen, in the projector's frustum, not in its shadow), shape (K, H, W)
+    bool."""
+    if rec.gt.motion_px is None:
+        return rec.gt.depth_m[None], rec.gt.lit[None]
+    instants = _capture_instants(rec.scene, window_s)
+    return np.stack([gt.depth_m for gt in instants]), np.stack([gt.lit for gt in instants])
+
+
+def motion_classes(depth_m: np.ndarray, lit: np.ndarray, *, wrong_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where motion changed what a pixel recorded, from :func:`capture_states`: ``moved``, the
+    pixels whose surface changed under them during the capture (its depth spanned more than
+    ``wrong_m``, or it was seen at some instants only: depth smeared across a moving outline, or
+    along a motion towards the camera), and ``shadowed``, of the others, those the projector lit
+    at some instants only (a shadow's border crossed a surface that stayed put: a fringe cut off
+    part of the time).  Both (H, W) bool; a static scene has neither."""
+    seen = np.isfinite(depth_m)
+    span = np.where(seen, depth_m, -np.inf).max(axis=0) - np.where(seen, depth_m, np.inf).min(axis=0)
+    moved = (seen.any(axis=0) & ~seen.all(axis=0)) | (seen.all(axis=0) & (span > wrong_m))
+    shadowed = ~moved & lit.any(axis=0) & ~lit.all(axis=0)
+    return moved, shadowed
+
+
+def _wrong_shares_image(depth_m: np.ndarray, states: tuple[np.ndarray, np.ndarray]) -> dict[str, float]:
+    """Shares of every decoded pixel of the image more than 5 mm from every truth of ``states``
+    (:func:`capture_states`): all of them (``wrong_share_image``) and those of
+    :func:`motion_classes`' two classes (``..._moved``, ``..._shadowed``); NaN where nothing is
+    decoded."""
     n = int(np.isfinite(depth_m).sum())
-    return float(wrong_pixels(depth_m, truths, wrong_m=WRONG_M).sum() / n) if n else math.nan
+    names = ("wrong_share_image", "wrong_share_image_moved", "wrong_share_image_shadowed")
+    if not n:
+        return dict.fromkeys(names, math.nan)
+    wrong = wrong_pixels(depth_m, states[0], wrong_m=WRONG_M)
+    moved, shadowed = motion_classes(*states, wrong_m=WRONG_M)
+    return dict(zip(names, (float(np.count_nonzero(wrong & m) / n) for m in (wrong, moved, shadowed))))
 
 
 def _wrong_share(depth_m: np.ndarray, rec, region: np.ndarray) -> float:
@@ -302,20 +344,20 @@ def _row_set(
         cap = sub.capture(prepared, label)[0]
         region = _region(cap, moving_id, band)
         motion_px = float(np.abs(cap.gt.motion_px).max()) if cap.gt.motion_px is not None else 0.0
-        truths = capture_truths(cap, window)
+        states = capture_states(cap, window)
         for decoder in ("paper", "robust"):
             params = cfg.decoder if decoder == "paper" else cfg.robust()
             result = sub.decode(cap, params, mode="calibrated")
             sc = score(cap, result, params.period_px, region=region)
             sc["wrong_share"] = _wrong_share(result.depth_m, cap, region)
-            sc["wrong_share_image"] = _wrong_share_image(result.depth_m, truths)
+            sc.update(_wrong_shares_image(result.depth_m, states))
             rows.append(_row("proposed", decoder, speed, sc, window, motion_px, int(region.sum()), ""))
     if group == "phase_shift":
         rows += _phase_shift_rows(sub, scene, moving_id, label, speed, band, timing)
     if group == "competitors":
         rows += _competitor_rows(sub, scene, moving_id, label, speed, band, prepared.rig.camera.focal_px, timing)
     for r in rows:
-        for m in ("gt_mae_mm", "completeness", "wrong_share", "wrong_share_image"):
+        for m in ("gt_mae_mm", "completeness", "wrong_share", *WRONG_IMAGE):
             metrics[f"{key}/{r['row']}/{m}"] = r[m]
     return rows
 
@@ -332,7 +374,7 @@ def _phase_shift_rows(sub: Session, scene, moving_id: int, label: str, speed: fl
         region_ps = _region(rec, moving_id, band)
         sc = score(rec, depth, ps.info().period_px, region=region_ps)
         sc["wrong_share"] = _wrong_share(depth.depth_m, rec, region_ps)
-        sc["wrong_share_image"] = _wrong_share_image(depth.depth_m, capture_truths(rec, ps_window))
+        sc.update(_wrong_shares_image(depth.depth_m, capture_states(rec, ps_window)))
         mpx = float(np.abs(rec.gt.motion_px).max()) if rec.gt.motion_px is not None else 0.0
         rows.append(_row("phase_shift", "", speed, sc, ps_window, mpx, int(region_ps.sum()), ""))
     else:
@@ -364,7 +406,7 @@ def _competitor_rows(
         sc["wrong_share"] = _wrong_share(depth.depth_m, rec, region_own)
         mpx = float(np.abs(rec.gt.motion_px).max()) if rec.gt.motion_px is not None else 0.0
         own_window = sub.system(name).capture_window_s(rec.scene)
-        sc["wrong_share_image"] = _wrong_share_image(depth.depth_m, capture_truths(rec, own_window))
+        sc.update(_wrong_shares_image(depth.depth_m, capture_states(rec, own_window)))
         timing[name] = own_window[1] - own_window[0]
         rows.append(_row(name, "", speed, sc, own_window, mpx, int(region_own.sum()), ""))
     return rows
@@ -380,7 +422,7 @@ def _row(system: str, decoder: str, speed: float, sc: dict | None, window, motio
         "gt_mae_mm": nan if sc is None else float(sc["gt_mae_mm"]),
         "completeness": nan if sc is None else float(sc["completeness"]),
         "wrong_share": nan if sc is None else float(sc["wrong_share"]),
-        "wrong_share_image": nan if sc is None else float(sc["wrong_share_image"]),
+        **{m: nan if sc is None else float(sc[m]) for m in WRONG_IMAGE},
         "capture_s": float(window[1] - window[0]),
         "image_motion_px": motion_px,
         "pixels": pixels,
@@ -462,16 +504,33 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
         "Wrong depth (> 5 mm), % of the decoded pixels: of the object's (the region above) / of the whole image's "
         "(against every truth during the capture). The static row is each system's floor at this camera's "
         "resolution (its depth edges, and its noise: the competitors' alone passes 5 mm on part of the wall); what "
-        "motion adds is the rise above it - depth smeared beside the moving object's outline, which the object's "
-        "region does not see. The whole image's measure is lenient where a pixel saw a range of depths (an axial "
-        "motion, a long sequence): any depth in it is right there; the object's MAE is not.",
+        "motion adds is the rise above it, which the object's region does not see (the next table says where it "
+        "lies). The whole image's measure is lenient where a pixel saw a range of depths (an axial motion, a long "
+        "sequence): any depth in it is right there; the object's MAE is not.",
         "",
     ]
     lines += markdown_table(
         hdr,
         _by_speed(rows, scenes, speeds, lambda r: f"{_percent(r['wrong_share'])} / {_percent(r['wrong_share_image'])}"),
     )
+    lines += [
+        "",
+        "Where the whole image's wrong pixels lie, % of the decoded pixels: where the surface under the pixel moved "
+        "during the capture (its depth changed by more than 5 mm, or it came into or out of view: depth smeared "
+        "across a moving outline, or along a motion towards the camera) / where the surface stayed put but a "
+        "shadow's border crossed it (the projector's light cut off part of the time: a fringe that fades within "
+        "the capture) / elsewhere (the static floor above, and what lies beyond those pixels; "
+        "`simbench.experiments.motion.motion_classes`). A pixel on a moving outline counts as moved at any speed, "
+        "so at the slowest speeds the static floor's own depth-edge pixels pass into the first class.",
+        "",
+    ]
+    lines += markdown_table(hdr, _by_speed(rows, scenes, speeds, _where_wrong))
     return "\n".join(lines) + "\n"
+
+
+def _where_wrong(r: dict) -> str:
+    moved, shadowed = r["wrong_share_image_moved"], r["wrong_share_image_shadowed"]
+    return f"{_percent(moved)} / {_percent(shadowed)} / {_percent(r['wrong_share_image'] - moved - shadowed)}"
 
 
 def _by_speed(rows: list[dict], scenes, speeds, cell) -> list[list[str]]:
