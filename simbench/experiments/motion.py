@@ -246,48 +246,65 @@ def _region(rec, moving_id: int, band_px: int) -> np.ndarray:
     return region
 
 
-def _capture_instants(scene, window_s: tuple[float, float]) -> list:
-    """The truth (:class:`simbench.sim.truth.GroundTruth`) of moving ``scene`` at evenly spaced
-    instants over ``window_s`` (:func:`capture_truths`)."""
+def capture_states(rec: "Recording", window_s: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The truth over ``rec``'s capture (``window_s``: its system's ``capture_window_s``): the
+    moving scene posed at K evenly spaced instants from the capture's start to its end, K such
+    that no point moves more than :data:`SWEEP_STEP_PX` camera pixels between two (at most
+    :data:`MAX_SWEEP_INSTANTS`); a static scene's one truth (K = 1).
+
+    Returns
+    -------
+    depth_m : ndarray, shape (K, H, W), float32
+        The truth's depth at each instant (NaN where it sees nothing).  A depth any of them takes
+        at a pixel is one the pixel saw during the capture: judged against them, a blurred pixel is
+        wrong only if it is far from everything it saw (lenient where a rolling shutter's row saw
+        less than the whole capture: the Kinect's rows are judged against the frame's window).
+    lit : ndarray, shape (K, H, W), bool
+        Whether the projector lit each pixel at each instant (``GroundTruth.lit``: seen, in the
+        projector's frustum, not in its shadow, on the surface's side facing both).
+    """
+    if rec.gt.motion_px is None:
+        return rec.gt.depth_m[None], rec.gt.lit[None]
+    scene = rec.scene
     t0, t1 = window_s
     # evenly spaced instants: the fastest in-view motion sets their count (timeline.slice_count)
     reach = image_speed_px_s(scene, scene.rig.camera, t0, t1) * (t1 - t0)
     n = int(min(MAX_SWEEP_INSTANTS, max(2, math.ceil(reach / SWEEP_STEP_PX) + 1)))
     pinhole = dataclasses.replace(scene, camera_lens=None)  # the truth is at the pinhole's pixel centres
-    return [ground_truth(scene_at(pinhole, float(t))) for t in np.linspace(t0, t1, n)]
+    depth, lit = [], []
+    for t in np.linspace(t0, t1, n):  # (two maps an instant kept, not K whole truths)
+        gt = ground_truth(scene_at(pinhole, float(t)))
+        depth.append(gt.depth_m)
+        lit.append(gt.lit)
+    return np.stack(depth), np.stack(lit)
 
 
 def capture_truths(rec: "Recording", window_s: tuple[float, float]) -> np.ndarray:
-    """The truth's depth (m) at instants over ``rec``'s capture (``window_s``: its system's
-    ``capture_window_s``), shape (K, H, W), float32: the
-    moving scene posed at K evenly spaced instants from the capture's start to its end, K such that
-    no point moves more than :data:`SWEEP_STEP_PX` camera pixels between two (at most
-    :data:`MAX_SWEEP_INSTANTS`); a static scene's one truth (K = 1).  A depth any of them takes
-    at a pixel is one the pixel saw during the capture: judged against them, a blurred pixel is
-    wrong only if it is far from everything it saw (lenient where a rolling shutter's row saw
-    less than the whole capture: the Kinect's rows are judged against the frame's window)."""
-    if rec.gt.motion_px is None:
-        return rec.gt.depth_m[None]
-    return np.stack([gt.depth_m for gt in _capture_instants(rec.scene, window_s)])
-
-
-def capture_states(rec: "Recording", window_s: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`capture_truths` and, at the same instants, whether the projector lit each pixel
-    (``GroundTruth.lit``: seen, in the projector's frustum, not in its shadow), shape (K, H, W)
-    bool."""
-    if rec.gt.motion_px is None:
-        return rec.gt.depth_m[None], rec.gt.lit[None]
-    instants = _capture_instants(rec.scene, window_s)
-    return np.stack([gt.depth_m for gt in instants]), np.stack([gt.lit for gt in instants])
+    """The depth of :func:`capture_states`, shape (K, H, W), float32."""
+    return capture_states(rec, window_s)[0]
 
 
 def motion_classes(depth_m: np.ndarray, lit: np.ndarray, *, wrong_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where motion changed what a pixel recorded, from :func:`capture_states`: ``moved``, the
-    pixels whose surface changed under them during the capture (its depth spanned more than
-    ``wrong_m``, or it was seen at some instants only: depth smeared across a moving outline, or
-    along a motion towards the camera), and ``shadowed``, of the others, those the projector lit
-    at some instants only (a shadow's border crossed a surface that stayed put: a fringe cut off
-    part of the time).  Both (H, W) bool; a static scene has neither."""
+    """Where motion changed what a pixel recorded during a capture.
+
+    Parameters
+    ----------
+    depth_m, lit : ndarray, shape (K, H, W), float32 and bool
+        The truth over the capture (:func:`capture_states`).
+    wrong_m : float
+        The depth change (m) that counts as another surface.
+
+    Returns
+    -------
+    moved : ndarray, shape (H, W), bool
+        Pixels whose surface changed under them: a depth span over ``wrong_m``, or seen at some
+        instants only (depth smeared across a moving outline - a pixel counts once the outline
+        crosses its centre -, or along a motion towards the camera).
+    shadowed : ndarray, shape (H, W), bool
+        Of the others, pixels the projector lit at some instants only: a shadow's border crossed
+        a surface whose depth stayed within ``wrong_m`` (a fringe cut off part of the time).
+        Neither class holds a pixel never seen, never lit, or of a static scene (K = 1).
+    """
     seen = np.isfinite(depth_m)
     span = np.where(seen, depth_m, -np.inf).max(axis=0) - np.where(seen, depth_m, np.inf).min(axis=0)
     moved = (seen.any(axis=0) & ~seen.all(axis=0)) | (seen.all(axis=0) & (span > wrong_m))
@@ -297,16 +314,14 @@ def motion_classes(depth_m: np.ndarray, lit: np.ndarray, *, wrong_m: float) -> t
 
 def _wrong_shares_image(depth_m: np.ndarray, states: tuple[np.ndarray, np.ndarray]) -> dict[str, float]:
     """Shares of every decoded pixel of the image more than 5 mm from every truth of ``states``
-    (:func:`capture_states`): all of them (``wrong_share_image``) and those of
-    :func:`motion_classes`' two classes (``..._moved``, ``..._shadowed``); NaN where nothing is
-    decoded."""
+    (:func:`capture_states`), :data:`WRONG_IMAGE`: all of them, and those of :func:`motion_classes`'
+    two classes; NaN where nothing is decoded."""
     n = int(np.isfinite(depth_m).sum())
-    names = ("wrong_share_image", "wrong_share_image_moved", "wrong_share_image_shadowed")
     if not n:
-        return dict.fromkeys(names, math.nan)
+        return dict.fromkeys(WRONG_IMAGE, math.nan)
     wrong = wrong_pixels(depth_m, states[0], wrong_m=WRONG_M)
     moved, shadowed = motion_classes(*states, wrong_m=WRONG_M)
-    return dict(zip(names, (float(np.count_nonzero(wrong & m) / n) for m in (wrong, moved, shadowed))))
+    return dict(zip(WRONG_IMAGE, (float(np.count_nonzero(wrong & m) / n) for m in (wrong, moved, shadowed))))
 
 
 def _wrong_share(depth_m: np.ndarray, rec, region: np.ndarray) -> float:
@@ -517,11 +532,13 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
         "",
         "Where the whole image's wrong pixels lie, % of the decoded pixels: where the surface under the pixel moved "
         "during the capture (its depth changed by more than 5 mm, or it came into or out of view: depth smeared "
-        "across a moving outline, or along a motion towards the camera) / where the surface stayed put but a "
+        "across a moving outline, or along a motion towards the camera) / where its depth stayed within 5 mm but a "
         "shadow's border crossed it (the projector's light cut off part of the time: a fringe that fades within "
         "the capture) / elsewhere (the static floor above, and what lies beyond those pixels; "
-        "`simbench.experiments.motion.motion_classes`). A pixel on a moving outline counts as moved at any speed, "
-        "so at the slowest speeds the static floor's own depth-edge pixels pass into the first class.",
+        "`simbench.experiments.motion.motion_classes`). A pixel counts as moved once a moving outline crosses its "
+        "centre, so from the speed at which an outline first crosses a column of pixel centres the "
+        "static floor's own wrong pixels along it pass into the first class; the Kinect's rows are classed over the "
+        "whole frame's window, about twice a row's exposure, so its first two classes are as lenient.",
         "",
     ]
     lines += markdown_table(hdr, _by_speed(rows, scenes, speeds, _where_wrong))
@@ -530,7 +547,9 @@ def _markdown(session: Session, sub: Session, rows, summary, timing, speeds, sce
 
 def _where_wrong(r: dict) -> str:
     moved, shadowed = r["wrong_share_image_moved"], r["wrong_share_image_shadowed"]
-    return f"{_percent(moved)} / {_percent(shadowed)} / {_percent(r['wrong_share_image'] - moved - shadowed)}"
+    # (the classes are disjoint subsets of the wrong pixels: a difference under 0 is float rounding)
+    elsewhere = max(0.0, r["wrong_share_image"] - moved - shadowed)
+    return f"{_percent(moved)} / {_percent(shadowed)} / {_percent(elsewhere)}"
 
 
 def _by_speed(rows: list[dict], scenes, speeds, cell) -> list[list[str]]:

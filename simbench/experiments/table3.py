@@ -486,7 +486,7 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
         "ratio",
         "reference: plane fit (mm)",
         "ratio",
-        "robust decoder, triangulation (mm)",
+        "robust decoder, triangulation: plane fit (mm)",
         "robust: completeness",
         "paper's decoder, triangulation: GT MAE (mm)",
         "paper's: completeness",
@@ -494,9 +494,9 @@ def _markdown(session: Session, rows: list[dict], whole: dict, competitors: dict
     ]
     for d, c in competitors.items():
         hdr += (
-            [f"{PAPER_COMPETITORS[d][0]}: paper / sim (mm)", "ratio"]
+            [f"{PAPER_COMPETITORS[d][0]}: paper / sim, plane fit (mm)", "ratio"]
             if d in PAPER_COMPETITORS
-            else [f"{c['label']} (mm)"]
+            else [f"{c['label']}: plane fit (mm)"]
         )
 
     def short(d: str) -> str:
