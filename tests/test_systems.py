@@ -202,7 +202,7 @@ def test_a_fourth_system_runs_through_table3_and_the_cli(ideal_system, tmp_path,
         assert metrics[f"table3/{obj}/{ideal_system}_completeness"] == 1.0
         assert metrics[f"table3/{obj}/{ideal_system}_plane_mae_mm"] < 0.01
     md = (tmp_path / "out" / "table3.md").read_text()
-    assert "ideal depth camera (mm)" in md and "Kinect" not in md.split("\n\n")[3]
+    assert "ideal depth camera: plane fit (mm)" in md and "Kinect" not in md.split("\n\n")[3]
     rows = (tmp_path / "out" / "table3.csv").read_text().splitlines()
     assert f"{ideal_system}_mm" in rows[0] and "kinect_mm" not in rows[0]
     assert f"{ideal_system}/table3/discontinuity" in session.seeds_used
