@@ -1176,6 +1176,33 @@ def test_the_pattern_on_the_rig_warns_of_undersampling_and_of_a_range_past_one_c
     assert "3.5 camera pixels" in told
 
 
+def test_reference_mode_warns_of_a_rig_its_formula_does_not_fit():
+    """A new user's audit: a projector 20 mm behind the camera gave the step scene 3.3 mm MAE and
+    28 % of its pixels > 5 mm wrong in reference mode (paper Eq. 14-15, exact for a rectified rig),
+    without a word; triangulation (calibrated mode) 0.48 mm.  reference_model_error predicts that
+    error from the rig - a noise-free plane at 0.9 m decoded in reference mode is off by what it
+    predicts (measured 1.11x at its worst pixel, 1.0 % of 0.9 m) - and reference mode warns above 0.1 % of the
+    depth; turns about x, y and z (the reference plane absorbs them), the paper's rig and calibrated
+    mode do not warn."""
+    from simbench.decode.params import pattern_on_rig_warnings, reference_model_error
+
+    behind = dataclasses.replace(RIG, position_m=(RIG.position_m[0], 0.0, -0.02))
+    (told,) = pattern_on_rig_warnings(behind, DecoderParams())
+    assert "--mode calibrated" in told and "projector at 93, 0, -20 mm" in told
+    assert pattern_on_rig_warnings(behind, DecoderParams(mode="calibrated")) == []
+    for turn in ((0.5, 0.0, 0.0), (0.0, 12.0, 0.0), (0.0, 0.0, 1.0)):
+        assert pattern_on_rig_warnings(dataclasses.replace(RIG, rotation_deg=turn), DecoderParams()) == [], turn
+    assert reference_model_error(RIG, DecoderParams()) < 1e-12
+    # the prediction against the decoder, at one depth
+    ref_img, _, _ = synthetic_plane_capture(DRIVE, behind, point_m=(0, 0, 1.0))
+    reference = decode_reference(ref_img, rig=behind, params=DecoderParams())
+    img, _, z = synthetic_plane_capture(DRIVE, behind, point_m=(0, 0, 0.9))
+    r = decode(img, rig=behind, params=DecoderParams(), reference=reference)
+    measured = np.nanmax(np.abs(r.depth_m[r.valid] - z[r.valid]) / z[r.valid])
+    predicted = reference_model_error(behind, DecoderParams(depth_range_m=(0.8999, 0.9001)))
+    assert 0.8 < measured / predicted < 1.25, (measured, predicted)
+
+
 def test_a_capture_with_its_channels_out_of_order_is_doubted():
     """A new user's audit: a capture saved BGR as RGB decoded with the colour-robust decoder to 2-9 %
     of its pixels 0.1-0.7 m wrong at full confidence, without a word.  channel_order_doubt finds the

@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from simbench.decode.color import albedo_gain_reach_rows
+from simbench.decode.color import albedo_gain_reach_rows, column_gain_reach_rows
 from simbench.decode.params import DecoderParams
 from simbench.decode.profile import run_in_context
 from simbench.pattern import check_channels
@@ -57,6 +57,10 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     halo = fit_halo + code_pool_rows(params, rig)
     if params.albedo_flatten:  # (it needs color_normalize: DecoderParams checks)
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
+        if params.albedo_columns:
+            # the steps along the rows are looked for in the light the column gain leaves: its
+            # rows as far again
+            halo += column_gain_reach_rows(params.camera_period(rig))
     most = max(1, height // max(4 * fit_halo, 32))
     threads = max(1, params.threads or process_threads())
     n = min(threads, most)

@@ -27,6 +27,8 @@ __all__ = [
     "segment_mean",
     "albedo_gain",
     "albedo_gain_reach_rows",
+    "column_albedo_gain",
+    "column_gain_reach_rows",
     "albedo_step_pixels",
     "fringe_confirmed",
     "overlay_weights",
@@ -604,6 +606,288 @@ def albedo_gain_reach_rows(period_px: float, order: int) -> int:
     (:func:`simbench.decode.bands.row_bands`), so that a band's gain and skipped pixels are the
     whole image's."""
     return _code_window_px(period_px, order) + ALBEDO_EDGE_ROWS // 2 + ALBEDO_MEAN_ROWS // 2 + 1
+
+
+# Printed steps down the columns (ours, the colour-robust decoder's ``albedo_columns``).  A
+# rig whose baseline runs along the camera's rows sees the projector's stripes run down its
+# columns: down a column the fringe and the code stay as they are, and the light changes with
+# the surface alone.  Rows averaged on each side of a boundary between two rows, beyond the pair
+# the camera's blur mixes (assumption: 4 - the noise of a 20:1 ink's few-DN fringe halved, and
+# a printed band of 2 x (4 + 1) rows, 4.6 mm at 1 m, still seen whole)
+COLUMN_EDGE_ROWS = 4
+# the columns either side over which a boundary's step is summed to find its row down the column
+# and its darker side (a fringe's trough, dark on both sides, cannot place it; assumption: a
+# quarter period - the trough's darkest third is then within reach of its brighter flanks)
+COLUMN_PLACE_PERIODS = 0.25
+# a boundary whose two sides' light differs by ALBEDO_EDGE_RATIO or more is a print's edge where
+# the rows beyond it are a scaled copy of the rows before it, fringe included: along the run of
+# such boundaries in a row, at least COLUMN_MIN_COPY_SHARE of its columns (those not in a
+# fringe's trough) have their dark-over-bright ratio within COLUMN_COPY_RATIO of the run's median
+# (assumption: 1.25 and 0.75 - a 20:1 ink's 5-18 DN of light, 4 rows averaged, is within 1.25x of
+# its ratio at 8 bits; a projector shadow's border leaves no fringe on its dark side, whose ratio
+# then follows 1 / the bright side's fringe, over a 4x range outside the troughs: ~40 % within
+# 1.25x; a depth edge shifts the fringe, s, and its ratio f(x - s) / f(x) varies alike unless s
+# is a small part of a period, where flattening the brightness step is flattening shading)
+COLUMN_COPY_RATIO = 1.25
+COLUMN_MIN_COPY_SHARE = 0.75
+# ... over at least this many periods of columns (a shorter run holds too little of the fringe's
+# shape to tell a scaled copy from a shifted one; assumption: 0.4) ...
+COLUMN_MIN_RUN_PERIODS = 0.4
+# ... whose brighter side's light varies along it by at least this share of its mean (a run on
+# a fringe's flat crest, or under strong ambient light, cannot show a shift; assumption: 0.1)
+COLUMN_MIN_VARIATION = 0.1
+# the run's columns whose own darker side is the other count in its statistics not at all, and
+# take its gain where both their sides are under this share of the run's brighter side's mean (a
+# fringe's trough; assumption: 0.25 - a trough's darkest third), not beside a square's edge
+COLUMN_TROUGH_SHARE = 0.25
+COLUMN_DIM_SHARE = 0.1
+# a segment down a column between two print edges is flattened when it is at most this many
+# periods long (assumption: 2 - longer segments are as wide as the steps along the rows need,
+# ALBEDO_MIN_SEGMENT_PERIODS, in every print of squares; the decoder's row bands carry the rows)
+COLUMN_MAX_SEGMENT_PERIODS = 2.0
+
+
+def column_segment_rows(period_px: float) -> int:
+    """The longest segment down a column :func:`column_albedo_gain` flattens (rows)."""
+    return int(np.ceil(COLUMN_MAX_SEGMENT_PERIODS * period_px))
+
+
+def column_gain_reach_rows(period_px: float) -> int:
+    """How many rows above and below a pixel :func:`column_albedo_gain` reads to make that
+    pixel's gain: the edges of the longest segment it flattens (:func:`column_segment_rows` + 1),
+    the run of the boundary next to an edge's (1), the rows each edge's test averages beyond it
+    and the pair it skips (:data:`COLUMN_EDGE_ROWS` + 1), the boundaries its peak test compares
+    it with (2), and one row more (:func:`albedo_step_pixels` compares each row's gain with the
+    next row's)."""
+    return column_segment_rows(period_px) + 1 + 1 + COLUMN_EDGE_ROWS + 1 + 2 + 1
+
+
+def _scaled_copy(a, b, rid, own, m, up_v, dn_v, *, of_max: bool = False):
+    """Per run (``rid`` < ``m``) of :func:`column_albedo_gain`: the median ``k`` of its columns'
+    dark-over-bright ratios ``a / b``, the share of them within :data:`COLUMN_COPY_RATIO` of it
+    and their count - over the columns whose own darker side is the run's (``own``) and that are
+    not in a fringe's trough (both sides ``up_v``, ``dn_v`` under :data:`COLUMN_TROUGH_SHARE` of
+    the run's brighter side's mean, or with ``of_max`` its brightest column), per column those
+    columns and the troughs', and per run that level."""
+    if of_max:
+        level = np.zeros(m)
+        np.maximum.at(level, rid[own], b[own])
+    else:
+        n_own = np.bincount(rid[own], minlength=m).astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            level = np.bincount(rid[own], b[own], m) / n_own
+    with np.errstate(invalid="ignore"):
+        trough = np.maximum(up_v, dn_v) < COLUMN_TROUGH_SHARE * level[rid]
+    use = own & ~trough & (b > 0)
+    ru = rid[use]
+    qa = a[use] / b[use]
+    n = np.bincount(ru, minlength=m).astype(np.float64)
+    # the median (beside a square's edge along the row a column's dark side holds the
+    # neighbour's light: an outlier a median ignores)
+    order_ = np.lexsort((qa, ru))
+    first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
+    k = np.full(m, np.nan)
+    has = n > 0
+    k[has] = qa[order_][first[has] + (n[has].astype(np.int64) - 1) // 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        copy = np.abs(np.log(qa / k[ru])) <= np.log(COLUMN_COPY_RATIO)
+        share = np.bincount(ru, copy, m) / n
+    return k, share, n, use, trough, level
+
+
+def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np.ndarray | None:
+    """Per-pixel gain that flattens printed albedo steps found down the columns (ours; not in the
+    paper), or None where there is none.
+
+    :func:`albedo_gain` finds a print's steps along the rows, where the fringe itself varies: it
+    needs a segment of :data:`ALBEDO_MIN_SEGMENT_PERIODS` periods to tell the print's brightness
+    from the fringe's, and a checkerboard of squares about one period wide (10 mm at 1 m) decodes
+    nowhere.  Down a column nothing but the surface varies, so a step there is measured from a
+    few rows on each side, whatever the squares' width:
+
+    1. each boundary between rows y and y + 1 compares the light (the channels' sum, ``rgb``
+       unmixed) of the :data:`COLUMN_EDGE_ROWS` rows above row y with that of the rows below row
+       y + 1 (the pair between them is mixed by the blur); summed over
+       :data:`COLUMN_PLACE_PERIODS` either side along the row, their contrast's peak down the
+       column (over two boundaries each way) places an edge, and its sign the darker side;
+    2. the edges of one row that follow each other with the same darker side form a run; a run
+       is a print's edge where the darker side's light is a scaled copy of the brighter side's
+       along it: outside the fringe's troughs (:data:`COLUMN_TROUGH_SHARE`) and the columns
+       whose own darker side is the other (beside a square's edge along the row), at least
+       :data:`COLUMN_MIN_COPY_SHARE` of its columns' dark-over-bright ratios within
+       :data:`COLUMN_COPY_RATIO` of their median ``k``, over at least
+       :data:`COLUMN_MIN_RUN_PERIODS` periods, the brighter side varying by
+       :data:`COLUMN_MIN_VARIATION` or more and at least ``floor`` on average - a projector
+       shadow's border leaves no fringe on its dark side, and a depth edge shifts the fringe -
+       and where ``1 / k >=`` :data:`ALBEDO_EDGE_RATIO`;
+    3. the darker side's segment, down to the next print edge of its column, takes the gain
+       ``1 / k`` (at most :data:`ALBEDO_MAX_GAIN`) where that edge is within
+       :func:`column_segment_rows`; a longer segment is left to the steps along the rows.
+
+    A pixel's gain is the larger of its segment's two edges'.  Shading, falloff and any change
+    slower than the rows compared pass through; a stripe pattern that does not run down the
+    image's columns (a rig with a vertical baseline) shows no copy there and is left alone.
+
+    Parameters
+    ----------
+    rgb : ndarray, shape (H, W, 3), float32; the unmixed capture
+    period_px : float
+        Fringe period in camera pixels.
+    floor : float
+        The least mean light (channels' sum, full scale) an edge's brighter side needs.
+
+    Returns
+    -------
+    ndarray, shape (H, W), float32 in [1, :data:`ALBEDO_MAX_GAIN`], or None
+    """
+    src = np.ascontiguousarray(rgb, np.float32)
+    h, w = src.shape[:2]
+    n_rows = COLUMN_EDGE_ROWS
+    if h < 2 * n_rows + 2 + 4 or w < 2 or src.ndim != 3:
+        return None
+    # the channels' mean, then the means of n rows from each row on (summed in a fixed order: the
+    # same bits whichever rows a band holds)
+    total = cv2.transform(src, np.full((1, src.shape[2]), 1.0 / src.shape[2], np.float32))
+    runs = total[: h - n_rows + 1].copy()
+    for i in range(1, n_rows):
+        runs += total[i : h - n_rows + 1 + i]
+    runs *= np.float32(1.0 / n_rows)
+    ys = np.arange(n_rows, h - n_rows - 1)  # boundary y: between rows y and y + 1
+    above = runs[ys - n_rows]  # rows y - n .. y - 1
+    below = runs[ys + 2]  # rows y + 2 .. y + n + 1 (rows y and y + 1 straddle the boundary)
+    reach = max(1, int(round(COLUMN_PLACE_PERIODS * period_px)))
+    box = (2 * reach + 1, 1)
+    # the edge is placed with the rows either side of the boundary next to it (rows y - n + 1 .. y
+    # and y + 1 .. y + n): its contrast then peaks at a sharp edge's own boundary, where the
+    # means that skip the straddling pair are alike for three boundaries
+    step = runs[ys - n_rows + 1] - runs[ys + 1]
+    diff = cv2.blur(step, box, borderType=cv2.BORDER_REPLICATE)
+    both = cv2.blur(runs[ys - n_rows + 1] + runs[ys + 1], box, borderType=cv2.BORDER_REPLICATE)
+    contrast = cv2.blur(np.abs(step), box, borderType=cv2.BORDER_REPLICATE) / np.maximum(both, np.float32(1e-6))
+    # a step of ALBEDO_EDGE_RATIO: contrast (r - 1) / (r + 1)
+    cand = contrast >= np.float32((ALBEDO_EDGE_RATIO - 1.0) / (ALBEDO_EDGE_RATIO + 1.0))
+    if not cand.any():
+        return None
+    peak = cand.copy()  # the step's own boundary: the contrast peaks there down the column (ties: the upper one)
+    for d in (1, 2):
+        peak[d:] &= contrast[d:] > contrast[:-d]
+        peak[:-d] &= contrast[:-d] >= contrast[d:]
+    if not peak.any():
+        return None
+    # runs along the rows: consecutive edges with the same darker side, an edge counting for the
+    # boundary above it too (noise moves a step's peak by a boundary from column to column)
+    near = peak.copy()
+    near[:-1] |= peak[1:]
+    sel = np.flatnonzero(near.ravel())
+    # each column's own darker side, but in a fringe's trough (dark on both sides, its side is
+    # noise) the side of the columns either side
+    up_f, dn_f = above.ravel()[sel], below.ravel()[sel]
+    with np.errstate(invalid="ignore"):
+        dim = (up_f + dn_f) < np.float32(COLUMN_DIM_SHARE) * both.ravel()[sel]
+    down = np.where(dim, diff.ravel()[sel] > 0, dn_f < up_f)  # the run's darker side
+    start = np.ones(sel.size, bool)
+    start[1:] = ~((sel[1:] == sel[:-1] + 1) & (sel[1:] % w != 0) & (down[1:] == down[:-1]))
+    rid = np.cumsum(start) - 1
+    up_v, dn_v = up_f.astype(np.float64), dn_f.astype(np.float64)
+    # the column's own darker side: beside a square's edge along the row, the run's side is its
+    # neighbour's, and in a fringe's trough, dark on both sides, either
+    own = (dn_v < up_v) == down
+    a = np.where(down, dn_v, up_v)  # the darker side's light
+    b = np.where(down, up_v, dn_v)
+    m = int(rid.max()) + 1
+    k, share, n, use, trough, _ = _scaled_copy(a, b, rid, own, m, up_v, dn_v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bu = b[use]
+        sb, sbb = np.bincount(rid[use], bu, m), np.bincount(rid[use], bu * bu, m)
+        # the darker side's crest, the scaled copy's (a straddling column's mixed light is no crest)
+        crest = np.zeros(m)
+        np.maximum.at(crest, rid[use], bu)
+        crest *= k
+        variation = np.sqrt(np.maximum(sbb / n - (sb / n) ** 2, 0.0)) / (sb / n)
+        ok = (
+            (n >= COLUMN_MIN_RUN_PERIODS * period_px)
+            & (crest >= floor)
+            & (share >= COLUMN_MIN_COPY_SHARE)
+            & (variation >= COLUMN_MIN_VARIATION)
+            & (k > 0)
+            & (k * ALBEDO_EDGE_RATIO <= 1.0)
+        )
+    if not ok.any():
+        return None
+    # each colour channel a scaled copy too (its own scale: a coloured ink): across a depth edge
+    # whose fringe happens to line up, the code stripes do not (a shifted De Bruijn window)
+    part = ok[rid]
+    sub, rsub, dsub, osub = sel[part], rid[part], down[part], own[part]
+    rows_up = ys[sub // w][:, None] - np.arange(1, n_rows + 1)[None, :]
+    rows_dn = ys[sub // w][:, None] + 1 + np.arange(1, n_rows + 1)[None, :]
+    cols = (sub % w)[:, None]
+    for c in range(src.shape[2]):
+        cu = src[rows_up, cols, c].mean(axis=1, dtype=np.float64)
+        cd = src[rows_dn, cols, c].mean(axis=1, dtype=np.float64)
+        ca, cb = np.where(dsub, cd, cu), np.where(dsub, cu, cd)
+        # (a code channel is dark across the other code's stripes: its level is its crest's)
+        _, share_c, n_c, _, _, crest_c = _scaled_copy(ca, cb, rsub, osub, m, cu, cd, of_max=True)
+        # (a channel the run's stripes hardly light - a code channel across the other code's
+        # stripes - cannot judge)
+        judged = (n_c >= COLUMN_MIN_RUN_PERIODS * period_px) & (crest_c >= floor)
+        with np.errstate(invalid="ignore"):
+            ok &= ~judged | (share_c >= COLUMN_MIN_COPY_SHARE)
+    with np.errstate(divide="ignore"):
+        run_gain = np.where(ok, np.minimum(1.0 / k, ALBEDO_MAX_GAIN), 1.0).astype(np.float32)
+    # an edge is a print's where its run is, or the run of the boundary above it (its column's own
+    # darker side there, or a trough's); its gain is that run's
+    fit = ok[rid] & (own | trough)
+    fit_gain = run_gain[rid]
+    mine = fit & peak.ravel()[sel]
+    # the run of the boundary above a peak (near holds it: sel has it)
+    up_idx = np.searchsorted(sel, sel - w)
+    has_up = (sel >= w) & (up_idx < sel.size)
+    has_up[has_up] &= sel[up_idx[has_up]] == sel[has_up] - w
+    by_above = np.zeros(sel.size, bool)
+    by_above[has_up] = fit[up_idx[has_up]]
+    by_above &= peak.ravel()[sel] & ~mine
+    pick = np.flatnonzero(mine | by_above)
+    if pick.size == 0:
+        return None
+    g = np.where(mine[pick], fit_gain[pick], fit_gain[np.where(has_up, up_idx, 0)[pick]])
+    down = down[pick]
+    chosen = sel[pick]
+    row, bx = np.divmod(chosen, w)
+    by = ys[row]  # the edge's boundary y: between rows y and y + 1
+    edge = np.zeros((h + 1, w), bool)  # edge[y]: a print edge between rows y and y + 1
+    edge[by, bx] = True
+    # any step down a column ends a segment; the segment is flattened where that step is a print edge
+    stop = np.zeros((h + 1, w), bool)
+    stop[ys] = peak
+    longest = column_segment_rows(period_px)
+    gain = np.ones((h, w), np.float32)
+    for sign in (1, -1):
+        pick = down if sign == 1 else ~down
+        # the segment's first row, then row after row away from the edge until the next edge
+        y0, x0, g0 = (by + 1)[pick] if sign == 1 else by[pick], bx[pick], g[pick]
+        end = np.full(y0.shape, -1)  # the segment's length in rows, where its far edge is in reach
+        alive = (y0 >= 0) & (y0 < h)
+        for r in range(longest):
+            y = y0 + sign * r
+            alive &= (y >= 0) & (y < h)
+            if not alive.any():
+                break
+            idx = np.flatnonzero(alive)
+            yi = y[idx]
+            at = (yi, x0[idx]) if sign == 1 else (np.maximum(yi - 1, 0), x0[idx])
+            far = stop[at] & ((yi > 0) | (sign == 1))
+            end[idx[far & edge[at]]] = r + 1
+            alive[idx[far]] = False
+        # (the segments of one direction do not overlap: the next edge ends each)
+        done = end > 0
+        lengths = end[done]
+        first = np.repeat(np.cumsum(lengths) - lengths, lengths)
+        offset = np.arange(int(lengths.sum())) - first
+        rows = np.repeat(y0[done], lengths) + sign * offset
+        cols = np.repeat(x0[done], lengths)
+        np.maximum.at(gain, (rows, cols), np.repeat(g0[done], lengths))
+    # (no segment closed by a print edge: nothing to flatten)
+    return gain if (gain != 1.0).any() else None
 
 
 def albedo_step_pixels(

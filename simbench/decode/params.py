@@ -291,6 +291,14 @@ class DecoderParams:
         (:func:`simbench.decode.color.albedo_step_pixels`; ours): the camera's blur mixes the
         two sides' light in them, which a gain that steps cannot flatten.  Off = every pixel's
         sample counts (and without ``albedo_flatten`` there is no gain: nothing is skipped).
+    albedo_columns : bool
+        With ``albedo_flatten``, first divide out printed albedo steps found down the columns
+        (:func:`simbench.decode.color.column_albedo_gain`; ours): down a column the projector's
+        stripes stay put, so a print's edge across the stripes is measured from a few rows on
+        each side whatever its squares' width, where the rows beyond it are a scaled copy of the
+        rows before it (not a shadow's border or a depth edge).  Off = only the steps along the
+        rows are flattened (and without ``albedo_flatten`` nothing is: the paper's decoder
+        flattens none).
     voting : bool
         Majority vote of codes per stripe (paper Sec. 5.2); off = the stripe's middle pixel.
     pool_code : bool
@@ -466,6 +474,7 @@ class DecoderParams:
     color_normalize: bool = False
     albedo_flatten: bool = False
     albedo_edge_skip: bool = False
+    albedo_columns: bool = False
     voting: bool = True
     pool_code: bool = False
     neighbour_reach: int = 3
@@ -514,6 +523,7 @@ class DecoderParams:
             "color_normalize": v.boolean(self.color_normalize, "color_normalize"),
             "albedo_flatten": v.boolean(self.albedo_flatten, "albedo_flatten"),
             "albedo_edge_skip": v.boolean(self.albedo_edge_skip, "albedo_edge_skip"),
+            "albedo_columns": v.boolean(self.albedo_columns, "albedo_columns"),
             "voting": v.boolean(self.voting, "voting"),
             "neighbour_reach": v.integer(self.neighbour_reach, "neighbour_reach", lo=0, hi=64),
             "min_support": v.integer(self.min_support, "min_support", lo=1, hi=129),
@@ -631,6 +641,56 @@ class DecoderParams:
 MIN_CAMERA_PERIOD_PX = 4.0
 
 
+# reference mode's depth (paper Eq. 14-15, 1/Z = 1/Z0 + d / (f B)) is exact on a rectified rig;
+# on another its error is warned of above this share of the depth (assumption: 1e-3 - 1 mm at
+# 1 m, a fifth of the 5 mm the hard scenes count wrong and ~10x the decoder's noise on the white
+# board at the paper's resolution; a new user's audit: a projector 20 mm behind the camera gave
+# the step scene 3.3 mm MAE and 28 % of its pixels > 5 mm wrong, unwarned)
+REFERENCE_MODEL_MAX_ERROR = 1e-3
+
+
+def reference_model_error(rig: Rig, params: DecoderParams) -> float:
+    """The largest relative depth error ``|Z_ref - Z| / Z`` the reference-plane formula makes on
+    ``rig``, over the camera's image (9 rows, 17 columns) and five depths across
+    ``params.depth_range_m``: each point's projector column (through the projector's lens as the
+    reference sees it too) matched along its row to the reference plane at ``params.z0_m``, the
+    disparity turned into depth as the decoder does (the camera undistorted, as the decoder
+    undistorts it).  0 on a rectified rig (parallel axes, baseline along x); NaN where no point
+    can be matched."""
+    import numpy as np
+
+    from simbench.rig import project_to_projector
+
+    cam = rig.camera
+    h, w = cam.height_px, cam.width_px
+    xs = np.arange(w, dtype=np.float64)
+    z0 = float(params.z0_m)
+    near, far = params.depth_range_m
+    inv_fb = math.copysign(1.0, rig.position_m[0]) / (cam.focal_px * rig.baseline_m)
+    worst = float("nan")
+    for v in np.linspace(0.0, h - 1.0, 9):
+        rays = np.stack([(xs - cam.cx_px) / cam.focal_px, np.full(w, (v - cam.cy_px) / cam.focal_px), np.ones(w)], -1)
+        ref = project_to_projector(rays * z0, rig)[0]
+        order = np.argsort(ref)
+        if not np.all(np.diff(ref[order]) > 0):
+            continue
+        for z in np.linspace(near, far, 5):
+            sample = rays[:: max(1, w // 16)]
+            col = project_to_projector(sample * z, rig)[0]
+            inside = (col >= ref.min()) & (col <= ref.max())
+            if not inside.any():
+                continue
+            x_ref = np.interp(col[inside], ref[order], xs[order])
+            d = xs[:: max(1, w // 16)][inside] - x_ref
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z_est = 1.0 / (1.0 / z0 + d * inv_fb)
+            err = np.abs(z_est - z) / z
+            err = err[np.isfinite(err)]
+            if err.size:
+                worst = float(np.nanmax([worst, err.max()])) if worst == worst else float(err.max())
+    return worst
+
+
 def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
     """What the pattern and the rig make of the decode before it runs, as warnings (a new user's
     audit of their own rigs and patterns: each was silent):
@@ -641,7 +701,10 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
       the baseline's x component) the range spans ``f_p b (1/near - 1/far)`` projector pixels of
       disparity; past one cycle of stripes (``L T``) a pixel can decode a whole cycle off and still
       land inside the range - a wrong depth with a high confidence (within one cycle such a pixel
-      lands outside the range and is a hole).
+      lands outside the range and is a hole);
+    - in reference mode, a rig on which the reference-plane formula errs by more than
+      :data:`REFERENCE_MODEL_MAX_ERROR` of the depth (:func:`reference_model_error`: a projector
+      ahead of or behind the camera, or turned about the rows or the optical axis).
     """
     out = []
     camera_period = params.camera_period(rig)
@@ -666,6 +729,16 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
             f"hole); a range of one cycle, e.g. {deepest} (--near/--far), or a longer cycle "
             "(--period, --order) keeps every depth right"
         )
+    if params.mode == "reference":
+        err = reference_model_error(rig, params)
+        if err > REFERENCE_MODEL_MAX_ERROR:
+            out.append(
+                f"reference mode's depth (paper Eq. 14-15) is exact for a rectified rig - parallel axes, the "
+                f"projector beside the camera along x - and this rig is not (projector at "
+                f"{', '.join(f'{c * 1000:g}' for c in rig.position_m)} mm): over {near:g}-{far:g} m its depths "
+                f"are off by up to {100 * err:.2g} % ({err * far * 1000:.2g} mm at {far:g} m); decode with "
+                "--mode calibrated, which triangulates with the whole rig"
+            )
     return out
 
 
@@ -691,7 +764,8 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     :data:`ROBUST_MIN_AMPLITUDE`, on the normalised fringe, ``max_residual`` relative to it; the
     lit test looks across a whole code window; the pixels straddling a printed step, which the
     camera's blur mixes, and along a row the next ones on its bright side carry no sample, but
-    count for their windows' support: ``albedo_edge_skip``).
+    count for their windows' support: ``albedo_edge_skip``; printed steps are flattened along the
+    rows and, first, down the columns: ``albedo_columns``).
     Its confidence folds in the phase's stability against the window's width
     (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
@@ -710,6 +784,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         color_normalize=True,
         albedo_flatten=True,
         albedo_edge_skip=True,
+        albedo_columns=True,
         link_keep_certain=ROBUST_MIN_CONFIDENCE,
         link_split=True,
         intensity_mode="weighted",

@@ -17,6 +17,7 @@ from simbench.decode.color import (
     mixing_matrix,
     albedo_gain,
     albedo_step_pixels,
+    column_albedo_gain,
     normalize_channels,
     code_at_row_ends,
     normalized_color_code,
@@ -400,7 +401,19 @@ def _columns(
                 norm = dict(period_px=t_cam, order=params.order, min_span=0.25 * params.dark_level, return_span=True)
                 normed, span = normalize_channels(rgb, **norm)
                 if params.albedo_flatten:
-                    gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
+                    columns = None
+                    if params.albedo_columns:
+                        # the print's steps down the columns first: the steps along the rows are
+                        # then looked for in the light they leave (and the gains multiply)
+                        columns = column_albedo_gain(rgb, period_px=t_cam, floor=params.dark_level)
+                    if columns is None:
+                        gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
+                    else:
+                        flat = rgb * columns[..., None]
+                        gain = albedo_gain(
+                            flat, normalize_channels(flat, **norm)[1], period_px=t_cam, order=params.order
+                        )
+                        gain *= columns
                     # the band holds the rows the gain reads beyond the fit's (bands.row_bands); the
                     # rest of the work needs the fit's rows only: copies of them, so that the band's
                     # images are freed (the memory a band thread holds at once decides whether the
