@@ -1203,6 +1203,20 @@ def test_reference_mode_warns_of_a_rig_its_formula_does_not_fit():
     assert 0.8 < measured / predicted < 1.25, (measured, predicted)
 
 
+def test_a_reference_lit_in_part_by_a_lens_shifted_projector_decodes():
+    """A new user's audit: a projector lens-shifted down (its principal point 440 px below the
+    centre) lights 64 % of the view on the plane at Z0, all of which decoded, and the reference
+    was refused as "decodes at only ... is it the reference-plane capture?" - the coverage is now
+    asked of the lit part; a black reference is still refused, naming that part."""
+    shifted = dataclasses.replace(RIG, projector=dataclasses.replace(RIG.projector, cy_px=RIG.projector.cy_px + 440))
+    img, _, _ = synthetic_plane_capture(DRIVE, shifted, point_m=(0, 0, 1.0))
+    assert 0.6 < (img.max(axis=2) > 0).mean() < 0.7
+    ref = decode_reference(img, rig=shifted, params=DecoderParams())
+    assert np.isfinite(ref.column_px).mean() > 0.6
+    with pytest.raises(ValueError, match=r"at least 50 % of the 64\.2 % this rig's projector lights"):
+        decode_reference(np.zeros_like(img), rig=shifted, params=DecoderParams())
+
+
 def test_a_capture_with_its_channels_out_of_order_is_doubted():
     """A new user's audit: a capture saved BGR as RGB decoded with the colour-robust decoder to 2-9 %
     of its pixels 0.1-0.7 m wrong at full confidence, without a word.  channel_order_doubt finds the

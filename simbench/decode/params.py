@@ -447,10 +447,11 @@ class DecoderParams:
         choose another.  0 (the paper's decoder: the paper describes no confidence) keeps every
         decoded pixel; :func:`robust_params` sets :data:`ROBUST_MIN_CONFIDENCE`.
     min_reference_coverage : float
-        Share of the reference capture's pixels that must decode: a reference plane at Z0
-        fills the view, so a black, unlit or unrelated reference is an error, not a silent
-        fall-back to triangulation (assumption: half the view, leaving room for a reference
-        board smaller than the view).
+        Share of the reference capture's pixels that must decode, of those the projector lights
+        on a plane at Z0 (all of the view on the paper's rig; less with a lens-shifted or narrow
+        projector): a reference plane at Z0 fills the view, so a black, unlit or unrelated
+        reference is an error, not a silent fall-back to triangulation (assumption: half, leaving
+        room for a reference board smaller than the view).
     mode : str
         ``reference`` (paper Sec. 5.4) or ``calibrated`` (triangulate with the rig).
     z0_m : float
@@ -722,12 +723,21 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
         # (rounded down: a far limit rounded up would be past one cycle again)
         far_ok = math.floor(1000.0 / inv_far) / 1000.0 if inv_far > 0 else math.inf
         deepest = f"{near:g}-{far_ok:g} m" if inv_far > 0 else f"from {near:g} m on"
+        # reference mode picks the cycle nearest the reference plane's column: half a cycle of
+        # disparity either side of Z0, whatever the range (a new user's audit: the advice below,
+        # given in reference mode, decoded nothing)
+        z0 = float(params.z0_m)
+        lo_inv, hi_inv = 1.0 / z0 + 0.5 * span / fb, 1.0 / z0 - 0.5 * span / fb
+        around = f"{math.ceil(1000.0 / lo_inv) / 1000.0:g}-" + (
+            f"{math.floor(1000.0 / hi_inv) / 1000.0:g} m" if hi_inv > 0 else "any distance"
+        )
         out.append(
             f"the pattern's code repeats every {span} projector px ({params.cycle} stripes of {params.period_px} px), "
             f"and with this rig (f_p b = {fb:.1f} px m) the working range {near:g}-{far:g} m spans {extent:.0f} px "
             f"of disparity: a pixel can decode a whole cycle off and still lie in the range (a wrong depth, not a "
-            f"hole); a range of one cycle, e.g. {deepest} (--near/--far), or a longer cycle "
-            "(--period, --order) keeps every depth right"
+            f"hole); decoding with a range of one cycle, e.g. {deepest} (decode --mode calibrated --near/--far; "
+            f"reference mode decodes only {around}, half a cycle either side of Z0 = {z0:g} m, whatever the range), "
+            "or a longer cycle (--period, --order) keeps every depth right"
         )
     if params.mode == "reference":
         err = reference_model_error(rig, params)

@@ -1226,6 +1226,19 @@ def _window_table(order: int, sequence: tuple[int, ...] | None) -> np.ndarray:
 
 
 @lru_cache(maxsize=16)
+def _plane_lit_share(rig: Rig, z_m: float) -> float:
+    """The share of the camera's view (every 8th pixel each way) that the projector's image
+    reaches on a fronto-parallel plane at ``z_m``."""
+    from simbench.rig import project_to_projector, pixel_rays
+
+    rays = pixel_rays(rig.camera)[::8, ::8]
+    u, v, z = project_to_projector(rays * z_m, rig)
+    prj = rig.projector
+    with np.errstate(invalid="ignore"):
+        inside = (z > 0) & (u >= -0.5) & (u < prj.width_px - 0.5) & (v >= -0.5) & (v < prj.height_px - 0.5)
+    return float(inside.mean())
+
+
 def _plane_columns(rig: Rig, z_m: float) -> np.ndarray:
     col = projector_column_at_depth(z_m, rig).astype(np.float32)
     col.setflags(write=False)
@@ -1327,11 +1340,15 @@ def decode_reference(
     if doubt:
         raise ValueError(doubt)
     coverage = float(np.isfinite(column).mean())
-    if coverage < params.min_reference_coverage:
+    # of the view the projector lights on a plane at Z0 (a new user's audit: a lens-shifted
+    # projector lit 43 % of it, all of which decoded, and was told to check its reference)
+    lit = _plane_lit_share(rig, float(params.z0_m))
+    if coverage < params.min_reference_coverage * lit:
         clipped = clipped_share(image, saturation_level=params.saturation_level)
+        of_lit = f" of the {100 * lit:.1f} % this rig's projector lights" if lit < 0.995 else ""
         raise ValueError(
             f"the reference capture decodes at only {100 * coverage:.1f} % of its pixels (at least "
-            f"{100 * params.min_reference_coverage:.0f} % expected of a lit plane at Z0 = {params.z0_m:g} m): "
+            f"{100 * params.min_reference_coverage:.0f} %{of_lit} expected of a plane at Z0 = {params.z0_m:g} m): "
             "is it the reference-plane capture, taken with this pattern and rig?"
             + (f" ({100 * clipped:.0f} % of it is clipped: expose shorter)" if clipped >= CLIPPED_SHARE_WARN else "")
         )
