@@ -745,7 +745,8 @@ case(
 case(
     "decode-decoder-pattern-against-the-recording",
     lambda d: _decode(d, "--decoder", "pattern={period_px=30}"),
-    ("--decoder pattern=", "contradicts the recording"),
+    # (a new user's audit: the message named both patterns whole, not the field that differs)
+    ("--decoder pattern=", "contradicts the recording", "they differ in period (30 px against 21 px recorded)"),
     setup=lambda d: render_folder(d),
 )
 case(

@@ -283,7 +283,8 @@ def decode_capture_files(request: DecodeRequest) -> FileDecode:
         if recorded is not None:
             raise ValueError(
                 f"--decoder pattern= ({describe_pattern(params.pattern)}) contradicts the recording, made with the "
-                f"pattern {describe_pattern(pattern)} (meta.json); leave it out to decode it as recorded"
+                f"pattern {describe_pattern(pattern)} (meta.json) - they differ in "
+                f"{pattern_differences(params.pattern, pattern)}; leave it out to decode it as recorded"
             )
         if any(x is not None for x in (request.period_px, request.order, request.sequence, request.channels)):
             raise ValueError(
@@ -831,6 +832,24 @@ def recorded_adc_bits(meta: dict, *, where: str) -> int | None:
 def _short_pattern(p: PatternSpec) -> str:
     # the pattern options' own terms (simbench pattern --help)
     return f"period {p.period_px} px, order {p.order}, sequence {''.join(map(str, p.codes()))}, channels {p.channels}"
+
+
+def pattern_differences(given: PatternSpec, recorded: PatternSpec) -> str:
+    """What tells ``given`` from ``recorded`` apart, field by field (a new user's audit: a pattern
+    table giving only the period took the default size, and the message listed both patterns
+    whole, the period alike in each)."""
+    fields = (
+        ("period", lambda p: f"{p.period_px} px"),
+        ("order", lambda p: str(p.order)),
+        ("codes", lambda p: "".join(map(str, p.codes()))),
+        ("channels", lambda p: p.channels),
+        ("dc", lambda p: f"{p.dc:g}"),
+        ("amplitude", lambda p: f"{p.amplitude:g}"),
+        ("size", lambda p: f"{p.size_hw[1]}x{p.size_hw[0]}"),
+    )
+    out = [f"{name} ({f(given)} against {f(recorded)} recorded)" for name, f in fields if f(given) != f(recorded)]
+    hint = " - a pattern table's fields left out take PatternSpec's defaults, not the recording's" if out else ""
+    return (", ".join(out) or "nothing shown here") + hint
 
 
 def describe_pattern(p: PatternSpec) -> str:
