@@ -821,6 +821,20 @@ def test_reproduce_help_names_every_target():
     assert listed == set(TARGETS)
 
 
+def test_render_says_the_sensor_models_lens_distortion_is_on_the_users_rig(tmp_path, capsys):
+    """A new user's audit: their undistorted rig came back in rig.toml with the `paper` sensor's
+    lens distortion, without a word; render names the coefficients it put on the rig."""
+    from tests.test_bad_inputs import TINY_RIG
+
+    (tmp_path / "rig.toml").write_text(TINY_RIG)
+    (tmp_path / "s.toml").write_text(TINY_SCENE)
+    argv = ["render", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"), "--cache", str(tmp_path / "c")]
+    assert main([*argv, "--spp", "1"]) == 0
+    out_text = capsys.readouterr().out
+    assert "the sensor model's lens distortion is on rig 'tiny': camera k1 = -0.08" in out_text, out_text
+    assert "projector k1 = -0.02" in out_text
+
+
 def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_foreign_folder(tmp_path, capsys):
     """A recording folder of another system (its device.json) is replaced like one of the same
     system, with a line naming what was there (the audit found it refused as "not written by this
@@ -842,7 +856,9 @@ def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_forei
     # the device's own rig, said (a new user's audit: their rig was set aside without a word)
     assert "own 176x144 rig: the scene's rig 'tiny' set aside" in out_text
     assert render("--sensor", "ideal") == 0
-    assert "(replaced a tof recording of scene" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "(replaced a tof recording of scene" in out_text
+    assert "lens distortion is on rig" not in out_text  # the ideal sensor has no lenses of its own
     assert (out / "meta.json").is_file() and not (out / "device.json").exists()
     # each manifest names the scene alike: its name, its file and its render content's SHA-256 (a
     # fourth audit: meta.json held the name alone, device.json the path as typed)

@@ -151,6 +151,18 @@ def _render(args) -> int:
     if not info.uses_scene_rig:  # (a new user's audit: their own rig was set aside without a word)
         h, w = info.size_hw
         print(f"  (with the {info.label}'s own {w}x{h} rig: the scene's rig {scene.rig.name!r} set aside)")
+    elif rec.sensor is not None:
+        # (a new user's audit: an undistorted rig of their own came back in rig.toml with the
+        # sensor model's lens distortion, without a word)
+        from simbench.sim.sensor import apply_to_rig
+
+        lensed = apply_to_rig(scene.rig, rec.sensor)
+        if lensed is not scene.rig:
+            print(
+                f"  (the sensor model's lens distortion is on rig {scene.rig.name!r}: camera "
+                f"{_coefficients(lensed.camera.distortion)}, projector {_coefficients(lensed.projector.distortion)}, "
+                "as rig.toml records; --sensor minimal or ideal renders the rig's own lenses)"
+            )
     if replaced:
         print(f"  (replaced {replaced} there)")
     for key, path in files.items():
@@ -158,6 +170,13 @@ def _render(args) -> int:
     if hasattr(rec.calibration, "reference_map"):  # a system decoding against the scene's reference plane
         _warn_reference_outside_range(scene, rec.meta)
     return 0
+
+
+def _coefficients(d) -> str:
+    """Lens distortion coefficients in OpenCV's order, the trailing zeros left out."""
+    names = ("k1", "k2", "p1", "p2", "k3")
+    shown = [f"{n} = {float(v):g}" for n, v in zip(names, d) if float(v) != 0.0]
+    return ", ".join(shown) or "none"
 
 
 def _warn_reference_outside_range(scene, meta: dict) -> None:
