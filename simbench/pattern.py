@@ -130,7 +130,9 @@ def window_positions(sequence: np.ndarray, *, order: int, alphabet: int = 2) -> 
             code = code * alphabet + int(seq[(q + j) % length])
         if table[code] != -1:
             raise ValueError(
-                f"window at position {q} repeats the one at {table[code]}: the sequence cannot locate stripes uniquely"
+                f"window at position {q} repeats the one at {table[code]} (windows of {order} codes): the sequence "
+                f"cannot locate stripes uniquely - a sequence of {length} codes needs windows of at least "
+                f"{max(order + 1, int(np.ceil(np.log2(max(length, 2)))))} (--order)"
             )
         table[code] = q
     return table

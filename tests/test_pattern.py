@@ -128,3 +128,13 @@ def test_grey_drive_is_the_quantised_grey_in_three_channels(bits):
     want = quantize(np.repeat(grey[..., None], 3, axis=-1), bits=bits)
     assert got.dtype == want.dtype and got.shape == (2, 5, 7, 3) and np.array_equal(got, want)
     assert got.flags.c_contiguous
+
+
+def test_a_sequence_longer_than_its_windows_can_tell_apart_names_the_order_it_needs():
+    """A new user's audit: `pattern --sequence 0000100110101111` without `--order 4` failed with
+    "window at position 1 repeats the one at 0", no word of the window length it defaulted to."""
+    from simbench.pattern import window_positions
+
+    with pytest.raises(ValueError, match=r"\(windows of 3 codes\).*needs windows of at least 4 \(--order\)"):
+        window_positions(np.array([int(c) for c in "0000100110101111"]), order=3)
+    assert window_positions(np.array([int(c) for c in "0000100110101111"]), order=4).min() >= 0

@@ -230,7 +230,14 @@ def add_pattern_options(s: argparse.ArgumentParser) -> None:
     # None = not given: a recording folder is decoded with the pattern it records, and an option
     # given explicitly that contradicts it is an error
     s.add_argument("--period", type=int_in(4, 16384), help="fringe period T in projector pixels (default: 21)")
-    s.add_argument("--order", type=int_in(2, 16), help="window length n (De Bruijn cycle = 2**n stripes; default: 3)")
+    s.add_argument(
+        "--order",
+        type=int_in(2, 16),
+        help=(
+            "window length n (the De Bruijn cycle: 2**n stripes, or the --sequence's length, whose windows of n "
+            "codes must all differ; default: 3)"
+        ),
+    )
     s.add_argument("--sequence", help="stripe codes of one cycle, e.g. 00010111 (default: B(2, order))")
     s.add_argument(
         "--channels",
