@@ -132,7 +132,7 @@ def window_positions(sequence: np.ndarray, *, order: int, alphabet: int = 2) -> 
             raise ValueError(
                 f"window at position {q} repeats the one at {table[code]} (windows of {order} codes): the sequence "
                 f"cannot locate stripes uniquely - a sequence of {length} codes needs windows of at least "
-                f"{max(order + 1, int(np.ceil(np.log2(max(length, 2)))))} (--order)"
+                f"{max(order + 1, int(np.ceil(np.log(max(length, 2)) / np.log(alphabet))))} (--order)"
             )
         table[code] = q
     return table

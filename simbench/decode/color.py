@@ -631,8 +631,12 @@ COLUMN_PLACE_PERIODS = 0.25
 COLUMN_COPY_RATIO = 1.25
 COLUMN_MIN_COPY_SHARE = 0.75
 # ... over at least this many periods of columns (a shorter run holds too little of the fringe's
-# shape to tell a scaled copy from a shifted one; assumption: 0.4) ...
+# shape to tell a scaled copy from a shifted one; assumption: 0.4), and at least COLUMN_MIN_RUN_PX
+# columns (the share test's sample: of 8 ratios that follow the fringe, 6 within 1.25x of their
+# median is rare; of 3, a quarter period at a quarter of the paper's resolution, it is not - the
+# motion study's bust, 320x240, had its shading flattened at a few runs of 2-4 columns) ...
 COLUMN_MIN_RUN_PERIODS = 0.4
+COLUMN_MIN_RUN_PX = 8
 # ... whose brighter side's light varies along it by at least this share of its mean (a run on
 # a fringe's flat crest, or under strong ambient light, cannot show a shift; assumption: 0.1)
 COLUMN_MIN_VARIATION = 0.1
@@ -640,6 +644,9 @@ COLUMN_MIN_VARIATION = 0.1
 # take its gain where both their sides are under this share of the run's brighter side's mean (a
 # fringe's trough; assumption: 0.25 - a trough's darkest third), not beside a square's edge
 COLUMN_TROUGH_SHARE = 0.25
+# a column whose light on both sides of a boundary is under this share of the mean either side
+# along the row (a quarter period) takes the darker side of its neighbours', not its own (deep in a
+# fringe's trough its own is noise; assumption: 0.1)
 COLUMN_DIM_SHARE = 0.1
 # a segment down a column between two print edges is flattened when it is at most this many
 # periods long (assumption: 2 - longer segments are as wide as the steps along the rows need,
@@ -705,21 +712,26 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     nowhere.  Down a column nothing but the surface varies, so a step there is measured from a
     few rows on each side, whatever the squares' width:
 
-    1. each boundary between rows y and y + 1 compares the light (the channels' sum, ``rgb``
-       unmixed) of the :data:`COLUMN_EDGE_ROWS` rows above row y with that of the rows below row
-       y + 1 (the pair between them is mixed by the blur); summed over
+    1. each boundary between rows y and y + 1 compares the light (the channels' mean, ``rgb``
+       unmixed) of the :data:`COLUMN_EDGE_ROWS` rows next to it on each side; summed over
        :data:`COLUMN_PLACE_PERIODS` either side along the row, their contrast's peak down the
-       column (over two boundaries each way) places an edge, and its sign the darker side;
+       column (over two boundaries each way) places an edge - the means skipping the pair the
+       blur mixes (rows y and y + 1) tie over three boundaries at a sharp edge - and, where it
+       reaches :data:`ALBEDO_EDGE_RATIO`, a candidate; the darker side is the column's own
+       (:data:`COLUMN_DIM_SHARE`: in a trough, its neighbours');
     2. the edges of one row that follow each other with the same darker side form a run; a run
        is a print's edge where the darker side's light is a scaled copy of the brighter side's
        along it: outside the fringe's troughs (:data:`COLUMN_TROUGH_SHARE`) and the columns
        whose own darker side is the other (beside a square's edge along the row), at least
-       :data:`COLUMN_MIN_COPY_SHARE` of its columns' dark-over-bright ratios within
-       :data:`COLUMN_COPY_RATIO` of their median ``k``, over at least
-       :data:`COLUMN_MIN_RUN_PERIODS` periods, the brighter side varying by
-       :data:`COLUMN_MIN_VARIATION` or more and at least ``floor`` on average - a projector
-       shadow's border leaves no fringe on its dark side, and a depth edge shifts the fringe -
-       and where ``1 / k >=`` :data:`ALBEDO_EDGE_RATIO`;
+       :data:`COLUMN_MIN_COPY_SHARE` of its columns' dark-over-bright ratios (the means that skip
+       the mixed pair) within :data:`COLUMN_COPY_RATIO` of their median ``k``, in the channels'
+       mean and in each channel whose crest along the run reaches ``floor``, over at least
+       :data:`COLUMN_MIN_RUN_PERIODS` periods and :data:`COLUMN_MIN_RUN_PX` columns, the brighter
+       side varying by :data:`COLUMN_MIN_VARIATION` or more - a projector shadow's border leaves no
+       fringe on its dark side, and a depth edge shifts the fringe (and, where that lines up, the
+       code stripes) - where ``1 / k >=`` :data:`ALBEDO_EDGE_RATIO` and the darker side's crest,
+       ``k`` times the brighter side's, reaches ``floor`` (a darker print brightened is its noise
+       brightened);
     3. the darker side's segment, down to the next print edge of its column, takes the gain
        ``1 / k`` (at most :data:`ALBEDO_MAX_GAIN`) where that edge is within
        :func:`column_segment_rows`; a longer segment is left to the steps along the rows.
@@ -734,7 +746,8 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     period_px : float
         Fringe period in camera pixels.
     floor : float
-        The least mean light (channels' sum, full scale) an edge's brighter side needs.
+        The least light (full scale; the decoder's ``dark_level``) the darker side's crest needs,
+        and a channel's crest to be judged.
 
     Returns
     -------
@@ -805,7 +818,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         crest *= k
         variation = np.sqrt(np.maximum(sbb / n - (sb / n) ** 2, 0.0)) / (sb / n)
         ok = (
-            (n >= COLUMN_MIN_RUN_PERIODS * period_px)
+            (n >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX))
             & (crest >= floor)
             & (share >= COLUMN_MIN_COPY_SHARE)
             & (variation >= COLUMN_MIN_VARIATION)
@@ -829,7 +842,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         _, share_c, n_c, _, _, crest_c = _scaled_copy(ca, cb, rsub, osub, m, cu, cd, of_max=True)
         # (a channel the run's stripes hardly light - a code channel across the other code's
         # stripes - cannot judge)
-        judged = (n_c >= COLUMN_MIN_RUN_PERIODS * period_px) & (crest_c >= floor)
+        judged = (n_c >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX)) & (crest_c >= floor)
         with np.errstate(invalid="ignore"):
             ok &= ~judged | (share_c >= COLUMN_MIN_COPY_SHARE)
     with np.errstate(divide="ignore"):

@@ -1239,6 +1239,7 @@ def _plane_lit_share(rig: Rig, z_m: float) -> float:
     return float(inside.mean())
 
 
+@lru_cache(maxsize=16)
 def _plane_columns(rig: Rig, z_m: float) -> np.ndarray:
     col = projector_column_at_depth(z_m, rig).astype(np.float32)
     col.setflags(write=False)
@@ -1343,6 +1344,11 @@ def decode_reference(
     # of the view the projector lights on a plane at Z0 (a new user's audit: a lens-shifted
     # projector lit 43 % of it, all of which decoded, and was told to check its reference)
     lit = _plane_lit_share(rig, float(params.z0_m))
+    if lit < 0.01:
+        raise ValueError(
+            f"rig {rig.name!r}: its projector lights {100 * lit:.1f} % of the camera's view on a plane at Z0 = "
+            f"{params.z0_m:g} m - no reference plane there can be decoded: check the rig's pose and Z0"
+        )
     if coverage < params.min_reference_coverage * lit:
         clipped = clipped_share(image, saturation_level=params.saturation_level)
         of_lit = f" of the {100 * lit:.1f} % this rig's projector lights" if lit < 0.995 else ""
