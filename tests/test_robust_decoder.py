@@ -310,6 +310,18 @@ def _robust_decode(calibration, cap: np.ndarray, **changes):
     return decode(cap, rig=RIG, params=p, reference=rmap)
 
 
+def _kept_off_band(calibration, cap, col, band, **changes) -> tuple[float, float]:
+    """The colour-robust decoder's (``changes`` made) share of the lit pixels off ``band`` kept at
+    its operating point and their mean column error (projector px; NaN where none is kept),
+    asserting that none is a stripe or more off."""
+    region = np.isfinite(col) & ~band
+    r = _robust_decode(calibration, cap, **changes)
+    ok = r.valid & region
+    err = np.abs(r.column_px[ok] - col[ok])
+    assert np.all(err < 0.5 * 21), f"stripe-order error ({changes})"
+    return ok.sum() / region.sum(), float(err.mean()) if err.size else float("nan")
+
+
 def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     """An 8:1 grey checkerboard of 3.4-period squares (between scenes/hard_chart_mid.toml's
     3:1 and hard_chart_high.toml's 20:1, their squares' size): with the albedo steps flattened
@@ -319,14 +331,7 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     here: 99.2 % against 80.7 %; at 3:1 99.99 % against 97.2 %; on the rendered 3:1 chart, with
     the camera's blur, 99.7 % against 82.8 %, results/hard_scenes.md)."""
     cap, col, band = _checkerboard(0.1)
-    region = np.isfinite(col) & ~band
-    out = {}
-    for flatten in (True, False):
-        r = _robust_decode(calibration, cap, albedo_flatten=flatten)
-        ok = r.valid & region
-        err = np.abs(r.column_px[ok] - col[ok])
-        assert np.all(err < 0.5 * 21), f"stripe-order error (flatten {flatten})"
-        out[flatten] = (ok.sum() / region.sum(), float(err.mean()))
+    out = {flatten: _kept_off_band(calibration, cap, col, band, albedo_flatten=flatten) for flatten in (True, False)}
     assert out[False][0] < 0.97 <= out[True][0], out
 
 
@@ -526,15 +531,18 @@ def test_the_albedo_gain_reads_no_row_beyond_its_reach(calibration):
         assert np.array_equal(band[r0 - a : r1 - a], whole[r0:r1]), (r0, r1)
 
 
-def test_colour_robust_result_does_not_depend_on_threads(calibration):
+@pytest.mark.parametrize("board", ["checkerboard", "fine print"])
+def test_colour_robust_result_does_not_depend_on_threads(calibration, board):
     """The albedo flattening reads ~48 rows above and below a pixel (its spans' box mean, the edge
     rows): each row band carries them beyond the phase fit's halo, so that the checkerboard
     decodes to the same bits in 1, 2, 3 or 7 bands (with the fit's halo alone, 2 bands moved
-    the depth of ~14 k pixels within ~46 rows of the bands' border on scenes/step.toml)."""
+    the depth of ~14 k pixels within ~46 rows of the bands' border on scenes/step.toml); on the
+    fine print the column gain reads column_gain_reach_rows more, and the steps along the rows
+    read theirs in the light it leaves: the bands carry both."""
     from simbench.decode.bands import row_bands
 
     ref, f = calibration
-    cap, _, _ = _checkerboard(0.1)
+    cap, _, _ = _checkerboard(0.1) if board == "checkerboard" else _fine_checkerboard(0.25)
     p = robust_params(DecoderParams(mode="calibrated"))
     rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
     one = decode(cap, rig=RIG, params=dataclasses.replace(p, threads=1), reference=rmap)
@@ -1240,14 +1248,7 @@ def test_the_column_gain_decodes_a_fine_print_the_rows_cannot(calibration, ink):
     stripe-order error either way, its mean column error with the gain under 0.2 projector px
     (measured: 3:1 83.8 % / 0.12 px against 33.4 %; 8:1 74.7 % / 0.12 px against nothing)."""
     cap, col, band = _fine_checkerboard(ink)
-    region = np.isfinite(col) & ~band
-    out = {}
-    for columns in (True, False):
-        r = _robust_decode(calibration, cap, albedo_columns=columns)
-        ok = r.valid & region
-        err = np.abs(r.column_px[ok] - col[ok])
-        assert np.all(err < 0.5 * 21), f"stripe-order error (columns {columns})"
-        out[columns] = (ok.sum() / region.sum(), float(err.mean()) if err.size else float("nan"))
+    out = {columns: _kept_off_band(calibration, cap, col, band, albedo_columns=columns) for columns in (True, False)}
     assert out[True][0] >= 0.7 and out[False][0] < 0.5 * out[True][0], out
     assert out[True][1] < 0.2, out
 
@@ -1277,17 +1278,3 @@ def test_the_column_gain_reads_no_row_beyond_its_reach(print_rows):
         band = color.column_albedo_gain(rgb[a:b], period_px=t, floor=0.04)
         part = np.ones((b - a, rgb.shape[1]), np.float32) if band is None else band
         assert np.array_equal(part[r0 - a : r1 - a], whole[r0:r1]), (r0, r1)
-
-
-def test_a_fine_print_decodes_to_the_same_bits_on_any_number_of_threads(calibration):
-    """The column gain reads column_gain_reach_rows rows beyond a pixel, and the steps along the
-    rows read theirs in the light it leaves: the row bands carry both (bands.row_bands)."""
-    ref, f = calibration
-    cap, _, _ = _fine_checkerboard(0.25)
-    p = robust_params(DecoderParams(mode="calibrated"))
-    rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
-    one = decode(cap, rig=RIG, params=dataclasses.replace(p, threads=1), reference=rmap)
-    for threads in (2, 3, 7):
-        r = decode(cap, rig=RIG, params=dataclasses.replace(p, threads=threads), reference=rmap)
-        assert np.array_equal(r.depth_m, one.depth_m, equal_nan=True), threads
-        assert np.array_equal(r.confidence, one.confidence, equal_nan=True), threads
