@@ -17,7 +17,7 @@ from simbench.decode.fourier import ftp_phase, wfr_phase
 from simbench.decode.phase import INTENSITY_MODES, MAX_FRINGE_SNR, gabor_phase
 from simbench.extensions import after_load, load_extensions
 from simbench.pattern import PatternSpec
-from simbench.rig import Rig
+from simbench.rig import MIN_BASELINE_X_SHARE, Rig
 
 __all__ = [
     "MIN_CAMERA_PERIOD_PX",
@@ -740,7 +740,10 @@ def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:
             f"reference mode decodes only {around}, half a cycle either side of Z0 = {z0:g} m, whatever the range), "
             "or a longer cycle (--period, --order) keeps every depth right"
         )
-    if params.mode == "reference":
+    # (a rig whose baseline is not along x is refused as such - simbench.rig.check_stripe_baseline -
+    # before any of this matters)
+    along_x = abs(rig.position_m[0]) >= MIN_BASELINE_X_SHARE * rig.baseline_m
+    if params.mode == "reference" and along_x:
         err = reference_model_error(rig, params)
         if err > REFERENCE_MODEL_MAX_ERROR:
             out.append(
