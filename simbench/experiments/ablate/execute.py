@@ -153,9 +153,12 @@ def _named_files_digest(params: dict) -> str:
     from simbench.sim.sensor import PRESETS_DIR, SENSOR_PRESETS
 
     files = []
-    sensor = params.get("sensor.preset")
-    if isinstance(sensor, str):
-        files.append(PRESETS_DIR / f"{sensor}.toml" if sensor in SENSOR_PRESETS else Path(sensor))
+    # the preset the run is made with, and the one its sensor.effects take their values from (a
+    # new user's audit: a resume after the source file's noise changed kept the old results)
+    for key in ("sensor.preset", "sensor.source"):
+        sensor = params.get(key)
+        if isinstance(sensor, str):
+            files.append(PRESETS_DIR / f"{sensor}.toml" if sensor in SENSOR_PRESETS else Path(sensor))
     scene = None
     if isinstance(params.get("scene.name"), str):
         try:

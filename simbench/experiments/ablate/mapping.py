@@ -140,13 +140,26 @@ def scene_for(params: dict) -> SceneSpec:
     return scene
 
 
+def _text(value: object, name: str) -> str:
+    if not isinstance(value, str):
+        raise ValueError(f"{name} must be a string, got {value!r}")
+    return value
+
+
 def decoder_for(params: dict) -> DecoderParams:
     from simbench.decode import DecoderParams, with_changes
     from simbench.pattern import PatternSpec, parse_sequence
 
+    from simbench import validate
+
     fields = {k.split(".", 1)[1]: v for k, v in params.items() if k.startswith("decoder.")}
-    kinds = {"pattern.period_px": int, "pattern.order": int, "pattern.channels": str}
-    pattern = {k.split(".", 1)[1]: kinds[k](v) for k, v in params.items() if k in kinds}
+    # checked, not cast (a new user's audit: period_px = 21.9 ran as 21 and was tabled as 21.9)
+    kinds = {
+        "pattern.period_px": lambda v, k: validate.integer(v, k),
+        "pattern.order": lambda v, k: validate.integer(v, k),
+        "pattern.channels": _text,
+    }
+    pattern = {k.split(".", 1)[1]: kinds[k](v, k) for k, v in params.items() if k in kinds}
     if "pattern.sequence" in params:
         pattern["sequence"] = parse_sequence(str(params["pattern.sequence"]))
     return with_changes(DecoderParams(pattern=PatternSpec(**pattern)), fields)
