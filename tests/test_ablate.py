@@ -736,8 +736,13 @@ def test_a_run_records_what_the_decoder_says_of_the_pattern_on_the_rig(tmp_path,
     table = _table(tmp_path / "t.csv")
     assert table[0]["warnings"] == fine["warnings"] and table[1]["warnings"] == ""
     text = (tmp_path / "t.md").read_text()
-    assert "Warnings (the decoder's checks of the pattern on the rig" in text
+    assert "Warnings (the decoder's checks of the pattern on the rig" in text and "what the recording shows" in text
     assert "- `pattern.period_px = 8`: the pattern's code repeats" in text and "`pattern.period_px = 21`" not in text
+    # and what the recording shows (a third new user's audit: a board at 1.9 m, past the working
+    # range, tabled a 0.147 mm plane fit - every pixel a code cycle off - under an empty warnings column)
+    far = _sweep(axis=[{"name": "scene.depth_m", "values": [1.9]}])
+    (row,) = run_sweep(far, out_dir=tmp_path / "far", cache_dir=tmp_path / "cache", progress=lambda s: None)
+    assert "of the lit pixels lie outside the decoder's working range 0.75-1.75 m" in row["warnings"], row["warnings"]
 
 
 def test_the_plot_says_its_axes_in_words_with_units():

@@ -12,6 +12,8 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from simbench.experiments.ablate.mapping import check_sweep, decoder_for, run_config_for, scene_for, sensor_for
 from simbench.experiments.ablate.report import sweep_rows, write_sweep
 from simbench.experiments.ablate.spec import EDGE_BAND_PX, MODES, Sweep, expand
@@ -36,6 +38,7 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
         from simbench import cache as cache_module
         from simbench.experiments.common import Session, score
         from simbench.decode.params import pattern_on_rig_warnings
+        from simbench.systems.recording_checks import exposure_warnings, recording_warnings
         from simbench.experiments.workers import worker_state
         from simbench.variant import select_variant
 
@@ -74,6 +77,14 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
         # explains (a pattern designer's audit, 2026-11-30: a period-8 run's 112.7 mm MAE and 32 %
         # outliers came with no word of the range's ambiguity the command line names)
         told = pattern_on_rig_warnings(cap.scene.rig, decoder)
+        # and what the recording shows, as `simbench.record` warns of it (a third new user's audit: a
+        # board at 1.9 m, past the working range, tabled a 0.147 mm plane fit - every pixel a code
+        # cycle off, 1157 mm GT MAE - with an empty warnings column)
+        told = [
+            *told,
+            *recording_warnings(scene, cap.gt, decoder),
+            *(exposure_warnings(cap.raw, cap.scene, sensor) if (np.asarray(cap.gt.object_id) >= 0).any() else []),
+        ]
         for line in told:
             say(f"warning: {line}")
         row = {"warnings": told}
