@@ -203,9 +203,9 @@ def _markdown(sweep: Sweep, rows: list[dict], command: str) -> str:
         lines += [
             "",
             "Warnings (the decoder's checks of the pattern on the rig, as `simbench decode` gives them - in a sweep "
-            "its options are `pattern.period_px`, `pattern.order` and `decoder.depth_range_m` -, and what the recording "
-            "shows, as `simbench.record` warns of it: an object no pixel sees, lit surface beyond the working range, "
-            "a clipped or dark capture):",
+            "its options are `pattern.period_px`, `pattern.order` and `decoder.depth_range_m` -, and what the "
+            "recording shows, as `simbench.record` warns of it: an object no pixel sees, lit surface beyond the "
+            "working range, a clipped or dark capture):",
             "",
         ]
         lines += [f"- {', '.join(f'`{c}`' for c in combos)}: {w}" for w, combos in told.items()]
