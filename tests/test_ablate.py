@@ -697,6 +697,29 @@ def test_a_sweep_takes_a_scene_of_ones_own_by_its_path_and_its_key_follows_the_m
     check_sweep(_sweep(base={**FAST_BASE, "scene.name": "mine.toml"}))
 
 
+def test_ablate_exits_1_when_a_run_failed(tmp_path, monkeypatch, capsys):
+    """A third new user's audit: every run failing still exited 0 behind a table of n/a; the
+    tables are written, and the exit status says that runs failed (a rerun retries them)."""
+    import simbench.experiments.ablate as ablate_module
+
+    from simbench.cli import main
+
+    study = tmp_path / "s.toml"
+    study.write_text('name = "s"\n[base]\n"run.spp" = 4\n[[axis]]\nname = "decoder.voting"\nvalues = [true, false]\n')
+
+    def rows(failing):
+        def run(sweep, **kw):
+            return [{"decoder.voting": v, "error": "ValueError: x" if v in failing else ""} for v in (True, False)]
+
+        return run
+
+    monkeypatch.setattr(ablate_module, "run_sweep", rows({False}))
+    assert main(["ablate", str(study), "--out", str(tmp_path / "o"), "--no-cache"]) == 1
+    assert "1 run(s) failed" in capsys.readouterr().err
+    monkeypatch.setattr(ablate_module, "run_sweep", rows(set()))
+    assert main(["ablate", str(study), "--out", str(tmp_path / "o"), "--no-cache"]) == 0
+
+
 def test_the_table_says_n_a_where_a_metric_was_not_measured():
     """A plane fit of a scene that is not a plane is NaN (metrics.score_depth): the sweep's table
     says n/a there, not 'nan', and says what n/a means; measured values print as numbers."""

@@ -742,6 +742,13 @@ case(
     setup=lambda d: (render_folder(d), (d / "p.ply").mkdir()),
 )
 # a fourth audit: --decoder pattern= and min_confidence= won over the options that say the same
+# a third new user's audit: a --cache that is a file failed every run of the sweep - a table of n/a, exit 0
+case(
+    "ablate-cache-is-a-file",
+    lambda d: ["ablate", "period", "--out", str(d / "o"), "--cache", str(d / "f")],
+    "is a file, not a cache folder",
+    setup=lambda d: (d / "f").write_text("x"),
+)
 case(
     "decode-decoder-pattern-against-the-recording",
     lambda d: _decode(d, "--decoder", "pattern={period_px=30}"),

@@ -203,6 +203,12 @@ def _cmd_ablate(args) -> int:
             )
     names = [m for n in args.sweep for m in (BUILTIN_STUDIES if n == "builtin" else [n])]
     check_output_folder(args.out, what="--out")
+    if not args.no_cache and args.cache is not None and Path(args.cache).exists():
+        # (a third new user's audit: a --cache that is a file, or a folder of other files, failed every
+        # run - a table of n/a, exit 0 - where render refuses it at once)
+        from simbench.cache import check_cache_folder
+
+        check_cache_folder(args.cache)
     sweeps = [load_sweep(n) for n in names]  # every file checked before any run starts
     for sweep in sweeps:
         check_sweep(sweep)  # and every run's values
@@ -221,6 +227,7 @@ def _cmd_ablate(args) -> int:
         if sys.argv[1:2] == ["ablate"]
         else "simbench ablate " + " ".join(args.sweep)
     )
+    failures = 0
     for sweep in sweeps:
         t0 = time.perf_counter()
         if args.fresh:
@@ -236,10 +243,18 @@ def _cmd_ablate(args) -> int:
             command=command,
         )
         failed = sum(1 for r in rows if r["error"])
+        failures += failed
         print(
             f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> "
             f"{args.out}/{sweep.name}.csv, .md, .png, .pdf"
         )
+    if failures:  # the tables are written, their failed rows n/a; a script must not read that as done
+        print(
+            f"simbench: {failures} run(s) failed (their errors are in the tables and the run logs; a rerun "
+            "retries them)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
