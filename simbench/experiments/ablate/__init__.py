@@ -37,7 +37,8 @@ Parameters (:data:`PARAMETERS`; anything else is rejected with the list):
   (e.g. ``sensor.camera.dark_noise_e``, ``sensor.ambient.ratio``, ``sensor.projector.lumens``);
 - ``scene.name`` (a scene of ``scenes/`` by name, or a scene TOML of one's own by its path),
   ``scene.srgb8`` (repaint every object), ``scene.depth_m``
-  (move the scene so its first object's centre is at this depth), ``scene.tilt_deg`` (the first
+  (move the scene so its first object's placement - a plane's or box's ``center_m``, a mesh's
+  ``translate_m``, its origin - is at this depth), ``scene.tilt_deg`` (the first
   object's rotation about the vertical axis), ``scene.speed_m_s`` and ``scene.motion`` (the first
   object moving ``lateral``-ly or ``axial``-ly at that speed during the exposure:
   :mod:`simbench.sim.motion`), ``scene.spin_deg_s`` (the first object turning at that rate about

@@ -114,6 +114,14 @@ def run_one(params: dict, *, seed: int, cache_dir: str | None, label: str = "abl
         if termination.requested():  # SIGTERM, re-wrapped by a render: stop, record nothing
             raise
         msg = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        if "the reference capture decodes at only" in msg:
+            # (a third new user's audit: a run's own reference plane was asked "is it the reference-plane
+            # capture, taken with this pattern and rig?" - simbench made it)
+            msg += (
+                " [simbench rendered this reference plane itself, with the run's pattern, rig and sensor: its "
+                "fringe did not survive them - camera noise, ambient light, a fringe too fine for the camera - "
+                "so the run has no depth in either mode]"
+            )
         return {
             "error": msg,
             "traceback": traceback.format_exc(limit=4),

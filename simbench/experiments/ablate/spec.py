@@ -74,7 +74,8 @@ def _parameters() -> dict[str, str]:
         "scene.srgb8": "repaint every object with this 8-bit sRGB colour",
         "scene.subsurface": "make every object translucent as this medium (simbench.sim.subsurface.MEDIA) or opaque "
         "('none'); not given: as the scene file says",
-        "scene.depth_m": "move the scene so its first object's centre is at this depth",
+        "scene.depth_m": "move the scene so its first object's placement (its center_m, or a mesh's translate_m: its "
+        "origin) is at this depth",
         "scene.tilt_deg": "rotation of the first object about the vertical axis (deg)",
         "scene.speed_m_s": "speed of the first object (m/s; simbench.sim.motion), in the scene.motion direction",
         "scene.motion": "direction of that motion: lateral (+x, sideways) or axial (-z, towards the camera); "
