@@ -435,6 +435,8 @@ def test_speed_is_an_axis():
         ({"scene.speed_m_s": math.nan}, "scene.speed_m_s must be a finite number in"),
         ({"scene.speed_m_s": 0.1, "scene.motion": "up"}, "scene.motion must be one of"),
         ({"scene.motion": "sideways"}, "scene.motion must be one of"),
+        # a third new user's audit: a direction without a speed moved nothing, without a word
+        ({"scene.motion": "axial"}, "scene.motion gives the direction of scene.speed_m_s"),
     ):
         with pytest.raises(ValueError, match=match):
             scene_for({"scene.name": "motion_board", **bad})

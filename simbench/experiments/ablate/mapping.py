@@ -122,6 +122,11 @@ def scene_for(params: dict) -> SceneSpec:
         objs[0] = dataclasses.replace(objs[0], motion=None if motion.is_static else motion)
     elif "scene.motion" in params:
         validate.choice(params["scene.motion"], "scene.motion", ("lateral", "axial"))
+        # (a third new user's audit: a direction alone moved nothing, without a word)
+        raise ValueError(
+            "scene.motion gives the direction of scene.speed_m_s, which this run has not: give both "
+            "(scene.speed_m_s = 0 for a still run)"
+        )
     if "scene.spin_deg_s" in params:
         # the first object turning about the vertical axis through its own position (its file's
         # axis and centre, if it gives them), 0 = not turning; its translation is kept (an audit,
