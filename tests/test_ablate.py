@@ -720,6 +720,13 @@ def test_ablate_exits_1_when_a_run_failed(tmp_path, monkeypatch, capsys):
     assert "1 run(s) failed" in capsys.readouterr().err
     monkeypatch.setattr(ablate_module, "run_sweep", rows(set()))
     assert main(["ablate", str(study), "--out", str(tmp_path / "o"), "--no-cache"]) == 0
+    # one sweep command at a time into a folder (the same audit: two at once each did every run, and
+    # the run log held each twice)
+    from simbench.io import claim_output
+
+    with claim_output(tmp_path / "o"):
+        assert main(["ablate", str(study), "--out", str(tmp_path / "o"), "--no-cache"]) == 2
+    assert "another process is writing it now" in capsys.readouterr().err
 
 
 def test_the_table_says_n_a_where_a_metric_was_not_measured():

@@ -227,27 +227,32 @@ def _cmd_ablate(args) -> int:
         if sys.argv[1:2] == ["ablate"]
         else "simbench ablate " + " ".join(args.sweep)
     )
-    failures = 0
-    for sweep in sweeps:
-        t0 = time.perf_counter()
-        if args.fresh:
-            (Path(args.out) / f"{sweep.name}.runs.jsonl").unlink(missing_ok=True)
-        rows = run_sweep(
-            sweep,
-            out_dir=args.out,
-            cache_dir=None if args.no_cache else args.cache,
-            workers=args.workers,
-            scheduler=args.scheduler,
-            variant=args.variant,
-            progress=lambda s: print(s, flush=True),
-            command=command,
-        )
-        failed = sum(1 for r in rows if r["error"])
-        failures += failed
-        print(
-            f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> "
-            f"{args.out}/{sweep.name}.csv, .md, .png, .pdf"
-        )
+    from simbench.io import claim_output
+
+    # one sweep command at a time into a folder (a third new user's audit: two runs of one study into
+    # one --out each did all its runs, and its run log held every run twice)
+    with claim_output(args.out):
+        failures = 0
+        for sweep in sweeps:
+            t0 = time.perf_counter()
+            if args.fresh:
+                (Path(args.out) / f"{sweep.name}.runs.jsonl").unlink(missing_ok=True)
+            rows = run_sweep(
+                sweep,
+                out_dir=args.out,
+                cache_dir=None if args.no_cache else args.cache,
+                workers=args.workers,
+                scheduler=args.scheduler,
+                variant=args.variant,
+                progress=lambda s: print(s, flush=True),
+                command=command,
+            )
+            failed = sum(1 for r in rows if r["error"])
+            failures += failed
+            print(
+                f"ablation {sweep.name}: {len(rows)} runs ({failed} failed) in {time.perf_counter() - t0:.0f} s -> "
+                f"{args.out}/{sweep.name}.csv, .md, .png, .pdf"
+            )
     if failures:  # the tables are written, their failed rows n/a; a script must not read that as done
         print(
             f"simbench: {failures} run(s) failed (their errors are in the tables and the run logs; a rerun "
