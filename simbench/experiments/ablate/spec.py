@@ -148,7 +148,10 @@ class Sweep:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or not all(c.isalnum() or c in "-_" for c in self.name):
-            raise ValueError(f"sweep name must be letters, digits, - and _, got {self.name!r}")
+            raise ValueError(
+                f"sweep name must be letters, digits, - and _, got {self.name!r} (a study without a `name` key is "
+                "named by its file's stem: give it a `name`)"
+            )
         if not isinstance(self.base, dict):
             raise ValueError(f"[base] must be a table, got {self.base!r}")
         for k in self.base:
