@@ -11,6 +11,8 @@ import numpy as np
 if TYPE_CHECKING:
     from simbench.decode.params import DecoderParams
     from simbench.sim.scene import SceneSpec
+    from simbench.sim.sensor import SensorModel
+    from simbench.sim.truth import GroundTruth
 
 __all__ = [
     "OUT_OF_RANGE_SHARE",
@@ -27,7 +29,7 @@ __all__ = [
 OUT_OF_RANGE_SHARE = 0.001
 
 
-def recording_warnings(spec: SceneSpec, gt, decoder: DecoderParams | None = None) -> list[str]:
+def recording_warnings(spec: SceneSpec, gt: GroundTruth, decoder: DecoderParams | None = None) -> list[str]:
     """What the ground truth of a recording shows that its scene file did not (a new user's audit,
     2026-11-30, each recorded and decoded without a word): an object no pixel sees (outside the
     view, or hidden behind another), and - with ``decoder``, the colour-fringe sensor's - lit
@@ -71,7 +73,12 @@ CLIPPED_REFERENCE_SHARE = 0.01
 
 
 def exposure_warnings(
-    raw: np.ndarray, scene: SceneSpec, sensor, *, what: str = "capture", clipped_share: float = CLIPPED_CAPTURE_SHARE
+    raw: np.ndarray,
+    scene: SceneSpec,
+    sensor: SensorModel,
+    *,
+    what: str = "capture",
+    clipped_share: float = CLIPPED_CAPTURE_SHARE,
 ) -> list[str]:
     """What a recording's exposure spoiled: a capture clipped over more than
     :data:`CLIPPED_CAPTURE_SHARE` of its pixels (with the reasons the sensor model gives: the
