@@ -788,4 +788,9 @@ def test_the_plot_says_its_axes_in_words_with_units():
     assert metric_words("outlier_share")[1] == 100.0
     assert axis_words("pattern.period_px") == "fringe period T (projector px) [pattern.period_px]"
     assert axis_words("sensor.camera.dark_noise_e") == "sensor.camera.dark_noise_e"  # (its key holds its unit)
-    assert axis_words("decoder.voting") == "decoder.voting"
+    # a decoder field in its own docstring's words (a new user's audit: decoder axes read the bare key)
+    assert axis_words("decoder.voting") == "Majority vote of codes per stripe (paper Sec. 5.2) [decoder.voting]"
+    assert (
+        axis_words("decoder.sigma_periods") == "Gabor envelope sigma along x in fringe periods [decoder.sigma_periods]"
+    )
+    assert axis_words("decoder.no_such_field") == "decoder.no_such_field"

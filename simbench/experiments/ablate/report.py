@@ -284,16 +284,52 @@ def axis_words(name: str) -> str:
     from simbench.experiments.ablate.spec import PARAMETERS
 
     described = PARAMETERS.get(name, "")
-    if not described or described.startswith("DecoderParams."):
+    if described.startswith("DecoderParams."):
+        # the field's own description in DecoderParams' docstring (a new user's audit: decoder axes
+        # were labelled by their bare key, where docs/ablations.md promises words)
+        described = _decoder_field_words(described.split(".", 1)[1])
+    if not described:
         return name
-    # up to the first ':' or ';' outside brackets (a review: "speed (m/s; ...)" lost its bracket's end)
-    depth, cut = 0, len(described)
-    for i, ch in enumerate(described):
+    return f"{_first_clause(described)} [{name}]"
+
+
+def _first_clause(text: str) -> str:
+    """``text`` up to its first ':', ';' or sentence end outside brackets (a review: "speed (m/s;
+    ...)" lost its bracket's end)."""
+    depth, cut = 0, len(text)
+    for i, ch in enumerate(text):
         depth += (ch == "(") - (ch == ")")
-        if depth == 0 and ch in ":;":
+        if depth == 0 and (ch in ":;" or text.startswith(". ", i)):
             cut = i
             break
-    return f"{described[:cut].rstrip()} [{name}]"
+    return text[:cut].rstrip().rstrip(".")
+
+
+# a decoder field's words on a plot axis: at most this many characters, brackets dropped beyond it
+_DECODER_WORDS_MAX = 60
+
+
+def _decoder_field_words(field: str) -> str:
+    """The first clause of ``field``'s description in :class:`DecoderParams`' docstring, its reST
+    markup removed (``x`` -> x, :func:`a.b` -> b); "" where the docstring has none."""
+    import inspect
+    import re
+
+    from simbench.decode.params import DecoderParams
+
+    doc = inspect.cleandoc(DecoderParams.__doc__ or "")
+    # (a line may name several fields: "dark_level, saturation_level : float")
+    m = re.search(rf"^(?:\w+, )*{re.escape(field)}(?:, \w+)* : [^\n]*\n((?:    [^\n]*\n?)+)", doc, re.M)
+    if m is None:
+        return ""
+    text = " ".join(line.strip() for line in m.group(1).splitlines())
+    text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([\w]+)`", r"\1", text).replace("``", "")
+    first = _first_clause(text)
+    if len(first) > _DECODER_WORDS_MAX:
+        first = re.sub(r"\s*\([^()]*\)", "", first)
+    if len(first) > _DECODER_WORDS_MAX:  # (the rest is in DecoderParams' docstring)
+        first = first[: first.rfind(" ", 0, _DECODER_WORDS_MAX)].rstrip(",;") + " \u2026"
+    return first
 
 
 def _plot(sweep: Sweep, rows: list[dict]) -> dict[str, bytes]:
