@@ -650,6 +650,13 @@ MIN_CAMERA_PERIOD_PX = 4.0
 REFERENCE_MODEL_MAX_ERROR = 1e-3
 
 
+def reference_inverse_fb(rig: Rig) -> float:
+    """``1 / (f B)`` of reference mode's depth, ``1/Z = 1/Z0 + d / (f B)`` (paper Eq. 14), with the
+    baseline's sign: a projector on the camera's left (x < 0) turns the disparity's (an audit:
+    such a rig's depths came out mirrored about Z0, 1/Z = 2/Z0 - 1/Z_true)."""
+    return math.copysign(1.0, rig.position_m[0]) / (rig.camera.focal_px * rig.baseline_m)
+
+
 def reference_model_error(rig: Rig, params: DecoderParams) -> float:
     """The largest relative depth error ``|Z_ref - Z| / Z`` the reference-plane formula makes on
     ``rig``, over the camera's image (9 rows, 17 columns) and five depths across
@@ -668,8 +675,8 @@ def reference_model_error(rig: Rig, params: DecoderParams) -> float:
     picked = np.unique(np.round(np.linspace(0.0, w - 1.0, 17)).astype(int))
     z0 = float(params.z0_m)
     near, far = params.depth_range_m
-    inv_fb = math.copysign(1.0, rig.position_m[0]) / (cam.focal_px * rig.baseline_m)
-    worst = float("nan")
+    inv_fb = reference_inverse_fb(rig)  # the decoder's own
+    worst = []
     for v in np.linspace(0.0, h - 1.0, 9):
         rays = np.stack([(xs - cam.cx_px) / cam.focal_px, np.full(w, (v - cam.cy_px) / cam.focal_px), np.ones(w)], -1)
         ref = project_to_projector(rays * z0, rig)[0]
@@ -689,8 +696,8 @@ def reference_model_error(rig: Rig, params: DecoderParams) -> float:
             err = np.abs(z_est - z) / z
             err = err[np.isfinite(err)]
             if err.size:
-                worst = float(np.nanmax([worst, err.max()])) if worst == worst else float(err.max())
-    return worst
+                worst.append(float(err.max()))
+    return max(worst) if worst else float("nan")
 
 
 def pattern_on_rig_warnings(rig: Rig, params: DecoderParams) -> list[str]:

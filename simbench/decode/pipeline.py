@@ -88,6 +88,7 @@ from simbench.decode.params import (
     DecoderParams,
     PHASE_METHODS,
     phase_method_code,
+    reference_inverse_fb,
     STABILITY_KAPPA_RAD,
     STABILITY_WINDOW_SCALE,
 )
@@ -1495,9 +1496,7 @@ def decode(
     conf_out = np.empty((h, w), np.float32)
     col_out = np.empty((h, w), np.float32)
     index_out = np.empty((h, w), np.int32)
-    # paper Eq. 14 with the baseline's sign: a projector on the camera's left (x < 0) turns the
-    # disparity's (an audit: such a rig's depths came out mirrored about Z0, 1/Z = 2/Z0 - 1/Z_true)
-    inv_fb = math.copysign(1.0, rig.position_m[0]) / (rig.camera.focal_px * rig.baseline_m)
+    inv_fb = reference_inverse_fb(rig)
     # the crease and edge terms' kappa over a bias in projector px: kappa T / (2 pi bias), the
     # stability term's scale
     bias_kappa_px = np.float32(STABILITY_KAPPA_RAD * params.period_px / (2.0 * np.pi))
