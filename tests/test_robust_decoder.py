@@ -1194,10 +1194,10 @@ def _fine_checkerboard(ink: float, *, square_periods: float = 1.06, noise=0.002,
 def test_the_column_gain_flattens_a_fine_print_down_the_columns():
     """Down a column the stripes stay put, so a 3:1 print of one-period squares is measured from
     a few rows either side of its edges across the stripes: >= 90 % of the ink (off a pixel of its
-    edges, and the squares the image's top and bottom rows cut, which no edge closes) takes a gain
-    within 10 % of 3.2 (0.8 / 0.25; the synthetic camera's ambient offset, added after the
-    reflectance, brings the light's ratio to ~3.0), >= 99 % of the paper keeps exactly 1
-    (measured: 98.4 % and 99.6 %)."""
+    edges) takes a gain within 10 % of 3.2 (0.8 / 0.25; the synthetic camera's ambient offset,
+    added after the reflectance, brings the light's ratio to ~3.0), in the squares the image holds
+    whole and in those its top and bottom rows cut (the frame closes them), >= 99 % of the paper
+    keeps exactly 1 (measured: 98.4 %, 98.5 % and 99.6 %)."""
     cap, _, _ = _fine_checkerboard(0.25)
     rgb = unmix(cap, np.linalg.inv(K).astype(np.float32))
     gain = color.column_albedo_gain(rgb, period_px=PARAMS_PERIOD_PX, floor=0.04)
@@ -1206,9 +1206,10 @@ def test_the_column_gain_flattens_a_fine_print_down_the_columns():
     yy, xx = np.mgrid[0:h, 0:w]
     dark = ((xx // side).astype(int) + (yy // side).astype(int)) % 2 == 1
     whole = (yy >= side) & (yy < (h // side) * side)  # rows of squares the image holds whole
-    inner = cv2.erode(dark.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool) & whole
+    ink = cv2.erode(dark.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     paper = cv2.erode((~dark).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    assert (np.abs(gain[inner] / 3.2 - 1.0) < 0.1).mean() >= 0.9, np.percentile(gain[inner], [5, 50, 95])
+    for inner in (ink & whole, ink & ~whole):
+        assert (np.abs(gain[inner] / 3.2 - 1.0) < 0.1).mean() >= 0.9, np.percentile(gain[inner], [5, 50, 95])
     assert (gain[paper] == 1.0).mean() >= 0.99
 
 
@@ -1244,13 +1245,70 @@ def test_the_column_gain_leaves_a_shadow_band_a_depth_step_and_a_uniform_board_a
 def test_the_column_gain_decodes_a_fine_print_the_rows_cannot(calibration, ink):
     """A checkerboard of one-period squares at 3:1 and 8:1 (11.6 px at this half resolution: the
     5-px band at the print's edges leaves each square's middle): the colour-robust decoder at its
-    operating point keeps >= 70 % of it with the column gain and under half of that without, no
+    operating point keeps >= 95 % of it with the column gain and under half of that without, no
     stripe-order error either way, its mean column error with the gain under 0.2 projector px
-    (measured: 3:1 83.8 % / 0.12 px against 33.4 %; 8:1 74.7 % / 0.12 px against nothing)."""
+    (measured: 3:1 98.1 % / 0.13 px against 33.4 %; 8:1 97.1 % / 0.13 px against nothing; 83.8 and
+    74.7 % before the image's top and bottom rows closed the squares they cut)."""
     cap, col, band = _fine_checkerboard(ink)
     out = {columns: _kept_off_band(calibration, cap, col, band, albedo_columns=columns) for columns in (True, False)}
-    assert out[True][0] >= 0.7 and out[False][0] < 0.5 * out[True][0], out
+    assert out[True][0] >= 0.95 and out[False][0] < 0.5 * out[True][0], out
     assert out[True][1] < 0.2, out
+
+
+@pytest.mark.parametrize("tall", [0.6, 1.5])
+def test_the_frame_closes_a_cut_square_only_in_a_column_of_short_squares(tall):
+    """Bands of ink across the stripes, ``tall`` times the longest segment the column gain
+    flattens, paper of the same height between, the image's top 10 rows ink (a band the frame
+    cuts): where the bands are short the cut one takes their gain (~3, the flattened bands'); where
+    they are taller than the reach none is flattened down the columns, the cut one neither (the
+    steps along the rows are the ones to flatten such a print: flattened down the columns, the cut
+    squares of scenes/hard_chart_low.toml lost a few hundred pixels near the frame, 2026-12-01)."""
+    t = PARAMS_PERIOD_PX
+    img, _ = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
+    h = img.shape[0]
+    size = int(tall * color.column_segment_rows(t))
+    rows = np.arange(h) + 2 * size - 10  # rows 0-9 the end of an ink band
+    dark = (rows // size) % 2 == 1
+    assert dark[:10].all() and not dark[10]
+    rho = np.where(dark, np.float32(0.25), np.float32(0.8))[:, None, None] * np.ones_like(img[..., :1])
+    cap = _printed(img, rho.astype(np.float32), noise=0.002, seed=9)
+    gain = color.column_albedo_gain(unmix(cap, np.linalg.inv(K).astype(np.float32)), period_px=t, floor=0.04)
+    if tall < 1.0:
+        cut, inner = np.median(gain[:8]), np.median(gain[10 + size + 2 : 10 + 2 * size - 2])
+        assert cut == pytest.approx(inner, rel=0.05) and inner == pytest.approx(3.0, rel=0.1), (cut, inner)
+    else:
+        assert gain is None
+
+
+def test_column_step_pixels_mark_both_sides_of_a_step_of_the_column_gain():
+    """Two pixels each side of a step of the column gain by 2x or more, along a row and down a
+    column (its steps are placed to about a pixel, and the blur mixes one more); a smaller step
+    marks none; reach 1 is the straddling pair."""
+    gain = np.ones((9, 12), np.float32)
+    gain[:, 5:9] = 3.0  # steps along the rows between columns 4|5 and 8|9
+    gain[6:, 2] = 1.5  # a step down column 2 under the ratio
+    got = color.column_step_pixels(gain)
+    assert np.flatnonzero(got[0]).tolist() == [3, 4, 5, 6, 7, 8, 9, 10]
+    assert np.flatnonzero(color.column_step_pixels(gain, reach_px=1)[0]).tolist() == [4, 5, 8, 9]
+    assert not got[:, :2].any() and not got[:, 11].any()
+    tall = np.ones((10, 3), np.float32)
+    tall[4:] = 4.0  # a step down the columns between rows 3|4
+    assert color.column_step_pixels(tall).all(axis=1).tolist() == [False, False, True, True, True, True] + [False] * 4
+    assert not color.column_step_pixels(np.ones((1, 1), np.float32)).any()
+
+
+def test_the_decoder_leaves_out_the_pixels_beside_the_column_gains_steps(calibration):
+    """In a decode of the fine print the pixels beside the column gain's steps
+    (:func:`simbench.decode.color.column_step_pixels`) carry no certainty: left out of the phase
+    fit."""
+    cap, _, _ = _fine_checkerboard(0.25)
+    r = _robust_decode(calibration, cap)
+    gain = color.column_albedo_gain(
+        unmix(cap, np.linalg.inv(K).astype(np.float32)), period_px=PARAMS_PERIOD_PX, floor=0.04
+    )
+    beside = color.column_step_pixels(gain)
+    assert beside.mean() > 0.1
+    assert not r.stages["certainty"][beside].any()
 
 
 @pytest.mark.parametrize("print_rows", ["squares", "longest"])

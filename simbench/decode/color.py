@@ -28,6 +28,7 @@ __all__ = [
     "albedo_gain",
     "albedo_gain_reach_rows",
     "column_albedo_gain",
+    "column_step_pixels",
     "column_gain_reach_rows",
     "albedo_step_pixels",
     "fringe_confirmed",
@@ -457,6 +458,21 @@ ALBEDO_SKIP_RATIO = 2.0
 # MAE 0.474 -> 0.425 mm (1280x960), none > 5 mm wrong.  Held out: scenes/robust_printed.toml (16 spp)
 # 97.69 -> 97.91 % complete, MAE 0.366 -> 0.365 mm; step.toml and robust_staircase.toml within 0.01 %
 ALBEDO_SKIP_BRIGHT_PX = 3
+# the pixels either side of a step of the column gain left out of the phase fit
+# (column_step_pixels): its steps are placed to about a pixel and the blur mixes about one more.
+# Chosen on scenes/hard_chart_fine_mid.toml (the cached capture of `simbench reproduce
+# hard_scenes`, 1280x960, share of the scored pixels kept at the operating point, 2026-12-01):
+# albedo_step_pixels' alone 94.2 %, MAE 0.414 mm; 2 along the rows 96.3 % (0.330 mm); and down the
+# columns 97.5 % (0.326 mm); 3 each way 97.5 %, more pixels > 5 mm wrong (0.035 against 0.025 %).
+# Held out, charts rendered the same way and not kept (ink, squares, distance, pose): 0.2, 12 mm,
+# 0.9 m: 91.6 -> 96.3 %; 0.32, 8 mm, 0.8 m: 96.5 -> 98.2 %; 0.16, 11 mm, 1 m: 83.2 -> 92.0 %; the
+# same turned 20 deg about y: 72.0 -> 77.1 %; the 3:1 chart turned 3 deg in its plane: 86.5 ->
+# 94.8 %; 0.4, 10 mm, tilted 10 deg: 92.7 % either way; MAE down on each.  On the synthetic board
+# of tests/test_robust_decoder.py (no lens, no Bayer mosaic; a Gaussian blur or a Bayer mosaic
+# added, or the print turned a few degrees, change little) the same 2 px cost the 3:1 fine print
+# ~10 points of its pixels (its steps are placed exactly there, and the samples left out lower its
+# fringe SNR): what places the rendered chart's steps a pixel off is not pinned down (2026-12-01)
+COLUMN_SKIP_PX = 2
 # a segment whose fringe visibility (the proxy's standard deviation over its mean, rows averaged
 # over ALBEDO_EDGE_ROWS) is under this share of the most visible one within the window carries no
 # fringe - a projector shadow, not dark ink - and is not brightened (assumption: 0.5; measured
@@ -664,9 +680,10 @@ def column_gain_reach_rows(period_px: float) -> int:
     pixel's gain: the edges of the longest segment it flattens (:func:`column_segment_rows` + 1),
     the run of the boundary next to an edge's (1), the rows each edge's test averages beyond it
     and the pair it skips (:data:`COLUMN_EDGE_ROWS` + 1), the boundaries its peak test compares
-    it with (2), and one row more (:func:`albedo_step_pixels` compares each row's gain with the
-    next row's)."""
-    return column_segment_rows(period_px) + 1 + 1 + COLUMN_EDGE_ROWS + 1 + 2 + 1
+    it with (2), and the rows the pixels beside its steps are marked from
+    (:data:`COLUMN_SKIP_PX`; :func:`albedo_step_pixels` compares each row's gain with the next
+    row's, one of them)."""
+    return column_segment_rows(period_px) + 1 + 1 + COLUMN_EDGE_ROWS + 1 + 2 + COLUMN_SKIP_PX
 
 
 def _scaled_copy(a, b, rid, own, m, up_v, dn_v, *, of_max: bool = False):
@@ -734,7 +751,15 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
        brightened);
     3. the darker side's segment, down to the next print edge of its column, takes the gain
        ``1 / k`` (at most :data:`ALBEDO_MAX_GAIN`) where that edge is within
-       :func:`column_segment_rows`; a longer segment is left to the steps along the rows.
+       :func:`column_segment_rows`; a longer segment is left to the steps along the rows.  The
+       image's top or bottom row closes a segment too where the segment beyond its edge is
+       closed within reach (a square the frame cuts, in a column of squares that short: the
+       3:1 print of ``scenes/hard_chart_fine_mid.toml`` lost ~20 rows at each end of the image
+       without it; a print of taller squares is the steps along the rows' to flatten, its cut
+       squares too - flattened down the columns, 40 mm squares at 1.6:1 lost a few hundred
+       pixels near the frame).
+
+    The pixels beside the gain's steps hold both sides' light: :func:`column_step_pixels`.
 
     A pixel's gain is the larger of its segment's two edges'.  Shading, falloff and any change
     slower than the rows compared pass through; a stripe pattern that does not run down the
@@ -876,21 +901,16 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     gain = np.ones((h, w), np.float32)
     for sign in (1, -1):
         pick = down if sign == 1 else ~down
-        # the segment's first row, then row after row away from the edge until the next edge
+        # the segment's first row (the darker side's), and the brighter side's first row
         y0, x0, g0 = (by + 1)[pick] if sign == 1 else by[pick], bx[pick], g[pick]
-        end = np.full(y0.shape, -1)  # the segment's length in rows, where its far edge is in reach
-        alive = (y0 >= 0) & (y0 < h)
-        for r in range(longest):
-            y = y0 + sign * r
-            alive &= (y >= 0) & (y < h)
-            if not alive.any():
-                break
-            idx = np.flatnonzero(alive)
-            yi = y[idx]
-            at = (yi, x0[idx]) if sign == 1 else (np.maximum(yi - 1, 0), x0[idx])
-            far = stop[at] & ((yi > 0) | (sign == 1))
-            end[idx[far & edge[at]]] = r + 1
-            alive[idx[far]] = False
+        end, rim = _column_segments(y0, x0, sign, stop=stop, edge=edge, longest=longest)
+        if rim.any():
+            # a square the frame cuts is flattened where the column's print is fine: the
+            # segment beyond its edge is a flattened one's length (a print of squares taller
+            # than the reach is the steps along the rows' to flatten, the cut one too)
+            y1 = by[pick][rim] if sign == 1 else (by + 1)[pick][rim]
+            other, _ = _column_segments(y1, x0[rim], -sign, stop=stop, edge=edge, longest=longest)
+            end[np.flatnonzero(rim)[other <= 0]] = -1
         # (the segments of one direction do not overlap: the next edge ends each)
         done = end > 0
         lengths = end[done]
@@ -901,6 +921,79 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         np.maximum.at(gain, (rows, cols), np.repeat(g0[done], lengths))
     # (no segment closed by a print edge: nothing to flatten)
     return gain if (gain != 1.0).any() else None
+
+
+def _column_segments(
+    y0: np.ndarray, x0: np.ndarray, sign: int, *, stop: np.ndarray, edge: np.ndarray, longest: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The segments down (``sign`` 1) or up (-1) the columns ``x0`` from rows ``y0`` to the next
+    step (``stop[y]``: a step between rows y and y + 1): their lengths in rows where that step is
+    a print edge (``edge``) or the image's border within ``longest`` rows, else -1; and whether
+    the border ended each (a square the frame cuts: no other step between)."""
+    h = stop.shape[0] - 1
+    end = np.full(y0.shape, -1)
+    rim = np.zeros(y0.shape, bool)
+    alive = (y0 >= 0) & (y0 < h)
+    for r in range(longest):
+        y = y0 + sign * r
+        alive &= (y >= 0) & (y < h)
+        if not alive.any():
+            break
+        idx = np.flatnonzero(alive)
+        yi = y[idx]
+        at = (yi, x0[idx]) if sign == 1 else (np.maximum(yi - 1, 0), x0[idx])
+        far = stop[at] & ((yi > 0) | (sign == 1))
+        end[idx[far & edge[at]]] = r + 1
+        alive[idx[far]] = False
+        border = ~far & (yi == (h - 1 if sign == 1 else 0))
+        end[idx[border]] = r + 1
+        rim[idx[border]] = True
+        alive[idx[border]] = False
+    return end, rim
+
+
+def column_step_pixels(
+    gain: np.ndarray, *, ratio: float = ALBEDO_SKIP_RATIO, reach_px: int = COLUMN_SKIP_PX
+) -> np.ndarray:
+    """The pixels within ``reach_px`` of a step of :func:`column_albedo_gain` by ``ratio`` or more,
+    on both sides, along the rows and down the columns (ours; left out of the phase fit as
+    :func:`albedo_step_pixels`' are, which mark the column gain's steps too, but closer).
+
+    The column gain's steps are placed to about a pixel - along a row where its runs of edges
+    end, down a column at a contrast peak of row means - and the camera's blur (the bilinear
+    demosaicing's neighbour rows and columns, the lens) mixes about a pixel more each side: a
+    pixel there takes one side's gain on light partly the other's, off by up to the ratio
+    (:data:`COLUMN_SKIP_PX`).
+
+    Parameters
+    ----------
+    gain : ndarray, shape (H, W), float32 >= 1; :func:`column_albedo_gain`'s
+    ratio : float
+        The step, as the larger gain over the smaller, from which the pixels are marked.
+    reach_px : int >= 1
+        Pixels marked on each side of a step (1: the pair straddling it).
+
+    Returns
+    -------
+    ndarray, shape (H, W), bool
+    """
+    from simbench import validate as v
+
+    reach_px = v.integer(reach_px, "reach_px", lo=1)
+    g = np.asarray(gain, np.float32)
+    r = np.float32(ratio)
+    out = np.zeros(g.shape, bool)
+    for axis in (0, 1):
+        n = g.shape[axis]
+        if n < 2:
+            continue
+        a, b = np.moveaxis(g, axis, 0)[1:], np.moveaxis(g, axis, 0)[:-1]
+        step = (a >= r * b) | (b >= r * a)  # step[i]: between pixels i and i + 1
+        view = np.moveaxis(out, axis, 0)
+        for s in range(min(reach_px, n - 1)):
+            view[s + 1 :] |= step[: n - 1 - s]  # pixels i + 1 + s, on the far side
+            view[: n - 1 - s] |= step[s:]  # pixels i - s, on the near side
+    return out
 
 
 def albedo_step_pixels(

@@ -13,11 +13,13 @@ import numpy as np
 
 from simbench.decode import _kernels
 from simbench.decode.color import (
+    COLUMN_SKIP_PX,
     color_code,
     mixing_matrix,
     albedo_gain,
     albedo_step_pixels,
     column_albedo_gain,
+    column_step_pixels,
     normalize_channels,
     code_at_row_ends,
     normalized_color_code,
@@ -422,13 +424,17 @@ def _columns(
                     halo = fit_halo_rows(params, rig) + code_pool_rows(params, rig)
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
-                    # before the cut: the step test down a column compares the fit's first and
-                    # last rows with the rows beyond them (the band carries one more for it)
-                    wide = slice(max(0, fit.start - 1), min(gain.shape[0], fit.stop + 1))
+                    # before the cut: the step tests down a column mark the fit's first and last
+                    # rows from the rows beyond them (the band carries them: column_gain_reach_rows)
+                    beyond = 1 if columns is None else COLUMN_SKIP_PX
+                    wide = slice(max(0, fit.start - beyond), min(gain.shape[0], fit.stop + beyond))
                     # a gain of exactly 1 (no step near: most bands of most scenes) has no step to
                     # skip beside (~3.5 ms a band at the paper's resolution saved)
                     if params.albedo_edge_skip and not (gain[wide] == 1.0).all():
-                        mixed = albedo_step_pixels(gain[wide])[fit.start - wide.start :][: fit.stop - fit.start]
+                        mixed = albedo_step_pixels(gain[wide])
+                        if columns is not None:
+                            mixed |= column_step_pixels(columns[wide])
+                        mixed = mixed[fit.start - wide.start :][: fit.stop - fit.start]
                     image, gain = image[fit], gain[fit].copy()
                     raw = raw[fit].copy()
                     rgb = raw if unmixing is None else rgb[fit].copy()
