@@ -281,14 +281,15 @@ def test_robust_decoder_bridges_printed_edges(calibration, mode):
     assert out["chart", bridged] >= 0.999 and out["chart", 0.0] >= 0.999, out
 
 
-def _checkerboard(ink: float, *, square_periods: float = 3.4, noise=0.002, seed=6):
+def _checkerboard(ink: float, *, square_periods: float = 3.4, slope: float = 0.0, noise=0.002, seed=6):
     """A grey checkerboard printed on the board (paper 0.8): steps along and across the stripes,
-    squares a few periods wide, so that the normalisation window always holds a step."""
+    squares a few periods wide, so that the normalisation window always holds a step; ``slope``
+    shears its rows of squares (rows per column: a print turned about the vertical)."""
     img, col = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
     h, w = col.shape
     side = square_periods * PARAMS_PERIOD_PX
     yy, xx = np.mgrid[0:h, 0:w]
-    dark = ((xx // side).astype(int) + (yy // side).astype(int)) % 2 == 1
+    dark = ((xx // side).astype(int) + ((yy - slope * xx) // side).astype(int)) % 2 == 1
     rho = np.where(dark, np.float32(ink), np.float32(0.8))[..., None].astype(np.float32)
     cap = _printed(img, rho, noise=noise, seed=seed)
     edge = np.zeros((h, w), bool)
@@ -1184,11 +1185,11 @@ def test_the_pixels_beside_a_shadow_score_zero_where_the_cut_fringe_biases_their
     assert out[False, False][2] - 0.05 < out[True, True][2] <= min(out[True, False][2], out[False, True][2]), out
 
 
-def _fine_checkerboard(ink: float, *, square_periods: float = 1.06, noise=0.002, seed=8):
+def _fine_checkerboard(ink: float, *, square_periods: float = 1.06, slope: float = 0.0, noise=0.002, seed=8):
     """scenes/hard_chart_fine_mid.toml's print on the synthetic board: a checkerboard whose
     squares are about one period wide, too narrow for the steps along the rows
     (ALBEDO_MIN_SEGMENT_PERIODS), each row of squares crossing the stripes."""
-    return _checkerboard(ink, square_periods=square_periods, noise=noise, seed=seed)
+    return _checkerboard(ink, square_periods=square_periods, slope=slope, noise=noise, seed=seed)
 
 
 def test_the_column_gain_flattens_a_fine_print_down_the_columns():
@@ -1239,13 +1240,11 @@ def test_the_column_gain_flattens_a_fine_print_whose_edges_slant(slope):
     13, 70.8 % at 1 in 8).  (The rendered turned chart's unflagged wrong depths are not the slant
     alone: its worst patch is a square whose bottom edge peaks a boundary lower in the fringe's
     trough over its last 6 columns - too short a run to count - so those columns keep gain 1.)"""
-    img, col = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
-    h, w = col.shape
+    cap, _, _ = _fine_checkerboard(0.25, slope=slope)
+    h, w = cap.shape[:2]
     side = 1.06 * PARAMS_PERIOD_PX
     yy, xx = np.mgrid[0:h, 0:w]
     dark = ((xx // side).astype(int) + ((yy - slope * xx) // side).astype(int)) % 2 == 1
-    rho = np.where(dark, np.float32(0.25), np.float32(0.8))[..., None].astype(np.float32)
-    cap = _printed(img, rho, noise=0.002, seed=8)
     gain = color.column_albedo_gain(
         unmix(cap, np.linalg.inv(K).astype(np.float32)), period_px=PARAMS_PERIOD_PX, floor=0.04
     )
