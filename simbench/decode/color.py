@@ -655,6 +655,18 @@ COLUMN_MIN_COPY_SHARE = 0.75
 # motion study's bust, 320x240, had its shading flattened at a few runs of 2-4 columns) ...
 COLUMN_MIN_RUN_PERIODS = 0.4
 COLUMN_MIN_RUN_PX = 8
+# ... its length counting every column, its ratios not the COLUMN_RUN_END_PX first and last: there
+# the square beside along the row is part of the light (the camera's blur - lens and demosaicing,
+# about a pixel; assumption: 1 - on scenes/hard_chart_fine_turned.toml's 22-px squares two mixed
+# columns at each end of a run of ~20 failed the share test of a print's edge in one channel, and
+# the square kept gain 1 over its last columns: a step inside the ink that the phase fit read as
+# fringe, 5-7 mm wrong at confidences over the operating point) ...
+COLUMN_RUN_END_PX = 1
+# ... an edge at boundary y counting for the runs of the rows y - 1, y and y + 1 (a print's edge that
+# slants in the image - a print turned about the vertical - or whose peak the noise moves steps from
+# boundary to boundary along the row; at most one edge of a column is within 3 boundaries: their
+# peak test) ...
+COLUMN_RUN_ROWS = 3
 # ... whose brighter side's light varies along it by at least this share of its mean (a run on
 # a fringe's flat crest, or under strong ambient light, cannot show a shift; assumption: 0.1)
 COLUMN_MIN_VARIATION = 0.1
@@ -680,21 +692,41 @@ def column_segment_rows(period_px: float) -> int:
 def column_gain_reach_rows(period_px: float) -> int:
     """How many rows above and below a pixel :func:`column_albedo_gain` reads to make that
     pixel's gain: the edges of the longest segment it flattens (:func:`column_segment_rows` + 1),
-    the run of the boundary next to an edge's (1), the rows each edge's test averages beyond it
-    and the pair it skips (:data:`COLUMN_EDGE_ROWS` + 1), the boundaries its peak test compares
-    it with (2), and the rows the pixels beside its steps are marked from
-    (:data:`COLUMN_SKIP_PX`; :func:`albedo_step_pixels` compares each row's gain with the next
-    row's, one of them)."""
-    return column_segment_rows(period_px) + 1 + 1 + COLUMN_EDGE_ROWS + 1 + 2 + COLUMN_SKIP_PX
+    the runs an edge counts for and the edges they hold (2 x :data:`COLUMN_RUN_ROWS` // 2), the
+    rows each edge's test averages beyond it and the pair it skips (:data:`COLUMN_EDGE_ROWS` + 1),
+    the boundaries its peak test compares it with (2), and the rows the pixels beside its steps
+    are marked from (:data:`COLUMN_SKIP_PX`; :func:`albedo_step_pixels` compares each row's gain
+    with the next row's, one of them)."""
+    runs = 2 * (COLUMN_RUN_ROWS // 2)
+    return column_segment_rows(period_px) + 1 + runs + COLUMN_EDGE_ROWS + 1 + 2 + COLUMN_SKIP_PX
 
 
-def _scaled_copy(a, b, rid, own, m, up_v, dn_v, *, of_max: bool = False):
+def _median_share(qa: np.ndarray, ru: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per run (``ru`` < ``m``): the median ``k`` of the ratios ``qa`` and the share of them within
+    :data:`COLUMN_COPY_RATIO` of it (NaN where a run has none)."""
+    n = np.bincount(ru, minlength=m).astype(np.float64)
+    # the median (beside a square's edge along the row a column's dark side holds the
+    # neighbour's light: an outlier a median ignores)
+    order_ = np.lexsort((qa, ru))
+    first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
+    k = np.full(m, np.nan)
+    has = n > 0
+    k[has] = qa[order_][first[has] + (n[has].astype(np.int64) - 1) // 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        copy = np.abs(np.log(qa / k[ru])) <= np.log(COLUMN_COPY_RATIO)
+        share = np.bincount(ru, copy, m) / n
+    return k, share
+
+
+def _scaled_copy(a, b, rid, own, m, up_v, dn_v, *, inner, of_max: bool = False):
     """Per run (``rid`` < ``m``) of :func:`column_albedo_gain`: the median ``k`` of its columns'
     dark-over-bright ratios ``a / b``, the share of them within :data:`COLUMN_COPY_RATIO` of it
     and their count - over the columns whose own darker side is the run's (``own``) and that are
     not in a fringe's trough (both sides ``up_v``, ``dn_v`` under :data:`COLUMN_TROUGH_SHARE` of
-    the run's brighter side's mean, or with ``of_max`` its brightest column), per column those
-    columns and the troughs', and per run that level."""
+    the run's brighter side's mean, or with ``of_max`` its brightest column); ``k`` and the share
+    those of the run's ``inner`` columns instead where more of theirs are within reach
+    (:data:`COLUMN_RUN_END_PX`) - per column those columns and the troughs', and per run that
+    level."""
     if of_max:
         level = np.zeros(m)
         np.maximum.at(level, rid[own], b[own])
@@ -708,17 +740,12 @@ def _scaled_copy(a, b, rid, own, m, up_v, dn_v, *, of_max: bool = False):
     ru = rid[use]
     qa = a[use] / b[use]
     n = np.bincount(ru, minlength=m).astype(np.float64)
-    # the median (beside a square's edge along the row a column's dark side holds the
-    # neighbour's light: an outlier a median ignores)
-    order_ = np.lexsort((qa, ru))
-    first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
-    k = np.full(m, np.nan)
-    has = n > 0
-    k[has] = qa[order_][first[has] + (n[has].astype(np.int64) - 1) // 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        copy = np.abs(np.log(qa / k[ru])) <= np.log(COLUMN_COPY_RATIO)
-        share = np.bincount(ru, copy, m) / n
-    return k, share, n, use, trough, level
+    k, share = _median_share(qa, ru, m)
+    mid = inner[use]
+    k_in, share_in = _median_share(qa[mid], ru[mid], m)
+    with np.errstate(invalid="ignore"):
+        better = share_in > share
+    return np.where(better, k_in, k), np.where(better, share_in, share), n, use, trough, level
 
 
 def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np.ndarray | None:
@@ -814,20 +841,46 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         peak[:-d] &= contrast[:-d] >= contrast[d:]
     if not peak.any():
         return None
-    # runs along the rows: consecutive edges with the same darker side, an edge counting for the
-    # boundary above it too (noise moves a step's peak by a boundary from column to column)
-    near = peak.copy()
-    near[:-1] |= peak[1:]
-    sel = np.flatnonzero(near.ravel())
+    # runs along the rows: the edges of consecutive columns with the same darker side, an edge at
+    # boundary y counting for the runs of rows y - 1 .. y + 1 (COLUMN_RUN_ROWS) and judged there
+    # with its own boundary's light
+    pk = np.flatnonzero(peak.ravel())
+    up_p, dn_p = above.ravel()[pk], below.ravel()[pk]
     # each column's own darker side, but in a fringe's trough (dark on both sides, its side is
     # noise) the side of the columns either side
-    up_f, dn_f = above.ravel()[sel], below.ravel()[sel]
-    with np.errstate(invalid="ignore"):
-        dim = (up_f + dn_f) < np.float32(COLUMN_DIM_SHARE) * both.ravel()[sel]
-    down = np.where(dim, diff.ravel()[sel] > 0, dn_f < up_f)  # the run's darker side
-    start = np.ones(sel.size, bool)
-    start[1:] = ~((sel[1:] == sel[:-1] + 1) & (sel[1:] % w != 0) & (down[1:] == down[:-1]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dim = (up_p + dn_p) < np.float32(COLUMN_DIM_SHARE) * both.ravel()[pk]
+        # (the two sides' light closer than a print edge's ratio: a trough not that dark, whose side
+        # is noise too; it takes the side of the sure columns either side along its run)
+        unsure = np.maximum(up_p, dn_p) < np.float32(ALBEDO_EDGE_RATIO) * np.minimum(up_p, dn_p)
+    down_p = np.where(dim, diff.ravel()[pk] > 0, dn_p < up_p)
+    shifts = np.arange(COLUMN_RUN_ROWS) - COLUMN_RUN_ROWS // 2
+    key = (pk[None, :] - shifts[:, None] * w).ravel()  # the run's row, the edge's column
+    of = np.tile(np.arange(pk.size), shifts.size)  # the edge
+    shift = np.repeat(shifts, pk.size)  # its boundary less the run's row
+    keep = (key >= 0) & (key < peak.size)
+    # (a column's keys are its edges', 3 boundaries apart at least: no two alike)
+    order_ = np.argsort(key[keep], kind="stable")
+    key, of, shift = key[keep][order_], of[keep][order_], shift[keep][order_]
+    sel = pk[of]
+    up_f, dn_f, down = up_p[of], dn_p[of], down_p[of]
+    joined = np.zeros(key.size, bool)  # the column after the one before, in the same row
+    joined[1:] = (key[1:] == key[:-1] + 1) & (key[1:] % w != 0)
+    unsure = unsure[of]
+    if unsure.any():
+        at = np.arange(key.size)
+        chain = np.cumsum(~joined)
+        left = np.maximum.accumulate(np.where(unsure, -1, at))
+        right = np.minimum.accumulate(np.where(unsure, key.size, at)[::-1])[::-1]
+        li, ri = np.maximum(left, 0), np.minimum(right, key.size - 1)
+        both_sides = (left >= 0) & (chain[li] == chain) & (right < key.size) & (chain[ri] == chain)
+        down = np.where(unsure & both_sides & (down[li] == down[ri]), down[li], down)
+    start = ~joined
+    start[1:] |= down[1:] != down[:-1]
     rid = np.cumsum(start) - 1
+    firsts = np.flatnonzero(start)
+    place = np.arange(rid.size) - firsts[rid]
+    inner = (place >= COLUMN_RUN_END_PX) & (place < np.diff(np.append(firsts, rid.size))[rid] - COLUMN_RUN_END_PX)
     up_v, dn_v = up_f.astype(np.float64), dn_f.astype(np.float64)
     # the column's own darker side: beside a square's edge along the row, the run's side is its
     # neighbour's, and in a fringe's trough, dark on both sides, either
@@ -835,7 +888,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     a = np.where(down, dn_v, up_v)  # the darker side's light
     b = np.where(down, up_v, dn_v)
     m = int(rid.max()) + 1
-    k, share, n, use, trough, _ = _scaled_copy(a, b, rid, own, m, up_v, dn_v)
+    k, share, n, use, trough, _ = _scaled_copy(a, b, rid, own, m, up_v, dn_v, inner=inner)
     with np.errstate(divide="ignore", invalid="ignore"):
         bu = b[use]
         sb, sbb = np.bincount(rid[use], bu, m), np.bincount(rid[use], bu * bu, m)
@@ -857,7 +910,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     # each colour channel a scaled copy too (its own scale: a coloured ink): across a depth edge
     # whose fringe happens to line up, the code stripes do not (a shifted De Bruijn window)
     part = ok[rid]
-    sub, rsub, dsub, osub = sel[part], rid[part], down[part], own[part]
+    sub, rsub, dsub, osub, isub = sel[part], rid[part], down[part], own[part], inner[part]
     rows_up = ys[sub // w][:, None] - np.arange(1, n_rows + 1)[None, :]
     rows_dn = ys[sub // w][:, None] + 1 + np.arange(1, n_rows + 1)[None, :]
     cols = (sub % w)[:, None]
@@ -866,7 +919,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         cd = src[rows_dn, cols, c].mean(axis=1, dtype=np.float64)
         ca, cb = np.where(dsub, cd, cu), np.where(dsub, cu, cd)
         # (a code channel is dark across the other code's stripes: its level is its crest's)
-        _, share_c, n_c, _, _, crest_c = _scaled_copy(ca, cb, rsub, osub, m, cu, cd, of_max=True)
+        _, share_c, n_c, _, _, crest_c = _scaled_copy(ca, cb, rsub, osub, m, cu, cd, inner=isub, of_max=True)
         # (a channel the run's stripes hardly light - a code channel across the other code's
         # stripes - cannot judge)
         judged = (n_c >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX)) & (crest_c >= floor)
@@ -874,22 +927,15 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
             ok &= ~judged | (share_c >= COLUMN_MIN_COPY_SHARE)
     with np.errstate(divide="ignore"):
         run_gain = np.where(ok, np.minimum(1.0 / k, ALBEDO_MAX_GAIN), 1.0).astype(np.float32)
-    # an edge is a print's where its run is, or the run of the boundary above it (its column's own
-    # darker side there, or a trough's); its gain is that run's
+    # an edge is a print's where one of its runs is (its column's own darker side there, or a
+    # trough's): its own row's, else the row above's, else below's; its gain is that run's
     fit = ok[rid] & (own | trough)
-    fit_gain = run_gain[rid]
-    mine = fit & peak.ravel()[sel]
-    # the run of the boundary above a peak (near holds it: sel has it)
-    up_idx = np.searchsorted(sel, sel - w)
-    has_up = (sel >= w) & (up_idx < sel.size)
-    has_up[has_up] &= sel[up_idx[has_up]] == sel[has_up] - w
-    by_above = np.zeros(sel.size, bool)
-    by_above[has_up] = fit[up_idx[has_up]]
-    by_above &= peak.ravel()[sel] & ~mine
-    pick = np.flatnonzero(mine | by_above)
+    cand = np.flatnonzero(fit)
+    cand = cand[np.lexsort((shift[cand], np.abs(shift[cand]), of[cand]))]
+    pick = cand[np.unique(of[cand], return_index=True)[1]]
     if pick.size == 0:
         return None
-    g = np.where(mine[pick], fit_gain[pick], fit_gain[np.where(has_up, up_idx, 0)[pick]])
+    g = run_gain[rid[pick]]
     down = down[pick]
     chosen = sel[pick]
     row, bx = np.divmod(chosen, w)
