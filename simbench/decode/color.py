@@ -678,6 +678,16 @@ COLUMN_TROUGH_SHARE = 0.25
 # along the row (a quarter period) takes the darker side of its neighbours', not its own (deep in a
 # fringe's trough its own is noise; assumption: 0.1)
 COLUMN_DIM_SHARE = 0.1
+# a run's darker-over-brighter ratio of the rows next to the skipped pair (half of each side's
+# COLUMN_EDGE_ROWS) over that of the rows beyond them: a print's edge is a step, its sides flat
+# down the column (that ratio ~1), where a ramp - a highlight's lobe fading, a glossy part's
+# sheen, shading - changes within the sides as across them: with 4 rows a side, the near
+# halves' centres 4 rows apart, the far halves' 8 and the sides' 6, by (8 - 4) / 6 = 2/3 of the
+# step in logarithm.  A run whose median ratio is over COLUMN_RAMP_SHARE of its step is left
+# alone (assumption: 1/3, halfway - a step the blur spreads ~25 % of into the row beyond the
+# pair still passes; scenes/specular.toml's aluminium sphere, 640 x 480, had a 13-row segment of
+# its highlight's rim flattened by 1.8x and lost ~2 % of its pixels beside the gain's steps)
+COLUMN_RAMP_SHARE = 1.0 / 3.0
 # a segment down a column between two print edges is flattened when it is at most this many
 # periods long (assumption: 2 - longer segments are as wide as the steps along the rows need,
 # ALBEDO_MIN_SEGMENT_PERIODS, in every print of squares; the decoder's row bands carry the rows)
@@ -775,9 +785,11 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
        :data:`COLUMN_MIN_RUN_PERIODS` periods and :data:`COLUMN_MIN_RUN_PX` columns, the brighter
        side varying by :data:`COLUMN_MIN_VARIATION` or more - a projector shadow's border leaves no
        fringe on its dark side, and a depth edge shifts the fringe (and, where that lines up, the
-       code stripes) - where ``1 / k >=`` :data:`ALBEDO_EDGE_RATIO` and the darker side's crest,
+       code stripes) - where ``1 / k >=`` :data:`ALBEDO_EDGE_RATIO`, the darker side's crest,
        ``k`` times the brighter side's, reaches ``floor`` (a darker print brightened is its noise
-       brightened);
+       brightened), and the sides are flat down the column: the ratio of their halves next to
+       the boundary over that of their halves beyond, the run's median, at most ``(1 / k) **``
+       :data:`COLUMN_RAMP_SHARE` (a ramp - a highlight's lobe - is a scaled copy too);
     3. the darker side's segment, down to the next print edge of its column, takes the gain
        ``1 / k`` (at most :data:`ALBEDO_MAX_GAIN`) where that edge is within
        :func:`column_segment_rows`; a longer segment is left to the steps along the rows.  The
@@ -889,6 +901,21 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     b = np.where(down, up_v, dn_v)
     m = int(rid.max()) + 1
     k, share, n, use, trough, _ = _scaled_copy(a, b, rid, own, m, up_v, dn_v, inner=inner)
+    # the sides' halves next to the pair and beyond it (a ramp's light changes within the sides)
+    half = n_rows // 2
+    pairs = total[: h - half + 1].copy()
+    for i in range(1, half):
+        pairs += total[i : h - half + 1 + i]
+    by_e, bx_e = ys[sel[use] // w], sel[use] % w
+    d_use = down[use]
+    up_near, up_far = pairs[by_e - half, bx_e], pairs[by_e - n_rows, bx_e]
+    dn_near, dn_far = pairs[by_e + 2, bx_e], pairs[by_e + 2 + n_rows - half, bx_e]
+    a_near, a_far = np.where(d_use, dn_near, up_near), np.where(d_use, dn_far, up_far)
+    b_near, b_far = np.where(d_use, up_near, dn_near), np.where(d_use, up_far, dn_far)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ramp_c = (a_near.astype(np.float64) * b_far) / (b_near.astype(np.float64) * a_far)
+    ramp_c = np.where(np.isfinite(ramp_c), ramp_c, np.inf)
+    ramp, _ = _median_share(ramp_c, rid[use], m)
     with np.errstate(divide="ignore", invalid="ignore"):
         bu = b[use]
         sb, sbb = np.bincount(rid[use], bu, m), np.bincount(rid[use], bu * bu, m)
@@ -904,6 +931,8 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
             & (variation >= COLUMN_MIN_VARIATION)
             & (k > 0)
             & (k * ALBEDO_EDGE_RATIO <= 1.0)
+            # (a step, not a ramp: ramp <= (1 / k) ** COLUMN_RAMP_SHARE)
+            & (np.log(ramp) <= COLUMN_RAMP_SHARE * -np.log(k))
         )
     if not ok.any():
         return None
