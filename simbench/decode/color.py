@@ -902,14 +902,19 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     m = int(rid.max()) + 1
     k, share, n, use, trough, _ = _scaled_copy(a, b, rid, own, m, up_v, dn_v, inner=inner)
     # the sides' halves next to the pair and beyond it (a ramp's light changes within the sides)
+    # (read at the run's edges only; summed in the rows' order, as the side means are)
     half = n_rows // 2
-    pairs = total[: h - half + 1].copy()
-    for i in range(1, half):
-        pairs += total[i : h - half + 1 + i]
     by_e, bx_e = ys[sel[use] // w], sel[use] % w
     d_use = down[use]
-    up_near, up_far = pairs[by_e - half, bx_e], pairs[by_e - n_rows, bx_e]
-    dn_near, dn_far = pairs[by_e + 2, bx_e], pairs[by_e + 2 + n_rows - half, bx_e]
+
+    def rows_sum(first: np.ndarray) -> np.ndarray:
+        out = total[first, bx_e].copy()
+        for i in range(1, half):
+            out += total[first + i, bx_e]
+        return out
+
+    up_near, up_far = rows_sum(by_e - half), rows_sum(by_e - n_rows)
+    dn_near, dn_far = rows_sum(by_e + 2), rows_sum(by_e + 2 + n_rows - half)
     a_near, a_far = np.where(d_use, dn_near, up_near), np.where(d_use, dn_far, up_far)
     b_near, b_far = np.where(d_use, up_near, dn_near), np.where(d_use, up_far, dn_far)
     with np.errstate(divide="ignore", invalid="ignore"):
