@@ -20,6 +20,7 @@ from simbench.decode.color import (
     albedo_step_pixels,
     column_albedo_gain,
     column_step_pixels,
+    mixed_pixel_gain,
     normalize_channels,
     code_at_row_ends,
     normalized_color_code,
@@ -369,6 +370,7 @@ def _columns(
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
     skipped = mixed = None  # the albedo-edge skip's pixels, and the certainty of those it leaves out
+    extrema = None  # the gain the normalisation's running extrema read, where not the gain
     if _fused_front_end(params, unmixing, image):
         # the same bits as the general path below, in one pass over the capture
         with stage("front end (float, lit/clipped, Eq. 9, Eq. 13)"):
@@ -434,7 +436,11 @@ def _columns(
                         mixed = albedo_step_pixels(gain[wide])
                         if columns is not None:
                             mixed |= column_step_pixels(columns[wide])
+                        # nor do they lift the normalisation's running extrema (mixed_pixel_gain; a
+                        # mixed pixel's lower side is within `beyond` of it)
+                        extrema = mixed_pixel_gain(gain[wide], mixed, reach_px=beyond)
                         mixed = mixed[fit.start - wide.start :][: fit.stop - fit.start]
+                        extrema = extrema[fit.start - wide.start :][: fit.stop - fit.start]
                     image, gain = image[fit], gain[fit].copy()
                     raw = raw[fit].copy()
                     rgb = raw if unmixing is None else rgb[fit].copy()
@@ -443,7 +449,7 @@ def _columns(
                         gain = None
                         normed, span = normed[fit].copy(), span[fit].copy()
                     else:
-                        normed, span = normalize_channels(rgb, gain=gain, **norm)
+                        normed, span = normalize_channels(rgb, gain=gain, extrema_gain=extrema, **norm)
         with stage("lit and clipped pixels"):
             if image.dtype in _FUSED_DTYPES and image.flags.c_contiguous:
                 # the fused front end's lit and clipped pixels (the same bits as certainty_map);
