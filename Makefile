@@ -33,16 +33,17 @@ reproduce: setup
 ablations: setup
 	$(VENV)/bin/simbench ablate builtin --fresh --workers 2
 
-# The CI benchmark: the quick run (with the hard scenes' quick form, not part of `all`) checked
+# The CI benchmark: the quick run (with the hard scenes' quick form and the robust decoder's stage study
+# on them, not part of `all`) checked
 # against the committed thresholds, on 2 worker processes
 # (the same files as one; from a cold cache 120 s on 2 cores, warm 9.5 s not 13.9 s in one process).
 quick: setup
-	$(VENV)/bin/simbench reproduce all hard_scenes --quick --workers 2 --out .cache/quick --check results/quick/thresholds.toml
+	$(VENV)/bin/simbench reproduce all hard_scenes robust_stages --quick --workers 2 --out .cache/quick --check results/quick/thresholds.toml
 
 # Re-measure the quick run into results/quick and re-derive its thresholds (for an intended
 # change only; say why in the commit).
 quick-thresholds: setup
-	$(VENV)/bin/simbench reproduce all hard_scenes --quick --workers 2 --write-thresholds results/quick/thresholds.toml
+	$(VENV)/bin/simbench reproduce all hard_scenes robust_stages --quick --workers 2 --write-thresholds results/quick/thresholds.toml
 
 # Style: ruff's lint rules and formatting (pyproject.toml [tool.ruff], line length 120).
 lint: setup

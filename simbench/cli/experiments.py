@@ -266,6 +266,8 @@ def _cmd_ablate(args) -> int:
 def _cmd_bench(args) -> int:
     from simbench.experiments.bench import run_decode_benchmark, stage_table
 
+    if args.stages:
+        return _bench_stages(args)
     rig = None
     if args.rig is not None:
         from simbench.rig import load_rig
@@ -323,6 +325,44 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _bench_stages(args) -> int:
+    """``bench --robust --stages``: the colour-robust decoder timed whole and with each stage off."""
+    from simbench.experiments.bench import run_stage_benchmark
+
+    if not args.robust or args.device != "proposed":
+        raise ValueError("--stages times the colour-robust decoder's stages: give --robust (the proposed decoder)")
+    clash = [
+        flag
+        for flag, given in (
+            ("--rig", args.rig is not None),
+            ("--mode", args.mode is not None),
+            ("--decoder", bool(args.decoder)),
+            ("--max-ms", args.max_ms is not None),
+            ("--max-ratio", args.max_ratio is not None),
+        )
+        if given
+    ]
+    if clash:
+        raise ValueError(f"--stages times the variants of simbench.experiments.robust_stages alone, not with {clash}")
+    res = run_stage_benchmark(repeats=args.repeats, scene=args.scene)
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    w, h = res["size_wh"]
+    print(
+        f"colour-robust decoder of one {w}x{h} capture ({res['scene']}), whole and with each stage off "
+        f"(simbench.experiments.robust_stages), the decoders taking turns: median over {res['repeats']} rounds "
+        f"({res['threads']} threads)"
+    )
+    named = {"none": "none (the whole decoder)", "paper": "all (the paper's decoder)"}
+    names = [named.get(r["stage_off"], r["stage_off"]) for r in res["rows"]]
+    width = max(map(len, names))
+    print(f"{'stage off':<{width}}  {'median ms':>9}  {'saved ms':>8}")
+    for name, r in zip(names, res["rows"]):
+        print(f"{name:<{width}}  {r['median_ms']:9.1f}  {r['saved_ms']:8.1f}")
+    return 0
+
+
 def add_parsers(sub, kw: dict) -> None:
     """Add this module's commands to the command line's subparsers."""
     from simbench.systems import DEFAULT_SYSTEM
@@ -350,8 +390,9 @@ def add_parsers(sub, kw: dict) -> None:
         default=["all"],
         # listed here, not imported (every command would pay the experiments' imports, ~45 ms);
         # tests/test_cli.py checks the list against simbench.experiments.reproduce.TARGETS
-        help="table1, table3, fig9, figures, budget, render_noise, flatness, motion, hard_scenes or all (default: "
-        "every target but hard_scenes: ~42-60 min from an empty cache on 2 cores, README.md's measurements)",
+        help="table1, table3, fig9, figures, budget, render_noise, flatness, motion, hard_scenes, robust_stages or all "
+        "(default: every target but hard_scenes and robust_stages: ~42-60 min from an empty cache on 2 cores, "
+        "README.md's measurements)",
     )
     s.add_argument("--quick", action="store_true", help="640x480, 4 spp, 3 recordings per depth (the CI benchmark)")
     s.add_argument("--out", default=None, help="output folder (default: results, or results/quick with --quick)")
@@ -491,6 +532,12 @@ def add_parsers(sub, kw: dict) -> None:
         default=None,
         help="with --robust: time the paper decoder alongside and fail when the colour-robust decoder's median "
         "exceeds this multiple of its median (a guard the machine's speed does not move)",
+    )
+    s.add_argument(
+        "--stages",
+        action="store_true",
+        help="with --robust: time the colour-robust decoder whole, with each of its stages off (the variants of "
+        "`simbench reproduce robust_stages`) and the paper's decoder, taking turns; --repeats rounds",
     )
     s.add_argument("--json", action="store_true", help="print the timings as JSON")
     s.set_defaults(fn=_cmd_bench)

@@ -30,7 +30,15 @@ from simbench.systems import get_system, system_names
 from simbench.systems.proposed import BENCH_SCENES
 from simbench.systems.proposed import BENCH_SHADOW as SHADOW
 
-__all__ = ["benchmark_inputs", "run_decode_benchmark", "stage_table", "competitor_inputs", "BENCH_SCENES", "SHADOW"]
+__all__ = [
+    "benchmark_inputs",
+    "run_decode_benchmark",
+    "run_stage_benchmark",
+    "stage_table",
+    "competitor_inputs",
+    "BENCH_SCENES",
+    "SHADOW",
+]
 
 
 def benchmark_inputs(*, seed: int = 0, scene: str = "plane") -> tuple:
@@ -162,6 +170,54 @@ def run_decode_benchmark(
         "cpus": os.cpu_count(),
         "stages_ms": {k: v / repeats for k, v in stages.ms.items()},
         **extra_out,
+    }
+
+
+def run_stage_benchmark(*, repeats: int = 10, warmup: int = 1, scene: str = "plane") -> dict:
+    """Time the colour-robust decoder whole and with each stage of
+    :data:`simbench.experiments.robust_stages.VARIANTS` off (the variants that study scores), and
+    the paper's decoder, on the proposed decoder's benchmark capture (``scene``: see the module
+    doc).  The decoders take turns, one decode each per round for ``repeats`` rounds, so that
+    each sees the machine as the others do (a busy moment slows a round, not one variant).
+
+    Returns the set-up and ``rows``: ``stage_off`` (``none`` = the whole decoder, ``paper`` = the
+    paper's), ``median_ms`` and ``saved_ms`` (the whole decoder's median less this one's)."""
+    from simbench.decode import robust_params
+    from simbench.experiments.robust_stages import VARIANTS
+
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    system = get_system("proposed")
+    raw, cal, spec = system.bench_inputs(scene=scene, frames=True)
+    paper = system.decoder
+    robust = robust_params(paper)
+    params = {"none": robust}
+    for name, v in VARIANTS.items():
+        params[name] = dataclasses.replace(robust, **{f: getattr(paper, f) for f in v.fields})
+    params["paper"] = paper
+    # the paper's decoder with its own calibration (the frames it does not take left out), as run_decode_benchmark's
+    cals = {name: cal for name in params}
+    cals["paper"] = dataclasses.replace(cal, frames={}, _maps={})
+    times: dict[str, list[float]] = {name: [] for name in params}
+    for r in range(warmup + repeats):
+        for name, p in params.items():
+            t0 = time.perf_counter()
+            system.decode(raw, cals[name], scene=spec, params=p)
+            if r >= warmup:
+                times[name].append((time.perf_counter() - t0) * 1000.0)
+    whole = statistics.median(times["none"])
+    rows = [
+        {"stage_off": name, "median_ms": statistics.median(t), "saved_ms": whole - statistics.median(t)}
+        for name, t in times.items()
+    ]
+    h, w = raw.shape[:2]
+    return {
+        "scene": scene,
+        "size_wh": [w, h],
+        "repeats": repeats,
+        "threads": cv2.getNumThreads(),
+        "cpus": os.cpu_count(),
+        "rows": rows,
     }
 
 

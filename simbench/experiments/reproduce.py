@@ -23,7 +23,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simbench import validate
-from simbench.experiments import budget, fig9, figures, flatness, hard_scenes, motion, render_noise, table1, table3
+from simbench.experiments import (
+    budget,
+    fig9,
+    figures,
+    flatness,
+    hard_scenes,
+    motion,
+    render_noise,
+    robust_stages,
+    table1,
+    table3,
+)
 from simbench.experiments.common import RunConfig, Session, Split
 from simbench.io import atomic_write_text, read_toml, save_json
 
@@ -74,8 +85,9 @@ def _split(split: Split, in_all: bool, rank: int) -> Target:
 # hard_scenes is not in ``all``: at full resolution its 26 scenes, each with the 12-exposure
 # phase-shifting reference, take ~2-3 h of rendering on 2 cores from an empty cache (measured:
 # 7-16 min a scene), more than the rest together; its quick form runs in CI (`make quick`:
-# `reproduce all hard_scenes --quick`).  Every target is measured in parts (Split: its scenes, depths,
-# boards, captures), so that workers take them side by side.
+# `reproduce all hard_scenes robust_stages --quick`; robust_stages decodes hard_scenes' captures
+# again, without their reference, and is not in ``all`` either).  Every target is measured in
+# parts (Split: its scenes, depths, boards, captures), so that workers take them side by side.
 TARGETS: dict[str, Target] = {
     "table1": _split(table1.SPLIT, True, 1),
     "table3": _split(table3.SPLIT, True, 3),
@@ -85,6 +97,7 @@ TARGETS: dict[str, Target] = {
     "render_noise": _split(render_noise.SPLIT, True, 6),
     "flatness": _split(flatness.SPLIT, True, 7),
     "hard_scenes": _split(hard_scenes.SPLIT, False, 2),
+    "robust_stages": _split(robust_stages.SPLIT, False, 2),
     "motion": _split(motion.SPLIT, True, 1),
 }
 

@@ -1,0 +1,104 @@
+"""The colour-robust decoder's stage study (``simbench reproduce robust_stages``) and its timing
+(``simbench bench --robust --stages``): every stage the decoder adds has a variant that takes it
+away and nothing else, and the summary says which scenes a stage's absence costs."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from simbench.decode import DecoderParams, robust_params
+from simbench.experiments.common import RunConfig
+from simbench.experiments.robust_stages import FULL, VARIANTS, _summary, variant_params
+
+
+def _added_fields() -> set[str]:
+    paper, robust = DecoderParams(), robust_params(DecoderParams())
+    return {f.name for f in dataclasses.fields(DecoderParams) if getattr(paper, f.name) != getattr(robust, f.name)}
+
+
+def test_every_stage_the_robust_decoder_adds_has_a_variant():
+    """A field robust_params sets that no variant takes back would be a stage the study never
+    weighs (the operating point is not a stage: it stays fixed); a variant's field that the robust
+    decoder leaves at the paper's value would take nothing away."""
+    added = _added_fields()
+    covered = {f for v in VARIANTS.values() for f in v.fields}
+    assert added - covered == {"min_confidence"}
+    assert covered <= added
+    for name, v in VARIANTS.items():
+        assert v.fields[0] == name, "a variant is named after its own field"
+
+
+@pytest.mark.parametrize("name", sorted(VARIANTS))
+def test_a_variant_sets_its_fields_to_the_paper_decoders_and_keeps_the_rest(name):
+    cfg = RunConfig()
+    p, whole = variant_params(cfg, name), variant_params(cfg, FULL)
+    for f in dataclasses.fields(DecoderParams):
+        want = getattr(cfg.decoder, f.name) if f.name in VARIANTS[name].fields else getattr(whole, f.name)
+        assert getattr(p, f.name) == want, f.name
+    assert p.min_confidence == 0.0  # decoded with no threshold; the operating point comes after
+    with pytest.raises(ValueError, match="unknown stage"):
+        variant_params(cfg, "no_such_stage")
+
+
+def _row(stage, scene, c, mae=0.2, wrong=0.0):
+    return {"stage_off": stage, "scene": scene, "completeness": c, "gt_mae_mm": mae, "wrong_share_all": wrong}
+
+
+def test_the_summary_names_the_scenes_a_stage_costs_and_gains():
+    scenes = ["a", "b", "c"]
+    rows = []
+    for v in (FULL, *VARIANTS):
+        rows += [_row(v, "a", 0.99), _row(v, "b", 0.98), _row(v, "c", 0.90)]
+    # without the edge term, b keeps 0.5 % of its pixels wrong; without unmixing, a falls to 96 %
+    # and c rises to 97.5 %
+    rows = [
+        r for r in rows if (r["stage_off"], r["scene"]) not in {("edge_doubt", "b"), ("unmix", "a"), ("unmix", "c")}
+    ]
+    rows += [_row("edge_doubt", "b", 0.985, wrong=0.005), _row("unmix", "a", 0.96), _row("unmix", "c", 0.975)]
+    table = {r[0]: r for r in _summary(rows, scenes)}
+    assert table["none (the whole decoder)"][1:5] == ["2 of 3", "-", "-", "-"]
+    assert table["`edge_doubt`"][1:4] == ["1 of 3", "`b`", "-"]
+    assert table["`edge_doubt`"][6] == "0.50 %"
+    assert table["`unmix`"][1:5] == ["2 of 3", "`a`", "`c`", "-3.00 (`a`)"]
+    assert table["`crease_doubt`"][1:5] == ["2 of 3", "-", "-", "-"]
+
+
+def test_the_stage_benchmark_times_every_variant_and_refuses_what_it_does_not_time(capsys):
+    from simbench.cli import main
+    from simbench.experiments.bench import run_stage_benchmark
+
+    res = run_stage_benchmark(repeats=1, warmup=0)
+    names = [r["stage_off"] for r in res["rows"]]
+    assert names == ["none", *VARIANTS, "paper"]
+    assert all(r["median_ms"] > 0 for r in res["rows"]) and res["rows"][0]["saved_ms"] == 0.0
+    assert main(["bench", "--stages", "--repeats", "1"]) == 2
+    assert "give --robust" in capsys.readouterr().err
+    assert main(["bench", "--robust", "--stages", "--max-ratio", "3", "--repeats", "1"]) == 2
+    assert "not with ['--max-ratio']" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("folder", ["results/quick", "results"])
+def test_the_committed_study_decodes_the_hard_scenes_as_their_table_does(folder):
+    """The study's whole decoder is hard_scenes' colour-robust decoder on the same captures: its
+    rows are that table's cells (a study that rendered or scored otherwise would weigh its stages
+    against another baseline)."""
+    import csv
+
+    from .conftest import ROOT
+
+    study, table = ROOT / folder / "robust_stages.csv", ROOT / folder / "hard_scenes.csv"
+    if not study.is_file():
+        pytest.skip(f"{folder}/robust_stages.csv not made (simbench reproduce robust_stages)")
+    with study.open() as f:
+        whole = {r["scene"]: r for r in csv.DictReader(f) if r["stage_off"] == FULL}
+    with table.open() as f:
+        cells = {r["scene"]: r for r in csv.DictReader(f)}
+    assert whole and set(whole) == set(cells)
+    for scene, r in whole.items():
+        for k in ("completeness", "gt_mae_mm", "wrong_share_all"):
+            assert float(r[k]) == pytest.approx(float(cells[scene][f"robust_{k}"]), rel=1e-6, nan_ok=True), (scene, k)
+    with study.open() as f:
+        stages = {r["stage_off"] for r in csv.DictReader(f)}
+    assert stages == {FULL, *VARIANTS}
