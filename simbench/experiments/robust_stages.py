@@ -15,7 +15,8 @@ wrong; a variant's row says how many scenes meet issue 35's three goals and what
 against the whole decoder.  What each stage costs in time is machine-dependent and not in these
 files: ``simbench bench --robust --stages`` times the same variants (docs/results.md).
 
-Writes ``robust_stages.md``, ``robust_stages.csv`` and ``robust_stages.provenance.json``.
+Writes ``robust_stages.md``, ``robust_stages.csv``, ``robust_stages.png``, ``.pdf`` and
+``robust_stages.provenance.json``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from simbench.decode.pipeline import apply_min_confidence
 from simbench.experiments import hard_scenes
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, table_text
 from simbench.metrics import edge_band
+from simbench.report import figure_files, figure_formats
 
 __all__ = ["VARIANTS", "Variant", "variant_params", "measure_scene", "write_robust_stages", "SPLIT", "FULL"]
 
@@ -167,6 +169,63 @@ def _summary(rows: list[dict], scenes: list[str]) -> list[list[str]]:
     return out
 
 
+def _plot(rows: list[dict], scenes: list[str], *, note: str = "") -> dict[str, bytes]:
+    """PNG and PDF: each stage's absence by scene - beside the whole decoder, the change in
+    completeness and in the share of every decoded pixel more than 5 mm wrong (points; symmetric
+    logarithmic colour scales, so that a hundredth of a point and sixty points both show: a
+    confidence term buys fewer wrong pixels, a flattening more complete ones); a cross where the
+    scene then misses issue 35's goals that it met, a ring where it meets them and did not."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import SymLogNorm
+
+    base = {r["scene"]: r for r in rows if r["stage_off"] == FULL}
+    stages = list(VARIANTS)
+    cell = {(r["stage_off"], r["scene"]): r for r in rows}
+
+    def change(key: str) -> np.ndarray:
+        # a scene with nothing decoded has no wrong share: no change drawn
+        return np.array([[100 * (cell[v, s][key] - base[s][key]) for s in scenes] for v in stages], dtype=float)
+
+    panels = (
+        ("completeness", "completeness change (points)", "RdBu", 0.1),
+        ("wrong_share_all", "change in the share > 5 mm wrong,\nof every decoded pixel (points)", "RdBu_r", 0.01),
+    )
+    fig, axes = plt.subplots(
+        1, 2, figsize=(0.68 * len(scenes) + 5.0, 0.3 * len(stages) + 2.8), sharey=True, constrained_layout=True
+    )
+    for ax, (key, label, cmap, linthresh) in zip(axes, panels):
+        values = change(key)
+        finite = values[np.isfinite(values)]
+        span = max(10 * linthresh, float(np.abs(finite).max()) if finite.size else 0.0)
+        image = ax.imshow(
+            np.ma.masked_invalid(values),
+            cmap=plt.get_cmap(cmap).with_extremes(bad="0.6"),
+            norm=SymLogNorm(linthresh=linthresh, vmin=-span, vmax=span),
+            aspect="auto",
+        )
+        for i, v in enumerate(stages):
+            for j, s in enumerate(scenes):
+                was, now = _meets(base[s]), _meets(cell[v, s])
+                if was and not now:
+                    ax.plot(j, i, "x", color="k", ms=6, mew=1.5)
+                elif now and not was:
+                    ax.plot(j, i, "o", mfc="none", color="k", ms=6, mew=1.2)
+        ax.set_xticks(range(len(scenes)), [s.removeprefix("hard_") for s in scenes], rotation=90, fontsize=7)
+        ax.set_xlabel("scene")
+        fig.colorbar(image, ax=ax, shrink=0.8).set_label(label, fontsize=8)
+    axes[0].set_yticks(range(len(stages)), stages, fontsize=7)
+    axes[0].set_ylabel("stage off (set to the paper decoder's setting)")
+    fig.suptitle(
+        "The colour-robust decoder without one stage, at its operating point, against the whole decoder\n"
+        f"x: the scene no longer meets issue 35's goals; o: it now does; grey: nothing decoded{note}",
+        fontsize=9,
+    )
+    return figure_formats(fig, dpi=110)
+
+
 def write_robust_stages(session: Session, measured: list[dict]) -> dict:
     """The target's files from :func:`measure_scene`'s results (scenes in run order)."""
     cfg = session.config
@@ -181,7 +240,8 @@ def write_robust_stages(session: Session, measured: list[dict]) -> dict:
         "# What each stage of the colour-robust decoder buys",
         "",
         f"Made by `{session.command}` ({size}{cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, base seed "
-        f"{cfg.seed}, variant `{session.variant}`). Every number: `robust_stages.csv`.",
+        f"{cfg.seed}, variant `{session.variant}`). Every number: `robust_stages.csv`; by scene: "
+        "`robust_stages.png`.",
         "",
         f"The hard scenes (`hard_scenes.md`: the same captures, the same protocol) decoded by the colour-robust "
         f"decoder by triangulation, whole and with one stage at a time set back to the paper decoder's setting (with "
@@ -221,6 +281,7 @@ def write_robust_stages(session: Session, measured: list[dict]) -> dict:
         {
             "robust_stages.csv": table_text(rows, ["stage_off", "scene", *SCORE_KEYS]),
             "robust_stages.md": "\n".join(lines),
+            **figure_files("robust_stages", _plot(rows, scenes, note=cfg.figure_note())),
         },
         extra={
             "scenes": scenes,
