@@ -350,16 +350,18 @@ def _bench_stages(args) -> int:
         return 0
     w, h = res["size_wh"]
     print(
-        f"colour-robust decoder of one {w}x{h} capture ({res['scene']}), whole and with each stage off "
-        f"(simbench.experiments.robust_stages), the decoders taking turns: median over {res['repeats']} rounds "
-        f"({res['threads']} threads)"
+        f"colour-robust decoder of one {w}x{h} capture ({res['scene']}, triangulation), whole and with each stage "
+        f"off (simbench.experiments.robust_stages), the decoders taking turns: over {res['repeats']} rounds "
+        f"({res['threads']} threads), the median and the saving against the whole decoder in the same round "
+        "(median, interquartile range)"
     )
     named = {"none": "none (the whole decoder)", "paper": "all (the paper's decoder)"}
     names = [named.get(r["stage_off"], r["stage_off"]) for r in res["rows"]]
     width = max(map(len, names))
-    print(f"{'stage off':<{width}}  {'median ms':>9}  {'saved ms':>8}")
+    print(f"{'stage off':<{width}}  {'median ms':>9}  {'saved ms':>8}  {'IQR':>13}")
     for name, r in zip(names, res["rows"]):
-        print(f"{name:<{width}}  {r['median_ms']:9.1f}  {r['saved_ms']:8.1f}")
+        q1, q3 = r["saved_iqr_ms"]
+        print(f"{name:<{width}}  {r['median_ms']:9.1f}  {r['saved_ms']:8.1f}  {q1:6.1f}..{q3:5.1f}")
     return 0
 
 

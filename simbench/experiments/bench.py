@@ -21,6 +21,7 @@ import statistics
 import time
 
 import cv2
+import numpy as np
 
 from simbench.decode import DecoderParams
 from simbench.decode.params import MODES
@@ -175,44 +176,58 @@ def run_decode_benchmark(
 
 def run_stage_benchmark(*, repeats: int = 10, warmup: int = 1, scene: str = "plane") -> dict:
     """Time the colour-robust decoder whole and with each stage of
-    :data:`simbench.experiments.robust_stages.VARIANTS` off (the variants that study scores), and
-    the paper's decoder, on the proposed decoder's benchmark capture (``scene``: see the module
-    doc).  The decoders take turns, one decode each per round for ``repeats`` rounds, so that
-    each sees the machine as the others do (a busy moment slows a round, not one variant).
+    :data:`simbench.experiments.robust_stages.VARIANTS` off (the variants that study scores, in
+    its mode: triangulation), and the paper's decoder, on the proposed decoder's benchmark
+    capture (``scene``: see the module doc; a stage that works only where something happens - a
+    printed step, a broken link, a failed fit - costs little on the plane, so time ``shadow``
+    too).  The decoders take turns, one decode each per round, the order rotated every round, so
+    that a busy moment or the allocator's state slows a round rather than one variant; the
+    ``warmup`` rounds (at least one) decode each variant's reference map before any is timed.
 
     Returns the set-up and ``rows``: ``stage_off`` (``none`` = the whole decoder, ``paper`` = the
-    paper's), ``median_ms`` and ``saved_ms`` (the whole decoder's median less this one's)."""
+    paper's), ``median_ms``, and ``saved_ms`` with ``saved_iqr_ms``: the median and the
+    interquartile range over the rounds of the whole decoder's time less this one's in the same
+    round."""
     from simbench.decode import robust_params
-    from simbench.experiments.robust_stages import VARIANTS
+    from simbench.experiments.robust_stages import VARIANTS, without_stage
 
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
+    if warmup < 1:
+        raise ValueError(f"warmup must be >= 1 (the reference maps are decoded there), got {warmup}")
     system = get_system("proposed")
     raw, cal, spec = system.bench_inputs(scene=scene, frames=True)
-    paper = system.decoder
+    paper = dataclasses.replace(system.decoder, mode="calibrated")
     robust = robust_params(paper)
-    params = {"none": robust}
-    for name, v in VARIANTS.items():
-        params[name] = dataclasses.replace(robust, **{f: getattr(paper, f) for f in v.fields})
-    params["paper"] = paper
+    params = {"none": robust, **{name: without_stage(robust, paper, name) for name in VARIANTS}, "paper": paper}
     # the paper's decoder with its own calibration (the frames it does not take left out), as run_decode_benchmark's
     cals = {name: cal for name in params}
     cals["paper"] = dataclasses.replace(cal, frames={}, _maps={})
-    times: dict[str, list[float]] = {name: [] for name in params}
+    names = list(params)
+    times: dict[str, list[float]] = {name: [] for name in names}
     for r in range(warmup + repeats):
-        for name, p in params.items():
+        k = r % len(names)
+        for name in names[k:] + names[:k]:
             t0 = time.perf_counter()
-            system.decode(raw, cals[name], scene=spec, params=p)
+            system.decode(raw, cals[name], scene=spec, params=params[name])
             if r >= warmup:
                 times[name].append((time.perf_counter() - t0) * 1000.0)
-    whole = statistics.median(times["none"])
-    rows = [
-        {"stage_off": name, "median_ms": statistics.median(t), "saved_ms": whole - statistics.median(t)}
-        for name, t in times.items()
-    ]
+    rows = []
+    for name in names:
+        saved = np.subtract(times["none"], times[name])
+        q1, q3 = np.percentile(saved, [25, 75])
+        rows.append(
+            {
+                "stage_off": name,
+                "median_ms": statistics.median(times[name]),
+                "saved_ms": float(np.median(saved)),
+                "saved_iqr_ms": [float(q1), float(q3)],
+            }
+        )
     h, w = raw.shape[:2]
     return {
         "scene": scene,
+        "mode": "calibrated",
         "size_wh": [w, h],
         "repeats": repeats,
         "threads": cv2.getNumThreads(),

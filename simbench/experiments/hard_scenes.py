@@ -68,6 +68,7 @@ __all__ = [
     "GOAL_MAE_MM",
     "short_of_goals",
     "object_scores",
+    "scene_scores",
 ]
 
 # scene -> its class (the issue's list; scenes/make_hard_scenes.py writes them)
@@ -113,7 +114,10 @@ CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.
 SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "stripe_order_errors")
 
 
-def _scores(rec, depth, period_px, region) -> dict:
+def scene_scores(rec, depth, period_px, region) -> dict:
+    """A recording's decoded depth scored by this target's protocol over ``region`` (the lit
+    pixels off the edge band): completeness, MAE, the wrong share there and of every decoded
+    pixel, and the stripe-order errors (NaN for a system without stripes)."""
     s = score(rec, depth, period_px, region=region)
     return {
         "completeness": s["completeness"],
@@ -248,7 +252,7 @@ def measure_scene(session: Session, name: str) -> dict:
     for d in DECODERS:
         full = session.decode(cap, params[d], mode="calibrated")
         result = apply_min_confidence(full, operating[d])
-        for k, v in _scores(cap, result, cfg.decoder.period_px, region).items():
+        for k, v in scene_scores(cap, result, cfg.decoder.period_px, region).items():
             row[f"{d}_{k}"] = v
             metrics[f"hard_scenes/{name}/{d}/{k}"] = v
         for c in confidence_curve(full.depth_m, full.confidence, cap.gt.depth_m, region):
@@ -256,7 +260,7 @@ def measure_scene(session: Session, name: str) -> dict:
     rec, depth = session.acquire(REFERENCE_SYSTEM, raw, label)[0]
     ref_band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=cfg.edge_band_px)
     info = session.system(REFERENCE_SYSTEM).info()
-    for k, v in _scores(rec, depth, info.period_px, rec.gt.lit & ~ref_band).items():
+    for k, v in scene_scores(rec, depth, info.period_px, rec.gt.lit & ~ref_band).items():
         row[f"{REFERENCE_SYSTEM}_{k}"] = v
         metrics[f"hard_scenes/{name}/{REFERENCE_SYSTEM}/{k}"] = v
     row.update({f"{REFERENCE_SYSTEM}_{k}_seed": v for k, v in rec.seeds.items()})
