@@ -116,11 +116,19 @@ def test_the_stage_benchmark_times_every_variant_and_refuses_what_it_does_not_ti
     assert "not with ['--max-ratio']" in capsys.readouterr().err
 
 
+def _cpu(path) -> str:
+    import json
+
+    return json.loads(path.read_text(encoding="utf-8"))["versions"]["cpu"]
+
+
 @pytest.mark.parametrize("folder", ["results/quick", "results"])
 def test_the_committed_study_decodes_the_hard_scenes_as_their_table_does(folder):
     """The study's whole decoder is hard_scenes' colour-robust decoder on the same captures: its
     rows are that table's cells (a study that rendered or scored otherwise would weigh its stages
-    against another baseline)."""
+    against another baseline) - the same bits when both were made on one CPU; made on two, within
+    the spread docs/rendering.md measured across CPUs (a glossy board's render moves a scene's
+    completeness by up to ~1.5 %, its MAE by ~2 %; every other scene the same)."""
     import csv
 
     from .conftest import ROOT
@@ -128,14 +136,22 @@ def test_the_committed_study_decodes_the_hard_scenes_as_their_table_does(folder)
     study, table = ROOT / folder / "robust_stages.csv", ROOT / folder / "hard_scenes.csv"
     if not study.is_file():
         pytest.skip(f"{folder}/robust_stages.csv not made (simbench reproduce robust_stages)")
+    one_cpu = _cpu(study.with_suffix(".provenance.json")) == _cpu(table.with_suffix(".provenance.json"))
     with study.open() as f:
         whole = {r["scene"]: r for r in csv.DictReader(f) if r["stage_off"] == FULL}
     with table.open() as f:
         cells = {r["scene"]: r for r in csv.DictReader(f)}
     assert whole and set(whole) == set(cells)
     for scene, r in whole.items():
-        for k in ("completeness", "gt_mae_mm", "wrong_share_all"):
-            assert float(r[k]) == pytest.approx(float(cells[scene][f"robust_{k}"]), rel=1e-6, nan_ok=True), (scene, k)
+        glossy = not one_cpu and "glossy" in scene
+        for k, tol in (("completeness", 0.015), ("gt_mae_mm", 0.02), ("wrong_share_all", 0.0005)):
+            got, want = float(r[k]), float(cells[scene][f"robust_{k}"])
+            if glossy:
+                assert got == pytest.approx(
+                    want, rel=tol if k == "gt_mae_mm" else 0, abs=0 if k == "gt_mae_mm" else tol
+                )
+            else:
+                assert got == pytest.approx(want, rel=1e-6, nan_ok=True), (scene, k)
     with study.open() as f:
         stages = {r["stage_off"] for r in csv.DictReader(f)}
     assert stages == {FULL, *VARIANTS}
