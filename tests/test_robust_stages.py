@@ -110,6 +110,8 @@ def test_the_stage_benchmark_times_every_variant_and_refuses_what_it_does_not_ti
     assert res["rows"][0]["saved_ms"] == 0.0 and res["rows"][0]["saved_iqr_ms"] == [0.0, 0.0]
     with pytest.raises(ValueError, match="warmup must be >= 1"):
         run_stage_benchmark(repeats=1, warmup=0)
+    with pytest.raises(ValueError, match="not 'kinect'"):
+        run_stage_benchmark(repeats=1, device="kinect")
     assert main(["bench", "--stages", "--repeats", "1"]) == 2
     assert "give --robust" in capsys.readouterr().err
     assert main(["bench", "--robust", "--stages", "--max-ratio", "3", "--repeats", "1"]) == 2

@@ -174,7 +174,7 @@ def run_decode_benchmark(
     }
 
 
-def run_stage_benchmark(*, repeats: int = 10, warmup: int = 1, scene: str = "plane") -> dict:
+def run_stage_benchmark(*, repeats: int = 10, warmup: int = 1, scene: str = "plane", device: str = "proposed") -> dict:
     """Time the colour-robust decoder whole and with each stage of
     :data:`simbench.experiments.robust_stages.VARIANTS` off (the variants that study scores, in
     its mode: triangulation), and the paper's decoder, on the proposed decoder's benchmark
@@ -191,6 +191,8 @@ def run_stage_benchmark(*, repeats: int = 10, warmup: int = 1, scene: str = "pla
     from simbench.decode import robust_params
     from simbench.experiments.robust_stages import VARIANTS, without_stage
 
+    if device != "proposed":
+        raise ValueError(f"the colour-robust decoder's stages are the proposed decoder's, not {device!r}'s")
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     if warmup < 1:

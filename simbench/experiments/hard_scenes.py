@@ -114,7 +114,9 @@ CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.
 SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "stripe_order_errors")
 
 
-def scene_scores(rec, depth, period_px, region) -> dict:
+def scene_scores(
+    rec: Recording, depth: SystemDepth | DecodeResult, period_px: float | None, region: np.ndarray
+) -> dict:
     """A recording's decoded depth scored by this target's protocol over ``region`` (the lit
     pixels off the edge band): completeness, MAE, the wrong share there and of every decoded
     pixel, and the stripe-order errors (NaN for a system without stripes)."""
