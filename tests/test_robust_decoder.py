@@ -332,7 +332,12 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     here: 99.2 % against 80.7 %; at 3:1 99.99 % against 97.2 %; on the rendered 3:1 chart, with
     the camera's blur, 99.7 % against 82.8 %, results/hard_scenes.md)."""
     cap, col, band = _checkerboard(0.1)
-    out = {flatten: _kept_off_band(calibration, cap, col, band, albedo_flatten=flatten) for flatten in (True, False)}
+    out = {
+        flatten: _kept_off_band(
+            calibration, cap, col, band, albedo_flatten=flatten, albedo_columns=flatten, albedo_edge_skip=flatten
+        )
+        for flatten in (True, False)
+    }
     assert out[False][0] < 0.97 <= out[True][0], out
 
 
@@ -1082,7 +1087,7 @@ def test_the_pooled_code_does_not_depend_on_threads(calibration, path):
     robust = robust_params(DecoderParams(mode="calibrated"))
     p = {
         "fused": DecoderParams(mode="calibrated", pool_code=True),
-        "general": dataclasses.replace(robust, albedo_flatten=False),
+        "general": dataclasses.replace(robust, albedo_flatten=False, albedo_columns=False, albedo_edge_skip=False),
         "albedo": robust,
     }[path]
     rmap = None

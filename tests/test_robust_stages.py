@@ -157,3 +157,21 @@ def test_the_committed_study_decodes_the_hard_scenes_as_their_table_does(folder)
     with study.open() as f:
         stages = {r["stage_off"] for r in csv.DictReader(f)}
     assert stages == {FULL, *VARIANTS}
+
+
+def test_a_stage_that_needs_another_is_refused_without_it_and_every_dependent_is_named_at_once():
+    """``albedo_columns`` and ``albedo_edge_skip`` act inside the flattening: set without it they
+    once did nothing, silently (a new user's audit: ``albedo_flatten=false`` alone decoded the same
+    bits as all three off); turning the normalisation off on the colour-robust decoder names
+    every field that needs it in one error, not one per attempt."""
+    for name in ("albedo_columns", "albedo_edge_skip"):
+        with pytest.raises(ValueError, match=f"{name} needs albedo_flatten"):
+            DecoderParams(color_normalize=True, **{name: True})
+    robust = robust_params(DecoderParams())
+    with pytest.raises(ValueError) as err:
+        dataclasses.replace(robust, color_normalize=False)
+    for needs in ("intensity_mode 'weighted' needs", "albedo_flatten needs", "shadow_doubt needs"):
+        assert needs in str(err.value)
+    for name in VARIANTS:
+        # every variant is a legal decoder: its fields name what its stage's absence takes with it
+        variant_params(RunConfig(), name)

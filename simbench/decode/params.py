@@ -567,24 +567,33 @@ class DecoderParams:
             raise ValueError(f"depth_range_m must satisfy 0 < near < far, got {self.depth_range_m}")
         if not fixed["stripe_step_ratio"][0] < fixed["stripe_step_ratio"][1]:
             raise ValueError(f"stripe_step_ratio must satisfy low < high, got {self.stripe_step_ratio}")
+        # every field whose stage another needs, named at once (a user turning the normalisation off
+        # was told of one dependent per attempt: a new user's audit, 2026-12-03)
+        needs = []
         if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
-            raise ValueError("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
+            needs.append("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
         if fixed["albedo_flatten"] and not fixed["color_normalize"]:
-            raise ValueError("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
+            needs.append("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
         if fixed["shadow_doubt"] and not fixed["color_normalize"]:
-            raise ValueError(
+            needs.append(
                 "shadow_doubt needs color_normalize = true (its level is one of the normalised intensity: on raw "
                 "channels a dark board would read as a shadow)"
             )
+        for name in ("albedo_columns", "albedo_edge_skip"):
+            # (both act inside the flattening: without it they did nothing, silently)
+            if fixed[name] and not fixed["albedo_flatten"]:
+                needs.append(f"{name} needs albedo_flatten = true (it acts on the flattening's gain)")
         if fixed["narrow_snr"] and not fixed["phase_stability"]:
-            raise ValueError("narrow_snr needs phase_stability = true (the narrow window is the stability term's fit)")
+            needs.append("narrow_snr needs phase_stability = true (the narrow window is the stability term's fit)")
         if fixed["carrier_bank"] and fixed["phase_method"] != "gabor":
-            raise ValueError(
+            needs.append(
                 "carrier_bank needs phase_method = 'gabor' (it refits slices of a row's columns, which the "
                 "Fourier methods' whole-row transforms do not allow)"
             )
         if fixed["centroid_correction"] and fixed["phase_method"] != "gabor":
-            raise ValueError("centroid_correction needs phase_method = 'gabor' (it corrects the Gabor window's fit)")
+            needs.append("centroid_correction needs phase_method = 'gabor' (it corrects the Gabor window's fit)")
+        if needs:
+            raise ValueError("; ".join(needs))
         for name, value in fixed.items():
             object.__setattr__(self, name, value)
 

@@ -146,6 +146,12 @@ def measure_scene(session: Session, name: str) -> dict:
     return {"rows": rows, "metrics": metrics}
 
 
+def _assignment(field: str, value: object) -> str:
+    """``NAME=VALUE`` as ``--decoder`` reads it (:func:`simbench.decode.with_assignments`)."""
+    text = str(value).lower() if isinstance(value, bool) else f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{field}={text}"
+
+
 def _meets(r: dict) -> bool:
     return not hard_scenes.short_of_goals({f"x_{k}": r[k] for k in SCORE_KEYS}, "x")
 
@@ -266,7 +272,17 @@ def write_robust_stages(session: Session, measured: list[dict]) -> dict:
     operating = cfg.robust().min_confidence
     cam = session.scene(scenes[0]).rig.camera if scenes else None
     size = f"{cam.width_px}x{cam.height_px} camera, " if cam else ""
-    stages = [[f"`{n}`", ", ".join(f"`{f}`" for f in v.fields), v.does] for n, v in VARIANTS.items()]
+    stages = [
+        [f"`{n}`", " ".join(f"`{_assignment(f, getattr(cfg.decoder, f))}`" for f in v.fields), v.does]
+        for n, v in VARIANTS.items()
+    ]
+    quick = (
+        f" - this run's {len(scenes)} of the {len(hard_scenes.HARD_SCENES)}, one of each class, at the quick run's "
+        "resolution and samples (the goals were set for the full-resolution run; a scene's margin to them is not "
+        "the same here) -"
+        if cfg.quick
+        else ""
+    )
     lines = [
         "# What each stage of the colour-robust decoder buys",
         "",
@@ -274,17 +290,20 @@ def write_robust_stages(session: Session, measured: list[dict]) -> dict:
         f"{cfg.seed}, variant `{session.variant}`). Every number: `robust_stages.csv`; by scene: "
         "`robust_stages.png`.",
         "",
-        f"The hard scenes (`hard_scenes.md`: the same captures, the same protocol) decoded by the colour-robust "
-        f"decoder by triangulation, whole and with one stage at a time set back to the paper decoder's setting (with "
-        f"the fields that need it), at its operating point (confidence >= {operating:g}) throughout. *Meet the goals*: "
-        "issue 35's three, >= 97 % complete, MAE <= 0.5 mm, <= 0.1 % of every decoded pixel more than 5 mm wrong; "
-        "*lost* / *gained*: the scenes that meet them with the whole decoder and not without the stage, and the "
-        "reverse; *largest fall* / *rise*: the scene where turning the stage off costs most, and by how much (none "
-        "under 0.005 points of completeness, 0.0005 points of wrong share, 0.0005 mm of MAE; a scene where nothing "
-        "decodes has no wrong share or MAE, and is counted in the last column). "
-        "The time each stage costs "
-        "is not here (it is this machine's, not the run's): `simbench bench --robust --stages` times the same "
-        "variants (measured in `docs/results.md`).",
+        f"The hard scenes{quick} (`hard_scenes.md`: the same captures, the same protocol) decoded by the "
+        "colour-robust decoder by triangulation, whole and with one stage at a time set back to the paper decoder's "
+        "setting (with the fields that need it: the last table gives each variant as `--decoder` assignments on top "
+        f"of the colour-robust decoder), at its operating point (confidence >= {operating:g}) throughout. *Meet the "
+        "goals*: the three the project set the colour-robust decoder on these scenes (issue 35), >= 97 % complete, "
+        "MAE <= 0.5 mm, <= 0.1 % of every decoded pixel more than 5 mm wrong; *lost* / *gained*: the scenes that "
+        "meet them with the whole decoder and not without the stage, and the reverse; *largest fall* / *rise*: the "
+        "scene where turning the stage off costs most, and by how much, in percentage points of the share or in mm "
+        "(none under 0.005 points of completeness, 0.0005 points of wrong share, 0.0005 mm of MAE; a scene where "
+        "nothing decodes has no wrong share or MAE, and is counted in the last column). A stage whose absence helps "
+        "a scene shows here only when the scene then meets the goals (*gained*): the plot shows every change both "
+        "ways, and `robust_stages.csv` every value (shares as fractions, MAE in mm). The time each stage costs is "
+        "not here (it is the machine's, not the run's): `simbench bench --robust --stages` times the same variants "
+        "(measured in `docs/results.md`).",
         "",
         *markdown_table(
             [
@@ -313,7 +332,7 @@ def write_robust_stages(session: Session, measured: list[dict]) -> dict:
         "",
         "## The stages",
         "",
-        *markdown_table(["stage", "fields set to the paper decoder's", "what it does"], stages),
+        *markdown_table(["stage", "set to the paper decoder's (`--decoder` assignments)", "what it does"], stages),
         "",
     ]
     session.write_results(
