@@ -69,6 +69,7 @@ __all__ = [
     "short_of_goals",
     "object_scores",
     "scene_scores",
+    "format_score",
 ]
 
 # scene -> its class (the issue's list; scenes/make_hard_scenes.py writes them)
@@ -460,7 +461,8 @@ def _shortfalls(rows: list[dict], system: str) -> str:
     return f"{len(short)} of {len(rows)}" + (": " + ", ".join(short) if short else "")
 
 
-def _fmt(v: float, pct: bool = False) -> str:
+def format_score(v: float, pct: bool = False) -> str:
+    """A score for a Markdown cell: a share as a percentage (``pct``), else 3 decimals; ``-`` if not finite."""
     if not np.isfinite(v):
         return "-"
     return f"{100 * v:.2f} %" if pct else f"{v:.3f}"
@@ -477,8 +479,12 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
     for r in rows:
         cells = [f"`{r['scene']}`", r["class"]]
         for d in ("paper", "robust", REFERENCE_SYSTEM):
-            cells += [_fmt(r[f"{d}_completeness"], True), _fmt(r[f"{d}_gt_mae_mm"]), _fmt(r[f"{d}_wrong_share"], True)]
-            cells.append(_fmt(r[f"{d}_wrong_share_all"], True))
+            cells += [
+                format_score(r[f"{d}_completeness"], True),
+                format_score(r[f"{d}_gt_mae_mm"]),
+                format_score(r[f"{d}_wrong_share"], True),
+            ]
+            cells.append(format_score(r[f"{d}_wrong_share_all"], True))
         table.append(cells)
     # per threshold, over the scenes: the worst completeness and wrong share, and how many scenes meet both goals
     sweep = []
@@ -492,9 +498,9 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
                 [
                     d,
                     f"{t:g}{mark}",
-                    _fmt(min(c["completeness"] for c in cs), True),
-                    _fmt(float(np.median([c["completeness"] for c in cs])), True),
-                    _fmt(max(wrong) if wrong else float("nan"), True),
+                    format_score(min(c["completeness"] for c in cs), True),
+                    format_score(float(np.median([c["completeness"] for c in cs])), True),
+                    format_score(max(wrong) if wrong else float("nan"), True),
                     f"{sum(w <= 0.001 for w in wrong)} of {len(cs)}",
                     f"{meet} of {len(cs)}",
                 ]

@@ -156,12 +156,6 @@ def _meets(r: dict) -> bool:
     return not hard_scenes.short_of_goals({f"x_{k}": r[k] for k in SCORE_KEYS}, "x")
 
 
-def _fmt(v: float, pct: bool = False) -> str:
-    if not np.isfinite(v):
-        return "-"
-    return f"{100 * v:.2f} %" if pct else f"{v:.3f}"
-
-
 def _largest(delta: np.ndarray, scenes: list[str], *, sign: float, scale: float, digits: int, floor: float) -> str:
     """The largest change of ``delta`` (per scene; NaN: not measured there) in the direction
     ``sign`` (-1: the largest fall), times ``scale``, with its scene; ``-`` under ``floor``."""
@@ -177,10 +171,11 @@ def _summary(rows: list[dict], scenes: list[str]) -> list[list[str]]:
     decoder, the largest fall in completeness and rises in wrong share and MAE (each with its
     scene: a maximum over scenes would show the hardest scene's level, not the stage's effect),
     the median completeness, and the scenes where nothing decodes (no wrong share or MAE)."""
-    base = {r["scene"]: r for r in rows if r["stage_off"] == FULL}
+    cell = {(r["stage_off"], r["scene"]): r for r in rows}
+    base = {s: cell[FULL, s] for s in scenes}
     out = []
     for v in _names():
-        mine = [next(r for r in rows if r["stage_off"] == v and r["scene"] == s) for s in scenes]
+        mine = [cell[v, s] for s in scenes]
         lost = [r["scene"] for r in mine if _meets(base[r["scene"]]) and not _meets(r)]
         gained = [r["scene"] for r in mine if _meets(r) and not _meets(base[r["scene"]])]
 
@@ -199,7 +194,7 @@ def _summary(rows: list[dict], scenes: list[str]) -> list[list[str]]:
                 "-" if whole else _largest(delta("completeness"), scenes, sign=-1, scale=100, digits=2, floor=5e-5),
                 "-" if whole else _largest(delta("wrong_share_all"), scenes, sign=1, scale=100, digits=3, floor=5e-6),
                 "-" if whole else _largest(delta("gt_mae_mm"), scenes, sign=1, scale=1, digits=3, floor=5e-4),
-                _fmt(float(np.nanmedian(c)) if np.isfinite(c).any() else float("nan"), True),
+                hard_scenes.format_score(float(np.nanmedian(c)) if np.isfinite(c).any() else float("nan"), True),
                 str(none),
             ]
         )
