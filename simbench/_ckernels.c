@@ -1729,6 +1729,152 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
         }
 }
 
+/* Each channel's mean over the k rows above and below n boundaries (simbench.decode.color.
+ * column_albedo_gain's per-channel copy test): for boundary i between rows y = yb[i] and y + 1 at
+ * column x = xs[i], up[3 i + c] = the sum in double of src rows y - 1, y - 2, .. y - k (in that
+ * order) over k, dn[3 i + c] that of rows y + 2 .. y + k + 1 - the bits of numpy's
+ * src[rows, cols, c].mean(axis=1, dtype=np.float64) over those rows, which sums k < 8 values in
+ * order.  src: (h, w, 3) float32; the rows must lie inside it (checked by the wrapper). */
+void column_side_means(int64_t n, int64_t w, const float *restrict src, const int64_t *restrict yb,
+                       const int64_t *restrict xs, int64_t k, double *restrict up, double *restrict dn) {
+    for (int64_t i = 0; i < n; i++) {
+        const float *col = src + xs[i] * 3;
+        for (int64_t c = 0; c < 3; c++) {
+            double su = (double)col[(yb[i] - 1) * w * 3 + c], sd = (double)col[(yb[i] + 2) * w * 3 + c];
+            for (int64_t j = 2; j <= k; j++) {
+                su += (double)col[(yb[i] - j) * w * 3 + c];
+                sd += (double)col[(yb[i] + 1 + j) * w * 3 + c];
+            }
+            up[3 * i + c] = su / (double)k;
+            dn[3 * i + c] = sd / (double)k;
+        }
+    }
+}
+
+/* The segments down (sign 1) or up (-1) the columns x0 from rows y0 (simbench.decode.color.
+ * _column_segments, whose numpy form this replaces: the same results), walked one start at a time
+ * instead of every start one row at a time: for r = 0 .. longest - 1 at row y = y0 + sign r (the
+ * walk ends outside [0, h)), the boundary read is y's own (sign 1) or the one above it (-1,
+ * clamped to 0; never a step at y = 0); a step there (stop) ends the walk, with length r + 1 where
+ * it is a print edge (edge), or where frame marks its boundary (rim set too); otherwise the image's
+ * last (sign 1) or first row ends it with length r + 1 and rim set.  end: -1 where no such end;
+ * stop and edge (h + 1, w), frame h + 1, uint8. */
+void column_segments(int64_t n, const int64_t *restrict y0, const int64_t *restrict x0, int64_t sign, int64_t h,
+                     int64_t w, const uint8_t *restrict stop, const uint8_t *restrict edge,
+                     const uint8_t *restrict frame, int64_t longest, int64_t *restrict end, uint8_t *restrict rim) {
+    const int64_t last = sign == 1 ? h - 1 : 0;
+    for (int64_t i = 0; i < n; i++) {
+        end[i] = -1;
+        rim[i] = 0;
+        for (int64_t r = 0; r < longest; r++) {
+            const int64_t y = y0[i] + sign * r;
+            if (y < 0 || y >= h) break;
+            const int64_t ya = sign == 1 ? y : (y > 1 ? y - 1 : 0);
+            const int64_t a = ya * w + x0[i];
+            if (stop[a] && (y > 0 || sign == 1)) {
+                if (edge[a]) {
+                    end[i] = r + 1;
+                } else if (frame[ya]) {
+                    end[i] = r + 1;
+                    rim[i] = 1;
+                }
+                break;
+            }
+            if (y == last) {
+                end[i] = r + 1;
+                rim[i] = 1;
+                break;
+            }
+        }
+    }
+}
+
+/* Per group g < m of the n values v (the groups contiguous: grp non-decreasing), the
+ * ((c - 1) / 2)-th of its c values in the order of numpy's lexsort((v, grp)): ascending, NaN
+ * last, equal values (and NaNs) in their index order, so that the very element lexsort puts there
+ * is found (a -0.0 beside a 0.0 included); out[g] = that value, NaN where the group is empty.  By
+ * quickselect (median-of-three pivots) over the group's indices, O(c) on average instead of a
+ * sort.  idx: n int64 of scratch. */
+static inline int lex_less(const double *restrict v, int64_t i, int64_t j) {
+    const double a = v[i], b = v[j];
+    const int na = a != a, nb = b != b;
+    if (na | nb) return na == nb ? i < j : nb;
+    return a < b || (a == b && i < j);
+}
+
+static inline void swap_i64(int64_t *restrict a, int64_t i, int64_t j) {
+    const int64_t t = a[i];
+    a[i] = a[j];
+    a[j] = t;
+}
+
+void group_median(int64_t n, const double *restrict v, const int64_t *restrict grp, int64_t m,
+                  int64_t *restrict idx, double *restrict out) {
+    for (int64_t g = 0; g < m; g++) out[g] = NAN;
+    int64_t s = 0;
+    while (s < n) {
+        const int64_t g = grp[s];
+        int64_t e = s;
+        while (e < n && grp[e] == g) e++;
+        for (int64_t i = s; i < e; i++) idx[i] = i;
+        const int64_t k = s + (e - s - 1) / 2;
+        int64_t lo = s, hi = e - 1;
+        while (lo < hi) {
+            const int64_t mid = lo + (hi - lo) / 2;
+            if (lex_less(v, idx[mid], idx[lo])) swap_i64(idx, mid, lo);
+            if (lex_less(v, idx[hi], idx[lo])) swap_i64(idx, hi, lo);
+            if (lex_less(v, idx[hi], idx[mid])) swap_i64(idx, hi, mid);
+            swap_i64(idx, mid, hi);
+            const int64_t p = idx[hi];
+            int64_t store = lo;
+            for (int64_t i = lo; i < hi; i++)
+                if (lex_less(v, idx[i], p)) swap_i64(idx, i, store++);
+            swap_i64(idx, store, hi);
+            if (store == k) break;
+            if (k < store)
+                hi = store - 1;
+            else
+                lo = store + 1;
+        }
+        out[g] = v[idx[k]];
+        s = e;
+    }
+}
+
+/* The means of the m values left and right of n steps (simbench.decode.color.fringe_confirmed):
+ * g is (h, w, 3) float32, ys and xs the steps' rows and columns in row-major order (xs[i]: between
+ * columns x and x + 1).  Per row holding a step, prefix sums in double over each channel's row
+ * padded by m values each side (its ends replicated; numpy's cumsum order, the bits of the numpy
+ * form in tests/numpy_reference.py); out[6 i + 2 c] = the mean of channel c over columns
+ * x - m + 1 .. x, out[6 i + 2 c + 1] over x + 1 .. x + m.  cs: 3 (w + 2 m + 1) doubles. */
+void side_means(int64_t h, int64_t w, const float *restrict g, int64_t n, const int64_t *restrict ys,
+                const int64_t *restrict xs, int64_t m, double *restrict cs, double *restrict out) {
+    const int64_t np_ = w + 2 * m;
+    int64_t row = -1;
+    (void)h;
+    for (int64_t i = 0; i < n; i++) {
+        if (ys[i] != row) {
+            row = ys[i];
+            const float *r = g + row * w * 3;
+            for (int64_t c = 0; c < 3; c++) {
+                double *p = cs + c * (np_ + 1);
+                p[0] = 0.0;
+                for (int64_t j = 0; j < np_; j++) {
+                    int64_t x = j - m;
+                    x = x < 0 ? 0 : (x > w - 1 ? w - 1 : x);
+                    p[j + 1] = p[j] + (double)r[3 * x + c];
+                }
+            }
+        }
+        const int64_t cc = xs[i] + m + 1;
+        for (int64_t c = 0; c < 3; c++) {
+            const double *p = cs + c * (np_ + 1);
+            out[6 * i + 2 * c] = (p[cc] - p[cc - m]) / (double)m;
+            out[6 * i + 2 * c + 1] = (p[cc + m] - p[cc]) / (double)m;
+        }
+    }
+}
+
 /* The albedo flattening's per-segment measures (simbench.decode.color.albedo_gain), one row at a
  * time from the steps `cuts` (cuts[x]: between columns x and x + 1): each pixel's segment
  * [s0, s1); mean (float32) = the mean of `width` values of `proxy` centred on the pixel, kept

@@ -575,6 +575,54 @@ def albedo_step_ratio(g, *, t, n=None):
     return np.maximum(a, b) / np.minimum(a, b), np.abs(np.log(a) - np.log(b)).astype(np.float32)
 
 
+def side_means(rgb, ys, xs, *, m, rows_mean):
+    """The side means of simbench.decode.color.fringe_confirmed as they were in numpy: per channel
+    (its rows averaged by ``rows_mean``), prefix sums over the rows holding a step, padded by m
+    values each side; (n, 6) float64, left and right of channel 0, 1, 2."""
+    rows, row_of = np.unique(ys, return_inverse=True)
+    c = xs + m + 1
+    out = []
+    for ch in range(3):
+        g = rows_mean(np.ascontiguousarray(rgb[..., ch], np.float32))[rows].astype(np.float64)
+        cs = np.zeros((rows.size, g.shape[1] + 2 * m + 1))
+        np.cumsum(np.pad(g, ((0, 0), (m, m)), mode="edge"), axis=1, out=cs[:, 1:])
+        out += [(cs[row_of, c] - cs[row_of, c - m]) / m, (cs[row_of, c + m] - cs[row_of, c]) / m]
+    return np.stack(out, axis=1)
+
+
+def column_segments(
+    y0,
+    x0,
+    sign,
+    *,
+    stop,
+    edge,
+    frame,
+    longest,
+):
+    """simbench.decode.color._column_segments as it was in numpy."""
+    h = stop.shape[0] - 1
+    end = np.full(y0.shape, -1)
+    rim = np.zeros(y0.shape, bool)
+    alive = (y0 >= 0) & (y0 < h)
+    for r in range(longest):
+        y = y0 + sign * r
+        alive &= (y >= 0) & (y < h)
+        if not alive.any():
+            break
+        idx = np.flatnonzero(alive)
+        yi = y[idx]
+        at = (yi, x0[idx]) if sign == 1 else (np.maximum(yi - 1, 0), x0[idx])
+        far = stop[at] & ((yi > 0) | (sign == 1))
+        end[idx[far & edge[at]]] = r + 1
+        alive[idx[far]] = False
+        border = (~far & (yi == (h - 1 if sign == 1 else 0))) | (far & ~edge[at] & frame[at[0]])
+        end[idx[border]] = r + 1
+        rim[idx[border]] = True
+        alive[idx[border]] = False
+    return end, rim
+
+
 def albedo_edges(g, *, t, ratio_min, strip_min=np.inf, log_score=False):
     """Cuts where the step ratio exceeds ratio_min and is the largest within t columns (ends
     replicated), never within 2 t - 1 columns of the left end or 2 t of the right; with

@@ -823,6 +823,102 @@ def test_albedo_segments_match_numpy(seed):
     assert short.any() and not short.all() and (vis > 0).any() and (vis[:3] == 0).all()
 
 
+@pytest.mark.parametrize("m", [4, 42])
+def test_fringe_check_side_means_match_numpy(m):
+    """The fringe check's side means of each step (fringe_confirmed): the bits of the per-channel
+    prefix sums in numpy, for steps at the rows' ends (padding replicated), rows with one step and
+    with many, negative values (an unmixed capture's) and one-row images; the three channels'
+    rows averaged in one call are each channel's alone."""
+    import cv2
+
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(m)
+    for h, w in [(40, 300), (7, 90), (1, 50)]:
+        rgb = (rng.random((h, w, 3)) * rng.random((1, w, 1)) - 0.05).astype(np.float32)
+        cuts = rng.random((h, w)) < 0.05
+        cuts[0, [0, w - 1]] = True
+        ys, xs = np.nonzero(cuts)
+        got = np.empty((ys.size, 6))
+        rows = color._rows_mean(rgb)
+        for c in range(3):
+            one = cv2.blur(
+                np.ascontiguousarray(rgb[..., c]), (1, color.ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE
+            )
+            same(rows[..., c], one)
+        _kernels.side_means(rows, ys, xs, m, got)
+        same(got, ref.side_means(rgb, ys, xs, m=m, rows_mean=color._rows_mean))
+    with pytest.raises(ValueError, match="ascending"):
+        _kernels.side_means(rows, np.array([1, 0]), np.array([0, 0]), m, np.empty((2, 6)))
+
+
+def test_group_median_is_the_element_lexsort_puts_there():
+    """The copy test's per-run median by selection: the very element np.lexsort((values, runs))
+    puts at each run's lower median - with NaN (last), infinities, ties, -0.0 beside 0.0 (index
+    order), empty runs (NaN) and runs of one value."""
+    from simbench.decode import _kernels
+
+    def by_sort(qa, ru, m):
+        n = np.bincount(ru, minlength=m)
+        order = np.lexsort((qa, ru))
+        first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
+        k = np.full(m, np.nan)
+        has = n > 0
+        k[has] = qa[order][first[has] + (n[has] - 1) // 2]
+        return k
+
+    rng = np.random.default_rng(0)
+    for trial in range(300):
+        n, m = int(rng.integers(0, 80)), int(rng.integers(1, 9))
+        ru = np.sort(rng.integers(0, m, n))
+        qa = rng.choice([0.0, -0.0, 1.0, np.nan, np.inf, -np.inf, -1.0, 2.5], n) if trial % 2 else rng.random(n)
+        got = np.empty(m)
+        _kernels.group_median(qa, ru, m, got)
+        assert got.tobytes() == by_sort(qa, ru, m).tobytes(), trial
+    with pytest.raises(ValueError, match="non-decreasing"):
+        _kernels.group_median(np.zeros(2), np.array([1, 0]), 2, np.empty(2))
+
+
+def test_column_walks_match_numpy():
+    """The column flattening's segment walks (one start at a time in C): the results of the numpy
+    form that stepped every start a row at a time, both ways, with starts outside the image,
+    steps at the first boundary, frame-marked boundaries and reaches longer than the image."""
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(3)
+    for _ in range(400):
+        h, w = int(rng.integers(1, 30)), int(rng.integers(1, 6))
+        stop = rng.random((h + 1, w)) < rng.random() * 0.4
+        edge = stop & (rng.random((h + 1, w)) < 0.6)
+        frame = rng.random(h + 1) < 0.3
+        n = int(rng.integers(0, 20))
+        y0, x0 = rng.integers(-2, h + 2, n), rng.integers(0, w, n)
+        sign, longest = int(rng.choice([1, -1])), int(rng.integers(1, 40))
+        got = _kernels.column_segments(y0, x0, sign, stop, edge, frame, longest)
+        want = ref.column_segments(y0, x0, sign, stop=stop, edge=edge, frame=frame, longest=longest)
+        same(got[0], want[0])
+        same(got[1], want[1])
+
+
+def test_column_side_means_match_numpys_mean():
+    """Each channel's mean over the rows above and below a boundary: the bits of numpy's
+    ``mean(axis=1, dtype=np.float64)`` of the gathered rows, on values spanning six decades."""
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(1)
+    h, w, k = 60, 200, color.COLUMN_EDGE_ROWS
+    src = (rng.random((h, w, 3)) ** 3 * rng.choice([1e-3, 1.0, 1e3], (h, w, 3))).astype(np.float32)
+    yb, xs = rng.integers(k, h - k - 1, 500), rng.integers(0, w, 500)
+    up, dn = _kernels.column_side_means(src, yb, xs, k)
+    rows_up = yb[:, None] - np.arange(1, k + 1)[None, :]
+    rows_dn = yb[:, None] + 1 + np.arange(1, k + 1)[None, :]
+    for c in range(3):
+        same(up[:, c], src[rows_up, xs[:, None], c].mean(axis=1, dtype=np.float64))
+        same(dn[:, c], src[rows_dn, xs[:, None], c].mean(axis=1, dtype=np.float64))
+    with pytest.raises(ValueError, match="inside"):
+        _kernels.column_side_means(src, np.array([h - 2]), np.array([0]), k)
+
+
 def test_crease_bias_matches_numpy():
     """The crease term's C loops: the bits of its numpy form on a noisy map with concave and convex
     breaks, depth steps, holes and rows too short for the reach, for both signs and row reaches

@@ -43,6 +43,10 @@ __all__ = [
     "noise_weights",
     "robust_fringe_code",
     "albedo_segments",
+    "side_means",
+    "group_median",
+    "column_segments",
+    "column_side_means",
     "crease_bias",
     "edge_bend",
 ]
@@ -70,6 +74,10 @@ _SIGNATURES = {
     "noise_weights": (None, [_I, _P, _P, _P, _P]),
     "robust_fringe_code": (None, [_I, _P, _P, _P, _P, _P, _P]),
     "albedo_segments": (None, [_I, _I, _P, _P, _P, _I, _I, _D, _P, _P, _P, _P]),
+    "side_means": (None, [_I, _I, _P, _I, _P, _P, _I, _P, _P]),
+    "group_median": (None, [_I, _P, _P, _I, _P, _P]),
+    "column_side_means": (None, [_I, _I, _P, _P, _P, _I, _P, _P]),
+    "column_segments": (None, [_I, _P, _P, _I, _I, _I, _P, _P, _P, _I, _P, _P]),
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
     "neighbour_correct": (None, [_I, _P, _P, _P, _I, _I, _I, _P, _P, _P]),
@@ -761,6 +769,111 @@ def albedo_segments(proxy, pv, cuts, width, margin, min_len, mean, vis, short) -
         _ptr(vis, "vis", np.float32, (h, w), writable=True),
         _ptr(short, "short", np.bool_, (h, w), writable=True),
     )
+
+
+def side_means(g, ys, xs, m, out) -> None:
+    """The means of the ``m`` values of each channel of ``g`` ((H, W, 3) float32) left and right of
+    the steps at rows ``ys`` and columns ``xs`` (int64, in row-major order; a step at x is between
+    columns x and x + 1), the rows' ends replicated: ``out[i]`` (float64, (n, 6)) = left and right
+    of channel 0, 1, 2.  The bits of the prefix sums of :func:`simbench.decode.color.fringe_confirmed`
+    as they were in numpy (``side_means`` in tests/numpy_reference.py)."""
+    if g.ndim != 3 or g.shape[2] != 3 or g.shape[0] < 1 or g.shape[1] < 1:
+        raise ValueError(f"g: expected (H, W, 3) with H, W >= 1, got {g.shape}")
+    h, w = g.shape[:2]
+    m = int(m)
+    if m < 1:
+        raise ValueError(f"m must be >= 1, got {m}")
+    ys = np.ascontiguousarray(ys, np.int64)
+    xs = np.ascontiguousarray(xs, np.int64)
+    n = ys.size
+    if xs.size != n:
+        raise ValueError(f"ys and xs: expected one size, got {ys.size} and {xs.size}")
+    if n and (ys.min() < 0 or ys.max() >= h or xs.min() < 0 or xs.max() >= w or (np.diff(ys) < 0).any()):
+        raise ValueError(f"ys, xs: expected steps inside ({h}, {w}), rows in ascending order")
+    cs = np.empty(3 * (w + 2 * m + 1), np.float64)
+    _library().side_means(
+        h,
+        w,
+        _ptr(g, "g", np.float32, (h, w, 3)),
+        n,
+        ys.ctypes.data,
+        xs.ctypes.data,
+        m,
+        cs.ctypes.data,
+        _ptr(out, "out", np.float64, (n, 6), writable=True),
+    )
+
+
+def group_median(values, groups, m, out) -> None:
+    """Per group ``g < m`` of ``values`` (float64) by ``groups`` (int64, non-decreasing: each
+    group's values together), the element ``np.lexsort((values, groups))`` puts at the group's
+    lower median (the ``(c - 1) // 2``-th of its ``c`` values; NaN last, ties in index order) into
+    ``out`` ((m,) float64), NaN for an empty group: the bits of the sort, by selection."""
+    values = np.ascontiguousarray(values, np.float64)
+    groups = np.ascontiguousarray(groups, np.int64)
+    n, m = values.size, int(m)
+    if groups.shape != values.shape or values.ndim != 1:
+        raise ValueError(f"values, groups: expected two 1-D arrays of one size, got {values.shape} and {groups.shape}")
+    if m < 0 or (n and (groups[0] < 0 or groups[-1] >= m or (np.diff(groups) < 0).any())):
+        raise ValueError(f"groups: expected non-decreasing values in [0, {m})")
+    idx = np.empty(n, np.int64)
+    _library().group_median(
+        n, values.ctypes.data, groups.ctypes.data, m, idx.ctypes.data, _ptr(out, "out", np.float64, (m,), writable=True)
+    )
+
+
+def column_segments(y0, x0, sign, stop, edge, frame, longest) -> tuple[np.ndarray, np.ndarray]:
+    """The walks of :func:`simbench.decode.color._column_segments` (its docstring) from rows ``y0``
+    down (``sign`` 1) or up (-1) columns ``x0``: ``(end, rim)``, int64 and bool of ``y0``'s size."""
+    h1, w = stop.shape
+    y0 = np.ascontiguousarray(y0, np.int64)
+    x0 = np.ascontiguousarray(x0, np.int64)
+    n = y0.size
+    if sign not in (1, -1):
+        raise ValueError(f"sign must be 1 or -1, got {sign}")
+    if x0.size != n or (n and (x0.min() < 0 or x0.max() >= w)):
+        raise ValueError(f"x0: expected {n} columns in [0, {w})")
+    end = np.empty(n, np.int64)
+    rim = np.empty(n, bool)
+    _library().column_segments(
+        n,
+        y0.ctypes.data,
+        x0.ctypes.data,
+        int(sign),
+        h1 - 1,
+        w,
+        _ptr(stop, "stop", np.bool_, (h1, w)),
+        _ptr(edge, "edge", np.bool_, (h1, w)),
+        _ptr(frame, "frame", np.bool_, (h1,)),
+        int(longest),
+        end.ctypes.data,
+        rim.ctypes.data,
+    )
+    return end, rim
+
+
+def column_side_means(src, yb, xs, k) -> tuple[np.ndarray, np.ndarray]:
+    """Each channel of ``src`` ((H, W, 3) float32) averaged over the ``k`` rows above boundary
+    ``yb[i]`` (between rows y and y + 1: rows y - 1 .. y - k) and the ``k`` rows below the pair
+    straddling it (y + 2 .. y + k + 1), at columns ``xs``: ``(up, dn)``, (n, 3) float64, the bits
+    of numpy's ``src[rows, cols, c].mean(axis=1, dtype=np.float64)`` (``k`` < 8: summed in order)."""
+    if src.ndim != 3 or src.shape[2] != 3:
+        raise ValueError(f"src: expected (H, W, 3), got {src.shape}")
+    h, w = src.shape[:2]
+    k = int(k)
+    if not 1 <= k < 8:
+        raise ValueError(f"k must be in [1, 8), got {k}")
+    yb = np.ascontiguousarray(yb, np.int64)
+    xs = np.ascontiguousarray(xs, np.int64)
+    n = yb.size
+    if xs.size != n or (n and (yb.min() < k or yb.max() + k + 1 >= h or xs.min() < 0 or xs.max() >= w)):
+        raise ValueError(f"yb, xs: expected {n} boundaries at least {k} rows inside ({h}, {w})")
+    up = np.empty((n, 3), np.float64)
+    dn = np.empty((n, 3), np.float64)
+    _library().column_side_means(
+        n, w, _ptr(src, "src", np.float32, (h, w, 3)), yb.ctypes.data, xs.ctypes.data, k, up.ctypes.data, dn.ctypes.data
+    )
+    return up, dn
 
 
 def crease_bias(

@@ -584,7 +584,8 @@ def albedo_edges(proxy: np.ndarray, *, period_px: float) -> np.ndarray:
 
 
 def _rows_mean(proxy: np.ndarray) -> np.ndarray:
-    """The proxy averaged over :data:`ALBEDO_EDGE_ROWS` rows (ends replicated)."""
+    """The proxy (or each channel of an (H, W, C) image) averaged over :data:`ALBEDO_EDGE_ROWS`
+    rows (ends replicated)."""
     return cv2.blur(np.ascontiguousarray(proxy, np.float32), (1, ALBEDO_EDGE_ROWS), borderType=cv2.BORDER_REPLICATE)
 
 
@@ -621,15 +622,12 @@ def fringe_confirmed(cuts: np.ndarray, rgb: np.ndarray, *, period_px: float) -> 
     if ys.size == 0:
         return cuts
     m = 2 * max(2, int(round(period_px)))
-    rows, row_of = np.unique(ys, return_inverse=True)
-    c = xs + m + 1
-    means = []
-    for ch in range(3):
-        g = _rows_mean(np.ascontiguousarray(rgb[..., ch], np.float32))[rows].astype(np.float64)
-        cs = np.zeros((rows.size, g.shape[1] + 2 * m + 1))
-        np.cumsum(np.pad(g, ((0, 0), (m, m)), mode="edge"), axis=1, out=cs[:, 1:])
-        means.append(((cs[row_of, c] - cs[row_of, c - m]) / m, (cs[row_of, c + m] - cs[row_of, c]) / m))
-    (r_l, r_r), (g_l, g_r), (b_l, b_r) = means
+    # the channels' rows averaged in one call (the bits of each channel's alone), then each step's
+    # side means from per-row prefix sums in double (simbench/_ckernels.c: the bits of the numpy
+    # form, side_means in tests/numpy_reference.py; ~5x faster where most rows hold a step)
+    means = np.empty((ys.size, 6), np.float64)
+    _kernels.side_means(_rows_mean(rgb), ys, xs, m, means)
+    r_l, r_r, g_l, g_r, b_l, b_r = means.T
     judged = (b_l >= ALBEDO_CONFIRM_SHARE * np.maximum(np.maximum(r_l, g_l), b_l)) & (
         b_r >= ALBEDO_CONFIRM_SHARE * np.maximum(np.maximum(r_r, g_r), b_r)
     )
@@ -748,12 +746,11 @@ def _median_share(qa: np.ndarray, ru: np.ndarray, m: int) -> tuple[np.ndarray, n
     :data:`COLUMN_COPY_RATIO` of it (NaN where a run has none)."""
     n = np.bincount(ru, minlength=m).astype(np.float64)
     # the median (beside a square's edge along the row a column's dark side holds the
-    # neighbour's light: an outlier a median ignores)
-    order_ = np.lexsort((qa, ru))
-    first = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
-    k = np.full(m, np.nan)
-    has = n > 0
-    k[has] = qa[order_][first[has] + (n[has].astype(np.int64) - 1) // 2]
+    # neighbour's light: an outlier a median ignores), the lower one, by selection
+    # (simbench/_ckernels.c: the element np.lexsort((qa, ru)) puts there, ~10x faster; the runs'
+    # columns are in run order, rid being a cumulative sum)
+    k = np.empty(m, np.float64)
+    _kernels.group_median(qa, ru, m, k)
     with np.errstate(divide="ignore", invalid="ignore"):
         copy = np.abs(np.log(qa / k[ru])) <= np.log(COLUMN_COPY_RATIO)
         share = np.bincount(ru, copy, m) / n
@@ -872,16 +869,18 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         runs += total[i : h - n_rows + 1 + i]
     runs *= np.float32(1.0 / n_rows)
     ys = np.arange(n_rows, h - n_rows - 1)  # boundary y: between rows y and y + 1
-    above = runs[ys - n_rows]  # rows y - n .. y - 1
-    below = runs[ys + 2]  # rows y + 2 .. y + n + 1 (rows y and y + 1 straddle the boundary)
+    # (each a row range of runs: runs[ys + d] as a view, not a copy)
+    rows_at = {d: runs[n_rows + d : n_rows + d + ys.size] for d in (-n_rows, -n_rows + 1, 1, 2)}
+    above = rows_at[-n_rows]  # rows y - n .. y - 1
+    below = rows_at[2]  # rows y + 2 .. y + n + 1 (rows y and y + 1 straddle the boundary)
     reach = max(1, int(round(COLUMN_PLACE_PERIODS * period_px)))
     box = (2 * reach + 1, 1)
     # the edge is placed with the rows either side of the boundary next to it (rows y - n + 1 .. y
     # and y + 1 .. y + n): its contrast then peaks at a sharp edge's own boundary, where the
     # means that skip the straddling pair are alike for three boundaries
-    step = runs[ys - n_rows + 1] - runs[ys + 1]
+    step = rows_at[-n_rows + 1] - rows_at[1]
     diff = cv2.blur(step, box, borderType=cv2.BORDER_REPLICATE)
-    both = cv2.blur(runs[ys - n_rows + 1] + runs[ys + 1], box, borderType=cv2.BORDER_REPLICATE)
+    both = cv2.blur(rows_at[-n_rows + 1] + rows_at[1], box, borderType=cv2.BORDER_REPLICATE)
     contrast = cv2.blur(np.abs(step), box, borderType=cv2.BORDER_REPLICATE) / np.maximum(both, np.float32(1e-6))
     # a step of ALBEDO_EDGE_RATIO: contrast (r - 1) / (r + 1)
     cand = contrast >= np.float32((ALBEDO_EDGE_RATIO - 1.0) / (ALBEDO_EDGE_RATIO + 1.0))
@@ -980,17 +979,16 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     # whose fringe happens to line up, the code stripes do not (a shifted De Bruijn window)
     part = ok[rid]
     sub, rsub, dsub, osub, esub = sel[part], rid[part], down[part], own[part], from_end[part]
-    rows_up = ys[sub // w][:, None] - np.arange(1, n_rows + 1)[None, :]
-    rows_dn = ys[sub // w][:, None] + 1 + np.arange(1, n_rows + 1)[None, :]
-    cols = (sub % w)[:, None]
+    # (one pass over the edges for every channel, simbench/_ckernels.c: the bits of numpy's
+    # src[rows, cols, c].mean(axis=1, dtype=np.float64) over rows y - 1 .. y - n and y + 2 .. y + n + 1)
+    side_up, side_dn = _kernels.column_side_means(src, ys[sub // w], sub % w, n_rows)
     # the darker side's crest, the scaled copy's, in its brightest channel - the decoder's lit test
     # reads the brightest channel too (certainty_map); the channels' mean of a fringe in one
     # channel and a code in another is ~a third of it (scenes/hard_chart_fine_turned.toml's far
     # left, 5:1 ink at ~1.1 m: 0.039 in the mean, 0.048 in its blue and 0.07 in its green code)
     lit = np.zeros(m, bool)
     for c in range(src.shape[2]):
-        cu = src[rows_up, cols, c].mean(axis=1, dtype=np.float64)
-        cd = src[rows_dn, cols, c].mean(axis=1, dtype=np.float64)
+        cu, cd = side_up[:, c], side_dn[:, c]
         ca, cb = np.where(dsub, cd, cu), np.where(dsub, cu, cd)
         # (a code channel is dark across the other code's stripes: its level is its crest's)
         k_c, share_c, n_c, _, _, crest_c = _scaled_copy(ca, cb, rsub, osub, m, cu, cd, from_end=esub, of_max=True)
@@ -1067,27 +1065,10 @@ def _column_segments(
     step (``stop[y]``: a step between rows y and y + 1): their lengths in rows where that step is
     a print edge (``edge``) or the image's border within ``longest`` rows, else -1; and whether
     the border ended each (a square the frame cuts: no other step between, or a step at a
-    boundary ``frame[y]`` marks, too near the border to be judged)."""
-    h = stop.shape[0] - 1
-    end = np.full(y0.shape, -1)
-    rim = np.zeros(y0.shape, bool)
-    alive = (y0 >= 0) & (y0 < h)
-    for r in range(longest):
-        y = y0 + sign * r
-        alive &= (y >= 0) & (y < h)
-        if not alive.any():
-            break
-        idx = np.flatnonzero(alive)
-        yi = y[idx]
-        at = (yi, x0[idx]) if sign == 1 else (np.maximum(yi - 1, 0), x0[idx])
-        far = stop[at] & ((yi > 0) | (sign == 1))
-        end[idx[far & edge[at]]] = r + 1
-        alive[idx[far]] = False
-        border = (~far & (yi == (h - 1 if sign == 1 else 0))) | (far & ~edge[at] & frame[at[0]])
-        end[idx[border]] = r + 1
-        rim[idx[border]] = True
-        alive[idx[border]] = False
-    return end, rim
+    boundary ``frame[y]`` marks, too near the border to be judged).  One walk per start in
+    simbench/_ckernels.c (the results of the numpy form, column_segments in
+    tests/numpy_reference.py, which stepped every start a row at a time: ~10x slower)."""
+    return _kernels.column_segments(y0, x0, sign, stop, edge, frame, longest)
 
 
 def column_step_pixels(
