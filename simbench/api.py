@@ -130,7 +130,11 @@ _RECORDING_FLAGS = {
     "sensor": "--sensor",
     "pattern": "--period, --order, --sequence, --channels",
     "calibration_frames": "--calibration-frames",
+    "camera_scale": "--camera-scale",
 }
+
+# the camera resolution factors record() takes (the run option run.camera_scale's range)
+CAMERA_SCALE_RANGE = (0.0, 4.0)
 
 
 def record(
@@ -146,6 +150,7 @@ def record(
     pattern: PatternSpec | None = None,
     cache: str | Path | RenderCache | None = DEFAULT_CACHE,
     variant: str | None = None,
+    camera_scale: float = 1.0,
 ) -> Recorded:
     """Render and record ``scene`` (a scene file, a library scene by name - ``"step"`` - or a
     loaded scene) with the depth system ``system`` (:func:`simbench.systems.system_names`), the
@@ -162,7 +167,10 @@ def record(
     projects (default: the paper's, at the scene projector's size, as ``simbench render`` makes it;
     the other systems project their own).  ``cache``: the render
     cache folder or a :class:`simbench.cache.RenderCache` (None: render everything, store
-    nothing).
+    nothing).  ``camera_scale``: the scene rig's camera resolution times this factor, its field
+    of view and pose kept (:func:`simbench.rig.scale_camera`; 0.5: 640x480 for the paper's
+    camera, as ``simbench reproduce --quick`` renders), for the systems that record with the
+    scene's rig; the recording's rig is the scaled one, so that its folder decodes as it is.
 
     Examples
     --------
@@ -192,10 +200,14 @@ def record(
     max_depth = v.integer(max_depth, "max_depth", lo=MAX_DEPTH_RANGE[0], hi=MAX_DEPTH_RANGE[1])
     sampler = DEFAULT_SAMPLER if sampler is None else sampler
     check_sampler(sampler, spp)
+    camera_scale = v.number(
+        camera_scale, "camera_scale", lo=CAMERA_SCALE_RANGE[0], lo_open=True, hi=CAMERA_SCALE_RANGE[1]
+    )
     given = {
         "sensor": sensor is not None,
         "pattern": pattern is not None,
         "calibration_frames": bool(calibration_frames),
+        "camera_scale": camera_scale != 1.0,
     }
     sensor_model = sensor if isinstance(sensor, SensorModel) else get_sensor("paper" if sensor is None else sensor)
     spec = scene if isinstance(scene, SceneSpec) else load_scene(scene_file(scene))
@@ -217,6 +229,11 @@ def record(
         raise ValueError(
             f"{named} {verb} not apply to the {system} system ({uses}): leave {'it' if len(stray) == 1 else 'them'} out"
         )
+    if camera_scale != 1.0:
+        from simbench.rig import scale_camera
+
+        # (a factor that gives no whole image size is refused here, before any render)
+        spec = dataclasses.replace(spec, rig=scale_camera(spec.rig, camera_scale))
     if info.uses_scene_rig:  # (the competitors replace the scene's rig with their own)
         check_rig_lens(spec.rig, sensor_model, where=f"scene {scene if isinstance(scene, (str, Path)) else spec.name}")
     from simbench.sim.timeline import is_moving, placement_warnings
@@ -239,6 +256,7 @@ def record(
         "sampler": sampler,
         "max_depth": max_depth,
         "variant": used_variant,
+        "camera_scale": camera_scale,
     }
     if system == "proposed":
         from simbench.systems.proposed import acquire_with_calibration
@@ -257,7 +275,7 @@ def record(
         from simbench.systems import Recording
 
         rec = Recording(system, acq.scene, acq.capture, acq.gt, dict(acq.meta["seeds"]))
-        meta = {**acq.meta, **_scene_record(scene, spec)}
+        meta = {**acq.meta, **_scene_record(scene, spec), "camera_scale": camera_scale}
         told_all = recording_warnings(spec, rec.gt, DecoderParams(pattern=the_system.pattern))
         if (np.asarray(rec.gt.object_id) >= 0).any():  # (none seen: the render's own error says it)
             told_all += exposure_warnings(rec.raw, acq.scene, sensor_model)
@@ -293,6 +311,7 @@ def record(
         warnings.warn(f"scene {spec.name}: {told}", SimbenchWarning, stacklevel=2)
     meta = {
         **_scene_record(scene, spec),
+        "camera_scale": camera_scale,
         "spp": spp,
         "sampler": sampler,
         "max_depth": max_depth,

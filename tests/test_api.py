@@ -227,8 +227,11 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplo
         (
             {"system": "phase_shift", "pattern": "P25"},
             r"pattern \(--period, --order, --sequence, --channels\) does not apply to the phase_shift system \(it "
-            r"records with sensor only\)",
+            r"records with sensor, camera_scale only\)",
         ),
+        ({"camera_scale": 0}, r"camera_scale must be a finite number in \(0, 4\], got 0"),
+        ({"camera_scale": 0.33}, "camera scale 0.33 must give whole image sizes"),
+        ({"system": "kinect", "camera_scale": 0.5}, r"^camera_scale \(--camera-scale\) does not apply to the kinect"),
     ],
 )
 def test_record_checks_its_arguments_as_the_command_line_does(tmp_path, monkeypatch, kwargs, match):

@@ -976,6 +976,9 @@ for cid, extra, msg in [
     ("tof-period", ["--system", "tof", "--period", "25"], "pattern (--period, --order, --sequence, --channels) does"),
     ("phase-shift-order", ["--system", "phase_shift", "--order", "4"], "does not apply to the phase_shift system"),
     ("kinect-calibration-frames", ["--system", "kinect", "--calibration-frames"], "calibration_frames (--calib"),
+    ("tof-camera-scale", ["--system", "tof", "--camera-scale", "0.5"], "camera_scale (--camera-scale) does not apply"),
+    ("camera-scale-not-whole", ["--camera-scale", "0.33"], "camera scale 0.33 must give whole image sizes"),
+    ("camera-scale-zero", ["--camera-scale", "0"], "argument --camera-scale: must be a finite number in (0, 4]"),
 ]:
     case(
         f"render-{cid}",

@@ -109,6 +109,8 @@ SEED = int_in(*api.SEED_RANGE)
 
 SPP = int_in(*api.SPP_RANGE)
 
+CAMERA_SCALE = float_in(lo=api.CAMERA_SCALE_RANGE[0], lo_open=True, hi=api.CAMERA_SCALE_RANGE[1])
+
 
 # the render cache's folder, relative to the working folder (every command that renders or reads it)
 DEFAULT_CACHE = api.DEFAULT_CACHE  # the render cache folder of the Python API and the command line

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -10,6 +11,7 @@ import numpy as np
 
 from simbench.seeds import DEFAULT_SEED
 from simbench.cli.options import (
+    CAMERA_SCALE,
     MAX_DEPTH,
     SEED,
     add_cache_options,
@@ -59,6 +61,11 @@ def _render(args) -> int:
     if args.system not in system_names():  # an unknown name fails before anything else
         get_system(args.system)
     scene = load_scene(scene_file(args.scene))
+    if args.camera_scale != 1.0:
+        from simbench.rig import scale_camera
+
+        # the camera the render will have (a factor giving no whole image size is refused here)
+        scene = dataclasses.replace(scene, rig=scale_camera(scene.rig, args.camera_scale))
     pattern = pattern_spec(args, scene.rig.projector.size_hw)
     # a system that projects a coded pattern projects the pattern options'; the others their own
     system = get_system(
@@ -117,6 +124,7 @@ def _render(args) -> int:
         pattern=pattern if pattern_given or takes_pattern else None,
         cache=cache,
         variant=args.variant,
+        camera_scale=args.camera_scale,
     )
     _check_visible(rec.gt, scene)
     files = system.write_recording(
@@ -283,6 +291,15 @@ def add_parsers(sub, kw: dict) -> None:
         help="base seed (every render and noise seed derives from it and a label; all recorded in the manifest)",
     )
     s.add_argument("--max-depth", type=MAX_DEPTH, default=6, help="longest light path (2 = direct light only)")
+    s.add_argument(
+        "--camera-scale",
+        type=CAMERA_SCALE,
+        default=1.0,
+        help="the scene rig's camera resolution times this factor, field of view and pose kept (0.5: 640x480 for the "
+        "paper's camera, as reproduce --quick renders; 0.25 for a test render in seconds); the recording's rig.toml "
+        "holds the scaled camera, so that the folder decodes as it is (for the systems that record with the scene's "
+        "rig)",
+    )
     s.add_argument(
         "--sensor",
         "--camera",

@@ -106,7 +106,8 @@ class SystemInfo:
     # what it records with among simbench.api.record's options beyond the scene and the render
     # settings: "sensor" (the sensor model its camera and projector are), "pattern" (the coded
     # pattern it projects), "calibration_frames" (the reference plane under black and each
-    # primary); any other given is an error there, not ignored.  None (a system that does not
+    # primary), "camera_scale" (the scene rig's camera resolution, scaled: a system recording with
+    # the scene's rig); any other given is an error there, not ignored.  None (a system that does not
     # say): every option is handed on, and the system uses what applies to it
     recording_options: tuple[str, ...] | None = None
 

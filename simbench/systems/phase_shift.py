@@ -148,7 +148,7 @@ class PhaseShiftSystem:
             captures=s.captures,
             period_px=s.period_px,
             uses_scene_rig=True,
-            recording_options=("sensor",),  # its own sequence, not the coded pattern
+            recording_options=("sensor", "camera_scale"),  # its own sequence, not the coded pattern
             confidence=_confidence_text(s),
             numbers={
                 "steps": (s.steps, "assumption: the common choice; N steps are blind to fringe harmonics up to N - 2"),

@@ -188,7 +188,7 @@ class ColourFringeSystem:
             captures=1,
             period_px=self.pattern.period_px,
             uses_scene_rig=True,
-            recording_options=("sensor", "pattern", "calibration_frames"),
+            recording_options=("sensor", "pattern", "calibration_frames", "camera_scale"),
             confidence=(
                 "fringe SNR: the RMS of the fitted fringe over the RMS of the local fit's residual "
                 "(simbench.decode.phase.fringe_snr); "
