@@ -1729,6 +1729,69 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
         }
 }
 
+/* A phase wrapped to [-pi, pi) as simbench.decode.phase._wrap does it in float32 numpy:
+ * a - 2 pi rint(a / 2 pi), then pi itself folded to -pi. */
+static inline float wrap_f(float a) {
+    const float r = a - TWO_PI_F * rintf(a / TWO_PI_F);
+    return r >= PI_F ? r - TWO_PI_F : r;
+}
+
+/* The window-centroid correction's rate sums (simbench.decode.phase.centroid_corrected, the bits
+ * of its numpy form): per row of ps ((nr, wb) float32, the widest fit's phase) the step
+ * wrap(ps[x + 1] - ps[x - 1]) / 2 at x = 1 .. wb - 2, counted where cr (uint8) holds at x - 1, x,
+ * x + 1 and the step is finite, in fixed point rint(step 2^20) (int64); sq and sn ((nr, wb + 1)
+ * int64) the prefix sums of those steps and of their count, from 0. */
+void centroid_rate_sums(int64_t nr, int64_t wb, const float *restrict ps, const uint8_t *restrict cr,
+                        float scale, int64_t *restrict sq, int64_t *restrict sn) {
+    for (int64_t y = 0; y < nr; y++) {
+        const float *p = ps + y * wb;
+        const uint8_t *c = cr + y * wb;
+        int64_t *q = sq + y * (wb + 1), *n = sn + y * (wb + 1);
+        q[0] = n[0] = 0;
+        for (int64_t x = 0; x < wb; x++) {
+            int64_t v = 0, g = 0;
+            if (x >= 1 && x < wb - 1 && c[x - 1] && c[x] && c[x + 1]) {
+                const float step = wrap_f(p[x + 1] - p[x - 1]) * 0.5f;
+                if (isfinite(step)) {
+                    v = (int64_t)rintf(step * scale);
+                    g = 1;
+                }
+            }
+            q[x + 1] = q[x] + v;
+            n[x + 1] = n[x] + g;
+        }
+    }
+}
+
+/* The correction itself at the block's pixels `need` ((nb, wb) uint8; dx their window centre's
+ * offset, (nb, wb) float32): the mean step over [x, x + reach] (dx > 0, cut at the block's right
+ * end) or [x - reach, x] (cut at 0) from the rate sums of row row_of[y] (sq, sn: (nr, wb + 1)),
+ * as double over 2^20 and a count of at least 1, to float32; the bias (rate - omega) dx where a
+ * step was counted, else 0; out[y0 + y, a + x] = wrap(psi[y0 + y, a + x] - bias) (psi, out: (h, w)
+ * float32).  The bits of the numpy form. */
+void centroid_apply(int64_t nb, int64_t wb, int64_t w, const uint8_t *restrict need, const float *restrict dx,
+                    const int64_t *restrict row_of, const int64_t *restrict sq, const int64_t *restrict sn,
+                    int64_t reach, float omega, double scale, int64_t y0, int64_t a, const float *restrict psi,
+                    float *restrict out) {
+    for (int64_t y = 0; y < nb; y++) {
+        const int64_t r = row_of[y];
+        if (r < 0) continue;
+        const int64_t *q = sq + r * (wb + 1), *n = sn + r * (wb + 1);
+        for (int64_t x = 0; x < wb; x++) {
+            if (!need[y * wb + x]) continue;
+            const float d = dx[y * wb + x];
+            const int64_t lo = d > 0.0f ? x : (x - reach > 0 ? x - reach : 0);
+            const int64_t hi = d > 0.0f ? (x + reach + 1 < wb ? x + reach + 1 : wb) : x + 1;
+            const double sv = (double)(q[hi] - q[lo]) / scale;
+            const int64_t sc = n[hi] - n[lo];
+            const float rate = (float)(sv / (sc > 1 ? (double)sc : 1.0));
+            const float bias = sc > 0 ? (rate - omega) * d : 0.0f;
+            const int64_t i = (y0 + y) * w + a + x;
+            out[i] = wrap_f(psi[i] - bias);
+        }
+    }
+}
+
 /* Each channel's mean over the k rows above and below n boundaries (simbench.decode.color.
  * column_albedo_gain's per-channel copy test): for boundary i between rows y = yb[i] and y + 1 at
  * column x = xs[i], up[3 i + c] = the sum in double of src rows y - 1, y - 2, .. y - k (in that

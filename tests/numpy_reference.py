@@ -854,3 +854,86 @@ def emva_camera(
     if camera.cfa != "none":
         out = demosaic(out, pattern=camera.cfa, method=camera.demosaic)
     return out
+
+
+def centroid_corrected(
+    fits,
+    certainty,
+    *,
+    sigma_y_px,
+    period_px,
+    keep=None,
+):
+    """simbench.decode.phase.centroid_corrected as it was in numpy."""
+    from simbench.decode import phase
+
+    psis = [np.asarray(wrapped, np.float32) for wrapped, _ in fits]
+    sigmas = [float(sx) for _, sx in fits]
+    c = np.ascontiguousarray(certainty, np.float32)
+    rx, ry = len(phase.gaussian_kernel(sigmas[0])) // 2, len(phase.gaussian_kernel(sigma_y_px)) // 2
+    # the widest window's cut pixels hold every narrower one's
+    cut = phase._not_whole(c, rx, ry)
+    cand = cut if keep is None else cut & ~keep
+    cols = np.flatnonzero(cand.any(axis=0))
+    outs = [psi.copy() for psi in psis]
+    if cols.size == 0:
+        return outs
+    reach = phase.rate_reach_px(sigmas[0], period_px)
+    margin = rx + reach + 1
+    omega = np.float32(2.0 * np.pi / period_px)
+    h, w = c.shape
+    for run in np.split(cols, np.flatnonzero(np.diff(cols) > 2 * margin) + 1):
+        # a block wide and tall enough that every pixel read holds its whole window within it
+        a, b = max(0, int(run[0]) - margin), min(w, int(run[-1]) + margin + 1)
+        in_rows = np.flatnonzero(cand[:, a:b].any(axis=1))
+        y0, y1 = max(0, int(in_rows[0]) - ry), min(h, int(in_rows[-1]) + ry + 1)
+        cs = np.ascontiguousarray(c[y0:y1, a:b])
+        block_cut, block_cand = cut[y0:y1, a:b], cand[y0:y1, a:b]
+        # OpenCV's filters take a row's last few columns (its width modulo the vector width) in
+        # scalar code, a last bit off the vector code's: a block as wide as a whole number of the
+        # widest vectors (the outside uncertain, as the image's) gives each pixel the same bits
+        # wherever the block starts - which follows the row band's cut pixels (measured: the
+        # right border's pixels 1 ulp apart between 1 and 2 bands on scenes/robust_printed.toml)
+        padded = np.zeros((y1 - y0, -(-(b - a) // phase.CENTROID_BLOCK_ALIGN) * phase.CENTROID_BLOCK_ALIGN), np.float32)
+        padded[:, : b - a] = cs
+        dxs = [phase._centroid(padded, sx, sigma_y_px)[:, : b - a] for sx in sigmas]
+        with np.errstate(invalid="ignore"):
+            # a wholly uncertain window (a shadow wider than it) has no phase to step: its fit
+            # returns 0, which would pull the rate towards 0
+            centred = (~block_cut & (cs > np.float32(0.5))) | (np.abs(dxs[0]) <= np.float32(phase.CENTRED_PX))
+        needs = []
+        for psi, dx in zip(psis, dxs):
+            with np.errstate(invalid="ignore"):
+                needs.append(block_cand & (np.abs(dx) > np.float32(phase.CENTRED_PX)) & np.isfinite(psi[y0:y1, a:b]))
+        rows = np.flatnonzero(np.logical_or.reduce([n.any(axis=1) for n in needs]))
+        if rows.size == 0:
+            continue
+        # the rate's steps on the rows some fit needs, once for all fits (each row's sums its own)
+        ps, cr = psis[0][y0:y1, a:b][rows], centred[rows]
+        step = np.zeros(ps.shape, np.float32)
+        step[:, 1:-1] = phase._wrap(ps[:, 2:] - ps[:, :-2]) * np.float32(0.5)
+        good = np.zeros(ps.shape, bool)
+        good[:, 1:-1] = cr[:, 1:-1] & cr[:, 2:] & cr[:, :-2]
+        good &= np.isfinite(step)
+        # the steps in fixed point (2^-20 rad), summed as integers: a window's sum is then exact
+        # wherever its block starts, so the result does not follow the block's extent
+        q = np.where(good, np.rint(step * np.float32(phase.STEP_SCALE)), np.float32(0.0)).astype(np.int64)
+        zero = np.zeros((rows.size, 1), np.int64)
+        sq = np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
+        sn = np.concatenate([zero, np.cumsum(good, axis=1, dtype=np.int64)], axis=1)
+        for psi, out, dx, need in zip(psis, outs, dxs, needs):
+            ys, xs = np.nonzero(need)
+            if ys.size == 0:
+                continue
+            row_of = np.searchsorted(rows, ys)
+            d = dx[ys, xs]
+            # [x, x + reach] where the centre lies right of the pixel, [x - reach, x] left; within the block
+            lo = np.where(d > 0, xs, np.maximum(xs - reach, 0))
+            hi = np.where(d > 0, np.minimum(xs + reach + 1, b - a), xs + 1)
+            sv = (sq[row_of, hi] - sq[row_of, lo]).astype(np.float64) / phase.STEP_SCALE
+            sc = sn[row_of, hi] - sn[row_of, lo]
+            rate = (sv / np.maximum(sc, 1.0)).astype(np.float32)
+            bias = np.where(sc > 0, (rate - omega) * d, np.float32(0.0))
+            yy, xx = ys + y0, xs + a
+            out[yy, xx] = phase._wrap(psi[yy, xx] - bias)
+    return outs

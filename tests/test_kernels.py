@@ -919,6 +919,41 @@ def test_column_side_means_match_numpys_mean():
         _kernels.column_side_means(src, np.array([h - 2]), np.array([0]), k)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_centroid_correction_matches_numpy(seed):
+    """The window-centroid correction's rate sums and per-pixel bias in C: the bits of the numpy
+    form, on a noisy fringe whose rate changes mid-image, with scattered holes (the skipped step
+    pixels of a printed chart: windows cut everywhere), a shadow, NaN phases, two fits and a
+    carrier bank's kept pixels; and all certain (the image's ends alone cut windows)."""
+    from simbench.decode.phase import centroid_corrected, gabor_phase
+
+    rng = np.random.default_rng(seed)
+    h, w, period = 70, 330, 21.8
+    x = np.arange(w)
+    psi = 2 * np.pi * x / period * np.where(x < w // 2, 0.85, 1.15)
+    img = (0.5 + 0.4 * np.cos(psi) + rng.normal(0, 0.02, (h, w))).astype(np.float32)
+    cert = np.ones((h, w), np.float32)
+    cert[rng.random((h, w)) < 0.03] = 0.0
+    cert[20:40, 100:130] = 0.0
+    sx, sy = 0.5 * period, 0.3 * period
+    kw = dict(certainty=cert, period_px=period, sigma_y_px=sy, offset=False)
+    wide = gabor_phase(img, sigma_x_px=sx, **kw).wrapped
+    narrow = gabor_phase(img, sigma_x_px=sx / 2, **kw).wrapped
+    narrow[rng.random((h, w)) < 0.01] = np.nan
+    keep = rng.random((h, w)) < 0.05
+    for fits, kept in (([(wide, sx), (narrow, sx / 2)], None), ([(wide, sx)], keep)):
+        got = centroid_corrected(fits, cert, sigma_y_px=sy, period_px=period, keep=kept)
+        want = ref.centroid_corrected(fits, cert, sigma_y_px=sy, period_px=period, keep=kept)
+        for g, f, (psi_in, _) in zip(got, want, fits):
+            assert g.tobytes() == f.tobytes()
+            assert (g != psi_in).any()  # (something was corrected)
+    # all certain: only the windows the image's left and right ends cut
+    whole = np.ones((h, w), np.float32)
+    got = centroid_corrected([(wide, sx)], whole, sigma_y_px=sy, period_px=period)[0]
+    same(got, ref.centroid_corrected([(wide, sx)], whole, sigma_y_px=sy, period_px=period)[0])
+    assert (got[:, w // 4 : -w // 4] == wide[:, w // 4 : -w // 4]).all()
+
+
 def test_crease_bias_matches_numpy():
     """The crease term's C loops: the bits of its numpy form on a noisy map with concave and convex
     breaks, depth steps, holes and rows too short for the reach, for both signs and row reaches

@@ -47,6 +47,8 @@ __all__ = [
     "group_median",
     "column_segments",
     "column_side_means",
+    "centroid_rate_sums",
+    "centroid_apply",
     "crease_bias",
     "edge_bend",
 ]
@@ -77,6 +79,8 @@ _SIGNATURES = {
     "side_means": (None, [_I, _I, _P, _I, _P, _P, _I, _P, _P]),
     "group_median": (None, [_I, _P, _P, _I, _P, _P]),
     "column_side_means": (None, [_I, _I, _P, _P, _P, _I, _P, _P]),
+    "centroid_rate_sums": (None, [_I, _I, _P, _P, _F, _P, _P]),
+    "centroid_apply": (None, [_I, _I, _I, _P, _P, _P, _P, _P, _I, _F, _D, _I, _I, _P, _P]),
     "column_segments": (None, [_I, _P, _P, _I, _I, _I, _P, _P, _P, _I, _P, _P]),
     "window_positions": (None, [_I, _P, _P, _P, _I, _P, _I, _P]),
     "drop_broken_links": (None, [_I, _P, _P, _I, _P]),
@@ -874,6 +878,60 @@ def column_side_means(src, yb, xs, k) -> tuple[np.ndarray, np.ndarray]:
         n, w, _ptr(src, "src", np.float32, (h, w, 3)), yb.ctypes.data, xs.ctypes.data, k, up.ctypes.data, dn.ctypes.data
     )
     return up, dn
+
+
+def centroid_rate_sums(ps, centred, scale) -> tuple[np.ndarray, np.ndarray]:
+    """The window-centroid correction's rate sums over the rows of ``ps`` ((R, W) float32, the
+    widest fit's phase) where ``centred`` ((R, W) bool) holds at a step's three pixels: ``(sq,
+    sn)``, (R, W + 1) int64, the prefix sums of the steps ``rint(scale * wrap(ps[x + 1] -
+    ps[x - 1]) / 2)`` and of their count (``centroid_rate_sums`` in simbench/_ckernels.c; the bits
+    of the numpy form in tests/numpy_reference.py)."""
+    nr, wb = ps.shape
+    sq = np.empty((nr, wb + 1), np.int64)
+    sn = np.empty((nr, wb + 1), np.int64)
+    _library().centroid_rate_sums(
+        nr,
+        wb,
+        _ptr(ps, "ps", np.float32, (nr, wb)),
+        _ptr(centred, "centred", np.bool_, (nr, wb)),
+        _f32(scale),
+        sq.ctypes.data,
+        sn.ctypes.data,
+    )
+    return sq, sn
+
+
+def centroid_apply(need, dx, row_of, sq, sn, reach, omega, scale, y0, a, psi, out) -> None:
+    """The window-centroid correction at the pixels ``need`` ((B, Wb) bool) of the block at row
+    ``y0``, column ``a`` of ``psi`` ((H, W) float32), written into ``out`` (same shape): the bias
+    ``(rate - omega) dx`` (``dx``: (B, Wb) float32), the rate the mean step within ``reach``
+    towards the window's centre from row ``row_of[y]`` of the rate sums ``sq``, ``sn`` (of
+    :func:`centroid_rate_sums`, with ``scale``); see ``centroid_apply`` in simbench/_ckernels.c."""
+    nb, wb = need.shape
+    h, w = psi.shape
+    nr = sq.shape[0]
+    row_of = np.ascontiguousarray(row_of, np.int64)
+    if row_of.shape != (nb,) or (row_of >= nr).any() or y0 < 0 or a < 0 or y0 + nb > h or a + wb > w:
+        raise ValueError(f"block ({nb}, {wb}) at ({y0}, {a}) and its rows: expected inside ({h}, {w}) and {nr} sums")
+    if np.logical_and(need, (row_of < 0)[:, None]).any():
+        raise ValueError("row_of: a row with pixels to correct has no rate sums")
+    _library().centroid_apply(
+        nb,
+        wb,
+        w,
+        _ptr(need, "need", np.bool_, (nb, wb)),
+        _ptr(dx, "dx", np.float32, (nb, wb)),
+        row_of.ctypes.data,
+        _ptr(sq, "sq", np.int64, (nr, wb + 1)),
+        _ptr(sn, "sn", np.int64, (nr, wb + 1)),
+        int(reach),
+        _f32(omega),
+        float(scale),
+        int(y0),
+        int(a),
+        _ptr(psi, "psi", np.float32, (h, w)),
+        _ptr(out, "out", np.float32, (h, w), writable=True),
+    )
 
 
 def crease_bias(

@@ -707,7 +707,7 @@ def centroid_corrected(
     -------
     list of ndarray, shape (H, W), float32: the fits in their order
     """
-    psis = [np.asarray(wrapped, np.float32) for wrapped, _ in fits]
+    psis = [np.ascontiguousarray(wrapped, np.float32) for wrapped, _ in fits]
     sigmas = [float(sx) for _, sx in fits]
     c = np.ascontiguousarray(certainty, np.float32)
     rx, ry = len(gaussian_kernel(sigmas[0])) // 2, len(gaussian_kernel(sigma_y_px)) // 2
@@ -748,32 +748,32 @@ def centroid_corrected(
         rows = np.flatnonzero(np.logical_or.reduce([n.any(axis=1) for n in needs]))
         if rows.size == 0:
             continue
-        # the rate's steps on the rows some fit needs, once for all fits (each row's sums its own)
-        ps, cr = psis[0][y0:y1, a:b][rows], centred[rows]
-        step = np.zeros(ps.shape, np.float32)
-        step[:, 1:-1] = _wrap(ps[:, 2:] - ps[:, :-2]) * np.float32(0.5)
-        good = np.zeros(ps.shape, bool)
-        good[:, 1:-1] = cr[:, 1:-1] & cr[:, 2:] & cr[:, :-2]
-        good &= np.isfinite(step)
-        # the steps in fixed point (2^-20 rad), summed as integers: a window's sum is then exact
-        # wherever its block starts, so the result does not follow the block's extent
-        q = np.where(good, np.rint(step * np.float32(STEP_SCALE)), np.float32(0.0)).astype(np.int64)
-        zero = np.zeros((rows.size, 1), np.int64)
-        sq = np.concatenate([zero, np.cumsum(q, axis=1)], axis=1)
-        sn = np.concatenate([zero, np.cumsum(good, axis=1, dtype=np.int64)], axis=1)
+        # the rate's steps on the rows some fit needs, once for all fits (each row's sums its own):
+        # the steps in fixed point (2^-20 rad), summed as integers, so that a window's sum is exact
+        # wherever its block starts and the result does not follow the block's extent; then each
+        # fit's pixels: [x, x + reach] where the centre lies right of the pixel, [x - reach, x]
+        # left, within the block (simbench/_ckernels.c: the bits of the numpy form,
+        # centroid_corrected in tests/numpy_reference.py; ~5x faster on a printed chart, whose
+        # skipped step pixels cut windows everywhere)
+        sq, sn = _kernels.centroid_rate_sums(
+            np.ascontiguousarray(psis[0][y0:y1, a:b][rows]), np.ascontiguousarray(centred[rows]), STEP_SCALE
+        )
+        row_of = np.full(y1 - y0, -1, np.int64)
+        row_of[rows] = np.arange(rows.size)
         for psi, out, dx, need in zip(psis, outs, dxs, needs):
-            ys, xs = np.nonzero(need)
-            if ys.size == 0:
-                continue
-            row_of = np.searchsorted(rows, ys)
-            d = dx[ys, xs]
-            # [x, x + reach] where the centre lies right of the pixel, [x - reach, x] left; within the block
-            lo = np.where(d > 0, xs, np.maximum(xs - reach, 0))
-            hi = np.where(d > 0, np.minimum(xs + reach + 1, b - a), xs + 1)
-            sv = (sq[row_of, hi] - sq[row_of, lo]).astype(np.float64) / STEP_SCALE
-            sc = sn[row_of, hi] - sn[row_of, lo]
-            rate = (sv / np.maximum(sc, 1.0)).astype(np.float32)
-            bias = np.where(sc > 0, (rate - omega) * d, np.float32(0.0))
-            yy, xx = ys + y0, xs + a
-            out[yy, xx] = _wrap(psi[yy, xx] - bias)
+            if need.any():
+                _kernels.centroid_apply(
+                    np.ascontiguousarray(need),
+                    np.ascontiguousarray(dx, np.float32),
+                    row_of,
+                    sq,
+                    sn,
+                    reach,
+                    omega,
+                    STEP_SCALE,
+                    y0,
+                    a,
+                    psi,
+                    out,
+                )
     return outs
