@@ -1729,6 +1729,22 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
         }
 }
 
+/* The column flattening's segments raised into its gain (simbench.decode.color.column_albedo_gain):
+ * for segment i, rows y0[i] + sign r, r = 0 .. len[i] - 1, of column x0[i], gain = max(gain, g[i])
+ * as np.maximum.at does it (a NaN on either side stays NaN); gain (h, w) float32.  The rows lie
+ * inside the image (checked by the wrapper). */
+void segments_max(int64_t n, int64_t w, const int64_t *restrict y0, const int64_t *restrict x0,
+                  const int64_t *restrict len, const float *restrict g, int64_t sign, float *restrict gain) {
+    for (int64_t i = 0; i < n; i++) {
+        const float v = g[i];
+        for (int64_t r = 0; r < len[i]; r++) {
+            float *p = gain + (y0[i] + sign * r) * w + x0[i];
+            const float a = *p;
+            *p = (a != a) ? a : ((v > a || v != v) ? v : a);
+        }
+    }
+}
+
 /* A phase wrapped to [-pi, pi) as simbench.decode.phase._wrap does it in float32 numpy:
  * a - 2 pi rint(a / 2 pi), then pi itself folded to -pi. */
 static inline float wrap_f(float a) {

@@ -900,6 +900,32 @@ def test_column_walks_match_numpy():
         same(got[1], want[1])
 
 
+def test_segment_gains_match_maximum_at():
+    """The column gain's segments raised in place: np.maximum.at over their rows' index arrays,
+    overlapping segments, zero lengths, both ways, and NaN on either side kept."""
+    from simbench.decode import _kernels
+
+    rng = np.random.default_rng(5)
+    h, w = 40, 30
+    for sign in (1, -1):
+        gain = rng.uniform(0.5, 2.0, (h, w)).astype(np.float32)
+        gain[3, 4] = np.nan
+        n = 200
+        lengths = rng.integers(0, 12, n)
+        y0 = rng.integers(12, h - 12, n)
+        x0 = rng.integers(0, w, n)
+        g = rng.uniform(0.5, 3.0, n).astype(np.float32)
+        g[:3] = np.nan
+        want = gain.copy()
+        rows = np.concatenate([y0[i] + sign * np.arange(lengths[i]) for i in range(n)])
+        cols = np.repeat(x0, lengths)
+        np.maximum.at(want, (rows, cols), np.repeat(g, lengths))
+        _kernels.segments_max(gain, y0, x0, lengths, g, sign)
+        same(gain, want)
+    with pytest.raises(ValueError, match="inside"):
+        _kernels.segments_max(gain, np.array([h - 1]), np.array([0]), np.array([3]), np.ones(1, np.float32), 1)
+
+
 def test_column_side_means_match_numpys_mean():
     """Each channel's mean over the rows above and below a boundary: the bits of numpy's
     ``mean(axis=1, dtype=np.float64)`` of the gathered rows, on values spanning six decades."""

@@ -47,6 +47,7 @@ __all__ = [
     "group_median",
     "column_segments",
     "column_side_means",
+    "segments_max",
     "centroid_rate_sums",
     "centroid_apply",
     "crease_bias",
@@ -79,6 +80,7 @@ _SIGNATURES = {
     "side_means": (None, [_I, _I, _P, _I, _P, _P, _I, _P, _P]),
     "group_median": (None, [_I, _P, _P, _I, _P, _P]),
     "column_side_means": (None, [_I, _I, _P, _P, _P, _I, _P, _P]),
+    "segments_max": (None, [_I, _I, _P, _P, _P, _P, _I, _P]),
     "centroid_rate_sums": (None, [_I, _I, _P, _P, _F, _P, _P]),
     "centroid_apply": (None, [_I, _I, _I, _P, _P, _P, _P, _P, _I, _F, _D, _I, _I, _P, _P]),
     "column_segments": (None, [_I, _P, _P, _I, _I, _I, _P, _P, _P, _I, _P, _P]),
@@ -878,6 +880,34 @@ def column_side_means(src, yb, xs, k) -> tuple[np.ndarray, np.ndarray]:
         n, w, _ptr(src, "src", np.float32, (h, w, 3)), yb.ctypes.data, xs.ctypes.data, k, up.ctypes.data, dn.ctypes.data
     )
     return up, dn
+
+
+def segments_max(gain, y0, x0, lengths, g, sign) -> None:
+    """``np.maximum.at(gain, (rows, cols), values)`` for the segments of ``lengths[i]`` rows from
+    row ``y0[i]`` down (``sign`` 1) or up (-1) column ``x0[i]``, each of value ``g[i]`` (float32),
+    without the index arrays: ``gain`` ((H, W) float32) in place."""
+    h, w = gain.shape
+    y0, x0, lengths = (np.ascontiguousarray(v, np.int64) for v in (y0, x0, lengths))
+    g = np.ascontiguousarray(g, np.float32)
+    n = y0.size
+    if sign not in (1, -1) or not (x0.size == lengths.size == g.size == n):
+        raise ValueError("y0, x0, lengths, g: expected one size each, and sign 1 or -1")
+    if n:
+        last = y0 + sign * np.maximum(lengths - 1, 0)
+        if (lengths < 0).any() or min(y0.min(), last.min()) < 0 or max(y0.max(), last.max()) >= h:
+            raise ValueError(f"segments: expected rows inside [0, {h}) and lengths >= 0")
+        if x0.min() < 0 or x0.max() >= w:
+            raise ValueError(f"x0: expected columns inside [0, {w})")
+    _library().segments_max(
+        n,
+        w,
+        y0.ctypes.data,
+        x0.ctypes.data,
+        lengths.ctypes.data,
+        g.ctypes.data,
+        int(sign),
+        _ptr(gain, "gain", np.float32, (h, w), writable=True),
+    )
 
 
 def centroid_rate_sums(ps, centred, scale) -> tuple[np.ndarray, np.ndarray]:

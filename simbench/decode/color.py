@@ -1040,13 +1040,9 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
             other, _ = _column_segments(y1, x0[rim], -sign, stop=stop, edge=edge, frame=frame, longest=longest)
             end[np.flatnonzero(rim)[other <= 0]] = -1
         # (the segments of one direction do not overlap: the next edge ends each)
+        # (np.maximum.at over every segment's pixels, without their index arrays: simbench/_ckernels.c)
         done = end > 0
-        lengths = end[done]
-        first = np.repeat(np.cumsum(lengths) - lengths, lengths)
-        offset = np.arange(int(lengths.sum())) - first
-        rows = np.repeat(y0[done], lengths) + sign * offset
-        cols = np.repeat(x0[done], lengths)
-        np.maximum.at(gain, (rows, cols), np.repeat(g0[done], lengths))
+        _kernels.segments_max(gain, y0[done], x0[done], end[done], g0[done], sign)
     # (no segment closed by a print edge: nothing to flatten)
     return gain if (gain != 1.0).any() else None
 
