@@ -937,3 +937,51 @@ def centroid_corrected(
             yy, xx = ys + y0, xs + a
             out[yy, xx] = phase._wrap(psi[yy, xx] - bias)
     return outs
+
+
+def crease_apex_bias(
+    bias,
+    column_px,
+    *,
+    scale_px,
+    depth_sign,
+    peak_px,
+    apex_px,
+    apex_factor,
+    lobe_share,
+    min_px=0.0,
+):
+    """simbench.decode.depth.crease_apex_bias as it was: every step over the whole image."""
+    b = np.ascontiguousarray(bias, dtype=np.float32)
+    # only an apex whose prediction reaches min_px is raised: below it (a plane's fitted ripple
+    # predicts <= 0.1 px) the raised prediction stays far from any wrong depth, and the test costs
+    # ~35 ms a decode at the paper's resolution
+    apex = (b > 0) & (b >= np.float32(min_px)) & (b >= cv2.dilate(b, np.ones((1, 2 * int(peak_px) + 1), np.uint8)))
+    if not apex.any():
+        return b
+    # float32 throughout (a fold's lobe test has margins of tenths of its peak; float64 filters and
+    # dilations cost ~100 ms a decode at the paper's resolution)
+    c = np.asarray(column_px, np.float32)
+    h, w = c.shape
+    L = int(scale_px)
+    d2 = np.full((h, w), np.nan, np.float32)
+    if w > 2 * L:
+        # in the concave sense: positive where crease_bias predicts a bias
+        d2[:, L:-L] = np.float32(-np.sign(depth_sign)) * (c[:, 2 * L :] - np.float32(2.0) * c[:, L:-L] + c[:, : -2 * L])
+    ok = np.isfinite(d2)
+    # the sums over 2 L + 1 rows, by running sums
+    rows = (1, 2 * L + 1)
+    total = cv2.boxFilter(np.where(ok, d2, np.float32(0.0)), -1, rows, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.boxFilter(ok.astype(np.float32), -1, rows, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    mean = np.where(count > 0.5, total / np.maximum(count, np.float32(1.0)), np.float32(0.0)).astype(np.float32)
+    lobe = np.ones((1, 4 * L + 1), np.uint8)
+    deepest = cv2.erode(mean, lobe)
+    # judged only where D2 is known across the whole reach (not by the image's sides, nor a hole)
+    known = cv2.erode((count > 0.5).astype(np.uint8), lobe, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    fold = apex & known.astype(bool) & (deepest >= np.float32(-lobe_share) * mean)
+    if not fold.any():
+        return b
+    reach = np.ones((1, 2 * int(apex_px) + 1), np.uint8)
+    near = cv2.dilate(fold.view(np.uint8), reach).astype(bool)
+    raised = cv2.dilate(np.where(fold, b, np.float32(0.0)), reach) * np.float32(apex_factor)
+    return np.where(near, np.maximum(b, raised), b).astype(np.float32)

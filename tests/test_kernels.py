@@ -980,6 +980,37 @@ def test_centroid_correction_matches_numpy(seed):
     assert (got[:, w // 4 : -w // 4] == wide[:, w // 4 : -w // 4]).all()
 
 
+def test_fold_apexes_match_the_whole_image_form():
+    """crease_apex_bias judges folds on the columns within reach of an apex only: the bits of the
+    whole-image form, with folds by the image's sides, runs of apex columns closer and farther
+    than the lobe's reach, an S-shaped print bend, holes in the map and rows without a fold."""
+    from simbench.decode.depth import crease_apex_bias, crease_bias
+
+    rng = np.random.default_rng(2)
+    h, w, reach = 90, 420, 22
+    x = np.arange(w)
+    maps = np.empty((h, w), np.float32)
+    for y in range(h):
+        # the slope drops at each fold (concave); every seventh row has none
+        folds = [] if y % 7 == 0 else [(12 + y % 5, 0.3), (150, 0.25), (150 + 4 * reach + 3 + y % 3, 0.2), (400, 0.3)]
+        slope = np.ones(w)
+        for x0, k in folds:
+            slope[x0:] -= k
+        if y % 11 == 3:  # a print's S: the slope drops, then rises back as much
+            slope[270:] -= 0.25
+            slope[300:] += 0.25
+        maps[y] = np.concatenate([[0.0], np.cumsum(slope[:-1])]) + rng.normal(0, 0.001, w)
+    maps[rng.random((h, w)) < 0.0005] = np.nan
+    kw = dict(scale_px=reach, depth_sign=1.0)
+    bias = crease_bias(maps, bias_ratio=0.3, max_step_px=3.0, rows_reach=reach, **kw)
+    for min_px in (0.0, 0.15):
+        args = dict(peak_px=10, apex_px=8, apex_factor=0.55 / 0.3, lobe_share=0.3, min_px=min_px, **kw)
+        got = crease_apex_bias(bias, maps, **args)
+        want = ref.crease_apex_bias(bias, maps, **args)
+        same(got, want)
+        assert (got > bias).any()
+
+
 def test_crease_bias_matches_numpy():
     """The crease term's C loops: the bits of its numpy form on a noisy map with concave and convex
     breaks, depth steps, holes and rows too short for the reach, for both signs and row reaches

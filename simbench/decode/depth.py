@@ -315,10 +315,44 @@ def crease_apex_bias(
     c = np.asarray(column_px, np.float32)
     h, w = c.shape
     L = int(scale_px)
-    d2 = np.full((h, w), np.nan, np.float32)
-    if w > 2 * L:
+    fold = np.zeros((h, w), bool)
+    # the lobe test at an apex reads D2's row means within 2 L of it along the row, and D2 reads
+    # the map L further: it runs on the columns within 2 L of an apex only, each run of them with
+    # its own margin (the sums down the columns are each column's own, and a morphological
+    # window's outside is the image's wherever the run reaches the image's side: the same bits as
+    # over the whole image, on a corner's ~10 apex columns ~10x less work)
+    cols = np.flatnonzero(apex.any(axis=0))
+    runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, np.flatnonzero(np.diff(cols) > 4 * L + 1) + 1)]
+    for a0, a1 in runs:
+        s0, s1 = max(0, a0 - 2 * L), min(w, a1 + 2 * L)
+        fold[:, s0:s1] = _folds(c, apex[:, s0:s1], s0, L=L, depth_sign=depth_sign, lobe_share=lobe_share)
+    if not fold.any():
+        return b
+    # raised within apex_px of a fold (every fold lies in a run, and runs lie more than 4 L apart:
+    # beyond apex_px of its own run's columns no fold reaches a pixel)
+    out = b.copy()
+    reach = np.ones((1, 2 * int(apex_px) + 1), np.uint8)
+    for a0, a1 in runs:
+        s0, s1 = max(0, a0 - int(apex_px)), min(w, a1 + int(apex_px))
+        f, bs = np.ascontiguousarray(fold[:, s0:s1]), b[:, s0:s1]
+        near = cv2.dilate(f.view(np.uint8), reach).astype(bool)
+        raised = cv2.dilate(np.where(f, bs, np.float32(0.0)), reach) * np.float32(apex_factor)
+        out[:, s0:s1] = np.where(near, np.maximum(bs, raised), bs)
+    return out
+
+
+def _folds(c: np.ndarray, apex: np.ndarray, s0: int, *, L: int, depth_sign: float, lobe_share: float) -> np.ndarray:
+    """:func:`crease_apex_bias`' lobe test on the columns ``s0 .. s0 + apex.shape[1]`` of the map
+    ``c`` ((H, W) float32): the apexes there that are folds."""
+    h, w = c.shape
+    s1 = s0 + apex.shape[1]
+    d2 = np.full((h, s1 - s0), np.nan, np.float32)
+    x0, x1 = max(s0, L), min(s1, w - L)  # D2 is defined L from the image's sides
+    if x1 > x0:
         # in the concave sense: positive where crease_bias predicts a bias
-        d2[:, L:-L] = np.float32(-np.sign(depth_sign)) * (c[:, 2 * L :] - np.float32(2.0) * c[:, L:-L] + c[:, : -2 * L])
+        d2[:, x0 - s0 : x1 - s0] = np.float32(-np.sign(depth_sign)) * (
+            c[:, x0 + L : x1 + L] - np.float32(2.0) * c[:, x0:x1] + c[:, x0 - L : x1 - L]
+        )
     ok = np.isfinite(d2)
     # the sums over 2 L + 1 rows, by running sums
     rows = (1, 2 * L + 1)
@@ -329,13 +363,7 @@ def crease_apex_bias(
     deepest = cv2.erode(mean, lobe)
     # judged only where D2 is known across the whole reach (not by the image's sides, nor a hole)
     known = cv2.erode((count > 0.5).astype(np.uint8), lobe, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    fold = apex & known.astype(bool) & (deepest >= np.float32(-lobe_share) * mean)
-    if not fold.any():
-        return b
-    reach = np.ones((1, 2 * int(apex_px) + 1), np.uint8)
-    near = cv2.dilate(fold.view(np.uint8), reach).astype(bool)
-    raised = cv2.dilate(np.where(fold, b, np.float32(0.0)), reach) * np.float32(apex_factor)
-    return np.where(near, np.maximum(b, raised), b).astype(np.float32)
+    return apex & known.astype(bool) & (deepest >= np.float32(-lobe_share) * mean)
 
 
 def crease_trusted(valid: np.ndarray, *, scale_px: int) -> np.ndarray:
