@@ -988,7 +988,6 @@ def test_fold_apexes_match_the_whole_image_form():
 
     rng = np.random.default_rng(2)
     h, w, reach = 90, 420, 22
-    x = np.arange(w)
     maps = np.empty((h, w), np.float32)
     for y in range(h):
         # the slope drops at each fold (concave); every seventh row has none
