@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import os
 import sys
 import warnings
@@ -137,6 +138,32 @@ _RECORDING_FLAGS = {
 CAMERA_SCALE_RANGE = (0.0, 4.0)
 
 
+def scaled_rig(rig: Rig, camera_scale: float, *, period_px: float | None) -> Rig:
+    """``rig`` with its camera's resolution times ``camera_scale`` (:func:`simbench.rig.scale_camera`)
+    for :func:`record`, refused - before any render - where the factor gives no whole image size,
+    or where it takes the fringe's period (``period_px`` projector px; None: no fringe) under
+    :data:`simbench.decode.params.MIN_CAMERA_PERIOD_PX` camera pixels (a new user's audit: at 0.1
+    the render exited 0, and its folder's decode blamed the reference capture or the calibration;
+    phase shifting decoded 74 % of the step, 11.8 mm off, without a word)."""
+    from simbench.decode.params import MIN_CAMERA_PERIOD_PX
+    from simbench.rig import scale_camera
+
+    try:
+        scaled = scale_camera(rig, camera_scale)
+    except ValueError as exc:
+        raise ValueError(f"camera_scale (--camera-scale): {exc}") from None
+    if period_px:
+        t_cam = float(period_px) * scaled.camera.focal_px / scaled.projector.focal_px
+        if t_cam < MIN_CAMERA_PERIOD_PX:
+            least = math.ceil(100.0 * camera_scale * MIN_CAMERA_PERIOD_PX / t_cam) / 100.0
+            raise ValueError(
+                f"camera_scale (--camera-scale) {camera_scale:g} takes the fringe's period ({period_px:g} projector "
+                f"px) to {t_cam:.2f} camera pixels, under the {MIN_CAMERA_PERIOD_PX:g} its decoding needs (Nyquist: "
+                f"2): nothing would decode right; scale by {least:g} or more (or project a longer period)"
+            )
+    return scaled
+
+
 def record(
     scene: str | Path | SceneSpec,
     *,
@@ -230,10 +257,7 @@ def record(
             f"{named} {verb} not apply to the {system} system ({uses}): leave {'it' if len(stray) == 1 else 'them'} out"
         )
     if camera_scale != 1.0:
-        from simbench.rig import scale_camera
-
-        # (a factor that gives no whole image size is refused here, before any render)
-        spec = dataclasses.replace(spec, rig=scale_camera(spec.rig, camera_scale))
+        spec = dataclasses.replace(spec, rig=scaled_rig(spec.rig, camera_scale, period_px=info.period_px))
     if info.uses_scene_rig:  # (the competitors replace the scene's rig with their own)
         check_rig_lens(spec.rig, sensor_model, where=f"scene {scene if isinstance(scene, (str, Path)) else spec.name}")
     from simbench.sim.timeline import is_moving, placement_warnings

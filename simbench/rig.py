@@ -407,16 +407,27 @@ def scale_camera(rig: Rig, factor: float) -> Rig:
     """
     cam = rig.camera
     w, h = cam.width_px * factor, cam.height_px * factor
-    if not factor > 0 or w != int(w) or h != int(h):
+    # (whole to within float rounding: 0.5125 x 1280 is 655.9999999999999)
+    whole = factor > 0 and all(abs(v - round(v)) <= 1e-9 * max(1.0, v) and round(v) >= 1 for v in (w, h))
+    if not whole:
+        step = math.gcd(cam.width_px, cam.height_px)
         raise ValueError(
-            f"camera scale {factor} must give whole image sizes (camera is {cam.width_px}x{cam.height_px})"
+            f"camera scale {factor:g} gives a {w:g}x{h:g} image: it must give whole image sizes (camera "
+            f"{cam.width_px}x{cam.height_px}: a multiple of 1/{step}, e.g. 0.25 or 0.5)"
         )
+    w_px, h_px = int(round(w)), int(round(h))
+
+    def centre(c: float, n: int, n_scaled: int) -> float:
+        # a centred principal point stays exactly centred (at 0.5125, 640 x 0.5125 - 0.5 is
+        # 327.49999999999994, not the centre 327.5 the thin-lens defocus insists on)
+        return (n_scaled - 1) / 2.0 if c == (n - 1) / 2.0 else (c + 0.5) * factor - 0.5
+
     scaled = Intrinsics(
-        int(w),
-        int(h),
+        w_px,
+        h_px,
         cam.focal_px * factor,
-        (cam.cx_px + 0.5) * factor - 0.5,
-        (cam.cy_px + 0.5) * factor - 0.5,
+        centre(cam.cx_px, cam.width_px, w_px),
+        centre(cam.cy_px, cam.height_px, h_px),
         cam.distortion,
     )
     suffix = f"@{factor:g}x" if factor != 1 else ""

@@ -230,7 +230,16 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplo
             r"records with sensor, camera_scale only\)",
         ),
         ({"camera_scale": 0}, r"camera_scale must be a finite number in \(0, 4\], got 0"),
-        ({"camera_scale": 0.33}, "camera scale 0.33 must give whole image sizes"),
+        (
+            {"camera_scale": 0.33},
+            r"camera scale 0.33 gives a 422.4x316.8 image: it must give whole image sizes .*1/320",
+        ),
+        # (an audit: at 0.1 the render exited 0 and nothing decoded right)
+        (
+            {"camera_scale": 0.1},
+            r"0.1 takes the fringe's period \(21 projector px\) to 2.18 camera pixels.*by 0.19 or more",
+        ),
+        ({"system": "phase_shift", "camera_scale": 0.1}, "camera pixels, under the 4 its decoding needs"),
         ({"system": "kinect", "camera_scale": 0.5}, r"^camera_scale \(--camera-scale\) does not apply to the kinect"),
     ],
 )

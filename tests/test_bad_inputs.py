@@ -977,7 +977,9 @@ for cid, extra, msg in [
     ("phase-shift-order", ["--system", "phase_shift", "--order", "4"], "does not apply to the phase_shift system"),
     ("kinect-calibration-frames", ["--system", "kinect", "--calibration-frames"], "calibration_frames (--calib"),
     ("tof-camera-scale", ["--system", "tof", "--camera-scale", "0.5"], "camera_scale (--camera-scale) does not apply"),
-    ("camera-scale-not-whole", ["--camera-scale", "0.33"], "camera scale 0.33 must give whole image sizes"),
+    ("camera-scale-not-whole", ["--camera-scale", "0.33"], "camera scale 0.33 gives a 422.4x316.8 image: it must"),
+    ("camera-scale-period", ["--camera-scale", "0.1"], "to 2.18 camera pixels, under the 4 its decoding needs"),
+    ("kinect-camera-scale-not-whole", ["--system", "kinect", "--camera-scale", "0.33"], "does not apply to the kinect"),
     ("camera-scale-zero", ["--camera-scale", "0"], "argument --camera-scale: must be a finite number in (0, 4]"),
 ]:
     case(

@@ -458,7 +458,8 @@ def test_render_at_a_camera_scale_decodes_from_its_folder(tmp_path, capsys, vari
     out = tmp_path / "wp"
     argv = ["render", "white_plane", "--camera-scale", "0.25", "--spp", "4", "--calibration-frames"]
     assert main([*argv, "--out", str(out), "--cache", str(tmp_path / "cache")]) == 0
-    assert "li2017@0.25x" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "rendered white_plane at 320x240 (--camera-scale 0.25) with" in said and "li2017@0.25x" in said
     assert load_image(out / "capture.png").shape == (240, 320, 3)
     camera, full = load_rig(out / "rig.toml").camera, paper_rig().camera
     assert camera.size_hw == (240, 320) and camera.focal_px == pytest.approx(full.focal_px / 4)

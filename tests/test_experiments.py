@@ -45,6 +45,9 @@ def test_scale_camera_keeps_the_view():
     assert half.projector == rig.projector
     with pytest.raises(ValueError, match="whole image sizes"):
         scale_camera(rig, 0.33)
+    # whole to within float rounding (640 x 0.5125 is 327.99999999999994), and still exactly centred
+    odd = scale_camera(rig, 0.5125).camera
+    assert odd.size_hw == (492, 656) and (odd.cx_px, odd.cy_px) == (327.5, 245.5)
 
 
 def test_unknown_target_is_rejected():

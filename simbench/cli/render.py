@@ -61,16 +61,20 @@ def _render(args) -> int:
     if args.system not in system_names():  # an unknown name fails before anything else
         get_system(args.system)
     scene = load_scene(scene_file(args.scene))
-    if args.camera_scale != 1.0:
-        from simbench.rig import scale_camera
-
-        # the camera the render will have (a factor giving no whole image size is refused here)
-        scene = dataclasses.replace(scene, rig=scale_camera(scene.rig, args.camera_scale))
     pattern = pattern_spec(args, scene.rig.projector.size_hw)
     # a system that projects a coded pattern projects the pattern options'; the others their own
     system = get_system(
         args.system, SystemOptions(sensor=get_sensor(args.camera or "paper"), decoder=DecoderParams(pattern=pattern))
     )
+    takes = system.info().recording_options
+    if args.camera_scale != 1.0 and (takes is None or "camera_scale" in takes):
+        from simbench.api import scaled_rig
+
+        # the camera the render will have, refused before anything else where it cannot be (a
+        # system with its own device is refused the option by simbench.record)
+        scene = dataclasses.replace(
+            scene, rig=scaled_rig(scene.rig, args.camera_scale, period_px=system.info().period_px)
+        )
     pattern_given = any(getattr(args, k) is not None for k in ("period", "order", "sequence", "channels"))
     options = system.info().recording_options  # None: a system that does not say takes what applies
     takes_pattern = options is None or "pattern" in options
@@ -140,9 +144,13 @@ def _render(args) -> int:
     cached = (
         f", render cache: {cache.hits} entries read, {cache.misses} made{damaged}" if cache.root is not None else ""
     )
+    at = ""
+    if args.camera_scale != 1.0:  # (a new user's audit: only the lens line's rig name said it)
+        cam = scene.rig.camera  # (scaled above)
+        at = f" at {cam.width_px}x{cam.height_px} (--camera-scale {args.camera_scale:g})"
     print(
-        f"rendered {scene.name} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, seed "
-        f"{args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
+        f"rendered {scene.name}{at} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, "
+        f"seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
     t_exp = rec.meta.get("exposure_s")
     if t_exp:  # (an audit: only meta.json said it)
@@ -295,8 +303,11 @@ def add_parsers(sub, kw: dict) -> None:
         "--camera-scale",
         type=CAMERA_SCALE,
         default=1.0,
-        help="the scene rig's camera resolution times this factor, field of view and pose kept (0.5: 640x480 for the "
-        "paper's camera, as reproduce --quick renders; 0.25 for a test render in seconds); the recording's rig.toml "
+        help="the scene rig's camera resolution times this factor, in (0, 4], field of view and pose kept: a sensor "
+        "of as many more or fewer pixels of the same pitch behind a lens as much longer or shorter at the same "
+        "f-number (the same light per pixel; defocus blur in pixels scales with the factor squared). 0.5: 640x480 "
+        "for the paper's camera, as reproduce --quick renders; 0.25 for a test render in seconds. The factor must "
+        "give whole image sizes and keep the fringe's period at 4 camera pixels or more. The recording's rig.toml "
         "holds the scaled camera, so that the folder decodes as it is (for the systems that record with the scene's "
         "rig)",
     )
