@@ -1731,7 +1731,8 @@ void robust_fringe_code(int64_t n, const float *restrict rgb, const float *restr
 
 /* The column flattening's segments raised into its gain (simbench.decode.color.column_albedo_gain):
  * for segment i, rows y0[i] + sign r, r = 0 .. len[i] - 1, of column x0[i], gain = max(gain, g[i])
- * as np.maximum.at does it (a NaN on either side stays NaN); gain (h, w) float32.  The rows lie
+ * as np.maximum.at does it (a NaN on either side wins; of +0.0 and -0.0 the second, as numpy 2 does);
+ * gain (h, w) float32.  The rows lie
  * inside the image (checked by the wrapper). */
 void segments_max(int64_t n, int64_t w, const int64_t *restrict y0, const int64_t *restrict x0,
                   const int64_t *restrict len, const float *restrict g, int64_t sign, float *restrict gain) {
@@ -1740,7 +1741,8 @@ void segments_max(int64_t n, int64_t w, const int64_t *restrict y0, const int64_
         for (int64_t r = 0; r < len[i]; r++) {
             float *p = gain + (y0[i] + sign * r) * w + x0[i];
             const float a = *p;
-            *p = (a != a) ? a : ((v > a || v != v) ? v : a);
+            /* np.maximum's: NaN either side wins, and a tie (+0.0 against -0.0) takes the second */
+            *p = (a != a) ? a : (a > v ? a : v);
         }
     }
 }
@@ -1811,7 +1813,7 @@ void centroid_apply(int64_t nb, int64_t wb, int64_t w, const uint8_t *restrict n
 /* Each channel's mean over the k rows above and below n boundaries (simbench.decode.color.
  * column_albedo_gain's per-channel copy test): for boundary i between rows y = yb[i] and y + 1 at
  * column x = xs[i], up[3 i + c] = the sum in double of src rows y - 1, y - 2, .. y - k (in that
- * order) over k, dn[3 i + c] that of rows y + 2 .. y + k + 1 - the bits of numpy's
+ * order, from 0.0) over k, dn[3 i + c] that of rows y + 2 .. y + k + 1 - the bits of numpy's
  * src[rows, cols, c].mean(axis=1, dtype=np.float64) over those rows, which sums k < 8 values in
  * order.  src: (h, w, 3) float32; the rows must lie inside it (checked by the wrapper). */
 void column_side_means(int64_t n, int64_t w, const float *restrict src, const int64_t *restrict yb,
@@ -1819,8 +1821,9 @@ void column_side_means(int64_t n, int64_t w, const float *restrict src, const in
     for (int64_t i = 0; i < n; i++) {
         const float *col = src + xs[i] * 3;
         for (int64_t c = 0; c < 3; c++) {
-            double su = (double)col[(yb[i] - 1) * w * 3 + c], sd = (double)col[(yb[i] + 2) * w * 3 + c];
-            for (int64_t j = 2; j <= k; j++) {
+            /* from numpy's +0.0 identity: k values of -0.0 sum to +0.0 there (a review) */
+            double su = 0.0, sd = 0.0;
+            for (int64_t j = 1; j <= k; j++) {
                 su += (double)col[(yb[i] - j) * w * 3 + c];
                 sd += (double)col[(yb[i] + 1 + j) * w * 3 + c];
             }

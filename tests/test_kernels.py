@@ -916,6 +916,7 @@ def test_segment_gains_match_maximum_at():
         x0 = rng.integers(0, w, n)
         g = rng.uniform(0.5, 3.0, n).astype(np.float32)
         g[:3] = np.nan
+        g[3:6] = gain[y0[3:6], x0[3:6]]  # ties
         want = gain.copy()
         rows = np.concatenate([y0[i] + sign * np.arange(lengths[i]) for i in range(n)])
         cols = np.repeat(x0, lengths)
@@ -934,7 +935,9 @@ def test_column_side_means_match_numpys_mean():
     rng = np.random.default_rng(1)
     h, w, k = 60, 200, color.COLUMN_EDGE_ROWS
     src = (rng.random((h, w, 3)) ** 3 * rng.choice([1e-3, 1.0, 1e3], (h, w, 3))).astype(np.float32)
+    src[10 : 10 + 2 * k + 2, :5] = -0.0  # k values of -0.0: numpy's mean is +0.0
     yb, xs = rng.integers(k, h - k - 1, 500), rng.integers(0, w, 500)
+    yb[:5], xs[:5] = k + 10, np.arange(5)
     up, dn = _kernels.column_side_means(src, yb, xs, k)
     rows_up = yb[:, None] - np.arange(1, k + 1)[None, :]
     rows_dn = yb[:, None] + 1 + np.arange(1, k + 1)[None, :]
@@ -943,6 +946,8 @@ def test_column_side_means_match_numpys_mean():
         same(dn[:, c], src[rows_dn, xs[:, None], c].mean(axis=1, dtype=np.float64))
     with pytest.raises(ValueError, match="inside"):
         _kernels.column_side_means(src, np.array([h - 2]), np.array([0]), k)
+    with pytest.raises(ValueError, match="inside"):  # (an int64 wrap let this through)
+        _kernels.column_side_means(src, np.array([2**63 - 2]), np.array([0]), k)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -973,6 +978,18 @@ def test_centroid_correction_matches_numpy(seed):
         for g, f, (psi_in, _) in zip(got, want, fits):
             assert g.tobytes() == f.tobytes()
             assert (g != psi_in).any()  # (something was corrected)
+    # the wrapper refuses what would read or write outside the arrays (a review: a negative reach
+    # segfaulted; an int64 y0 near 2**63 wrapped past the bounds check)
+    from simbench.decode import _kernels
+
+    need, dx = np.ones((1, 4), bool), np.ones((1, 4), np.float32)
+    sums = np.zeros((1, 5), np.int64)
+    psi_small = np.zeros((2, 8), np.float32)
+    for reach, y0 in ((-(10**15), 0), (3, np.int64(2**63 - 1))):
+        with pytest.raises(ValueError):
+            _kernels.centroid_apply(
+                need, dx, np.zeros(1), sums, sums, reach, 0.3, 2.0**20, y0, 0, psi_small, psi_small.copy()
+            )
     # all certain: only the windows the image's left and right ends cut
     whole = np.ones((h, w), np.float32)
     got = centroid_corrected([(wide, sx)], whole, sigma_y_px=sy, period_px=period)[0]
@@ -1008,6 +1025,15 @@ def test_fold_apexes_match_the_whole_image_form():
         want = ref.crease_apex_bias(bias, maps, **args)
         same(got, want)
         assert (got > bias).any()
+    # a raise reaching farther than the lobe (apex_px > 2 L): runs of apexes 4 L + 2 .. 2 apex_px
+    # apart are raised together (a review: each overwrote the other's raise)
+    line = np.tile(np.arange(40, dtype=np.float32), (3, 1))
+    apexes = np.zeros((3, 40), np.float32)
+    apexes[:, 10], apexes[:, 17] = 2.0, 1.0
+    args = dict(scale_px=1, depth_sign=1.0, peak_px=1, apex_px=5, apex_factor=1.5, lobe_share=0.3)
+    same(crease_apex_bias(apexes, line, **args), ref.crease_apex_bias(apexes, line, **args))
+    with pytest.raises(ValueError, match="scale_px must be >= 1"):
+        crease_apex_bias(apexes, line, **{**args, "scale_px": 0})
 
 
 def test_crease_bias_matches_numpy():

@@ -872,7 +872,8 @@ def column_side_means(src, yb, xs, k) -> tuple[np.ndarray, np.ndarray]:
     yb = np.ascontiguousarray(yb, np.int64)
     xs = np.ascontiguousarray(xs, np.int64)
     n = yb.size
-    if xs.size != n or (n and (yb.min() < k or yb.max() + k + 1 >= h or xs.min() < 0 or xs.max() >= w)):
+    # (compared as Python ints: yb.max() + k + 1 could wrap in int64)
+    if xs.size != n or (n and (int(yb.min()) < k or int(yb.max()) >= h - k - 1 or xs.min() < 0 or xs.max() >= w)):
         raise ValueError(f"yb, xs: expected {n} boundaries at least {k} rows inside ({h}, {w})")
     up = np.empty((n, 3), np.float64)
     dn = np.empty((n, 3), np.float64)
@@ -941,6 +942,9 @@ def centroid_apply(need, dx, row_of, sq, sn, reach, omega, scale, y0, a, psi, ou
     h, w = psi.shape
     nr = sq.shape[0]
     row_of = np.ascontiguousarray(row_of, np.int64)
+    y0, a, reach = int(y0), int(a), int(reach)  # (Python ints: no int64 wrap in the checks)
+    if not 0 <= reach <= 1 << 40:
+        raise ValueError(f"reach must be in [0, 2**40], got {reach}")
     if row_of.shape != (nb,) or (row_of >= nr).any() or y0 < 0 or a < 0 or y0 + nb > h or a + wb > w:
         raise ValueError(f"block ({nb}, {wb}) at ({y0}, {a}) and its rows: expected inside ({h}, {w}) and {nr} sums")
     if np.logical_and(need, (row_of < 0)[:, None]).any():
@@ -954,11 +958,11 @@ def centroid_apply(need, dx, row_of, sq, sn, reach, omega, scale, y0, a, psi, ou
         row_of.ctypes.data,
         _ptr(sq, "sq", np.int64, (nr, wb + 1)),
         _ptr(sn, "sn", np.int64, (nr, wb + 1)),
-        int(reach),
+        reach,
         _f32(omega),
         float(scale),
-        int(y0),
-        int(a),
+        y0,
+        a,
         _ptr(psi, "psi", np.float32, (h, w)),
         _ptr(out, "out", np.float32, (h, w), writable=True),
     )

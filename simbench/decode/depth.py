@@ -303,6 +303,8 @@ def crease_apex_bias(
     -------
     ndarray, shape (H, W), float32, >= ``bias``
     """
+    if int(scale_px) < 1 or int(peak_px) < 0 or int(apex_px) < 0:
+        raise ValueError(f"scale_px must be >= 1 and peak_px, apex_px >= 0, got {scale_px}, {peak_px}, {apex_px}")
     b = np.ascontiguousarray(bias, dtype=np.float32)
     # only an apex whose prediction reaches min_px is raised: below it (a plane's fitted ripple
     # predicts <= 0.1 px) the raised prediction stays far from any wrong depth, and the test costs
@@ -321,15 +323,18 @@ def crease_apex_bias(
     # its own margin (the sums down the columns are each column's own, and a morphological
     # window's outside is the image's wherever the run reaches the image's side: the same bits as
     # over the whole image, on a corner's ~10 apex columns ~10x less work)
+    # (runs more than 4 L apart have disjoint lobe tests, and more than 2 apex_px apart disjoint
+    # raises: a review found the raises of runs 4 L + 2 .. 2 apex_px apart overwriting each other)
     cols = np.flatnonzero(apex.any(axis=0))
-    runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, np.flatnonzero(np.diff(cols) > 4 * L + 1) + 1)]
+    apart = np.flatnonzero(np.diff(cols) > max(4 * L + 1, 2 * int(apex_px))) + 1
+    runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, apart)]
     for a0, a1 in runs:
         s0, s1 = max(0, a0 - 2 * L), min(w, a1 + 2 * L)
         fold[:, s0:s1] = _folds(c, apex[:, s0:s1], s0, L=L, depth_sign=depth_sign, lobe_share=lobe_share)
     if not fold.any():
         return b
-    # raised within apex_px of a fold (every fold lies in a run, and runs lie more than 4 L apart:
-    # beyond apex_px of its own run's columns no fold reaches a pixel)
+    # raised within apex_px of a fold (every fold lies in a run, and runs lie more than 2 apex_px
+    # apart: within apex_px of its own run's columns no other run's fold reaches a pixel)
     out = b.copy()
     reach = np.ones((1, 2 * int(apex_px) + 1), np.uint8)
     for a0, a1 in runs:
