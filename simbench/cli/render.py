@@ -66,17 +66,15 @@ def _render(args) -> int:
     system = get_system(
         args.system, SystemOptions(sensor=get_sensor(args.camera or "paper"), decoder=DecoderParams(pattern=pattern))
     )
-    takes = system.info().recording_options
-    if args.camera_scale != 1.0 and (takes is None or "camera_scale" in takes):
+    info = system.info()
+    options = info.recording_options  # None: a system that does not say takes what applies
+    if args.camera_scale != 1.0 and (options is None or "camera_scale" in options):
         from simbench.api import scaled_rig
 
         # the camera the render will have, refused before anything else where it cannot be (a
         # system with its own device is refused the option by simbench.record)
-        scene = dataclasses.replace(
-            scene, rig=scaled_rig(scene.rig, args.camera_scale, period_px=system.info().period_px)
-        )
+        scene = dataclasses.replace(scene, rig=scaled_rig(scene.rig, args.camera_scale, period_px=info.period_px))
     pattern_given = any(getattr(args, k) is not None for k in ("period", "order", "sequence", "channels"))
-    options = system.info().recording_options  # None: a system that does not say takes what applies
     takes_pattern = options is None or "pattern" in options
     if options is not None and "pattern" in options:  # a system that projects the coded pattern
         import logging
@@ -149,7 +147,7 @@ def _render(args) -> int:
         cam = scene.rig.camera  # (scaled above)
         at = f" at {cam.width_px}x{cam.height_px} (--camera-scale {args.camera_scale:g})"
     print(
-        f"rendered {scene.name}{at} with the {system.info().label} ({rec.settings['variant']}, {spp} spp {sampler}, "
+        f"rendered {scene.name}{at} with the {info.label} ({rec.settings['variant']}, {spp} spp {sampler}, "
         f"seed {args.seed}{cached}) in {time.perf_counter() - t0:.1f} s -> {Path(args.out)}/"
     )
     t_exp = rec.meta.get("exposure_s")
@@ -163,7 +161,6 @@ def _render(args) -> int:
             else "as the sensor model sets it"
         )
         print(f"  exposure {t_exp * 1e3:.4g} ms ({how})")
-    info = system.info()
     if not info.uses_scene_rig:  # (a new user's audit: their own rig was set aside without a word)
         h, w = info.size_hw
         print(f"  (with the {info.label}'s own {w}x{h} rig: the scene's rig {scene.rig.name!r} set aside)")
