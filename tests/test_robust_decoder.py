@@ -347,7 +347,9 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
     of the sequence; the whole paper stripes between them inherit that position at full fringe
     SNR (measured without ``code_doubt``: 1582 pixels kept at the operating point half a cycle or
     so off; 675, at a median confidence of 17.7 - above the right pixels' 9.4 -, before the
-    flattening's gain lost its jumps half a window from each step, 2026-11-29).  With it, no lit
+    flattening's gain lost its jumps half a window from each step, 2026-11-29; 1462 until the
+    column gain flattened the ink too, 2026-12-03, and 123 since, when the board kept 20764
+    pixels off the edges' band with it, against 1262 before).  With it, no lit
     pixel kept is more than half a period off, on 1.5- and 1.75-period squares (1.75: 47 pixels a
     period off without it, beside the squares' edges, until the albedo-edge skip left out more
     pixels and no longer counted them against a window's support, 2026-11-30: none since); the
@@ -370,7 +372,7 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
                 assert not r.confidence[r.stages["uncertain_code"]].any()
                 assert r.stages["uncertain_code"].any() or periods == 3.4
         assert np.array_equal(*positions)  # it moves no stripe: the confidence alone
-    assert kept[1.5, False][0] > 300, kept
+    assert kept[1.5, False][0] > 100, kept
     assert kept[1.5, True][0] == kept[1.75, True][0] == kept[3.4, True][0] == 0, kept
     assert kept[1.5, True][1] > 0  # not by dropping the whole board
     assert kept[3.4, True][1] > 0.99 * kept[3.4, False][1], kept
@@ -1320,6 +1322,48 @@ def test_the_column_gain_decodes_a_fine_print_the_rows_cannot(calibration, ink):
     out = {columns: _kept_off_band(calibration, cap, col, band, albedo_columns=columns) for columns in (True, False)}
     assert out[True][0] >= 0.95 and out[False][0] < 0.5 * out[True][0], out
     assert out[True][1] < 0.2, out
+
+
+def test_the_column_gain_flattens_a_20_to_1_ink_whose_crest_is_under_dark_level(calibration):
+    """The fine checkerboard of the test above at 20:1 (0.04 ink): its darker side's crest is under
+    the decoder's ``dark_level`` (0.04) and its code channels across the other code's stripes are a
+    few DN, so until 2026-12-03 (the crest asked ``COLUMN_CREST_SHARE`` of ``dark_level``, a
+    channel judged in its columns the run's scale lights to it) the column gain left nearly all of
+    it alone: 3.3 % kept at the operating point.  Measured since: 85.8 %, mean column error 0.14
+    projector px, none a stripe off (:func:`_kept_off_band` asserts it); without the column gain,
+    nothing."""
+    cap, col, band = _fine_checkerboard(0.04)
+    out = {columns: _kept_off_band(calibration, cap, col, band, albedo_columns=columns) for columns in (True, False)}
+    assert out[True][0] >= 0.8 and out[False][0] == 0.0, out
+    assert out[True][1] < 0.2, out
+
+
+def test_the_column_gain_flattens_a_band_only_where_its_two_edges_see_one_ink():
+    """Bands across the stripes a period tall: ink (0.1) between paper (0.8) above and below takes
+    one gain, ~6.6 (8 in reflectance; the synthetic camera's ambient offset, added after it,
+    lowers the light's ratio); the same ink between paper above and a grey (0.4) below has edges
+    whose gains (~6.6 and ~3.6) disagree by more than COLUMN_SCALE_AGREE and is left alone - the rule that keeps a
+    projector shadow's band between a lit wall and a dimmer surface from being brightened
+    (scenes/hard_sphere_before_wall.toml: 226 pixels, 11x, until 2026-12-03), at the cost of
+    leaving such a print's ink to the steps along the rows."""
+    t = PARAMS_PERIOD_PX
+    img, _ = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
+    h = img.shape[0]
+    size = int(round(t))
+    band = (np.arange(h) // size) % 4  # 0 paper, 1 ink, 2 paper or grey, 3 ink
+    inner = np.zeros(h, bool)
+    inner[size : (h // size) * size] = True  # the bands the image holds whole (not cut by the frame)
+    middle = (np.arange(h) % size >= 3) & (np.arange(h) % size < size - 3) & inner
+    for below, flattened in ((0.8, True), (0.4, False)):
+        rho = np.choose(band, [0.8, 0.1, below, 0.1]).astype(np.float32)[:, None, None] * np.ones_like(img[..., :1])
+        cap = _printed(img, rho.astype(np.float32), noise=0.002, seed=11)
+        gain = color.column_albedo_gain(unmix(cap, np.linalg.inv(K).astype(np.float32)), period_px=t, floor=0.04)
+        ink = ((band == 1) | (band == 3)) & middle
+        if flattened:
+            assert gain is not None and np.median(gain[ink]) == pytest.approx(6.6, rel=0.1), np.median(gain[ink])
+            assert (np.abs(gain[ink] / np.median(gain[ink]) - 1.0) < 0.1).mean() >= 0.95
+        else:
+            assert gain is None or (gain[ink] == 1.0).mean() >= 0.99, np.percentile(gain[ink], [5, 50, 95])
 
 
 @pytest.mark.parametrize("tall", [0.6, 1.5])

@@ -94,6 +94,7 @@ HARD_SCENES = {
     "hard_chart_fine": "printed albedo",
     "hard_chart_fine_mid": "printed albedo",
     "hard_chart_fine_turned": "printed albedo",
+    "hard_chart_fine_high_turned": "printed albedo",
     "hard_paint_red": "saturated colour",
     "hard_paint_orange": "saturated colour",
     "hard_paint_yellow_green": "saturated colour",
