@@ -1366,6 +1366,35 @@ def test_the_column_gain_flattens_a_band_only_where_its_two_edges_see_one_ink():
             assert gain is None or (gain[ink] == 1.0).mean() >= 0.99, np.percentile(gain[ink], [5, 50, 95])
 
 
+def test_a_weak_edge_closes_a_segment_whose_other_edge_is_a_print_and_agrees():
+    """Bands across the stripes a period tall, paper / ink (0.1) / paper / ink: every second paper
+    band is half as bright in 30 % of its columns (scattered), so the ink's edges to it hold a
+    scaled copy over 0.5-0.7 of their columns (measured) - under COLUMN_MIN_COPY_SHARE, over
+    COLUMN_WEAK_SHARE: weak edges. Each ink band has one print edge (to the plain paper) and one
+    weak edge whose gain agrees: flattened, ~6.6 (8 in reflectance, the synthetic camera's ambient
+    offset lowering the light's ratio). Until 2026-12-03 a segment needed a print edge at both ends
+    and none of it was (scenes/hard_chart_fine.toml: 8 whole 20:1 squares at gain 1, each with one
+    edge's copy at 0.87-0.94 and the other's at 0.69-0.74)."""
+    t = PARAMS_PERIOD_PX
+    img, _ = _frames((1.0, 1.0, 1.0), depth=1.0, noise=0.0)
+    h, w = img.shape[:2]
+    size = int(round(t))
+    band = (np.arange(h) // size) % 4  # 0 paper, 1 ink, 2 paper (30 % of its columns dimmer), 3 ink
+    rng = np.random.default_rng(5)
+    dim = rng.random(w) < 0.3
+    rho = np.choose(band, [0.8, 0.1, 0.8, 0.1]).astype(np.float32)[:, None] * np.ones((1, w), np.float32)
+    rho[band == 2] *= np.where(dim, np.float32(0.5), np.float32(1.0))[None, :]
+    rho = rho[..., None]
+    cap = _printed(img, rho.astype(np.float32), noise=0.002, seed=12)
+    gain = color.column_albedo_gain(unmix(cap, np.linalg.inv(K).astype(np.float32)), period_px=t, floor=0.04)
+    middle = (np.arange(h) % size >= 3) & (np.arange(h) % size < size - 3)
+    middle[:size] = middle[(h // size) * size :] = False  # the bands the image holds whole
+    ink = (((band == 1) | (band == 3)) & middle)[:, None] & np.ones((1, w), bool)
+    ink[:, :8] = ink[:, -8:] = False  # (the image's side columns: runs end there)
+    assert gain is not None
+    assert (np.abs(gain[ink] / 6.6 - 1.0) < 0.15).mean() >= 0.9, np.percentile(gain[ink], [5, 50, 95])
+
+
 @pytest.mark.parametrize("tall", [0.6, 1.5])
 def test_the_frame_closes_a_cut_square_only_in_a_column_of_short_squares(tall):
     """Bands of ink across the stripes, ``tall`` times the longest segment the column gain

@@ -741,6 +741,13 @@ COLUMN_CREST_SHARE = 0.5
 # scenes/specular.toml's aluminium sphere, where chance runs in its highlight's speckle now pass
 # (85 pixels at ~2.2x; its colour-robust scores 41.92 -> 41.97 % complete, 0.249 -> 0.262 % wrong)
 COLUMN_SCALE_AGREE = COLUMN_COPY_RATIO**2
+# a run whose copy holds over this share of its columns (not COLUMN_MIN_COPY_SHARE), or that a
+# channel's copy test fails, is a weak edge: it closes a segment started by a print edge whose gain
+# it agrees with (COLUMN_SCALE_AGREE) - two measures of one ink - and starts none (assumption: 0.5,
+# a majority; the 20:1 ink's 4-row means on its darker side are 2-5 DN in the channels' mean: of
+# scenes/hard_chart_fine.toml's 8 squares left wholly at gain 1, each had one edge at 0.87-0.94 and
+# the other at 0.69-0.74)
+COLUMN_WEAK_SHARE = 0.5
 
 
 def column_segment_rows(period_px: float) -> int:
@@ -986,20 +993,23 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         bu = b[use]
         sb, sbb = np.bincount(rid[use], bu, m), np.bincount(rid[use], bu * bu, m)
         variation = np.sqrt(np.maximum(sbb / n - (sb / n) ** 2, 0.0)) / (sb / n)
-        ok = (
+        base = (
             (n >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX))
-            & (share >= COLUMN_MIN_COPY_SHARE)
             & (variation >= COLUMN_MIN_VARIATION)
             & (k > 0)
             & (k * ALBEDO_EDGE_RATIO <= 1.0)
             # (a step, not a ramp: ramp <= (1 / k) ** COLUMN_RAMP_SHARE)
             & (np.log(ramp) <= COLUMN_RAMP_SHARE * -np.log(k))
         )
+        ok = base & (share >= COLUMN_MIN_COPY_SHARE)
+        # a weaker copy (COLUMN_WEAK_SHARE) only closes a segment whose other edge is a print's
+        # and agrees with it (COLUMN_SCALE_AGREE)
+        weak = base & (share >= COLUMN_WEAK_SHARE) & ~ok
     if not ok.any():
         return None
     # each colour channel a scaled copy too (its own scale: a coloured ink): across a depth edge
     # whose fringe happens to line up, the code stripes do not (a shifted De Bruijn window)
-    part = ok[rid]
+    part = (ok | weak)[rid]
     sub, rsub, dsub, osub, esub = sel[part], rid[part], down[part], own[part], from_end[part]
     # (one pass over the edges for every channel, simbench/_ckernels.c: the bits of numpy's
     # src[rows, cols, c].mean(axis=1, dtype=np.float64) over rows y - 1 .. y - n and y + 2 .. y + n + 1)
@@ -1025,27 +1035,44 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         judged = n_c >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX)
         with np.errstate(invalid="ignore"):
             ok &= ~judged | (share_c >= COLUMN_MIN_COPY_SHARE)
+    # (a weak run's channels are not judged: their copy is the noisier one)
+    weak = (weak | (base & ~ok & (share >= COLUMN_MIN_COPY_SHARE))) & lit
     ok &= lit
     with np.errstate(divide="ignore"):
-        run_gain = np.where(ok, np.minimum(1.0 / k, ALBEDO_MAX_GAIN), 1.0).astype(np.float32)
-    # an edge is a print's where one of its runs is (its column's own darker side there, or a
-    # trough's): its own row's, else the row above's, else below's; its gain is that run's
-    fit = ok[rid] & (own | trough)
-    cand = np.flatnonzero(fit)
-    cand = cand[np.lexsort((shift[cand], np.abs(shift[cand]), of[cand]))]
-    pick = cand[np.unique(of[cand], return_index=True)[1]]
+        run_gain = np.where(ok | weak, np.minimum(1.0 / k, ALBEDO_MAX_GAIN), 1.0).astype(np.float32)
+
+    def edges_of(runs: np.ndarray, taken: np.ndarray | None = None) -> np.ndarray:
+        # an edge is a print's where one of its runs is (its column's own darker side there, or a
+        # trough's): its own row's, else the row above's, else below's; its gain is that run's
+        fit = runs[rid] & (own | trough)
+        if taken is not None:
+            fit &= ~taken[of]
+        cand = np.flatnonzero(fit)
+        cand = cand[np.lexsort((shift[cand], np.abs(shift[cand]), of[cand]))]
+        return cand[np.unique(of[cand], return_index=True)[1]]
+
+    pick = edges_of(ok)
     if pick.size == 0:
         return None
+    strong = np.zeros(pk.size, bool)
+    strong[of[pick]] = True
+    pick_weak = edges_of(weak, strong)
     g = run_gain[rid[pick]]
-    down = down[pick]
     chosen = sel[pick]
     row, bx = np.divmod(chosen, w)
     by = ys[row]  # the edge's boundary y: between rows y and y + 1
-    edge = np.zeros((h + 1, w), bool)  # edge[y]: a print edge between rows y and y + 1
+    edge = np.zeros((h + 1, w), bool)  # edge[y]: a print edge (or a weak one) between rows y and y + 1
     edge[by, bx] = True
     # its gain, signed by its darker side: + below the boundary, - above it
     scale = np.zeros((h + 1, w), np.float32)
-    scale[by, bx] = np.where(down, g, -g)
+    scale[by, bx] = np.where(down[pick], g, -g)
+    weak_edge = np.zeros((h + 1, w), bool)
+    if pick_weak.size:
+        wy, wx = ys[sel[pick_weak] // w], sel[pick_weak] % w
+        edge[wy, wx] = weak_edge[wy, wx] = True
+        gw = run_gain[rid[pick_weak]]
+        scale[wy, wx] = np.where(down[pick_weak], gw, -gw)
+    down = down[pick]
     # any step down a column ends a segment; the segment is flattened where that step is a print edge
     stop = np.zeros((h + 1, w), bool)
     stop[ys] = peak
@@ -1077,9 +1104,9 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         far_y = y0[both] + end[both] - 1 if sign == 1 else y0[both] - end[both]
         g_far = -sign * scale[far_y, x0[both]]  # > 0 where the far edge's darker side is this segment
         g_near = g0[both]
-        disagree = (g_far > 0) & (
-            np.maximum(g_far, g_near) > np.float32(COLUMN_SCALE_AGREE) * np.minimum(g_far, g_near)
-        )
+        apart = np.maximum(g_far, g_near) > np.float32(COLUMN_SCALE_AGREE) * np.minimum(g_far, g_near)
+        # (a weak far edge closes the segment only facing it and agreeing)
+        disagree = ((g_far > 0) & apart) | (weak_edge[far_y, x0[both]] & ~(g_far > 0))
         done[both[disagree]] = False
         _kernels.segments_max(gain, y0[done], x0[done], end[done], g0[done], sign)
     # (no segment closed by a print edge: nothing to flatten)
