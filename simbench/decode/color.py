@@ -854,7 +854,12 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
        lobe - is a scaled copy too);
     3. the darker side's segment, down to the next print edge of its column, takes the gain
        ``1 / k`` (at most :data:`ALBEDO_MAX_GAIN`) where that edge is within
-       :func:`column_segment_rows`; a longer segment is left to the steps along the rows.  The
+       :func:`column_segment_rows` and, where its darker side is this segment too, its gain agrees
+       (:data:`COLUMN_SCALE_AGREE`: one ink under both); a longer segment is left to the steps
+       along the rows.  A run that fails only the copy share (over :data:`COLUMN_WEAK_SHARE` of
+       its columns) or a channel's copy test is a weak edge: it closes a segment whose darker
+       side it faces and whose gain it agrees with, and starts none (nor counts for the frame's
+       test below; in the first or last two boundaries it stays the frame's).  The
        image's top or bottom row closes a segment too where the segment beyond its edge is
        closed within reach (a square the frame cuts, in a column of squares that short: the
        3:1 print of ``scenes/hard_chart_fine_mid.toml`` lost ~20 rows at each end of the image
@@ -867,7 +872,8 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
 
     The pixels beside the gain's steps hold both sides' light: :func:`column_step_pixels`.
 
-    A pixel's gain is the larger of its segment's two edges'.  Shading, falloff and any change
+    A pixel's gain is the larger of its segment's two print edges' (a weak edge's gain only
+    checks the other's).  Shading, falloff and any change
     slower than the rows compared pass through; a stripe pattern that does not run down the
     image's columns (a rig with a vertical baseline) shows no copy there and is left alone.
 
@@ -1066,21 +1072,25 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
     # its gain, signed by its darker side: + below the boundary, - above it
     scale = np.zeros((h + 1, w), np.float32)
     scale[by, bx] = np.where(down[pick], g, -g)
-    weak_edge = np.zeros((h + 1, w), bool)
-    if pick_weak.size:
-        wy, wx = ys[sel[pick_weak] // w], sel[pick_weak] % w
-        edge[wy, wx] = weak_edge[wy, wx] = True
-        gw = run_gain[rid[pick_weak]]
-        scale[wy, wx] = np.where(down[pick_weak], gw, -gw)
-    down = down[pick]
-    # any step down a column ends a segment; the segment is flattened where that step is a print edge
-    stop = np.zeros((h + 1, w), bool)
-    stop[ys] = peak
     # the first and last two boundaries' peaks were compared on one side only (the rows beyond
     # them are the frame's): such a step is an edge too near the frame to place or judge - the
     # frame's own, for the segments that reach it
     frame = np.zeros(h + 1, bool)
     frame[ys[:2]] = frame[ys[-2:]] = True
+    strong_edge = edge.copy()  # (the frame's test of a cut square reads print edges only)
+    weak_edge = np.zeros((h + 1, w), bool)
+    if pick_weak.size:
+        wy, wx = ys[sel[pick_weak] // w], sel[pick_weak] % w
+        gw = run_gain[rid[pick_weak]]
+        # (a weak step in the frame's rows stays the frame's)
+        inner = ~frame[wy]
+        wy, wx, gw, wd = wy[inner], wx[inner], gw[inner], down[pick_weak][inner]
+        edge[wy, wx] = weak_edge[wy, wx] = True
+        scale[wy, wx] = np.where(wd, gw, -gw)
+    down = down[pick]
+    # any step down a column ends a segment; the segment is flattened where that step is a print edge
+    stop = np.zeros((h + 1, w), bool)
+    stop[ys] = peak
     longest = column_segment_rows(period_px)
     gain = np.ones((h, w), np.float32)
     for sign in (1, -1):
@@ -1093,7 +1103,7 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
             # segment beyond its edge is a flattened one's length (a print of squares taller
             # than the reach is the steps along the rows' to flatten, the cut one too)
             y1 = by[pick][rim] if sign == 1 else (by + 1)[pick][rim]
-            other, _ = _column_segments(y1, x0[rim], -sign, stop=stop, edge=edge, frame=frame, longest=longest)
+            other, _ = _column_segments(y1, x0[rim], -sign, stop=stop, edge=strong_edge, frame=frame, longest=longest)
             end[np.flatnonzero(rim)[other <= 0]] = -1
         # (the segments of one direction do not overlap: the next edge ends each)
         # (np.maximum.at over every segment's pixels, without their index arrays: simbench/_ckernels.c)
