@@ -1010,12 +1010,12 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         ok = base & (share >= COLUMN_MIN_COPY_SHARE)
         # a weaker copy (COLUMN_WEAK_SHARE) only closes a segment whose other edge is a print's
         # and agrees with it (COLUMN_SCALE_AGREE)
-        weak = base & (share >= COLUMN_WEAK_SHARE) & ~ok
+        weak_or_ok = base & (share >= COLUMN_WEAK_SHARE)
     if not ok.any():
         return None
     # each colour channel a scaled copy too (its own scale: a coloured ink): across a depth edge
     # whose fringe happens to line up, the code stripes do not (a shifted De Bruijn window)
-    part = (ok | weak)[rid]
+    part = weak_or_ok[rid]
     sub, rsub, dsub, osub, esub = sel[part], rid[part], down[part], own[part], from_end[part]
     # (one pass over the edges for every channel, simbench/_ckernels.c: the bits of numpy's
     # src[rows, cols, c].mean(axis=1, dtype=np.float64) over rows y - 1 .. y - n and y + 2 .. y + n + 1)
@@ -1041,8 +1041,9 @@ def column_albedo_gain(rgb: np.ndarray, *, period_px: float, floor: float) -> np
         judged = n_c >= max(COLUMN_MIN_RUN_PERIODS * period_px, COLUMN_MIN_RUN_PX)
         with np.errstate(invalid="ignore"):
             ok &= ~judged | (share_c >= COLUMN_MIN_COPY_SHARE)
-    # (a weak run's channels are not judged: their copy is the noisier one)
-    weak = (weak | (base & ~ok & (share >= COLUMN_MIN_COPY_SHARE))) & lit
+    # weak: the copy share under COLUMN_MIN_COPY_SHARE, or a channel's test failed (a weak run's
+    # channels are not asked to pass: their copy is the noisier one)
+    weak = weak_or_ok & ~ok & lit
     ok &= lit
     with np.errstate(divide="ignore"):
         run_gain = np.where(ok | weak, np.minimum(1.0 / k, ALBEDO_MAX_GAIN), 1.0).astype(np.float32)
