@@ -234,9 +234,10 @@ def scenes() -> dict[str, tuple[str, list[dict]]]:
     # added 2026-12-01 after the column flattening's second pass: held out while it was made (a 5:1
     # print of 11 mm squares turned 20 deg), it kept 0.47 % of its decoded pixels > 5 mm wrong
     out["hard_chart_fine_turned"] = chart("fine 5:1", 0.16, (64, 48), 0.011, turn_deg=20.0)
-    # added 2026-12-03 after the column flattening reached the 20:1 ink (COLUMN_CREST_SHARE, the
-    # per-column channel test, COLUMN_SCALE_AGREE), held out while they were made: a 20:1 print of
-    # 12 mm squares turned the other way
+    # added 2026-12-03 when the column flattening reached the 20:1 ink: held out while
+    # COLUMN_CREST_SHARE, the per-column channel test and COLUMN_SCALE_AGREE were made (81.9 %
+    # complete, 0.12 % wrong when first scored), not while the weak edges were (made after that
+    # score): a 20:1 print of 12 mm squares turned the other way
     out["hard_chart_fine_high_turned"] = chart("fine 20:1", 0.04, (64, 48), 0.012, turn_deg=-15.0)
     out.update({f"hard_paint_{n}": paint(n) for n in PAINTS})
     out.update({f"hard_glossy_{int(round(r * 100)):03d}": glossy(r) for r in (0.05, 0.15, 0.3)})
