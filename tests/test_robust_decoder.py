@@ -9,7 +9,7 @@ import pytest
 
 from simbench.decode import DecoderParams, decode, decode_reference, robust_params
 from simbench.decode import color, pipeline
-from simbench.decode.phase import gabor_phase, shadow_margin, window_share
+from simbench.decode.phase import MIN_WINDOW_WEIGHT, gabor_phase, shadow_margin, weighted_fit, window_share
 from simbench.decode.color import (
     albedo_edges,
     albedo_gain,
@@ -341,7 +341,7 @@ def test_albedo_flattening_decodes_a_printed_checkerboard(calibration):
     assert out[False][0] < 0.97 <= out[True][0], out
 
 
-def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
+def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration, monkeypatch):
     """A 20:1 checkerboard of 1.5-period squares: on the ink the stripes keep pieces of a couple
     of pixels, their codes tied or misread, and a short chain of them reads like another stretch
     of the sequence; the whole paper stripes between them inherit that position at full fringe
@@ -349,12 +349,16 @@ def test_pieces_of_stripes_on_a_dark_print_are_doubted(calibration):
     so off; 675, at a median confidence of 17.7 - above the right pixels' 9.4 -, before the
     flattening's gain lost its jumps half a window from each step, 2026-11-29; 1462 until the
     column gain flattened the ink too, 2026-12-03, and 123 since, when the board kept 20764
-    pixels off the edges' band with it, against 1262 before).  With it, no lit
+    pixels off the edges' band with it, against 1262 before).  Since the phase fit weighs each
+    flattened sample by 1/gain (2026-12-03) this board no longer misreads so without the term (no
+    pixel half a period off, on 1.25- to 3.4-period squares): the test fits with the weights all
+    equal, as before, to keep the misreading the term exists for.  With it, no lit
     pixel kept is more than half a period off, on 1.5- and 1.75-period squares (1.75: 47 pixels a
     period off without it, beside the squares' edges, until the albedo-edge skip left out more
     pixels and no longer counted them against a window's support, 2026-11-30: none since); the
     3.4-period board, whose codes are all
     read, loses under 1 % of what it kept off the edges' band (measured nothing)."""
+    monkeypatch.setattr(pipeline, "flattened_fit_weights", lambda c, g: c * np.float32(color.ALBEDO_MAX_GAIN**2))
     ref, f = calibration
     p = robust_params(DecoderParams(mode="calibrated"))
     rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
@@ -1629,3 +1633,61 @@ def test_the_column_gain_reads_no_row_beyond_its_reach(print_rows):
         band = color.column_albedo_gain(rgb[a:b], period_px=t, floor=0.04)
         part = np.ones((b - a, rgb.shape[1]), np.float32) if band is None else band
         assert np.array_equal(part[r0 - a : r1 - a], whole[r0:r1]), (r0, r1)
+
+
+def test_a_weighted_fit_of_equal_weights_is_the_plain_fit_and_keeps_its_support_and_floor():
+    """``weighted_fit`` with every certain sample weighing the same (here 7) fits what the 0/1
+    certainty fits, to float32 rounding; its support is the window's share of certain samples, and
+    a window whose share is at most MIN_WINDOW_WEIGHT has no fit, as the plain fit's - which the
+    weights' sum alone (7x the share) would have let through."""
+    rng = np.random.default_rng(4)
+    h, w, t = 60, 200, 21.0
+    x = np.arange(w, dtype=np.float32)
+    img = (0.5 + 0.4 * np.cos(2 * np.pi * x / t + 0.3))[None, :].repeat(h, 0)
+    img = (img + rng.normal(0, 0.02, (h, w))).astype(np.float32)
+    cert = np.ones((h, w), np.float32)
+    cert[:, 120:] = 0.0  # a shadow: the windows reaching into it keep less and less support
+    kw = dict(period_px=t, sigma_x_px=5.25, sigma_y_px=3.15, offset=False)
+    plain = gabor_phase(img, certainty=cert, **kw)
+    weighted = weighted_fit(gabor_phase)(img, certainty=7.0 * cert, **kw)
+    fitted = plain.amplitude > 0
+    np.testing.assert_allclose(weighted.wrapped[fitted], plain.wrapped[fitted], atol=2e-5)
+    np.testing.assert_allclose(weighted.support, plain.support, atol=1e-6)
+    assert np.array_equal(weighted.amplitude > 0, fitted)
+    # the floor is on the share, not on the weights' sum (which passes it up to 7x further in)
+    floor = (plain.support <= MIN_WINDOW_WEIGHT) & (7.0 * plain.support > MIN_WINDOW_WEIGHT)
+    assert floor.any() and not (weighted.amplitude[floor] > 0).any()
+    assert np.isinf(weighted.residual[floor]).all()
+
+
+def test_weighting_flattened_samples_by_their_gain_keeps_the_inks_noise_out_of_the_papers_phase():
+    """A fringe over paper and 20:1 ink in blocks narrower than the window, as the albedo flattening
+    leaves it: the same fringe everywhere, the ink's noise 20x the paper's (the gain that brought
+    it up multiplied its noise too).  Weighing each sample by 1/gain (the decoder's, scaled by the
+    largest gain: ``weighted_fit``) cuts the paper pixels' phase spread, ~14x a plain paper board's
+    (the ink's samples in their windows), to under 0.4 of that (measured: 13.7x and 3.9x the
+    board's; 1/gain is not the inverse variance here, 1/gain^2 would be: the decoder's compromise,
+    its comment in simbench/decode/pipeline.py); the phase's mean error stays near zero (the
+    windows are centred at the carrier's rate)."""
+    rng = np.random.default_rng(9)
+    h, w, t, sigma = 200, 400, 21.0, 0.01
+    x = np.arange(w, dtype=np.float32)
+    phase = 2 * np.pi * x / t
+    clean = (0.5 + 0.4 * np.cos(phase))[None, :].repeat(h, 0).astype(np.float32)
+    gain = np.where((np.arange(w) // 8) % 2 == 1, np.float32(20.0), np.float32(1.0))[None, :].repeat(h, 0)
+    noisy = (clean + rng.normal(0, sigma, (h, w)) * gain).astype(np.float32)
+    plain_board = (clean + rng.normal(0, sigma, (h, w))).astype(np.float32)
+    ones = np.ones((h, w), np.float32)
+    kw = dict(period_px=t, sigma_x_px=5.25, sigma_y_px=3.15, offset=False)
+    truth = np.angle(np.exp(1j * phase)).astype(np.float32)
+
+    def spread(fit) -> tuple[float, float]:
+        d = np.angle(np.exp(1j * (fit.wrapped - truth[None, :])))[20:-20, 30:-30]
+        paper = gain[20:-20, 30:-30] == 1.0
+        return float(d[paper].std()), float(d[paper].mean())
+
+    board = spread(gabor_phase(plain_board, certainty=ones, **kw))[0]
+    unweighted, _ = spread(gabor_phase(noisy, certainty=ones, **kw))
+    weighted, bias = spread(weighted_fit(gabor_phase)(noisy, certainty=ones * (2500.0 / gain), **kw))
+    assert unweighted > 8.0 * board and weighted < 0.4 * unweighted, (board, unweighted, weighted)
+    assert abs(bias) < 0.2 * weighted

@@ -31,6 +31,8 @@ __all__ = [
     "INTENSITY_MODES",
     "overlay_intensity",
     "window_share",
+    "weighted_fit",
+    "MIN_WINDOW_WEIGHT",
     "certainty_window_px",
     "certainty_map",
     "PhaseResult",
@@ -317,6 +319,37 @@ def window_share(weights: np.ndarray, *, sigma_x_px: float, sigma_y_px: float) -
     w = np.ascontiguousarray(weights, dtype=np.float32)
     kx, ky = gaussian_kernel(float(sigma_x_px)), gaussian_kernel(float(sigma_y_px))
     return cv2.sepFilter2D(w, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+
+
+# The normalised-convolution fit's floor on its window's weight (the Gabor kernel's s_min,
+# simbench/_ckernels.c fit_solver): a window with at most this share of its weight on certain samples
+# has no fit (amplitude 0, residual inf).
+MIN_WINDOW_WEIGHT = 0.05
+
+
+def weighted_fit(method: Callable[..., "PhaseResult"]) -> Callable[..., "PhaseResult"]:
+    """``method`` (a normalised-convolution fit, :func:`gabor_phase`) taking a certainty that
+    carries per-sample weights - a certain sample's weight ``>= 1``, an uncertain one's 0 - and
+    returning what the fit of the 0/1 certainty returns for everything but the fit itself: its
+    ``support`` is the window's share of certain samples, and a window whose share is at most
+    :data:`MIN_WINDOW_WEIGHT` has no fit, as with 0/1 weights (the kernel's floor is on the
+    weights' sum, which weights over 1 would lift; the fit itself does not change with the
+    weights' common scale)."""
+
+    def fit(intensity: np.ndarray, *, certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float, **kw):
+        out = method(intensity, certainty=certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px, **kw)
+        share = window_share((certainty > 0).astype(np.float32), sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
+        none = share <= np.float32(MIN_WINDOW_WEIGHT)
+        zero = np.float32(0.0)
+        return PhaseResult(
+            wrapped=np.where(none, zero, out.wrapped),
+            amplitude=np.where(none, zero, out.amplitude),
+            offset=None if out.offset is None else np.where(none, zero, out.offset),
+            residual=np.where(none, np.float32(np.inf), out.residual),
+            support=share,
+        )
+
+    return fit
 
 
 def magnitude(

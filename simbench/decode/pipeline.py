@@ -13,6 +13,7 @@ import numpy as np
 
 from simbench.decode import _kernels
 from simbench.decode.color import (
+    ALBEDO_MAX_GAIN,
     COLUMN_SKIP_PX,
     color_code,
     mixing_matrix,
@@ -66,6 +67,7 @@ from simbench.decode.phase import (
     off_discontinuity,
     overlay_intensity,
     shadow_margin,
+    weighted_fit,
     window_share,
 )
 from simbench.decode.profile import stage
@@ -370,6 +372,7 @@ def _columns(
     # at the image border, where only one side is in view, both stripe colours still are
     window = 2 * (params.order + 1) if params.color_normalize else 1
     skipped = mixed = None  # the albedo-edge skip's pixels, and the certainty of those it leaves out
+    gain = None  # the albedo flattening's gain, where it found a step in the band
     extrema = None  # the gain the normalisation's running extrema read, where not the gain
     if _fused_front_end(params, unmixing, image):
         # the same bits as the general path below, in one pass over the capture
@@ -512,9 +515,23 @@ def _columns(
     if user_code is not None:
         method = _checked_phase_method(method, params.phase_method)
     carrier = None
+    fit_certainty = certainty
+    if gain is not None and params.phase_method == "gabor":
+        # A flattened sample is its capture times the gain, so is its noise: on a 20:1 print the
+        # ink's few-DN fringe comes back ~20x, its noise with it, and a window over paper and ink
+        # that weighs both alike takes the ink's noise into the paper's phase (measured on
+        # scenes/hard_chart_fine.toml: the phase's spread 0.045-0.055 rad on paper and ink alike,
+        # ~3.5x what the paper's own samples give).  Each certain sample weighs 1/gain (an
+        # assumption between the inverse variances of shot-noise-limited samples, 1/gain, and of
+        # read-noise-limited ones, 1/gain^2: 1/gain^2 makes the windows beside every print edge so
+        # lopsided that the centroid correction, which reads the fringe's rate only from whole
+        # windows, leaves their bias - the 5:1 turned chart's MAE 0.30 -> 0.57 mm; docs/decoder.md),
+        # scaled by the largest gain there can be so that every weight is >= 1 (weighted_fit).
+        fit_certainty = flattened_fit_weights(certainty, gain)
+        method = weighted_fit(method)
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
-        fit = dict(certainty=certainty, period_px=t_cam, sigma_y_px=sx * params.sigma_y_ratio)
+        fit = dict(certainty=fit_certainty, period_px=t_cam, sigma_y_px=sx * params.sigma_y_ratio)
         if params.carrier_bank:
             phase, carrier = bank_fit(
                 method,
@@ -567,7 +584,7 @@ def _columns(
             narrow = narrow.wrapped[crop]
     if params.centroid_correction:
         with stage("window centroid correction"):
-            phase, narrow = _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam)
+            phase, narrow = _centroid_correction(phase, narrow, fit_certainty, carrier, crop, fit, sx, t_cam)
     with stage("validity"):
         intensity, certainty, lit = intensity[crop], certainty[crop], lit[crop]
         wrapped, amplitude, residual, support_w = (
@@ -736,6 +753,14 @@ def _pool_rows(crop: slice, height: int, params: DecoderParams, rig: Rig) -> sli
     without ``pool_code``), within the ``height`` rows at hand."""
     k = code_pool_rows(params, rig)
     return slice(max(0, crop.start - k), min(height, crop.stop + k))
+
+
+def flattened_fit_weights(certainty: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """The phase fit's sample weights where the albedo flattening multiplied the capture by
+    ``gain`` ((H, W) float32 in [1, ALBEDO_MAX_GAIN^2]): ``certainty / gain`` (see ``_columns``),
+    scaled by ``ALBEDO_MAX_GAIN^2`` so that every certain sample weighs >= 1
+    (:func:`simbench.decode.phase.weighted_fit`)."""
+    return certainty * (np.float32(ALBEDO_MAX_GAIN**2) / gain)
 
 
 def _window_shares(weights, carrier, *, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
