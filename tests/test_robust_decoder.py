@@ -1691,3 +1691,28 @@ def test_weighting_flattened_samples_by_their_gain_keeps_the_inks_noise_out_of_t
     weighted, bias = spread(weighted_fit(gabor_phase)(noisy, certainty=ones * (2500.0 / gain), **kw))
     assert unweighted > 8.0 * board and weighted < 0.4 * unweighted, (board, unweighted, weighted)
     assert abs(bias) < 0.2 * weighted
+
+
+def test_a_depth_edges_brightness_step_is_flattened_but_does_not_weigh_the_fit(calibration, monkeypatch):
+    """Two boards side by side, the far one 0.15 as bright: the steps along the rows flatten the far
+    board like a print (they cannot tell a depth edge's step from a print's), but the fit's
+    weights come from the gain down the columns alone, whose steps passed a print edge's
+    scaled-copy test: weighed down, the far side of a depth edge would fit its windows to the near
+    side alone and its first columns take the near side's phase at full confidence (the motion
+    study's still board, 320x240: 62 -> 77 pixels more than 5 mm wrong with the whole gain as
+    weights, all on the first column past its side edge)."""
+    ref, f = calibration
+    cap, col, region, near = _one_period_step(0.15)
+    p = robust_params(DecoderParams(mode="calibrated"))
+    rmap = decode_reference(ref, rig=RIG, params=p, primaries=[f["red"], f["green"], f["blue"]], dark=f["dark"])
+    flattened = decode(cap, rig=RIG, params=p, reference=rmap)
+    off = dataclasses.replace(p, albedo_flatten=False, albedo_columns=False, albedo_edge_skip=False)
+    plain = decode(cap, rig=RIG, params=off, reference=rmap)
+    assert not np.array_equal(flattened.valid, plain.valid)  # the flattening acts on this edge
+
+    def weighed(*_):
+        raise AssertionError("the fit weighed by a gain that is not a print's")
+
+    monkeypatch.setattr(pipeline, "flattened_fit_weights", weighed)
+    again = decode(cap, rig=RIG, params=p, reference=rmap)
+    assert np.array_equal(again.depth_m, flattened.depth_m, equal_nan=True)

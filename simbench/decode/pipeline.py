@@ -373,6 +373,7 @@ def _columns(
     window = 2 * (params.order + 1) if params.color_normalize else 1
     skipped = mixed = None  # the albedo-edge skip's pixels, and the certainty of those it leaves out
     gain = None  # the albedo flattening's gain, where it found a step in the band
+    print_gain = None  # its part down the columns, where it found one: a print's (column_albedo_gain)
     extrema = None  # the gain the normalisation's running extrema read, where not the gain
     if _fused_front_end(params, unmixing, image):
         # the same bits as the general path below, in one pass over the capture
@@ -445,6 +446,8 @@ def _columns(
                         mixed = mixed[fit.start - wide.start :][: fit.stop - fit.start]
                         extrema = extrema[fit.start - wide.start :][: fit.stop - fit.start]
                     image, gain = image[fit], gain[fit].copy()
+                    if columns is not None and not (columns[fit] == 1.0).all():
+                        print_gain = columns[fit].copy()
                     raw = raw[fit].copy()
                     rgb = raw if unmixing is None else rgb[fit].copy()
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
@@ -516,18 +519,23 @@ def _columns(
         method = _checked_phase_method(method, params.phase_method)
     carrier = None
     fit_certainty = certainty
-    if gain is not None and params.phase_method == "gabor":
+    if print_gain is not None and gain is not None and params.phase_method == "gabor":
         # A flattened sample is its capture times the gain, so is its noise: on a 20:1 print the
         # ink's few-DN fringe comes back ~20x, its noise with it, and a window over paper and ink
         # that weighs both alike takes the ink's noise into the paper's phase (measured on
         # scenes/hard_chart_fine.toml: the phase's spread 0.045-0.055 rad on paper and ink alike,
-        # ~3.5x what the paper's own samples give).  Each certain sample weighs 1/gain (an
+        # ~3.5x what the paper's own samples give).  Only the gain down the columns counts here:
+        # its steps passed the scaled-copy test of a print's edge, where the steps along the rows
+        # are any brightness step, a depth edge's too - weighed down, the far side of a depth edge
+        # fits its window alone and the pixels on the near side take its phase at full confidence
+        # (with the whole gain: the motion study's still board, 320x240, 62 -> 77 pixels more than
+        # 5 mm wrong, all on the first column past its side edge).  Each certain sample weighs 1/gain (an
         # assumption between the inverse variances of shot-noise-limited samples, 1/gain, and of
         # read-noise-limited ones, 1/gain^2: 1/gain^2 makes the windows beside every print edge so
         # lopsided that the centroid correction, which reads the fringe's rate only from whole
         # windows, leaves their bias - the 5:1 turned chart's MAE 0.30 -> 0.57 mm; docs/decoder.md),
         # scaled by the largest gain there can be so that every weight is >= 1 (weighted_fit).
-        fit_certainty = flattened_fit_weights(certainty, gain)
+        fit_certainty = flattened_fit_weights(certainty, print_gain)
         method = weighted_fit(method)
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
