@@ -470,9 +470,13 @@ ALBEDO_SKIP_RATIO = 2.0
 # point is 3), the windows within ~8 rows of such an edge fell to 2.1-3.  Why the bright side's
 # 2nd and 3rd pixels along a row are off is only partly known: the camera's demosaicing (the
 # `paper` sensor: bilinear, a 3x3 support) fills their missing colours from the straddling pixel,
-# but a synthetic 20:1 board through that demosaicing gains only 0.1-0.5 % from the 2nd; a gain
-# step a pixel off its row's edge (the steps are found in rows averaged over ALBEDO_EDGE_ROWS) is a
-# guess.  The skipped samples count for a window's support (the pipeline adds their share back):
+# but a synthetic 20:1 board through that demosaicing gains only 0.1-0.5 % from the 2nd.  Measured
+# since (2026-12-03): the gain's steps along the rows sit in the ink - the ratio of the means either
+# side (albedo_edges' placement) is largest once the darker side's window is past the paper's blur -
+# by 0.87 / 1.20 / 1.82 px on average on the synthetic 20:1 board blurred by 0.7 / 1 / 1.5 px, and by
+# 4-5 px on the rendered turned 20:1 chart's dim far side, where the ink's first pixels keep the
+# paper's gain (tests/test_robust_decoder.py, a strict xfail: the steps on the print's edges).
+# The skipped samples count for a window's support (the pipeline adds their share back):
 # they are lit surface, left out for their mixed light.  Chosen on the rendered 20:1 chart
 # (scenes/hard_chart_high.toml, the cached captures of `simbench reproduce hard_scenes`, share of
 # the scored pixels kept at the operating point, 1280x960 / 640x480; measured 2026-11-30):
