@@ -51,9 +51,9 @@
  * products with the data (fit_apply).  A window wholly certain has the certainty sums of an
  * all-ones band, so its solver can be made once (gabor_band's table). */
 enum { SOLVER = 10 }; /* k0 k1 k2 p0 p1 p2 q0 q1 q2 inv_s1 */
-static inline void fit_solver(float s1, float sc, float ss, float sc2, float ss2, float c, float s,
+static inline void fit_solver(float s1, float sc, float ss, float sc2, float ss2, float c, float s, float s_min,
                               float *restrict k) {
-    const float half = 0.5f, zero = 0.0f, one = 1.0f, s_min = 0.05f, det_min = 1e-4f;
+    const float half = 0.5f, zero = 0.0f, one = 1.0f, det_min = 1e-4f;
     const float scc = half * (s1 + sc2);
     const float sss = half * (s1 - sc2);
     const float scs = half * ss2;
@@ -288,12 +288,12 @@ static inline float phase_of(float re, float im) {
 /* The fit and the phase of one output row (see gabor_band) from its certainty sums m0..m4. */
 FIT_ROW_FN void fit_row(int64_t w, const float *restrict m0, const float *restrict m1, const float *restrict m2,
                     const float *restrict m3, const float *restrict m4, const float *restrict cos1,
-                    const float *restrict sin1, const float *restrict v0, const float *restrict v1,
+                    const float *restrict sin1, float s_min, const float *restrict v0, const float *restrict v1,
                     const float *restrict v2, const float *restrict v3, float *restrict wrapped,
                     float *restrict amp, float *restrict a0, float *restrict residual, float *restrict support) {
     for (int64_t x = 0; x < w; x++) {
         float k[SOLVER], re, im;
-        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], k);
+        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], s_min, k);
         fit_apply(k, cos1[x], sin1[x], v0[x], v1[x], v2[x], v3[x], &re, &im, a0 + x, amp + x, residual + x);
         wrapped[x] = phase_of(re, im);
         support[x] = m0[x];
@@ -320,10 +320,10 @@ FIT_ROW_FN void fit_row_solved(int64_t w, const float *restrict solver, int64_t 
 /* The solver rows (fit_solver, SOLVER planes of stride `stride`) of one row's certainty sums. */
 FIT_ROW_FN void solver_row(int64_t w, const float *restrict m0, const float *restrict m1, const float *restrict m2,
                        const float *restrict m3, const float *restrict m4, const float *restrict cos1,
-                       const float *restrict sin1, int64_t stride, float *restrict solver) {
+                       const float *restrict sin1, float s_min, int64_t stride, float *restrict solver) {
     for (int64_t x = 0; x < w; x++) {
         float k[SOLVER];
-        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], k);
+        fit_solver(m0[x], m1[x], m2[x], m3[x], m4[x], cos1[x], sin1[x], s_min, k);
         for (int j = 0; j < SOLVER; j++) solver[j * stride + x] = k[j];
     }
 }
@@ -422,7 +422,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 const float *restrict ks1, const float *restrict kc2, const float *restrict ks2, int64_t ry,
                 const float *restrict ky, const float *restrict cos1, const float *restrict sin1,
                 const float *restrict cos2, const float *restrict sin2, float *restrict table, int64_t fill_table,
-                float *restrict scratch, float *restrict wrapped, float *restrict amp, float *restrict a0,
+                float s_min, float *restrict scratch, float *restrict wrapped, float *restrict amp, float *restrict a0,
                 float *restrict residual, float *restrict support) {
     const int skip = table != NULL && !fill_table; /* certain windows' sums from the table */
     const int64_t R = 2 * ry + 1;
@@ -499,9 +499,9 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 if (table != NULL) {
                     const int64_t t = table_row(y, h, ry) * w;
                     for (int64_t q = 0; q < 5; q++) copy_row(w, B + (4 + q) * w, table + q * tw + t);
-                    solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, tw, table + 5 * tw + t);
+                    solver_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, s_min, tw, table + 5 * tw + t);
                 }
-                fit_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0_out,
+                fit_row(w, s1, sc, ss, sc2, ss2, cos1, sin1, s_min, b0, b1, b2, E, wrapped + o, amp + o, a0_out,
                         residual + o, support + o);
                 continue;
             }
@@ -528,7 +528,7 @@ void gabor_band(int64_t h, int64_t w, const float *restrict intensity, const flo
                 if (lo < hi) column_sums(lo, hi, ry, rowp + ry, ky, v_c);
                 done = hi;
                 certainty_sums(a, b, w, rx, v_c, kx, kc1, ks1, kc2, ks2, cos1, sin1, cos2, sin2, T, B);
-                solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, w, K + a);
+                solver_row(b - a, s1 + a, sc + a, ss + a, sc2 + a, ss2 + a, cos1 + a, sin1 + a, s_min, w, K + a);
                 a = b;
             }
             fit_row_solved(w, K, w, s1, cos1, sin1, b0, b1, b2, E, wrapped + o, amp + o, a0_out, residual + o,

@@ -13,7 +13,7 @@ from simbench.decode.color import Stripes
 from simbench.decode.phase import _basis, gaussian_kernel, magnitude
 
 
-def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
+def _solver(s1, sc, ss, sc2, ss2, cos1, sin1, s_min=0.05):
     """Per-pixel maps turning the window moments (b0, b1, b2) of the data into the fit.
 
     The normal equations are ``M p = b`` with ``M = [[s1, sc, ss], [sc, scc, scs], [ss, scs,
@@ -31,7 +31,7 @@ def _solver(s1, sc, ss, sc2, ss2, cos1, sin1):
     c12 = sc * ss - s1 * scs
     c22 = s1 * scc - sc * sc
     det = s1 * c00 + sc * c01 + ss * c02
-    good = (s1 > 0.05) & (det > 1e-4 * s1 * s1 * s1)
+    good = (s1 > np.float32(s_min)) & (det > 1e-4 * s1 * s1 * s1)
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = np.where(good, np.float32(1) / det, np.float32(0))
         inv_s1 = np.where(good, np.float32(1) / s1, np.float32(0))
@@ -75,6 +75,7 @@ def gabor_phase(
     period_px: float,
     sigma_x_px: float,
     sigma_y_px: float,
+    min_weight: float = 0.05,
 ) -> tuple:
     h, w = intensity.shape
     omega = round(2.0 * np.pi / period_px, 12)
@@ -87,7 +88,7 @@ def gabor_phase(
         ci = intensity
     else:
         moments = [_conv(c * b, kx, ky) for b in (np.float32(1), cos1, sin1, cos2, sin2)]
-        k, p, q, inv_s1, good = _solver(*moments, cos1, sin1)
+        k, p, q, inv_s1, good = _solver(*moments, cos1, sin1, min_weight)
         s1 = moments[0]
         ci = c * intensity
     b0 = _conv(ci, kx, ky)

@@ -58,7 +58,7 @@ _P, _I, _F, _D = native.P, native.I64, native.F32, native.F64
 _SIGNATURES = {
     "gabor_band": (
         None,
-        [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _P] + [_P] * 5,
+        [_I, _I, _P, _P, _I, _I, _I, _P, _P, _P, _P, _P, _I, _P, _P, _P, _P, _P, _P, _I, _F, _P] + [_P] * 5,
     ),
     "gabor_scratch_floats": (_I, [_I, _I, _I]),
     "front_end_scratch_floats": (_I, [_I, _I]),
@@ -131,7 +131,20 @@ def _scratch(n: int) -> np.ndarray:
 
 
 def gabor_band(
-    intensity, certainty, y0, y1, half_kernels, basis, table, fill_table, wrapped, amp, a0, residual, support
+    intensity,
+    certainty,
+    y0,
+    y1,
+    half_kernels,
+    basis,
+    table,
+    fill_table,
+    wrapped,
+    amp,
+    a0,
+    residual,
+    support,
+    min_weight=0.05,
 ) -> None:
     """Normalised-convolution Gabor fit (paper Eq. 10-11) of the rows ``y0:y1`` of a band.
 
@@ -146,8 +159,9 @@ def gabor_band(
     ``fill_table``, computed from ``certainty`` (then all ones) and written there.  Outputs
     (y1 - y0, W): the wrapped phase ``atan2(im, re)`` in [-pi, pi) of the fit
     ``I ~ a0 + re cos(w x) + im sin(w x)`` (a polynomial atan2, ~1e-7 rad), the amplitude
-    ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular: window weight <= 0.05 or
-    a near-singular determinant), ``a0`` (None: not written, which saves a fifth of the outputs'
+    ``sqrt(re^2 + im^2)`` (0 where the normal equations are singular: window weight <=
+    ``min_weight`` - the certainty's weighted sum, 0.05 unless asked otherwise - or a near-singular
+    determinant), ``a0`` (None: not written, which saves a fifth of the outputs'
     memory traffic), the RMS residual relative to ``amp/sqrt 2`` (inf
     there) and the window's certain weight.
 
@@ -186,6 +200,7 @@ def gabor_band(
         *(_ptr(b, name, f4, (w,)) for b, name in zip(basis, ("cos1", "sin1", "cos2", "sin2"))),
         table,
         int(bool(fill_table)),
+        _f32(min_weight),
         scratch.ctypes.data,
         *(
             None if a is None and name == "a0" else _ptr(a, name, f4, (n, w), writable=True)

@@ -321,37 +321,6 @@ def window_share(weights: np.ndarray, *, sigma_x_px: float, sigma_y_px: float) -
     return cv2.sepFilter2D(w, cv2.CV_32F, kx, ky, borderType=cv2.BORDER_CONSTANT)
 
 
-# The normalised-convolution fit's floor on its window's weight (the Gabor kernel's s_min,
-# simbench/_ckernels.c fit_solver): a window with at most this share of its weight on certain samples
-# has no fit (amplitude 0, residual inf).
-MIN_WINDOW_WEIGHT = 0.05
-
-
-def weighted_fit(method: Callable[..., "PhaseResult"]) -> Callable[..., "PhaseResult"]:
-    """``method`` (a normalised-convolution fit, :func:`gabor_phase`) taking a certainty that
-    carries per-sample weights - a certain sample's weight ``>= 1``, an uncertain one's 0 - and
-    returning what the fit of the 0/1 certainty returns for everything but the fit itself: its
-    ``support`` is the window's share of certain samples, and a window whose share is at most
-    :data:`MIN_WINDOW_WEIGHT` has no fit, as with 0/1 weights (the kernel's floor is on the
-    weights' sum, which weights over 1 would lift; the fit itself does not change with the
-    weights' common scale)."""
-
-    def fit(intensity: np.ndarray, *, certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float, **kw):
-        out = method(intensity, certainty=certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px, **kw)
-        share = window_share((certainty > 0).astype(np.float32), sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
-        none = share <= np.float32(MIN_WINDOW_WEIGHT)
-        zero = np.float32(0.0)
-        return PhaseResult(
-            wrapped=np.where(none, zero, out.wrapped),
-            amplitude=np.where(none, zero, out.amplitude),
-            offset=None if out.offset is None else np.where(none, zero, out.offset),
-            residual=np.where(none, np.float32(np.inf), out.residual),
-            support=share,
-        )
-
-    return fit
-
-
 def magnitude(
     re: np.ndarray, im: np.ndarray, *, tmp: np.ndarray | None = None, out: np.ndarray | None = None
 ) -> np.ndarray:
@@ -393,6 +362,12 @@ def _half_kernels(omega: float, sx: float, sy: float) -> tuple[np.ndarray, ...]:
     return out
 
 
+# The normalised-convolution fit's floor on its window's weight (the Gabor kernel's s_min,
+# simbench/_ckernels.c fit_solver): a window with at most this share of its Gaussian weight on
+# certain samples has no fit (amplitude 0, residual inf).
+MIN_WINDOW_WEIGHT = 0.05
+
+
 def _fit(
     intensity: np.ndarray,
     certainty: np.ndarray,
@@ -402,6 +377,7 @@ def _fit(
     table=None,
     offset: bool = True,
     column0: int = 0,
+    min_weight: float = MIN_WINDOW_WEIGHT,
 ) -> tuple:
     """The band fit of :func:`simbench.decode._kernels.gabor_band`: (wrapped, amp, a0, residual,
     support), a0 None unless ``offset``; ``table`` as it takes it (read); ``column0``: the image
@@ -409,7 +385,8 @@ def _fit(
     h, w = intensity.shape
     out = tuple(None if q == 2 and not offset else np.empty((h, w), np.float32) for q in range(5))
     basis = _basis(w, omega, column0)
-    _kernels.gabor_band(intensity, certainty, 0, h, _half_kernels(omega, sx, sy), basis, table, False, *out)
+    kernels = _half_kernels(omega, sx, sy)
+    _kernels.gabor_band(intensity, certainty, 0, h, kernels, basis, table, False, *out, min_weight=min_weight)
     return out
 
 
@@ -445,6 +422,7 @@ def gabor_phase(
     sigma_y_px: float,
     offset: bool = True,
     column0: int = 0,
+    min_weight: float = MIN_WINDOW_WEIGHT,
 ) -> PhaseResult:
     """Wrapped phase of a vertical-stripe fringe by a Gaussian-windowed (Gabor) fit.
 
@@ -461,6 +439,9 @@ def gabor_phase(
     column0 : int
         The image column of ``intensity``'s first (a slice of an image's columns gives the bits
         the whole image's fit gives there, where the window lies within the slice).
+    min_weight : float
+        A window whose certainty-weighted sum (its Gaussian's weights sum to 1) is at most this
+        has no fit (:func:`weighted_fit` lowers it for weights under 1).
 
     Returns
     -------
@@ -479,8 +460,9 @@ def gabor_phase(
     sx, sy = float(sigma_x_px), float(sigma_y_px)
     h, w = intensity.shape
     n = _kernels.gabor_table_rows(h, _half_kernels(omega, sx, sy))
+    table = _all_certain_table(n, w, omega, sx, sy, column0)
     wrapped, amp, a0, residual, s1 = _fit(
-        intensity, c, omega, sx, sy, _all_certain_table(n, w, omega, sx, sy, column0), offset=offset, column0=column0
+        intensity, c, omega, sx, sy, table, offset=offset, column0=column0, min_weight=min_weight
     )
     return PhaseResult(
         wrapped=wrapped,
@@ -489,6 +471,37 @@ def gabor_phase(
         residual=residual,
         support=s1,
     )
+
+
+def weighted_fit(method: Callable[..., PhaseResult], *, min_weight: float) -> Callable[..., PhaseResult]:
+    """:func:`gabor_phase` (``method``) taking a certainty that carries per-sample weights - a
+    certain sample's in ``(0, 1]``, an uncertain one's 0 - and returning, but for the fit itself,
+    what the fit of the 0/1 certainty returns: its ``support`` is the window's share of certain
+    samples, and a window whose share is at most :data:`MIN_WINDOW_WEIGHT` has no fit.  The fit's
+    own floor, on the weights' sum, is lowered to ``min_weight`` (at most ``MIN_WINDOW_WEIGHT``
+    times the least weight, so that it never acts first).  A pixel whose window's certain samples
+    all weigh 1 gets the bits of the unweighted fit: the same kernel sums, its support the kernel's
+    own plus an exact 0, the floor the same test of the same sum - so a row band that holds no
+    weight under 1 may take the plain fit and give the same result."""
+
+    def fit(intensity: np.ndarray, *, certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float, **kw):
+        out = method(
+            intensity, certainty=certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px, min_weight=min_weight, **kw
+        )
+        c = np.ascontiguousarray(certainty, dtype=np.float32)
+        lost = (c > 0).astype(np.float32) - c  # each certain sample's weight under 1
+        support = out.support + window_share(lost, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
+        none = support <= np.float32(MIN_WINDOW_WEIGHT)
+        zero = np.float32(0.0)
+        return PhaseResult(
+            wrapped=np.where(none, zero, out.wrapped),
+            amplitude=np.where(none, zero, out.amplitude),
+            offset=None if out.offset is None else np.where(none, zero, out.offset),
+            residual=np.where(none, np.float32(np.inf), out.residual),
+            support=support,
+        )
+
+    return fit
 
 
 # The colour-robust decoder's carrier bank (DecoderParams.carrier_bank): (period scale, sigma_y
@@ -721,6 +734,7 @@ def centroid_corrected(
     sigma_y_px: float,
     period_px: float,
     keep: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
 ) -> list[np.ndarray]:
     """Gabor fits of one image - ``(wrapped, sigma_x_px)``, the widest window first, each with
     windows ``sigma_x_px`` by ``sigma_y_px`` and carrier ``2 pi / period_px`` on samples of
@@ -732,6 +746,10 @@ def centroid_corrected(
     from the pixel towards its window's centre.  A pixel stays as it is where its window's centre
     is within :data:`CENTRED_PX` of it, where no such step is in reach, and where ``keep`` (e.g.
     another carrier's fit).
+
+    ``weights`` ((H, W) float32, or None: the certainty): the samples' weights in the fits where
+    they were weighed (:func:`weighted_fit`), which place the windows' centres; which windows are
+    cut and which centred the certainty alone says.
 
     Each corrected pixel reads its own window and columns alone, so the result does not depend
     on how the image is cut into row bands.
@@ -761,6 +779,7 @@ def centroid_corrected(
         in_rows = np.flatnonzero(cand[:, a:b].any(axis=1))
         y0, y1 = max(0, int(in_rows[0]) - ry), min(h, int(in_rows[-1]) + ry + 1)
         cs = np.ascontiguousarray(c[y0:y1, a:b])
+        cw = cs if weights is None else np.ascontiguousarray(weights[y0:y1, a:b], np.float32)
         block_cut, block_cand = cut[y0:y1, a:b], cand[y0:y1, a:b]
         # OpenCV's filters take a row's last few columns (its width modulo the vector width) in
         # scalar code, a last bit off the vector code's: a block as wide as a whole number of the
@@ -768,7 +787,7 @@ def centroid_corrected(
         # wherever the block starts - which follows the row band's cut pixels (measured: the
         # right border's pixels 1 ulp apart between 1 and 2 bands on scenes/robust_printed.toml)
         padded = np.zeros((y1 - y0, -(-(b - a) // CENTROID_BLOCK_ALIGN) * CENTROID_BLOCK_ALIGN), np.float32)
-        padded[:, : b - a] = cs
+        padded[:, : b - a] = cw
         dxs = [_centroid(padded, sx, sigma_y_px)[:, : b - a] for sx in sigmas]
         with np.errstate(invalid="ignore"):
             # a wholly uncertain window (a shadow wider than it) has no phase to step: its fit

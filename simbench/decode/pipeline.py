@@ -67,6 +67,7 @@ from simbench.decode.phase import (
     off_discontinuity,
     overlay_intensity,
     shadow_margin,
+    MIN_WINDOW_WEIGHT,
     weighted_fit,
     window_share,
 )
@@ -533,10 +534,11 @@ def _columns(
         # assumption between the inverse variances of shot-noise-limited samples, 1/gain, and of
         # read-noise-limited ones, 1/gain^2: 1/gain^2 makes the windows beside every print edge so
         # lopsided that the centroid correction, which reads the fringe's rate only from whole
-        # windows, leaves their bias - the 5:1 turned chart's MAE 0.30 -> 0.57 mm; docs/decoder.md),
-        # scaled by the largest gain there can be so that every weight is >= 1 (weighted_fit).
+        # windows, leaves their bias - the 5:1 turned chart's MAE 0.30 -> 0.57 mm; docs/decoder.md).
+        # Paper weighs exactly 1: a window without ink fits as the plain fit does, bit for bit, so
+        # a row band without a print (the plain fit) and one with it give its pixels one result.
         fit_certainty = flattened_fit_weights(certainty, print_gain)
-        method = weighted_fit(method)
+        method = weighted_fit(method, min_weight=MIN_WINDOW_WEIGHT / ALBEDO_MAX_GAIN)
     with stage(f"phase ({params.phase_method}, Eq. 10-11)"):
         # no offset: no stage reads it, and not writing it saves a fifth of the Gabor kernel's output
         fit = dict(certainty=fit_certainty, period_px=t_cam, sigma_y_px=sx * params.sigma_y_ratio)
@@ -592,7 +594,7 @@ def _columns(
             narrow = narrow.wrapped[crop]
     if params.centroid_correction:
         with stage("window centroid correction"):
-            phase, narrow = _centroid_correction(phase, narrow, fit_certainty, carrier, crop, fit, sx, t_cam)
+            phase, narrow = _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam)
     with stage("validity"):
         intensity, certainty, lit = intensity[crop], certainty[crop], lit[crop]
         wrapped, amplitude, residual, support_w = (
@@ -765,10 +767,9 @@ def _pool_rows(crop: slice, height: int, params: DecoderParams, rig: Rig) -> sli
 
 def flattened_fit_weights(certainty: np.ndarray, gain: np.ndarray) -> np.ndarray:
     """The phase fit's sample weights where the albedo flattening multiplied the capture by
-    ``gain`` ((H, W) float32 in [1, ALBEDO_MAX_GAIN^2]): ``certainty / gain`` (see ``_columns``),
-    scaled by ``ALBEDO_MAX_GAIN^2`` so that every certain sample weighs >= 1
-    (:func:`simbench.decode.phase.weighted_fit`)."""
-    return certainty * (np.float32(ALBEDO_MAX_GAIN**2) / gain)
+    ``gain`` ((H, W) float32 in [1, ALBEDO_MAX_GAIN]: the gain down the columns): ``certainty /
+    gain`` (see ``_columns``; :func:`simbench.decode.phase.weighted_fit` takes them)."""
+    return (certainty / gain).astype(np.float32, copy=False)
 
 
 def _window_shares(weights, carrier, *, sigma_x_px: float, sigma_y_px: float) -> np.ndarray:
@@ -796,7 +797,10 @@ def _centroid_correction(phase, narrow, certainty, carrier, crop, fit, sx, t_cam
         band[crop] = narrow
         fits.append((band, sx * STABILITY_WINDOW_SCALE))
     bank = None if carrier is None else carrier != 0
-    out = centroid_corrected(fits, certainty, sigma_y_px=fit["sigma_y_px"], period_px=t_cam, keep=bank)
+    # the windows' centres as the fit weighed them (fit["certainty"]: the flattened prints' weights
+    # where it has them), which are cut and which centred as the 0/1 certainty says
+    weights = None if fit["certainty"] is certainty else fit["certainty"]
+    out = centroid_corrected(fits, certainty, sigma_y_px=fit["sigma_y_px"], period_px=t_cam, keep=bank, weights=weights)
     return dataclasses.replace(phase, wrapped=out[0]), (out[1][crop] if narrow is not None else None)
 
 
