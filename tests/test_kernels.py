@@ -59,6 +59,21 @@ def test_gabor_fit_matches_numpy(holes, shape):
     close_fit(phase.gabor_phase(img, certainty=cert, **kw), ref.gabor_phase(img, certainty=cert, **kw))
 
 
+def test_gabor_fit_with_weights_and_a_lowered_floor_matches_numpy():
+    """Certain samples weighing 0.02-1 (the colour-robust decoder's flattened prints: 1/gain) and
+    the kernel's floor on the weights' sum lowered to 0.001 (``min_weight``): the C fit is still
+    the numpy form's, and windows whose weights sum to under 0.05 but over 0.001 - no fit at the
+    default floor - are fitted."""
+    img, cert = fringe(90, 300, holes=True)
+    weights = cert * np.where((np.arange(300) // 9) % 2 == 1, np.float32(0.02), np.float32(1.0))[None, :]
+    kw = dict(period_px=T_CAM, sigma_x_px=0.25 * T_CAM, sigma_y_px=0.15 * T_CAM)
+    got = phase.gabor_phase(img, certainty=weights, min_weight=0.001, **kw)
+    close_fit(got, ref.gabor_phase(img, certainty=weights, min_weight=0.001, **kw))
+    default = phase.gabor_phase(img, certainty=weights, **kw)
+    lifted = (got.support > 0.001) & (got.support <= 0.05)
+    assert lifted.any() and (default.amplitude[lifted] == 0).all() and (got.amplitude[lifted] > 0).any()
+
+
 @pytest.mark.parametrize("phi0", [0.0, 1.0, -2.5, 3.1, np.pi])
 def test_gabor_fit_recovers_a_known_fringe_phase(phi0):
     """A pure fringe ``0.5 + 0.3 cos(w x + phi0)``: away from the borders (where the window is
