@@ -58,6 +58,7 @@ from simbench.decode.depth import (
 )
 from simbench.decode.phase import (
     CARRIER_BANK,
+    MIN_WINDOW_WEIGHT,
     PhaseResult,
     bank_fit,
     centroid_corrected,
@@ -67,7 +68,6 @@ from simbench.decode.phase import (
     off_discontinuity,
     overlay_intensity,
     shadow_margin,
-    MIN_WINDOW_WEIGHT,
     weighted_fit,
     window_share,
 )
@@ -520,7 +520,8 @@ def _columns(
         method = _checked_phase_method(method, params.phase_method)
     carrier = None
     fit_certainty = certainty
-    if print_gain is not None and gain is not None and params.phase_method == "gabor":
+    # (print_gain is set only with a gain: the gain down the columns is a factor of it)
+    if print_gain is not None and params.phase_method == "gabor":
         # A flattened sample is its capture times the gain, so is its noise: on a 20:1 print the
         # ink's few-DN fringe comes back ~20x, its noise with it, and a window over paper and ink
         # that weighs both alike takes the ink's noise into the paper's phase (measured on
