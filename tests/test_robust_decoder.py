@@ -1782,3 +1782,14 @@ def test_a_print_in_some_row_bands_only_gives_every_thread_count_one_result(cali
     for n in (2, 3):
         assert np.array_equal(out[n].depth_m, out[1].depth_m, equal_nan=True), n
         assert np.array_equal(out[n].confidence, out[1].confidence, equal_nan=True), n
+
+
+@pytest.mark.parametrize("weights, floor", [(1.5, 0.001), (-0.1, 0.001), (np.nan, 0.001), (0.5, -0.01), (0.5, np.nan)])
+def test_a_weighted_fit_refuses_weights_outside_0_to_1_and_a_floor_outside_0_to_1(weights, floor):
+    """A weight over 1 would count as negative lost weight (a support over the window's share of
+    certain samples), a negative one or NaN has no meaning, nor has a floor outside [0, 1): a
+    clear error, not a silently wrong support."""
+    img = np.ones((20, 60), np.float32)
+    cert = np.full((20, 60), weights, np.float32)
+    with pytest.raises(ValueError, match="weights|min_weight"):
+        weighted_fit(gabor_phase, min_weight=floor)(img, certainty=cert, period_px=21.0, sigma_x_px=5.0, sigma_y_px=3.0)

@@ -454,6 +454,8 @@ def gabor_phase(
     .. [2] D. Gabor, "Theory of communication", J. IEE 93(26), 429-457, 1946.
     """
     check_phase_inputs(intensity, certainty, period_px)
+    if not 0.0 <= min_weight < 1.0:
+        raise ValueError(f"min_weight must be in [0, 1) (a share of the window's weight), got {min_weight}")
     omega = round(2.0 * np.pi / period_px, 12)
     intensity = np.ascontiguousarray(intensity, dtype=np.float32)
     c = np.ascontiguousarray(certainty, dtype=np.float32)
@@ -485,10 +487,11 @@ def weighted_fit(method: Callable[..., PhaseResult], *, min_weight: float) -> Ca
     weight under 1 may take the plain fit and give the same result."""
 
     def fit(intensity: np.ndarray, *, certainty: np.ndarray, sigma_x_px: float, sigma_y_px: float, **kw):
-        out = method(
-            intensity, certainty=certainty, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px, min_weight=min_weight, **kw
-        )
         c = np.ascontiguousarray(certainty, dtype=np.float32)
+        if c.size and not (c.min() >= 0.0 and c.max() <= 1.0):
+            # a weight over 1 would count as negative lost weight: a support over the window's share
+            raise ValueError(f"weights must be in [0, 1], got {c.min()} .. {c.max()}")
+        out = method(intensity, certainty=c, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px, min_weight=min_weight, **kw)
         lost = (c > 0).astype(np.float32) - c  # each certain sample's weight under 1
         support = out.support + window_share(lost, sigma_x_px=sigma_x_px, sigma_y_px=sigma_y_px)
         none = support <= np.float32(MIN_WINDOW_WEIGHT)
