@@ -20,6 +20,7 @@ from simbench.decode.color import (
     albedo_gain,
     albedo_step_pixels,
     column_albedo_gain,
+    column_flattened,
     column_step_pixels,
     mixed_pixel_gain,
     normalize_channels,
@@ -419,7 +420,7 @@ def _columns(
                     if columns is None:
                         gain = albedo_gain(rgb, span, period_px=t_cam, order=params.order)
                     else:
-                        flat = rgb * columns[..., None]
+                        flat = column_flattened(rgb, columns)
                         gain = albedo_gain(
                             flat, normalize_channels(flat, **norm)[1], period_px=t_cam, order=params.order
                         )
