@@ -1646,6 +1646,41 @@ def test_column_flattened_holds_the_pixels_beside_a_step_within_the_light_around
     assert np.array_equal(color.column_flattened(rgb, np.ones((12, 24), np.float32)), rgb)
 
 
+def test_the_overlays_weights_down_the_columns_are_each_columns_mean_where_a_channel_has_fringe():
+    """``overlay_weights(..., down_columns=True)``: a board whose level alternates from row to row
+    (as a Bayer mosaic's demosaiced rows do) and whose fringe channel has no range in its right
+    third: each weight of the code pair, made per row, alternates; averaged down the columns over
+    the code window's rows it is, away from the top and bottom, the mean of the two rows' (but
+    for the one row more of one kind an odd window holds); the fringe channel's weight stays 0
+    where it has no fringe.  A band of the decoder holds those rows (``row_bands``' halo grows by
+    them), and the option needs the weighted overlay."""
+    from simbench.decode.bands import row_bands
+
+    t = PARAMS_PERIOD_PX
+    h, w = 120, 90
+    raw = np.full((h, w, 3), 0.3, np.float32)
+    raw[1::2] *= 0.5  # every other row half as bright
+    span = np.full((h, w, 3), 0.2, np.float32)
+    span[:, 60:, 2] = 0.0  # no fringe in blue on the right
+    args = dict(unmixing=None, period_px=t, order=3, floor=0.01)
+    own = color.overlay_weights(raw, span, **args)
+    down = color.overlay_weights(raw, span, **args, down_columns=True)
+    assert not np.allclose(own[0][0], own[0][1])  # per row, they alternate
+    reach = color.overlay_weight_reach_rows(t, 3)
+    inner = slice(reach + 1, h - reach - 1)
+    np.testing.assert_allclose(down[0][inner], 0.5 * (own[0][0, 0] + own[0][1, 0]), rtol=2e-2)
+    # (an odd count of rows holds one more of one kind: a share 1 / (2 reach + 1) of the swing left)
+    assert np.ptp(down[0][inner]) <= 1.01 * np.ptp(own[0]) / (2 * reach + 1)
+    assert (down[1][:, 60:] == 0).all() and (down[1][:, :60] > 0).all()
+    p = robust_params(DecoderParams())
+    off = dataclasses.replace(p, weights_down_columns=False)
+    assert row_bands(960, 1280, p, RIG)[1] == row_bands(960, 1280, off, RIG)[1] + color.overlay_weight_reach_rows(
+        p.camera_period(RIG), p.order
+    )
+    with pytest.raises(ValueError, match="weights_down_columns needs intensity_mode"):
+        DecoderParams(weights_down_columns=True)
+
+
 def test_column_step_pixels_mark_both_sides_of_a_step_of_the_column_gain():
     """Two pixels each side of a step of the column gain by 2x or more, along a row and down a
     column (its steps are placed to about a pixel, and the blur mixes one more); a smaller step

@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from simbench.decode.color import albedo_gain_reach_rows, column_gain_reach_rows
+from simbench.decode.color import albedo_gain_reach_rows, column_gain_reach_rows, overlay_weight_reach_rows
 from simbench.decode.params import DecoderParams
 from simbench.decode.profile import run_in_context
 from simbench.pattern import check_channels
@@ -41,7 +41,9 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
 
     The halo is what a band's rows read beyond themselves: the phase fit's window (3 sigma_y),
     with ``pool_code`` the rows whose code votes on theirs (:func:`code_pool_rows`: their phase
-    must be exact too, so the fit's window beyond them as well) and, with the albedo flattening, the rows its gain reads
+    must be exact too, so the fit's window beyond them as well), with ``weights_down_columns`` the
+    rows the overlay's weights are averaged over
+    (:func:`simbench.decode.color.overlay_weight_reach_rows`) and, with the albedo flattening, the rows its gain reads
     (:func:`simbench.decode.color.albedo_gain_reach_rows`: the gain of the fit's rows must be the
     whole image's).  With less, a band's rows near its ends would see a gain made of a truncated
     image, and the result would follow the thread count (it did, until 2026-11-26: the
@@ -55,6 +57,10 @@ def row_bands(height: int, width: int, params: DecoderParams, rig: Rig) -> tuple
     fit_halo = fit_halo_rows(params, rig)
     # the pooled code's rows need their phase exact: their own fit window beyond them
     halo = fit_halo + code_pool_rows(params, rig)
+    if params.weights_down_columns:
+        # the overlay's weights of those rows are means down the columns: their rows as far again
+        # (the flattening's gain below is then needed on these rows too)
+        halo += overlay_weight_reach_rows(params.camera_period(rig), params.order)
     if params.albedo_flatten:  # (it needs color_normalize: DecoderParams checks)
         halo += albedo_gain_reach_rows(params.camera_period(rig), params.order)
         if params.albedo_columns:

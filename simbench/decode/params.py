@@ -255,6 +255,11 @@ class DecoderParams:
         ``overlay`` (paper Eq. 9), ``blue`` (the fringe channel alone: blue in the paper's
         pattern) or ``weighted`` (normalised channels weighted by their noise,
         :func:`simbench.decode.color.overlay_weights`; needs ``color_normalize``).
+    weights_down_columns : bool
+        With ``intensity_mode`` ``weighted``: each pixel's noise weights are the mean of those
+        down its column over the code window's rows
+        (:func:`simbench.decode.color.overlay_weights`, ``rows``; the colour-robust decoder; off =
+        each pixel's own).
     phase_method : str
         Key of :data:`PHASE_METHODS`: ``gabor`` (paper Eq. 10-11), ``ftp`` (Fourier transform
         profilometry, row by row) or ``wfr`` (windowed Fourier ridges); see
@@ -467,6 +472,7 @@ class DecoderParams:
 
     pattern: PatternSpec = PatternSpec()
     intensity_mode: str = "overlay"
+    weights_down_columns: bool = False
     phase_method: str = "gabor"
     sigma_periods: float = 0.25
     sigma_y_ratio: float = 0.6
@@ -514,6 +520,7 @@ class DecoderParams:
         fixed = {
             "pattern": _pattern_of(self.pattern),
             "intensity_mode": v.choice(self.intensity_mode, "intensity_mode", INTENSITY_MODES),
+            "weights_down_columns": v.boolean(self.weights_down_columns, "weights_down_columns"),
             "phase_method": v.choice(self.phase_method, "phase_method", PHASE_METHODS),
             "sigma_periods": v.number(self.sigma_periods, "sigma_periods", lo=0.0, hi=10.0, lo_open=True),
             "sigma_y_ratio": v.number(self.sigma_y_ratio, "sigma_y_ratio", lo=0.0, hi=10.0, lo_open=True),
@@ -572,6 +579,8 @@ class DecoderParams:
         needs = []
         if fixed["intensity_mode"] == "weighted" and not fixed["color_normalize"]:
             needs.append("intensity_mode 'weighted' needs color_normalize = true (it weights normalised channels)")
+        if fixed["weights_down_columns"] and fixed["intensity_mode"] != "weighted":
+            needs.append("weights_down_columns needs intensity_mode = 'weighted' (it averages the overlay's weights)")
         if fixed["albedo_flatten"] and not fixed["color_normalize"]:
             needs.append("albedo_flatten needs color_normalize = true (it flattens before the normalisation)")
         if fixed["shadow_doubt"] and not fixed["color_normalize"]:
@@ -795,7 +804,9 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
     lit test looks across a whole code window; the pixels straddling a printed step, which the
     camera's blur mixes, and along a row the next ones on its bright side carry no sample, but
     count for their windows' support: ``albedo_edge_skip``; printed steps are flattened along the
-    rows and, first, down the columns: ``albedo_columns``).
+    rows and, first, down the columns: ``albedo_columns``); its fringe is the channels' overlay
+    weighted by their noise (``intensity_mode`` ``weighted``), the weights averaged down the
+    columns (``weights_down_columns``).
     Its confidence folds in the phase's stability against the window's width
     (``phase_stability``), takes the better of the two windows'
     fringe SNRs (``narrow_snr``) and doubts the pixels beside concave creases (``crease_doubt``)
@@ -818,6 +829,7 @@ def robust_params(params: DecoderParams = DecoderParams()) -> DecoderParams:
         link_keep_certain=ROBUST_MIN_CONFIDENCE,
         link_split=True,
         intensity_mode="weighted",
+        weights_down_columns=True,
         bridge_gap_periods=ROBUST_BRIDGE_GAP_PERIODS,
         min_amplitude=ROBUST_MIN_AMPLITUDE,
         phase_stability=True,

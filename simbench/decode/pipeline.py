@@ -24,6 +24,7 @@ from simbench.decode.color import (
     column_step_pixels,
     mixed_pixel_gain,
     normalize_channels,
+    overlay_weight_reach_rows,
     code_at_row_ends,
     normalized_color_code,
     overlay_weights,
@@ -431,11 +432,16 @@ def _columns(
                     # allocator hands it fresh pages every decode: ~8 ms more a decode when it did)
                     halo = fit_halo_rows(params, rig) + code_pool_rows(params, rig)
                     fit = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
+                    # the overlay's weights of the fit's rows are means down the columns over
+                    # rows beyond them (weights_down_columns): those rows are normalised too
+                    if params.weights_down_columns:
+                        halo += overlay_weight_reach_rows(t_cam, params.order)
+                    band_rows = slice(max(0, crop.start - halo), min(image.shape[0], crop.stop + halo))
                     crop = slice(crop.start - fit.start, crop.stop - fit.start)
-                    # before the cut: the step tests down a column mark the fit's first and last
-                    # rows from the rows beyond them (the band carries them: column_gain_reach_rows)
+                    # before the cut: the step tests down a column mark the first and last rows
+                    # from the rows beyond them (the band carries them: column_gain_reach_rows)
                     beyond = 1 if columns is None else COLUMN_SKIP_PX
-                    wide = slice(max(0, fit.start - beyond), min(gain.shape[0], fit.stop + beyond))
+                    wide = slice(max(0, band_rows.start - beyond), min(gain.shape[0], band_rows.stop + beyond))
                     # a gain of exactly 1 (no step near: most bands of most scenes) has no step to
                     # skip beside (~3.5 ms a band at the paper's resolution saved)
                     if params.albedo_edge_skip and not (gain[wide] == 1.0).all():
@@ -446,18 +452,36 @@ def _columns(
                         # mixed pixel's lower side is within `beyond` of it)
                         extrema = mixed_pixel_gain(gain[wide], mixed, reach_px=beyond)
                         mixed = mixed[fit.start - wide.start :][: fit.stop - fit.start]
-                        extrema = extrema[fit.start - wide.start :][: fit.stop - fit.start]
-                    image, gain = image[fit], gain[fit].copy()
+                        extrema = extrema[band_rows.start - wide.start :][: band_rows.stop - band_rows.start]
                     if columns is not None and not (columns[fit] == 1.0).all():
                         print_gain = columns[fit].copy()
-                    raw = raw[fit].copy()
-                    rgb = raw if unmixing is None else rgb[fit].copy()
+                    # (the rows beyond the fit's are cut once the weights are made, below)
+                    image, gain, raw = image[band_rows], gain[band_rows].copy(), raw[band_rows].copy()
+                    rgb = raw if unmixing is None else rgb[band_rows].copy()
                     # with no step anywhere the gain is exactly 1 and the normalisation stands
                     if (gain == 1.0).all():
                         gain = None
-                        normed, span = normed[fit].copy(), span[fit].copy()
+                        normed, span = normed[band_rows].copy(), span[band_rows].copy()
                     else:
                         normed, span = normalize_channels(rgb, gain=gain, extrema_gain=extrema, **norm)
+                    if params.intensity_mode == "weighted":
+                        weights = overlay_weights(
+                            raw,
+                            span,
+                            unmixing=unmixing,
+                            period_px=t_cam,
+                            order=params.order,
+                            floor=params.dark_level,
+                            down_columns=params.weights_down_columns,
+                        )
+                    if band_rows != fit:
+                        keep = slice(fit.start - band_rows.start, fit.stop - band_rows.start)
+                        image, raw = image[keep], raw[keep].copy()
+                        rgb = raw if unmixing is None else rgb[keep].copy()
+                        normed, span = normed[keep].copy(), span[keep].copy()
+                        gain = None if gain is None else gain[keep].copy()
+                        extrema = None if extrema is None else extrema[keep].copy()
+                        weights = None if weights is None else tuple(w[keep].copy() for w in weights)
         with stage("lit and clipped pixels"):
             if image.dtype in _FUSED_DTYPES and image.flags.c_contiguous:
                 # the fused front end's lit and clipped pixels (the same bits as certainty_map);
@@ -493,10 +517,16 @@ def _columns(
         unmixed = rgb
         if span is not None:
             rgb = normed
-            if params.intensity_mode == "weighted":
+            if params.intensity_mode == "weighted" and weights is None:
                 with stage("colour unmixing and normalisation"):
                     weights = overlay_weights(
-                        raw, span, unmixing=unmixing, period_px=t_cam, order=params.order, floor=params.dark_level
+                        raw,
+                        span,
+                        unmixing=unmixing,
+                        period_px=t_cam,
+                        order=params.order,
+                        floor=params.dark_level,
+                        down_columns=params.weights_down_columns,
                     )
         with stage("intensity overlay (Eq. 9)"):
             intensity = overlay_intensity(rgb, mode=params.intensity_mode, weights=weights)

@@ -67,6 +67,7 @@ VARIANTS: dict[str, Variant] = {
             "albedo_edge_skip",
             "albedo_columns",
             "intensity_mode",
+            "weights_down_columns",
             "shadow_doubt",
             "min_amplitude",
         ),
@@ -81,7 +82,12 @@ VARIANTS: dict[str, Variant] = {
     ),
     "albedo_columns": Variant(("albedo_columns",), "printed steps flattened down the columns"),
     "albedo_edge_skip": Variant(("albedo_edge_skip",), "the pixels straddling a flattened step carry no sample"),
-    "intensity_mode": Variant(("intensity_mode",), "the overlay (Eq. 9) weighted by each channel's noise"),
+    "intensity_mode": Variant(
+        ("intensity_mode", "weights_down_columns"),
+        "the overlay (Eq. 9) weighted by each channel's noise (with the weights' means down the columns, which "
+        "need it)",
+    ),
+    "weights_down_columns": Variant(("weights_down_columns",), "the overlay's noise weights averaged down the columns"),
     "min_amplitude": Variant(("min_amplitude",), "a fringe under 2 % of the local range taken for none"),
     "carrier_bank": Variant(("carrier_bank",), "other carriers tried where the nominal phase fit fails"),
     "centroid_correction": Variant(("centroid_correction",), "the phase of a cut window moved to its pixel"),
