@@ -226,3 +226,15 @@ def test_booleans_only_from_booleans(field):
     for bad in ("false", "true", 0, 1, "maybe", None):
         with pytest.raises(ValueError, match=field):
             DecoderParams(**{field: bad})
+
+
+@pytest.mark.parametrize("value", [[1, 2], {"a": 1}, 3, None])
+def test_registered_names_only_from_strings(value):
+    """A list or table where a registry's name goes is a ValueError naming the field (a dict lookup
+    of the unhashable value raised TypeError: the fuzzer found ``phase_method=[1, 2]`` in CI)."""
+    with pytest.raises(ValueError, match="phase_method"):
+        DecoderParams(phase_method=value)
+    scene = copy.deepcopy(SCENE)
+    scene["object"][0]["type"] = value
+    with pytest.raises(ValueError, match=r"object\[0\]: type"):
+        scene_from_dict(scene, base_dir=ROOT / "scenes")

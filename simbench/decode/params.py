@@ -514,7 +514,7 @@ class DecoderParams:
     threads: int | None = None
 
     def __post_init__(self) -> None:
-        if self.phase_method not in PHASE_METHODS:
+        if isinstance(self.phase_method, str) and self.phase_method not in PHASE_METHODS:
             load_extensions()  # phase methods of installed packages (simbench.extensions), once per process
         v = validate
         fixed = {

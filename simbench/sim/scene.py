@@ -325,6 +325,8 @@ def _object_from_dict(d: object, index: int, base_dir: Path) -> SceneObject:
     if not isinstance(d, dict):
         raise ValueError(f"{where}: expected a table")
     kind = d.get("type")
+    if not isinstance(kind, str):  # a list or table is no kind (and no key to look one up by)
+        raise ValueError(f"{where}: type must be a string naming one of {sorted(OBJECT_KINDS)}, got {kind!r}")
     if kind not in OBJECT_KINDS:
         load_extensions()  # object kinds of installed packages (simbench.extensions), once per process
     if kind not in OBJECT_KINDS:
