@@ -263,3 +263,92 @@ def test_the_held_out_line_names_the_scenes_the_pick_rests_on():
     swing = rows("a", {3}) + rows("b", {3}) + rows("c", {4}) + rows("d", {2, 4})
     line = _held_out(swing)
     assert "without `c` 3" in line and "4 otherwise" in line and "without `a`" not in line
+
+
+def test_the_camera_table_takes_out_exactly_its_effects_from_the_sensor_model():
+    """Each set of CAMERA_EFFECTS is taken out of the run's model by copying exactly its fields
+    from the `ideal` model: a row "without the Bayer mosaic" differs from the paper's camera in
+    the colour filter and the demosaicing only, so its change is that effect's alone."""
+    import dataclasses
+
+    from simbench.experiments.hard_scenes import CAMERA_EFFECTS, camera_sensors
+    from simbench.sim.sensor import EFFECT_TABLE, get_sensor
+
+    paper, ideal = get_sensor("paper"), get_sensor("ideal")
+
+    def flat(obj, prefix=""):
+        out = {}
+        for f in dataclasses.fields(obj):
+            v = getattr(obj, f.name)
+            if dataclasses.is_dataclass(v):
+                out.update(flat(v, f"{prefix}{f.name}."))
+            else:
+                out[f"{prefix}{f.name}"] = v
+        return out
+
+    models = camera_sensors(paper)
+    assert list(models) == ["+".join(e) for e in CAMERA_EFFECTS]
+    p, i = flat(paper), flat(ideal)
+    for key, model in models.items():
+        m = flat(model)
+        fields = {f for e in key.split("+") for f in EFFECT_TABLE[e].fields}
+        for path, v in m.items():
+            if path in ("name", "description"):
+                continue
+            taken = any(path == f or path.startswith(f + ".") for f in fields)
+            assert v == (i[path] if taken else p[path]), (key, path)
+        assert any(p[f] != m[f] for f in fields if f in p), key  # something was taken out
+    assert models["cfa"].camera.cfa == "none" and paper.camera.cfa != "none"
+    assert not models["noise"].camera.noise and models["noise"].camera.cfa == paper.camera.cfa
+
+
+@pytest.mark.parametrize("folder", ["results/quick", "results"])
+def test_the_committed_camera_table_starts_each_scene_with_its_row_of_the_main_table(folder):
+    """hard_scenes_camera.csv (`simbench reproduce hard_scenes`, with --quick in results/quick):
+    every scene of CAMERA_SCENES the run measured, in the main table's order, first as modelled -
+    the numbers of its row in hard_scenes.csv, so both files are one run's - then once per set of
+    effects taken out (both methods scored) and, for RENDER_SCENES, rendered with more samples per
+    pixel (the colour-robust decoder only; the reference NaN)."""
+    import csv
+    import json
+    import math
+
+    from simbench.experiments.hard_scenes import CAMERA_EFFECTS, CAMERA_SCENES, RENDER_SCENES, more_samples
+
+    from .conftest import ROOT
+
+    with open(ROOT / folder / "hard_scenes_camera.csv", newline="") as f:
+        camera = list(csv.DictReader(f))
+    with open(ROOT / folder / "hard_scenes.csv", newline="") as f:
+        main = {r["scene"]: r for r in csv.DictReader(f)}
+    run = json.loads((ROOT / folder / "hard_scenes.provenance.json").read_text())["config"]
+    spp = more_samples(run["sampler"], run["spp"])
+    expected = []
+    for n in (n for n in main if n in CAMERA_SCENES):
+        expected += [(n, ""), *((n, "without_" + "+".join(e)) for e in CAMERA_EFFECTS)]
+        expected += [(n, f"spp_{spp}")] if n in RENDER_SCENES else []
+    assert expected and [(r["scene"], r["camera"]) for r in camera] == expected
+    for r in camera:
+        scores = {c: float(v) for c, v in r.items() if c not in ("scene", "camera")}
+        measured = {c: v for c, v in scores.items() if c.startswith("robust_") or not r["camera"].startswith("spp_")}
+        assert all(math.isfinite(v) for v in measured.values()), r
+        assert all(math.isnan(v) for c, v in scores.items() if c not in measured), r
+        if not r["camera"]:
+            assert all(v == float(main[r["scene"]][c]) for c, v in scores.items()), r["scene"]
+
+
+def test_more_samples_is_the_least_count_the_sampler_takes_of_at_least_four_times_the_run_s():
+    """The box's variant renders with RENDER_SPP_FACTOR x the samples where the sampler takes that
+    count, else the next it takes (the orthogonal sampler: a prime squared)."""
+    from simbench.experiments.hard_scenes import RENDER_SPP_FACTOR, more_samples
+    from simbench.sim.mitsuba_dict import check_sampler
+
+    assert RENDER_SPP_FACTOR == 4
+    assert more_samples("multijitter", 36) == 144
+    assert more_samples("independent", 10) == 40
+    assert more_samples("ldsampler", 16) == 64
+    assert more_samples("orthogonal", 25) == 121  # 100 = 10^2 is no prime squared
+    for sampler, spp in (("stratified", 9), ("orthogonal", 49), ("ldsampler", 4)):
+        n = more_samples(sampler, spp)
+        check_sampler(sampler, n)
+        assert n >= 4 * spp

@@ -31,8 +31,15 @@ the curves the operating point is chosen from.  What it cannot see: errors under
 systematic (the MAE shows them); completeness and MAE leave the edge band and the unlit pixels out
 (``wrong_share_all`` does not).
 
-Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_confidence.csv``,
-``hard_scenes_confidence.png``, ``.pdf`` and ``hard_scenes.provenance.json``.
+What the camera costs: the scenes of :data:`CAMERA_SCENES` are recorded again with sets of
+effects of the run's sensor model taken out (:data:`CAMERA_EFFECTS`, each taken from the ``ideal``
+model: the same renders, placement and noise seeds) and decoded by the colour-robust decoder at
+its operating point and the phase-shifting reference: each term's share of a shortfall, shown
+separately (e.g. the Bayer mosaic's on the fine 20:1 prints).
+
+Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_camera.csv``,
+``hard_scenes_confidence.csv``, ``hard_scenes_confidence.png``, ``.pdf`` and
+``hard_scenes.provenance.json``.
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ from simbench.decode.pipeline import apply_min_confidence
 from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.metrics import edge_band, wrong_pixels
+from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
 if TYPE_CHECKING:
     from simbench.decode.pipeline import DecodeResult
@@ -70,6 +78,12 @@ __all__ = [
     "object_scores",
     "scene_scores",
     "format_score",
+    "CAMERA_SCENES",
+    "CAMERA_EFFECTS",
+    "RENDER_SCENES",
+    "RENDER_SPP_FACTOR",
+    "camera_sensors",
+    "more_samples",
 ]
 
 # scene -> its class (the issue's list; scenes/make_hard_scenes.py writes them)
@@ -114,6 +128,28 @@ GOAL_MAE_MM = 0.5
 # confidence thresholds the curves are drawn at (0: every decoded pixel)
 CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0)
 SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "stripe_order_errors")
+# The scenes also rendered with at least RENDER_SPP_FACTOR times the run's samples per pixel (the
+# path tracer's noise about halved; the colour-robust decoder only - the reference's 12 exposures
+# would take as many renders again): the box interior, whose faces are lit by each other, where 36
+# spp leave a render noise above the camera's (measured 2026-12-04, 1280x960, standard deviation per
+# channel: 1.4-1.6 DN on its right, top and back faces against 0.8-1.5 DN of camera noise, on a
+# +-5 DN fringe on the right face; the render-noise target is a third of the camera's,
+# results/render_noise.md, where the cube's interreflections reach 0.58 of it at 36 spp).
+RENDER_SCENES = ("hard_box_interior",)
+RENDER_SPP_FACTOR = 4
+# The scenes recorded again without some of the camera's effects (in HARD_SCENES' order, the order
+# they are measured and written in): the printed charts (their albedo edges are where a colour
+# camera's Bayer mosaic interpolates a missing colour across a 20:1 step) and RENDER_SCENES (is the
+# box's few-DN fringe noise-limited?).  Measured on hard_chart_fine_high_turned before this table
+# (2026-12-04, 1280x960, the colour-robust decoder at its operating point): 94.78 % complete, MAE
+# 0.510 mm; without the mosaic 98.40 %, 0.360 mm; re-interpolating the mosaic in the decoder
+# (gain-guided, one-sided at the edges, gradient-corrected, VNG, Gaussian) got none of it back
+# (docs/decoder.md).
+CAMERA_SCENES = tuple(n for n, c in HARD_SCENES.items() if c == "printed albedo" or n in RENDER_SCENES)
+# the sets of effects taken out (simbench.sim.sensor.EFFECT_TABLE's names), each from the `ideal` model
+CAMERA_EFFECTS = (("cfa",), ("noise",), ("cfa", "noise"))
+# the scores the camera table keeps, per decoder
+CAMERA_SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share_all")
 
 
 def scene_scores(
@@ -237,6 +273,100 @@ def _decoders(config: RunConfig) -> tuple[dict, dict]:
     return params, {"paper": config.decoder.min_confidence, "robust": robust.min_confidence}
 
 
+def camera_sensors(sensor: SensorModel) -> dict[str, SensorModel]:
+    """``sensor`` (a physical model) with each set of :data:`CAMERA_EFFECTS` taken out - its
+    fields copied from the ``ideal`` model (:func:`simbench.sim.sensor.with_effects`) - by the
+    set's key (the effects' names joined by ``+``)."""
+    ideal = get_sensor("ideal")
+    return {
+        "+".join(e): with_effects(sensor, ideal, e, name=f"{sensor.name} without {' and '.join(e)}")
+        for e in CAMERA_EFFECTS
+    }
+
+
+def more_samples(sampler: str, spp: int) -> int:
+    """The samples per pixel of :data:`RENDER_SCENES`' variant: the least count the sampler takes
+    (:func:`simbench.sim.mitsuba_dict.check_sampler`) of at least :data:`RENDER_SPP_FACTOR` x ``spp``
+    (4x a square is a square; the orthogonal sampler needs a prime squared)."""
+    from simbench.sim.mitsuba_dict import check_sampler
+
+    n = RENDER_SPP_FACTOR * int(spp)
+    while True:
+        try:
+            check_sampler(sampler, n)
+            return n
+        except ValueError:
+            n += 1
+
+
+def _camera_variants(session: Session, name: str) -> list[tuple[str, str, Session]]:
+    """The variants of the camera table for scene ``name``: (key, description, the session that
+    records it) - the sets of :data:`CAMERA_EFFECTS` taken out (``without_EFFECTS``) and, for
+    :data:`RENDER_SCENES`, more samples per pixel (``spp_N``).  A run with ``rig = "calibrated"``
+    calibrates each camera's rig through that camera, as a lab would."""
+    out = [
+        (
+            f"without_{key}",
+            f"without {' and '.join(EFFECT_TABLE[e].description for e in key.split('+'))}",
+            session.fork(s),
+        )
+        for key, s in camera_sensors(session.sensor).items()
+    ]
+    if name in RENDER_SCENES:
+        cfg = session.config
+        spp = more_samples(cfg.sampler, cfg.spp)
+        more = session.fork(session.sensor, config=dataclasses.replace(cfg, spp=spp))
+        out.append((f"spp_{spp}", f"rendered with {spp} spp, not {cfg.spp}", more))
+    return out
+
+
+def _capture(session: Session, name: str, label: str) -> tuple[Recording, np.ndarray]:
+    """Scene ``name`` captured by the proposed sensor (``label``'s seeds) and the pixels it is
+    scored over: the lit ones off the edge band."""
+    cap = session.capture(session.prepare(session.raw_scene(name)), label)[0]
+    band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=session.config.edge_band_px)
+    return cap, cap.gt.lit & ~band
+
+
+def _decoded(session: Session, cap: Recording, region: np.ndarray, params, min_confidence: float):
+    """``cap`` decoded with ``params`` by triangulation (no threshold) and its scores
+    (:func:`scene_scores`) with ``min_confidence`` applied."""
+    full = session.decode(cap, params, mode="calibrated")
+    result = apply_min_confidence(full, min_confidence)
+    return full, scene_scores(cap, result, session.config.decoder.period_px, region)
+
+
+def _reference_scored(session: Session, name: str, label: str) -> tuple[Recording, dict]:
+    """Scene ``name`` recorded by the multi-shot reference (``label``'s seeds) and scored."""
+    rec, depth = session.acquire(REFERENCE_SYSTEM, session.raw_scene(name), label)[0]
+    band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=session.config.edge_band_px)
+    info = session.system(REFERENCE_SYSTEM).info()
+    return rec, scene_scores(rec, depth, info.period_px, rec.gt.lit & ~band)
+
+
+def _camera_rows(session: Session, name: str, row: dict, robust, operating: float) -> tuple[list[dict], dict]:
+    """The rows of the camera table for scene ``name`` (its row of the main table first, then one
+    per variant of :func:`_camera_variants`; ``description`` for the Markdown) and their metrics
+    (``hard_scenes/SCENE/DECODER/VARIANT/METRIC``); the reference is not recorded at more samples
+    per pixel (NaN)."""
+    label = f"hard_scenes/{name}"
+    first = {"scene": name, "camera": "", "description": "as modelled"}
+    rows = [{**first, **{f"{d}_{k}": row[f"{d}_{k}"] for d in ("robust", REFERENCE_SYSTEM) for k in CAMERA_SCORE_KEYS}}]
+    metrics = {}
+    for variant, description, sub in _camera_variants(session, name):
+        scores = {"robust": _decoded(sub, *_capture(sub, name, label), robust, operating)[1]}
+        if not variant.startswith("spp_"):
+            scores[REFERENCE_SYSTEM] = _reference_scored(sub, name, label)[1]
+        out = {"scene": name, "camera": variant, "description": description}
+        for d in ("robust", REFERENCE_SYSTEM):
+            for k in CAMERA_SCORE_KEYS:
+                out[f"{d}_{k}"] = scores[d][k] if d in scores else float("nan")
+                if d in scores:
+                    metrics[f"hard_scenes/{name}/{d}/{variant}/{k}"] = scores[d][k]
+        rows.append(out)
+    return rows, metrics
+
+
 def scene_names(config: RunConfig) -> tuple[str, ...]:
     """The scenes a run measures: every hard scene, or one of each class when quick."""
     return QUICK_SCENES if config.quick else tuple(HARD_SCENES)
@@ -248,27 +378,25 @@ def measure_scene(session: Session, name: str) -> dict:
     params, operating = _decoders(cfg)
     curves, metrics = [], {}
     label = f"hard_scenes/{name}"
-    raw = session.raw_scene(name)
-    cap = session.capture(session.prepare(raw), label)[0]
-    band = edge_band(cap.gt.depth_m, object_id=cap.gt.object_id, band_px=cfg.edge_band_px)
-    region = cap.gt.lit & ~band
+    cap, region = _capture(session, name, label)
     row = {"scene": name, "class": HARD_SCENES[name], "scored_pixels": int(region.sum()), **cap.seeds}
     for d in DECODERS:
-        full = session.decode(cap, params[d], mode="calibrated")
-        result = apply_min_confidence(full, operating[d])
-        for k, v in scene_scores(cap, result, cfg.decoder.period_px, region).items():
+        full, scores = _decoded(session, cap, region, params[d], operating[d])
+        for k, v in scores.items():
             row[f"{d}_{k}"] = v
             metrics[f"hard_scenes/{name}/{d}/{k}"] = v
         for c in confidence_curve(full.depth_m, full.confidence, cap.gt.depth_m, region):
             curves.append({"scene": name, "decoder": d, **c})
-    rec, depth = session.acquire(REFERENCE_SYSTEM, raw, label)[0]
-    ref_band = edge_band(rec.gt.depth_m, object_id=rec.gt.object_id, band_px=cfg.edge_band_px)
-    info = session.system(REFERENCE_SYSTEM).info()
-    for k, v in scene_scores(rec, depth, info.period_px, rec.gt.lit & ~ref_band).items():
+    rec, ref_scores = _reference_scored(session, name, label)
+    for k, v in ref_scores.items():
         row[f"{REFERENCE_SYSTEM}_{k}"] = v
         metrics[f"hard_scenes/{name}/{REFERENCE_SYSTEM}/{k}"] = v
     row.update({f"{REFERENCE_SYSTEM}_{k}_seed": v for k, v in rec.seeds.items()})
-    return {"row": row, "curves": curves, "metrics": metrics}
+    camera = []
+    if name in CAMERA_SCENES:
+        camera, more = _camera_rows(session, name, row, params["robust"], operating["robust"])
+        metrics.update(more)
+    return {"row": row, "curves": curves, "metrics": metrics, "camera": camera}
 
 
 def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
@@ -277,17 +405,21 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
     _, operating = _decoders(session.config)
     rows = [m["row"] for m in measured]
     curves = [c for m in measured for c in m["curves"]]
+    camera = [c for m in measured for c in m.get("camera", [])]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = ["scene", "class", "scored_pixels"]
     cols += [f"{d}_{k}" for d in (*DECODERS, REFERENCE_SYSTEM) for k in SCORE_KEYS]
     cols += ["render", "noise", f"{REFERENCE_SYSTEM}_render_seed", f"{REFERENCE_SYSTEM}_noise_seed"]
     files = {
         "hard_scenes.csv": table_text(rows, cols),
+        "hard_scenes_camera.csv": table_text(
+            camera, ["scene", "camera", *(f"{d}_{k}" for d in ("robust", REFERENCE_SYSTEM) for k in CAMERA_SCORE_KEYS)]
+        ),
         "hard_scenes_confidence.csv": table_text(
             curves, ["scene", "decoder", "threshold", "completeness", "wrong_share", "wrong_share_all"]
         ),
         **figure_files("hard_scenes_confidence", _curve_plot(curves, operating, note=session.config.figure_note())),
-        "hard_scenes.md": _markdown(session, rows, curves, operating),
+        "hard_scenes.md": _markdown(session, rows, curves, operating, camera=camera),
     }
     session.write_results(
         "hard_scenes",
@@ -297,6 +429,13 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
             "wrong_mm": WRONG_MM,
             "confidence_thresholds": list(CONFIDENCE_THRESHOLDS),
             "operating_points": operating,
+            "camera_effects_taken_out": {
+                "+".join(e): {x: list(EFFECT_TABLE[x].fields) for x in e} for e in CAMERA_EFFECTS
+            },
+            "render_scenes": {
+                "scenes": list(RENDER_SCENES),
+                "spp": more_samples(session.config.sampler, session.config.spp),
+            },
         },
     )
     return metrics
@@ -469,7 +608,50 @@ def format_score(v: float, pct: bool = False) -> str:
     return f"{100 * v:.2f} %" if pct else f"{v:.3f}"
 
 
-def _markdown(session: Session, rows: list[dict], curves: list[dict], operating: dict) -> str:
+def _camera_section(camera: list[dict], operating: dict, sensor_name: str) -> list[str]:
+    """The markdown section of the camera table (none without rows)."""
+    if not camera:
+        return []
+    rendered = [n for n in RENDER_SCENES if any(c["scene"] == n for c in camera)]
+    more = (
+        f"{', '.join(f'`{n}`' for n in rendered)} also rendered with more samples per pixel (the colour-robust "
+        "decoder only): on faces lit by each other the path tracer's noise at the run's samples is above a camera's. "
+        if rendered
+        else ""
+    )
+    header = ["scene", "camera"]
+    for title in ("colour-robust", "phase shifting"):
+        header += [f"{title}: complete", "MAE mm", "> 5 mm, all decoded"]
+    table = []
+    for c in camera:
+        cells = [f"`{c['scene']}`", c["description"]]
+        for d in ("robust", REFERENCE_SYSTEM):
+            cells += [
+                format_score(c[f"{d}_completeness"], True),
+                format_score(c[f"{d}_gt_mae_mm"]),
+                format_score(c[f"{d}_wrong_share_all"], True),
+            ]
+        table.append(cells)
+    return [
+        "## What the camera and the renderer cost",
+        "",
+        f"{', '.join(f'`{n}`' for n in dict.fromkeys(c['scene'] for c in camera))} recorded again with effects of "
+        f"the sensor model `{sensor_name}` taken out - their parameters taken from the `ideal` model "
+        "(`simbench/presets/ideal.toml`; the Bayer mosaic out: all three colours at every pixel, as a three-chip "
+        "camera has them; the noise out: no shot, dark or fixed-pattern noise) - from the same renders with the same "
+        f"seeds, decoded by the colour-robust decoder at its operating point (confidence >= {operating['robust']:g}) "
+        "and by the phase-shifting reference, scored as above (`hard_scenes_camera.csv`). "
+        f"{more}"
+        "Each row shows one term's share of a shortfall on its own.",
+        "",
+        *markdown_table(header, table),
+        "",
+    ]
+
+
+def _markdown(
+    session: Session, rows: list[dict], curves: list[dict], operating: dict, *, camera: list[dict] | None = None
+) -> str:
     cfg = session.config
     cam = session.scene(rows[0]["scene"]).rig.camera if rows else None
     size = f"{cam.width_px}x{cam.height_px} camera, " if cam else ""
@@ -511,7 +693,8 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "",
         f"Made by `{session.command}` ({size}{cfg.spp} spp {cfg.sampler}, sensor model `{cfg.sensor}`, base seed "
         f"{cfg.seed}, variant `{session.variant}`). Scenes: `scenes/hard_*.toml` (`scenes/make_hard_scenes.py`). "
-        "Plot: `hard_scenes_confidence.png`; every number: `hard_scenes.csv`, `hard_scenes_confidence.csv`.",
+        "Plot: `hard_scenes_confidence.png`; every number: `hard_scenes.csv`, `hard_scenes_confidence.csv`, "
+        "`hard_scenes_camera.csv`.",
         "",
         "The proposed sensor's capture decoded by triangulation with the paper's decoder (no confidence threshold: "
         "the paper describes none) and with our colour-robust decoder at its operating point (confidence >= "
@@ -583,5 +766,6 @@ def _markdown(session: Session, rows: list[dict], curves: list[dict], operating:
         "(a whole period off) on a clean fringe keeps a high confidence - the stripe-order column of "
         "`hard_scenes.csv` counts those.",
         "",
+        *_camera_section(camera or [], operating, cfg.sensor),
     ]
     return "\n".join(lines)
