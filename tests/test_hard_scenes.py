@@ -352,3 +352,68 @@ def test_more_samples_is_the_least_count_the_sampler_takes_of_at_least_four_time
         n = more_samples(sampler, spp)
         check_sampler(sampler, n)
         assert n >= 4 * spp
+
+
+def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_the_reference_where_recorded(
+    monkeypatch,
+):
+    """The camera table's wiring, with the recording and decoding stubbed: each variant is recorded
+    by a session of its own sensor (or samples per pixel) under the scene's own label - so with its
+    seeds -, the first row is the main table's, the box's more-samples row leaves the reference
+    NaN, and every measured score becomes a metric named SCENE/DECODER/VARIANT/METRIC."""
+    import math
+
+    import simbench.experiments.hard_scenes as hs
+    from simbench.experiments.common import RunConfig
+    from simbench.sim.sensor import get_sensor
+
+    calls = []
+
+    class Sub:
+        def __init__(self, sensor, config):
+            self.sensor, self.config = sensor, config
+
+        def fork(self, sensor, *, config=None):
+            return Sub(sensor, config or self.config)
+
+    def fake_capture(sub, name, label):
+        calls.append(("capture", sub.sensor.camera.cfa, sub.sensor.camera.noise, sub.config.spp, label))
+        return (sub.sensor, sub.config.spp), None
+
+    def fake_decoded(sub, cap, region, params, min_confidence):
+        sensor, spp = cap
+        value = 0.5 + 0.25 * (sensor.camera.cfa == "none") + 0.125 * (not sensor.camera.noise) + spp / 1000
+        return None, {"completeness": value, "gt_mae_mm": value, "wrong_share_all": min_confidence / 100}
+
+    def fake_reference(sub, name, label):
+        calls.append(("reference", sub.sensor.camera.cfa, sub.sensor.camera.noise, sub.config.spp, label))
+        return None, {"completeness": 1.0, "gt_mae_mm": 0.7, "wrong_share_all": 0.01}
+
+    monkeypatch.setattr(hs, "_capture", fake_capture)
+    monkeypatch.setattr(hs, "_decoded", fake_decoded)
+    monkeypatch.setattr(hs, "_reference_scored", fake_reference)
+    session = Sub(get_sensor("paper"), RunConfig())
+    main = {f"{d}_{k}": 0.1 for d in ("robust", hs.REFERENCE_SYSTEM) for k in hs.CAMERA_SCORE_KEYS}
+    rows, metrics = hs._camera_rows(session, "hard_box_interior", main, robust=None, operating=3.0)
+
+    assert [r["camera"] for r in rows] == ["", "without_cfa", "without_noise", "without_cfa+noise", "spp_144"]
+    assert all(rows[0][k] == 0.1 for k in main)
+    assert {c[-1] for c in calls} == {"hard_scenes/hard_box_interior"}  # one label: the scene's seeds
+    captures = [c[1:4] for c in calls if c[0] == "capture"]
+    assert captures == [("none", True, 36), ("RGGB", False, 36), ("none", False, 36), ("RGGB", True, 144)]
+    assert [c[1:4] for c in calls if c[0] == "reference"] == captures[:3]  # none at 144 spp
+    assert rows[1]["robust_completeness"] == 0.5 + 0.25 + 0.036 and rows[4]["robust_completeness"] == 0.5 + 0.144
+    assert all(math.isnan(rows[4][f"{hs.REFERENCE_SYSTEM}_{k}"]) for k in hs.CAMERA_SCORE_KEYS)
+    assert rows[2]["robust_wrong_share_all"] == 0.03  # decoded at the operating point given
+    names = {
+        f"hard_scenes/hard_box_interior/{d}/{v}/{k}"
+        for v in ("without_cfa", "without_noise", "without_cfa+noise")
+        for d in ("robust", hs.REFERENCE_SYSTEM)
+        for k in hs.CAMERA_SCORE_KEYS
+    }
+    names |= {f"hard_scenes/hard_box_interior/robust/spp_144/{k}" for k in hs.CAMERA_SCORE_KEYS}
+    assert set(metrics) == names
+    # a print is not rendered again
+    calls.clear()
+    rows, _ = hs._camera_rows(session, "hard_chart_high", main, robust=None, operating=3.0)
+    assert [r["camera"] for r in rows] == ["", "without_cfa", "without_noise", "without_cfa+noise"]
