@@ -31,11 +31,12 @@ the curves the operating point is chosen from.  What it cannot see: errors under
 systematic (the MAE shows them); completeness and MAE leave the edge band and the unlit pixels out
 (``wrong_share_all`` does not).
 
-What the camera costs: the scenes of :data:`CAMERA_SCENES` are recorded again with sets of
-effects of the run's sensor model taken out (:data:`CAMERA_EFFECTS`, each taken from the ``ideal``
-model: the same renders, placement and noise seeds) and decoded by the colour-robust decoder at
-its operating point and the phase-shifting reference: each term's share of a shortfall, shown
-separately (e.g. the Bayer mosaic's on the fine 20:1 prints).
+What the camera and the renderer cost: the scenes of :data:`CAMERA_SCENES` are recorded again
+with sets of effects of the run's sensor model taken out (:data:`CAMERA_EFFECTS`, each taken from
+the ``ideal`` model: the same renders, placement and noise seeds) and decoded by the colour-robust
+decoder at its operating point and the phase-shifting reference; those of :data:`RENDER_SCENES`
+also rendered with more samples per pixel (:func:`more_samples`; the colour-robust decoder only):
+each term's share of a shortfall, shown separately (e.g. the Bayer mosaic's on the 20:1 prints).
 
 Writes ``hard_scenes.md``, ``hard_scenes.csv``, ``hard_scenes_camera.csv``,
 ``hard_scenes_confidence.csv``, ``hard_scenes_confidence.png``, ``.pdf`` and
