@@ -406,7 +406,7 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
     _, operating = _decoders(session.config)
     rows = [m["row"] for m in measured]
     curves = [c for m in measured for c in m["curves"]]
-    camera = [c for m in measured for c in m.get("camera", [])]
+    camera = [c for m in measured for c in m["camera"]]
     metrics = {k: v for m in measured for k, v in m["metrics"].items()}
     cols = ["scene", "class", "scored_pixels"]
     cols += [f"{d}_{k}" for d in (*DECODERS, REFERENCE_SYSTEM) for k in SCORE_KEYS]
