@@ -417,3 +417,129 @@ def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_th
     calls.clear()
     rows, _ = hs._camera_rows(session, "hard_chart_high", main, robust=None, operating=3.0)
     assert [r["camera"] for r in rows] == ["", "without_cfa", "without_noise", "without_cfa+noise"]
+
+
+def test_samples_for_the_target_scale_as_the_ratio_squared_to_a_count_the_sampler_takes():
+    """Render noise falling as 1/sqrt(spp): at the target the run's count, at twice the target 4x,
+    on the box's measured 1.58 of the camera's 36 x (1.58 x 3)^2 = 809 -> 29^2 with a square-count
+    sampler; a count the sampler takes, never below the estimate; None for no ratio."""
+    from simbench.experiments.hard_scenes import least_samples, samples_for_target
+    from simbench.experiments.render_noise import TARGET_RATIO
+
+    assert samples_for_target("multijitter", 36, TARGET_RATIO) == 36
+    assert samples_for_target("multijitter", 36, 2 * TARGET_RATIO) == 144
+    assert samples_for_target("multijitter", 36, 1.58) == 841
+    assert samples_for_target("multijitter", 36, 0.5 * TARGET_RATIO) == 9
+    assert samples_for_target("independent", 10, 1.5 * TARGET_RATIO) == 23  # 22.5 up
+    assert samples_for_target("multijitter", 36, float("nan")) is None
+    assert least_samples("ldsampler", 65) == 256
+    assert least_samples("orthogonal", 26) == 49
+    assert least_samples("independent", 0.2) == 1
+    for sampler, spp, ratio in (("stratified", 16, 0.9), ("ldsampler", 16, 0.45), ("orthogonal", 25, 0.7)):
+        n = samples_for_target(sampler, spp, ratio)
+        assert n >= spp * (ratio / TARGET_RATIO) ** 2
+        assert least_samples(sampler, n) == n
+
+
+def test_the_render_noise_is_the_spread_over_renders_with_the_camera_noise_off_against_over_recordings(
+    monkeypatch,
+):
+    """measure_render_noise's wiring, with the recording and decoding stubbed: the camera's noise is
+    the spread over NOISE_REPEATS recordings of the scene's render under its own label (its first
+    is the table's capture), the renderer's over as many renders - the scene's label first, then
+    labels of their own - recorded by the same sensor with only the camera's temporal noise off,
+    each decoded by the given decoder by triangulation at the given operating point; the ratio,
+    the target test and the samples for it follow."""
+    from types import SimpleNamespace
+
+    import simbench.experiments.hard_scenes as hs
+    from simbench.experiments.common import RunConfig
+    from simbench.sim.sensor import get_sensor
+
+    paper = get_sensor("paper")
+    calls = []
+    region = np.ones((4, 5), bool)
+    region[0] = False
+
+    class Sess:
+        def __init__(self, sensor):
+            self.sensor, self.config = sensor, RunConfig()
+
+        def fork(self, sensor, *, config=None):
+            assert config is None
+            return Sess(sensor)
+
+        def raw_scene(self, name):
+            return f"raw {name}"
+
+        def prepare(self, scene):
+            return f"prepared {scene}"
+
+        def capture(self, scene, label, *, repeats=1):
+            calls.append((scene, self.sensor.camera.noise, label, repeats))
+            k0 = int(label.rsplit("/", 1)[1]) if "/render/" in label else 0
+            return [(self.sensor.camera.noise, k0 + k) for k in range(repeats)]
+
+        def decode(self, cap, params, *, mode):
+            assert params == "robust params" and mode == "calibrated"
+            noisy, k = cap
+            # 2 mm steps between the recordings, 1 mm between the renders; row 0 is out of the region
+            depth = np.full((4, 5), 1.0 + (0.002 if noisy else 0.001) * k)
+            depth[0] = 5.0 * k
+            return SimpleNamespace(depth_m=depth)
+
+    monkeypatch.setattr(hs, "apply_min_confidence", lambda full, t: full if t == 3.0 else None)
+    label = "hard_scenes/hard_corner_045"
+    out = hs.measure_render_noise(Sess(paper), "hard_corner_045", label, None, region, "robust params", 3.0)
+
+    scene = "prepared raw hard_corner_045"
+    assert calls[0] == (scene, True, label, hs.NOISE_REPEATS)
+    assert calls[1:] == [(scene, False, lab, 1) for lab in (label, f"{label}/render/1", f"{label}/render/2")]
+    assert hs.NOISE_REPEATS == 3
+    assert out["camera_sd_mm"] == pytest.approx(2.0) and out["render_sd_mm"] == pytest.approx(1.0)
+    assert out["ratio"] == pytest.approx(0.5) and out["meets_target"] is False
+    assert out["spp_for_target"] == 81  # 36 x (0.5 x 3)^2
+    assert out["pixels"] == 15 and out["class"] == "interreflection"
+    assert set(out) == set(hs.NOISE_COLUMNS)
+
+
+def test_the_quiet_sensor_of_the_render_noise_differs_from_the_run_s_by_the_camera_noise_only(monkeypatch):
+    """The renders whose spread is the renderer's noise are recorded by the run's sensor with only
+    the camera's temporal noise switched off (quantisation, fixed-pattern noise, the mosaic stay)."""
+    import dataclasses
+
+    import simbench.experiments.hard_scenes as hs
+    from simbench.sim.sensor import get_sensor
+
+    paper = get_sensor("paper")
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    class Sess:
+        sensor = paper
+        config = None
+
+        def prepare(self, scene):
+            return scene
+
+        def raw_scene(self, name):
+            return name
+
+        def capture(self, scene, label, *, repeats=1):
+            return []
+
+        def decode(self, *a, **k):
+            raise AssertionError("nothing to decode")
+
+        def fork(self, sensor, *, config=None):
+            seen.append(sensor)
+            raise Stop
+
+    monkeypatch.setattr(hs, "depth_spread_mm", lambda depths, region: (1.0, 0))
+    with pytest.raises(Stop):
+        hs.measure_render_noise(Sess(), "hard_box_interior", "x", None, None, None, 3.0)
+    (quiet,) = seen
+    assert quiet == dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, noise=False))
+    assert quiet != paper
