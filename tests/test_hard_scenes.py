@@ -313,7 +313,13 @@ def test_the_committed_camera_table_starts_each_scene_with_its_row_of_the_main_t
     import json
     import math
 
-    from simbench.experiments.hard_scenes import CAMERA_EFFECTS, CAMERA_SCENES, RENDER_SCENES, more_samples
+    from simbench.experiments.hard_scenes import (
+        CAMERA_EFFECTS,
+        CAMERA_SCENES,
+        RENDER_SCENES,
+        RENDER_SPP_FACTORS,
+        more_samples,
+    )
 
     from .conftest import ROOT
 
@@ -322,11 +328,11 @@ def test_the_committed_camera_table_starts_each_scene_with_its_row_of_the_main_t
     with open(ROOT / folder / "hard_scenes.csv", newline="") as f:
         main = {r["scene"]: r for r in csv.DictReader(f)}
     run = json.loads((ROOT / folder / "hard_scenes.provenance.json").read_text())["config"]
-    spp = more_samples(run["sampler"], run["spp"])
+    spps = [more_samples(run["sampler"], run["spp"], f) for f in RENDER_SPP_FACTORS]
     expected = []
     for n in (n for n in main if n in CAMERA_SCENES):
         expected += [(n, ""), *((n, "without_" + "+".join(e)) for e in CAMERA_EFFECTS)]
-        expected += [(n, f"spp_{spp}")] if n in RENDER_SCENES else []
+        expected += [(n, f"spp_{spp}") for spp in spps] if n in RENDER_SCENES else []
     assert expected and [(r["scene"], r["camera"]) for r in camera] == expected
     for r in camera:
         scores = {c: float(v) for c, v in r.items() if c not in ("scene", "camera")}
@@ -337,21 +343,23 @@ def test_the_committed_camera_table_starts_each_scene_with_its_row_of_the_main_t
             assert all(v == float(main[r["scene"]][c]) for c, v in scores.items()), r["scene"]
 
 
-def test_more_samples_is_the_least_count_the_sampler_takes_of_at_least_four_times_the_run_s():
-    """The box's variant renders with RENDER_SPP_FACTOR x the samples where the sampler takes that
-    count, else the next it takes (the orthogonal sampler: a prime squared)."""
-    from simbench.experiments.hard_scenes import RENDER_SPP_FACTOR, more_samples
+def test_more_samples_is_the_least_count_the_sampler_takes_of_at_least_each_factor_times_the_run_s():
+    """The box's variants render with each of RENDER_SPP_FACTORS x the samples where the sampler
+    takes that count, else the next it takes (the orthogonal sampler: a prime squared)."""
+    from simbench.experiments.hard_scenes import RENDER_SPP_FACTORS, more_samples
     from simbench.sim.mitsuba_dict import check_sampler
 
-    assert RENDER_SPP_FACTOR == 4
-    assert more_samples("multijitter", 36) == 144
-    assert more_samples("independent", 10) == 40
-    assert more_samples("ldsampler", 16) == 64
-    assert more_samples("orthogonal", 25) == 121  # 100 = 10^2 is no prime squared
+    assert RENDER_SPP_FACTORS == (4, 25)
+    assert [more_samples("multijitter", 36, f) for f in RENDER_SPP_FACTORS] == [144, 900]
+    assert more_samples("independent", 10, 4) == 40
+    assert more_samples("ldsampler", 16, 4) == 64
+    assert more_samples("ldsampler", 16, 25) == 1024  # 400 is no power of two
+    assert more_samples("orthogonal", 25, 4) == 121  # 100 = 10^2 is no prime squared
     for sampler, spp in (("stratified", 9), ("orthogonal", 49), ("ldsampler", 4)):
-        n = more_samples(sampler, spp)
-        check_sampler(sampler, n)
-        assert n >= 4 * spp
+        for f in RENDER_SPP_FACTORS:
+            n = more_samples(sampler, spp, f)
+            check_sampler(sampler, n)
+            assert n >= f * spp
 
 
 def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_the_reference_where_recorded(
@@ -396,14 +404,28 @@ def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_th
     main = {f"{d}_{k}": 0.1 for d in ("robust", hs.REFERENCE_SYSTEM) for k in hs.CAMERA_SCORE_KEYS}
     rows, metrics = hs._camera_rows(session, "hard_box_interior", main, robust=None, operating=3.0)
 
-    assert [r["camera"] for r in rows] == ["", "without_cfa", "without_noise", "without_cfa+noise", "spp_144"]
+    assert [r["camera"] for r in rows] == [
+        "",
+        "without_cfa",
+        "without_noise",
+        "without_cfa+noise",
+        "spp_144",
+        "spp_900",
+    ]
     assert all(rows[0][k] == 0.1 for k in main)
     assert {c[-1] for c in calls} == {"hard_scenes/hard_box_interior"}  # one label: the scene's seeds
     captures = [c[1:4] for c in calls if c[0] == "capture"]
-    assert captures == [("none", True, 36), ("RGGB", False, 36), ("none", False, 36), ("RGGB", True, 144)]
-    assert [c[1:4] for c in calls if c[0] == "reference"] == captures[:3]  # none at 144 spp
+    assert captures == [
+        ("none", True, 36),
+        ("RGGB", False, 36),
+        ("none", False, 36),
+        ("RGGB", True, 144),
+        ("RGGB", True, 900),
+    ]
+    assert [c[1:4] for c in calls if c[0] == "reference"] == captures[:3]  # none at more spp
     assert rows[1]["robust_completeness"] == 0.5 + 0.25 + 0.036 and rows[4]["robust_completeness"] == 0.5 + 0.144
-    assert all(math.isnan(rows[4][f"{hs.REFERENCE_SYSTEM}_{k}"]) for k in hs.CAMERA_SCORE_KEYS)
+    assert rows[5]["robust_completeness"] == 0.5 + 0.9
+    assert all(math.isnan(rows[i][f"{hs.REFERENCE_SYSTEM}_{k}"]) for i in (4, 5) for k in hs.CAMERA_SCORE_KEYS)
     assert rows[2]["robust_wrong_share_all"] == 0.03  # decoded at the operating point given
     names = {
         f"hard_scenes/hard_box_interior/{d}/{v}/{k}"
@@ -411,7 +433,7 @@ def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_th
         for d in ("robust", hs.REFERENCE_SYSTEM)
         for k in hs.CAMERA_SCORE_KEYS
     }
-    names |= {f"hard_scenes/hard_box_interior/robust/spp_144/{k}" for k in hs.CAMERA_SCORE_KEYS}
+    names |= {f"hard_scenes/hard_box_interior/robust/spp_{n}/{k}" for n in (144, 900) for k in hs.CAMERA_SCORE_KEYS}
     assert set(metrics) == names
     # a print is not rendered again
     calls.clear()
@@ -543,3 +565,39 @@ def test_the_quiet_sensor_of_the_render_noise_differs_from_the_run_s_by_the_came
     (quiet,) = seen
     assert quiet == dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, noise=False))
     assert quiet != paper
+
+
+@pytest.mark.parametrize("folder", ["results/quick", "results"])
+def test_the_committed_render_noise_table_is_one_run_s_and_its_columns_follow_from_its_spreads(folder):
+    """hard_scenes_render_noise.csv (`simbench reproduce hard_scenes`, with --quick in results/quick):
+    a row per scene of the main table, in its order; the ratio is the two spreads', the target
+    test and the samples for it (at the run's sampler and spp) follow from it, and the Markdown
+    holds the table.  In the full run the box's ratio still needs no more samples than its most
+    rendered variant (RENDER_SPP_FACTORS: that variant shows the box within the target)."""
+    import csv
+    import json
+
+    from simbench.experiments.hard_scenes import RENDER_SCENES, RENDER_SPP_FACTORS, more_samples, samples_for_target
+    from simbench.experiments.render_noise import TARGET_RATIO
+
+    from .conftest import ROOT
+
+    with open(ROOT / folder / "hard_scenes_render_noise.csv", newline="") as f:
+        noise = list(csv.DictReader(f))
+    with open(ROOT / folder / "hard_scenes.csv", newline="") as f:
+        main = [r["scene"] for r in csv.DictReader(f)]
+    run = json.loads((ROOT / folder / "hard_scenes.provenance.json").read_text())["config"]
+    assert [r["scene"] for r in noise] == main
+    for r in noise:
+        render, camera, ratio = (float(r[k]) for k in ("render_sd_mm", "camera_sd_mm", "ratio"))
+        assert render > 0 and camera > 0 and int(r["pixels"]) > 0
+        assert ratio == pytest.approx(render / camera, rel=1e-4)
+        assert r["meets_target"] == str(ratio <= TARGET_RATIO)
+        assert int(r["spp_for_target"]) == samples_for_target(run["sampler"], run["spp"], ratio)
+    md = (ROOT / folder / "hard_scenes.md").read_text()
+    assert "## What the renderer's noise is, scene by scene" in md
+    assert all(f"| `{r['scene']}` | {r['class']} | {float(r['render_sd_mm']):.4f} |" in md for r in noise)
+    if folder == "results":
+        most = more_samples(run["sampler"], run["spp"], max(RENDER_SPP_FACTORS))
+        boxes = [r for r in noise if r["scene"] in RENDER_SCENES]
+        assert boxes and all(int(r["spp_for_target"]) <= most for r in boxes)

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from fractions import Fraction
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -88,7 +89,7 @@ __all__ = [
     "CAMERA_SCENES",
     "CAMERA_EFFECTS",
     "RENDER_SCENES",
-    "RENDER_SPP_FACTOR",
+    "RENDER_SPP_FACTORS",
     "camera_sensors",
     "more_samples",
     "least_samples",
@@ -139,15 +140,18 @@ GOAL_MAE_MM = 0.5
 # confidence thresholds the curves are drawn at (0: every decoded pixel)
 CONFIDENCE_THRESHOLDS = (0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0)
 SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "stripe_order_errors")
-# The scenes also rendered with at least RENDER_SPP_FACTOR times the run's samples per pixel (the
-# path tracer's noise about halved; the colour-robust decoder only - the reference's 12 exposures
-# would take as many renders again): the box interior, whose faces are lit by each other, where 36
-# spp leave a render noise above the camera's (measured 2026-12-04, 1280x960, standard deviation per
-# channel: 1.4-1.6 DN on its right, top and back faces against 0.8-1.5 DN of camera noise, on a
-# +-5 DN fringe on the right face; the render-noise target is a third of the camera's,
-# results/render_noise.md, where the cube's interreflections reach 0.58 of it at 36 spp).
+# The scenes also rendered with at least each of RENDER_SPP_FACTORS times the run's samples per
+# pixel (the colour-robust decoder only - the reference's 12 exposures would take as many renders
+# again): the box interior, whose faces are lit by each other, where 36 spp leave a render noise
+# above the camera's (measured 2026-12-04, 1280x960, standard deviation per channel: 1.4-1.6 DN on
+# its right, top and back faces against 0.8-1.5 DN of camera noise, on a +-5 DN fringe on the right
+# face; in its decoded depth 1.58x the camera's: the table's render-noise section).  4x halves that
+# noise; 25x (900 spp: 30^2, rendered in passes of 4; ~12 min on 2 cores) brings it to 1.58 / 5 =
+# 0.32 of the camera's, under the testbed's target of a third (results/render_noise.md) - the box as
+# a camera sees it, within the target (tests/test_hard_scenes.py checks the committed ratio still
+# needs no more).
 RENDER_SCENES = ("hard_box_interior",)
-RENDER_SPP_FACTOR = 4
+RENDER_SPP_FACTORS = (4, 25)
 # The scenes recorded again without some of the camera's effects (in HARD_SCENES' order, the order
 # they are measured and written in): the printed charts (their albedo edges are where a colour
 # camera's Bayer mosaic interpolates a missing colour across a 20:1 step) and RENDER_SCENES (is the
@@ -320,11 +324,12 @@ def least_samples(sampler: str, spp: float) -> int:
             n += 1
 
 
-def more_samples(sampler: str, spp: int) -> int:
-    """The samples per pixel of :data:`RENDER_SCENES`' variant: the least count the sampler takes
-    of at least :data:`RENDER_SPP_FACTOR` x ``spp`` (:func:`least_samples`; 4x a square is a
-    square; the orthogonal sampler needs a prime squared)."""
-    return least_samples(sampler, RENDER_SPP_FACTOR * int(spp))
+def more_samples(sampler: str, spp: int, factor: int) -> int:
+    """The samples per pixel of a variant of :data:`RENDER_SCENES` (``factor``: one of
+    :data:`RENDER_SPP_FACTORS`): the least count the sampler takes of at least ``factor`` x
+    ``spp`` (:func:`least_samples`; a square times a square is a square; the orthogonal sampler
+    needs a prime squared)."""
+    return least_samples(sampler, factor * int(spp))
 
 
 def samples_for_target(sampler: str, spp: int, ratio: float) -> int | None:
@@ -358,9 +363,10 @@ def _camera_variants(session: Session, name: str) -> list[tuple[str, str, Sessio
     ]
     if name in RENDER_SCENES:
         cfg = session.config
-        spp = more_samples(cfg.sampler, cfg.spp)
-        more = session.fork(session.sensor, config=dataclasses.replace(cfg, spp=spp))
-        out.append((f"spp_{spp}", f"rendered with {spp} spp, not {cfg.spp}", more))
+        for factor in RENDER_SPP_FACTORS:
+            spp = more_samples(cfg.sampler, cfg.spp, factor)
+            more = session.fork(session.sensor, config=dataclasses.replace(cfg, spp=spp))
+            out.append((f"spp_{spp}", f"rendered with {spp} spp, not {cfg.spp}", more))
     return out
 
 
@@ -524,7 +530,7 @@ def write_hard_scenes(session: Session, measured: list[dict]) -> dict:
             },
             "render_scenes": {
                 "scenes": list(RENDER_SCENES),
-                "spp": more_samples(session.config.sampler, session.config.spp),
+                "spp": [more_samples(session.config.sampler, session.config.spp, f) for f in RENDER_SPP_FACTORS],
             },
             "render_noise": {"repeats": NOISE_REPEATS, "target_ratio": TARGET_RATIO, "measured": bool(noise)},
         },
@@ -719,21 +725,14 @@ def _noise_section(noise: list[dict], operating: dict, cfg: RunConfig) -> list[s
     by_class = {}
     for r in over:
         by_class.setdefault(r["class"], []).append(r["ratio"])
-    summary = (
-        f"{len(noise) - len(over)} of {len(noise)} scenes meet the target"
-        + (
-            "; above it: "
-            + "; ".join(
-                f"{c} {len(v)} ({min(v):.2f}-{max(v):.2f} of the camera's)"
-                if len(v) > 1
-                else f"{c} 1 ({v[0]:.2f} of the camera's)"
-                for c, v in by_class.items()
-            )
-            if over
-            else ""
-        )
-        + "."
+    spans = [
+        f"{c}: {len(v)} ({min(v):.2f}-{max(v):.2f} of the camera's)" if len(v) > 1 else f"{c}: 1 ({v[0]:.2f})"
+        for c, v in by_class.items()
+    ]
+    summary = f"{len(noise) - len(over)} of {len(noise)} scenes meet the target" + (
+        "; above it, by class - " + "; ".join(spans) + "." if over else "."
     )
+    target = str(Fraction(TARGET_RATIO).limit_denominator(100))
     return [
         "## What the renderer's noise is, scene by scene",
         "",
@@ -744,7 +743,7 @@ def _noise_section(noise: list[dict], operating: dict, cfg: RunConfig) -> list[s
         f"(quantisation and fixed-pattern noise stay; the first is the table's capture's render) - *render noise* -, "
         f"and over {NOISE_REPEATS} recordings of the capture's render with noise seeds of their own - *camera noise*: "
         f"what a real camera adds frame to frame (`hard_scenes_render_noise.csv`). The testbed's target is render "
-        f"noise at most {TARGET_RATIO:.2g} of camera noise (`render_noise.md`). A scene above it is scored here under "
+        f"noise at most {target} of camera noise (`render_noise.md`). A scene above it is scored here under "
         "more noise than a camera alone gives it - sqrt(1 + r^2) of the camera's, for a ratio r: its completeness and "
         "MAE above are pessimistic, by as much as that extra noise costs. *spp for the target*: the samples per pixel "
         f"of the run's sampler (`{cfg.sampler}`, {cfg.spp} spp here) that would meet it, were render noise to fall as "
@@ -758,7 +757,7 @@ def _noise_section(noise: list[dict], operating: dict, cfg: RunConfig) -> list[s
                 "render noise (mm)",
                 "camera noise (mm)",
                 "render / camera",
-                f"<= {TARGET_RATIO:.2g}",
+                f"<= {target}",
                 "spp for the target",
             ],
             table,
@@ -774,7 +773,8 @@ def _camera_section(camera: list[dict], operating: dict, sensor_name: str) -> li
     rendered = [n for n in RENDER_SCENES if any(c["scene"] == n for c in camera)]
     more = (
         f"{', '.join(f'`{n}`' for n in rendered)} also rendered with more samples per pixel (the colour-robust "
-        "decoder only): on faces lit by each other the path tracer's noise at the run's samples is above a camera's. "
+        "decoder only): on faces lit by each other the path tracer's noise at the run's samples is above a camera's "
+        "(the next section); at the most samples here it is under the testbed's target. "
         if rendered
         else ""
     )
