@@ -766,15 +766,25 @@ def _noise_section(noise: list[dict], operating: dict, cfg: RunConfig) -> list[s
     ]
 
 
-def _camera_section(camera: list[dict], operating: dict, sensor_name: str) -> list[str]:
-    """The markdown section of the camera table (none without rows)."""
+def _camera_section(camera: list[dict], operating: dict, cfg: RunConfig, noise: list[dict]) -> list[str]:
+    """The markdown section of the camera table (none without rows); ``noise``: the render-noise
+    rows, whose ratios say where the most samples rendered put each re-rendered scene."""
     if not camera:
         return []
     rendered = [n for n in RENDER_SCENES if any(c["scene"] == n for c in camera)]
+    most = more_samples(cfg.sampler, cfg.spp, max(RENDER_SPP_FACTORS))
+    ratios = {r["scene"]: r["ratio"] for r in noise}
+    where = [
+        f"`{n}` {ratios[n]:.2f} of the camera's at {cfg.spp} spp, {ratios[n] * math.sqrt(cfg.spp / most):.2f} at "
+        f"{most} by 1/sqrt(spp)"
+        for n in rendered
+        if n in ratios
+    ]
     more = (
         f"{', '.join(f'`{n}`' for n in rendered)} also rendered with more samples per pixel (the colour-robust "
         "decoder only): on faces lit by each other the path tracer's noise at the run's samples is above a camera's "
-        "(the next section); at the most samples here it is under the testbed's target. "
+        f"(the next section{': ' + '; '.join(where) if where else ''}; the target: at most "
+        f"{Fraction(TARGET_RATIO).limit_denominator(100)}). "
         if rendered
         else ""
     )
@@ -795,7 +805,7 @@ def _camera_section(camera: list[dict], operating: dict, sensor_name: str) -> li
         "## What the camera and the renderer cost",
         "",
         f"{', '.join(f'`{n}`' for n in dict.fromkeys(c['scene'] for c in camera))} recorded again with effects of "
-        f"the sensor model `{sensor_name}` taken out - their parameters taken from the `ideal` model "
+        f"the sensor model `{cfg.sensor}` taken out - their parameters taken from the `ideal` model "
         "(`simbench/presets/ideal.toml`; the Bayer mosaic out: all three colours at every pixel, as a three-chip "
         "camera has them; the noise out: no shot, dark or fixed-pattern noise) - from the same renders with the same "
         f"seeds, decoded by the colour-robust decoder at its operating point (confidence >= {operating['robust']:g}) "
@@ -931,7 +941,7 @@ def _markdown(
         "(a whole period off) on a clean fringe keeps a high confidence - the stripe-order column of "
         "`hard_scenes.csv` counts those.",
         "",
-        *_camera_section(camera or [], operating, cfg.sensor),
+        *_camera_section(camera or [], operating, cfg, noise or []),
         *_noise_section(noise or [], operating, cfg),
     ]
     return "\n".join(lines)
