@@ -512,7 +512,7 @@ def test_the_render_noise_is_the_spread_over_renders_with_the_camera_noise_off_a
 
     monkeypatch.setattr(hs, "apply_min_confidence", lambda full, t: full if t == 3.0 else None)
     label = "hard_scenes/hard_corner_045"
-    out = hs.measure_render_noise(Sess(paper), "hard_corner_045", label, None, region, "robust params", 3.0)
+    out = hs.measure_render_noise(Sess(paper), "hard_corner_045", label, region, "robust params", 3.0)
 
     scene = "prepared raw hard_corner_045"
     assert calls[0] == (scene, True, label, hs.NOISE_REPEATS)
@@ -561,7 +561,7 @@ def test_the_quiet_sensor_of_the_render_noise_differs_from_the_run_s_by_the_came
 
     monkeypatch.setattr(hs, "depth_spread_mm", lambda depths, region: (1.0, 0))
     with pytest.raises(Stop):
-        hs.measure_render_noise(Sess(), "hard_box_interior", "x", None, None, None, 3.0)
+        hs.measure_render_noise(Sess(), "hard_box_interior", "x", None, None, 3.0)
     (quiet,) = seen
     assert quiet == dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, noise=False))
     assert quiet != paper

@@ -64,6 +64,7 @@ from simbench.metrics import edge_band, wrong_pixels
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
 if TYPE_CHECKING:
+    from simbench.decode.params import DecoderParams
     from simbench.decode.pipeline import DecodeResult
     from simbench.systems import Recording, SystemDepth
 
@@ -418,17 +419,22 @@ def _camera_rows(session: Session, name: str, row: dict, robust, operating: floa
 
 
 def measure_render_noise(
-    session: Session, name: str, label: str, cap: Recording, region: np.ndarray, robust, operating: float
+    session: Session,
+    name: str,
+    label: str,
+    region: np.ndarray,
+    robust: DecoderParams,
+    operating: float,
 ) -> dict:
     """Scene ``name``'s render noise against its camera noise, as
     :mod:`simbench.experiments.render_noise` measures them on the white board: the depth spread
     (:func:`simbench.experiments.render_noise.depth_spread_mm`, mm) of the colour-robust decoder
     (``robust`` by triangulation, at its operating point ``operating``) over :data:`NOISE_REPEATS`
     renders with render seeds of their own recorded with the camera's temporal noise off (the
-    first is ``cap``'s render: ``label``'s seeds) and over as many recordings of ``cap``'s render
-    with noise seeds of their own (the first is ``cap``), on ``region``; their ratio, whether it
-    meets :data:`simbench.experiments.render_noise.TARGET_RATIO`, and
-    :func:`samples_for_target`."""
+    first is the render of the scene's capture under ``label``, :func:`measure_scene`'s) and over
+    as many recordings of that render with noise seeds of their own (the first is that capture),
+    on ``region``; their ratio, whether it meets
+    :data:`simbench.experiments.render_noise.TARGET_RATIO`, and :func:`samples_for_target`."""
     cfg = session.config
     scene = session.prepare(session.raw_scene(name))
 
@@ -486,7 +492,7 @@ def measure_scene(session: Session, name: str) -> dict:
     noise = None
     # (a sensor model with no physical camera has no camera noise to weigh the renderer's against)
     if session.sensor.is_physical:
-        noise = measure_render_noise(session, name, label, cap, region, params["robust"], operating["robust"])
+        noise = measure_render_noise(session, name, label, region, params["robust"], operating["robust"])
         for k in ("render_sd_mm", "camera_sd_mm", "ratio"):
             metrics[f"hard_scenes/{name}/render_noise/{k}"] = noise[k]
     return {"row": row, "curves": curves, "metrics": metrics, "camera": camera, "render_noise": noise}
