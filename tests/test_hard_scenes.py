@@ -328,7 +328,7 @@ def test_the_committed_camera_table_starts_each_scene_with_its_row_of_the_main_t
     with open(ROOT / folder / "hard_scenes.csv", newline="") as f:
         main = {r["scene"]: r for r in csv.DictReader(f)}
     run = json.loads((ROOT / folder / "hard_scenes.provenance.json").read_text())["config"]
-    spps = [more_samples(run["sampler"], run["spp"], f) for f in RENDER_SPP_FACTORS]
+    spps = [more_samples(run["sampler"], run["spp"], factor=f) for f in RENDER_SPP_FACTORS]
     expected = []
     for n in (n for n in main if n in CAMERA_SCENES):
         expected += [(n, ""), *((n, "without_" + "+".join(e)) for e in CAMERA_EFFECTS)]
@@ -350,14 +350,14 @@ def test_more_samples_is_the_least_count_the_sampler_takes_of_at_least_each_fact
     from simbench.sim.mitsuba_dict import check_sampler
 
     assert RENDER_SPP_FACTORS == (4, 25)
-    assert [more_samples("multijitter", 36, f) for f in RENDER_SPP_FACTORS] == [144, 900]
-    assert more_samples("independent", 10, 4) == 40
-    assert more_samples("ldsampler", 16, 4) == 64
-    assert more_samples("ldsampler", 16, 25) == 1024  # 400 is no power of two
-    assert more_samples("orthogonal", 25, 4) == 121  # 100 = 10^2 is no prime squared
+    assert [more_samples("multijitter", 36, factor=f) for f in RENDER_SPP_FACTORS] == [144, 900]
+    assert more_samples("independent", 10, factor=4) == 40
+    assert more_samples("ldsampler", 16, factor=4) == 64
+    assert more_samples("ldsampler", 16, factor=25) == 1024  # 400 is no power of two
+    assert more_samples("orthogonal", 25, factor=4) == 121  # 100 = 10^2 is no prime squared
     for sampler, spp in (("stratified", 9), ("orthogonal", 49), ("ldsampler", 4)):
         for f in RENDER_SPP_FACTORS:
-            n = more_samples(sampler, spp, f)
+            n = more_samples(sampler, spp, factor=f)
             check_sampler(sampler, n)
             assert n >= f * spp
 
@@ -448,48 +448,41 @@ def test_samples_for_the_target_scale_as_the_ratio_squared_to_a_count_the_sample
     from simbench.experiments.hard_scenes import least_samples, samples_for_target
     from simbench.experiments.render_noise import TARGET_RATIO
 
-    assert samples_for_target("multijitter", 36, TARGET_RATIO) == 36
-    assert samples_for_target("multijitter", 36, 2 * TARGET_RATIO) == 144
-    assert samples_for_target("multijitter", 36, 1.58) == 841
-    assert samples_for_target("multijitter", 36, 0.5 * TARGET_RATIO) == 9
-    assert samples_for_target("independent", 10, 1.5 * TARGET_RATIO) == 23  # 22.5 up
-    assert samples_for_target("multijitter", 36, float("nan")) is None
+    assert samples_for_target("multijitter", 36, ratio=TARGET_RATIO) == 36
+    assert samples_for_target("multijitter", 36, ratio=2 * TARGET_RATIO) == 144
+    assert samples_for_target("multijitter", 36, ratio=1.58) == 841
+    assert samples_for_target("multijitter", 36, ratio=0.5 * TARGET_RATIO) == 9
+    assert samples_for_target("independent", 10, ratio=1.5 * TARGET_RATIO) == 23  # 22.5 up
+    assert samples_for_target("multijitter", 36, ratio=float("nan")) is None
     assert least_samples("ldsampler", 65) == 256
     assert least_samples("orthogonal", 26) == 49
     assert least_samples("independent", 0.2) == 1
     for sampler, spp, ratio in (("stratified", 16, 0.9), ("ldsampler", 16, 0.45), ("orthogonal", 25, 0.7)):
-        n = samples_for_target(sampler, spp, ratio)
+        n = samples_for_target(sampler, spp, ratio=ratio)
         assert n >= spp * (ratio / TARGET_RATIO) ** 2
         assert least_samples(sampler, n) == n
 
 
-def test_the_render_noise_is_the_spread_over_renders_with_the_camera_noise_off_against_over_recordings(
+def test_the_render_noise_is_what_captures_with_their_own_renders_spread_beyond_recordings_of_one_render(
     monkeypatch,
 ):
     """measure_render_noise's wiring, with the recording and decoding stubbed: the camera's noise is
-    the spread over NOISE_REPEATS recordings of the scene's render under its own label (its first
-    is the table's capture), the renderer's over as many renders - the scene's label first, then
-    labels of their own - recorded by the same sensor with only the camera's temporal noise off,
-    each decoded by the given decoder by triangulation at the given operating point; the ratio,
-    the target test and the samples for it follow."""
+    the spread over NOISE_REPEATS recordings of the scene's render under its own label (the first
+    is the table's capture), both noises together the spread over that capture and captures under
+    labels of their own; every map decoded by the run's session (one calibration) with the given
+    decoder by triangulation at the given threshold; the render noise is the root of the variances'
+    difference, over the pixels of the region every map decodes, less a stripe-order jump."""
     from types import SimpleNamespace
 
     import simbench.experiments.hard_scenes as hs
     from simbench.experiments.common import RunConfig
-    from simbench.sim.sensor import get_sensor
 
-    paper = get_sensor("paper")
     calls = []
     region = np.ones((4, 5), bool)
-    region[0] = False
+    region[0] = False  # out of the region: its wild depths count nowhere
 
-    class Sess:
-        def __init__(self, sensor):
-            self.sensor, self.config = sensor, RunConfig()
-
-        def fork(self, sensor, *, config=None):
-            assert config is None
-            return Sess(sensor)
+    class Sess:  # no fork: every capture is the run's camera's, every decode the run's session's
+        config = RunConfig()
 
         def raw_scene(self, name):
             return f"raw {name}"
@@ -498,73 +491,72 @@ def test_the_render_noise_is_the_spread_over_renders_with_the_camera_noise_off_a
             return f"prepared {scene}"
 
         def capture(self, scene, label, *, repeats=1):
-            calls.append((scene, self.sensor.camera.noise, label, repeats))
-            k0 = int(label.rsplit("/", 1)[1]) if "/render/" in label else 0
-            return [(self.sensor.camera.noise, k0 + k) for k in range(repeats)]
+            calls.append((scene, label, repeats))
+            render = int(label.rsplit("/", 1)[1]) if "/render/" in label else 0
+            return [SimpleNamespace(seeds={"render": 100 + render, "noise": 10 * render + k}) for k in range(repeats)]
 
         def decode(self, cap, params, *, mode):
             assert params == "robust params" and mode == "calibrated"
-            noisy, k = cap
-            # 2 mm steps between the recordings, 1 mm between the renders; row 0 is out of the region
-            depth = np.full((4, 5), 1.0 + (0.002 if noisy else 0.001) * k)
-            depth[0] = 5.0 * k
+            render, noise = cap.seeds["render"] - 100, cap.seeds["noise"] % 10
+            # 2 mm steps between one render's recordings, 4 mm between the renders
+            depth = np.full((4, 5), 1.0 + 0.002 * noise + 0.004 * render)
+            depth[0] = 5.0 * noise
+            if render == 2:
+                depth[1, 1] += 0.1  # a stripe-order jump in one map
+                depth[3, 4] = np.nan  # not decoded in one map
             return SimpleNamespace(depth_m=depth)
 
     monkeypatch.setattr(hs, "apply_min_confidence", lambda full, t: full if t == 3.0 else None)
     label = "hard_scenes/hard_corner_045"
-    out = hs.measure_render_noise(Sess(paper), "hard_corner_045", label, region, "robust params", 3.0)
+    out = hs.measure_render_noise(
+        Sess(), "hard_corner_045", label=label, region=region, robust="robust params", min_confidence=3.0
+    )
 
     scene = "prepared raw hard_corner_045"
-    assert calls[0] == (scene, True, label, hs.NOISE_REPEATS)
-    assert calls[1:] == [(scene, False, lab, 1) for lab in (label, f"{label}/render/1", f"{label}/render/2")]
     assert hs.NOISE_REPEATS == 3
-    assert out["camera_sd_mm"] == pytest.approx(2.0) and out["render_sd_mm"] == pytest.approx(1.0)
-    assert out["ratio"] == pytest.approx(0.5) and out["meets_target"] is False
-    assert out["spp_for_target"] == 81  # 36 x (0.5 x 3)^2
-    assert out["pixels"] == 15 and out["class"] == "interreflection"
-    assert set(out) == set(hs.NOISE_COLUMNS)
+    assert calls == [(scene, label, 3), (scene, f"{label}/render/1", 1), (scene, f"{label}/render/2", 1)]
+    assert out["camera_sd_mm"] == pytest.approx(2.0)
+    assert out["total_sd_mm"] == pytest.approx(4.0)  # 0, 4 and 8 mm
+    assert out["render_sd_mm"] == pytest.approx(np.sqrt(16.0 - 4.0))
+    assert out["ratio"] == pytest.approx(np.sqrt(12.0) / 2.0) and out["meets_target"] is False
+    assert out["spp_for_target"] == hs.samples_for_target("multijitter", 36, ratio=out["ratio"])
+    assert out["pixels"] == 13 and out["jumps"] == pytest.approx(1 / 14)
+    assert out["render_seeds"] == "100 101 102" and out["noise_seeds"] == "0 1 2 10 20"
+    assert out["class"] == "interreflection" and set(out) == set(hs.NOISE_COLUMNS)
 
 
-def test_the_quiet_sensor_of_the_render_noise_differs_from_the_run_s_by_the_camera_noise_only(monkeypatch):
-    """The renders whose spread is the renderer's noise are recorded by the run's sensor with only
-    the camera's temporal noise switched off (quantisation, fixed-pattern noise, the mosaic stay)."""
-    import dataclasses
+def test_a_render_noise_the_sampling_leaves_under_the_camera_s_reads_zero(monkeypatch):
+    """Where the spread over captures with their own renders comes out under the camera's (no
+    render noise, sampling error), the render noise is 0, not NaN, and meets the target."""
+    from types import SimpleNamespace
 
     import simbench.experiments.hard_scenes as hs
-    from simbench.sim.sensor import get_sensor
-
-    paper = get_sensor("paper")
-    seen = []
-
-    class Stop(Exception):
-        pass
+    from simbench.experiments.common import RunConfig
 
     class Sess:
-        sensor = paper
-        config = None
-
-        def prepare(self, scene):
-            return scene
+        config = RunConfig()
 
         def raw_scene(self, name):
             return name
 
+        def prepare(self, scene):
+            return scene
+
         def capture(self, scene, label, *, repeats=1):
-            return []
+            render = int(label.rsplit("/", 1)[1]) if "/render/" in label else 0
+            return [SimpleNamespace(seeds={"render": render, "noise": k}) for k in range(repeats)]
 
-        def decode(self, *a, **k):
-            raise AssertionError("nothing to decode")
+        def decode(self, cap, params, *, mode):
+            # the recordings of one render spread 2 mm apart, the renders' first recordings 1 mm
+            k = cap.seeds["noise"] if cap.seeds["render"] == 0 else cap.seeds["render"] / 2
+            return SimpleNamespace(depth_m=np.full((2, 2), 1.0 + 0.002 * k))
 
-        def fork(self, sensor, *, config=None):
-            seen.append(sensor)
-            raise Stop
-
-    monkeypatch.setattr(hs, "depth_spread_mm", lambda depths, region: (1.0, 0))
-    with pytest.raises(Stop):
-        hs.measure_render_noise(Sess(), "hard_box_interior", "x", None, None, 3.0)
-    (quiet,) = seen
-    assert quiet == dataclasses.replace(paper, camera=dataclasses.replace(paper.camera, noise=False))
-    assert quiet != paper
+    monkeypatch.setattr(hs, "apply_min_confidence", lambda full, t: full)
+    out = hs.measure_render_noise(
+        Sess(), "hard_chart_low", label="x", region=np.ones((2, 2), bool), robust=None, min_confidence=3.0
+    )
+    assert out["total_sd_mm"] < out["camera_sd_mm"]
+    assert out["render_sd_mm"] == 0.0 and out["ratio"] == 0.0 and out["meets_target"] is True
 
 
 @pytest.mark.parametrize("folder", ["results/quick", "results"])
@@ -587,17 +579,19 @@ def test_the_committed_render_noise_table_is_one_run_s_and_its_columns_follow_fr
     with open(ROOT / folder / "hard_scenes.csv", newline="") as f:
         main = [r["scene"] for r in csv.DictReader(f)]
     run = json.loads((ROOT / folder / "hard_scenes.provenance.json").read_text())["config"]
-    assert [r["scene"] for r in noise] == main
+    assert noise and [r["scene"] for r in noise] == main
     for r in noise:
-        render, camera, ratio = (float(r[k]) for k in ("render_sd_mm", "camera_sd_mm", "ratio"))
-        assert render > 0 and camera > 0 and int(r["pixels"]) > 0
+        render, camera, total, ratio = (float(r[k]) for k in ("render_sd_mm", "camera_sd_mm", "total_sd_mm", "ratio"))
+        assert render >= 0 and camera > 0 and int(r["pixels"]) > 0 and 0 <= float(r["jumps"]) < 0.01
+        assert render**2 == pytest.approx(max(total**2 - camera**2, 0.0), rel=1e-4, abs=1e-8)
         assert ratio == pytest.approx(render / camera, rel=1e-4)
+        assert len(r["render_seeds"].split()) == 3 and len(r["noise_seeds"].split()) == 5
         assert r["meets_target"] == str(ratio <= TARGET_RATIO)
-        assert int(r["spp_for_target"]) == samples_for_target(run["sampler"], run["spp"], ratio)
+        assert int(r["spp_for_target"]) == samples_for_target(run["sampler"], run["spp"], ratio=ratio)
     md = (ROOT / folder / "hard_scenes.md").read_text()
     assert "## What the renderer's noise is, scene by scene" in md
     assert all(f"| `{r['scene']}` | {r['class']} | {float(r['render_sd_mm']):.4f} |" in md for r in noise)
     if folder == "results":
-        most = more_samples(run["sampler"], run["spp"], max(RENDER_SPP_FACTORS))
+        most = more_samples(run["sampler"], run["spp"], factor=max(RENDER_SPP_FACTORS))
         boxes = [r for r in noise if r["scene"] in RENDER_SCENES]
         assert boxes and all(int(r["spp_for_target"]) <= most for r in boxes)
