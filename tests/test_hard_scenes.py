@@ -582,7 +582,8 @@ def test_the_committed_render_noise_table_is_one_run_s_and_its_columns_follow_fr
     assert noise and [r["scene"] for r in noise] == main
     for r in noise:
         render, camera, total, ratio = (float(r[k]) for k in ("render_sd_mm", "camera_sd_mm", "total_sd_mm", "ratio"))
-        assert render >= 0 and camera > 0 and int(r["pixels"]) > 0 and 0 <= float(r["jumps"]) < 0.01
+        # (jumps: a few pixels in 10^4 at full resolution, up to ~1 % at the quick run's 4 spp)
+        assert render >= 0 and camera > 0 and int(r["pixels"]) > 0 and 0 <= float(r["jumps"]) < 0.05
         # (6 significant digits: each square known to 1e-5 of itself)
         assert render**2 == pytest.approx(max(total**2 - camera**2, 0.0), abs=2e-5 * (total**2 + camera**2))
         assert ratio == pytest.approx(render / camera, rel=1e-4)
