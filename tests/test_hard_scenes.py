@@ -443,7 +443,7 @@ def test_the_camera_rows_record_each_variant_with_the_scene_s_seeds_and_score_th
 
 def test_samples_for_the_target_scale_as_the_ratio_squared_to_a_count_the_sampler_takes():
     """Render noise falling as 1/sqrt(spp): at the target the run's count, at twice the target 4x,
-    on the box's measured 1.58 of the camera's 36 x (1.58 x 3)^2 = 809 -> 29^2 with a square-count
+    at 1.58 of the camera's 36 x (1.58 x 3)^2 = 809 -> 29^2 with a square-count
     sampler; a count the sampler takes, never below the estimate; None for no ratio."""
     from simbench.experiments.hard_scenes import least_samples, samples_for_target
     from simbench.experiments.render_noise import TARGET_RATIO

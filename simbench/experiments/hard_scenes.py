@@ -146,7 +146,7 @@ SCORE_KEYS = ("completeness", "gt_mae_mm", "wrong_share", "wrong_share_all", "st
 # again): the box interior, whose faces are lit by each other, where 36 spp leave a render noise
 # above the camera's (measured 2026-12-04, 1280x960, standard deviation per channel: 1.4-1.6 DN on
 # its right, top and back faces against 0.8-1.5 DN of camera noise, on a +-5 DN fringe on the right
-# face; in its decoded depth ~1.6x the camera's: the table's render-noise section).  4x halves that
+# face; in its decoded depth 1.43x the camera's: the table's render-noise section).  4x halves that
 # noise; 25x (900 spp: 30^2, rendered in passes of 4; 17.5 min on 2 cores, shared for ~7 of them
 # with another run) projects it, by 1/sqrt(spp) (measured on hard_corner_045 from 36 to 144 spp:
 # samples_for_target), to a fifth: under the testbed's target of a third (results/render_noise.md),
