@@ -59,7 +59,7 @@ from simbench.decode.pipeline import apply_min_confidence
 from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.experiments.render_noise import REPEATS as NOISE_REPEATS
-from simbench.experiments.render_noise import TARGET_RATIO, depth_spread_mm
+from simbench.experiments.render_noise import TARGET_RATIO, noise_spreads
 from simbench.metrics import edge_band, wrong_pixels
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
@@ -434,24 +434,17 @@ def measure_render_noise(
     min_confidence: float,
 ) -> dict:
     """Scene ``name``'s render noise against its camera noise, in the colour-robust decoder's
-    depth (``robust`` by triangulation, at ``min_confidence``): the depth spread (root mean
-    per-pixel variance, mm, :func:`simbench.experiments.render_noise.depth_spread_mm`) over
-    :data:`NOISE_REPEATS` recordings of the scene's render under ``label`` with noise seeds of
-    their own (the first is :func:`measure_scene`'s capture) - the camera's noise - and over
-    :data:`NOISE_REPEATS` captures each rendered and recorded with seeds of their own (the first
-    the same capture) - the camera's and the renderer's together; the renderer's is the root of
-    the difference of the two variances (0 where sampling leaves it negative).
-
-    Both arms are recorded by the run's camera, its temporal noise on: it dithers the 8-bit
-    quantisation, under which a render noise of a fraction of a DN recorded noise-free (as
-    :mod:`simbench.experiments.render_noise` does on the white board) reads too large - by ~1.6x at
-    0.3 DN - or too small.  Both are decoded by ``session``, with the same calibration, over the
-    same pixels: those of ``region`` that every map decodes, less those where a map is more than
-    :data:`WRONG_MM` from the pixel's median over the maps (a stripe-order jump, a period's depth,
-    would outweigh the noise of every other pixel; their share of the decoded pixels is
-    ``jumps``).  Returns the spreads, their ratio, whether it meets
-    :data:`simbench.experiments.render_noise.TARGET_RATIO`, :func:`samples_for_target`, the pixels
-    and the captures' seeds."""
+    depth (``robust`` by triangulation, at ``min_confidence``), by the protocol of
+    :func:`simbench.experiments.render_noise.noise_spreads`: :data:`NOISE_REPEATS` recordings of
+    the scene's render under ``label`` with noise seeds of their own (the first is
+    :func:`measure_scene`'s capture) - the camera's noise - and :data:`NOISE_REPEATS` captures each
+    rendered and recorded with seeds of their own (the first the same capture) - the camera's and
+    the renderer's together - all recorded by the run's camera with its noise on (it dithers the
+    8-bit quantisation) and decoded by ``session`` with one calibration, over the pixels of
+    ``region`` every map decodes less stripe-order jumps (more than :data:`WRONG_MM` from the
+    pixel's median).  Returns the spreads, their ratio, whether it meets
+    :data:`simbench.experiments.render_noise.TARGET_RATIO`, :func:`samples_for_target`, the pixels,
+    the jumps' share and the captures' seeds."""
     cfg = session.config
     scene = session.prepare(session.raw_scene(name))
     same = session.capture(scene, label, repeats=NOISE_REPEATS)
@@ -460,26 +453,13 @@ def measure_render_noise(
     depths = np.stack(
         [apply_min_confidence(session.decode(c, robust, mode="calibrated"), min_confidence).depth_m for c in caps]
     )
-    decoded = region & np.all(np.isfinite(depths), axis=0)
-    d = depths[:, decoded]
-    jumps = np.any(np.abs(d - np.median(d, axis=0)) > WRONG_MM / 1000.0, axis=0)
-    kept = decoded.copy()
-    kept[decoded] = ~jumps
-    camera_sd, pixels = depth_spread_mm(list(depths[: len(same)]), kept)
-    total_sd, _ = depth_spread_mm([depths[0], *depths[len(same) :]], kept)
-    render_sd = math.sqrt(max(total_sd**2 - camera_sd**2, 0.0)) if pixels else float("nan")
-    ratio = render_sd / camera_sd if camera_sd > 0 else float("nan")
+    spreads = noise_spreads(depths, recordings=len(same), region=region, jump_mm=WRONG_MM)
     return {
         "scene": name,
         "class": HARD_SCENES[name],
-        "render_sd_mm": render_sd,
-        "camera_sd_mm": camera_sd,
-        "total_sd_mm": total_sd,
-        "ratio": ratio,
-        "meets_target": bool(ratio <= TARGET_RATIO),
-        "spp_for_target": samples_for_target(cfg.sampler, cfg.spp, ratio=ratio),
-        "pixels": pixels,
-        "jumps": float(jumps.mean()) if jumps.size else float("nan"),
+        **spreads,
+        "meets_target": bool(spreads["ratio"] <= TARGET_RATIO),
+        "spp_for_target": samples_for_target(cfg.sampler, cfg.spp, ratio=spreads["ratio"]),
         "render_seeds": " ".join(str(c.seeds["render"]) for c in [same[0], *own]),
         "noise_seeds": " ".join(str(c.seeds["noise"]) for c in caps),
     }
