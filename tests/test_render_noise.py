@@ -135,3 +135,71 @@ def test_the_committed_render_noise_table_follows_from_its_spreads(folder):
     assert all(f"| {r['spp']} | {float(r['render_sd_mm']):.4f} | {float(r['camera_sd_mm']):.4f} |" in md for r in rows)
     best = cheapest_meeting([{**r, "spp": int(r["spp"]), "ratio": float(r["ratio"])} for r in rows])
     assert (f"cheapest setting that meets it so is `{best[0]}` at {best[1]} spp" if best else "no setting meets") in md
+
+
+def test_measure_noise_renders_each_setting_and_records_its_first_render_again(monkeypatch):
+    """measure_noise's wiring, with the scene, the recording and the decoding stubbed: a part
+    ``scene/sampler_spp`` forks the session to that sampler and spp (the camera unchanged), records
+    its first render REPEATS times and each other render once under labels of their own, decodes
+    every capture by triangulation with the fork's decoder, and gives the recordings of the first
+    render as the camera's arm: here 2 mm between one render's recordings and 4 mm between
+    renders, so camera 2 mm, both 4 mm, render sqrt(12) mm; the seeds are the captures'."""
+    from types import SimpleNamespace
+
+    import simbench.experiments.render_noise as rn
+    from simbench.experiments.common import RunConfig
+
+    calls, decoded = [], []
+    shape = (6, 8)
+
+    class Sess:
+        def __init__(self, config, *, forked=False):
+            self.config, self.forked = config, forked
+            self.sensor = SimpleNamespace(is_physical=True)
+
+        def raw_scene(self, name):
+            return f"raw {name}"
+
+        def place(self, scene, label, objects):
+            assert objects == rn.SCENES["plane_white"][1]
+            return f"placed {scene} {label}"
+
+        def prepare(self, scene):
+            return f"prepared {scene}"
+
+        def fork(self, sensor, *, config):
+            assert sensor is self.sensor and not self.forked
+            return Sess(config, forked=True)
+
+        def capture(self, scene, label, *, repeats=1):
+            assert self.forked, "a setting's captures are the forked session's"
+            calls.append((self.config.sampler, self.config.spp, label, repeats))
+            render = int(label.rsplit("/", 1)[1])
+            gt = SimpleNamespace(lit=np.ones(shape, bool), depth_m=np.ones(shape), object_id=np.ones(shape, np.int32))
+            return [
+                SimpleNamespace(gt=gt, seeds={"render": 100 + render, "noise": 10 * render + k}) for k in range(repeats)
+            ]
+
+        def decode(self, cap, params, *, mode):
+            assert self.forked and params is self.config.decoder and mode == "calibrated"
+            render, noise = cap.seeds["render"] - 100, cap.seeds["noise"] % 10
+            decoded.append((render, noise))
+            return SimpleNamespace(depth_m=np.full(shape, 1.0 + 0.002 * noise + 0.004 * render))
+
+    run = RunConfig()
+    out = rn.measure_noise(Sess(run), "plane_white/ldsampler_64")
+    label = "render_noise/plane_white/render"
+    assert calls == [
+        ("ldsampler", 64, f"{label}/0", rn.REPEATS),
+        ("ldsampler", 64, f"{label}/1", 1),
+        ("ldsampler", 64, f"{label}/2", 1),
+    ]
+    assert decoded == [(0, 0), (0, 1), (0, 2), (1, 0), (2, 0)]
+    assert out["camera_sd_mm"] == pytest.approx(2.0) and out["total_sd_mm"] == pytest.approx(4.0)
+    assert out["render_sd_mm"] == pytest.approx(math.sqrt(12.0)) and out["ratio"] == pytest.approx(math.sqrt(3.0))
+    assert out["pixels"] == shape[0] * shape[1] and out["jumps"] == 0.0
+    assert out["render_seeds"] == "100 101 102" and out["noise_seeds"] == "0 1 2 10 20"
+    with pytest.raises(ValueError, match="physical"):
+        s = Sess(run)
+        s.sensor.is_physical = False
+        rn.measure_noise(s, "plane_white/multijitter_36")

@@ -5,8 +5,8 @@ tracer's Monte Carlo noise from posing as sensor noise.  Writes ``render_noise.m
 Per scene and setting (sampler, spp), two spreads of the decoded depth (triangulation, paper
 Eq. 15, the run's decoder), each the root mean per-pixel variance (:func:`noise_spreads`):
 
-- **camera noise**: one render recorded ``REPEATS`` times by the ``paper`` camera with noise
-  seeds of their own (what a real camera adds frame to frame);
+- **camera noise**: one render recorded ``REPEATS`` times by the run's camera (a physical one,
+  ``emva``) with noise seeds of their own (what a real camera adds frame to frame);
 - **camera and render noise together**: ``REPEATS`` captures, each rendered and recorded with
   seeds of its own (the first the same capture);
 
@@ -289,7 +289,7 @@ def _markdown(session: Session, rows: list[dict]) -> str:
         f"{DEFAULT_SPP}) was chosen on 2026-11-23, from this table as then measured, as the cheapest setting that "
         f"met the target with a margin of 10 % (render / camera <= {MARGIN * TARGET_RATIO:.2f}); {now}. The "
         "white board is not the binding case: interreflected light converges more slowly (the cube and cuboid here; "
-        "the concave corners and the box interior of `hard_scenes.md`, 0.9-1.6x the camera's noise at 36 spp). "
+        "most concave corners and the box interior of `hard_scenes.md`, up to 1.6x the camera's noise at 36 spp). "
         "Stratified generators help most where the integrand is smooth over the pixel (direct light on a plane).",
         "",
     ]

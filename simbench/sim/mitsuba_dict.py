@@ -164,8 +164,8 @@ SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler
 # spread stayed at most 1/3 of the camera-noise one with a 10 % margin (0.28 measured on
 # 2026-11-23, the renders recorded noise-free, which reads a sub-DN render noise too large).
 # Recorded with the camera's noise on (2026-12-05) it is 0.22, and `orthogonal` at 25 spp (0.24)
-# meets the margin too; the default stays: the binding scenes are those lit by each other, at
-# 0.9-1.6x the camera's noise at 36 spp (results/hard_scenes.md), and a change re-renders all.
+# meets the margin too; the default stays: the binding scenes are those lit by each other, up
+# to 1.6x the camera's noise at 36 spp (results/hard_scenes.md), and a change re-renders all.
 # Independent sampling would need ~150-190 spp for it (1.01 at 16 spp, falling as 1/sqrt(spp)).
 DEFAULT_SAMPLER = "multijitter"
 DEFAULT_SPP = 36
