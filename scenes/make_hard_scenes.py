@@ -13,7 +13,8 @@ tuned on flat boards breaks - each class at several settings, of our own design:
   shadows at several depths;
 * printed charts: checkerboards of ink on paper at high, middle and low contrast, and fine ones
   (high and middle contrast) whose 10 mm squares are about one fringe period wide in the image
-  (text-sized print), and a fine 5:1 one turned 20 deg about the vertical;
+  (text-sized print), a fine 5:1 one turned 20 deg about the vertical and a fine 20:1 one turned
+  -15 deg;
 * saturated paints round the hue circle: red, orange, yellow-green, magenta;
 * glossy white boards (a GGX coating over the diffuse base) at roughness 0.05, 0.15 and 0.3,
   whose specular highlight of the projector sits in the view.

@@ -53,7 +53,21 @@ if TYPE_CHECKING:
     from simbench.sim.sensor import SensorModel
     from simbench.systems import Recording, SystemDepth
 
-__all__ = ["Recorded", "record", "depth", "score", "SimbenchWarning", "DEFAULT_CACHE", "RENDER_CACHE_VARIABLE"]
+__all__ = [
+    "Recorded",
+    "record",
+    "depth",
+    "score",
+    "SimbenchWarning",
+    "DEFAULT_CACHE",
+    "RENDER_CACHE_VARIABLE",
+    "SEED_RANGE",
+    "SPP_RANGE",
+    "MAX_DEPTH_RANGE",
+    "MIN_CONFIDENCE_RANGE",
+    "EDGE_BAND_RANGE_PX",
+    "CAMERA_SCALE_RANGE",
+]
 
 # The render cache folder of the command line and of this API: $SIMBENCH_RENDER_CACHE, else
 # .cache/simbench under the working folder.  (A new user's audit, 2026-11-30: a library scene
@@ -61,15 +75,19 @@ __all__ = ["Recorded", "record", "depth", "score", "SimbenchWarning", "DEFAULT_C
 # small per-user memos, simbench.cache.user_cache_dir - read as if it were this one.)
 RENDER_CACHE_VARIABLE = "SIMBENCH_RENDER_CACHE"
 DEFAULT_CACHE = os.environ.get(RENDER_CACHE_VARIABLE) or ".cache/simbench"
-# the ranges the command line's options take too (simbench.cli.options): seeds exact in JSON and
-# NumPy (63 bits), samples per pixel, path length (2 = direct light; Mitsuba's -1, unbounded, is
-# not offered: Russian roulette ends paths anyway)
+# the ranges the command line's options take too (simbench.cli.options)
 SEED_RANGE = (0, 2**63 - 1)
+"""Seeds :func:`record` takes, inclusive (``--seed``): exact in JSON and NumPy (63 bits)."""
 SPP_RANGE = (1, 1 << 16)
+"""Samples per pixel :func:`record` takes, inclusive (``--spp``; the sampler may ask more of a count)."""
 MAX_DEPTH_RANGE = (2, 1024)
-# confidence thresholds, in the systems' own units (the fringe SNR is < ~1e3)
+"""Path lengths :func:`record` takes, inclusive (``--max-depth``; 2 = direct light; Mitsuba's -1,
+unbounded, is not offered: Russian roulette ends paths anyway)."""
 MIN_CONFIDENCE_RANGE = (0.0, 1e6)
+"""Confidence thresholds :func:`depth` takes, inclusive (``--min-confidence``), in the systems'
+own units (the fringe SNR is < ~1e3)."""
 EDGE_BAND_RANGE_PX = (0, 1000)
+"""Edge bands :func:`score` takes, inclusive, in pixels (``--edge-band``)."""
 
 
 @dataclass(frozen=True)
@@ -134,8 +152,10 @@ _RECORDING_FLAGS = {
     "camera_scale": "--camera-scale",
 }
 
-# the camera resolution factors record() takes (the run option run.camera_scale's range)
 CAMERA_SCALE_RANGE = (0.0, 4.0)
+"""Camera resolution factors :func:`record` takes (``--camera-scale``, the run option
+``run.camera_scale``): above the first, up to the second; the pattern's period must still be
+resolved (the smallest scale accepted is in the error)."""
 
 
 def scaled_rig(rig: Rig, camera_scale: float, *, period_px: float | None) -> Rig:
@@ -155,11 +175,15 @@ def scaled_rig(rig: Rig, camera_scale: float, *, period_px: float | None) -> Rig
     if period_px:
         t_cam = float(period_px) * scaled.camera.focal_px / scaled.projector.focal_px
         if t_cam < MIN_CAMERA_PERIOD_PX:
-            least = math.ceil(100.0 * camera_scale * MIN_CAMERA_PERIOD_PX / t_cam) / 100.0
+            # the least factor that both resolves the period and gives whole image sizes (a
+            # multiple of 1/step: an audit, 2026-12-05, found the 0.19 suggested refused for them)
+            step = math.gcd(rig.camera.width_px, rig.camera.height_px)
+            least = math.ceil(step * camera_scale * MIN_CAMERA_PERIOD_PX / t_cam - 1e-9) / step
             raise ValueError(
                 f"camera_scale (--camera-scale) {camera_scale:g} takes the fringe's period ({period_px:g} projector "
                 f"px) to {t_cam:.2f} camera pixels, under the {MIN_CAMERA_PERIOD_PX:g} its decoding needs (Nyquist: "
-                f"2): nothing would decode right; scale by {least:g} or more (or project a longer period)"
+                f"2): nothing would decode right; scale by {least:g} or more, a multiple of 1/{step} (or project a "
+                "longer period)"
             )
     return scaled
 
@@ -473,9 +497,12 @@ def _scene_record(scene, spec: SceneSpec) -> dict:
     }
 
 
-def _decoding_rig(rig, recorded: Recorded, options, *, mode: str) -> Rig:
+def _decoding_rig(rig, recorded: Recorded, options, *, mode: str, told: list[str]) -> Rig:
     """``rig`` (a Rig or a rig TOML) checked as ``simbench decode --rig`` checks it: a calibration
-    of the rig ``recorded`` was recorded with, for a system that decodes with the scene's rig."""
+    of the rig ``recorded`` was recorded with, for a system that decodes with the scene's rig.  The
+    checks' warnings (a rig within the tolerance but off) go into ``told``, for the caller to give
+    as :class:`SimbenchWarning` (an audit, 2026-12-05: logged, they passed a script that made
+    SimbenchWarning an error, with a rig's baseline 1.6 % long: 17 mm MAE)."""
     from simbench.rig import Rig, load_rig
     from simbench.systems import get_system
     from simbench.systems.files import check_rig_on_a_plane, refuse_another_rig
@@ -510,10 +537,17 @@ def _decoding_rig(rig, recorded: Recorded, options, *, mode: str) -> Rig:
         )
         plane = recorded.calibration.reference_map(params, rig=rig)
         check_reference_plane(
-            plane, rig, reference_path="of the recording", rig_path=name, recorded_z0=True, mode=mode, rig_option="rig="
+            plane,
+            rig,
+            reference_path="of the recording",
+            rig_path=name,
+            recorded_z0=True,
+            mode=mode,
+            rig_option="rig=",
+            tell=told.append,
         )
     else:
-        check_rig_on_a_plane(rig, recorded_rig, rig_path=None, capture="the recording", label=label)
+        check_rig_on_a_plane(rig, recorded_rig, rig_path=None, capture="the recording", label=label, tell=told.append)
     return rig
 
 
@@ -596,7 +630,10 @@ def depth(
     scene = rec.scene
     if rig is not None:
         asked = mode or own_mode
-        scene = dataclasses.replace(scene, rig=_decoding_rig(rig, recorded, options, mode=asked))
+        told: list[str] = []
+        scene = dataclasses.replace(scene, rig=_decoding_rig(rig, recorded, options, mode=asked, told=told))
+        for message in told:
+            warnings.warn(message, SimbenchWarning, stacklevel=2)
     if recorded.system == "proposed":
         system = get_system("proposed", options)
         # the pattern it was recorded with (an audit: a period-30 recording was decoded with the

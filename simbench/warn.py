@@ -7,7 +7,8 @@ __all__ = ["SimbenchWarning"]
 class SimbenchWarning(UserWarning):
     """The library's sanity checks, told to the caller: a scene whose objects leave the view
     (:func:`simbench.record`), a capture that is dark, saturated or off the reference plane's
-    registration, stripes read out of the pattern's order (:func:`simbench.depth`), a depth map
+    registration, stripes read out of the pattern's order, a ``rig=`` off the recording's within
+    the tolerance (:func:`simbench.depth`), a depth map
     in other units or of another scene (:func:`simbench.score`), an output folder replaced whose
     old copy could not be removed (:func:`simbench.io.output_directory`).  (Notices about the
     set-up - a sensor file that leaves keys out, a projector principal point rendered elsewhere,

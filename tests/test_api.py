@@ -6,6 +6,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -192,11 +193,20 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplo
     small = dataclasses.replace(recorded_rig, camera=dataclasses.replace(recorded_rig.camera, width_px=640))
     with pytest.raises(ValueError, match="camera 640x"):
         simbench.depth(rec, rig=small)
-    # 1.5 % long: warned, in the API's own words (the command line's advice named --rig)
+    # 1.5 % long: warned, in the API's own words (the command line's advice named --rig), as a
+    # SimbenchWarning that a script can make an error (an audit, 2026-12-05: it was logged, and such a
+    # script decoded on at 17 mm MAE), not logged besides
     warned = dataclasses.replace(recorded_rig, position_m=tuple(1.015 * x for x in recorded_rig.position_m))
-    with caplog.at_level("WARNING", logger="simbench"):
+    with caplog.at_level("WARNING", logger="simbench"), pytest.warns(simbench.SimbenchWarning) as told:
         simbench.depth(rec, mode="calibrated", rig=warned)
-    assert "the rig given (rig=) is not the one it was recorded with" in caplog.text and "--rig" not in caplog.text
+    said = " ".join(str(w.message) for w in told)
+    assert "the rig given (rig=) is not the one it was recorded with" in said and "--rig" not in said
+    assert "triangulates with the rig" not in caplog.text
+    assert all(w.filename == __file__ for w in told)  # the caller's line
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", simbench.SimbenchWarning)
+        with pytest.raises(simbench.SimbenchWarning, match="is not the one it was recorded with"):
+            simbench.depth(rec, mode="calibrated", rig=warned)
     # inside rig_differences' tolerances, but its reference plane 4 % off its Z0: not a calibration of it
     off = dataclasses.replace(recorded_rig, position_m=tuple(1.04 * x for x in recorded_rig.position_m))
     with pytest.raises(ValueError, match="reference plane of the recording triangulates with the rig"):
@@ -205,6 +215,27 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplo
         simbench.depth(rec, rig=0.093)
     with pytest.raises(ValueError, match="the kinect system keeps its device's factory calibration"):
         simbench.depth(_recorded("kinect"), rig=recorded_rig)
+    # a system without a reference plane (phase shifting) checks the rig on a plane: warned the same way
+    shifted = _recorded("phase_shift")
+    with pytest.warns(simbench.SimbenchWarning, match="1.0150 m across the image"):
+        simbench.depth(shifted, rig=warned)
+
+
+def test_the_least_camera_scale_suggested_is_taken_and_the_step_below_refused():
+    """A period the factor cannot resolve names the least factor that both resolves it and gives
+    whole image sizes (an audit, 2026-12-05: the 0.19 suggested gave a 243.2x182.4 image)."""
+    import re
+
+    from simbench.api import scaled_rig
+    from simbench.rig import paper_rig
+
+    rig = paper_rig()
+    with pytest.raises(ValueError, match="or more") as refused:
+        scaled_rig(rig, 0.1, period_px=21)
+    least = float(re.search(r"scale by ([0-9.]+) or more, a multiple of 1/(\d+)", str(refused.value)).group(1))
+    assert scaled_rig(rig, least, period_px=21).camera.width_px == round(1280 * least)
+    with pytest.raises(ValueError, match="takes the fringe's period"):
+        scaled_rig(rig, least - 1 / 320, period_px=21)
 
 
 @pytest.mark.parametrize(
@@ -237,7 +268,8 @@ def test_depth_decodes_with_a_rig_given_as_the_command_line_does(tmp_path, caplo
         # (an audit: at 0.1 the render exited 0 and nothing decoded right)
         (
             {"camera_scale": 0.1},
-            r"0.1 takes the fringe's period \(21 projector px\) to 2.18 camera pixels.*by 0.19 or more",
+            r"0.1 takes the fringe's period \(21 projector px\) to 2.18 camera pixels.*by 0.184375 or more, a "
+            r"multiple of 1/320",
         ),
         ({"system": "phase_shift", "camera_scale": 0.1}, "camera pixels, under the 4 its decoding needs"),
         ({"system": "kinect", "camera_scale": 0.5}, r"^camera_scale \(--camera-scale\) does not apply to the kinect"),

@@ -302,6 +302,18 @@ def test_mesh_files_that_are_no_mesh(tmp_path):
             scene_from_dict(_mesh_scene(tmp_path, text), base_dir=tmp_path)
 
 
+def test_a_missing_mesh_says_where_a_relative_path_is_taken_from(tmp_path):
+    """A library scene copied elsewhere (an audit, 2026-12-05): its relative mesh path reads from
+    the scene file's folder, which the error names; an absolute path is named alone."""
+    with pytest.raises(
+        FileNotFoundError,
+        match=r"mesh file not found: .*meshes/bust.ply \(a relative mesh path is taken from the scene file's folder, ",
+    ):
+        scene_from_dict({"object": [{"type": "mesh", "file": "meshes/bust.ply"}]}, base_dir=tmp_path)
+    with pytest.raises(FileNotFoundError, match=r"mesh file not found: /nowhere/bust.ply$"):
+        scene_from_dict({"object": [{"type": "mesh", "file": "/nowhere/bust.ply"}]}, base_dir=tmp_path)
+
+
 def test_mesh_size_bounds(tmp_path, monkeypatch):
     import simbench.sim.scene as scene_module
 

@@ -818,7 +818,16 @@ def _parse_mesh(d: dict, where: str, base_dir: Path) -> dict:
     if not path.is_absolute():
         path = base_dir / path
     if not path.exists():
-        raise FileNotFoundError(f"{where}: mesh file not found: {path}")
+        # (a relative path is the scene file's folder's: an audit, 2026-12-05, copied a library
+        # scene elsewhere and read only "not found")
+        raise FileNotFoundError(
+            f"{where}: mesh file not found: {path}"
+            + (
+                ""
+                if Path(str(d["file"])).is_absolute()
+                else f" (a relative mesh path is taken from the scene file's folder, {base_dir})"
+            )
+        )
     if not path.is_file():
         what = "a folder" if path.is_dir() else "not a regular file (a pipe or device?)"
         raise ValueError(f"{where}: mesh file {path} is {what}")

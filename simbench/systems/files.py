@@ -653,7 +653,13 @@ RIG_CHECK_DEPTH_M = 1.0
 
 
 def check_rig_on_a_plane(
-    rig: Rig, recorded: Rig, *, rig_path: str | Path | None, capture: str | Path, label: str | None = None
+    rig: Rig,
+    recorded: Rig,
+    *,
+    rig_path: str | Path | None,
+    capture: str | Path,
+    label: str | None = None,
+    tell: Callable[[str], None] | None = None,
 ) -> None:
     """A ``--rig`` (``label`` names it otherwise) for a recording decoded by triangulation with
     no reference plane (phase shifting): a fronto-parallel plane at :data:`RIG_CHECK_DEPTH_M`,
@@ -663,7 +669,8 @@ def check_rig_on_a_plane(
     warning over ..._WARNING).  A new user's audit (2026-11-30): phase shifting decoded with a
     camera focal length 4 % off - inside :func:`simbench.rig.rig_differences`' 5 % - triangulated
     60 mm wrong with only "overriding the recording" said.  (Lens distortion is not compared: the
-    plane is on the ideal pixel grid.)"""
+    plane is on the ideal pixel grid.)  ``tell``: what takes the warning's text (None: the
+    ``simbench`` logger)."""
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, ReferenceMap, reference_plane_extent
     from simbench.rig import projector_column_at_depth
 
@@ -686,12 +693,14 @@ def check_rig_on_a_plane(
             f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} % off: it is not a calibration of the rig "
             f"{capture} was recorded with"
         )
-    logging.getLogger("simbench").warning(
-        "%s (more than %.1f %% off): depths by triangulation carry that (~%.0f mm at 1 m)",
-        where,
-        100 * REFERENCE_Z0_WARNING,
-        1000 * worst * RIG_CHECK_DEPTH_M,
+    told = (
+        f"{where} (more than {100 * REFERENCE_Z0_WARNING:.1f} % off): depths by triangulation carry that "
+        f"(~{1000 * worst * RIG_CHECK_DEPTH_M:.0f} mm at 1 m)"
     )
+    if tell is None:
+        logging.getLogger("simbench").warning("%s", told)
+    else:
+        tell(told)
 
 
 def _device_parameters(system) -> dict | None:

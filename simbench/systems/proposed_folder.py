@@ -15,6 +15,7 @@ import dataclasses
 import logging
 import time
 from collections import ChainMap
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -490,19 +491,22 @@ def check_reference_plane(
     mode: str = "calibrated",
     rig_option: str = "--rig",
     pattern_assumed: str = "",
+    tell: Callable[[str], None] | None = None,
 ) -> None:
     """The decoded reference must triangulate, with the rig, to a plane at its Z0: a reference
     of another rig (or a wrong Z0) decoded 100 % at hundreds of mm of error before.  Within the
     tolerance but over :data:`simbench.decode.REFERENCE_Z0_WARNING` it warns: reference-mode
     depths carry that error (a Z0 2 % off gave 20 mm MAE on a plane, exit 0, without a word).
     ``pattern_assumed``: the pattern taken for a bare image (none given), named in a refusal as
-    a cause (a capture of period 24 decoded at 21 lies 3.6 % off Z0, blamed on the rig alone)."""
+    a cause (a capture of period 24 decoded at 21 lies 3.6 % off Z0, blamed on the rig alone).
+    ``tell``: what takes a warning's text (None: the ``simbench`` logger; the Python API passes
+    one that gives it as a :class:`simbench.SimbenchWarning`, which a script can make an error)."""
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_extent
 
     low, offset, high = reference_plane_extent(reference, rig)
     if np.isnan(offset):
         return
-    tilt = dict(reference_path=reference_path, rig_path=rig_path, mode=mode, pattern_assumed=pattern_assumed)
+    tilt = dict(reference_path=reference_path, rig_path=rig_path, mode=mode, pattern_assumed=pattern_assumed, tell=tell)
     if abs(offset) <= REFERENCE_Z0_WARNING:
         _check_reference_tilt(reference, low, offset, high, **tilt)
         return
@@ -539,13 +543,7 @@ def check_reference_plane(
         "is, calibrated-mode ones carry it and reference-mode ones far less (they match columns against the "
         "reference, Eq. 14)"
     )
-    logging.getLogger("simbench").warning(
-        "%s, more than %.1f %%): %s; %s",
-        where,
-        100 * REFERENCE_Z0_WARNING,
-        carried,
-        advice,
-    )
+    _tell(tell, f"{where}, more than {100 * REFERENCE_Z0_WARNING:.1f} %): {carried}; {advice}")
     _check_reference_tilt(reference, low, offset, high, **tilt)
 
 
@@ -558,8 +556,25 @@ def _pattern_question(pattern_assumed: str) -> str:
     )
 
 
+def _tell(tell: Callable[[str], None] | None, message: str) -> None:
+    """``message`` to ``tell``, or logged (logger ``simbench``) where it is None."""
+    if tell is None:
+        logging.getLogger("simbench").warning("%s", message)
+    else:
+        tell(message)
+
+
 def _check_reference_tilt(
-    reference, low, median, high, *, reference_path, rig_path, mode: str = "calibrated", pattern_assumed: str = ""
+    reference,
+    low,
+    median,
+    high,
+    *,
+    reference_path,
+    rig_path,
+    mode: str = "calibrated",
+    pattern_assumed: str = "",
+    tell: Callable[[str], None] | None = None,
 ) -> None:
     """The reference plane must be flat and square across the image too, not only at its Z0 in
     the median: its depth's 2nd and 98th percentiles against the median
@@ -593,12 +608,10 @@ def _check_reference_tilt(
         else "reference-mode depths carry far less of it (they match columns against the reference, Eq. 14), "
         f"calibrated-mode ones all of it (~{1000 * worst * z0:.0f} mm at the image's edges)"
     )
-    logging.getLogger("simbench").warning(
-        "%s more than %.1f %%: %s; check the rig's camera (focal length, principal point, distortion), or that the "
-        "board stood square to the camera",
-        where,
-        100 * REFERENCE_Z0_WARNING,
-        carried,
+    _tell(
+        tell,
+        f"{where} more than {100 * REFERENCE_Z0_WARNING:.1f} %: {carried}; check the rig's camera (focal length, "
+        "principal point, distortion), or that the board stood square to the camera",
     )
 
 
