@@ -21,6 +21,7 @@ def test_shipped_scenes_load(path):
         ({"object": [{"type": "cone"}]}, "unknown type 'cone'"),
         ({"object": [{"type": "plane", "size_m": [1, 1], "colour": [1, 1, 1]}]}, "unknown key"),
         ({"object": [{"type": "plane"}]}, "missing size_m"),
+        ({"object": [{"type": "sphere", "center_m": [0, 0, 1]}]}, "missing radius_m"),
         ({"object": [{"type": "plane", "size_m": [1, 1], "rgb": [2, 0, 0]}]}, "rgb"),
         ({"object": [{"type": "sphere", "radius_m": -1}]}, "radius_m"),
         ({"object": [{"type": "mesh", "file": "nope.ply"}]}, "not found"),

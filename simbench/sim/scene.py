@@ -49,6 +49,8 @@ plane's ``center_m``, ``rotation_deg`` and form keys, and its square in the top 
 
 Spheres take ``center_m`` and ``radius_m``; meshes take ``file`` (PLY/OBJ, relative to the
 scene file), ``scale`` (uniform, mesh units to metres), ``translate_m`` and ``rotation_deg``.
+A plane's, box's, target's or sphere's ``center_m`` left out is ``[0, 0, 1]``, 1 m ahead on the
+camera's axis; a plane's or box's ``size_m`` and a sphere's ``radius_m`` must be given.
 All coordinates are in the camera frame (x right, y down, z forward, metres).
 """
 
@@ -729,6 +731,8 @@ def _parse_box(d: dict, where: str, base_dir: Path) -> dict:
 
 
 def _parse_sphere(d: dict, where: str, base_dir: Path) -> dict:
+    if "radius_m" not in d:  # (as a plane's size_m: an audit read "got None" as a bad value)
+        raise ValueError(f"{where}: missing radius_m")
     return {
         "center_m": _vec(d.get("center_m", (0, 0, 1)), 3, f"{where}.center_m"),
         "radius_m": validate.number(d.get("radius_m"), f"{where}: radius_m", lo=0.0, lo_open=True, hi=SCENE_EXTENT_M),
