@@ -1019,6 +1019,19 @@ case(
     "triangulates with the rig",
     setup=_bare_copies,
 )
+# a docs audit (2026-12-05): bare images decoded in reference mode with a rig whose baseline is
+# mostly vertical were blamed on the reference, Z0 or pattern; the baseline is named first now
+case(
+    "decode-reference-bare-images-rig-of-a-vertical-baseline",
+    lambda d: (
+        f"decode {d}/bare/capture.png --reference {d}/bare/reference.png --rig {d}/up.toml --out {d}/x.npy".split()
+    ),
+    "along the camera's x axis",
+    setup=lambda d: (
+        _bare_copies(d),
+        (d / "up.toml").write_text(_rig_text(**{"pose.position_m": "[0.005, 0.093, 0]"})),
+    ),
+)
 # the fresh-clone audit: a rig of another baseline decoded 95 % at 77 mm MAE in calibrated mode
 # (refused since by its reference plane's Z0, and since 2026-11-29 first by the recorded rig.toml,
 # which also covers the folder's capture given alone: tests/test_manifest.py)

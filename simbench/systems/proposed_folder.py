@@ -502,7 +502,11 @@ def check_reference_plane(
     ``tell``: what takes a warning's text (None: the ``simbench`` logger; the Python API passes
     one that gives it as a :class:`simbench.SimbenchWarning`, which a script can make an error)."""
     from simbench.decode import REFERENCE_Z0_TOLERANCE, REFERENCE_Z0_WARNING, reference_plane_extent
+    from simbench.rig import check_stripe_baseline
 
+    # a baseline not along x first: its plane lies anywhere, and the words below would blame the
+    # reference or Z0 (an audit, 2026-12-05: position_m = [0.005, 0.093, 0] in reference mode)
+    check_stripe_baseline(rig)
     low, offset, high = reference_plane_extent(reference, rig)
     if np.isnan(offset):
         return
