@@ -90,11 +90,14 @@ def test_bare_twelve_bit_files_decode_with_bits_and_warn_without(tmp_path, capsy
     assert main(["decode", *args, "--out", str(out), "--bits", "12"]) == 0
     depth = np.load(out)
     assert np.isfinite(depth).mean() > 0.97 and np.nanmedian(depth) == pytest.approx(1.1, abs=5e-4)
-    # without --bits: read as 16-bit, and told so for each image (here the reference then fails its check)
-    main(["decode", *args, "--out", str(tmp_path / "e.npy")])
+    # without --bits: read as 16-bit, and told so for each image (here the reference then fails its
+    # check, whose one-line error names the warning's advice: an audit, 2026-12-05)
+    assert main(["decode", *args, "--out", str(tmp_path / "e.npy")]) == 2
     told = caplog.text + capsys.readouterr().err
     for name in ("capture.png", "reference.png"):
         assert f"{name}: a 16-bit image whose largest value is" in told and "give --bits 12" in told
+    assert "the reference capture decodes at only" in told
+    assert "as warned above, the images hold fewer bits than their type: give --bits 12" in told
     # bits the values exceed: one line naming the file
     assert main(["decode", *args, "--out", str(tmp_path / "f.npy"), "--bits", "10"]) == 2
     err = capsys.readouterr().err

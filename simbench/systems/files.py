@@ -22,6 +22,7 @@ import contextlib
 import dataclasses
 import json
 import logging
+import re
 import shlex
 import sys
 import time
@@ -332,7 +333,18 @@ def decode_files(request: DecodeRequest) -> str:
     system = get_system(name)
     hook = getattr(system, "decode_files", None)
     with _warnings_told() as told:
-        res = hook(request) if hook is not None else _decode_folder(system, request)
+        try:
+            res = hook(request) if hook is not None else _decode_folder(system, request)
+        except ValueError as exc:
+            # a 16-bit image of fewer bits' digital numbers, warned of, then failing a check that
+            # blames something else (an audit, 2026-12-05: a 12-bit pair without --bits was asked
+            # whether its reference was the reference-plane capture): the error names the warning
+            hint = next((m.group(0) for t in told if (m := re.search(r"give --bits \d+", t))), None)
+            if hint is None or "--bits" in str(exc):
+                raise
+            raise ValueError(
+                f"{exc} - or, as warned above, the images hold fewer bits than their type: {hint}"
+            ) from None
     files = {Path(request.out): npy_bytes(res.depth_m)}
     if res.confidence is not None:
         files[confidence_path(request)] = npy_bytes(res.confidence)
