@@ -44,6 +44,7 @@ __all__ = [
     "confidence_path",
     "refuse_another_rig",
     "check_rig_on_a_plane",
+    "tell_or_log",
 ]
 
 
@@ -705,14 +706,20 @@ def check_rig_on_a_plane(
             f"{where}, more than {100 * REFERENCE_Z0_TOLERANCE:.0f} % off: it is not a calibration of the rig "
             f"{capture} was recorded with"
         )
-    told = (
+    tell_or_log(
+        tell,
         f"{where} (more than {100 * REFERENCE_Z0_WARNING:.1f} % off): depths by triangulation carry that "
-        f"(~{1000 * worst * RIG_CHECK_DEPTH_M:.0f} mm at 1 m)"
+        f"(~{1000 * worst * RIG_CHECK_DEPTH_M:.0f} mm at 1 m)",
     )
+
+
+def tell_or_log(tell: Callable[[str], None] | None, message: str) -> None:
+    """A check's warning ``message`` to ``tell`` (the Python API's, which gives it as a
+    :class:`simbench.SimbenchWarning`), or logged (logger ``simbench``) where it is None."""
     if tell is None:
-        logging.getLogger("simbench").warning("%s", told)
+        logging.getLogger("simbench").warning("%s", message)
     else:
-        tell(told)
+        tell(message)
 
 
 def _device_parameters(system) -> dict | None:

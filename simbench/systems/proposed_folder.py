@@ -35,6 +35,7 @@ from simbench.systems.files import (
     check_outputs,
     recording_manifest_of,
     refuse_another_rig,
+    tell_or_log,
 )
 
 __all__ = [
@@ -547,7 +548,7 @@ def check_reference_plane(
         "is, calibrated-mode ones carry it and reference-mode ones far less (they match columns against the "
         "reference, Eq. 14)"
     )
-    _tell(tell, f"{where}, more than {100 * REFERENCE_Z0_WARNING:.1f} %): {carried}; {advice}")
+    tell_or_log(tell, f"{where}, more than {100 * REFERENCE_Z0_WARNING:.1f} %): {carried}; {advice}")
     _check_reference_tilt(reference, low, offset, high, **tilt)
 
 
@@ -558,14 +559,6 @@ def _pattern_question(pattern_assumed: str) -> str:
         f" Or lit by another pattern than the one assumed ({pattern_assumed}: an image does not record its pattern; "
         "--period/--order/--sequence/--channels give yours)?"
     )
-
-
-def _tell(tell: Callable[[str], None] | None, message: str) -> None:
-    """``message`` to ``tell``, or logged (logger ``simbench``) where it is None."""
-    if tell is None:
-        logging.getLogger("simbench").warning("%s", message)
-    else:
-        tell(message)
 
 
 def _check_reference_tilt(
@@ -612,7 +605,7 @@ def _check_reference_tilt(
         else "reference-mode depths carry far less of it (they match columns against the reference, Eq. 14), "
         f"calibrated-mode ones all of it (~{1000 * worst * z0:.0f} mm at the image's edges)"
     )
-    _tell(
+    tell_or_log(
         tell,
         f"{where} more than {100 * REFERENCE_Z0_WARNING:.1f} %: {carried}; check the rig's camera (focal length, "
         "principal point, distortion), or that the board stood square to the camera",
