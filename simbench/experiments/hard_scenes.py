@@ -59,7 +59,7 @@ from simbench.decode.pipeline import apply_min_confidence
 from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.experiments.render_noise import REPEATS as NOISE_REPEATS
-from simbench.experiments.render_noise import TARGET_RATIO, noise_spreads
+from simbench.experiments.render_noise import TARGET_RATIO, noise_captures, noise_spreads
 from simbench.metrics import edge_band, wrong_pixels
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
@@ -447,21 +447,18 @@ def measure_render_noise(
     the jumps' share and the captures' seeds."""
     cfg = session.config
     scene = session.prepare(session.raw_scene(name))
-    same = session.capture(scene, label, repeats=NOISE_REPEATS)
-    own = [session.capture(scene, f"{label}/render/{k}")[0] for k in range(1, NOISE_REPEATS)]
-    caps = [*same, *own]
+    caps, recordings, seeds = noise_captures(session, scene, first=label, others=f"{label}/render")
     depths = np.stack(
         [apply_min_confidence(session.decode(c, robust, mode="calibrated"), min_confidence).depth_m for c in caps]
     )
-    spreads = noise_spreads(depths, recordings=len(same), region=region, jump_mm=WRONG_MM)
+    spreads = noise_spreads(depths, recordings=recordings, region=region, jump_mm=WRONG_MM)
     return {
         "scene": name,
         "class": HARD_SCENES[name],
         **spreads,
         "meets_target": bool(spreads["ratio"] <= TARGET_RATIO),
         "spp_for_target": samples_for_target(cfg.sampler, cfg.spp, ratio=spreads["ratio"]),
-        "render_seeds": " ".join(str(c.seeds["render"]) for c in [same[0], *own]),
-        "noise_seeds": " ".join(str(c.seeds["noise"]) for c in caps),
+        **seeds,
     }
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "write_render_noise",
     "depth_spread_mm",
     "noise_spreads",
+    "noise_captures",
     "JUMP_MM",
 ]
 
@@ -119,6 +120,21 @@ def noise_spreads(depths: np.ndarray, *, recordings: int, region: np.ndarray, ju
     }
 
 
+def noise_captures(session: Session, scene, *, first: str, others: str) -> tuple[list, int, dict]:
+    """The captures :func:`noise_spreads` takes of ``scene`` (prepared): its render under label
+    ``first`` recorded :data:`REPEATS` times, then renders ``others/1`` .. ``others/REPEATS-1``
+    recorded once each, all by ``session``; with the number of the first's recordings and their
+    seeds (``render_seeds``: each render's; ``noise_seeds``: each capture's)."""
+    same = session.capture(scene, first, repeats=REPEATS)
+    own = [session.capture(scene, f"{others}/{k}")[0] for k in range(1, REPEATS)]
+    caps = [*same, *own]
+    seeds = {
+        "render_seeds": " ".join(str(c.seeds["render"]) for c in [same[0], *own]),
+        "noise_seeds": " ".join(str(c.seeds["noise"]) for c in caps),
+    }
+    return caps, len(same), seeds
+
+
 def _region(session: Session, cap) -> np.ndarray:
     gt = cap.gt
     region = gt.lit & np.isfinite(gt.depth_m)
@@ -169,17 +185,9 @@ def measure_noise(session: Session, part: str) -> dict:
     scene, label = _scene(session, name)
     sampler, spp = what.rsplit("_", 1)
     sub = session.fork(session.sensor, config=dataclasses.replace(cfg, sampler=sampler, spp=int(spp)))
-    same = sub.capture(scene, f"{label}/render/0", repeats=REPEATS)
-    own = [sub.capture(scene, f"{label}/render/{k}")[0] for k in range(1, REPEATS)]
-    caps = [*same, *own]
-    spreads = noise_spreads(
-        np.stack([_depth(sub, c) for c in caps]), recordings=len(same), region=_region(session, same[0])
-    )
-    return {
-        **spreads,
-        "render_seeds": " ".join(str(c.seeds["render"]) for c in [same[0], *own]),
-        "noise_seeds": " ".join(str(c.seeds["noise"]) for c in caps),
-    }
+    caps, recordings, seeds = noise_captures(sub, scene, first=f"{label}/render/0", others=f"{label}/render")
+    depths = np.stack([_depth(sub, c) for c in caps])
+    return {**noise_spreads(depths, recordings=recordings, region=_region(session, caps[0])), **seeds}
 
 
 COLUMNS = [
