@@ -33,6 +33,7 @@ from simbench.experiments.common import RunConfig, Session, Split, markdown_tabl
 from simbench.experiments.table3 import PLACED
 from simbench.metrics import edge_band
 from simbench.sim.mitsuba_dict import DEFAULT_SAMPLER, DEFAULT_SPP
+from simbench.sim.scene import SceneSpec
 
 __all__ = [
     "CANDIDATES",
@@ -120,7 +121,7 @@ def noise_spreads(depths: np.ndarray, *, recordings: int, region: np.ndarray, ju
     }
 
 
-def noise_captures(session: Session, scene, *, first: str, others: str) -> tuple[list, int, dict]:
+def noise_captures(session: Session, scene: SceneSpec, *, first: str, others: str) -> tuple[list, int, dict]:
     """The captures :func:`noise_spreads` takes of ``scene`` (prepared): its render under label
     ``first`` recorded :data:`REPEATS` times, then renders ``others/1`` .. ``others/REPEATS-1``
     recorded once each, all by ``session``; with the number of the first's recordings and their
