@@ -201,6 +201,10 @@ def test_thresholds_pass_on_measured_and_fail_on_worse(tmp_path):
     wrong_side.write_text('["table1/white/paper/completeness"]\nmax = 1\n')
     with pytest.raises(ValueError, match="has no min, and a lower completeness is worse: give min"):
         load_thresholds(wrong_side)
+    # a noise study's spread is held from both sides: one without its min is refused too
+    wrong_side.write_text('["render_noise/plane_white/multijitter_4/render_sd_mm"]\nmax = 0.2\n')
+    with pytest.raises(ValueError, match="has no min, and render_sd_mm is a noise study's spread, held from both"):
+        load_thresholds(wrong_side)
     # an empty (or comment-only) file checks nothing: refused (it printed "all metrics within")
     empty = tmp_path / "empty.toml"
     empty.write_text("# hello\n")
@@ -259,6 +263,10 @@ def test_threshold_rules():
     assert [shares[f"a/{k}"]["max"] for k in ("wrong_share", "wrong_share_all", "wrong_share_image")] == pytest.approx(
         [0.0155, 0.0035, 0.0005]
     )
+    # the noise studies' spreads: a min too (floor 0), the other errors none
+    spreads = thresholds_from({"a/render_sd_mm": 0.2, "a/camera_sd_mm": 0.02, "a/gt_mae_mm": 0.2}, margin=0.25)
+    assert spreads["a/render_sd_mm"] == {"measured": 0.2, "max": 0.27, "min": 0.13}
+    assert spreads["a/camera_sd_mm"]["min"] == 0.0 and "min" not in spreads["a/gt_mae_mm"]
     # a row that decodes under 1 % of its region: no error threshold (its stripe-order errors hold it)
     sparse = {"b/mae_mm": 60.0, "b/completeness": 0.005, "b/stripe_order_errors": 900, "b/c/mae_mm": 1.0}
     t = thresholds_from({**sparse, "b/c/completeness": 0.01}, margin=0.5)
@@ -272,6 +280,13 @@ def test_committed_quick_thresholds_are_valid():
     path = ROOT / "results" / "quick" / "thresholds.toml"
     metrics = json.loads((ROOT / "results" / "quick" / "metrics.json").read_text())
     assert check_thresholds(metrics, path) == []  # the committed quick run passes its own thresholds
+    # a render-noise study that stops seeing its noise (e.g. the own renders given the main
+    # render's seed: a render spread of 0 and every scene's ratio met) fails them; it passed the
+    # max-only thresholds before 2026-12-05
+    spreads = [k for k in metrics if k.endswith("/render_sd_mm")]
+    assert len(spreads) >= 9
+    collapsed = check_thresholds({**metrics, **dict.fromkeys(spreads, 0.0)}, path)
+    assert sorted(f.split(" = ")[0] for f in collapsed) == sorted(spreads)
 
 
 @pytest.mark.slow

@@ -466,6 +466,7 @@ def _run_in_workers(
 #   completeness              min = measured - 0.01 (one percentage point), floor 0
 #   stripe-order errors       max = measured * (1 + margin) + 20 pixels
 #   stripe-order error rate   max = measured * (1 + margin) + 0.0005
+#   the noise studies' spreads (NOISE_SPREADS) also min = measured * (1 - margin) - 0.02 mm, floor 0
 # The margin (default 0.25) covers run-to-run differences between machines (the llvm and
 # scalar variants sample differently); a change to the decoder that makes a key error 25 %
 # worse fails CI.
@@ -479,23 +480,38 @@ def _run_in_workers(
 # 1 % fails its completeness).
 MIN_SCORED_COMPLETENESS = 0.01
 
+# The depth spreads the noise studies measure (render_noise, hard_scenes' render_noise parts): a
+# spread is the simulator's noise carried through the decoder, so a smaller one is not a better
+# decoder but, as likely, a study that no longer sees its noise - e.g. the "own renders" taking
+# the main render's seed, which makes the render noise 0 and every scene's ratio "met".  They are
+# held from below too (the max alone let such a collapse pass CI).
+NOISE_SPREADS = ("render_sd_mm", "camera_sd_mm")
 
-def _rule(name: str, value: float, margin: float) -> tuple[str, float] | None:
+
+def _rules(name: str, value: float, margin: float) -> list[tuple[str, float]]:
+    """The bounds (``("max" | "min", value)``) a metric of this name measured at ``value`` gets."""
+    leaf = name.rsplit("/", 1)[-1]
+    if leaf in NOISE_SPREADS and value is not None and not math.isnan(value):
+        return [*_rule(name, value, margin), ("min", round(max(0.0, value * (1 - margin) - 0.02), 4))]
+    return _rule(name, value, margin)
+
+
+def _rule(name: str, value: float, margin: float) -> list[tuple[str, float]]:
     leaf = name.rsplit("/", 1)[-1]
     if value is None or (isinstance(value, float) and math.isnan(value)):
-        return None
+        return []
     if leaf == "bias_mm":
-        return None  # signed: a "max" would not bound its size
+        return []  # signed: a "max" would not bound its size
     if leaf.endswith("_mm"):
-        return "max", round(value * (1 + margin) + 0.02, 4)
+        return [("max", round(value * (1 + margin) + 0.02, 4))]
     if leaf == "completeness":
-        return "min", round(max(0.0, value - 0.01), 4)
+        return [("min", round(max(0.0, value - 0.01), 4))]
     if leaf == "stripe_order_errors":
-        return "max", int(math.ceil(value * (1 + margin) + 20))
+        return [("max", int(math.ceil(value * (1 + margin) + 20)))]
     # shares of pixels (the wrong shares of a region, of every decoded pixel, of the whole image)
     if leaf == "stripe_order_error_rate" or leaf.startswith("wrong_share"):
-        return "max", round(value * (1 + margin) + 0.0005, 6)
-    return None
+        return [("max", round(value * (1 + margin) + 0.0005, 6))]
+    return []
 
 
 def _too_sparse(name: str, metrics: dict) -> bool:
@@ -510,9 +526,9 @@ def thresholds_from(metrics: dict, *, margin: float) -> dict:
     for name, value in sorted(metrics.items()):
         if _too_sparse(name, metrics):
             continue
-        r = _rule(name, value, margin)
-        if r is not None:
-            out[name] = {"measured": value, r[0]: r[1]}
+        bounds = _rules(name, value, margin)
+        if bounds:
+            out[name] = {"measured": value, **dict(bounds)}
     return out
 
 
@@ -554,7 +570,9 @@ def write_thresholds(
         written_by,
         f"# Margin {margin!r}: errors (mm) max = measured*(1+margin)+0.02; completeness min = measured-0.01;",
         "# stripe-order errors max = measured*(1+margin)+20; their rate and the shares of pixels > 5 mm wrong",
-        "# (wrong_share, wrong_share_all, wrong_share_image) max = measured*(1+margin)+0.0005. No error",
+        "# (wrong_share, wrong_share_all, wrong_share_image) max = measured*(1+margin)+0.0005; the noise studies'",
+        f"# spreads ({', '.join(NOISE_SPREADS)}) also min = measured*(1-margin)-0.02 (a collapsed spread is a study"
+        " that no longer sees its noise). No error",
         f"# threshold for a row that decodes under {MIN_SCORED_COMPLETENESS:.0%} of its region (the errors of a few"
         " stray pixels): its stripe-order errors hold it.",
         "# Regenerate only for an intended change, and say why in the commit.",
@@ -677,13 +695,17 @@ def load_thresholds(path: str | Path) -> dict:
                 validate.number(t[k], f"{path}: [{name!r}] {k}")
         # the bound that holds a regression back (a decoder developer's audit, 2026-11-30: `min = 0`
         # written in place of an error's `max` passed every run)
-        side = _rule(str(name), 1.0, 0.0)
-        if side is not None and side[0] not in t:
-            worse = "higher" if side[0] == "max" else "lower"
-            raise ValueError(
-                f"{path}: [{name!r}] has no {side[0]}, and a {worse} {str(name).rsplit('/', 1)[-1]} is worse: give "
-                f"{side[0]} (the bound that fails a regression)"
-            )
+        for side, _ in _rules(str(name), 1.0, 0.0):
+            if side not in t:
+                leaf = str(name).rsplit("/", 1)[-1]
+                worse = (
+                    f"a {'higher' if side == 'max' else 'lower'} {leaf} is worse"
+                    if leaf not in NOISE_SPREADS
+                    else f"{leaf} is a noise study's spread, held from both sides"
+                )
+                raise ValueError(
+                    f"{path}: [{name!r}] has no {side}, and {worse}: give {side} (the bound that fails a regression)"
+                )
     return table
 
 
