@@ -1045,6 +1045,48 @@ def test_score_refuses_a_lit_mask_that_is_not_one_and_warns_of_inputs_that_are_n
     assert "warning" not in capsys.readouterr().err
 
 
+def test_a_depth_decoded_into_another_recordings_folder_is_scored_as_the_recording_it_came_from(tmp_path, capsys):
+    """An audit (2026-12-05): `decode A --out B/depth.npy` put A's depth in recording B's folder,
+    where `score` took it for B's: scored against B's truth without a word, against A's with a
+    false "another recording's truth?".  The decode record now names the decoded recording's
+    ground truth (format 2), score checks --gt against it, and the decode warns of the folder."""
+    import numpy as np
+
+    from simbench.io import save_npy
+    from tests.test_bad_inputs import _seal, render_folder
+
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a, b = render_folder(tmp_path / "a"), render_folder(tmp_path / "b")
+    (b / "gt_depth.npy").unlink()
+    save_npy(b / "gt_depth.npy", np.full((120, 160), 1.3, np.float32))
+    _seal(b, reference_depth_m=1.0)  # b: another scene's truth
+    out = b / "from_a.npy"
+    assert main(["decode", str(a), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"written into the recording {b}, but it is the depth of the recording {a.resolve()}" in err, err
+    record = json.loads((b / "from_a_decode.json").read_text())
+    assert record["format"] == 2 and record["ground_truth"]["recording"] == str(a.resolve())
+    assert any("written into the recording" in w for w in record["warnings"])
+    # scored against the folder's (b's) truth: warned, by the record; against its own (a's): not
+    assert main(["score", str(out), "--gt", str(b / "gt_depth.npy")]) == 0
+    err = capsys.readouterr().err
+    assert f"says it is the depth of the recording {a.resolve()}, whose ground truth is not" in err, err
+    assert main(["score", str(out), "--gt", str(a / "gt_depth.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    # moved elsewhere with its record, it still knows whose it is
+    moved = tmp_path / "elsewhere"
+    moved.mkdir()
+    for name in ("from_a.npy", "from_a_decode.json"):
+        (b / name).rename(moved / name)
+    assert main(["score", str(moved / "from_a.npy"), "--gt", str(b / "gt_depth.npy")]) == 0
+    assert "says it is the depth of the recording" in capsys.readouterr().err
+    # decoded into its own folder, or outside any recording: no warning; the record still names the truth
+    assert main(["decode", str(a), "--out", str(a / "mine.npy")]) == 0
+    assert "written into the recording" not in capsys.readouterr().err
+    assert json.loads((a / "mine_decode.json").read_text())["ground_truth"]["sha256"]["gt_depth"]
+
+
 def test_a_competitors_min_confidence_that_removes_nothing_says_so(tmp_path, capsys):
     """The fresh-clone audit: a ToF folder decoded with --min-confidence 0.9 said nothing of the
     threshold doing nothing (its decoded pixels all hold thousands of electrons)."""
@@ -1261,7 +1303,7 @@ def test_decode_writes_a_record_of_what_its_files_are(tmp_path, capsys):
     assert main(argv) == 0
     assert "record -> " in capsys.readouterr().out
     record = json.loads((tmp_path / "o" / "d_decode.json").read_text())
-    assert record["format"] == 1 and record["system"] == "proposed" and record["min_confidence"] == 2.0
+    assert record["format"] == 2 and record["system"] == "proposed" and record["min_confidence"] == 2.0
     assert record["command"].startswith("simbench decode") and record["capture"].endswith("capture.png")
     assert record["depth"]["file"] == "d.npy" and "z-depth in metres" in record["depth"]["meaning"]
     assert 0.9 < record["depth"]["valid_share"] <= 1.0

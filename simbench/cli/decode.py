@@ -175,6 +175,17 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
 
     if not depth_path.is_file() or not gt_path.is_file():
         return ""
+    # the decode's record beside the map says whose depth it is, wherever it was written (a depth
+    # decoded from one recording into another's folder was taken for the folder's: an audit)
+    truth = _decoded_truth(depth_path)
+    if truth is not None:
+        if file_sha256(gt_path) in set(truth["sha256"].values()):
+            return ""
+        return (
+            f"its decode record ({depth_path.stem}_decode.json) says it is the depth of the recording "
+            f"{truth['recording']}, whose ground truth is not {gt_path} (another SHA-256): scored against another "
+            "recording's truth?"
+        )
     try:  # a folder with a meta.json of the user's own (no recording) tells nothing
         meta = recording_manifest_of(depth_path)
     except (ManifestError, ValueError, OSError):
@@ -188,6 +199,24 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
         f"it lies in the recording {depth_path.parent}, whose ground truth is not {gt_path} (another SHA-256): "
         f"scored against another recording's truth? (that recording's is {own})"
     )
+
+
+def _decoded_truth(depth_path: Path) -> dict | None:
+    """The ground truth the decode record beside ``depth_path`` (NAME_decode.json, format 2 or
+    later, whose depth file is this one) names: {"recording", "sha256": {key: hex}}; None where
+    there is no such record, it names none (a bare image decoded), or it cannot be read."""
+    record = depth_path.with_name(f"{depth_path.stem}_decode.json")
+    try:
+        info = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    depth = info.get("depth") if isinstance(info, dict) else None
+    if not isinstance(depth, dict) or depth.get("file") != depth_path.name:
+        return None
+    truth = info.get("ground_truth")
+    if not isinstance(truth, dict) or not isinstance(truth.get("sha256"), dict) or not truth["sha256"]:
+        return None
+    return truth
 
 
 def _score_period(given: float | None, recorded: dict | None) -> float:

@@ -171,13 +171,37 @@ def record_path(request: DecodeRequest) -> Path:
     return out.with_name(f"{out.stem}_decode.json")
 
 
-# the decode record's format (record_path)
-RECORD_FORMAT = 1
+# the decode record's format (record_path); 2 (2026-12-05): ``ground_truth``, the decoded
+# recording's ground truth (capture_ground_truth), which `simbench score` checks a --gt against
+RECORD_FORMAT = 2
 # what every system's depth map is (simbench.systems.SystemDepth, the ground truth's convention)
 DEPTH_MEANING = (
     "z-depth in metres along the camera's optical axis (OpenCV axes: x right, y down, z forward), float32, "
     "one value per pixel of the ideal pinhole image (lens distortion undone); NaN where nothing was decoded"
 )
+
+
+def capture_ground_truth(capture: str | Path) -> dict | None:
+    """The ground truth of the recording a capture belongs to (``capture`` a recording folder or
+    a file in one): ``{"recording": its folder (absolute), "sha256": {"gt_depth": ..., ...}}``
+    (the SHA-256 its sealed manifest records of each ground-truth depth file), or None for a
+    capture outside any recording, or a recording without ground truth.  The decode record keeps
+    it, so that `simbench score` knows whose depth a map is wherever it was written."""
+    from simbench.manifest import read_manifest
+    from simbench.systems import RECORDING_MANIFESTS
+
+    capture = Path(capture)
+    folder = capture if capture.is_dir() else capture.parent
+    for name in reversed(RECORDING_MANIFESTS):  # meta.json first, as recording_manifest_of
+        if (folder / name).is_file():
+            sha = read_manifest(folder / name, verify_files=False)["sha256"]
+            truth = {k: sha[k] for k in GROUND_TRUTH_DEPTH_KEYS if k in sha}
+            return {"recording": str(folder.resolve()), "sha256": truth} if truth else None
+    return None
+
+
+# a recording's ground-truth depth files, as its manifest names them (.npy, and the same as EXR)
+GROUND_TRUTH_DEPTH_KEYS = ("gt_depth", "gt_depth_exr")
 
 
 def recording_manifest_of(path: str | Path) -> dict | None:
@@ -346,6 +370,11 @@ def decode_files(request: DecodeRequest) -> str:
             raise ValueError(
                 f"{exc} - or, as warned above, the images hold fewer bits than their type: {hint}"
             ) from None
+    truth = capture_ground_truth(request.capture)
+    elsewhere = _another_recordings_folder(Path(request.out), truth)
+    if elsewhere:
+        logging.getLogger("simbench").warning("--out %s: %s", request.out, elsewhere)
+        told.append(f"--out {request.out}: {elsewhere}")
     files = {Path(request.out): npy_bytes(res.depth_m)}
     if res.confidence is not None:
         files[confidence_path(request)] = npy_bytes(res.confidence)
@@ -416,6 +445,8 @@ def decode_files(request: DecodeRequest) -> str:
             "capture": res.capture_file or request.capture,
             "system": name,
             "decoded": res.summary,
+            # whose depth this is, wherever it is written: `simbench score` checks its --gt against it
+            "ground_truth": truth,
             "depth": {"file": Path(request.out).name, "meaning": DEPTH_MEANING, "valid_share": float(res.valid.mean())},
             "confidence": (
                 None
@@ -462,6 +493,21 @@ def decode_files(request: DecodeRequest) -> str:
     if hint:
         logging.getLogger("simbench").warning("%s: %s", request.capture, hint)
     return msg
+
+
+def _another_recordings_folder(out: Path, truth: dict | None) -> str:
+    """Why writing the depth map ``out`` may mislead, where it lies in a recording folder other
+    than the decoded capture's (``truth``: :func:`capture_ground_truth` of the capture): a user
+    reading that folder, or a script pairing each folder's depth with its ground truth, would
+    take it for that recording's (an audit, 2026-12-05).  "" otherwise."""
+    there = capture_ground_truth(out.parent) if out.parent.is_dir() else None
+    if there is None or (truth is not None and there["recording"] == truth["recording"]):
+        return ""
+    whose = f"the recording {truth['recording']}" if truth else "a capture outside any recording"
+    return (
+        f"written into the recording {out.parent}, but it is the depth of {whose}; `simbench score` tells "
+        "them apart by the decode's record beside it, other readers may not"
+    )
 
 
 def _stale_records(files: dict, request: DecodeRequest) -> list[Path]:
