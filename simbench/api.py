@@ -721,8 +721,11 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
     projector columns, stripe-order errors; pixels within ``edge_band_px`` of a depth edge are
     left out of the errors (the completeness still counts them).  Of a moving recording, against
     its truth at mid-capture, with ``image_motion_px``: its fastest pixel's image motion over the
-    capture (:data:`simbench.metrics.MOVING_TRUTH_NOTE`)."""
-    from simbench.metrics import depth_errors, edge_band, image_motion_px, implausible_columns, implausible_depth
+    capture (:data:`simbench.metrics.MOVING_TRUTH_NOTE`).  With every decoded pixel's counts
+    and wrong share (:func:`simbench.metrics.every_decoded_pixel`: ``n_decoded``,
+    ``n_decoded_outside``, ``wrong_share_all``), the lit region's errors leaving those out."""
+    from simbench.metrics import depth_errors, edge_band, every_decoded_pixel, image_motion_px
+    from simbench.metrics import implausible_columns, implausible_depth
     from simbench.systems import get_system
 
     from simbench import validate as v
@@ -749,6 +752,8 @@ def score(depth: SystemDepth | np.ndarray, recorded: Recorded, *, edge_band_px: 
         for warning in implausible_columns(column, gt.column_px):
             warnings.warn(f"score: the depth's column_px: {warning}", SimbenchWarning, stacklevel=2)
     scores = depth_errors(depth_m, gt.depth_m, region=gt.lit, exclude=exclude, **kw)
+    # as `simbench score`: every decoded pixel too, those outside the lit region included
+    scores.update(every_decoded_pixel(depth_m, gt.depth_m, gt.lit))
     if getattr(gt, "motion_px", None) is not None:  # as `simbench score`: the truth is one moving instant
         scores["image_motion_px"] = image_motion_px(gt.motion_px)
     return scores

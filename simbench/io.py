@@ -625,16 +625,44 @@ def load_npy(path: str | Path, *, expected_shape: tuple[int, ...] | None = None)
 IMAGE_SUFFIXES = frozenset({".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm"})
 
 
+def _float_tiff(path: Path) -> np.ndarray | None:
+    """A one-channel floating-point TIFF's values (read by OpenCV), or None where the file holds
+    integers (refused by the caller as any integer image).  Other TIFFs are refused here."""
+    import cv2
+
+    if not path.is_file():
+        raise FileNotFoundError(f"file not found: {path}")
+    try:
+        arr = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        arr = None
+    if arr is None:
+        raise ValueError(f"{path}: not a TIFF file OpenCV can read")
+    if arr.dtype.kind != "f":
+        return None
+    if arr.ndim != 2:
+        raise ValueError(f"{path}: {arr.shape[2]} channels; a depth map has one")
+    return arr
+
+
 def load_depth_map(path: str | Path, *, expected_shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """A depth map from an .npy file (:func:`load_npy`) or a one-channel OpenEXR file (``render``
-    writes ``gt_depth`` as both, the same values; read with Mitsuba's ``Bitmap``); errors name
-    the file and what is wrong.  Its dtype and shape as stored (the caller checks them)."""
+    """A depth map from an .npy file (:func:`load_npy`), a one-channel OpenEXR file (``render``
+    writes ``gt_depth`` as both, the same values; read with Mitsuba's ``Bitmap``) or a
+    one-channel floating-point TIFF (read with OpenCV; an audit, 2026-12-05: a float32 TIFF in
+    metres was refused as an image of integers); errors name the file and what is wrong.  Its
+    dtype and shape as stored (the caller checks them)."""
     path = Path(path)
+    if path.suffix.lower() in (".tif", ".tiff"):
+        arr = _float_tiff(path)
+        if arr is not None:
+            if expected_shape is not None and arr.shape != tuple(expected_shape):
+                raise ValueError(f"{path}: shape {arr.shape}, expected {tuple(expected_shape)}")
+            return arr
     if path.suffix.lower() in IMAGE_SUFFIXES:
         # (a new user's audit: a 16-bit PNG depth read "not a NumPy .npy file", naming no way on)
         raise ValueError(
-            f"{path}: a depth map is read from .npy or .exr, float metres with NaN holes; an image file holds "
-            "integers in units of its own (e.g. millimetres in a 16-bit PNG): convert it, e.g. "
+            f"{path}: a depth map is read from .npy, .exr or a floating-point .tif, float metres with NaN holes; this "
+            "image file holds integers in units of its own (e.g. millimetres in a 16-bit PNG): convert it, e.g. "
             "numpy.save('depth.npy', png.astype(numpy.float32) / 1000) with 0 set to NaN"
         )
     if path.suffix.lower() != ".exr":

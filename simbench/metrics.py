@@ -35,6 +35,7 @@ __all__ = [
     "points_from_depth",
     "score",
     "wrong_pixels",
+    "every_decoded_pixel",
     "image_motion_px",
     "MOVING_TRUTH_NOTE",
     "code_stripes",
@@ -568,6 +569,29 @@ def code_stripes(
     return out
 
 
+def every_decoded_pixel(
+    depth_m: np.ndarray, gt_depth_m: np.ndarray, region: np.ndarray, *, wrong_mm: float = 5.0
+) -> dict:
+    """What :func:`depth_errors` leaves out: every decoded pixel (finite depth) of the image,
+    the region's and the rest (shadows, pixels the projector does not reach; the edge band).
+
+    Returns ``n_decoded`` (every decoded pixel), ``n_decoded_outside`` (those outside
+    ``region``) and ``wrong_share_all``: the share of ``n_decoded`` farther than ``wrong_mm``
+    from the truth, a decoded pixel where the truth is NaN counting wrong
+    (:func:`wrong_pixels`); NaN where nothing is decoded.  A depth map scored over its region
+    alone hides the wrong depths it writes outside it (an audit, 2026-12-05: 2640 unlit pixels
+    set to 0.5 m scored the same as the clean map); the hard scenes' goal is on this share."""
+    d = np.asarray(depth_m)
+    decoded = np.isfinite(d)
+    n = int(decoded.sum())
+    wrong = int(wrong_pixels(d, gt_depth_m, wrong_m=wrong_mm / 1000.0).sum())
+    return {
+        "n_decoded": n,
+        "n_decoded_outside": int((decoded & ~np.asarray(region, bool)).sum()),
+        "wrong_share_all": wrong / n if n else float("nan"),
+    }
+
+
 def implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> list[str]:
     """What makes a depth map look like something other than a decode of this scene in metres:
     no finite depth where it is scored, depths <= 0, or a median far (> 5x) from the ground
@@ -580,8 +604,13 @@ def implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> 
         return ["it holds no finite depth where the scene is scored: the errors are undefined (a decode of nothing?)"]
     out = []
     if (d[finite] <= 0).any():
-        out.append(f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m")
+        out.append(
+            f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m, scored as decoded depths (and wrong): if "
+            "they mark pixels not decoded, write NaN there (simbench score --zero-is-hole reads them so)"
+        )
     gt_median = float(np.median(gt[ok][finite]))
+    if not gt_median > 0:  # (an audit: a ground truth of median 0 divided by zero)
+        return [*out, f"the ground truth's median depth is {gt_median:.3g} m: is it a depth map in metres?"]
     ratio = float(np.median(d[finite])) / gt_median
     if not 0.2 <= ratio <= 5.0:
         out.append(

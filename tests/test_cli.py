@@ -1087,6 +1087,98 @@ def test_a_depth_decoded_into_another_recordings_folder_is_scored_as_the_recordi
     assert json.loads((a / "mine_decode.json").read_text())["ground_truth"]["sha256"]["gt_depth"]
 
 
+def test_score_counts_every_decoded_pixel_and_reads_what_a_researchers_own_decoder_writes(tmp_path, capsys):
+    """A bring-your-own-decoder audit (2026-12-05): depths written outside the lit region (a
+    shadow filled with 0.5 m) scored as the clean map; 0 for "not decoded" scored as decoded
+    depth at 100 % completeness; a recording's gt_column.npy or gt_object_id.npy as --gt was
+    scored (701570 mm) or crashed (a ground truth of median 0); a ground truth copied out of its
+    recording silently scored its shadows; a float32 TIFF was refused as an image of integers."""
+    import cv2
+    import numpy as np
+
+    from tests.test_bad_inputs import render_folder
+
+    gt = np.full((40, 50), 1.1, np.float32)
+    lit = np.ones((40, 50), bool)
+    lit[:, :10] = False  # a shadow: its truth is there, the projector is not
+    np.save(tmp_path / "gt.npy", gt)
+    np.save(tmp_path / "lit.npy", lit)
+    clean = gt + np.float32(0.001)
+    clean[:, :10] = np.nan
+    filled = clean.copy()
+    filled[:, :10] = 0.5  # the shadow filled with wrong depths
+    np.save(tmp_path / "clean.npy", clean)
+    np.save(tmp_path / "filled.npy", filled)
+    base = ["--gt", str(tmp_path / "gt.npy"), "--lit", str(tmp_path / "lit.npy"), "--json"]
+    scores = {}
+    for name in ("clean", "filled"):
+        assert main(["score", str(tmp_path / f"{name}.npy"), *base]) == 0
+        scores[name] = json.loads(capsys.readouterr().out)
+    assert scores["clean"]["mae_mm"] == scores["filled"]["mae_mm"]  # the region's errors alike ...
+    assert scores["clean"]["wrong_share_all"] == 0 and scores["clean"]["n_decoded_outside"] == 0
+    assert scores["filled"]["n_decoded"] == 2000 and scores["filled"]["n_decoded_outside"] == 400  # ... not these
+    assert scores["filled"]["wrong_share_all"] == pytest.approx(0.2)
+    assert scores["filled"]["region"] == str(tmp_path / "lit.npy")
+    assert main(["score", str(tmp_path / "filled.npy"), *base[:-1]]) == 0
+    assert (
+        "every decoded pixel: 2000 (400 outside the region), 20.000 % of them > 5 mm wrong" in capsys.readouterr().out
+    )
+    # 0 marking holes: scored as depth, said so; --zero-is-hole reads them as holes
+    zero = np.nan_to_num(clean, nan=0.0)
+    np.save(tmp_path / "zero.npy", zero)
+    assert main(["score", str(tmp_path / "zero.npy"), *base]) == 0
+    out, err = capsys.readouterr()
+    assert "400 of its depths are <= 0 m, scored as decoded depths (and wrong)" not in err  # (outside the region)
+    assert json.loads(out)["wrong_share_all"] == pytest.approx(0.2)
+    zero[5, 20] = 0.0
+    np.save(tmp_path / "zero.npy", zero)
+    assert main(["score", str(tmp_path / "zero.npy"), *base]) == 0
+    out, err = capsys.readouterr()
+    assert "1 of its depths are <= 0 m, scored as decoded depths (and wrong)" in err and "--zero-is-hole" in err
+    assert json.loads(out)["completeness"] == 1.0
+    assert main(["score", str(tmp_path / "zero.npy"), *base, "--zero-is-hole"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["completeness"] == pytest.approx(1 - 1 / 1600) and "<= 0 m" not in err
+    read = json.loads(out)
+    assert read["mae_mm"] == pytest.approx(scores["clean"]["mae_mm"]) and read["wrong_share_all"] == 0
+    # no gt_lit.npy beside --gt and no --lit: a note, and the JSON names the region
+    assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
+    assert "note: no gt_lit.npy beside --gt: the region is every pixel with a finite ground truth" in (
+        capsys.readouterr().err
+    )
+    assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "gt.npy"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["region"] == "finite ground truth"
+    # a ground truth of median 0, or no depth > 0: refused in one line, not a crash
+    np.save(tmp_path / "zeros.npy", np.zeros((40, 50), np.float32))
+    assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "zeros.npy")]) == 2
+    assert "has no depth > 0 m: is it a depth map in metres?" in capsys.readouterr().err
+    half = gt.copy()
+    half[:25] = 0.0
+    np.save(tmp_path / "half.npy", half)
+    assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "half.npy")]) == 0
+    assert "the ground truth's median depth is 0 m: is it a depth map in metres?" in capsys.readouterr().err
+    # a recording's other files as --gt: refused by name
+    from simbench.io import save_json
+    from simbench.manifest import seal_manifest
+
+    r = render_folder(tmp_path)
+    meta = json.loads((r / "meta.json").read_text())
+    listed = {**meta["files"], "gt_column": "gt_column.npy", "gt_lit": "gt_lit.npy"}
+    (r / "meta.json").unlink()  # sealed anew, listing them as `simbench render` does
+    save_json(r / "meta.json", seal_manifest(r, meta, listed))
+    for name in ("gt_column.npy", "gt_lit.npy"):
+        assert main(["score", str(r / "depth.npy"), "--gt", str(r / name)]) == 2
+        err = capsys.readouterr().err
+        assert f"is the recording's {name[:-4]}, not its ground-truth depth: give {r / 'gt_depth.npy'}" in err
+    # a float32 TIFF in metres is read (as the .npy); an integer one refused as before
+    cv2.imwrite(str(tmp_path / "clean.tif"), clean)
+    assert main(["score", str(tmp_path / "clean.tif"), *base]) == 0
+    assert json.loads(capsys.readouterr().out) == scores["clean"]
+    cv2.imwrite(str(tmp_path / "mm.tif"), np.nan_to_num(clean * 1000).astype(np.uint16))
+    assert main(["score", str(tmp_path / "mm.tif"), *base]) == 2
+    assert "this image file holds integers in units of its own" in capsys.readouterr().err
+
+
 def test_a_competitors_min_confidence_that_removes_nothing_says_so(tmp_path, capsys):
     """The fresh-clone audit: a ToF folder decoded with --min-confidence 0.9 said nothing of the
     threshold doing nothing (its decoded pixels all hold thousands of electrons)."""

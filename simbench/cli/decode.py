@@ -54,15 +54,20 @@ def _cmd_decode(args) -> int:
 def _cmd_score(args) -> int:
     from simbench.io import load_depth_map, load_npy
     from simbench.systems.files import recording_manifest_of
-    from simbench.metrics import MOVING_TRUTH_NOTE, depth_errors, edge_band, image_motion_px
+    from simbench.metrics import MOVING_TRUTH_NOTE, depth_errors, edge_band, every_decoded_pixel, image_motion_px
     from simbench.metrics import implausible_columns, implausible_depth
 
     if args.period is not None and args.period <= 2:
         raise ValueError(f"--period must be > 2 projector px, got {args.period}")
+    _refuse_another_recorded_file(Path(args.gt))
     gt = _depth_map(load_depth_map(args.gt), args.gt, what="ground truth")
     if not np.isfinite(gt).any():
         raise ValueError(f"{args.gt}: the ground truth has no finite depth: nothing to score against")
+    if not (gt[np.isfinite(gt)] > 0).any():
+        raise ValueError(f"{args.gt}: the ground truth has no depth > 0 m: is it a depth map in metres?")
     depth = _depth_map(load_depth_map(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
+    if args.zero_is_hole:
+        depth = np.where(depth > 0, depth, np.nan).astype(depth.dtype)
     gt_dir = Path(args.gt).parent
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
@@ -75,6 +80,14 @@ def _cmd_score(args) -> int:
     if not args.lit:
         _refuse_missing(lit_path, recorded, "the region would be all finite ground truth instead")
     region = _mask(load_npy(lit_path, expected_shape=gt.shape), lit_path) if lit_path.is_file() else np.isfinite(gt)
+    region_is = str(lit_path) if lit_path.is_file() else "finite ground truth"
+    if not lit_path.is_file() and not args.json:
+        # (an audit: a ground truth copied out of its recording scored its shadows too, without a word)
+        print(
+            f"simbench: note: no {lit_path.name} beside --gt: the region is every pixel with a finite ground truth, "
+            "shadows and pixels the projector does not reach included; give --lit for the lit pixels",
+            file=sys.stderr,
+        )
     other = _not_the_recordings_truth(Path(args.depth), Path(args.gt))
     if other:
         print(f"simbench: warning: {args.depth}: {other}", file=sys.stderr)
@@ -99,6 +112,8 @@ def _cmd_score(args) -> int:
         for warning in implausible_columns(kw["column_px"], kw["gt_column_px"]):
             print(f"simbench: warning: {args.column}: {warning}", file=sys.stderr)
     m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
+    m.update(every_decoded_pixel(depth, gt, region))
+    m["region"] = region_is
     if not m["n_region"]:
         raise ValueError(
             f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
@@ -131,6 +146,11 @@ def _cmd_score(args) -> int:
             f"({lit_path.name if lit_path.is_file() else 'finite ground truth'}), outliers (> 5 mm) "
             f"{100 * m['outlier_share']:.3f} %"
         )
+        print(
+            f"every decoded pixel: {m['n_decoded']} ({m['n_decoded_outside']} outside the region), "
+            f"{100 * m['wrong_share_all']:.3f} % of them > 5 mm wrong (depth edges, shadows and unlit pixels "
+            "included; a depth where the truth has none counts wrong)"
+        )
         if "stripe_order_errors" in m:
             print(
                 f"stripe-order errors {m['stripe_order_errors']} ({100 * m['stripe_order_error_rate']:.4f} % of valid "
@@ -139,6 +159,25 @@ def _cmd_score(args) -> int:
         if "image_motion_px" in m:
             print(f"note: {MOVING_TRUTH_NOTE.format(px=m['image_motion_px'])}")
     return 0
+
+
+def _refuse_another_recorded_file(gt_path: Path) -> None:
+    """A ValueError when ``--gt`` is a file its recording lists as something other than the
+    ground-truth depth (an audit, 2026-12-05: gt_column.npy as --gt scored 701570 mm MAE with a
+    warning that blamed the depth map; gt_object_id.npy crashed)."""
+    from simbench.systems.files import GROUND_TRUTH_DEPTH_KEYS, recording_manifest_of
+
+    if not gt_path.is_file():
+        return
+    meta = recording_manifest_of(gt_path)
+    files = (meta or {}).get("files", {})
+    key = next((k for k, name in files.items() if name == gt_path.name), None)
+    if key is not None and key not in GROUND_TRUTH_DEPTH_KEYS:
+        depth = files.get("gt_depth")
+        raise ValueError(
+            f"--gt {gt_path} is the recording's {key}, not its ground-truth depth"
+            + (f": give {gt_path.parent / depth}" if depth else "")
+        )
 
 
 def _refuse_missing(path: Path, recorded: dict | None, instead: str) -> None:
@@ -350,9 +389,17 @@ def add_parsers(sub, kw: dict) -> None:
     s.set_defaults(fn=_cmd_decode)
 
     s = sub.add_parser("score", help="score a depth map against ground truth", **kw)
-    s.add_argument("depth", help="depth map .npy or one-channel .exr (metres, NaN = invalid)")
+    s.add_argument(
+        "depth", help="depth map .npy, one-channel .exr or floating-point .tif (z-depth in metres, NaN = not decoded)"
+    )
     s.add_argument(
         "--gt", required=True, help="ground-truth depth .npy or .exr (gt_lit.npy beside it defines the region)"
+    )
+    s.add_argument(
+        "--zero-is-hole",
+        action="store_true",
+        help="read depths <= 0 as pixels not decoded (a decoder that marks holes with 0 or -1; without it they are "
+        "scored as decoded depths, and wrong)",
     )
     s.add_argument("--lit", help="region mask .npy (default: gt_lit.npy beside --gt, else all finite GT)")
     s.add_argument("--column", help="decoded projector columns .npy, for stripe-order errors")

@@ -60,7 +60,7 @@ from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.experiments.render_noise import REPEATS as NOISE_REPEATS
 from simbench.experiments.render_noise import TARGET_RATIO, noise_captures, noise_spreads
-from simbench.metrics import edge_band, wrong_pixels
+from simbench.metrics import edge_band, every_decoded_pixel, wrong_pixels
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
 if TYPE_CHECKING:
@@ -216,8 +216,9 @@ def wrong_share_all(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> float:
     """The share of every decoded pixel (finite depth) more than :data:`WRONG_MM` from
     ``gt_depth_m``, a decoded pixel where the truth is NaN (nothing seen) counting wrong: the
     edge band, shadows and unlit pixels included (the module doc); NaN where nothing is decoded."""
-    n = int(np.isfinite(np.asarray(depth_m)).sum())
-    return float(_wrong_everywhere(depth_m, gt_depth_m).sum() / n) if n else float("nan")
+    return float(
+        every_decoded_pixel(depth_m, gt_depth_m, np.ones(np.shape(depth_m), bool), wrong_mm=WRONG_MM)["wrong_share_all"]
+    )
 
 
 def object_scores(rec: Recording, depth: "SystemDepth | DecodeResult", region: np.ndarray) -> dict:
