@@ -896,6 +896,15 @@ def test_render_replaces_a_recording_of_any_system_and_says_so_but_never_a_forei
     (tmp_path / "s.toml").write_text(TINY_SCENE.replace("1.1]", "1.2]"))  # the same name, another scene
     assert render("--system", "tof") == 0
     assert json.loads((out / "device.json").read_text())["scene_sha256"] != meta["scene_sha256"]
+    # --overwrite over a folder holding a file of the user's: the line names what went with it
+    # (a bring-your-own-decoder audit, 2026-12-05)
+    np.save(out / "mydepth.npy", np.zeros((2, 2), np.float32))
+    assert render("--system", "tof") == 2
+    capsys.readouterr()
+    assert render("--system", "tof", "--overwrite") == 0
+    said = capsys.readouterr().out
+    assert "of scene tiny, and with it 1 file(s) it did not record or that changed since: mydepth.npy there)" in said
+    assert not (out / "mydepth.npy").exists()
     foreign = tmp_path / "mine"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("keep me")

@@ -523,6 +523,11 @@ def test_a_scene_is_a_path_or_a_library_name_from_any_folder(tmp_path, monkeypat
     mine.write_text("")
     assert scene_file("step") == Path("step")  # a file of that name in the working folder wins
     mine.unlink()
+    # a folder of that name (a recording named after its scene) is no scene: the name still is
+    # (an audit, 2026-12-05: the name the error advised read "a folder, not a scene file")
+    mine.mkdir()
+    assert scene_file("step") == SCENES_DIR / "step.toml" and scene_file("./step") == Path("./step")
+    mine.rmdir()
     with pytest.raises(
         FileNotFoundError, match=rf"scenes/step.toml \(relative paths .* is {SCENES_DIR}/step.toml: give"
     ):

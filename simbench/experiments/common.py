@@ -115,6 +115,12 @@ def library_scene_path(name: object) -> Path:
     return path
 
 
+def _library_name(scene: str | Path) -> bool:
+    """Whether ``scene``, as given, is the bare name of a library scene (``step``)."""
+    name = str(scene)
+    return "/" not in name and "\\" not in name and (SCENES_DIR / f"{name}.toml").is_file()
+
+
 def scene_file(scene: str | Path) -> Path:
     """The scene file a command or :func:`simbench.record` is given: a path, as it is, or else a
     library scene's name (``step``: ``scenes/step.toml`` of the repository, from any working
@@ -127,8 +133,11 @@ def scene_file(scene: str | Path) -> Path:
         the README's ``scenes/step.toml`` run from another folder said only "not found").
     """
     path = Path(scene)
-    if path.exists():
+    if path.exists() and not (path.is_dir() and _library_name(scene)):
         return path
+    # a folder is no scene: a library scene's name that a folder of the working folder shares
+    # (a recording named after its scene, `render step --out step`) still names the scene (an audit,
+    # 2026-12-05: the error advised the name, which then read "a folder, not a scene file")
     try:
         return library_scene_path(str(scene))
     except ValueError:  # no name of the library (a path, or no such scene)
