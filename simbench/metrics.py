@@ -603,9 +603,12 @@ def implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> 
     if not finite.any():
         return ["it holds no finite depth where the scene is scored: the errors are undefined (a decode of nothing?)"]
     out = []
-    if (d[finite] <= 0).any():
+    # over the whole map: 0 marking the holes of a shadow counts in the wrong share of every
+    # decoded pixel, outside the region too (a review, 2026-12-05)
+    everywhere = np.asarray(depth)[np.isfinite(depth)]
+    if (everywhere <= 0).any():
         out.append(
-            f"{int((d[finite] <= 0).sum())} of its depths are <= 0 m, scored as decoded depths (and wrong): if "
+            f"{int((everywhere <= 0).sum())} of its depths are <= 0 m, scored as decoded depths (and wrong): if "
             "they mark pixels not decoded, write NaN there (simbench score --zero-is-hole reads them so)"
         )
     gt_median = float(np.median(gt[ok][finite]))

@@ -1062,6 +1062,7 @@ def test_a_depth_decoded_into_another_recordings_folder_is_scored_as_the_recordi
     import numpy as np
 
     from simbench.io import save_npy
+    from simbench.manifest import file_sha256
     from tests.test_bad_inputs import _seal, render_folder
 
     (tmp_path / "a").mkdir()
@@ -1094,6 +1095,38 @@ def test_a_depth_decoded_into_another_recordings_folder_is_scored_as_the_recordi
     assert main(["decode", str(a), "--out", str(a / "mine.npy")]) == 0
     assert "written into the recording" not in capsys.readouterr().err
     assert json.loads((a / "mine_decode.json").read_text())["ground_truth"]["sha256"]["gt_depth"]
+    # a map written over since the decode (another decoder's depth of b, saved over it): its record
+    # is not believed, and the map is judged by the folder it lies in
+    (moved / "from_a.npy").rename(b / "x.npy")
+    (moved / "from_a_decode.json").rename(b / "x_decode.json")
+    np.save(b / "x.npy", np.full((120, 160), 1.3, np.float32))
+    assert main(["score", str(b / "x.npy"), "--gt", str(b / "gt_depth.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    # hand-edited records are not believed either, and crash nothing
+    for truth in ({"sha256": {"gt_depth": "x"}}, {"recording": "r", "sha256": {"gt_depth": ["x"]}}, "r", 3):
+        record = json.loads((b / "x_decode.json").read_text())
+        record["depth"]["sha256"] = file_sha256(b / "x.npy")
+        record["ground_truth"] = truth
+        (b / "x_decode.json").write_text(json.dumps(record))
+        assert main(["score", str(b / "x.npy"), "--gt", str(b / "gt_depth.npy")]) == 0, truth
+        assert "warning" not in capsys.readouterr().err
+    # a bare capture (outside any recording) decoded into b: the decode warns, and so does score
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    for name in ("capture.png", "reference.png", "rig.toml"):
+        (bare / name).write_bytes((a / name).read_bytes())
+    argv = ["decode", str(bare / "capture.png"), "--reference", str(bare / "reference.png"), "--rig"]
+    assert main([*argv, str(bare / "rig.toml"), "--z0", "1.0", "--out", str(b / "y.npy")]) == 0
+    assert "but it is the depth of a capture outside any recording" in capsys.readouterr().err
+    assert json.loads((b / "y_decode.json").read_text())["ground_truth"] is None
+    assert main(["score", str(b / "y.npy"), "--gt", str(b / "gt_depth.npy")]) == 0
+    assert "a capture outside any recording: is it this recording's depth?" in capsys.readouterr().err
+    # a folder with a meta.json of the user's own is no recording: decoded into without a word
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "meta.json").write_text('{"experiment": "x"}')
+    assert main(["decode", str(a), "--out", str(mine / "d.npy")]) == 0
+    assert "written into the recording" not in capsys.readouterr().err
 
 
 def test_score_counts_every_decoded_pixel_and_reads_what_a_researchers_own_decoder_writes(tmp_path, capsys):
@@ -1137,8 +1170,18 @@ def test_score_counts_every_decoded_pixel_and_reads_what_a_researchers_own_decod
     np.save(tmp_path / "zero.npy", zero)
     assert main(["score", str(tmp_path / "zero.npy"), *base]) == 0
     out, err = capsys.readouterr()
-    assert "400 of its depths are <= 0 m, scored as decoded depths (and wrong)" not in err  # (outside the region)
+    assert "400 of its depths are <= 0 m, scored as decoded depths (and wrong)" in err  # (outside the region too)
     assert json.loads(out)["wrong_share_all"] == pytest.approx(0.2)
+    assert main(["score", str(tmp_path / "zero.npy"), *base, "--zero-is-hole"]) == 0
+    assert json.loads(capsys.readouterr().out)["wrong_share_all"] == 0
+    # an integer map (millimetres, 0 = hole) with --zero-is-hole: its zeros holes, not a cast NaN
+    np.save(tmp_path / "mm.npy", np.round(zero * 1000).astype(np.int32))
+    assert main(["score", str(tmp_path / "mm.npy"), *base, "--zero-is-hole"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["n_decoded"] == 1600 and "<= 0 m" not in err and "is it in metres" in err
+    # a --lit that is not there: refused, not every finite truth in its place
+    assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "gt.npy"), "--lit", "nope.npy"]) == 2
+    assert "--lit nope.npy: no such file" in capsys.readouterr().err
     zero[5, 20] = 0.0
     np.save(tmp_path / "zero.npy", zero)
     assert main(["score", str(tmp_path / "zero.npy"), *base]) == 0

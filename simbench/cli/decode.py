@@ -67,8 +67,11 @@ def _cmd_score(args) -> int:
         raise ValueError(f"{args.gt}: the ground truth has no depth > 0 m: is it a depth map in metres?")
     depth = _depth_map(load_depth_map(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
     if args.zero_is_hole:
-        depth = np.where(depth > 0, depth, np.nan).astype(depth.dtype)
+        d = depth if depth.dtype.kind == "f" else depth.astype(np.float64)  # (an integer map has no NaN)
+        depth = np.where(d > 0, d, d.dtype.type(np.nan))
     gt_dir = Path(args.gt).parent
+    if args.lit and not Path(args.lit).is_file():  # (it fell back to every finite truth without a word)
+        raise FileNotFoundError(f"--lit {args.lit}: no such file")
     lit_path = Path(args.lit) if args.lit else gt_dir / "gt_lit.npy"
     col_gt_path = Path(args.gt_column) if args.gt_column else gt_dir / "gt_column.npy"
     recorded = None
@@ -208,7 +211,7 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
     not (another scene's ground truth scored without a word gave 174 mm MAE); "" otherwise, or
     where the depth map lies outside any recording (nothing to compare with)."""
     from simbench.manifest import file_sha256
-    from simbench.systems.files import recording_manifest_of
+    from simbench.systems.files import GROUND_TRUTH_DEPTH_KEYS, recording_manifest_of
 
     from simbench.manifest import ManifestError
 
@@ -216,8 +219,9 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
         return ""
     # the decode's record beside the map says whose depth it is, wherever it was written (a depth
     # decoded from one recording into another's folder was taken for the folder's: an audit)
-    truth = _decoded_truth(depth_path)
-    if truth is not None:
+    record = _decode_record(depth_path)
+    if record is not None and record["truth"] is not None:
+        truth = record["truth"]
         if file_sha256(gt_path) in set(truth["sha256"].values()):
             return ""
         return (
@@ -229,6 +233,15 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
         meta = recording_manifest_of(depth_path)
     except (ManifestError, ValueError, OSError):
         return ""
+    if record is not None:  # decoded from a capture outside any recording, into this folder or not
+        own_truth = {(meta or {}).get("sha256", {}).get(k) for k in GROUND_TRUTH_DEPTH_KEYS} - {None}
+        if file_sha256(gt_path) not in own_truth:
+            return ""
+        return (
+            f"it lies in the recording {depth_path.parent}, but its decode record ({depth_path.stem}_decode.json) "
+            f"says it was decoded from {record['capture']}, a capture outside any recording: is it this recording's "
+            "depth?"
+        )
     if meta is None or "gt_depth" not in meta.get("sha256", {}):
         return ""
     if file_sha256(gt_path) in {meta["sha256"].get(k) for k in ("gt_depth", "gt_depth_exr")}:  # .npy or .exr
@@ -240,22 +253,37 @@ def _not_the_recordings_truth(depth_path: Path, gt_path: Path) -> str:
     )
 
 
-def _decoded_truth(depth_path: Path) -> dict | None:
-    """The ground truth the decode record beside ``depth_path`` (NAME_decode.json, format 2 or
-    later, whose depth file is this one) names: {"recording", "sha256": {key: hex}}; None where
-    there is no such record, it names none (a bare image decoded), or it cannot be read."""
+def _decode_record(depth_path: Path) -> dict | None:
+    """What the decode record beside ``depth_path`` (NAME_decode.json, format 2 or later) says of
+    it: {"truth": {"recording": folder, "sha256": {key: hex}} or None (a capture outside any
+    recording), "capture": the capture decoded}; None where there is no such record, it is of
+    another file, the map is not the one it wrote (written over since: its SHA-256 differs), or
+    it cannot be read (edited by hand: anything unexpected in it)."""
+    from simbench.manifest import file_sha256
+
     record = depth_path.with_name(f"{depth_path.stem}_decode.json")
     try:
         info = json.loads(record.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    depth = info.get("depth") if isinstance(info, dict) else None
-    if not isinstance(depth, dict) or depth.get("file") != depth_path.name:
+    if not isinstance(info, dict) or not isinstance(info.get("format"), int) or info["format"] < 2:
+        return None
+    depth = info.get("depth")
+    if not isinstance(depth, dict) or depth.get("file") != depth_path.name or not isinstance(depth.get("sha256"), str):
+        return None
+    if file_sha256(depth_path) != depth["sha256"]:
         return None
     truth = info.get("ground_truth")
-    if not isinstance(truth, dict) or not isinstance(truth.get("sha256"), dict) or not truth["sha256"]:
-        return None
-    return truth
+    if truth is not None:
+        sha = truth.get("sha256") if isinstance(truth, dict) else None
+        if not (
+            isinstance(truth.get("recording") if isinstance(truth, dict) else None, str)
+            and isinstance(sha, dict)
+            and sha
+            and all(isinstance(v, str) for v in sha.values())
+        ):
+            return None
+    return {"truth": truth, "capture": str(info.get("capture", "?"))}
 
 
 def _score_period(given: float | None, recorded: dict | None) -> float:

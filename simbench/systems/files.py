@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 
 import dataclasses
+import hashlib
 import json
 import logging
 import re
@@ -172,7 +173,9 @@ def record_path(request: DecodeRequest) -> Path:
 
 
 # the decode record's format (record_path); 2 (2026-12-05): ``ground_truth``, the decoded
-# recording's ground truth (capture_ground_truth), which `simbench score` checks a --gt against
+# recording's ground truth (capture_ground_truth; null for a capture outside any recording), and
+# ``depth.sha256``, the depth map's: `simbench score` checks a --gt against the first where the
+# map is still the one the decode wrote
 RECORD_FORMAT = 2
 # what every system's depth map is (simbench.systems.SystemDepth, the ground truth's convention)
 DEPTH_MEANING = (
@@ -447,7 +450,14 @@ def decode_files(request: DecodeRequest) -> str:
             "decoded": res.summary,
             # whose depth this is, wherever it is written: `simbench score` checks its --gt against it
             "ground_truth": truth,
-            "depth": {"file": Path(request.out).name, "meaning": DEPTH_MEANING, "valid_share": float(res.valid.mean())},
+            "depth": {
+                "file": Path(request.out).name,
+                "meaning": DEPTH_MEANING,
+                "valid_share": float(res.valid.mean()),
+                # (what `simbench score` checks before it believes the record: a map written over
+                # since is not this decode's)
+                "sha256": hashlib.sha256(files[Path(request.out)]).hexdigest(),
+            },
             "confidence": (
                 None
                 if res.confidence is None
@@ -500,7 +510,12 @@ def _another_recordings_folder(out: Path, truth: dict | None) -> str:
     than the decoded capture's (``truth``: :func:`capture_ground_truth` of the capture): a user
     reading that folder, or a script pairing each folder's depth with its ground truth, would
     take it for that recording's (an audit, 2026-12-05).  "" otherwise."""
-    there = capture_ground_truth(out.parent) if out.parent.is_dir() else None
+    from simbench.manifest import ManifestError
+
+    try:  # a folder with a meta.json of the user's own, or an edited recording's: no recording to mistake
+        there = capture_ground_truth(out.parent) if out.parent.is_dir() else None
+    except (ManifestError, ValueError, OSError):
+        return ""
     if there is None or (truth is not None and there["recording"] == truth["recording"]):
         return ""
     whose = f"the recording {truth['recording']}" if truth else "a capture outside any recording"
