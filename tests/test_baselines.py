@@ -354,6 +354,7 @@ def test_cli_system_render_decode_score(tmp_path, capsys, variant, device):
     rec = simbench.record(SCENES / "discontinuity.toml", system=device, spp=4, cache=".cache/simbench")
     api = simbench.score(simbench.depth(rec), rec, edge_band_px=5)
     cli = json.loads(capsys.readouterr().out)
+    assert cli.pop("region") == str(tmp_path / "rec" / "gt_lit.npy")  # (the region's file: the API's has no name)
     assert cli == {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in api.items()}
     assert np.array_equal(np.load(tmp_path / "rec" / "gt_lit.npy"), rec.gt.lit)
     depth = np.load(tmp_path / "d.npy")
