@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
@@ -36,6 +37,7 @@ __all__ = [
     "score",
     "wrong_pixels",
     "every_decoded_pixel",
+    "confidence_curve",
     "image_motion_px",
     "MOVING_TRUTH_NOTE",
     "code_stripes",
@@ -590,6 +592,46 @@ def every_decoded_pixel(
         "n_decoded_outside": int((decoded & ~np.asarray(region, bool)).sum()),
         "wrong_share_all": wrong / n if n else float("nan"),
     }
+
+
+def confidence_curve(
+    depth_m: np.ndarray,
+    confidence: np.ndarray,
+    gt_depth_m: np.ndarray,
+    region: np.ndarray,
+    *,
+    thresholds: Sequence[float],
+    wrong_mm: float = 5.0,
+) -> list[dict]:
+    """Completeness (share of ``region``) and wrong shares (> ``wrong_mm`` from
+    ``gt_depth_m``) when only the decoded pixels whose ``confidence`` reaches each of
+    ``thresholds`` are kept: ``wrong_share`` of the kept pixels of ``region``,
+    ``wrong_share_all`` of every kept pixel of the image, a depth where the truth has none
+    counting wrong (:func:`every_decoded_pixel`); NaN where none is kept.  The curve a
+    confidence's operating point is chosen from (the hard scenes' study; ``simbench score
+    --confidence``)."""
+    decoded = region & np.isfinite(depth_m)
+    n_region = max(int(region.sum()), 1)
+    conf = confidence[decoded]
+    wrong = np.abs(depth_m - gt_depth_m)[decoded] > wrong_mm / 1000.0
+    anywhere = np.isfinite(depth_m)
+    conf_all = np.asarray(confidence)[anywhere]
+    wrong_all = wrong_pixels(depth_m, gt_depth_m, wrong_m=wrong_mm / 1000.0)[anywhere]
+    out = []
+    for t in thresholds:
+        kept = conf >= t
+        n = int(kept.sum())
+        kept_all = conf_all >= t
+        n_all = int(kept_all.sum())
+        out.append(
+            {
+                "threshold": float(t),
+                "completeness": n / n_region,
+                "wrong_share": float(wrong[kept].mean()) if n else float("nan"),
+                "wrong_share_all": float(wrong_all[kept_all].mean()) if n_all else float("nan"),
+            }
+        )
+    return out
 
 
 def implausible_depth(depth: np.ndarray, gt: np.ndarray, region: np.ndarray) -> list[str]:

@@ -1179,6 +1179,27 @@ def test_score_counts_every_decoded_pixel_and_reads_what_a_researchers_own_decod
     assert main(["score", str(tmp_path / "mm.npy"), *base, "--zero-is-hole"]) == 0
     out, err = capsys.readouterr()
     assert json.loads(out)["n_decoded"] == 1600 and "<= 0 m" not in err and "is it in metres" in err
+    # a confidence map of the user's decoder (its own scale): the curve over its quantiles, and a threshold
+    conf = np.full((40, 50), 9.0, np.float32)
+    conf[:, :10] = 1.0  # the filled shadow: unsure
+    conf[0, 20] = np.nan  # a confidence of NaN: sure of nothing
+    np.save(tmp_path / "conf.npy", conf)
+    with_conf = [*base, "--confidence", str(tmp_path / "conf.npy")]
+    assert main(["score", str(tmp_path / "filled.npy"), *with_conf]) == 0
+    curve = json.loads(capsys.readouterr().out)["confidence_curve"]
+    assert [c["threshold"] for c in curve[:2]] == [1.0, 1.0] and curve[-1]["threshold"] == 9.0
+    assert curve[0]["wrong_share_all"] == pytest.approx(400 / 1999) and curve[-1]["wrong_share_all"] == 0
+    assert curve[-1]["completeness"] == pytest.approx(1599 / 1600)  # (the NaN confidence's pixel left out)
+    assert main(["score", str(tmp_path / "filled.npy"), *with_conf, "--min-confidence", "5"]) == 0
+    kept = json.loads(capsys.readouterr().out)
+    assert kept["wrong_share_all"] == 0 and kept["n_decoded"] == 1599 and kept["confidence_curve"][0]["threshold"] == 9
+    assert main(["score", str(tmp_path / "filled.npy"), *base[:-1], "--confidence", str(tmp_path / "conf.npy")]) == 0
+    assert "kept at confidence >=" in capsys.readouterr().out
+    assert main(["score", str(tmp_path / "filled.npy"), *base, "--min-confidence", "5"]) == 2
+    assert "--min-confidence needs --confidence" in capsys.readouterr().err
+    np.save(tmp_path / "conf_small.npy", conf[:20])
+    assert main(["score", str(tmp_path / "filled.npy"), *base, "--confidence", str(tmp_path / "conf_small.npy")]) == 2
+    capsys.readouterr()
     # a --lit that is not there: refused, not every finite truth in its place
     assert main(["score", str(tmp_path / "clean.npy"), "--gt", str(tmp_path / "gt.npy"), "--lit", "nope.npy"]) == 2
     assert "--lit nope.npy: no such file" in capsys.readouterr().err

@@ -54,7 +54,8 @@ def _cmd_decode(args) -> int:
 def _cmd_score(args) -> int:
     from simbench.io import load_depth_map, load_npy
     from simbench.systems.files import recording_manifest_of
-    from simbench.metrics import MOVING_TRUTH_NOTE, depth_errors, edge_band, every_decoded_pixel, image_motion_px
+    from simbench.metrics import MOVING_TRUTH_NOTE, confidence_curve, depth_errors, edge_band, every_decoded_pixel
+    from simbench.metrics import image_motion_px
     from simbench.metrics import implausible_columns, implausible_depth
 
     if args.period is not None and args.period <= 2:
@@ -69,6 +70,19 @@ def _cmd_score(args) -> int:
     if args.zero_is_hole:
         d = depth if depth.dtype.kind == "f" else depth.astype(np.float64)  # (an integer map has no NaN)
         depth = np.where(d > 0, d, d.dtype.type(np.nan))
+    confidence = None
+    if args.min_confidence is not None and not args.confidence:
+        raise ValueError("--min-confidence needs --confidence (the map it thresholds)")
+    if args.confidence:
+        confidence = load_npy(args.confidence, expected_shape=depth.shape)
+        if confidence.dtype.kind not in "fiu":
+            raise ValueError(f"--confidence {args.confidence}: a map of numbers, got {confidence.dtype}")
+        confidence = confidence.astype(np.float64)
+        if args.min_confidence is not None:  # (NaN confidence: not sure of anything)
+            with np.errstate(invalid="ignore"):
+                unsure = ~(confidence >= args.min_confidence)
+            d = depth if depth.dtype.kind == "f" else depth.astype(np.float64)
+            depth = np.where(unsure, d.dtype.type(np.nan), d)
     gt_dir = Path(args.gt).parent
     if args.lit and not Path(args.lit).is_file():  # (it fell back to every finite truth without a word)
         raise FileNotFoundError(f"--lit {args.lit}: no such file")
@@ -117,6 +131,10 @@ def _cmd_score(args) -> int:
     m = depth_errors(depth, gt, region=region, exclude=exclude, **kw)
     m.update(every_decoded_pixel(depth, gt, region))
     m["region"] = region_is
+    if confidence is not None:
+        m["confidence_curve"] = confidence_curve(
+            depth, confidence, gt, region, thresholds=_curve_thresholds(confidence[np.isfinite(depth)])
+        )
     if not m["n_region"]:
         raise ValueError(
             f"no pixel to score: the region ({lit_path.name if lit_path.is_file() else 'finite ground truth'}) "
@@ -131,7 +149,13 @@ def _cmd_score(args) -> int:
         recording_manifest_of(motion_path)
         m["image_motion_px"] = image_motion_px(load_npy(motion_path, expected_shape=(*gt.shape, 2)))
     if args.json:  # strict JSON: a metric with nothing to measure is null, not NaN
-        clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in m.items()}
+
+        def strict(v):
+            if isinstance(v, list):
+                return [{k: strict(x) for k, x in row.items()} for row in v]
+            return None if isinstance(v, float) and not np.isfinite(v) else v
+
+        clean = {k: strict(v) for k, v in m.items()}
         print(json.dumps(clean, indent=2, sort_keys=True, allow_nan=False))
     else:
         band = ""
@@ -161,7 +185,31 @@ def _cmd_score(args) -> int:
             )
         if "image_motion_px" in m:
             print(f"note: {MOVING_TRUTH_NOTE.format(px=m['image_motion_px'])}")
+        if "confidence_curve" in m:
+            print(
+                "kept at confidence >=   completeness   > 5 mm wrong: of the region's kept, of every kept pixel "
+                "(decoded pixels left out: 0 / 1 / 2 / 5 / 10 / 20 / 30 / 50 %)"
+            )
+            for row in m["confidence_curve"]:
+                print(
+                    f"  {row['threshold']:>20.6g}   {100 * row['completeness']:10.2f} %   "
+                    f"{100 * row['wrong_share']:.3f} %, {100 * row['wrong_share_all']:.3f} %"
+                )
     return 0
+
+
+# the shares of the decoded pixels the confidence curve's thresholds leave out (a user's decoder's
+# confidence has a scale of its own: its thresholds are quantiles of it)
+CURVE_LEFT_OUT = (0.0, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.5)
+
+
+def _curve_thresholds(confidence: np.ndarray) -> list[float]:
+    """The confidence values below which :data:`CURVE_LEFT_OUT` of the decoded pixels' finite
+    ``confidence`` lie (the first, the least: every decoded pixel kept; its NaN never are)."""
+    c = confidence[np.isfinite(confidence)]
+    if not c.size:
+        return [0.0]
+    return [float(np.min(c)) if q == 0 else float(np.quantile(c, q, method="higher")) for q in CURVE_LEFT_OUT]
 
 
 def _refuse_another_recorded_file(gt_path: Path) -> None:
@@ -445,6 +493,18 @@ def add_parsers(sub, kw: dict) -> None:
         default=0,
         help="leave the pixels this close to a depth edge or an object's boundary (px) out of the error statistics "
         "(they still count for completeness)",
+    )
+    s.add_argument(
+        "--confidence",
+        help="the depth map's confidence map .npy (float, the depth's shape, higher = surer; e.g. the "
+        "NAME_confidence.npy `decode` writes, or your decoder's): adds the completeness against the wrong shares "
+        "when only the decoded pixels at or above each of a range of its values are kept",
+    )
+    s.add_argument(
+        "--min-confidence",
+        type=float_in(lo=-1e30, hi=1e30),
+        default=None,
+        help="with --confidence: score the decoded pixels whose confidence reaches this only (the others holes)",
     )
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.set_defaults(fn=_cmd_score)

@@ -60,6 +60,7 @@ from simbench.report import figure_files, figure_formats
 from simbench.experiments.common import RunConfig, Session, Split, markdown_table, score, table_text
 from simbench.experiments.render_noise import REPEATS as NOISE_REPEATS
 from simbench.experiments.render_noise import TARGET_RATIO, noise_captures, noise_spreads
+from simbench.metrics import confidence_curve as _curve
 from simbench.metrics import edge_band, every_decoded_pixel, wrong_pixels
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
@@ -243,33 +244,9 @@ def confidence_curve(
     *,
     thresholds: tuple[float, ...] = CONFIDENCE_THRESHOLDS,
 ) -> list[dict]:
-    """Completeness (share of ``region``) and wrong shares (> :data:`WRONG_MM` from
-    ``gt_depth_m``) when only the decoded pixels whose ``confidence`` reaches each of
-    ``thresholds`` are kept: ``wrong_share`` of the kept pixels of ``region``,
-    ``wrong_share_all`` of every kept pixel of the image (:func:`wrong_share_all`); NaN where none
-    is kept."""
-    decoded = region & np.isfinite(depth_m)
-    n_region = max(int(region.sum()), 1)
-    conf = confidence[decoded]
-    wrong = np.abs(depth_m - gt_depth_m)[decoded] > WRONG_MM / 1000.0
-    anywhere = np.isfinite(depth_m)
-    conf_all = np.asarray(confidence)[anywhere]
-    wrong_all = _wrong_everywhere(depth_m, gt_depth_m)[anywhere]
-    out = []
-    for t in thresholds:
-        kept = conf >= t
-        n = int(kept.sum())
-        kept_all = conf_all >= t
-        n_all = int(kept_all.sum())
-        out.append(
-            {
-                "threshold": float(t),
-                "completeness": n / n_region,
-                "wrong_share": float(wrong[kept].mean()) if n else float("nan"),
-                "wrong_share_all": float(wrong_all[kept_all].mean()) if n_all else float("nan"),
-            }
-        )
-    return out
+    """:func:`simbench.metrics.confidence_curve` at :data:`CONFIDENCE_THRESHOLDS` and
+    :data:`WRONG_MM` (the rows the operating point is chosen from)."""
+    return _curve(depth_m, confidence, gt_depth_m, region, thresholds=thresholds, wrong_mm=WRONG_MM)
 
 
 def operating_point(curves: list[dict], *, decoder: str = "robust") -> float:
