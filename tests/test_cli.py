@@ -1052,6 +1052,16 @@ def test_score_refuses_a_lit_mask_that_is_not_one_and_warns_of_inputs_that_are_n
     np.save(mine / "d.npy", gt + np.float32(0.0004))
     assert main(["score", str(mine / "d.npy"), "--gt", str(tmp_path / "gt.npy")]) == 0
     assert "warning" not in capsys.readouterr().err
+    # nor beside the ground truth (a lab's dataset folder: it was refused as "a manifest of format None")
+    np.save(mine / "gt.npy", gt)
+    assert main(["score", str(mine / "d.npy"), "--gt", str(mine / "gt.npy")]) == 0
+    assert "warning" not in capsys.readouterr().err
+    # a recording's manifest edited (its format taken out) is still refused
+    meta = json.loads((r / "meta.json").read_text())
+    del meta["manifest_format"]
+    (r / "meta.json").write_text(json.dumps(meta))
+    assert main(["score", str(r / "decoded.npy"), "--gt", str(r / "gt_depth.npy")]) == 2
+    assert "a manifest of format None" in capsys.readouterr().err
 
 
 def test_a_depth_decoded_into_another_recordings_folder_is_scored_as_the_recording_it_came_from(tmp_path, capsys):

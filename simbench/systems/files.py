@@ -196,7 +196,7 @@ def capture_ground_truth(capture: str | Path) -> dict | None:
     capture = Path(capture)
     folder = capture if capture.is_dir() else capture.parent
     for name in reversed(RECORDING_MANIFESTS):  # meta.json first, as recording_manifest_of
-        if (folder / name).is_file():
+        if (folder / name).is_file() and not _not_a_manifest(folder / name):
             sha = read_manifest(folder / name, verify_files=False)["sha256"]
             truth = {k: sha[k] for k in GROUND_TRUTH_DEPTH_KEYS if k in sha}
             return {"recording": str(folder.resolve()), "sha256": truth} if truth else None
@@ -205,6 +205,18 @@ def capture_ground_truth(capture: str | Path) -> dict | None:
 
 # a recording's ground-truth depth files, as its manifest names them (.npy, and the same as EXR)
 GROUND_TRUTH_DEPTH_KEYS = ("gt_depth", "gt_depth_exr")
+
+
+def _not_a_manifest(path: Path) -> bool:
+    """Whether the JSON file ``path`` is plainly no simbench manifest: an object with neither a
+    ``manifest_format`` nor ``files`` (a lab's own ``meta.json`` beside its ground truth was
+    refused as "a manifest of format None": an audit, 2026-12-05).  One with either, edited or
+    of an older simbench, is still a recording's, and checked as one."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and "manifest_format" not in data and "files" not in data
 
 
 def recording_manifest_of(path: str | Path) -> dict | None:
@@ -219,6 +231,8 @@ def recording_manifest_of(path: str | Path) -> dict | None:
     for name in reversed(RECORDING_MANIFESTS):  # meta.json first
         meta = path.parent / name
         if not meta.exists():
+            continue
+        if _not_a_manifest(meta):  # a lab's own meta.json beside its files: no recording
             continue
         data = read_manifest(meta, verify_files=False)
         for key, listed in data["files"].items():
