@@ -29,6 +29,8 @@ __all__ = [
     "claim_output",
     "check_own_folder",
     "check_output_directory",
+    "recorded_files",
+    "not_recorded",
     "file_sha256",
     "atomic_write_bytes",
     "atomic_write_text",
@@ -177,17 +179,12 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: bool) -> None:
-    """May ``folder`` be replaced by a new output?  Yes if empty; if it is an output of the
-    same kind (a ``manifest`` - or one of several names - lists every file in it); or, with
-    ``overwrite``, if it is such an output holding other files too.  A folder simbench did not
-    write is never replaced, ``overwrite`` or not."""
+def recorded_files(folder: Path, manifest: str | Sequence[str]) -> tuple[set[str], dict[str, str]] | None:
+    """What the first readable ``manifest`` (a name, or several tried in order) in ``folder``
+    lists: the names it lists (itself included) and the SHA-256 it records of each (name ->
+    hex); None where there is none.  Read as plain JSON (no seal checked): what a command
+    wrote there, for deciding what replacing the folder would remove."""
     names = (manifest,) if isinstance(manifest, str) else tuple(manifest)
-    entries = sorted(e.name for e in folder.iterdir())
-    if not entries:
-        return
-    listed: set[str] | None = None
-    digests: dict = {}
     for name in names:
         m = folder / name
         if not m.is_file():
@@ -197,26 +194,50 @@ def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: b
             files = data.get("files", {})
             listed = {str(v) for v in (files.values() if isinstance(files, dict) else files)} | {name}
             sha = data.get("sha256")
+            digests = {}
             if isinstance(files, dict) and isinstance(sha, dict):
                 digests = {str(files[k]): sha[k] for k in files if k in sha}
-            break
-        except (ValueError, AttributeError, UnicodeDecodeError):
+            return listed, digests
+        except (ValueError, AttributeError, UnicodeDecodeError, TypeError):
             continue
-    if listed is None:
+    return None
+
+
+def not_recorded(folder: Path, manifest: str | Sequence[str]) -> tuple[list[str], list[str]]:
+    """The entries of ``folder`` its manifest (:func:`recorded_files`) does not list, and the
+    listed files whose bytes are no longer those it recorded (both sorted): the user's work
+    that replacing the folder would remove.  Both empty where it has no manifest."""
+    rec = recorded_files(folder, manifest)
+    if rec is None:
+        return [], []
+    listed, digests = rec
+    entries = sorted(e.name for e in folder.iterdir())
+    extra = [e for e in entries if e not in listed]
+    changed = [n for n, d in sorted(digests.items()) if (folder / n).is_file() and file_sha256(folder / n) != d]
+    return extra, changed
+
+
+def _check_replaceable(folder: Path, manifest: str | Sequence[str], overwrite: bool) -> None:
+    """May ``folder`` be replaced by a new output?  Yes if empty; if it is an output of the
+    same kind (a ``manifest`` - or one of several names - lists every file in it); or, with
+    ``overwrite``, if it is such an output holding other files too.  A folder simbench did not
+    write is never replaced, ``overwrite`` or not."""
+    names = (manifest,) if isinstance(manifest, str) else tuple(manifest)
+    if not any(folder.iterdir()):
+        return
+    if recorded_files(folder, names) is None:
         raise ValueError(
             f"{folder} exists, is not empty and was not written by this command (no {' or '.join(names)}); simbench "
             f"never replaces such a folder, --overwrite or not: choose another output folder"
         )
-    extra = [e for e in entries if e not in listed]
-    if digests and not overwrite:
-        # a listed file changed since the command wrote it (a rig.toml edited by hand: an audit,
-        # 2026-11-30, saw calibrate replace it without --overwrite) is the user's work now
-        changed = [n for n, d in sorted(digests.items()) if (folder / n).is_file() and file_sha256(folder / n) != d]
-        if changed:
-            raise ValueError(
-                f"{folder}: {', '.join(changed)} changed since this command wrote it (edited by hand?); pass "
-                "--overwrite to replace the folder whole, or choose another output folder"
-            )
+    extra, changed = not_recorded(folder, names)
+    # a listed file changed since the command wrote it (a rig.toml edited by hand: an audit,
+    # 2026-11-30, saw calibrate replace it without --overwrite) is the user's work now
+    if changed and not overwrite:
+        raise ValueError(
+            f"{folder}: {', '.join(changed)} changed since this command wrote it (edited by hand?); pass "
+            "--overwrite to replace the folder whole, or choose another output folder"
+        )
     if extra and not overwrite:
         shown = ", ".join(extra[:4]) + (", ..." if len(extra) > 4 else "")
         raise ValueError(

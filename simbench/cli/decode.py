@@ -67,9 +67,10 @@ def _cmd_score(args) -> int:
     if not (gt[np.isfinite(gt)] > 0).any():
         raise ValueError(f"{args.gt}: the ground truth has no depth > 0 m: is it a depth map in metres?")
     depth = _depth_map(load_depth_map(args.depth, expected_shape=gt.shape), args.depth, what="depth map")
+    if (args.zero_is_hole or args.min_confidence is not None) and depth.dtype.kind != "f":
+        depth = depth.astype(np.float64)  # (holes are NaN: an integer map has none)
     if args.zero_is_hole:
-        d = depth if depth.dtype.kind == "f" else depth.astype(np.float64)  # (an integer map has no NaN)
-        depth = np.where(d > 0, d, d.dtype.type(np.nan))
+        depth = np.where(depth > 0, depth, depth.dtype.type(np.nan))
     confidence = None
     if args.min_confidence is not None and not args.confidence:
         raise ValueError("--min-confidence needs --confidence (the map it thresholds)")
@@ -81,8 +82,7 @@ def _cmd_score(args) -> int:
         if args.min_confidence is not None:  # (NaN confidence: not sure of anything)
             with np.errstate(invalid="ignore"):
                 unsure = ~(confidence >= args.min_confidence)
-            d = depth if depth.dtype.kind == "f" else depth.astype(np.float64)
-            depth = np.where(unsure, d.dtype.type(np.nan), d)
+            depth = np.where(unsure, depth.dtype.type(np.nan), depth)
     gt_dir = Path(args.gt).parent
     if args.lit and not Path(args.lit).is_file():  # (it fell back to every finite truth without a word)
         raise FileNotFoundError(f"--lit {args.lit}: no such file")

@@ -93,7 +93,11 @@ def _render(args) -> int:
     if replaced:
         # what --overwrite takes with it (a bring-your-own-decoder audit, 2026-12-05: a depth map
         # of one's own in the folder went without a word)
-        theirs = _files_not_recorded(Path(args.out))
+        from simbench.io import not_recorded
+        from simbench.systems import RECORDING_MANIFESTS
+
+        extra, changed = not_recorded(Path(args.out), RECORDING_MANIFESTS)
+        theirs = sorted(extra + changed)
         if theirs:
             shown = ", ".join(theirs[:8]) + (f" and {len(theirs) - 8} more" if len(theirs) > 8 else "")
             replaced += f", and with it {len(theirs)} file(s) it did not record or that changed since: {shown}"
@@ -238,30 +242,6 @@ def _earlier_recording(out: Path) -> str:
         system = meta.get("system") or meta.get("device") or "?"
         return f"a {system} recording" + (f" of scene {scene}" if scene else "")
     return ""  # no manifest: check_output_directory refused the folder already
-
-
-def _files_not_recorded(out: Path) -> list[str]:
-    """The entries of the recording folder ``out`` that its manifest does not list, or lists
-    with other bytes than it recorded (the user's files, which replacing the folder removes)."""
-    from simbench.manifest import file_sha256, json_object
-    from simbench.systems import RECORDING_MANIFESTS
-
-    for name in RECORDING_MANIFESTS:
-        try:
-            meta = json_object(out / name)
-        except (OSError, ValueError):
-            continue
-        files = meta.get("files") if isinstance(meta.get("files"), dict) else {}
-        sha = meta.get("sha256") if isinstance(meta.get("sha256"), dict) else {}
-        listed = {str(v): sha.get(k) for k, v in files.items()}
-        found = []
-        for entry in sorted(out.iterdir(), key=lambda e: e.name):
-            if entry.name == name:
-                continue
-            if entry.name not in listed or (entry.is_file() and file_sha256(entry) != listed[entry.name]):
-                found.append(entry.name + ("/" if entry.is_dir() else ""))
-        return found
-    return []
 
 
 def _check_visible(gt, scene) -> None:

@@ -61,7 +61,7 @@ from simbench.experiments.common import RunConfig, Session, Split, markdown_tabl
 from simbench.experiments.render_noise import REPEATS as NOISE_REPEATS
 from simbench.experiments.render_noise import TARGET_RATIO, noise_captures, noise_spreads
 from simbench.metrics import confidence_curve as _curve
-from simbench.metrics import edge_band, every_decoded_pixel, wrong_pixels
+from simbench.metrics import edge_band, every_decoded_pixel
 from simbench.sim.sensor import EFFECT_TABLE, SensorModel, get_sensor, with_effects
 
 if TYPE_CHECKING:
@@ -205,12 +205,6 @@ def scene_scores(
 def _wrong_share(rec, depth, region) -> float:
     err = np.abs(depth.depth_m - rec.gt.depth_m)[region & np.isfinite(depth.depth_m)]
     return float(np.mean(err > WRONG_MM / 1000.0)) if err.size else float("nan")
-
-
-def _wrong_everywhere(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> np.ndarray:
-    """Per pixel: decoded and more than :data:`WRONG_MM` from the truth, or decoded where the
-    truth sees nothing."""
-    return wrong_pixels(depth_m, gt_depth_m, wrong_m=WRONG_MM / 1000.0)
 
 
 def wrong_share_all(depth_m: np.ndarray, gt_depth_m: np.ndarray) -> float:
